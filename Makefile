@@ -1,0 +1,43 @@
+# Every target builds or refreshes .venv itself: a fresh machine needs only python3 and make.
+PY      ?= python3
+VENV    := .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+MISSION ?= default
+PROFILE ?= 0
+METHOD  ?= second-order
+OUT     ?= runs/demo
+
+.PHONY: venv demo test bench lint browser clean
+
+$(STAMP): requirements.lock pyproject.toml
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -r requirements.lock
+	$(BIN)/python -m pip install -q --no-deps -e .
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+# Main job: a SITL flight through the default city, printed summary and saved figures.
+demo: $(STAMP)
+	$(BIN)/beliefnav sitl --mission $(MISSION) --profile $(PROFILE) --method $(METHOD) --out $(OUT)
+
+# Headless Chromium for the dashboard's browser test (Debian package; needs root or sudo).
+browser:
+	@command -v chromium >/dev/null 2>&1 || { \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && $$SUDO DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; }
+
+test: $(STAMP) browser
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/beliefnav bench all --json
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/mypy
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""Companion computer: the belief-adaptive estimator and the planner bridge."""

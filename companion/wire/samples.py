@@ -1,0 +1,89 @@
+"""Domain types that cross the wire. Frames and units are in the field names.
+
+Times are integers in microseconds of vehicle boot time (``t_us``); a GNSS fix carries the
+time its position is VALID (``t_validity_us``), which is earlier than its arrival.
+Vectors are ``numpy`` float arrays of shape (3,); quaternions are (w, x, y, z), body FRD
+to NED.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+Vec3 = np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class ImuSample:
+    """One IMU sample: specific force and angular rate in body FRD (≈ -9.81 on z at rest)."""
+
+    t_us: int
+    acc_frd_m_s2: Vec3
+    gyro_frd_rad_s: Vec3
+
+
+@dataclass(frozen=True, slots=True)
+class AttitudeSample:
+    """Attitude of body FRD relative to NED as a unit quaternion (w, x, y, z)."""
+
+    t_us: int
+    q_ned_frd: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class GnssFix:
+    """A GNSS position fix as received (GPS_RAW_INT), stamped with its validity time.
+
+    ``h_acc_m``/``v_acc_m`` are NaN when the receiver does not report them.
+    """
+
+    t_validity_us: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    fix_type: int
+    satellites_visible: int
+    h_acc_m: float = float("nan")
+    v_acc_m: float = float("nan")
+
+
+Sample = ImuSample | AttitudeSample | GnssFix
+
+
+@dataclass(frozen=True, slots=True)
+class NavEstimate:
+    """The companion's navigation output (ODOMETRY + belief) in the local NED frame."""
+
+    t_us: int
+    p_ned_m: Vec3
+    v_ned_m_s: Vec3
+    b_ned_m: Vec3
+    cov_diag: np.ndarray  # (9,) variances of [p, v, b] in m², (m/s)², m²
+    beta: float  # GNSS trust belief in [0, 1]
+    nis: float  # NIS of the last fused fix (NaN before the first)
+    method: str
+
+
+@dataclass(frozen=True, slots=True)
+class Setpoint:
+    """Reference of the minimum-jerk trajectory (SET_POSITION_TARGET_LOCAL_NED)."""
+
+    t_us: int
+    p_ned_m: Vec3
+    v_ned_m_s: Vec3
+    a_ned_m_s2: Vec3
+
+
+@dataclass(frozen=True, slots=True)
+class TruthState:
+    """Simulation truth (SIM_STATE): never reaches the estimator."""
+
+    t_us: int
+    p_ned_m: Vec3
+    v_ned_m_s: Vec3
+    q_ned_frd: np.ndarray
+    gnss_bias_ned_m: Vec3 = field(default_factory=lambda: np.zeros(3))
+    gnss_latency_s: float = 0.0
+    clearance_m: float = float("inf")

@@ -1,0 +1,1 @@
+"""Ground tools: CLI, in-process flights, SITL launcher, replay, telemetry tools, evaluation."""

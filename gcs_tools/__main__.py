@@ -1,0 +1,3 @@
+from gcs_tools.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Benchmarks: measured figures printed as JSON, never asserted in timed tests."""

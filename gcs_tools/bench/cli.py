@@ -1,0 +1,47 @@
+"""``beliefnav bench TARGET --json``: each target module defines ``measure(args) -> dict``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import platform
+import sys
+
+import numpy as np
+
+TARGETS = {
+    "estimator": "gcs_tools.bench.estimator",
+    "fly": "gcs_tools.bench.fly",
+    "sitl": "gcs_tools.bench.sitl",
+    "telemetry": "gcs_tools.bench.telemetry",
+    "evaluate": "gcs_tools.bench.evaluate",
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("target", choices=[*TARGETS, "all"], help="what to measure")
+    parser.add_argument("--json", action="store_true", help="print one JSON object (the default output)")
+    parser.add_argument("--quick", action="store_true", help="shorter runs (smoke check, noisier figures)")
+
+
+def machine() -> dict[str, object]:
+    import os
+
+    return {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "cpu": platform.processor() or platform.machine(),
+        "cores": os.cpu_count(),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    names = list(TARGETS) if args.target == "all" else [args.target]
+    out: dict[str, object] = {"machine": machine()}
+    for name in names:
+        module = importlib.import_module(TARGETS[name])
+        out[name] = module.measure(args)
+    print(json.dumps(out if len(names) > 1 else {"machine": out["machine"], **out[names[0]]}, indent=2))
+    sys.stdout.flush()
+    return 0

@@ -1,0 +1,5 @@
+"""Simulated quadrotor: urban world truth, dynamics, autopilot, IMU and GNSS degradation.
+
+Imports from ``companion`` only the shared contracts: ``companion.mission`` (mission/map
+schema) and ``companion.wire`` (wire types and codecs). Never the estimator.
+"""
