@@ -36,7 +36,8 @@ class AttitudeSample:
 class GnssFix:
     """A GNSS position fix as received (GPS_RAW_INT), stamped with its validity time.
 
-    ``h_acc_m``/``v_acc_m`` are NaN when the receiver does not report them.
+    ``h_acc_m``/``v_acc_m`` (1-σ accuracies) and ``hdop`` are NaN when the receiver does not
+    report them.
     """
 
     t_validity_us: int
@@ -47,6 +48,7 @@ class GnssFix:
     satellites_visible: int
     h_acc_m: float = float("nan")
     v_acc_m: float = float("nan")
+    hdop: float = float("nan")
 
 
 Sample = ImuSample | AttitudeSample | GnssFix

@@ -1,0 +1,471 @@
+"""MAVLink 2 (common dialect) <-> domain types: the one translation layer for the UDP link and tlogs.
+
+``encode_*`` build pymavlink message objects (pack them with :func:`pack`); ``decode_*`` read any
+object with the message's field names as attributes — a pymavlink message or the lightweight
+views of :mod:`companion.wire.tlog`. Decoders never pass on a non-finite or out-of-range value:
+they raise :class:`CodecError`, whose ``reason`` the caller counts.
+
+Units and conventions on the wire (DESIGN §2):
+
+- HIGHRES_IMU: ``time_usec`` boot time; body-FRD specific force (m/s²) and rate (rad/s).
+- ATTITUDE_QUATERNION: ``q1..q4`` = w, x, y, z, body FRD -> NED; ``time_boot_ms`` (ms).
+- GPS_RAW_INT: ``time_usec`` = VALIDITY time; lat/lon degE7, alt mm; ``eph`` = HDOP x 100
+  (65535 unknown -> NaN); ``h_acc``/``v_acc`` mm (0 = not sent -> NaN); ``satellites_visible``
+  passed through (255 = unknown, as MAVLink says).
+- SIM_STATE: no time field (the caller supplies the matching IMU time); position as
+  ``lat_int``/``lon_int`` degE7 (float ``lat``/``lon`` too, in degrees) and ``alt`` m, converted
+  with a :class:`LocalNedFrame`. It carries p, v, q only: bias, latency and clearance of a
+  decoded :class:`TruthState` are NaN (unknown), never a made-up zero.
+- ODOMETRY: LOCAL_NED position and NED velocity (``child_frame_id`` = LOCAL_NED), variances on
+  the covariance diagonals, ``quality`` = round(100 β) (1..100), attitude unknown (NaN). The
+  bias, exact β and NIS travel in NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` and
+  ESTIMATOR_STATUS, so a decoded ODOMETRY has NaN bias and NIS.
+- SET_POSITION_TARGET_LOCAL_NED: LOCAL_NED, ``time_boot_ms`` (ms); velocity/acceleration marked
+  ignored in ``type_mask`` decode as zero feed-forward; ignored position is an error.
+- RAW_IMU / SCALED_IMU (decode only): acceleration mg, rate mrad/s, body FRD.
+- ATTITUDE (decode only): ZYX Euler roll/pitch/yaw (rad).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")
+
+import numpy as np  # noqa: E402
+from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+
+from companion.wire.geodesy import LocalNedFrame  # noqa: E402
+from companion.wire.samples import (  # noqa: E402
+    AttitudeSample,
+    GnssFix,
+    ImuSample,
+    NavEstimate,
+    Setpoint,
+    TruthState,
+)
+
+STANDARD_GRAVITY_M_S2 = 9.80665
+UINT16_UNKNOWN = 65535
+DEG_E7 = 1e7
+QUAT_NORM_TOLERANCE = 0.05  # |‖q‖ - 1| beyond this is a corrupt attitude, not rounding
+IMU_FIELDS_ACC_GYRO = 0b111111  # HIGHRES_IMU fields_updated bits for xacc..zgyro
+BELIEF_NAME = "GNSS_BETA"
+NIS_NAME = "GNSS_NIS"
+_NAN3 = (math.nan, math.nan, math.nan)
+_SETPOINT_TYPE_MASK = (
+    mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+)
+_VEL_IGNORE = 0b000111000
+_ACC_IGNORE = 0b111000000
+_POS_IGNORE = 0b000000111
+# Upper-triangle (row-major) indices of the diagonal of a 6x6 covariance, as ODOMETRY packs it.
+_COV6_DIAG = (0, 6, 11, 15, 18, 20)
+ESTIMATOR_HEALTHY_FLAGS = (
+    mavlink.ESTIMATOR_VELOCITY_HORIZ
+    | mavlink.ESTIMATOR_VELOCITY_VERT
+    | mavlink.ESTIMATOR_POS_HORIZ_REL
+    | mavlink.ESTIMATOR_POS_HORIZ_ABS
+    | mavlink.ESTIMATOR_POS_VERT_ABS
+)
+ROLE_TYPES = {  # HEARTBEAT (type, autopilot) per process role
+    "vehicle": (mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC),
+    "companion": (mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID),
+}
+
+
+class CodecError(ValueError):
+    """A message that cannot be turned into a domain value; ``reason`` is a stable counter name."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+# --- wire-only records (no domain type of their own) ---------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class EstimatorStatus:
+    """ESTIMATOR_STATUS: health flags, NIS over its gate, 1-σ accuracies."""
+
+    t_us: int
+    flags: int
+    pos_horiz_ratio: float  # NIS / gate (χ² threshold): > 1 means the fix failed the gate
+    pos_horiz_accuracy_m: float
+    pos_vert_accuracy_m: float
+
+
+@dataclass(frozen=True, slots=True)
+class NamedValue:
+    """NAMED_VALUE_FLOAT, e.g. ``GNSS_BETA`` or ``GNSS_NIS``."""
+
+    t_us: int
+    name: str
+    value: float
+
+
+@dataclass(frozen=True, slots=True)
+class Heartbeat:
+    mav_type: int
+    autopilot: int
+    system_status: int
+
+
+@dataclass(frozen=True, slots=True)
+class ClockPair:
+    """SYSTEM_TIME: pairs the sender's UNIX (or simulated) clock with its boot time."""
+
+    time_unix_us: int
+    t_boot_us: int
+
+
+# --- link helpers ----------------------------------------------------------------------------
+
+
+def new_link(system_id: int, component_id: int) -> mavlink.MAVLink:
+    """A MAVLink 2 packer/parser (no file); use with :func:`pack` and ``parse_buffer``."""
+    link = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+    link.robust_parsing = True
+    return link
+
+
+def pack(link: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
+    """Serialise ``msg`` as one MAVLink 2 frame and advance the link's sequence number."""
+    frame = msg.pack(link)
+    link.seq = (link.seq + 1) % 256
+    return frame
+
+
+# --- checks ----------------------------------------------------------------------------------
+
+
+def _finite(name: str, *values: float) -> None:
+    for v in values:
+        if not math.isfinite(v):
+            raise CodecError("non_finite", f"{name} has a non-finite field")
+
+
+def _vec(name: str, x: float, y: float, z: float) -> np.ndarray:
+    _finite(name, x, y, z)
+    return np.array((x, y, z), dtype=float)
+
+
+def _unit_quaternion(name: str, w: float, x: float, y: float, z: float) -> np.ndarray:
+    _finite(name, w, x, y, z)
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    if abs(norm - 1.0) > QUAT_NORM_TOLERANCE:
+        raise CodecError("out_of_range", f"{name} quaternion norm {norm:.3f}")
+    return np.array((w, x, y, z), dtype=float) / norm
+
+
+def _lat_lon(name: str, lat_deg: float, lon_deg: float) -> None:
+    if not (-90.0 <= lat_deg <= 90.0 and -180.0 <= lon_deg <= 180.0):
+        raise CodecError("out_of_range", f"{name} lat/lon {lat_deg:.7f},{lon_deg:.7f}")
+
+
+def _text(raw: str | bytes) -> str:
+    if isinstance(raw, bytes):
+        return raw.split(b"\x00", 1)[0].decode("ascii", errors="replace")
+    return raw
+
+
+# --- rotations (ZYX Euler, body FRD -> NED) ---------------------------------------------------
+
+
+def euler_to_quaternion(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
+    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
+    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    return np.array(
+        (
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        )
+    )
+
+
+def quaternion_to_euler(q: np.ndarray) -> tuple[float, float, float]:
+    w, x, y, z = (float(c) for c in q)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+# --- estimator inputs ---------------------------------------------------------------------------
+
+
+def encode_imu(s: ImuSample) -> mavlink.MAVLink_highres_imu_message:
+    a, g = s.acc_frd_m_s2, s.gyro_frd_rad_s
+    return mavlink.MAVLink_highres_imu_message(
+        s.t_us, a[0], a[1], a[2], g[0], g[1], g[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        IMU_FIELDS_ACC_GYRO, 0,
+    )
+
+
+def decode_imu(m: Any) -> ImuSample:
+    if m.fields_updated & IMU_FIELDS_ACC_GYRO != IMU_FIELDS_ACC_GYRO:
+        raise CodecError("fields_not_updated", f"HIGHRES_IMU fields_updated={m.fields_updated:#x}")
+    return ImuSample(
+        int(m.time_usec),
+        _vec("HIGHRES_IMU acc", m.xacc, m.yacc, m.zacc),
+        _vec("HIGHRES_IMU gyro", m.xgyro, m.ygyro, m.zgyro),
+    )
+
+
+def _decode_scaled(t_us: int, m: Any) -> ImuSample:
+    mg = STANDARD_GRAVITY_M_S2 / 1000.0
+    return ImuSample(
+        t_us,
+        np.array((m.xacc * mg, m.yacc * mg, m.zacc * mg)),
+        np.array((m.xgyro * 1e-3, m.ygyro * 1e-3, m.zgyro * 1e-3)),
+    )
+
+
+def decode_raw_imu(m: Any) -> ImuSample:
+    """RAW_IMU as ArduPilot sends it: mg and mrad/s, body FRD, ``time_usec``."""
+    return _decode_scaled(int(m.time_usec), m)
+
+
+def decode_scaled_imu(m: Any) -> ImuSample:
+    """SCALED_IMU: mg and mrad/s, body FRD, ``time_boot_ms``."""
+    return _decode_scaled(int(m.time_boot_ms) * 1000, m)
+
+
+def encode_attitude(s: AttitudeSample) -> mavlink.MAVLink_attitude_quaternion_message:
+    q = s.q_ned_frd
+    return mavlink.MAVLink_attitude_quaternion_message(
+        s.t_us // 1000, q[0], q[1], q[2], q[3], 0.0, 0.0, 0.0, [0.0, 0.0, 0.0, 0.0]
+    )
+
+
+def decode_attitude(m: Any) -> AttitudeSample:
+    return AttitudeSample(
+        int(m.time_boot_ms) * 1000, _unit_quaternion("ATTITUDE_QUATERNION", m.q1, m.q2, m.q3, m.q4)
+    )
+
+
+def decode_attitude_euler(m: Any) -> AttitudeSample:
+    _finite("ATTITUDE", m.roll, m.pitch, m.yaw)
+    return AttitudeSample(int(m.time_boot_ms) * 1000, euler_to_quaternion(m.roll, m.pitch, m.yaw))
+
+
+def _mm(value_m: float) -> int:
+    return 0 if not math.isfinite(value_m) else max(1, min(2**32 - 1, round(value_m * 1000.0)))
+
+
+def encode_gnss(f: GnssFix) -> mavlink.MAVLink_gps_raw_int_message:
+    eph = UINT16_UNKNOWN
+    if math.isfinite(f.hdop):
+        eph = max(0, min(UINT16_UNKNOWN - 1, round(f.hdop * 100)))
+    return mavlink.MAVLink_gps_raw_int_message(
+        f.t_validity_us, f.fix_type, round(f.lat_deg * DEG_E7), round(f.lon_deg * DEG_E7),
+        round(f.alt_m * 1000.0), eph, UINT16_UNKNOWN, UINT16_UNKNOWN, UINT16_UNKNOWN,
+        f.satellites_visible, 0, _mm(f.h_acc_m), _mm(f.v_acc_m), 0, 0, 0,
+    )
+
+
+def decode_gnss(m: Any) -> GnssFix:
+    lat_deg, lon_deg = m.lat / DEG_E7, m.lon / DEG_E7
+    _lat_lon("GPS_RAW_INT", lat_deg, lon_deg)
+    return GnssFix(
+        t_validity_us=int(m.time_usec),
+        lat_deg=lat_deg,
+        lon_deg=lon_deg,
+        alt_m=m.alt / 1000.0,
+        fix_type=int(m.fix_type),
+        satellites_visible=int(m.satellites_visible),
+        h_acc_m=m.h_acc / 1000.0 if m.h_acc else math.nan,
+        v_acc_m=m.v_acc / 1000.0 if m.v_acc else math.nan,
+        hdop=m.eph / 100.0 if m.eph != UINT16_UNKNOWN else math.nan,
+    )
+
+
+# Estimator inputs by message name; decode_sample dispatches on these.
+SAMPLE_DECODERS: dict[str, Callable[[Any], ImuSample | AttitudeSample | GnssFix]] = {
+    "HIGHRES_IMU": decode_imu,
+    "RAW_IMU": decode_raw_imu,
+    "SCALED_IMU": decode_scaled_imu,
+    "ATTITUDE_QUATERNION": decode_attitude,
+    "ATTITUDE": decode_attitude_euler,
+    "GPS_RAW_INT": decode_gnss,
+}
+
+
+def decode_sample(m: Any) -> ImuSample | AttitudeSample | GnssFix | None:
+    """The estimator input a message carries, None if it carries none; CodecError if it is bad."""
+    decoder = SAMPLE_DECODERS.get(m.get_type())
+    return None if decoder is None else decoder(m)
+
+
+# --- truth ------------------------------------------------------------------------------------
+
+
+def encode_truth(s: TruthState, frame: LocalNedFrame) -> mavlink.MAVLink_sim_state_message:
+    lat, lon, alt = frame.to_geodetic(s.p_ned_m)
+    q, v = s.q_ned_frd, s.v_ned_m_s
+    roll, pitch, yaw = quaternion_to_euler(q)
+    nan = math.nan
+    return mavlink.MAVLink_sim_state_message(
+        q[0], q[1], q[2], q[3], roll, pitch, yaw, nan, nan, nan, nan, nan, nan,
+        lat, lon, alt, 0.0, 0.0, v[0], v[1], v[2], round(lat * DEG_E7), round(lon * DEG_E7),
+    )
+
+
+def decode_truth(m: Any, frame: LocalNedFrame, t_us: int) -> TruthState:
+    """SIM_STATE has no time: ``t_us`` is that of the IMU sample sent in the same tick."""
+    if m.lat_int or m.lon_int:
+        lat, lon = m.lat_int / DEG_E7, m.lon_int / DEG_E7
+    else:
+        lat, lon = float(m.lat), float(m.lon)
+    _finite("SIM_STATE", lat, lon, m.alt)
+    _lat_lon("SIM_STATE", lat, lon)
+    return TruthState(
+        t_us=t_us,
+        p_ned_m=frame.to_ned_m(lat, lon, m.alt),
+        v_ned_m_s=_vec("SIM_STATE velocity", m.vn, m.ve, m.vd),
+        q_ned_frd=_unit_quaternion("SIM_STATE", m.q1, m.q2, m.q3, m.q4),
+        gnss_bias_ned_m=np.array(_NAN3),
+        gnss_latency_s=math.nan,
+        clearance_m=math.nan,
+    )
+
+
+# --- estimator outputs ------------------------------------------------------------------------
+
+
+def _cov21(diag3: np.ndarray) -> list[float]:
+    cov = [0.0] * 21
+    for i, var in zip(_COV6_DIAG[:3], diag3, strict=True):
+        cov[i] = float(var)
+    for i in _COV6_DIAG[3:]:
+        cov[i] = math.nan  # attitude / angular-rate variance: not estimated
+    return cov
+
+
+def encode_odometry(e: NavEstimate) -> mavlink.MAVLink_odometry_message:
+    p, v = e.p_ned_m, e.v_ned_m_s
+    quality = 0 if not math.isfinite(e.beta) else max(1, min(100, round(100.0 * e.beta)))
+    nan = math.nan
+    return mavlink.MAVLink_odometry_message(
+        e.t_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED,
+        p[0], p[1], p[2], [nan, nan, nan, nan], v[0], v[1], v[2], nan, nan, nan,
+        _cov21(e.cov_diag[0:3]), _cov21(e.cov_diag[3:6]), 0, mavlink.MAV_ESTIMATOR_TYPE_GPS_INS, quality,
+    )
+
+
+def decode_odometry(m: Any) -> NavEstimate:
+    if m.frame_id != mavlink.MAV_FRAME_LOCAL_NED or m.child_frame_id != mavlink.MAV_FRAME_LOCAL_NED:
+        raise CodecError("unsupported_frame", f"ODOMETRY frame {m.frame_id}/{m.child_frame_id}")
+    pos_var = [m.pose_covariance[i] for i in _COV6_DIAG[:3]]
+    vel_var = [m.velocity_covariance[i] for i in _COV6_DIAG[:3]]
+    _finite("ODOMETRY covariance", *pos_var, *vel_var)
+    if min(*pos_var, *vel_var) < 0.0:
+        raise CodecError("out_of_range", "ODOMETRY negative variance")
+    return NavEstimate(
+        t_us=int(m.time_usec),
+        p_ned_m=_vec("ODOMETRY position", m.x, m.y, m.z),
+        v_ned_m_s=_vec("ODOMETRY velocity", m.vx, m.vy, m.vz),
+        b_ned_m=np.array(_NAN3),
+        cov_diag=np.array([*pos_var, *vel_var, *_NAN3]),
+        beta=m.quality / 100.0 if m.quality > 0 else math.nan,
+        nis=math.nan,
+        method="odometry",
+    )
+
+
+def encode_estimator_status(
+    e: NavEstimate, nis_gate: float, flags: int = ESTIMATOR_HEALTHY_FLAGS
+) -> mavlink.MAVLink_estimator_status_message:
+    """``pos_horiz_ratio`` = NIS / ``nis_gate`` (the χ² gate); 0 before the first fused fix."""
+    ratio = e.nis / nis_gate if math.isfinite(e.nis) else 0.0
+    horiz = math.sqrt(float(e.cov_diag[0] + e.cov_diag[1]))
+    vert = math.sqrt(float(e.cov_diag[2]))
+    return mavlink.MAVLink_estimator_status_message(
+        e.t_us, flags, 0.0, ratio, 0.0, 0.0, 0.0, 0.0, horiz, vert
+    )
+
+
+def decode_estimator_status(m: Any) -> EstimatorStatus:
+    _finite("ESTIMATOR_STATUS", m.pos_horiz_ratio, m.pos_horiz_accuracy, m.pos_vert_accuracy)
+    return EstimatorStatus(
+        int(m.time_usec), int(m.flags), float(m.pos_horiz_ratio),
+        float(m.pos_horiz_accuracy), float(m.pos_vert_accuracy),
+    )
+
+
+def encode_named_value(t_us: int, name: str, value: float) -> mavlink.MAVLink_named_value_float_message:
+    raw = name.encode("ascii")
+    if len(raw) > 10:
+        raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} longer than 10 characters")
+    return mavlink.MAVLink_named_value_float_message(t_us // 1000, raw, value)
+
+
+def decode_named_value(m: Any) -> NamedValue:
+    name = _text(m.name)
+    _finite(f"NAMED_VALUE_FLOAT {name}", m.value)
+    return NamedValue(int(m.time_boot_ms) * 1000, name, float(m.value))
+
+
+def encode_belief(e: NavEstimate) -> list[mavlink.MAVLink_named_value_float_message]:
+    """GNSS_BETA and (once a fix was fused, i.e. finite) GNSS_NIS for one estimate."""
+    return [
+        encode_named_value(e.t_us, name, value)
+        for name, value in ((BELIEF_NAME, e.beta), (NIS_NAME, e.nis))
+        if math.isfinite(value)
+    ]
+
+
+# --- planner bridge ---------------------------------------------------------------------------
+
+
+def encode_setpoint(
+    s: Setpoint, target_system: int = 1, target_component: int = 1
+) -> mavlink.MAVLink_set_position_target_local_ned_message:
+    p, v, a = s.p_ned_m, s.v_ned_m_s, s.a_ned_m_s2
+    return mavlink.MAVLink_set_position_target_local_ned_message(
+        s.t_us // 1000, target_system, target_component, mavlink.MAV_FRAME_LOCAL_NED,
+        _SETPOINT_TYPE_MASK, p[0], p[1], p[2], v[0], v[1], v[2], a[0], a[1], a[2], 0.0, 0.0,
+    )
+
+
+def decode_setpoint(m: Any) -> Setpoint:
+    if m.coordinate_frame != mavlink.MAV_FRAME_LOCAL_NED:
+        raise CodecError("unsupported_frame", f"SET_POSITION_TARGET_LOCAL_NED frame {m.coordinate_frame}")
+    mask = int(m.type_mask)
+    if mask & (_POS_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_FORCE_SET):
+        raise CodecError("unsupported_frame", f"SET_POSITION_TARGET_LOCAL_NED type_mask {mask:#x}")
+    zero = np.zeros(3)
+    return Setpoint(
+        int(m.time_boot_ms) * 1000,
+        _vec("setpoint position", m.x, m.y, m.z),
+        zero if mask & _VEL_IGNORE else _vec("setpoint velocity", m.vx, m.vy, m.vz),
+        zero.copy() if mask & _ACC_IGNORE else _vec("setpoint acceleration", m.afx, m.afy, m.afz),
+    )
+
+
+# --- link housekeeping ------------------------------------------------------------------------
+
+
+def encode_heartbeat(role: str) -> mavlink.MAVLink_heartbeat_message:
+    mav_type, autopilot = ROLE_TYPES[role]
+    return mavlink.MAVLink_heartbeat_message(mav_type, autopilot, 0, 0, mavlink.MAV_STATE_ACTIVE, 3)
+
+
+def decode_heartbeat(m: Any) -> Heartbeat:
+    return Heartbeat(int(m.type), int(m.autopilot), int(m.system_status))
+
+
+def encode_system_time(time_unix_us: int, t_boot_us: int) -> mavlink.MAVLink_system_time_message:
+    return mavlink.MAVLink_system_time_message(time_unix_us, t_boot_us // 1000)
+
+
+def decode_system_time(m: Any) -> ClockPair:
+    return ClockPair(int(m.time_unix_usec), int(m.time_boot_ms) * 1000)
