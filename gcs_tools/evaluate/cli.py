@@ -1,0 +1,98 @@
+"""``beliefnav evaluate``: argument parsing and wiring only.
+
+    beliefnav evaluate --missions 10 --methods naive,adaptive,first-order,second-order \\
+        --seeds 0-49 --workers 2 --out runs/eval [--scheduler tcp://127.0.0.1:8786]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from companion.errors import UserError
+from gcs_tools.evaluate import campaign, report
+
+DEFAULT_METHODS = "naive,adaptive,first-order,second-order"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--mission", default="default", help="mission name or YAML path (default: default)")
+    parser.add_argument("--missions", default="10",
+                        help="mission profiles: a count N (profiles 0..N-1) or a list/range like 10-13")
+    parser.add_argument("--methods", default=DEFAULT_METHODS, help="comma-separated estimator methods")
+    parser.add_argument("--seeds", default="0", help="seeds, e.g. 0-49 or 0,3,7 (default: 0)")
+    parser.add_argument("--workers", type=int, default=1, help="local worker processes (default: 1)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run on this Dask distributed scheduler instead of the local pool")
+    parser.add_argument("--max-duration", type=float, default=None, metavar="S",
+                        help="cap each flight at S seconds of simulated time")
+    parser.add_argument("--out", required=True, type=Path, help="output directory")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def parse_profiles(text: str, available: int) -> tuple[int, ...]:
+    """``"10"`` → 0..9; ``"10-13"`` or ``"0,4"`` → those profiles; checked against the mission."""
+    if "-" in text or "," in text:
+        profiles = campaign.parse_seeds(text.replace(" ", ""))
+    else:
+        try:
+            n = int(text)
+        except ValueError:
+            raise UserError(f"--missions: expected a count or a range, got {text!r}") from None
+        if n < 1:
+            raise UserError(f"--missions: expected ≥ 1, got {n}")
+        profiles = tuple(range(n))
+    if max(profiles) >= available:
+        raise UserError(f"--missions: the mission has {available} profiles (0–{available - 1}), got {text}")
+    return profiles
+
+
+def parse_methods(text: str) -> tuple[str, ...]:
+    from companion.estimator import METHODS
+
+    methods = tuple(m.strip() for m in text.split(",") if m.strip())
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or not methods:
+        bad = unknown[0] if unknown else text
+        raise UserError(f"--methods: unknown method {bad!r} (known: {', '.join(METHODS)})")
+    return methods
+
+
+def parameters(mission: Any) -> dict[str, Any]:
+    """Estimator defaults and this mission's overrides, for the report."""
+    from companion.estimator import EstimatorConfig
+
+    out: dict[str, Any] = {"estimator_defaults": campaign.jsonable(dataclasses.asdict(EstimatorConfig()))}
+    for name in ("estimator", "gnss", "imu", "autopilot", "vehicle"):
+        section = mission.section(name)
+        if section:
+            out[f"mission_{name}"] = campaign.jsonable(section)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from companion.mission import load_mission
+
+    mission = load_mission(args.mission)
+    profiles = parse_profiles(args.missions, len(mission.profiles))
+    methods = parse_methods(args.methods)
+    seeds = campaign.parse_seeds(args.seeds)
+    jobs = campaign.grid(args.mission, profiles, methods, seeds, args.max_duration)
+    t0 = time.perf_counter()
+    results = campaign.run(jobs, args.workers, args.scheduler, progress=not args.no_progress)
+    wall_s = time.perf_counter() - t0
+    info = {
+        "mission": args.mission, "profiles": list(profiles), "methods": list(methods), "seeds": list(seeds),
+        "max_duration_s": args.max_duration, "flights": len(jobs), "workers": args.workers,
+        "scheduler": args.scheduler, "wall_s": wall_s, "parameters": parameters(mission),
+    }
+    res = report.write(args.out, results, methods, info, mission)
+    print(report.table(res), end="")
+    print(f"wrote {args.out}/results.json, report.md and {len(res['figures'])} figures "
+          f"({len(jobs)} flights, {wall_s:.1f} s)", file=sys.stderr)
+    return 0
+

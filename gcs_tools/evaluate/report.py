@@ -1,0 +1,162 @@
+"""Write a campaign's ``results.json``, ``report.md`` and figures into one directory.
+
+The tuning protocol lives here: hyper-parameters of the estimator were tuned only on
+``TUNING`` (mission profiles and seeds that are never reported); a run that overlaps it
+says so in its report.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from companion.errors import UserError
+from gcs_tools.evaluate import aggregate, plots
+from gcs_tools.evaluate.campaign import JobResult
+
+
+@dataclass(frozen=True)
+class TuningSet:
+    """Where hyper-parameters were tuned (never the reported profiles/seeds)."""
+
+    mission: str
+    profiles: tuple[int, ...]
+    seeds: tuple[int, ...]
+
+    def overlap(self, mission: str, profiles: Sequence[int], seeds: Sequence[int]) -> bool:
+        return mission == self.mission and bool(set(profiles) & set(self.profiles)) and bool(
+            set(seeds) & set(self.seeds)
+        )
+
+
+TUNING = TuningSet(mission="default", profiles=tuple(range(10, 14)), seeds=tuple(range(1000, 1010)))
+
+
+def write(
+    out_dir: Path,
+    results: Sequence[JobResult],
+    methods: Sequence[str],
+    campaign: dict[str, Any],
+    mission: Any = None,
+) -> dict[str, Any]:
+    """Aggregate, draw and write everything; returns the results mapping."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"--out: cannot create {out_dir}: {exc.strerror or exc}") from None
+    seeds = campaign["seeds"]
+    profiles = campaign["profiles"]
+    campaign = {
+        **campaign,
+        "tuning": {"mission": TUNING.mission, "profiles": list(TUNING.profiles), "seeds": list(TUNING.seeds)},
+        "overlaps_tuning_set": TUNING.overlap(campaign["mission"], profiles, seeds),
+    }
+    res = aggregate.build_results(results, methods, seeds, campaign)
+    figures = plots.draw_all(results, methods, mission, profiles, seeds[0], out_dir)
+    res["figures"] = figures
+    (out_dir / "results.json").write_text(json.dumps(_finite_or_null(res), indent=2) + "\n", encoding="utf-8")
+    (out_dir / "report.md").write_text(markdown(res), encoding="utf-8")
+    return res
+
+
+def table(res: dict[str, Any]) -> str:
+    """The results table (markdown)."""
+    seeds_ci = len(res["campaign"]["seeds"]) >= 2
+    head = ["method", "est. median [m]", "est. IQR", "est. p95", "Δ est. vs naive",
+            "track median [m]", "track IQR", "track p95", "Δ track vs naive",
+            "goal", "collisions", "β settle [s]", "β osc. RMS"]
+    rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for method, e in res["methods"].items():
+        est, trk = e["estimation_error_m"], e["tracking_error_m"]
+        rows.append("| " + " | ".join([
+            f"`{method}`",
+            f"{est['median']:.3f}", f"{est['iqr']:.3f}", f"{est['p95']:.3f}", _delta(est, seeds_ci, method),
+            f"{trk['median']:.3f}", f"{trk['iqr']:.3f}", f"{trk['p95']:.3f}", _delta(trk, seeds_ci, method),
+            f"{e['goal_reached_rate']:.0%}", f"{e['collisions']}",
+            f"{e['belief_settling_time_s']['median']:.1f}", f"{e['belief_oscillation_rms']['median']:.3f}",
+        ]) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def markdown(res: dict[str, Any]) -> str:
+    c = res["campaign"]
+    claims = res["paper_claims"]
+    lines = [
+        "# Evaluation campaign",
+        "",
+        f"Mission `{c['mission']}`, profiles {_ranges(c['profiles'])}, seeds {_ranges(c['seeds'])}, "
+        f"methods {', '.join(f'`{m}`' for m in c['methods'])}; {c['flights']} flights, "
+        f"max duration {c['max_duration_s']} s, {c['wall_s']:.1f} s wall on {c['workers']} worker(s).",
+        "",
+        f"Hyper-parameters were tuned only on mission `{c['tuning']['mission']}` profiles "
+        f"{_ranges(c['tuning']['profiles'])} with seeds {_ranges(c['tuning']['seeds'])}; "
+        + ("**this run overlaps that tuning set, so it is not an honest test.**"
+           if c["overlaps_tuning_set"] else "this run shares neither with it."),
+        "",
+        table(res),
+        "Errors are pooled over time (20 Hz), profiles and seeds. Δ = median / naive median − 1"
+        + ("; brackets: 95 % percentile-bootstrap CI over seeds (paired with naive)." if len(c["seeds"]) >= 2
+           else "."),
+        "",
+        "## The paper's claims (second-order vs naive)",
+        "",
+    ]
+    for key, value in claims.items():
+        if isinstance(value, dict):
+            ci = value.get("measured_over_seeds_ci95")
+            ci_text = f" (CI over seeds {ci[0]:+.0%} … {ci[1]:+.0%})" if ci and None not in ci else ""
+            verdict = "reproduced" if value["reproduced"] else "NOT reproduced"
+            lines.append(f"- {key}: claimed {value['claimed']:+.0%}, "
+                         f"measured {value['measured']:+.0%}{ci_text} — {verdict}")
+        else:
+            lines.append(f"- {key}: {'holds' if value else 'does NOT hold'}")
+    lines += ["", "## Figures", ""]
+    captions = {
+        "fig3": "Fig. 3 — belief β over time, first- vs second-order, one line per profile",
+        "fig4": "Fig. 4 — true trajectories on the map: naive, first-, second-order",
+        "fig5": "Fig. 5 — tracking error ‖p − p_ref‖ per method",
+        "fig6": "Fig. 6 — estimation error ‖p̂ − p‖ per method",
+    }
+    for key, name in res["figures"].items():
+        lines += [f"![{captions[key]}]({name})", "", f"*{captions[key]}*", ""]
+    lines += ["## Parameters", "", "```json", json.dumps(c.get("parameters", {}), indent=1), "```", ""]
+    lines += ["## Definitions", ""] + [f"- `{k}`: {v}" for k, v in res["definitions"].items()] + [""]
+    return "\n".join(lines)
+
+
+def _delta(e: dict[str, Any], with_ci: bool, method: str) -> str:
+    if "reduction_vs_naive" not in e or method == aggregate.BASELINE:
+        return "—"
+    text = f"{e['reduction_vs_naive']:+.0%}"
+    ci = e.get("seed_reduction_vs_naive_ci95")
+    if with_ci and ci and all(math.isfinite(v) for v in ci):
+        text += f" [{ci[0]:+.0%}, {ci[1]:+.0%}]"
+    return text
+
+
+def _ranges(values: Sequence[int]) -> str:
+    """[0,1,2,5] → '0–2, 5'."""
+    v = sorted(values)
+    parts, i = [], 0
+    while i < len(v):
+        j = i
+        while j + 1 < len(v) and v[j + 1] == v[j] + 1:
+            j += 1
+        parts.append(f"{v[i]}" if i == j else f"{v[i]}–{v[j]}")
+        i = j + 1
+    return ", ".join(parts)
+
+
+def _finite_or_null(value: Any) -> Any:
+    """JSON has no NaN: write null instead."""
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_null(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

@@ -1,0 +1,149 @@
+"""Campaign statistics: pure functions of numpy arrays (no I/O, no global random state).
+
+Definitions used in ``results.json`` and the report:
+
+- **median / IQR / p95** of an error sample: ``np.percentile`` with linear interpolation;
+  IQR = p75 − p25.
+- **percentile bootstrap 95 % CI** of a statistic of a sample of independent units
+  (seeds): resample the units with replacement ``n_resamples`` times with an injected
+  ``numpy.random.Generator``, evaluate the statistic on each resample and take the 2.5th
+  and 97.5th percentiles of those values (Efron's percentile interval).
+- **reduction vs naive**: ``value / naive − 1`` (−0.80 means 80 % lower than naive).
+- **belief settling time** ``t_settle``: the final belief ``β∞`` is the median of β over
+  the last ``tail_fraction`` of the flight; ``t_settle`` is the earliest time, measured from
+  the first sample, after which β stays within ``±band`` of ``β∞`` until the end.
+- **belief oscillation**: RMS of the high-frequency part of β, i.e. of β minus its centred
+  moving average over ``window_s`` seconds. Slow, legitimate trust changes (open sky →
+  street canyon) pass through the moving average and do not count; chatter does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+
+Statistic = Callable[..., np.ndarray]
+
+
+def summarize(samples: np.ndarray) -> dict[str, float]:
+    """``{median, iqr, p95, n}`` of a 1-D sample (non-finite values dropped)."""
+    x = _finite(samples)
+    if x.size == 0:
+        return {"median": float("nan"), "iqr": float("nan"), "p95": float("nan"), "n": 0}
+    p25, p50, p75, p95 = np.percentile(x, [25.0, 50.0, 75.0, 95.0])
+    return {"median": float(p50), "iqr": float(p75 - p25), "p95": float(p95), "n": int(x.size)}
+
+
+def bootstrap_ci(
+    x: np.ndarray,
+    rng: np.random.Generator,
+    statistic: Statistic = np.median,
+    n_resamples: int = 2000,
+    level: float = 0.95,
+) -> tuple[float, float]:
+    """Percentile bootstrap interval of ``statistic`` of a 1-D sample of independent units.
+
+    ``statistic(a, axis=1)`` must reduce each row of an (n_resamples, n) array.
+    """
+    a = _finite(x)
+    if a.size < 2:
+        return (float("nan"), float("nan"))
+    values = statistic(a[rng.integers(0, a.size, size=(n_resamples, a.size))], axis=1)
+    return _percentile_interval(values, level)
+
+
+def paired_reduction_ci(
+    seed_medians: np.ndarray,
+    naive_seed_medians: np.ndarray,
+    rng: np.random.Generator,
+    n_resamples: int = 2000,
+    level: float = 0.95,
+) -> tuple[float, float, float]:
+    """Reduction ``median(m)/median(naive) − 1`` over seeds and its paired bootstrap CI.
+
+    Seeds are resampled jointly for both methods (the same seed drives the same vehicle
+    noise), so the interval reflects the paired comparison. Returns (value, lo, hi).
+    """
+    a = np.asarray(seed_medians, dtype=float)
+    b = np.asarray(naive_seed_medians, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    a, b = a[ok], b[ok]
+    if a.size == 0:
+        return (float("nan"),) * 3
+    value = reduction(float(np.median(a)), float(np.median(b)))
+    if a.size < 2:
+        return (value, float("nan"), float("nan"))
+    idx = rng.integers(0, a.size, size=(n_resamples, a.size))
+    values = np.median(a[idx], axis=1) / np.median(b[idx], axis=1) - 1.0
+    lo, hi = _percentile_interval(values, level)
+    return (value, lo, hi)
+
+
+def reduction(value: float, naive: float) -> float:
+    """Relative change against naive: ``value / naive − 1`` (negative = lower than naive)."""
+    return float(value / naive - 1.0) if naive > 0 else float("nan")
+
+
+def settling_time_s(
+    t_s: np.ndarray, beta: np.ndarray, band: float = 0.05, tail_fraction: float = 0.2
+) -> float:
+    """Earliest time (from the first sample) after which β stays within ``±band`` of β∞.
+
+    β∞ is the median of β over the last ``tail_fraction`` of the samples. NaN samples
+    (before the filter is initialised) count as outside the band.
+    """
+    t = np.asarray(t_s, dtype=float)
+    b = np.asarray(beta, dtype=float)
+    if b.size == 0:
+        return float("nan")
+    tail = b[int(np.floor(b.size * (1.0 - tail_fraction))) :]
+    tail = tail[np.isfinite(tail)]
+    if tail.size == 0:
+        return float("nan")
+    beta_inf = float(np.median(tail))
+    outside = ~(np.abs(b - beta_inf) <= band)  # NaN compares False → outside
+    if not outside.any():
+        return 0.0
+    last_out = int(np.flatnonzero(outside)[-1])
+    if last_out + 1 >= b.size:
+        return float(t[-1] - t[0])
+    return float(t[last_out + 1] - t[0])
+
+
+def oscillation_rms(t_s: np.ndarray, beta: np.ndarray, window_s: float = 2.0) -> float:
+    """RMS of β minus its centred moving average over ``window_s`` (uniform sampling assumed)."""
+    t = np.asarray(t_s, dtype=float)
+    b = np.asarray(beta, dtype=float)
+    ok = np.isfinite(b)
+    t, b = t[ok], b[ok]
+    if b.size < 3:
+        return float("nan")
+    dt = float(np.median(np.diff(t)))
+    w = max(1, int(round(window_s / dt)))
+    w += 1 - w % 2  # odd, so the average is centred
+    if w >= b.size:
+        return float(np.std(b))
+    kernel = np.ones(w) / w
+    padded = np.pad(b, w // 2, mode="edge")
+    trend = np.convolve(padded, kernel, mode="valid")
+    return float(np.sqrt(np.mean((b - trend) ** 2)))
+
+
+def rank_order(medians: Mapping[str, float], order: Sequence[str]) -> bool:
+    """True when the medians are strictly decreasing along ``order`` (names missing → False)."""
+    if any(name not in medians for name in order):
+        return False
+    values = [medians[name] for name in order]
+    return all(a > b for a, b in zip(values, values[1:], strict=False))
+
+
+def _finite(x: np.ndarray) -> np.ndarray:
+    a = np.asarray(x, dtype=float).ravel()
+    return a[np.isfinite(a)]
+
+
+def _percentile_interval(values: np.ndarray, level: float) -> tuple[float, float]:
+    tail = 50.0 * (1.0 - level)
+    lo, hi = np.percentile(values, [tail, 100.0 - tail])
+    return (float(lo), float(hi))
