@@ -1,0 +1,220 @@
+"""Standard tlog files: each MAVLink frame preceded by its arrival time (8-byte big-endian µs).
+
+:class:`TlogWriter` writes them (``mavlogdump.py`` and MAVProxy read the result).
+:func:`read_tlog` is a fast reader for replay: it scans frames itself, checks each frame's
+CRC (x25 / MCRF4XX with the message's CRC_EXTRA, via ``fastcrc``) and unpacks only the message
+types asked for into light tuple views with the message's field names (what the decoders of
+:mod:`companion.wire.mavlink_codec` read). A damaged log is read as far as it is readable:
+the reader resynchronises on the next frame whose CRC checks, and counts what it skipped by
+reason (``bad_crc``, ``bad_length``, ``garbage``, ``unknown_msgid``, ``truncated``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter, namedtuple
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from operator import itemgetter
+from pathlib import Path
+from types import TracebackType
+from typing import Any, BinaryIO
+
+from fastcrc.crc16 import mcrf4xx
+
+from companion.wire.mavlink_codec import mavlink, new_link, pack
+
+STAMP_BYTES = 8
+MAGIC_V2 = 0xFD
+MAGIC_V1 = 0xFE
+HEADER_V2 = 10  # magic, len, incompat, compat, seq, sysid, compid, msgid (3)
+HEADER_V1 = 6
+SIGNATURE_BYTES = 13
+IFLAG_SIGNED = 0x01
+CRC_INIT = 0xFFFF
+
+
+class TlogWriter:
+    """Append frames to a tlog; a context manager. ``write`` packs a pymavlink message."""
+
+    def __init__(self, path: str | Path, system_id: int = 1, component_id: int = 1) -> None:
+        self.path = Path(path)
+        self._file: BinaryIO = open(self.path, "wb")  # noqa: SIM115 - closed by close()/__exit__
+        self._link = new_link(system_id, component_id)
+        self.frames_written = 0
+
+    def write(self, arrival_us: int, msg: mavlink.MAVLink_message) -> None:
+        self.write_frame(arrival_us, pack(self._link, msg))
+
+    def write_frame(self, arrival_us: int, frame: bytes) -> None:
+        """Record a frame as received (any sender)."""
+        self._file.write(arrival_us.to_bytes(STAMP_BYTES, "big") + frame)
+        self.frames_written += 1
+
+    def flush(self) -> None:
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> TlogWriter:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+# --- fast reader -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class _MessageSpec:
+    """How to check and unpack one message id."""
+
+    crc_extra: bytes
+    size: int
+    view: Any  # callable: payload bytes (full size) -> view tuple
+
+
+def _view_class(msgtype: type[mavlink.MAVLink_message]) -> Any:
+    name, msgid = msgtype.msgname, msgtype.id
+    base = namedtuple(name, msgtype.fieldnames, rename=True)  # type: ignore[misc]  # noqa: PYI024
+    return type(name, (base,), {"__slots__": (), "get_type": lambda self: name, "msgid": msgid})
+
+
+def _make_spec(msgtype: type[mavlink.MAVLink_message]) -> _MessageSpec:
+    """Wire order -> field order, as pymavlink's ``decode`` does, but precomputed once."""
+    cls = _view_class(msgtype)
+    lengths, orders = msgtype.lengths, msgtype.orders
+    starts = [sum(lengths[: orders[i]]) for i in range(len(orders))]
+    spans = [lengths[orders[i]] for i in range(len(orders))]
+    unpack = msgtype.unpacker.unpack
+    is_text = [t == "char" for t in msgtype.fieldtypes]
+    new = tuple.__new__
+    if all(s == 1 for s in spans) and not any(is_text):
+        getter = itemgetter(*starts) if len(starts) > 1 else (lambda t: (t[starts[0]],))
+
+        def view(payload: bytes) -> Any:
+            return new(cls, getter(unpack(payload)))
+    else:
+
+        def view(payload: bytes) -> Any:
+            t = unpack(payload)
+            values = []
+            for start, span, text in zip(starts, spans, is_text, strict=True):
+                if text:
+                    values.append(t[start].rstrip(b"\x00"))
+                else:
+                    values.append(t[start] if span == 1 else t[start : start + span])
+            return new(cls, values)
+
+    return _MessageSpec(bytes([msgtype.crc_extra]), msgtype.unpacker.size, view)
+
+
+_SPECS: dict[int, _MessageSpec] = {}
+
+
+def _spec(msgid: int) -> _MessageSpec | None:
+    spec = _SPECS.get(msgid)
+    if spec is None and msgid in mavlink.mavlink_map:
+        spec = _SPECS[msgid] = _make_spec(mavlink.mavlink_map[msgid])
+    return spec
+
+
+def message_ids(types: Iterable[str]) -> frozenset[int]:
+    """MAVLink ids of the named message types (KeyError for a name the dialect lacks)."""
+    ids = {m.msgname: i for i, m in mavlink.mavlink_map.items()}
+    return frozenset(ids[t] for t in types)
+
+
+@dataclass
+class TlogReader:
+    """Iterate ``(arrival_us, message_view)``; after (or during) iteration ``skipped`` counts
+    damaged spans by reason, ``skipped_bytes`` their size, ``frames`` the good frames seen
+    (including types not asked for)."""
+
+    path: Path
+    wanted: frozenset[int] | None = None
+    skipped: Counter[str] = field(default_factory=Counter)
+    skipped_bytes: int = 0
+    frames: int = 0
+
+    def __iter__(self) -> Iterator[tuple[int, Any]]:
+        data = self.path.read_bytes()
+        n = len(data)
+        wanted = self.wanted
+        pos = 0
+        lost_at, lost_reason = -1, ""  # start of the damaged span being skipped (-1: in sync)
+        while pos < n:
+            parsed = self._frame_at(data, pos, n)
+            if isinstance(parsed, str):
+                if lost_at < 0:
+                    lost_at, lost_reason = pos, parsed
+                pos = self._next_candidate(data, pos + 1, n)
+                continue
+            end, msgid, spec, body = parsed
+            if lost_at >= 0:
+                # a "truncated" frame followed by good ones had a corrupt length byte
+                self._skip("bad_length" if lost_reason == "truncated" else lost_reason, pos - lost_at)
+                lost_at = -1
+            self.frames += 1
+            if wanted is None or msgid in wanted:
+                stamp = int.from_bytes(data[pos : pos + STAMP_BYTES], "big")
+                if len(body) < spec.size:  # MAVLink 2 trims trailing zero bytes
+                    body = body + bytes(spec.size - len(body))
+                yield stamp, spec.view(body[: spec.size])
+            pos = end
+        if lost_at >= 0:
+            self._skip(lost_reason, n - lost_at)
+
+    def _skip(self, reason: str, size: int) -> None:
+        self.skipped[reason] += 1
+        self.skipped_bytes += size
+
+    def _frame_at(self, data: bytes, pos: int, n: int) -> tuple[int, int, _MessageSpec, bytes] | str:
+        """The frame starting at ``pos`` (stamp first), or the reason it is not one."""
+        m = pos + STAMP_BYTES
+        if m + HEADER_V1 + 2 > n:
+            return "truncated"
+        magic = data[m]
+        if magic == MAGIC_V2:
+            if m + HEADER_V2 > n:
+                return "truncated"
+            header = HEADER_V2
+            sig = SIGNATURE_BYTES if data[m + 2] & IFLAG_SIGNED else 0
+            msgid = data[m + 7] | data[m + 8] << 8 | data[m + 9] << 16
+        elif magic == MAGIC_V1:
+            header, sig, msgid = HEADER_V1, 0, data[m + 5]
+        else:
+            return "garbage"
+        payload_end = m + header + data[m + 1]
+        end = payload_end + 2 + sig
+        if end > n:
+            return "truncated"
+        spec = _spec(msgid)
+        if spec is None:
+            return "unknown_msgid"
+        crc = mcrf4xx(spec.crc_extra, mcrf4xx(data[m + 1 : payload_end], CRC_INIT))
+        if crc != data[payload_end] | data[payload_end + 1] << 8:
+            return "bad_crc"
+        return end, msgid, spec, data[m + header : payload_end]
+
+    @staticmethod
+    def _next_candidate(data: bytes, start: int, n: int) -> int:
+        """Next position whose byte after the stamp is a MAVLink magic (``n`` if none)."""
+        best = n
+        for magic in (b"\xfd", b"\xfe"):
+            i = data.find(magic, start + STAMP_BYTES)
+            if 0 <= i < best + STAMP_BYTES:
+                best = i - STAMP_BYTES
+        return best
+
+
+def read_tlog(path: str | Path, types: Iterable[str] | None = None) -> TlogReader:
+    """Fast tlog reader; ``types`` (message names) limits what is unpacked and yielded."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(os.fspath(p))
+    return TlogReader(p, None if types is None else message_ids(types))
