@@ -42,7 +42,8 @@ class JobResult:
     """What a job sends back: small enough to ship thousands through a pool."""
 
     job: Job
-    summary: dict[str, Any]
+    summary: dict[str, Any]  # the flight summary without its wall time (so results compare exactly)
+    wall_s: float
     settling_time_s: float
     oscillation_rms: float
     est_error_m: np.ndarray = field(repr=False)  # (N,) float32 at 20 Hz
@@ -97,7 +98,8 @@ def compact(job: Job, summary: dict[str, Any], series: dict[str, np.ndarray]) ->
     d = FIGURE_DECIMATION
     return JobResult(
         job=job,
-        summary=jsonable(summary),
+        summary=jsonable({k: v for k, v in summary.items() if k != "wall_s"}),
+        wall_s=float(summary.get("wall_s", float("nan"))),
         settling_time_s=stats.settling_time_s(t, beta),
         oscillation_rms=stats.oscillation_rms(t, beta),
         est_error_m=np.asarray(series["est_error_m"], dtype=np.float32),
