@@ -32,6 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="cap each flight at S seconds of simulated time")
     parser.add_argument("--out", required=True, type=Path, help="output directory")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--readme", type=Path, default=None, metavar="PATH",
+                        help="also splice the table and figures into this README (block keyed by --out)")
 
 
 def parse_profiles(text: str, available: int) -> tuple[int, ...]:
@@ -91,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
         "scheduler": args.scheduler, "wall_s": wall_s, "parameters": parameters(mission),
     }
     res = report.write(args.out, results, methods, info, mission)
+    if args.readme is not None:
+        report.splice_readme(args.readme, args.out.name, report.readme_section(res, args.out, args.readme))
     print(report.table(res), end="")
     print(f"wrote {args.out}/results.json, report.md and {len(res['figures'])} figures "
           f"({len(jobs)} flights, {wall_s:.1f} s)", file=sys.stderr)

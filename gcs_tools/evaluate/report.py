@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -160,3 +161,49 @@ def _finite_or_null(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def readme_section(res: dict[str, Any], out_dir: Path, readme: Path) -> str:
+    """The README block for one results directory: headline, table, figures, link to the report."""
+    c = res["campaign"]
+    rel = Path(_relpath(out_dir, readme.parent))
+    claims = res["paper_claims"]
+    est = claims["second_order_estimation_error_m_reduction"]
+    trk = claims["second_order_tracking_error_m_reduction"]
+    lines = [
+        f"Mission `{c['mission']}`, profiles {_ranges(c['profiles'])}, seeds {_ranges(c['seeds'])} "
+        f"({c['flights']} flights; tuning used profiles {_ranges(c['tuning']['profiles'])} of "
+        f"`{c['tuning']['mission']}` with seeds {_ranges(c['tuning']['seeds'])}). "
+        f"Second-order vs naive: estimation {est['measured']:+.0%} (paper {est['claimed']:+.0%}), "
+        f"tracking {trk['measured']:+.0%} (paper {trk['claimed']:+.0%}). "
+        f"Full report: [{rel / 'report.md'}]({rel / 'report.md'}).",
+        "",
+        table(res),
+    ]
+    if len(c["seeds"]) == 1:
+        lines += [" ".join(f"![{key}]({rel / name})" for key, name in res["figures"].items()), ""]
+    return "\n".join(lines)
+
+
+def splice_readme(readme: Path, key: str, body: str) -> None:
+    """Replace the block between ``<!-- results:KEY -->`` and ``<!-- /results:KEY -->``.
+
+    The block is appended at the end of the file the first time.
+    """
+    begin, end = f"<!-- results:{key} -->", f"<!-- /results:{key} -->"
+    try:
+        text = readme.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"--readme: cannot read {readme}: {exc.strerror or exc}") from None
+    block = f"{begin}\n{body.rstrip()}\n{end}"
+    if begin in text and end in text:
+        head, _, rest = text.partition(begin)
+        _, _, tail = rest.partition(end)
+        text = head + block + tail
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    readme.write_text(text, encoding="utf-8")
+
+
+def _relpath(path: Path, start: Path) -> str:
+    return os.path.relpath(path.resolve(), start.resolve())
