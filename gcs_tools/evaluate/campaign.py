@@ -30,7 +30,7 @@ FIGURE_DECIMATION = 4  # 20 Hz flight series → 5 Hz for belief and trajectory 
 class Job:
     """One flight of the grid."""
 
-    mission: str  # mission name ("default", "test") or path to a mission YAML
+    mission: str  # mission name ("default", "test", "default-tuning") or path to a mission YAML
     profile_index: int
     method: str
     seed: int
@@ -85,10 +85,11 @@ def grid(
 
 
 @functools.lru_cache(maxsize=8)
-def _mission(name: str) -> Any:
-    from companion.mission import load_mission
+def mission(name: str) -> Any:
+    """The mission of a job, loaded once per process."""
+    from gcs_tools.evaluate import tuning
 
-    return load_mission(name)
+    return tuning.load(name)
 
 
 def compact(job: Job, summary: dict[str, Any], series: dict[str, np.ndarray]) -> JobResult:
@@ -115,8 +116,8 @@ def run_job(job: Job) -> JobResult:
     """Fly one job in this process (the default job function, importable by pool workers)."""
     from gcs_tools.fly import fly
 
-    mission = _mission(job.mission)
-    res = fly(mission, job.profile_index, job.method, job.seed, max_duration_s=job.max_duration_s)
+    m = mission(job.mission)
+    res = fly(m, job.profile_index, job.method, job.seed, max_duration_s=job.max_duration_s)
     return compact(job, res.summary, res.series)
 
 

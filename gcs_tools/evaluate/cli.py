@@ -20,7 +20,8 @@ DEFAULT_METHODS = "naive,adaptive,first-order,second-order"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--mission", default="default", help="mission name or YAML path (default: default)")
+    parser.add_argument("--mission", default="default",
+                        help="mission name (default, test, default-tuning) or YAML path")
     parser.add_argument("--missions", default="10",
                         help="mission profiles: a count N (profiles 0..N-1) or a list/range like 10-13")
     parser.add_argument("--methods", default=DEFAULT_METHODS, help="comma-separated estimator methods")
@@ -77,9 +78,7 @@ def parameters(mission: Any) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from companion.mission import load_mission
-
-    mission = load_mission(args.mission)
+    mission = campaign.mission(args.mission)
     profiles = parse_profiles(args.missions, len(mission.profiles))
     methods = parse_methods(args.methods)
     seeds = campaign.parse_seeds(args.seeds)

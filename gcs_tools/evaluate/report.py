@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
-from gcs_tools.evaluate import aggregate, plots
+from gcs_tools.evaluate import aggregate, plots, tuning
 from gcs_tools.evaluate.campaign import JobResult
 
 
@@ -29,12 +29,12 @@ class TuningSet:
     seeds: tuple[int, ...]
 
     def overlap(self, mission: str, profiles: Sequence[int], seeds: Sequence[int]) -> bool:
-        return mission == self.mission and bool(set(profiles) & set(self.profiles)) and bool(
-            set(seeds) & set(self.seeds)
-        )
+        """True when a run shares a tuning profile or a tuning seed."""
+        same_profiles = mission == self.mission and bool(set(profiles) & set(self.profiles))
+        return same_profiles or bool(set(seeds) & set(self.seeds))
 
 
-TUNING = TuningSet(mission="default", profiles=tuple(range(10, 14)), seeds=tuple(range(1000, 1010)))
+TUNING = TuningSet(tuning.TUNING_MISSION, tuple(range(len(tuning.TUNING_PROFILES))), tuning.TUNING_SEEDS)
 
 
 def write(
