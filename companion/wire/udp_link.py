@@ -1,0 +1,268 @@
+"""A MAVLink 2 endpoint over UDP on 127.0.0.1: one socket, one peer, counted rejections.
+
+Every datagram is parsed on its own (a broken datagram never poisons the next). What cannot be
+used is counted and dropped, never raised: garbage bytes, bad CRCs, message ids outside the
+common dialect, frames from a system id the link does not accept, and — when a signing key is
+set — unsigned frames or frames signed with another key. The peer is either fixed
+(``peer_port``) or learned from the first accepted frame, so a restarted client on a new
+ephemeral port is picked up again.
+
+Test-only loss injection drops datagrams per direction with a seeded generator. An optional
+``tee`` callback sees the bytes of every frame sent and every accepted frame received (the
+node stamps them and writes the tlog).
+"""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import os
+import select
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.errors import UserError
+
+MAX_DATAGRAM_BYTES = 65_535
+SIGNING_EPOCH_UNIX_S = 1_420_070_400  # MAVLink 2 signing timestamps count 10 µs since 2015-01-01
+SIGNING_KEY_BYTES = 32
+
+Tee = Callable[[bytes, bool], None]  # (frame, sent) -> None
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """Where a link listens and whom it talks to (loopback only by default)."""
+
+    bind_port: int = 0  # 0: an ephemeral port chosen by the OS
+    peer_port: int | None = None  # None: reply to whoever last sent an accepted frame
+    host: str = "127.0.0.1"
+    system_id: int = 1  # our MAVLink system id
+    component_id: int = 1  # our MAVLink component id
+    accept_system_ids: frozenset[int] | None = None  # None: frames from any system id
+    signing_key: bytes | None = None  # 32-byte MAVLink 2 signing secret; None: no signing
+    link_id: int = 0  # MAVLink 2 signing link id of this endpoint
+    drop_probability_tx: float = 0.0  # test-only loss injection on sends, in [0, 1]
+    drop_probability_rx: float = 0.0  # test-only loss injection on receives, in [0, 1]
+
+
+@dataclass(slots=True)
+class LinkCounters:
+    """What the link saw; names are stable (they appear in summaries and tests)."""
+
+    datagrams_rx: int = 0
+    datagrams_tx: int = 0
+    messages_rx: int = 0
+    messages_tx: int = 0
+    garbage: int = 0  # bytes that are not a MAVLink frame (bad prefix, truncated, bad length)
+    bad_crc: int = 0
+    unknown_message: int = 0  # valid frame, message id not in the common dialect
+    wrong_system_id: int = 0
+    bad_signature: int = 0  # unsigned, wrong key or replayed timestamp while signing is on
+    dropped_rx: int = 0  # loss injector
+    dropped_tx: int = 0  # loss injector
+    send_errors: int = 0  # e.g. the peer's port is closed (ECONNREFUSED)
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+def read_signing_key(path: str | os.PathLike[str]) -> bytes:
+    """A signing key file holds 64 hex characters (the raw key) or a passphrase (SHA-256 of it,
+    as MAVProxy's ``signing setup`` does)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read signing key file {path}: {exc}") from None
+    if not text:
+        raise UserError(f"signing key file {path} is empty")
+    if len(text) == 2 * SIGNING_KEY_BYTES:
+        try:
+            return bytes.fromhex(text)
+        except ValueError:
+            pass
+    return hashlib.sha256(text.encode("utf-8")).digest()
+
+
+def _signing_timestamp_now() -> int:
+    return int((max(time.time(), SIGNING_EPOCH_UNIX_S) - SIGNING_EPOCH_UNIX_S) * 100_000)
+
+
+class _DatagramSink:
+    """File-like target for pymavlink's packer: each ``write`` is one datagram."""
+
+    def __init__(self, link: UdpLink) -> None:
+        self._link = link
+
+    def write(self, buf: bytes) -> None:
+        self._link._send_datagram(bytes(buf))
+
+
+class UdpLink:
+    """One MAVLink endpoint. ``send`` never blocks; ``recv`` returns the accepted messages of
+    one datagram (empty on timeout or rejection)."""
+
+    def __init__(
+        self,
+        config: LinkConfig,
+        rng: np.random.Generator | None = None,
+        tee: Tee | None = None,
+    ) -> None:
+        if (config.drop_probability_tx or config.drop_probability_rx) and rng is None:
+            raise ValueError("loss injection needs a seeded numpy Generator")
+        self.config = config
+        self.counters = LinkCounters()
+        self.tee = tee
+        self._rng = rng
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind((config.host, config.bind_port))
+        except OSError as exc:
+            self._sock.close()
+            if exc.errno == errno.EADDRINUSE:
+                raise UserError(f"UDP port {config.bind_port} on {config.host} is already in use") from None
+            raise UserError(f"cannot bind UDP {config.host}:{config.bind_port}: {exc.strerror}") from None
+        self._sock.setblocking(False)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 1024 * 1024)
+        self.peer: tuple[str, int] | None = (
+            (config.host, config.peer_port) if config.peer_port is not None else None
+        )
+        self._mav = mavlink.MAVLink(_DatagramSink(self), config.system_id, config.component_id)
+        self._mav.robust_parsing = True
+        if config.signing_key is not None:
+            if len(config.signing_key) != SIGNING_KEY_BYTES:
+                raise UserError(f"a MAVLink 2 signing key has {SIGNING_KEY_BYTES} bytes")
+            self._mav.signing.secret_key = config.signing_key
+            self._mav.signing.sign_outgoing = True
+            self._mav.signing.link_id = config.link_id
+            self._mav.signing.timestamp = _signing_timestamp_now()
+
+    # -- plumbing -------------------------------------------------------------------------
+    @property
+    def port(self) -> int:
+        return int(self._sock.getsockname()[1])
+
+    @property
+    def mav(self) -> mavlink.MAVLink:
+        """pymavlink's encoder (``link.mav.heartbeat_encode(...)`` builds messages)."""
+        return self._mav
+
+    def fileno(self) -> int:
+        return self._sock.fileno()
+
+    def close(self) -> None:
+        self._sock.close()
+
+    def __enter__(self) -> UdpLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- sending --------------------------------------------------------------------------
+    def send(self, msg: mavlink.MAVLink_message) -> None:
+        """Pack (and sign) ``msg`` and send it to the peer; without a peer yet it is skipped."""
+        if self.peer is None:
+            return
+        self._mav.send(msg)
+        self.counters.messages_tx += 1
+
+    def _send_datagram(self, buf: bytes) -> None:
+        if self.config.drop_probability_tx and self._drop(self.config.drop_probability_tx):
+            self.counters.dropped_tx += 1
+            return
+        assert self.peer is not None
+        try:
+            self._sock.sendto(buf, self.peer)
+        except OSError:  # ECONNREFUSED from an earlier send, full buffer: a lost datagram
+            self.counters.send_errors += 1
+            return
+        self.counters.datagrams_tx += 1
+        if self.tee is not None:
+            self.tee(buf, True)
+
+    def _drop(self, probability: float) -> bool:
+        assert self._rng is not None
+        return bool(self._rng.random() < probability)
+
+    # -- receiving ------------------------------------------------------------------------
+    def wait_readable(self, timeout_s: float) -> bool:
+        readable, _, _ = select.select([self._sock], [], [], max(timeout_s, 0.0))
+        return bool(readable)
+
+    def recv(self, timeout_s: float = 0.0) -> list[mavlink.MAVLink_message]:
+        """Accepted messages of the next datagram; [] if none arrives within ``timeout_s``."""
+        if timeout_s > 0 and not self.wait_readable(timeout_s):
+            return []
+        while True:
+            try:
+                data, addr = self._sock.recvfrom(MAX_DATAGRAM_BYTES)
+            except (BlockingIOError, InterruptedError):
+                return []
+            except OSError:  # ICMP port unreachable reported on a later call
+                self.counters.send_errors += 1
+                continue
+            return self.accept_datagram(data, addr)
+
+    def recv_all(self) -> list[mavlink.MAVLink_message]:
+        """Every message already waiting in the socket buffer, in arrival order."""
+        out: list[mavlink.MAVLink_message] = []
+        while True:
+            try:
+                data, addr = self._sock.recvfrom(MAX_DATAGRAM_BYTES)
+            except (BlockingIOError, InterruptedError):
+                return out
+            except OSError:
+                self.counters.send_errors += 1
+                continue
+            out.extend(self.accept_datagram(data, addr))
+
+    def accept_datagram(self, data: bytes, addr: tuple[str, int]) -> list[mavlink.MAVLink_message]:
+        """Parse one datagram; count and drop what cannot be used (never raises)."""
+        c = self.counters
+        c.datagrams_rx += 1
+        if self.config.drop_probability_rx and self._drop(self.config.drop_probability_rx):
+            c.dropped_rx += 1
+            return []
+        mav = self._mav
+        try:
+            parsed = mav.parse_buffer(data) or []
+        except Exception:  # robust parsing should not raise; be defensive about odd inputs
+            parsed = []
+            c.garbage += 1
+        if mav.buf_len() > 0:  # a frame cut short by the datagram's end
+            c.garbage += 1
+        mav.buf = bytearray()
+        mav.buf_index = 0
+        mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+        accepted: list[mavlink.MAVLink_message] = []
+        accept_ids = self.config.accept_system_ids
+        for msg in parsed:
+            if isinstance(msg, mavlink.MAVLink_bad_data):
+                reason = str(getattr(msg, "reason", "")).lower()
+                if "crc" in reason:
+                    c.bad_crc += 1
+                elif "signature" in reason:
+                    c.bad_signature += 1
+                else:
+                    c.garbage += 1
+            elif isinstance(msg, mavlink.MAVLink_unknown):
+                c.unknown_message += 1
+            elif accept_ids is not None and msg.get_srcSystem() not in accept_ids:
+                c.wrong_system_id += 1
+            else:
+                accepted.append(msg)
+        if accepted:
+            c.messages_rx += len(accepted)
+            if self.config.peer_port is None:
+                self.peer = addr
+            if self.tee is not None:
+                for msg in accepted:
+                    self.tee(bytes(msg.get_msgbuf()), False)
+        return accepted
