@@ -14,6 +14,7 @@ node stamps them and writes the tlog).
 
 from __future__ import annotations
 
+import argparse
 import errno
 import hashlib
 import os
@@ -32,6 +33,7 @@ from companion.errors import UserError
 MAX_DATAGRAM_BYTES = 65_535
 SIGNING_EPOCH_UNIX_S = 1_420_070_400  # MAVLink 2 signing timestamps count 10 µs since 2015-01-01
 SIGNING_KEY_BYTES = 32
+VEHICLE_SYSTEM_ID = 1  # the vehicle and its companions share one MAVLink system id
 
 Tee = Callable[[bytes, bool], None]  # (frame, sent) -> None
 
@@ -130,6 +132,7 @@ class UdpLink:
             raise UserError(f"cannot bind UDP {config.host}:{config.bind_port}: {exc.strerror}") from None
         self._sock.setblocking(False)
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 1024 * 1024)
+        self.last_rx_ns = 0  # perf_counter_ns() when the last datagram was read from the socket
         self.peer: tuple[str, int] | None = (
             (config.host, config.peer_port) if config.peer_port is not None else None
         )
@@ -173,6 +176,12 @@ class UdpLink:
         self._mav.send(msg)
         self.counters.messages_tx += 1
 
+    def send_frame(self, frame: bytes) -> None:
+        """Forward an already packed frame unchanged (routing: its source ids and signature stay)."""
+        if self.peer is not None:
+            self._send_datagram(frame)
+            self.counters.messages_tx += 1
+
     def _send_datagram(self, buf: bytes) -> None:
         if self.config.drop_probability_tx and self._drop(self.config.drop_probability_tx):
             self.counters.dropped_tx += 1
@@ -208,6 +217,7 @@ class UdpLink:
             except OSError:  # ICMP port unreachable reported on a later call
                 self.counters.send_errors += 1
                 continue
+            self.last_rx_ns = time.perf_counter_ns()
             return self.accept_datagram(data, addr)
 
     def recv_all(self) -> list[mavlink.MAVLink_message]:
@@ -221,6 +231,7 @@ class UdpLink:
             except OSError:
                 self.counters.send_errors += 1
                 continue
+            self.last_rx_ns = time.perf_counter_ns()
             out.extend(self.accept_datagram(data, addr))
 
     def accept_datagram(self, data: bytes, addr: tuple[str, int]) -> list[mavlink.MAVLink_message]:
@@ -266,3 +277,24 @@ class UdpLink:
                 for msg in accepted:
                     self.tee(bytes(msg.get_msgbuf()), False)
         return accepted
+
+
+# -- command-line options shared by the vehicle and companion processes --------------------------
+def add_link_arguments(parser: argparse.ArgumentParser) -> None:
+    """Signing and (test-only) loss options; parsing itself stays in each ``__main__``."""
+    parser.add_argument("--signing-key-file", help="MAVLink 2 signing key (64 hex chars or a passphrase)")
+    parser.add_argument(
+        "--drop-probability", type=float, default=0.0,
+        help="TEST ONLY: drop this fraction of datagrams in each direction",
+    )
+    parser.add_argument("--loss-seed", type=int, default=0, help="seed of the loss injector")
+
+
+def link_settings(args: argparse.Namespace) -> tuple[dict[str, object], np.random.Generator | None]:
+    """LinkConfig fields and the loss generator chosen by :func:`add_link_arguments` options."""
+    p = float(args.drop_probability)
+    if not 0.0 <= p <= 1.0:
+        raise UserError(f"--drop-probability must be in [0, 1], got {p}")
+    key = read_signing_key(args.signing_key_file) if args.signing_key_file else None
+    fields: dict[str, object] = {"signing_key": key, "drop_probability_tx": p, "drop_probability_rx": p}
+    return fields, (np.random.default_rng(args.loss_seed) if p > 0 else None)

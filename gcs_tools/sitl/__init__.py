@@ -1,0 +1,1 @@
+"""SITL: three processes over MAVLink/UDP, supervised (``beliefnav sitl``)."""

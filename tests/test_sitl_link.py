@@ -1,0 +1,130 @@
+"""UdpLink over real loopback sockets: what cannot be used is counted, never raised."""
+
+import hashlib
+import socket
+
+import numpy as np
+import pytest
+
+from companion.errors import UserError
+from companion.wire import mavlink_codec as codec
+from companion.wire.lockstep import marker_time_us, response_time_us, step_marker, step_response
+from companion.wire.samples import GnssFix
+from companion.wire.udp_link import LinkConfig, UdpLink, read_signing_key
+
+KEY = bytes(range(32))
+
+
+@pytest.fixture
+def links():
+    made = []
+
+    def make(**kw):
+        link = UdpLink(LinkConfig(**kw))
+        made.append(link)
+        return link
+
+    yield make
+    for link in made:
+        link.close()
+
+
+def _raw(port, data):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(data, ("127.0.0.1", port))
+
+
+def _heartbeat_frame(system_id=1):
+    link = codec.new_link(system_id, 1)
+    return bytearray(codec.pack(link, codec.encode_heartbeat("companion")))
+
+
+def test_valid_frame_is_accepted_and_peer_learned(links):
+    rx = links(accept_system_ids=frozenset({1}))
+    tx = links(peer_port=rx.port, system_id=1)
+    tx.send(codec.encode_heartbeat("vehicle"))
+    msgs = rx.recv(timeout_s=1.0)
+    assert [m.get_type() for m in msgs] == ["HEARTBEAT"]
+    assert rx.peer == ("127.0.0.1", tx.port)
+    rx.send(codec.encode_heartbeat("companion"))  # replies reach the learned peer
+    assert [m.get_type() for m in tx.recv(timeout_s=1.0)] == ["HEARTBEAT"]
+
+
+def test_garbage_bad_crc_unknown_and_wrong_system_id_are_counted(links):
+    rx = links(accept_system_ids=frozenset({1}))
+    _raw(rx.port, b"\x00not mavlink at all")
+    _raw(rx.port, b"\xfd\x30\x00")  # a frame cut short
+    bad_crc = _heartbeat_frame()
+    bad_crc[-1] ^= 0xFF
+    _raw(rx.port, bytes(bad_crc))
+    unknown = _heartbeat_frame()
+    unknown[7:10] = bytes((0x21, 0x43, 0x0E))  # message id 0x0E4321: not in the common dialect
+    _raw(rx.port, bytes(unknown))
+    _raw(rx.port, bytes(_heartbeat_frame(system_id=42)))
+    _raw(rx.port, bytes(_heartbeat_frame(system_id=1)))
+    got = []
+    for _ in range(6):
+        got += rx.recv(timeout_s=1.0)
+    c = rx.counters
+    assert [m.get_type() for m in got] == ["HEARTBEAT"]
+    assert (c.datagrams_rx, c.bad_crc, c.unknown_message, c.wrong_system_id) == (6, 1, 1, 1)
+    assert c.garbage >= 2
+
+
+def test_signing_rejects_wrong_key_and_unsigned(links):
+    rx = links(signing_key=KEY)
+    wrong = links(peer_port=rx.port, signing_key=bytes(32), system_id=1, link_id=3)
+    unsigned = links(peer_port=rx.port, system_id=1)
+    good = links(peer_port=rx.port, signing_key=KEY, system_id=1, link_id=4)
+    fix = codec.encode_gnss(GnssFix(1_000_000, 48.0, 11.0, 500.0, 3, 12))
+    for sender in (wrong, unsigned, good):
+        sender.send(fix)
+    got = []
+    for _ in range(3):
+        got += rx.recv(timeout_s=1.0)
+    assert [m.get_type() for m in got] == ["GPS_RAW_INT"]
+    assert rx.counters.bad_signature == 2
+    assert got[0]._signed
+
+
+def test_port_in_use_is_one_line_user_error(links):
+    taken = links()
+    with pytest.raises(UserError, match=f"UDP port {taken.port} .* already in use"):
+        UdpLink(LinkConfig(bind_port=taken.port))
+
+
+def test_loss_injection_is_seeded_and_counted(links):
+    def run(seed):
+        rx = links()
+        tx = UdpLink(LinkConfig(peer_port=rx.port, drop_probability_tx=0.3), np.random.default_rng(seed))
+        for _ in range(200):
+            tx.send(codec.encode_heartbeat("vehicle"))
+        tx.close()
+        return tx.counters.dropped_tx, tx.counters.datagrams_tx
+
+    a, b = run(7), run(7)
+    assert a == b and a[0] + a[1] == 200
+    assert 30 < a[0] < 90  # ~60 expected (binomial 200, 0.3; sd 6.5)
+
+
+def test_lockstep_marker_and_response_round_trip_through_bytes():
+    link = codec.new_link(1, 1)
+    parser = codec.new_link(1, 2)
+    marker = parser.parse_buffer(codec.pack(link, step_marker(1_250_000)))[0]
+    response = parser.parse_buffer(codec.pack(link, step_response(1_250_000, 99)))[0]
+    assert marker_time_us(marker) == 1_250_000 and response_time_us(marker) is None
+    assert response_time_us(response) == 1_250_000 and marker_time_us(response) is None
+
+
+def test_signing_key_file(tmp_path):
+    hexkey = tmp_path / "hex.key"
+    hexkey.write_text(KEY.hex())
+    assert read_signing_key(hexkey) == KEY
+    phrase = tmp_path / "phrase.key"
+    phrase.write_text("correct horse\n")
+    assert read_signing_key(phrase) == hashlib.sha256(b"correct horse").digest()
+    (tmp_path / "empty.key").write_text("")
+    with pytest.raises(UserError, match="empty"):
+        read_signing_key(tmp_path / "empty.key")
+    with pytest.raises(UserError, match="cannot read"):
+        read_signing_key(tmp_path / "missing.key")
