@@ -8,7 +8,7 @@ PROFILE ?= 0
 METHOD  ?= second-order
 OUT     ?= runs/demo
 
-.PHONY: venv demo test bench lint browser clean
+.PHONY: venv demo test bench lint browser clean results
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -34,6 +34,14 @@ test: $(STAMP) browser
 
 bench: $(STAMP)
 	$(BIN)/beliefnav bench all --json
+
+# README results section: the 10-profile campaign (seed 0, with figures) and the 50-seed run
+# (bootstrap CIs); both write docs/results/<run>/ and splice their table into README.md.
+EVAL_METHODS ?= naive,adaptive,first-order,second-order,vbakf
+EVAL = $(BIN)/beliefnav evaluate --missions 10 --methods $(EVAL_METHODS) --workers 2 --readme README.md --no-progress
+results: $(STAMP)
+	$(EVAL) --seeds 0 --out docs/results/profiles10
+	$(EVAL) --seeds 0-49 --out docs/results/seeds50
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
