@@ -62,3 +62,28 @@ def test_config_ranges_are_checked():
     for bad in (VbConfig(forgetting=0.0), VbConfig(iterations=0), VbConfig(prior_dof=-1.0)):
         with pytest.raises(ValueError):
             bad.validate()
+
+
+def test_measurement_space_iteration_equals_the_full_state_iteration():
+    # Reference: Särkkä & Nummenmaa's loop written on the full state (x, P), with a bias-
+    # augmented state like the estimator's (z = p + b + ν, H = [I 0 I]).
+    rng = np.random.default_rng(11)
+    A = rng.normal(size=(9, 9))
+    P = A @ A.T / 9 + 0.1 * np.eye(9)
+    x = rng.normal(size=9)
+    H = np.hstack([np.eye(3), np.zeros((3, 3)), np.eye(3)])
+    z = H @ x + rng.normal(size=3)
+    cfg = VbConfig(iterations=5)
+    prior = NoisePosterior.prior(np.diag([0.3, 0.5, 0.7]), cfg).predict(cfg)
+    dof, scale = prior.dof + 1.0, prior.scale
+    for _ in range(cfg.iterations):
+        R = scale / dof
+        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+        x_post, P_post = x + K @ (z - H @ x), (np.eye(9) - K @ H) @ P
+        e = z - H @ x_post
+        scale = prior.scale + np.outer(e, e) + H @ P_post @ H.T
+    x2, P2, post = vb_update(x, P, z, H, prior, cfg)
+    np.testing.assert_allclose(x2, x_post, atol=1e-12)
+    np.testing.assert_allclose(P2, P_post, atol=1e-12)
+    np.testing.assert_allclose(post.scale, scale, atol=1e-12)
+    assert post.dof == dof

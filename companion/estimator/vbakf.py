@@ -58,6 +58,29 @@ class NoisePosterior:
         return NoisePosterior(cfg.forgetting * self.dof, cfg.forgetting * self.scale)
 
 
+def vb_iterate(
+    y: np.ndarray, hph: np.ndarray, noise: NoisePosterior, cfg: VbConfig
+) -> tuple[np.ndarray, NoisePosterior]:
+    """The VB fixed point in measurement space, for a fix with innovation ``y`` and
+    predicted ``H P⁻ Hᵀ = hph``; ``noise`` is the predicted (forgotten) posterior.
+
+    With ``S = H P⁻ Hᵀ + R̂`` the Kalman update gives the posterior residual
+    ``z − H x⁺ = R̂ S⁻¹ y`` and ``H P⁺ Hᵀ = H P⁻ Hᵀ − H P⁻ Hᵀ S⁻¹ H P⁻ Hᵀ``, so no state is
+    needed. Returns the ``R̂`` to fuse this fix with (the last iteration's) and the new posterior.
+    """
+    dof = noise.dof + 1.0
+    scale = noise.scale
+    R = scale / dof
+    for _ in range(cfg.iterations):
+        R = scale / dof
+        S = hph + R
+        e = R @ np.linalg.solve(S, y)
+        hph_post = hph - hph @ np.linalg.solve(S, hph)
+        scale = noise.scale + np.outer(e, e) + hph_post
+        scale = 0.5 * (scale + scale.T)
+    return R, NoisePosterior(dof, scale)
+
+
 def vb_update(
     x: np.ndarray,
     P: np.ndarray,
@@ -66,23 +89,12 @@ def vb_update(
     noise: NoisePosterior,
     cfg: VbConfig,
 ) -> tuple[np.ndarray, np.ndarray, NoisePosterior]:
-    """One VB measurement update; ``noise`` is the predicted (forgotten) posterior.
+    """One VB measurement update of a linear-Gaussian state ``(x, P)``; ``noise`` is predicted.
 
-    Returns the posterior state, its covariance and the new noise posterior.
+    Returns the posterior state, its covariance (Joseph form) and the new noise posterior.
     """
-    innovation = z - H @ x
     PHt = P @ H.T
-    HPHt = H @ PHt
-    dof = noise.dof + 1.0
-    scale = noise.scale
-    x_post, P_post = x, P
-    for _ in range(cfg.iterations):
-        R = scale / dof
-        S = HPHt + R
-        K = np.linalg.solve(S, PHt.T).T
-        x_post = x + K @ innovation
-        IKH = np.eye(P.shape[0]) - K @ H
-        P_post = IKH @ P @ IKH.T + K @ R @ K.T  # Joseph form: symmetric, PSD
-        e = z - H @ x_post
-        scale = noise.scale + np.outer(e, e) + H @ P_post @ H.T
-    return x_post, P_post, NoisePosterior(dof, 0.5 * (scale + scale.T))
+    R, posterior = vb_iterate(z - H @ x, H @ PHt, noise, cfg)
+    K = np.linalg.solve(H @ PHt + R, PHt.T).T
+    IKH = np.eye(P.shape[0]) - K @ H
+    return x + K @ (z - H @ x), IKH @ P @ IKH.T + K @ R @ K.T, posterior
