@@ -133,17 +133,19 @@ def message_ids(types: Iterable[str]) -> frozenset[int]:
 class TlogReader:
     """Iterate ``(arrival_us, message_view)``; after (or during) iteration ``skipped`` counts
     damaged spans by reason, ``skipped_bytes`` their size, ``frames`` the good frames seen
-    (including types not asked for)."""
+    (including types not asked for); ``position``/``size`` (bytes) show progress."""
 
     path: Path
     wanted: frozenset[int] | None = None
     skipped: Counter[str] = field(default_factory=Counter)
     skipped_bytes: int = 0
     frames: int = 0
+    position: int = 0
+    size: int = 0
 
     def __iter__(self) -> Iterator[tuple[int, Any]]:
         data = self.path.read_bytes()
-        n = len(data)
+        n = self.size = len(data)
         wanted = self.wanted
         pos = 0
         lost_at, lost_reason = -1, ""  # start of the damaged span being skipped (-1: in sync)
@@ -164,10 +166,12 @@ class TlogReader:
                 stamp = int.from_bytes(data[pos : pos + STAMP_BYTES], "big")
                 if len(body) < spec.size:  # MAVLink 2 trims trailing zero bytes
                     body = body + bytes(spec.size - len(body))
+                self.position = end
                 yield stamp, spec.view(body[: spec.size])
             pos = end
         if lost_at >= 0:
             self._skip(lost_reason, n - lost_at)
+        self.position = n
 
     def _skip(self, reason: str, size: int) -> None:
         self.skipped[reason] += 1

@@ -1,0 +1,1 @@
+"""Replay of recorded tlogs through the estimator (``beliefnav replay``)."""

@@ -1,0 +1,143 @@
+"""``beliefnav replay``: bad logs end in one line and a non-zero exit; good logs give estimates,
+counted rejections and error statistics named by reference."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.wire import mavlink_codec as mc
+from companion.wire.geodesy import LocalNedFrame
+from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, TruthState
+from companion.wire.tlog import TlogWriter
+from gcs_tools.cli import main
+from gcs_tools.replay import core
+
+QUAD106 = Path(__file__).parent / "data" / "quad106.tlog"
+HOME = LocalNedFrame(-37.86, 144.76, 20.0)
+SPEED_N_M_S = 1.0
+GNSS_DELAY_US = 200_000
+
+
+class LastFixNavigator:
+    """Test double honouring the Navigator contract: reports the last fix's position.
+
+    Lets the replay plumbing be checked with known answers independently of the filter."""
+
+    def __init__(self, method: str, frame: LocalNedFrame) -> None:
+        self.frame, self.method = frame, method
+        self.pushed: list[object] = []
+        self.p: np.ndarray | None = None
+        self.t_us = 0
+
+    def push(self, sample: object) -> None:
+        self.pushed.append(sample)
+        if isinstance(sample, GnssFix):
+            self.p = self.frame.to_ned_m(sample.lat_deg, sample.lon_deg, sample.alt_m)
+        elif isinstance(sample, ImuSample):
+            self.t_us = sample.t_us
+
+    def estimate(self) -> NavEstimate | None:
+        if self.p is None:
+            return None
+        z = np.zeros(3)
+        return NavEstimate(self.t_us, self.p, z, z, np.ones(9), 1.0, math.nan, self.method)
+
+    def counters(self) -> dict[str, int]:
+        return {"pushed": len(self.pushed)}
+
+
+def write_flight(path: Path, seconds: float = 4.0, *, gnss: bool = True, bad_imu_every: int = 0) -> None:
+    """Straight flight north at 1 m/s: HIGHRES_IMU + RAW_IMU (a second IMU source), attitude,
+    SIM_STATE truth each tick, late GNSS at 5 Hz, GLOBAL_POSITION_INT at 10 Hz."""
+    with TlogWriter(path) as w:
+        for k in range(int(seconds * 100)):
+            t_us = 10_000 * k
+            stamp = 1_700_000_000_000_000 + t_us
+            p = np.array([SPEED_N_M_S * t_us / 1e6, 0.0, -10.0])
+            acc = np.array([math.nan if bad_imu_every and k % bad_imu_every == 5 else 0.0, 0.0, -9.81])
+            w.write(stamp, mc.encode_imu(ImuSample(t_us, acc, np.zeros(3))))
+            w.write(stamp, mc.mavlink.MAVLink_raw_imu_message(t_us, 0, 0, -1000, 0, 0, 0, 0, 0, 0, 0, 0))
+            w.write(stamp, mc.encode_attitude(AttitudeSample(t_us, np.array([1.0, 0, 0, 0]))))
+            w.write(stamp, mc.encode_truth(TruthState(t_us, p, np.array([SPEED_N_M_S, 0, 0]),
+                                                      np.array([1.0, 0, 0, 0])), HOME))
+            if k % 10 == 0:
+                lat, lon, alt = HOME.to_geodetic(p)
+                w.write(stamp, mc.mavlink.MAVLink_global_position_int_message(
+                    t_us // 1000, round(lat * 1e7), round(lon * 1e7), round(alt * 1000), 0, 100, 0, 0, 0))
+            if gnss and k % 20 == 0 and t_us >= GNSS_DELAY_US:
+                t_valid = t_us - GNSS_DELAY_US
+                lat, lon, alt = HOME.to_geodetic(np.array([SPEED_N_M_S * t_valid / 1e6, 0.0, -10.0]))
+                w.write(stamp, mc.encode_gnss(GnssFix(t_valid, lat, lon, alt, 3, 12)))
+
+
+def test_replay_plumbing_with_known_answers(tmp_path: Path) -> None:
+    log = tmp_path / "flight.tlog"
+    write_flight(log, bad_imu_every=50)
+    navs: list[LastFixNavigator] = []
+
+    def factory(method: str, frame: LocalNedFrame) -> LastFixNavigator:
+        navs.append(LastFixNavigator(method, frame))
+        return navs[-1]
+
+    result = core.replay(log, "naive", home=HOME, rate_hz=0, navigator=factory)
+    s = result.summary
+    pushed = navs[0].pushed
+    assert s["sources"] == {"imu": "HIGHRES_IMU", "attitude": "ATTITUDE_QUATERNION"}
+    assert s["samples_used"]["imu"] == 400 - 8 and s["samples_rejected"]["codec"] == {"imu_non_finite": 8}
+    assert s["samples_used"]["imu_other_source_ignored"] == 400  # RAW_IMU never fed twice
+    assert s["samples_used"]["gnss"] == 20 - 1
+    assert len(pushed) == s["navigator"]["pushed"] == 392 + 400 + 19
+    t_imu = [p.t_us for p in pushed if isinstance(p, ImuSample)]
+    assert t_imu == sorted(t_imu)
+    # the double lags truth by the GNSS delay plus up to one fix period (0.2 .. 0.4 s at 1 m/s)
+    truth = s["errors"]["sim_state_truth"]["error_horizontal_m"]
+    assert 0.19 < truth["median"] < 0.41 and truth["max"] < 0.41
+    assert set(s["errors"]) == {"gnss", "sim_state_truth", "autopilot_global_position"}
+    ap = s["errors"]["autopilot_global_position"]["error_horizontal_m"]
+    assert abs(ap["median"] - truth["median"]) < 0.05
+
+
+def test_cli_writes_csv_and_strict_json(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    log = tmp_path / "flight.tlog"
+    write_flight(log)
+    monkeypatch.setattr(core, "default_navigator", LastFixNavigator)
+    out = tmp_path / "out"
+    assert main(["replay", str(log), "--method", "naive", "--out", str(out), "--rate-hz", "10"]) == 0
+    table = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)
+    header = (out / "estimates.csv").read_text().splitlines()[0].split(",")
+    assert tuple(header) == core.CSV_COLUMNS and table.shape[1] == len(core.CSV_COLUMNS)
+    assert 30 <= table.shape[0] <= 40 and np.all(np.diff(table[:, 0]) >= 0.1 - 1e-9)
+    summary = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    assert summary["nis"] == {"n": 0} and summary["beta"]["median"] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("content", "reason"),
+    [
+        (b"", "no readable MAVLink frames"),
+        (np.random.default_rng(5).integers(0, 256, 5000, dtype=np.uint8).tobytes(), "no readable MAVLink"),
+        (None, "no usable GPS_RAW_INT 3-D fix"),
+    ],
+)
+def test_unusable_logs_end_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: bytes | None, reason: str
+) -> None:
+    log = tmp_path / "bad.tlog"
+    if content is None:
+        write_flight(log, seconds=0.5, gnss=False)
+    else:
+        log.write_bytes(content)
+    assert main(["replay", str(log), "--method", "naive", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("beliefnav: error: ") and reason in err and "\n" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_home_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["replay", str(QUAD106), "--out", str(tmp_path), "--home", "91,0,0"]) == 2
+    assert "--home" in capsys.readouterr().err
