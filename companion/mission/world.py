@@ -74,13 +74,13 @@ class World:
     def segment_clearance_m(self, a_ne_m: np.ndarray, b_ne_m: np.ndarray) -> ArrayLike:
         """Exact distance from the segment(s) ``a → b`` to the nearest building (0 if crossing).
 
-        ``a_ne_m``, ``b_ne_m``: (..., 2). Two disjoint convex polygons are closest at a vertex
-        of one of them, so the distance is the least of the endpoints' distances to the
+        ``a_ne_m``, ``b_ne_m``: (..., 2), broadcast together. Two disjoint convex polygons are
+        closest at a vertex of one of them, so the distance is the least of the endpoints' distances to the
         rectangle and the rectangle corners' distances to the segment; crossing is detected
         by Liang-Barsky clipping.
         """
-        a = np.asarray(a_ne_m, dtype=float)[..., None, :]  # (..., 1, 2)
-        b = np.asarray(b_ne_m, dtype=float)[..., None, :]
+        a, b = np.broadcast_arrays(np.asarray(a_ne_m, dtype=float), np.asarray(b_ne_m, dtype=float))
+        a, b = a[..., None, :], b[..., None, :]  # (..., 1, 2)
         r = self.rects_m  # (B, 4)
         lo, hi = r[:, :2], r[:, 2:]
         d_ends = np.minimum(_point_rect_m(a, lo, hi), _point_rect_m(b, lo, hi))  # (..., B)
