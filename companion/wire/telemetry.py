@@ -1,0 +1,319 @@
+"""Zenoh edge: telemetry sessions, a publisher that never blocks its caller, and a decoding subscriber.
+
+Topology (no router needed): every process is a Zenoh *peer* with multicast scouting off. The
+first process on the host binds the hub endpoint (``tcp/127.0.0.1:7447`` by default) and the
+others connect to it; gossip then tells each peer the others' (loopback, random-port) listeners
+and they link directly, so the mesh survives the hub's exit and a later process becomes the new
+hub. ``TelemetryConfig.connect`` adds a router or mesh peers (multi-host), and a full Zenoh JSON5
+file (``zenoh_config_file``) replaces all of this.
+
+Environment (read by ``TelemetryConfig.from_env``, so child processes inherit it):
+``BELIEFNAV_ZENOH_HUB`` (endpoint), ``BELIEFNAV_ZENOH_CONNECT`` (comma-separated endpoints),
+``BELIEFNAV_ZENOH_CONFIG`` (file), ``BELIEFNAV_TELEMETRY=off`` (publish nothing).
+"""
+
+from __future__ import annotations
+
+import argparse
+import atexit
+import contextlib
+import json
+import os
+import queue
+import threading
+import time
+import weakref
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from companion.errors import UserError
+from companion.wire import zenoh_codec as zc
+
+DEFAULT_HUB = "tcp/127.0.0.1:7447"
+
+
+@dataclass(frozen=True)
+class TelemetryConfig:
+    """How a process joins the telemetry network."""
+
+    hub_endpoint: str = DEFAULT_HUB  # first process on the host listens here, the others connect
+    connect: tuple[str, ...] = ()  # extra endpoints to connect to (a router, peers on other hosts)
+    mode: str = "peer"  # "peer" (default) or "client" (needs a router in `connect`)
+    zenoh_config_file: str = ""  # a Zenoh JSON5 config that replaces everything above
+    enabled: bool = True  # False: publishers do nothing (no session is opened)
+    queue_len: int = 4096  # bounded hand-off queue of each publisher; full -> the sample is dropped
+
+    @classmethod
+    def from_env(cls, env: dict[str, str] | None = None) -> TelemetryConfig:
+        env = dict(os.environ if env is None else env)
+        return cls(
+            hub_endpoint=env.get("BELIEFNAV_ZENOH_HUB", DEFAULT_HUB),
+            connect=tuple(e for e in env.get("BELIEFNAV_ZENOH_CONNECT", "").split(",") if e),
+            zenoh_config_file=env.get("BELIEFNAV_ZENOH_CONFIG", ""),
+            enabled=env.get("BELIEFNAV_TELEMETRY", "on").lower() not in ("off", "0", "false", "no"),
+        )
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--zenoh-hub``, ``--zenoh-connect``, ``--zenoh-config``: defaults come from the environment."""
+    g = parser.add_argument_group("telemetry (Zenoh)")
+    g.add_argument("--zenoh-hub", metavar="ENDPOINT", help=f"local hub endpoint (default {DEFAULT_HUB})")
+    g.add_argument("--zenoh-connect", metavar="ENDPOINT", action="append", default=[],
+                   help="also connect to this router/peer (repeatable), e.g. tcp/10.0.0.2:7447")
+    g.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file (replaces the defaults)")
+
+
+def config_from_args(args: argparse.Namespace) -> TelemetryConfig:
+    cfg = TelemetryConfig.from_env()
+    if getattr(args, "zenoh_hub", None):
+        cfg = replace(cfg, hub_endpoint=args.zenoh_hub)
+    if getattr(args, "zenoh_connect", None):
+        cfg = replace(cfg, connect=cfg.connect + tuple(args.zenoh_connect))
+    if getattr(args, "zenoh_config", None):
+        cfg = replace(cfg, zenoh_config_file=args.zenoh_config)
+    return cfg
+
+
+def _zenoh_config(cfg: TelemetryConfig, listen: list[str], connect: list[str]) -> zenoh.Config:
+    c = zenoh.Config()
+    c.insert_json5("mode", json.dumps(cfg.mode))
+    c.insert_json5("scouting/multicast/enabled", "false")
+    c.insert_json5("listen/endpoints", json.dumps(listen))
+    c.insert_json5("connect/endpoints", json.dumps(connect))
+    return c
+
+
+def open_session(cfg: TelemetryConfig) -> zenoh.Session:
+    """Open a session per ``cfg``; a broken config or endpoint raises a one-line UserError."""
+    if cfg.zenoh_config_file:
+        path = Path(cfg.zenoh_config_file)
+        try:
+            return zenoh.open(zenoh.Config.from_file(str(path)))
+        except (zenoh.ZError, OSError, ValueError) as exc:
+            raise UserError(f"{path}: cannot open a Zenoh session: {_first_line(exc)}") from None
+    extra = list(cfg.connect)
+    try:
+        if cfg.mode == "client":
+            return zenoh.open(_zenoh_config(cfg, [], extra or [cfg.hub_endpoint]))
+        try:  # be the hub ...
+            return zenoh.open(_zenoh_config(cfg, [cfg.hub_endpoint], extra))
+        except zenoh.ZError as exc:
+            if "in use" not in str(exc):
+                raise
+        # ... or join it, listening on a random loopback port that gossip advertises to the others
+        host = cfg.hub_endpoint.split("/", 1)[-1].rsplit(":", 1)[0]
+        proto = cfg.hub_endpoint.split("/", 1)[0]
+        return zenoh.open(_zenoh_config(cfg, [f"{proto}/{host}:0"], [cfg.hub_endpoint, *extra]))
+    except (zenoh.ZError, ValueError) as exc:
+        raise UserError(f"Zenoh hub {cfg.hub_endpoint}: cannot open a session: {_first_line(exc)}") from None
+
+
+def _first_line(exc: BaseException) -> str:
+    return str(exc).splitlines()[0][:200] if str(exc) else exc.__class__.__name__
+
+
+_OPEN: weakref.WeakSet[Any] = weakref.WeakSet()
+
+
+def _close_all() -> None:
+    """Close every session still open: one left open with a live peer hangs the interpreter at exit.
+
+    Zenoh runs Python callbacks on its own non-daemon threads, which the interpreter joins BEFORE
+    ``atexit`` handlers run, so this is registered with ``threading``'s (earlier) exit hook.
+    """
+    for obj in list(_OPEN):
+        obj.close()
+
+
+_register = getattr(threading, "_register_atexit", atexit.register)
+_register(_close_all)
+
+
+_STOP = object()
+
+
+class TelemetryPublisher:
+    """Publishes domain objects on ``beliefnav/<vehicle>/<process>/<topic>``; never blocks the caller.
+
+    ``publish`` stamps the wall clock and appends to a bounded queue (about a microsecond); a
+    background thread encodes and puts with congestion control DROP. A full queue or a full
+    transport drops the sample and counts it (``counters()``), so slow, stalled or crashed
+    subscribers cost the caller nothing. Use as a context manager or call ``close()``.
+    """
+
+    def __init__(self, vehicle_id: str, process: str, config: TelemetryConfig | None = None):
+        self.config = config or TelemetryConfig.from_env()
+        self.vehicle_id, self.process = vehicle_id, process
+        zc.key_for(vehicle_id, process, "x")  # validates the parts
+        self._counts = {"published": 0, "dropped_queue_full": 0, "encode_errors": 0}
+        self._session: zenoh.Session | None = None
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._queue: queue.Queue[Any] = queue.Queue(maxsize=self.config.queue_len)
+        self._thread: threading.Thread | None = None
+        if not self.config.enabled:
+            return
+        self._session = open_session(self.config)
+        _OPEN.add(self)
+        self._thread = threading.Thread(target=self._drain, name=f"telemetry-{process}", daemon=True)
+        self._thread.start()
+
+    def publish(self, topic: str, obj: Any) -> None:
+        """Queue ``obj`` for ``topic`` (see ``zenoh_codec.TOPICS``); drops and counts when full."""
+        if self._thread is None:
+            return
+        try:
+            self._queue.put_nowait((topic, obj, time.time_ns()))
+        except queue.Full:
+            self._counts["dropped_queue_full"] += 1
+
+    def put_raw(self, topic: str, payload: bytes) -> None:
+        """Put an already-encoded payload now (re-publishing a recording; tests of malformed input)."""
+        if self._session is not None:
+            self._publisher(topic).put(payload)
+
+    def counters(self) -> dict[str, int]:
+        return dict(self._counts)
+
+    def wait_for_subscribers(self, topic: str, timeout_s: float = 10.0) -> bool:
+        """True once a subscriber matches ``topic`` (tests and benchmarks; nodes never wait)."""
+        if self._session is None:
+            return False
+        pub = self._publisher(topic)
+        deadline = time.monotonic() + timeout_s
+        while not pub.matching_status:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
+        return True
+
+    def flush(self, timeout_s: float = 5.0) -> bool:
+        """Wait until the queue is empty (tests, end of a run)."""
+        deadline = time.monotonic() + timeout_s
+        while self._queue.unfinished_tasks and time.monotonic() < deadline:
+            time.sleep(0.002)
+        return not self._queue.unfinished_tasks
+
+    def _publisher(self, topic: str) -> zenoh.Publisher:
+        pub = self._publishers.get(topic)
+        if pub is None:
+            assert self._session is not None
+            pub = self._session.declare_publisher(
+                zc.key_for(self.vehicle_id, self.process, topic),
+                encoding=zenoh.Encoding.APPLICATION_JSON,
+                congestion_control=zenoh.CongestionControl.DROP,
+            )
+            self._publishers[topic] = pub
+        return pub
+
+    def _drain(self) -> None:
+        while True:
+            item = self._queue.get()
+            try:
+                if item is _STOP:
+                    return
+                topic, obj, sent_ns = item
+                try:
+                    payload = zc.encode(topic, obj, sent_ns)
+                except (TypeError, ValueError, KeyError, AttributeError):
+                    self._counts["encode_errors"] += 1
+                    continue
+                try:
+                    self._publisher(topic).put(payload)
+                    self._counts["published"] += 1
+                except zenoh.ZError:  # session closing underneath us
+                    return
+            finally:
+                self._queue.task_done()
+
+    def close(self, flush_timeout_s: float = 1.0) -> None:
+        """Send what is queued (bounded wait), stop the thread, close the session; idempotent."""
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            self.flush(flush_timeout_s)
+            with contextlib.suppress(queue.Full):
+                self._queue.put_nowait(_STOP)
+            thread.join(timeout=flush_timeout_s)
+        session, self._session = self._session, None
+        if session is not None:
+            for pub in self._publishers.values():
+                pub.undeclare()
+            self._publishers.clear()
+            session.close()
+        _OPEN.discard(self)
+
+    def __enter__(self) -> TelemetryPublisher:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class Received:
+    """One decoded telemetry message."""
+
+    vehicle: str
+    process: str
+    topic: str
+    obj: Any
+    sent_unix_ns: int | None
+    recv_unix_ns: int
+    payload: bytes
+
+
+class TelemetrySubscriber:
+    """Subscribes to ``key_expr`` (all beliefnav telemetry by default) and decodes every sample.
+
+    ``on_message(Received)`` runs on a Zenoh thread; a payload that does not decode is counted in
+    ``malformed`` (by key) and passed to ``on_malformed(key, payload, error_text)`` — never raised.
+    """
+
+    def __init__(self, on_message: Callable[[Received], None], config: TelemetryConfig | None = None,
+                 key_expr: str = f"{zc.KEY_PREFIX}/**",
+                 on_malformed: Callable[[str, bytes, str], None] | None = None):
+        self.config = config or TelemetryConfig.from_env()
+        self.on_message, self.on_malformed = on_message, on_malformed
+        self.malformed: dict[str, int] = {}
+        self.received = 0
+        self._lock = threading.Lock()
+        self._session: zenoh.Session | None = open_session(self.config)
+        _OPEN.add(self)
+        self._sub = self._session.declare_subscriber(key_expr, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        now = time.time_ns()
+        key = str(sample.key_expr)
+        payload = sample.payload.to_bytes()
+        try:
+            vehicle, process, topic = zc.split_key(key)
+            obj, sent = zc.decode(topic, payload)
+        except zc.MalformedPayloadError as exc:
+            with self._lock:
+                self.malformed[key] = self.malformed.get(key, 0) + 1
+            if self.on_malformed is not None:
+                self.on_malformed(key, payload, str(exc))
+            return
+        with self._lock:
+            self.received += 1
+        self.on_message(Received(vehicle, process, topic, obj, sent, now, payload))
+
+    @property
+    def malformed_total(self) -> int:
+        return sum(self.malformed.values())
+
+    def close(self) -> None:
+        session, self._session = self._session, None
+        if session is not None:
+            self._sub.undeclare()
+            session.close()
+        _OPEN.discard(self)
+
+    def __enter__(self) -> TelemetrySubscriber:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,269 @@
+"""Zenoh telemetry codec: domain types <-> JSON payloads (Zenoh encoding ``application/json``).
+
+Key expressions are ``beliefnav/<vehicle>/<process>/<topic>``; the topic (last segment) fixes the
+payload's schema (``TOPICS``). Every payload is one flat JSON object with the topic's fields plus
+``sent_unix_ns`` (the publisher's wall clock, ns since the Unix epoch, taken when the caller
+published: receivers on the same host get the end-to-end latency from it). Vectors are JSON lists;
+non-finite floats are ``null`` (JSON has no NaN). The README's "Telemetry topics" section is the
+human-readable form of ``TOPICS``.
+
+Decoding validates everything and raises ``MalformedPayloadError`` (one line, naming the field) on
+anything else: tools count those, they never crash on them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from companion.wire.samples import GnssFix, NavEstimate, Setpoint, TruthState
+
+KEY_PREFIX = "beliefnav"
+ENCODING = "application/json"
+
+
+class MalformedPayloadError(ValueError):
+    """A payload that is not valid JSON for its topic; the message names the field."""
+
+
+# --- telemetry-only types (no MAVLink counterpart) ------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Belief:
+    """GNSS trust belief of the estimator: beta in [0, 1] and the last fix's NIS."""
+
+    t_us: int
+    beta: float
+    nis: float  # NaN before the first fused fix
+    method: str
+
+    @classmethod
+    def of(cls, est: NavEstimate) -> Belief:
+        return cls(t_us=est.t_us, beta=est.beta, nis=est.nis, method=est.method)
+
+
+@dataclass(frozen=True, slots=True)
+class Health:
+    """Counters of a process (samples used, fused, rejected by reason, ...) and its status text."""
+
+    t_us: int
+    counters: Mapping[str, int]
+    status: str = "ok"
+
+
+@dataclass(frozen=True, slots=True)
+class GnssReport:
+    """A GNSS fix as the vehicle released it at ``t_us`` (its validity time is in the fix)."""
+
+    t_us: int
+    fix: GnssFix
+
+    @property
+    def latency_s(self) -> float:
+        return (self.t_us - self.fix.t_validity_us) * 1e-6
+
+
+@dataclass(frozen=True, slots=True)
+class RouteInfo:
+    """The planned route and the map it was planned on (published by the bridge, about 1 Hz)."""
+
+    t_us: int
+    mission: str
+    profile: int
+    waypoints_ned_m: np.ndarray  # (N, 3)
+    duration_s: float
+    buildings_ne_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # (K, 4) n0, e0, n1, e1
+    goal_ned_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+
+
+# --- field kinds: (encode, decode) ----------------------------------------------------------------
+
+_Enc = Callable[[Any], Any]
+_Dec = Callable[[Any, str], Any]
+
+
+def _enc_float(x: Any) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _dec_float(optional: bool) -> _Dec:
+    def dec(v: Any, where: str) -> float:
+        if v is None and optional:
+            return math.nan
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise MalformedPayloadError(f"{where}: expected a finite number, got {v!r}")
+        return float(v)
+
+    return dec
+
+
+def _dec_int(v: Any, where: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise MalformedPayloadError(f"{where}: expected an integer, got {v!r}")
+    return v
+
+
+def _dec_str(v: Any, where: str) -> str:
+    if not isinstance(v, str):
+        raise MalformedPayloadError(f"{where}: expected a string, got {v!r}")
+    return v
+
+
+def _enc_array(x: Any) -> list:
+    a = np.asarray(x, dtype=float)
+    if np.isfinite(a).all():
+        return a.tolist()
+    return [_enc_array(r) for r in a] if a.ndim > 1 else [_enc_float(v) for v in a]
+
+
+def _nan_for_null(v: Any) -> Any:
+    if v is None:
+        return math.nan
+    return [_nan_for_null(x) for x in v] if isinstance(v, list) else v
+
+
+def _dec_array(shape: tuple[int | None, ...], optional: bool = False) -> _Dec:
+    def dec(v: Any, where: str) -> np.ndarray:
+        if not isinstance(v, list):
+            raise MalformedPayloadError(f"{where}: expected a list, got {type(v).__name__}")
+        try:
+            a = np.array(_nan_for_null(v), dtype=float)
+        except (TypeError, ValueError):
+            raise MalformedPayloadError(f"{where}: expected numbers") from None
+        if len(v) == 0 and len(shape) == 2:
+            a = a.reshape(0, shape[1] or 0)
+        if a.ndim != len(shape) or any(n is not None and n != m for n, m in zip(shape, a.shape, strict=True)):
+            want = "x".join("N" if n is None else str(n) for n in shape)
+            raise MalformedPayloadError(f"{where}: expected shape {want}, got {'x'.join(map(str, a.shape))}")
+        if not optional and not np.isfinite(a).all():
+            raise MalformedPayloadError(f"{where}: expected finite numbers")
+        return a
+
+    return dec
+
+
+def _dec_counters(v: Any, where: str) -> dict[str, int]:
+    if not isinstance(v, dict):
+        raise MalformedPayloadError(f"{where}: expected an object, got {type(v).__name__}")
+    return {str(k): _dec_int(c, f"{where}.{k}") for k, c in v.items()}
+
+
+INT = (int, _dec_int)
+STR = (str, _dec_str)
+FLOAT = (_enc_float, _dec_float(False))
+FLOAT_OPT = (_enc_float, _dec_float(True))  # null <-> NaN (not available)
+VEC3 = (_enc_array, _dec_array((3,)))
+COUNTERS = (lambda c: {str(k): int(n) for k, n in c.items()}, _dec_counters)
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """Schema of one topic: the domain type, its JSON fields in order, and derived extra fields."""
+
+    cls: type
+    fields: dict[str, tuple[_Enc, _Dec]]
+    extras: Callable[[Any], dict[str, Any]] = lambda obj: {}
+
+
+_GNSS_FIELDS = {
+    "t_validity_us": INT, "lat_deg": FLOAT, "lon_deg": FLOAT, "alt_m": FLOAT, "fix_type": INT,
+    "satellites_visible": INT, "h_acc_m": FLOAT_OPT, "v_acc_m": FLOAT_OPT,
+}
+
+TOPICS: dict[str, TopicSpec] = {
+    "estimate": TopicSpec(NavEstimate, {
+        "t_us": INT, "p_ned_m": VEC3, "v_ned_m_s": VEC3, "b_ned_m": VEC3,
+        "cov_diag": (_enc_array, _dec_array((9,))), "beta": FLOAT, "nis": FLOAT_OPT, "method": STR}),
+    "belief": TopicSpec(Belief, {"t_us": INT, "beta": FLOAT, "nis": FLOAT_OPT, "method": STR}),
+    "health": TopicSpec(Health, {"t_us": INT, "counters": COUNTERS, "status": STR}),
+    "truth": TopicSpec(TruthState, {
+        "t_us": INT, "p_ned_m": VEC3, "v_ned_m_s": VEC3, "q_ned_frd": (_enc_array, _dec_array((4,))),
+        "gnss_bias_ned_m": VEC3, "gnss_latency_s": FLOAT, "clearance_m": FLOAT_OPT}),
+    "gnss": TopicSpec(GnssReport, {"t_us": INT, **_GNSS_FIELDS},
+                      extras=lambda r: {"latency_s": r.latency_s}),
+    "setpoint": TopicSpec(Setpoint, {"t_us": INT, "p_ned_m": VEC3, "v_ned_m_s": VEC3, "a_ned_m_s2": VEC3}),
+    "route": TopicSpec(RouteInfo, {
+        "t_us": INT, "mission": STR, "profile": INT, "waypoints_ned_m": (_enc_array, _dec_array((None, 3))),
+        "duration_s": FLOAT, "buildings_ne_m": (_enc_array, _dec_array((None, 4))),
+        "goal_ned_m": (_enc_array, _dec_array((3,), optional=True))}),
+}
+
+
+# --- keys -------------------------------------------------------------------------------------------
+
+
+def key_for(vehicle: str, process: str, topic: str) -> str:
+    """``beliefnav/<vehicle>/<process>/<topic>``; each part must be a plain key chunk."""
+    for part in (vehicle, process, topic):
+        if not part or any(c in part for c in "/*$?#"):
+            raise ValueError(f"invalid key part {part!r}")
+    return f"{KEY_PREFIX}/{vehicle}/{process}/{topic}"
+
+
+def split_key(key: str) -> tuple[str, str, str]:
+    """Inverse of ``key_for``: (vehicle, process, topic); MalformedPayloadError for a foreign key."""
+    parts = str(key).split("/")
+    if len(parts) != 4 or parts[0] != KEY_PREFIX or not all(parts):
+        raise MalformedPayloadError(f"{key}: not a beliefnav/<vehicle>/<process>/<topic> key")
+    return parts[1], parts[2], parts[3]
+
+
+# --- payloads ---------------------------------------------------------------------------------------
+
+
+def to_dict(topic: str, obj: Any) -> dict[str, Any]:
+    """The JSON object (before serialisation) of ``obj`` on ``topic``."""
+    spec = TOPICS[topic]
+    if not isinstance(obj, spec.cls):
+        raise TypeError(f"topic {topic!r} carries {spec.cls.__name__}, got {type(obj).__name__}")
+    source = obj.fix if isinstance(obj, GnssReport) else obj
+    out = {}
+    for name, (enc, _dec) in spec.fields.items():
+        value = obj.t_us if name == "t_us" else getattr(source, name)
+        out[name] = enc(value)
+    out.update(spec.extras(obj))
+    return out
+
+
+def encode(topic: str, obj: Any, sent_unix_ns: int) -> bytes:
+    """UTF-8 JSON payload of ``obj`` on ``topic`` (``TypeError`` if the type does not match)."""
+    d = to_dict(topic, obj)
+    d["sent_unix_ns"] = int(sent_unix_ns)
+    return json.dumps(d, separators=(",", ":"), allow_nan=False).encode()
+
+
+def from_dict(topic: str, d: Any) -> Any:
+    """Domain object from a parsed JSON object; MalformedPayloadError on any deviation."""
+    spec = TOPICS.get(topic)
+    if spec is None:
+        raise MalformedPayloadError(f"unknown topic {topic!r}")
+    if not isinstance(d, dict):
+        raise MalformedPayloadError(f"{topic}: expected a JSON object")
+    values = {}
+    for name, (_enc, dec) in spec.fields.items():
+        if name not in d:
+            raise MalformedPayloadError(f"{topic}.{name}: missing")
+        values[name] = dec(d[name], f"{topic}.{name}")
+    if spec.cls is GnssReport:
+        t_us = values.pop("t_us")
+        return GnssReport(t_us=t_us, fix=GnssFix(**values))
+    return spec.cls(**values)
+
+
+def decode(topic: str, payload: bytes | str) -> tuple[Any, int | None]:
+    """(domain object, sent_unix_ns or None) from a payload; MalformedPayloadError if it is not valid."""
+    try:
+        d = json.loads(payload)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise MalformedPayloadError(f"{topic}: not JSON ({exc.__class__.__name__})") from None
+    obj = from_dict(topic, d)
+    sent = d.get("sent_unix_ns")
+    return obj, (sent if isinstance(sent, int) and not isinstance(sent, bool) else None)
+

@@ -1,0 +1,1 @@
+"""Zenoh telemetry recorder (JSON Lines) and the reader that turns a recording back into series."""
