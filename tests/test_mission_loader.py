@@ -129,3 +129,11 @@ def test_file_errors_name_the_file(tmp_path):
     p.write_text(yaml.safe_dump({**BASE, "speed": 3}))
     with pytest.raises(ConfigError, match=r"bad.yaml: unknown key 'speed'"):
         load_mission(p)
+
+
+def test_overlapping_buildings_are_fine():
+    data = copy.deepcopy(BASE)
+    extra = {"north_min_m": 30, "east_min_m": 30, "north_max_m": 50, "east_max_m": 45}  # overlaps building 0
+    data["world"]["buildings"].append(extra)
+    m = build_mission(data, "x.yaml")
+    assert m.world.clearance_m(40.0, 42.0) == 0.0 and m.world.clearance_m(40.0, 47.0) == pytest.approx(2.0)

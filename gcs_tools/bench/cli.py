@@ -16,6 +16,7 @@ TARGETS = {
     "sitl": "gcs_tools.bench.sitl",
     "telemetry": "gcs_tools.bench.telemetry",
     "evaluate": "gcs_tools.bench.evaluate",
+    "plan": "gcs_tools.bench.plan",
 }
 
 
