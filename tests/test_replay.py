@@ -141,3 +141,20 @@ def test_unusable_logs_end_in_one_line(
 def test_bad_home_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["replay", str(QUAD106), "--out", str(tmp_path), "--home", "91,0,0"]) == 2
     assert "--home" in capsys.readouterr().err
+
+
+def test_real_log_every_method() -> None:
+    """quad106 (open sky, 668 s): finite output throughout, within metres of GNSS, β high."""
+    estimator = pytest.importorskip("companion.estimator")
+    if not hasattr(estimator, "Navigator"):
+        pytest.skip("companion.estimator.Navigator has not landed yet")
+    for method in estimator.METHODS:
+        result = core.replay(QUAD106, method)
+        s, table = result.summary, result.table
+        assert s["samples_used"]["imu"] == 32936 and s["samples_used"]["gnss"] == 3339, method
+        assert not s["samples_rejected"]["reader"] and not s["samples_rejected"]["codec"], method
+        assert np.isfinite(table[:, :10]).all() and np.isfinite(table[:, 11:]).all(), method
+        gnss = s["errors"]["gnss"]["error_horizontal_m"]
+        assert gnss["median"] < 2.0 and gnss["p95"] < 5.0, (method, gnss)
+        if "order" in method:
+            assert s["beta"]["median"] > 0.8, (method, s["beta"])

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pymap3d
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True, slots=True)
@@ -16,7 +17,8 @@ class LocalNedFrame:
     home_lon_deg: float
     home_alt_m: float
 
-    def to_ned_m(self, lat_deg: float, lon_deg: float, alt_m: float) -> np.ndarray:
+    def to_ned_m(self, lat_deg: ArrayLike, lon_deg: ArrayLike, alt_m: ArrayLike) -> np.ndarray:
+        """(3,) for scalars; (3, N) for arrays of N points."""
         n, e, d = pymap3d.geodetic2ned(
             lat_deg, lon_deg, alt_m, self.home_lat_deg, self.home_lon_deg, self.home_alt_m
         )

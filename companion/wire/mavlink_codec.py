@@ -151,16 +151,18 @@ def _finite(name: str, *values: float) -> None:
 
 
 def _vec(name: str, x: float, y: float, z: float) -> np.ndarray:
-    _finite(name, x, y, z)
+    if not math.isfinite(x + y + z):  # NaN/inf in any term (float32 inputs cannot overflow)
+        raise CodecError("non_finite", f"{name} has a non-finite field")
     return np.array((x, y, z), dtype=float)
 
 
 def _unit_quaternion(name: str, w: float, x: float, y: float, z: float) -> np.ndarray:
-    _finite(name, w, x, y, z)
     norm = math.sqrt(w * w + x * x + y * y + z * z)
-    if abs(norm - 1.0) > QUAT_NORM_TOLERANCE:
+    if not abs(norm - 1.0) <= QUAT_NORM_TOLERANCE:  # also catches NaN
+        if not math.isfinite(norm):
+            raise CodecError("non_finite", f"{name} has a non-finite field")
         raise CodecError("out_of_range", f"{name} quaternion norm {norm:.3f}")
-    return np.array((w, x, y, z), dtype=float) / norm
+    return np.array((w / norm, x / norm, y / norm, z / norm))
 
 
 def _lat_lon(name: str, lat_deg: float, lon_deg: float) -> None:

@@ -98,16 +98,15 @@ def _make_spec(msgtype: type[mavlink.MAVLink_message]) -> _MessageSpec:
 
         def view(payload: bytes) -> Any:
             return new(cls, getter(unpack(payload)))
-    else:
+    else:  # arrays (slices of the unpacked tuple) and/or NUL-padded text
+        keys = [s if n == 1 else slice(s, s + n) for s, n in zip(starts, spans, strict=True)]
+        text_at = [i for i, text in enumerate(is_text) if text]
 
         def view(payload: bytes) -> Any:
             t = unpack(payload)
-            values = []
-            for start, span, text in zip(starts, spans, is_text, strict=True):
-                if text:
-                    values.append(t[start].rstrip(b"\x00"))
-                else:
-                    values.append(t[start] if span == 1 else t[start : start + span])
+            values = [t[k] for k in keys]
+            for i in text_at:
+                values[i] = values[i].rstrip(b"\x00")
             return new(cls, values)
 
     return _MessageSpec(bytes([msgtype.crc_extra]), msgtype.unpacker.size, view)

@@ -210,6 +210,7 @@ def replay(
     used: Counter[str] = Counter()
     rejected: Counter[str] = Counter()
     series = _Series()
+    fixes: list[GnssFix] = []
     source = {"imu": "", "attitude": ""}
     period_us = int(1e6 / rate_hz) if rate_hz > 0 else 0
     next_row_us = -1
@@ -238,6 +239,8 @@ def replay(
             rejected[f"{group}_{exc.reason}"] += 1
             continue
         used[group] += 1
+        if isinstance(sample, GnssFix) and sample.fix_type >= MIN_FIX_TYPE_3D:
+            fixes.append(sample)
         t0 = time.perf_counter()
         nav.push(sample)
         if isinstance(sample, ImuSample):
@@ -263,34 +266,30 @@ def replay(
     if t_us.size == 0:
         raise UserError(f"{path}: the estimator never initialised ({used['gnss']} GNSS fixes, "
                         f"{used['imu']} IMU samples)")
-    summary = _summary(path, method, home, reader, used, rejected, nav, t_us, table, refs,
+    summary = _summary(path, method, home, reader, used, rejected, nav, t_us, table, refs, fixes,
                        (last_imu_us - (first_imu_us or 0)) / 1e6, read_s, estimator_s, source)
     summary["wall_s"] = time.perf_counter() - wall0
     summary["realtime_factor"] = summary["duration_s"] / summary["wall_s"]
     return ReplayResult(summary, t_us, table)
 
 
-def _gnss_reference(path: Path, frame: LocalNedFrame) -> tuple[np.ndarray, np.ndarray]:
-    t, p = [], []
-    for _, view in read_tlog(path, [GNSS_TYPE]):
-        try:
-            fix = mc.decode_gnss(view)
-        except mc.CodecError:
-            continue
-        if fix.fix_type >= MIN_FIX_TYPE_3D:
-            t.append(fix.t_validity_us)
-            p.append(frame.to_ned_m(fix.lat_deg, fix.lon_deg, fix.alt_m))
-    return np.array(t, dtype=np.int64), np.array(p, dtype=float).reshape(-1, 3)
+def _gnss_reference(fixes: list[GnssFix], frame: LocalNedFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Validity times and local positions of the 3-D fixes (one vectorised conversion)."""
+    t = np.array([f.t_validity_us for f in fixes], dtype=np.int64)
+    if not fixes:
+        return t, np.zeros((0, 3))
+    lla = np.array([(f.lat_deg, f.lon_deg, f.alt_m) for f in fixes])
+    return t, frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
 
 
 def _summary(
     path: Path, method: str, home: LocalNedFrame, reader: TlogReader, used: Counter[str],
     rejected: Counter[str], nav: NavigatorLike, t_us: np.ndarray, table: np.ndarray,
-    refs: _References, duration_s: float, read_s: float, estimator_s: float, source: dict[str, str],
+    refs: _References, fixes: list[GnssFix], duration_s: float, read_s: float, estimator_s: float,
+    source: dict[str, str],
 ) -> dict[str, Any]:
     p_est = table[:, 0:3]
-    t_gnss, p_gnss = _gnss_reference(path, home)
-    references = {"gnss": (t_gnss, p_gnss)}
+    references = {"gnss": _gnss_reference(fixes, home)}
     references.update({k: (np.array(t, dtype=np.int64), np.array(p)) for k, (t, p) in refs.series.items()})
     return {
         "file": str(path),
