@@ -3,3 +3,8 @@
 Imports from ``companion`` only the shared contracts: ``companion.mission`` (mission/map
 schema) and ``companion.wire`` (wire types and codecs). Never the estimator.
 """
+
+from simvehicle.config import SimConfig
+from simvehicle.vehicle import SimVehicle, StepOutput
+
+__all__ = ["SimConfig", "SimVehicle", "StepOutput"]

@@ -1,0 +1,174 @@
+"""Vehicle, autopilot, IMU and GNSS-degradation parameters: the ONE place their values live.
+
+Each section is a frozen dataclass built from the mission's override section of the same
+name (``vehicle``, ``autopilot``, ``imu``, ``gnss``) with ``companion.mission.schema.build``.
+Defaults are the paper's values (Section V.A, DESIGN §4) where it gives them; the rest are
+our documented choices, marked "(ours)".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from companion.mission.schema import build
+
+
+def _positive(obj: Any, *names: str) -> None:
+    for name in names:
+        if not getattr(obj, name) > 0:
+            raise ValueError(f"{name}: must be > 0, got {getattr(obj, name)!r}")
+
+
+def _non_negative(obj: Any, *names: str) -> None:
+    for name in names:
+        if getattr(obj, name) < 0:
+            raise ValueError(f"{name}: must be >= 0, got {getattr(obj, name)!r}")
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """Rigid-body quadrotor (eq. 6-8) and its integration rates."""
+
+    mass_kg: float = 5.0  # paper
+    inertia_kg_m2: tuple[float, float, float] = (0.02, 0.02, 0.04)  # paper, diagonal (FRD axes)
+    gravity_m_s2: float = 9.81
+    drag_n_s_m: float = 0.25  # (ours) linear air drag, force = -drag * v
+    max_thrust_n: float = 98.1  # (ours) thrust-to-weight 2
+    max_torque_nm: float = 2.0  # (ours) per axis
+    radius_m: float = 0.3  # (ours) collision radius around the centre, horizontal
+    physics_rate_hz: int = 200  # paper: IMU and integration rate
+    control_rate_hz: int = 20  # paper: control and GNSS rate
+
+    def validate(self) -> None:
+        _positive(self, "mass_kg", "gravity_m_s2", "max_thrust_n", "max_torque_nm", "radius_m")
+        _positive(self, "physics_rate_hz", "control_rate_hz")
+        _non_negative(self, "drag_n_s_m")
+        if min(self.inertia_kg_m2) <= 0:
+            raise ValueError(f"inertia_kg_m2: every entry must be > 0, got {list(self.inertia_kg_m2)}")
+        if self.physics_rate_hz % self.control_rate_hz or 1_000_000 % self.physics_rate_hz:
+            raise ValueError("physics_rate_hz must be a multiple of control_rate_hz and divide 1e6 µs")
+        if self.max_thrust_n <= self.mass_kg * self.gravity_m_s2:
+            raise ValueError("max_thrust_n: must exceed the weight mass_kg * gravity_m_s2")
+
+    @property
+    def physics_dt_us(self) -> int:
+        return 1_000_000 // self.physics_rate_hz
+
+    @property
+    def steps_per_control(self) -> int:
+        return self.physics_rate_hz // self.control_rate_hz
+
+
+@dataclass(frozen=True)
+class AutopilotConfig:
+    """Cascaded controller (eq. 9-11). All gains (ours): outer loop ~1.5 rad/s, inner ~15 rad/s."""
+
+    kp_xy_1_s2: float = 2.25  # outer P, horizontal
+    kd_xy_1_s: float = 2.7  # outer D, horizontal
+    ki_xy_1_s3: float = 0.3  # outer I, horizontal
+    kp_z_1_s2: float = 4.0  # outer P, vertical
+    kd_z_1_s: float = 4.0  # outer D, vertical
+    ki_z_1_s3: float = 0.5  # outer I, vertical
+    eps_int_m: float = 1.0  # integral active only while ||p_ref - p_hat|| < eps_int (anti-windup)
+    max_integral_m_s2: float = 1.5  # |K_i * integral| clamp per axis
+    max_accel_m_s2: float = 6.0  # commanded acceleration clamp per axis
+    max_tilt_deg: float = 25.0  # roll and pitch command limit
+    k_att_nm_rad: float = 4.5  # inner P on roll/pitch: I_xx * (15 rad/s)^2
+    d_att_nm_s_rad: float = 0.48  # inner rate damping on roll/pitch: 2 * 0.8 * 15 * I_xx
+    k_yaw_nm_rad: float = 1.0  # yaw hold P: I_zz * (5 rad/s)^2
+    d_yaw_nm_s_rad: float = 0.32  # yaw rate damping
+    stale_estimate_s: float = 0.5  # older estimates are ignored: the autopilot holds on its own
+
+    def validate(self) -> None:
+        _positive(self, "eps_int_m", "max_accel_m_s2", "stale_estimate_s", "k_att_nm_rad", "k_yaw_nm_rad")
+        _non_negative(self, "kp_xy_1_s2", "kd_xy_1_s", "ki_xy_1_s3", "kp_z_1_s2", "kd_z_1_s", "ki_z_1_s3")
+        _non_negative(self, "max_integral_m_s2", "d_att_nm_s_rad", "d_yaw_nm_s_rad")
+        if not 0 < self.max_tilt_deg < 80:
+            raise ValueError(f"max_tilt_deg: must be in (0, 80), got {self.max_tilt_deg!r}")
+
+    @property
+    def max_tilt_rad(self) -> float:
+        return math.radians(self.max_tilt_deg)
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    """Accelerometer and gyro white noise, sampled at the physics rate."""
+
+    sigma_acc_m_s2: float = 0.08  # paper
+    sigma_gyro_rad_s: float = 0.003  # (ours)
+
+    def validate(self) -> None:
+        _non_negative(self, "sigma_acc_m_s2", "sigma_gyro_rad_s")
+
+
+@dataclass(frozen=True)
+class GnssConfig:
+    """GNSS degradation (eq. 22-27), one fix per control period.
+
+    Proximity weight (ours): ``w(d) = clip((d_near - d) / ramp, 0, 1)`` with ``d`` the exact
+    distance to the nearest building; the paper's piecewise forms (eq. 25-26 and L̄) are the
+    limit ``ramp -> 0``. Each canyon/open pair below is blended with ``w``: bias correlation
+    time Γ(d) (eq. 24-25), stationary bias std σ_ss(d) (eq. 23 excitation
+    ``σ_ss sqrt(1 - κ²)``, eq. 26), noise variance factor ``m = 1 + (r_urban - 1) w`` and
+    mean latency L̄(d) (eq. 27).
+    """
+
+    sigma_noise_m: float = 0.08  # paper, nominal white noise per axis
+    r_urban: float = 1.5625  # paper-derived: variance factor, 0.08 m -> 0.10 m under multipath
+    d_near_m: float = 15.0  # (ours) clearance below which degradation starts
+    proximity_ramp_m: float = 10.0  # (ours) full degradation at d <= d_near - ramp
+    gamma_open_s: float = 0.3  # (ours) bias correlation time in open sky
+    gamma_canyon_s: float = 3.0  # paper: multipath time constant
+    sigma_bias_open_m: float = 0.05  # (ours) stationary bias std in open sky
+    sigma_bias_max_m: float = 1.2  # paper: maximum bias std
+    latency_open_s: float = 0.1  # (ours) mean latency in open sky
+    latency_canyon_s: float = 0.6  # (ours) mean latency in a canyon
+    latency_tau_s: float = 2.5  # paper: latency correlation time, ζ = exp(-Δt/τ)
+    latency_noise_s: float = 0.03  # paper: latency process noise std per fix
+    latency_cap_s: float = 1.2  # paper: latency is clipped to [0, cap]
+    satellites_open: int = 16  # (ours) satellites_visible in open sky
+    satellites_canyon: int = 7  # (ours) satellites_visible in a canyon
+    report_accuracy: bool = True  # (ours) h_acc/v_acc carry the white-noise std (not the bias)
+
+    def validate(self) -> None:
+        _positive(self, "sigma_noise_m", "d_near_m", "proximity_ramp_m", "gamma_open_s", "gamma_canyon_s")
+        _positive(self, "latency_tau_s", "latency_cap_s")
+        _non_negative(self, "sigma_bias_open_m", "sigma_bias_max_m", "latency_open_s", "latency_canyon_s")
+        _non_negative(self, "latency_noise_s", "satellites_open", "satellites_canyon")
+        if self.r_urban < 1:
+            raise ValueError(f"r_urban: must be >= 1, got {self.r_urban!r}")
+        if max(self.latency_open_s, self.latency_canyon_s) > self.latency_cap_s:
+            raise ValueError("latency_open_s/latency_canyon_s: must not exceed latency_cap_s")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Everything the simulated vehicle needs, one section per part."""
+
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    autopilot: AutopilotConfig = field(default_factory=AutopilotConfig)
+    imu: ImuConfig = field(default_factory=ImuConfig)
+    gnss: GnssConfig = field(default_factory=GnssConfig)
+
+
+SECTIONS = ("vehicle", "autopilot", "imu", "gnss")
+_SECTION_TYPES: dict[str, type] = {
+    "vehicle": VehicleConfig, "autopilot": AutopilotConfig, "imu": ImuConfig, "gnss": GnssConfig
+}
+
+
+def sim_config_from(sections: dict[str, Any], where: str) -> SimConfig:
+    """Build a SimConfig from raw override sections (missing or None = defaults)."""
+    parts: dict[str, Any] = {
+        name: build(_SECTION_TYPES[name], sections.get(name) or {}, f"{where}: {name}") for name in SECTIONS
+    }
+    return SimConfig(**parts)
+
+
+def sim_config_for(mission: Any) -> SimConfig:
+    """The SimConfig of a mission (``mission.section(name)`` per part)."""
+    where = str(getattr(mission, "source", None) or getattr(mission, "name", "mission"))
+    return sim_config_from({name: mission.section(name) for name in SECTIONS}, where)

@@ -1,0 +1,127 @@
+"""Rigid-body quadrotor (eq. 6-8) in NED with body FRD, integrated with RK4.
+
+The paper's 12-state vector ``s = [p, v, φ, θ, ψ, ω]`` (eq. 6) is available from
+``RigidBody.state12()``; internally attitude is a unit quaternion (w, x, y, z), body FRD to
+NED, renormalised after every step, so the rotation matrix stays orthonormal and there is no
+gimbal lock. Translational dynamics (eq. 7, written in NED, thrust along body -z):
+
+    p' = v,    v' = g e_3 - (T / m) R e_3 - (c_drag / m) v
+
+Rotational dynamics (eq. 8): ω' = I⁻¹ (τ - ω × I ω), q' = ½ q ⊗ (0, ω).
+The inner loop is plain Python floats: one step allocates no numpy arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from simvehicle.config import VehicleConfig
+
+# state layout: 0-2 p_ned_m, 3-5 v_ned_m_s, 6-9 q_ned_frd (w, x, y, z), 10-12 omega_frd_rad_s
+STATE_SIZE = 13
+
+
+def quat_to_rot(q: Sequence[float]) -> np.ndarray:
+    """Rotation matrix R_ned_frd of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def quat_to_euler(q: Sequence[float]) -> tuple[float, float, float]:
+    """ZYX Euler angles (roll φ, pitch θ, yaw ψ) in radians of a unit quaternion."""
+    w, x, y, z = q
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def euler_to_quat(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of ZYX Euler angles; ``quat_to_rot`` of it is the paper's ϱ."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+class RigidBody:
+    """The true vehicle state and its RK4 integrator (mutable; one per simulated vehicle)."""
+
+    def __init__(self, cfg: VehicleConfig, p_ned_m: Sequence[float] | np.ndarray, yaw_rad: float = 0.0) -> None:
+        self.cfg = cfg
+        self._inv_m = 1.0 / cfg.mass_kg
+        self._g = cfg.gravity_m_s2
+        self._drag_per_kg = cfg.drag_n_s_m / cfg.mass_kg
+        self._ixx, self._iyy, self._izz = cfg.inertia_kg_m2
+        q = euler_to_quat(0.0, 0.0, yaw_rad)
+        self.x: list[float] = [*map(float, p_ned_m), 0.0, 0.0, 0.0, *q, 0.0, 0.0, 0.0]
+
+    # -- the model ---------------------------------------------------------------------
+    def _deriv(self, x: Sequence[float], thrust_n: float, tx: float, ty: float, tz: float) -> list[float]:
+        _, _, _, vn, ve, vd, qw, qx, qy, qz, p, q, r = x
+        a = thrust_n * self._inv_m
+        c = self._drag_per_kg
+        ixx, iyy, izz = self._ixx, self._iyy, self._izz
+        return [
+            vn,
+            ve,
+            vd,
+            -a * 2 * (qx * qz + qw * qy) - c * vn,
+            -a * 2 * (qy * qz - qw * qx) - c * ve,
+            self._g - a * (1 - 2 * (qx * qx + qy * qy)) - c * vd,
+            0.5 * (-qx * p - qy * q - qz * r),
+            0.5 * (qw * p + qy * r - qz * q),
+            0.5 * (qw * q + qz * p - qx * r),
+            0.5 * (qw * r + qx * q - qy * p),
+            (tx + (iyy - izz) * q * r) / ixx,
+            (ty + (izz - ixx) * p * r) / iyy,
+            (tz + (ixx - iyy) * p * q) / izz,
+        ]
+
+    def step(self, dt_s: float, thrust_n: float, tx: float, ty: float, tz: float) -> None:
+        """Advance by ``dt_s`` with thrust and body torques held constant (zero-order hold)."""
+        x = self.x
+        k1 = self._deriv(x, thrust_n, tx, ty, tz)
+        h = 0.5 * dt_s
+        k2 = self._deriv([xi + h * ki for xi, ki in zip(x, k1, strict=True)], thrust_n, tx, ty, tz)
+        k3 = self._deriv([xi + h * ki for xi, ki in zip(x, k2, strict=True)], thrust_n, tx, ty, tz)
+        k4 = self._deriv([xi + dt_s * ki for xi, ki in zip(x, k3, strict=True)], thrust_n, tx, ty, tz)
+        s = dt_s / 6.0
+        x = [
+            xi + s * (a + 2 * b + 2 * c + d)
+            for xi, a, b, c, d in zip(x, k1, k2, k3, k4, strict=True)
+        ]
+        n = 1.0 / math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+        x[6] *= n
+        x[7] *= n
+        x[8] *= n
+        x[9] *= n
+        self.x = x
+
+    # -- views -------------------------------------------------------------------------
+    @property
+    def q_ned_frd(self) -> tuple[float, float, float, float]:
+        return self.x[6], self.x[7], self.x[8], self.x[9]
+
+    def rotation(self) -> np.ndarray:
+        """R_ned_frd (body FRD to NED), the paper's ϱ(φ, θ, ψ)."""
+        return quat_to_rot(self.q_ned_frd)
+
+    def state12(self) -> np.ndarray:
+        """The paper's state (eq. 6): [n, e, d, v_n, v_e, v_d, φ, θ, ψ, p, q, r]."""
+        x = self.x
+        return np.array([*x[0:6], *quat_to_euler(x[6:10]), *x[10:13]])

@@ -1,0 +1,144 @@
+"""GNSS degradation (eq. 22-27) and the delivery queue that makes fixes arrive late.
+
+One fix per control period, valid at its sampling time ``t_validity_us``:
+
+* ``d`` = exact clearance to the nearest building (eq. 22), proximity weight
+  ``w(d) = clip((d_near - d) / ramp, 0, 1)`` (see ``GnssConfig``);
+* multipath bias, first-order Gauss-Markov (eq. 23-26):
+  ``b ← κ b + σ_ss(w) sqrt(1 - κ²) n``, ``κ = exp(-Δt / Γ(w))`` so that ``σ_ss`` is the
+  stationary std and Γ the correlation time at a fixed place;
+* white noise with variance ``σ² m``, ``m = 1 + (r_urban - 1) w``;
+* latency (eq. 27): ``L ← clip(ζ L + (1 - ζ) L̄(w) + Υ, 0, cap)``, ``ζ = exp(-Δt / τ)``,
+  ``Υ ~ N(0, σ_L²)``.
+
+The fix is queued and released at the first physics tick at or after ``t_validity + L``, so
+consecutive fixes can overtake each other when the latency drops quickly.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.wire.geodesy import LocalNedFrame
+from companion.wire.samples import GnssFix
+from simvehicle.config import GnssConfig
+
+FIX_TYPE_3D = 3
+
+
+@dataclass(frozen=True, slots=True)
+class GnssConditions:
+    """Model parameters at one place (function of the clearance only)."""
+
+    weight: float  # proximity weight w(d) in [0, 1]
+    gamma_s: float  # bias correlation time Γ
+    sigma_bias_m: float  # stationary bias std σ_ss
+    sigma_noise_m: float  # white-noise std (inflated by r_urban)
+    latency_mean_s: float  # L̄
+    satellites: int
+
+
+def conditions(cfg: GnssConfig, clearance_m: float) -> GnssConditions:
+    """Eq. 25-26 and L̄ blended by the proximity weight."""
+    w = min(1.0, max(0.0, (cfg.d_near_m - clearance_m) / cfg.proximity_ramp_m))
+    return GnssConditions(
+        weight=w,
+        gamma_s=cfg.gamma_open_s + (cfg.gamma_canyon_s - cfg.gamma_open_s) * w,
+        sigma_bias_m=cfg.sigma_bias_open_m + (cfg.sigma_bias_max_m - cfg.sigma_bias_open_m) * w,
+        sigma_noise_m=cfg.sigma_noise_m * math.sqrt(1.0 + (cfg.r_urban - 1.0) * w),
+        latency_mean_s=cfg.latency_open_s + (cfg.latency_canyon_s - cfg.latency_open_s) * w,
+        satellites=round(cfg.satellites_open + (cfg.satellites_canyon - cfg.satellites_open) * w),
+    )
+
+
+class NedToGeodetic:
+    """Local NED -> geodetic for ``frame``: the library's forward map (geodetic -> NED), inverted by Newton.
+
+    ``pymap3d.ned2geodetic`` costs ~150 µs per call, ``geodetic2ned`` ~12 µs; with the Jacobian at
+    home (central differences of the library map) one or two corrections reach ``tol_m``.
+    """
+
+    def __init__(self, frame: LocalNedFrame, tol_m: float = 1e-6) -> None:
+        self.frame = frame
+        self.tol_m = tol_m
+        self._home = np.array([frame.home_lat_deg, frame.home_lon_deg, frame.home_alt_m])
+        steps = np.array([1e-5, 1e-5, 1.0])
+        cols = [
+            (frame.to_ned_m(*(self._home + h)) - frame.to_ned_m(*(self._home - h))) / (2 * h[i])
+            for i, h in enumerate(np.diag(steps))
+        ]
+        self._J_inv = np.linalg.inv(np.column_stack(cols))
+
+    def __call__(self, p_ned_m: np.ndarray) -> tuple[float, float, float]:
+        g = self._home + self._J_inv @ p_ned_m
+        for _ in range(6):
+            r = self.frame.to_ned_m(*g.tolist()) - p_ned_m
+            if abs(r).max() <= self.tol_m:
+                break
+            g = g - self._J_inv @ r
+        return float(g[0]), float(g[1]), float(g[2])
+
+
+class GnssModel:
+    """Bias and latency processes plus the delivery queue (seeded, deterministic)."""
+
+    def __init__(self, cfg: GnssConfig, period_s: float, frame: LocalNedFrame, rng: np.random.Generator,
+                 clearance0_m: float) -> None:
+        self.cfg = cfg
+        self.period_s = period_s
+        self.to_geodetic = NedToGeodetic(frame)
+        self._rng = rng
+        c0 = conditions(cfg, clearance0_m)
+        self.bias_ned_m = c0.sigma_bias_m * rng.standard_normal(3)  # start in the stationary law
+        self.latency_s = c0.latency_mean_s
+        self._zeta = math.exp(-period_s / cfg.latency_tau_s)
+        self._queue: list[tuple[int, int, GnssFix]] = []
+        self.sent = 0
+
+    def step(self, clearance_m: float) -> GnssConditions:
+        """Advance bias (eq. 23) and latency (eq. 27) by one fix period at clearance ``d``."""
+        c = conditions(self.cfg, clearance_m)
+        n = self._rng.standard_normal(4)
+        kappa = math.exp(-self.period_s / c.gamma_s)
+        self.bias_ned_m = kappa * self.bias_ned_m + c.sigma_bias_m * math.sqrt(1.0 - kappa * kappa) * n[:3]
+        lat = self._zeta * self.latency_s + (1.0 - self._zeta) * c.latency_mean_s
+        lat += self.cfg.latency_noise_s * float(n[3])
+        self.latency_s = min(self.cfg.latency_cap_s, max(0.0, lat))
+        return c
+
+    def sample(self, t_validity_us: int, p_ned_m: np.ndarray, clearance_m: float) -> GnssFix:
+        """Make the fix valid at ``t_validity_us`` for true position ``p_ned_m`` and queue it."""
+        c = self.step(clearance_m)
+        z_ned_m = p_ned_m + self.bias_ned_m + c.sigma_noise_m * self._rng.standard_normal(3)
+        lat, lon, alt = self.to_geodetic(z_ned_m)
+        acc = self.cfg.report_accuracy
+        fix = GnssFix(
+            t_validity_us=int(t_validity_us),
+            lat_deg=lat,
+            lon_deg=lon,
+            alt_m=alt,
+            fix_type=FIX_TYPE_3D,
+            satellites_visible=c.satellites,
+            h_acc_m=c.sigma_noise_m if acc else float("nan"),
+            v_acc_m=c.sigma_noise_m if acc else float("nan"),
+        )
+        release_us = int(t_validity_us) + math.ceil(self.latency_s * 1e6 - 1e-6)
+        heapq.heappush(self._queue, (release_us, self.sent, fix))
+        self.sent += 1
+        return fix
+
+    def release(self, t_us: int) -> list[GnssFix]:
+        """Fixes whose latency has elapsed by ``t_us``, in order of release time."""
+        out = []
+        q = self._queue
+        while q and q[0][0] <= t_us:
+            out.append(heapq.heappop(q)[2])
+        return out
+
+    @property
+    def pending(self) -> int:
+        return len(self._queue)
