@@ -1,0 +1,85 @@
+"""aiohttp server: the page, its static files, and a Server-Sent Events stream of telemetry frames."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import json
+from pathlib import Path
+
+from aiohttp import web
+
+from companion.errors import UserError
+from gcs_tools.dashboard.state import LiveState
+
+STATIC = Path(__file__).with_name("static")
+FRAME_PERIOD_S = 0.05  # 20 Hz frames to the page
+CLIENT_QUEUE_LEN = 64  # frames a slow browser may lag behind before frames are dropped for it
+
+
+class Dashboard:
+    def __init__(self, state: LiveState, frame_period_s: float = FRAME_PERIOD_S):
+        self.state = state
+        self.frame_period_s = frame_period_s
+        self.clients: set[asyncio.Queue[str]] = set()
+        self.frames_sent = 0
+
+    def app(self) -> web.Application:
+        app = web.Application()
+        app.router.add_get("/", self.index)
+        app.router.add_get("/events", self.events)
+        app.router.add_static("/static/", STATIC)
+        app.cleanup_ctx.append(self._ticker)
+        return app
+
+    async def index(self, request: web.Request) -> web.FileResponse:
+        return web.FileResponse(STATIC / "index.html")
+
+    async def events(self, request: web.Request) -> web.StreamResponse:
+        resp = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache"})
+        await resp.prepare(request)
+        queue: asyncio.Queue[str] = asyncio.Queue(maxsize=CLIENT_QUEUE_LEN)
+        # snapshot and registration in one step of the loop: no frame is missed or doubled
+        queue.put_nowait(json.dumps(self.state.snapshot()))
+        self.clients.add(queue)
+        try:
+            while True:
+                data = await queue.get()
+                await resp.write(f"data: {data}\n\n".encode())
+        except (ConnectionResetError, asyncio.CancelledError):
+            pass
+        finally:
+            self.clients.discard(queue)
+        return resp
+
+    async def _ticker(self, app: web.Application):
+        task = asyncio.create_task(self._tick_forever())
+        yield
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    async def _tick_forever(self) -> None:
+        while True:
+            await asyncio.sleep(self.frame_period_s)
+            frame = json.dumps(self.state.take_frame())
+            self.frames_sent += 1
+            for q in list(self.clients):
+                if q.full():  # a stalled browser loses frames, never the server
+                    continue
+                q.put_nowait(frame)
+
+
+async def serve(dashboard: Dashboard, host: str, port: int) -> web.AppRunner:
+    """Start serving; a port in use is a one-line UserError."""
+    runner = web.AppRunner(dashboard.app(), handle_signals=False)
+    await runner.setup()
+    try:
+        await web.TCPSite(runner, host, port).start()
+    except OSError as exc:
+        await runner.cleanup()
+        if exc.errno == errno.EADDRINUSE:
+            raise UserError(f"port {port} on {host} is already in use (choose another with --port)") from None
+        raise UserError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    return runner

@@ -1,0 +1,150 @@
+"""Live telemetry state shared by the dashboard and ``beliefnav top`` (no I/O, thread-safe).
+
+``ingest`` is called from Zenoh threads with decoded messages; ``take_frame`` (10 Hz or faster)
+returns what arrived since the previous frame as plain JSON-able data and keeps a bounded history
+that ``snapshot`` hands to a newly connected viewer.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from companion.wire import zenoh_codec as zc
+from companion.wire.samples import NavEstimate, Setpoint, TruthState
+from companion.wire.telemetry import Received
+
+SERIES = ("truth", "est", "ref", "beta", "err", "latency")
+TRUTH_MATCH_US = 30_000  # an estimate is compared with truth stamped within this much of it
+
+
+def _num(x: float) -> float | None:
+    return round(float(x), 4) if math.isfinite(x) else None
+
+
+@dataclass
+class VehicleView:
+    history_len: int
+    series: dict[str, deque] = field(default_factory=dict)
+    pending: dict[str, list] = field(default_factory=dict)
+    truth_recent: deque = field(default_factory=lambda: deque(maxlen=64))  # (t_us, p_ned_m)
+    counters: dict[str, dict[str, int]] = field(default_factory=dict)  # process -> counters
+    status: dict[str, str] = field(default_factory=dict)
+    route: dict[str, Any] | None = None
+    route_new: bool = False
+    latest: dict[str, Any] = field(default_factory=dict)  # headline numbers for `top`
+    messages: Counter = field(default_factory=Counter)
+
+    def __post_init__(self) -> None:
+        for name in SERIES:
+            self.series[name] = deque(maxlen=self.history_len)
+            self.pending[name] = []
+
+    def add(self, name: str, point: list) -> None:
+        self.pending[name].append(point)
+
+
+class LiveState:
+    """Per-vehicle bounded histories of tracks, belief, errors, latency and counters."""
+
+    def __init__(self, history_len: int = 6000):
+        self.history_len = history_len
+        self.vehicles: dict[str, VehicleView] = {}
+        self.malformed: Counter[str] = Counter()
+        self.last_malformed = ""
+        self.received = 0
+        self._lock = threading.Lock()
+        self._t0 = time.monotonic()
+
+    def ingest(self, msg: Received) -> None:
+        with self._lock:
+            self.received += 1
+            v = self.vehicles.get(msg.vehicle)
+            if v is None:
+                v = self.vehicles[msg.vehicle] = VehicleView(self.history_len)
+            v.messages[f"{msg.process}/{msg.topic}"] += 1
+            self._ingest(v, msg.process, msg.topic, msg.obj)
+
+    def ingest_malformed(self, key: str, payload: bytes, error: str) -> None:
+        with self._lock:
+            self.malformed[key] += 1
+            self.last_malformed = f"{key}: {error}"[:200]
+
+    @staticmethod
+    def _ingest(v: VehicleView, process: str, topic: str, obj: Any) -> None:
+        t_s = round(obj.t_us * 1e-6, 4)
+        if isinstance(obj, TruthState):
+            v.truth_recent.append((obj.t_us, obj.p_ned_m))
+            v.add("truth", [t_s, _num(obj.p_ned_m[0]), _num(obj.p_ned_m[1])])
+            v.latest["clearance_m"] = obj.clearance_m
+        elif isinstance(obj, NavEstimate):
+            v.add("est", [t_s, _num(obj.p_ned_m[0]), _num(obj.p_ned_m[1])])
+            v.latest.update(t_s=t_s, beta=obj.beta, nis=obj.nis, method=obj.method)
+            match = min(v.truth_recent, key=lambda tp: abs(tp[0] - obj.t_us), default=None)
+            if match is not None and abs(match[0] - obj.t_us) <= TRUTH_MATCH_US:
+                err = float(np.linalg.norm(obj.p_ned_m - match[1]))
+                v.add("err", [t_s, _num(err)])
+                v.latest["est_error_m"] = err
+        elif isinstance(obj, zc.Belief):
+            v.add("beta", [t_s, _num(obj.beta), _num(obj.nis)])
+        elif isinstance(obj, zc.GnssReport):
+            v.add("latency", [t_s, _num(obj.latency_s)])
+            v.latest["gnss_latency_s"] = obj.latency_s
+        elif isinstance(obj, Setpoint):
+            v.add("ref", [t_s, _num(obj.p_ned_m[0]), _num(obj.p_ned_m[1])])
+        elif isinstance(obj, zc.Health):
+            v.counters[process] = dict(obj.counters)
+            v.status[process] = obj.status
+        elif isinstance(obj, zc.RouteInfo):
+            route = {"mission": obj.mission, "profile": obj.profile,
+                     "waypoints_ne_m": [[_num(p[0]), _num(p[1])] for p in obj.waypoints_ned_m],
+                     "buildings_ne_m": [[_num(x) for x in b] for b in obj.buildings_ne_m]}
+            if route != v.route:
+                v.route, v.route_new = route, True
+
+    def _vehicle_json(self, v: VehicleView, series: dict[str, list], route: bool) -> dict[str, Any]:
+        return {
+            "series": series,
+            "counters": v.counters,
+            "status": v.status,
+            "messages": dict(v.messages),
+            "route": v.route if route else None,
+        }
+
+    def take_frame(self) -> dict[str, Any]:
+        """What arrived since the last frame (moved into the history)."""
+        with self._lock:
+            out = {}
+            for name, v in self.vehicles.items():
+                series = {}
+                for s in SERIES:
+                    series[s] = v.pending[s]
+                    v.series[s].extend(v.pending[s])
+                    v.pending[s] = []
+                out[name] = self._vehicle_json(v, series, v.route_new)
+                v.route_new = False
+            return {"type": "frame", "vehicles": out, **self._totals()}
+
+    def snapshot(self) -> dict[str, Any]:
+        """The retained history (for a viewer that just connected); pending data is NOT included."""
+        with self._lock:
+            out = {name: self._vehicle_json(v, {s: list(v.series[s]) for s in SERIES}, True)
+                   for name, v in self.vehicles.items()}
+            return {"type": "snapshot", "vehicles": out, **self._totals()}
+
+    def _totals(self) -> dict[str, Any]:
+        return {"received": self.received, "malformed": sum(self.malformed.values()),
+                "malformed_by_key": dict(self.malformed), "last_malformed": self.last_malformed,
+                "uptime_s": round(time.monotonic() - self._t0, 1)}
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Headline numbers per vehicle (for ``beliefnav top``)."""
+        with self._lock:
+            return {name: {**v.latest, "counters": {p: dict(c) for p, c in v.counters.items()},
+                           "messages": dict(v.messages)} for name, v in self.vehicles.items()}

@@ -1,0 +1,71 @@
+"""``beliefnav top``: terminal view of live telemetry (rich), for use over SSH."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import threading
+from typing import Any
+
+from rich.console import Group
+from rich.live import Live
+from rich.table import Table
+
+from companion.wire import telemetry
+from gcs_tools.dashboard.state import LiveState
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--duration-s", type=float, default=0.0, help="stop after this long (0: until Ctrl-C)")
+    parser.add_argument("--rate-hz", type=float, default=10.0, help="screen refresh rate")
+    telemetry.add_arguments(parser)
+
+
+def _f(x: Any, fmt: str) -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+
+
+def render(state: LiveState) -> Group:
+    """One table of headline numbers per vehicle, one of counters, one line of malformed payloads."""
+    summary = state.summary()
+    main = Table(title="beliefnav vehicles", expand=True)
+    for col in ("vehicle", "t [s]", "method", "β", "NIS", "est. error [m]", "GNSS latency [ms]",
+                "clearance [m]", "messages"):
+        main.add_column(col, justify="right" if col != "method" else "left")
+    counters = Table(title="counters", expand=True)
+    for col in ("vehicle", "process", "counter", "value"):
+        counters.add_column(col, justify="right" if col == "value" else "left")
+    for name, s in sorted(summary.items()):
+        lat = s.get("gnss_latency_s")
+        main.add_row(name, _f(s.get("t_s"), ".2f"), s.get("method", "–"), _f(s.get("beta"), ".3f"),
+                     _f(s.get("nis"), ".2f"), _f(s.get("est_error_m"), ".2f"),
+                     _f(None if lat is None else lat * 1e3, ".0f"), _f(s.get("clearance_m"), ".1f"),
+                     str(sum(s["messages"].values())))
+        for proc, cs in sorted(s["counters"].items()):
+            for k, n in sorted(cs.items()):
+                style = "bold red" if "reject" in k and n else ""
+                counters.add_row(name, proc, k, f"[{style}]{n}[/]" if style else str(n))
+    bad = sum(state.malformed.values())
+    note = f"malformed payloads: {bad}" + (f" (last: {state.last_malformed})" if bad else "")
+    return Group(main, counters, f"[bold red]{note}[/]" if bad else note)
+
+
+def run(args: argparse.Namespace) -> int:
+    state = LiveState(history_len=1)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    with telemetry.TelemetrySubscriber(state.ingest, telemetry.config_from_args(args),
+                                       on_malformed=state.ingest_malformed):
+        period = 1.0 / max(args.rate_hz, 0.1)
+        remaining = args.duration_s if args.duration_s > 0 else math.inf
+        with Live(render(state), refresh_per_second=args.rate_hz, screen=False) as live:
+            try:
+                while not stop.is_set() and remaining > 0:
+                    stop.wait(min(period, remaining))
+                    remaining -= period
+                    state.take_frame()  # keep the (length-1) histories from growing pending lists
+                    live.update(render(state))
+            except KeyboardInterrupt:
+                pass
+    return 0

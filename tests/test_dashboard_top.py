@@ -1,0 +1,19 @@
+"""``beliefnav top`` shows the live numbers (and the malformed count) of a synthetic run."""
+
+import pytest
+from telemetry_helpers import child, hub_env
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
+
+
+def test_top_shows_live_numbers():
+    env = {**hub_env(), "COLUMNS": "160"}
+    with child(["-m", "gcs_tools", "top", "--duration-s", "4"], env) as top:
+        with child(["-m", "gcs_tools.synth", "--vehicle", "uav7", "--duration-s", "3", "--speed", "2",
+                    "--wait-subscriber", "--malformed", "1"], env) as synth:
+            synth.communicate(timeout=30)
+        out, err = top.communicate(timeout=30)
+    assert top.returncode == 0, err
+    last = out[out.rindex("beliefnav vehicles"):]
+    assert "uav7" in last and "second-order" in last and "gnss_rejected_stale" in last
+    assert "malformed payloads: 1" in last
