@@ -17,7 +17,8 @@ from gcs_tools.dashboard.state import LiveState
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--duration-s", type=float, default=0.0, help="stop after this long (0: until Ctrl-C)")
+    parser.add_argument("--duration-s", type=float, default=0.0,
+                        help="stop after this long (0: until Ctrl-C)")
     parser.add_argument("--rate-hz", type=float, default=10.0, help="screen refresh rate")
     telemetry.add_arguments(parser)
 

@@ -10,8 +10,8 @@ from telemetry_helpers import child, free_port, hub_env
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync"]
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 
 @pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="Debian chromium is not installed (make browser)")
@@ -70,4 +70,5 @@ def test_port_in_use_is_one_line_error():
         with child(["-m", "gcs_tools", "dashboard", "--port", str(port)], env) as dash:
             _, err = dash.communicate(timeout=30)
     assert dash.returncode == 2
-    assert err.strip() == f"beliefnav: error: port {port} on 127.0.0.1 is already in use (choose another with --port)"
+    want = f"beliefnav: error: port {port} on 127.0.0.1 is already in use (choose another with --port)"
+    assert err.strip() == want

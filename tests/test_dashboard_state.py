@@ -16,7 +16,8 @@ def test_error_frames_and_history():
     st = LiveState(history_len=3)
     for k in range(5):
         t = k * 20_000
-        st.ingest(msg("vehicle", "truth", TruthState(t, np.array([k, 0.0, -5]), np.zeros(3), np.r_[1.0, 0, 0, 0])))
+        q = np.r_[1.0, 0, 0, 0]
+        st.ingest(msg("vehicle", "truth", TruthState(t, np.array([k, 0.0, -5]), np.zeros(3), q)))
         st.ingest(msg("companion", "estimate",
                       NavEstimate(t + 1000, np.array([k + 3.0, 4.0, -5]), np.zeros(3), np.zeros(3),
                                   np.ones(9), 0.5, float("nan"), "naive")))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import signal
 import sys
 
@@ -32,10 +33,8 @@ async def _main(args: argparse.Namespace) -> None:
     try:
         print(f"dashboard on http://{args.host}:{args.port}/", flush=True)
         with_timeout = args.duration_s if args.duration_s > 0 else None
-        try:
+        with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(stop.wait(), with_timeout)
-        except TimeoutError:
-            pass
     finally:
         sub.close()
         await runner.cleanup()
