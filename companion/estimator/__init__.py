@@ -1,0 +1,24 @@
+"""The belief-adaptive EKF (eq. 12-21, Algorithm 1): pure numpy, no I/O.
+
+    from companion.estimator import EstimatorConfig, Navigator, METHODS
+    nav = Navigator(EstimatorConfig(), method="second-order", frame=None)
+
+Modules: ``config`` (parameters), ``model`` (the linear 9-state model), ``history`` (held IMU
+inputs with prefix integrals), ``belief`` (loss and ∂ℓ/∂β), ``methods`` (adaptation strategies
+and their registry), ``engine`` (filter + out-of-sequence fusion), ``navigator`` (front end).
+"""
+
+import importlib
+
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.methods import REGISTRY, register
+from companion.estimator.navigator import Navigator
+
+# Modules that register extra adaptation methods (see ``methods``' docstring), by name.
+PLUGINS: tuple[str, ...] = ()
+for _plugin in PLUGINS:
+    importlib.import_module(f"companion.estimator.{_plugin}")
+
+METHODS: tuple[str, ...] = tuple(REGISTRY)
+
+__all__ = ["METHODS", "EstimatorConfig", "Navigator", "register"]

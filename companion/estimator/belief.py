@@ -1,0 +1,111 @@
+"""The belief loss ℓ(β) and its analytic derivative ∂ℓ/∂β (DESIGN §3), as pure functions.
+
+At a fix, everything but the belief is fixed: the innovation ``y``, the posterior of the
+previous fusion propagated over the interval T, the nominal R. The belief enters the
+innovation covariance twice, through ``R(β)`` and through the bias process noise of the last
+interval (we include that path; the older posteriors' dependence on earlier beliefs is
+truncated, as in every online gradient):
+
+    S(β) = S₀ + q_b σ_b(β)² I + r(β) R_nom        (diagonal: the axes are independent)
+    S₀   = H (F P⁺ Fᵀ + Q_pv) Hᵀ,  q_b = 1 − α(T)²,  σ_b(β) = σ_max (1 − β) + ε,
+    r(β) = k_R^(1−β)
+    Ṡ    = ∂S/∂β = −2 q_b σ_b σ_max I − ln(k_R) r(β) R_nom
+
+Loss (minimum where S matches the innovation, i.e. at statistical consistency):
+
+    gaussian:  ℓ = ½ log det S + ½ NIS
+    student-t: ℓ = ½ log det S + ((ν+m)/2) log(1 + NIS/ν)      (ν = χ²₀.₉₅ by default)
+    both:      + λ ‖Δp(β)‖,  Δp = [K(β) y]_p, the position jump the fix causes
+
+For one axis the Gaussian term is minimal at s = y²; the Student-t term at NIS = m. We take Δp
+as the jump p̂_k|k − p̂_k|k−1 rather than p̂_k|k − p̂_k−1|k−1 of eq. 16: the propagated part of
+the latter does not depend on β and mostly measures flight speed. The derivatives are
+
+    ∂½log det S/∂β = ½ tr(S⁻¹Ṡ),   ∂NIS/∂β = −yᵀS⁻¹ṠS⁻¹y,
+    ∂Δp/∂β = −(P⁻Hᵀ)_p S⁻¹ Ṡ S⁻¹ y     ((P⁻Hᵀ)_p does not depend on β: Q_b sits in the b-b block)
+
+S is diagonal (``model.py``), so everything below is a sum over the three axes of scalars.
+``paper_loss_grad`` is the loss exactly as printed (eq. 16, log(1 + NIS/χ²) + λ‖Δp‖), kept
+only for comparison: it decreases monotonically as trust falls, so it has no interior minimum.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from companion.estimator.config import EstimatorConfig
+
+Vec3 = tuple[float, float, float]
+
+
+class InnovationTerms(NamedTuple):
+    """What a fix offers to the adaptation rules, per NED axis (m, m²)."""
+
+    y: Vec3  # innovation z − (p⁻ + b⁻)
+    s0: Vec3  # β-independent part of diag(H P⁻ Hᵀ)
+    q_bias_unit: float  # 1 − α(T)²: H Q_b Hᵀ = this · σ_b(β)² I
+    r_nominal: Vec3  # nominal R (variances)
+    pht_p: Vec3  # position rows of P⁻ Hᵀ: P⁻_pp + P⁻_pb (β-independent)
+
+    def hph(self, sigma_bias_m: float) -> Vec3:
+        """diag(H P⁻ Hᵀ) for a bias std σ_b."""
+        q = self.q_bias_unit * sigma_bias_m * sigma_bias_m
+        return (self.s0[0] + q, self.s0[1] + q, self.s0[2] + q)
+
+
+def s_of_beta(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[Vec3, Vec3]:
+    """(diag S(β), diag ∂S/∂β)."""
+    sb = cfg.sigma_bias_m(beta)
+    r = cfg.r_factor(beta)
+    hph = t.hph(sb)
+    dq = -2.0 * t.q_bias_unit * sb * cfg.sigma_bias_max_m
+    dr = -math.log(cfg.r_inflation_max) * r
+    S = (hph[0] + r * t.r_nominal[0], hph[1] + r * t.r_nominal[1], hph[2] + r * t.r_nominal[2])
+    dS = (dq + dr * t.r_nominal[0], dq + dr * t.r_nominal[1], dq + dr * t.r_nominal[2])
+    return S, dS
+
+
+def _terms(beta: float, t: InnovationTerms, cfg: EstimatorConfig
+           ) -> tuple[float, float, float, float, float, float]:
+    """(log det S, its β-derivative, NIS, ∂NIS/∂β, λ‖Δp‖, its β-derivative)."""
+    S, dS = s_of_beta(beta, t, cfg)
+    logdet = d_logdet = nis = d_nis = dp2 = d_dp2 = 0.0
+    for i in range(3):
+        s, ds, y = S[i], dS[i], t.y[i]
+        logdet += math.log(s)
+        d_logdet += ds / s
+        w = y / s
+        nis += y * w
+        d_nis -= w * w * ds
+        dp = t.pht_p[i] * w  # position jump of this axis
+        dp2 += dp * dp
+        d_dp2 += 2.0 * dp * (-t.pht_p[i] * w * ds / s)
+    lam = cfg.lambda_smooth_1_m
+    n = math.sqrt(dp2)
+    smooth, d_smooth = (lam * n, 0.5 * lam * d_dp2 / n) if n > 0.0 else (0.0, 0.0)
+    return logdet, d_logdet, nis, d_nis, smooth, d_smooth
+
+
+def loss_grad(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[float, float, float]:
+    """(ℓ(β), ∂ℓ/∂β, NIS) for the consistency loss selected by ``cfg.loss``."""
+    logdet, d_logdet, nis, d_nis, smooth, d_smooth = _terms(beta, t, cfg)
+    if cfg.loss == "gaussian":
+        fit, d_fit = 0.5 * nis, 0.5 * d_nis
+    else:
+        nu, m = cfg.student_dof, 3.0
+        fit = 0.5 * (nu + m) * math.log1p(nis / nu)
+        d_fit = 0.5 * (nu + m) * d_nis / (nu + nis)
+    return 0.5 * logdet + fit + smooth, 0.5 * d_logdet + d_fit + d_smooth, nis
+
+
+def paper_loss_grad(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[float, float, float]:
+    """(ℓ, ∂ℓ/∂β, NIS) of eq. 16 as printed: log(1 + NIS/χ²₀.₉₅) + λ‖Δp‖ (no interior minimum)."""
+    _, _, nis, d_nis, smooth, d_smooth = _terms(beta, t, cfg)
+    c = cfg.chi2_095
+    return math.log1p(nis / c) + smooth, d_nis / (c + nis) + d_smooth, nis
+
+
+def sigmoid(theta: float) -> float:
+    """β = σ(θ) (eq. 15)."""
+    return 1.0 / (1.0 + math.exp(-theta))

@@ -1,0 +1,109 @@
+"""The estimator's parameters: one frozen dataclass, every field with its unit.
+
+Paper values (Section V.A, DESIGN §4) are marked "paper"; every other value is our choice and
+says why. Mission YAML files override fields through ``companion.mission.schema.build``.
+
+Trust model (the paper gives ``Q_b(β)`` but not ``R(β)``):
+
+* bias process noise (eq. 13): ``Q_b(β) = (1 − α(Δt)²) σ_b(β)² I`` with
+  ``σ_b(β) = sigma_bias_max_m · (1 − β) + sigma_bias_floor_m`` (the paper's ``1 − β + ε``
+  scaled by the largest multipath bias std, so ``σ_b`` has its unit) and
+  ``α(Δt) = exp(−Δt / bias_tau_s)``, so blocks of steps compose exactly;
+* measurement covariance: ``R(β) = R_nom · r_inflation_max ** (1 − β)``. Monotone decreasing
+  in β, ``R(1) = R_nom`` (full trust), ``R(0) = r_inflation_max · R_nom`` (bounded
+  distrust). Log-linear, so equal steps of β scale the GNSS weight by equal factors.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    # --- process model (eq. 12-13)
+    sigma_acc_m_s2: float = 0.08  # paper: IMU acceleration noise std (white, continuous-time density per √s)
+    bias_tau_s: float = 3.0  # paper Γ_mp: correlation time of the GNSS multipath bias state
+    sigma_bias_max_m: float = 1.2  # paper: largest multipath bias std; σ_b(β=0) ≈ this
+    sigma_bias_floor_m: float = 0.01  # ε of eq. 13: bias std kept at full trust (β = 1)
+    gravity_m_s2: float = 9.80665  # added on NED z: a_ned = R f_frd + [0, 0, g]
+
+    # --- measurement model (eq. 14)
+    sigma_gnss_horizontal_m: float = 0.08  # paper: nominal GNSS noise std, north and east
+    sigma_gnss_vertical_m: float = 0.08  # paper gives one value; vertical kept equal
+    r_inflation_max: float = 100.0  # R(0) / R(1): GNSS variance at zero trust (std × 10)
+
+    # --- initial covariance (at the first good fix; position from the fix itself)
+    sigma_velocity0_m_s: float = 1.0  # velocity is unknown at start-up
+    sigma_bias0_m: float = 0.1  # initial multipath bias std
+
+    # --- time handling and out-of-sequence fusion (Algorithm 1)
+    history_s: float = 2.0  # fixes with validity older than (latest IMU − this) are rejected (≥ 1.5 s)
+    future_tolerance_s: float = 0.05  # a fix valid up to this far ahead of the latest IMU waits for it
+    imu_hold_max_s: float = 0.1  # longest an IMU sample is held; a longer gap counts and coasts
+
+    # --- belief adaptation (eq. 15-21)
+    theta0: float = 0.0  # initial belief logit (β0 = 0.5: undecided)
+    theta_max: float = 6.0  # |θ| clamp, keeps β in [0.0025, 0.9975] so the sigmoid never freezes
+    eta: float = 0.15  # paper: learning rate of the damped Newton step (eq. 20)
+    lambda_reg: float = 0.1  # paper: Newton step regulariser λ_reg (eq. 20)
+    alpha_fast: float = 0.5  # fast curvature accumulator decay per fix (eq. 18), 0 < α_f ≪ α_s
+    alpha_slow: float = 0.95  # slow curvature accumulator decay per fix (eq. 18)
+    omega_fast: float = 0.7  # weight of the fast accumulator (eq. 19)
+    h_fast0: float = 1.0  # initial accumulators (> 0, Algorithm 1 line 3)
+    h_slow0: float = 1.0
+    eta_first_order: float = 0.15  # first-order baseline: θ ← θ − η₁ ∇θ (same gradient, plain step)
+    loss: Literal["student-t", "gaussian"] = "student-t"  # innovation NLL form (DESIGN §3)
+    student_dof: float = 7.815  # ν of the Student-t loss = χ²₀.₉₅(3 dof), the paper's threshold
+    lambda_smooth_1_m: float = 0.1  # weight λ of the smoothness term ‖Δp‖ (1/m)
+    chi2_095: float = 7.815  # paper-literal loss: χ²₀.₉₅ for 3 dof
+
+    # --- baselines
+    beta_fixed: float = 1.0  # naive and adaptive: belief held fixed (full trust; Q_b at its floor)
+    adaptive_window_fixes: int = 20  # Mohamed & Schwarz innovation window N (1 s at 20 Hz)
+    adaptive_r_floor: float = 0.25  # adaptive R eigenvalues kept ≥ this × the smallest nominal variance
+
+    def validate(self) -> None:
+        positive = (
+            "sigma_acc_m_s2", "bias_tau_s", "sigma_bias_max_m", "sigma_bias_floor_m",
+            "sigma_gnss_horizontal_m", "sigma_gnss_vertical_m", "sigma_velocity0_m_s",
+            "sigma_bias0_m", "imu_hold_max_s", "theta_max", "eta", "lambda_reg", "student_dof",
+            "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: must be a finite number > 0, got {value!r}")
+        if self.history_s < 1.5:
+            raise ValueError(f"history_s: must be >= 1.5 s, got {self.history_s}")
+        if self.r_inflation_max < 1.0:
+            raise ValueError(f"r_inflation_max: must be >= 1, got {self.r_inflation_max}")
+        if not 0.0 < self.alpha_fast < self.alpha_slow < 1.0:
+            raise ValueError("alpha_fast, alpha_slow: need 0 < alpha_fast < alpha_slow < 1")
+        if not 0.0 < self.omega_fast < 1.0:
+            raise ValueError(f"omega_fast: must be in (0, 1), got {self.omega_fast}")
+        if not 0.0 <= self.beta_fixed <= 1.0:
+            raise ValueError(f"beta_fixed: must be in [0, 1], got {self.beta_fixed}")
+        if self.adaptive_window_fixes < 2:
+            raise ValueError("adaptive_window_fixes: must be >= 2")
+        for name in ("future_tolerance_s", "lambda_smooth_1_m", "eta_first_order"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"{name}: must be a finite number >= 0")
+
+    # --- derived quantities (pure functions of the fields)
+    def r_nominal_m2(self) -> np.ndarray:
+        """Nominal GNSS covariance R_nom (3×3, m²), NED."""
+        h, v = self.sigma_gnss_horizontal_m**2, self.sigma_gnss_vertical_m**2
+        return np.diag([h, h, v])
+
+    def sigma_bias_m(self, beta: float) -> float:
+        """σ_b(β) of eq. 13 (m)."""
+        return self.sigma_bias_max_m * (1.0 - beta) + self.sigma_bias_floor_m
+
+    def r_factor(self, beta: float) -> float:
+        """R(β) / R_nom = r_inflation_max ** (1 − β): 1 at full trust, r_inflation_max at none."""
+        return float(self.r_inflation_max ** (1.0 - beta))

@@ -1,0 +1,270 @@
+"""The belief-adaptive EKF with out-of-sequence GNSS fusion (Algorithm 1), in the local NED frame.
+
+Inputs are NED accelerations (gravity-compensated) and NED position fixes stamped with their
+validity time; no frames, attitude or geodesy here (``navigator.py`` does those).
+
+The filter is a time-ordered list of fusions. Each entry keeps the posterior (x⁺, P⁺) at the
+fix's validity time, the adaptation state after it (so β too) and the fix itself. Between two
+entries nothing but the prediction happens, and the prediction over any interval is one closed-
+form step (``model.py``: exact F(T), Q(T); ``history.py``: exact mean from prefix integrals),
+so neither the state nor the covariance is propagated per IMU sample:
+
+* an on-time or late fix whose validity is after the last fusion: one prediction from the last
+  entry to its validity time, one update — the same cost whatever the delay;
+* a fix older than the last fusion (arrived out of order): roll back to the entry before its
+  validity time, fuse it, then re-fuse the later fixes from their stored measurements — cost
+  O(number of later fixes), never O(IMU samples). The result equals in-order processing;
+* a fix valid slightly after the newest IMU sample waits until the IMU stream passes it;
+* ``estimate()`` predicts from the last entry to the newest IMU time (cached).
+
+Entries older than ``history_s`` are dropped; the newest of them is kept as the base (re-based
+to the horizon when it is older, so a GNSS outage does not grow the IMU history). Fixes valid
+before the base are rejected and counted.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from companion.estimator import methods, model
+from companion.estimator.belief import InnovationTerms, Vec3
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.history import ImuHistory, finite3
+
+_TRIM_EVERY = 256  # IMU samples between two trims of the histories
+
+
+class Fusion(NamedTuple):
+    """One entry of the fusion history (all NED)."""
+
+    t_us: int  # validity time of the fix (or of a re-based anchor)
+    z_ned_m: Vec3 | None  # the fix; None for an anchor without a measurement
+    x: model.State  # posterior [p, v, b] (m, m/s, m)
+    P: model.Cov  # posterior covariance, per axis (model.py)
+    state: Any  # adaptation state after this fix (immutable)
+    nis: float  # NIS of this fix (of the last fix for an anchor)
+
+
+class Snapshot(NamedTuple):
+    """The filter carried to the newest IMU time."""
+
+    t_us: int
+    x: model.State
+    P: model.Cov
+    beta: float
+    nis: float
+
+
+class FusionEngine:
+    """Belief-adaptive EKF on NED inputs; counts every rejection in ``counts``."""
+
+    def __init__(self, cfg: EstimatorConfig, method: str, counts: dict[str, int] | None = None) -> None:
+        self.cfg = cfg
+        self.method_name = method
+        self.method = methods.make(method, cfg)
+        self.counts = counts if counts is not None else {}
+        for name in (
+            "imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
+            "gnss_fused", "gnss_refused", "gnss_out_of_order", "gnss_rejected_before_imu",
+            "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
+            "gnss_rejected_nonfinite",
+        ):
+            self.counts.setdefault(name, 0)
+        self.imu = ImuHistory(cfg.imu_hold_max_s)
+        self.fusions: list[Fusion] = []
+        self._fusion_t: list[int] = []
+        self._pending: list[tuple[int, Vec3]] = []  # fixes waiting for the IMU, by time
+        self._history_us = int(round(cfg.history_s * 1e6))
+        self._future_us = int(round(cfg.future_tolerance_s * 1e6))
+        self._r_nominal: Vec3 = tuple(float(v) for v in cfg.r_nominal_m2().diagonal())  # type: ignore[assignment]
+        self._q_acc = cfg.sigma_acc_m_s2**2
+        self._trim_len = _TRIM_EVERY
+        self._cache: tuple[Fusion, int, Snapshot] | None = None
+
+    # ----------------------------------------------------------------- IMU
+    def push_acc(self, t_us: int, ax: float, ay: float, az: float) -> None:
+        """One NED acceleration (m/s², gravity-compensated) at ``t_us``."""
+        c = self.counts
+        if (ax - ax) + (ay - ay) + (az - az) != 0.0:  # NaN or ±inf somewhere
+            c["imu_rejected_nonfinite"] += 1
+            return
+        imu = self.imu
+        if imu.t_us and t_us <= imu.t_us[-1]:
+            c["imu_rejected_time_backwards"] += 1
+            return
+        if imu.append(t_us, ax, ay, az):
+            c["imu_gaps"] += 1
+        c["imu_used"] += 1
+        if self._pending and self._pending[0][0] <= t_us:
+            self._flush_pending()
+        if len(imu.rows) > self._trim_len:
+            self._trim()
+
+    def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray) -> None:
+        """Many NED accelerations at once; the same result as ``push_acc`` one by one."""
+        t_us = np.asarray(t_us, dtype=np.int64)
+        a_ned = np.asarray(a_ned, dtype=float)
+        n = len(t_us)
+        if n == 0:
+            return
+        imu = self.imu
+        clean = bool(np.isfinite(a_ned).all()) and bool(imu.rows)
+        if clean:
+            t_prev = np.concatenate(([imu.t_us[-1]], t_us[:-1]))
+            dt_s = (t_us - imu.t0_us) * 1e-6 - (t_prev - imu.t0_us) * 1e-6
+            clean = bool((t_us > t_prev).all()) and bool((dt_s <= imu.hold_max_s).all())
+        if not clean:  # anything to gate or count: take the per-sample path
+            for t, (ax, ay, az) in zip(t_us.tolist(), a_ned.tolist(), strict=True):
+                self.push_acc(t, ax, ay, az)
+            return
+        imu.append_batch(t_us, a_ned)
+        self.counts["imu_used"] += n
+        if self._pending and self._pending[0][0] <= imu.t_us[-1]:
+            self._flush_pending()
+        if len(imu.rows) > self._trim_len:
+            self._trim()
+
+    # ---------------------------------------------------------------- GNSS
+    def push_fix(self, t_us: int, z_ned_m: Any) -> None:
+        """A GNSS position (NED, m; 3 numbers) valid at ``t_us``; fused now, later, or rejected."""
+        c = self.counts
+        z = tuple(map(float, z_ned_m))
+        if len(z) != 3 or not finite3(*z):
+            c["gnss_rejected_nonfinite"] += 1
+            return
+        if not self.imu.rows:
+            c["gnss_rejected_before_imu"] += 1
+            return
+        now = self.imu.t_us[-1]
+        if t_us > now + self._future_us:
+            c["gnss_rejected_future"] += 1
+            return
+        if t_us < now - self._history_us or t_us < self.imu.t_us[0] or (
+            self._fusion_t and t_us < self._fusion_t[0]
+        ):
+            c["gnss_rejected_too_old"] += 1
+            return
+        if self._is_duplicate(t_us):
+            c["gnss_rejected_duplicate"] += 1
+            return
+        if t_us > now:
+            bisect.insort(self._pending, (t_us, z), key=lambda item: item[0])  # type: ignore[arg-type]
+            return
+        self._insert(t_us, z)  # type: ignore[arg-type]
+
+    def _is_duplicate(self, t_us: int) -> bool:
+        i = bisect.bisect_left(self._fusion_t, t_us)
+        if i < len(self._fusion_t) and self._fusion_t[i] == t_us and self.fusions[i].z_ned_m is not None:
+            return True
+        return bool(self._pending) and any(t == t_us for t, _ in self._pending)
+
+    def _flush_pending(self) -> None:
+        now = self.imu.t_us[-1]
+        while self._pending and self._pending[0][0] <= now:
+            t_us, z = self._pending.pop(0)
+            self._insert(t_us, z)
+
+    def _insert(self, t_us: int, z: Vec3) -> None:
+        if not self.fusions:
+            self._initialise(t_us, z)
+            return
+        i = bisect.bisect_right(self._fusion_t, t_us)
+        if i == 0:
+            self.counts["gnss_rejected_too_old"] += 1
+            return
+        later = self.fusions[i:]
+        if later:
+            self.counts["gnss_out_of_order"] += 1
+            del self.fusions[i:]
+            del self._fusion_t[i:]
+        self._fuse(t_us, z)
+        self.counts["gnss_fused"] += 1
+        for f in later:
+            assert f.z_ned_m is not None  # anchors only ever sit at index 0
+            self._fuse(f.t_us, f.z_ned_m)
+            self.counts["gnss_refused"] += 1
+
+    def _initialise(self, t_us: int, z: Vec3) -> None:
+        x = (*z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        state = self.method.initial_state()
+        self._append(Fusion(t_us, z, x, model.initial_cov_axes(self.cfg), state, float("nan")))
+        self.counts["gnss_fused"] += 1
+
+    def _append(self, f: Fusion) -> None:
+        self.fusions.append(f)
+        self._fusion_t.append(f.t_us)
+
+    def _fuse(self, t_us: int, z: Vec3) -> None:
+        """Predict the last entry to ``t_us`` and fuse ``z`` there (Algorithm 1, lines 7-17)."""
+        cfg = self.cfg
+        prev = self.fusions[-1]
+        T = (t_us - prev.t_us) * 1e-6
+        alpha = math.exp(-T / cfg.bias_tau_s)
+        sigma_b = cfg.sigma_bias_m(self.method.beta(prev.state))
+        q_bias_unit = 1.0 - alpha * alpha
+        q_b = q_bias_unit * sigma_b * sigma_b
+        P_prior = model.predict_axes(prev.P, T, alpha, self._q_acc, q_b)
+        (pp0, _, pb0, _, _, bb0), (pp1, _, pb1, _, _, bb1), (pp2, _, pb2, _, _, bb2) = P_prior
+        x_prior = self.imu.propagate_mean(prev.x, prev.t_us, t_us, alpha)
+        y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
+        terms = InnovationTerms(
+            y,
+            (pp0 + 2.0 * pb0 + bb0 - q_b, pp1 + 2.0 * pb1 + bb1 - q_b, pp2 + 2.0 * pb2 + bb2 - q_b),
+            q_bias_unit,
+            self._r_nominal,
+            (pp0 + pb0, pp1 + pb1, pp2 + pb2),
+        )
+        R = self.method.measurement_cov(prev.state, terms)
+        x_post, P_post, nis = model.update_axes(x_prior, P_prior, z, R)
+        state = self.method.update(prev.state, terms)
+        self._append(Fusion(t_us, z, x_post, P_post, state, nis))
+
+    # ------------------------------------------------------------- history
+    def _trim(self) -> None:
+        """Drop what no fix inside the history can need; re-base an old base to the horizon."""
+        self._trim_history()
+        self._trim_len = len(self.imu.rows) + _TRIM_EVERY
+
+    def _trim_history(self) -> None:
+        horizon = self.imu.t_us[-1] - self._history_us
+        if not self.fusions:
+            self.imu.trim_before(horizon)
+            return
+        j = bisect.bisect_right(self._fusion_t, horizon) - 1
+        if j < 0:
+            return
+        if j > 0:
+            del self.fusions[:j]
+            del self._fusion_t[:j]
+        base = self.fusions[0]
+        if base.t_us < horizon:
+            x, P = self._predict(base, horizon)
+            self.fusions[0] = Fusion(horizon, None, x, P, base.state, base.nis)
+            self._fusion_t[0] = horizon
+        self.imu.trim_before(self._fusion_t[0])
+
+    def _predict(self, f: Fusion, t_us: int) -> tuple[model.State, model.Cov]:
+        T = (t_us - f.t_us) * 1e-6
+        alpha = math.exp(-T / self.cfg.bias_tau_s)
+        sigma_b = self.cfg.sigma_bias_m(self.method.beta(f.state))
+        q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
+        x = self.imu.propagate_mean(f.x, f.t_us, t_us, alpha)
+        return x, model.predict_axes(f.P, T, alpha, self._q_acc, q_b)
+
+    # -------------------------------------------------------------- output
+    def snapshot(self) -> Snapshot | None:
+        """The filter at the newest IMU time, or None before the first fix."""
+        if not self.fusions:
+            return None
+        last = self.fusions[-1]
+        now = self.imu.t_us[-1]
+        if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
+            return self._cache[2]
+        x, P = self._predict(last, now)
+        snap = Snapshot(now, x, P, self.method.beta(last.state), last.nis)
+        self._cache = (last, now, snap)
+        return snap

@@ -1,0 +1,199 @@
+"""GNSS trust adaptation strategies, selectable by name (``naive``, ``adaptive``, ...).
+
+A strategy is a small object following the ``Adaptation`` protocol. The filter asks it, at each
+fix, for the belief β (which sets Q_b(β) over the interval just predicted) and for the
+measurement covariance R to fuse with, then hands it the fix's ``InnovationTerms`` and gets a
+NEW state back. States must be immutable values (tuples, frozen dataclasses, arrays never
+written again): the out-of-sequence buffer keeps the state after every fix and rolls back to
+it, so a strategy must never keep mutable history on ``self``.
+
+Adding a method (e.g. a variational-Bayes adaptive KF) without touching this file: in its own
+module ``companion/estimator/vb.py``::
+
+    from companion.estimator.methods import register
+
+    @register("variational-bayes")
+    class VariationalBayes:
+        def __init__(self, cfg): ...
+        def initial_state(self): ...
+        def beta(self, state): ...
+        def measurement_cov(self, state, terms): ...
+        def update(self, state, terms): ...
+
+then add ``vb`` to ``PLUGINS`` in ``companion/estimator/__init__.py`` so it is imported and
+appears in ``METHODS``; ``Navigator(cfg, method="variational-bayes")`` then works everywhere.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, NamedTuple, Protocol
+
+from companion.estimator.belief import InnovationTerms, Vec3, loss_grad, paper_loss_grad, sigmoid
+from companion.estimator.config import EstimatorConfig
+from companion.mission.schema import ConfigError
+
+
+class Adaptation(Protocol):
+    """One GNSS trust adaptation rule. ``state`` values are immutable."""
+
+    def initial_state(self) -> Any: ...
+
+    def beta(self, state: Any) -> float:
+        """Belief in [0, 1] in force until the next fix (sets σ_b(β) and is reported)."""
+        ...
+
+    def measurement_cov(self, state: Any, terms: InnovationTerms) -> Vec3:
+        """R to fuse this fix with: per-axis variances (m², NED; R is diagonal)."""
+        ...
+
+    def update(self, state: Any, terms: InnovationTerms) -> Any:
+        """The state after this fix."""
+        ...
+
+
+REGISTRY: dict[str, Callable[[EstimatorConfig], Adaptation]] = {}
+
+
+def register(name: str) -> Callable[[Callable[[EstimatorConfig], Adaptation]], Any]:
+    """Class decorator: make a strategy selectable as ``name``."""
+
+    def deco(factory: Callable[[EstimatorConfig], Adaptation]) -> Any:
+        if name in REGISTRY:
+            raise ValueError(f"adaptation method {name!r} registered twice")
+        REGISTRY[name] = factory
+        return factory
+
+    return deco
+
+
+def make(name: str, cfg: EstimatorConfig) -> Adaptation:
+    """Build the strategy called ``name``; unknown names are a user error naming the choices."""
+    try:
+        factory = REGISTRY[name]
+    except KeyError:
+        raise ConfigError(f"estimator method {name!r} is unknown (known: {', '.join(REGISTRY)})") from None
+    return factory(cfg)
+
+
+@register("naive")
+class Naive:
+    """Fixed R = R_nom and fixed Q (β held at ``beta_fixed``)."""
+
+    def __init__(self, cfg: EstimatorConfig) -> None:
+        self.cfg = cfg
+
+    def initial_state(self) -> None:
+        return None
+
+    def beta(self, state: None) -> float:
+        return self.cfg.beta_fixed
+
+    def measurement_cov(self, state: None, terms: InnovationTerms) -> Vec3:
+        return terms.r_nominal
+
+    def update(self, state: None, terms: InnovationTerms) -> None:
+        return None
+
+
+@register("adaptive")
+class InnovationAdaptive(Naive):
+    """Innovation-based adaptive EKF (Mohamed & Schwarz 1999): R̂ = C_ν − H P⁻ Hᵀ.
+
+    ``C_ν`` is the mean of y yᵀ over the last N innovations (the current one included). The
+    filter's axes are independent and R is diagonal, so the diagonal of R̂ is estimated; each
+    variance is floored at ``adaptive_r_floor`` × the smallest nominal variance, which keeps R̂
+    positive definite. Until N innovations exist, R = R_nom. The state is the tuple of the last
+    N innovations.
+    """
+
+    def __init__(self, cfg: EstimatorConfig) -> None:
+        super().__init__(cfg)
+        sigma_min_m = min(cfg.sigma_gnss_horizontal_m, cfg.sigma_gnss_vertical_m)
+        self.floor_m2 = cfg.adaptive_r_floor * sigma_min_m**2
+
+    def initial_state(self) -> tuple[Vec3, ...]:  # type: ignore[override]
+        return ()
+
+    def _window(self, state: tuple[Vec3, ...], y: Vec3) -> tuple[Vec3, ...]:
+        return (*state, y)[-self.cfg.adaptive_window_fixes :]
+
+    def measurement_cov(self, state: tuple[Vec3, ...], terms: InnovationTerms) -> Vec3:  # type: ignore[override]
+        window = self._window(state, terms.y)
+        n = len(window)
+        if n < self.cfg.adaptive_window_fixes:
+            return terms.r_nominal
+        hph = terms.hph(self.cfg.sigma_bias_m(self.cfg.beta_fixed))
+        c = [sum(y[i] * y[i] for y in window) / n for i in range(3)]
+        return (max(c[0] - hph[0], self.floor_m2), max(c[1] - hph[1], self.floor_m2),
+                max(c[2] - hph[2], self.floor_m2))
+
+    def update(self, state: tuple[Vec3, ...], terms: InnovationTerms) -> tuple[Vec3, ...]:  # type: ignore[override]
+        return self._window(state, terms.y)
+
+
+class BeliefState(NamedTuple):
+    theta: float  # belief logit (eq. 15)
+    h_fast: float  # curvature accumulators (eq. 18)
+    h_slow: float
+
+
+class _Belief:
+    """Sigmoid belief β = σ(θ) driving R(β) and Q_b(β); subclasses choose the θ step."""
+
+    def __init__(self, cfg: EstimatorConfig) -> None:
+        self.cfg = cfg
+
+    def initial_state(self) -> BeliefState:
+        return BeliefState(self.cfg.theta0, self.cfg.h_fast0, self.cfg.h_slow0)
+
+    def beta(self, state: BeliefState) -> float:
+        return sigmoid(state.theta)
+
+    def measurement_cov(self, state: BeliefState, terms: InnovationTerms) -> Vec3:
+        f = self.cfg.r_factor(self.beta(state))
+        return (f * terms.r_nominal[0], f * terms.r_nominal[1], f * terms.r_nominal[2])
+
+    def grad_theta(self, state: BeliefState, terms: InnovationTerms) -> float:
+        """∇θ ℓ = ∂ℓ/∂β · β(1 − β) (chain rule through eq. 15)."""
+        beta = self.beta(state)
+        return loss_grad(beta, terms, self.cfg)[1] * beta * (1.0 - beta)
+
+    def step(self, state: BeliefState, g: float) -> BeliefState:
+        raise NotImplementedError
+
+    def update(self, state: BeliefState, terms: InnovationTerms) -> BeliefState:
+        new = self.step(state, self.grad_theta(state, terms))
+        lim = self.cfg.theta_max
+        return new._replace(theta=min(lim, max(-lim, new.theta)))
+
+
+@register("first-order")
+class FirstOrder(_Belief):
+    """Plain gradient step θ ← θ − η₁ ∇θ ℓ (the ablation baseline)."""
+
+    def step(self, state: BeliefState, g: float) -> BeliefState:
+        return state._replace(theta=state.theta - self.cfg.eta_first_order * g)
+
+
+@register("second-order")
+class SecondOrder(_Belief):
+    """Dual-timescale damped Newton step (eq. 18-21)."""
+
+    def step(self, state: BeliefState, g: float) -> BeliefState:
+        c = self.cfg
+        h_fast = c.alpha_fast * state.h_fast + g * g
+        h_slow = c.alpha_slow * state.h_slow + g * g
+        h = c.omega_fast * h_fast + (1.0 - c.omega_fast) * h_slow
+        return BeliefState(state.theta - c.eta * g / (h + c.lambda_reg), h_fast, h_slow)
+
+
+@register("paper-literal")
+class PaperLiteral(SecondOrder):
+    """FOR COMPARISON ONLY: eq. 16 and eq. 17 exactly as printed (loss without interior
+    minimum, gradient sign flipped), with the second-order step. It drifts to β → 1 whatever
+    the GNSS quality."""
+
+    def grad_theta(self, state: BeliefState, terms: InnovationTerms) -> float:
+        beta = self.beta(state)
+        return -paper_loss_grad(beta, terms, self.cfg)[1] * beta * (1.0 - beta)

@@ -1,0 +1,142 @@
+"""``Navigator``: the estimator's front end on a source-agnostic stream of wire samples.
+
+It pairs each IMU sample with the latest attitude, rotates the specific force from body FRD to
+NED and adds gravity (NED z is down: ``a_ned = R_ned_frd f_frd + [0, 0, g]``), converts fixes
+from geodetic to local NED (``LocalNedFrame``; with ``frame=None`` the first good fix is home),
+gates bad input with counted rejections and feeds ``FusionEngine``. No I/O.
+
+The per-sample IMU path is plain float arithmetic; ``push_imu_batch`` is a vectorised path for
+recorded or simulated blocks that gives the same result as pushing attitude + IMU one by one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.engine import FusionEngine
+from companion.mission.schema import ConfigError
+from companion.wire.geodesy import LocalNedFrame
+from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+
+Rot = tuple[Any, Any, Any, Any, Any, Any, Any, Any, Any]
+BATCH_MIN = 64  # below this many samples the per-sample float path is faster than numpy
+
+
+def rotation_ned_frd(w: Any, x: Any, y: Any, z: Any, sqrt: Callable[[Any], Any]) -> Rot:
+    """Row-major R_ned_frd of a quaternion (normalised here); floats or arrays alike."""
+    n = sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return (
+        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+        2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
+        2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y),
+    )
+
+
+class Navigator:
+    """Belief-adaptive GNSS/IMU navigation on wire samples pushed in arrival order."""
+
+    def __init__(self, cfg: EstimatorConfig | None = None, method: str = "second-order",
+                 frame: LocalNedFrame | None = None) -> None:
+        self.cfg = cfg if cfg is not None else EstimatorConfig()
+        try:
+            self.cfg.validate()
+        except ValueError as exc:
+            raise ConfigError(f"estimator: {exc}") from None
+        self.method = method
+        self.frame = frame
+        self._counts: dict[str, int] = {
+            "attitude_used": 0, "attitude_rejected_nonfinite": 0, "imu_rejected_no_attitude": 0,
+            "gnss_rejected_fix_type": 0,
+        }
+        self.engine = FusionEngine(self.cfg, method, self._counts)
+        self._rot: Rot | None = None
+        self._push_acc = self.engine.push_acc
+        self._g = self.cfg.gravity_m_s2
+
+    # -------------------------------------------------------------- input
+    def push(self, sample: ImuSample | AttitudeSample | GnssFix) -> None:
+        """Consume one sample (arrival order). Never raises on bad data: it is counted."""
+        kind = type(sample)
+        if kind is ImuSample:
+            rot = self._rot
+            if rot is None:
+                self._counts["imu_rejected_no_attitude"] += 1
+                return
+            fx, fy, fz = sample.acc_frd_m_s2.tolist()  # type: ignore[union-attr]
+            self._push_acc(
+                sample.t_us,
+                rot[0] * fx + rot[1] * fy + rot[2] * fz,
+                rot[3] * fx + rot[4] * fy + rot[5] * fz,
+                rot[6] * fx + rot[7] * fy + rot[8] * fz + self._g,
+            )
+        elif kind is AttitudeSample:
+            w, x, y, z = sample.q_ned_frd.tolist()  # type: ignore[union-attr]
+            n2 = w * w + x * x + y * y + z * z
+            if not (math.isfinite(n2) and n2 > 1e-12):
+                self._counts["attitude_rejected_nonfinite"] += 1
+                return
+            self._rot = rotation_ned_frd(w, x, y, z, math.sqrt)
+            self._counts["attitude_used"] += 1
+        elif kind is GnssFix:
+            self._push_fix(sample)  # type: ignore[arg-type]
+        else:
+            raise TypeError(f"Navigator.push: not a sample: {kind.__name__}")
+
+    def push_imu_batch(self, t_us: np.ndarray, acc_frd_m_s2: np.ndarray, q_ned_frd: np.ndarray) -> None:
+        """IMU samples (n,), (n, 3) with their attitudes (n, 4, w first), in time order.
+
+        The same as pushing ``AttitudeSample(t, q)`` then ``ImuSample(t, f)`` for each row.
+        """
+        q = np.asarray(q_ned_frd, dtype=float)
+        f = np.asarray(acc_frd_m_s2, dtype=float)
+        n2 = np.einsum("ij,ij->i", q, q)
+        if len(q) < BATCH_MIN or not (np.isfinite(n2).all() and (n2 > 1e-12).all()):
+            for t, fk, qk in zip(np.asarray(t_us).tolist(), f, q, strict=True):
+                self.push(AttitudeSample(t, qk))
+                self.push(ImuSample(t, fk, np.zeros(3)))
+            return
+        r = rotation_ned_frd(q[:, 0], q[:, 1], q[:, 2], q[:, 3], np.sqrt)
+        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+        a = np.empty_like(f)
+        a[:, 0] = r[0] * fx + r[1] * fy + r[2] * fz
+        a[:, 1] = r[3] * fx + r[4] * fy + r[5] * fz
+        a[:, 2] = r[6] * fx + r[7] * fy + r[8] * fz + self._g
+        self._counts["attitude_used"] += len(q)
+        self._rot = tuple(float(v[-1]) for v in r)  # type: ignore[assignment]
+        self.engine.push_acc_batch(np.asarray(t_us, dtype=np.int64), a)
+
+    def _push_fix(self, fix: GnssFix) -> None:
+        if fix.fix_type < 3:
+            self._counts["gnss_rejected_fix_type"] += 1
+            return
+        if not (math.isfinite(fix.lat_deg) and math.isfinite(fix.lon_deg) and math.isfinite(fix.alt_m)
+                and abs(fix.lat_deg) <= 90.0 and abs(fix.lon_deg) <= 180.0):
+            self._counts["gnss_rejected_nonfinite"] += 1
+            return
+        if self.frame is None:
+            if not self.engine.imu.rows:  # home is set by a fix the filter can start from
+                self._counts["gnss_rejected_before_imu"] += 1
+                return
+            self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
+        self.engine.push_fix(fix.t_validity_us, self.frame.to_ned_m(fix.lat_deg, fix.lon_deg, fix.alt_m))
+
+    # ------------------------------------------------------------- output
+    def estimate(self) -> NavEstimate | None:
+        """The estimate at the newest IMU time; None until the first good fix and IMU."""
+        snap = self.engine.snapshot()
+        if snap is None:
+            return None
+        x = np.array(snap.x)
+        P = snap.P
+        var = np.array([P[0][0], P[1][0], P[2][0], P[0][3], P[1][3], P[2][3], P[0][5], P[1][5], P[2][5]])
+        return NavEstimate(snap.t_us, x[0:3], x[3:6], x[6:9], var, snap.beta, snap.nis, self.method)
+
+    def counters(self) -> dict[str, int]:
+        """Samples used and rejected by reason (stable names)."""
+        return dict(self._counts)
