@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import signal
+import sys
 import threading
 from typing import Any
 
@@ -58,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     with telemetry.TelemetrySubscriber(state.ingest, telemetry.config_from_args(args),
                                        on_malformed=state.ingest_malformed):
+        print("top: subscribed to beliefnav/**", file=sys.stderr, flush=True)
         period = 1.0 / max(args.rate_hz, 0.1)
         remaining = args.duration_s if args.duration_s > 0 else math.inf
         with Live(render(state), refresh_per_second=args.rate_hz, screen=False) as live:

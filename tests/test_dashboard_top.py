@@ -9,6 +9,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 def test_top_shows_live_numbers():
     env = {**hub_env(), "COLUMNS": "160"}
     with child(["-m", "gcs_tools", "top", "--duration-s", "4"], env) as top:
+        assert top.stderr.readline().startswith("top: subscribed")  # subscriber first: nothing missed
         with child(["-m", "gcs_tools.synth", "--vehicle", "uav7", "--duration-s", "3", "--speed", "2",
                     "--wait-subscriber", "--malformed", "1"], env) as synth:
             synth.communicate(timeout=30)

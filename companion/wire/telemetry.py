@@ -179,7 +179,11 @@ class TelemetryPublisher:
         return dict(self._counts)
 
     def wait_for_subscribers(self, topic: str, timeout_s: float = 10.0) -> bool:
-        """True once a subscriber matches ``topic`` (tests and benchmarks; nodes never wait)."""
+        """True once a subscriber matches ``topic`` (tests and benchmarks; nodes never wait).
+
+        A subscriber that joins AFTER the publisher may match up to about a second before gossip has
+        linked it directly; tools that must miss nothing (the recorder) are started first.
+        """
         if self._session is None:
             return False
         pub = self._publisher(topic)
