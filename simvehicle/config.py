@@ -33,7 +33,7 @@ class VehicleConfig:
 
     mass_kg: float = 5.0  # paper
     inertia_kg_m2: tuple[float, float, float] = (0.02, 0.02, 0.04)  # paper, diagonal (FRD axes)
-    gravity_m_s2: float = 9.81
+    gravity_m_s2: float = 9.80665  # standard gravity (the estimator uses the same)
     drag_n_s_m: float = 0.25  # (ours) linear air drag, force = -drag * v
     max_thrust_n: float = 98.1  # (ours) thrust-to-weight 2
     max_torque_nm: float = 2.0  # (ours) per axis

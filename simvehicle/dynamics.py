@@ -61,7 +61,8 @@ def euler_to_quat(roll: float, pitch: float, yaw: float) -> tuple[float, float, 
 class RigidBody:
     """The true vehicle state and its RK4 integrator (mutable; one per simulated vehicle)."""
 
-    def __init__(self, cfg: VehicleConfig, p_ned_m: Sequence[float] | np.ndarray, yaw_rad: float = 0.0) -> None:
+    def __init__(self, cfg: VehicleConfig, p_ned_m: Sequence[float] | np.ndarray,
+                 yaw_rad: float = 0.0) -> None:
         self.cfg = cfg
         self._inv_m = 1.0 / cfg.mass_kg
         self._g = cfg.gravity_m_s2
@@ -71,15 +72,12 @@ class RigidBody:
         self.x: list[float] = [*map(float, p_ned_m), 0.0, 0.0, 0.0, *q, 0.0, 0.0, 0.0]
 
     # -- the model ---------------------------------------------------------------------
-    def _deriv(self, x: Sequence[float], thrust_n: float, tx: float, ty: float, tz: float) -> list[float]:
-        _, _, _, vn, ve, vd, qw, qx, qy, qz, p, q, r = x
-        a = thrust_n * self._inv_m
+    def _deriv(self, vn: float, ve: float, vd: float, qw: float, qx: float, qy: float, qz: float,
+               p: float, q: float, r: float, a: float, tx: float, ty: float, tz: float) -> tuple[float, ...]:
+        """Time derivative of (v, q, ω) at thrust acceleration ``a = T/m`` (p' = v is implicit)."""
         c = self._drag_per_kg
         ixx, iyy, izz = self._ixx, self._iyy, self._izz
-        return [
-            vn,
-            ve,
-            vd,
+        return (
             -a * 2 * (qx * qz + qw * qy) - c * vn,
             -a * 2 * (qy * qz - qw * qx) - c * ve,
             self._g - a * (1 - 2 * (qx * qx + qy * qy)) - c * vd,
@@ -90,27 +88,37 @@ class RigidBody:
             (tx + (iyy - izz) * q * r) / ixx,
             (ty + (izz - ixx) * p * r) / iyy,
             (tz + (ixx - iyy) * p * q) / izz,
-        ]
+        )
 
     def step(self, dt_s: float, thrust_n: float, tx: float, ty: float, tz: float) -> None:
-        """Advance by ``dt_s`` with thrust and body torques held constant (zero-order hold)."""
-        x = self.x
-        k1 = self._deriv(x, thrust_n, tx, ty, tz)
+        """Advance by ``dt_s`` with thrust and body torques held constant (zero-order hold), RK4."""
+        n, e, d, vn, ve, vd, qw, qx, qy, qz, p, q, r = self.x
+        a = thrust_n * self._inv_m
+        f = self._deriv
         h = 0.5 * dt_s
-        k2 = self._deriv([xi + h * ki for xi, ki in zip(x, k1, strict=True)], thrust_n, tx, ty, tz)
-        k3 = self._deriv([xi + h * ki for xi, ki in zip(x, k2, strict=True)], thrust_n, tx, ty, tz)
-        k4 = self._deriv([xi + dt_s * ki for xi, ki in zip(x, k3, strict=True)], thrust_n, tx, ty, tz)
+        k1 = f(vn, ve, vd, qw, qx, qy, qz, p, q, r, a, tx, ty, tz)
+        v1 = (vn + h * k1[0], ve + h * k1[1], vd + h * k1[2])
+        k2 = f(*v1, qw + h * k1[3], qx + h * k1[4], qy + h * k1[5], qz + h * k1[6],
+               p + h * k1[7], q + h * k1[8], r + h * k1[9], a, tx, ty, tz)
+        v2 = (vn + h * k2[0], ve + h * k2[1], vd + h * k2[2])
+        k3 = f(*v2, qw + h * k2[3], qx + h * k2[4], qy + h * k2[5], qz + h * k2[6],
+               p + h * k2[7], q + h * k2[8], r + h * k2[9], a, tx, ty, tz)
+        v3 = (vn + dt_s * k3[0], ve + dt_s * k3[1], vd + dt_s * k3[2])
+        k4 = f(*v3, qw + dt_s * k3[3], qx + dt_s * k3[4], qy + dt_s * k3[5], qz + dt_s * k3[6],
+               p + dt_s * k3[7], q + dt_s * k3[8], r + dt_s * k3[9], a, tx, ty, tz)
         s = dt_s / 6.0
-        x = [
-            xi + s * (a + 2 * b + 2 * c + d)
-            for xi, a, b, c, d in zip(x, k1, k2, k3, k4, strict=True)
+        # position: p' = v, so its RK4 stages are the stage velocities
+        n += s * (vn + 2 * v1[0] + 2 * v2[0] + v3[0])
+        e += s * (ve + 2 * v1[1] + 2 * v2[1] + v3[1])
+        d += s * (vd + 2 * v1[2] + 2 * v2[2] + v3[2])
+        y = [
+            x0 + s * (k1i + 2 * k2i + 2 * k3i + k4i)
+            for x0, k1i, k2i, k3i, k4i in zip(
+                (vn, ve, vd, qw, qx, qy, qz, p, q, r), k1, k2, k3, k4, strict=True
+            )
         ]
-        n = 1.0 / math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-        x[6] *= n
-        x[7] *= n
-        x[8] *= n
-        x[9] *= n
-        self.x = x
+        inv = 1.0 / math.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
+        self.x = [n, e, d, y[0], y[1], y[2], y[3] * inv, y[4] * inv, y[5] * inv, y[6] * inv, y[7], y[8], y[9]]
 
     # -- views -------------------------------------------------------------------------
     @property

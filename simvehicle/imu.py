@@ -7,6 +7,8 @@ gravity, divided by mass — thrust along body -z and air drag — so ≈ (0, 0,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from simvehicle.config import ImuConfig, VehicleConfig
@@ -28,13 +30,17 @@ def rotations(q_ned_frd: np.ndarray) -> np.ndarray:
     return R
 
 
-def specific_force_frd(vehicle: VehicleConfig, thrust_n: np.ndarray, R_ned_frd: np.ndarray,
-                       v_ned_m_s: np.ndarray) -> np.ndarray:
-    """True specific force (n, 3) in body FRD: thrust (body -z) and drag, per unit mass."""
-    drag_frd = -vehicle.drag_n_s_m * np.einsum("nji,nj->ni", R_ned_frd, v_ned_m_s)
-    f = drag_frd / vehicle.mass_kg
-    f[:, 2] -= thrust_n / vehicle.mass_kg
-    return f
+def specific_force_frd(vehicle: VehicleConfig, thrust_n: float,
+                       x: Sequence[float]) -> tuple[float, float, float]:
+    """True specific force in body FRD for thrust and state ``x`` (RigidBody layout): (-c Rᵀv - T e_3) / m."""
+    _, _, _, vn, ve, vd, w, qx, qy, qz = x[:10]
+    # Rᵀ v, the NED velocity in body axes
+    bx = (1 - 2 * (qy * qy + qz * qz)) * vn + 2 * (qx * qy + w * qz) * ve + 2 * (qx * qz - w * qy) * vd
+    by = 2 * (qx * qy - w * qz) * vn + (1 - 2 * (qx * qx + qz * qz)) * ve + 2 * (qy * qz + w * qx) * vd
+    bz = 2 * (qx * qz + w * qy) * vn + 2 * (qy * qz - w * qx) * ve + (1 - 2 * (qx * qx + qy * qy)) * vd
+    c = vehicle.drag_n_s_m
+    inv_m = 1.0 / vehicle.mass_kg
+    return -c * bx * inv_m, -c * by * inv_m, (-thrust_n - c * bz) * inv_m
 
 
 class Imu:

@@ -78,7 +78,7 @@ class SimVehicle:
         """Fly one control period (outer loop once, inner loop and physics every step)."""
         ap, body, gnss = self.autopilot, self.body, self.gnss
         ap.outer(self.t_us, estimate, setpoint)
-        t, dt_s, dt_us = self.t_us, self._dt_s, self._dt_us
+        t, dt_s, dt_us, veh = self.t_us, self._dt_s, self._dt_us, self.config.vehicle
         rows: list[list[float]] = []
         fixes: list[GnssFix] = []
         arrivals: list[int] = []
@@ -87,19 +87,18 @@ class SimVehicle:
             thrust, tx, ty, tz = ap.inner((x[6], x[7], x[8], x[9]), x[10], x[11], x[12])
             body.step(dt_s, thrust, tx, ty, tz)
             t += dt_us
-            rows.append([thrust, *body.x])
+            rows.append([*specific_force_frd(veh, thrust, body.x), *body.x])
             if gnss.pending:
                 for fix in gnss.release(t):
                     fixes.append(fix)
                     arrivals.append(t)
         self.t_us = t
 
-        block = np.array(rows)  # (steps, 14): thrust, p, v, q, omega
-        p, v, q, omega = block[:, 1:4], block[:, 4:7], block[:, 7:11], block[:, 11:14]
-        R = rotations(q)
-        f_true = specific_force_frd(self.config.vehicle, block[:, 0], R, v)
-        acc, gyro = self.imu.measure(f_true, omega)
-        ap.dead_reckon(np.einsum("nij,nj->ni", R, acc) + self._g_ned, dt_s)
+        block = np.array(rows)  # (steps, 16): specific force, p, v, q, omega
+        p, v, q, omega = block[:, 3:6], block[:, 6:9], block[:, 9:13], block[:, 13:16]
+        acc, gyro = self.imu.measure(block[:, 0:3], omega)
+        if ap.holding:
+            ap.dead_reckon(np.einsum("nij,nj->ni", rotations(q), acc) + self._g_ned, dt_s)
 
         # one GNSS fix per period, valid at its end; truth carries the bias of the latest valid fix
         prev_bias, prev_latency_s, prev_clearance_m = gnss.bias_ned_m, gnss.latency_s, self._clearance_m

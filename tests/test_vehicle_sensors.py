@@ -40,11 +40,12 @@ def test_imu_noise_has_configured_std_and_is_seeded():
 
 def test_specific_force_is_rotated_drag_plus_thrust():
     cfg = VehicleConfig(drag_n_s_m=2.0)
-    q = np.array([[math.cos(0.2), 0.0, math.sin(0.2), 0.0]])  # pitched 0.4 rad
-    v = np.array([[3.0, 0.0, 0.0]])
-    f = specific_force_frd(cfg, np.array([50.0]), rotations(q), v)
-    R = rotations(q)[0]
-    np.testing.assert_allclose(f[0], R.T @ (-2.0 * v[0]) / 5.0 + [0, 0, -10.0], atol=1e-14)
+    q = np.array([math.cos(0.2), 0.1, math.sin(0.2), -0.3])
+    q /= np.linalg.norm(q)
+    v = np.array([3.0, -1.0, 0.5])
+    f = np.array([specific_force_frd(cfg, 50.0, [0.0, 0.0, 0.0, *v, *q, 0.0, 0.0, 0.0])])
+    R = rotations(q[None, :])[0]
+    np.testing.assert_allclose(f[0], R.T @ (-2.0 * v) / 5.0 + [0, 0, -10.0], atol=1e-14)
     noisy, _ = Imu(ImuConfig(sigma_acc_m_s2=0.0), np.random.default_rng(0)).measure(f, np.zeros((1, 3)))
     np.testing.assert_array_equal(noisy, f)
 
@@ -140,7 +141,8 @@ def test_fix_is_truth_plus_truth_bias_plus_white_noise():
 def test_ned_to_geodetic_inverts_the_library_map():
     inv = NedToGeodetic(FRAME)
     rng = np.random.default_rng(0)
-    for p in rng.uniform(-3000, 3000, (50, 3)):
-        lat, lon, alt = inv(p)
-        np.testing.assert_allclose(FRAME.to_ned_m(lat, lon, alt), p, atol=1e-6)
-        np.testing.assert_allclose((lat, lon, alt), FRAME.to_geodetic(p), atol=1e-10)
+    for scale, tol_m in ((1000.0, 1e-4), (5000.0, 1e-6)):  # one correction within 1 km, iterated beyond
+        for p in rng.uniform(-scale, scale, (40, 3)):
+            lat, lon, alt = inv(p)
+            np.testing.assert_allclose(FRAME.to_ned_m(lat, lon, alt), p, atol=tol_m)
+            np.testing.assert_allclose((lat, lon), FRAME.to_geodetic(p)[:2], atol=tol_m * 1e-5)

@@ -1,0 +1,30 @@
+"""``beliefnav fly --mission FILE|default --profile N --method M --seed S --out DIR``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--mission", default="default", help="mission YAML file, or 'default' / 'test'")
+    parser.add_argument("--profile", type=int, default=0, help="mission profile index (default 0)")
+    parser.add_argument("--method", default="second-order", help="estimator method (default second-order)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed of the run (default 0)")
+    parser.add_argument("--max-duration", type=float, default=None, metavar="S",
+                        help="stop after S simulated seconds (default: route duration + margin)")
+    parser.add_argument("--out", default="runs/fly", help="output directory (default runs/fly)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from companion.mission import load_mission
+    from gcs_tools.fly.core import fly
+    from gcs_tools.fly.output import strict_json, write_outputs
+
+    mission = load_mission(args.mission)
+    result = fly(mission, args.profile, args.method, args.seed, max_duration_s=args.max_duration)
+    paths = write_outputs(result, mission.world, args.out)
+    s = {k: v for k, v in result.summary.items() if k != "estimator_counters"}
+    print(json.dumps(strict_json(s), indent=2))
+    print(f"wrote {', '.join(str(p) for p in paths)}")
+    return 0

@@ -1,0 +1,143 @@
+"""In-process flight: vehicle, planner, autopilot and estimator closed in one process.
+
+Per control period (20 Hz): ``out = sim.advance(est, sp)``; the period's attitude, IMU and
+released GNSS samples go to the ``Navigator`` in arrival order; ``est = nav.estimate()``;
+``sp = route.setpoint(t)``. The flight ends once the reference has arrived and the vehicle is
+within ``goal_radius_m`` of the goal and slower than ``goal_speed_m_s``, or at the timeout.
+No files here: see ``output``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from companion.errors import UserError
+from companion.estimator import METHODS, EstimatorConfig, Navigator
+from companion.mission import Mission, build, load_mission
+from companion.planning import Route, plan_route
+from simvehicle import SimVehicle
+
+
+@dataclass(frozen=True)
+class FlyConfig:
+    """How a flight starts and ends."""
+
+    start_delay_s: float = 2.0  # hover at the start before the route moves (estimator initialises)
+    goal_radius_m: float = 1.0  # reached: true position within this of the goal ...
+    goal_speed_m_s: float = 0.5  # ... and slower than this
+    timeout_margin_s: float = 30.0  # timeout = start delay + route duration + max(margin, 50 % of duration)
+
+
+@dataclass(frozen=True)
+class FlightResult:
+    summary: dict[str, Any]
+    series: dict[str, np.ndarray]  # 20 Hz, see docs/ARCHITECTURE.md
+    route: Route
+
+
+def error_stats(err_m: np.ndarray) -> dict[str, float]:
+    """median, p95 and RMS of the finite entries (NaN when there are none)."""
+    e = err_m[np.isfinite(err_m)]
+    if e.size == 0:
+        return {"median": math.nan, "p95": math.nan, "rmse": math.nan}
+    return {
+        "median": float(np.median(e)),
+        "p95": float(np.percentile(e, 95)),
+        "rmse": float(np.sqrt(np.mean(e * e))),
+    }
+
+
+def estimator_config(mission: Mission) -> EstimatorConfig:
+    return build(EstimatorConfig, mission.section("estimator"), f"{mission.source}: estimator")
+
+
+def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
+        max_duration_s: float | None = None, config: FlyConfig | None = None) -> FlightResult:
+    """Fly one profile of ``mission`` with estimator ``method``; deterministic given ``seed``."""
+    cfg = config or FlyConfig()
+    m = load_mission(mission) if isinstance(mission, str) else mission
+    if method not in METHODS:
+        raise UserError(f"method {method!r}: expected one of {', '.join(METHODS)}")
+    route = plan_route(m, profile_index, t_start_s=cfg.start_delay_s)
+    sim = SimVehicle(m, profile_index, seed)
+    nav = Navigator(estimator_config(m), method=method, frame=m.frame)
+    goal_ned_m = route.waypoints_ned_m[-1]
+    end_s = cfg.start_delay_s + route.duration_s + max(cfg.timeout_margin_s, 0.5 * route.duration_s)
+    if max_duration_s is not None:
+        end_s = min(end_s, max_duration_s)
+    end_us = round(end_s * 1e6)
+    push = nav.push
+    rows: list[tuple[Any, ...]] = []
+    est, collisions, in_contact, reached = None, 0, False, False
+    wall0 = time.perf_counter()
+    while sim.t_us < end_us:
+        out = sim.advance(est, route.setpoint(sim.t_us))
+        fixes = list(zip(out.gnss_arrival_us, out.gnss, strict=True))
+        k = 0
+        for att, imu in zip(out.attitude, out.imu, strict=True):
+            push(att)
+            push(imu)
+            while k < len(fixes) and fixes[k][0] <= imu.t_us:
+                push(fixes[k][1])
+                k += 1
+        est = nav.estimate()
+        truth = out.truth[-1]
+        rows.append((out.t_us, truth, est))
+        collisions += out.collided and not in_contact
+        in_contact = out.collided
+        if (np.linalg.norm(truth.p_ned_m - goal_ned_m) <= cfg.goal_radius_m
+                and np.linalg.norm(truth.v_ned_m_s) <= cfg.goal_speed_m_s
+                and out.t_us * 1e-6 >= route.t_start_s + route.duration_s):
+            reached = True
+            break
+    wall_s = time.perf_counter() - wall0
+    series = _series(rows, route)
+    counters = nav.counters()
+    summary = {
+        "mission": m.name,
+        "profile": profile_index,
+        "method": method,
+        "seed": seed,
+        "reached_goal": reached,
+        "collisions": int(collisions),
+        "duration_s": sim.t_us * 1e-6,
+        "route_duration_s": route.duration_s,
+        "wall_s": wall_s,
+        "estimation_error_m": error_stats(series["est_error_m"]),
+        "tracking_error_m": error_stats(series["track_error_m"]),
+        "min_clearance_m": float(np.min(series["clearance_m"])),
+        "gnss": {
+            "sent": sim.gnss.sent,
+            "fused": counters.get("gnss_fused", 0),
+            "rejected": sum(v for k, v in counters.items() if k.startswith("gnss_rejected")),
+        },
+        "estimator_counters": counters,
+    }
+    return FlightResult(summary, series, route)
+
+
+def _series(rows: list[tuple[Any, ...]], route: Route) -> dict[str, np.ndarray]:
+    nan3 = np.full(3, np.nan)
+    t_s = np.array([r[0] for r in rows]) * 1e-6
+    p_true = np.array([r[1].p_ned_m for r in rows])
+    p_est = np.array([r[2].p_ned_m if r[2] is not None else nan3 for r in rows])
+    p_ref = route.reference(t_s)[0]
+    return {
+        "t_s": t_s,
+        "p_true_ned_m": p_true,
+        "p_est_ned_m": p_est,
+        "p_ref_ned_m": p_ref,
+        "b_true_ned_m": np.array([r[1].gnss_bias_ned_m for r in rows]),
+        "b_est_ned_m": np.array([r[2].b_ned_m if r[2] is not None else nan3 for r in rows]),
+        "beta": np.array([r[2].beta if r[2] is not None else np.nan for r in rows]),
+        "nis": np.array([r[2].nis if r[2] is not None else np.nan for r in rows]),
+        "latency_s": np.array([r[1].gnss_latency_s for r in rows]),
+        "clearance_m": np.array([r[1].clearance_m for r in rows]),
+        "est_error_m": np.linalg.norm(p_est - p_true, axis=1),
+        "track_error_m": np.linalg.norm(p_true - p_ref, axis=1),
+    }

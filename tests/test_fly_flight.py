@@ -1,0 +1,64 @@
+"""``beliefnav fly``: a real in-process flight on the test city (vehicle, planner, estimator)."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from companion.errors import UserError
+from companion.mission import load_mission
+from gcs_tools.cli import main
+from gcs_tools.fly import fly
+from gcs_tools.fly.output import COLUMNS
+
+TEST_CITY = load_mission("test")
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fly")
+    rc = main(["fly", "--mission", "test", "--profile", "2", "--method", "second-order", "--seed", "1",
+               "--out", str(out)])
+    assert rc == 0
+    return out
+
+
+def test_short_flight_reaches_the_goal_and_writes_every_file(flight):
+    summary = json.loads((flight / "summary.json").read_text())  # strict JSON (no NaN)
+    assert summary["reached_goal"] is True and summary["collisions"] == 0
+    assert summary["duration_s"] >= summary["route_duration_s"]
+    for key in ("estimation_error_m", "tracking_error_m"):
+        stats = summary[key]
+        assert 0 < stats["median"] <= stats["p95"] and stats["rmse"] > 0
+        assert stats["median"] < 2.0  # the estimator really closes the loop (GNSS bias std <= 1.2 m)
+    g = summary["gnss"]
+    assert g["sent"] == round(summary["duration_s"] * 20) and 0.9 * g["sent"] <= g["fused"] <= g["sent"]
+    assert summary["min_clearance_m"] > 0.3
+    with open(flight / "timeseries.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == [c for cols in COLUMNS.values() for c in cols]
+    assert len(rows) - 1 == g["sent"]  # one row per control period
+    for name in ("map.png", "belief.png"):
+        assert (flight / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_same_seed_same_flight_bit_for_bit_and_seeds_differ():
+    a, b, c = (fly(TEST_CITY, 0, "second-order", s, max_duration_s=8.0) for s in (4, 4, 5))
+    for key in a.series:
+        np.testing.assert_array_equal(a.series[key], b.series[key], err_msg=key)
+    assert {k: v for k, v in a.summary.items() if k != "wall_s"} == {
+        k: v for k, v in b.summary.items() if k != "wall_s"
+    }
+    assert not np.array_equal(a.series["p_true_ned_m"], c.series["p_true_ned_m"])
+    assert a.summary["duration_s"] == pytest.approx(8.0) and a.summary["reached_goal"] is False
+
+
+def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
+    with pytest.raises(UserError, match="method 'magic'"):
+        fly(TEST_CITY, 0, "magic", 0)
+    assert main(["fly", "--mission", str(tmp_path / "nope.yaml"), "--out", str(tmp_path)]) == 2
+    assert main(["fly", "--mission", "test", "--profile", "9", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.startswith("beliefnav: error: ") for line in err)
+    assert "nope.yaml" in err[0] and "profile" in err[1]
