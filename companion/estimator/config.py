@@ -39,7 +39,7 @@ class EstimatorConfig:
     # --- measurement model (eq. 14)
     sigma_gnss_horizontal_m: float = 0.08  # paper: nominal GNSS noise std, north and east
     sigma_gnss_vertical_m: float = 0.08  # paper gives one value; vertical kept equal
-    r_inflation_max: float = 100.0  # R(0) / R(1): GNSS variance at zero trust (std × 10)
+    r_inflation_max: float = 1.5625  # R(0) / R(1) = (0.10 / 0.08)²: paper noise under multipath / nominal
 
     # --- initial covariance (at the first good fix; position from the fix itself)
     sigma_velocity0_m_s: float = 1.0  # velocity is unknown at start-up

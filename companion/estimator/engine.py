@@ -152,9 +152,9 @@ class FusionEngine:
             c["gnss_rejected_duplicate"] += 1
             return
         if t_us > now:
-            bisect.insort(self._pending, (t_us, z), key=lambda item: item[0])  # type: ignore[arg-type]
+            bisect.insort(self._pending, (t_us, z), key=lambda item: item[0])
             return
-        self._insert(t_us, z)  # type: ignore[arg-type]
+        self._insert(t_us, z)
 
     def _is_duplicate(self, t_us: int) -> bool:
         i = bisect.bisect_left(self._fusion_t, t_us)

@@ -93,7 +93,7 @@ class ImuHistory:
         s2 = np.cumsum(np.vstack((np.array(r[7:10]), inc * mid[:, None])), axis=0)[1:]
         block = np.hstack((t[:, None], a_ned, s1, s2))
         self.t_us.extend(t_us.tolist())
-        self.rows.extend(map(tuple, block.tolist()))  # type: ignore[arg-type]
+        self.rows.extend(map(tuple, block.tolist()))
 
     def integrals(self, t_us: int) -> tuple[float, float, float, float, float, float, float]:
         """(t_s, S1 (3), S2 (3)) at a time inside the history (held input extrapolated past the last)."""

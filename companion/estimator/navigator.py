@@ -70,7 +70,7 @@ class Navigator:
                 return
             fx, fy, fz = sample.acc_frd_m_s2.tolist()  # type: ignore[union-attr]
             self._push_acc(
-                sample.t_us,
+                sample.t_us,  # type: ignore[union-attr]
                 rot[0] * fx + rot[1] * fy + rot[2] * fz,
                 rot[3] * fx + rot[4] * fy + rot[5] * fz,
                 rot[6] * fx + rot[7] * fy + rot[8] * fz + self._g,

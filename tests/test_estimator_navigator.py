@@ -1,0 +1,167 @@
+"""Navigator front end: FRD→NED + gravity, geodesy, batch path, and every gated input reason."""
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.estimator import EstimatorConfig, Navigator
+from companion.estimator.navigator import rotation_ned_frd
+from companion.wire.geodesy import LocalNedFrame
+from companion.wire.samples import AttitudeSample, GnssFix, ImuSample
+from tests.estimator_streams import multipath_stream
+
+CFG = EstimatorConfig()
+HOME = LocalNedFrame(-37.8136, 144.9631, 40.0)
+G = CFG.gravity_m_s2
+Q_LEVEL = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def _fix(t_us: int, p_ned_m=(0.0, 0.0, 0.0), **kw) -> GnssFix:
+    lat, lon, alt = HOME.to_geodetic(np.asarray(p_ned_m, dtype=float))
+    return GnssFix(t_us, lat, lon, alt, kw.pop("fix_type", 3), 12, **kw)
+
+
+def _imu(t_us: int, f=(0.0, 0.0, -G)) -> ImuSample:
+    return ImuSample(t_us, np.asarray(f, dtype=float), np.zeros(3))
+
+
+def _started(method: str = "naive") -> Navigator:
+    nav = Navigator(CFG, method, HOME)
+    nav.push(AttitudeSample(0, Q_LEVEL))
+    nav.push(_imu(0))
+    nav.push(_fix(0))
+    return nav
+
+
+def test_rotation_matches_axis_angle():
+    yaw = 0.7
+    q = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    R = np.array(rotation_ned_frd(*q, math.sqrt)).reshape(3, 3)
+    c, s = math.cos(yaw), math.sin(yaw)
+    np.testing.assert_allclose(R, [[c, -s, 0], [s, c, 0], [0, 0, 1]], atol=1e-15)
+
+
+def test_hover_is_zero_acceleration_and_pitched_thrust_accelerates_north():
+    nav = _started()
+    for k in range(1, 201):
+        nav.push(AttitudeSample(k * 5000, Q_LEVEL))
+        nav.push(_imu(k * 5000))
+    est = nav.estimate()
+    np.testing.assert_allclose(est.v_ned_m_s, 0.0, atol=1e-12)
+    # nose down by 0.1 rad with thrust balancing gravity vertically: a_north = g tan(0.1)
+    th = -0.1
+    q = np.array([math.cos(th / 2), 0.0, math.sin(th / 2), 0.0])
+    f = (0.0, 0.0, -G / math.cos(th))
+    for k in range(201, 401):
+        nav.push(AttitudeSample(k * 5000, q))
+        nav.push(_imu(k * 5000, f))
+    est = nav.estimate()
+    # the hover sample at k = 200 is held until k = 201: 199 periods of tilted thrust
+    assert est.v_ned_m_s[0] == pytest.approx(G * math.tan(0.1) * 199 * 0.005, rel=1e-9)
+    assert abs(est.v_ned_m_s[2]) < 1e-9
+
+
+def test_geodetic_fix_becomes_local_ned_and_first_fix_is_home():
+    nav = Navigator(CFG, "naive", frame=None)
+    nav.push(AttitudeSample(0, Q_LEVEL))
+    nav.push(_imu(0))
+    nav.push(_fix(0, (12.0, -7.0, -3.0)))
+    first = _fix(0, (12.0, -7.0, -3.0))
+    assert nav.frame is not None and nav.frame.home_lat_deg == pytest.approx(first.lat_deg)
+    np.testing.assert_allclose(nav.estimate().p_ned_m, 0.0, atol=1e-9)
+    nav2 = _started()
+    nav2.push(_fix(0 + 5000, (12.0, -7.0, -3.0)))  # waits for the IMU, then is fused
+    nav2.push(AttitudeSample(5000, Q_LEVEL))
+    nav2.push(_imu(5000))
+    assert nav2.counters()["gnss_fused"] == 2
+    assert nav2.estimate().p_ned_m[0] > 1.0
+
+
+def _feed(nav: Navigator, s, batch: bool, q: np.ndarray, f_all: np.ndarray) -> None:
+    k0 = 0
+    for j, k in enumerate(s.fix_index.tolist()):
+        if j % 8 == 7 or j == len(s.fix_index) - 1:  # push IMU in blocks of 8 fixes (80 samples)
+            ks = slice(k0, k + 1)
+            f_frd = f_all[ks]
+            if batch:
+                nav.push_imu_batch(s.t_us[ks], f_frd, q[ks])
+            else:
+                for t, fk, qk in zip(s.t_us[ks].tolist(), f_frd, q[ks], strict=True):
+                    nav.push(AttitudeSample(t, qk))
+                    nav.push(ImuSample(t, fk, np.zeros(3)))
+            for jj in range(j - 7 if j >= 7 else 0, j + 1):
+                nav.push(_fix(int(s.fix_t_us[jj]), s.z_ned_m[jj]))
+            k0 = k + 1
+
+
+def test_batch_path_equals_per_sample_path():
+    s = multipath_stream(np.random.default_rng(3), CFG, [(6.0, 0.0), (4.0, 1.2)])
+    n = len(s.t_us)
+    yaw = 0.3 * np.sin(0.5 * s.t_us * 1e-6)  # NED inputs are rotated back into a yawing body
+    q = np.stack([np.cos(yaw / 2), np.zeros(n), np.zeros(n), np.sin(yaw / 2)], axis=1)
+    f = s.a_ned_m_s2 - [0.0, 0.0, G]
+    c, sn = np.cos(yaw), np.sin(yaw)
+    f_frd = np.stack([c * f[:, 0] + sn * f[:, 1], -sn * f[:, 0] + c * f[:, 1], f[:, 2]], axis=1)
+    a, b = Navigator(CFG, "second-order", HOME), Navigator(CFG, "second-order", HOME)
+    _feed(a, s, batch=True, q=q, f_all=f_frd)
+    _feed(b, s, batch=False, q=q, f_all=f_frd)
+    ea, eb = a.estimate(), b.estimate()
+    assert a.counters() == b.counters() and a.counters()["gnss_fused"] == len(s.fix_t_us)
+    for name in ("p_ned_m", "v_ned_m_s", "b_ned_m", "cov_diag"):
+        np.testing.assert_allclose(getattr(ea, name), getattr(eb, name), rtol=1e-12, atol=1e-12)
+    assert ea.beta == pytest.approx(eb.beta, abs=1e-12)
+    assert a.engine.imu.rows[-50:] == b.engine.imu.rows[-50:]  # bit-for-bit inputs
+    truth_gnss = s.x_true[-1, :3] + s.x_true[-1, 6:]
+    assert np.linalg.norm(ea.p_ned_m + ea.b_ned_m - truth_gnss) < 0.5  # and it navigates
+
+
+def test_every_rejection_reason_is_counted_and_output_stays_finite():
+    nav = Navigator(CFG, "second-order", HOME)
+    nav.push(_imu(0))  # no attitude yet
+    nav.push(_fix(0))  # no IMU yet
+    nav.push(AttitudeSample(0, np.array([np.nan, 0.0, 0.0, 0.0])))
+    nav.push(AttitudeSample(0, np.zeros(4)))
+    nav.push(AttitudeSample(0, Q_LEVEL))
+    nav.push(_imu(0))
+    nav.push(_fix(0))
+    for k in range(1, 400):
+        nav.push(_imu(k * 5000))
+    now = 399 * 5000
+    nav.push(_imu(now, (np.nan, 0.0, 0.0)))
+    nav.push(_imu(now, (np.inf, 0.0, 0.0)))
+    nav.push(_imu(now))  # same time again
+    nav.push(_imu(now - 20_000))  # backwards
+    nav.push(_fix(now, fix_type=2))
+    nav.push(GnssFix(now, float("nan"), 144.0, 10.0, 3, 10))
+    nav.push(GnssFix(now, 95.0, 144.0, 10.0, 3, 10))
+    nav.push(_fix(now - 2_500_000))  # older than the history
+    nav.push(_fix(now + 500_000))  # from the future
+    nav.push(_fix(now - 100_000))
+    nav.push(_fix(now - 100_000))  # duplicate of a fused fix
+    nav.push(_fix(now + 20_000))  # waits for the IMU (within the future tolerance)
+    nav.push(_fix(now + 20_000))  # duplicate of a waiting fix
+    nav.push(_imu(now + 300_000))  # 0.3 s gap
+    c = nav.counters()
+    expected = {
+        "imu_rejected_no_attitude": 1, "gnss_rejected_before_imu": 1, "attitude_rejected_nonfinite": 2,
+        "imu_rejected_nonfinite": 2, "imu_rejected_time_backwards": 2, "gnss_rejected_fix_type": 1,
+        "gnss_rejected_nonfinite": 2, "gnss_rejected_too_old": 1, "gnss_rejected_future": 1,
+        "gnss_rejected_duplicate": 2, "imu_gaps": 1, "gnss_fused": 3, "imu_used": 401,
+    }
+    assert {k: c[k] for k in expected} == expected
+    est = nav.estimate()
+    for v in (est.p_ned_m, est.v_ned_m_s, est.b_ned_m, est.cov_diag):
+        assert np.isfinite(v).all()
+    assert math.isfinite(est.beta) and math.isfinite(est.nis)
+    with pytest.raises(TypeError):
+        nav.push("not a sample")  # type: ignore[arg-type]
+
+
+def test_bad_config_is_a_one_line_user_error():
+    from companion.mission.schema import ConfigError, build
+
+    with pytest.raises(ConfigError, match="history_s"):
+        Navigator(EstimatorConfig(history_s=1.0))
+    with pytest.raises(ConfigError, match=r"^estimator: alpha_fast"):
+        build(EstimatorConfig, {"alpha_fast": 0.99, "alpha_slow": 0.9}, "estimator")
