@@ -28,8 +28,12 @@ class FlyConfig:
     """How a flight starts and ends."""
 
     start_delay_s: float = 2.0  # hover at the start before the route moves (estimator initialises)
-    goal_radius_m: float = 1.0  # reached: true position within this of the goal ...
-    goal_speed_m_s: float = 0.5  # ... and slower than this
+    # reached: after the reference arrived, the TRUE position within goal_radius_m of the goal
+    # and slower than goal_speed_m_s. The vehicle flies its estimate onto the goal, and near
+    # buildings the GNSS multipath bias has a 1.2 m std per axis, so a tighter radius would
+    # time out on estimation error rather than say whether the vehicle got there.
+    goal_radius_m: float = 2.0
+    goal_speed_m_s: float = 1.0
     timeout_margin_s: float = 30.0  # timeout = start delay + route duration + max(margin, 50 % of duration)
 
 
