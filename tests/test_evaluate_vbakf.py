@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from companion.estimator import EstimatorConfig
 from companion.estimator.vbakf import NoisePosterior, VbConfig, vb_update
 
 
@@ -30,12 +31,12 @@ def test_learns_a_constant_inflated_R():
     # The filter is told GNSS σ = 0.08 m; the stream's noise is 6-10x larger and correlated.
     R_true = np.array([[0.25, 0.05, 0.0], [0.05, 0.36, 0.0], [0.0, 0.0, 0.64]])
     R0 = 0.08**2 * np.eye(3)
-    history, x, truth = run_stream(R_true, R0, VbConfig(), n=3000, seed=4)
+    history, x, truth = run_stream(R_true, R0, VbConfig.of(EstimatorConfig()), n=3000, seed=4)
     R_mean = history[1000:].mean(axis=0)
     assert np.allclose(np.diag(R_mean), np.diag(R_true), rtol=0.1)
     assert R_mean[0, 1] == pytest.approx(0.05, abs=0.03)
     # A slow learner (ρ → 1) converges tighter on the same stream.
-    slow, _, _ = run_stream(R_true, R0, VbConfig(forgetting=0.999), n=3000, seed=4)
+    slow, _, _ = run_stream(R_true, R0, VbConfig(0.999, 3, 10.0), n=3000, seed=4)
     assert np.allclose(np.diag(slow[-1]), np.diag(R_true), rtol=0.1)
     # It tracks the truth at least as well as the noise allows.
     assert np.linalg.norm(x - truth) < 3.0 * np.sqrt(np.trace(R_true) / 50)
@@ -59,9 +60,9 @@ def test_known_answer_with_a_perfectly_known_state():
 
 
 def test_config_ranges_are_checked():
-    for bad in (VbConfig(forgetting=0.0), VbConfig(iterations=0), VbConfig(prior_dof=-1.0)):
+    for bad in ({"vb_forgetting": 0.0}, {"vb_iterations": 0}, {"vb_prior_dof": -1.0}):
         with pytest.raises(ValueError):
-            bad.validate()
+            EstimatorConfig(**bad).validate()
 
 
 def test_measurement_space_iteration_equals_the_full_state_iteration():
@@ -73,7 +74,7 @@ def test_measurement_space_iteration_equals_the_full_state_iteration():
     x = rng.normal(size=9)
     H = np.hstack([np.eye(3), np.zeros((3, 3)), np.eye(3)])
     z = H @ x + rng.normal(size=3)
-    cfg = VbConfig(iterations=5)
+    cfg = VbConfig(0.98, 5, 10.0)
     prior = NoisePosterior.prior(np.diag([0.3, 0.5, 0.7]), cfg).predict(cfg)
     dof, scale = prior.dof + 1.0, prior.scale
     for _ in range(cfg.iterations):
@@ -87,3 +88,25 @@ def test_measurement_space_iteration_equals_the_full_state_iteration():
     np.testing.assert_allclose(P2, P_post, atol=1e-12)
     np.testing.assert_allclose(post.scale, scale, atol=1e-12)
     assert post.dof == dof
+
+
+def test_vbakf_method_in_the_filter_learns_inflated_gnss_noise():
+    # Through the real registry and fusion engine: fixes with σ = 0.4 m (25x the nominal
+    # variance), no multipath bias. The learned R̂ must approach 0.16 m² on every axis.
+    from companion.estimator import METHODS
+    from companion.estimator.engine import FusionEngine
+    from tests.estimator_streams import multipath_stream
+
+    assert "vbakf" in METHODS
+    cfg = EstimatorConfig(vb_forgetting=0.995)
+    stream = multipath_stream(np.random.default_rng(2), cfg, [(60.0, 0.0)], sigma_clean_m=0.4)
+    engine = FusionEngine(cfg, "vbakf")
+    fix_k = dict(zip(stream.fix_index.tolist(), range(len(stream.fix_index)), strict=True))
+    for k, t in enumerate(stream.t_us.tolist()):
+        engine.push_acc(t, *stream.a_ned_m_s2[k].tolist())
+        if k in fix_k:
+            engine.push_fix(t, stream.z_ned_m[fix_k[k]])
+    R_hat = engine.fusions[-1].state.R_hat
+    assert engine.counts["gnss_fused"] == len(stream.fix_index)
+    np.testing.assert_allclose(np.diag(R_hat), 0.16, rtol=0.25)
+    assert np.mean(np.diag(R_hat)) == pytest.approx(0.16, rel=0.12)

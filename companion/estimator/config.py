@@ -70,6 +70,9 @@ class EstimatorConfig:
     beta_fixed: float = 1.0  # naive and adaptive: belief held fixed (full trust; Q_b at its floor)
     adaptive_window_fixes: int = 20  # Mohamed & Schwarz innovation window N (1 s at 20 Hz)
     adaptive_r_floor: float = 0.25  # adaptive R eigenvalues kept ≥ this × the smallest nominal variance
+    vb_forgetting: float = 0.98  # vbakf: ρ per fix, memory 1/(1−ρ) = 50 fixes = 2.5 s at 20 Hz
+    vb_iterations: int = 3  # vbakf: fixed-point iterations per fix
+    vb_prior_dof: float = 10.0  # vbakf: ν of the initial inverse-Wishart density (fixes of evidence)
 
     def validate(self) -> None:
         positive = (
@@ -94,6 +97,8 @@ class EstimatorConfig:
             raise ValueError(f"beta_fixed: must be in [0, 1], got {self.beta_fixed}")
         if self.adaptive_window_fixes < 2:
             raise ValueError("adaptive_window_fixes: must be >= 2")
+        if not (0.0 < self.vb_forgetting <= 1.0 and self.vb_iterations >= 1 and self.vb_prior_dof > 0.0):
+            raise ValueError("vb_forgetting, vb_iterations, vb_prior_dof: need 0 < ρ ≤ 1, ≥ 1, > 0")
         for name in ("future_tolerance_s", "lambda_smooth_1_m", "eta_first_order"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name}: must be a finite number >= 0")

@@ -11,8 +11,8 @@ inverse-Gamma; with diagonal ``V`` the two coincide). Per fix:
   ``ν = ν⁻ + 1``, ``V = V⁻ + (z − H x)(z − H x)ᵀ + H P Hᵀ``.
 
 In steady state ``V / ν`` is the exponentially weighted mean of ``e eᵀ + H P Hᵀ``, i.e. an
-unbiased estimate of a constant ``R``. Pure numpy, no I/O; the estimator's method registry
-wraps it as the ``vbakf`` method.
+unbiased estimate of a constant ``R``. Pure numpy, no I/O. Registered as the estimator method
+``vbakf``: the belief stays at ``beta_fixed`` (as for ``naive``/``adaptive``) and R is learned.
 """
 
 from __future__ import annotations
@@ -21,22 +21,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.estimator.belief import InnovationTerms, Vec3
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.methods import register
+
 
 @dataclass(frozen=True)
 class VbConfig:
-    """Hyper-parameters of the VB noise-covariance learner."""
+    """Hyper-parameters of the VB noise-covariance learner (values: ``EstimatorConfig.vb_*``)."""
 
-    forgetting: float = 0.98  # ρ per fix [-]: memory 1/(1−ρ) = 50 fixes = 2.5 s at 20 Hz
-    iterations: int = 3  # fixed-point iterations per fix [-]
-    prior_dof: float = 10.0  # ν of the initial IW density [fixes of evidence]
+    forgetting: float  # ρ per fix [-]
+    iterations: int  # fixed-point iterations per fix [-]
+    prior_dof: float  # ν of the initial IW density [fixes of evidence]
 
-    def validate(self) -> None:
-        if not 0.0 < self.forgetting <= 1.0:
-            raise ValueError(f"forgetting: must be in (0, 1], got {self.forgetting}")
-        if self.iterations < 1:
-            raise ValueError(f"iterations: must be ≥ 1, got {self.iterations}")
-        if self.prior_dof <= 0.0:
-            raise ValueError(f"prior_dof: must be > 0, got {self.prior_dof}")
+    @classmethod
+    def of(cls, cfg: EstimatorConfig) -> VbConfig:
+        return cls(cfg.vb_forgetting, cfg.vb_iterations, cfg.vb_prior_dof)
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ class NoisePosterior:
 
 
 def vb_iterate(
-    y: np.ndarray, hph: np.ndarray, noise: NoisePosterior, cfg: VbConfig
+    y: np.ndarray, hph: np.ndarray, noise: NoisePosterior, cfg: VbConfig, diagonal: bool = False
 ) -> tuple[np.ndarray, NoisePosterior]:
     """The VB fixed point in measurement space, for a fix with innovation ``y`` and
     predicted ``H P⁻ Hᵀ = hph``; ``noise`` is the predicted (forgotten) posterior.
@@ -67,6 +67,7 @@ def vb_iterate(
     With ``S = H P⁻ Hᵀ + R̂`` the Kalman update gives the posterior residual
     ``z − H x⁺ = R̂ S⁻¹ y`` and ``H P⁺ Hᵀ = H P⁻ Hᵀ − H P⁻ Hᵀ S⁻¹ H P⁻ Hᵀ``, so no state is
     needed. Returns the ``R̂`` to fuse this fix with (the last iteration's) and the new posterior.
+    ``diagonal`` keeps the scale diagonal (independent per-axis inverse-Gamma posteriors).
     """
     dof = noise.dof + 1.0
     scale = noise.scale
@@ -77,7 +78,7 @@ def vb_iterate(
         e = R @ np.linalg.solve(S, y)
         hph_post = hph - hph @ np.linalg.solve(S, hph)
         scale = noise.scale + np.outer(e, e) + hph_post
-        scale = 0.5 * (scale + scale.T)
+        scale = np.diag(np.diag(scale)) if diagonal else 0.5 * (scale + scale.T)
     return R, NoisePosterior(dof, scale)
 
 
@@ -98,3 +99,36 @@ def vb_update(
     K = np.linalg.solve(H @ PHt + R, PHt.T).T
     IKH = np.eye(P.shape[0]) - K @ H
     return x + K @ (z - H @ x), IKH @ P @ IKH.T + K @ R @ K.T, posterior
+
+
+@register("vbakf")
+class VariationalBayesAKF:
+    """The ``vbakf`` method: R learned by ``vb_iterate``; β held at ``beta_fixed`` (no belief).
+
+    The filter runs its three NED axes independently (diagonal R and H P Hᵀ), so the scale
+    is kept diagonal: exactly Särkkä & Nummenmaa's per-axis inverse-Gamma posteriors. The
+    state is the ``NoisePosterior`` after the last fix (immutable, as the OOSM buffer needs).
+    """
+
+    def __init__(self, cfg: EstimatorConfig) -> None:
+        self.cfg = cfg
+        self.vb = VbConfig.of(cfg)
+        self.sigma_bias_m = cfg.sigma_bias_m(cfg.beta_fixed)
+
+    def initial_state(self) -> NoisePosterior:
+        return NoisePosterior.prior(np.diag(np.diag(self.cfg.r_nominal_m2())), self.vb)
+
+    def beta(self, state: NoisePosterior) -> float:
+        return self.cfg.beta_fixed
+
+    def _solve(self, state: NoisePosterior, terms: InnovationTerms) -> tuple[np.ndarray, NoisePosterior]:
+        hph = np.diag(terms.hph(self.sigma_bias_m))
+        R, post = vb_iterate(np.asarray(terms.y), hph, state.predict(self.vb), self.vb, diagonal=True)
+        return np.diag(R), post
+
+    def measurement_cov(self, state: NoisePosterior, terms: InnovationTerms) -> Vec3:
+        r = self._solve(state, terms)[0]
+        return (float(r[0]), float(r[1]), float(r[2]))
+
+    def update(self, state: NoisePosterior, terms: InnovationTerms) -> NoisePosterior:
+        return self._solve(state, terms)[1]

@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 
 from gcs_tools.evaluate.aggregate import of_method, pooled  # noqa: E402
 from gcs_tools.evaluate.campaign import JobResult  # noqa: E402
+from gcs_tools.figures import DPI, draw_world  # noqa: E402
 
 FIGURES = {
     "fig3": "fig3_belief.png",
@@ -32,9 +33,6 @@ COLORS = {
     "first-order": "tab:blue",
     "second-order": "tab:green",
 }
-DPI = 110
-
-
 def color(method: str) -> str:
     return COLORS.get(method, "tab:purple")
 
@@ -64,7 +62,7 @@ def fig4_trajectories(
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 4.2), squeeze=False)
     for ax, profile in zip(axes[0], profiles, strict=False):
         if mission is not None:
-            draw_map(ax, mission)
+            draw_world(ax, mission.world)
         ref_drawn = False
         for method in methods:
             for r in of_method(results, method):
@@ -84,15 +82,6 @@ def fig4_trajectories(
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
-
-
-def draw_map(ax: Any, mission: Any) -> None:
-    """Buildings of the mission's world (the vehicle helper's map drawing when it exists)."""
-    try:
-        from gcs_tools.figures import draw_world
-    except ImportError:
-        return
-    draw_world(ax, mission.world)
 
 
 def error_boxes(
