@@ -163,9 +163,9 @@ class _Belief:
         raise NotImplementedError
 
     def update(self, state: BeliefState, terms: InnovationTerms) -> BeliefState:
-        new = self.step(state, self.grad_theta(state, terms))
+        theta, h_fast, h_slow = self.step(state, self.grad_theta(state, terms))
         lim = self.cfg.theta_max
-        return new._replace(theta=min(lim, max(-lim, new.theta)))
+        return BeliefState(min(lim, max(-lim, theta)), h_fast, h_slow)
 
 
 @register("first-order")
@@ -173,7 +173,7 @@ class FirstOrder(_Belief):
     """Plain gradient step θ ← θ − η₁ ∇θ ℓ (the ablation baseline)."""
 
     def step(self, state: BeliefState, g: float) -> BeliefState:
-        return state._replace(theta=state.theta - self.cfg.eta_first_order * g)
+        return BeliefState(state.theta - self.cfg.eta_first_order * g, state.h_fast, state.h_slow)
 
 
 @register("second-order")

@@ -57,6 +57,7 @@ class Navigator:
         self.engine = FusionEngine(self.cfg, method, self._counts)
         self._rot: Rot | None = None
         self._push_acc = self.engine.push_acc
+        self._last: tuple[Any, NavEstimate] | None = None
         self._g = self.cfg.gravity_m_s2
 
     # -------------------------------------------------------------- input
@@ -126,16 +127,29 @@ class Navigator:
             self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
         self.engine.push_fix(fix.t_validity_us, self.frame.to_ned_m(fix.lat_deg, fix.lon_deg, fix.alt_m))
 
+    def push_fix_ned(self, t_validity_us: int, p_ned_m: np.ndarray) -> None:
+        """A fix already converted to this navigator's frame (e.g. vectorised by a log reader).
+
+        Gated like ``push`` after the geodesy (the caller checked ``fix_type``); needs ``frame``.
+        """
+        if self.frame is None:
+            raise ValueError("push_fix_ned needs a navigator with a frame (home)")
+        self.engine.push_fix(t_validity_us, p_ned_m)
+
     # ------------------------------------------------------------- output
     def estimate(self) -> NavEstimate | None:
         """The estimate at the newest IMU time; None until the first good fix and IMU."""
         snap = self.engine.snapshot()
         if snap is None:
             return None
+        if self._last is not None and self._last[0] is snap:
+            return self._last[1]
         x = np.array(snap.x)
         P = snap.P
         var = np.array([P[0][0], P[1][0], P[2][0], P[0][3], P[1][3], P[2][3], P[0][5], P[1][5], P[2][5]])
-        return NavEstimate(snap.t_us, x[0:3], x[3:6], x[6:9], var, snap.beta, snap.nis, self.method)
+        est = NavEstimate(snap.t_us, x[0:3], x[3:6], x[6:9], var, snap.beta, snap.nis, self.method)
+        self._last = (snap, est)
+        return est
 
     def counters(self) -> dict[str, int]:
         """Samples used and rejected by reason (stable names)."""
