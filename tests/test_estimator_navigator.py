@@ -165,3 +165,17 @@ def test_bad_config_is_a_one_line_user_error():
         Navigator(EstimatorConfig(history_s=1.0))
     with pytest.raises(ConfigError, match=r"^estimator: alpha_fast"):
         build(EstimatorConfig, {"alpha_fast": 0.99, "alpha_slow": 0.9}, "estimator")
+
+
+def test_push_fix_ned_equals_geodetic_fix():
+    a, b = _started(), _started()
+    for nav in (a, b):
+        for k in range(1, 41):
+            nav.push(AttitudeSample(k * 5000, Q_LEVEL))
+            nav.push(_imu(k * 5000))
+    fix = _fix(200_000, (3.0, -2.0, -1.0))
+    a.push(fix)
+    b.push_fix_ned(fix.t_validity_us, HOME.to_ned_m(fix.lat_deg, fix.lon_deg, fix.alt_m))
+    np.testing.assert_array_equal(a.estimate().p_ned_m, b.estimate().p_ned_m)
+    with pytest.raises(ValueError, match="frame"):
+        Navigator(CFG, "naive", frame=None).push_fix_ned(0, np.zeros(3))

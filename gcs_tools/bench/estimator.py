@@ -102,7 +102,7 @@ def batched_wall_s(samples: list[Sample], block_s: float = 0.5) -> tuple[float, 
     f_l: list[np.ndarray] = []
     q_l: list[np.ndarray] = []
     fixes: list[GnssFix] = []
-    q_now = None
+    q_now = np.array([1.0, 0.0, 0.0, 0.0])  # every IMU sample follows its attitude in flight()
     block_us = int(block_s * 1e6)
     end = block_us
     for s in samples:
