@@ -111,14 +111,25 @@ class RigidBody:
         n += s * (vn + 2 * v1[0] + 2 * v2[0] + v3[0])
         e += s * (ve + 2 * v1[1] + 2 * v2[1] + v3[1])
         d += s * (vd + 2 * v1[2] + 2 * v2[2] + v3[2])
-        y = [
-            x0 + s * (k1i + 2 * k2i + 2 * k3i + k4i)
-            for x0, k1i, k2i, k3i, k4i in zip(
-                (vn, ve, vd, qw, qx, qy, qz, p, q, r), k1, k2, k3, k4, strict=True
-            )
+        k1vn, k1ve, k1vd, k1w, k1x, k1y, k1z, k1p, k1q, k1r = k1
+        k2vn, k2ve, k2vd, k2w, k2x, k2y, k2z, k2p, k2q, k2r = k2
+        k3vn, k3ve, k3vd, k3w, k3x, k3y, k3z, k3p, k3q, k3r = k3
+        k4vn, k4ve, k4vd, k4w, k4x, k4y, k4z, k4p, k4q, k4r = k4
+        qw += s * (k1w + 2 * (k2w + k3w) + k4w)
+        qx += s * (k1x + 2 * (k2x + k3x) + k4x)
+        qy += s * (k1y + 2 * (k2y + k3y) + k4y)
+        qz += s * (k1z + 2 * (k2z + k3z) + k4z)
+        inv = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self.x = [
+            n, e, d,
+            vn + s * (k1vn + 2 * (k2vn + k3vn) + k4vn),
+            ve + s * (k1ve + 2 * (k2ve + k3ve) + k4ve),
+            vd + s * (k1vd + 2 * (k2vd + k3vd) + k4vd),
+            qw * inv, qx * inv, qy * inv, qz * inv,
+            p + s * (k1p + 2 * (k2p + k3p) + k4p),
+            q + s * (k1q + 2 * (k2q + k3q) + k4q),
+            r + s * (k1r + 2 * (k2r + k3r) + k4r),
         ]
-        inv = 1.0 / math.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
-        self.x = [n, e, d, y[0], y[1], y[2], y[3] * inv, y[4] * inv, y[5] * inv, y[6] * inv, y[7], y[8], y[9]]
 
     # -- views -------------------------------------------------------------------------
     @property

@@ -85,3 +85,18 @@ def test_small_angle_mapping_signs_in_ned(yaw):
         R = quat_to_rot(euler_to_quat(ap.roll_cmd_rad, ap.pitch_cmd_rad, yaw))
         a_horizontal = (-9.81 * R[:, 2])[:2]  # thrust acceleration (body -z) at hover thrust
         np.testing.assert_allclose(a_horizontal, a_ref[:2], rtol=0.02, atol=0.01)
+
+
+def test_non_finite_estimate_or_setpoint_is_not_flown():
+    sim = SimVehicle(MISSION, 0, 2)
+    start, zero = sim.start_ned_m.copy(), np.zeros(3)
+    nan3 = np.full(3, np.nan)
+    for k in range(60):  # 3 s: fresh but NaN estimates, then good estimates with a NaN setpoint
+        x = sim.body.x
+        good = NavEstimate(sim.t_us, np.array(x[0:3]), np.array(x[3:6]), zero, np.zeros(9), 1.0, 0.0, "x")
+        bad = NavEstimate(sim.t_us, nan3, zero, zero, np.zeros(9), 1.0, 0.0, "x")
+        target = start + [25.0, 0.0, 0.0] if k < 30 else nan3
+        sp = Setpoint(sim.t_us, target, zero, zero)
+        sim.advance(bad if k < 30 else good, sp)
+        assert sim.autopilot.holding == (k < 30)
+    assert np.linalg.norm(sim.p_ned_m - start) < 0.2
