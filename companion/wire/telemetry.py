@@ -194,6 +194,10 @@ class TelemetryPublisher:
             time.sleep(0.01)
         return True
 
+    def peer_count(self) -> int:
+        """Zenoh peers this process is linked to directly (0 when disabled)."""
+        return 0 if self._session is None else len(list(self._session.info.peers_zid()))
+
     def flush(self, timeout_s: float = 5.0) -> bool:
         """Wait until the queue is empty (tests, end of a run)."""
         deadline = time.monotonic() + timeout_s
@@ -230,6 +234,7 @@ class TelemetryPublisher:
                     self._counts["published"] += 1
                 except zenoh.ZError:  # session closing underneath us
                     return
+                time.sleep(0)  # hand the GIL back at once: a backlog must not hold the caller's loop
             finally:
                 self._queue.task_done()
 

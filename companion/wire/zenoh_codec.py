@@ -117,10 +117,10 @@ def _dec_str(v: Any, where: str) -> str:
 
 
 def _enc_array(x: Any) -> list:
-    a = np.asarray(x, dtype=float)
-    if np.isfinite(a).all():
-        return a.tolist()
-    return [_enc_array(r) for r in a] if a.ndim > 1 else [_enc_float(v) for v in a]
+    values = np.asarray(x, dtype=float).tolist()
+    if values and isinstance(values[0], list):
+        return [_enc_array(r) for r in values]
+    return values if all(map(math.isfinite, values)) else [_enc_float(v) for v in values]
 
 
 def _nan_for_null(v: Any) -> Any:
