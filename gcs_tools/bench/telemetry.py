@@ -65,7 +65,8 @@ def _start_subscribers(n: int, env: dict[str, str]) -> list[subprocess.Popen]:
     code = "from gcs_tools.bench.telemetry import subscriber_main; subscriber_main()"
     procs = []
     for _ in range(n):
-        procs.append(subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True))
+        procs.append(subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
+                                      text=True))
         assert procs[-1].stdout is not None
         if procs[-1].stdout.readline().strip() != "ready":  # the first one becomes the hub
             raise RuntimeError("subscriber failed to start")
