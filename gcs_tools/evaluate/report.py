@@ -93,7 +93,7 @@ def markdown(res: dict[str, Any]) -> str:
         f"methods {', '.join(f'`{m}`' for m in c['methods'])}; {c['flights']} flights, "
         f"max duration {c['max_duration_s']} s, {c['wall_s']:.1f} s wall on {c['workers']} worker(s).",
         "",
-        f"Hyper-parameters were tuned only on mission `{c['tuning']['mission']}` profiles "
+        f"Hyper-parameters may be tuned only on mission `{c['tuning']['mission']}` profiles "
         f"{_ranges(c['tuning']['profiles'])} with seeds {_ranges(c['tuning']['seeds'])}; "
         + ("**this run overlaps that tuning set, so it is not an honest test.**"
            if c["overlaps_tuning_set"] else "this run shares neither with it."),
@@ -172,7 +172,8 @@ def readme_section(res: dict[str, Any], out_dir: Path, readme: Path) -> str:
     trk = claims["second_order_tracking_error_m_reduction"]
     lines = [
         f"Mission `{c['mission']}`, profiles {_ranges(c['profiles'])}, seeds {_ranges(c['seeds'])} "
-        f"({c['flights']} flights; tuning used profiles {_ranges(c['tuning']['profiles'])} of "
+        f"({c['flights']} flights; tuning set, never reported: profiles "
+        f"{_ranges(c['tuning']['profiles'])} of "
         f"`{c['tuning']['mission']}` with seeds {_ranges(c['tuning']['seeds'])}). "
         f"Second-order vs naive: estimation {est['measured']:+.0%} (paper {est['claimed']:+.0%}), "
         f"tracking {trk['measured']:+.0%} (paper {trk['claimed']:+.0%}). "
