@@ -132,7 +132,7 @@ class FusionEngine:
     def push_fix(self, t_us: int, z_ned_m: Any) -> None:
         """A GNSS position (NED, m; 3 numbers) valid at ``t_us``; fused now, later, or rejected."""
         c = self.counts
-        z = tuple(map(float, z_ned_m))
+        z = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
         if len(z) != 3 or not finite3(*z):
             c["gnss_rejected_nonfinite"] += 1
             return
