@@ -48,7 +48,9 @@ class EstimatorConfig:
     # --- time handling and out-of-sequence fusion (Algorithm 1)
     history_s: float = 2.0  # fixes with validity older than (latest IMU − this) are rejected (≥ 1.5 s)
     future_tolerance_s: float = 0.05  # a fix valid up to this far ahead of the latest IMU waits for it
-    imu_hold_max_s: float = 0.1  # longest an IMU sample is held; a longer gap counts and coasts
+    # Longest an IMU sample is held: a longer interval is a gap (counted; the filter coasts at
+    # constant velocity after this). 10 periods at 200 Hz; quad106's ~50 Hz IMU has 1 such gap.
+    imu_hold_max_s: float = 0.05
 
     # --- belief adaptation (eq. 15-21)
     theta0: float = 0.0  # initial belief logit (β0 = 0.5: undecided)
