@@ -31,6 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.errors import UserError
 
 MAX_DATAGRAM_BYTES = 65_535
+BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this size
 SIGNING_EPOCH_UNIX_S = 1_420_070_400  # MAVLink 2 signing timestamps count 10 µs since 2015-01-01
 SIGNING_KEY_BYTES = 32
 VEHICLE_SYSTEM_ID = 1  # the vehicle and its companions share one MAVLink system id
@@ -132,6 +133,7 @@ class UdpLink:
             raise UserError(f"cannot bind UDP {config.host}:{config.bind_port}: {exc.strerror}") from None
         self._sock.setblocking(False)
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 1024 * 1024)
+        self._batch: list[bytes] | None = None
         self.last_rx_ns = 0  # perf_counter_ns() when the last datagram was read from the socket
         self.peer: tuple[str, int] | None = (
             (config.host, config.peer_port) if config.peer_port is not None else None
@@ -176,25 +178,52 @@ class UdpLink:
         self._mav.send(msg)
         self.counters.messages_tx += 1
 
+    def begin_batch(self) -> None:
+        """Collect the frames sent from now on into one datagram, sent by :meth:`flush` (lockstep
+        uses one datagram per step and per answer: far fewer wake-ups than one per frame)."""
+        if self._batch is None:
+            self._batch = []
+
+    def flush(self) -> None:
+        """Send the collected frames (split below the datagram size limit) and stop batching."""
+        frames, self._batch = self._batch, None
+        chunk: list[bytes] = []
+        size = 0
+        for frame in frames or ():
+            if size + len(frame) > BATCH_DATAGRAM_BYTES and chunk:
+                self._transmit(chunk)
+                chunk, size = [], 0
+            chunk.append(frame)
+            size += len(frame)
+        if chunk:
+            self._transmit(chunk)
+
     def send_frame(self, frame: bytes) -> None:
         """Forward an already packed frame unchanged (routing: its source ids and signature stay)."""
         if self.peer is not None:
             self._send_datagram(frame)
             self.counters.messages_tx += 1
 
-    def _send_datagram(self, buf: bytes) -> None:
+    def _send_datagram(self, frame: bytes) -> None:
+        if self._batch is not None:
+            self._batch.append(frame)
+        else:
+            self._transmit([frame])
+
+    def _transmit(self, frames: list[bytes]) -> None:
         if self.config.drop_probability_tx and self._drop(self.config.drop_probability_tx):
             self.counters.dropped_tx += 1
             return
         assert self.peer is not None
         try:
-            self._sock.sendto(buf, self.peer)
+            self._sock.sendto(frames[0] if len(frames) == 1 else b"".join(frames), self.peer)
         except OSError:  # ECONNREFUSED from an earlier send, full buffer: a lost datagram
             self.counters.send_errors += 1
             return
         self.counters.datagrams_tx += 1
         if self.tee is not None:
-            self.tee(buf, True)
+            for frame in frames:
+                self.tee(frame, True)
 
     def _drop(self, probability: float) -> bool:
         assert self._rng is not None

@@ -1,0 +1,86 @@
+"""``python -m companion estimator|bridge``: the companion computer's processes."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from companion.errors import UserError
+
+
+def _parser() -> argparse.ArgumentParser:
+    from companion.wire.udp_link import add_link_arguments
+
+    parser = argparse.ArgumentParser(prog="python -m companion", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="process", required=True)
+    for name, text in (("estimator", "belief-adaptive estimator"), ("bridge", "planner bridge")):
+        p = sub.add_parser(name, help=text)
+        p.add_argument("--vehicle-port", type=int, required=True, help="the vehicle's UDP port for us")
+        p.add_argument("--bind-port", type=int, default=0, help="our UDP port (0: any free one)")
+        p.add_argument("--mission", default="default", help="mission name or YAML path")
+        p.add_argument("--stats", type=Path, help="write link/node counters here (JSON) on exit")
+        add_link_arguments(p)
+        if name == "estimator":
+            p.add_argument("--method", default="second-order", help="estimator method")
+        else:
+            p.add_argument("--profile", type=int, default=0, help="mission profile index")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from companion.wire.runtime import exit_on_sigterm, write_json
+
+    args = _parser().parse_args(argv)
+    exit_on_sigterm()
+    node = None
+    try:
+        node = _build(args)
+        if args.process == "estimator":
+            from companion.nodes.estimator_node import serve
+        else:
+            from companion.nodes.bridge_node import serve  # type: ignore[assignment]
+        serve(node)  # type: ignore[arg-type]
+    except UserError as exc:
+        print(f"companion {args.process}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if node is not None and args.stats is not None:
+            write_json(args.stats, node.stats())
+    return 0
+
+
+def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNode)
+    from companion.mission import load_mission
+    from companion.wire.udp_link import UdpLink, link_settings
+
+    mission = load_mission(args.mission)
+    fields, rng = link_settings(args)
+    if args.process == "estimator":
+        from companion.nodes.estimator_node import ESTIMATOR_COMPONENT_ID, EstimatorNode, make_navigator
+
+        navigator, nis_gate = make_navigator(mission, args.method)
+        link = UdpLink(_config(args, ESTIMATOR_COMPONENT_ID, fields, link_id=1), rng)
+        return EstimatorNode(link, navigator, nis_gate)
+    from companion.nodes.bridge_node import BRIDGE_COMPONENT_ID, BridgeNode
+    from companion.planning import plan_route
+
+    route = plan_route(mission, args.profile)
+    link = UdpLink(_config(args, BRIDGE_COMPONENT_ID, fields, link_id=2), rng)
+    return BridgeNode(link, route)
+
+
+def _config(args: argparse.Namespace, component_id: int, fields: dict[str, object], link_id: int):  # noqa: ANN202
+    from companion.wire.udp_link import VEHICLE_SYSTEM_ID, LinkConfig
+
+    return LinkConfig(
+        bind_port=args.bind_port, peer_port=args.vehicle_port, system_id=VEHICLE_SYSTEM_ID,
+        component_id=component_id, accept_system_ids=frozenset({VEHICLE_SYSTEM_ID}), link_id=link_id,
+        **fields,  # type: ignore[arg-type]
+    )
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

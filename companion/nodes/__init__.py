@@ -1,0 +1,1 @@
+"""Companion processes: thin UDP/MAVLink edges around the estimator and the planner bridge."""

@@ -1,0 +1,54 @@
+"""The companion planner-bridge process: plans the route once, then streams its setpoints.
+
+The vehicle's step marker (TIMESYNC request, 20 Hz of boot time) drives the output: the bridge
+answers with SET_POSITION_TARGET_LOCAL_NED for that time, then the TIMESYNC response. The same
+code serves lockstep and real time; only the vehicle decides whether to wait for the answer.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from companion.planning import Route
+from companion.wire import mavlink_codec as codec
+from companion.wire.lockstep import marker_time_us, step_response
+from companion.wire.udp_link import UdpLink
+
+BRIDGE_COMPONENT_ID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
+HEARTBEAT_PERIOD_S = 1.0
+
+
+@dataclass(slots=True)
+class BridgeNode:
+    link: UdpLink
+    route: Route
+    counters: dict[str, int] = field(default_factory=dict)
+
+    def handle(self, msg: Any) -> None:
+        t_us = marker_time_us(msg)
+        if t_us is None:
+            return
+        self.counters["setpoints"] = self.counters.get("setpoints", 0) + 1
+        self.link.send(codec.encode_setpoint(self.route.setpoint(t_us)))
+        self.link.send(step_response(t_us, time.monotonic_ns()))
+
+    def stats(self) -> dict[str, Any]:
+        return {"link": self.link.counters.as_dict(), "node": dict(self.counters),
+                "route_duration_s": self.route.duration_s}
+
+
+def serve(node: BridgeNode) -> None:
+    """Run until interrupted (SIGTERM/SIGINT end the process through SystemExit/KeyboardInterrupt)."""
+    next_heartbeat = 0.0
+    while True:
+        now = time.monotonic()
+        if now >= next_heartbeat:
+            node.link.send(codec.encode_heartbeat("companion"))
+            next_heartbeat = now + HEARTBEAT_PERIOD_S
+        msgs = node.link.recv(timeout_s=max(next_heartbeat - time.monotonic(), 0.001))
+        node.link.begin_batch()  # everything answering one datagram leaves in one datagram
+        for msg in msgs:
+            node.handle(msg)
+        node.link.flush()

@@ -1,0 +1,163 @@
+"""Run one SITL flight: three processes over MAVLink/UDP, supervised, then summarised.
+
+The vehicle (``python -m simvehicle``), the companion estimator and the planner bridge
+(``python -m companion estimator|bridge``) are started on free (or given) loopback ports. The
+launcher shows progress from the vehicle's progress lines; when the vehicle ends (arrival or
+its simulated time limit), when any process dies, on Ctrl-C or on the wall-clock timeout, it
+stops all three (vehicle first, so it flushes the tlog and time series) and then writes what
+was recorded.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from companion.errors import UserError
+from gcs_tools.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports, read_tail
+
+PORT_NAMES = ("estimator", "bridge", "ground")
+POLL_S = 0.05
+
+
+@dataclass(frozen=True, slots=True)
+class SitlOptions:
+    mission: str
+    profile: int
+    method: str
+    seed: int
+    out_dir: Path
+    max_duration_s: float
+    realtime: bool = False
+    signing_key_file: Path | None = None
+    ports: tuple[int, int, int] | None = None  # vehicle's estimator, bridge and ground ports
+    wall_timeout_s: float | None = None
+    drop_probability: float = 0.0  # TEST ONLY: loss injection on every link, both directions
+    goal_radius_m: float = 1.0
+
+
+@dataclass(slots=True)
+class SitlRun:
+    """What the processes left behind (read after they were stopped)."""
+
+    out_dir: Path
+    ended_by: str  # "vehicle" (arrival or time limit), "crash:<name>", "timeout", "interrupted"
+    return_codes: dict[str, int | None]
+    vehicle: dict[str, Any] = field(default_factory=dict)
+    estimator: dict[str, Any] = field(default_factory=dict)
+    bridge: dict[str, Any] = field(default_factory=dict)
+    crash_detail: str = ""
+
+
+def check_ports_free(ports: tuple[int, int, int], host: str = "127.0.0.1") -> None:
+    """One clear line naming the first port another program holds."""
+    for name, port in zip(PORT_NAMES, ports, strict=True):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind((host, port))
+            except OSError:
+                raise UserError(f"UDP port {port} on {host} ({name} port) is already in use") from None
+
+
+def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpec]:
+    out = opts.out_dir
+    common: list[str] = []
+    if opts.signing_key_file is not None:
+        common += ["--signing-key-file", str(opts.signing_key_file)]
+    if opts.drop_probability > 0:
+        common += ["--drop-probability", str(opts.drop_probability)]
+
+    def loss_seed(k: int) -> list[str]:
+        return ["--loss-seed", str(opts.seed * 10 + k)] if opts.drop_probability > 0 else []
+
+    vehicle = [
+        "simvehicle", "--mission", opts.mission, "--profile", str(opts.profile), "--seed", str(opts.seed),
+        "--estimator-port", str(ports[0]), "--bridge-port", str(ports[1]), "--ground-port", str(ports[2]),
+        "--out", str(out), "--max-duration-s", str(opts.max_duration_s),
+        "--goal-radius-m", str(opts.goal_radius_m), *common, *loss_seed(0),
+    ]
+    if opts.realtime:
+        vehicle.append("--realtime")
+    estimator = [
+        "companion", "estimator", "--vehicle-port", str(ports[0]), "--mission", opts.mission,
+        "--method", opts.method, "--stats", str(out / "estimator.json"), *common, *loss_seed(1),
+    ]
+    bridge = [
+        "companion", "bridge", "--vehicle-port", str(ports[1]), "--mission", opts.mission,
+        "--profile", str(opts.profile), "--stats", str(out / "bridge.json"), *common, *loss_seed(2),
+    ]
+    return [ChildSpec("vehicle", tuple(vehicle)), ChildSpec("estimator", tuple(estimator)),
+            ChildSpec("bridge", tuple(bridge))]
+
+
+Progress = Callable[[float, float], None]  # (simulated time s, distance to goal m)
+
+
+def _follow_progress(stream: Any, on_progress: Progress | None) -> None:
+    for raw in stream:
+        try:
+            line = json.loads(raw)
+        except ValueError:
+            continue
+        if on_progress is not None and isinstance(line, dict):
+            on_progress(float(line.get("t_s", 0.0)), float(line.get("goal_distance_m", float("nan"))))
+
+
+def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
+    """Fly once; always stops every process and returns what they recorded."""
+    ports = opts.ports or tuple(free_udp_ports(3))
+    assert len(ports) == 3
+    check_ports_free(ports)  # type: ignore[arg-type]
+    opts.out_dir.mkdir(parents=True, exist_ok=True)
+    for stale in ("vehicle.json", "estimator.json", "bridge.json", "vehicle_series.npz", "run.tlog"):
+        (opts.out_dir / stale).unlink(missing_ok=True)
+    supervisor = Supervisor(opts.out_dir / "logs")
+    ended_by = "interrupted"
+    detail = ""
+    reader: threading.Thread | None = None
+    try:
+        specs = child_specs(opts, ports)  # type: ignore[arg-type]
+        vehicle = supervisor.start(specs[0], stdout=subprocess.PIPE)
+        reader = threading.Thread(target=_follow_progress, args=(vehicle.stdout, on_progress), daemon=True)
+        reader.start()
+        for spec in specs[1:]:
+            supervisor.start(spec)
+        deadline = None if opts.wall_timeout_s is None else time.monotonic() + opts.wall_timeout_s
+        while True:
+            exited = supervisor.first_exit()
+            if exited is not None:
+                if exited.name == "vehicle" and exited.returncode == 0:
+                    ended_by = "vehicle"
+                else:
+                    ended_by = f"crash:{exited.name}"
+                    detail = read_tail(opts.out_dir / "logs" / f"{exited.name}.log")
+                break
+            if deadline is not None and time.monotonic() > deadline:
+                ended_by = "timeout"
+                break
+            time.sleep(POLL_S)
+    except KeyboardInterrupt:
+        ended_by = "interrupted"
+    finally:
+        codes = supervisor.stop(order=("vehicle",))
+        if reader is not None:
+            reader.join(timeout=1.0)
+    run = SitlRun(opts.out_dir, ended_by, codes, crash_detail=detail)
+    run.vehicle = _read_json(opts.out_dir / "vehicle.json")
+    run.estimator = _read_json(opts.out_dir / "estimator.json")
+    run.bridge = _read_json(opts.out_dir / "bridge.json")
+    return run
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}

@@ -1,0 +1,71 @@
+"""``python -m simvehicle``: the simulated vehicle as a MAVLink/UDP process (see simvehicle.node)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _parser() -> argparse.ArgumentParser:
+    from companion.wire.udp_link import add_link_arguments
+
+    p = argparse.ArgumentParser(prog="python -m simvehicle", description=__doc__.splitlines()[0])
+    p.add_argument("--mission", default="default", help="mission name or YAML path")
+    p.add_argument("--profile", type=int, default=0, help="mission profile index")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random draw of the vehicle")
+    p.add_argument("--estimator-port", type=int, required=True, help="UDP port the estimator talks to")
+    p.add_argument("--bridge-port", type=int, required=True, help="UDP port the planner bridge talks to")
+    p.add_argument("--ground-port", type=int, required=True, help="UDP port for a ground station")
+    p.add_argument("--out", type=Path, required=True, help="directory for run.tlog and the records")
+    p.add_argument("--max-duration-s", type=float, required=True, help="simulated time limit")
+    p.add_argument("--goal-radius-m", type=float, default=1.0, help="arrival: true position this close")
+    p.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
+    add_link_arguments(p)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+
+    from companion.errors import UserError
+    from companion.mission import load_mission
+    from companion.wire.runtime import exit_on_sigterm, write_json
+    from companion.wire.udp_link import link_settings
+    from simvehicle import SimVehicle
+    from simvehicle.node import VehicleNode, VehicleNodeConfig
+    from simvehicle.recording import FlightRecorder
+
+    exit_on_sigterm()
+    node = None
+    result: dict[str, object] = {"outcome": "interrupted"}
+    try:
+        mission = load_mission(args.mission)
+        sim = SimVehicle(mission, args.profile, args.seed)
+        goal_ne = mission.profiles[args.profile].goal_ne_m
+        recorder = FlightRecorder([goal_ne[0], goal_ne[1], -mission.altitude_m], args.goal_radius_m)
+        fields, rng = link_settings(args)
+        config = VehicleNodeConfig(
+            estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,
+            out_dir=args.out, max_duration_s=args.max_duration_s, realtime=args.realtime,
+        )
+        node = VehicleNode(sim, mission, recorder, config, fields, rng)
+        result = node.fly()
+    except UserError as exc:
+        print(f"simvehicle: error: {exc}", file=sys.stderr)
+        return 2
+    except TimeoutError as exc:
+        print(f"simvehicle: error: {exc}", file=sys.stderr)
+        result = {"outcome": "no_companions"}
+        return 3
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            write_json(args.out / "vehicle.json", {**result, **node.stats()})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,271 @@
+"""The vehicle process: SimVehicle on UDP, talking MAVLink 2 to the companions and the ground.
+
+Per control step (0.05 s of boot time) the vehicle advances :class:`SimVehicle` on the latest
+ODOMETRY and setpoint it has received, then sends that period's HIGHRES_IMU and
+ATTITUDE_QUATERNION (200 Hz; SIM_STATE at 50 Hz in the tick of the IMU sample it matches), the
+GNSS fixes whose latency elapsed in the period (GPS_RAW_INT, ``time_usec`` = validity time),
+SYSTEM_TIME and HEARTBEAT (1 Hz), and finally the lockstep step marker. In lockstep it then
+waits for the companions' answers (:class:`StepBarrier`); in real time each IMU sample leaves
+at its own wall-clock instant and nothing waits.
+
+Three UDP ports: one per companion (estimator, bridge; each learns its peer from the first
+valid frame, so a restarted companion is picked up again) and a ground port for MAVProxy-like
+clients, which receive the low-rate telemetry and whose requests are tolerated and counted.
+Every frame sent to or received from a companion goes to ``run.tlog``, stamped with simulated
+time in lockstep (``epoch + t``; SYSTEM_TIME pairs that clock with boot time) and with the wall
+clock in real time.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from companion.mission import Mission
+from companion.wire import mavlink_codec as codec
+from companion.wire.lockstep import LockstepConfig, step_marker
+from companion.wire.samples import NavEstimate, Setpoint
+from companion.wire.tlog import TlogWriter
+from companion.wire.udp_link import VEHICLE_SYSTEM_ID, LinkConfig, UdpLink
+from simvehicle import SimVehicle
+from simvehicle.barrier import StepBarrier
+from simvehicle.recording import FlightRecorder
+
+AUTOPILOT_COMPONENT_ID = 1
+LOCKSTEP_EPOCH_UNIX_US = 1_735_689_600_000_000  # 2025-01-01T00:00:00Z: t = 0 of every lockstep run
+GROUND_FORWARD_TYPES = frozenset(
+    {"HEARTBEAT", "GPS_RAW_INT", "SYSTEM_TIME", "ODOMETRY", "ESTIMATOR_STATUS", "NAMED_VALUE_FLOAT",
+     "SET_POSITION_TARGET_LOCAL_NED"}
+)
+COMPANIONS = ("estimator", "bridge")
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleNodeConfig:
+    estimator_port: int
+    bridge_port: int
+    ground_port: int
+    out_dir: Path
+    max_duration_s: float
+    realtime: bool = False
+    lockstep: LockstepConfig = field(default_factory=LockstepConfig)
+    startup_timeout_s: float = 60.0  # wall time to wait for both companions' first HEARTBEAT
+    sim_state_period_us: int = 20_000  # SIM_STATE, 50 Hz
+    clock_period_us: int = 1_000_000  # SYSTEM_TIME and HEARTBEAT, 1 Hz
+    progress_period_s: float = 0.25  # wall time between progress lines on stdout
+
+
+@dataclass(slots=True)
+class _Inbox:
+    """The latest of what the companions sent (the autopilot flies on these)."""
+
+    estimate: NavEstimate | None = None
+    setpoint: Setpoint | None = None
+    beta: float = math.nan
+    nis: float = math.nan
+
+
+class VehicleNode:
+    def __init__(
+        self,
+        sim: SimVehicle,
+        mission: Mission,
+        recorder: FlightRecorder,
+        config: VehicleNodeConfig,
+        link_fields: dict[str, Any],
+        rng: np.random.Generator | None,
+    ) -> None:
+        self.sim = sim
+        self.mission = mission
+        self.config = config
+        self.inbox = _Inbox()
+        self.counters: dict[str, int] = {}
+        self.t_us = 0
+        self.epoch_us = int(time.time() * 1e6) if config.realtime else LOCKSTEP_EPOCH_UNIX_US
+        config.out_dir.mkdir(parents=True, exist_ok=True)
+        self.tlog = TlogWriter(config.out_dir / "run.tlog")
+        tee = self._tee
+        accept = frozenset({VEHICLE_SYSTEM_ID})
+        base = {"system_id": VEHICLE_SYSTEM_ID, "component_id": AUTOPILOT_COMPONENT_ID, **link_fields}
+        self.links = {
+            "estimator": UdpLink(LinkConfig(bind_port=config.estimator_port, accept_system_ids=accept,
+                                            link_id=10, **base), rng, tee),
+            "bridge": UdpLink(LinkConfig(bind_port=config.bridge_port, accept_system_ids=accept,
+                                         link_id=11, **base), rng, tee),
+        }
+        ground_fields = {k: v for k, v in base.items() if not k.startswith("drop_")}
+        self.ground = UdpLink(LinkConfig(bind_port=config.ground_port, link_id=12, **ground_fields))
+        self.barrier = StepBarrier({n: self.links[n] for n in COMPANIONS}, config.lockstep)
+        self.recorder = recorder
+        self.imu_send_ns: list[int] = []
+        self.gnss_sent = 0
+        self.collisions = 0  # control periods that end in contact (counted on entry)
+
+    # -- clocks and the tlog ---------------------------------------------------------------
+    def _stamp_us(self) -> int:
+        return int(time.time() * 1e6) if self.config.realtime else self.epoch_us + self.t_us
+
+    def _tee(self, frame: bytes, sent: bool) -> None:
+        self.tlog.write_frame(self._stamp_us(), frame)
+
+    def _count(self, name: str) -> None:
+        self.counters[name] = self.counters.get(name, 0) + 1
+
+    # -- receiving -------------------------------------------------------------------------
+    def on_message(self, source: str, msg: Any) -> None:
+        kind = msg.get_type()
+        if source == "ground":
+            self._on_ground(msg, kind)
+            return
+        try:
+            if kind == "ODOMETRY":
+                estimate = codec.decode_odometry(msg)
+                if self.inbox.estimate is None or estimate.t_us >= self.inbox.estimate.t_us:
+                    self.inbox.estimate = estimate
+            elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+                self.inbox.setpoint = codec.decode_setpoint(msg)
+            elif kind == "NAMED_VALUE_FLOAT":
+                value = codec.decode_named_value(msg)
+                if value.name == codec.BELIEF_NAME:
+                    self.inbox.beta = value.value
+                elif value.name == codec.NIS_NAME:
+                    self.inbox.nis = value.value
+            elif kind not in ("HEARTBEAT", "TIMESYNC", "ESTIMATOR_STATUS"):
+                self._count(f"ignored_{kind}")
+        except codec.CodecError as exc:
+            self._count(f"rejected_{kind}_{exc.reason}")
+            return
+        if kind in GROUND_FORWARD_TYPES:
+            self.ground.send_frame(bytes(msg.get_msgbuf()))
+
+    def _on_ground(self, msg: Any, kind: str) -> None:
+        """Tolerate a ground station: acknowledge commands as unsupported, count the rest."""
+        self._count(f"ground_{kind}")
+        if kind == "COMMAND_LONG":
+            self.ground.send(self.ground.mav.command_ack_encode(msg.command, 3))  # MAV_RESULT_UNSUPPORTED
+
+    def poll(self) -> None:
+        """Handle whatever is waiting on every link (never blocks)."""
+        for name, link in (*self.links.items(), ("ground", self.ground)):
+            for msg in link.recv_all():
+                self.on_message(name, msg)
+
+    # -- sending ---------------------------------------------------------------------------
+    def _send(self, msg: Any, ground: bool = False) -> None:
+        self.links["estimator"].send(msg)
+        if ground:
+            self.ground.send(msg)
+
+    def _send_step(self, out: Any, pace: Callable[[int], None] | None) -> None:
+        frame = self.mission.frame
+        fixes = list(zip(out.gnss_arrival_us, out.gnss, strict=True))
+        for imu, att, truth in zip(out.imu, out.attitude, out.truth, strict=True):
+            if pace is not None:
+                pace(imu.t_us)
+            self._send(codec.encode_imu(imu))
+            self._send(codec.encode_attitude(att))
+            if imu.t_us % self.config.sim_state_period_us == 0:
+                self._send(codec.encode_truth(truth, frame))
+            while fixes and fixes[0][0] <= imu.t_us:
+                self._send(codec.encode_gnss(fixes.pop(0)[1]), ground=True)
+                self.gnss_sent += 1
+        if out.t_us % self.config.clock_period_us == 0:
+            clock = codec.encode_system_time(self._stamp_us(), out.t_us)
+            beat = codec.encode_heartbeat("vehicle")
+            for msg in (clock, beat):
+                self._send(msg, ground=True)
+                self.links["bridge"].send(msg)
+
+    def _pace(self, wall0_ns: int) -> Callable[[int], None]:
+        def pace(t_us: int) -> None:
+            target = wall0_ns + t_us * 1000
+            while (now := time.perf_counter_ns()) < target:
+                if target - now > 1_500_000:
+                    self.poll()
+                    time.sleep(min((target - now) / 1e9 - 0.001, 0.001))
+            self.imu_send_ns.append(time.perf_counter_ns())
+
+        return pace
+
+    # -- the flight ------------------------------------------------------------------------
+    def wait_for_companions(self) -> None:
+        """Lockstep needs both companions: wait for their first HEARTBEAT (they learn nothing
+        from us until then; we learn their address from it)."""
+        deadline = time.monotonic() + self.config.startup_timeout_s
+        seen: set[str] = set()
+        while seen != set(COMPANIONS):
+            if time.monotonic() > deadline:
+                missing = ", ".join(sorted(set(COMPANIONS) - seen))
+                raise TimeoutError(f"no HEARTBEAT from {missing} within {self.config.startup_timeout_s} s")
+            for name in COMPANIONS:
+                if self.links[name].recv(timeout_s=0.05):
+                    seen.add(name)
+            for msg in self.ground.recv_all():
+                self.on_message("ground", msg)
+
+    def fly(self) -> dict[str, Any]:
+        cfg = self.config
+        self.wait_for_companions()
+        max_t_us = round(cfg.max_duration_s * 1e6)
+        wall0 = time.perf_counter_ns()
+        pace = self._pace(wall0) if cfg.realtime else None
+        next_progress = 0.0
+        outcome = "timeout"
+        was_collided = False
+        while self.t_us < max_t_us:
+            out = self.sim.advance(self.inbox.estimate, self.inbox.setpoint)
+            self.t_us = out.t_us
+            if not cfg.realtime:
+                for name in COMPANIONS:
+                    self.links[name].begin_batch()
+            self._send_step(out, pace)
+            if cfg.realtime:
+                for name in COMPANIONS:
+                    self.links[name].send(step_marker(out.t_us))
+                self.poll()
+            else:
+                self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground})
+            row = self.recorder.record(out, self.inbox.estimate, self.inbox.setpoint, self.inbox.beta,
+                                       self.inbox.nis)
+            if out.collided and not was_collided:
+                self.collisions += 1
+            was_collided = out.collided
+            if self.recorder.reached_goal():
+                outcome = "reached_goal"
+                break
+            if time.monotonic() >= next_progress:
+                next_progress = time.monotonic() + cfg.progress_period_s
+                print(json.dumps({"t_s": out.t_us / 1e6, "goal_distance_m": row.goal_distance_m}), flush=True)
+        return {"outcome": outcome, "t_s": self.t_us / 1e6, "wall_s": (time.perf_counter_ns() - wall0) / 1e9}
+
+    def stats(self) -> dict[str, Any]:
+        periods_ms = np.diff(np.asarray(self.imu_send_ns, dtype=float)) / 1e6
+        period_ms = self.sim.config.vehicle.physics_dt_us / 1000
+        jitter = np.abs(periods_ms - period_ms)
+        return {
+            "links": {name: link.counters.as_dict() for name, link in self.links.items()},
+            "ground": self.ground.counters.as_dict(),
+            "node": dict(self.counters),
+            "gnss_sent": self.gnss_sent,
+            "collisions": self.collisions,
+            "lockstep": dict(self.barrier.counters),
+            "imu_period_jitter": (
+                {"count": int(jitter.size), "p50_ms": float(np.percentile(jitter, 50)),
+                 "p99_ms": float(np.percentile(jitter, 99)), "max_ms": float(jitter.max())}
+                if jitter.size else {"count": 0}
+            ),
+        }
+
+    def close(self) -> None:
+        """Flush what was recorded (also on SIGTERM): tlog, time series, statistics."""
+        self.tlog.close()
+        self.recorder.save(self.config.out_dir / "vehicle_series.npz")
+        for link in (*self.links.values(), self.ground):
+            link.close()
