@@ -26,7 +26,7 @@ NS_PER_US = 1_000
 
 @dataclass(frozen=True, slots=True)
 class LockstepConfig:
-    retry_s: float = 0.02  # wall time before a missing response is requested again
+    retry_s: float = 0.01  # wall time before a missing response is requested again
     give_up_s: float = 0.5  # wall time after which a silent companion counts as absent
 
 

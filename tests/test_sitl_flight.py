@@ -1,0 +1,258 @@
+"""End-to-end SITL: three real processes over MAVLink/UDP on free loopback ports."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sitl_helpers import Trio, children_of, require_pieces, route_duration_s, run_cli
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
+MISSION = "test"
+
+
+@pytest.fixture(autouse=True)
+def _pieces():
+    require_pieces()
+
+
+def _summary(out: Path) -> dict:
+    return json.loads((out / "summary.json").read_text())
+
+
+def _deterministic(s: dict) -> dict:
+    keep = ("outcome", "reached_goal", "collisions", "duration_s", "estimation_error_m", "tracking_error_m",
+            "min_clearance_m", "gnss")
+    return {k: s[k] for k in keep}
+
+
+def test_lockstep_is_reproducible_and_its_tlog_is_standard_and_replays(tmp_path):
+    outs = [tmp_path / "a", tmp_path / "b"]
+    for out in outs:
+        done = run_cli("--mission", MISSION, "--profile", "0", "--seed", "5", "--out", str(out))
+        assert done.returncode == 0, done.stderr
+    a, b = (_summary(o) for o in outs)
+    assert a["reached_goal"] and a["estimation_error_m"]["median"] < 5.0
+    assert _deterministic(a) == _deterministic(b)
+
+    tlog = outs[0] / "run.tlog"
+    dump = subprocess.run([sys.executable, str(Path(sys.executable).parent / "mavlogdump.py"),
+                           "--types", "GPS_RAW_INT,ODOMETRY,SYSTEM_TIME", str(tlog)],
+                          capture_output=True, text=True, timeout=50)
+    assert dump.returncode == 0
+    assert "GPS_RAW_INT" in dump.stdout and "ODOMETRY" in dump.stdout and "SYSTEM_TIME" in dump.stdout
+
+    from companion.mission import load_mission
+    from companion.wire.tlog import read_tlog
+    from gcs_tools.replay.core import CSV_COLUMNS, replay
+
+    live: dict[int, tuple[float, float, float]] = {}
+    for _, m in read_tlog(tlog, ("ODOMETRY",)):
+        if m.time_usec % 20_000 == 0:  # 50 Hz ODOMETRY, sent right after its IMU sample
+            live.setdefault(int(m.time_usec), (m.x, m.y, m.z))
+    result = replay(tlog, "second-order", home=load_mission(MISSION).frame, rate_hz=0)
+    col = CSV_COLUMNS.index("p_n_m") - 1
+    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+    common = sorted(set(live) & set(replayed))
+    assert len(common) > 0.9 * len(live) > 500
+    diff = np.array([np.asarray(live[t]) - replayed[t] for t in common])
+    scale = np.array([np.abs(replayed[t]) for t in common]) + 1.0
+    assert np.max(np.abs(diff) / scale) < 2e-7  # float32 of the ODOMETRY fields
+    assert "SIM_STATE" in json.dumps(result.summary["errors"]) or result.summary["errors"]
+
+
+def test_ten_percent_loss_both_ways_still_reaches_goal(tmp_path):
+    done = run_cli("--mission", MISSION, "--profile", "1", "--seed", "2", "--out", str(tmp_path),
+                   "--drop-probability", "0.1")
+    assert done.returncode == 0, done.stderr
+    s = _summary(tmp_path)
+    assert s["reached_goal"], s
+    assert s["links"]["vehicle"]["estimator"]["dropped_tx"] > 100
+    assert s["links"]["estimator"]["dropped_tx"] > 10
+    assert s["lockstep"]["retries"] > 10
+
+
+def _frame(msg, system_id: int, key: bytes | None = None) -> bytes:
+    """One packed frame from ``system_id``, signed with ``key`` when given."""
+    from companion.wire import mavlink_codec as codec
+
+    mav = codec.new_link(system_id, 1)
+    if key is not None:
+        mav.signing.secret_key = key
+        mav.signing.sign_outgoing = True
+        mav.signing.timestamp = int((time.time() - 1_420_070_400) * 100_000)
+    return codec.pack(mav, msg)
+
+
+def test_bad_datagrams_and_wrong_key_are_counted_and_rejected(tmp_path):
+    from companion.mission import load_mission
+    from companion.wire import mavlink_codec as codec
+    from companion.wire.samples import GnssFix, Setpoint
+    from companion.wire.udp_link import read_signing_key
+    from gcs_tools.sitl.launcher import SitlOptions
+    from gcs_tools.sitl.supervisor import free_udp_ports
+
+    key_file = tmp_path / "key"
+    key_file.write_text("beliefnav test key")
+    out = tmp_path / "run"
+    opts = SitlOptions(MISSION, 0, "second-order", 4, out, route_duration_s(MISSION, 0) + 20,
+                       signing_key_file=key_file)
+    est_port = free_udp_ports(1)[0]
+    trio = Trio(out, opts, estimator_bind_port=est_port)
+    try:
+        trio.wait_sim_time(2.0, 30)
+        home = load_mission(MISSION).frame
+        lat, lon, alt = home.to_geodetic(np.array([500.0, 500.0, -30.0]))
+        bad_fix = codec.encode_gnss(GnssFix(1_000_000, lat, lon, alt, 3, 12))
+        far = np.array([500.0, 500.0, -30.0])
+        bad_sp = codec.encode_setpoint(Setpoint(1_000, far, np.zeros(3), np.zeros(3)))
+        wrong, right = b"x" * 32, read_signing_key(key_file)
+        ok = _frame(codec.encode_heartbeat("companion"), 1)
+        bad_crc = bytearray(ok)
+        bad_crc[-1] ^= 0xFF
+        unknown = bytearray(ok)
+        unknown[7:10] = bytes((0x21, 0x43, 0x0E))
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for _ in range(20):
+                s.sendto(_frame(bad_fix, 1, wrong), ("127.0.0.1", est_port))
+                s.sendto(_frame(bad_sp, 1, wrong), ("127.0.0.1", trio.ports[1]))
+                s.sendto(b"\x00garbage", ("127.0.0.1", trio.ports[0]))
+                s.sendto(bytes(bad_crc), ("127.0.0.1", trio.ports[0]))
+                s.sendto(bytes(unknown), ("127.0.0.1", trio.ports[0]))
+                s.sendto(_frame(codec.encode_heartbeat("companion"), 42, right), ("127.0.0.1", trio.ports[0]))
+                time.sleep(0.01)
+        vehicle = trio.wait_vehicle(50)
+    finally:
+        trio.stop()
+    est = json.loads((out / "estimator.json").read_text())
+    assert vehicle["outcome"] == "reached_goal"
+    assert est["link"]["bad_signature"] >= 20  # the wrong-key GPS
+    links = vehicle["links"]
+    assert links["bridge"]["bad_signature"] >= 20  # the wrong-key setpoints
+    e = links["estimator"]
+    assert e["garbage"] >= 20 and e["bad_crc"] >= 20 and e["unknown_message"] >= 20
+    assert e["wrong_system_id"] >= 20  # correctly signed, but not our system
+
+
+def test_companion_killed_and_restarted_vehicle_holds_and_flight_continues(tmp_path):
+    from gcs_tools.sitl.launcher import SitlOptions
+
+    out = tmp_path / "run"
+    opts = SitlOptions(MISSION, 0, "second-order", 6, out, route_duration_s(MISSION, 0) + 30)
+    trio = Trio(out, opts)
+    try:
+        trio.wait_sim_time(10.0, 30)
+        estimator = trio.sup.children["estimator"]
+        estimator.kill()
+        estimator.wait()
+        t_kill = trio.poll_progress()
+        time.sleep(1.0)
+        trio.start("estimator", tag="2")
+        vehicle = trio.wait_vehicle(50)
+    finally:
+        trio.stop()
+    assert vehicle["outcome"] == "reached_goal"
+    assert vehicle["lockstep"]["gave_up"] >= 1
+    with np.load(out / "vehicle_series.npz") as series:
+        t, err = series["t_s"], series["est_error_m"]
+        p_true = series["p_true_ned_m"]
+    # The vehicle stopped waiting for the dead estimator and flew on (its autopilot holding on a
+    # stale estimate) until the new one answered.
+    assert np.all(np.isfinite(p_true)) and t[-1] > t_kill + 5
+    est2 = json.loads((out / "estimator2.json").read_text())
+    assert est2["navigator"]["gnss_fused"] > 50  # re-initialised from GNSS
+    assert np.nanmedian(err[t > t_kill + 10]) < 5.0
+
+
+@pytest.mark.parametrize("how", ["interrupt", "crash", "timeout"])
+def test_launcher_never_leaves_processes_behind(tmp_path, how):
+    out = tmp_path / "run"
+    args = [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", MISSION,
+            "--realtime", "--out", str(out)]
+    if how == "timeout":
+        args += ["--wall-timeout-s", "5"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while len(children_of(out)) < 3 or not (out / "run.tlog").exists():
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.1)
+        time.sleep(2.0)
+        if how == "interrupt":
+            proc.send_signal(signal.SIGINT)
+        elif how == "crash":
+            victim = next(p for p in children_of(out)
+                          if b"companion\0estimator" in Path(f"/proc/{p}/cmdline").read_bytes())
+            os.kill(victim, signal.SIGKILL)
+        _, stderr = proc.communicate(timeout=25)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert children_of(out) == []
+    assert proc.returncode != 0
+    summary = _summary(out)
+    expected = {"interrupt": "interrupted", "crash": "crash:estimator", "timeout": "timeout"}[how]
+    assert summary["ended_by"] == expected
+    assert summary["duration_s"] > 0.2 and (out / "run.tlog").stat().st_size > 1_000
+    if how == "crash":
+        assert "estimator process failed" in stderr
+
+
+def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
+    mavproxy = Path(sys.executable).parent / "mavproxy.py"
+    if not mavproxy.exists():
+        pytest.skip("MAVProxy not installed (pip install --no-deps mavproxy)")
+    from gcs_tools.sitl.supervisor import free_udp_ports
+
+    ports = free_udp_ports(3)
+    out = tmp_path / "run"
+    proxy = subprocess.Popen(
+        [sys.executable, str(mavproxy), f"--master=udpout:127.0.0.1:{ports[2]}", "--daemon",
+         "--non-interactive", f"--state-basedir={tmp_path}", "--logfile=proxy.tlog",
+         "--default-modules=", "--nowait"],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path,
+        start_new_session=True,
+    )
+    try:
+        done = run_cli("--mission", MISSION, "--realtime", "--max-duration-s", "8", "--out", str(out),
+                       "--ports", ",".join(map(str, ports)))
+    finally:
+        os.killpg(proxy.pid, signal.SIGTERM)
+        try:
+            proxy.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            os.killpg(proxy.pid, signal.SIGKILL)
+    assert done.returncode in (0, 1), done.stderr
+    from companion.wire.tlog import read_tlog
+
+    logs = list(tmp_path.rglob("proxy.tlog"))
+    assert logs, "MAVProxy wrote no log"
+    seen = {m.get_type() if m.get_type() != "NAMED_VALUE_FLOAT" else m.name
+            for _, m in read_tlog(logs[0], ("GPS_RAW_INT", "NAMED_VALUE_FLOAT"))}
+    seen = {s.decode() if isinstance(s, bytes) else s for s in seen}
+    assert "GPS_RAW_INT" in seen and "GNSS_BETA" in seen, seen
+    s = _summary(out)
+    assert any(k.startswith("ground_HEARTBEAT") for k in s["links"]["ground"]) or s["links"]["ground"][
+        "messages_rx"] > 0
+
+
+def test_lockstep_sitl_agrees_with_in_process_fly(tmp_path):
+    fly_mod = pytest.importorskip("gcs_tools.fly")
+    from companion.mission import load_mission
+
+    done = run_cli("--mission", MISSION, "--profile", "2", "--seed", "8", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    sitl = _summary(tmp_path)
+    fly = fly_mod.fly(load_mission(MISSION), 2, "second-order", 8).summary
+    for key in ("estimation_error_m", "tracking_error_m"):
+        a, b = sitl[key]["median"], fly[key]["median"]
+        assert math.isclose(a, b, rel_tol=0.05), (key, a, b)
