@@ -25,6 +25,7 @@ def _parser() -> argparse.ArgumentParser:
             p.add_argument("--method", default="second-order", help="estimator method")
         else:
             p.add_argument("--profile", type=int, default=0, help="mission profile index")
+            p.add_argument("--start-delay-s", type=float, default=0.0, help="hover before the route (s)")
     return parser
 
 
@@ -67,7 +68,7 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
     from companion.nodes.bridge_node import BRIDGE_COMPONENT_ID, BridgeNode
     from companion.planning import plan_route
 
-    route = plan_route(mission, args.profile)
+    route = plan_route(mission, args.profile, t_start_s=args.start_delay_s)
     link = UdpLink(_config(args, BRIDGE_COMPONENT_ID, fields, link_id=2), rng)
     return BridgeNode(link, route)
 

@@ -19,7 +19,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--ground-port", type=int, required=True, help="UDP port for a ground station")
     p.add_argument("--out", type=Path, required=True, help="directory for run.tlog and the records")
     p.add_argument("--max-duration-s", type=float, required=True, help="simulated time limit")
+    p.add_argument("--goal-ned-m", type=float, nargs=3, required=True, help="the route's last waypoint")
     p.add_argument("--goal-radius-m", type=float, default=1.0, help="arrival: true position this close")
+    p.add_argument("--goal-speed-m-s", type=float, default=0.5, help="arrival: and this slow")
+    p.add_argument("--arrive-after-s", type=float, default=0.0, help="arrival: not before this time")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
     add_link_arguments(p)
     return p
@@ -42,8 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         mission = load_mission(args.mission)
         sim = SimVehicle(mission, args.profile, args.seed)
-        goal_ne = mission.profiles[args.profile].goal_ne_m
-        recorder = FlightRecorder([goal_ne[0], goal_ne[1], -mission.altitude_m], args.goal_radius_m)
+        recorder = FlightRecorder(args.goal_ned_m, args.goal_radius_m, args.goal_speed_m_s,
+                                  args.arrive_after_s)
         fields, rng = link_settings(args)
         config = VehicleNodeConfig(
             estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,

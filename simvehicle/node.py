@@ -169,8 +169,8 @@ class VehicleNode:
         for imu, att, truth in zip(out.imu, out.attitude, out.truth, strict=True):
             if pace is not None:
                 pace(imu.t_us)
+            self._send(codec.encode_attitude(att))  # attitude first: the IMU sample is rotated by it
             self._send(codec.encode_imu(imu))
-            self._send(codec.encode_attitude(att))
             if imu.t_us % self.config.sim_state_period_us == 0:
                 self._send(codec.encode_truth(truth, frame))
             while fixes and fixes[0][0] <= imu.t_us:

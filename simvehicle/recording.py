@@ -26,9 +26,13 @@ class Row:
 
 
 class FlightRecorder:
-    def __init__(self, goal_ned_m: np.ndarray, goal_radius_m: float) -> None:
+    def __init__(self, goal_ned_m: np.ndarray, goal_radius_m: float, goal_speed_m_s: float,
+                 arrive_after_s: float) -> None:
         self.goal_ned_m = np.asarray(goal_ned_m, dtype=float)
         self.goal_radius_m = goal_radius_m
+        self.goal_speed_m_s = goal_speed_m_s
+        self.arrive_after_s = arrive_after_s  # the reference reaches the goal at this time
+        self._arrived = False
         self._rows: dict[str, list[Any]] = {k: [] for k in SERIES_KEYS}
         self._goal_distance_m = math.inf
 
@@ -56,10 +60,14 @@ class FlightRecorder:
         for key, value in values.items():
             self._rows[key].append(value)
         self._goal_distance_m = float(np.linalg.norm(p_true - self.goal_ned_m))
+        self._arrived = (self._goal_distance_m <= self.goal_radius_m
+                         and float(np.linalg.norm(truth.v_ned_m_s)) <= self.goal_speed_m_s
+                         and out.t_us / 1e6 >= self.arrive_after_s)
         return Row(out.t_us / 1e6, self._goal_distance_m)
 
     def reached_goal(self) -> bool:
-        return self._goal_distance_m < self.goal_radius_m
+        """Within the goal radius, slow enough, and not before the reference arrived (as ``fly``)."""
+        return self._arrived
 
     def series(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(v, dtype=float) for k, v in self._rows.items()}

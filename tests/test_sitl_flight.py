@@ -30,9 +30,9 @@ def _summary(out: Path) -> dict:
 
 
 def _deterministic(s: dict) -> dict:
-    keep = ("outcome", "reached_goal", "collisions", "duration_s", "estimation_error_m", "tracking_error_m",
+    keep = ("reached_goal", "collisions", "duration_s", "estimation_error_m", "tracking_error_m",
             "min_clearance_m", "gnss")
-    return {k: s[k] for k in keep}
+    return {k: s[k] for k in keep} | {"outcome": s["sitl"]["outcome"]}
 
 
 def test_lockstep_is_reproducible_and_its_tlog_is_standard_and_replays(tmp_path):
@@ -76,9 +76,9 @@ def test_ten_percent_loss_both_ways_still_reaches_goal(tmp_path):
     assert done.returncode == 0, done.stderr
     s = _summary(tmp_path)
     assert s["reached_goal"], s
-    assert s["links"]["vehicle"]["estimator"]["dropped_tx"] > 100
-    assert s["links"]["estimator"]["dropped_tx"] > 10
-    assert s["lockstep"]["retries"] > 10
+    assert s["sitl"]["links"]["vehicle"]["estimator"]["dropped_tx"] > 100
+    assert s["sitl"]["links"]["estimator"]["dropped_tx"] > 10
+    assert s["sitl"]["lockstep"]["retries"] > 10
 
 
 def _frame(msg, system_id: int, key: bytes | None = None) -> bytes:
@@ -179,7 +179,7 @@ def test_launcher_never_leaves_processes_behind(tmp_path, how):
     args = [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", MISSION,
             "--realtime", "--out", str(out)]
     if how == "timeout":
-        args += ["--wall-timeout-s", "5"]
+        args += ["--wall-timeout-s", "9"]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 30
@@ -201,7 +201,7 @@ def test_launcher_never_leaves_processes_behind(tmp_path, how):
     assert proc.returncode != 0
     summary = _summary(out)
     expected = {"interrupt": "interrupted", "crash": "crash:estimator", "timeout": "timeout"}[how]
-    assert summary["ended_by"] == expected
+    assert summary["sitl"]["ended_by"] == expected
     assert summary["duration_s"] > 0.2 and (out / "run.tlog").stat().st_size > 1_000
     if how == "crash":
         assert "estimator process failed" in stderr
@@ -241,8 +241,7 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
     seen = {s.decode() if isinstance(s, bytes) else s for s in seen}
     assert "GPS_RAW_INT" in seen and "GNSS_BETA" in seen, seen
     s = _summary(out)
-    assert any(k.startswith("ground_HEARTBEAT") for k in s["links"]["ground"]) or s["links"]["ground"][
-        "messages_rx"] > 0
+    assert s["sitl"]["links"]["ground"]["messages_rx"] > 0  # MAVProxy talked back and was tolerated
 
 
 def test_lockstep_sitl_agrees_with_in_process_fly(tmp_path):

@@ -9,8 +9,6 @@ from pathlib import Path
 
 from companion.errors import UserError
 
-DEFAULT_DURATION_MARGIN_S = 30.0  # simulated time allowed beyond the route's duration
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mission", default="default", help="mission name or YAML path")
@@ -21,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
     parser.add_argument("--signing-key-file", type=Path, help="MAVLink 2 signing key for all three processes")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
-    parser.add_argument("--max-duration-s", type=float, help="simulated time limit (default: route + 30 s)")
+    parser.add_argument("--max-duration-s", type=float, help="simulated time limit (default: as fly)")
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
     parser.add_argument("--drop-probability", type=float, default=0.0, help=argparse.SUPPRESS)  # tests only
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -41,10 +39,9 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 
 def run(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
-    from companion.planning import plan_route
-    from companion.wire.runtime import write_json
-    from gcs_tools.sitl.launcher import SitlOptions, launch
-    from gcs_tools.sitl.report import load_series, summarize
+    from gcs_tools.fly.output import strict_json, write_outputs
+    from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
+    from gcs_tools.sitl.report import flight_result
 
     mission = load_mission(args.mission)
     if not 0 <= args.profile < len(mission.profiles):
@@ -52,14 +49,12 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--profile {args.profile}: mission {mission.name!r} has profiles 0..{last}")
     if args.signing_key_file is not None and not args.signing_key_file.is_file():
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
-    max_duration_s = args.max_duration_s or (
-        plan_route(mission, args.profile).duration_s + DEFAULT_DURATION_MARGIN_S
-    )
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
-        max_duration_s=max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
+        max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
     )
+    route, max_duration_s = flight_plan(opts)
     bar = None
     if not args.no_progress and sys.stderr.isatty():
         from tqdm import tqdm
@@ -68,28 +63,30 @@ def run(args: argparse.Namespace) -> int:
     progress = None if bar is None else (lambda t_s, d_m: (bar.update(round(t_s - bar.n, 2)),
                                                            bar.set_postfix(goal_m=f"{d_m:.1f}")))
     try:
-        result = launch(opts, progress)
+        run_ = launch(opts, progress)
     finally:
         if bar is not None:
             bar.close()
-    series = load_series(args.out)
-    summary = summarize(result, series, args.method, args.seed)
-    write_json(args.out / "summary.json", summary)
-    _print(summary, args.out)
-    if result.ended_by.startswith("crash"):
-        print(f"beliefnav: error: {result.ended_by.split(':', 1)[1]} process failed: {result.crash_detail}",
+    result = flight_result(opts, run_, route, mission.name)
+    if result.series:
+        write_outputs(result, mission.world, args.out)
+    else:
+        (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
+    _print(result.summary, args.out)
+    if run_.ended_by.startswith("crash"):
+        print(f"beliefnav: error: {run_.ended_by.split(':', 1)[1]} process failed: {run_.crash_detail}",
               file=sys.stderr)
         return 1
-    return 0 if result.ended_by == "vehicle" else 1
+    return 0 if run_.ended_by == "vehicle" else 1
 
 
 def _print(s: dict, out: Path) -> None:
-    est, trk = s["estimation_error_m"], s["tracking_error_m"]
-    print(f"sitl {s['method']} seed {s['seed']}: {s['outcome']} after {s['duration_s']:.1f} s simulated "
-          f"in {s['wall_s']:.1f} s wall ({s['ended_by']})")
+    est, trk, sitl = s["estimation_error_m"], s["tracking_error_m"], s["sitl"]
+    print(f"sitl {s['method']} seed {s['seed']} ({sitl['mode']}): {sitl['outcome']} after "
+          f"{s['duration_s']:.1f} s simulated in {s['wall_s']:.1f} s wall (ended by {sitl['ended_by']})")
     print(f"  estimation error median {est['median']:.2f} m p95 {est['p95']:.2f} m; "
           f"tracking error median {trk['median']:.2f} m p95 {trk['p95']:.2f} m; "
           f"min clearance {s['min_clearance_m']:.1f} m")
     print(f"  GNSS sent {s['gnss']['sent']} fused {s['gnss']['fused']} rejected {s['gnss']['rejected']}; "
-          f"lockstep {json.dumps(s['lockstep'])}")
-    print(f"  wrote {out / 'summary.json'}, {out / 'run.tlog'}")
+          f"lockstep {json.dumps(sitl['lockstep'])}")
+    print(f"  wrote {out / 'summary.json'}, figures and {out / 'run.tlog'}")

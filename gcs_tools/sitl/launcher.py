@@ -21,6 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
+from companion.mission import load_mission
+from companion.planning import Route, plan_route
+from gcs_tools.fly.core import FlyConfig
 from gcs_tools.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports, read_tail
 
 PORT_NAMES = ("estimator", "bridge", "ground")
@@ -34,13 +37,13 @@ class SitlOptions:
     method: str
     seed: int
     out_dir: Path
-    max_duration_s: float
+    max_duration_s: float | None = None  # None: as ``fly`` (start delay + route + margin)
     realtime: bool = False
     signing_key_file: Path | None = None
     ports: tuple[int, int, int] | None = None  # vehicle's estimator, bridge and ground ports
     wall_timeout_s: float | None = None
     drop_probability: float = 0.0  # TEST ONLY: loss injection on every link, both directions
-    goal_radius_m: float = 1.0
+    fly: FlyConfig = field(default_factory=FlyConfig)  # start delay, arrival test, time limit: as ``fly``
 
 
 @dataclass(slots=True)
@@ -66,8 +69,19 @@ def check_ports_free(ports: tuple[int, int, int], host: str = "127.0.0.1") -> No
                 raise UserError(f"UDP port {port} on {host} ({name} port) is already in use") from None
 
 
+def flight_plan(opts: SitlOptions) -> tuple[Route, float]:
+    """The route the bridge will fly (same start delay as ``fly``) and the simulated time limit."""
+    route = plan_route(load_mission(opts.mission), opts.profile, t_start_s=opts.fly.start_delay_s)
+    if opts.max_duration_s is not None:
+        return route, opts.max_duration_s
+    return route, opts.fly.start_delay_s + route.duration_s + max(opts.fly.timeout_margin_s,
+                                                                  0.5 * route.duration_s)
+
+
 def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpec]:
     out = opts.out_dir
+    route, max_duration_s = flight_plan(opts)
+    goal = route.waypoints_ned_m[-1]
     common: list[str] = []
     if opts.signing_key_file is not None:
         common += ["--signing-key-file", str(opts.signing_key_file)]
@@ -80,8 +94,10 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
     vehicle = [
         "simvehicle", "--mission", opts.mission, "--profile", str(opts.profile), "--seed", str(opts.seed),
         "--estimator-port", str(ports[0]), "--bridge-port", str(ports[1]), "--ground-port", str(ports[2]),
-        "--out", str(out), "--max-duration-s", str(opts.max_duration_s),
-        "--goal-radius-m", str(opts.goal_radius_m), *common, *loss_seed(0),
+        "--out", str(out), "--max-duration-s", str(max_duration_s),
+        "--goal-ned-m", *(repr(float(c)) for c in goal), "--goal-radius-m", str(opts.fly.goal_radius_m),
+        "--goal-speed-m-s", str(opts.fly.goal_speed_m_s),
+        "--arrive-after-s", str(route.t_start_s + route.duration_s), *common, *loss_seed(0),
     ]
     if opts.realtime:
         vehicle.append("--realtime")
@@ -91,7 +107,8 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
     ]
     bridge = [
         "companion", "bridge", "--vehicle-port", str(ports[1]), "--mission", opts.mission,
-        "--profile", str(opts.profile), "--stats", str(out / "bridge.json"), *common, *loss_seed(2),
+        "--profile", str(opts.profile), "--start-delay-s", str(opts.fly.start_delay_s),
+        "--stats", str(out / "bridge.json"), *common, *loss_seed(2),
     ]
     return [ChildSpec("vehicle", tuple(vehicle)), ChildSpec("estimator", tuple(estimator)),
             ChildSpec("bridge", tuple(bridge))]

@@ -1,4 +1,4 @@
-"""Summary of a SITL run from what the processes recorded (keys as ``gcs_tools.fly``'s summary)."""
+"""Turn what the SITL processes recorded into ``fly``'s result: same summary keys, same files."""
 
 from __future__ import annotations
 
@@ -8,51 +8,64 @@ from typing import Any
 
 import numpy as np
 
-from gcs_tools.sitl.launcher import SitlRun
+from companion.planning import Route
+from gcs_tools.fly.core import FlightResult, error_stats
+from gcs_tools.sitl.launcher import SitlOptions, SitlRun
 
 
-def error_stats(errors_m: np.ndarray) -> dict[str, float]:
-    e = errors_m[np.isfinite(errors_m)]
-    if e.size == 0:
-        return {"median": math.nan, "p95": math.nan, "rmse": math.nan}
-    return {"median": float(np.median(e)), "p95": float(np.percentile(e, 95)),
-            "rmse": float(np.sqrt(np.mean(e * e)))}
-
-
-def load_series(out_dir: Path) -> dict[str, np.ndarray]:
+def load_series(out_dir: Path, route: Route) -> dict[str, np.ndarray]:
+    """The vehicle's 20 Hz record, with the reference taken from the route exactly as ``fly`` does."""
     try:
         with np.load(out_dir / "vehicle_series.npz") as data:
-            return {k: data[k] for k in data.files}
+            series = {k: data[k] for k in data.files}
     except (OSError, ValueError):
         return {}
+    if series["t_s"].size:
+        series["p_ref_ned_m"] = route.reference(series["t_s"])[0]
+        series["track_error_m"] = np.linalg.norm(series["p_true_ned_m"] - series["p_ref_ned_m"], axis=1)
+    return series
 
 
-def summarize(run: SitlRun, series: dict[str, np.ndarray], method: str, seed: int) -> dict[str, Any]:
+def flight_result(opts: SitlOptions, run: SitlRun, route: Route, mission_name: str) -> FlightResult:
+    series = load_series(opts.out_dir, route)
     v, e = run.vehicle, run.estimator
     nav = e.get("navigator", {})
     t_s = series.get("t_s", np.zeros(0))
-    clearance = series.get("clearance_m", np.zeros(0))
-    vehicle_links = v.get("links", {})
-    gnss_sent = int(v.get("gnss_sent", 0))
-    return {
-        "method": method,
-        "seed": seed,
-        "ended_by": run.ended_by,
-        "outcome": v.get("outcome", "unknown"),
+    empty = np.zeros(0)
+    clearance = series.get("clearance_m", empty)
+    summary: dict[str, Any] = {
+        "mission": mission_name,
+        "profile": opts.profile,
+        "method": opts.method,
+        "seed": opts.seed,
         "reached_goal": v.get("outcome") == "reached_goal",
         "collisions": int(v.get("collisions", 0)),
         "duration_s": float(t_s[-1]) if t_s.size else 0.0,
+        "route_duration_s": route.duration_s,
         "wall_s": float(v.get("wall_s", math.nan)),
-        "estimation_error_m": error_stats(series.get("est_error_m", np.zeros(0))),
-        "tracking_error_m": error_stats(series.get("track_error_m", np.zeros(0))),
+        "estimation_error_m": error_stats(series.get("est_error_m", empty)),
+        "tracking_error_m": error_stats(series.get("track_error_m", empty)),
         "min_clearance_m": float(np.min(clearance)) if clearance.size else math.nan,
         "gnss": {
-            "sent": gnss_sent,
+            "sent": int(v.get("gnss_sent", 0)),
             "fused": int(nav.get("gnss_fused", 0)),
             "rejected": int(sum(n for k, n in nav.items() if k.startswith("gnss_rejected"))),
         },
-        "links": {"vehicle": vehicle_links, "ground": v.get("ground", {}), "estimator": e.get("link", {}),
-                  "bridge": run.bridge.get("link", {})},
-        "lockstep": v.get("lockstep", {}),
-        "return_codes": run.return_codes,
+        "estimator_counters": nav,
+        "sitl": {
+            "mode": "realtime" if opts.realtime else "lockstep",
+            "ended_by": run.ended_by,
+            "outcome": v.get("outcome", "unknown"),
+            "return_codes": run.return_codes,
+            "lockstep": v.get("lockstep", {}),
+            "links": {"vehicle": v.get("links", {}), "ground": v.get("ground", {}),
+                      "estimator": e.get("link", {}), "bridge": run.bridge.get("link", {})},
+            "vehicle_node": v.get("node", {}),
+            "estimator_node": e.get("node", {}),
+            "gnss_to_odometry_latency": e.get("gnss_to_odometry_latency", {}),
+            "imu_period_jitter": v.get("imu_period_jitter", {}),
+        },
     }
+    if not t_s.size:
+        series = {}
+    return FlightResult(summary, series, route)
