@@ -179,3 +179,13 @@ def test_push_fix_ned_equals_geodetic_fix():
     np.testing.assert_array_equal(a.estimate().p_ned_m, b.estimate().p_ned_m)
     with pytest.raises(ValueError, match="frame"):
         Navigator(CFG, "naive", frame=None).push_fix_ned(0, np.zeros(3))
+
+
+def test_ned_converter_equals_local_ned_frame():
+    from companion.estimator.navigator import NedConverter
+
+    conv = NedConverter(HOME)
+    rng = np.random.default_rng(5)
+    for p in rng.uniform(-3000.0, 3000.0, size=(20, 3)):
+        lat, lon, alt = HOME.to_geodetic(p)
+        np.testing.assert_allclose(conv(lat, lon, alt), HOME.to_ned_m(lat, lon, alt), rtol=0, atol=1e-8)

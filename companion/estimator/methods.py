@@ -136,6 +136,7 @@ class BeliefState(NamedTuple):
     theta: float  # belief logit (eq. 15)
     h_fast: float  # curvature accumulators (eq. 18)
     h_slow: float
+    beta: float  # σ(θ), kept so it is computed once per fix
 
 
 class _Belief:
@@ -144,48 +145,52 @@ class _Belief:
     def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
 
+    def _state(self, theta: float, h_fast: float, h_slow: float) -> BeliefState:
+        lim = self.cfg.theta_max
+        theta = min(lim, max(-lim, theta))
+        return BeliefState(theta, h_fast, h_slow, sigmoid(theta))
+
     def initial_state(self) -> BeliefState:
-        return BeliefState(self.cfg.theta0, self.cfg.h_fast0, self.cfg.h_slow0)
+        return self._state(self.cfg.theta0, self.cfg.h_fast0, self.cfg.h_slow0)
 
     def beta(self, state: BeliefState) -> float:
-        return sigmoid(state.theta)
+        return state.beta
 
     def measurement_cov(self, state: BeliefState, terms: InnovationTerms) -> Vec3:
-        f = self.cfg.r_factor(self.beta(state))
+        f = self.cfg.r_factor(state.beta)
         return (f * terms.r_nominal[0], f * terms.r_nominal[1], f * terms.r_nominal[2])
 
     def grad_theta(self, state: BeliefState, terms: InnovationTerms) -> float:
         """∇θ ℓ = ∂ℓ/∂β · β(1 − β) (chain rule through eq. 15)."""
-        beta = self.beta(state)
+        beta = state.beta
         return loss_grad(beta, terms, self.cfg)[1] * beta * (1.0 - beta)
 
-    def step(self, state: BeliefState, g: float) -> BeliefState:
+    def step(self, state: BeliefState, g: float) -> tuple[float, float, float]:
+        """(θ, H_fast, H_slow) after a step along ∇θ ℓ = g."""
         raise NotImplementedError
 
     def update(self, state: BeliefState, terms: InnovationTerms) -> BeliefState:
-        theta, h_fast, h_slow = self.step(state, self.grad_theta(state, terms))
-        lim = self.cfg.theta_max
-        return BeliefState(min(lim, max(-lim, theta)), h_fast, h_slow)
+        return self._state(*self.step(state, self.grad_theta(state, terms)))
 
 
 @register("first-order")
 class FirstOrder(_Belief):
     """Plain gradient step θ ← θ − η₁ ∇θ ℓ (the ablation baseline)."""
 
-    def step(self, state: BeliefState, g: float) -> BeliefState:
-        return BeliefState(state.theta - self.cfg.eta_first_order * g, state.h_fast, state.h_slow)
+    def step(self, state: BeliefState, g: float) -> tuple[float, float, float]:
+        return state.theta - self.cfg.eta_first_order * g, state.h_fast, state.h_slow
 
 
 @register("second-order")
 class SecondOrder(_Belief):
     """Dual-timescale damped Newton step (eq. 18-21)."""
 
-    def step(self, state: BeliefState, g: float) -> BeliefState:
+    def step(self, state: BeliefState, g: float) -> tuple[float, float, float]:
         c = self.cfg
         h_fast = c.alpha_fast * state.h_fast + g * g
         h_slow = c.alpha_slow * state.h_slow + g * g
         h = c.omega_fast * h_fast + (1.0 - c.omega_fast) * h_slow
-        return BeliefState(state.theta - c.eta * g / (h + c.lambda_reg), h_fast, h_slow)
+        return state.theta - c.eta * g / (h + c.lambda_reg), h_fast, h_slow
 
 
 @register("paper-literal")
@@ -195,5 +200,5 @@ class PaperLiteral(SecondOrder):
     the GNSS quality."""
 
     def grad_theta(self, state: BeliefState, terms: InnovationTerms) -> float:
-        beta = self.beta(state)
+        beta = state.beta
         return -paper_loss_grad(beta, terms, self.cfg)[1] * beta * (1.0 - beta)

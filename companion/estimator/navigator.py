@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+import pymap3d
 
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
@@ -38,6 +39,31 @@ def rotation_ned_frd(w: Any, x: Any, y: Any, z: Any, sqrt: Callable[[Any], Any])
     )
 
 
+class NedConverter:
+    """``frame.to_ned_m`` with the home point's ECEF position and rotation computed once.
+
+    pymap3d's geodetic → NED is ECEF(fix) − ECEF(home), rotated into the home's tangent plane;
+    both the home ECEF and the rotation (from pymap3d, on the unit vectors) are constant, so
+    each fix costs one ``pymap3d.geodetic2ecef`` and a 3×3 product in floats.
+    """
+
+    def __init__(self, frame: LocalNedFrame) -> None:
+        self.home_ecef_m = tuple(float(v) for v in pymap3d.geodetic2ecef(
+            frame.home_lat_deg, frame.home_lon_deg, frame.home_alt_m))
+        rows = []
+        for unit in np.eye(3):
+            e, n, u = pymap3d.uvw2enu(*unit, frame.home_lat_deg, frame.home_lon_deg)
+            rows.append((float(n), float(e), -float(u)))  # column of R_ned_ecef for this ECEF axis
+        self.r_ned_ecef = tuple(tuple(rows[j][i] for j in range(3)) for i in range(3))
+
+    def __call__(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
+        x, y, z = pymap3d.geodetic2ecef(lat_deg, lon_deg, alt_m)
+        hx, hy, hz = self.home_ecef_m
+        dx, dy, dz = float(x) - hx, float(y) - hy, float(z) - hz
+        (a, b, c), (d, e, f), (g, h, i) = self.r_ned_ecef
+        return (a * dx + b * dy + c * dz, d * dx + e * dy + f * dz, g * dx + h * dy + i * dz)
+
+
 class Navigator:
     """Belief-adaptive GNSS/IMU navigation on wire samples pushed in arrival order."""
 
@@ -50,6 +76,7 @@ class Navigator:
             raise ConfigError(f"estimator: {exc}") from None
         self.method = method
         self.frame = frame
+        self._to_ned = NedConverter(frame) if frame is not None else None
         self._counts: dict[str, int] = {
             "attitude_used": 0, "attitude_rejected_nonfinite": 0, "imu_rejected_no_attitude": 0,
             "gnss_rejected_fix_type": 0,
@@ -125,7 +152,8 @@ class Navigator:
                 self._counts["gnss_rejected_before_imu"] += 1
                 return
             self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
-        self.engine.push_fix(fix.t_validity_us, self.frame.to_ned_m(fix.lat_deg, fix.lon_deg, fix.alt_m))
+            self._to_ned = NedConverter(self.frame)
+        self.engine.push_fix(fix.t_validity_us, self._to_ned(fix.lat_deg, fix.lon_deg, fix.alt_m))  # type: ignore[misc]
 
     def push_fix_ned(self, t_validity_us: int, p_ned_m: np.ndarray) -> None:
         """A fix already converted to this navigator's frame (e.g. vectorised by a log reader).
