@@ -29,10 +29,11 @@ def map_figure(path: Path, world: Any, waypoints_ned_m: np.ndarray, tracks: dict
     """Map with the planned path (waypoints) and any number of NED tracks (label -> (N, 3))."""
     fig, ax = plt.subplots(figsize=(6.4, 6.0))
     draw_world(ax, world)
-    wp = np.asarray(waypoints_ned_m)
-    ax.plot(wp[:, 1], wp[:, 0], "k--", lw=1.0, marker="o", ms=3, label="planned path")
-    ax.plot(wp[0, 1], wp[0, 0], "ks", ms=6)
-    ax.plot(wp[-1, 1], wp[-1, 0], "k*", ms=10)
+    wp = np.asarray(waypoints_ned_m).reshape(-1, 3)
+    if len(wp):  # a recording may hold no route
+        ax.plot(wp[:, 1], wp[:, 0], "k--", lw=1.0, marker="o", ms=3, label="planned path")
+        ax.plot(wp[0, 1], wp[0, 0], "ks", ms=6)
+        ax.plot(wp[-1, 1], wp[-1, 0], "k*", ms=10)
     colours = ("tab:green", "tab:red", "tab:blue", "tab:orange")
     for (label, p), colour in zip(tracks.items(), colours, strict=False):
         p = np.asarray(p)

@@ -61,6 +61,17 @@ def test_payload_is_plain_json_with_documented_fields():
     assert d["nis"] is None and len(d["cov_diag"]) == 9 and d["method"] == "second-order"
 
 
+@pytest.mark.parametrize("hdop", [1.35, float("nan")])
+def test_gnss_hdop_round_trips_and_nan_travels_as_null(hdop):
+    fix = GnssFix(1_000_000, 47.3977419, 8.5455938, 488.25, 3, 12, 0.8, 1.1, hdop)
+    payload = zc.encode("gnss", zc.GnssReport(1_200_000, fix), 5)
+    assert json.loads(payload)["hdop"] == (None if math.isnan(hdop) else hdop)
+    back, _ = zc.decode("gnss", payload)
+    assert_same(zc.GnssReport(1_200_000, fix), back)
+    with pytest.raises(zc.MalformedPayloadError, match=r"gnss\.hdop: expected a finite number"):
+        zc.decode("gnss", payload.replace(b'"hdop":', b'"hdop":"x","_":'))
+
+
 def test_key_round_trip_and_foreign_keys():
     key = zc.key_for("uav1", "companion", "estimate")
     assert key == "beliefnav/uav1/companion/estimate"

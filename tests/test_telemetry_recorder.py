@@ -42,7 +42,8 @@ def test_recorder_loses_nothing_and_plot_redraws(tmp_path):
     with child(["-m", "gcs_tools", "plot", str(out), "--out", str(tmp_path / "fig")], env) as plot:
         p_out, p_err = plot.communicate(timeout=60)
         assert plot.returncode == 0, p_err
-    assert (tmp_path / "fig" / "uav1_overview.png").stat().st_size > 10_000
+    for name in ("uav1_map.png", "uav1_belief.png"):
+        assert (tmp_path / "fig" / name).stat().st_size > 10_000
 
 
 def test_plot_of_garbage_is_one_line_error(tmp_path):

@@ -174,7 +174,7 @@ class TopicSpec:
 
 _GNSS_FIELDS = {
     "t_validity_us": INT, "lat_deg": FLOAT, "lon_deg": FLOAT, "alt_m": FLOAT, "fix_type": INT,
-    "satellites_visible": INT, "h_acc_m": FLOAT_OPT, "v_acc_m": FLOAT_OPT,
+    "satellites_visible": INT, "h_acc_m": FLOAT_OPT, "v_acc_m": FLOAT_OPT, "hdop": FLOAT_OPT,
 }
 
 TOPICS: dict[str, TopicSpec] = {

@@ -112,6 +112,22 @@ def read_recording(path: str | Path) -> Recording:
     return rec
 
 
+@dataclass(frozen=True)
+class RecordedWorld:
+    """The map as a recording carries it (``route.buildings_ne_m``): what ``figures.draw_world`` needs."""
+
+    rects_m: np.ndarray  # (K, 4) n0, e0, n1, e1 [m]
+
+
+def recorded_route(rec: Recording, vehicle: str) -> tuple[RecordedWorld, np.ndarray, str]:
+    """(world, planned waypoints (N, 3), " (mission, profile)" or "") of the vehicle's last route message."""
+    routes = rec.messages[vehicle].get("route", [])
+    if not routes:
+        return RecordedWorld(np.zeros((0, 4))), np.zeros((0, 3)), ""
+    r = routes[-1]
+    return RecordedWorld(r.buildings_ne_m), r.waypoints_ned_m, f" ({r.mission}, profile {r.profile})"
+
+
 def _interp(t_s: np.ndarray, t_src_s: np.ndarray, values: np.ndarray) -> np.ndarray:
     if len(t_src_s) == 0:
         return np.full((len(t_s), values.shape[1] if values.ndim > 1 else 1), np.nan)
