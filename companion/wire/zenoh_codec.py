@@ -123,18 +123,12 @@ def _enc_array(x: Any) -> list:
     return values if all(map(math.isfinite, values)) else [_enc_float(v) for v in values]
 
 
-def _nan_for_null(v: Any) -> Any:
-    if v is None:
-        return math.nan
-    return [_nan_for_null(x) for x in v] if isinstance(v, list) else v
-
-
 def _dec_array(shape: tuple[int | None, ...], optional: bool = False) -> _Dec:
     def dec(v: Any, where: str) -> np.ndarray:
         if not isinstance(v, list):
             raise MalformedPayloadError(f"{where}: expected a list, got {type(v).__name__}")
         try:
-            a = np.array(_nan_for_null(v), dtype=float)
+            a = np.array(v, dtype=float)  # null -> NaN
         except (TypeError, ValueError):
             raise MalformedPayloadError(f"{where}: expected numbers") from None
         if len(v) == 0 and len(shape) == 2:

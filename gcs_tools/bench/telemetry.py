@@ -11,6 +11,13 @@ Two measurements, both over real Zenoh on 127.0.0.1 with a private hub port:
    The ``stress_sim_rate_*`` figures publish at the SIMULATED rates instead (hundreds of times the
    default rate): there the 10 subscriber processes decoding everything share the host's cores
    with the estimator, so they measure the machine more than the publisher.
+
+Before each measurement the publisher sends ``setpoint`` warm-up messages until EVERY subscriber
+reports (on its stdout) that it receives them: a subscriber process joins the mesh through the hub
+and is linked to the publisher directly only once gossip has run, and in peer-to-peer mode the hub
+does not forward, so until then it receives nothing. (Zenoh's matching status only tells that
+*some* subscriber matches, and a linked peer is not yet a peer whose declarations have arrived:
+waiting on either let a late subscriber miss a whole 3 s run.) ``link_wait_s`` is how long that took.
 """
 
 from __future__ import annotations
@@ -29,27 +36,38 @@ from typing import Any
 import numpy as np
 
 from companion.wire import zenoh_codec as zc
+from companion.wire.samples import Setpoint
 from companion.wire.telemetry import TelemetryConfig, TelemetryPublisher
 
 N_SUBSCRIBERS = 10
 RATES_HZ = {"estimate": 50, "belief": 20, "health": 5}  # the estimator node's publishing rates
 IMU_HZ = 200
 FANOUT_VEHICLE, RTF_VEHICLE = "fanout", "rtf"  # separate keys for the two phases
+WARMUP_TOPIC = "setpoint"  # sent until every subscriber receives the publisher; not counted
 
 
 def subscriber_main() -> None:
-    """Child process: decode everything, print counts and latencies (JSON) on SIGTERM."""
+    """Child process: decode everything; say "receiving" on the first warm-up message (setpoint) of
+    each publisher; on SIGTERM print counts, latencies and decode times (JSON)."""
     from companion.wire.telemetry import TelemetrySubscriber
 
     counts: Counter[str] = Counter()
     latency_ms: list[float] = []
+    decode_us: list[float] = []
+    warm: set[str] = set()
     lock = threading.Lock()
 
     def on(msg: Any) -> None:
         with lock:
+            if msg.topic == WARMUP_TOPIC:
+                if msg.vehicle not in warm:
+                    warm.add(msg.vehicle)
+                    print("receiving", flush=True)
+                return
             counts[msg.vehicle] += 1
             if msg.vehicle == FANOUT_VEHICLE and msg.sent_unix_ns is not None:
                 latency_ms.append((msg.recv_unix_ns - msg.sent_unix_ns) * 1e-6)
+                decode_us.append((time.time_ns() - msg.recv_unix_ns) * 1e-3)  # callback entry -> decoded
 
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
@@ -57,20 +75,46 @@ def subscriber_main() -> None:
         print("ready", flush=True)
         done.wait()
         with lock:
-            out = {"counts": dict(counts), "latency_ms": latency_ms, "malformed": sub.malformed_total}
+            out = {"counts": dict(counts), "latency_ms": latency_ms, "malformed": sub.malformed_total,
+                   "decode_us": decode_us}
     print(json.dumps(out), flush=True)
 
 
 def _start_subscribers(n: int, env: dict[str, str]) -> list[subprocess.Popen]:
+    """The first one becomes the hub; the others are started together once it is up."""
     code = "from gcs_tools.bench.telemetry import subscriber_main; subscriber_main()"
-    procs = []
-    for _ in range(n):
-        procs.append(subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
-                                      text=True))
-        assert procs[-1].stdout is not None
-        if procs[-1].stdout.readline().strip() != "ready":  # the first one becomes the hub
-            raise RuntimeError("subscriber failed to start")
+    procs: list[subprocess.Popen] = []
+    for batch in (1, n - 1):
+        new = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True)
+               for _ in range(batch)]
+        procs += new
+        for p in new:
+            assert p.stdout is not None
+            if p.stdout.readline().strip() != "ready":
+                raise RuntimeError("subscriber failed to start")
     return procs
+
+
+def await_receiving(pub: TelemetryPublisher, procs: list[subprocess.Popen], timeout_s: float = 30.0) -> float:
+    """Publish warm-up setpoints until every subscriber process receives them; returns the wait in s."""
+    said: list[str] = []
+    readers = [threading.Thread(target=lambda p=p: said.append(p.stdout.readline().strip()), daemon=True)
+               for p in procs]
+    for r in readers:
+        r.start()
+    t0 = time.monotonic()
+    k = 0
+    sp = Setpoint(0, np.zeros(3), np.zeros(3), np.zeros(3))
+    while any(r.is_alive() for r in readers):
+        if time.monotonic() - t0 > timeout_s:
+            raise RuntimeError(f"only {len(said)} of {len(procs)} subscribers received the publisher "
+                               f"within {timeout_s:.0f} s")
+        pub.publish(WARMUP_TOPIC, Setpoint(k, sp.p_ned_m, sp.v_ned_m_s, sp.a_ned_m_s2))
+        k += 1
+        time.sleep(0.01)
+    if said != ["receiving"] * len(procs):
+        raise RuntimeError(f"subscriber said {said!r}")
+    return time.monotonic() - t0
 
 
 def _stop_subscribers(procs: list[subprocess.Popen]) -> list[dict[str, Any]]:
@@ -84,7 +128,7 @@ def _stop_subscribers(procs: list[subprocess.Popen]) -> list[dict[str, Any]]:
         except (subprocess.TimeoutExpired, ValueError, IndexError):
             p.kill()
             p.communicate()
-            results.append({"counts": {}, "latency_ms": [], "malformed": 0})
+            results.append({"counts": {}, "latency_ms": [], "malformed": 0, "decode_us": []})
     return results
 
 
@@ -100,31 +144,31 @@ def _estimator_messages(est: Any, counters: dict[str, int], k_imu: int) -> list[
     return out
 
 
-def fan_out(duration_s: float, cfg: TelemetryConfig, flight: list[Any]) -> dict[str, Any]:
+def fan_out(duration_s: float, cfg: TelemetryConfig, flight: list[Any],
+            procs: list[subprocess.Popen]) -> dict[str, Any]:
     """Real-time publishing at the default rates (replaying estimates of the pre-flown flight)."""
     ests = flight
     sent: Counter[str] = Counter()
+    call_us: list[float] = []
     with TelemetryPublisher(FANOUT_VEHICLE, "companion", cfg) as pub:
-        for topic in RATES_HZ:
-            pub.wait_for_subscribers(topic)
-        deadline = time.monotonic() + 15.0  # gossip links the publisher to every subscriber
-        while pub.peer_count() < N_SUBSCRIBERS and time.monotonic() < deadline:
-            time.sleep(0.05)
+        link_wait_s = await_receiving(pub, procs)
         peers = pub.peer_count()
         t0 = time.monotonic()
         k = 0
         while (now := time.monotonic() - t0) < duration_s:
             est, counters = ests[k // 4 % len(ests)]
             for topic, obj in _estimator_messages(est, counters, k):
+                c0 = time.perf_counter_ns()
                 pub.publish(topic, obj)
+                call_us.append((time.perf_counter_ns() - c0) * 1e-3)
                 sent[topic] += 1
             k += 1
             time.sleep(max(0.0, k / IMU_HZ - now))
         wall_s = time.monotonic() - t0
-        pub.flush()
         time.sleep(0.5)
         pub_counters = pub.counters()
-    return {"sent": dict(sent), "publisher": pub_counters, "wall_s": wall_s, "peers": peers}
+    return {"sent": dict(sent), "publisher": pub_counters, "wall_s": wall_s, "peers": peers,
+            "link_wait_s": link_wait_s, "publish_call_us": call_us}
 
 
 def fly_samples(duration_s: float, seed: int) -> list[Any]:
@@ -192,20 +236,19 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     with TelemetryPublisher(RTF_VEHICLE, "companion", cfg) as pub:  # no subscribers attached
         rtf_none = rtf_runs(pub)
         stress_none = rtf_runs(pub, wall_rate=False)
-        pub.flush(10.0)
     procs = _start_subscribers(N_SUBSCRIBERS, env)
     try:
-        fan = fan_out(fan_s, cfg, flight)
+        fan = fan_out(fan_s, cfg, flight, procs)
         with TelemetryPublisher(RTF_VEHICLE, "companion", cfg) as pub:
-            pub.wait_for_subscribers("estimate")
-            time.sleep(1.0)
+            await_receiving(pub, procs)
             rtf_ten = rtf_runs(pub)
             stress_ten = rtf_runs(pub, wall_rate=False)
-            flushed = pub.flush(10.0)
+            time.sleep(0.5)
     finally:
         results = _stop_subscribers(procs)
     sent_total = sum(fan["sent"].values())
     lat = np.concatenate([np.asarray(r["latency_ms"], dtype=float) for r in results])
+    decode = np.concatenate([np.asarray(r["decode_us"], dtype=float) for r in results])
     delivered_fan = [r["counts"].get(FANOUT_VEHICLE, 0) for r in results]
     return {
         "subscribers": N_SUBSCRIBERS,
@@ -215,11 +258,15 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "sent_per_subscriber": sent_total,
         "delivered_rate_hz": round(float(np.mean(delivered_fan)) / fan["wall_s"], 1),
         "delivered_fraction": round(float(np.sum(delivered_fan)) / (sent_total * N_SUBSCRIBERS), 5),
-        "drops_at_default_rate": int(sent_total * N_SUBSCRIBERS - np.sum(delivered_fan))
-        + fan["publisher"]["dropped_queue_full"],
+        "drops_at_default_rate": int(sent_total * N_SUBSCRIBERS - np.sum(delivered_fan)),
+        "delivered_min_per_subscriber": int(min(delivered_fan)),
+        "link_wait_s": round(fan["link_wait_s"], 2),
         "latency_p50_ms": round(float(np.percentile(lat, 50)), 3) if len(lat) else None,
         "latency_p99_ms": round(float(np.percentile(lat, 99)), 3) if len(lat) else None,
         "latency_max_ms": round(float(np.max(lat)), 3) if len(lat) else None,
+        "publish_call_us_p50": round(float(np.percentile(fan["publish_call_us"], 50)), 1),
+        "publish_call_us_p99": round(float(np.percentile(fan["publish_call_us"], 99)), 1),
+        "subscriber_decode_us_p50": round(float(np.median(decode)), 1) if len(decode) else None,
         "malformed": int(sum(r["malformed"] for r in results)),
         "estimator_realtime_factor_no_subscribers": round(float(np.median(rtf_none)), 1),
         "estimator_realtime_factor_10_subscribers": round(float(np.median(rtf_ten)), 1),
@@ -228,7 +275,6 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "stress_sim_rate_realtime_factor_no_subscribers": round(float(np.median(stress_none)), 1),
         "stress_sim_rate_realtime_factor_10_subscribers": round(float(np.median(stress_ten)), 1),
         "estimator_flight_s": flight_s,
-        "publisher_flushed": flushed,
     }
 
 

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
+from companion.wire import telemetry
 from gcs_tools.replay import core
 
 
@@ -19,6 +21,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate-hz", type=float, default=20.0,
                         help="estimate rows per second in estimates.csv (0: one per IMU sample)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--publish", action="store_true",
+                        help="publish companion/estimate, belief and health on Zenoh (see README)")
+    parser.add_argument("--vehicle", default="replay",
+                        help="vehicle id in the published keys (default: replay)")
+    parser.add_argument("--speed", type=float, default=0.0,
+                        help="pace the replay at this many times real time (default 0: as fast as possible)")
+    telemetry.add_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,11 +39,16 @@ def run(args: argparse.Namespace) -> int:
         bar = tqdm(total=args.file.stat().st_size if args.file.is_file() else 0, unit="B",
                    unit_scale=True, desc=f"replay {args.method}", leave=False)
     progress = None if bar is None else (lambda pos, size: bar.update(pos - bar.n))
+    pub = telemetry.TelemetryPublisher(args.vehicle, "companion", telemetry.config_from_args(args)) \
+        if args.publish else None
     try:
-        result = core.replay(args.file, args.method, home=home, rate_hz=args.rate_hz, progress=progress)
+        result = core.replay(args.file, args.method, home=home, rate_hz=args.rate_hz, progress=progress,
+                             on_imu=_on_imu(pub, args.speed))
     finally:
         if bar is not None:
             bar.close()
+        if pub is not None:
+            pub.close()
     core.write_outputs(result, args.out)
     s = result.summary
     beta = s["beta"]
@@ -45,4 +59,27 @@ def run(args: argparse.Namespace) -> int:
     print(f"  beta median {beta.get('median', float('nan')):.3f} min {beta.get('min', float('nan')):.3f}; "
           f"horizontal distance to GNSS median {gnss['median']:.2f} m p95 {gnss['p95']:.2f} m")
     print(f"  wrote {args.out / 'estimates.csv'} and {args.out / 'summary.json'}")
+    if pub is not None:
+        c = pub.counters()
+        print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle}/companion/*")
     return 0
+
+
+def _on_imu(pub: telemetry.TelemetryPublisher | None, speed: float) -> core.ImuHook | None:
+    """Publish the estimator's topics at their rates and/or pace to ``speed`` x real time."""
+    tap = telemetry.EstimatorTelemetry(pub) if pub is not None else None
+    if tap is None and speed <= 0:
+        return None
+    start: list[float] = []  # (wall s, boot s) of the first IMU sample
+
+    def hook(t_us: int, nav: core.NavigatorLike) -> None:
+        if speed > 0:
+            if not start:
+                start.extend((time.monotonic(), t_us * 1e-6))
+            lag_s = start[0] + (t_us * 1e-6 - start[1]) / speed - time.monotonic()
+            if lag_s > 0.002:
+                time.sleep(lag_s)
+        if tap is not None:
+            tap.update(t_us, nav)
+
+    return hook

@@ -48,6 +48,7 @@ class NavigatorLike(Protocol):
 
 
 NavigatorFactory = Callable[[str, LocalNedFrame], NavigatorLike]
+ImuHook = Callable[[int, NavigatorLike], None]
 
 
 def default_navigator(method: str, frame: LocalNedFrame) -> NavigatorLike:
@@ -186,11 +187,13 @@ def replay(
     rate_hz: float = 20.0,
     navigator: NavigatorFactory | None = None,
     progress: Callable[[int, int], None] | None = None,
+    on_imu: ImuHook | None = None,
 ) -> ReplayResult:
     """Replay ``path`` through a navigator; ``rate_hz`` limits the estimate rows (0: every IMU).
 
-    ``progress(position_bytes, size_bytes)`` is called now and then. Raises UserError when the
-    log holds nothing usable (no frames, no IMU, no good fix, no estimate).
+    ``progress(position_bytes, size_bytes)`` is called now and then; ``on_imu(t_us, navigator)``
+    after every IMU sample is pushed (telemetry, pacing; its time is not the estimator's).
+    Raises UserError when the log holds nothing usable (no frames, no IMU, no good fix, no estimate).
     """
     path = Path(path)
     if not path.is_file():
@@ -254,6 +257,8 @@ def replay(
                     series.rows.append(np.concatenate((est.p_ned_m, est.v_ned_m_s, est.b_ned_m,
                                                        (est.beta, est.nis), est.cov_diag)))
         estimator_s += time.perf_counter() - t0
+        if on_imu is not None and isinstance(sample, ImuSample):
+            on_imu(sample.t_us, nav)
     if progress is not None:
         progress(reader.size, reader.size)
     read_s = time.perf_counter() - wall0 - estimator_s
