@@ -15,6 +15,7 @@ attitude and flies back to the point where it lost the estimate (or its start po
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -29,6 +30,7 @@ def _finite(*arrays: np.ndarray) -> bool:
 
 _ZERO3 = np.zeros(3)
 _ZERO3.flags.writeable = False
+_TWO_PI = 2 * math.pi
 
 
 class Autopilot:
@@ -46,6 +48,8 @@ class Autopilot:
         self._kd = (cfg.kd_xy_1_s, cfg.kd_xy_1_s, cfg.kd_z_1_s)
         self._ki = (cfg.ki_xy_1_s3, cfg.ki_xy_1_s3, cfg.ki_z_1_s3)
         self._tilt = cfg.max_tilt_rad
+        self._k_att, self._d_att = cfg.k_att_nm_rad, cfg.d_att_nm_s_rad
+        self._k_yaw, self._d_yaw = cfg.k_yaw_nm_rad, cfg.d_yaw_nm_s_rad
         self.yaw_hold_rad = yaw_hold_rad
         self.hold_p_ned_m = np.array(p_hold_ned_m, dtype=float)
         # the autopilot's own navigation state: the last estimate, dead-reckoned while stale
@@ -116,17 +120,16 @@ class Autopilot:
         self.nav_v_ned_m_s = v[-1].copy()
 
     # -- inner loop --------------------------------------------------------------------
-    def inner(self, q_ned_frd: tuple[float, float, float, float], p: float, q: float, r: float
-              ) -> tuple[float, float, float, float]:
-        """Eq. 11: (thrust_n, tau_roll, tau_pitch, tau_yaw) from the attitude and body rates."""
-        cfg = self.cfg
-        roll, pitch, yaw = quat_to_euler(q_ned_frd)
+    def inner(self, x: Sequence[float]) -> tuple[float, float, float, float]:
+        """Eq. 11: (thrust_n, tau_roll, tau_pitch, tau_yaw) from the attitude and body rates of the
+        rigid-body state ``x`` (``RigidBody.x`` layout: quaternion at 6-9, body rates at 10-12)."""
+        roll, pitch, yaw = quat_to_euler(x[6:10])
+        p, q, r = x[10], x[11], x[12]
         tilt_cos = max(0.5, math.cos(roll) * math.cos(pitch))
-        thrust = self._m * (self._g - self.accel_down_cmd_m_s2) / tilt_cos
-        thrust = min(self._t_max, max(0.0, thrust))
+        thrust = min(self._t_max, max(0.0, self._m * (self._g - self.accel_down_cmd_m_s2) / tilt_cos))
         lim = self._tau_max
-        yaw_err = (self.yaw_hold_rad - yaw + math.pi) % (2 * math.pi) - math.pi
-        tx = cfg.k_att_nm_rad * (self.roll_cmd_rad - roll) - cfg.d_att_nm_s_rad * p
-        ty = cfg.k_att_nm_rad * (self.pitch_cmd_rad - pitch) - cfg.d_att_nm_s_rad * q
-        tz = cfg.k_yaw_nm_rad * yaw_err - cfg.d_yaw_nm_s_rad * r
+        yaw_err = (self.yaw_hold_rad - yaw + math.pi) % _TWO_PI - math.pi
+        tx = self._k_att * (self.roll_cmd_rad - roll) - self._d_att * p
+        ty = self._k_att * (self.pitch_cmd_rad - pitch) - self._d_att * q
+        tz = self._k_yaw * yaw_err - self._d_yaw * r
         return thrust, min(lim, max(-lim, tx)), min(lim, max(-lim, ty)), min(lim, max(-lim, tz))

@@ -11,7 +11,8 @@ One fix per control period, valid at its sampling time ``t_validity_us``:
 * latency (eq. 27): ``L ← clip(ζ L + (1 - ζ) L̄(w) + Υ, 0, cap)``, ``ζ = exp(-Δt / τ)``,
   ``Υ ~ N(0, σ_L²)``.
 
-The fix is queued and released at the first physics tick at or after ``t_validity + L``, so
+The fix is queued (in local NED, ``NedFix``; ``to_fix`` gives the geodetic wire form) and released
+at the first physics tick at or after ``t_validity + L``, so
 consecutive fixes can overtake each other when the latency drops quickly.
 """
 
@@ -28,6 +29,17 @@ from companion.wire.samples import GnssFix
 from simvehicle.config import GnssConfig
 
 FIX_TYPE_3D = 3
+
+
+@dataclass(frozen=True, slots=True)
+class NedFix:
+    """A fix in the mission's local NED frame (what in-process consumers fuse); ``GnssModel.to_fix``
+    gives its wire form."""
+
+    t_validity_us: int
+    p_ned_m: np.ndarray  # true position + bias + white noise
+    sigma_noise_m: float  # white-noise std in force
+    satellites: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +113,7 @@ class GnssModel:
         self.bias_ned_m = c0.sigma_bias_m * rng.standard_normal(3)  # start in the stationary law
         self.latency_s = c0.latency_mean_s
         self._zeta = math.exp(-period_s / cfg.latency_tau_s)
-        self._queue: list[tuple[int, int, GnssFix]] = []
+        self._queue: list[tuple[int, int, NedFix]] = []
         self.sent = 0
 
     def step(self, clearance_m: float) -> GnssConditions:
@@ -115,34 +127,43 @@ class GnssModel:
         self.latency_s = min(self.cfg.latency_cap_s, max(0.0, lat))
         return c
 
-    def sample(self, t_validity_us: int, p_ned_m: np.ndarray, clearance_m: float) -> GnssFix:
+    def sample(self, t_validity_us: int, p_ned_m: np.ndarray, clearance_m: float) -> NedFix:
         """Make the fix valid at ``t_validity_us`` for true position ``p_ned_m`` and queue it."""
         c = self.step(clearance_m)
         z_ned_m = p_ned_m + self.bias_ned_m + c.sigma_noise_m * self._rng.standard_normal(3)
-        lat, lon, alt = self.to_geodetic(z_ned_m)
-        acc = self.cfg.report_accuracy
-        fix = GnssFix(
-            t_validity_us=int(t_validity_us),
-            lat_deg=lat,
-            lon_deg=lon,
-            alt_m=alt,
-            fix_type=FIX_TYPE_3D,
-            satellites_visible=c.satellites,
-            h_acc_m=c.sigma_noise_m if acc else float("nan"),
-            v_acc_m=c.sigma_noise_m if acc else float("nan"),
-        )
-        release_us = int(t_validity_us) + math.ceil(self.latency_s * 1e6 - 1e-6)
+        fix = NedFix(int(t_validity_us), z_ned_m, c.sigma_noise_m, c.satellites)
+        release_us = fix.t_validity_us + math.ceil(self.latency_s * 1e6 - 1e-6)
         heapq.heappush(self._queue, (release_us, self.sent, fix))
         self.sent += 1
         return fix
 
-    def release(self, t_us: int) -> list[GnssFix]:
+    def to_fix(self, fix: NedFix) -> GnssFix:
+        """The wire form of a fix: geodetic position (``frame``), fix type and accuracies."""
+        lat, lon, alt = self.to_geodetic(fix.p_ned_m)
+        acc = fix.sigma_noise_m if self.cfg.report_accuracy else float("nan")
+        return GnssFix(
+            t_validity_us=fix.t_validity_us,
+            lat_deg=lat,
+            lon_deg=lon,
+            alt_m=alt,
+            fix_type=FIX_TYPE_3D,
+            satellites_visible=fix.satellites,
+            h_acc_m=acc,
+            v_acc_m=acc,
+        )
+
+    def release(self, t_us: int) -> list[NedFix]:
         """Fixes whose latency has elapsed by ``t_us``, in order of release time."""
         out = []
         q = self._queue
         while q and q[0][0] <= t_us:
             out.append(heapq.heappop(q)[2])
         return out
+
+    @property
+    def next_release_us(self) -> int | float:
+        """Release time of the next queued fix (inf when none is queued)."""
+        return self._queue[0][0] if self._queue else math.inf
 
     @property
     def pending(self) -> int:

@@ -8,7 +8,9 @@ profile's start point, yaw 0 (facing north).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -18,21 +20,64 @@ from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstima
 from simvehicle.autopilot import Autopilot
 from simvehicle.config import SimConfig, sim_config_for
 from simvehicle.dynamics import RigidBody
-from simvehicle.gnss import GnssModel
+from simvehicle.gnss import GnssModel, NedFix
 from simvehicle.imu import Imu, rotations, specific_force_frd
 
+# columns of the per-period block: specific force (0-2), then the RigidBody state (3-15)
+_BLOCK_COLUMNS = 16
 
-@dataclass(frozen=True, slots=True)
+
+@dataclass(frozen=True, eq=False)
 class StepOutput:
-    """What one control period produced, in time order within each list."""
+    """What one control period produced, in time order.
+
+    The period is held as arrays (one row per physics tick); the sample objects ``imu``,
+    ``attitude``, ``truth`` and the geodetic ``gnss`` fixes are built on first access, so an
+    in-process consumer that reads the arrays (and ``gnss_ned``) pays for none of them.
+    """
 
     t_us: int  # end of the period
-    imu: list[ImuSample]
-    attitude: list[AttitudeSample]
-    gnss: list[GnssFix]  # released this period (latency elapsed), stamped with validity time
-    truth: list[TruthState]  # one per IMU sample
+    tick_us: range  # the physics ticks of the period (last = t_us)
+    acc_frd_m_s2: np.ndarray  # (n, 3) IMU specific force, noisy
+    gyro_frd_rad_s: np.ndarray  # (n, 3) IMU rates, noisy
+    q_ned_frd: np.ndarray  # (n, 4) true attitude (what the attitude samples carry)
+    p_ned_m: np.ndarray  # (n, 3) true position
+    v_ned_m_s: np.ndarray  # (n, 3) true velocity
+    # (gnss bias, latency, clearance) of the latest valid fix: before the period's fix, at the last tick
+    gnss_truth: tuple[tuple[np.ndarray, float, float], tuple[np.ndarray, float, float]]
+    gnss_ned: list[NedFix]  # released this period (latency elapsed), stamped with validity time
+    gnss_arrival_us: list[int]  # arrival tick of each ``gnss_ned`` / ``gnss`` entry
     collided: bool  # within radius_m of a building, or at/below the ground, at the end of the period
-    gnss_arrival_us: list[int] = field(default_factory=list)  # arrival tick of each ``gnss`` entry
+    to_fix: Callable[[NedFix], GnssFix]  # the wire form of a released fix (geodetic)
+
+    @cached_property
+    def imu(self) -> list[ImuSample]:
+        acc, gyro = self.acc_frd_m_s2, self.gyro_frd_rad_s
+        return [ImuSample(t, acc[i], gyro[i]) for i, t in enumerate(self.tick_us)]
+
+    @cached_property
+    def attitude(self) -> list[AttitudeSample]:
+        q = self.q_ned_frd
+        return [AttitudeSample(t, q[i]) for i, t in enumerate(self.tick_us)]
+
+    @cached_property
+    def truth(self) -> list[TruthState]:
+        """One per IMU sample; each carries the bias/latency/clearance of the latest fix valid at it."""
+        return [self.truth_at(i) for i in range(len(self.tick_us))]
+
+    @property
+    def final_truth(self) -> TruthState:
+        """``truth[-1]`` without building the others."""
+        return self.truth_at(len(self.tick_us) - 1)
+
+    def truth_at(self, i: int) -> TruthState:
+        bias, latency_s, clearance_m = self.gnss_truth[i == len(self.tick_us) - 1]
+        return TruthState(self.tick_us[i], self.p_ned_m[i], self.v_ned_m_s[i], self.q_ned_frd[i],
+                          gnss_bias_ned_m=bias, gnss_latency_s=latency_s, clearance_m=clearance_m)
+
+    @cached_property
+    def gnss(self) -> list[GnssFix]:
+        return [self.to_fix(f) for f in self.gnss_ned]
 
 
 class SimVehicle:
@@ -78,47 +123,43 @@ class SimVehicle:
         """Fly one control period (outer loop once, inner loop and physics every step)."""
         ap, body, gnss = self.autopilot, self.body, self.gnss
         ap.outer(self.t_us, estimate, setpoint)
-        t, dt_s, dt_us, veh = self.t_us, self._dt_s, self._dt_us, self.config.vehicle
-        rows: list[list[float]] = []
-        fixes: list[GnssFix] = []
+        t0, dt_s, dt_us, veh = self.t_us, self._dt_s, self._dt_us, self.config.vehicle
+        inner, step = ap.inner, body.step
+        flat: list[float] = []
+        fixes: list[NedFix] = []
         arrivals: list[int] = []
+        next_release_us = gnss.next_release_us
+        t = t0
         for _ in range(self._steps):
-            x = body.x
-            thrust, tx, ty, tz = ap.inner((x[6], x[7], x[8], x[9]), x[10], x[11], x[12])
-            body.step(dt_s, thrust, tx, ty, tz)
+            thrust, tx, ty, tz = inner(body.x)
+            step(dt_s, thrust, tx, ty, tz)
             t += dt_us
-            rows.append([*specific_force_frd(veh, thrust, body.x), *body.x])
-            if gnss.pending:
+            x = body.x
+            flat += specific_force_frd(veh, thrust, x)
+            flat += x
+            if t >= next_release_us:
                 for fix in gnss.release(t):
                     fixes.append(fix)
                     arrivals.append(t)
+                next_release_us = gnss.next_release_us
         self.t_us = t
 
-        block = np.array(rows)  # (steps, 16): specific force, p, v, q, omega
+        block = np.array(flat).reshape(self._steps, _BLOCK_COLUMNS)
         p, v, q, omega = block[:, 3:6], block[:, 6:9], block[:, 9:13], block[:, 13:16]
         acc, gyro = self.imu.measure(block[:, 0:3], omega)
         if ap.holding:
             ap.dead_reckon(np.einsum("nij,nj->ni", rotations(q), acc) + self._g_ned, dt_s)
 
         # one GNSS fix per period, valid at its end; truth carries the bias of the latest valid fix
-        prev_bias, prev_latency_s, prev_clearance_m = gnss.bias_ned_m, gnss.latency_s, self._clearance_m
+        before = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
         self._clearance_m = self._clearance(p[-1])
         gnss.sample(t, p[-1], self._clearance_m)
         for fix in gnss.release(t):
             fixes.append(fix)
             arrivals.append(t)
-
-        times = range(t - (self._steps - 1) * dt_us, t + 1, dt_us)
-        last = self._steps - 1
-        imu = [ImuSample(ti, acc[i], gyro[i]) for i, ti in enumerate(times)]
-        attitude = [AttitudeSample(ti, q[i]) for i, ti in enumerate(times)]
-        truth = [
-            TruthState(ti, p[i], v[i], q[i], gnss_bias_ned_m=prev_bias, gnss_latency_s=prev_latency_s,
-                       clearance_m=prev_clearance_m)
-            if i < last else
-            TruthState(ti, p[i], v[i], q[i], gnss_bias_ned_m=gnss.bias_ned_m, gnss_latency_s=gnss.latency_s,
-                       clearance_m=self._clearance_m)
-            for i, ti in enumerate(times)
-        ]
-        collided = self._clearance_m < self.config.vehicle.radius_m or p[-1, 2] >= 0.0
-        return StepOutput(t, imu, attitude, fixes, truth, bool(collided), arrivals)
+        after = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
+        collided = self._clearance_m < veh.radius_m or p[-1, 2] >= 0.0
+        return StepOutput(
+            t, range(t0 + dt_us, t + 1, dt_us), acc, gyro, q, p, v, (before, after),
+            fixes, arrivals, bool(collided), gnss.to_fix,
+        )

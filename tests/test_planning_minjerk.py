@@ -72,3 +72,13 @@ def test_peak_speed_and_acceleration_stay_within_limits_and_one_is_reached():
 def test_rejects_repeated_waypoints():
     with pytest.raises(ValueError, match="distinct"):
         MinJerkTrajectory.through(WAYPOINTS[[0, 0, 1]], SPEED_M_S, ACC_M_S2)
+
+
+def test_scalar_float_path_equals_the_vector_path_bit_for_bit():
+    traj = MinJerkTrajectory.through(WAYPOINTS, SPEED_M_S, ACC_M_S2, t_start_s=2.0)
+    ends = 2.0 + np.cumsum(traj.durations_s)
+    t = np.r_[np.linspace(-1.0, traj.duration_s + 3.0, 2001), 2.0, ends, np.nextafter(ends, 0.0)]
+    p, v, a = traj.reference(t)
+    for k, tk in enumerate(t.tolist()):
+        for x, y in zip(traj.reference(tk), (p[k], v[k], a[k]), strict=True):
+            np.testing.assert_array_equal(x, y)

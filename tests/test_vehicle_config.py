@@ -84,3 +84,21 @@ def test_overrides_change_only_what_they_name():
     default = SimConfig()
     assert cfg.vehicle.mass_kg == 4.0 and cfg.gnss.d_near_m == 20.0
     assert cfg.vehicle.inertia_kg_m2 == default.vehicle.inertia_kg_m2 and cfg.imu == default.imu
+
+
+def test_lazy_samples_match_the_period_arrays_and_the_ned_fixes():
+    sim = SimVehicle(FixtureMission(world=RectWorld(((-20.0, 8.0, 20.0, 30.0),))), 0, 3)
+    outs = [sim.advance(None, None) for _ in range(40)]
+    fixes = [(f, g) for o in outs for f, g in zip(o.gnss, o.gnss_ned, strict=True)]
+    assert len(fixes) > 20
+    for fix, ned in fixes:  # the wire fix is the NED fix in geodetic form
+        assert fix.t_validity_us == ned.t_validity_us and fix.satellites_visible == ned.satellites
+        np.testing.assert_allclose(FixtureMission().frame.to_ned_m(fix.lat_deg, fix.lon_deg, fix.alt_m),
+                                   ned.p_ned_m, atol=1e-6)
+    out = outs[-1]
+    last, final = out.truth[-1], out.final_truth
+    assert final.t_us == last.t_us == out.t_us and final.clearance_m == last.clearance_m == sim.clearance_m
+    for name in ("p_ned_m", "v_ned_m_s", "q_ned_frd", "gnss_bias_ned_m"):
+        np.testing.assert_array_equal(getattr(final, name), getattr(last, name))
+    np.testing.assert_array_equal([s.acc_frd_m_s2 for s in out.imu], out.acc_frd_m_s2)
+    np.testing.assert_array_equal([s.q_ned_frd for s in out.attitude], out.q_ned_frd)

@@ -85,3 +85,39 @@ def test_rotation_stays_orthonormal_and_torque_free_momentum_is_conserved():
     R = body.rotation()
     np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-13)
     assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-13)
+
+
+def rk4_from_deriv(body: RigidBody, dt: float, thrust: float, tx: float, ty: float, tz: float) -> list[float]:
+    """One RK4 step built from ``_deriv`` (the reference form), with ``step``'s combination order."""
+    n, e, d, *y = body.x  # y = v (3), q (4), ω (3)
+    a = thrust * (1.0 / body.cfg.mass_kg)
+
+    def f(state):
+        return body._deriv(*state, a, tx, ty, tz)
+
+    k1 = f(y)
+    y1 = [yi + 0.5 * dt * ki for yi, ki in zip(y, k1, strict=True)]
+    k2 = f(y1)
+    y2 = [yi + 0.5 * dt * ki for yi, ki in zip(y, k2, strict=True)]
+    k3 = f(y2)
+    y3 = [yi + dt * ki for yi, ki in zip(y, k3, strict=True)]
+    k4 = f(y3)
+    s = dt / 6.0
+    pos = [pi + s * (y[i] + 2 * y1[i] + 2 * y2[i] + y3[i]) for i, pi in enumerate((n, e, d))]
+    new = [yi + s * (a1 + 2 * (a2 + a3) + a4) for yi, a1, a2, a3, a4 in zip(y, k1, k2, k3, k4, strict=True)]
+    inv = 1.0 / math.sqrt(sum(c * c for c in new[3:7]))
+    return [*pos, *new[:3], *(c * inv for c in new[3:7]), *new[7:]]
+
+
+def test_inline_rk4_step_is_bit_for_bit_the_deriv_form():
+    cfg = VehicleConfig(inertia_kg_m2=(0.02, 0.03, 0.045), drag_n_s_m=0.4)
+    body = RigidBody(cfg, [1.0, -2.0, -30.0])
+    rng = np.random.default_rng(8)
+    for _ in range(500):
+        x = rng.normal(size=13)
+        x[6:10] /= np.linalg.norm(x[6:10])
+        body.x = x.tolist()
+        thrust, tx, ty, tz = 49.0 + 10.0 * rng.normal(), *rng.normal(scale=0.5, size=3)
+        expected = rk4_from_deriv(body, DT, thrust, tx, ty, tz)
+        body.step(DT, thrust, tx, ty, tz)
+        assert body.x == expected

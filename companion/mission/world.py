@@ -38,6 +38,7 @@ class World:
             dtype=float,
         ).reshape(-1, 4)
         self.rects_m.setflags(write=False)
+        self._rect_columns = tuple(np.ascontiguousarray(c) for c in self.rects_m.T)
         n_rows = int(np.ceil((b.north_max_m - b.north_min_m) / self.resolution_m - 1e-9))
         n_cols = int(np.ceil((b.east_max_m - b.east_min_m) / self.resolution_m - 1e-9))
         self.shape = (n_rows, n_cols)
@@ -52,8 +53,19 @@ class World:
 
         Vectorised: array inputs broadcast together and give an array of their shape.
         """
+        if np.ndim(north_m) == 0 and np.ndim(east_m) == 0:
+            return self._point_clearance_m(float(north_m), float(east_m))
         d = self.building_distances_m(north_m, east_m).min(axis=-1, initial=np.inf)
         return float(d) if d.ndim == 0 else d
+
+    def _point_clearance_m(self, north_m: float, east_m: float) -> float:
+        """``clearance_m`` of one point: the same arithmetic on the rectangle columns, fewer numpy calls."""
+        if not len(self.rects_m):
+            return np.inf
+        n0, e0, n1, e1 = self._rect_columns
+        gap_n = np.maximum(np.maximum(n0 - north_m, north_m - n1), 0.0)
+        gap_e = np.maximum(np.maximum(e0 - east_m, east_m - e1), 0.0)
+        return float(np.hypot(gap_n, gap_e).min())
 
     def nearest_building(self, north_m: float, east_m: float) -> int:
         """Index of the building nearest to a point (-1 when there are none)."""

@@ -31,7 +31,7 @@ def vehicle_only_wall_s(mission: Any, sim_s: float) -> float:
     t0 = time.perf_counter()
     while sim.t_us < sim_s * 1e6:
         out = sim.advance(est, route.setpoint(sim.t_us))
-        tr = out.truth[-1]
+        tr = out.final_truth
         est = NavEstimate(out.t_us, tr.p_ned_m, tr.v_ned_m_s, tr.gnss_bias_ned_m, zero9, 1.0, np.nan, "truth")
     return time.perf_counter() - t0
 

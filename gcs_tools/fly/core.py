@@ -1,7 +1,9 @@
 """In-process flight: vehicle, planner, autopilot and estimator closed in one process.
 
 Per control period (20 Hz): ``out = sim.advance(est, sp)``; the period's attitude, IMU and
-released GNSS samples go to the ``Navigator`` in arrival order; ``est = nav.estimate()``;
+released GNSS samples go to the ``Navigator`` in arrival order (fixes as ``out.gnss_ned`` via
+``push_fix_ned``: in one process both sides share the mission frame, so the geodetic wire form,
+exact to ~1 µm, is skipped; SITL flies it); ``est = nav.estimate()``;
 ``sp = route.setpoint(t)``. The flight ends once the reference has arrived and the vehicle is
 within ``goal_radius_m`` of the goal and slower than ``goal_speed_m_s``, or at the timeout.
 No files here: see ``output``.
@@ -75,28 +77,30 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     if max_duration_s is not None:
         end_s = min(end_s, max_duration_s)
     end_us = round(end_s * 1e6)
-    push = nav.push
+    arrive_s = route.t_start_s + route.duration_s
+    push, push_fix_ned = nav.push, nav.push_fix_ned
     rows: list[tuple[Any, ...]] = []
     est, collisions, in_contact, reached = None, 0, False, False
     wall0 = time.perf_counter()
     while sim.t_us < end_us:
         out = sim.advance(est, route.setpoint(sim.t_us))
-        fixes = list(zip(out.gnss_arrival_us, out.gnss, strict=True))
+        fixes = list(zip(out.gnss_arrival_us, out.gnss_ned, strict=True))
         k = 0
         for att, imu in zip(out.attitude, out.imu, strict=True):
             push(att)
             push(imu)
             while k < len(fixes) and fixes[k][0] <= imu.t_us:
-                push(fixes[k][1])
+                fix = fixes[k][1]
+                push_fix_ned(fix.t_validity_us, fix.p_ned_m)  # in the mission frame: no geodesy
                 k += 1
         est = nav.estimate()
-        truth = out.truth[-1]
+        truth = out.final_truth
         rows.append((out.t_us, truth, est))
         collisions += out.collided and not in_contact
         in_contact = out.collided
-        if (np.linalg.norm(truth.p_ned_m - goal_ned_m) <= cfg.goal_radius_m
-                and np.linalg.norm(truth.v_ned_m_s) <= cfg.goal_speed_m_s
-                and out.t_us * 1e-6 >= route.t_start_s + route.duration_s):
+        if (out.t_us * 1e-6 >= arrive_s
+                and np.linalg.norm(truth.p_ned_m - goal_ned_m) <= cfg.goal_radius_m
+                and np.linalg.norm(truth.v_ned_m_s) <= cfg.goal_speed_m_s):
             reached = True
             break
     wall_s = time.perf_counter() - wall0
