@@ -10,6 +10,7 @@ from companion.errors import UserError
 
 
 def _parser() -> argparse.ArgumentParser:
+    from companion.wire import telemetry
     from companion.wire.udp_link import add_link_arguments
 
     parser = argparse.ArgumentParser(prog="python -m companion", description=__doc__.splitlines()[0])
@@ -21,6 +22,7 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--mission", default="default", help="mission name or YAML path")
         p.add_argument("--stats", type=Path, help="write link/node counters here (JSON) on exit")
         add_link_arguments(p)
+        telemetry.add_arguments(p, publisher=True)
         if name == "estimator":
             p.add_argument("--method", default="second-order", help="estimator method")
         else:
@@ -48,13 +50,16 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        if node is not None and args.stats is not None:
-            write_json(args.stats, node.stats())
+        if node is not None:
+            node.telemetry.close()
+            if args.stats is not None:
+                write_json(args.stats, node.stats())
     return 0
 
 
 def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNode)
     from companion.mission import load_mission
+    from companion.wire.telemetry import publisher_from_args
     from companion.wire.udp_link import UdpLink, link_settings
 
     mission = load_mission(args.mission)
@@ -64,13 +69,14 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
 
         navigator, nis_gate = make_navigator(mission, args.method)
         link = UdpLink(_config(args, ESTIMATOR_COMPONENT_ID, fields, link_id=1), rng)
-        return EstimatorNode(link, navigator, nis_gate)
-    from companion.nodes.bridge_node import BRIDGE_COMPONENT_ID, BridgeNode
+        return EstimatorNode(link, navigator, nis_gate, publisher_from_args(args, "companion"))
+    from companion.nodes.bridge_node import BRIDGE_COMPONENT_ID, BridgeNode, route_info
     from companion.planning import plan_route
 
     route = plan_route(mission, args.profile, t_start_s=args.start_delay_s)
     link = UdpLink(_config(args, BRIDGE_COMPONENT_ID, fields, link_id=2), rng)
-    return BridgeNode(link, route)
+    return BridgeNode(link, route, publisher_from_args(args, "bridge"),
+                      route_info(mission, args.profile, route))
 
 
 def _config(args: argparse.Namespace, component_id: int, fields: dict[str, object], link_id: int):  # noqa: ANN202

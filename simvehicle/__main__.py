@@ -8,6 +8,7 @@ from pathlib import Path
 
 
 def _parser() -> argparse.ArgumentParser:
+    from companion.wire import telemetry
     from companion.wire.udp_link import add_link_arguments
 
     p = argparse.ArgumentParser(prog="python -m simvehicle", description=__doc__.splitlines()[0])
@@ -25,6 +26,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--arrive-after-s", type=float, default=0.0, help="arrival: not before this time")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
     add_link_arguments(p)
+    telemetry.add_arguments(p, publisher=True)
     return p
 
 
@@ -34,6 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     from companion.errors import UserError
     from companion.mission import load_mission
     from companion.wire.runtime import exit_on_sigterm, write_json
+    from companion.wire.telemetry import publisher_from_args
     from companion.wire.udp_link import link_settings
     from simvehicle import SimVehicle
     from simvehicle.node import VehicleNode, VehicleNodeConfig
@@ -52,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
             estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,
             out_dir=args.out, max_duration_s=args.max_duration_s, realtime=args.realtime,
         )
-        node = VehicleNode(sim, mission, recorder, config, fields, rng)
+        node = VehicleNode(sim, mission, recorder, config, fields, rng, publisher_from_args(args, "vehicle"))
         result = node.fly()
     except UserError as exc:
         print(f"simvehicle: error: {exc}", file=sys.stderr)

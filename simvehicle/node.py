@@ -32,8 +32,10 @@ from companion.mission import Mission
 from companion.wire import mavlink_codec as codec
 from companion.wire.lockstep import LockstepConfig, step_marker
 from companion.wire.samples import NavEstimate, Setpoint
+from companion.wire.telemetry import TelemetryPublisher
 from companion.wire.tlog import TlogWriter
 from companion.wire.udp_link import VEHICLE_SYSTEM_ID, LinkConfig, UdpLink
+from companion.wire.zenoh_codec import GnssReport
 from simvehicle import SimVehicle
 from simvehicle.barrier import StepBarrier
 from simvehicle.recording import FlightRecorder
@@ -81,8 +83,10 @@ class VehicleNode:
         config: VehicleNodeConfig,
         link_fields: dict[str, Any],
         rng: np.random.Generator | None,
+        telemetry: TelemetryPublisher | None = None,
     ) -> None:
         self.sim = sim
+        self.telemetry = telemetry or TelemetryPublisher.disabled()  # Zenoh: vehicle/truth, vehicle/gnss
         self.mission = mission
         self.config = config
         self.inbox = _Inbox()
@@ -173,8 +177,11 @@ class VehicleNode:
             self._send(codec.encode_imu(imu))
             if imu.t_us % self.config.sim_state_period_us == 0:
                 self._send(codec.encode_truth(truth, frame))
+                self.telemetry.publish("truth", truth)
             while fixes and fixes[0][0] <= imu.t_us:
-                self._send(codec.encode_gnss(fixes.pop(0)[1]), ground=True)
+                fix = fixes.pop(0)[1]
+                self._send(codec.encode_gnss(fix), ground=True)
+                self.telemetry.publish("gnss", GnssReport(imu.t_us, fix))
                 self.gnss_sent += 1
         if out.t_us % self.config.clock_period_us == 0:
             clock = codec.encode_system_time(self._stamp_us(), out.t_us)
@@ -255,6 +262,7 @@ class VehicleNode:
             "node": dict(self.counters),
             "gnss_sent": self.gnss_sent,
             "collisions": self.collisions,
+            "telemetry": self.telemetry.counters(),
             "lockstep": dict(self.barrier.counters),
             "imu_period_jitter": (
                 {"count": int(jitter.size), "p50_ms": float(np.percentile(jitter, 50)),
@@ -269,3 +277,4 @@ class VehicleNode:
         self.recorder.save(self.config.out_dir / "vehicle_series.npz")
         for link in (*self.links.values(), self.ground):
             link.close()
+        self.telemetry.close()

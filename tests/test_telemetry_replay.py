@@ -27,7 +27,7 @@ def test_replay_publishes_estimate_belief_health_at_their_rates(tmp_path):
 
     with TelemetrySubscriber(on, TelemetryConfig.from_env(env)):  # first: the hub
         with child(["-m", "gcs_tools", "replay", str(log), "--out", str(out), "--rate-hz", "0",
-                    "--publish", "--vehicle", "bench1"], env) as proc:
+                    "--publish", "--vehicle-id", "bench1"], env) as proc:
             stdout, err = proc.communicate(timeout=50)
         assert proc.returncode == 0, err
         assert "published" in stdout

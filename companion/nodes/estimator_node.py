@@ -22,6 +22,7 @@ from companion.mission.schema import build
 from companion.wire import mavlink_codec as codec
 from companion.wire.lockstep import marker_time_us, step_response
 from companion.wire.samples import GnssFix, ImuSample, NavEstimate
+from companion.wire.telemetry import EstimatorTelemetry, TelemetryPublisher
 from companion.wire.udp_link import UdpLink
 
 ESTIMATOR_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
@@ -52,10 +53,15 @@ class EstimatorNode:
     link: UdpLink
     navigator: Navigator
     nis_gate: float
+    telemetry: TelemetryPublisher = field(default_factory=TelemetryPublisher.disabled)
     rates: OutputRates = field(default_factory=OutputRates)
     counters: dict[str, int] = field(default_factory=dict)
     gnss_to_odometry_ns: list[int] = field(default_factory=list)
     _due: _Due = field(default_factory=_Due)
+    _topics: EstimatorTelemetry | None = None
+
+    def __post_init__(self) -> None:
+        self._topics = EstimatorTelemetry(self.telemetry)  # Zenoh: estimate, belief, health
 
     def _count(self, name: str) -> None:
         self.counters[name] = self.counters.get(name, 0) + 1
@@ -88,6 +94,7 @@ class EstimatorNode:
                 del self.gnss_to_odometry_ns[: MAX_LATENCY_SAMPLES // 2]
         elif isinstance(sample, ImuSample):
             self._periodic(sample.t_us)
+            self._topics.update(sample.t_us, self.navigator)
 
     def _periodic(self, t_us: int) -> None:
         due = self._due
@@ -126,6 +133,7 @@ class EstimatorNode:
             "link": self.link.counters.as_dict(),
             "node": dict(self.counters),
             "navigator": self.navigator.counters(),
+            "telemetry": self.telemetry.counters(),
             "gnss_to_odometry_latency": latency,
         }
 

@@ -55,9 +55,18 @@ class TelemetryConfig:
         )
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--zenoh-hub``, ``--zenoh-connect``, ``--zenoh-config``: defaults come from the environment."""
+DEFAULT_VEHICLE_ID = "uav1"
+
+
+def add_arguments(parser: argparse.ArgumentParser, publisher: bool = False) -> None:
+    """``--zenoh-hub``, ``--zenoh-connect``, ``--zenoh-config``: defaults come from the environment.
+
+    ``publisher``: also ``--vehicle-id`` (the ``<vehicle>`` key part) and ``--no-telemetry``."""
     g = parser.add_argument_group("telemetry (Zenoh)")
+    if publisher:
+        g.add_argument("--vehicle-id", default=DEFAULT_VEHICLE_ID,
+                       help="vehicle id in the telemetry keys beliefnav/<id>/... (default %(default)s)")
+        g.add_argument("--no-telemetry", action="store_true", help="publish no Zenoh telemetry")
     g.add_argument("--zenoh-hub", metavar="ENDPOINT", help=f"local hub endpoint (default {DEFAULT_HUB})")
     g.add_argument("--zenoh-connect", metavar="ENDPOINT", action="append", default=[],
                    help="also connect to this router/peer (repeatable), e.g. tcp/10.0.0.2:7447")
@@ -72,7 +81,30 @@ def config_from_args(args: argparse.Namespace) -> TelemetryConfig:
         cfg = replace(cfg, connect=cfg.connect + tuple(args.zenoh_connect))
     if getattr(args, "zenoh_config", None):
         cfg = replace(cfg, zenoh_config_file=args.zenoh_config)
+    if getattr(args, "no_telemetry", False):
+        cfg = replace(cfg, enabled=False)
     return cfg
+
+
+def forward_arguments(args: argparse.Namespace) -> list[str]:
+    """The telemetry flags of ``args`` again, for a child process (``beliefnav sitl`` -> its nodes)."""
+    out = []
+    if getattr(args, "vehicle_id", None):
+        out += ["--vehicle-id", args.vehicle_id]
+    if getattr(args, "no_telemetry", False):
+        out.append("--no-telemetry")
+    if getattr(args, "zenoh_hub", None):
+        out += ["--zenoh-hub", args.zenoh_hub]
+    for endpoint in getattr(args, "zenoh_connect", None) or ():
+        out += ["--zenoh-connect", endpoint]
+    if getattr(args, "zenoh_config", None):
+        out += ["--zenoh-config", args.zenoh_config]
+    return out
+
+
+def publisher_from_args(args: argparse.Namespace, process: str) -> TelemetryPublisher:
+    """The one publisher of a process, from its ``add_arguments(parser, publisher=True)`` flags."""
+    return TelemetryPublisher(args.vehicle_id, process, config_from_args(args))
 
 
 def _zenoh_config(cfg: TelemetryConfig, listen: list[str], connect: list[str]) -> zenoh.Config:
@@ -152,6 +184,11 @@ class TelemetryPublisher:
             return
         self._session = open_session(self.config)
         _OPEN.add(self)
+
+    @classmethod
+    def disabled(cls) -> TelemetryPublisher:
+        """A publisher that publishes nothing (no session): the default of nodes built in tests."""
+        return cls("none", "none", TelemetryConfig(enabled=False))
 
     def publish(self, topic: str, obj: Any) -> None:
         """Encode ``obj`` for ``topic`` (see ``zenoh_codec.TOPICS``) and put it; never raises."""

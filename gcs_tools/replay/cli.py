@@ -23,11 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--publish", action="store_true",
                         help="publish companion/estimate, belief and health on Zenoh (see README)")
-    parser.add_argument("--vehicle", default="replay",
-                        help="vehicle id in the published keys (default: replay)")
     parser.add_argument("--speed", type=float, default=0.0,
                         help="pace the replay at this many times real time (default 0: as fast as possible)")
-    telemetry.add_arguments(parser)
+    telemetry.add_arguments(parser, publisher=True)
+    parser.set_defaults(vehicle_id="replay")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,8 +38,7 @@ def run(args: argparse.Namespace) -> int:
         bar = tqdm(total=args.file.stat().st_size if args.file.is_file() else 0, unit="B",
                    unit_scale=True, desc=f"replay {args.method}", leave=False)
     progress = None if bar is None else (lambda pos, size: bar.update(pos - bar.n))
-    pub = telemetry.TelemetryPublisher(args.vehicle, "companion", telemetry.config_from_args(args)) \
-        if args.publish else None
+    pub = telemetry.publisher_from_args(args, "companion") if args.publish else None
     try:
         result = core.replay(args.file, args.method, home=home, rate_hz=args.rate_hz, progress=progress,
                              on_imu=_on_imu(pub, args.speed))
@@ -61,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"  wrote {args.out / 'estimates.csv'} and {args.out / 'summary.json'}")
     if pub is not None:
         c = pub.counters()
-        print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle}/companion/*")
+        print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle_id}/companion/*")
     return 0
 
 

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from companion.errors import UserError
+from companion.wire import telemetry
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
     parser.add_argument("--drop-probability", type=float, default=0.0, help=argparse.SUPPRESS)  # tests only
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    telemetry.add_arguments(parser, publisher=True)  # every process publishes on Zenoh unless --no-telemetry
 
 
 def _ports(text: str | None) -> tuple[int, int, int] | None:
@@ -53,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
         max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
+        telemetry_args=tuple(telemetry.forward_arguments(args)),
     )
     route, max_duration_s = flight_plan(opts)
     bar = None

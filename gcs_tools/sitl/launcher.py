@@ -43,6 +43,7 @@ class SitlOptions:
     ports: tuple[int, int, int] | None = None  # vehicle's estimator, bridge and ground ports
     wall_timeout_s: float | None = None
     drop_probability: float = 0.0  # TEST ONLY: loss injection on every link, both directions
+    telemetry_args: tuple[str, ...] = ()  # Zenoh flags for every process (--vehicle-id, --no-telemetry)
     fly: FlyConfig = field(default_factory=FlyConfig)  # start delay, arrival test, time limit: as ``fly``
 
 
@@ -82,7 +83,7 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
     out = opts.out_dir
     route, max_duration_s = flight_plan(opts)
     goal = route.waypoints_ned_m[-1]
-    common: list[str] = []
+    common: list[str] = list(opts.telemetry_args)
     if opts.signing_key_file is not None:
         common += ["--signing-key-file", str(opts.signing_key_file)]
     if opts.drop_probability > 0:
