@@ -20,6 +20,12 @@ needs_chromium = pytest.mark.skipif(not Path(CHROMIUM).exists(),
                                    reason="Debian chromium is not installed (make browser)")
 
 
+def _screenshot(page, path: Path) -> None:
+    page.screenshot(path=str(path))
+    assert path.stat().st_size > 20_000  # a blank page is ~5 kB
+    print(f"screenshot: {path}")
+
+
 def _sim_state_count(tlog: Path) -> int:
     from companion.wire.tlog import read_tlog
 
@@ -71,10 +77,7 @@ def test_dashboard_plots_a_live_sitl_flight_in_chromium(tmp_path):
             assert rate_hz >= 10, rate_hz
             assert page.evaluate("window.dashboardStats.malformed") == 0
             assert "gnss_fused" in page.inner_text("#counters")
-            shot = tmp_path / "dashboard_sitl.png"
-            page.screenshot(path=str(shot))
-            assert shot.stat().st_size > 20_000
-            print(f"screenshot: {shot}")
+            _screenshot(page, tmp_path / "dashboard_sitl.png")
         finally:
             browser.close()
         dash.terminate()
@@ -115,10 +118,7 @@ def test_dashboard_shows_two_vehicles_and_malformed_payloads_in_chromium(tmp_pat
                 assert "gnss_fused" in page.inner_text("#counters")
                 page.select_option("#vehicle", "uav2")
                 page.wait_for_timeout(300)
-                shot = tmp_path / "dashboard.png"
-                page.screenshot(path=str(shot))
-                assert shot.stat().st_size > 20_000
-                print(f"screenshot: {shot}")
+                _screenshot(page, tmp_path / "dashboard.png")
             finally:
                 browser.close()
         dash.terminate()
