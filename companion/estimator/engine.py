@@ -33,7 +33,7 @@ import numpy as np
 from companion.estimator import methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.history import ImuHistory, finite3
+from companion.estimator.history import ImuHistory, Integrals, finite3, mean_between
 
 _TRIM_EVERY = 256  # IMU samples between two trims of the histories
 
@@ -47,6 +47,10 @@ class Fusion(NamedTuple):
     P: model.Cov  # posterior covariance, per axis (model.py)
     state: Any  # adaptation state after this fix (immutable)
     nis: float  # NIS of this fix (of the last fix for an anchor)
+    # per-fusion constants, computed once (each prediction from this entry needs them)
+    ints: Integrals  # IMU prefix integrals at t_us (history.py)
+    beta: float  # method.beta(state): the belief in force after this entry
+    sigma_bias_m: float  # σ_b(β) of eq. 13 for that belief
 
 
 class Snapshot(NamedTuple):
@@ -82,6 +86,7 @@ class FusionEngine:
         self._future_us = int(round(cfg.future_tolerance_s * 1e6))
         self._r_nominal: Vec3 = tuple(float(v) for v in cfg.r_nominal_m2().diagonal())  # type: ignore[assignment]
         self._q_acc = cfg.sigma_acc_m_s2**2
+        self._tau_s = cfg.bias_tau_s
         self._trim_len = _TRIM_EVERY
         self._cache: tuple[Fusion, int, Snapshot] | None = None
 
@@ -191,25 +196,28 @@ class FusionEngine:
     def _initialise(self, t_us: int, z: Vec3) -> None:
         x = (*z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         state = self.method.initial_state()
-        self._append(Fusion(t_us, z, x, model.initial_cov_axes(self.cfg), state, float("nan")))
+        P = model.initial_cov_axes(self.cfg)
+        self._append(t_us, z, x, P, state, float("nan"), self.imu.integrals(t_us))
         self.counts["gnss_fused"] += 1
 
-    def _append(self, f: Fusion) -> None:
-        self.fusions.append(f)
-        self._fusion_t.append(f.t_us)
+    def _append(self, t_us: int, z: Vec3 | None, x: model.State, P: model.Cov, state: Any, nis: float,
+                ints: Integrals) -> None:
+        beta = self.method.beta(state)
+        self.fusions.append(Fusion(t_us, z, x, P, state, nis, ints, beta, self.cfg.sigma_bias_m(beta)))
+        self._fusion_t.append(t_us)
 
     def _fuse(self, t_us: int, z: Vec3) -> None:
         """Predict the last entry to ``t_us`` and fuse ``z`` there (Algorithm 1, lines 7-17)."""
-        cfg = self.cfg
         prev = self.fusions[-1]
         T = (t_us - prev.t_us) * 1e-6
-        alpha = math.exp(-T / cfg.bias_tau_s)
-        sigma_b = cfg.sigma_bias_m(self.method.beta(prev.state))
+        alpha = math.exp(-T / self._tau_s)
+        sigma_b = prev.sigma_bias_m
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
         P_prior = model.predict_axes(prev.P, T, alpha, self._q_acc, q_b)
         (pp0, _, pb0, _, _, bb0), (pp1, _, pb1, _, _, bb1), (pp2, _, pb2, _, _, bb2) = P_prior
-        x_prior = self.imu.propagate_mean(prev.x, prev.t_us, t_us, alpha)
+        ints = self.imu.integrals(t_us)
+        x_prior = mean_between(prev.x, prev.ints, ints, alpha)
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
         terms = InnovationTerms(
             y,
@@ -220,8 +228,7 @@ class FusionEngine:
         )
         R = self.method.measurement_cov(prev.state, terms)
         x_post, P_post, nis = model.update_axes(x_prior, P_prior, z, R)
-        state = self.method.update(prev.state, terms)
-        self._append(Fusion(t_us, z, x_post, P_post, state, nis))
+        self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints)
 
     # ------------------------------------------------------------- history
     def _trim(self) -> None:
@@ -242,17 +249,19 @@ class FusionEngine:
             del self._fusion_t[:j]
         base = self.fusions[0]
         if base.t_us < horizon:
-            x, P = self._predict(base, horizon)
-            self.fusions[0] = Fusion(horizon, None, x, P, base.state, base.nis)
+            ints = self.imu.integrals(horizon)
+            x, P = self._predict(base, horizon, ints)
+            self.fusions[0] = base._replace(t_us=horizon, z_ned_m=None, x=x, P=P, ints=ints)
             self._fusion_t[0] = horizon
         self.imu.trim_before(self._fusion_t[0])
 
-    def _predict(self, f: Fusion, t_us: int) -> tuple[model.State, model.Cov]:
+    def _predict(self, f: Fusion, t_us: int, ints: Integrals) -> tuple[model.State, model.Cov]:
+        """Entry ``f`` predicted to ``t_us`` (whose IMU integrals are ``ints``)."""
         T = (t_us - f.t_us) * 1e-6
-        alpha = math.exp(-T / self.cfg.bias_tau_s)
-        sigma_b = self.cfg.sigma_bias_m(self.method.beta(f.state))
+        alpha = math.exp(-T / self._tau_s)
+        sigma_b = f.sigma_bias_m
         q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
-        x = self.imu.propagate_mean(f.x, f.t_us, t_us, alpha)
+        x = mean_between(f.x, f.ints, ints, alpha)
         return x, model.predict_axes(f.P, T, alpha, self._q_acc, q_b)
 
     # -------------------------------------------------------------- output
@@ -264,7 +273,7 @@ class FusionEngine:
         now = self.imu.t_us[-1]
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]
-        x, P = self._predict(last, now)
-        snap = Snapshot(now, x, P, self.method.beta(last.state), last.nis)
+        x, P = self._predict(last, now, self.imu.last_integrals())
+        snap = Snapshot(now, x, P, last.beta, last.nis)
         self._cache = (last, now, snap)
         return snap

