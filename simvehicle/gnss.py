@@ -27,6 +27,7 @@ import numpy as np
 from companion.wire.geodesy import LocalNedFrame
 from companion.wire.samples import GnssFix
 from simvehicle.config import GnssConfig
+from simvehicle.noise import NormalBlocks
 
 FIX_TYPE_3D = 3
 
@@ -108,9 +109,9 @@ class GnssModel:
         self.cfg = cfg
         self.period_s = period_s
         self.to_geodetic = NedToGeodetic(frame)
-        self._rng = rng
+        self._normals = NormalBlocks(rng)  # the stream of rng.standard_normal, drawn in blocks
         c0 = conditions(cfg, clearance0_m)
-        self.bias_ned_m = c0.sigma_bias_m * rng.standard_normal(3)  # start in the stationary law
+        self.bias_ned_m = c0.sigma_bias_m * self._normals.take(3)  # start in the stationary law
         self.latency_s = c0.latency_mean_s
         self._zeta = math.exp(-period_s / cfg.latency_tau_s)
         self._queue: list[tuple[int, int, NedFix]] = []
@@ -119,19 +120,24 @@ class GnssModel:
     def step(self, clearance_m: float) -> GnssConditions:
         """Advance bias (eq. 23) and latency (eq. 27) by one fix period at clearance ``d``."""
         c = conditions(self.cfg, clearance_m)
-        n = self._rng.standard_normal(4)
+        n0, n1, n2, n3 = self._normals.take(4).tolist()
         kappa = math.exp(-self.period_s / c.gamma_s)
-        self.bias_ned_m = kappa * self.bias_ned_m + c.sigma_bias_m * math.sqrt(1.0 - kappa * kappa) * n[:3]
+        gain = c.sigma_bias_m * math.sqrt(1.0 - kappa * kappa)
+        b0, b1, b2 = self.bias_ned_m.tolist()
+        self.bias_ned_m = np.array([kappa * b0 + gain * n0, kappa * b1 + gain * n1, kappa * b2 + gain * n2])
         lat = self._zeta * self.latency_s + (1.0 - self._zeta) * c.latency_mean_s
-        lat += self.cfg.latency_noise_s * float(n[3])
+        lat += self.cfg.latency_noise_s * n3
         self.latency_s = min(self.cfg.latency_cap_s, max(0.0, lat))
         return c
 
     def sample(self, t_validity_us: int, p_ned_m: np.ndarray, clearance_m: float) -> NedFix:
         """Make the fix valid at ``t_validity_us`` for true position ``p_ned_m`` and queue it."""
         c = self.step(clearance_m)
-        z_ned_m = p_ned_m + self.bias_ned_m + c.sigma_noise_m * self._rng.standard_normal(3)
-        fix = NedFix(int(t_validity_us), z_ned_m, c.sigma_noise_m, c.satellites)
+        s = c.sigma_noise_m
+        m0, m1, m2 = self._normals.take(3).tolist()
+        (p0, p1, p2), (b0, b1, b2) = p_ned_m.tolist(), self.bias_ned_m.tolist()
+        z_ned_m = np.array([p0 + b0 + s * m0, p1 + b1 + s * m1, p2 + b2 + s * m2])
+        fix = NedFix(int(t_validity_us), z_ned_m, s, c.satellites)
         release_us = fix.t_validity_us + math.ceil(self.latency_s * 1e6 - 1e-6)
         heapq.heappush(self._queue, (release_us, self.sent, fix))
         self.sent += 1

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from simvehicle.config import ImuConfig, VehicleConfig
+from simvehicle.noise import NormalBlocks
 
 
 def rotations(q_ned_frd: np.ndarray) -> np.ndarray:
@@ -48,11 +49,14 @@ class Imu:
 
     def __init__(self, cfg: ImuConfig, rng: np.random.Generator) -> None:
         self.cfg = cfg
-        self._rng = rng
+        self._normals = NormalBlocks(rng)
 
     def measure(self, f_frd_m_s2: np.ndarray, omega_frd_rad_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Noisy (acc_frd_m_s2, gyro_frd_rad_s) blocks of the same shape (n, 3) as the inputs."""
-        noise = self._rng.standard_normal((f_frd_m_s2.shape[0], 6))
+        """Noisy (acc_frd_m_s2, gyro_frd_rad_s) blocks of the same shape (n, 3) as the inputs.
+
+        The noise is ``rng.standard_normal((n, 6))`` (served from blocks: the same stream)."""
+        n = f_frd_m_s2.shape[0]
+        noise = self._normals.take(6 * n).reshape(n, 6)
         acc = f_frd_m_s2 + self.cfg.sigma_acc_m_s2 * noise[:, :3]
         gyro = omega_frd_rad_s + self.cfg.sigma_gyro_rad_s * noise[:, 3:]
         return acc, gyro

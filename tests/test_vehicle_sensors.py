@@ -146,3 +146,11 @@ def test_ned_to_geodetic_inverts_the_library_map():
             lat, lon, alt = inv(p)
             np.testing.assert_allclose(FRAME.to_ned_m(lat, lon, alt), p, atol=tol_m)
             np.testing.assert_allclose((lat, lon), FRAME.to_geodetic(p)[:2], atol=tol_m * 1e-5)
+
+
+def test_normal_blocks_serve_the_generators_own_stream():
+    from simvehicle.noise import NormalBlocks
+
+    blocks, direct = NormalBlocks(np.random.default_rng(9), block_size=50), np.random.default_rng(9)
+    for n in (3, 4, 60, 7, 0, 45, 120, 1):  # across block edges and larger than a block
+        np.testing.assert_array_equal(blocks.take(n), direct.standard_normal(n))
