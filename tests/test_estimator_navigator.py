@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from companion.estimator import EstimatorConfig, Navigator
-from companion.estimator.navigator import rotation_ned_frd
+from companion.estimator.navigator import frd_to_ned, rotation_ned_frd
 from companion.wire.geodesy import LocalNedFrame
 from companion.wire.samples import AttitudeSample, GnssFix, ImuSample
 from tests.estimator_streams import multipath_stream
@@ -40,6 +40,20 @@ def test_rotation_matches_axis_angle():
     R = np.array(rotation_ned_frd(*q, math.sqrt)).reshape(3, 3)
     c, s = math.cos(yaw), math.sin(yaw)
     np.testing.assert_allclose(R, [[c, -s, 0], [s, c, 0], [0, 0, 1]], atol=1e-15)
+
+
+def test_folded_quaternion_rotation_equals_the_matrix():
+    """frd_to_ned (normalisation folded into s = 2/|q|²) = R(q/|q|) f, floats and arrays alike."""
+    rng = np.random.default_rng(11)
+    q = rng.normal(size=(50, 4)) * rng.uniform(0.5, 2.0, size=(50, 1))  # not unit norm
+    f = rng.normal(scale=10.0, size=(50, 3))
+    w, x, y, z = q.T
+    s = 2.0 / (w * w + x * x + y * y + z * z)
+    got = np.stack(frd_to_ned(w, x, y, z, s, *f.T), axis=1)
+    for k in range(50):
+        R = np.array(rotation_ned_frd(*q[k], math.sqrt)).reshape(3, 3)
+        np.testing.assert_allclose(got[k], R @ f[k], rtol=0, atol=1e-13)
+        assert frd_to_ned(*q[k].tolist(), float(s[k]), *f[k].tolist()) == tuple(got[k])  # same bits
 
 
 def test_hover_is_zero_acceleration_and_pitched_thrust_accelerates_north():
