@@ -7,9 +7,12 @@ the heading frame: pitching nose-down accelerates forward, so ``θ_cmd = -a_fwd 
 (the paper's ``m (g + a_z)`` with z up, plus tilt compensation).
 Inner loop (physics rate): PD on roll/pitch with rate damping (eq. 11); yaw held the same way.
 
-Without a fresh estimate (none yet, non-finite, or older than ``stale_estimate_s``) the
-autopilot holds on its own: it dead-reckons from the last estimate with its own IMU and
-attitude and flies back to the point where it lost the estimate (or its start point).
+The autopilot's navigation state is the latest estimate; in a control period that brings no
+newer one it is dead-reckoned with the vehicle's own IMU and attitude (specific force rotated
+to NED plus gravity), so it stays current while the estimate is late. Without a fresh estimate
+(none yet, non-finite, or older than ``stale_estimate_s``) the autopilot holds on its own: it
+brakes to zero velocity at the dead-reckoned point where the estimate went stale (or its start
+point) and stays there until a fresh estimate returns.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy as np
 from companion.wire.samples import NavEstimate, Setpoint
 from simvehicle.config import AutopilotConfig, VehicleConfig
 from simvehicle.dynamics import quat_to_euler
+from simvehicle.imu import rotations
 
 
 def _finite(*arrays: np.ndarray) -> bool:
@@ -55,6 +59,10 @@ class Autopilot:
         # the autopilot's own navigation state: the last estimate, dead-reckoned while stale
         self.nav_p_ned_m = self.hold_p_ned_m.copy()
         self.nav_v_ned_m_s = np.zeros(3)
+        self._nav_est_t_us = -1  # boot time of the estimate the navigation state was last set from
+        self._imu_period: tuple[np.ndarray, np.ndarray] | None = None  # (q_ned_frd, acc_frd) blocks
+        self._g_ned = np.array([0.0, 0.0, self._g])
+        self._physics_dt_s = vehicle.physics_dt_us * 1e-6
         self.integral_m_s = [0.0, 0.0, 0.0]  # ∫ (p_ref - p_hat) dt per NED axis
         self.holding = True  # True while flying without a fresh estimate
         self.roll_cmd_rad = 0.0
@@ -70,12 +78,18 @@ class Autopilot:
             and 0 <= t_us - estimate.t_us <= stale_us
             and _finite(estimate.p_ned_m, estimate.v_ned_m_s)
         )
-        if fresh:
+        if fresh and estimate.t_us > self._nav_est_t_us:  # type: ignore[union-attr]
             assert estimate is not None
             self.nav_p_ned_m = np.array(estimate.p_ned_m, dtype=float)
             self.nav_v_ned_m_s = np.array(estimate.v_ned_m_s, dtype=float)
+            self._nav_est_t_us = estimate.t_us
+        elif self._imu_period is not None:  # no newer estimate: dead-reckon the last period
+            self.dead_reckon(*self._imu_period)
+        self._imu_period = None
+        if fresh:
             self.holding = False
-        elif not self.holding:  # just lost the estimate: hold where we believe we are
+        elif not self.holding or math.hypot(*self.nav_v_ned_m_s.tolist()) > cfg.hold_brake_speed_m_s:
+            # lost the estimate: brake (the point held moves along until slow), then hold that point
             self.holding = True
             self.hold_p_ned_m = self.nav_p_ned_m.copy()
         sp_ok = (
@@ -111,10 +125,15 @@ class Autopilot:
         self.roll_cmd_rad = min(self._tilt, max(-self._tilt, a_right / self._g))
         self.accel_down_cmd_m_s2 = a_d
 
-    def dead_reckon(self, acc_ned_m_s2: np.ndarray, dt_s: float) -> None:
-        """Propagate the own navigation state with measured NED accelerations (n, 3) while holding."""
-        if not self.holding:
-            return
+    def imu_period(self, q_ned_frd: np.ndarray, acc_frd_m_s2: np.ndarray) -> None:
+        """The attitude (n, 4) and measured specific force (n, 3) of the period just flown; the next
+        ``outer()`` dead-reckons with them unless a newer estimate replaces the navigation state."""
+        self._imu_period = (q_ned_frd, acc_frd_m_s2)
+
+    def dead_reckon(self, q_ned_frd: np.ndarray, acc_frd_m_s2: np.ndarray) -> None:
+        """Propagate the own navigation state over one period of IMU samples (physics rate)."""
+        dt_s = self._physics_dt_s
+        acc_ned_m_s2 = np.einsum("nij,nj->ni", rotations(q_ned_frd), acc_frd_m_s2) + self._g_ned
         v = self.nav_v_ned_m_s + dt_s * np.cumsum(acc_ned_m_s2, axis=0)
         self.nav_p_ned_m = self.nav_p_ned_m + dt_s * v.sum(axis=0)
         self.nav_v_ned_m_s = v[-1].copy()

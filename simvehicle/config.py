@@ -80,9 +80,11 @@ class AutopilotConfig:
     k_yaw_nm_rad: float = 1.0  # yaw hold P: I_zz * (5 rad/s)^2
     d_yaw_nm_s_rad: float = 0.32  # yaw rate damping
     stale_estimate_s: float = 0.5  # older estimates are ignored: the autopilot holds on its own
+    hold_brake_speed_m_s: float = 0.5  # holding: brake to below this speed, then hold the point reached
 
     def validate(self) -> None:
-        _positive(self, "eps_int_m", "max_accel_m_s2", "stale_estimate_s", "k_att_nm_rad", "k_yaw_nm_rad")
+        _positive(self, "eps_int_m", "max_accel_m_s2", "stale_estimate_s", "k_att_nm_rad", "k_yaw_nm_rad",
+                  "hold_brake_speed_m_s")
         _non_negative(self, "kp_xy_1_s2", "kd_xy_1_s", "ki_xy_1_s3", "kp_z_1_s2", "kd_z_1_s", "ki_z_1_s3")
         _non_negative(self, "max_integral_m_s2", "d_att_nm_s_rad", "d_yaw_nm_s_rad")
         if not 0 < self.max_tilt_deg < 80:

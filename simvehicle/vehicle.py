@@ -21,7 +21,7 @@ from simvehicle.autopilot import Autopilot
 from simvehicle.config import SimConfig, sim_config_for
 from simvehicle.dynamics import RigidBody
 from simvehicle.gnss import GnssModel, NedFix
-from simvehicle.imu import Imu, rotations, specific_force_frd
+from simvehicle.imu import Imu, specific_force_frd
 
 # columns of the per-period block: specific force (0-2), then the RigidBody state (3-15)
 _BLOCK_COLUMNS = 16
@@ -105,7 +105,6 @@ class SimVehicle:
         self._dt_us = cfg.vehicle.physics_dt_us
         self._dt_s = self._dt_us * 1e-6
         self._steps = cfg.vehicle.steps_per_control
-        self._g_ned = np.array([0.0, 0.0, cfg.vehicle.gravity_m_s2])
 
     def _clearance(self, p_ned_m: np.ndarray) -> float:
         return float(self._world.clearance_m(float(p_ned_m[0]), float(p_ned_m[1])))
@@ -147,8 +146,7 @@ class SimVehicle:
         block = np.array(flat).reshape(self._steps, _BLOCK_COLUMNS)
         p, v, q, omega = block[:, 3:6], block[:, 6:9], block[:, 9:13], block[:, 13:16]
         acc, gyro = self.imu.measure(block[:, 0:3], omega)
-        if ap.holding:
-            ap.dead_reckon(np.einsum("nij,nj->ni", rotations(q), acc) + self._g_ned, dt_s)
+        ap.imu_period(q, acc)
 
         # one GNSS fix per period, valid at its end; truth carries the bias of the latest valid fix
         before = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)

@@ -100,3 +100,36 @@ def test_non_finite_estimate_or_setpoint_is_not_flown():
         sim.advance(bad if k < 30 else good, sp)
         assert sim.autopilot.holding == (k < 30)
     assert np.linalg.norm(sim.p_ned_m - start) < 0.2
+
+
+def test_estimate_lost_mid_flight_dead_reckons_brakes_and_holds():
+    """Truth estimates until t = 6 s (7.3 m/s), then the estimate freezes while the setpoint moves on.
+    Stated bounds: within the 0.5 s stale window it tracks the setpoint on its dead-reckoned state
+    (< 0.5 m); then it brakes (< 8 m: 7.6 m/s at ≤ g tan 25° needs ≥ 6.3 m) and is slower than
+    1 m/s 2 s after the hold began, moving < 0.3 m in the 3.5 s after that."""
+    sim = SimVehicle(MISSION, 0, 3)
+    p0, p1 = sim.start_ned_m.copy(), np.array([60.0, 20.0, -35.0])
+    est, t_lost, hold_t, rows, p_start_of_period = None, 6.0, None, [], p0
+    while sim.t_us < 12e6:
+        t_s = sim.t_us * 1e-6
+        out = sim.advance(est, Setpoint(sim.t_us, *min_jerk(p0, p1, 15.0, t_s)))
+        if out.t_us * 1e-6 <= t_lost:
+            est = truth_estimate(sim, out)
+        tr = out.truth[-1]
+        if sim.autopilot.holding and hold_t is None and t_s > t_lost:
+            hold_t = t_s
+            assert hold_t == pytest.approx(t_lost + 0.5, abs=0.06)
+        if t_s > t_lost:  # the navigation state of this period's start, dead-reckoned
+            assert np.linalg.norm(sim.autopilot.nav_p_ned_m - p_start_of_period) < 0.1
+        p_start_of_period = tr.p_ned_m
+        rows.append((out.t_us * 1e-6, *tr.p_ned_m, np.linalg.norm(tr.v_ned_m_s), sim.autopilot.holding))
+        if hold_t is None and t_s > t_lost:
+            assert np.linalg.norm(tr.p_ned_m - min_jerk(p0, p1, 15.0, out.t_us * 1e-6)[0]) < 0.5
+    r = np.array(rows)
+    holding = (r[:, 5] > 0) & (r[:, 0] > t_lost)
+    p_hold0 = r[holding][0, 1:4]
+    assert r[holding][0, 4] > 6.0  # it was fast when the hold began
+    assert np.max(np.linalg.norm(r[holding, 1:4] - p_hold0, axis=1)) < 8.0
+    settled = r[:, 0] >= hold_t + 2.0
+    assert np.all(r[settled, 4] < 1.0)
+    assert np.max(np.linalg.norm(r[settled, 1:4] - r[settled][0, 1:4], axis=1)) < 0.3
