@@ -29,6 +29,7 @@ class StepBarrier:
         readers = {**self.links, **(extra or {})}
         by_fd = {link.fileno(): name for name, link in readers.items()}
         pending = set(self.links)
+        refused = {name: self.links[name].counters.peer_refused for name in pending}
         for name in pending:
             self.links[name].send(step_marker(t_us))
             self.links[name].flush()  # the step's batch, marker last
@@ -43,6 +44,9 @@ class StepBarrier:
                     on_message(name, msg)
                     if name in pending and response_time_us(msg) == t_us:
                         pending.discard(name)
+            for name in pending:
+                if self.links[name].counters.peer_refused > refused[name]:  # its process is gone
+                    self.absent.add(name)
             now = time.monotonic()
             if not pending or now < last_send + self.config.retry_s:
                 continue

@@ -8,11 +8,14 @@ then the TIMESYNC response ``tc1 = its clock (> 0), ts1 = t_k``. One socket deli
 so a response behind an answer means the answer has arrived (unless the network lost it).
 
 The vehicle advances only when every companion that is present has responded for ``t_k``; a
-lost marker or response is re-requested after ``retry_s``. A companion that stays silent for
-``give_up_s`` is treated as absent: it is then waited for only ``retry_s`` per step, so the
-flight goes on (the autopilot holds on a stale estimate) and it rejoins as soon as it answers.
-With no loss the sequence of states is a function of the seed alone; a repeated marker only
-repeats an identical answer.
+lost marker or response is re-requested after ``retry_s``. A companion is absent when its
+process is known to be gone (its port is closed: the marker comes back as ICMP port
+unreachable) or when it stays silent for ``give_up_s`` of wall time (several seconds: a
+companion that is merely slow, descheduled or stopped for a while on a loaded machine is
+waited for, so it never changes the result). An absent companion is waited for only
+``retry_s`` per step, so the flight goes on (the autopilot holds on a stale estimate), and it
+rejoins as soon as it answers. With no loss and no companion gone the sequence of states is
+a function of the seed alone; a repeated marker only repeats an identical answer.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ NS_PER_US = 1_000
 @dataclass(frozen=True, slots=True)
 class LockstepConfig:
     retry_s: float = 0.01  # wall time before a missing response is requested again
-    give_up_s: float = 0.5  # wall time after which a silent companion counts as absent
+    give_up_s: float = 5.0  # wall time after which a silent (but not gone) companion counts as absent
 
 
 def step_marker(t_us: int) -> mavlink.MAVLink_timesync_message:

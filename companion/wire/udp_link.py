@@ -7,6 +7,11 @@ set — unsigned frames or frames signed with another key. The peer is either fi
 (``peer_port``) or learned from the first accepted frame, so a restarted client on a new
 ephemeral port is picked up again.
 
+A closed peer port (its process is gone) is reported: the socket asks for ICMP errors
+(``IP_RECVERR``, Linux), so the next operation after a send to it fails with ECONNREFUSED; that
+is counted as ``peer_refused`` and the error queue is drained (its entries would otherwise
+take up the receive buffer).
+
 Test-only loss injection drops datagrams per direction with a seeded generator. An optional
 ``tee`` callback sees the bytes of every frame sent and every accepted frame received (the
 node stamps them and writes the tlog).
@@ -15,6 +20,7 @@ node stamps them and writes the tlog).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import hashlib
 import os
@@ -35,6 +41,8 @@ BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this
 SIGNING_EPOCH_UNIX_S = 1_420_070_400  # MAVLink 2 signing timestamps count 10 µs since 2015-01-01
 SIGNING_KEY_BYTES = 32
 VEHICLE_SYSTEM_ID = 1  # the vehicle and its companions share one MAVLink system id
+IP_RECVERR = getattr(socket, "IP_RECVERR", 11)  # Linux: report ICMP errors on unconnected sockets
+MSG_ERRQUEUE = getattr(socket, "MSG_ERRQUEUE", 0x2000)
 
 Tee = Callable[[bytes, bool], None]  # (frame, sent) -> None
 
@@ -70,7 +78,8 @@ class LinkCounters:
     bad_signature: int = 0  # unsigned, wrong key or replayed timestamp while signing is on
     dropped_rx: int = 0  # loss injector
     dropped_tx: int = 0  # loss injector
-    send_errors: int = 0  # e.g. the peer's port is closed (ECONNREFUSED)
+    send_errors: int = 0  # e.g. a full send buffer
+    peer_refused: int = 0  # the peer's port is closed (ECONNREFUSED): its process is gone
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -133,6 +142,8 @@ class UdpLink:
             raise UserError(f"cannot bind UDP {config.host}:{config.bind_port}: {exc.strerror}") from None
         self._sock.setblocking(False)
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 1024 * 1024)
+        with contextlib.suppress(OSError):  # not on every platform: then a dead peer is only silent
+            self._sock.setsockopt(socket.IPPROTO_IP, IP_RECVERR, 1)
         self._batch: list[bytes] | None = None
         self.last_rx_ns = 0  # perf_counter_ns() when the last datagram was read from the socket
         self.peer: tuple[str, int] | None = (
@@ -217,13 +228,24 @@ class UdpLink:
         assert self.peer is not None
         try:
             self._sock.sendto(frames[0] if len(frames) == 1 else b"".join(frames), self.peer)
-        except OSError:  # ECONNREFUSED from an earlier send, full buffer: a lost datagram
-            self.counters.send_errors += 1
+        except OSError as exc:  # ECONNREFUSED from an earlier send, full buffer: a lost datagram
+            self._socket_error(exc)
             return
         self.counters.datagrams_tx += 1
         if self.tee is not None:
             for frame in frames:
                 self.tee(frame, True)
+
+    def _socket_error(self, exc: OSError) -> None:
+        if not isinstance(exc, ConnectionRefusedError):
+            self.counters.send_errors += 1
+            return
+        self.counters.peer_refused += 1
+        while True:  # drain the ICMP error queue
+            try:
+                self._sock.recvmsg(1, 512, MSG_ERRQUEUE)
+            except OSError:
+                return
 
     def _drop(self, probability: float) -> bool:
         assert self._rng is not None
@@ -243,8 +265,8 @@ class UdpLink:
                 data, addr = self._sock.recvfrom(MAX_DATAGRAM_BYTES)
             except (BlockingIOError, InterruptedError):
                 return []
-            except OSError:  # ICMP port unreachable reported on a later call
-                self.counters.send_errors += 1
+            except OSError as exc:  # ICMP port unreachable reported on a later call
+                self._socket_error(exc)
                 continue
             self.last_rx_ns = time.perf_counter_ns()
             return self.accept_datagram(data, addr)
@@ -257,8 +279,8 @@ class UdpLink:
                 data, addr = self._sock.recvfrom(MAX_DATAGRAM_BYTES)
             except (BlockingIOError, InterruptedError):
                 return out
-            except OSError:
-                self.counters.send_errors += 1
+            except OSError as exc:
+                self._socket_error(exc)
                 continue
             self.last_rx_ns = time.perf_counter_ns()
             out.extend(self.accept_datagram(data, addr))
