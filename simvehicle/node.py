@@ -176,7 +176,7 @@ class VehicleNode:
             self._send(codec.encode_attitude(att))  # attitude first: the IMU sample is rotated by it
             self._send(codec.encode_imu(imu))
             if imu.t_us % self.config.sim_state_period_us == 0:
-                self._send(codec.encode_truth(truth, frame))
+                self._send(codec.encode_truth(truth, frame, self.sim.gnss.to_geodetic))
                 self.telemetry.publish("truth", truth)
             while fixes and fixes[0][0] <= imu.t_us:
                 fix = fixes.pop(0)[1]

@@ -128,3 +128,37 @@ def test_signing_key_file(tmp_path):
         read_signing_key(tmp_path / "empty.key")
     with pytest.raises(UserError, match="cannot read"):
         read_signing_key(tmp_path / "missing.key")
+
+
+def _normalised(value):
+    if isinstance(value, bytes | str):
+        return value.encode() if isinstance(value, str) else value
+    return list(value) if isinstance(value, list | tuple) else value
+
+
+def test_fast_datagram_parser_equals_pymavlink_and_resynchronises():
+    """Unsigned links parse with companion.wire.frames: every field, the sender's system id and
+    the frame bytes equal pymavlink's; garbage between frames costs only itself."""
+    from companion.wire.frames import parse_datagram
+    from companion.wire.samples import ImuSample, NavEstimate
+
+    sender = codec.new_link(7, 197)
+    est = NavEstimate(1_020_000, np.array([1.5, -2.25, -30.0]), np.array([0.1, 0.2, -0.3]), np.zeros(3),
+                      np.arange(9.0) * 0.01, 0.75, 1.25, "second-order")
+    msgs = [codec.encode_imu(ImuSample(1_000_000, np.array([0.1, -0.2, -9.8]), np.array([0.01, 0.0, -0.02]))),
+            codec.encode_odometry(est), *codec.encode_belief(est), step_response(1_000_000, 5),
+            codec.encode_gnss(GnssFix(1_000_000, 48.1, 11.5, 520.25, 3, 12)),
+            codec.encode_heartbeat("companion")]
+    frames = [codec.pack(sender, m) for m in msgs]
+    data = b"".join(frames[:3]) + b"\x00\x01junk" + b"".join(frames[3:])
+    views, skipped = parse_datagram(data)
+    reference = codec.new_link(1, 1).parse_buffer(b"".join(frames))
+    assert [v.get_type() for v in views] == [m.get_type() for m in reference]
+    assert skipped == ["garbage"]
+    for view, ref, frame in zip(views, reference, frames, strict=True):
+        assert view.get_srcSystem() == 7 and bytes(view.get_msgbuf()) == frame == bytes(ref.get_msgbuf())
+        for name in ref.get_fieldnames():
+            np.testing.assert_equal(_normalised(getattr(view, name)), _normalised(getattr(ref, name)),
+                                    err_msg=f"{ref.get_type()}.{name}")
+    fast, slow = codec.decode_odometry(views[1]), codec.decode_odometry(reference[1])
+    np.testing.assert_equal([fast.p_ned_m, fast.cov_diag], [slow.p_ned_m, slow.cov_diag])

@@ -310,8 +310,12 @@ def decode_sample(m: Any) -> ImuSample | AttitudeSample | GnssFix | None:
 # --- truth ------------------------------------------------------------------------------------
 
 
-def encode_truth(s: TruthState, frame: LocalNedFrame) -> mavlink.MAVLink_sim_state_message:
-    lat, lon, alt = frame.to_geodetic(s.p_ned_m)
+def encode_truth(s: TruthState, frame: LocalNedFrame,
+                 to_geodetic: Callable[[np.ndarray], tuple[float, float, float]] | None = None,
+                 ) -> mavlink.MAVLink_sim_state_message:
+    """SIM_STATE of ``s``; ``to_geodetic`` (default ``frame.to_geodetic``) may be a faster
+    converter of the same frame, e.g. the vehicle's ``simvehicle.gnss.NedToGeodetic``."""
+    lat, lon, alt = (to_geodetic or frame.to_geodetic)(s.p_ned_m)
     q, v = s.q_ned_frd, s.v_ned_m_s
     roll, pitch, yaw = quaternion_to_euler(q)
     nan = math.nan

@@ -12,26 +12,17 @@ reason (``bad_crc``, ``bad_length``, ``garbage``, ``unknown_msgid``, ``truncated
 from __future__ import annotations
 
 import os
-from collections import Counter, namedtuple
+from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from operator import itemgetter
 from pathlib import Path
 from types import TracebackType
 from typing import Any, BinaryIO
 
-from fastcrc.crc16 import mcrf4xx
-
+from companion.wire.frames import MessageSpec, frame_at, full_payload, message_ids
 from companion.wire.mavlink_codec import mavlink, new_link, pack
 
 STAMP_BYTES = 8
-MAGIC_V2 = 0xFD
-MAGIC_V1 = 0xFE
-HEADER_V2 = 10  # magic, len, incompat, compat, seq, sysid, compid, msgid (3)
-HEADER_V1 = 6
-SIGNATURE_BYTES = 13
-IFLAG_SIGNED = 0x01
-CRC_INIT = 0xFFFF
 
 
 class TlogWriter:
@@ -69,65 +60,6 @@ class TlogWriter:
 # --- fast reader -------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, slots=True)
-class _MessageSpec:
-    """How to check and unpack one message id."""
-
-    crc_extra: bytes
-    size: int
-    view: Any  # callable: payload bytes (full size) -> view tuple
-
-
-def _view_class(msgtype: type[mavlink.MAVLink_message]) -> Any:
-    name, msgid = msgtype.msgname, msgtype.id
-    base = namedtuple(name, msgtype.fieldnames, rename=True)  # type: ignore[misc]  # noqa: PYI024
-    return type(name, (base,), {"__slots__": (), "get_type": lambda self: name, "msgid": msgid})
-
-
-def _make_spec(msgtype: type[mavlink.MAVLink_message]) -> _MessageSpec:
-    """Wire order -> field order, as pymavlink's ``decode`` does, but precomputed once."""
-    cls = _view_class(msgtype)
-    lengths, orders = msgtype.lengths, msgtype.orders
-    starts = [sum(lengths[: orders[i]]) for i in range(len(orders))]
-    spans = [lengths[orders[i]] for i in range(len(orders))]
-    unpack = msgtype.unpacker.unpack
-    is_text = [t == "char" for t in msgtype.fieldtypes]
-    new = tuple.__new__
-    if all(s == 1 for s in spans) and not any(is_text):
-        getter = itemgetter(*starts) if len(starts) > 1 else (lambda t: (t[starts[0]],))
-
-        def view(payload: bytes) -> Any:
-            return new(cls, getter(unpack(payload)))
-    else:  # arrays (slices of the unpacked tuple) and/or NUL-padded text
-        keys = [s if n == 1 else slice(s, s + n) for s, n in zip(starts, spans, strict=True)]
-        text_at = [i for i, text in enumerate(is_text) if text]
-
-        def view(payload: bytes) -> Any:
-            t = unpack(payload)
-            values = [t[k] for k in keys]
-            for i in text_at:
-                values[i] = values[i].rstrip(b"\x00")
-            return new(cls, values)
-
-    return _MessageSpec(bytes([msgtype.crc_extra]), msgtype.unpacker.size, view)
-
-
-_SPECS: dict[int, _MessageSpec] = {}
-
-
-def _spec(msgid: int) -> _MessageSpec | None:
-    spec = _SPECS.get(msgid)
-    if spec is None and msgid in mavlink.mavlink_map:
-        spec = _SPECS[msgid] = _make_spec(mavlink.mavlink_map[msgid])
-    return spec
-
-
-def message_ids(types: Iterable[str]) -> frozenset[int]:
-    """MAVLink ids of the named message types (KeyError for a name the dialect lacks)."""
-    ids = {m.msgname: i for i, m in mavlink.mavlink_map.items()}
-    return frozenset(ids[t] for t in types)
-
-
 @dataclass
 class TlogReader:
     """Iterate ``(arrival_us, message_view)``; after (or during) iteration ``skipped`` counts
@@ -163,10 +95,8 @@ class TlogReader:
             self.frames += 1
             if wanted is None or msgid in wanted:
                 stamp = int.from_bytes(data[pos : pos + STAMP_BYTES], "big")
-                if len(body) < spec.size:  # MAVLink 2 trims trailing zero bytes
-                    body = body + bytes(spec.size - len(body))
                 self.position = end
-                yield stamp, spec.view(body[: spec.size])
+                yield stamp, spec.view(full_payload(spec, body))
             pos = end
         if lost_at >= 0:
             self._skip(lost_reason, n - lost_at)
@@ -176,33 +106,9 @@ class TlogReader:
         self.skipped[reason] += 1
         self.skipped_bytes += size
 
-    def _frame_at(self, data: bytes, pos: int, n: int) -> tuple[int, int, _MessageSpec, bytes] | str:
+    def _frame_at(self, data: bytes, pos: int, n: int) -> tuple[int, int, MessageSpec, bytes] | str:
         """The frame starting at ``pos`` (stamp first), or the reason it is not one."""
-        m = pos + STAMP_BYTES
-        if m + HEADER_V1 + 2 > n:
-            return "truncated"
-        magic = data[m]
-        if magic == MAGIC_V2:
-            if m + HEADER_V2 > n:
-                return "truncated"
-            header = HEADER_V2
-            sig = SIGNATURE_BYTES if data[m + 2] & IFLAG_SIGNED else 0
-            msgid = data[m + 7] | data[m + 8] << 8 | data[m + 9] << 16
-        elif magic == MAGIC_V1:
-            header, sig, msgid = HEADER_V1, 0, data[m + 5]
-        else:
-            return "garbage"
-        payload_end = m + header + data[m + 1]
-        end = payload_end + 2 + sig
-        if end > n:
-            return "truncated"
-        spec = _spec(msgid)
-        if spec is None:
-            return "unknown_msgid"
-        crc = mcrf4xx(spec.crc_extra, mcrf4xx(data[m + 1 : payload_end], CRC_INIT))
-        if crc != data[payload_end] | data[payload_end + 1] << 8:
-            return "bad_crc"
-        return end, msgid, spec, data[m + header : payload_end]
+        return frame_at(data, pos + STAMP_BYTES, n)
 
     @staticmethod
     def _next_candidate(data: bytes, start: int, n: int) -> int:

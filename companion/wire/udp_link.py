@@ -30,11 +30,13 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.errors import UserError
+from companion.wire.frames import parse_datagram
 
 MAX_DATAGRAM_BYTES = 65_535
 BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this size
@@ -285,13 +287,25 @@ class UdpLink:
             self.last_rx_ns = time.perf_counter_ns()
             out.extend(self.accept_datagram(data, addr))
 
-    def accept_datagram(self, data: bytes, addr: tuple[str, int]) -> list[mavlink.MAVLink_message]:
-        """Parse one datagram; count and drop what cannot be used (never raises)."""
+    def accept_datagram(self, data: bytes, addr: tuple[str, int]) -> list[Any]:
+        """Parse one datagram; count and drop what cannot be used (never raises). Without signing
+        the fast scanner of :mod:`companion.wire.frames` parses (messages are its light views);
+        with signing pymavlink does, as it checks signatures."""
         c = self.counters
         c.datagrams_rx += 1
         if self.config.drop_probability_rx and self._drop(self.config.drop_probability_rx):
             c.dropped_rx += 1
             return []
+        if self.config.signing_key is None:
+            views, skipped = parse_datagram(data)
+            for reason in skipped:
+                if reason == "bad_crc":
+                    c.bad_crc += 1
+                elif reason == "unknown_msgid":
+                    c.unknown_message += 1
+                else:
+                    c.garbage += 1
+            return self._accept(views, addr)
         mav = self._mav
         try:
             parsed = mav.parse_buffer(data) or []
@@ -303,8 +317,7 @@ class UdpLink:
         mav.buf = bytearray()
         mav.buf_index = 0
         mav.expected_length = mavlink.HEADER_LEN_V1 + 2
-        accepted: list[mavlink.MAVLink_message] = []
-        accept_ids = self.config.accept_system_ids
+        good: list[mavlink.MAVLink_message] = []
         for msg in parsed:
             if isinstance(msg, mavlink.MAVLink_bad_data):
                 reason = str(getattr(msg, "reason", "")).lower()
@@ -316,10 +329,18 @@ class UdpLink:
                     c.garbage += 1
             elif isinstance(msg, mavlink.MAVLink_unknown):
                 c.unknown_message += 1
-            elif accept_ids is not None and msg.get_srcSystem() not in accept_ids:
-                c.wrong_system_id += 1
             else:
-                accepted.append(msg)
+                good.append(msg)
+        return self._accept(good, addr)
+
+    def _accept(self, msgs: list[Any], addr: tuple[str, int]) -> list[Any]:
+        """Keep the messages from accepted system ids; learn the peer; tee what is kept."""
+        c = self.counters
+        accept_ids = self.config.accept_system_ids
+        accepted = msgs
+        if accept_ids is not None:
+            accepted = [m for m in msgs if m.get_srcSystem() in accept_ids]
+            c.wrong_system_id += len(msgs) - len(accepted)
         if accepted:
             c.messages_rx += len(accepted)
             if self.config.peer_port is None:
