@@ -62,3 +62,16 @@ def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("beliefnav: error: ") for line in err)
     assert "nope.yaml" in err[0] and "profile" in err[1]
+
+
+def test_routes_are_planned_once_per_mission_object_and_profile():
+    from companion.planning import plan_route
+    from gcs_tools.fly.core import planned_route
+
+    a = planned_route(TEST_CITY, 1, 2.0)
+    assert planned_route(TEST_CITY, 1, 2.0) is a
+    other = load_mission("test")  # an equal but distinct mission object plans its own
+    b = planned_route(other, 1, 2.0)
+    assert b is not a
+    np.testing.assert_array_equal(b.waypoints_ned_m, plan_route(TEST_CITY, 1, t_start_s=2.0).waypoints_ned_m)
+    assert planned_route(TEST_CITY, 1, 3.0).t_start_s == 3.0

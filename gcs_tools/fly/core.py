@@ -62,6 +62,28 @@ def estimator_config(mission: Mission) -> EstimatorConfig:
     return build(EstimatorConfig, mission.section("estimator"), f"{mission.source}: estimator")
 
 
+_ROUTES: dict[tuple[int, int, float], tuple[Mission, Route]] = {}
+_ROUTES_KEPT = 16
+
+
+def planned_route(mission: Mission, profile_index: int, t_start_s: float) -> Route:
+    """``plan_route``, remembered for the last few (mission, profile, start) in this process.
+
+    A campaign flies each profile with every method: the route (a pure function of the frozen
+    mission) is planned once per worker instead of once per flight. The entry holds the
+    mission itself, so its ``id`` cannot be reused while the entry lives.
+    """
+    key = (id(mission), profile_index, t_start_s)
+    hit = _ROUTES.get(key)
+    if hit is not None and hit[0] is mission:
+        return hit[1]
+    route = plan_route(mission, profile_index, t_start_s=t_start_s)
+    if len(_ROUTES) >= _ROUTES_KEPT:
+        del _ROUTES[next(iter(_ROUTES))]
+    _ROUTES[key] = (mission, route)
+    return route
+
+
 def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         max_duration_s: float | None = None, config: FlyConfig | None = None) -> FlightResult:
     """Fly one profile of ``mission`` with estimator ``method``; deterministic given ``seed``."""
@@ -69,7 +91,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     m = load_mission(mission) if isinstance(mission, str) else mission
     if method not in METHODS:
         raise UserError(f"method {method!r}: expected one of {', '.join(METHODS)}")
-    route = plan_route(m, profile_index, t_start_s=cfg.start_delay_s)
+    route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
     nav = Navigator(estimator_config(m), method=method, frame=m.frame)
     goal_ned_m = route.waypoints_ned_m[-1]
