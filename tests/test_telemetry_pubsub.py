@@ -126,3 +126,25 @@ def test_disabled_telemetry_opens_nothing():
     assert pub.counters()["published"] == 0
     pub.close()
     assert os.environ.get("BELIEFNAV_TELEMETRY") != "off"  # read from the mapping given, not os.environ
+
+
+def test_bench_waits_until_every_subscriber_process_receives_the_publisher():
+    """The bench's start gate: a subscriber on another mesh never receives, and the gate says so
+    instead of letting a run count it as 100 % drops; subscribers on the mesh all pass it."""
+    from gcs_tools.bench.telemetry import _start_subscribers, _stop_subscribers, await_receiving
+
+    env, other = hub_env(), hub_env()
+    procs = _start_subscribers(2, env)
+    try:
+        with TelemetryPublisher("gate", "companion", cfg_of(env)) as pub:
+            assert await_receiving(pub, procs, timeout_s=20.0) < 20.0
+        lost = _start_subscribers(1, other)
+        try:
+            with TelemetryPublisher("gate", "companion", cfg_of(env)) as pub, \
+                    pytest.raises(RuntimeError, match="only 0 of 1 subscribers received"):
+                await_receiving(pub, lost, timeout_s=1.5)
+        finally:
+            _stop_subscribers(lost)
+    finally:
+        results = _stop_subscribers(procs)
+    assert all(r["malformed"] == 0 for r in results)

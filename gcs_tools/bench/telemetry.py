@@ -7,7 +7,10 @@ Two measurements, both over real Zenoh on 127.0.0.1 with a private hub port:
    (publish call -> decoded in the subscriber; both clocks are this host's), drops.
 2. The estimator (``Navigator``, second-order) run as fast as possible over a pre-generated
    SimVehicle flight, publishing its topics at the default rates in wall time, with the 10
-   subscribers attached versus none: ``realtime_factor`` = simulated s / wall s, median of runs.
+   subscribers attached versus none: ``realtime_factor`` = simulated s / wall s, median of runs;
+   ``realtime_factor_ratio`` = median over alternating pairs of runs (with / without). The
+   ``cpu_`` figures divide by this process's CPU time instead (all its threads, Zenoh's included):
+   on a busy shared host the wall figures mostly measure the scheduler, the CPU ones the publisher.
    The ``stress_sim_rate_*`` figures publish at the SIMULATED rates instead (hundreds of times the
    default rate): there the 10 subscriber processes decoding everything share the host's cores
    with the estimator, so they measure the machine more than the publisher.
@@ -42,7 +45,9 @@ from companion.wire.telemetry import TelemetryConfig, TelemetryPublisher
 N_SUBSCRIBERS = 10
 RATES_HZ = {"estimate": 50, "belief": 20, "health": 5}  # the estimator node's publishing rates
 IMU_HZ = 200
-FANOUT_VEHICLE, RTF_VEHICLE = "fanout", "rtf"  # separate keys for the two phases
+FANOUT_VEHICLE, RTF_VEHICLE = "fanout", "rtf"  # separate keys for the phases
+SETTLE_S = 2.0  # after starting 9 processes at once: their imports and mutual gossip links load the host
+SINGLE_VEHICLE = "fanout1"  # the same fan-out with ONE subscriber process: the path without fan-out
 WARMUP_TOPIC = "setpoint"  # sent until every subscriber receives the publisher; not counted
 
 
@@ -52,7 +57,7 @@ def subscriber_main() -> None:
     from companion.wire.telemetry import TelemetrySubscriber
 
     counts: Counter[str] = Counter()
-    latency_ms: list[float] = []
+    latency_ms: dict[str, list[float]] = {FANOUT_VEHICLE: [], SINGLE_VEHICLE: []}
     decode_us: list[float] = []
     warm: set[str] = set()
     lock = threading.Lock()
@@ -65,8 +70,8 @@ def subscriber_main() -> None:
                     print("receiving", flush=True)
                 return
             counts[msg.vehicle] += 1
-            if msg.vehicle == FANOUT_VEHICLE and msg.sent_unix_ns is not None:
-                latency_ms.append((msg.recv_unix_ns - msg.sent_unix_ns) * 1e-6)
+            if msg.vehicle in latency_ms and msg.sent_unix_ns is not None:
+                latency_ms[msg.vehicle].append((msg.recv_unix_ns - msg.sent_unix_ns) * 1e-6)
                 decode_us.append((time.time_ns() - msg.recv_unix_ns) * 1e-3)  # callback entry -> decoded
 
     done = threading.Event()
@@ -81,17 +86,14 @@ def subscriber_main() -> None:
 
 
 def _start_subscribers(n: int, env: dict[str, str]) -> list[subprocess.Popen]:
-    """The first one becomes the hub; the others are started together once it is up."""
+    """``n`` subscriber processes started together (start one first: it becomes the hub)."""
     code = "from gcs_tools.bench.telemetry import subscriber_main; subscriber_main()"
-    procs: list[subprocess.Popen] = []
-    for batch in (1, n - 1):
-        new = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True)
-               for _ in range(batch)]
-        procs += new
-        for p in new:
-            assert p.stdout is not None
-            if p.stdout.readline().strip() != "ready":
-                raise RuntimeError("subscriber failed to start")
+    procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True)
+             for _ in range(n)]
+    for p in procs:
+        assert p.stdout is not None
+        if p.stdout.readline().strip() != "ready":
+            raise RuntimeError("subscriber failed to start")
     return procs
 
 
@@ -128,7 +130,7 @@ def _stop_subscribers(procs: list[subprocess.Popen]) -> list[dict[str, Any]]:
         except (subprocess.TimeoutExpired, ValueError, IndexError):
             p.kill()
             p.communicate()
-            results.append({"counts": {}, "latency_ms": [], "malformed": 0, "decode_us": []})
+            results.append({"counts": {}, "latency_ms": {}, "malformed": 0, "decode_us": []})
     return results
 
 
@@ -145,12 +147,12 @@ def _estimator_messages(est: Any, counters: dict[str, int], k_imu: int) -> list[
 
 
 def fan_out(duration_s: float, cfg: TelemetryConfig, flight: list[Any],
-            procs: list[subprocess.Popen]) -> dict[str, Any]:
+            procs: list[subprocess.Popen], vehicle: str = FANOUT_VEHICLE) -> dict[str, Any]:
     """Real-time publishing at the default rates (replaying estimates of the pre-flown flight)."""
     ests = flight
     sent: Counter[str] = Counter()
     call_us: list[float] = []
-    with TelemetryPublisher(FANOUT_VEHICLE, "companion", cfg) as pub:
+    with TelemetryPublisher(vehicle, "companion", cfg) as pub:
         link_wait_s = await_receiving(pub, procs)
         peers = pub.peer_count()
         t0 = time.monotonic()
@@ -229,25 +231,34 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     samples = fly_samples(flight_s, seed=0)
     _, flight = run_estimator(samples, None)
 
-    def rtf_runs(pub: TelemetryPublisher, wall_rate: bool = True) -> list[float]:
-        return [flight_s / run_estimator(samples, pub, wall_rate)[0] for _ in range(repeats)]
-
-    rtf_bare = [flight_s / run_estimator(samples, None)[0] for _ in range(repeats)]
-    with TelemetryPublisher(RTF_VEHICLE, "companion", cfg) as pub:  # no subscribers attached
-        rtf_none = rtf_runs(pub)
-        stress_none = rtf_runs(pub, wall_rate=False)
-    procs = _start_subscribers(N_SUBSCRIBERS, env)
+    # a publisher on a private hub nobody joins: "no subscribers", measured alternately with the
+    # attached one (pairs of runs), so the host's load drifts cancel in the ratio
+    cfg_alone = TelemetryConfig.from_env({**env, "BELIEFNAV_ZENOH_HUB": f"tcp/127.0.0.1:{_free_port()}"})
+    rtf: dict[str, list[float]] = {k: [] for k in ("bare", "none", "ten", "stress_none", "stress_ten")}
+    cpu_rtf: dict[str, list[float]] = {k: [] for k in rtf}  # process CPU time: this process's threads only
+    procs = _start_subscribers(1, env)
     try:
+        single = fan_out(fan_s, cfg, flight, procs, SINGLE_VEHICLE)
+        procs += _start_subscribers(N_SUBSCRIBERS - 1, env)
+        time.sleep(SETTLE_S)
         fan = fan_out(fan_s, cfg, flight, procs)
-        with TelemetryPublisher(RTF_VEHICLE, "companion", cfg) as pub:
-            await_receiving(pub, procs)
-            rtf_ten = rtf_runs(pub)
-            stress_ten = rtf_runs(pub, wall_rate=False)
+        with TelemetryPublisher(RTF_VEHICLE, "companion", cfg_alone) as alone, \
+                TelemetryPublisher(RTF_VEHICLE, "companion", cfg) as attached:
+            await_receiving(attached, procs)
+            # the stress runs last: they leave the subscribers a backlog that would load the others
+            for runs in ((("bare", None, True), ("none", alone, True), ("ten", attached, True)),
+                         (("stress_none", alone, False), ("stress_ten", attached, False))):
+                for _ in range(repeats):
+                    for key, pub, wall_rate in runs:
+                        cpu0 = time.process_time()
+                        rtf[key].append(flight_s / run_estimator(samples, pub, wall_rate)[0])
+                        cpu_rtf[key].append(flight_s / (time.process_time() - cpu0))
             time.sleep(0.5)
     finally:
         results = _stop_subscribers(procs)
     sent_total = sum(fan["sent"].values())
-    lat = np.concatenate([np.asarray(r["latency_ms"], dtype=float) for r in results])
+    lat = np.concatenate([np.asarray(r["latency_ms"].get(FANOUT_VEHICLE, []), dtype=float) for r in results])
+    lat1 = np.asarray(results[0]["latency_ms"].get(SINGLE_VEHICLE, []), dtype=float)
     decode = np.concatenate([np.asarray(r["decode_us"], dtype=float) for r in results])
     delivered_fan = [r["counts"].get(FANOUT_VEHICLE, 0) for r in results]
     return {
@@ -264,16 +275,23 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "latency_p50_ms": round(float(np.percentile(lat, 50)), 3) if len(lat) else None,
         "latency_p99_ms": round(float(np.percentile(lat, 99)), 3) if len(lat) else None,
         "latency_max_ms": round(float(np.max(lat)), 3) if len(lat) else None,
+        "latency_1_subscriber_p50_ms": round(float(np.percentile(lat1, 50)), 3) if len(lat1) else None,
+        "latency_1_subscriber_p99_ms": round(float(np.percentile(lat1, 99)), 3) if len(lat1) else None,
+        "delivered_1_subscriber": int(results[0]["counts"].get(SINGLE_VEHICLE, 0)),
+        "sent_1_subscriber": sum(single["sent"].values()),
         "publish_call_us_p50": round(float(np.percentile(fan["publish_call_us"], 50)), 1),
         "publish_call_us_p99": round(float(np.percentile(fan["publish_call_us"], 99)), 1),
         "subscriber_decode_us_p50": round(float(np.median(decode)), 1) if len(decode) else None,
         "malformed": int(sum(r["malformed"] for r in results)),
-        "estimator_realtime_factor_no_subscribers": round(float(np.median(rtf_none)), 1),
-        "estimator_realtime_factor_10_subscribers": round(float(np.median(rtf_ten)), 1),
-        "realtime_factor_ratio": round(float(np.median(rtf_ten) / np.median(rtf_none)), 3),
-        "estimator_realtime_factor_without_telemetry": round(float(np.median(rtf_bare)), 1),
-        "stress_sim_rate_realtime_factor_no_subscribers": round(float(np.median(stress_none)), 1),
-        "stress_sim_rate_realtime_factor_10_subscribers": round(float(np.median(stress_ten)), 1),
+        "estimator_realtime_factor_no_subscribers": round(float(np.median(rtf["none"])), 1),
+        "estimator_realtime_factor_10_subscribers": round(float(np.median(rtf["ten"])), 1),
+        "realtime_factor_ratio": round(float(np.median(np.divide(rtf["ten"], rtf["none"]))), 3),
+        "estimator_realtime_factor_without_telemetry": round(float(np.median(rtf["bare"])), 1),
+        "estimator_cpu_realtime_factor_no_subscribers": round(float(np.median(cpu_rtf["none"])), 1),
+        "estimator_cpu_realtime_factor_10_subscribers": round(float(np.median(cpu_rtf["ten"])), 1),
+        "cpu_realtime_factor_ratio": round(float(np.median(np.divide(cpu_rtf["ten"], cpu_rtf["none"]))), 3),
+        "stress_sim_rate_realtime_factor_no_subscribers": round(float(np.median(rtf["stress_none"])), 1),
+        "stress_sim_rate_realtime_factor_10_subscribers": round(float(np.median(rtf["stress_ten"])), 1),
         "estimator_flight_s": flight_s,
     }
 
