@@ -148,3 +148,25 @@ def test_bench_waits_until_every_subscriber_process_receives_the_publisher():
     finally:
         results = _stop_subscribers(procs)
     assert all(r["malformed"] == 0 for r in results)
+
+
+def test_nothing_is_encoded_while_no_subscriber_matches():
+    env = hub_env()
+    got: list[int] = []
+    belief = zc.Belief(1, 0.5, 1.0, "naive")
+    with TelemetryPublisher("uav1", "companion", cfg_of(env)) as pub:
+        pub.publish("belief", belief)
+        pub.publish("belief", "not a Belief")  # would be an encode error, but is never encoded
+        assert pub.counters() == {"published": 0, "unmatched": 2, "encode_errors": 0, "put_errors": 0}
+        with TelemetrySubscriber(lambda m: got.append(m.obj.t_us), cfg_of(env)):
+            assert pub.wait_for_subscribers("belief")
+            pub.publish("belief", belief)
+            deadline = time.monotonic() + 5
+            while not got and time.monotonic() < deadline:
+                time.sleep(0.01)
+        assert got == [1] and pub.counters()["published"] == 1
+        deadline = time.monotonic() + 5  # the subscriber left: back to the free path
+        while pub.has_subscribers("belief") and time.monotonic() < deadline:
+            time.sleep(0.01)
+        pub.publish("belief", belief)
+        assert pub.counters()["unmatched"] == 3

@@ -169,17 +169,21 @@ class TelemetryPublisher:
     congestion control DROP, which never waits: a slow, stalled or crashed subscriber makes the
     transport drop samples, it never holds the caller. There is no hand-off thread: a thread hop
     costs a wake-up per message (the dominant part of the latency on a busy host) and, under the
-    GIL, saves the caller no CPU. Counters: ``published``, ``encode_errors``, ``put_errors``.
-    Use from one thread, as a context manager or with ``close()``.
+    GIL, saves the caller no CPU. While no subscriber matches a topic (Zenoh's matching listener)
+    nothing is encoded at all, so telemetry nobody watches costs a dictionary look-up.
+    Counters: ``published``, ``unmatched`` (skipped: no subscriber), ``encode_errors``,
+    ``put_errors``. Use from one thread, as a context manager or with ``close()``.
     """
 
     def __init__(self, vehicle_id: str, process: str, config: TelemetryConfig | None = None):
         self.config = config or TelemetryConfig.from_env()
         self.vehicle_id, self.process = vehicle_id, process
         zc.key_for(vehicle_id, process, "x")  # validates the parts
-        self._counts = {"published": 0, "encode_errors": 0, "put_errors": 0}
+        self._counts = {"published": 0, "unmatched": 0, "encode_errors": 0, "put_errors": 0}
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, zenoh.Publisher] = {}
+        self._listeners: list[zenoh.MatchingListener] = []
+        self._matching: dict[str, bool] = {}  # topic -> a subscriber matches (set by Zenoh's listener)
         if not self.config.enabled:
             return
         self._session = open_session(self.config)
@@ -193,6 +197,9 @@ class TelemetryPublisher:
     def publish(self, topic: str, obj: Any) -> None:
         """Encode ``obj`` for ``topic`` (see ``zenoh_codec.TOPICS``) and put it; never raises."""
         if self._session is None:
+            return
+        if not self.has_subscribers(topic):
+            self._counts["unmatched"] += 1
             return
         try:
             payload = zc.encode(topic, obj, time.time_ns())
@@ -221,18 +228,26 @@ class TelemetryPublisher:
     def wait_for_subscribers(self, topic: str, timeout_s: float = 10.0) -> bool:
         """True once a subscriber matches ``topic`` (tests and benchmarks; nodes never wait).
 
-        A subscriber that joins AFTER the publisher may match up to about a second before gossip has
-        linked it directly; tools that must miss nothing (the recorder) are started first.
+        Zenoh's matching status says that SOME subscriber matches, nothing about the others: with
+        several subscriber processes, one that joined late may not be linked yet (see the bench's
+        ``await_receiving``). Tools that must miss nothing (the recorder) are started first.
         """
         if self._session is None:
             return False
-        pub = self._publisher(topic)
         deadline = time.monotonic() + timeout_s
-        while not pub.matching_status.matching:
+        while not self.has_subscribers(topic):
             if time.monotonic() > deadline:
                 return False
             time.sleep(0.01)
         return True
+
+    def has_subscribers(self, topic: str) -> bool:
+        """Whether a subscriber matches ``topic`` now (False when disabled)."""
+        if self._session is None:
+            return False
+        if topic not in self._matching:
+            self._publisher(topic)
+        return self._matching[topic]
 
     def peer_count(self) -> int:
         """Zenoh peers this process is linked to directly (0 when disabled)."""
@@ -248,12 +263,21 @@ class TelemetryPublisher:
                 congestion_control=zenoh.CongestionControl.DROP,
             )
             self._publishers[topic] = pub
+
+            def on_matching(status: zenoh.MatchingStatus) -> None:
+                self._matching[topic] = status.matching
+
+            self._listeners.append(pub.declare_matching_listener(on_matching))
+            self._matching[topic] = pub.matching_status.matching
         return pub
 
     def close(self) -> None:
         """Undeclare the publishers and close the session; idempotent."""
         session, self._session = self._session, None
         if session is not None:
+            for listener in self._listeners:
+                listener.undeclare()
+            self._listeners.clear()
             for pub in self._publishers.values():
                 pub.undeclare()
             self._publishers.clear()
