@@ -72,7 +72,7 @@ def test_stalled_and_crashed_subscribers_cost_the_publisher_nothing():
         ):
             assert pub.wait_for_subscribers("setpoint")
             time.sleep(1.0)  # let gossip link every peer
-            worst_s = 0.0
+            call_s = []
             n = 20_000
             # ~8 kB, encoded once: fills TCP buffers fast
             big = zc.encode("route", zc.RouteInfo(0, "x" * 2000, 0, np.zeros((200, 3)), 1.0), 0)
@@ -80,13 +80,17 @@ def test_stalled_and_crashed_subscribers_cost_the_publisher_nothing():
                 t0 = time.perf_counter()
                 pub.publish("setpoint", Setpoint(k, sp.p_ned_m, sp.v_ned_m_s, sp.a_ned_m_s2))
                 pub.put_raw("route", big)
-                worst_s = max(worst_s, time.perf_counter() - t0)
+                call_s.append(time.perf_counter() - t0)
                 if k == n // 2:
                     crashed.kill()
                 if k % 100 == 0:
                     time.sleep(0.001)
             counts = pub.counters()
-        assert worst_s < 0.05, f"publish() took {worst_s * 1e3:.1f} ms"
+        # once the stalled subscriber's buffers are full (second half) the calls stay cheap: a publisher
+        # that waited for it would block for good. (Single calls can be preempted for tens of ms on a
+        # loaded host, with or without subscribers, so the maximum says nothing.)
+        p50_ms, p99_ms = np.percentile(call_s[n // 2:], [50, 99]) * 1e3
+        assert p50_ms < 1 and p99_ms < 5, (p50_ms, p99_ms)
         assert counts["published"] == n and counts["put_errors"] == 0
         assert stalled.poll() is None  # it really was alive and stalled all along
         assert len(healthy) > 1000 and healthy == sorted(healthy)
