@@ -169,6 +169,8 @@ def test_nothing_is_encoded_while_no_subscriber_matches():
             while not got and time.monotonic() < deadline:
                 time.sleep(0.01)
         assert got == [1] and pub.counters()["published"] == 1
+        pub.publish("no/such topic", belief)  # counted, never raised
+        assert pub.counters()["put_errors"] == 1
         deadline = time.monotonic() + 5  # the subscriber left: back to the free path
         while pub.has_subscribers("belief") and time.monotonic() < deadline:
             time.sleep(0.01)

@@ -246,7 +246,11 @@ class TelemetryPublisher:
         if self._session is None:
             return False
         if topic not in self._matching:
-            self._publisher(topic)
+            try:
+                self._publisher(topic)
+            except (ValueError, zenoh.ZError):  # not a valid key part, or the session is closing
+                self._counts["put_errors"] += 1
+                return False
         return self._matching[topic]
 
     def peer_count(self) -> int:
