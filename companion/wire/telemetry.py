@@ -199,7 +199,8 @@ class TelemetryPublisher:
         if self._session is None:
             return
         if not self.has_subscribers(topic):
-            self._counts["unmatched"] += 1
+            if topic in self._matching:  # else: not declarable, counted as a put error
+                self._counts["unmatched"] += 1
             return
         try:
             payload = zc.encode(topic, obj, time.time_ns())
