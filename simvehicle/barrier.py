@@ -23,9 +23,11 @@ class StepBarrier:
     absent: set[str] = field(default_factory=set)
     counters: dict[str, int] = field(default_factory=lambda: {"retries": 0, "gave_up": 0})
 
-    def wait(self, t_us: int, on_message: OnMessage, extra: Mapping[str, UdpLink] | None = None) -> None:
+    def wait(self, t_us: int, on_message: OnMessage, extra: Mapping[str, UdpLink] | None = None,
+             meanwhile: Callable[[], None] | None = None) -> None:
         """Send the step marker for ``t_us`` and read every link (companions and ``extra``)
-        until each present companion has responded for ``t_us`` (see module docstring)."""
+        until each present companion has responded for ``t_us`` (see module docstring).
+        ``meanwhile`` runs once the markers are out (work that need not delay the companions)."""
         readers = {**self.links, **(extra or {})}
         by_fd = {link.fileno(): name for name, link in readers.items()}
         pending = set(self.links)
@@ -33,6 +35,8 @@ class StepBarrier:
         for name in pending:
             self.links[name].send(step_marker(t_us))
             self.links[name].flush()  # the step's batch, marker last
+        if meanwhile is not None:
+            meanwhile()
         start = last_send = time.monotonic()
         while pending:
             timeout = last_send + self.config.retry_s - time.monotonic()

@@ -32,7 +32,7 @@ from companion.mission import Mission
 from companion.wire import mavlink_codec as codec
 from companion.wire.lockstep import LockstepConfig, step_marker
 from companion.wire.samples import NavEstimate, Setpoint
-from companion.wire.telemetry import TelemetryPublisher
+from companion.wire.telemetry import DeferredPublisher, TelemetryPublisher
 from companion.wire.tlog import TlogWriter
 from companion.wire.udp_link import VEHICLE_SYSTEM_ID, LinkConfig, UdpLink
 from companion.wire.zenoh_codec import GnssReport
@@ -87,6 +87,7 @@ class VehicleNode:
     ) -> None:
         self.sim = sim
         self.telemetry = telemetry or TelemetryPublisher.disabled()  # Zenoh: vehicle/truth, vehicle/gnss
+        self._topics = DeferredPublisher(self.telemetry)  # published while the companions work
         self.mission = mission
         self.config = config
         self.inbox = _Inbox()
@@ -177,11 +178,11 @@ class VehicleNode:
             self._send(codec.encode_imu(imu))
             if imu.t_us % self.config.sim_state_period_us == 0:
                 self._send(codec.encode_truth(truth, frame, self.sim.gnss.to_geodetic))
-                self.telemetry.publish("truth", truth)
+                self._topics.publish("truth", truth)
             while fixes and fixes[0][0] <= imu.t_us:
                 fix = fixes.pop(0)[1]
                 self._send(codec.encode_gnss(fix), ground=True)
-                self.telemetry.publish("gnss", GnssReport(imu.t_us, fix))
+                self._topics.publish("gnss", GnssReport(imu.t_us, fix))
                 self.gnss_sent += 1
         if out.t_us % self.config.clock_period_us == 0:
             clock = codec.encode_system_time(self._stamp_us(), out.t_us)
@@ -237,8 +238,9 @@ class VehicleNode:
                 for name in COMPANIONS:
                     self.links[name].send(step_marker(out.t_us))
                 self.poll()
+                self._topics.drain()
             else:
-                self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground})
+                self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground}, self._topics.drain)
             row = self.recorder.record(out, self.inbox.estimate, self.inbox.setpoint, self.inbox.beta,
                                        self.inbox.nis)
             if out.collided and not was_collided:

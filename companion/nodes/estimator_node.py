@@ -22,7 +22,7 @@ from companion.mission.schema import build
 from companion.wire import mavlink_codec as codec
 from companion.wire.lockstep import marker_time_us, step_response
 from companion.wire.samples import GnssFix, ImuSample, NavEstimate
-from companion.wire.telemetry import EstimatorTelemetry, TelemetryPublisher
+from companion.wire.telemetry import DeferredPublisher, EstimatorTelemetry, TelemetryPublisher
 from companion.wire.udp_link import UdpLink
 
 ESTIMATOR_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
@@ -59,9 +59,16 @@ class EstimatorNode:
     gnss_to_odometry_ns: list[int] = field(default_factory=list)
     _due: _Due = field(default_factory=_Due)
     _topics: EstimatorTelemetry | None = None
+    _deferred: DeferredPublisher | None = None
 
     def __post_init__(self) -> None:
-        self._topics = EstimatorTelemetry(self.telemetry)  # Zenoh: estimate, belief, health
+        self._deferred = DeferredPublisher(self.telemetry)  # published once a datagram is answered
+        self._topics = EstimatorTelemetry(self._deferred)  # Zenoh: estimate, belief, health
+
+    def publish_telemetry(self) -> None:
+        """Publish the telemetry queued while handling (call after the answer has left)."""
+        assert self._deferred is not None
+        self._deferred.drain()
 
     def _count(self, name: str) -> None:
         self.counters[name] = self.counters.get(name, 0) + 1
@@ -162,3 +169,4 @@ def serve(node: EstimatorNode, stop_after_s: float | None = None) -> None:
         for msg in msgs:
             node.handle(msg)
         node.link.flush()
+        node.publish_telemetry()

@@ -10,6 +10,7 @@ Link views also carry the sender's system id and the frame's bytes (``get_srcSys
 
 from __future__ import annotations
 
+import struct
 from collections import namedtuple
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -157,3 +158,28 @@ def parse_datagram(data: bytes) -> tuple[list[Any], list[str]]:
     if lost:
         skipped.append(lost)
     return views, skipped
+
+
+# --- packing ---------------------------------------------------------------------------------
+_HEADER_V2 = struct.Struct("<BBBBBBBHB")
+_CRC = struct.Struct("<H")
+
+
+def _payload_only(mav: Any, crc_extra: int, payload: bytes, force_mavlink1: bool = False) -> bytes:
+    return payload
+
+
+def pack_frame(msg: mavlink.MAVLink_message, seq: int, system_id: int, component_id: int) -> bytes:
+    """The unsigned MAVLink 2 frame of a pymavlink message, byte-equal to pymavlink's ``pack``
+    (its generated code builds the payload; header, zero trimming and CRC are done here)."""
+    msg._pack = _payload_only  # type: ignore[method-assign]  # the instance's packer returns the payload
+    try:
+        payload = msg.pack(None)  # type: ignore[arg-type]
+    finally:
+        del msg._pack
+    body = payload.rstrip(b"\x00") or payload[:1]  # MAVLink 2 trims trailing zeros (keeps one byte)
+    msgid = msg.get_msgId()
+    header = _HEADER_V2.pack(MAGIC_V2, len(body), 0, 0, seq, system_id, component_id,
+                             msgid & 0xFFFF, msgid >> 16)
+    crc = mcrf4xx(bytes((msg.crc_extra,)), mcrf4xx(header[1:] + body, CRC_INIT))
+    return header + body + _CRC.pack(crc)

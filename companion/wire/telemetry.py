@@ -296,6 +296,23 @@ class TelemetryPublisher:
         self.close()
 
 
+class DeferredPublisher:
+    """Queues ``publish(topic, obj)`` until ``drain()``: a lockstep SITL node publishes after it
+    has answered its step, so telemetry is off the step's critical path (same messages, same order)."""
+
+    def __init__(self, publisher: TelemetryPublisher) -> None:
+        self.publisher = publisher
+        self._queue: list[tuple[str, Any]] = []
+
+    def publish(self, topic: str, obj: Any) -> None:
+        self._queue.append((topic, obj))
+
+    def drain(self) -> None:
+        queue, self._queue = self._queue, []
+        for topic, obj in queue:
+            self.publisher.publish(topic, obj)
+
+
 @dataclass(frozen=True)
 class EstimatorRates:
     """Publishing periods of the estimator's topics, on the estimate's clock (boot time)."""
@@ -313,7 +330,8 @@ class EstimatorTelemetry:
     whether it goes at real time, in lockstep or as fast as possible.
     """
 
-    def __init__(self, publisher: TelemetryPublisher, rates: EstimatorRates | None = None):
+    def __init__(self, publisher: TelemetryPublisher | DeferredPublisher,
+                 rates: EstimatorRates | None = None) -> None:
         self.publisher = publisher
         r = rates or EstimatorRates()
         self._periods = {"estimate": r.estimate_period_us, "belief": r.belief_period_us,
