@@ -35,6 +35,7 @@ class Job:
     method: str
     seed: int
     max_duration_s: float | None = None
+    overrides: tuple[tuple[str, Any], ...] = ()  # ("estimator.eta", 0.3), see tuning.parse_override
 
 
 @dataclass(frozen=True)
@@ -79,17 +80,19 @@ def grid(
     methods: Sequence[str],
     seeds: Sequence[int],
     max_duration_s: float | None = None,
+    overrides: Sequence[tuple[str, Any]] = (),
 ) -> list[Job]:
     """Jobs in a fixed order: profile-major, then method, then seed."""
-    return [Job(mission, p, m, s, max_duration_s) for p in profiles for m in methods for s in seeds]
+    o = tuple(overrides)
+    return [Job(mission, p, m, s, max_duration_s, o) for p in profiles for m in methods for s in seeds]
 
 
 @functools.lru_cache(maxsize=8)
-def mission(name: str) -> Any:
-    """The mission of a job, loaded once per process."""
+def mission(name: str, overrides: tuple[tuple[str, Any], ...] = ()) -> Any:
+    """The mission of a job with its overrides, loaded once per process."""
     from gcs_tools.evaluate import tuning
 
-    return tuning.load(name)
+    return tuning.load(name, overrides)
 
 
 def compact(job: Job, summary: dict[str, Any], series: dict[str, np.ndarray]) -> JobResult:
@@ -116,7 +119,7 @@ def run_job(job: Job) -> JobResult:
     """Fly one job in this process (the default job function, importable by pool workers)."""
     from gcs_tools.fly import fly
 
-    m = mission(job.mission)
+    m = mission(job.mission, job.overrides)
     res = fly(m, job.profile_index, job.method, job.seed, max_duration_s=job.max_duration_s)
     return compact(job, res.summary, res.series)
 

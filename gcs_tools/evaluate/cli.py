@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
-from gcs_tools.evaluate import campaign, report
+from gcs_tools.evaluate import campaign, report, tuning
 
 DEFAULT_METHODS = "naive,adaptive,first-order,second-order"
 
@@ -31,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run on this Dask distributed scheduler instead of the local pool")
     parser.add_argument("--max-duration", type=float, default=None, metavar="S",
                         help="cap each flight at S seconds of simulated time")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                        help="override one mission config field for every flight (all methods), e.g. "
+                             "estimator.r_inflation_max=100; repeatable")
     parser.add_argument("--out", required=True, type=Path, help="output directory")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--readme", type=Path, default=None, metavar="PATH",
@@ -78,18 +81,21 @@ def parameters(mission: Any) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    mission = campaign.mission(args.mission)
+    overrides = tuple(tuning.parse_override(text) for text in args.set)
+    mission = campaign.mission(args.mission, overrides)
+    tuning.check(mission)
     profiles = parse_profiles(args.missions, len(mission.profiles))
     methods = parse_methods(args.methods)
     seeds = campaign.parse_seeds(args.seeds)
-    jobs = campaign.grid(args.mission, profiles, methods, seeds, args.max_duration)
+    jobs = campaign.grid(args.mission, profiles, methods, seeds, args.max_duration, overrides)
     t0 = time.perf_counter()
     results = campaign.run(jobs, args.workers, args.scheduler, progress=not args.no_progress)
     wall_s = time.perf_counter() - t0
     info = {
         "mission": args.mission, "profiles": list(profiles), "methods": list(methods), "seeds": list(seeds),
         "max_duration_s": args.max_duration, "flights": len(jobs), "workers": args.workers,
-        "scheduler": args.scheduler, "wall_s": wall_s, "parameters": parameters(mission),
+        "scheduler": args.scheduler, "wall_s": wall_s, "overrides": dict(overrides),
+        "parameters": parameters(mission),
     }
     res = report.write(args.out, results, methods, info, mission)
     if args.readme is not None:

@@ -1,16 +1,27 @@
-"""The tuning set: the default city with start/goal profiles that are never reported.
+"""The tuning set and parameter overrides for sweeps.
 
 Hyper-parameters (estimator config defaults) are tuned only on ``default-tuning`` with
 seeds ``TUNING_SEEDS``; the reported campaign flies the default city's own 10 profiles with
 other seeds. ``load("default-tuning")`` is the default mission file with its profiles
 replaced, checked by the same loader (so every pair is reachable).
+
+Overrides (``--set estimator.r_inflation_max=100``) replace one field of one of the mission's
+override sections (``companion.mission.OVERRIDE_SECTIONS``) for every flight of a campaign, so
+every method sees the same change. They are ``(key, value)`` pairs with hashable scalar values,
+so a job that carries them stays picklable and a worker can cache the mission it builds.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from importlib import resources
+from typing import Any
 
-from companion.mission import Mission, build_mission, load_mission, load_yaml
+import yaml
+
+from companion.errors import UserError
+from companion.mission import OVERRIDE_SECTIONS, Mission, build_mission, load_mission, load_yaml
 
 TUNING_MISSION = "default-tuning"
 TUNING_SEEDS = tuple(range(1000, 1010))
@@ -21,13 +32,54 @@ TUNING_PROFILES = (  # north/east metres; none shares an end point with a report
     {"name": "wide-canyon-north", "start_ne_m": [30, 180], "goal_ne_m": [240, 180]},
 )
 
+Override = tuple[str, Any]  # ("estimator.sigma_acc_m_s2", 0.02)
 
-def load(name: str) -> Mission:
-    """A mission by name or path; ``default-tuning`` is the tuning set."""
+
+def load(name: str, overrides: Sequence[Override] = ()) -> Mission:
+    """A mission by name or path (``default-tuning`` is the tuning set), with ``overrides`` applied."""
     if name != TUNING_MISSION:
-        return load_mission(name)
+        return with_overrides(load_mission(name), overrides)
     ref = resources.files("companion.mission") / "data" / "default.yaml"
     with resources.as_file(ref) as path:
         data = load_yaml(path)
     data["profiles"] = [dict(p) for p in TUNING_PROFILES]
-    return build_mission(data, f"{TUNING_MISSION} (default.yaml, tuning profiles)")
+    return with_overrides(build_mission(data, f"{TUNING_MISSION} (default.yaml, tuning profiles)"), overrides)
+
+
+def parse_override(text: str) -> Override:
+    """``"estimator.eta=0.3"`` → ``("estimator.eta", 0.3)`` (value read as YAML: a scalar)."""
+    key, sep, raw = text.partition("=")
+    section, dot, name = key.strip().partition(".")
+    if not (sep and dot and name.isidentifier()):
+        raise UserError(f"--set: expected SECTION.FIELD=VALUE, got {text!r}")
+    if section not in OVERRIDE_SECTIONS:
+        known = ", ".join(OVERRIDE_SECTIONS)
+        raise UserError(f"--set {text!r}: unknown section {section!r} (known: {known})")
+    try:
+        value = yaml.safe_load(raw)
+    except yaml.YAMLError:
+        value = None
+    if not isinstance(value, (int, float, str, bool)):
+        raise UserError(f"--set {text!r}: expected a number, string or boolean value")
+    return f"{section}.{name}", value
+
+
+def with_overrides(mission: Mission, overrides: Sequence[Override]) -> Mission:
+    """``mission`` with each ``section.field`` replaced (later overrides win); fields are checked
+    when the section's config is built (``check``)."""
+    if not overrides:
+        return mission
+    sections = {name: dict(body) for name, body in mission.sections.items()}
+    for key, value in overrides:
+        section, _, field = key.partition(".")
+        sections.setdefault(section, {})[field] = value
+    return dataclasses.replace(mission, sections=sections)
+
+
+def check(mission: Mission) -> None:
+    """Build every config a flight builds from ``mission``: a bad override fails here, in one line."""
+    from gcs_tools.fly.core import estimator_config
+    from simvehicle.config import sim_config_for
+
+    estimator_config(mission)
+    sim_config_for(mission)
