@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
-from gcs_tools.evaluate import aggregate, campaign, stats, tuning
+from gcs_tools.evaluate import aggregate, campaign, report, stats, tuning
 from gcs_tools.evaluate.cli import DEFAULT_METHODS, parse_methods, parse_profiles
 
 RECORDS = "sweeps.jsonl"
@@ -47,11 +47,16 @@ def record(results: Sequence[campaign.JobResult], methods: Sequence[str]) -> dic
         mine = aggregate.of_method(results, method)
         out[method] = {name: stats.summarize(aggregate.pooled(mine, attr))["median"]
                        for name, attr in aggregate.ERRORS.items()}
-    if aggregate.BASELINE in out:
-        base = out[aggregate.BASELINE]
-        for entry in out.values():
+    return record_reductions(out)
+
+
+def record_reductions(medians: dict[str, Any]) -> dict[str, Any]:
+    """Add each method's ``reduction_vs_naive`` (per error) when naive is among them."""
+    base = medians.get(aggregate.BASELINE)
+    if base is not None:
+        for entry in medians.values():
             entry["reduction_vs_naive"] = {k: stats.reduction(entry[k], base[k]) for k in aggregate.ERRORS}
-    return out
+    return medians
 
 
 def table(records: Sequence[dict[str, Any]]) -> str:
@@ -65,7 +70,7 @@ def table(records: Sequence[dict[str, Any]]) -> str:
     for i, r in enumerate(records):
         section = r["estimator_section"]
         cells = [str(i), ", ".join(f"{k}={v}" for k, v in section.items()) or "defaults",
-                 _ranges(r["profiles"]), _ranges(r["seeds"])]
+                 report._ranges(r["profiles"]), report._ranges(r["seeds"])]
         for m in methods:
             e = r["methods"].get(m)
             cells.append(f"{e['estimation_error_m']:.3f} / {e['tracking_error_m']:.3f}" if e else "")
@@ -73,11 +78,6 @@ def table(records: Sequence[dict[str, Any]]) -> str:
         cells.append(f"{d['estimation_error_m']:+.0%} / {d['tracking_error_m']:+.0%}" if d else "")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def _ranges(values: Sequence[int]) -> str:
-    lo, hi = min(values), max(values)
-    return f"{lo}–{hi}" if list(values) == list(range(lo, hi + 1)) and hi > lo else ",".join(map(str, values))
 
 
 def write_table(out: Path) -> None:
