@@ -132,9 +132,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = "python -m gcs_tools.evaluate.tune " + " ".join(argv if argv is not None else sys.argv[1:])
     for overrides in grid_points:
         jobs = campaign.grid(tuning.TUNING_MISSION, profiles, methods, seeds, overrides=overrides)
+        section = campaign.mission(tuning.TUNING_MISSION, overrides).section("estimator")
         t0 = time.perf_counter()
         results = campaign.run(jobs, args.workers, progress=sys.stderr.isatty())
-        section = campaign.mission(tuning.TUNING_MISSION, overrides).section("estimator")
         rec = {"estimator_section": section, "overrides": dict(overrides),
                "profiles": list(profiles), "seeds": list(seeds),
                "methods": record(results, methods), "flights": len(jobs),
