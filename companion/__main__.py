@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
             from companion.nodes.estimator_node import serve
         else:
             from companion.nodes.bridge_node import serve  # type: ignore[assignment]
-        serve(node)  # type: ignore[arg-type]
+        serve(node)
     except UserError as exc:
         print(f"companion {args.process}: error: {exc}", file=sys.stderr)
         return 2

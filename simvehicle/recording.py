@@ -73,7 +73,7 @@ class FlightRecorder:
         return {k: np.asarray(v, dtype=float) for k, v in self._rows.items()}
 
     def save(self, path: Path) -> None:
-        np.savez(path, **self.series())
+        np.savez(path, **self.series())  # type: ignore[arg-type]  # numpy stubs type **kwds as bool
 
 
 SERIES_KEYS = (

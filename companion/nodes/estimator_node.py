@@ -58,8 +58,8 @@ class EstimatorNode:
     counters: dict[str, int] = field(default_factory=dict)
     gnss_to_odometry_ns: list[int] = field(default_factory=list)
     _due: _Due = field(default_factory=_Due)
-    _topics: EstimatorTelemetry | None = None
-    _deferred: DeferredPublisher | None = None
+    _topics: EstimatorTelemetry = field(init=False)
+    _deferred: DeferredPublisher = field(init=False)
 
     def __post_init__(self) -> None:
         self._deferred = DeferredPublisher(self.telemetry)  # published once a datagram is answered
@@ -67,7 +67,6 @@ class EstimatorNode:
 
     def publish_telemetry(self) -> None:
         """Publish the telemetry queued while handling (call after the answer has left)."""
-        assert self._deferred is not None
         self._deferred.drain()
 
     def _count(self, name: str) -> None:

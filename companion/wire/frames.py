@@ -64,7 +64,7 @@ def _make_spec(msgtype: type[mavlink.MAVLink_message], extra: tuple[str, ...] = 
             def view(payload: bytes, *more: Any) -> Any:
                 return new(cls, (*getter(unpack(payload)), *more))
         else:
-            def view(payload: bytes) -> Any:
+            def view(payload: bytes, *more: Any) -> Any:  # no extras: `more` is always empty
                 return new(cls, getter(unpack(payload)))
     else:  # arrays (slices of the unpacked tuple) and/or NUL-padded text
         keys = [s if n == 1 else slice(s, s + n) for s, n in zip(starts, spans, strict=True)]
@@ -172,9 +172,9 @@ def _payload_only(mav: Any, crc_extra: int, payload: bytes, force_mavlink1: bool
 def pack_frame(msg: mavlink.MAVLink_message, seq: int, system_id: int, component_id: int) -> bytes:
     """The unsigned MAVLink 2 frame of a pymavlink message, byte-equal to pymavlink's ``pack``
     (its generated code builds the payload; header, zero trimming and CRC are done here)."""
-    msg._pack = _payload_only  # type: ignore[method-assign]  # the instance's packer returns the payload
+    msg._pack = _payload_only  # the instance's packer returns the payload
     try:
-        payload = msg.pack(None)  # type: ignore[arg-type]
+        payload = msg.pack(None)
     finally:
         del msg._pack
     body = payload.rstrip(b"\x00") or payload[:1]  # MAVLink 2 trims trailing zeros (keeps one byte)

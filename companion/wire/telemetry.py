@@ -273,7 +273,8 @@ class TelemetryPublisher:
                 self._matching[topic] = status.matching
 
             self._listeners.append(pub.declare_matching_listener(on_matching))
-            self._matching[topic] = pub.matching_status.matching
+            # zenoh 1.10's stub types matching_status as bool; at run time it is a MatchingStatus
+        self._matching[topic] = pub.matching_status.matching  # type: ignore[attr-defined]
         return pub
 
     def close(self) -> None:

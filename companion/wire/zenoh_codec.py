@@ -166,7 +166,7 @@ class TopicSpec:
     extras: Callable[[Any], dict[str, Any]] = lambda obj: {}
 
 
-_GNSS_FIELDS = {
+_GNSS_FIELDS: dict[str, tuple[_Enc, _Dec]] = {
     "t_validity_us": INT, "lat_deg": FLOAT, "lon_deg": FLOAT, "alt_m": FLOAT, "fix_type": INT,
     "satellites_visible": INT, "h_acc_m": FLOAT_OPT, "v_acc_m": FLOAT_OPT, "hdop": FLOAT_OPT,
 }
@@ -217,10 +217,10 @@ def to_dict(topic: str, obj: Any) -> dict[str, Any]:
     spec = TOPICS[topic]
     if not isinstance(obj, spec.cls):
         raise TypeError(f"topic {topic!r} carries {spec.cls.__name__}, got {type(obj).__name__}")
-    source = obj.fix if isinstance(obj, GnssReport) else obj
-    out = {}
+    source: Any = obj.fix if isinstance(obj, GnssReport) else obj
+    out: dict[str, Any] = {}
     for name, (enc, _dec) in spec.fields.items():
-        value = obj.t_us if name == "t_us" else getattr(source, name)
+        value = getattr(obj if name == "t_us" else source, name)  # a GNSS report's t_us is its own
         out[name] = enc(value)
     out.update(spec.extras(obj))
     return out

@@ -39,10 +39,8 @@ def machine() -> dict[str, object]:
 
 def run(args: argparse.Namespace) -> int:
     names = list(TARGETS) if args.target == "all" else [args.target]
-    out: dict[str, object] = {"machine": machine()}
-    for name in names:
-        module = importlib.import_module(TARGETS[name])
-        out[name] = module.measure(args)
-    print(json.dumps(out if len(names) > 1 else {"machine": out["machine"], **out[names[0]]}, indent=2))
+    results = {name: importlib.import_module(TARGETS[name]).measure(args) for name in names}
+    out = {"machine": machine(), **(results if len(names) > 1 else results[names[0]])}
+    print(json.dumps(out, indent=2))
     sys.stdout.flush()
     return 0

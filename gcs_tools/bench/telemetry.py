@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from companion.wire import zenoh_codec as zc
-from companion.wire.samples import Setpoint
+from companion.wire.samples import AttitudeSample, ImuSample, Setpoint
 from companion.wire.telemetry import TelemetryConfig, TelemetryPublisher
 
 N_SUBSCRIBERS = 10
@@ -183,7 +183,8 @@ def fly_samples(duration_s: float, seed: int) -> list[Any]:
     samples: list[Any] = []
     for _ in range(int(duration_s / 0.05)):
         out = sim.advance(None, None)
-        samples += sorted([*out.imu, *out.attitude], key=lambda s: s.t_us) + list(out.gnss)
+        imu_and_attitude: list[ImuSample | AttitudeSample] = [*out.imu, *out.attitude]
+        samples += sorted(imu_and_attitude, key=lambda s: s.t_us) + list(out.gnss)
     return samples
 
 

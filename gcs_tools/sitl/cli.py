@@ -6,9 +6,13 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from companion.errors import UserError
 from companion.wire import telemetry
+
+if TYPE_CHECKING:
+    from gcs_tools.sitl.launcher import Progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +40,7 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
         ports = ()
     if len(ports) != 3 or not all(0 < p < 65536 for p in ports):
         raise UserError(f"--ports: expected three UDP ports ESTIMATOR,BRIDGE,GROUND, got {text!r}")
-    return ports  # type: ignore[return-value]
+    return ports
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,8 +67,7 @@ def run(args: argparse.Namespace) -> int:
         from tqdm import tqdm
 
         bar = tqdm(total=round(max_duration_s, 1), unit="s sim", desc=f"sitl {args.method}", leave=False)
-    progress = None if bar is None else (lambda t_s, d_m: (bar.update(round(t_s - bar.n, 2)),
-                                                           bar.set_postfix(goal_m=f"{d_m:.1f}")))
+    progress = None if bar is None else _progress_to(bar)
     try:
         run_ = launch(opts, progress)
     finally:
@@ -93,3 +96,13 @@ def _print(s: dict, out: Path) -> None:
     print(f"  GNSS sent {s['gnss']['sent']} fused {s['gnss']['fused']} rejected {s['gnss']['rejected']}; "
           f"lockstep {json.dumps(sitl['lockstep'])}")
     print(f"  wrote {out / 'summary.json'}, figures and {out / 'run.tlog'}")
+
+
+def _progress_to(bar: Any) -> Progress:
+    """A launcher progress callback that moves a tqdm bar (simulated seconds, metres to goal)."""
+
+    def update(t_s: float, d_m: float) -> None:
+        bar.update(round(t_s - bar.n, 2))
+        bar.set_postfix(goal_m=f"{d_m:.1f}")
+
+    return update

@@ -132,7 +132,7 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
     """Fly once; always stops every process and returns what they recorded."""
     ports = opts.ports or tuple(free_udp_ports(3))
     assert len(ports) == 3
-    check_ports_free(ports)  # type: ignore[arg-type]
+    check_ports_free(ports)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
     for stale in ("vehicle.json", "estimator.json", "bridge.json", "vehicle_series.npz", "run.tlog"):
         (opts.out_dir / stale).unlink(missing_ok=True)
@@ -141,7 +141,7 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
     detail = ""
     reader: threading.Thread | None = None
     try:
-        specs = child_specs(opts, ports)  # type: ignore[arg-type]
+        specs = child_specs(opts, ports)
         vehicle = supervisor.start(specs[0], stdout=subprocess.PIPE)
         reader = threading.Thread(target=_follow_progress, args=(vehicle.stdout, on_progress), daemon=True)
         reader.start()

@@ -106,7 +106,7 @@ class Supervisor:
             for proc in self.children.values():
                 _wait(proc, max(deadline - time.monotonic(), 0.0))
             _signal_group(self._pgid, signal.SIGKILL)
-        codes = {}
+        codes: dict[str, int | None] = {}
         for name, proc in self.children.items():
             if proc.poll() is None:
                 proc.kill()
