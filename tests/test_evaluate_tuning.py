@@ -3,10 +3,10 @@
 import pytest
 
 from companion.errors import UserError
+from companion.estimator import mission_estimator_config
 from companion.mission import ConfigError
 from gcs_tools.cli import main
 from gcs_tools.evaluate import campaign, tune, tuning
-from gcs_tools.fly.core import estimator_config
 
 
 def test_override_parsing_reads_yaml_scalars_and_rejects_bad_keys():
@@ -22,7 +22,7 @@ def test_overrides_reach_the_flight_config_and_leave_the_mission_untouched():
     plain = tuning.load("test")
     o = (("estimator.sigma_acc_m_s2", 0.02), ("estimator.eta", 0.3), ("estimator.eta", 0.4))
     tuned = tuning.load("test", o)
-    cfg, base = estimator_config(tuned), estimator_config(plain)
+    cfg, base = mission_estimator_config(tuned), mission_estimator_config(plain)
     assert (cfg.sigma_acc_m_s2, cfg.eta) == (0.02, 0.4)  # the later override wins
     assert cfg.r_inflation_max == base.r_inflation_max
     assert plain.section("estimator") == tuning.load("test").section("estimator")

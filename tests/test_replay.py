@@ -105,7 +105,8 @@ def test_replay_plumbing_with_known_answers(tmp_path: Path) -> None:
 def test_cli_writes_csv_and_strict_json(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     log = tmp_path / "flight.tlog"
     write_flight(log)
-    monkeypatch.setattr(core, "default_navigator", LastFixNavigator)
+    monkeypatch.setattr(core, "default_navigator",
+                        lambda method, frame, config=None: LastFixNavigator(method, frame))
     out = tmp_path / "out"
     assert main(["replay", str(log), "--method", "naive", "--out", str(out), "--rate-hz", "10"]) == 0
     table = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)
@@ -158,3 +159,33 @@ def test_real_log_every_method() -> None:
         assert gnss["median"] < 2.0 and gnss["p95"] < 5.0, (method, gnss)
         if "order" in method:
             assert s["beta"]["median"] > 0.8, (method, s["beta"])
+
+
+def test_mission_option_sets_home_and_the_missions_estimator_config(tmp_path, capsys):
+    """``--mission`` replays with the filter the SITL estimator ran (its ``estimator:`` section)."""
+    from companion.estimator import EstimatorConfig, mission_estimator_config
+    from companion.mission import load_mission
+
+    mission = load_mission("default")
+    assert mission_estimator_config(mission) != EstimatorConfig()
+    short = tmp_path / "short.tlog"
+    short.write_bytes(QUAD106.read_bytes()[:400_000])
+
+    def run(name: str, *extra: str) -> tuple[dict, np.ndarray]:
+        out = tmp_path / name
+        assert main(["replay", str(short), "--out", str(out), "--no-progress", *extra]) == 0
+        table = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)
+        return json.loads((out / "summary.json").read_text()), table
+
+    plain, plain_rows = run("defaults")
+    h = plain["home"]
+    same_home = f"{h['lat_deg']!r},{h['lon_deg']!r},{h['alt_m']!r}"
+    _, tuned_rows = run("mission-config", "--mission", "default", f"--home={same_home}")
+    var_v = list(core.CSV_COLUMNS).index("var_v_n_m2_s2")
+    assert plain_rows.shape == tuned_rows.shape
+    assert not np.allclose(plain_rows[:, var_v], tuned_rows[:, var_v])  # the mission's process noise
+    mission_home, _ = run("mission-home", "--mission", "default")
+    assert (mission_home["home"]["lat_deg"], mission_home["home"]["lon_deg"]) == (
+        mission.frame.home_lat_deg, mission.frame.home_lon_deg)
+    assert main(["replay", str(short), "--out", str(tmp_path / "x"), "--mission", "nonexistent"]) == 2
+    assert "nonexistent" in capsys.readouterr().err

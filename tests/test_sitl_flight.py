@@ -59,6 +59,7 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     assert dump.returncode == 0
     assert "GPS_RAW_INT" in dump.stdout and "ODOMETRY" in dump.stdout and "SYSTEM_TIME" in dump.stdout
 
+    from companion.estimator import mission_estimator_config
     from companion.mission import load_mission
     from companion.wire.tlog import read_tlog
     from gcs_tools.replay.core import CSV_COLUMNS, replay
@@ -67,7 +68,10 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     for _, m in read_tlog(tlog, ("ODOMETRY",)):
         if m.time_usec % 20_000 == 0:  # 50 Hz ODOMETRY, sent right after its IMU sample
             live.setdefault(int(m.time_usec), (m.x, m.y, m.z))
-    result = replay(tlog, "second-order", home=load_mission(MISSION).frame, rate_hz=0)
+    mission = load_mission(MISSION)
+    assert mission.section("estimator"), "the test mission should carry a non-default estimator section"
+    config = mission_estimator_config(mission)
+    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
     col = CSV_COLUMNS.index("p_n_m") - 1
     replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
     common = sorted(set(live) & set(replayed))

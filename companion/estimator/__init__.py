@@ -10,7 +10,7 @@ and their registry), ``engine`` (filter + out-of-sequence fusion), ``navigator``
 
 import importlib
 
-from companion.estimator.config import EstimatorConfig
+from companion.estimator.config import EstimatorConfig, mission_estimator_config
 from companion.estimator.methods import REGISTRY, register
 from companion.estimator.navigator import Navigator
 
@@ -21,4 +21,4 @@ for _plugin in PLUGINS:
 
 METHODS: tuple[str, ...] = tuple(REGISTRY)
 
-__all__ = ["METHODS", "EstimatorConfig", "Navigator", "register"]
+__all__ = ["METHODS", "EstimatorConfig", "Navigator", "mission_estimator_config", "register"]

@@ -22,6 +22,8 @@ from typing import Literal
 
 import numpy as np
 
+from companion.mission import Mission, build
+
 
 @dataclass(frozen=True)
 class EstimatorConfig:
@@ -118,3 +120,11 @@ class EstimatorConfig:
     def r_factor(self, beta: float) -> float:
         """R(β) / R_nom = r_inflation_max ** (1 − β): 1 at full trust, r_inflation_max at none."""
         return float(self.r_inflation_max ** (1.0 - beta))
+
+
+def mission_estimator_config(mission: Mission) -> EstimatorConfig:
+    """``EstimatorConfig`` defaults overridden by the mission's ``estimator:`` section.
+
+    Used by every wiring that flies or replays a mission (``fly``, the SITL estimator node,
+    ``replay --mission``), so a replayed SITL log runs the filter the live one ran."""
+    return build(EstimatorConfig, mission.section("estimator"), f"{mission.source}: estimator")

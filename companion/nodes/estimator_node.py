@@ -16,9 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from companion.estimator import EstimatorConfig, Navigator
+from companion.estimator import Navigator, mission_estimator_config
 from companion.mission import Mission
-from companion.mission.schema import build
 from companion.wire import mavlink_codec as codec
 from companion.wire.lockstep import marker_time_us, step_response
 from companion.wire.samples import GnssFix, ImuSample, NavEstimate
@@ -150,7 +149,7 @@ def _next_multiple(t_us: int, period_us: int) -> int:
 
 def make_navigator(mission: Mission, method: str) -> tuple[Navigator, float]:
     """The mission's Navigator (home = the mission's home point) and its χ² NIS gate."""
-    config = build(EstimatorConfig, mission.section("estimator"), f"mission {mission.name}: estimator")
+    config = mission_estimator_config(mission)
     return Navigator(config, method=method, frame=mission.frame), config.chi2_095
 
 

@@ -78,8 +78,8 @@ def with_overrides(mission: Mission, overrides: Sequence[Override]) -> Mission:
 
 def check(mission: Mission) -> None:
     """Build every config a flight builds from ``mission``: a bad override fails here, in one line."""
-    from gcs_tools.fly.core import estimator_config
+    from companion.estimator import mission_estimator_config
     from simvehicle.config import sim_config_for
 
-    estimator_config(mission)
+    mission_estimator_config(mission)
     sim_config_for(mission)

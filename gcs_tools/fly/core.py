@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
-from companion.estimator import METHODS, EstimatorConfig, Navigator
-from companion.mission import Mission, build, load_mission
+from companion.estimator import METHODS, Navigator, mission_estimator_config
+from companion.mission import Mission, load_mission
 from companion.planning import Route, plan_route
 from simvehicle import SimVehicle
 
@@ -58,10 +58,6 @@ def error_stats(err_m: np.ndarray) -> dict[str, float]:
     }
 
 
-def estimator_config(mission: Mission) -> EstimatorConfig:
-    return build(EstimatorConfig, mission.section("estimator"), f"{mission.source}: estimator")
-
-
 _ROUTES: dict[tuple[int, int, float], tuple[Mission, Route]] = {}
 _ROUTES_KEPT = 16
 
@@ -93,7 +89,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         raise UserError(f"method {method!r}: expected one of {', '.join(METHODS)}")
     route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
-    nav = Navigator(estimator_config(m), method=method, frame=m.frame)
+    nav = Navigator(mission_estimator_config(m), method=method, frame=m.frame)
     goal_ned_m = route.waypoints_ned_m[-1]
     end_s = cfg.start_delay_s + route.duration_s + max(cfg.timeout_margin_s, 0.5 * route.duration_s)
     if max_duration_s is not None:

@@ -17,7 +17,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path,
                         help="output directory for estimates.csv, summary.json")
     parser.add_argument("--home", default=None, metavar="LAT,LON,ALT",
-                        help="local-frame origin (degrees, degrees, metres); default: the first good fix")
+                        help="local-frame origin (degrees, degrees, metres); default: the mission's home "
+                             "with --mission, else the first good fix")
+    parser.add_argument("--mission", default=None, metavar="NAME|PATH",
+                        help="take the estimator config (the mission's estimator: section) and home from "
+                             "this mission, as the SITL estimator did; default: EstimatorConfig defaults "
+                             "(real-log values), home = first good fix")
     parser.add_argument("--rate-hz", type=float, default=20.0,
                         help="estimate rows per second in estimates.csv (0: one per IMU sample)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -31,6 +36,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     home = core.parse_home(args.home) if args.home else None
+    config = None
+    if args.mission is not None:
+        from companion.estimator import mission_estimator_config
+        from companion.mission import load_mission
+
+        mission = load_mission(args.mission)
+        config = mission_estimator_config(mission)
+        home = home or mission.frame
     bar = None
     if not args.no_progress and sys.stderr.isatty():
         from tqdm import tqdm
@@ -40,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     progress = None if bar is None else (lambda pos, size: bar.update(pos - bar.n))
     pub = telemetry.publisher_from_args(args, "companion") if args.publish else None
     try:
-        result = core.replay(args.file, args.method, home=home, rate_hz=args.rate_hz, progress=progress,
+        result = core.replay(args.file, args.method, home=home, config=config, rate_hz=args.rate_hz,
+                             progress=progress,
                              on_imu=_on_imu(pub, args.speed))
     finally:
         if bar is not None:

@@ -17,7 +17,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -27,6 +27,9 @@ from companion.wire.geodesy import LocalNedFrame
 from companion.wire.samples import GnssFix, ImuSample, NavEstimate
 from companion.wire.tlog import TlogReader, read_tlog
 from gcs_tools.evaluate.stats import summarize
+
+if TYPE_CHECKING:
+    from companion.estimator import EstimatorConfig
 
 IMU_TYPES = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU")
 ATTITUDE_TYPES = ("ATTITUDE_QUATERNION", "ATTITUDE")
@@ -54,12 +57,15 @@ NavigatorFactory = Callable[[str, LocalNedFrame], NavigatorLike]
 ImuHook = Callable[[int, NavigatorLike], None]
 
 
-def default_navigator(method: str, frame: LocalNedFrame) -> NavigatorLike:
+def default_navigator(
+    method: str, frame: LocalNedFrame, config: EstimatorConfig | None = None
+) -> NavigatorLike:
+    """The real Navigator; ``config`` None = ``EstimatorConfig`` defaults (the real-log values)."""
     from companion.estimator import METHODS, EstimatorConfig, Navigator
 
     if method not in METHODS:
         raise UserError(f"unknown method {method!r} (choose from {', '.join(METHODS)})")
-    return Navigator(EstimatorConfig(), method=method, frame=frame)
+    return Navigator(config or EstimatorConfig(), method=method, frame=frame)
 
 
 @dataclass
@@ -223,12 +229,16 @@ def replay(
     method: str,
     *,
     home: LocalNedFrame | None = None,
+    config: EstimatorConfig | None = None,
     rate_hz: float = 20.0,
     navigator: NavigatorFactory | None = None,
     progress: Callable[[int, int], None] | None = None,
     on_imu: ImuHook | None = None,
 ) -> ReplayResult:
     """Replay ``path`` through a navigator; ``rate_hz`` limits the estimate rows (0: every IMU).
+
+    ``config`` is the real Navigator's configuration (None: ``EstimatorConfig`` defaults); a
+    ``navigator`` factory (tests) replaces the real Navigator and ignores it.
 
     ``progress(position_bytes, size_bytes)`` is called now and then; ``on_imu(t_us, navigator)``
     after every IMU sample is pushed (telemetry, pacing; its time is not the estimator's).
@@ -246,7 +256,7 @@ def replay(
             what = "no usable GPS_RAW_INT 3-D fix" if frames else "no readable MAVLink frames"
             raise UserError(f"{path}: {what} in {frames} frames{_describe_skips(probe)}")
         home = LocalNedFrame(fix0.lat_deg, fix0.lon_deg, fix0.alt_m)
-    nav = (navigator or default_navigator)(method, home)
+    nav = navigator(method, home) if navigator is not None else default_navigator(method, home, config)
     reader = read_tlog(path, (*IMU_TYPES, *ATTITUDE_TYPES, GNSS_TYPE, *REFERENCE_TYPES))
     refs = _References(home)
     used: Counter[str] = Counter()
