@@ -53,7 +53,8 @@ WARMUP_TOPIC = "setpoint"  # sent until every subscriber receives the publisher;
 
 def subscriber_main() -> None:
     """Child process: decode everything; say "receiving" on the first warm-up message (setpoint) of
-    each publisher; on SIGTERM print counts, latencies and decode times (JSON)."""
+    each publisher; on SIGUSR1 (a snapshot) and on SIGTERM print counts, latencies and decode times
+    (one JSON line)."""
     from companion.wire.telemetry import TelemetrySubscriber
 
     counts: Counter[str] = Counter()
@@ -74,15 +75,23 @@ def subscriber_main() -> None:
                 latency_ms[msg.vehicle].append((msg.recv_unix_ns - msg.sent_unix_ns) * 1e-6)
                 decode_us.append((time.time_ns() - msg.recv_unix_ns) * 1e-3)  # callback entry -> decoded
 
-    done = threading.Event()
+    done, snapshot = threading.Event(), threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
-    with TelemetrySubscriber(on, key_expr="beliefnav/**") as sub:
-        print("ready", flush=True)
-        done.wait()
+    signal.signal(signal.SIGUSR1, lambda *_: snapshot.set())
+
+    def report() -> None:
         with lock:
             out = {"counts": dict(counts), "latency_ms": latency_ms, "malformed": sub.malformed_total,
                    "decode_us": decode_us}
-    print(json.dumps(out), flush=True)
+            print(json.dumps(out), flush=True)
+
+    with TelemetrySubscriber(on, key_expr="beliefnav/**") as sub:
+        print("ready", flush=True)
+        while not done.wait(0.02):
+            if snapshot.is_set():
+                snapshot.clear()
+                report()
+        report()
 
 
 def _start_subscribers(n: int, env: dict[str, str]) -> list[subprocess.Popen]:
@@ -119,6 +128,17 @@ def await_receiving(pub: TelemetryPublisher, procs: list[subprocess.Popen], time
     return time.monotonic() - t0
 
 
+def _snapshot_subscribers(procs: list[subprocess.Popen]) -> list[dict[str, Any]]:
+    """What every subscriber has received so far (asked with SIGUSR1, answered on stdout)."""
+    for p in procs:
+        p.send_signal(signal.SIGUSR1)
+    results = []
+    for p in procs:
+        assert p.stdout is not None
+        results.append(json.loads(p.stdout.readline()))
+    return results
+
+
 def _stop_subscribers(procs: list[subprocess.Popen]) -> list[dict[str, Any]]:
     results = []
     for p in procs:
@@ -130,7 +150,7 @@ def _stop_subscribers(procs: list[subprocess.Popen]) -> list[dict[str, Any]]:
         except (subprocess.TimeoutExpired, ValueError, IndexError):
             p.kill()
             p.communicate()
-            results.append({"counts": {}, "latency_ms": {}, "malformed": 0, "decode_us": []})
+            results.append({"counts": {}, "latency_ms": {}, "malformed": 0, "decode_us": [], "lost": True})
     return results
 
 
@@ -243,6 +263,9 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         procs += _start_subscribers(N_SUBSCRIBERS - 1, env)
         time.sleep(SETTLE_S)
         fan = fan_out(fan_s, cfg, flight, procs)
+        # counted now: the stress runs below leave a backlog that a subscriber may not drain by the
+        # end (its final counts would then be lost, read as "nothing delivered")
+        delivered = _snapshot_subscribers(procs)
         with TelemetryPublisher(RTF_VEHICLE, "companion", cfg_alone) as alone, \
                 TelemetryPublisher(RTF_VEHICLE, "companion", cfg) as attached:
             await_receiving(attached, procs)
@@ -258,10 +281,11 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     finally:
         results = _stop_subscribers(procs)
     sent_total = sum(fan["sent"].values())
-    lat = np.concatenate([np.asarray(r["latency_ms"].get(FANOUT_VEHICLE, []), dtype=float) for r in results])
-    lat1 = np.asarray(results[0]["latency_ms"].get(SINGLE_VEHICLE, []), dtype=float)
-    decode = np.concatenate([np.asarray(r["decode_us"], dtype=float) for r in results])
-    delivered_fan = [r["counts"].get(FANOUT_VEHICLE, 0) for r in results]
+    lat = np.concatenate([np.asarray(r["latency_ms"].get(FANOUT_VEHICLE, []), dtype=float)
+                          for r in delivered])
+    lat1 = np.asarray(delivered[0]["latency_ms"].get(SINGLE_VEHICLE, []), dtype=float)
+    decode = np.concatenate([np.asarray(r["decode_us"], dtype=float) for r in delivered])
+    delivered_fan = [r["counts"].get(FANOUT_VEHICLE, 0) for r in delivered]
     return {
         "subscribers": N_SUBSCRIBERS,
         "publisher_peers_linked": fan["peers"],
@@ -278,12 +302,13 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "latency_max_ms": round(float(np.max(lat)), 3) if len(lat) else None,
         "latency_1_subscriber_p50_ms": round(float(np.percentile(lat1, 50)), 3) if len(lat1) else None,
         "latency_1_subscriber_p99_ms": round(float(np.percentile(lat1, 99)), 3) if len(lat1) else None,
-        "delivered_1_subscriber": int(results[0]["counts"].get(SINGLE_VEHICLE, 0)),
+        "delivered_1_subscriber": int(delivered[0]["counts"].get(SINGLE_VEHICLE, 0)),
         "sent_1_subscriber": sum(single["sent"].values()),
         "publish_call_us_p50": round(float(np.percentile(fan["publish_call_us"], 50)), 1),
         "publish_call_us_p99": round(float(np.percentile(fan["publish_call_us"], 99)), 1),
         "subscriber_decode_us_p50": round(float(np.median(decode)), 1) if len(decode) else None,
         "malformed": int(sum(r["malformed"] for r in results)),
+        "subscribers_not_stopped_in_time": int(sum(bool(r.get("lost")) for r in results)),
         "estimator_realtime_factor_no_subscribers": round(float(np.median(rtf["none"])), 1),
         "estimator_realtime_factor_10_subscribers": round(float(np.median(rtf["ten"])), 1),
         "realtime_factor_ratio": round(float(np.median(np.divide(rtf["ten"], rtf["none"]))), 3),
