@@ -13,7 +13,10 @@ the estimator is timed. Figures:
 * ``oosm_cost_ratio``: median cost of fusing a fix 1.2 s late ÷ an on-time fix (constant
   latency, so every fix is fused after the latest one: no re-fusion); the random-latency
   stream's mean cost per fix (re-fusions after out-of-order arrivals included) is reported too;
-* ``replay_realtime_factor`` and its break-down: ``gcs_tools.bench.replay`` on quad106.
+* ``replay_realtime_factor`` and its break-down: ``gcs_tools.bench.replay`` on quad106;
+* ``memory_rss_mb_by_sim_min``: resident memory of this process while one Navigator flies a
+  one-hour stream (built beforehand, so growth between the marks is the estimator's own), and
+  ``memory_growth_mb_10_to_60_min`` (DESIGN §6: flat over a one-hour flight). Not with --quick.
 """
 
 from __future__ import annotations
@@ -93,6 +96,30 @@ def streaming_wall_s(samples: list[Sample]) -> tuple[float, float, Navigator]:
             if imu_count % 4 == 0:  # 50 Hz output
                 estimate()
     return time.perf_counter() - t0, time.process_time() - c0, nav
+
+
+def rss_mb() -> float:
+    """Resident set size of this process (Linux /proc), MiB."""
+    with open("/proc/self/statm", encoding="ascii") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def memory_over_flight(duration_s: float = 3600.0, every_s: float = 600.0) -> dict[str, Any]:
+    """RSS every ``every_s`` of simulated time while a Navigator flies ``duration_s`` (50 Hz estimates)."""
+    samples = flight(duration_s, None)
+    nav = Navigator(EstimatorConfig(), METHOD, HOME)
+    marks: dict[str, float] = {}
+    imu_count, per_mark = 0, int(every_s * 1e6 / IMU_PERIOD_US)
+    for s in samples:
+        nav.push(s)
+        if type(s) is ImuSample:
+            imu_count += 1
+            if imu_count % 4 == 0:
+                nav.estimate()
+            if imu_count % per_mark == 0:
+                marks[str(round(imu_count * IMU_PERIOD_US * 1e-6 / 60))] = round(rss_mb(), 2)
+    first, last = next(iter(marks.values())), list(marks.values())[-1]
+    return {"memory_rss_mb_by_sim_min": marks, "memory_growth_mb_10_to_60_min": round(last - first, 2)}
 
 
 def batched_wall_s(samples: list[Sample], block_s: float = 0.5) -> tuple[float, float, Navigator]:
@@ -204,6 +231,8 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "gnss_rejected": sum(v for k, v in counts.items() if k.startswith("gnss_rejected")),
         "final_beta": es.beta if es is not None else None,
     }
+    if not quick:
+        out.update(memory_over_flight())
     try:
         from gcs_tools.bench.replay import REAL_LOG, measure_replay
     except ImportError:  # the replay engine is not in this build
