@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from companion.errors import UserError
 from gcs_tools.evaluate import stats
+from gcs_tools.jsonvalues import plain_json
 
 FIGURE_DECIMATION = 4  # 20 Hz flight series → 5 Hz for belief and trajectory figures
 
@@ -179,14 +180,6 @@ def _run_dask(jobs: Sequence[Job], address: str, job_fn: JobFn) -> Iterator[tupl
 
 
 def jsonable(value: Any) -> Any:
-    """Summary dicts may carry numpy scalars/arrays; make them plain JSON values."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
+    """Summary dicts may carry numpy scalars/arrays; make them plain JSON values (NaN kept)."""
+    return plain_json(value, nan_to_none=False)
 

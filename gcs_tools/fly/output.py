@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +11,7 @@ import numpy as np
 from companion.errors import UserError
 from gcs_tools.figures import belief_figure, map_figure
 from gcs_tools.fly.core import FlightResult
+from gcs_tools.jsonvalues import plain_json
 
 # CSV column groups: series key -> column names
 COLUMNS = {
@@ -32,15 +32,7 @@ COLUMNS = {
 
 def strict_json(value: Any) -> Any:
     """NaN/inf -> None, numpy scalars -> Python, recursively (so the file is strict JSON)."""
-    if isinstance(value, dict):
-        return {str(k): strict_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [strict_json(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+    return plain_json(value, nan_to_none=True)
 
 
 def write_outputs(result: FlightResult, world: Any, out_dir: str | Path) -> list[Path]:

@@ -1,0 +1,26 @@
+"""Summaries as plain JSON values: numpy scalars and arrays become Python numbers and lists."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+
+def plain_json(value: Any, *, nan_to_none: bool) -> Any:
+    """Recursively convert dicts, lists, tuples, numpy arrays and scalars to plain JSON values.
+
+    ``nan_to_none``: NaN/inf become ``None`` (strict JSON files); otherwise they stay floats
+    (in-memory results that are compared or aggregated)."""
+    if isinstance(value, dict):
+        return {str(k): plain_json(v, nan_to_none=nan_to_none) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain_json(v, nan_to_none=nan_to_none) for v in value]
+    if isinstance(value, np.ndarray):
+        return plain_json(value.tolist(), nan_to_none=nan_to_none)
+    if isinstance(value, np.generic):
+        value = value.item()
+    if nan_to_none and isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
