@@ -10,8 +10,8 @@ from companion.errors import UserError
 
 
 def _parser() -> argparse.ArgumentParser:
-    from companion.wire import telemetry
-    from companion.wire.udp_link import add_link_arguments
+    from companion.mavlink.udp_link import add_link_arguments
+    from companion.telemetry import pubsub as telemetry
 
     parser = argparse.ArgumentParser(prog="python -m companion", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="process", required=True)
@@ -32,7 +32,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from companion.wire.runtime import exit_on_sigterm, write_json
+    from companion.runtime import exit_on_sigterm, write_json
 
     args = _parser().parse_args(argv)
     exit_on_sigterm()
@@ -58,9 +58,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNode)
+    from companion.mavlink.udp_link import UdpLink, link_settings
     from companion.mission import load_mission
-    from companion.wire.telemetry import publisher_from_args
-    from companion.wire.udp_link import UdpLink, link_settings
+    from companion.telemetry.pubsub import publisher_from_args
 
     mission = load_mission(args.mission)
     fields, rng = link_settings(args)
@@ -80,7 +80,7 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
 
 
 def _config(args: argparse.Namespace, component_id: int, fields: dict[str, object], link_id: int):  # noqa: ANN202
-    from companion.wire.udp_link import VEHICLE_SYSTEM_ID, LinkConfig
+    from companion.mavlink.udp_link import VEHICLE_SYSTEM_ID, LinkConfig
 
     return LinkConfig(
         bind_port=args.bind_port, peer_port=args.vehicle_port, system_id=VEHICLE_SYSTEM_ID,

@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from companion.wire import zenoh_codec as zc
-from companion.wire.samples import GnssFix, NavEstimate, Setpoint, TruthState
-from companion.wire.telemetry import TelemetryConfig, TelemetryPublisher
+from companion.domain.samples import GnssFix, NavEstimate, Setpoint, TruthState
+from companion.telemetry import codec as zc
+from companion.telemetry.pubsub import TelemetryConfig, TelemetryPublisher
 
 TICK_US = 20_000  # 50 Hz base tick
 RADIUS_M, SPEED_M_S, ALT_M = 40.0, 5.0, 20.0

@@ -13,7 +13,7 @@ from rich.console import Group
 from rich.live import Live
 from rich.table import Table
 
-from companion.wire import telemetry
+from companion.telemetry import pubsub as telemetry
 from gcs_tools.dashboard.state import LiveState
 
 

@@ -1,7 +1,8 @@
 """Simulated quadrotor: urban world truth, dynamics, autopilot, IMU and GNSS degradation.
 
 Imports from ``companion`` only the shared contracts: ``companion.mission`` (mission/map
-schema) and ``companion.wire`` (wire types and codecs). Never the estimator.
+schema) and ``companion.domain``/``companion.mavlink``/``companion.telemetry`` (types and
+codecs). Never the estimator.
 """
 
 from simvehicle.config import SimConfig

@@ -8,8 +8,8 @@ from pathlib import Path
 
 
 def _parser() -> argparse.ArgumentParser:
-    from companion.wire import telemetry
-    from companion.wire.udp_link import add_link_arguments
+    from companion.mavlink.udp_link import add_link_arguments
+    from companion.telemetry import pubsub as telemetry
 
     p = argparse.ArgumentParser(prog="python -m simvehicle", description=__doc__.splitlines()[0])
     p.add_argument("--mission", default="default", help="mission name or YAML path")
@@ -34,10 +34,10 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
 
     from companion.errors import UserError
+    from companion.mavlink.udp_link import link_settings
     from companion.mission import load_mission
-    from companion.wire.runtime import exit_on_sigterm, write_json
-    from companion.wire.telemetry import publisher_from_args
-    from companion.wire.udp_link import link_settings
+    from companion.runtime import exit_on_sigterm, write_json
+    from companion.telemetry.pubsub import publisher_from_args
     from simvehicle import SimVehicle
     from simvehicle.node import VehicleNode, VehicleNodeConfig
     from simvehicle.recording import FlightRecorder

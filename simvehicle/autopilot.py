@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from companion.wire.samples import NavEstimate, Setpoint
+from companion.domain.samples import NavEstimate, Setpoint
 from simvehicle.config import AutopilotConfig, VehicleConfig
 from simvehicle.dynamics import quat_to_euler
 from simvehicle.imu import rotations

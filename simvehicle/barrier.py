@@ -1,4 +1,4 @@
-"""The vehicle's side of the lockstep barrier (protocol: :mod:`companion.wire.lockstep`)."""
+"""The vehicle's side of the lockstep barrier (protocol: :mod:`companion.mavlink.lockstep`)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from companion.wire.lockstep import LockstepConfig, response_time_us, step_marker
-from companion.wire.udp_link import UdpLink
+from companion.mavlink.lockstep import LockstepConfig, response_time_us, step_marker
+from companion.mavlink.udp_link import UdpLink
 
 OnMessage = Callable[[str, Any], None]
 

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.wire.geodesy import LocalNedFrame
-from companion.wire.samples import GnssFix
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import GnssFix
 from simvehicle.config import GnssConfig
 from simvehicle.noise import NormalBlocks
 

@@ -28,14 +28,14 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.samples import NavEstimate, Setpoint
+from companion.mavlink import codec as codec
+from companion.mavlink.lockstep import LockstepConfig, step_marker
+from companion.mavlink.tlog import TlogWriter
+from companion.mavlink.udp_link import VEHICLE_SYSTEM_ID, LinkConfig, UdpLink
 from companion.mission import Mission
-from companion.wire import mavlink_codec as codec
-from companion.wire.lockstep import LockstepConfig, step_marker
-from companion.wire.samples import NavEstimate, Setpoint
-from companion.wire.telemetry import DeferredPublisher, TelemetryPublisher
-from companion.wire.tlog import TlogWriter
-from companion.wire.udp_link import VEHICLE_SYSTEM_ID, LinkConfig, UdpLink
-from companion.wire.zenoh_codec import GnssReport
+from companion.telemetry.codec import GnssReport
+from companion.telemetry.pubsub import DeferredPublisher, TelemetryPublisher
 from simvehicle import SimVehicle
 from simvehicle.barrier import StepBarrier
 from simvehicle.recording import FlightRecorder

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.wire.samples import NavEstimate, Setpoint
+from companion.domain.samples import NavEstimate, Setpoint
 
 _NAN3 = (math.nan, math.nan, math.nan)
 

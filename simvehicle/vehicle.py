@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, Setpoint, TruthState
 from companion.errors import UserError
-from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, Setpoint, TruthState
 from simvehicle.autopilot import Autopilot
 from simvehicle.config import SimConfig, sim_config_for
 from simvehicle.dynamics import RigidBody

@@ -27,7 +27,7 @@ def _screenshot(page, path: Path) -> None:
 
 
 def _sim_state_count(tlog: Path) -> int:
-    from companion.wire.tlog import read_tlog
+    from companion.mavlink.tlog import read_tlog
 
     return sum(1 for _ in read_tlog(tlog, ["SIM_STATE"]))
 

@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from companion.wire import zenoh_codec as zc
-from companion.wire.samples import NavEstimate, TruthState
-from companion.wire.telemetry import Received
+from companion.domain.samples import NavEstimate, TruthState
+from companion.telemetry import codec as zc
+from companion.telemetry.pubsub import Received
 from gcs_tools.dashboard.state import LiveState
 
 

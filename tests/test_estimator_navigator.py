@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.estimator import EstimatorConfig, Navigator
 from companion.estimator.navigator import frd_to_ned, rotation_ned_frd
-from companion.wire.geodesy import LocalNedFrame
-from companion.wire.samples import AttitudeSample, GnssFix, ImuSample
 from tests.estimator_streams import multipath_stream
 
 CFG = EstimatorConfig()

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from companion.wire import mavlink_codec as mc
-from companion.wire.geodesy import LocalNedFrame
-from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, Setpoint, TruthState
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, Setpoint, TruthState
+from companion.mavlink import codec as mc
 
 FRAME = LocalNedFrame(-37.8594910, 144.7647800, 10.0)
 

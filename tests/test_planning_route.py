@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from companion.domain.samples import Setpoint
 from companion.mission import Bounds, Building, World, WorldConfig, load_mission
 from companion.planning import PlanningError, plan_route, prune_line_of_sight
-from companion.wire.samples import Setpoint
 
 DEFAULT = load_mission("default")
 

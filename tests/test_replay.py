@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.wire import mavlink_codec as mc
-from companion.wire.geodesy import LocalNedFrame
-from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, TruthState
-from companion.wire.tlog import TlogWriter
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, TruthState
+from companion.mavlink import codec as mc
+from companion.mavlink.tlog import TlogWriter
 from gcs_tools.cli import main
 from gcs_tools.replay import core
 

@@ -60,8 +60,8 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     assert "GPS_RAW_INT" in dump.stdout and "ODOMETRY" in dump.stdout and "SYSTEM_TIME" in dump.stdout
 
     from companion.estimator import mission_estimator_config
+    from companion.mavlink.tlog import read_tlog
     from companion.mission import load_mission
-    from companion.wire.tlog import read_tlog
     from gcs_tools.replay.core import CSV_COLUMNS, replay
 
     live: dict[int, tuple[float, float, float]] = {}
@@ -134,7 +134,7 @@ def test_ten_percent_loss_both_ways_still_reaches_goal(tmp_path):
 
 def _frame(msg, system_id: int, key: bytes | None = None) -> bytes:
     """One packed frame from ``system_id``, signed with ``key`` when given."""
-    from companion.wire import mavlink_codec as codec
+    from companion.mavlink import codec as codec
 
     mav = codec.new_link(system_id, 1)
     if key is not None:
@@ -145,10 +145,10 @@ def _frame(msg, system_id: int, key: bytes | None = None) -> bytes:
 
 
 def test_bad_datagrams_and_wrong_key_are_counted_and_rejected(tmp_path):
+    from companion.domain.samples import GnssFix, Setpoint
+    from companion.mavlink import codec as codec
+    from companion.mavlink.udp_link import read_signing_key
     from companion.mission import load_mission
-    from companion.wire import mavlink_codec as codec
-    from companion.wire.samples import GnssFix, Setpoint
-    from companion.wire.udp_link import read_signing_key
     from gcs_tools.sitl.launcher import SitlOptions
     from gcs_tools.sitl.supervisor import free_udp_ports
 
@@ -201,7 +201,7 @@ def test_companion_killed_and_restarted_vehicle_holds_and_flight_continues(tmp_p
     mission; with a perfect estimate the drift is < 0.3 m, see test_vehicle_autopilot).
     Stated bounds: from 2 s after the hold began the true velocity is within 0.3 m/s of minus the
     estimate's velocity error at the loss, and braking from cruise takes less than 8 m."""
-    from companion.wire.tlog import read_tlog
+    from companion.mavlink.tlog import read_tlog
     from gcs_tools.sitl.launcher import SitlOptions
 
     out = tmp_path / "run"
@@ -303,7 +303,7 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
         except subprocess.TimeoutExpired:
             os.killpg(proxy.pid, signal.SIGKILL)
     assert done.returncode in (0, 1), done.stderr
-    from companion.wire.tlog import read_tlog
+    from companion.mavlink.tlog import read_tlog
 
     logs = list(tmp_path.rglob("proxy.tlog"))
     assert logs, "MAVProxy wrote no log"

@@ -6,11 +6,11 @@ import socket
 import numpy as np
 import pytest
 
+from companion.domain.samples import GnssFix
 from companion.errors import UserError
-from companion.wire import mavlink_codec as codec
-from companion.wire.lockstep import marker_time_us, response_time_us, step_marker, step_response
-from companion.wire.samples import GnssFix
-from companion.wire.udp_link import LinkConfig, UdpLink, read_signing_key
+from companion.mavlink import codec as codec
+from companion.mavlink.lockstep import marker_time_us, response_time_us, step_marker, step_response
+from companion.mavlink.udp_link import LinkConfig, UdpLink, read_signing_key
 
 KEY = bytes(range(32))
 
@@ -137,10 +137,10 @@ def _normalised(value):
 
 
 def test_fast_datagram_parser_equals_pymavlink_and_resynchronises():
-    """Unsigned links parse with companion.wire.frames: every field, the sender's system id and
+    """Unsigned links parse with companion.mavlink.frames: every field, the sender's system id and
     the frame bytes equal pymavlink's; garbage between frames costs only itself."""
-    from companion.wire.frames import parse_datagram
-    from companion.wire.samples import ImuSample, NavEstimate
+    from companion.domain.samples import ImuSample, NavEstimate
+    from companion.mavlink.frames import parse_datagram
 
     sender = codec.new_link(7, 197)
     est = NavEstimate(1_020_000, np.array([1.5, -2.25, -30.0]), np.array([0.1, 0.2, -0.3]), np.zeros(3),
@@ -165,8 +165,8 @@ def test_fast_datagram_parser_equals_pymavlink_and_resynchronises():
 
 
 def test_fast_packer_is_byte_equal_to_pymavlink():
-    from companion.wire.frames import pack_frame
-    from companion.wire.samples import AttitudeSample, ImuSample
+    from companion.domain.samples import AttitudeSample, ImuSample
+    from companion.mavlink.frames import pack_frame
 
     reference = codec.new_link(3, 191)
     msgs = [codec.encode_imu(ImuSample(5_000, np.array([0.0, 0.25, -9.81]), np.zeros(3))),

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.wire import zenoh_codec as zc
-from companion.wire.samples import GnssFix, NavEstimate, Setpoint, TruthState
+from companion.domain.samples import GnssFix, NavEstimate, Setpoint, TruthState
+from companion.telemetry import codec as zc
 
 
 def samples(rng: np.random.Generator) -> dict[str, object]:

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from telemetry_helpers import child, hub_env
 
+from companion.domain.samples import Setpoint
 from companion.errors import UserError
-from companion.wire import zenoh_codec as zc
-from companion.wire.samples import Setpoint
-from companion.wire.telemetry import TelemetryConfig, TelemetryPublisher, TelemetrySubscriber, open_session
+from companion.telemetry import codec as zc
+from companion.telemetry.pubsub import TelemetryConfig, TelemetryPublisher, TelemetrySubscriber, open_session
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 
@@ -58,7 +58,7 @@ def test_stalled_and_crashed_subscribers_cost_the_publisher_nothing():
     env = hub_env()
     stall = (
         "import time, sys\n"
-        "from companion.wire.telemetry import TelemetrySubscriber\n"
+        "from companion.telemetry.pubsub import TelemetrySubscriber\n"
         "s = TelemetrySubscriber(lambda m: time.sleep(3600))\n"
         "print('ready', flush=True); time.sleep(3600)\n"
     )
@@ -101,8 +101,8 @@ def test_interpreter_exits_with_open_sessions_and_live_peers():
     env = hub_env()
     forgetful = (
         "import numpy as np\n"
-        "from companion.wire.telemetry import TelemetryPublisher, TelemetrySubscriber\n"
-        "from companion.wire.samples import Setpoint\n"
+        "from companion.telemetry.pubsub import TelemetryPublisher, TelemetrySubscriber\n"
+        "from companion.domain.samples import Setpoint\n"
         "s = TelemetrySubscriber(lambda m: None)\n"
         "p = TelemetryPublisher('uav1', 'bridge')\n"
         "p.publish('setpoint', Setpoint(0, np.zeros(3), np.zeros(3), np.zeros(3)))\n"

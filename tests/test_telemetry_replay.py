@@ -8,7 +8,7 @@ import pytest
 from telemetry_helpers import child, hub_env
 from test_replay import write_flight
 
-from companion.wire.telemetry import TelemetryConfig, TelemetrySubscriber
+from companion.telemetry.pubsub import TelemetryConfig, TelemetrySubscriber
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.wire import mavlink_codec as mc
-from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
-from companion.wire.tlog import TlogWriter, read_tlog
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+from companion.mavlink import codec as mc
+from companion.mavlink.tlog import TlogWriter, read_tlog
 
 DATA = Path(__file__).parent / "data"
 QUAD106 = DATA / "quad106.tlog"

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from vehicle_world import FixtureMission
 
-from companion.wire.samples import NavEstimate, Setpoint
+from companion.domain.samples import NavEstimate, Setpoint
 from simvehicle import SimVehicle
 from simvehicle.autopilot import Autopilot
 from simvehicle.config import AutopilotConfig, VehicleConfig

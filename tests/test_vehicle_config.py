@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from vehicle_world import FixtureMission, Profile, RectWorld
 
+from companion.domain.samples import NavEstimate, Setpoint
 from companion.errors import UserError
 from companion.mission.schema import ConfigError
-from companion.wire.samples import NavEstimate, Setpoint
 from simvehicle import SimVehicle
 from simvehicle.config import SimConfig, sim_config_for
 

@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from companion.wire.geodesy import LocalNedFrame
+from companion.domain.geodesy import LocalNedFrame
 
 
 @dataclass(frozen=True)

@@ -19,11 +19,11 @@ import numpy as np
 import pymap3d
 from pymap3d.ellipsoid import Ellipsoid
 
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
 from companion.mission.schema import ConfigError
-from companion.wire.geodesy import LocalNedFrame
-from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 
 Rot = tuple[Any, Any, Any, Any, Any, Any, Any, Any, Any]
 Attitude = tuple[float, float, float, float, float]  # (w, x, y, z, 2 / |q|²) for frd_to_ned

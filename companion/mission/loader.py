@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from companion.domain.geodesy import LocalNedFrame
 from companion.mission.config import OVERRIDE_SECTIONS, FlightConfig, MissionFile, PlannerConfig, Profile
 from companion.mission.schema import ConfigError, build, load_yaml
 from companion.mission.world import World
-from companion.wire.geodesy import LocalNedFrame
 
 BUILTIN_MISSIONS = ("default", "test")
 

@@ -11,13 +11,13 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from companion.mavlink import codec as codec
+from companion.mavlink.lockstep import marker_time_us, step_response
+from companion.mavlink.udp_link import UdpLink
 from companion.mission import Mission
 from companion.planning import Route
-from companion.wire import mavlink_codec as codec
-from companion.wire.lockstep import marker_time_us, step_response
-from companion.wire.telemetry import TelemetryPublisher
-from companion.wire.udp_link import UdpLink
-from companion.wire.zenoh_codec import RouteInfo
+from companion.telemetry.codec import RouteInfo
+from companion.telemetry.pubsub import TelemetryPublisher
 
 BRIDGE_COMPONENT_ID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
 HEARTBEAT_PERIOD_S = 1.0

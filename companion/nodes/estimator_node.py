@@ -16,13 +16,13 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.estimator import Navigator, mission_estimator_config
+from companion.mavlink import codec as codec
+from companion.mavlink.lockstep import marker_time_us, step_response
+from companion.mavlink.udp_link import UdpLink
 from companion.mission import Mission
-from companion.wire import mavlink_codec as codec
-from companion.wire.lockstep import marker_time_us, step_response
-from companion.wire.samples import GnssFix, ImuSample, NavEstimate
-from companion.wire.telemetry import DeferredPublisher, EstimatorTelemetry, TelemetryPublisher
-from companion.wire.udp_link import UdpLink
+from companion.telemetry.pubsub import DeferredPublisher, EstimatorTelemetry, TelemetryPublisher
 
 ESTIMATOR_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
 IGNORED_TYPES = frozenset({"HEARTBEAT", "SIM_STATE", "SYSTEM_TIME", "TIMESYNC"})

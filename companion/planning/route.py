@@ -11,12 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.domain.samples import Setpoint
 from companion.errors import UserError
 from companion.mission.loader import Mission
 from companion.mission.world import World
 from companion.planning.astar import GridPath, astar
 from companion.planning.minjerk import MinJerkTrajectory
-from companion.wire.samples import Setpoint
 
 
 class PlanningError(UserError):

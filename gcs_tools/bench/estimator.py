@@ -30,9 +30,9 @@ from typing import Any
 import numpy as np
 import pymap3d
 
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, Sample
 from companion.estimator import EstimatorConfig, Navigator
-from companion.wire.geodesy import LocalNedFrame
-from companion.wire.samples import AttitudeSample, GnssFix, ImuSample, Sample
 
 IMU_PERIOD_US = 5_000
 GNSS_EVERY = 10  # 20 Hz

@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.samples import NavEstimate
 from companion.mission import load_mission
 from companion.planning import plan_route
-from companion.wire.samples import NavEstimate
 from gcs_tools.fly import fly
 from simvehicle import SimVehicle
 

@@ -12,8 +12,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from companion.wire import mavlink_codec as mc
-from companion.wire.tlog import read_tlog
+from companion.mavlink import codec as mc
+from companion.mavlink.tlog import read_tlog
 from gcs_tools.replay import core
 
 REAL_LOG = Path(__file__).resolve().parents[2] / "tests" / "data" / "quad106.tlog"

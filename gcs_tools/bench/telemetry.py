@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from companion.wire import zenoh_codec as zc
-from companion.wire.samples import AttitudeSample, ImuSample, Setpoint
-from companion.wire.telemetry import TelemetryConfig, TelemetryPublisher
+from companion.domain.samples import AttitudeSample, ImuSample, Setpoint
+from companion.telemetry import codec as zc
+from companion.telemetry.pubsub import TelemetryConfig, TelemetryPublisher
 
 N_SUBSCRIBERS = 10
 RATES_HZ = {"estimate": 50, "belief": 20, "health": 5}  # the estimator node's publishing rates
@@ -55,7 +55,7 @@ def subscriber_main() -> None:
     """Child process: decode everything; say "receiving" on the first warm-up message (setpoint) of
     each publisher; on SIGUSR1 (a snapshot) and on SIGTERM print counts, latencies and decode times
     (one JSON line)."""
-    from companion.wire.telemetry import TelemetrySubscriber
+    from companion.telemetry.pubsub import TelemetrySubscriber
 
     counts: Counter[str] = Counter()
     latency_ms: dict[str, list[float]] = {FANOUT_VEHICLE: [], SINGLE_VEHICLE: []}
@@ -215,8 +215,8 @@ def run_estimator(samples: list[Any], pub: TelemetryPublisher | None,
     ``wall_rate``: publish each topic at its default rate in WALL time (what a node does at real
     time; faster than that it keeps the latest); otherwise at the simulated rate (a stress test).
     """
+    from companion.domain.samples import ImuSample
     from companion.estimator import Navigator
-    from companion.wire.samples import ImuSample
 
     nav = Navigator(method="second-order")
     k = 0

@@ -8,7 +8,7 @@ import contextlib
 import signal
 import sys
 
-from companion.wire import telemetry
+from companion.telemetry import pubsub as telemetry
 from gcs_tools.dashboard.server import Dashboard, serve
 from gcs_tools.dashboard.state import LiveState
 

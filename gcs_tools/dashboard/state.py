@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from companion.wire import zenoh_codec as zc
-from companion.wire.samples import NavEstimate, Setpoint, TruthState
-from companion.wire.telemetry import Received
+from companion.domain.samples import NavEstimate, Setpoint, TruthState
+from companion.telemetry import codec as zc
+from companion.telemetry.pubsub import Received
 
 SERIES = ("truth", "est", "ref", "beta", "err", "latency")
 TRUTH_MATCH_US = 30_000  # an estimate is compared with truth stamped within this much of it

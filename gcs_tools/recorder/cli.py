@@ -8,7 +8,7 @@ import sys
 import threading
 import time
 
-from companion.wire import telemetry
+from companion.telemetry import pubsub as telemetry
 from gcs_tools.recorder.recording import RecordingWriter
 
 

@@ -24,8 +24,8 @@ from typing import IO, Any
 import numpy as np
 
 from companion.errors import UserError
-from companion.wire import zenoh_codec as zc
-from companion.wire.telemetry import Received
+from companion.telemetry import codec as zc
+from companion.telemetry.pubsub import Received
 
 
 class RecordingWriter:

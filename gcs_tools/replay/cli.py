@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from companion.wire import telemetry
+from companion.telemetry import pubsub as telemetry
 from gcs_tools.replay import core
 
 

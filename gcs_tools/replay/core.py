@@ -1,7 +1,7 @@
 """Replay a tlog through the estimator: samples in arrival order, estimates and a summary out.
 
-The log is read with the fast reader of :mod:`companion.wire.tlog`; every message is turned
-into a domain sample by :mod:`companion.wire.mavlink_codec` and pushed to a
+The log is read with the fast reader of :mod:`companion.mavlink.tlog`; every message is turned
+into a domain sample by :mod:`companion.mavlink.codec` and pushed to a
 :class:`companion.estimator.Navigator` in the order it arrived. One IMU source (the first of
 HIGHRES_IMU, RAW_IMU, SCALED_IMU to appear) and one attitude source (ATTITUDE_QUATERNION or
 ATTITUDE) are used; messages of the other source of the same kind are counted, not fed twice.
@@ -21,11 +21,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
-from companion.wire import mavlink_codec as mc
-from companion.wire.geodesy import LocalNedFrame
-from companion.wire.samples import GnssFix, ImuSample, NavEstimate
-from companion.wire.tlog import TlogReader, read_tlog
+from companion.mavlink import codec as mc
+from companion.mavlink.tlog import TlogReader, read_tlog
 from gcs_tools.evaluate.stats import summarize
 
 if TYPE_CHECKING:

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from companion.errors import UserError
-from companion.wire import telemetry
+from companion.telemetry import pubsub as telemetry
 
 if TYPE_CHECKING:
     from gcs_tools.sitl.launcher import Progress

@@ -3,7 +3,7 @@
 Shared by the tlog reader and the UDP links (pymavlink's byte-wise parser costs ~20 µs per
 message; this ~2 µs). A frame is checked with its message's CRC_EXTRA (x25 / MCRF4XX via
 ``fastcrc``) and unpacked only when asked for, into a namedtuple with the message's field
-names and ``get_type()`` (what the decoders of :mod:`companion.wire.mavlink_codec` read).
+names and ``get_type()`` (what the decoders of :mod:`companion.mavlink.codec` read).
 Link views also carry the sender's system id and the frame's bytes (``get_srcSystem()``,
 ``get_msgbuf()``). Signatures are skipped, not checked: a signing link parses with pymavlink.
 """

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.wire.samples import GnssFix, NavEstimate, Setpoint, TruthState
+from companion.domain.samples import GnssFix, NavEstimate, Setpoint, TruthState
 
 KEY_PREFIX = "beliefnav"
 ENCODING = "application/json"

@@ -2,7 +2,7 @@
 
 ``encode_*`` build pymavlink message objects (pack them with :func:`pack`); ``decode_*`` read any
 object with the message's field names as attributes — a pymavlink message or the lightweight
-views of :mod:`companion.wire.tlog`. Decoders never pass on a non-finite or out-of-range value:
+views of :mod:`companion.mavlink.tlog`. Decoders never pass on a non-finite or out-of-range value:
 they raise :class:`CodecError`, whose ``reason`` the caller counts.
 
 Units and conventions on the wire (DESIGN §2):
@@ -39,8 +39,8 @@ os.environ.setdefault("MAVLINK20", "1")
 import numpy as np  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from companion.wire.geodesy import LocalNedFrame  # noqa: E402
-from companion.wire.samples import (  # noqa: E402
+from companion.domain.geodesy import LocalNedFrame  # noqa: E402
+from companion.domain.samples import (  # noqa: E402
     AttitudeSample,
     GnssFix,
     ImuSample,

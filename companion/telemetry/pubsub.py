@@ -29,7 +29,7 @@ from typing import Any
 import zenoh
 
 from companion.errors import UserError
-from companion.wire import zenoh_codec as zc
+from companion.telemetry import codec as zc
 
 DEFAULT_HUB = "tcp/127.0.0.1:7447"
 

@@ -4,7 +4,7 @@
 :func:`read_tlog` is a fast reader for replay: it scans frames itself, checks each frame's
 CRC (x25 / MCRF4XX with the message's CRC_EXTRA, via ``fastcrc``) and unpacks only the message
 types asked for into light tuple views with the message's field names (what the decoders of
-:mod:`companion.wire.mavlink_codec` read). A damaged log is read as far as it is readable:
+:mod:`companion.mavlink.codec` read). A damaged log is read as far as it is readable:
 the reader resynchronises on the next frame whose CRC checks, and counts what it skipped by
 reason (``bad_crc``, ``bad_length``, ``garbage``, ``unknown_msgid``, ``truncated``).
 """
@@ -19,8 +19,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, BinaryIO
 
-from companion.wire.frames import MessageSpec, frame_at, full_payload, message_ids
-from companion.wire.mavlink_codec import mavlink, new_link, pack
+from companion.mavlink.codec import mavlink, new_link, pack
+from companion.mavlink.frames import MessageSpec, frame_at, full_payload, message_ids
 
 STAMP_BYTES = 8
 

@@ -36,7 +36,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.errors import UserError
-from companion.wire.frames import pack_frame, parse_datagram
+from companion.mavlink.frames import pack_frame, parse_datagram
 
 MAX_DATAGRAM_BYTES = 65_535
 BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this size
@@ -294,7 +294,7 @@ class UdpLink:
 
     def accept_datagram(self, data: bytes, addr: tuple[str, int]) -> list[Any]:
         """Parse one datagram; count and drop what cannot be used (never raises). Without signing
-        the fast scanner of :mod:`companion.wire.frames` parses (messages are its light views);
+        the fast scanner of :mod:`companion.mavlink.frames` parses (messages are its light views);
         with signing pymavlink does, as it checks signatures."""
         c = self.counters
         c.datagrams_rx += 1

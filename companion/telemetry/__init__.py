@@ -1,0 +1,1 @@
+"""Zenoh telemetry: JSON codec per topic (``codec``) and publisher/subscriber (``pubsub``)."""
