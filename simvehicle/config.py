@@ -97,13 +97,64 @@ class AutopilotConfig:
 
 @dataclass(frozen=True)
 class ImuConfig:
-    """Accelerometer and gyro white noise, sampled at the physics rate."""
+    """Accelerometer and gyro errors, sampled at the physics rate (per axis, body FRD).
+
+    ``measured = (1 + scale) * true + bias + white``: white noise of std
+    ``sqrt(sigma² + density² * rate / 2)`` per sample (``sigma_*``: vibration and other white
+    noise; ``*_noise_density_*``: the sensor's own noise density over the Nyquist band), a bias
+    drawn once at turn-on and then a random walk, and a per-axis scale-factor error drawn once.
+    Defaults (white noise only) are the paper's IMU; ``simvehicle.scenarios`` holds a named MEMS part.
+    """
 
     sigma_acc_m_s2: float = 0.08  # paper
     sigma_gyro_rad_s: float = 0.003  # (ours)
+    acc_noise_density_m_s2_rt_hz: float = 0.0  # sensor noise density (datasheet)
+    gyro_noise_density_rad_s_rt_hz: float = 0.0
+    acc_bias_turn_on_m_s2: float = 0.0  # 1-σ of the turn-on bias per axis
+    gyro_bias_turn_on_rad_s: float = 0.0
+    acc_bias_walk_m_s2_rt_s: float = 0.0  # bias random walk: std grows as this × √t
+    gyro_bias_walk_rad_s_rt_s: float = 0.0
+    acc_scale_factor: float = 0.0  # 1-σ of the per-axis scale-factor error (fraction)
+    gyro_scale_factor: float = 0.0
 
     def validate(self) -> None:
-        _non_negative(self, "sigma_acc_m_s2", "sigma_gyro_rad_s")
+        _non_negative(self, "sigma_acc_m_s2", "sigma_gyro_rad_s", "acc_noise_density_m_s2_rt_hz",
+                      "gyro_noise_density_rad_s_rt_hz", "acc_bias_turn_on_m_s2", "gyro_bias_turn_on_rad_s",
+                      "acc_bias_walk_m_s2_rt_s", "gyro_bias_walk_rad_s_rt_s")
+        for name in ("acc_scale_factor", "gyro_scale_factor"):
+            if not 0.0 <= getattr(self, name) < 0.1:
+                raise ValueError(f"{name}: must be in [0, 0.1), got {getattr(self, name)!r}")
+
+    @property
+    def ideal(self) -> bool:
+        """White noise only (the paper's IMU): no extra random draws, the paper's stream."""
+        return not any((self.acc_noise_density_m_s2_rt_hz, self.gyro_noise_density_rad_s_rt_hz,
+                        self.acc_bias_turn_on_m_s2, self.gyro_bias_turn_on_rad_s,
+                        self.acc_bias_walk_m_s2_rt_s, self.gyro_bias_walk_rad_s_rt_s,
+                        self.acc_scale_factor, self.gyro_scale_factor))
+
+
+@dataclass(frozen=True)
+class AhrsConfig:
+    """The attitude the vehicle sends: the truth (``enabled: false``, the paper) or the estimate of
+    an onboard complementary filter (Mahony) on the simulated IMU plus a heading reference
+    (``simvehicle.ahrs``). All values (ours): roll/pitch time constant ``1 / kp_rp`` = 10 s, the
+    autopilot-style trade between gyro drift and accelerations leaking into the gravity reference."""
+
+    enabled: bool = False
+    kp_rp_1_s: float = 0.1  # roll/pitch correction gain toward the accelerometer's gravity direction
+    ki_rp_1_s2: float = 0.002  # gyro-bias integral gain (roll/pitch axes)
+    kp_yaw_1_s: float = 0.2  # yaw correction gain toward the heading reference
+    ki_yaw_1_s2: float = 0.004  # gyro-bias integral gain from the heading reference
+    heading_noise_rad: float = 0.035  # heading reference (magnetometer) white noise, 2° per sample
+    heading_bias_rad: float = 0.035  # heading reference bias, 1-σ, drawn once (declination/soft iron)
+    heading_rate_hz: float = 50.0  # heading reference rate
+    initial_tilt_error_rad: float = 0.02  # 1-σ per axis of the attitude error at boot
+
+    def validate(self) -> None:
+        _positive(self, "kp_rp_1_s", "kp_yaw_1_s", "heading_rate_hz")
+        _non_negative(self, "ki_rp_1_s2", "ki_yaw_1_s2", "heading_noise_rad", "heading_bias_rad",
+                      "initial_tilt_error_rad")
 
 
 @dataclass(frozen=True)
@@ -134,6 +185,18 @@ class GnssConfig:
     satellites_open: int = 16  # (ours) satellites_visible in open sky
     satellites_canyon: int = 7  # (ours) satellites_visible in a canyon
     report_accuracy: bool = True  # (ours) h_acc/v_acc carry the white-noise std (not the bias)
+    # --- effects the estimator does not model (simvehicle.nlos; all off = the paper's GNSS)
+    # A fixed constellation; a satellite whose line of sight a building blocks is tracked by its
+    # reflection (NLOS, a pseudorange delay drawn when it goes behind the building, so the fix
+    # steps) with probability nlos_reflect_prob, else lost. Noise then scales with the satellites
+    # used: σ · sqrt(satellites_open / n) (fewer satellites, worse geometry).
+    nlos: bool = False
+    constellation_size: int = 16  # (ours) satellites above the mask in open sky
+    elevation_min_deg: float = 15.0  # (ours) elevation mask
+    nlos_reflect_prob: float = 0.5  # (ours) a blocked satellite is tracked by reflection with this prob.
+    nlos_delay_mean_m: float = 8.0  # (ours) mean extra path of a reflection (exponential), metres
+    satellite_noise: bool = False  # noise std × sqrt(constellation_size / satellites used)
+    heavy_tail_dof: float = 0.0  # > 0: white noise is Student-t with this many dof (same std); 0 = Gaussian
 
     def validate(self) -> None:
         _positive(self, "sigma_noise_m", "d_near_m", "proximity_ramp_m", "gamma_open_s", "gamma_canyon_s")
@@ -144,6 +207,21 @@ class GnssConfig:
             raise ValueError(f"r_urban: must be >= 1, got {self.r_urban!r}")
         if max(self.latency_open_s, self.latency_canyon_s) > self.latency_cap_s:
             raise ValueError("latency_open_s/latency_canyon_s: must not exceed latency_cap_s")
+        if not 4 <= self.constellation_size <= 64:
+            raise ValueError(f"constellation_size: must be in [4, 64], got {self.constellation_size!r}")
+        if not 0.0 <= self.elevation_min_deg < 80.0:
+            raise ValueError(f"elevation_min_deg: must be in [0, 80), got {self.elevation_min_deg!r}")
+        if not 0.0 <= self.nlos_reflect_prob <= 1.0:
+            raise ValueError(f"nlos_reflect_prob: must be in [0, 1], got {self.nlos_reflect_prob!r}")
+        _non_negative(self, "nlos_delay_mean_m")
+        if self.heavy_tail_dof != 0.0 and not self.heavy_tail_dof > 2.0:
+            raise ValueError(f"heavy_tail_dof: must be 0 (Gaussian) or > 2 (finite variance), "
+                             f"got {self.heavy_tail_dof!r}")
+
+    @property
+    def unmodelled(self) -> bool:
+        """Any effect beyond eq. 22-27 switched on (needs the extra random stream)."""
+        return self.nlos or self.satellite_noise or self.heavy_tail_dof > 0.0
 
 
 @dataclass(frozen=True)
@@ -154,23 +232,35 @@ class SimConfig:
     autopilot: AutopilotConfig = field(default_factory=AutopilotConfig)
     imu: ImuConfig = field(default_factory=ImuConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
+    ahrs: AhrsConfig = field(default_factory=AhrsConfig)
 
 
-SECTIONS = ("vehicle", "autopilot", "imu", "gnss")
+SECTIONS = ("vehicle", "autopilot", "imu", "gnss", "ahrs")
 _SECTION_TYPES: dict[str, type] = {
-    "vehicle": VehicleConfig, "autopilot": AutopilotConfig, "imu": ImuConfig, "gnss": GnssConfig
+    "vehicle": VehicleConfig, "autopilot": AutopilotConfig, "imu": ImuConfig, "gnss": GnssConfig,
+    "ahrs": AhrsConfig,
 }
 
 
-def sim_config_from(sections: dict[str, Any], where: str) -> SimConfig:
-    """Build a SimConfig from raw override sections (missing or None = defaults)."""
+def sim_config_from(sections: dict[str, Any], where: str, scenario: str = "paper") -> SimConfig:
+    """Build a SimConfig from raw override sections (missing or None = defaults) on top of the
+    settings of ``scenario`` (``simvehicle.scenarios``; a section's fields override the scenario's)."""
+    from simvehicle.scenarios import scenario_sections
+
+    base = scenario_sections(scenario)
+
+    def merged(name: str) -> Any:
+        own = sections.get(name) or {}
+        return {**base.get(name, {}), **own} if isinstance(own, dict) else own  # a non-mapping: build says so
+
     parts: dict[str, Any] = {
-        name: build(_SECTION_TYPES[name], sections.get(name) or {}, f"{where}: {name}") for name in SECTIONS
+        name: build(_SECTION_TYPES[name], merged(name), f"{where}: {name}") for name in SECTIONS
     }
     return SimConfig(**parts)
 
 
 def sim_config_for(mission: Any) -> SimConfig:
-    """The SimConfig of a mission (``mission.section(name)`` per part)."""
+    """The SimConfig of a mission (``mission.section(name)`` per part, on its ``scenario``)."""
     where = str(getattr(mission, "source", None) or getattr(mission, "name", "mission"))
-    return sim_config_from({name: mission.section(name) for name in SECTIONS}, where)
+    scenario = str(getattr(mission, "scenario", "paper"))
+    return sim_config_from({name: mission.section(name) for name in SECTIONS}, where, scenario)

@@ -27,6 +27,7 @@ import numpy as np
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix
 from simvehicle.config import GnssConfig
+from simvehicle.nlos import UnmodelledGnss
 from simvehicle.noise import NormalBlocks
 
 FIX_TYPE_3D = 3
@@ -105,8 +106,9 @@ class GnssModel:
     """Bias and latency processes plus the delivery queue (seeded, deterministic)."""
 
     def __init__(self, cfg: GnssConfig, period_s: float, frame: LocalNedFrame, rng: np.random.Generator,
-                 clearance0_m: float) -> None:
+                 clearance0_m: float, unmodelled: UnmodelledGnss | None = None) -> None:
         self.cfg = cfg
+        self.unmodelled = unmodelled  # effects beyond eq. 22-27 (simvehicle.nlos), own generator
         self.period_s = period_s
         self.to_geodetic = NedToGeodetic(frame)
         self._normals = NormalBlocks(rng)  # the stream of rng.standard_normal, drawn in blocks
@@ -136,8 +138,15 @@ class GnssModel:
         s = c.sigma_noise_m
         m0, m1, m2 = self._normals.take(3).tolist()
         (p0, p1, p2), (b0, b1, b2) = p_ned_m.tolist(), self.bias_ned_m.tolist()
-        z_ned_m = np.array([p0 + b0 + s * m0, p1 + b1 + s * m1, p2 + b2 + s * m2])
-        fix = NedFix(int(t_validity_us), z_ned_m, s, c.satellites)
+        if self.unmodelled is None:
+            z_ned_m = np.array([p0 + b0 + s * m0, p1 + b1 + s * m1, p2 + b2 + s * m2])
+            fix = NedFix(int(t_validity_us), z_ned_m, s, c.satellites)
+        else:
+            u = self.unmodelled.step(p_ned_m)
+            k = s * u.noise_scale
+            o0, o1, o2 = u.offset_ned_m.tolist()
+            z_ned_m = np.array([p0 + b0 + o0 + k * m0, p1 + b1 + o1 + k * m1, p2 + b2 + o2 + k * m2])
+            fix = NedFix(int(t_validity_us), z_ned_m, s * u.sigma_scale, u.satellites)
         release_us = fix.t_validity_us + math.ceil(self.latency_s * 1e6 - 1e-6)
         heapq.heappush(self._queue, (release_us, self.sent, fix))
         self.sent += 1

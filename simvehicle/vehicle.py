@@ -17,11 +17,13 @@ import numpy as np
 
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, Setpoint, TruthState
 from companion.errors import UserError
+from simvehicle.ahrs import Ahrs
 from simvehicle.autopilot import Autopilot
 from simvehicle.config import SimConfig, sim_config_for
 from simvehicle.dynamics import RigidBody
 from simvehicle.gnss import GnssModel, NedFix
 from simvehicle.imu import Imu, specific_force_frd
+from simvehicle.nlos import UnmodelledGnss
 
 # columns of the per-period block: specific force (0-2), then the RigidBody state (3-15)
 _BLOCK_COLUMNS = 16
@@ -40,7 +42,7 @@ class StepOutput:
     tick_us: range  # the physics ticks of the period (last = t_us)
     acc_frd_m_s2: np.ndarray  # (n, 3) IMU specific force, noisy
     gyro_frd_rad_s: np.ndarray  # (n, 3) IMU rates, noisy
-    q_ned_frd: np.ndarray  # (n, 4) true attitude (what the attitude samples carry)
+    q_ned_frd: np.ndarray  # (n, 4) true attitude
     p_ned_m: np.ndarray  # (n, 3) true position
     v_ned_m_s: np.ndarray  # (n, 3) true velocity
     # (gnss bias, latency, clearance) of the latest valid fix: before the period's fix, at the last tick
@@ -49,6 +51,12 @@ class StepOutput:
     gnss_arrival_us: list[int]  # arrival tick of each ``gnss_ned`` / ``gnss`` entry
     collided: bool  # within radius_m of a building, or at/below the ground, at the end of the period
     to_fix: Callable[[NedFix], GnssFix]  # the wire form of a released fix (geodetic)
+    q_sent_ned_frd: np.ndarray | None = None  # (n, 4) the onboard AHRS estimate; None = the truth is sent
+
+    @property
+    def q_att_ned_frd(self) -> np.ndarray:
+        """The attitude the attitude samples carry (AHRS estimate, or the truth without one)."""
+        return self.q_ned_frd if self.q_sent_ned_frd is None else self.q_sent_ned_frd
 
     @cached_property
     def imu(self) -> list[ImuSample]:
@@ -57,7 +65,7 @@ class StepOutput:
 
     @cached_property
     def attitude(self) -> list[AttitudeSample]:
-        q = self.q_ned_frd
+        q = self.q_att_ned_frd
         return [AttitudeSample(t, q[i]) for i, t in enumerate(self.tick_us)]
 
     @cached_property
@@ -93,14 +101,22 @@ class SimVehicle:
         self._world = mission.world
         n0, e0 = (float(c) for c in profiles[profile_index].start_ne_m)
         self.start_ned_m = np.array([n0, e0, -float(mission.altitude_m)])
-        imu_seq, gnss_seq = np.random.SeedSequence(seed).spawn(2)
+        # children 0 and 1 are the paper's streams (spawning more leaves them as they were)
+        imu_seq, gnss_seq, ahrs_seq, nlos_seq = np.random.SeedSequence(seed).spawn(4)
         self.body = RigidBody(cfg.vehicle, self.start_ned_m)
         self.autopilot = Autopilot(cfg.autopilot, cfg.vehicle, self.start_ned_m)
-        self.imu = Imu(cfg.imu, np.random.default_rng(imu_seq))
+        self.imu = Imu(cfg.imu, np.random.default_rng(imu_seq), cfg.vehicle.physics_rate_hz)
+        self.ahrs = (Ahrs(cfg.ahrs, cfg.vehicle.physics_rate_hz, np.array(self.body.x[6:10]),
+                          np.random.default_rng(ahrs_seq)) if cfg.ahrs.enabled else None)
         self._clearance_m = self._clearance(self.start_ned_m)
         period_s = 1.0 / cfg.vehicle.control_rate_hz
         gnss_rng = np.random.default_rng(gnss_seq)
-        self.gnss = GnssModel(cfg.gnss, period_s, mission.frame, gnss_rng, self._clearance_m)
+        unmodelled = None
+        if cfg.gnss.unmodelled:
+            heights = np.array([b.height_m for b in mission.world.config.buildings], dtype=float)
+            nlos_rng = np.random.default_rng(nlos_seq)
+            unmodelled = UnmodelledGnss(cfg.gnss, mission.world.rects_m, heights, nlos_rng)
+        self.gnss = GnssModel(cfg.gnss, period_s, mission.frame, gnss_rng, self._clearance_m, unmodelled)
         self.t_us = 0
         self._dt_us = cfg.vehicle.physics_dt_us
         self._dt_s = self._dt_us * 1e-6
@@ -147,6 +163,7 @@ class SimVehicle:
         p, v, q, omega = block[:, 3:6], block[:, 6:9], block[:, 9:13], block[:, 13:16]
         acc, gyro = self.imu.measure(block[:, 0:3], omega)
         ap.imu_period(q, acc)
+        q_sent = None if self.ahrs is None else self.ahrs.update(acc, gyro, q)
 
         # one GNSS fix per period, valid at its end; truth carries the bias of the latest valid fix
         before = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
@@ -159,5 +176,5 @@ class SimVehicle:
         collided = self._clearance_m < veh.radius_m or p[-1, 2] >= 0.0
         return StepOutput(
             t, range(t0 + dt_us, t + 1, dt_us), acc, gyro, q, p, v, (before, after),
-            fixes, arrivals, bool(collided), gnss.to_fix,
+            fixes, arrivals, bool(collided), gnss.to_fix, q_sent,
         )

@@ -2,6 +2,7 @@
 
 from companion.mission.config import (
     OVERRIDE_SECTIONS,
+    SCENARIOS,
     Bounds,
     Building,
     FlightConfig,
@@ -10,7 +11,7 @@ from companion.mission.config import (
     Profile,
     WorldConfig,
 )
-from companion.mission.loader import BUILTIN_MISSIONS, Mission, build_mission, load_mission
+from companion.mission.loader import BUILTIN_MISSIONS, Mission, build_mission, load_mission, with_scenario
 from companion.mission.schema import ConfigError, build, load_yaml
 from companion.mission.world import World
 
@@ -23,6 +24,7 @@ __all__ = [
     "FlightConfig",
     "Home",
     "Mission",
+    "SCENARIOS",
     "PlannerConfig",
     "Profile",
     "World",
@@ -31,4 +33,5 @@ __all__ = [
     "build_mission",
     "load_mission",
     "load_yaml",
+    "with_scenario",
 ]

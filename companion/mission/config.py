@@ -149,7 +149,13 @@ class Profile:
 
 
 # Sections kept as raw mappings for their owners to validate (``Mission.section(name)``).
-OVERRIDE_SECTIONS: tuple[str, ...] = ("vehicle", "autopilot", "imu", "gnss", "estimator")
+OVERRIDE_SECTIONS: tuple[str, ...] = (
+    "vehicle", "autopilot", "imu", "gnss", "estimator", "ahrs", "belief_plugins",
+)
+
+# Sensor-realism scenarios (``scenario:`` in the mission, ``--scenario`` on fly/sitl/evaluate); their
+# sensor settings live with the simulator (``simvehicle.scenarios``), which checks it knows each name.
+SCENARIOS: tuple[str, ...] = ("paper", "realistic", "mismatch")
 
 
 @dataclass(frozen=True)
@@ -162,3 +168,4 @@ class MissionFile:
     profiles: tuple[Profile, ...]
     flight: FlightConfig = field(default_factory=FlightConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    scenario: str = "paper"  # sensor realism, one of SCENARIOS (paper = the paper's idealised sensors)

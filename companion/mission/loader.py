@@ -19,7 +19,14 @@ import numpy as np
 from scipy import ndimage
 
 from companion.domain.geodesy import LocalNedFrame
-from companion.mission.config import OVERRIDE_SECTIONS, FlightConfig, MissionFile, PlannerConfig, Profile
+from companion.mission.config import (
+    OVERRIDE_SECTIONS,
+    SCENARIOS,
+    FlightConfig,
+    MissionFile,
+    PlannerConfig,
+    Profile,
+)
 from companion.mission.schema import ConfigError, build, load_yaml
 from companion.mission.world import World
 
@@ -38,6 +45,7 @@ class Mission:
     profiles: tuple[Profile, ...]
     sections: dict[str, dict[str, Any]]
     source: str  # file the mission came from, for messages
+    scenario: str = "paper"  # sensor realism (simvehicle.scenarios), one of SCENARIOS
 
     @property
     def altitude_m(self) -> float:
@@ -50,13 +58,27 @@ class Mission:
         return dict(self.sections.get(name, {}))
 
 
-def load_mission(which: str | Path) -> Mission:
-    """Load ``"default"``, ``"test"`` (the packaged cities) or a YAML file path."""
+def load_mission(which: str | Path, scenario: str | None = None) -> Mission:
+    """Load ``"default"``, ``"test"`` (the packaged cities) or a YAML file path; ``scenario``
+    (``--scenario``) replaces the file's ``scenario:``."""
     if str(which) in BUILTIN_MISSIONS:
         ref = resources.files("companion.mission") / "data" / f"{which}.yaml"
         with resources.as_file(ref) as path:
-            return build_mission(load_yaml(path), path.name)
-    return build_mission(load_yaml(which), str(which))
+            mission = build_mission(load_yaml(path), path.name)
+    else:
+        mission = build_mission(load_yaml(which), str(which))
+    return mission if scenario is None else with_scenario(mission, scenario)
+
+
+def with_scenario(mission: Mission, scenario: str) -> Mission:
+    """``mission`` flown under sensor scenario ``scenario`` (checked against SCENARIOS)."""
+    _check_scenario(scenario, "--scenario")
+    return dataclasses.replace(mission, scenario=scenario)
+
+
+def _check_scenario(name: str, where: str) -> None:
+    if name not in SCENARIOS:
+        raise ConfigError(f"{where}: unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
 
 
 def build_mission(data: dict[str, Any], source: str = "mission") -> Mission:
@@ -76,6 +98,7 @@ def build_mission(data: dict[str, Any], source: str = "mission") -> Mission:
             sections[name] = build(dict[str, Any], data[name], f"{source}: {name}")
     if not spec.profiles:
         raise ConfigError(f"{source}: profiles: at least one profile is needed")
+    _check_scenario(spec.scenario, f"{source}: scenario")
     _check_cross(spec, source)
     world = World(spec.world)
     _check_profiles(spec, world, source)
@@ -89,6 +112,7 @@ def build_mission(data: dict[str, Any], source: str = "mission") -> Mission:
         profiles=spec.profiles,
         sections=sections,
         source=source,
+        scenario=spec.scenario,
     )
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.estimator import Navigator, mission_estimator_config
+from companion.estimator.plugin_config import bind
 from companion.mavlink import codec as codec
 from companion.mavlink.lockstep import marker_time_us, step_response
 from companion.mavlink.udp_link import UdpLink
@@ -150,7 +151,7 @@ def _next_multiple(t_us: int, period_us: int) -> int:
 def make_navigator(mission: Mission, method: str) -> tuple[Navigator, float]:
     """The mission's Navigator (home = the mission's home point) and its χ² NIS gate."""
     config = mission_estimator_config(mission)
-    return Navigator(config, method=method, frame=mission.frame), config.chi2_095
+    return bind(Navigator(config, method=method, frame=mission.frame), mission), config.chi2_095
 
 
 def serve(node: EstimatorNode, stop_after_s: float | None = None) -> None:

@@ -26,7 +26,8 @@ BOOTSTRAP_SEED = 20240917  # the bootstrap's own generator, recorded in results.
 
 
 def of_method(results: Sequence[JobResult], method: str) -> list[JobResult]:
-    return [r for r in results if r.job.method == method]
+    """The results of one row (a method, or an ablation row's label)."""
+    return [r for r in results if r.job.row == method]
 
 
 def pooled(results: Sequence[JobResult], attr: str) -> np.ndarray:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import multiprocessing
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -37,6 +38,21 @@ class Job:
     seed: int
     max_duration_s: float | None = None
     overrides: tuple[tuple[str, Any], ...] = ()  # ("estimator.eta", 0.3), see tuning.parse_override
+    scenario: str | None = None  # sensor scenario (None: the mission file's)
+    label: str = ""  # the results row (an ablation row: a method with its own overrides); "" = method
+
+    @property
+    def row(self) -> str:
+        return self.label or self.method
+
+
+@dataclass(frozen=True)
+class Row:
+    """One results row: an estimator method with its own hyper-parameters (on top of the campaign's)."""
+
+    label: str
+    method: str
+    overrides: tuple[tuple[str, Any], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -54,6 +70,7 @@ class JobResult:
     beta_fig: np.ndarray = field(repr=False)  # (M,)
     p_true_ne_m: np.ndarray = field(repr=False)  # (M, 2)
     p_ref_ne_m: np.ndarray = field(repr=False)  # (M, 2)
+    flight: dict[str, float] = field(default_factory=dict)  # per-flight statistics (flight_stats)
 
 
 JobFn = Callable[[Job], JobResult]
@@ -82,18 +99,40 @@ def grid(
     seeds: Sequence[int],
     max_duration_s: float | None = None,
     overrides: Sequence[tuple[str, Any]] = (),
+    scenario: str | None = None,
 ) -> list[Job]:
     """Jobs in a fixed order: profile-major, then method, then seed."""
+    rows = [Row(m, m) for m in methods]
+    return grid_rows(mission, profiles, rows, seeds, max_duration_s, overrides, scenario)
+
+
+def grid_rows(
+    mission: str,
+    profiles: Sequence[int],
+    rows: Sequence[Row],
+    seeds: Sequence[int],
+    max_duration_s: float | None = None,
+    overrides: Sequence[tuple[str, Any]] = (),
+    scenario: str | None = None,
+) -> list[Job]:
+    """Jobs in a fixed order: profile-major, then row, then seed; a row's overrides follow (win over)
+    the campaign's. A row named like its method keeps ``label`` empty (the plain-method grid)."""
     o = tuple(overrides)
-    return [Job(mission, p, m, s, max_duration_s, o) for p in profiles for m in methods for s in seeds]
+    return [
+        Job(mission, p, r.method, s, max_duration_s, o + r.overrides, scenario,
+            "" if r.label == r.method else r.label)
+        for p in profiles for r in rows for s in seeds
+    ]
 
 
-@functools.lru_cache(maxsize=8)
-def mission(name: str, overrides: tuple[tuple[str, Any], ...] = ()) -> Any:
-    """The mission of a job with its overrides, loaded once per process."""
+@functools.lru_cache(maxsize=16)
+def mission(name: str, overrides: tuple[tuple[str, Any], ...] = (), scenario: str | None = None) -> Any:
+    """The mission of a job with its overrides (and sensor scenario), loaded once per process."""
+    from companion.mission import with_scenario
     from gcs_tools.evaluate import tuning
 
-    return tuning.load(name, overrides)
+    m = tuning.load(name, overrides)
+    return m if scenario is None else with_scenario(m, scenario)
 
 
 def compact(job: Job, summary: dict[str, Any], series: dict[str, np.ndarray]) -> JobResult:
@@ -113,6 +152,7 @@ def compact(job: Job, summary: dict[str, Any], series: dict[str, np.ndarray]) ->
         beta_fig=beta[::d].astype(np.float32),
         p_true_ne_m=np.asarray(series["p_true_ned_m"])[::d, :2].astype(np.float32),
         p_ref_ne_m=np.asarray(series["p_ref_ned_m"])[::d, :2].astype(np.float32),
+        flight=stats.flight_stats(series),
     )
 
 
@@ -120,9 +160,12 @@ def run_job(job: Job) -> JobResult:
     """Fly one job in this process (the default job function, importable by pool workers)."""
     from gcs_tools.fly import fly
 
-    m = mission(job.mission, job.overrides)
+    cpu0 = time.process_time()
+    m = mission(job.mission, job.overrides, job.scenario)
     res = fly(m, job.profile_index, job.method, job.seed, max_duration_s=job.max_duration_s)
-    return compact(job, res.summary, res.series)
+    out = compact(job, res.summary, res.series)
+    out.flight["cpu_s"] = time.process_time() - cpu0
+    return out
 
 
 def run(

@@ -15,6 +15,7 @@ from typing import Any
 
 from companion.errors import UserError
 from gcs_tools.evaluate import campaign, report, tuning
+from gcs_tools.evaluate import rows as rows_mod
 
 DEFAULT_METHODS = "naive,adaptive,first-order,second-order"
 
@@ -24,7 +25,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="mission name (default, test, default-tuning) or YAML path")
     parser.add_argument("--missions", default="10",
                         help="mission profiles: a count N (profiles 0..N-1) or a list/range like 10-13")
-    parser.add_argument("--methods", default=DEFAULT_METHODS, help="comma-separated estimator methods")
+    parser.add_argument("--methods", default=None,
+                        help=f"comma-separated estimator methods (default {DEFAULT_METHODS}), "
+                             "or row labels of --rows")
+    parser.add_argument("--rows", type=Path, default=None, metavar="FILE",
+                        help="ablation rows: YAML 'rows: {label: {method: M, set: {SECTION.FIELD: V}}}' "
+                             "(each method with its own hyper-parameters)")
+    parser.add_argument("--scenario", default=None,
+                        help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
+    parser.add_argument("--reference", default=None, metavar="ROW",
+                        help="row the paired per-flight differences are taken against "
+                             "(default second-order if present, else the first row)")
     parser.add_argument("--seeds", default="0", help="seeds, e.g. 0-49 or 0,3,7 (default: 0)")
     parser.add_argument("--workers", type=int, default=1, help="local worker processes (default: 1)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -73,7 +84,7 @@ def parameters(mission: Any) -> dict[str, Any]:
     from companion.estimator import EstimatorConfig
 
     out: dict[str, Any] = {"estimator_defaults": campaign.jsonable(dataclasses.asdict(EstimatorConfig()))}
-    for name in ("estimator", "gnss", "imu", "autopilot", "vehicle"):
+    for name in ("estimator", "gnss", "imu", "ahrs", "belief_plugins", "autopilot", "vehicle"):
         section = mission.section(name)
         if section:
             out[f"mission_{name}"] = campaign.jsonable(section)
@@ -82,12 +93,22 @@ def parameters(mission: Any) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     overrides = tuple(tuning.parse_override(text) for text in args.set)
-    mission = campaign.mission(args.mission, overrides)
+    mission = campaign.mission(args.mission, overrides, args.scenario)
     tuning.check(mission)
     profiles = parse_profiles(args.missions, len(mission.profiles))
-    methods = parse_methods(args.methods)
+    if args.rows is not None:
+        rows = rows_mod.select(rows_mod.load_rows(args.rows), args.methods)
+    else:
+        rows = [campaign.Row(m, m) for m in parse_methods(args.methods or DEFAULT_METHODS)]
+    for row in rows:
+        tuning.check(campaign.mission(args.mission, overrides + row.overrides, args.scenario))
+    methods = tuple(row.label for row in rows)
+    reference = args.reference or ("second-order" if "second-order" in methods else methods[0])
+    if reference not in methods:
+        raise UserError(f"--reference {reference!r}: not among the rows ({', '.join(methods)})")
     seeds = campaign.parse_seeds(args.seeds)
-    jobs = campaign.grid(args.mission, profiles, methods, seeds, args.max_duration, overrides)
+    jobs = campaign.grid_rows(args.mission, profiles, rows, seeds, args.max_duration, overrides,
+                              args.scenario)
     t0 = time.perf_counter()
     results = campaign.run(jobs, args.workers, args.scheduler, progress=not args.no_progress)
     wall_s = time.perf_counter() - t0
@@ -95,7 +116,9 @@ def run(args: argparse.Namespace) -> int:
         "mission": args.mission, "profiles": list(profiles), "methods": list(methods), "seeds": list(seeds),
         "max_duration_s": args.max_duration, "flights": len(jobs), "workers": args.workers,
         "scheduler": args.scheduler, "wall_s": wall_s, "overrides": dict(overrides),
-        "parameters": parameters(mission),
+        "parameters": parameters(mission), "scenario": mission.scenario, "reference": reference,
+        "rows": {row.label: {"method": row.method, "overrides": dict(row.overrides)} for row in rows},
+        "flight_cpu_s": sum(r.flight.get("cpu_s", 0.0) for r in results),
     }
     res = report.write(args.out, results, methods, info, mission)
     if args.readme is not None:

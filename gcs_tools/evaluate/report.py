@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
-from gcs_tools.evaluate import aggregate, plots, tuning
+from gcs_tools.evaluate import aggregate, flights, plots, tuning
 from gcs_tools.evaluate.campaign import JobResult
 
 
@@ -57,6 +57,9 @@ def write(
         "overlaps_tuning_set": TUNING.overlap(campaign["mission"], profiles, seeds),
     }
     res = aggregate.build_results(results, methods, seeds, campaign)
+    if results and all(r.flight for r in results):
+        reference = campaign.get("reference") or ("second-order" if "second-order" in methods else methods[0])
+        res["flights"] = flights.build(results, methods, reference)
     figures = plots.draw_all(results, methods, mission, profiles, seeds[0], out_dir)
     res["figures"] = figures
     (out_dir / "results.json").write_text(json.dumps(_finite_or_null(res), indent=2) + "\n", encoding="utf-8")
@@ -103,6 +106,20 @@ def markdown(res: dict[str, Any]) -> str:
         + ("; brackets: 95 % percentile-bootstrap CI over seeds (paired with naive)." if len(c["seeds"]) >= 2
            else "."),
         "",
+    ]
+    if "flights" in res:
+        lines += [
+            "## Per-flight statistics",
+            "",
+            flights.markdown(res["flights"]),
+            "Each flight (profile × seed) is reduced to its own median error, mean NEES and NIS; a row's "
+            "value is the mean over its flights, brackets the 95 % bootstrap interval (seeds resampled "
+            "within each profile). The last two columns are paired differences (same profile and seed) "
+            f"`{res['flights']['reference']}` − row; * = the interval excludes 0. NEES and NIS have 3 "
+            "dof: a consistent filter averages 3.",
+            "",
+        ]
+    lines += [
         "## The paper's claims (second-order vs naive)",
         "",
     ]

@@ -147,3 +147,77 @@ def _percentile_interval(values: np.ndarray, level: float) -> tuple[float, float
     tail = 50.0 * (1.0 - level)
     lo, hi = np.percentile(values, [tail, 100.0 - tail])
     return (float(lo), float(hi))
+
+
+# ---- per-flight statistics (the unit of the ablation's intervals) --------------------------------
+CHI2_3DOF_95 = 7.814727903251178  # χ²₀.₉₅ with 3 dof: NEES / NIS above it are outside the 95 % bound
+
+
+def flight_stats(series: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """One flight's statistics from its 20 Hz series (samples before the filter starts are NaN).
+
+    - ``est_h_median_m`` / ``est_3d_median_m`` / ``est_h_p95_m``: of ‖p̂ − p‖ horizontal / 3-D;
+    - ``nees_mean`` / ``nees_median``: position NEES ``Σᵢ eᵢ² / Pᵢᵢ`` (3 dof; the filter's axes are
+      independent, so its position covariance is diagonal); ``nees_out95``: fraction above χ²₀.₉₅;
+    - ``nis_mean`` / ``nis_median``: NIS of the last fused fix (3 dof), sampled at 20 Hz;
+    - ``track_median_m``: of ‖p − p_ref‖.
+    """
+    e = np.asarray(series["p_est_ned_m"], dtype=float) - np.asarray(series["p_true_ned_m"], dtype=float)
+    ok = np.isfinite(e).all(axis=1)
+    e = e[ok]
+    out: dict[str, float] = {}
+    h = np.hypot(e[:, 0], e[:, 1])
+    d3 = np.linalg.norm(e, axis=1)
+    nan = float("nan")
+    out["est_h_median_m"] = float(np.median(h)) if h.size else nan
+    out["est_h_p95_m"] = float(np.percentile(h, 95)) if h.size else nan
+    out["est_3d_median_m"] = float(np.median(d3)) if d3.size else nan
+    nees = np.empty(0)
+    if "p_var_ned_m2" in series:
+        var = np.asarray(series["p_var_ned_m2"], dtype=float)[ok]
+        good = (var > 0).all(axis=1) & np.isfinite(var).all(axis=1)
+        nees = np.sum(e[good] ** 2 / var[good], axis=1)
+    out["nees_mean"] = float(np.mean(nees)) if nees.size else nan
+    out["nees_median"] = float(np.median(nees)) if nees.size else nan
+    out["nees_out95"] = float(np.mean(nees > CHI2_3DOF_95)) if nees.size else nan
+    nis = _finite(series["nis"]) if "nis" in series else np.empty(0)
+    out["nis_mean"] = float(np.mean(nis)) if nis.size else nan
+    out["nis_median"] = float(np.median(nis)) if nis.size else nan
+    track = _finite(series["track_error_m"]) if "track_error_m" in series else np.empty(0)
+    out["track_median_m"] = float(np.median(track)) if track.size else nan
+    return out
+
+
+def stratified_indices(strata: np.ndarray, rng: np.random.Generator, n_resamples: int) -> np.ndarray:
+    """(n_resamples, n) bootstrap indices that resample units WITHIN each stratum (e.g. seeds within
+    each mission profile: the profiles are a fixed design, the seeds are the random sample)."""
+    strata = np.asarray(strata)
+    cols = []
+    for s in np.unique(strata):
+        members = np.flatnonzero(strata == s)
+        cols.append(members[rng.integers(0, members.size, size=(n_resamples, members.size))])
+    return np.concatenate(cols, axis=1) if cols else np.empty((n_resamples, 0), dtype=int)
+
+
+def mean_ci(
+    values: np.ndarray,
+    strata: np.ndarray,
+    rng: np.random.Generator,
+    n_resamples: int = 2000,
+    level: float = 0.95,
+) -> tuple[float, float, float]:
+    """Mean of per-unit values and its stratified percentile-bootstrap interval: (mean, lo, hi).
+
+    Non-finite units are dropped (with their stratum entry); fewer than 2 units → NaN interval."""
+    v = np.asarray(values, dtype=float)
+    s = np.asarray(strata)
+    ok = np.isfinite(v)
+    v, s = v[ok], s[ok]
+    if v.size == 0:
+        return (float("nan"),) * 3
+    m = float(np.mean(v))
+    if v.size < 2:
+        return (m, float("nan"), float("nan"))
+    idx = stratified_indices(s, rng, n_resamples)
+    lo, hi = _percentile_interval(v[idx].mean(axis=1), level)
+    return (m, lo, hi)

@@ -20,6 +20,7 @@ import numpy as np
 
 from companion.errors import UserError
 from companion.estimator import METHODS, Navigator, mission_estimator_config
+from companion.estimator.plugin_config import bind
 from companion.mission import Mission, load_mission
 from companion.planning import Route, plan_route
 from simvehicle import SimVehicle
@@ -89,7 +90,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         raise UserError(f"method {method!r}: expected one of {', '.join(METHODS)}")
     route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
-    nav = Navigator(mission_estimator_config(m), method=method, frame=m.frame)
+    nav = bind(Navigator(mission_estimator_config(m), method=method, frame=m.frame), m)
     goal_ned_m = route.waypoints_ned_m[-1]
     end_s = cfg.start_delay_s + route.duration_s + max(cfg.timeout_margin_s, 0.5 * route.duration_s)
     if max_duration_s is not None:
@@ -162,6 +163,7 @@ def _series(rows: list[tuple[Any, ...]], route: Route) -> dict[str, np.ndarray]:
         "b_est_ned_m": np.array([r[2].b_ned_m if r[2] is not None else nan3 for r in rows]),
         "beta": np.array([r[2].beta if r[2] is not None else np.nan for r in rows]),
         "nis": np.array([r[2].nis if r[2] is not None else np.nan for r in rows]),
+        "p_var_ned_m2": np.array([r[2].cov_diag[0:3] if r[2] is not None else nan3 for r in rows]),
         "latency_s": np.array([r[1].gnss_latency_s for r in rows]),
         "clearance_m": np.array([r[1].clearance_m for r in rows]),
         "est_error_m": np.linalg.norm(p_est - p_true, axis=1),

@@ -1,0 +1,67 @@
+"""``map-beta``: β scheduled from the map's clearance at the estimated position (an ablation row).
+
+A vehicle that plans on a map knows where the street canyons are; this asks how much of the
+belief methods' gain that alone buys. β(d) = β_open + (β_canyon − β_open) · clip((d_near − d) /
+ramp, 0, 1) (``PluginConfig``), with d the exact clearance (``World.clearance_m``) of the filter's
+latest posterior position; R(β) and Q_b(β) as for the belief methods.
+
+The state is the β in force (a float). At each fix the NEW β is computed from the posterior of
+the previous fix (one fix, 50 ms, behind the fix being fused): the engine hands an adaptation
+method no position, so ``bind`` gives it a reader of the engine's latest fusion. That reader sees
+the history the out-of-sequence buffer rolled back to, so re-fusion reproduces in-order results.
+Without ``bind`` (no mission, hence no map) the first fix raises a one-line error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from companion.estimator.belief import InnovationTerms, Vec3
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.methods import register
+from companion.estimator.plugin_config import PluginConfig
+from companion.mission.schema import ConfigError
+
+
+def scheduled_beta(cfg: PluginConfig, clearance_m: float) -> float:
+    """β(d) of the schedule."""
+    w = min(1.0, max(0.0, (cfg.map_d_near_m - clearance_m) / cfg.map_ramp_m))
+    return cfg.map_beta_open + (cfg.map_beta_canyon - cfg.map_beta_open) * w
+
+
+@register("map-beta")
+class MapBeta:
+    def __init__(self, cfg: EstimatorConfig) -> None:
+        self.cfg = cfg
+        self.plugin: PluginConfig | None = None
+        self._clearance: Callable[[float, float], Any] | None = None
+        self._position: Callable[[], Any] | None = None
+
+    def bind(self, mission: Any, plugin: PluginConfig, position: Callable[[], Any]) -> None:
+        self.plugin = plugin
+        self._clearance = mission.world.clearance_m
+        self._position = position
+
+    def _beta_here(self) -> float:
+        if self.plugin is None or self._clearance is None or self._position is None:
+            raise ConfigError("estimator method 'map-beta' needs the mission's map (bind it: fly, evaluate "
+                              "and the companion estimator do)")
+        x = self._position()
+        return scheduled_beta(self.plugin, float(self._clearance(float(x[0]), float(x[1]))))
+
+    def initial_state(self) -> float:
+        if self.plugin is None:
+            self._beta_here()  # raises the one-line error
+        assert self.plugin is not None
+        return self.plugin.map_beta_open  # no position before the first fix
+
+    def beta(self, state: float) -> float:
+        return state
+
+    def measurement_cov(self, state: float, terms: InnovationTerms) -> Vec3:
+        f = self.cfg.r_factor(state)
+        return (f * terms.r_nominal[0], f * terms.r_nominal[1], f * terms.r_nominal[2])
+
+    def update(self, state: float, terms: InnovationTerms) -> float:
+        return self._beta_here()

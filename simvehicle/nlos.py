@@ -1,0 +1,132 @@
+"""GNSS effects the estimator does not model: NLOS reflections, satellite geometry, heavy tails.
+
+A fixed constellation (azimuths uniform, elevations uniform between the mask and 85°) is drawn
+once per flight. At each fix, from the true position:
+
+* **line of sight** (exact, in the 2-D-plus-heights city): the horizontal ray toward a satellite
+  enters building ``k`` at distance ``t_k`` (slab test); the satellite is blocked when the roof
+  is above the ray there, ``height_k > h + t_k tan(elevation)``, with ``h`` the height above home;
+* **NLOS**: a satellite that becomes blocked is, with probability ``nlos_reflect_prob``, tracked
+  by a reflection whose extra path ``δ`` (exponential, mean ``nlos_delay_mean_m``) is drawn once
+  for that blocked episode, so the fix STEPS when a building cuts the line of sight; otherwise
+  it is lost. With fewer than 5 satellites left, the lost ones are taken back as reflections
+  (a receiver uses what it gets);
+* the **position error** of those pseudorange errors is the least-squares solution's:
+  ``Δx = [(GᵀG)⁻¹ Gᵀ δ]_{0:3}``, rows of ``G`` = ``[−u_i, 1]`` (``u_i`` unit vector to satellite
+  ``i``, NED) over the satellites used;
+* **satellite-dependent noise** (``satellite_noise``): the white-noise std scales by
+  ``PDOP(used) / PDOP(all)`` (fewer satellites, worse geometry);
+* **heavy tails** (``heavy_tail_dof = ν > 2``): the white-noise vector of a fix is multiplied by
+  ``sqrt((ν − 2) / χ²_ν)``: multivariate Student-t with the same covariance.
+
+Its own seeded generator: the eq. 22-27 stream of ``GnssModel`` is untouched.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from simvehicle.config import GnssConfig
+
+MIN_SATELLITES = 5
+
+
+@dataclass(frozen=True, slots=True)
+class Unmodelled:
+    """The unmodelled part of one fix."""
+
+    offset_ned_m: np.ndarray  # NLOS position error (m)
+    noise_scale: float  # multiplies the white-noise vector (geometry × heavy tail)
+    sigma_scale: float  # geometry part only: what the receiver reports in its accuracy
+    satellites: int  # satellites used (LOS + reflections)
+    nlos: int  # of which reflections
+
+
+class Constellation:
+    """Satellite directions and the line-of-sight test against the city's buildings."""
+
+    def __init__(self, cfg: GnssConfig, rects_m: np.ndarray, heights_m: np.ndarray,
+                 rng: np.random.Generator) -> None:
+        n = cfg.constellation_size
+        self.azimuth_rad = rng.uniform(0.0, 2.0 * math.pi, n)
+        self.elevation_rad = np.radians(rng.uniform(cfg.elevation_min_deg, 85.0, n))
+        ce = np.cos(self.elevation_rad)
+        self.u_ned = np.column_stack([ce * np.cos(self.azimuth_rad), ce * np.sin(self.azimuth_rad),
+                                      -np.sin(self.elevation_rad)])
+        self._dir = self.u_ned[:, :2] / ce[:, None]  # horizontal unit directions (S, 2)
+        self._tan_el = np.tan(self.elevation_rad)
+        self._lo = rects_m[:, 0:2]  # (B, 2) north_min, east_min
+        self._hi = rects_m[:, 2:4]
+        self._height = np.asarray(heights_m, dtype=float)
+
+    def blocked(self, p_ned_m: np.ndarray) -> np.ndarray:
+        """(S,) True where a building blocks the line of sight from ``p_ned_m``."""
+        if self._height.size == 0:
+            return np.zeros(len(self.azimuth_rad), dtype=bool)
+        p = np.asarray(p_ned_m[:2], dtype=float)
+        d = self._dir[:, None, :]  # (S, 1, 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d
+            t1 = (self._lo[None] - p) * inv
+            t2 = (self._hi[None] - p) * inv
+        t1 = np.where(np.isnan(t1), -np.inf, t1)  # ray parallel to a slab and on its edge
+        t2 = np.where(np.isnan(t2), np.inf, t2)
+        t_near = np.max(np.minimum(t1, t2), axis=2)  # (S, B)
+        t_far = np.min(np.maximum(t1, t2), axis=2)
+        hits = (t_far >= np.maximum(t_near, 0.0))
+        t_enter = np.maximum(t_near, 0.0)
+        h = -float(p_ned_m[2])
+        ray_height = h + t_enter * self._tan_el[:, None]
+        return np.any(hits & (self._height[None] > ray_height), axis=1)
+
+
+def position_error(u_ned: np.ndarray, used: np.ndarray, delay_m: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares position error (NED, m) of pseudorange errors ``delay_m`` on the ``used``
+    satellites, and the PDOP of that set."""
+    G = np.column_stack([-u_ned[used], np.ones(int(used.sum()))])
+    inv = np.linalg.inv(G.T @ G)
+    dx = inv @ G.T @ delay_m[used]
+    return dx[:3], float(math.sqrt(max(0.0, float(np.trace(inv[:3, :3])))))
+
+
+class UnmodelledGnss:
+    """Per-fix NLOS offset and noise scaling (seeded; state: the blocked episodes)."""
+
+    def __init__(self, cfg: GnssConfig, rects_m: np.ndarray, heights_m: np.ndarray,
+                 rng: np.random.Generator) -> None:
+        self.cfg = cfg
+        self.rng = rng
+        self.sky = Constellation(cfg, rects_m, heights_m, rng)
+        n = cfg.constellation_size
+        self._blocked = np.zeros(n, dtype=bool)
+        self._tracked = np.zeros(n, dtype=bool)  # a blocked satellite tracked by its reflection
+        self._delay_m = np.zeros(n)
+        self.pdop_all = position_error(self.sky.u_ned, np.ones(n, dtype=bool), np.zeros(n))[1]
+
+    def step(self, p_ned_m: np.ndarray) -> Unmodelled:
+        cfg, rng = self.cfg, self.rng
+        sees = cfg.nlos or cfg.satellite_noise
+        blocked = self.sky.blocked(p_ned_m) if sees else np.zeros_like(self._blocked)
+        fresh = blocked & ~self._blocked
+        k = int(fresh.sum())
+        if k and cfg.nlos:
+            self._tracked[fresh] = rng.uniform(size=k) < cfg.nlos_reflect_prob
+            self._delay_m[fresh] = rng.exponential(cfg.nlos_delay_mean_m, size=k)
+        self._tracked[~blocked] = False
+        self._delay_m[~blocked] = 0.0
+        self._blocked = blocked
+        used = ~blocked | self._tracked
+        if used.sum() < MIN_SATELLITES:
+            used = np.ones_like(used)  # take the lost ones back as reflections
+        delay = np.where(blocked, self._delay_m, 0.0)  # zero without nlos: a lost satellite is just lost
+        offset, pdop = position_error(self.sky.u_ned, used, delay)
+        sigma_scale = pdop / self.pdop_all if cfg.satellite_noise else 1.0
+        tail = 1.0
+        if cfg.heavy_tail_dof > 0.0:
+            nu = cfg.heavy_tail_dof
+            tail = math.sqrt((nu - 2.0) / float(rng.chisquare(nu)))
+        n_nlos = int((used & blocked).sum())
+        return Unmodelled(offset, sigma_scale * tail, sigma_scale, int(used.sum()), n_nlos)
