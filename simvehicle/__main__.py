@@ -15,6 +15,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mission", default="default", help="mission name or YAML path")
     p.add_argument("--profile", type=int, default=0, help="mission profile index")
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw of the vehicle")
+    p.add_argument("--scenario", default=None,
+                   help="sensor scenario: paper, realistic, mismatch (default: the mission's)")
     p.add_argument("--estimator-port", type=int, required=True, help="UDP port the estimator talks to")
     p.add_argument("--bridge-port", type=int, required=True, help="UDP port the planner bridge talks to")
     p.add_argument("--ground-port", type=int, required=True, help="UDP port for a ground station")
@@ -46,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     node = None
     result: dict[str, object] = {"outcome": "interrupted"}
     try:
-        mission = load_mission(args.mission)
+        mission = load_mission(args.mission, args.scenario)
         sim = SimVehicle(mission, args.profile, args.seed)
         recorder = FlightRecorder(args.goal_ned_m, args.goal_radius_m, args.goal_speed_m_s,
                                   args.arrive_after_s)

@@ -9,7 +9,9 @@ The state is the β in force (a float). At each fix the NEW β is computed from 
 the previous fix (one fix, 50 ms, behind the fix being fused): the engine hands an adaptation
 method no position, so ``bind`` gives it a reader of the engine's latest fusion. That reader sees
 the history the out-of-sequence buffer rolled back to, so re-fusion reproduces in-order results.
-Without ``bind`` (no mission, hence no map) the first fix raises a one-line error.
+Without ``bind`` there is no map (e.g. ``replay`` of a foreign log without ``--mission``): every
+place then counts as open sky, β = ``map_beta_open`` throughout — the method degenerates to
+``fixed-beta`` at that β, as a vehicle without a map would.
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.methods import register
 from companion.estimator.plugin_config import PluginConfig
-from companion.mission.schema import ConfigError
 
 
 def scheduled_beta(cfg: PluginConfig, clearance_m: float) -> float:
@@ -34,7 +35,7 @@ def scheduled_beta(cfg: PluginConfig, clearance_m: float) -> float:
 class MapBeta:
     def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
-        self.plugin: PluginConfig | None = None
+        self.plugin = PluginConfig()
         self._clearance: Callable[[float, float], Any] | None = None
         self._position: Callable[[], Any] | None = None
 
@@ -44,16 +45,12 @@ class MapBeta:
         self._position = position
 
     def _beta_here(self) -> float:
-        if self.plugin is None or self._clearance is None or self._position is None:
-            raise ConfigError("estimator method 'map-beta' needs the mission's map (bind it: fly, evaluate "
-                              "and the companion estimator do)")
+        if self._clearance is None or self._position is None:
+            return self.plugin.map_beta_open  # no map: open sky everywhere
         x = self._position()
         return scheduled_beta(self.plugin, float(self._clearance(float(x[0]), float(x[1]))))
 
     def initial_state(self) -> float:
-        if self.plugin is None:
-            self._beta_here()  # raises the one-line error
-        assert self.plugin is not None
         return self.plugin.map_beta_open  # no position before the first fix
 
     def beta(self, state: float) -> float:

@@ -11,6 +11,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", type=int, default=0, help="mission profile index (default 0)")
     parser.add_argument("--method", default="second-order", help="estimator method (default second-order)")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the run (default 0)")
+    parser.add_argument("--scenario", default=None,
+                        help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
     parser.add_argument("--max-duration", type=float, default=None, metavar="S",
                         help="stop after S simulated seconds (default: route duration + margin)")
     parser.add_argument("--out", default="runs/fly", help="output directory (default runs/fly)")
@@ -21,7 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools.fly.core import fly
     from gcs_tools.fly.output import strict_json, write_outputs
 
-    mission = load_mission(args.mission)
+    mission = load_mission(args.mission, args.scenario)
     result = fly(mission, args.profile, args.method, args.seed, max_duration_s=args.max_duration)
     paths = write_outputs(result, mission.world, args.out)
     s = {k: v for k, v in result.summary.items() if k != "estimator_counters"}

@@ -20,6 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", type=int, default=0, help="mission profile index")
     parser.add_argument("--method", default="second-order", help="estimator method")
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
+    parser.add_argument("--scenario", default=None,
+                        help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
     parser.add_argument("--signing-key-file", type=Path, help="MAVLink 2 signing key for all three processes")
@@ -49,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
     from gcs_tools.sitl.report import flight_result
 
-    mission = load_mission(args.mission)
+    mission = load_mission(args.mission, args.scenario)
     if not 0 <= args.profile < len(mission.profiles):
         last = len(mission.profiles) - 1
         raise UserError(f"--profile {args.profile}: mission {mission.name!r} has profiles 0..{last}")
@@ -57,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
+        scenario=args.scenario,
         max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
         telemetry_args=tuple(telemetry.forward_arguments(args)),

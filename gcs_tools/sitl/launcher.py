@@ -44,6 +44,7 @@ class SitlOptions:
     wall_timeout_s: float | None = None
     drop_probability: float = 0.0  # TEST ONLY: loss injection on every link, both directions
     telemetry_args: tuple[str, ...] = ()  # Zenoh flags for every process (--vehicle-id, --no-telemetry)
+    scenario: str | None = None  # the vehicle's sensor scenario (None: the mission file's)
     fly: FlyConfig = field(default_factory=FlyConfig)  # start delay, arrival test, time limit: as ``fly``
 
 
@@ -102,6 +103,8 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
     ]
     if opts.realtime:
         vehicle.append("--realtime")
+    if opts.scenario is not None:
+        vehicle += ["--scenario", opts.scenario]
     estimator = [
         "companion", "estimator", "--vehicle-port", str(ports[0]), "--mission", opts.mission,
         "--method", opts.method, "--stats", str(out / "estimator.json"), *common, *loss_seed(1),
