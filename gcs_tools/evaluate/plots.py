@@ -78,7 +78,8 @@ def fig4_trajectories(
         ax.set_xlabel("east [m]")
         ax.set_ylabel("north [m]")
         ax.set_aspect("equal", adjustable="datalim")
-        ax.legend(fontsize=7, loc="best")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)

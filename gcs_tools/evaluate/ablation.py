@@ -1,0 +1,263 @@
+"""The ablation protocol: tune every row alike on the tuning set, then sweep model-mismatch severity.
+
+    python -m gcs_tools.evaluate.ablation tune --scenario realistic --out docs/results/ablation
+    beliefnav evaluate --scenario realistic --rows docs/results/ablation/rows-realistic.yaml ...
+    python -m gcs_tools.evaluate.ablation severity --rows docs/results/ablation/rows-mismatch.yaml ...
+
+``tune`` (mission ``default-tuning``, seeds 1000-1009 only — never reported):
+
+1. the filter's IMU noise density ``estimator.sigma_acc_m_s2`` is a model of the SENSOR, shared by
+   every row: swept with ``fixed-beta`` (β 0.5) and ``second-order``, the value with the lowest
+   mean of their two scores is kept for every row;
+2. then each method's OWN hyper-parameters are swept on their grid (``SWEEPS``) with that value;
+   the best point of each becomes its row. ``fixed-beta-0.5`` stays at 0.5 (the issue's row);
+   ``fixed-beta-best`` is the best β of the sweep.
+
+Score of a point: the mean over its flights of the per-flight median horizontal error (the
+campaign's headline statistic). Every point is appended to ``tuning-<scenario>.jsonl``; the rows
+go to ``rows-<scenario>.yaml`` (``beliefnav evaluate --rows``).
+
+``severity`` flies the given rows under the ``realistic`` scenario plus the unmodelled GNSS effects
+scaled by a severity ``s`` (``severity_overrides``; s = 1 is the ``mismatch`` scenario, s = 0 is
+``realistic``), and draws the error ratio of each belief row over the best fixed-β row against s,
+with paired-bootstrap intervals (``fig_where_adaptation_pays.png``, ``severity.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from companion.errors import UserError
+from gcs_tools.evaluate import campaign, flights, stats, tuning
+from gcs_tools.evaluate import rows as rows_mod
+from gcs_tools.evaluate.campaign import Row
+
+SCORE = "est_h_median_m"
+SIGMA_ACC = "estimator.sigma_acc_m_s2"
+SIGMA_ACC_VALUES = (0.05, 0.1, 0.2, 0.4, 0.8)
+# Each method's own hyper-parameters: (row label, method, {override key: values}) — one axis each,
+# or a small product; the same budget (3-6 points) for every method.
+SWEEPS: tuple[tuple[str, str, dict[str, tuple[Any, ...]]], ...] = (
+    ("naive", "naive", {"estimator.beta_fixed": (0.5, 0.8, 1.0)}),
+    ("fixed-beta-best", "fixed-beta", {"estimator.beta_fixed": (0.1, 0.3, 0.5, 0.7, 0.9)}),
+    ("map-beta", "map-beta", {"belief_plugins.map_beta_open": (0.7, 0.9),
+                              "belief_plugins.map_beta_canyon": (0.1, 0.3, 0.5)}),
+    ("first-order", "first-order", {"estimator.eta_first_order": (0.15, 0.5, 1.5)}),
+    ("second-order", "second-order", {"estimator.eta": (0.15, 0.5, 1.5)}),
+    ("vbakf", "vbakf", {"estimator.vb_forgetting": (0.95, 0.98, 0.995)}),
+    ("windowed-ml", "windowed-ml", {"belief_plugins.window_fixes": (20, 60),
+                                    "belief_plugins.window_gain": (0.2, 1.0)}),
+)
+ROW_ORDER = ("naive", "fixed-beta-0.5", "fixed-beta-best", "map-beta", "first-order", "second-order", "vbakf",
+             "windowed-ml")
+BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta")
+SEVERITIES = (0.0, 0.5, 1.0, 2.0)
+
+
+def severity_overrides(s: float) -> tuple[tuple[str, Any], ...]:
+    """GNSS overrides of severity ``s`` on top of ``realistic``: NLOS delay 8 s m, canyon bias
+    correlation 3 + 7 s seconds (the filter assumes 3), Student-t dof 2 + 1/s; off at s = 0.
+    s = 1 reproduces the ``mismatch`` scenario's GNSS."""
+    if s < 0:
+        raise UserError(f"severity: expected >= 0, got {s}")
+    if s == 0:
+        return ()
+    return (("gnss.nlos", True), ("gnss.satellite_noise", True), ("gnss.nlos_delay_mean_m", 8.0 * s),
+            ("gnss.gamma_canyon_s", 3.0 + 7.0 * s), ("gnss.heavy_tail_dof", 2.0 + 1.0 / s))
+
+
+def _points(axes: dict[str, tuple[Any, ...]]) -> list[tuple[tuple[str, Any], ...]]:
+    import itertools
+
+    keys = list(axes)
+    return [tuple(zip(keys, values, strict=True)) for values in itertools.product(*(axes[k] for k in keys))]
+
+
+def _fly(rows: Sequence[Row], scenario: str | None, profiles: Sequence[int], seeds: Sequence[int],
+         workers: int, mission: str = tuning.TUNING_MISSION,
+         overrides: Sequence[tuple[str, Any]] = ()) -> list[campaign.JobResult]:
+    for row in rows:
+        tuning.check(campaign.mission(mission, tuple(overrides) + row.overrides, scenario))
+    jobs = campaign.grid_rows(mission, profiles, rows, seeds, overrides=overrides, scenario=scenario)
+    return campaign.run(jobs, workers, progress=sys.stderr.isatty())
+
+
+def _score(results: Sequence[campaign.JobResult], label: str) -> float:
+    v = [r.flight[SCORE] for r in results if r.job.row == label]
+    return float(np.nanmean(v)) if v else float("nan")
+
+
+def tune(scenario: str, seeds: Sequence[int], profiles: Sequence[int], workers: int, out: Path) -> list[Row]:
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / f"tuning-{scenario}.jsonl"
+
+    def record(stage: str, row: Row, score: float, n: int, wall_s: float) -> None:
+        with log.open("a", encoding="utf-8") as f:
+            f.write(json.dumps({"scenario": scenario, "stage": stage, "row": row.label, "method": row.method,
+                                "overrides": dict(row.overrides), "profiles": list(profiles),
+                                "seeds": list(seeds), "flights": n, "score_" + SCORE: score,
+                                "wall_s": round(wall_s, 1)}) + "\n")
+        print(f"{scenario} {stage} {row.label} {dict(row.overrides)} -> {score:.3f}", flush=True)
+
+    # 1. the shared IMU noise model
+    best_sigma, best = SIGMA_ACC_VALUES[0], float("inf")
+    for sigma in SIGMA_ACC_VALUES:
+        o = ((SIGMA_ACC, sigma),)
+        rows = [Row("fixed-beta-0.5", "fixed-beta", o + (("estimator.beta_fixed", 0.5),)),
+                Row("second-order", "second-order", o)]
+        t0 = time.perf_counter()
+        res = _fly(rows, scenario, profiles, seeds, workers)
+        score = 0.5 * (_score(res, "fixed-beta-0.5") + _score(res, "second-order"))
+        wall_s = time.perf_counter() - t0
+        record("shared", Row("fixed-beta-0.5+second-order", "-", o), score, len(res), wall_s)
+        if score < best:
+            best_sigma, best = sigma, score
+    shared = ((SIGMA_ACC, best_sigma),)
+
+    # 2. every method's own hyper-parameters, on the shared value
+    chosen: dict[str, Row] = {"fixed-beta-0.5": Row("fixed-beta-0.5", "fixed-beta",
+                                                    shared + (("estimator.beta_fixed", 0.5),))}
+    for label, method, axes in SWEEPS:
+        candidates = [Row(f"{label}#{i}", method, shared + p) for i, p in enumerate(_points(axes))]
+        t0 = time.perf_counter()
+        res = _fly(candidates, scenario, profiles, seeds, workers)
+        wall = (time.perf_counter() - t0) / len(candidates)
+        scores = {c.label: _score(res, c.label) for c in candidates}
+        for c in candidates:
+            record("own", Row(label, method, c.overrides), scores[c.label], len(res) // len(candidates), wall)
+        win = min(candidates, key=lambda c: scores[c.label])
+        chosen[label] = Row(label, method, win.overrides)
+    rows = [chosen[label] for label in ROW_ORDER]
+    write_rows(out / f"rows-{scenario}.yaml", rows, scenario, profiles, seeds)
+    return rows
+
+
+def write_rows(path: Path, rows: Sequence[Row], scenario: str, profiles: Sequence[int],
+               seeds: Sequence[int]) -> None:
+    body = {"rows": {r.label: {"method": r.method, "set": dict(r.overrides)} for r in rows}}
+    head = (f"# Rows of the {scenario!r} ablation, each at the hyper-parameters the tuning sweep chose\n"
+            f"# (python -m gcs_tools.evaluate.ablation tune; mission {tuning.TUNING_MISSION}, profiles "
+            f"{list(profiles)}, seeds {list(seeds)}; records in tuning-{scenario}.jsonl).\n")
+    path.write_text(head + yaml.safe_dump(body, sort_keys=False), encoding="utf-8")
+
+
+def ratio_ci(results: Sequence[campaign.JobResult], row: str, base: str, rng: np.random.Generator,
+             n_resamples: int = 2000) -> tuple[float, float, float]:
+    """mean(row) / mean(base) of the per-flight score over matched flights, paired stratified bootstrap."""
+    a, b = flights.table_of(results, row), flights.table_of(results, base)
+    keys = sorted(set(a) & set(b))
+    va = np.array([a[k][SCORE] for k in keys])
+    vb = np.array([b[k][SCORE] for k in keys])
+    if not keys:
+        return (float("nan"),) * 3
+    idx = stats.stratified_indices(np.array([k[0] for k in keys]), rng, n_resamples)
+    ratios = va[idx].mean(axis=1) / vb[idx].mean(axis=1)
+    lo, hi = np.percentile(ratios, [2.5, 97.5])
+    return float(va.mean() / vb.mean()), float(lo), float(hi)
+
+
+def severity(rows: Sequence[Row], levels: Sequence[float], profiles: Sequence[int], seeds: Sequence[int],
+             workers: int, out: Path, mission: str = "default") -> dict[str, Any]:
+    out.mkdir(parents=True, exist_ok=True)
+    base = "fixed-beta-best"
+    if base not in {r.label for r in rows}:
+        raise UserError(f"severity: the rows need a {base!r} row")
+    rng = np.random.default_rng(flights.BOOTSTRAP_SEED)
+    table: dict[str, Any] = {"base": base, "score": SCORE, "profiles": list(profiles), "seeds": list(seeds),
+                             "mission": mission, "levels": {}}
+    t0 = time.perf_counter()
+    for s in levels:
+        res = _fly(rows, "realistic", profiles, seeds, workers, mission, severity_overrides(s))
+        entry = {r.label: dict(zip(("ratio", "lo", "hi"), ratio_ci(res, r.label, base, rng), strict=True))
+                 for r in rows if r.label != base}
+        entry[base] = {"mean_m": _score(res, base)}
+        table["levels"][str(s)] = entry
+        cells = [f"{k} {v.get('ratio', v.get('mean_m')):.3f}" for k, v in entry.items()]
+        print(f"severity {s}: " + ", ".join(cells), flush=True)
+    table["wall_s"] = round(time.perf_counter() - t0, 1)
+    (out / "severity.json").write_text(json.dumps(table, indent=2) + "\n", encoding="utf-8")
+    figure(table, out / "fig_where_adaptation_pays.png")
+    return table
+
+
+def figure(table: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gcs_tools.evaluate.plots import color
+    from gcs_tools.figures import DPI
+
+    levels = sorted(table["levels"], key=float)
+    x = np.array([float(s) for s in levels])
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    labels = [k for k in table["levels"][levels[0]] if k != table["base"]]
+    for i, label in enumerate(labels):
+        r = np.array([table["levels"][s][label]["ratio"] for s in levels])
+        lo = np.array([table["levels"][s][label]["lo"] for s in levels])
+        hi = np.array([table["levels"][s][label]["hi"] for s in levels])
+        dx = (i - (len(labels) - 1) / 2) * 0.03
+        ax.errorbar(x + dx, r, yerr=[r - lo, hi - r], marker="o", capsize=3, label=label,
+                    color=color(label.split("#")[0]) if label in ("second-order", "first-order") else None)
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xlabel("model-mismatch severity s (0 = realistic, 1 = mismatch scenario)")
+    ax.set_ylabel(f"error ratio: row / {table['base']}")
+    ax.set_title("Where adaptation pays: < 1 = better than the best fixed β", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.ablation",
+                                description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    t = sub.add_parser("tune", help="tune every row alike on the tuning set; write rows-<scenario>.yaml")
+    t.add_argument("--scenario", required=True)
+    t.add_argument("--seeds", default="1000-1002")
+    t.add_argument("--profiles", default=f"0-{len(tuning.TUNING_PROFILES) - 1}")
+    t.add_argument("--workers", type=int, default=2)
+    t.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
+    s = sub.add_parser("severity", help="error ratio against the best fixed β over mismatch severity")
+    s.add_argument("--rows", type=Path, required=True)
+    s.add_argument("--levels", default=",".join(str(v) for v in SEVERITIES))
+    s.add_argument("--missions", default="10")
+    s.add_argument("--seeds", default="0-2")
+    s.add_argument("--workers", type=int, default=2)
+    s.add_argument("--out", type=Path, default=Path("docs/results/ablation/severity"))
+    args = p.parse_args(argv)
+    try:
+        if args.command == "tune":
+            seeds = campaign.parse_seeds(args.seeds)
+            if not set(seeds) <= set(tuning.TUNING_SEEDS):
+                first, last = tuning.TUNING_SEEDS[0], tuning.TUNING_SEEDS[-1]
+                raise UserError(f"--seeds: tuning seeds are {first}–{last}")
+            profiles = campaign.parse_seeds(args.profiles)
+            tune(args.scenario, seeds, profiles, args.workers, args.out)
+        else:
+            from gcs_tools.evaluate.cli import parse_profiles
+
+            rows = rows_mod.load_rows(args.rows)
+            profiles = parse_profiles(args.missions, len(campaign.mission("default").profiles))
+            levels = [float(v) for v in args.levels.split(",")]
+            severity(rows, levels, profiles, campaign.parse_seeds(args.seeds), args.workers, args.out)
+    except UserError as exc:
+        print(f"ablation: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

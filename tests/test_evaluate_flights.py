@@ -1,0 +1,125 @@
+"""Per-flight statistics, stratified bootstrap, ablation rows and ``evaluate --scenario --rows``."""
+
+import json
+
+import numpy as np
+import pytest
+
+from companion.errors import UserError
+from gcs_tools.evaluate import ablation, flights, stats
+from gcs_tools.evaluate.campaign import Job, JobResult, Row, grid_rows
+from gcs_tools.evaluate.rows import load_rows, select
+
+
+def test_flight_stats_known_answers():
+    n = 5
+    p_true = np.zeros((n, 3))
+    e = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 2.0], [1.0, 0.0, 0.0], [np.nan] * 3, [0.0, 1.0, 1.0]])
+    var = np.array([[1.0, 4.0, 1.0]] * n)
+    series = {"p_est_ned_m": p_true + e, "p_true_ned_m": p_true, "p_var_ned_m2": var,
+              "nis": np.array([np.nan, 1.0, 2.0, 3.0, 6.0]), "track_error_m": np.arange(n, dtype=float)}
+    s = stats.flight_stats(series)
+    # horizontal: 5, 0, 1, 1 → median 1; 3-D: 5, 2, 1, √2 → median (√2 + 2) / 2
+    assert s["est_h_median_m"] == pytest.approx(1.0)
+    assert s["est_3d_median_m"] == pytest.approx((np.sqrt(2.0) + 2.0) / 2.0)
+    # NEES: 9 + 16/4 = 13, 4, 1, 1/4 + 1 = 1.25 → mean 19.25 / 4, one above χ²₀.₉₅(3) = 7.81
+    assert s["nees_mean"] == pytest.approx(19.25 / 4.0)
+    assert s["nees_out95"] == pytest.approx(0.25)
+    assert s["nis_mean"] == pytest.approx(3.0) and s["track_median_m"] == pytest.approx(2.0)
+
+
+def test_stratified_bootstrap_resamples_within_strata():
+    rng = np.random.default_rng(0)
+    strata = np.array([0, 0, 0, 1, 1, 5])
+    idx = stats.stratified_indices(strata, rng, 500)
+    assert idx.shape == (500, 6)
+    counts = np.stack([(strata[idx] == s).sum(axis=1) for s in (0, 1, 5)], axis=1)
+    assert (counts == [3, 2, 1]).all()  # every resample keeps each profile's number of flights
+    # a constant sample has a zero-width interval; a shifted one moves by the shift
+    m, lo, hi = stats.mean_ci(np.full(6, 2.0), strata, rng)
+    assert (m, lo, hi) == (2.0, 2.0, 2.0)
+    v = rng.normal(size=6)
+    a = stats.mean_ci(v, strata, np.random.default_rng(1))
+    b = stats.mean_ci(v + 1.0, strata, np.random.default_rng(1))
+    np.testing.assert_allclose(np.array(b) - np.array(a), 1.0, atol=1e-12)
+
+
+def _result(profile: int, seed: int, label: str, method: str, h: float) -> JobResult:
+    job = Job("test", profile, method, seed, label="" if label == method else label)
+    z = np.zeros(1, dtype=np.float32)
+    flight = {k: h for k in flights.KEYS}
+    return JobResult(job, {}, 0.0, 0.0, 0.0, z, z, z, z, np.zeros((1, 2)), np.zeros((1, 2)), flight)
+
+
+def test_paired_differences_match_flights_and_flag_significance():
+    rng = np.random.default_rng(3)
+    res = []
+    for p in range(3):
+        for s in range(8):
+            base = 1.0 + p + 0.1 * rng.normal()
+            res.append(_result(p, s, "second-order", "second-order", base))
+            res.append(_result(p, s, "fixed-beta-0.5", "fixed-beta", base + 0.2 + 0.01 * rng.normal()))
+            res.append(_result(p, s, "same", "naive", base))
+    block = flights.build(res, ["second-order", "fixed-beta-0.5", "same"], "second-order")
+    d = block["paired_reference_minus_row"]["fixed-beta-0.5"]["est_h_median_m"]
+    assert d["mean_difference"] == pytest.approx(-0.2, abs=0.01) and d["significant"]
+    assert d["ci95"][1] < 0
+    same = block["paired_reference_minus_row"]["same"]["est_h_median_m"]
+    assert same["mean_difference"] == 0.0 and same["ci95"] == [0.0, 0.0] and not same["significant"]
+    assert flights.best_row(block, ["second-order", "fixed-beta-0.5"]) == "second-order"
+    assert "| `fixed-beta-0.5` | 24 |" in flights.markdown(block)
+    # the ratio against the base row for the severity figure, with its paired interval
+    r, lo, hi = ablation.ratio_ci(res, "fixed-beta-0.5", "second-order", np.random.default_rng(0), 500)
+    assert lo < r < hi and r > 1.0
+
+
+def test_rows_file_and_grid(tmp_path):
+    f = tmp_path / "rows.yaml"
+    f.write_text("rows:\n  fb: {method: fixed-beta, set: {estimator.beta_fixed: 0.5}}\n"
+                 "  second-order: {method: second-order}\n")
+    rows = load_rows(f)
+    assert rows == [Row("fb", "fixed-beta", (("estimator.beta_fixed", 0.5),)),
+                    Row("second-order", "second-order")]
+    jobs = grid_rows("test", [0], rows, [1, 2], overrides=(("estimator.eta", 0.3),), scenario="realistic")
+    assert [j.row for j in jobs] == ["fb", "fb", "second-order", "second-order"]
+    assert jobs[0].overrides == (("estimator.eta", 0.3), ("estimator.beta_fixed", 0.5))
+    assert jobs[0].scenario == "realistic" and jobs[2].label == ""
+    assert select(rows, "second-order") == rows[1:]
+    with pytest.raises(UserError, match="unknown row 'x'"):
+        select(rows, "x")
+    f.write_text("rows:\n  a: {method: warp-drive}\n")
+    with pytest.raises(UserError, match="unknown method 'warp-drive'"):
+        load_rows(f)
+    f.write_text("rows: []\n")
+    with pytest.raises(UserError, match="non-empty 'rows:'"):
+        load_rows(f)
+
+
+def test_severity_levels_scale_the_unmodelled_gnss():
+    assert ablation.severity_overrides(0.0) == ()
+    one = dict(ablation.severity_overrides(1.0))
+    from simvehicle.scenarios import UNMODELLED_GNSS
+
+    for key, value in UNMODELLED_GNSS.items():  # s = 1 is the mismatch scenario's GNSS
+        assert one[f"gnss.{key}"] == value
+    assert dict(ablation.severity_overrides(2.0))["gnss.nlos_delay_mean_m"] == 16.0
+
+
+def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
+    from gcs_tools.cli import main
+
+    rows = tmp_path / "rows.yaml"
+    rows.write_text("rows:\n  fixed-beta-0.5: {method: fixed-beta, set: {estimator.beta_fixed: 0.5}}\n"
+                    "  map-beta: {method: map-beta}\n")
+    out = tmp_path / "out"
+    args = ["evaluate", "--mission", "test", "--missions", "1", "--rows", str(rows), "--seeds", "0-1",
+            "--max-duration", "4", "--out", str(out), "--no-progress"]
+    assert main([*args, "--scenario", "urban"]) == 2
+    assert "unknown scenario 'urban'" in capsys.readouterr().err
+    assert main([*args, "--scenario", "mismatch"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["campaign"]["scenario"] == "mismatch" and res["campaign"]["reference"] == "fixed-beta-0.5"
+    block = res["flights"]
+    assert set(block["rows"]) == {"fixed-beta-0.5", "map-beta"} and block["rows"]["map-beta"]["flights"] == 2
+    assert block["rows"]["map-beta"]["nees_mean"]["mean"] > 0
+    assert "## Per-flight statistics" in (out / "report.md").read_text()
