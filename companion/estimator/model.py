@@ -97,9 +97,10 @@ def update(
     return x_post, P_post, y, S, float(y @ S_inv @ y)
 
 
-def initial_cov(cfg: EstimatorConfig) -> np.ndarray:
-    """P₀ at the first fix: position as good as the fix, velocity and bias from the config."""
-    r = np.diag(cfg.r_nominal_m2())
+def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = None) -> np.ndarray:
+    """P₀ at the first fix: position as good as the fix (its R: ``r_m2``, default the config's
+    nominal R), velocity and bias from the config."""
+    r = np.diag(cfg.r_nominal_m2()) if r_m2 is None else np.asarray(r_m2, dtype=float)
     v, b = np.full(3, cfg.sigma_velocity0_m_s**2), np.full(3, cfg.sigma_bias0_m**2)
     return np.diag(np.concatenate([r, v, b]))
 
@@ -168,5 +169,21 @@ def matrix_to_cov(M: np.ndarray) -> Cov:
     return (out[0], out[1], out[2])  # type: ignore[return-value]
 
 
-def initial_cov_axes(cfg: EstimatorConfig) -> Cov:
-    return matrix_to_cov(initial_cov(cfg))
+def initial_cov_axes(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = None) -> Cov:
+    return matrix_to_cov(initial_cov(cfg, r_m2))
+
+
+def reset_to_fix(x: State, P: Cov, z: tuple[float, float, float], r_m2: tuple[float, float, float],
+                 bias_var_m2: float) -> tuple[State, Cov]:
+    """Position and GNSS bias reset to the fix ``z`` (glitch recovery), velocity kept.
+
+    The bias restarts at 0 with variance ``bias_var_m2``; since z = p + b + ν, the position is
+    z with variance R + var(b) and covariance −var(b) with the bias (H P Hᵀ = R: the reset
+    trusts the fix exactly as much as its R says). Velocity keeps its (grown) variance and loses
+    its correlation with the reset states.
+    """
+    out = []
+    for i in range(3):
+        vv = P[i][3]
+        out.append((r_m2[i] + bias_var_m2, 0.0, -bias_var_m2, vv, 0.0, bias_var_m2))
+    return (z[0], z[1], z[2], x[3], x[4], x[5], 0.0, 0.0, 0.0), (out[0], out[1], out[2])
