@@ -127,7 +127,7 @@ def test_batch_path_equals_per_sample_path():
         np.testing.assert_allclose(getattr(ea, name), getattr(eb, name), rtol=1e-12, atol=1e-12)
     assert ea.beta == pytest.approx(eb.beta, abs=1e-12)
     assert a.engine.imu.rows[-50:] == b.engine.imu.rows[-50:]  # bit-for-bit inputs
-    truth_gnss = s.x_true[-1, :3] + s.x_true[-1, 6:]
+    truth_gnss = s.x_true[-1, :3] + s.x_true[-1, 6:9]
     assert np.linalg.norm(ea.p_ned_m + ea.b_ned_m - truth_gnss) < 0.5  # and it navigates
 
 

@@ -36,6 +36,12 @@ class EstimatorConfig:
     bias_tau_s: float = 3.0  # paper Γ_mp: correlation time of the GNSS multipath bias state
     sigma_bias_max_m: float = 1.2  # paper: largest multipath bias std; σ_b(β=0) ≈ this
     sigma_bias_floor_m: float = 0.01  # ε of eq. 13: bias std kept at full trust (β = 1)
+    # Acceleration-input bias state a (NED, model.py): prior std at the first fix and random-walk
+    # density. A MEMS accelerometer bias is tens of mg (0.1-0.3 m/s²) and 1° of attitude error
+    # reads as 0.17 m/s²; EKF2's accelerometer bias noise EKF2_ACC_B_NOISE is 3e-3 m/s³/√Hz, ours is
+    # larger since the state also follows the attitude error. 0 and 0 give the paper's 9-state filter.
+    sigma_acc_bias0_m_s2: float = 0.2
+    sigma_acc_bias_rw_m_s2_sqrt_s: float = 0.01
     gravity_m_s2: float = 9.80665  # added on NED z: a_ned = R f_frd + [0, 0, g]
 
     # --- measurement model (eq. 14)
@@ -125,7 +131,8 @@ class EstimatorConfig:
             raise ValueError("adaptive_window_fixes: must be >= 2")
         if not (0.0 < self.vb_forgetting <= 1.0 and self.vb_iterations >= 1 and self.vb_prior_dof > 0.0):
             raise ValueError("vb_forgetting, vb_iterations, vb_prior_dof: need 0 < ρ ≤ 1, ≥ 1, > 0")
-        for name in ("future_tolerance_s", "lambda_smooth_1_m", "eta_first_order"):
+        for name in ("future_tolerance_s", "lambda_smooth_1_m", "eta_first_order", "sigma_acc_bias0_m_s2",
+                     "sigma_acc_bias_rw_m_s2_sqrt_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name}: must be a finite number >= 0")
 

@@ -43,7 +43,7 @@ class Fusion(NamedTuple):
 
     t_us: int  # validity time of the fix (or of a re-based anchor)
     z_ned_m: Vec3 | None  # the fix; None for an anchor without a measurement
-    x: model.State  # posterior [p, v, b] (m, m/s, m); the prior when the fix failed the gate
+    x: model.State  # posterior [p, v, b, a] (m, m/s, m, m/s²); the prior when the fix failed the gate
     P: model.Cov  # posterior covariance, per axis (model.py)
     state: Any  # adaptation state after this fix (immutable)
     nis: float  # NIS of this fix (of the last fix for an anchor)
@@ -103,6 +103,7 @@ class FusionEngine:
         self._future_us = int(round(cfg.future_tolerance_s * 1e6))
         self._r_nominal: Vec3 = tuple(float(v) for v in cfg.r_nominal_m2().diagonal())  # type: ignore[assignment]
         self._q_acc = cfg.sigma_acc_m_s2**2
+        self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
         self._gate2 = cfg.gnss_gate_sigma**2
         self._r_max = cfg.r_learned_max_factor
         self._reset_us = int(round(cfg.gnss_reset_timeout_s * 1e6))
@@ -230,7 +231,7 @@ class FusionEngine:
         c["gnss_fused"] = self._tested - last.n_rejected
 
     def _initialise(self, t_us: int, z: Vec3, r: Vec3) -> None:
-        x = (*z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        x = (*z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         state = self.method.initial_state()
         P = model.initial_cov_axes(self.cfg, r)
         self._append(t_us, z, x, P, state, float("nan"), self.imu.integrals(t_us),
@@ -256,8 +257,9 @@ class FusionEngine:
         sigma_b = prev.sigma_bias_m
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
-        P_prior = model.predict_axes(prev.P, T, alpha, self._q_acc, q_b)
-        (pp0, _, pb0, _, _, bb0), (pp1, _, pb1, _, _, bb1), (pp2, _, pb2, _, _, bb2) = P_prior
+        P_prior = model.predict_axes(prev.P, T, alpha, self._q_acc, q_b, self._q_rw)
+        (pp0, _, pb0, _, _, _, _, bb0, _, _), (pp1, _, pb1, _, _, _, _, bb1, _, _), \
+            (pp2, _, pb2, _, _, _, _, bb2, _, _) = P_prior
         ints = self.imu.integrals(t_us)
         x_prior = mean_between(prev.x, prev.ints, ints, alpha)
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
@@ -320,7 +322,7 @@ class FusionEngine:
         sigma_b = f.sigma_bias_m
         q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
         x = mean_between(f.x, f.ints, ints, alpha)
-        return x, model.predict_axes(f.P, T, alpha, self._q_acc, q_b)
+        return x, model.predict_axes(f.P, T, alpha, self._q_acc, q_b, self._q_rw)
 
     # -------------------------------------------------------------- output
     def snapshot(self) -> Snapshot | None:

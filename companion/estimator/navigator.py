@@ -199,9 +199,11 @@ class Navigator:
             return None
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
-        (pp0, _, _, vv0, _, bb0), (pp1, _, _, vv1, _, bb1), (pp2, _, _, vv2, _, bb2) = snap.P
+        P0, P1, P2 = snap.P
+        x = snap.x
         # one array for the state and the variances, handed out as views (one allocation)
-        a = np.array((*snap.x, pp0, pp1, pp2, vv0, vv1, vv2, bb0, bb1, bb2))
+        a = np.array((x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], P0[0], P1[0], P2[0],
+                      P0[4], P1[4], P2[4], P0[7], P1[7], P2[7]))
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method,
                           snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets)
         self._last = (snap, est)
