@@ -31,9 +31,10 @@ def test_predict_equals_F_P_Ft_plus_Q():
     F[6:9, 6:9] = np.exp(-T / CFG.bias_tau_s) * np.eye(3)
     q = CFG.sigma_acc_m_s2**2
     w = CFG.sigma_acc_bias_rw_m_s2_sqrt_s**2
-    # Q of the random walk a through v and p: ∫ G(s) w Gᵀ(s) ds with G(s) = (s²/2 ... ) by quadrature
+    # Q of the random walk a through (p, v, a): ∫ g(s) w g(s)ᵀ ds by quadrature, g(s) = the effect
+    # on (p, v, a) of a unit kick of a, s seconds before T (v̇ = −a)
     s_grid = np.linspace(0.0, T, 20001)
-    g = np.stack([-s_grid**2 / 2, -s_grid, np.ones_like(s_grid)])  # effect on (p, v, a) of a unit kick s before T
+    g = np.stack([-s_grid**2 / 2, -s_grid, np.ones_like(s_grid)])
     Q_rw = w * np.trapezoid(g[:, None, :] * g[None, :, :], s_grid, axis=2)
     Q = np.zeros((12, 12))
     Q[0:3, 0:3] = q * T**3 / 3 * np.eye(3)

@@ -12,10 +12,10 @@ the mean of eq. 12 over any interval [t_a, t_b] is, exactly (no per-sample loop)
     b_b = α(T) b_a
 
 and, with the acceleration bias ``a`` (constant in the mean: a random walk), ``v_b −= a T`` and
-``p_b −= a T²/2``; this equals stepping ``x ← F x + B ã`` (eq. 12) sample by sample. A sample arriving more than
-``hold_max_s`` after the previous one is a gap: the previous input is held for ``hold_max_s``
-only, then the filter coasts at constant velocity (a virtual zero-acceleration sample), so a
-stale acceleration is never integrated blindly across a gap.
+``p_b −= a T²/2``; this equals stepping ``x ← F x + B ã`` (eq. 12) sample by sample.
+A sample arriving more than ``hold_max_s`` after the previous one is a gap: the previous input
+is held for ``hold_max_s`` only, then the filter coasts at constant velocity (a virtual
+zero-acceleration sample), so a stale acceleration is never integrated blindly across a gap.
 """
 
 from __future__ import annotations
