@@ -33,6 +33,7 @@ def scheduled_beta(cfg: PluginConfig, clearance_m: float) -> float:
 
 @register("map-beta")
 class MapBeta:
+    learns_from_rejected = True  # β follows the position whether or not the fix passed the gate
     def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
         self.plugin = PluginConfig()

@@ -54,6 +54,7 @@ def window_nll(betas: np.ndarray, window: tuple[InnovationTerms, ...], cfg: Esti
 
 @register("windowed-ml")
 class WindowedMl:
+    learns_from_rejected = True  # a gated-out fix is evidence about the trust level too
     def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
         self.bind(None, PluginConfig(), lambda: None)
