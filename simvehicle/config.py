@@ -194,7 +194,7 @@ class GnssConfig:
     constellation_size: int = 16  # (ours) satellites above the mask in open sky
     elevation_min_deg: float = 15.0  # (ours) elevation mask
     nlos_reflect_prob: float = 0.5  # (ours) a blocked satellite is tracked by reflection with this prob.
-    nlos_delay_mean_m: float = 8.0  # (ours) mean extra path of a reflection (exponential), metres
+    nlos_delay_mean_m: float = 1.0  # (ours) mean extra path of a reflection (exponential), metres
     satellite_noise: bool = False  # noise std × sqrt(constellation_size / satellites used)
     heavy_tail_dof: float = 0.0  # > 0: white noise is Student-t with this many dof (same std); 0 = Gaussian
 

@@ -43,6 +43,7 @@ ICM_42688_P: dict[str, Any] = {
 
 UNMODELLED_GNSS: dict[str, Any] = {
     "nlos": True,
+    "nlos_delay_mean_m": 1.0,  # an urban receiver's NLOS delays reach tens of metres; 1 m keeps it flyable
     "satellite_noise": True,
     "heavy_tail_dof": 3.0,
     "gamma_canyon_s": 10.0,  # the filter's bias_tau_s is 3 s

@@ -102,7 +102,7 @@ def test_severity_levels_scale_the_unmodelled_gnss():
 
     for key, value in UNMODELLED_GNSS.items():  # s = 1 is the mismatch scenario's GNSS
         assert one[f"gnss.{key}"] == value
-    assert dict(ablation.severity_overrides(2.0))["gnss.nlos_delay_mean_m"] == 16.0
+    assert dict(ablation.severity_overrides(2.0))["gnss.nlos_delay_mean_m"] == 2.0
 
 
 def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):

@@ -43,7 +43,7 @@ from gcs_tools.evaluate.campaign import Row
 
 SCORE = "est_h_median_m"
 SIGMA_ACC = "estimator.sigma_acc_m_s2"
-SIGMA_ACC_VALUES = (0.05, 0.1, 0.2, 0.4, 0.8)
+SIGMA_ACC_VALUES = (0.1, 0.2, 0.4, 0.8)
 # Each method's own hyper-parameters: (row label, method, {override key: values}) — one axis each,
 # or a small product; the same budget (3-6 points) for every method.
 SWEEPS: tuple[tuple[str, str, dict[str, tuple[Any, ...]]], ...] = (
@@ -64,14 +64,14 @@ SEVERITIES = (0.0, 0.5, 1.0, 2.0)
 
 
 def severity_overrides(s: float) -> tuple[tuple[str, Any], ...]:
-    """GNSS overrides of severity ``s`` on top of ``realistic``: NLOS delay 8 s m, canyon bias
+    """GNSS overrides of severity ``s`` on top of ``realistic``: NLOS delay s m (mean), canyon bias
     correlation 3 + 7 s seconds (the filter assumes 3), Student-t dof 2 + 1/s; off at s = 0.
     s = 1 reproduces the ``mismatch`` scenario's GNSS."""
     if s < 0:
         raise UserError(f"severity: expected >= 0, got {s}")
     if s == 0:
         return ()
-    return (("gnss.nlos", True), ("gnss.satellite_noise", True), ("gnss.nlos_delay_mean_m", 8.0 * s),
+    return (("gnss.nlos", True), ("gnss.satellite_noise", True), ("gnss.nlos_delay_mean_m", 1.0 * s),
             ("gnss.gamma_canyon_s", 3.0 + 7.0 * s), ("gnss.heavy_tail_dof", 2.0 + 1.0 / s))
 
 
