@@ -57,6 +57,7 @@ results-ablation: $(STAMP)
 	$(ABLATE) --scenario mismatch --rows $(ABL)/rows-mismatch.yaml --out $(ABL)/mismatch
 	$(BIN)/python -m gcs_tools.evaluate.ablation severity --rows $(ABL)/rows-mismatch.yaml \
 	  --methods fixed-beta-best,second-order,windowed-ml --seeds 0 --out $(ABL)/severity
+	$(BIN)/python -m gcs_tools.evaluate.ablation report --out $(ABL)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

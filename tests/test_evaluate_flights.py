@@ -123,3 +123,18 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     assert set(block["rows"]) == {"fixed-beta-0.5", "map-beta"} and block["rows"]["map-beta"]["flights"] == 2
     assert block["rows"]["map-beta"]["nees_mean"]["mean"] > 0
     assert "## Per-flight statistics" in (out / "report.md").read_text()
+    # the ablation report picks the campaign up (scenario directory layout) with its rows and cost
+    abl = tmp_path / "abl"
+    (abl / "realistic").mkdir(parents=True)
+    (abl / "realistic" / "results.json").write_text((out / "results.json").read_text())
+    level = {"second-order": {"ratio": 1.0, "lo": 0.8, "hi": 1.1}, "fixed-beta-best": {"mean_m": 1.5}}
+    level1 = {**level, "second-order": {"ratio": 0.9, "lo": 0.7, "hi": 1.0}}
+    sev = {"base": "fixed-beta-best", "score": "est_h_median_m", "profiles": [0], "seeds": [0],
+           "mission": "test", "wall_s": 1.0, "levels": {"0.0": level, "1.0": level1}}
+    (abl / "severity").mkdir()
+    (abl / "severity" / "severity.json").write_text(json.dumps(sev))
+    ablation.figure(sev, abl / "severity" / "fig_where_adaptation_pays.png")
+    text = ablation.report(abl)
+    assert "## `realistic`" in text and "`map-beta` = `map-beta`: defaults" in text
+    assert "| 1.0 | 0.900 [0.700, 1.000] | 1.500 |" in text
+    assert (abl / "severity" / "fig_where_adaptation_pays.png").stat().st_size > 1000

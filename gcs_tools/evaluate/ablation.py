@@ -218,6 +218,54 @@ def figure(table: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
+def report(out: Path) -> str:
+    """``out/report.md``: the hand-written findings (``findings.md``), then per scenario the tuned rows,
+    the per-flight table and the cost, then the severity table; from the files the steps wrote."""
+    parts = ["# Ablation: what the belief adaptation buys, on sensors that do not flatter the filter", ""]
+    findings = out / "findings.md"
+    if findings.exists():
+        parts += [findings.read_text(encoding="utf-8").strip(), ""]
+    for scenario in ("realistic", "mismatch"):
+        res_path = out / scenario / "results.json"
+        if not res_path.exists():
+            continue
+        res = json.loads(res_path.read_text(encoding="utf-8"))
+        c = res["campaign"]
+        parts += [f"## `{scenario}`", "",
+                  f"Mission `{c['mission']}`, profiles {c['profiles'][0]}–{c['profiles'][-1]}, seeds "
+                  f"{', '.join(map(str, c['seeds']))}: {c['flights']} flights, {c['wall_s']:.0f} s wall on "
+                  f"{c['workers']} workers, {c.get('flight_cpu_s', float('nan')):.0f} s of flight CPU "
+                  f"(full report: [{scenario}/report.md]({scenario}/report.md)).", "",
+                  flights.markdown(res["flights"]),
+                  "Rows (hyper-parameters chosen on the tuning set, "
+                  f"[rows-{scenario}.yaml](rows-{scenario}.yaml), sweep records "
+                  f"[tuning-{scenario}.jsonl](tuning-{scenario}.jsonl)):", ""]
+        for label, row in c["rows"].items():
+            sets = ", ".join(f"`{k}={v}`" for k, v in row["overrides"].items()) or "defaults"
+            parts.append(f"- `{label}` = `{row['method']}`: {sets}")
+        parts.append("")
+    sev_path = out / "severity" / "severity.json"
+    if sev_path.exists():
+        sev = json.loads(sev_path.read_text(encoding="utf-8"))
+        levels = sorted(sev["levels"], key=float)
+        labels = [k for k in sev["levels"][levels[0]] if k != sev["base"]]
+        parts += ["## Where adaptation pays", "",
+                  f"Error ratio (mean per-flight median horizontal error, row / `{sev['base']}`) over the "
+                  f"severity of the unmodelled GNSS (0 = `realistic`, 1 = `mismatch`); 95 % paired bootstrap "
+                  f"intervals; profiles {sev['profiles'][0]}–{sev['profiles'][-1]}, seeds "
+                  f"{', '.join(map(str, sev['seeds']))}, {sev['wall_s']:.0f} s wall.", "",
+                  "| severity | " + " | ".join(f"`{k}`" for k in labels) + f" | `{sev['base']}` [m] |",
+                  "|---|" + "---|" * (len(labels) + 1)]
+        for s in levels:
+            e = sev["levels"][s]
+            cells = [f"{e[k]['ratio']:.3f} [{e[k]['lo']:.3f}, {e[k]['hi']:.3f}]" for k in labels]
+            parts.append(f"| {s} | " + " | ".join(cells) + f" | {e[sev['base']]['mean_m']:.3f} |")
+        parts += ["", "![where adaptation pays](severity/fig_where_adaptation_pays.png)", ""]
+    text = "\n".join(parts) + "\n"
+    (out / "report.md").write_text(text, encoding="utf-8")
+    return text
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.ablation",
                                 description=__doc__.split("\n")[0])
@@ -236,9 +284,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     s.add_argument("--seeds", default="0")
     s.add_argument("--workers", type=int, default=2)
     s.add_argument("--out", type=Path, default=Path("docs/results/ablation/severity"))
+    r = sub.add_parser("report", help="write OUT/report.md from the steps' outputs")
+    r.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     args = p.parse_args(argv)
     try:
-        if args.command == "tune":
+        if args.command == "report":
+            report(args.out)
+        elif args.command == "tune":
             seeds = campaign.parse_seeds(args.seeds)
             if not set(seeds) <= set(tuning.TUNING_SEEDS):
                 first, last = tuning.TUNING_SEEDS[0], tuning.TUNING_SEEDS[-1]
