@@ -150,3 +150,13 @@ def test_realistic_flight_sends_an_estimated_attitude_and_mismatch_fixes_step():
     paper = SimVehicle(m, 0, 3).advance(None, None)
     assert paper.q_sent_ned_frd is None
     assert paper.attitude[0].q_ned_frd.tolist() == paper.q_ned_frd[0].tolist()
+
+
+def test_sitl_passes_the_scenario_to_the_vehicle_process(tmp_path):
+    from gcs_tools.sitl.launcher import SitlOptions, child_specs
+
+    specs = child_specs(SitlOptions("test", 0, "naive", 0, tmp_path, scenario="mismatch"), (1, 2, 3))
+    vehicle = next(s for s in specs if s.name == "vehicle").module_argv
+    assert vehicle[vehicle.index("--scenario") + 1] == "mismatch"
+    plain = child_specs(SitlOptions("test", 0, "naive", 0, tmp_path), (1, 2, 3))
+    assert "--scenario" not in next(s for s in plain if s.name == "vehicle").module_argv
