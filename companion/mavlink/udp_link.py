@@ -4,8 +4,9 @@ Every datagram is parsed on its own (a broken datagram never poisons the next). 
 used is counted and dropped, never raised: garbage bytes, bad CRCs, message ids outside the
 common dialect, frames from a system id the link does not accept, and — when a signing key is
 set — unsigned frames or frames signed with another key. The peer is either fixed
-(``peer_port``) or learned from the first accepted frame, so a restarted client on a new
-ephemeral port is picked up again.
+(``peer_port``) or learned from the last accepted HEARTBEAT, so a restarted client on a new
+ephemeral port is picked up again (and no other kind of frame can redirect the link).
+Frames are accepted by system id and, where configured, component id.
 
 A closed peer port (its process is gone) is reported: the socket asks for ICMP errors
 (``IP_RECVERR``, Linux), so the next operation after a send to it fails with ECONNREFUSED; that
@@ -43,6 +44,9 @@ BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this
 SIGNING_EPOCH_UNIX_S = 1_420_070_400  # MAVLink 2 signing timestamps count 10 µs since 2015-01-01
 SIGNING_KEY_BYTES = 32
 VEHICLE_SYSTEM_ID = 1  # the vehicle and its companions share one MAVLink system id
+VEHICLE_COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1: the vehicle process
+ESTIMATOR_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
+BRIDGE_COMPONENT_ID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
 IP_RECVERR = getattr(socket, "IP_RECVERR", 11)  # Linux: report ICMP errors on unconnected sockets
 MSG_ERRQUEUE = getattr(socket, "MSG_ERRQUEUE", 0x2000)
 
@@ -59,6 +63,7 @@ class LinkConfig:
     system_id: int = 1  # our MAVLink system id
     component_id: int = 1  # our MAVLink component id
     accept_system_ids: frozenset[int] | None = None  # None: frames from any system id
+    accept_component_ids: frozenset[int] | None = None  # None: frames from any component id
     signing_key: bytes | None = None  # 32-byte MAVLink 2 signing secret; None: no signing
     link_id: int = 0  # MAVLink 2 signing link id of this endpoint
     drop_probability_tx: float = 0.0  # test-only loss injection on sends, in [0, 1]
@@ -77,6 +82,7 @@ class LinkCounters:
     bad_crc: int = 0
     unknown_message: int = 0  # valid frame, message id not in the common dialect
     wrong_system_id: int = 0
+    wrong_component_id: int = 0  # right system id, but not a component this link talks to
     bad_signature: int = 0  # unsigned, wrong key or replayed timestamp while signing is on
     dropped_rx: int = 0  # loss injector
     dropped_tx: int = 0  # loss injector
@@ -346,9 +352,14 @@ class UdpLink:
         if accept_ids is not None:
             accepted = [m for m in msgs if m.get_srcSystem() in accept_ids]
             c.wrong_system_id += len(msgs) - len(accepted)
+        components = self.config.accept_component_ids
+        if components is not None:
+            n = len(accepted)
+            accepted = [m for m in accepted if m.get_srcComponent() in components]
+            c.wrong_component_id += n - len(accepted)
         if accepted:
             c.messages_rx += len(accepted)
-            if self.config.peer_port is None:
+            if self.config.peer_port is None and any(m.get_type() == "HEARTBEAT" for m in accepted):
                 self.peer = addr
             if self.tee is not None:
                 for msg in accepted:
