@@ -47,6 +47,7 @@ from companion.mavlink.udp_link import (
     UdpLink,
 )
 from companion.mission import Mission
+from companion.runtime import write_json
 from companion.telemetry.codec import GnssReport
 from companion.telemetry.pubsub import DeferredPublisher, TelemetryPublisher
 from simvehicle import SimVehicle
@@ -78,6 +79,7 @@ class VehicleNodeConfig:
     sim_state_period_us: int = 20_000  # SIM_STATE, 50 Hz
     clock_period_us: int = 1_000_000  # SYSTEM_TIME and HEARTBEAT, 1 Hz
     progress_period_s: float = 0.25  # wall time between progress lines on stdout
+    stats_period_s: float = 1.0  # wall time between vehicle.json updates (a kill -9 loses <= this)
 
 
 @dataclass(slots=True)
@@ -273,7 +275,7 @@ class VehicleNode:
         max_t_us = round(cfg.max_duration_s * 1e6)
         wall0 = time.perf_counter_ns()
         pace = self._pace(wall0) if cfg.realtime else None
-        next_progress = 0.0
+        next_progress = next_stats = 0.0
         outcome = "timeout"
         was_collided = False
         while self.t_us < max_t_us:
@@ -301,7 +303,14 @@ class VehicleNode:
             if time.monotonic() >= next_progress:
                 next_progress = time.monotonic() + cfg.progress_period_s
                 print(json.dumps({"t_s": out.t_us / 1e6, "goal_distance_m": row.goal_distance_m}), flush=True)
+            if time.monotonic() >= next_stats:
+                next_stats = time.monotonic() + cfg.stats_period_s
+                self.write_stats({"outcome": "running", "t_s": self.t_us / 1e6})
         return {"outcome": outcome, "t_s": self.t_us / 1e6, "wall_s": (time.perf_counter_ns() - wall0) / 1e9}
+
+    def write_stats(self, result: dict[str, Any]) -> None:
+        """``vehicle.json``: the result so far and every counter (atomic: never half a file)."""
+        write_json(self.config.out_dir / "vehicle.json", {**result, **self.stats()})
 
     def stats(self) -> dict[str, Any]:
         periods_ms = np.diff(np.asarray(self.imu_send_ns, dtype=float)) / 1e6

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from gcs_tools.sitl.launcher import SitlOptions, child_specs
+from gcs_tools.sitl.launcher import SitlOptions, child_specs, prepare_signing
 from gcs_tools.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports
 
 
@@ -41,6 +41,7 @@ class Trio:
         self.ports = tuple(free_udp_ports(3))
         self.estimator_bind_port = estimator_bind_port
         self.sup = Supervisor(out / "logs")
+        prepare_signing(opts)  # signed as `beliefnav sitl` is by default
         self.specs = {s.name: s for s in child_specs(opts, self.ports)}  # type: ignore[arg-type]
         if estimator_bind_port is not None:
             est = self.specs["estimator"]

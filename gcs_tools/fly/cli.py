@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,4 +28,9 @@ def run(args: argparse.Namespace) -> int:
     s = {k: v for k, v in result.summary.items() if k != "estimator_counters"}
     print(json.dumps(strict_json(s), indent=2))
     print(f"wrote {', '.join(str(p) for p in paths)}")
+    s = result.summary
+    if not s["reached_goal"]:  # time-out or collision: a failure, said in one line
+        why = f"collided {s['collisions']} time(s)" if s["collisions"] else "did not reach the goal in time"
+        print(f"beliefnav: error: the vehicle {why} ({s['duration_s']:.1f} s simulated)", file=sys.stderr)
+        return 1
     return 0

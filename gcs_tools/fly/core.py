@@ -87,6 +87,8 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     m = load_mission(mission) if isinstance(mission, str) else mission
     if method not in METHODS:
         raise UserError(f"method {method!r}: expected one of {', '.join(METHODS)}")
+    if seed < 0:
+        raise UserError(f"--seed must be >= 0, got {seed}")
     route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
     nav = Navigator(mission_estimator_config(m), method=method, frame=m.frame)
@@ -129,7 +131,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         "profile": profile_index,
         "method": method,
         "seed": seed,
-        "reached_goal": reached,
+        "reached_goal": reached and collisions == 0,  # never after a collision
         "collisions": int(collisions),
         "duration_s": sim.t_us * 1e-6,
         "route_duration_s": route.duration_s,

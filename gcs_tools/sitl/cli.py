@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
+from gcs_tools.sitl.outcome import check_run_arguments, failure_reason
 
 if TYPE_CHECKING:
     from gcs_tools.sitl.launcher import Progress
@@ -22,7 +23,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
-    parser.add_argument("--signing-key-file", type=Path, help="MAVLink 2 signing key for all three processes")
+    parser.add_argument("--signing-key-file", type=Path,
+                        help="MAVLink 2 signing key for all three processes (default: a fresh key per run, "
+                             "OUT/signing.key, mode 0600)")
+    parser.add_argument("--no-signing", action="store_true",
+                        help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
     parser.add_argument("--max-duration-s", type=float, help="simulated time limit (default: as fly)")
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
@@ -50,14 +55,18 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools.sitl.report import flight_result
 
     mission = load_mission(args.mission)
+    check_run_arguments(args.method, args.seed)  # before any process starts
     if not 0 <= args.profile < len(mission.profiles):
         last = len(mission.profiles) - 1
         raise UserError(f"--profile {args.profile}: mission {mission.name!r} has profiles 0..{last}")
     if args.signing_key_file is not None and not args.signing_key_file.is_file():
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
+    if args.signing_key_file is not None and args.no_signing:
+        raise UserError("--signing-key-file and --no-signing contradict each other")
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
         max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
+        signing=not args.no_signing,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
         telemetry_args=tuple(telemetry.forward_arguments(args)),
     )
@@ -79,11 +88,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
     _print(result.summary, args.out)
-    if run_.ended_by.startswith("crash"):
-        print(f"beliefnav: error: {run_.ended_by.split(':', 1)[1]} process failed: {run_.crash_detail}",
-              file=sys.stderr)
+    reason = failure_reason(run_, result.summary)
+    if reason:
+        print(f"beliefnav: error: {reason}", file=sys.stderr)
         return 1
-    return 0 if run_.ended_by == "vehicle" else 1
+    return 0
 
 
 def _print(s: dict, out: Path) -> None:
