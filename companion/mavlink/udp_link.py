@@ -28,6 +28,7 @@ import os
 import select
 import socket
 import time
+import types
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -110,6 +111,36 @@ def read_signing_key(path: str | os.PathLike[str]) -> bytes:
     return hashlib.sha256(text.encode("utf-8")).digest()
 
 
+NEW_STREAM_MAX_AGE = 6_000_000  # 60 s in signing ticks (10 µs): an older new stream is a replay
+
+
+def check_signature(mav: mavlink.MAVLink, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+    """MAVLink 2 signature check that verifies the signature BEFORE it trusts the timestamp.
+
+    pymavlink's own ``check_signature`` records a stream's timestamp before comparing the
+    signature, so one forged frame (no key needed) with a huge timestamp makes every later genuine
+    frame of that stream look replayed: the link is cut. Here a frame moves the stream's
+    timestamp only once its signature checks; replays (timestamp not newer) are still refused.
+    """
+    signing = mav.signing
+    h = hashlib.sha256()
+    h.update(signing.secret_key)
+    h.update(msgbuf[:-6])
+    if h.digest()[:6] != bytes(msgbuf[-6:]):
+        return False
+    t_low, t_high = mav.mav_sign_unpacker.unpack(msgbuf[-12:-6])
+    timestamp = t_low + (t_high << 32)
+    stream = (msgbuf[-13], src_system, src_component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None and timestamp <= last:
+        return False
+    if last is None and timestamp + NEW_STREAM_MAX_AGE < signing.timestamp:
+        return False
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True
+
+
 def _signing_timestamp_now() -> int:
     return int((max(time.time(), SIGNING_EPOCH_UNIX_S) - SIGNING_EPOCH_UNIX_S) * 100_000)
 
@@ -166,6 +197,7 @@ class UdpLink:
             self._mav.signing.sign_outgoing = True
             self._mav.signing.link_id = config.link_id
             self._mav.signing.timestamp = _signing_timestamp_now()
+            self._mav.check_signature = types.MethodType(check_signature, self._mav)  # type: ignore[method-assign]
 
     # -- plumbing -------------------------------------------------------------------------
     @property
