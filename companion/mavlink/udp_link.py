@@ -197,7 +197,7 @@ class UdpLink:
             self._mav.signing.sign_outgoing = True
             self._mav.signing.link_id = config.link_id
             self._mav.signing.timestamp = _signing_timestamp_now()
-            self._mav.check_signature = types.MethodType(check_signature, self._mav)  # type: ignore[method-assign]
+            self._mav.check_signature = types.MethodType(check_signature, self._mav)
 
     # -- plumbing -------------------------------------------------------------------------
     @property
