@@ -251,11 +251,49 @@ def from_dict(topic: str, d: Any) -> Any:
     return spec.cls(**values)
 
 
+MAX_PAYLOAD_BYTES = 256 * 1024  # the largest real payload (a route) is a few kB
+MAX_JSON_DEPTH = 8  # payloads are flat: object -> list -> list at most
+
+
+def _json_depth(payload: bytes | str) -> int:
+    """Deepest bracket nesting outside strings (cheap: only scanned when brackets are many)."""
+    raw = payload.encode() if isinstance(payload, str) else payload
+    if raw.count(b"[") + raw.count(b"{") <= MAX_JSON_DEPTH:
+        return 0
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in raw:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:  # quote
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):
+            depth += 1
+            if depth > deepest:
+                deepest = depth
+                if deepest > MAX_JSON_DEPTH:
+                    return deepest
+        elif byte in (0x5D, 0x7D):
+            depth -= 1
+    return deepest
+
+
 def decode(topic: str, payload: bytes | str) -> tuple[Any, int | None]:
-    """(domain object, sent_unix_ns or None) from a payload; MalformedPayloadError if it is not valid."""
+    """(domain object, sent_unix_ns or None) from a payload; MalformedPayloadError if it is not valid
+    (including a payload over ``MAX_PAYLOAD_BYTES`` or nested deeper than ``MAX_JSON_DEPTH``)."""
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise MalformedPayloadError(f"{topic}: payload of {len(payload):,} bytes over the limit of "
+                                    f"{MAX_PAYLOAD_BYTES:,}")
+    if _json_depth(payload) > MAX_JSON_DEPTH:
+        raise MalformedPayloadError(f"{topic}: JSON nested deeper than the limit of {MAX_JSON_DEPTH}")
     try:
         d = json.loads(payload)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise MalformedPayloadError(f"{topic}: not JSON ({exc.__class__.__name__})") from None
     obj = from_dict(topic, d)
     sent = d.get("sent_unix_ns")
