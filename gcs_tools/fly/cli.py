@@ -21,7 +21,9 @@ def run(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
     from gcs_tools.fly.core import fly
     from gcs_tools.fly.output import strict_json, write_outputs
+    from gcs_tools.outdir import ensure_out_dir
 
+    ensure_out_dir(args.out)
     mission = load_mission(args.mission)
     result = fly(mission, args.profile, args.method, args.seed, max_duration_s=args.max_duration)
     paths = write_outputs(result, mission.world, args.out)

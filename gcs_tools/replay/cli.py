@@ -35,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gcs_tools.outdir import ensure_out_dir
+
+    ensure_out_dir(args.out)  # before the replay, not after it
     home = core.parse_home(args.home) if args.home else None
     config = None
     if args.mission is not None:

@@ -51,11 +51,13 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 def run(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
     from gcs_tools.fly.output import strict_json, write_outputs
+    from gcs_tools.outdir import ensure_out_dir
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
     from gcs_tools.sitl.report import flight_result
 
     mission = load_mission(args.mission)
     check_run_arguments(args.method, args.seed)  # before any process starts
+    ensure_out_dir(args.out)
     if not 0 <= args.profile < len(mission.profiles):
         last = len(mission.profiles) - 1
         raise UserError(f"--profile {args.profile}: mission {mission.name!r} has profiles 0..{last}")
