@@ -93,26 +93,36 @@ def _enc_float(x: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _shown(v: Any) -> str:
+    """``repr`` of an offending value, cut short (a hostile value may be megabytes long)."""
+    text = repr(v) if not isinstance(v, int) or abs(v) < 10**30 else f"<{v.bit_length()}-bit integer>"
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _dec_float(optional: bool) -> _Dec:
     def dec(v: Any, where: str) -> float:
         if v is None and optional:
             return math.nan
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise MalformedPayloadError(f"{where}: expected a finite number, got {v!r}")
+        try:
+            ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+        except OverflowError:  # an integer no float can hold
+            ok = False
+        if not ok:
+            raise MalformedPayloadError(f"{where}: expected a finite number, got {_shown(v)}")
         return float(v)
 
     return dec
 
 
 def _dec_int(v: Any, where: str) -> int:
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise MalformedPayloadError(f"{where}: expected an integer, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, int) or not -(2**63) <= v < 2**63:
+        raise MalformedPayloadError(f"{where}: expected a 64-bit integer, got {_shown(v)}")
     return v
 
 
 def _dec_str(v: Any, where: str) -> str:
     if not isinstance(v, str):
-        raise MalformedPayloadError(f"{where}: expected a string, got {v!r}")
+        raise MalformedPayloadError(f"{where}: expected a string, got {_shown(v)}")
     return v
 
 
@@ -129,7 +139,7 @@ def _dec_array(shape: tuple[int | None, ...], optional: bool = False) -> _Dec:
             raise MalformedPayloadError(f"{where}: expected a list, got {type(v).__name__}")
         try:
             a = np.array(v, dtype=float)  # null -> NaN
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise MalformedPayloadError(f"{where}: expected numbers") from None
         if len(v) == 0 and len(shape) == 2:
             a = a.reshape(0, shape[1] or 0)
