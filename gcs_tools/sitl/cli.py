@@ -13,6 +13,7 @@ from companion.telemetry import pubsub as telemetry
 from gcs_tools.sitl.outcome import check_run_arguments, failure_reason
 
 if TYPE_CHECKING:
+    from companion.mission import Mission
     from gcs_tools.sitl.launcher import Progress
 
 
@@ -50,10 +51,8 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 
 def run(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
-    from gcs_tools.fly.output import strict_json, write_outputs
     from gcs_tools.outdir import ensure_out_dir
-    from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
-    from gcs_tools.sitl.report import flight_result
+    from gcs_tools.sitl.vehicle_id import claim_vehicle_id
 
     mission = load_mission(args.mission)
     check_run_arguments(args.method, args.seed)  # before any process starts
@@ -65,6 +64,23 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
     if args.signing_key_file is not None and args.no_signing:
         raise UserError("--signing-key-file and --no-signing contradict each other")
+    claim = claim_vehicle_id(telemetry.config_from_args(args), args.vehicle_id)
+    try:
+        if claim is not None:
+            args.vehicle_id = claim.vehicle_id
+            if claim.note:
+                print(f"beliefnav: note: {claim.note}", file=sys.stderr)
+        return _fly(args, mission)
+    finally:
+        if claim is not None:
+            claim.close()
+
+
+def _fly(args: argparse.Namespace, mission: Mission) -> int:
+    from gcs_tools.fly.output import strict_json, write_outputs
+    from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
+    from gcs_tools.sitl.report import flight_result
+
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
         max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
@@ -85,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     result = flight_result(opts, run_, route, mission.name)
+    result.summary["sitl"]["vehicle_id"] = None if args.no_telemetry else args.vehicle_id
     if result.series:
         write_outputs(result, mission.world, args.out)
     else:
