@@ -35,9 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gcs_tools.outdir import ensure_out_dir
+    from gcs_tools.outdir import check_out_dir
 
-    ensure_out_dir(args.out)  # before the replay, not after it
+    check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
     home = core.parse_home(args.home) if args.home else None
     config = None
     if args.mission is not None:
