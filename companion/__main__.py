@@ -14,7 +14,7 @@ from companion.errors import UserError
 
 
 def _parser() -> argparse.ArgumentParser:
-    from companion.autopilot.node import add_master_arguments
+    from companion.autopilot.options import add_master_arguments
     from companion.mavlink.udp_link import add_link_arguments
     from companion.telemetry import pubsub as telemetry
 
@@ -31,6 +31,8 @@ def _parser() -> argparse.ArgumentParser:
         telemetry.add_arguments(p, publisher=True)
         if name == "estimator":
             p.add_argument("--method", default="second-order", help="estimator method")
+            p.add_argument("--step-markers", action="store_true",
+                           help="TIMESYNC requests are our simulated vehicle's step markers (beliefnav sitl)")
             add_master_arguments(p, master_required=False)
         else:
             p.add_argument("--profile", type=int, default=0, help="mission profile index")
@@ -102,7 +104,8 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
 
         navigator, nis_gate = make_navigator(mission, args.method)
         link = UdpLink(_config(args, ESTIMATOR_COMPONENT_ID, fields, link_id=1), rng)
-        return EstimatorNode(link, navigator, nis_gate, publisher_from_args(args, "companion"))
+        return EstimatorNode(link, navigator, nis_gate, publisher_from_args(args, "companion"),
+                             step_markers=args.step_markers)
     from companion.nodes.bridge_node import BRIDGE_COMPONENT_ID, BridgeNode, route_info
     from companion.planning import plan_route
 

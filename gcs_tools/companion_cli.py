@@ -6,8 +6,9 @@ from __future__ import annotations
 import argparse
 import json
 
-from companion.autopilot.node import add_master_arguments, config_from_args
+from companion.autopilot.node import config_from_args
 from companion.autopilot.node import run as run_companion
+from companion.autopilot.options import add_master_arguments
 from companion.telemetry import pubsub as telemetry
 
 
@@ -18,6 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from companion.runtime import exit_on_sigterm
+
+    exit_on_sigterm()  # SIGTERM ends the run like Ctrl-C: summary.json is still written
     config = config_from_args(args)
     publisher = telemetry.publisher_from_args(args, "companion")
     try:

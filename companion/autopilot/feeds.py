@@ -31,7 +31,6 @@ from companion.domain.samples import NavEstimate
 from companion.estimator.navigator import rotation_ned_frd
 from companion.mavlink.codec import quaternion_to_euler
 
-FEEDS = ("none", "vision", "odometry", "gps-input")
 GPS_EPOCH_UNIX_S = 315_964_800  # 1980-01-06T00:00:00Z
 GPS_LEAP_S = 18  # GPS time - UTC since 2017
 WEEK_S = 604_800

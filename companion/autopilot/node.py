@@ -31,6 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.autopilot import compare, feeds
 from companion.autopilot.connection import MavConnection, open_connection
 from companion.autopilot.discovery import Discovery, DiscoveryConfig
+from companion.autopilot.options import DEFAULT_COMPONENT_ID, FEEDS
 from companion.autopilot.streams import StreamRates, data_stream_requests, interval_requests
 from companion.autopilot.timesync import Timesync, TimesyncConfig
 from companion.autopilot.translate import TranslateConfig, Translator, boot_stamp_us
@@ -41,7 +42,6 @@ from companion.estimator import METHODS, EstimatorConfig, Navigator
 from companion.mavlink import codec
 from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
 
-DEFAULT_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
 MIN_FIX_TYPE = 3
 
@@ -51,7 +51,7 @@ class CompanionConfig:
     master: str  # connection string (companion.autopilot.connection)
     out_dir: Path
     method: str = "second-order"
-    feed: str = "none"  # one of feeds.FEEDS
+    feed: str = "none"  # one of FEEDS
     home: LocalNedFrame | None = None  # None: GPS_GLOBAL_ORIGIN, else HOME_POSITION, else first good fix
     duration_s: float | None = None  # wall seconds to run; None: until interrupted
     component_id: int = DEFAULT_COMPONENT_ID
@@ -69,8 +69,8 @@ class CompanionConfig:
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise UserError(f"unknown method {self.method!r} (choose from {', '.join(METHODS)})")
-        if self.feed not in feeds.FEEDS:
-            raise UserError(f"--feed {self.feed!r}: choose from {', '.join(feeds.FEEDS)}")
+        if self.feed not in FEEDS:
+            raise UserError(f"--feed {self.feed!r}: choose from {', '.join(FEEDS)}")
         if not 1 <= self.component_id <= 255:
             raise UserError(f"--component-id {self.component_id}: must be 1..255")
         if self.duration_s is not None and not self.duration_s > 0:
@@ -298,8 +298,11 @@ class AutopilotCompanion:
             rejected["bad_frames"] = self.conn.counters["bad_frames"]
         ap = self.discovery.autopilot
         beta = np.asarray(self.series.beta, dtype=float)
+        p = np.asarray(self.series.p_ned_m, dtype=float).reshape(-1, 3)
+        horiz = np.hypot(p[:, 0], p[:, 1])
         return {
             "master": c.master, "method": c.method, "feed": c.feed, "wall_s": wall_s,
+            "cpu_s": time.process_time(),
             "autopilot": ap.as_dict() if ap is not None else None,
             "home": None if self.frame is None else {
                 "lat_deg": self.frame.home_lat_deg, "lon_deg": self.frame.home_lon_deg,
@@ -314,6 +317,9 @@ class AutopilotCompanion:
             "beta": compare.distribution(beta) | {
                 "min": float(beta.min()) if beta.size else None,
                 "final": float(beta[-1]) if beta.size else None},
+            "estimate": {"count": int(p.shape[0]),
+                         "max_horizontal_from_home_m": float(horiz.max()) if p.size else None,
+                         "final_p_ned_m": [float(v) for v in p[-1]] if p.size else None},
             "errors": {"autopilot_estimate": self.autopilot_errors()},
             "streams": {"requests": self.counters["stream_requests"],
                         "fallback_requests": self.counters["stream_fallback_requests"],
@@ -376,25 +382,6 @@ def _enum(name: str, value: int) -> str:
 
 
 # -- process ------------------------------------------------------------------------------------
-
-
-def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool) -> None:
-    """The options of the foreign-autopilot mode (``--master`` and what goes with it)."""
-    parser.add_argument("--master", required=master_required,
-                        help="autopilot connection: tcp:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT, "
-                             "serial:DEVICE:BAUD")
-    parser.add_argument("--out", type=Path, help="output directory (run.tlog, summary.json)")
-    parser.add_argument("--feed", default="none", choices=feeds.FEEDS, help="what to send the autopilot")
-    parser.add_argument("--home", help="local frame origin LAT,LON,ALT (default: the autopilot's origin)")
-    parser.add_argument("--duration-s", type=float, help="stop after this many wall seconds")
-    parser.add_argument("--component-id", type=int, default=DEFAULT_COMPONENT_ID,
-                        help="our MAVLink component id")
-    parser.add_argument("--gnss-instance", type=int, default=1, choices=(1, 2),
-                        help="GNSS input: 1 = GPS_RAW_INT, 2 = GPS2_RAW")
-    parser.add_argument("--gnss-delay-ms", type=float, default=0.0,
-                        help="receiver delay: fix validity = the autopilot's stamp minus this")
-    parser.add_argument("--discovery-timeout-s", type=float, default=60.0,
-                        help="give up when no autopilot HEARTBEAT arrives within this (wall s)")
 
 
 def config_from_args(args: argparse.Namespace) -> CompanionConfig:

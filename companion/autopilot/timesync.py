@@ -18,6 +18,11 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 
+def answer(request: Any, now_ns: int) -> mavlink.MAVLink_timesync_message:
+    """The spec's answer to a TIMESYNC request: our clock in ``tc1`` (> 0), its ``ts1`` echoed."""
+    return mavlink.MAVLink_timesync_message(tc1=max(int(now_ns), 1), ts1=int(request.ts1))
+
+
 @dataclass(frozen=True, slots=True)
 class TimesyncConfig:
     request_period_s: float = 1.0  # our requests (wall clock)
@@ -45,7 +50,7 @@ class Timesync:
         """The answer to a request (to send), or None after taking in an answer to ours."""
         if msg.tc1 == 0:
             self.counters["requests_answered"] += 1
-            return mavlink.MAVLink_timesync_message(tc1=max(now_ns, 1), ts1=int(msg.ts1))
+            return answer(msg, now_ns)
         if int(msg.ts1) not in self._outstanding:
             self.counters["responses_not_ours"] += 1
             return None
