@@ -13,8 +13,9 @@
 - ``odometry``: ODOMETRY with ``frame_id`` = MAV_FRAME_LOCAL_FRD (20) and ``child_frame_id`` =
   MAV_FRAME_BODY_FRD (12), the frames ArduPilot fuses (same parameters as ``vision``); velocity
   in the body frame; ``estimator_type`` = MAV_ESTIMATOR_TYPE_VIO (3). PX4 takes ODOMETRY with
-  ``frame_id`` MAV_FRAME_LOCAL_NED or LOCAL_FRD and ``estimator_type`` VISION (1), VIO (3) or
-  MOCAP (6) (never 5, refused) — documented, not tested here.
+  ``frame_id`` MAV_FRAME_LOCAL_NED/ENU/FRD/FLU, velocity in those or BODY_FRD, and
+  ``estimator_type`` VISION (2) or VIO (3) (external vision) or MOCAP (6); other types (e.g.
+  GPS_INS = 5) are refused — documented from PX4's receiver, not tested here.
 """
 
 from __future__ import annotations
