@@ -17,23 +17,31 @@ M = mavutil.mavlink
 
 
 def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path):
+    """... and when the autopilot reboots (SITL restarted mid-run, parameters kept): reconnect,
+    a fresh estimator, the streams asked for again and arriving again."""
     require_ardupilot()
     out = tmp_path / "companion"
     with ArduPilotSitl(SitlConfig(work_dir=tmp_path / "ap", speedup=10)) as sitl:
-        proc = run_companion(sitl.url, out, "--duration-s", "9")
+        proc = run_companion(sitl.url, out, "--duration-s", "15")
         other = mavutil.mavlink_connection(sitl.wait_serial(1), source_system=42, source_component=190)
         try:
-            while proc.poll() is None:  # another system on SERIAL1; ArduPilot routes it to SERIAL0
+            start = time.monotonic()
+            while time.monotonic() - start < 8 and proc.poll() is None:
+                # another system on SERIAL1; ArduPilot routes it to SERIAL0
                 other.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
                 time.sleep(0.3)
-        finally:
             other.close()
+            sitl.restart()
+            proc.wait(timeout=30)
+        finally:
             code, err = stop(proc)
     assert code == 0, err
     s = json.loads((out / "summary.json").read_text())
     ap = s["autopilot"]
     assert (ap["system_id"], ap["component_id"], ap["autopilot_type"], ap["vehicle_type"]) == (1, 1, 3, 2)
-    assert s["streams"]["acks"] == {"MAV_CMD_SET_MESSAGE_INTERVAL:MAV_RESULT_ACCEPTED": 8}
+    asks = s["streams"]["requests"]  # at start, and again after the reboot
+    assert asks in (2, 3)
+    assert s["streams"]["acks"] == {"MAV_CMD_SET_MESSAGE_INTERVAL:MAV_RESULT_ACCEPTED": 8 * asks}
     assert s["streams"]["fallback_requests"] == 0
     received = s["samples"]["received"]
     for kind in ("HIGHRES_IMU", "ATTITUDE_QUATERNION", "GPS_RAW_INT", "SYSTEM_TIME", "GLOBAL_POSITION_INT",
@@ -47,6 +55,7 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
     assert err["error_horizontal_m"]["median"] < 1.0  # open sky: within 1 m of EKF3
     ts = s["timesync"]
     assert ts["requests_answered"] >= 1 and ts["responses_used"] >= 1 and ts["rtt_ms"] < 50
+    assert s["node"]["autopilot_reboots"] == 1 and s["link"]["reconnects"] == 1
 
     msgs = tlog_messages(out / "run.tlog")  # both directions
     ours = [m for m in msgs if (m.get_srcSystem(), m.get_srcComponent()) == (1, 197)]
@@ -58,6 +67,8 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
              and m.command == M.MAV_CMD_SET_MESSAGE_INTERVAL}
     assert asked[M.MAVLINK_MSG_ID_HIGHRES_IMU] == 20_000
     imu_t = np.array([m.time_usec for m in theirs if m.get_type() == "HIGHRES_IMU"])
+    reboot = int(np.argmax(np.diff(imu_t) < 0)) + 1  # boot time went back here
+    assert reboot > 100 and imu_t.size - reboot > 100  # streams arriving before and again after the reboot
     # at the 50 Hz asked for, on the autopilot's clock (measured 19 992 µs: its 400 Hz loop's ticks)
     assert abs(np.median(np.diff(imu_t)) - 20_000) < 100
     requests = {m.ts1 for m in theirs if m.get_type() == "TIMESYNC" and m.tc1 == 0}

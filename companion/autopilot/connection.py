@@ -17,6 +17,7 @@ simulated vehicle keeps its faster :class:`companion.mavlink.udp_link.UdpLink`
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections import Counter
@@ -35,6 +36,7 @@ KINDS = ("tcp", "udpin", "udpout", "serial")
 _ALIASES = {"tcp": "tcp", "udpin": "udpin", "udp": "udpin", "udpout": "udpout", "serial": "serial"}
 LOOPBACK = "127.0.0.1"
 MAX_DRAIN = 512  # messages taken per recv() call at most
+TCP_CONNECT_RETRIES = 3  # first connection: attempts 1 s apart (pymavlink's)
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,27 +100,59 @@ class MavConnection:
         self.endpoint = endpoint
         self.tlog = tlog
         self.counters: Counter[str] = Counter()
+        self._source = (system_id, component_id)
+        self._lost = False
         try:
-            self._conn: Any = mavutil.mavlink_connection(
-                endpoint.mavutil_device(), baud=endpoint.baud or 115200, source_system=system_id,
-                source_component=component_id, autoreconnect=False, robust_parsing=True,
-                dialect="ardupilotmega")
+            self._conn: Any = self._open(TCP_CONNECT_RETRIES)
         except (OSError, ValueError) as exc:
             raise UserError(f"--master {endpoint}: cannot open: {exc}") from None
 
+    def _open(self, retries: int) -> Any:
+        conn = mavutil.mavlink_connection(
+            self.endpoint.mavutil_device(), baud=self.endpoint.baud or 115200, source_system=self._source[0],
+            source_component=self._source[1], autoreconnect=False, robust_parsing=True, retries=retries,
+            dialect="ardupilotmega")
+        if self.endpoint.kind == "tcp":  # the peer closed (a SITL restart): reopen from recv()
+            conn.handle_eof = conn.handle_disconnect = self._on_lost
+        return conn
+
+    def _on_lost(self) -> None:
+        if not self._lost:
+            self.counters["disconnects"] += 1
+        self._lost = True
+
+    def _reopen(self, timeout_s: float) -> bool:
+        with contextlib.suppress(OSError):
+            self._conn.close()
+        try:
+            self._conn = self._open(0)
+        except (OSError, ValueError):
+            time.sleep(max(timeout_s, 0.0))
+            return False
+        self._lost = False
+        self.counters["reconnects"] += 1
+        return True
+
     def set_source(self, system_id: int, component_id: int) -> None:
+        self._source = (system_id, component_id)
         self._conn.mav.srcSystem = system_id
         self._conn.mav.srcComponent = component_id
 
     def recv(self, timeout_s: float) -> list[Any]:
-        """Messages received, waiting up to ``timeout_s`` for the first."""
+        """Messages received, waiting up to ``timeout_s`` for the first; a closed TCP peer is
+        reconnected (counted in ``disconnects`` / ``reconnects``)."""
         out: list[Any] = []
-        msg = self._conn.recv_match(blocking=True, timeout=max(timeout_s, 0.0))
-        while msg is not None:
-            self._take(msg, out)
-            if len(out) >= MAX_DRAIN:
-                break
-            msg = self._conn.recv_msg()
+        if self._lost and not self._reopen(timeout_s):
+            return out
+        try:
+            msg = self._conn.recv_match(blocking=True, timeout=max(timeout_s, 0.0))
+            while msg is not None:
+                self._take(msg, out)
+                if len(out) >= MAX_DRAIN or self._lost:
+                    break
+                msg = self._conn.recv_msg()
+        except OSError:
+            self._on_lost()
         return out
 
     def _take(self, msg: Any, out: list[Any]) -> None:

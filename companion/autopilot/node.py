@@ -44,6 +44,7 @@ from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
 
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
 MIN_FIX_TYPE = 3
+REASK_MIN_S = 2.0  # a reboot seen this soon after asking for the streams does not ask again
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,7 +139,7 @@ class AutopilotCompanion:
             self._next_heartbeat_s = self._next_timesync_s = now_s
         stamp = boot_stamp_us(msg)
         if stamp is not None and self.discovery.boot_time(stamp):
-            self._rebooted()
+            self._rebooted(now_s)
         if kind == "TIMESYNC":
             answer = self.timesync.handle(msg, time.monotonic_ns())
             if answer is not None:
@@ -235,7 +236,7 @@ class AutopilotCompanion:
         self.conn.send(msg)
         self.counters[f"feed_{msg.get_type().lower()}_sent"] += 1
 
-    def _rebooted(self) -> None:
+    def _rebooted(self, now_s: float) -> None:
         self.counters["autopilot_reboots"] += 1
         if self.nav is not None:
             self.past_nav_counters.update(self.nav.counters())
@@ -243,7 +244,8 @@ class AutopilotCompanion:
         self.epoch += 1
         self._next_series_us = self._next_feed_us = 0
         self.translator.reset()
-        self._ask_streams = True
+        # asked already since it came back (its HEARTBEAT returned first)? then once is enough
+        self._ask_streams = not now_s - self._asked_s < REASK_MIN_S
 
     # -- periodic -----------------------------------------------------------------------------
     def tick(self, now_s: float) -> None:
