@@ -161,3 +161,16 @@ def _nis_with_bounded_r(e, prev, f, r_max):
         s = P[i][0] + 2 * P[i][2] + P[i][7] + r_max
         nis += y * y / s
     return nis
+
+
+def test_frozen_fix_is_rejected_after_the_stated_time():
+    nav = Navigator(CFG, "naive", HOME)
+    nav.push(AttitudeSample(0, np.array([1.0, 0.0, 0.0, 0.0])))
+    for k in range(0, 61):  # 3 s of the same position at 5 Hz, then a new one
+        t = k * 50_000
+        nav.push(ImuSample(t, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
+        if k % 4 == 0:
+            nav.push(_fix(t, (0.0, 0.0, 0.0) if k < 60 else (0.05, 0.0, 0.0)))
+    c = nav.counters()
+    # fixes at 0, 0.2, ... 2.8 s: those more than 2 s after the first (2.2 ... 2.8 s) are frozen
+    assert c["gnss_rejected_frozen"] == 4 and c["gnss_fused"] == 12
