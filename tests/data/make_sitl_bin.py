@@ -100,7 +100,8 @@ def fly(mav: mavutil.mavfile, hover_s: float) -> None:
     for _ in range(60):
         command(mav, mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
         ack = mav.recv_match(type="COMMAND_ACK", blocking=True, timeout=2)
-        if ack is not None and ack.command == mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM and ack.result == 0:
+        arm = mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+        if ack is not None and ack.command == arm and ack.result == 0:
             break
         time.sleep(0.5)
     else:
