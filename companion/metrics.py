@@ -5,8 +5,9 @@ Pure numeric core shared by ``beliefnav replay`` and the live companion: no I/O.
 :class:`PositionErrors` matches a reference stream to an estimate stream online, both in the
 same local NED frame and in arrival order: each reference sample is compared with the estimate
 linearly interpolated to the reference's time, once the estimates have passed that time.
-Memory: a short window of recent estimates (``window_us``) plus three floats per matched
-reference. :func:`error_statistics` reduces the error vectors to the summary block
+Memory: a short window of recent estimates (``window_us``) plus three float32 per matched
+reference (exact medians need the values; 0.8 MB for 18 hours of 5 Hz fixes).
+:func:`error_statistics` reduces the error vectors to the summary block
 ``{n, alignment, offset_ned_m, error_horizontal_m, error_3d_m}`` (each ``median, p95, max,
 rmse, iqr, n``).
 
@@ -64,6 +65,45 @@ def error_statistics(err_ned_m: np.ndarray, alignment: str = "geodetic") -> dict
     }
 
 
+class Distribution:
+    """Summary of a stream of values in bounded memory: exact count, mean, min, max and last
+    value; quantiles from a histogram of ``bins`` bins over [lo, hi] (linear or logarithmic),
+    exact to half a bin (values outside [lo, hi] fall into the end bins)."""
+
+    def __init__(self, lo: float, hi: float, bins: int, log: bool = False) -> None:
+        self.lo, self.hi, self.log = lo, hi, log
+        self._a, self._b = (math.log(lo), math.log(hi)) if log else (lo, hi)
+        self.counts = np.zeros(bins, dtype=np.int64)
+        self.n, self.total, self.min, self.max, self.last = 0, 0.0, math.inf, -math.inf, math.nan
+
+    def add(self, values: np.ndarray) -> None:
+        x = np.asarray(values, dtype=float).ravel()
+        x = x[np.isfinite(x)]
+        if x.size == 0:
+            return
+        self.n += int(x.size)
+        self.total += float(x.sum())
+        self.min, self.max = min(self.min, float(x.min())), max(self.max, float(x.max()))
+        self.last = float(x[-1])
+        y = np.log(np.maximum(x, self.lo)) if self.log else x
+        k = ((y - self._a) / (self._b - self._a) * self.counts.size).astype(np.int64)
+        np.add.at(self.counts, np.clip(k, 0, self.counts.size - 1), 1)
+
+    def quantile(self, q: float) -> float:
+        if self.n == 0:
+            return math.nan
+        k = int(np.searchsorted(np.cumsum(self.counts), q * self.n, side="left"))
+        mid = self._a + (k + 0.5) * (self._b - self._a) / self.counts.size
+        value = math.exp(mid) if self.log else mid
+        return min(max(value, self.min), self.max)
+
+    def summary(self) -> dict[str, float]:
+        if self.n == 0:
+            return {"n": 0}
+        return {"n": self.n, "mean": self.total / self.n, "min": self.min, "p5": self.quantile(0.05),
+                "median": self.quantile(0.5), "max": self.max, "final": self.last}
+
+
 class PositionErrors:
     """Online estimate-vs-reference matching (see module doc).
 
@@ -79,7 +119,7 @@ class PositionErrors:
         self._t: list[int] = []
         self._p: list[tuple[float, float, float]] = []
         self._pending: deque[tuple[int, tuple[float, float, float]]] = deque()
-        self._err = array("d")
+        self._err = array("f")  # float32: 12 bytes per matched reference
         self.unmatched = 0
 
     def add_estimate(self, t_us: int, p_ned_m: Any) -> None:
@@ -126,7 +166,7 @@ class PositionErrors:
 
     def errors_ned_m(self) -> np.ndarray:
         """(n, 3) estimate − reference at the matched reference times."""
-        return np.frombuffer(self._err, dtype=float).reshape(-1, 3).copy()
+        return np.frombuffer(self._err, dtype=np.float32).reshape(-1, 3).astype(float)
 
     def statistics(self, alignment: str = "geodetic") -> dict[str, Any]:
         out = error_statistics(self.errors_ned_m(), alignment)

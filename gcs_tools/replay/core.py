@@ -6,8 +6,8 @@ to a :class:`companion.estimator.Navigator`, the references (the autopilot's own
 and the fixes themselves are compared with the estimate online (:mod:`companion.metrics`).
 
 Streaming: the tlog and DataFlash readers read in blocks; with ``out_dir`` the estimate rows are
-written to ``estimates.csv`` as they come. What is kept grows only by a few floats per estimate
-row (β, NIS) and per reference sample (its error vector).
+written to ``estimates.csv`` as they come; β and NIS are summarised in fixed-size histograms.
+What is kept grows only by the error vector of each reference sample (12 bytes).
 
 Log restarts: a concatenated log (or an autopilot reboot inside one) makes the IMU time jump
 back. A jump of more than ``RESTART_JUMP_US`` confirmed by ``RESTART_CONSENSUS`` consecutive
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import time
-from array import array
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -33,7 +32,7 @@ import numpy as np
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
-from companion.metrics import PositionErrors
+from companion.metrics import Distribution, PositionErrors
 from gcs_tools.jsonvalues import plain_json
 from gcs_tools.replay.events import AUTOPILOT, MIN_FIX_TYPE_3D, TRUTH, LocalReference, LogReader, Reference
 from gcs_tools.replay.logs import open_log
@@ -47,6 +46,11 @@ FEED_CHUNK = 512
 RESTART_JUMP_US = 1_000_000  # IMU time going back by more than this may be a log restart ...
 RESTART_CONSENSUS = 5  # ... once this many IMU samples in a row continue on the new time base
 RESTART_HOLD_MAX = 4096  # events held while deciding; past this the jump is not a restart
+# β and NIS distributions in bounded memory: quantiles exact to half a bin (β: 5e-5;
+# NIS: 0.05 % relative, log bins from 1e-6 to 1e6)
+BETA_BINS = 10_000
+NIS_RANGE = (1e-6, 1e6)
+NIS_BINS = 27_640
 CSV_COLUMNS = (
     "t_s", "p_n_m", "p_e_m", "p_d_m", "v_n_m_s", "v_e_m_s", "v_d_m_s", "b_n_m", "b_e_m", "b_d_m",
     "beta", "nis",
@@ -182,8 +186,8 @@ class _Run:
         self.first_imu_us: int | None = None
         self.last_imu_us: int | None = None
         self.rows = 0
-        self.beta = array("d")
-        self.nis = array("d")
+        self.beta = Distribution(0.0, 1.0, BETA_BINS)
+        self.nis = Distribution(*NIS_RANGE, NIS_BINS, log=True)
         self.next_row_us = -1
         self.estimator_s = 0.0
 
@@ -217,8 +221,8 @@ class _Run:
         comparisons = self.comparisons
         for e in estimates:
             comparisons.estimate(e.t_us, e.p_ned_m)
-            self.beta.append(e.beta)
-            self.nis.append(e.nis)
+        self.beta.add(np.array([e.beta for e in estimates]))
+        self.nis.add(np.array([e.nis for e in estimates]))
         self.rows += len(estimates)
 
     def imu_time(self, t_us: int) -> None:
@@ -260,16 +264,6 @@ def parse_home(text: str) -> LocalNedFrame:
     if not (-90 <= lat <= 90 and -180 <= lon <= 180 and math.isfinite(alt)):
         raise UserError(f"--home {text!r}: latitude/longitude out of range")
     return LocalNedFrame(lat, lon, alt)
-
-
-def _distribution(values: array[float]) -> dict[str, float]:
-    x = np.frombuffer(values, dtype=float) if len(values) else np.zeros(0)
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return {"n": 0}
-    p5, p50 = np.percentile(x, [5.0, 50.0])
-    return {"n": int(x.size), "mean": float(x.mean()), "min": float(x.min()), "p5": float(p5),
-            "median": float(p50), "max": float(x.max()), "final": float(x[-1])}
 
 
 def replay(
@@ -346,8 +340,8 @@ def replay(
         "log_restarts": restarts,
         "segments": run.segments,
         "estimates": run.rows,
-        "beta": _distribution(run.beta),
-        "nis": _distribution(run.nis),
+        "beta": run.beta.summary(),
+        "nis": run.nis.summary(),
         "errors": comparisons.summary(reader),
         "timing_s": {"read_decode_output": wall_s - estimator_s, "estimator": estimator_s},
         "wall_s": wall_s,

@@ -91,12 +91,21 @@ class _Layout:
             raise UserError(f"{path}: DataFlash message {fmt.name} has no field {missing[0]} "
                             f"(its fields: {','.join(fmt.columns)})")
         self.index = tuple(fmt.colhash[f] for f in wanted)
-        self.scale = tuple(fmt.msg_mults[i] for i in self.index)
+        # scaled as DFReader does: divide by 1/m for m < 1 (1e-7 degrees, centi-units: exact
+        # decimal results), multiply otherwise
+        self.divisor = tuple(None if m is None else (1 / m if 0 < m < 1 else 1 / m)
+                             for m in (fmt.msg_mults[i] for i in self.index))
+        self.multiplier = tuple(None if m is None or 0 < m < 1 else m
+                                for m in (fmt.msg_mults[i] for i in self.index))
         inst = INSTANCE_FIELD.get(fmt.name)
         self.instance = fmt.colhash.get(inst) if inst else None
 
     def values(self, raw: tuple[Any, ...]) -> list[Any]:
-        return [raw[i] if s is None else raw[i] * s for i, s in zip(self.index, self.scale, strict=True)]
+        out = []
+        for i, d, m in zip(self.index, self.divisor, self.multiplier, strict=True):
+            v = raw[i]
+            out.append(v if d is None else v * m if m is not None else v / d)
+        return out
 
 
 class DataFlashScanner:

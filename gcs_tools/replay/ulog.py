@@ -128,12 +128,10 @@ class ULogSource:
     def _fixes(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Arrival times and the GnssFix columns of every logged fix."""
         g = self._topic(GNSS_TOPIC)
-        if g.has("latitude_deg"):
-            lat, lon = g.field("latitude_deg").astype(float), g.field("longitude_deg").astype(float)
-            alt = g.field("altitude_msl_m").astype(float)
-        else:
-            lat, lon = g.field("lat") * 1e-7, g.field("lon") * 1e-7
-            alt = g.field("alt") * 1e-3
+        newer = g.has("latitude_deg")  # newer PX4: degrees and metres; older: 1e-7 deg and mm
+        lat = g.field("latitude_deg", "lat").astype(float) * (1.0 if newer else 1e-7)
+        lon = g.field("longitude_deg", "lon").astype(float) * (1.0 if newer else 1e-7)
+        alt = g.field("altitude_msl_m", "alt").astype(float) * (1.0 if newer else 1e-3)
         t_arrival = g.data["timestamp"].astype(np.int64)
         ts = g.data.get("timestamp_sample")
         delay_ms = self._params.get("EKF2_GPS_DELAY", DEFAULT_EKF2_GPS_DELAY_MS)
