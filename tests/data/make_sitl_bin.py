@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import struct
 import subprocess
 import tempfile
 import time
 from pathlib import Path
 
 from pymavlink import mavutil
+from pymavlink.DFReader import FORMAT_TO_STRUCT
 
 HOME = "-35.363261,149.165230,584,353"  # ArduPilot's autotest home (CMAC, Canberra)
 # Loop-rate IMU and attitude (IMU_FAST, ATTITUDE_FAST on top of the default bitmask), logging
@@ -60,10 +62,8 @@ def trim(src: Path, dst: Path, keep: frozenset[str]) -> tuple[int, int]:
             lengths[mtype] = (mname, mlen)
             if mname in FIRST_ONLY:
                 k = cols.index(FIRST_ONLY[mname])
-                sizes = {"Q": 8, "q": 8, "B": 1, "b": 1, "f": 4, "i": 4, "I": 4, "L": 4, "h": 2,
-                         "H": 2, "c": 2, "C": 2, "e": 4, "E": 4, "n": 4, "N": 16, "Z": 64, "M": 1,
-                         "d": 8}
-                instance_offset[mtype] = 3 + sum(sizes[c] for c in fmt[:k])
+                layout = "<" + "".join(FORMAT_TO_STRUCT[c][0] for c in fmt[:k])
+                instance_offset[mtype] = 3 + struct.calcsize(layout)
         k = instance_offset.get(data[pos + 2])
         if name in keep and (k is None or msg[k] == 0):
             out += msg
