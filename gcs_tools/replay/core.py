@@ -81,25 +81,32 @@ def default_navigator(
     return Navigator(config or EstimatorConfig(), method=method, frame=frame)
 
 
-def _row(est: NavEstimate, segment: int) -> list[float]:
-    return [*est.p_ned_m, *est.v_ned_m_s, *est.b_ned_m, est.beta, est.nis, *est.cov_diag, segment]
+def _rows(estimates: list[NavEstimate], segment: int) -> np.ndarray:
+    """(n, len(CSV_COLUMNS) - 1): the CSV columns after t_s."""
+    e = estimates
+    return np.column_stack((
+        np.array([x.p_ned_m for x in e]), np.array([x.v_ned_m_s for x in e]),
+        np.array([x.b_ned_m for x in e]), np.array([(x.beta, x.nis) for x in e]),
+        np.array([x.cov_diag for x in e]),
+        np.full(len(e), float(segment)),
+    )).astype(float)
 
 
 class _MemorySink:
     """Keeps the rows (API callers that want the arrays)."""
 
     def __init__(self) -> None:
-        self.t_us: list[int] = []
-        self.rows: list[list[float]] = []
+        self.t_us: list[np.ndarray] = []
+        self.rows: list[np.ndarray] = []
 
-    def write(self, t_us: list[int], rows: list[list[float]]) -> None:
-        self.t_us.extend(t_us)
-        self.rows.extend(rows)
+    def write(self, t_us: np.ndarray, rows: np.ndarray) -> None:
+        self.t_us.append(t_us)
+        self.rows.append(rows)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        t = np.array(self.t_us, dtype=np.int64)
-        table = np.array(self.rows, dtype=float).reshape(-1, len(CSV_COLUMNS) - 1)
-        return t, table
+        if not self.rows:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, len(CSV_COLUMNS) - 1))
+        return np.concatenate(self.t_us), np.concatenate(self.rows)
 
     def close(self) -> None:
         pass
@@ -112,14 +119,14 @@ class _CsvSink:
         self.path = path
         self._file: IO[str] | None = None
 
-    def write(self, t_us: list[int], rows: list[list[float]]) -> None:
-        if not rows:
+    def write(self, t_us: np.ndarray, rows: np.ndarray) -> None:
+        if not rows.size:
             return
         if self._file is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = open(self.path, "w")  # noqa: SIM115 - closed by close()
             self._file.write(",".join(CSV_COLUMNS) + "\n")
-        table = np.column_stack((np.array(t_us, dtype=float) / 1e6, np.array(rows, dtype=float)))
+        table = np.column_stack((t_us / 1e6, rows))
         np.savetxt(self._file, table, delimiter=",", fmt="%.9g")
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
@@ -131,13 +138,19 @@ class _CsvSink:
 
 
 class _Comparisons:
-    """Online error statistics against the fixes and the log's references."""
+    """Online error statistics against the fixes and the log's references.
+
+    Geodetic positions are converted into the frame in batches (one vectorised geodesy call per
+    ``BATCH`` positions or per feed), not one by one."""
+
+    BATCH = 32
 
     def __init__(self, frame: LocalNedFrame) -> None:
         self.frame = frame
         self.gnss = PositionErrors()
         self.geodetic: dict[str, PositionErrors] = {}
         self.local: dict[str, PositionErrors] = {}
+        self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
 
     def estimate(self, t_us: int, p_ned_m: Any) -> None:
         self.gnss.add_estimate(t_us, p_ned_m)
@@ -146,21 +159,38 @@ class _Comparisons:
 
     def fix(self, fix: GnssFix) -> None:
         if fix.fix_type >= MIN_FIX_TYPE_3D:
-            p_ned_m = self.frame.to_ned_m(fix.lat_deg, fix.lon_deg, fix.alt_m)
-            self.gnss.add_reference(fix.t_validity_us, p_ned_m)
+            self._geodetic(self.gnss, fix.t_validity_us, fix.lat_deg, fix.lon_deg, fix.alt_m)
 
     def reference(self, ref: Reference | LocalReference) -> None:
         if type(ref) is Reference:
-            m = self.geodetic.setdefault(ref.kind, PositionErrors())
-            m.add_reference(ref.t_us, self.frame.to_ned_m(ref.lat_deg, ref.lon_deg, ref.alt_m))
+            m = self.geodetic.get(ref.kind)
+            if m is None:
+                m = self.geodetic[ref.kind] = PositionErrors()
+            self._geodetic(m, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
         else:
             self.local.setdefault(ref.kind, PositionErrors()).add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
 
+    def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
+        self._queue.append((m, t_us, lat, lon, alt))
+        if len(self._queue) >= self.BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        queue, self._queue = self._queue, []
+        if not queue:
+            return
+        lla = np.array([q[2:] for q in queue], dtype=float)
+        ned = self.frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
+        for (m, t_us, *_), p in zip(queue, ned, strict=True):
+            m.add_reference(t_us, p)
+
     def restart(self) -> None:
+        self.flush()
         for m in (self.gnss, *self.geodetic.values(), *self.local.values()):
             m.restart()
 
     def summary(self, reader: LogReader) -> dict[str, Any]:
+        self.flush()
         out = {"gnss": {"source": reader.sources.get("gnss"), "note": GNSS_NOTE, **self.gnss.statistics()}}
         for kind in (AUTOPILOT, TRUTH):
             info = reader.references.get(kind)
@@ -214,15 +244,17 @@ class _Run:
         samples.clear()
         if out:
             self._rows(out)
+        self.comparisons.flush()
 
     def _rows(self, estimates: list[NavEstimate]) -> None:
-        seg = self.segment
-        self.sink.write([e.t_us for e in estimates], [_row(e, seg) for e in estimates])
+        t_us = np.array([e.t_us for e in estimates], dtype=np.int64)
+        rows = _rows(estimates, self.segment)
+        self.sink.write(t_us, rows)
         comparisons = self.comparisons
         for e in estimates:
             comparisons.estimate(e.t_us, e.p_ned_m)
-        self.beta.add(np.array([e.beta for e in estimates]))
-        self.nis.add(np.array([e.nis for e in estimates]))
+        self.beta.add(rows[:, 9])
+        self.nis.add(rows[:, 10])
         self.rows += len(estimates)
 
     def imu_time(self, t_us: int) -> None:
@@ -378,10 +410,18 @@ def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
         if len(chunk) >= FEED_CHUNK:
             run.feed(chunk)
 
+    feed_chunk = FEED_CHUNK
     for ev in reader:
         count += 1
         if progress is not None and count % 4096 == 0:
             progress(stats.position, stats.size)
+        kind = type(ev)
+        if not held and kind is not ImuSample and kind is not GnssFix and kind is not Reference \
+                and kind is not LocalReference:  # attitude: the common case, inline
+            chunk.append(ev)
+            if len(chunk) >= feed_chunk:
+                run.feed(chunk)
+            continue
         if held:
             held.append(ev)
             if type(ev) is ImuSample:
