@@ -342,3 +342,18 @@ def test_bad_ulog_bytes_are_a_user_error(tmp_path: Path) -> None:
     bad.write_bytes(b"ULog\x01\x12\x35" + bytes(50))
     with pytest.raises(UserError):
         core.replay(bad, "naive")
+
+
+def test_an_unreadable_optional_message_is_counted_not_fatal(tmp_path: Path) -> None:
+    """POS without its Lat field: the replay runs, the reason is counted, and the autopilot's
+    estimate comes from EKF3 core 0 (XKF1 about the ORGN origin) instead, as close as POS."""
+    log = tmp_path / "no_pos_lat.bin"
+    data = SITL_BIN.read_bytes()
+    assert data.count(b"TimeUS,Lat,Lng,Alt,RelHomeAlt") == 1
+    log.write_bytes(data.replace(b"TimeUS,Lat,Lng,Alt,RelHomeAlt", b"TimeUS,LaX,Lng,Alt,RelHomeAlt"))
+    s = core.replay(log, "naive").summary
+    assert s["samples_rejected"]["codec"]["pos_unknown_layout"] == 1
+    ap = s["errors"]["autopilot_estimate"]
+    assert ap["source"] == "XKF1+ORGN" and ap["alignment"] == "geodetic" and ap["n"] > 1500
+    assert ap["error_horizontal_m"]["median"] < 0.05 and ap["error_3d_m"]["p95"] < 0.3
+    assert s["errors"]["truth"]["n"] > 1500

@@ -68,6 +68,7 @@ FIELDS = {
     "SIM": ("TimeUS", "Lat", "Lng", "Alt"),
     "PARM": ("Name", "Value"),
 }
+REQUIRED = frozenset({"IMU", "ATT", "GPS"})  # the estimator's inputs; the rest only adds comparisons
 INSTANCE_FIELD = {"IMU": "I", "GPS": "I", "GPA": "I", "XKF1": "C", "NKF1": "C"}
 INFO = {
     "POS": ReferenceInfo("POS", "geodetic", "estimated position vs the autopilot's POS (lat, lon, alt MSL) "
@@ -187,7 +188,13 @@ class DataFlashScanner:
         if struct.calcsize(fmt.msg_struct) + 3 != mlen:
             self.stats.rejected["fmt_length_mismatch"] += 1
             return
-        layouts[mtype] = (name, _Layout(fmt, FIELDS[name], self.path))
+        try:
+            layouts[mtype] = (name, _Layout(fmt, FIELDS[name], self.path))
+        except UserError:
+            if name in REQUIRED:
+                raise
+            # an optional message (references, GPA, parameters) this reader cannot read: counted
+            self.stats.rejected[f"{name.lower()}_unknown_layout"] += 1
 
 
 class DataFlashSource:
