@@ -108,14 +108,15 @@ class PositionErrors:
     """Online estimate-vs-reference matching (see module doc).
 
     ``add_estimate(t_us, p_ned_m)`` in non-decreasing time; ``add_reference(t_us, p_ned_m)`` in
-    any order within the window. A reference older than the first estimate (or than the window)
-    or newer than the last estimate at the end is not compared (counted in ``unmatched``).
+    any order within the window. A reference older than the first estimate (or than the window),
+    newer than the last estimate at the end, or between two estimates more than ``max_gap_us``
+    apart is not compared (counted in ``unmatched``).
     ``restart()`` starts a new time base (a log restart): pending references are dropped as
     unmatched, collected errors are kept.
     """
 
-    def __init__(self, window_us: int = DEFAULT_WINDOW_US) -> None:
-        self.window_us = window_us
+    def __init__(self, window_us: int = DEFAULT_WINDOW_US, max_gap_us: int | None = None) -> None:
+        self.window_us, self.max_gap_us = window_us, max_gap_us
         self._t: list[int] = []
         self._p: list[tuple[float, float, float]] = []
         self._pending: deque[tuple[int, tuple[float, float, float]]] = deque()
@@ -153,6 +154,9 @@ class PositionErrors:
             q = self._p[i]
         else:
             t0, t1 = t[i - 1], t[i]
+            if self.max_gap_us is not None and t1 - t0 > self.max_gap_us:
+                self.unmatched += 1  # no estimate for a while (e.g. an IMU dropout): not compared
+                return
             w = (t_us - t0) / (t1 - t0)
             q0, q1 = self._p[i - 1], self._p[i]
             q = (q0[0] + w * (q1[0] - q0[0]), q0[1] + w * (q1[1] - q0[1]), q0[2] + w * (q1[2] - q0[2]))

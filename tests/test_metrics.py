@@ -50,6 +50,15 @@ def test_references_outside_the_estimates_are_not_compared() -> None:
     assert s["n"] == 1 and s["unmatched"] == 3 and s["error_3d_m"]["max"] == pytest.approx(0, abs=1e-6)
 
 
+def test_references_across_a_gap_in_the_estimates_are_not_compared() -> None:
+    m = PositionErrors(max_gap_us=300_000)
+    for t in (0, 100_000, 900_000, 1_000_000):
+        m.add_estimate(t, _ramp(t))
+    for t in (50_000, 500_000, 950_000):
+        m.add_reference(t, _ramp(t))
+    assert m.statistics()["n"] == 2 and m.unmatched == 1
+
+
 def test_restart_keeps_the_errors_and_takes_a_new_time_base() -> None:
     m = PositionErrors()
     for t in (0, 100_000):

@@ -51,6 +51,8 @@ RESTART_HOLD_MAX = 4096  # events held while deciding; past this the jump is not
 BETA_BINS = 10_000
 NIS_RANGE = (1e-6, 1e6)
 NIS_BINS = 27_640
+# a reference between two estimate rows further apart than this (an IMU dropout) is not compared
+MAX_GAP_US = 1_000_000
 CSV_COLUMNS = (
     "t_s", "p_n_m", "p_e_m", "p_d_m", "v_n_m_s", "v_e_m_s", "v_d_m_s", "b_n_m", "b_e_m", "b_d_m",
     "beta", "nis",
@@ -145,9 +147,9 @@ class _Comparisons:
 
     BATCH = 32
 
-    def __init__(self, frame: LocalNedFrame) -> None:
-        self.frame = frame
-        self.gnss = PositionErrors()
+    def __init__(self, frame: LocalNedFrame, max_gap_us: int) -> None:
+        self.frame, self.max_gap_us = frame, max_gap_us
+        self.gnss = PositionErrors(max_gap_us=max_gap_us)
         self.geodetic: dict[str, PositionErrors] = {}
         self.local: dict[str, PositionErrors] = {}
         self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
@@ -165,10 +167,13 @@ class _Comparisons:
         if type(ref) is Reference:
             m = self.geodetic.get(ref.kind)
             if m is None:
-                m = self.geodetic[ref.kind] = PositionErrors()
+                m = self.geodetic[ref.kind] = PositionErrors(max_gap_us=self.max_gap_us)
             self._geodetic(m, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
         else:
-            self.local.setdefault(ref.kind, PositionErrors()).add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
+            m = self.local.get(ref.kind)
+            if m is None:
+                m = self.local[ref.kind] = PositionErrors(max_gap_us=self.max_gap_us)
+            m.add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
 
     def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
         self._queue.append((m, t_us, lat, lon, alt))
@@ -336,8 +341,9 @@ def replay(
         return navigator(method, frame) if navigator is not None else default_navigator(method, frame, config)
 
     sink: _MemorySink | _CsvSink = _MemorySink() if out_dir is None else _CsvSink(out_dir / "estimates.csv")
-    comparisons = _Comparisons(frame)
-    run = _Run(make_nav, int(1e6 / rate_hz) if rate_hz > 0 else 0, sink, comparisons, on_imu)
+    period_us = int(1e6 / rate_hz) if rate_hz > 0 else 0
+    comparisons = _Comparisons(frame, max(MAX_GAP_US, 4 * period_us))
+    run = _Run(make_nav, period_us, sink, comparisons, on_imu)
     try:
         restarts = _stream(reader, run, comparisons, progress)
     finally:
