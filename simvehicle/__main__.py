@@ -38,11 +38,11 @@ def main(argv: list[str] | None = None) -> int:
     from companion.errors import UserError
     from companion.mavlink.udp_link import link_settings
     from companion.mission import load_mission
-    from companion.runtime import exit_on_sigterm, write_json
+    from companion.runtime import exit_on_sigterm
     from companion.telemetry.pubsub import publisher_from_args
     from simvehicle import SimVehicle
     from simvehicle.node import VehicleNode, VehicleNodeConfig
-    from simvehicle.recording import FlightRecorder
+    from simvehicle.recording import SPOOL_NAME, FlightRecorder
 
     exit_on_sigterm()
     node = None
@@ -50,8 +50,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         mission = load_mission(args.mission, args.scenario)
         sim = SimVehicle(mission, args.profile, args.seed)
+        args.out.mkdir(parents=True, exist_ok=True)
         recorder = FlightRecorder(args.goal_ned_m, args.goal_radius_m, args.goal_speed_m_s,
-                                  args.arrive_after_s)
+                                  args.arrive_after_s, spool_path=args.out / SPOOL_NAME)
         fields, rng = link_settings(args)
         config = VehicleNodeConfig(
             estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,
@@ -70,8 +71,9 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         if node is not None:
+            result.setdefault("t_s", node.t_us / 1e6)
             node.close()
-            write_json(args.out / "vehicle.json", {**result, **node.stats()})
+            node.write_stats(result)
     return 0
 
 

@@ -62,7 +62,12 @@ class EstimatorConfig:
 
     # --- belief adaptation (eq. 15-21)
     theta0: float = 0.0  # initial belief logit (β0 = 0.5: undecided)
-    theta_max: float = 6.0  # |θ| clamp, keeps β in [0.0025, 0.9975] so the sigmoid never freezes
+    theta_max: float = 6.0  # θ ≤ this: β ≤ 0.9975, so the sigmoid never freezes at full trust
+    # θ ≥ this: β ≥ 0.047. The θ-gradient carries β(1 − β), 0.0025 at θ = −6: a belief that low
+    # takes minutes to come back (first-order stayed at 0.007 through 40 s of clean GNSS after
+    # 60 s of 3 m multipath); at −3 the factor is 18× larger and it recovers in ~10 s (tested).
+    # R(β) and σ_b(β) differ by < 5 % between the two floors.
+    theta_min: float = -3.0
     eta: float = 0.15  # paper: learning rate of the damped Newton step (eq. 20)
     lambda_reg: float = 0.1  # paper: Newton step regulariser λ_reg (eq. 20)
     alpha_fast: float = 0.5  # fast curvature accumulator decay per fix (eq. 18), 0 < α_f ≪ α_s
@@ -90,6 +95,14 @@ class EstimatorConfig:
     # The position is flagged invalid (NavEstimate.pos_valid False) when no fix was fused for
     # longer than this (time of the estimate − validity of the last fused fix). EKF2_NOAID_TOUT.
     pos_valid_timeout_s: float = 5.0
+    # A fix repeating exactly (lat, lon, alt) a position first received more than gnss_frozen_s
+    # earlier, the estimated horizontal speed having exceeded gnss_frozen_speed_m_s since, is a frozen
+    # receiver output: rejected and counted (gnss_rejected_frozen). The vehicle should have moved
+    # 1 m, 10x the 1e-6 degree resolution of quad106's fixes, which repeat at most 5 fixes (0.8 s)
+    # in a row; a vehicle at rest may repeat for ever and is never rejected. A frozen fix while
+    # moving drags the estimate back (neither EKF2 nor EKF3 checks this).
+    gnss_frozen_s: float = 2.0
+    gnss_frozen_speed_m_s: float = 0.5
     # Largest R any method may use, as a multiple of the fix's nominal variance (R_nom, or the
     # receiver-reported accuracy): bounds what adaptive and vbakf learn (10× the nominal std).
     r_learned_max_factor: float = 100.0
@@ -108,12 +121,15 @@ class EstimatorConfig:
             "sigma_gnss_horizontal_m", "sigma_gnss_vertical_m", "sigma_velocity0_m_s",
             "sigma_bias0_m", "imu_hold_max_s", "theta_max", "eta", "lambda_reg", "student_dof",
             "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor", "gnss_gate_sigma",
-            "gnss_reset_timeout_s", "pos_valid_timeout_s",
+            "gnss_reset_timeout_s", "pos_valid_timeout_s", "gnss_frozen_s",
+            "gnss_frozen_speed_m_s",
         )
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {value!r}")
+        if not self.theta_min < self.theta0 < self.theta_max:
+            raise ValueError("theta_min, theta0, theta_max: need theta_min < theta0 < theta_max")
         if self.history_s < 1.5:
             raise ValueError(f"history_s: must be >= 1.5 s, got {self.history_s}")
         k_max = self.r_learned_max_factor
