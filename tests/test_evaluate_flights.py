@@ -30,11 +30,15 @@ def test_flight_stats_known_answers():
 
 def test_stratified_bootstrap_resamples_within_strata():
     rng = np.random.default_rng(0)
-    strata = np.array([0, 0, 0, 1, 1, 5])
+    strata = np.array([0, 0, 0, 1, 1, 5, 5])
     idx = stats.stratified_indices(strata, rng, 500)
-    assert idx.shape == (500, 6)
+    assert idx.shape == (500, 7)
     counts = np.stack([(strata[idx] == s).sum(axis=1) for s in (0, 1, 5)], axis=1)
-    assert (counts == [3, 2, 1]).all()  # every resample keeps each profile's number of flights
+    assert (counts == [3, 2, 2]).all()  # every resample keeps each profile's number of flights
+    # one flight per profile: nothing to resample within a profile, so flights are resampled together
+    single = stats.stratified_indices(np.arange(6), rng, 500)
+    assert len({tuple(r) for r in single.tolist()}) > 400
+    strata = strata[:6]
     # a constant sample has a zero-width interval; a shifted one moves by the shift
     m, lo, hi = stats.mean_ci(np.full(6, 2.0), strata, rng)
     assert (m, lo, hi) == (2.0, 2.0, 2.0)

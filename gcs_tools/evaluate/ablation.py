@@ -179,6 +179,10 @@ def severity(rows: Sequence[Row], levels: Sequence[float], profiles: Sequence[in
                  for r in rows if r.label != base}
         entry[base] = {"mean_m": _score(res, base)}
         table["levels"][str(s)] = entry
+        table.setdefault("flights", {})[str(s)] = {  # profile/seed -> score, to recompute from
+            r.label: {f"{k[0]}/{k[1]}": v[SCORE] for k, v in flights.table_of(res, r.label).items()}
+            for r in rows
+        }
         cells = [f"{k} {v.get('ratio', v.get('mean_m')):.3f}" for k, v in entry.items()]
         print(f"severity {s}: " + ", ".join(cells), flush=True)
     table["wall_s"] = round(time.perf_counter() - t0, 1)

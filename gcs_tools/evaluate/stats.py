@@ -190,8 +190,15 @@ def flight_stats(series: Mapping[str, np.ndarray]) -> dict[str, float]:
 
 def stratified_indices(strata: np.ndarray, rng: np.random.Generator, n_resamples: int) -> np.ndarray:
     """(n_resamples, n) bootstrap indices that resample units WITHIN each stratum (e.g. seeds within
-    each mission profile: the profiles are a fixed design, the seeds are the random sample)."""
+    each mission profile: the profiles are a fixed design, the seeds are the random sample).
+
+    A stratum of one unit has no within-stratum spread to resample: when any stratum has a single
+    unit (one seed per profile), all units are resampled together instead (profiles then count as
+    the random sample), so the interval is not a false zero width."""
     strata = np.asarray(strata)
+    _, counts = np.unique(strata, return_counts=True)
+    if counts.size and counts.min() < 2:
+        return rng.integers(0, strata.size, size=(n_resamples, strata.size))
     cols = []
     for s in np.unique(strata):
         members = np.flatnonzero(strata == s)
