@@ -275,7 +275,10 @@ class FusionEngine:
             R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
         # the gate: horizontal NIS (2 dof) and vertical NIS (1 dof) against gate², R floored
         g = self._gate_r_min
-        s0, s1, s2 = hph[0] + max(R[0], g), hph[1] + max(R[1], g), hph[2] + max(R[2], g)
+        r0, r1, r2 = R
+        s0 = hph[0] + (r0 if r0 > g else g)
+        s1 = hph[1] + (r1 if r1 > g else g)
+        s2 = hph[2] + (r2 if r2 > g else g)
         nis_h = y[0] * y[0] / s0 + y[1] * y[1] / s1
         nis_v = y[2] * y[2] / s2
         ratio = nis_h / self._gate2
