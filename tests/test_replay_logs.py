@@ -20,9 +20,10 @@ from companion.mavlink import tlog as tlog_module
 from companion.mavlink.tlog import TlogReader, TlogWriter
 from gcs_tools.cli import main
 from gcs_tools.replay import core, dataflash
+from gcs_tools.replay import ulog as ulog_module
 from gcs_tools.replay.dataflash import DataFlashScanner, DataFlashSource
 from gcs_tools.replay.events import ReaderStats
-from gcs_tools.replay.logs import detect_format
+from gcs_tools.replay.logs import detect_format, open_log
 
 DATA = Path(__file__).parent / "data"
 SITL_BIN = DATA / "arducopter_sitl_hover.bin"
@@ -242,6 +243,22 @@ def test_readers_stream_the_file(tmp_path: Path, kind: str, monkeypatch: pytest.
             consumed[0].set()
     writer.join(5)
     assert count > 2000 and consumed[0].is_set()
+
+
+@pytest.mark.parametrize("log", [QUAD106, SITL_BIN, PX4_NEW])
+def test_every_reader_yields_before_it_has_read_the_file(log: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A generator over the file: after the first 2000 events, less than half of the
+    file has been read (the ULog reader's definitions are read first, then data in batches)."""
+    monkeypatch.setattr(tlog_module, "READ_BLOCK", 4096)
+    monkeypatch.setattr(dataflash, "READ_BLOCK", 4096)
+    monkeypatch.setattr(ulog_module, "BATCH", 256)
+    reader = open_log(log)
+    events = iter(reader)
+    for _ in range(2000):
+        next(events)
+    assert 0 < reader.stats.position < reader.stats.size / 2, (reader.stats.position, reader.stats.size)
+    rest = sum(1 for _ in events)
+    assert rest > 5000 and reader.stats.position == reader.stats.size
 
 
 def test_block_boundaries_change_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
