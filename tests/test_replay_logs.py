@@ -374,3 +374,18 @@ def test_an_unreadable_optional_message_is_counted_not_fatal(tmp_path: Path) -> 
     assert ap["source"] == "XKF1+ORGN" and ap["alignment"] == "geodetic" and ap["n"] > 1500
     assert ap["error_horizontal_m"]["median"] < 0.05 and ap["error_3d_m"]["p95"] < 0.3
     assert s["errors"]["truth"]["n"] > 1500
+
+
+def test_damaged_ulog_is_read_around_the_damage(tmp_path: Path) -> None:
+    """Bytes overwritten in the ULog data section: counted as skipped, the replay still runs on
+    what is readable (to the next sync message, or to the damage when there is none)."""
+    data = bytearray(PX4_NEW.read_bytes())
+    at = int(len(data) * 0.8)
+    data[at:at + 64] = b"\xee" * 64
+    bad = tmp_path / "damaged.ulg"
+    bad.write_bytes(bytes(data))
+    s = core.replay(bad, "second-order").summary
+    whole = core.replay(PX4_NEW, "second-order").summary
+    skipped = s["samples_rejected"]
+    assert sum(skipped["reader"].values()) >= 1 and skipped["reader_skipped_bytes"] > 0
+    assert 0.5 * whole["samples_used"]["imu"] < s["samples_used"]["imu"] <= whole["samples_used"]["imu"]
