@@ -6,7 +6,8 @@ CRC (x25 / MCRF4XX with the message's CRC_EXTRA, via ``fastcrc``) and unpacks on
 types asked for into light tuple views with the message's field names (what the decoders of
 :mod:`companion.mavlink.codec` read). A damaged log is read as far as it is readable:
 the reader resynchronises on the next frame whose CRC checks, and counts what it skipped by
-reason (``bad_crc``, ``bad_length``, ``garbage``, ``unknown_msgid``, ``truncated``).
+reason (``bad_crc``, ``bad_length``, ``garbage``, ``unknown_msgid``, ``truncated``, and
+``bad_stamp`` for an arrival stamp beyond int64).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from companion.mavlink.frames import (
 STAMP_BYTES = 8
 READ_BLOCK = 1 << 20  # bytes read at a time
 MAX_RECORD = STAMP_BYTES + HEADER_V2 + 255 + 2 + SIGNATURE_BYTES  # the longest stamped frame
+MAX_STAMP_US = 2**63 - 1  # arrival stamps are int64 µs (numpy, JSON and every consumer)
 
 
 class TlogWriter:
@@ -115,7 +117,10 @@ class TlogReader:
                 if wanted is None or msgid in wanted:
                     stamp = int.from_bytes(data[pos : pos + STAMP_BYTES], "big")
                     self.position = base + end
-                    yield stamp, spec.view(full_payload(spec, body))
+                    if stamp > MAX_STAMP_US:  # not an int64 µs time: counted, never passed on
+                        self._skip("bad_stamp", end - pos)
+                    else:
+                        yield stamp, spec.view(full_payload(spec, body))
                 pos = end
         if lost_at >= 0:
             self._skip(lost_reason, self.size - lost_at)
