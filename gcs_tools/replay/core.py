@@ -125,8 +125,12 @@ class _CsvSink:
         if not rows.size:
             return
         if self._file is None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "w")  # noqa: SIM115 - closed by close()
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self._file = open(self.path, "w")  # noqa: SIM115 - closed by close()
+            except OSError as exc:
+                raise UserError(f"--out {self.path.parent}: cannot write {self.path.name}: "
+                                f"{exc.strerror or exc}") from None
             self._file.write(",".join(CSV_COLUMNS) + "\n")
         table = np.column_stack((t_us / 1e6, rows))
         np.savetxt(self._file, table, delimiter=",", fmt="%.9g")
