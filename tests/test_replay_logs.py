@@ -389,3 +389,11 @@ def test_damaged_ulog_is_read_around_the_damage(tmp_path: Path) -> None:
     skipped = s["samples_rejected"]
     assert sum(skipped["reader"].values()) >= 1 and skipped["reader_skipped_bytes"] > 0
     assert 0.5 * whole["samples_used"]["imu"] < s["samples_used"]["imu"] <= whole["samples_used"]["imu"]
+
+
+def test_out_below_a_file_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "file"
+    f.write_text("x")
+    assert main(["replay", str(SITL_BIN), "--out", str(f / "sub")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("beliefnav: error: --out ") and "cannot write estimates.csv" in err and "\n" not in err
