@@ -149,13 +149,18 @@ def test_gps_input_is_the_filter_position_with_covariance_accuracy():
 
 def test_odometry_in_the_frames_ardupilot_fuses_velocity_in_body_frd():
     q = euler_to_quaternion(0.0, 0.0, math.pi / 2)  # nose east
-    msg = feeds.odometry(_estimate((1.0, 2.0, -3.0), v=(0.0, 4.0, 0.0)), q, np.array((0.0, 0.0, 0.1)))
+    config = feeds.FeedConfig()
+    msg = feeds.odometry(_estimate((1.0, 2.0, -3.0), v=(0.0, 4.0, 0.0)), q, np.array((0.0, 0.0, 0.1)), config)
     assert (msg.frame_id, msg.child_frame_id) == (mavlink.MAV_FRAME_LOCAL_FRD, mavlink.MAV_FRAME_BODY_FRD)
     assert msg.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_VIO and msg.quality == 90
     np.testing.assert_allclose((msg.vx, msg.vy, msg.vz), (4.0, 0.0, 0.0), atol=1e-6)  # flying forward
     assert (msg.x, msg.y, msg.z) == (1.0, 2.0, -3.0) and msg.pose_covariance[0] == pytest.approx(0.04)
-    vis = feeds.vision_position(_estimate((1.0, 2.0, -3.0)), q)
+    assert msg.velocity_covariance[11] == pytest.approx(0.02)
+    assert msg.pose_covariance[15] == pytest.approx(config.attitude_sigma_rad**2)
+    vis = feeds.vision_position(_estimate((1.0, 2.0, -3.0)), q, config)
     assert vis.yaw == pytest.approx(math.pi / 2) and vis.covariance[6] == pytest.approx(0.05)
+    for cov in (msg.pose_covariance, msg.velocity_covariance, vis.covariance):  # ArduPilot: NaN = error
+        assert all(math.isfinite(c) for c in cov) and sum(c != 0 for c in cov) == 6
 
 
 def test_compare_known_offset_and_fitted_translation():

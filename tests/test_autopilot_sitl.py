@@ -8,10 +8,11 @@ import math
 import time
 
 import numpy as np
+import pytest
 from ardupilot_helpers import GroundStation, require_ardupilot, run_companion, stop, tlog_messages
 from pymavlink import mavutil
 
-from gcs_tools.ardupilot.sitl import ArduPilotSitl, SitlConfig
+from gcs_tools.ardupilot.sitl import CANBERRA_HOME, ArduPilotSitl, SitlConfig
 
 M = mavutil.mavlink
 
@@ -150,3 +151,32 @@ def _arm_take_off_and_hold(gcs: GroundStation, altitude_m: float, hold_s: float,
                     break
     state["hold_truth_drift_m"] = drift if truth0 is not None else math.nan
     return state
+
+
+@pytest.mark.parametrize("feed", ["odometry", "vision"])
+def test_arducopter_ekf3_fuses_our_odometry_and_vision_as_external_nav(tmp_path, feed):
+    """ExternalNav (VISO_TYPE 1, EK3_SRC1_POSXY 6): we put our frame's origin 10 m south of the
+    SITL's home, so our position reads 10 m north; EKF3's own local position must follow ours,
+    not its GPS (which it still receives but does not use for position)."""
+    require_ardupilot()
+    out = tmp_path / "companion"
+    params = {"VISO_TYPE": 1, "EK3_SRC1_POSXY": 6, "EK3_SRC1_VELXY": 0, "EK3_SRC1_POSZ": 1, "EK3_SRC1_YAW": 1}
+    lat, lon, alt, _ = CANBERRA_HOME
+    home = f"{lat - 10.0 / 111_132.95:.9f},{lon:.9f},{alt + 0.09:.3f}"  # 10 m south (WGS-84 m per degree)
+    with ArduPilotSitl(SitlConfig(work_dir=tmp_path / "ap", speedup=10, params=params)) as sitl:
+        proc = run_companion(sitl.url, out, "--feed", feed, f"--home={home}", "--duration-s", "8")
+        try:
+            proc.wait(timeout=60)
+        finally:
+            code, err = stop(proc)
+    assert code == 0, err
+    msgs = tlog_messages(out / "run.tlog")
+    texts = [m.text for m in msgs if m.get_type() == "STATUSTEXT"]
+    assert "EKF3 IMU0 is using external nav data" in texts, texts
+    assert not [t for t in texts if "Internal error" in t], texts  # e.g. a NaN covariance
+    s = json.loads((out / "summary.json").read_text())
+    kind = {"odometry": "odometry", "vision": "vision_position_estimate"}[feed]
+    assert s["node"][f"feed_{kind}_sent"] > 100
+    assert abs(s["estimate"]["final_p_ned_m"][0] - 10.0) < 0.5  # our frame: 10 m north of home
+    local = [m for m in msgs if m.get_type() == "LOCAL_POSITION_NED"][-20:]
+    assert len(local) == 20 and all(abs(m.x - 10.0) < 0.5 and abs(m.y) < 0.5 for m in local), local[-1]

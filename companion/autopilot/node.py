@@ -230,9 +230,10 @@ class AutopilotCompanion:
         elif tr.last_attitude is None or tr.last_imu is None:
             return
         elif feed == "vision":
-            msg = feeds.vision_position(est, tr.last_attitude.q_ned_frd)
+            msg = feeds.vision_position(est, tr.last_attitude.q_ned_frd, self.config.feeds)
         else:
-            msg = feeds.odometry(est, tr.last_attitude.q_ned_frd, tr.last_imu.gyro_frd_rad_s)
+            msg = feeds.odometry(est, tr.last_attitude.q_ned_frd, tr.last_imu.gyro_frd_rad_s,
+                                 self.config.feeds)
         self.conn.send(msg)
         self.counters[f"feed_{msg.get_type().lower()}_sent"] += 1
 
