@@ -16,7 +16,7 @@ from companion.autopilot.streams import StreamRates, data_stream_requests, inter
 from companion.autopilot.timesync import Timesync
 from companion.autopilot.translate import TranslateConfig, Translator
 from companion.domain.geodesy import LocalNedFrame
-from companion.domain.samples import GnssFix, ImuSample, NavEstimate
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
 from companion.mavlink.codec import euler_to_quaternion
 
@@ -176,3 +176,85 @@ def test_compare_known_offset_and_fitted_translation():
     np.testing.assert_allclose(fitted["fitted_translation_ned_m"], (-0.3, -0.4, -1.2))
     gap_t = np.concatenate((t[:10], t[-10:]))  # a 9 s hole: nothing compared inside it
     assert compare.compare(gap_t, p[np.r_[:10, -10:0]], ref_t, ref)["error_3d_m"]["count"] < 10
+
+
+class _FakeConn:
+    """Stands in for MavConnection: records what the node sends."""
+
+    def __init__(self) -> None:
+        self.sent: list = []
+        self.counters: dict = {}
+        self.source = (0, 0)
+
+    def send(self, msg) -> None:
+        self.sent.append(msg)
+
+    def set_source(self, system_id: int, component_id: int) -> None:
+        self.source = (system_id, component_id)
+
+    def kinds(self) -> list[str]:
+        kinds = [m.get_type() for m in self.sent]
+        self.sent.clear()
+        return kinds
+
+
+def test_node_streams_state_machine_fallback_and_reask(tmp_path):
+    from companion.autopilot.node import AutopilotCompanion, CompanionConfig
+
+    conn = _FakeConn()
+    node = AutopilotCompanion(CompanionConfig(master="udpin::14550", out_dir=tmp_path), conn)  # type: ignore[arg-type]
+    node.tick(0.0)
+    assert conn.kinds() == []  # nothing before discovery
+    hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
+    node.handle(_from(hb, 3, 1), 0.0)
+    assert conn.source == (3, 197)
+    node.tick(0.0)
+    first = conn.kinds()
+    assert first.count("COMMAND_LONG") == 8 and "HEARTBEAT" in first and "TIMESYNC" in first
+    node.tick(2.0)
+    assert "REQUEST_DATA_STREAM" not in conn.kinds()
+    node.tick(3.5)  # no IMU 3 s after asking: the legacy groups too
+    assert conn.kinds().count("REQUEST_DATA_STREAM") == 4
+    node.tick(4.0)
+    assert "REQUEST_DATA_STREAM" not in conn.kinds()  # once
+    node.handle(_from(hb, 3, 1), 6.4)
+    imu = mavlink.MAVLink_highres_imu_message(1_000_000, 0, 0, -9.8, *[0] * 10, 0b111111, 0)
+    node.handle(_from(imu, 3, 1), 6.5)  # no fix yet: counted, the stream is alive all the same
+    node.tick(6.6)
+    assert "COMMAND_LONG" in conn.kinds()  # still no IMU used after 3 s of silence: asked again
+    assert node.counters["samples_before_first_fix"] == 1 and node.counters["stream_requests"] == 2
+
+
+def test_sitl_estimator_answers_timesync_per_spec_unless_step_markers(tmp_path):
+    """The estimator of ``beliefnav sitl`` treats a TIMESYNC request as a lockstep step marker only
+    with ``--step-markers``; otherwise (a real autopilot, MAVSDK, ...) it just answers it."""
+    from companion.mavlink.lockstep import step_marker
+    from companion.mission import load_mission
+    from companion.nodes.estimator_node import EstimatorNode, make_navigator
+
+    class Link:
+        sent: list = []
+        last_rx_ns = 0
+
+        def send(self, msg) -> None:
+            self.sent.append(msg)
+
+    mission = load_mission("test")
+    navigator, gate = make_navigator(mission, "second-order")
+    level, rest = np.array((1.0, 0.0, 0.0, 0.0)), np.array((0.0, 0.0, -9.80665))
+    home = mission.frame
+    for t_us in range(1_000_000, 1_300_000, 5_000):  # an initialised estimate to answer with
+        navigator.push(AttitudeSample(t_us, level))
+        navigator.push(ImuSample(t_us, rest, np.zeros(3)))
+        if t_us == 1_100_000:
+            navigator.push(GnssFix(t_us, home.home_lat_deg, home.home_lon_deg, home.home_alt_m, 3, 10))
+    assert navigator.estimate() is not None
+    for step_markers in (False, True):
+        link = Link()
+        link.sent = []
+        node = EstimatorNode(link, navigator, gate, step_markers=step_markers)  # type: ignore[arg-type]
+        node.handle(step_marker(1_250_000))
+        kinds = [m.get_type() for m in link.sent]
+        assert kinds == (["ODOMETRY", "TIMESYNC"] if step_markers else ["TIMESYNC"])
+        assert link.sent[-1].ts1 == 1_250_000_000 and link.sent[-1].tc1 > 0
+        assert node.counters == ({"step_markers": 1} if step_markers else {"timesync_answered": 1})
