@@ -28,7 +28,7 @@ from companion.mission import Mission
 from companion.telemetry.pubsub import DeferredPublisher, EstimatorTelemetry, TelemetryPublisher
 
 ESTIMATOR_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
-IGNORED_TYPES = frozenset({"HEARTBEAT", "SIM_STATE", "SYSTEM_TIME", "TIMESYNC"})
+IGNORED_TYPES = frozenset({"HEARTBEAT", "SIM_STATE", "SYSTEM_TIME"})
 MAX_LATENCY_SAMPLES = 200_000
 
 
