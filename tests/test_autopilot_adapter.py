@@ -145,6 +145,10 @@ def test_gps_input_is_the_filter_position_with_covariance_accuracy():
     assert msg.speed_accuracy == pytest.approx(math.sqrt(0.04))
     assert (msg.vn, msg.ve, msg.vd) == (1.0, 2.0, -0.5) and msg.ignore_flags == 0
     assert (msg.time_week, msg.time_week_ms) == (2288, 252_818_000)  # 2023-11-14 22:13:20 UTC + 18 leap s
+    from dataclasses import replace
+
+    stale = feeds.gps_input(replace(e, pos_valid=False), HOME, feeds.FeedConfig())
+    assert stale.fix_type == 0 and stale.horiz_accuracy == 0.0 and stale.satellites_visible == 0  # no fix
 
 
 def test_odometry_in_the_frames_ardupilot_fuses_velocity_in_body_frd():

@@ -67,7 +67,7 @@ def gps_input(e: NavEstimate, frame: LocalNedFrame, config: FeedConfig, hdop: fl
               satellites: int = -1, unix_s: float | None = None) -> mavlink.MAVLink_gps_input_message:
     lat, lon, alt = frame.to_geodetic(np.asarray(e.p_ned_m, dtype=float))
     var = np.asarray(e.cov_diag, dtype=float)
-    valid = bool(getattr(e, "pos_valid", True)) and bool(np.all(np.isfinite(var[:6])))
+    valid = bool(e.pos_valid) and bool(np.all(np.isfinite(var[:6])))
     week, week_ms = gps_time(time.time() if unix_s is None else unix_s)
     hdop = hdop if math.isfinite(hdop) else config.hdop
     return mavlink.MAVLink_gps_input_message(
