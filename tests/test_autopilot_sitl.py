@@ -12,6 +12,7 @@ import pytest
 from ardupilot_helpers import GroundStation, require_ardupilot, run_companion, stop, tlog_messages
 from pymavlink import mavutil
 
+from companion.autopilot.translate import Translator
 from gcs_tools.ardupilot.sitl import CANBERRA_HOME, ArduPilotSitl, SitlConfig
 
 M = mavutil.mavlink
@@ -23,14 +24,19 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
     require_ardupilot()
     out = tmp_path / "companion"
     with ArduPilotSitl(SitlConfig(work_dir=tmp_path / "ap", speedup=10)) as sitl:
-        proc = run_companion(sitl.url, out, "--duration-s", "15")
+        proc = run_companion(sitl.url, out, "--duration-s", "13")
         other = mavutil.mavlink_connection(sitl.wait_serial(1), source_system=42, source_component=190)
+        for msg_id in UNIT_CHECK_IDS:  # on SERIAL1 only: the IMU/attitude in every form, to check units
+            other.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 100_000, *[0] * 5)
+        forms: dict[str, list] = {}
         try:
             start = time.monotonic()
-            while time.monotonic() - start < 8 and proc.poll() is None:
+            while time.monotonic() - start < 7 and proc.poll() is None:
                 # another system on SERIAL1; ArduPilot routes it to SERIAL0
                 other.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-                time.sleep(0.3)
+                deadline = time.monotonic() + 0.3
+                while (m := other.recv_match(blocking=True, timeout=max(deadline - time.monotonic(), 0))):
+                    forms.setdefault(m.get_type(), []).append(m)
             other.close()
             sitl.restart()
             proc.wait(timeout=30)
@@ -58,6 +64,7 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
     assert ts["requests_answered"] >= 1 and ts["responses_used"] >= 1 and ts["rtt_ms"] < 50
     assert s["node"]["autopilot_reboots"] == 1 and s["link"]["reconnects"] == 1
 
+    _same_units(forms)
     msgs = tlog_messages(out / "run.tlog")  # both directions
     ours = [m for m in msgs if (m.get_srcSystem(), m.get_srcComponent()) == (1, 197)]
     theirs = [m for m in msgs if (m.get_srcSystem(), m.get_srcComponent()) == (1, 1)]
@@ -75,6 +82,27 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
     requests = {m.ts1 for m in theirs if m.get_type() == "TIMESYNC" and m.tc1 == 0}
     answers = {m.ts1 for m in ours if m.get_type() == "TIMESYNC" and m.tc1 > 0}
     assert requests and requests <= answers  # every TIMESYNC request of the autopilot answered
+
+
+UNIT_CHECK_IDS = (M.MAVLINK_MSG_ID_HIGHRES_IMU, M.MAVLINK_MSG_ID_RAW_IMU, M.MAVLINK_MSG_ID_SCALED_IMU2,
+                  M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION)
+
+
+def _same_units(forms: dict[str, list]) -> None:
+    """ArduPilot's IMU and attitude in each of their forms, through our translator, agree (at rest):
+    RAW_IMU / SCALED_IMU2 really are mG and mrad/s, ATTITUDE matches ATTITUDE_QUATERNION."""
+    means = {}
+    for kind in ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU2", "ATTITUDE", "ATTITUDE_QUATERNION"):
+        got = forms.get(kind, [])[-20:]
+        assert len(got) >= 10, (kind, sorted(forms))
+        samples = [Translator().sample(m) for m in got]
+        means[kind] = [np.mean([getattr(x, f) for x in samples], axis=0)
+                       for f in (("acc_frd_m_s2", "gyro_frd_rad_s") if "IMU" in kind else ("q_ned_frd",))]
+    for kind in ("RAW_IMU", "SCALED_IMU2"):
+        np.testing.assert_allclose(means[kind][0], means["HIGHRES_IMU"][0], atol=0.05)  # 1 mG = 0.0098 m/s²
+        np.testing.assert_allclose(means[kind][1], means["HIGHRES_IMU"][1], atol=0.005)
+    assert abs(means["HIGHRES_IMU"][0][2] + 9.81) < 0.1  # at rest: -1 g on z, body FRD
+    assert abs(float(np.dot(means["ATTITUDE"][0], means["ATTITUDE_QUATERNION"][0]))) > 0.9999
 
 
 def test_arducopter_takes_off_and_holds_on_our_gps_input(tmp_path):
