@@ -262,3 +262,62 @@ def test_sitl_estimator_answers_timesync_per_spec_unless_step_markers(tmp_path):
         assert kinds == (["ODOMETRY", "TIMESYNC"] if step_markers else ["TIMESYNC"])
         assert link.sent[-1].ts1 == 1_250_000_000 and link.sent[-1].tc1 > 0
         assert node.counters == ({"step_markers": 1} if step_markers else {"timesync_answered": 1})
+
+
+def _heartbeat_frame(system_id: int) -> bytes:
+    link = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=1)
+    return bytes(mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 3).pack(link))
+
+
+def test_udpout_connection_both_ways_recorded_in_the_tlog(tmp_path):
+    import socket
+
+    from companion.autopilot.connection import open_connection
+    from companion.mavlink.tlog import read_tlog
+
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", 0))
+    peer.settimeout(5)
+    conn = open_connection(f"udpout:127.0.0.1:{peer.getsockname()[1]}", 1, 197, tmp_path / "run.tlog")
+    try:
+        conn.send(mavlink.MAVLink_timesync_message(0, 5))
+        data, ours = peer.recvfrom(512)
+        peer.sendto(_heartbeat_frame(7) + b"\x00junk", ours)
+        got = []
+        for _ in range(50):
+            got += conn.recv(0.05)
+            if got:
+                break
+    finally:
+        conn.close()
+        assert conn.tlog is not None
+        conn.tlog.close()
+        peer.close()
+    assert data[0] == 0xFD and [m.get_type() for m in got] == ["HEARTBEAT"] and got[0].get_srcSystem() == 7
+    assert [m.get_type() for _, m in read_tlog(tmp_path / "run.tlog")] == ["TIMESYNC", "HEARTBEAT"]
+    assert conn.counters["sent"] == 1 and conn.counters["received"] == 1
+
+
+def test_serial_connection_reads_a_pseudo_terminal(tmp_path):
+    """``serial:DEVICE:BAUD`` through pymavlink/pyserial, on a pty pair (no hardware needed)."""
+    import os
+
+    from companion.autopilot.connection import open_connection
+
+    controller, device = os.openpty()
+    conn = open_connection(f"serial:{os.ttyname(device)}:921600", 1, 197, None)
+    try:
+        os.write(controller, _heartbeat_frame(3))
+        got = []
+        for _ in range(50):
+            got += conn.recv(0.05)
+            if got:
+                break
+        conn.send(mavlink.MAVLink_timesync_message(0, 9))
+        echoed = os.read(controller, 512)
+    finally:
+        conn.close()
+        os.close(controller)
+        os.close(device)
+    assert [m.get_type() for m in got] == ["HEARTBEAT"] and got[0].get_srcSystem() == 3
+    assert echoed[0] == 0xFD and echoed[7:10] == bytes((111, 0, 0))  # TIMESYNC, msgid 111
