@@ -321,3 +321,31 @@ def test_serial_connection_reads_a_pseudo_terminal(tmp_path):
         os.close(device)
     assert [m.get_type() for m in got] == ["HEARTBEAT"] and got[0].get_srcSystem() == 3
     assert echoed[0] == 0xFD and echoed[7:10] == bytes((111, 0, 0))  # TIMESYNC, msgid 111
+
+
+def test_node_counts_implausible_and_broken_messages_and_never_raises(tmp_path):
+    from companion.autopilot.node import AutopilotCompanion, CompanionConfig
+
+    conn = _FakeConn()
+    node = AutopilotCompanion(CompanionConfig(master="udpin::14550", out_dir=tmp_path), conn)  # type: ignore[arg-type]
+    hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
+    node.handle(_from(hb, 3, 1), 0.0)
+    node.handle(_from(mavlink.MAVLink_gps_global_origin_message(950_000_000, 0, 0, 0), 3, 1), 0.1)
+    node.handle(_from(mavlink.MAVLink_local_position_ned_message(1000, math.nan, 0, 0, 0, 0, 0), 3, 1), 0.1)
+
+    class Broken:  # a SYSTEM_TIME without its fields
+        def get_type(self):
+            return "SYSTEM_TIME"
+
+        def get_srcSystem(self):
+            return 3
+
+        def get_srcComponent(self):
+            return 1
+
+    node.handle(Broken(), 0.2)
+    node.handle(Broken(), 0.3)
+    assert node.origins == {} and node.series.local_t_us == []
+    assert node.counters["rejected_gps_global_origin"] == 1
+    assert node.counters["rejected_local_position_ned"] == 1
+    assert node.counters["handler_error_SYSTEM_TIME_AttributeError"] == 2 and len(node.errors) == 1

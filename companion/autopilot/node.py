@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -126,6 +127,17 @@ class AutopilotCompanion:
 
     # -- incoming -----------------------------------------------------------------------------
     def handle(self, msg: Any, now_s: float) -> None:
+        """Handle one message; whatever it holds, count it and never raise."""
+        try:
+            self._handle(msg, now_s)
+        except Exception as exc:  # noqa: BLE001 - a frame must never end the process
+            name = f"handler_error_{msg.get_type()}_{type(exc).__name__}"
+            if name not in self.counters:
+                print(f"companion: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
+                self.errors.append(f"{msg.get_type()}: {type(exc).__name__}: {exc}")
+            self.counters[name] += 1
+
+    def _handle(self, msg: Any, now_s: float) -> None:
         was_known = self.discovery.autopilot is not None
         if not self.discovery.accept(msg, now_s):
             return
@@ -148,14 +160,21 @@ class AutopilotCompanion:
             self.acks[f"{_enum('MAV_CMD', msg.command)}:{_enum('MAV_RESULT', msg.result)}"] += 1
         elif kind == "SYSTEM_TIME":
             self.translator.system_time(msg)
-        elif kind == "GPS_GLOBAL_ORIGIN" or kind == "HOME_POSITION":
-            self.origins[kind] = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+        elif kind == "GPS_GLOBAL_ORIGIN" or kind == "HOME_POSITION":  # degE7, mm AMSL
+            lla = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+            if _plausible(*lla):
+                self.origins[kind] = lla
+            else:
+                self.counters[f"rejected_{kind.lower()}"] += 1
         elif kind == "GLOBAL_POSITION_INT":
             self._reference_global(msg)
         elif kind == "LOCAL_POSITION_NED":
-            s = self.series
-            s.local_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
-            s.local_ned_m.append((float(msg.x), float(msg.y), float(msg.z)))
+            p = (float(msg.x), float(msg.y), float(msg.z))
+            if all(math.isfinite(v) for v in p):
+                self.series.local_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
+                self.series.local_ned_m.append(p)
+            else:
+                self.counters["rejected_local_position_ned"] += 1
         else:
             sample = self.translator.sample(msg)
             if sample is not None:
@@ -164,6 +183,9 @@ class AutopilotCompanion:
     def _reference_global(self, msg: Any) -> None:
         if msg.lat == 0 and msg.lon == 0:  # ArduPilot before its EKF has a position
             self.counters["reference_without_position"] += 1
+            return
+        if not _plausible(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3):
+            self.counters["rejected_global_position_int"] += 1
             return
         self.series.global_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
         self.series.global_lla.append((msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3))
@@ -372,6 +394,11 @@ class AutopilotCompanion:
             return None
         alignment["time"] = "autopilot boot time (time_boot_ms); ours interpolated at its stamps"
         return result | {"alignment": alignment}
+
+
+def _plausible(lat_deg: float, lon_deg: float, alt_m: float) -> bool:
+    """A position on (or near) the Earth: the only kind used as a frame origin or a reference."""
+    return abs(lat_deg) <= 90 and abs(lon_deg) <= 180 and -1_000 <= alt_m <= 20_000
 
 
 def _known_satellites(fix: GnssFix | None) -> int:
