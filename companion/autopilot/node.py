@@ -317,6 +317,8 @@ class AutopilotCompanion:
         rejected = Counter({k: v for k, v in nav.items() if "rejected" in k and v})
         rejected.update({k: v for k, v in self.translator.counters.items() if v})
         rejected.update({f"autopilot_{k}": v for k, v in self.discovery.counters.items() if v})
+        rejected.update({k: v for k, v in self.counters.items()
+                         if v and k.startswith(("rejected_", "handler_error_"))})
         if self.counters["samples_before_first_fix"]:
             rejected["before_first_fix"] = self.counters["samples_before_first_fix"]
         if self.conn.counters["bad_frames"]:
