@@ -349,3 +349,37 @@ def test_node_counts_implausible_and_broken_messages_and_never_raises(tmp_path):
     assert node.counters["rejected_gps_global_origin"] == 1
     assert node.counters["rejected_local_position_ned"] == 1
     assert node.counters["handler_error_SYSTEM_TIME_AttributeError"] == 2 and len(node.errors) == 1
+
+
+def test_receiver_delay_read_from_the_autopilot_unless_given(tmp_path):
+    from companion.autopilot.node import AutopilotCompanion, CompanionConfig
+
+    def node_for(autopilot: int, delay_us: int | None = None):
+        conn = _FakeConn()
+        config = CompanionConfig(master="udpin::14550", out_dir=tmp_path,
+                                 translate=TranslateConfig(gnss_delay_us=delay_us))
+        node = AutopilotCompanion(config, conn)  # type: ignore[arg-type]
+        node.handle(_from(mavlink.MAVLink_heartbeat_message(2, autopilot, 0, 0, 0, 3), 1, 1), 0.0)
+        asked = [m.param_id for m in conn.sent if m.get_type() == "PARAM_REQUEST_READ"]
+        return node, asked
+
+    def value(name: str, v: float):
+        return _from(mavlink.MAVLink_param_value_message(name.encode(), v, 9, 1000, 65535), 1, 1)
+
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
+    tr = node.translator
+    assert asked == ["GPS1_DELAY_MS"] and tr.gnss_delay_us == 120_000  # its default until read
+    node.handle(value("GPS1_DELAY_MS", 0.0), 0.1)
+    assert tr.gnss_delay_us == 120_000 and "= 0" in tr.gnss_delay_source
+    node.handle(value("GPS1_DELAY_MS", 60.0), 0.2)
+    node.handle(value("GPS2_DELAY_MS", 300.0), 0.2)  # not the receiver we read
+    assert tr.gnss_delay_us == 60_000 and tr.gnss_delay_source == "autopilot parameter GPS1_DELAY_MS"
+    fix = tr.sample(_gps(20_000_000))
+    assert fix is not None and fix.t_validity_us == 19_940_000
+
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_PX4)
+    assert asked == ["EKF2_GPS_DELAY"] and node.translator.gnss_delay_us == 110_000
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, delay_us=0)  # --gps-delay-ms 0
+    assert asked == [] and (node.translator.gnss_delay_us, node.translator.gnss_delay_source) == (0, "option")
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_GENERIC)  # who knows: no delay assumed
+    assert asked == [] and (node.translator.gnss_delay_us, node.translator.gnss_delay_source) == (0, "none")

@@ -63,6 +63,7 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
     ts = s["timesync"]
     assert ts["requests_answered"] >= 1 and ts["responses_used"] >= 1 and ts["rtt_ms"] < 50
     assert s["node"]["autopilot_reboots"] == 1 and s["link"]["reconnects"] == 1
+    assert s["gnss_delay"] == {"ms": 120.0, "source": "GPS1_DELAY_MS = 0: ArduPilot's driver default"}
 
     _same_units(forms)
     msgs = tlog_messages(out / "run.tlog")  # both directions

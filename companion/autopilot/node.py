@@ -124,6 +124,7 @@ class AutopilotCompanion:
         self._fallback_sent = False
         self._last_imu_s = math.nan
         self._heartbeat_was_lost = False
+        self._delay_param: str | None = None
 
     # -- incoming -----------------------------------------------------------------------------
     def handle(self, msg: Any, now_s: float) -> None:
@@ -148,6 +149,10 @@ class AutopilotCompanion:
             assert ap is not None
             self.conn.set_source(ap.system_id, self.config.component_id)
             self._ask_streams = True
+            self._delay_param = self.translator.delay_parameter(ap.autopilot_type)
+            if self._delay_param is not None:
+                self.conn.send(mavlink.MAVLink_param_request_read_message(
+                    ap.system_id, ap.component_id, self._delay_param.encode(), -1))
             self._next_heartbeat_s = self._next_timesync_s = now_s
         stamp = boot_stamp_us(msg)
         if stamp is not None and self.discovery.boot_time(stamp):
@@ -158,6 +163,10 @@ class AutopilotCompanion:
                 self.conn.send(answer)
         elif kind == "COMMAND_ACK":
             self.acks[f"{_enum('MAV_CMD', msg.command)}:{_enum('MAV_RESULT', msg.result)}"] += 1
+        elif kind == "PARAM_VALUE":
+            ap = self.discovery.autopilot
+            if ap is not None and self._delay_param is not None and msg.param_id == self._delay_param:
+                self.translator.delay_parameter_value(ap.autopilot_type, msg.param_id, float(msg.param_value))
         elif kind == "SYSTEM_TIME":
             self.translator.system_time(msg)
         elif kind == "GPS_GLOBAL_ORIGIN" or kind == "HOME_POSITION":  # degE7, mm AMSL
@@ -354,7 +363,8 @@ class AutopilotCompanion:
             "timesync": self.timesync.as_dict(),
             "node": dict(sorted(self.counters.items())),
             "link": dict(self.conn.counters),
-            "gnss_delay_ms": c.translate.gnss_delay_us / 1000.0,
+            "gnss_delay": {"ms": self.translator.gnss_delay_us / 1000.0,
+                           "source": self.translator.gnss_delay_source},
             "problems": self.errors,
         }
 
@@ -419,14 +429,15 @@ def _enum(name: str, value: int) -> str:
 def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     if args.out is None:
         raise UserError("--out DIR is required with --master")
-    if not (math.isfinite(args.gnss_delay_ms) and 0 <= args.gnss_delay_ms <= 1000):
-        raise UserError(f"--gnss-delay-ms {args.gnss_delay_ms}: must be within 0..1000")
+    delay = args.gps_delay_ms
+    if delay is not None and not (math.isfinite(delay) and 0 <= delay <= 1000):
+        raise UserError(f"--gps-delay-ms {delay}: must be within 0..1000")
     return CompanionConfig(
         master=args.master, out_dir=args.out, method=args.method, feed=args.feed,
         home=parse_home(args.home) if args.home else None, duration_s=args.duration_s,
         component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
         translate=TranslateConfig(gnss_instance=args.gnss_instance,
-                                  gnss_delay_us=round(args.gnss_delay_ms * 1000)))
+                                  gnss_delay_us=None if delay is None else round(delay * 1000)))
 
 
 def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) -> dict[str, Any]:
