@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 
 import numpy as np
@@ -127,8 +128,10 @@ def test_arducopter_takes_off_and_holds_on_our_gps_input(tmp_path):
     assert flight["armed"], flight
     assert flight["reached_altitude"], flight
     alts = np.array(flight["hold_alt_m"])
-    assert alts.size > 20 and np.all(np.abs(alts - 10.0) < 1.0), flight
-    assert flight["hold_truth_drift_m"] < 1.5, flight  # SIMSTATE truth: held position
+    # (a failure says the load: at x10 every 100 ms the companion is descheduled is 1 s of flight)
+    context = {"load_1min": os.getloadavg()[0], **flight}
+    assert alts.size > 20 and np.all(np.abs(alts - 10.0) < 1.0), context
+    assert flight["hold_truth_drift_m"] < 1.5, context  # SIMSTATE truth: held position
     s = json.loads((out / "summary.json").read_text())
     assert s["node"]["feed_gps_input_sent"] > 100 and s["samples"]["received"].get("GPS2_RAW", 0) > 0
     sent = [m for m in tlog_messages(out / "run.tlog") if m.get_type() == "GPS_INPUT"]
