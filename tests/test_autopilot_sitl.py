@@ -135,14 +135,14 @@ def test_arducopter_takes_off_and_holds_on_our_gps_input(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["node"]["feed_gps_input_sent"] > 100 and s["samples"]["received"].get("GPS2_RAW", 0) > 0
     sent = [m for m in tlog_messages(out / "run.tlog") if m.get_type() == "GPS_INPUT"]
-    last = flight["last_gps1"]  # ArduPilot's GPS1 report = what we sent (within one feed period of motion)
-    near = [abs(m.lat - last[0]) <= 20 and abs(m.lon - last[1]) <= 20 for m in sent[-20:]]  # degE7
-    assert any(near), (last, sent[-1])
+    sent = {(m.lat, m.lon) for m in tlog_messages(out / "run.tlog") if m.get_type() == "GPS_INPUT"}
+    gps1 = flight["gps1"][-10:]  # ArduPilot's GPS1 reports exactly the fixes we sent (degE7)
+    assert len(gps1) == 10 and all(fix in sent for fix in gps1), (gps1, sorted(sent)[-3:])
 
 
 def _arm_take_off_and_hold(gcs: GroundStation, altitude_m: float, hold_s: float, wall_limit_s: float) -> dict:
     state: dict = {"armed": False, "reached_altitude": False, "hold_alt_m": [],
-                   "hold_truth_drift_m": math.nan, "last_gps1": None, "statustext": []}
+                   "hold_truth_drift_m": math.nan, "gps1": [], "statustext": []}
     start = time.monotonic()
     next_try = 0.0
     hold_from_ms = None
@@ -166,7 +166,8 @@ def _arm_take_off_and_hold(gcs: GroundStation, altitude_m: float, hold_s: float,
                 state["armed"] = True
                 gcs.takeoff(altitude_m)
         elif kind == "GPS_RAW_INT":
-            state["last_gps1"] = (msg.lat, msg.lon)
+            if msg.fix_type >= 3:
+                state["gps1"].append((msg.lat, msg.lon))
         elif kind == "SIMSTATE" and hold_from_ms is not None:
             here = np.array((msg.lat, msg.lng), float) * 1e-7
             truth0 = here if truth0 is None else truth0
