@@ -4,8 +4,10 @@ Samples are pushed into the :class:`Navigator` in arrival order. Outputs are sch
 estimate's own clock (boot time of the last IMU sample), so they are the same in lockstep and
 in real time: ODOMETRY at 50 Hz and right after every GNSS fix, ESTIMATOR_STATUS at 5 Hz,
 NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` at 20 Hz. A lockstep step marker is answered with
-ODOMETRY for that time, then the TIMESYNC response. A restarted process starts a fresh
-Navigator, which initialises again from the next good GNSS fix.
+ODOMETRY for that time, then the TIMESYNC response. ODOMETRY goes out once per estimate time: a
+trigger that finds the estimate already sent (e.g. a marker right after the 50 Hz one) sends
+nothing new, as the one sent is already ahead of the response on the same socket. A restarted
+process starts a fresh Navigator, which initialises again from the next good GNSS fix.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ class EstimatorNode:
     counters: dict[str, int] = field(default_factory=dict)
     gnss_to_odometry_ns: list[int] = field(default_factory=list)
     _due: _Due = field(default_factory=_Due)
+    _odometry_sent_t_us: int = -1  # estimate time of the last ODOMETRY sent (one per estimate time)
     _topics: EstimatorTelemetry = field(init=False)
     _deferred: DeferredPublisher = field(init=False)
 
@@ -120,7 +123,8 @@ class EstimatorNode:
 
     def _send_odometry(self) -> NavEstimate | None:
         estimate = self.navigator.estimate()
-        if estimate is not None:
+        if estimate is not None and estimate.t_us != self._odometry_sent_t_us:
+            self._odometry_sent_t_us = estimate.t_us
             self.link.send(codec.encode_odometry(estimate))
         return estimate
 

@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
     parser.add_argument("--signing-key-file", type=Path, help="MAVLink 2 signing key for all three processes")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
+    from simvehicle.groundlink import add_ground_arguments
+
+    add_ground_arguments(parser)
     parser.add_argument("--max-duration-s", type=float, help="simulated time limit (default: as fly)")
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
     parser.add_argument("--drop-probability", type=float, default=0.0, help=argparse.SUPPRESS)  # tests only
@@ -48,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools.fly.output import strict_json, write_outputs
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
     from gcs_tools.sitl.report import flight_result
+    from simvehicle.groundlink import ground_out_arguments, ground_out_targets
 
     mission = load_mission(args.mission)
     if not 0 <= args.profile < len(mission.profiles):
@@ -60,7 +64,9 @@ def run(args: argparse.Namespace) -> int:
         max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
         telemetry_args=tuple(telemetry.forward_arguments(args)),
+        ground_args=tuple(ground_out_arguments(args)),
     )
+    ground_out_targets(args)  # a bad --ground-out is a one-line error before anything starts
     route, max_duration_s = flight_plan(opts)
     bar = None
     if not args.no_progress and sys.stderr.isatty():

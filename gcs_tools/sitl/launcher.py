@@ -44,6 +44,7 @@ class SitlOptions:
     wall_timeout_s: float | None = None
     drop_probability: float = 0.0  # TEST ONLY: loss injection on every link, both directions
     telemetry_args: tuple[str, ...] = ()  # Zenoh flags for every process (--vehicle-id, --no-telemetry)
+    ground_args: tuple[str, ...] = ()  # vehicle's --ground-out / --no-ground-out flags (default: 14550)
     fly: FlyConfig = field(default_factory=FlyConfig)  # start delay, arrival test, time limit: as ``fly``
 
 
@@ -98,7 +99,8 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
         "--out", str(out), "--max-duration-s", str(max_duration_s),
         "--goal-ned-m", *(repr(float(c)) for c in goal), "--goal-radius-m", str(opts.fly.goal_radius_m),
         "--goal-speed-m-s", str(opts.fly.goal_speed_m_s),
-        "--arrive-after-s", str(route.t_start_s + route.duration_s), *common, *loss_seed(0),
+        "--arrive-after-s", str(route.t_start_s + route.duration_s), *opts.ground_args, *common,
+        *loss_seed(0),
     ]
     if opts.realtime:
         vehicle.append("--realtime")
