@@ -13,7 +13,7 @@ Telemetry is scheduled on boot time (so a lockstep run sends the same stream as 
 one): HEARTBEAT (armed, custom mode), SYS_STATUS, EXTENDED_SYS_STATE, GLOBAL_POSITION_INT,
 LOCAL_POSITION_NED, ATTITUDE, ATTITUDE_QUATERNION, VFR_HUD, HOME_POSITION and GPS_GLOBAL_ORIGIN
 at the periods of :data:`STREAMS`; SET_MESSAGE_INTERVAL changes them. Events go out as
-STATUSTEXT. Requests are answered: TIMESYNC, the parameter protocol (:mod:`simvehicle.params`)
+STATUSTEXT. Requests are answered: TIMESYNC, PING, the parameter protocol (:mod:`simvehicle.params`)
 and COMMAND_LONG (COMMAND_ACK to the requester's system and component). Every frame the
 companions send is forwarded unchanged (their sequence numbers stay continuous, so a ground
 station's link statistics count no false loss). The ground link is not written to ``run.tlog``,
@@ -288,6 +288,9 @@ class GroundLink:
                 self.event(_M.MAV_SEVERITY_INFO if "set to" in note else _M.MAV_SEVERITY_WARNING, note)
         elif kind == "COMMAND_LONG":
             self._command(msg)
+        elif kind == "PING" and int(msg.target_system) == 0:  # a request: answer to its sender
+            self.send(mavlink.MAVLink_ping_message(int(msg.time_usec), int(msg.seq), msg.get_srcSystem(),
+                                                   msg.get_srcComponent()))
 
     def _command(self, msg: Any) -> None:
         if int(msg.target_system) not in (0, self.system_id):
