@@ -174,7 +174,7 @@ def test_bad_datagrams_and_wrong_key_are_counted_and_rejected(tmp_path):
     from gcs_tools.sitl.supervisor import free_udp_ports
 
     key_file = tmp_path / "key"
-    key_file.write_text("beliefnav test key")
+    key_file.write_text("beliefnav-test-key")
     out = tmp_path / "run"
     opts = SitlOptions(MISSION, 0, "second-order", 4, out, route_duration_s(MISSION, 0) + 20,
                        signing_key_file=key_file)

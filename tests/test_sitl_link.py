@@ -121,8 +121,15 @@ def test_signing_key_file(tmp_path):
     hexkey.write_text(KEY.hex())
     assert read_signing_key(hexkey) == KEY
     phrase = tmp_path / "phrase.key"
-    phrase.write_text("correct horse\n")
-    assert read_signing_key(phrase) == hashlib.sha256(b"correct horse").digest()
+    phrase.write_text("correct-horse\n")
+    assert read_signing_key(phrase) == hashlib.sha256(b"correct-horse").digest()
+    from MAVProxy.modules.mavproxy_signing import SigningModule
+
+    assert read_signing_key(phrase) == SigningModule.passphrase_to_key(None, "correct-horse")  # `signing key`
+    for untypable in ("correct horse", "caf\u00e9"):  # MAVProxy keeps one word; it encodes ASCII
+        (tmp_path / "bad.key").write_text(untypable, encoding="utf-8")
+        with pytest.raises(UserError, match="one word of printable ASCII"):
+            read_signing_key(tmp_path / "bad.key")
     (tmp_path / "empty.key").write_text("")
     with pytest.raises(UserError, match="empty"):
         read_signing_key(tmp_path / "empty.key")

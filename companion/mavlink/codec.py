@@ -9,9 +9,11 @@ Units and conventions on the wire (DESIGN §2):
 
 - HIGHRES_IMU: ``time_usec`` boot time; body-FRD specific force (m/s²) and rate (rad/s).
 - ATTITUDE_QUATERNION: ``q1..q4`` = w, x, y, z, body FRD -> NED; ``time_boot_ms`` (ms).
-- GPS_RAW_INT: ``time_usec`` = VALIDITY time; lat/lon degE7, alt mm; ``eph`` = HDOP x 100
-  (65535 unknown -> NaN); ``h_acc``/``v_acc`` mm (0 = not sent -> NaN); ``satellites_visible``
-  passed through (255 = unknown, as MAVLink says).
+- GPS_RAW_INT: ``time_usec`` = VALIDITY time (when the fix was true), so in arrival order it may
+  go backwards: a fix with less latency can overtake an older one (the simulated latency varies
+  by up to 1.2 s); receivers order by it, not by arrival. lat/lon degE7, alt mm; ``eph`` = HDOP
+  x 100 (65535 unknown -> NaN); ``h_acc``/``v_acc`` mm (0 = not sent -> NaN);
+  ``satellites_visible`` passed through (255 = unknown, as MAVLink says).
 - SIM_STATE: no time field (the caller supplies the matching IMU time); position as
   ``lat_int``/``lon_int`` degE7 (float ``lat``/``lon`` too, in degrees) and ``alt`` m, converted
   with a :class:`LocalNedFrame`. It carries p, v, q only: bias, latency and clearance of a
