@@ -8,7 +8,8 @@ they raise :class:`CodecError`, whose ``reason`` the caller counts.
 Units and conventions on the wire (DESIGN §2):
 
 - HIGHRES_IMU: ``time_usec`` boot time; body-FRD specific force (m/s²) and rate (rad/s).
-- ATTITUDE_QUATERNION: ``q1..q4`` = w, x, y, z, body FRD -> NED; ``time_boot_ms`` (ms).
+- ATTITUDE_QUATERNION: ``q1..q4`` = w, x, y, z, body FRD -> NED; ``time_boot_ms`` (ms); body rates
+  NaN (not carried), ``repr_offset_q`` zeros (not supported).
 - GPS_RAW_INT: ``time_usec`` = VALIDITY time (when the fix was true), so in arrival order it may
   go backwards: a fix with less latency can overtake an older one (the simulated latency varies
   by up to 1.2 s); receivers order by it, not by arrival. lat/lon degE7, alt mm; ``eph`` = HDOP
