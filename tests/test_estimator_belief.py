@@ -99,13 +99,16 @@ def _first_time(mask: np.ndarray) -> float:
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("method", ["first-order", "second-order"])
 def test_belief_rises_falls_and_recovers(beliefs, seed, method):
-    """Clean → β > 0.9; 1.2 m-std Gauss-Markov bias → β < 0.5 within 6 s; β > 0.9 again within 12 s."""
+    """Clean → β > 0.9; 1.2 m-std Gauss-Markov bias → β < 0.5 within 7 s; β > 0.9 again within 12 s.
+
+    The bias starts as a step the innovation gate rejects at first (the belief still learns from
+    the rejected fixes), which costs first-order up to ~1 s against fusing them."""
     b = beliefs[seed][method]
     t = np.arange(len(b)) * DT_FIX_S
     clean = b[(t >= 10.0) & (t < CLEAN_S)]
     assert clean.min() > 0.9
     degraded = b[(t >= CLEAN_S) & (t < CLEAN_S + DEGRADED_S)]
-    assert _first_time(degraded < 0.5) < 6.0
+    assert _first_time(degraded < 0.5) < 7.0
     assert np.median(degraded[int(6.0 / DT_FIX_S):]) < 0.5
     after = b[t >= CLEAN_S + DEGRADED_S]
     assert _first_time(after > 0.9) < 12.0

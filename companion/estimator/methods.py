@@ -51,6 +51,9 @@ class Adaptation(Protocol):
         """The state after this fix."""
         ...
 
+    # Optional class attribute ``learns_from_rejected: bool`` (default False): whether ``update``
+    # is also called for a fix the innovation gate rejected (the filter state is not updated).
+
 
 REGISTRY: dict[str, Callable[[EstimatorConfig], Adaptation]] = {}
 
@@ -141,6 +144,8 @@ class BeliefState(NamedTuple):
 
 class _Belief:
     """Sigmoid belief β = σ(θ) driving R(β) and Q_b(β); subclasses choose the θ step."""
+
+    learns_from_rejected = True  # a fix failing the innovation gate still updates β (engine.py)
 
     def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
