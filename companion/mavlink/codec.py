@@ -28,8 +28,8 @@ Units and conventions on the wire (DESIGN §2):
   ESTIMATOR_STATUS, so a decoded ODOMETRY has NaN β, bias and NIS.
 - ESTIMATOR_STATUS: ``flags`` say which outputs are valid now (velocity and position only while
   ``pos_valid``; ``GPS_GLITCH`` while GNSS is rejected by the innovation gate);
-  ``pos_horiz_ratio`` = the last GNSS test ratio (NIS / gate of the 3-D position test), NaN
-  until a test was made; ratios of tests we never make (velocity, vertical, magnetometer,
+  ``pos_horiz_ratio`` = the estimator's last horizontal GNSS innovation test ratio (NIS /
+  gate²), NaN until a fix was tested; ratios of tests we never make (velocity, vertical, magnetometer,
   height above terrain, airspeed) are NaN ("not computed"), never 0 ("perfect").
 - SET_POSITION_TARGET_LOCAL_NED: LOCAL_NED, ``time_boot_ms`` (ms); velocity/acceleration marked
   ignored in ``type_mask`` decode as zero feed-forward; ignored position is an error.
@@ -394,12 +394,8 @@ def _cov21(diag3: np.ndarray) -> list[float]:
 
 
 def estimate_valid(e: NavEstimate) -> bool:
-    """``pos_valid`` of the estimator (True where an older NavEstimate lacks the field and its
-    position variances are finite)."""
-    valid = getattr(e, "pos_valid", None)
-    if valid is not None:
-        return bool(valid)
-    return bool(np.all(np.isfinite(e.cov_diag[0:6])))
+    """The estimator says the estimate is valid and its position/velocity variances are finite."""
+    return bool(e.pos_valid) and bool(np.all(np.isfinite(e.cov_diag[0:6])))
 
 
 def encode_odometry(e: NavEstimate) -> mavlink.MAVLink_odometry_message:
@@ -409,7 +405,7 @@ def encode_odometry(e: NavEstimate) -> mavlink.MAVLink_odometry_message:
     return mavlink.MAVLink_odometry_message(
         e.t_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED,
         p[0], p[1], p[2], [nan, 0.0, 0.0, 0.0], v[0], v[1], v[2], nan, nan, nan,
-        _cov21(e.cov_diag[0:3]), _cov21(e.cov_diag[3:6]), int(getattr(e, "gnss_resets", 0)) % 256,
+        _cov21(e.cov_diag[0:3]), _cov21(e.cov_diag[3:6]), e.gnss_resets % 256,  # reset_counter
         mavlink.MAV_ESTIMATOR_TYPE_GPS_INS, quality,
     )
 
@@ -431,38 +427,26 @@ def decode_odometry(m: Any) -> NavEstimate:
         beta=math.nan,  # β travels in NAMED_VALUE_FLOAT GNSS_BETA; quality is the spec's
         nis=math.nan,
         method="odometry",
+        pos_valid=int(m.quality) != ODOMETRY_QUALITY_FAILED,
+        gnss_resets=int(m.reset_counter),
     )
 
 
-def gnss_test_ratio(e: NavEstimate, nis_gate: float) -> float:
-    """The last GNSS innovation test ratio: the estimator's ``pos_horiz_test_ratio`` where it has
-    one, else NIS / ``nis_gate`` of the last fused fix; NaN when no test was made."""
-    ratio = getattr(e, "pos_horiz_test_ratio", None)
-    if ratio is not None:
-        return float(ratio)
-    return e.nis / nis_gate if math.isfinite(e.nis) else math.nan
-
-
-def estimator_flags(e: NavEstimate, nis_gate: float) -> int:
-    """ESTIMATOR_STATUS_FLAGS of ``e``: position/velocity bits while valid, GPS_GLITCH while the
-    gate rejects GNSS (the estimator's ``gnss_glitch``, else a last test ratio above 1)."""
+def estimator_flags(e: NavEstimate) -> int:
+    """ESTIMATOR_STATUS_FLAGS of ``e``: position/velocity bits while the estimate is valid,
+    GPS_GLITCH while the innovation gate rejects GNSS."""
     flags = ESTIMATOR_HEALTHY_FLAGS if estimate_valid(e) else 0
-    glitch = getattr(e, "gnss_glitch", None)
-    if glitch is None:
-        glitch = gnss_test_ratio(e, nis_gate) > 1.0
-    if glitch:
-        flags |= mavlink.ESTIMATOR_GPS_GLITCH
-    return flags
+    return flags | (mavlink.ESTIMATOR_GPS_GLITCH if e.gnss_glitch else 0)
 
 
-def encode_estimator_status(e: NavEstimate, nis_gate: float) -> mavlink.MAVLink_estimator_status_message:
-    """Flags and ratios of the tests actually made (see the module notes); 1-σ accuracies."""
+def encode_estimator_status(e: NavEstimate) -> mavlink.MAVLink_estimator_status_message:
+    """Flags and ratios of the tests actually made (see the module notes); 1-σ accuracies.
+    ``pos_horiz_ratio`` = the estimator's ``pos_horiz_test_ratio`` (NaN: no fix tested yet)."""
     horiz = math.sqrt(float(e.cov_diag[0] + e.cov_diag[1]))
     vert = math.sqrt(float(e.cov_diag[2]))
     nan = math.nan
     return mavlink.MAVLink_estimator_status_message(
-        e.t_us, estimator_flags(e, nis_gate), nan, gnss_test_ratio(e, nis_gate), nan, nan, nan, nan,
-        horiz, vert,
+        e.t_us, estimator_flags(e), nan, e.pos_horiz_test_ratio, nan, nan, nan, nan, horiz, vert,
     )
 
 

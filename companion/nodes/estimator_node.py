@@ -119,7 +119,7 @@ class EstimatorNode:
             due.status_us = _next_multiple(t_us, self.rates.status_period_us)
             estimate = self.navigator.estimate()
             if estimate is not None:
-                self.link.send(codec.encode_estimator_status(estimate, self.nis_gate))
+                self.link.send(codec.encode_estimator_status(estimate))
 
     def _send_odometry(self) -> NavEstimate | None:
         estimate = self.navigator.estimate()
