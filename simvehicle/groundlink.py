@@ -3,8 +3,9 @@
 One UDP socket bound to the ground port serves every ground client at once:
 
 - ``udpout`` clients (``mavproxy.py --master=udpout:127.0.0.1:PORT``, MAVSDK
-  ``udpout://127.0.0.1:PORT``) send to the ground port; each address heard within
-  ``client_timeout_s`` receives everything the vehicle sends;
+  ``udpout://127.0.0.1:PORT``) send to the ground port; each address whose HEARTBEAT was
+  accepted within ``client_timeout_s`` receives everything the vehicle sends (other frames
+  cannot add a destination);
 - ``udpin`` clients listen on a port of their own: the vehicle sends to the configured
   ``--ground-out`` targets (default 127.0.0.1:14550, where QGroundControl and MAVProxy listen)
   from the ground port, so their replies come back to it.
@@ -125,7 +126,7 @@ class MultiPeerLink(UdpLink):
 
     def _accept(self, msgs: list[Any], addr: tuple[str, int]) -> list[Any]:
         accepted = super()._accept(msgs, addr)
-        if accepted:
+        if any(m.get_type() == "HEARTBEAT" for m in accepted):  # a client announces itself
             self.clients.pop(addr, None)
             self.clients[addr] = time.monotonic()
             while len(self.clients) > MAX_CLIENTS:
