@@ -163,14 +163,23 @@ def _nis_with_bounded_r(e, prev, f, r_max):
     return nis
 
 
-def test_frozen_fix_is_rejected_after_the_stated_time():
+@pytest.mark.parametrize("speed_m_s", [0.0, 2.0])
+def test_frozen_fix_is_rejected_after_the_stated_time_when_moving(speed_m_s):
     nav = Navigator(CFG, "naive", HOME)
     nav.push(AttitudeSample(0, np.array([1.0, 0.0, 0.0, 0.0])))
-    for k in range(0, 61):  # 3 s of the same position at 5 Hz, then a new one
+    nav.push(ImuSample(0, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
+    for k in range(1, 41):  # 2 s at speed_m_s north, fixes at 5 Hz
         t = k * 50_000
         nav.push(ImuSample(t, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
         if k % 4 == 0:
-            nav.push(_fix(t, (0.0, 0.0, 0.0) if k < 60 else (0.05, 0.0, 0.0)))
+            nav.push(_fix(t, (speed_m_s * t * 1e-6, 0.0, 0.0)))
+    p_frozen = (speed_m_s * 2.0, 0.0, 0.0)
+    for k in range(41, 101):  # then 3 s of the same position
+        t = k * 50_000
+        nav.push(ImuSample(t, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
+        if k % 4 == 0:
+            nav.push(_fix(t, p_frozen))
     c = nav.counters()
-    # fixes at 0, 0.2, ... 2.8 s: those more than 2 s after the first (2.2 ... 2.8 s) are frozen
-    assert c["gnss_rejected_frozen"] == 4 and c["gnss_fused"] == 12
+    # repeats of the 2.0 s position at 2.2 ... 5.0 s: those > 2 s after it (4.2 ... 5.0 s: 5) are
+    # frozen if the vehicle moved when that position first came
+    assert c["gnss_rejected_frozen"] == (5 if speed_m_s else 0)

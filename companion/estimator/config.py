@@ -90,11 +90,14 @@ class EstimatorConfig:
     # The position is flagged invalid (NavEstimate.pos_valid False) when no fix was fused for
     # longer than this (time of the estimate − validity of the last fused fix). EKF2_NOAID_TOUT.
     pos_valid_timeout_s: float = 5.0
-    # A fix repeating the previous fixes' position exactly (lat, lon, alt) for longer than this is
-    # a frozen receiver output, rejected and counted (gnss_rejected_frozen). quad106's receiver
-    # repeats a position at most 5 fixes (0.8 s) in a row on the ground; a frozen fix while
-    # the vehicle moves drags the estimate back (neither EKF2 nor EKF3 checks this).
+    # A fix repeating exactly (lat, lon, alt) a position first received more than gnss_frozen_s
+    # earlier, the estimated horizontal speed having exceeded gnss_frozen_speed_m_s since, is a frozen
+    # receiver output: rejected and counted (gnss_rejected_frozen). The vehicle should have moved
+    # 1 m, 10x the 1e-6 degree resolution of quad106's fixes, which repeat at most 5 fixes (0.8 s)
+    # in a row; a vehicle at rest may repeat for ever and is never rejected. A frozen fix while
+    # moving drags the estimate back (neither EKF2 nor EKF3 checks this).
     gnss_frozen_s: float = 2.0
+    gnss_frozen_speed_m_s: float = 0.5
     # Largest R any method may use, as a multiple of the fix's nominal variance (R_nom, or the
     # receiver-reported accuracy): bounds what adaptive and vbakf learn (10× the nominal std).
     r_learned_max_factor: float = 100.0
@@ -114,6 +117,7 @@ class EstimatorConfig:
             "sigma_bias0_m", "imu_hold_max_s", "theta_max", "eta", "lambda_reg", "student_dof",
             "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor", "gnss_gate_sigma",
             "gnss_reset_timeout_s", "pos_valid_timeout_s", "gnss_frozen_s",
+            "gnss_frozen_speed_m_s",
         )
         for name in positive:
             value = getattr(self, name)

@@ -103,7 +103,7 @@ class Navigator:
             "gnss_rejected_fix_type": 0, "gnss_rejected_frozen": 0,
         }
         # frozen-output check: the last fix's (lat, lon, alt) and the validity time it first had
-        self._fix_seen: tuple[tuple[float, float, float], int] | None = None
+        self._fix_seen: tuple[tuple[float, float, float], int, bool] | None = None
         self._frozen_us = int(round(self.cfg.gnss_frozen_s * 1e6))
         self.engine = FusionEngine(self.cfg, method, self._counts)
         self._att: Attitude | None = None  # the latest attitude, (w, x, y, z, 2 / |q|²)
@@ -176,14 +176,21 @@ class Navigator:
                              self.fix_r_nominal_m2(fix.h_acc_m, fix.v_acc_m))
 
     def _frozen(self, fix: GnssFix) -> bool:
-        """True when this fix repeats the position received since more than ``gnss_frozen_s``
-        before (arrival order, like the other receiver-stream checks)."""
+        """True when this fix repeats the position first received more than ``gnss_frozen_s``
+        before and the vehicle moved faster than ``gnss_frozen_speed_m_s`` at some time since
+        (arrival order, like the other receiver-stream checks)."""
         where = (fix.lat_deg, fix.lon_deg, fix.alt_m)
         seen = self._fix_seen
         if seen is None or seen[0] != where:
-            self._fix_seen = (where, fix.t_validity_us)
+            self._fix_seen = (where, fix.t_validity_us, self._moving())
             return False
-        return fix.t_validity_us - seen[1] > self._frozen_us
+        if not seen[2] and self._moving():  # moved since: stays so until the position changes
+            seen = self._fix_seen = (where, seen[1], True)
+        return seen[2] and fix.t_validity_us - seen[1] > self._frozen_us
+
+    def _moving(self) -> bool:
+        snap = self.engine.snapshot()
+        return snap is not None and math.hypot(snap.x[3], snap.x[4]) > self.cfg.gnss_frozen_speed_m_s
 
     def fix_r_nominal_m2(self, h_acc_m: float, v_acc_m: float) -> tuple[float, float, float]:
         """A fix's nominal R (NED variances, m²): the receiver-reported 1σ accuracy where known,
