@@ -229,7 +229,10 @@ class VehicleNode:
         cfg = self.config
         self.wait_for_companions()
         max_t_us = round(cfg.max_duration_s * 1e6)
-        wall0 = self._wall0_ns = time.perf_counter_ns()  # boot time 0 in real time
+        wall0 = time.perf_counter_ns()
+        if cfg.realtime:  # boot time 0 is now; the stamp clock moves on from the same monotonic base
+            self.epoch_us += (wall0 - self._wall0_ns) // 1000
+        self._wall0_ns = wall0
         pace = self._pace(wall0) if cfg.realtime else None
         next_progress = 0.0
         outcome = "timeout"

@@ -208,3 +208,11 @@ def test_gnss_outage_set_from_the_ground_is_reported_and_withheld(flight):
     assert v["node"].get("gnss_withheld", 0) > 0  # the vehicle really held fixes back
     requests = v["ground_requests"]
     assert requests["param_set"] == 2 and requests["param_read_only"] == 1
+
+
+def test_realtime_tlog_stamps_are_monotonic_wall_time(flight):
+    from companion.mavlink.tlog import read_tlog
+
+    stamps = [stamp for stamp, _ in read_tlog(flight.root / "run" / "run.tlog")]
+    assert len(stamps) > 1000 and all(b >= a for a, b in zip(stamps, stamps[1:], strict=False))
+    assert time.time() - 600 < stamps[0] / 1e6 < stamps[-1] / 1e6 <= time.time()
