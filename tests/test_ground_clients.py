@@ -101,7 +101,7 @@ def flight(tmp_path_factory) -> Flight:
     sitl = subprocess.Popen(
         [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", MISSION, "--realtime",
          "--max-duration-s", "60", "--out", str(out), "--ports", ",".join(map(str, f.ports)),
-         "--ground-out", f"127.0.0.1:{f.udpin_port}", "--no-telemetry"],
+         "--ground-out", f"127.0.0.1:{f.udpin_port}", "--no-telemetry", "--no-signing"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
     ground = str(f.ports[2])

@@ -137,6 +137,22 @@ def test_signing_key_file(tmp_path):
         read_signing_key(tmp_path / "missing.key")
 
 
+def test_fresh_run_key_is_a_passphrase_mavproxy_can_take(tmp_path):
+    from MAVProxy.modules.mavproxy_signing import SigningModule
+
+    from gcs_tools.sitl.launcher import write_fresh_key
+
+    keys = []
+    for name in ("a.key", "b.key"):
+        write_fresh_key(tmp_path / name)
+        word = (tmp_path / name).read_text().strip()
+        assert len(word.split()) == 1 and len(word) == 43
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o600
+        keys.append(read_signing_key(tmp_path / name))
+        assert keys[-1] == SigningModule.passphrase_to_key(None, word)  # `signing key <word>` in MAVProxy
+    assert keys[0] != keys[1]
+
+
 def _normalised(value):
     if isinstance(value, bytes | str):
         return value.encode() if isinstance(value, str) else value

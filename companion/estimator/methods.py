@@ -151,8 +151,7 @@ class _Belief:
         self.cfg = cfg
 
     def _state(self, theta: float, h_fast: float, h_slow: float) -> BeliefState:
-        lim = self.cfg.theta_max
-        theta = min(lim, max(-lim, theta))
+        theta = min(self.cfg.theta_max, max(self.cfg.theta_min, theta))
         return BeliefState(theta, h_fast, h_slow, sigmoid(theta))
 
     def initial_state(self) -> BeliefState:

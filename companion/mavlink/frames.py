@@ -39,12 +39,6 @@ class MessageSpec:
     view: Any  # callable: (payload bytes of full size, *extra values) -> view tuple
 
 
-def _src_component(view: Any) -> int:
-    """Sender's component id, read from the frame bytes (MAVLink 2 header byte 6, MAVLink 1 byte 4)."""
-    buf = view[-1]
-    return int(buf[6] if buf[0] == 0xFD else buf[4])
-
-
 def _view_class(msgtype: type[mavlink.MAVLink_message], extra: tuple[str, ...]) -> Any:
     name, msgid = msgtype.msgname, msgtype.id
     base = namedtuple(name, [*msgtype.fieldnames, *extra], rename=True)  # type: ignore[misc]  # noqa: PYI024
@@ -52,7 +46,7 @@ def _view_class(msgtype: type[mavlink.MAVLink_message], extra: tuple[str, ...]) 
     if extra:
         methods["get_srcSystem"] = lambda self: self[-2]
         methods["get_msgbuf"] = lambda self: self[-1]
-        methods["get_srcComponent"] = _src_component
+        methods["get_srcComponent"] = lambda self: self[-1][6 if self[-1][0] == MAGIC_V2 else 4]
     return type(name, (base,), methods)
 
 
