@@ -277,7 +277,6 @@ class GroundLink:
     def handle(self, msg: Any) -> None:
         """One message from a ground client."""
         kind = msg.get_type()
-        self._count(f"rx_{kind}")
         if kind == "TIMESYNC":
             if int(msg.tc1) == 0:  # a request: answer with our clock, mirror theirs
                 self.send(mavlink.MAVLink_timesync_message(tc1=max(1, self.clock_ns()), ts1=int(msg.ts1)))
@@ -321,7 +320,7 @@ class GroundLink:
             # the simulated flight starts in the air and never lands: arming is a no-op, disarming refused
             return (accepted if float(m.param1) == 1.0 else denied), None
         if command == _M.MAV_CMD_DO_SET_MODE:
-            wanted = (int(m.param2) << 16) | (int(m.param3) << 24)
+            wanted = (_msgid(m.param2) << 16) | (_msgid(m.param3) << 24)
             current = codec.CUSTOM_MODES[self.status.mode if self.status else "OFFBOARD"]
             return (accepted if wanted == current else denied), None  # the companion picks the mode
         return unsupported, None
@@ -329,12 +328,14 @@ class GroundLink:
     def _set_interval(self, msgid: int, interval_us: float) -> int:
         if msgid not in STREAMS:
             return _M.MAV_RESULT_UNSUPPORTED
+        if not math.isfinite(interval_us):
+            return _M.MAV_RESULT_DENIED
         if interval_us == 0:
             period = STREAMS[msgid]  # default rate
         elif interval_us < 0:
             period = 0  # disabled
         else:
-            period = max(1, round(interval_us))
+            period = max(1, min(round(interval_us), 2**31))
         self.periods_us[msgid] = period
         self._due_us[msgid] = 0 if self.status is None else self.status.t_us
         return _M.MAV_RESULT_ACCEPTED

@@ -174,6 +174,7 @@ class VehicleNode:
     def _on_message(self, source: str, msg: Any) -> None:
         kind = msg.get_type()
         if source == "ground":
+            self._count(f"ground_{kind}")
             self.ground.handle(msg)
             return
         self.ground.forward(bytes(msg.get_msgbuf()))  # all of it: the ground sees no false loss

@@ -316,7 +316,7 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
     )
     try:
         done = run_cli("--mission", MISSION, "--realtime", "--max-duration-s", "8", "--out", str(out),
-                       "--ports", ",".join(map(str, ports)))
+                       "--ports", ",".join(map(str, ports)), "--no-signing")  # MAVProxy has no key here
     finally:
         os.killpg(proxy.pid, signal.SIGTERM)
         try:

@@ -520,7 +520,9 @@ def encode_estimator_status(e: NavEstimate) -> mavlink.MAVLink_estimator_status_
 
 
 def decode_estimator_status(m: Any) -> EstimatorStatus:
-    _finite("ESTIMATOR_STATUS", m.pos_horiz_accuracy, m.pos_vert_accuracy)  # a NaN ratio: no test
+    _finite("ESTIMATOR_STATUS", m.pos_horiz_accuracy, m.pos_vert_accuracy)
+    if not (math.isnan(m.pos_horiz_ratio) or 0.0 <= m.pos_horiz_ratio < math.inf):  # NaN: no test made
+        raise CodecError("out_of_range", f"ESTIMATOR_STATUS pos_horiz_ratio {m.pos_horiz_ratio}")
     return EstimatorStatus(
         int(m.time_usec), int(m.flags), float(m.pos_horiz_ratio),
         float(m.pos_horiz_accuracy), float(m.pos_vert_accuracy),
