@@ -282,3 +282,13 @@ def test_vehicle_status_of_a_hovering_simvehicle():
     assert (s.mode, s.estimate_ok, s.armed, s.t_us) == ("HOLD", False, True, 1_000_000)
     np.testing.assert_allclose(s.p_ned_m, sim.start_ned_m, atol=0.5)
     np.testing.assert_array_equal(s.q_ned_frd, out.q_ned_frd[-1])
+
+
+def test_bad_ground_out_is_one_line_before_anything_starts(tmp_path, capsys):
+    from gcs_tools.cli import main
+
+    out = tmp_path / "run"
+    argv = ["sitl", "--mission", "test", "--out", str(out), "--no-telemetry", "--ground-out", "x:y"]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip() == "beliefnav: error: --ground-out: expected HOST:PORT, got 'x:y'"
+    assert not out.exists()

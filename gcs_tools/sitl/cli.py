@@ -56,9 +56,11 @@ def run(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
     from gcs_tools.outdir import ensure_out_dir
     from gcs_tools.sitl.vehicle_id import claim_vehicle_id
+    from simvehicle.groundlink import ground_out_targets
 
     mission = load_mission(args.mission)
     check_run_arguments(args.method, args.seed)  # before any process starts
+    ground_out_targets(args)  # a bad --ground-out too
     ensure_out_dir(args.out)
     if not 0 <= args.profile < len(mission.profiles):
         last = len(mission.profiles) - 1
@@ -83,7 +85,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
     from gcs_tools.fly.output import strict_json, write_outputs
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
     from gcs_tools.sitl.report import flight_result
-    from simvehicle.groundlink import ground_out_arguments, ground_out_targets
+    from simvehicle.groundlink import ground_out_arguments
 
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
@@ -93,7 +95,6 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         telemetry_args=tuple(telemetry.forward_arguments(args)),
         ground_args=tuple(ground_out_arguments(args)),
     )
-    ground_out_targets(args)  # a bad --ground-out is a one-line error before anything starts
     route, max_duration_s = flight_plan(opts)
     bar = None
     if not args.no_progress and sys.stderr.isatty():
