@@ -43,7 +43,7 @@ def test_fixed_beta_at_full_trust_is_naive_exactly(stream):
     """β = 1: R(1) = R_nom and σ_b(1) — the naive filter, bit for bit."""
     a = _run(stream, FusionEngine(CFG, "fixed-beta"), stream.fix_t_us.copy()).snapshot()
     b = _run(stream, FusionEngine(CFG, "naive"), stream.fix_t_us.copy()).snapshot()
-    assert a.x == b.x and a.P == b.P
+    assert a.x == b.x and a.var == b.var
     half = dataclasses.replace(CFG, beta_fixed=0.5)
     c = _run(stream, FusionEngine(half, "fixed-beta"), stream.fix_t_us.copy())
     assert c.snapshot().beta == 0.5 and c.snapshot().x != a.x
