@@ -72,6 +72,7 @@ class _Inbox:
     setpoint: Setpoint | None = None
     beta: float = math.nan
     nis: float = math.nan
+    bias_ned_m: np.ndarray | None = None  # DEBUG_VECT GNSS_BIAS: the estimated GNSS bias [m]
 
 
 class VehicleNode:
@@ -142,6 +143,8 @@ class VehicleNode:
                     self.inbox.beta = value.value
                 elif value.name == codec.NIS_NAME:
                     self.inbox.nis = value.value
+            elif kind == "DEBUG_VECT":
+                self.inbox.bias_ned_m = codec.decode_bias(msg)[1]
             elif kind not in ("HEARTBEAT", "TIMESYNC", "ESTIMATOR_STATUS"):
                 self._count(f"ignored_{kind}")
         except codec.CodecError as exc:
@@ -242,7 +245,7 @@ class VehicleNode:
             else:
                 self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground}, self._topics.drain)
             row = self.recorder.record(out, self.inbox.estimate, self.inbox.setpoint, self.inbox.beta,
-                                       self.inbox.nis)
+                                       self.inbox.nis, self.inbox.bias_ned_m)
             if out.collided and not was_collided:
                 self.collisions += 1
             was_collided = out.collided
