@@ -151,3 +151,20 @@ def test_bad_inputs_are_one_line_errors(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(e.startswith("beliefnav: error: ") for e in err)
     assert "valid: a run directory, .tlog, .jsonl" in err[0]
+
+
+def test_foxglove_layout_names_only_exported_topics_and_fields(run_dir, tmp_path):
+    """docs/foxglove-layout.json and the export cannot drift apart: every topic and plotted field exists."""
+    from gcs_tools.export.flight import SCALARS
+
+    layout = json.loads((Path(__file__).parents[1] / "docs" / "foxglove-layout.json").read_text())
+    out = tmp_path / "run.mcap"
+    assert main(["export", str(run_dir), "--out", str(out)]) == 0
+    channels, _ = _read(out)
+    for panel, config in layout["configById"].items():
+        for topic in config.get("topics", {}):
+            assert topic.startswith(("/path/", "/pose/")), (panel, topic)
+            assert topic.split("/")[2] in ("true", "estimated", "reference", "gnss", "autopilot")
+        for path in config.get("paths", []):
+            topic, field = path["value"].split(".", 1)
+            assert topic in channels and field in SCALARS, (panel, path)
