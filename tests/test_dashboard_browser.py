@@ -3,6 +3,7 @@ and with two synthetic vehicles plus malformed payloads (vehicle selector, count
 hover), and `chromium --headless --screenshot` of the snapshot view (a real, checked PNG)."""
 
 import json
+import os
 import shutil
 import subprocess
 import time
@@ -13,13 +14,14 @@ from telemetry_helpers import child, free_port, hub_env
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+# BELIEFNAV_CHROMIUM: any Chromium binary (e.g. one installed without root by `playwright install chromium`)
+CHROMIUM = os.environ.get("BELIEFNAV_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 
 needs_chromium = pytest.mark.skipif(not Path(CHROMIUM).exists(),
-                                   reason="Debian chromium is not installed (make browser)")
+                                   reason="no Chromium (make browser, or set BELIEFNAV_CHROMIUM)")
 
 
 def _screenshot(page, path: Path) -> None:
