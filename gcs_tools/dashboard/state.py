@@ -22,6 +22,7 @@ from companion.telemetry.pubsub import Received
 
 SERIES = ("truth", "est", "ref", "beta", "err", "latency")
 TRUTH_MATCH_US = 30_000  # an estimate is compared with truth stamped within this much of it
+STALE_S = 2.0  # [s] without any message a vehicle is shown stale (the page's STALE_S too)
 AT_GOAL_M = 3.0  # [m] last true position this close to the route's goal: arrived (fly's 2 m radius + margin)
 
 
@@ -164,5 +165,7 @@ class LiveState:
     def summary(self) -> dict[str, dict[str, Any]]:
         """Headline numbers per vehicle (for ``beliefnav top``)."""
         with self._lock:
+            now = time.monotonic()
             return {name: {**v.latest, "counters": {p: dict(c) for p, c in v.counters.items()},
-                           "messages": dict(v.messages)} for name, v in self.vehicles.items()}
+                           "messages": dict(v.messages), "age_s": now - v.last_mono_s,
+                           "at_goal": v.at_goal()} for name, v in self.vehicles.items()}
