@@ -168,3 +168,23 @@ def test_foxglove_layout_names_only_exported_topics_and_fields(run_dir, tmp_path
         for path in config.get("paths", []):
             topic, field = path["value"].split(".", 1)
             assert topic in channels and field in SCALARS, (panel, path)
+
+
+def test_replay_output_exports_estimate_belief_and_the_logs_fixes(tmp_path):
+    """`beliefnav replay` of the real log, then export: the estimate, β and NIS of estimates.csv and
+    every fix of the log (read again through summary.json's file) on the same boot-time clock."""
+    run = tmp_path / "replay"
+    assert main(["replay", str(QUAD106), "--out", str(run), "--no-progress"]) == 0
+    assert main(["export", str(run), "--out", str(tmp_path / "r.mcap")]) == 0
+    channels, msgs = _read(tmp_path / "r.mcap")
+    est = _csv(run / "estimates.csv")
+    assert len(msgs["/pose/estimated"]) == len(est["t_s"]) == len(msgs["/beliefnav/state"])
+    assert len(msgs["/gnss/fix"]) == 3339
+    for i in (0, len(est["t_s"]) // 2):
+        _, st = msgs["/beliefnav/state"][i]
+        assert st["beta"] == est["beta"][i] and st["b_est_e_m"] == est["b_e_m"][i]
+    # the estimate follows the fixes: median horizontal gap well under a metre on this log
+    gnss = {t: g["pose"]["position"] for t, g in msgs["/pose/gnss"]}
+    gap = [math.hypot(p["pose"]["position"]["x"] - gnss[t]["x"], p["pose"]["position"]["y"] - gnss[t]["y"])
+           for t, p in msgs["/pose/estimated"] if t in gnss]
+    assert len(gap) > 0.9 * len(est["t_s"]) and float(np.median(gap)) < 1.0

@@ -93,7 +93,10 @@ def _interp(t_s: np.ndarray, t_src_s: np.ndarray, values: np.ndarray) -> np.ndar
 
 
 def load_flight(path: Path, vehicle: str | None = None, home: LocalNedFrame | None = None) -> Flight:
-    """A run directory (``timeseries.csv``), a ``.tlog`` or a ``.jsonl`` recording."""
+    """A run directory (``timeseries.csv`` of fly/sitl, or ``estimates.csv`` of replay), a ``.tlog``
+    or a ``.jsonl`` recording."""
+    if path.is_dir() and not (path / "timeseries.csv").is_file() and (path / "estimates.csv").is_file():
+        return from_replay_dir(path)
     if path.is_dir():
         return from_run_dir(path)
     if not path.is_file():
@@ -128,6 +131,49 @@ def from_run_dir(run: Path) -> Flight:
         name = f"{s.get('mission', '?')} profile {s.get('profile', '?')}, {s.get('method', '?')}"
         frame = _mission_frame(s.get("mission"))
     return Flight(name, columns["t_s"], columns, frame=frame, source=str(run))
+
+
+REPLAY_TRACKS = {"estimated": ("p_n_m", "p_e_m", "p_d_m")}
+REPLAY_COLUMNS = {"b_n_m": "b_est_n_m", "b_e_m": "b_est_e_m", "b_d_m": "b_est_d_m", "beta": "beta",
+                  "nis": "nis"}
+
+
+def from_replay_dir(run: Path) -> Flight:
+    """``beliefnav replay`` output: ``estimates.csv`` (boot time) and, from the log named in
+    ``summary.json`` when it is still there, the GNSS fixes (validity time, the same clock)."""
+    csv = run / "estimates.csv"
+    table = np.genfromtxt(csv, delimiter=",", names=True, ndmin=1)
+    names = table.dtype.names or ()
+    need = ["t_s", *REPLAY_TRACKS["estimated"], *REPLAY_COLUMNS]
+    if any(n not in names for n in need):
+        raise UserError(f"{csv}: not a replay table (needs columns {', '.join(need)})")
+    t_s = np.asarray(table["t_s"], dtype=float)
+    columns = {new: np.asarray(table[old], dtype=float) for old, new in REPLAY_COLUMNS.items()}
+    _set_track(columns, "estimated", np.column_stack([table[n] for n in REPLAY_TRACKS["estimated"]]))
+    summary = run / "summary.json"
+    s = json.loads(summary.read_text(encoding="utf-8")) if summary.is_file() else {}
+    h = s.get("home") or {}
+    has_home = {"lat_deg", "lon_deg", "alt_m"} <= set(h)
+    frame = LocalNedFrame(h["lat_deg"], h["lon_deg"], h["alt_m"]) if has_home else None
+    fixes: list[Fix] = []
+    log = Path(str(s.get("file", "")))
+    if frame is not None and log.suffix == ".tlog" and log.is_file():
+        from companion.mavlink import codec
+        from companion.mavlink.tlog import read_tlog
+
+        for _, m in read_tlog(log, ["GPS_RAW_INT"]):
+            try:
+                fix = codec.decode_gnss(m)
+            except codec.CodecError:
+                continue
+            if fix.fix_type >= 3:
+                fixes.append(Fix(fix.t_validity_us * 1e-6, fix.lat_deg, fix.lon_deg, fix.alt_m, fix.h_acc_m))
+        if fixes:
+            lla = np.array([(f.lat_deg, f.lon_deg, f.alt_m) for f in fixes])
+            ned = frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
+            _set_track(columns, "gnss", _interp(t_s, np.array([f.t_s for f in fixes]), ned))
+    name = f"{run.name} ({s.get('method', '?')} on {log.name or '?'})"
+    return Flight(name, t_s, columns, fixes=fixes, frame=frame, source=str(run))
 
 
 def _mission_frame(mission: object) -> LocalNedFrame | None:
