@@ -16,9 +16,10 @@ from companion.errors import UserError
 
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "replay": ("gcs_tools.replay.cli", "replay a tlog through the estimator"),
+    "replay": ("gcs_tools.replay.cli", "replay a flight log (tlog, .bin, .ulg) through the estimator"),
     "fly": ("gcs_tools.fly.cli", "fly a mission in-process (vehicle, planner, estimator)"),
     "sitl": ("gcs_tools.sitl.cli", "fly a mission as three processes over MAVLink/UDP"),
+    "companion": ("gcs_tools.companion_cli", "run the estimator beside a real autopilot (--master URL)"),
     "dashboard": ("gcs_tools.dashboard.cli", "live web dashboard fed by Zenoh"),
     "record": ("gcs_tools.recorder.cli", "record Zenoh telemetry to a file"),
     "plot": ("gcs_tools.recorder.plot_cli", "redraw a run's figures from a recording"),

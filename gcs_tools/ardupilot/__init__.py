@@ -1,0 +1,1 @@
+"""ArduPilot tools: the ArduCopter SITL launcher (sitl.py)."""
