@@ -63,7 +63,7 @@ def test_dashboard_plots_a_live_sitl_flight_in_chromium(tmp_path):
                 sitl_out, sitl_err = sitl.communicate(timeout=45)
                 rate_hz = (page.evaluate("window.dashboardStats.frames") - f0) / (time.monotonic() - t0)
             assert sitl.returncode == 0, sitl_err
-            assert "reached_goal" in sitl_out
+            assert "reached goal" in sitl_out
             vehicle = json.loads((out / "vehicle.json").read_text())
             estimator = json.loads((out / "estimator.json").read_text())
             n_truth, n_gnss = _sim_state_count(out / "run.tlog"), vehicle["gnss_sent"]
