@@ -160,6 +160,9 @@ function drawCharts(v) {
     err: columns(s.err || [], [1]),
     latency: columns(s.latency || [], [1], 1000),
   };
+  const why = { beta: "no belief messages from this vehicle", err: "not available: needs the simulation's truth",
+                latency: "not available: needs the vehicle's GNSS topic" };
+  for (const id of Object.keys(data)) document.getElementById(`${id}-nodata`).textContent = data[id][0].length ? "" : `— ${why[id]}`;
   let tmax = -Infinity, tmin = Infinity;
   for (const d of Object.values(data)) if (d[0].length) { tmax = Math.max(tmax, d[0][d[0].length - 1]); tmin = Math.min(tmin, d[0][0]); }
   for (const [id, c] of Object.entries(charts)) {
