@@ -82,6 +82,27 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     assert "SIM_STATE" in json.dumps(result.summary["errors"]) or result.summary["errors"]
 
 
+def test_lockstep_tlog_has_each_frame_once_monotonic_stamps_and_a_real_date(lockstep_flight):
+    from companion.mavlink.codec import mavlink
+    from companion.mavlink.tlog import read_tlog
+
+    frames = list(read_tlog(lockstep_flight / "run.tlog", ("HEARTBEAT", "SYSTEM_TIME", "ODOMETRY")))
+    stamps = [stamp for stamp, _ in read_tlog(lockstep_flight / "run.tlog")]
+    assert all(b >= a for a, b in zip(stamps, stamps[1:], strict=False))  # never backwards
+    assert time.time() - 3600 < stamps[0] / 1e6 <= time.time()  # anchored to the wall clock at start
+    clocks = [m for _, m in frames if m.get_type() == "SYSTEM_TIME"]
+    epochs = {m.time_unix_usec - m.time_boot_ms * 1000 for m in clocks}
+    assert len(epochs) == 1 and abs(epochs.pop() - stamps[0]) < 1_000_000  # stamp = epoch + simulated time
+    boots = [m.time_boot_ms for m in clocks]
+    assert len(boots) == len(set(boots)) > 3  # once each (it is sent to both companions)
+    beats = [m for _, m in frames if m.get_type() == "HEARTBEAT"]
+    vehicle_beats = [b for b in beats if b.type == mavlink.MAV_TYPE_QUADROTOR]
+    assert len(vehicle_beats) == len(clocks)
+    assert all(b.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED for b in vehicle_beats)
+    odometry = [m.time_usec for _, m in frames if m.get_type() == "ODOMETRY"]
+    assert len(odometry) == len(set(odometry)) > 100  # one ODOMETRY per estimate time
+
+
 def test_lockstep_is_reproducible_even_when_a_companion_stalls(lockstep_flight, tmp_path):
     """The same flight again, with the estimator stopped (SIGSTOP) for 1.5 s of wall time mid-flight,
     as a loaded machine may deschedule it: the vehicle waits for it, and every recorded series is
@@ -153,7 +174,7 @@ def test_bad_datagrams_and_wrong_key_are_counted_and_rejected(tmp_path):
     from gcs_tools.sitl.supervisor import free_udp_ports
 
     key_file = tmp_path / "key"
-    key_file.write_text("beliefnav test key")
+    key_file.write_text("beliefnav-test-key")
     out = tmp_path / "run"
     opts = SitlOptions(MISSION, 0, "second-order", 4, out, route_duration_s(MISSION, 0) + 20,
                        signing_key_file=key_file)

@@ -32,6 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-signing", action="store_true",
                         help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
+    from simvehicle.groundlink import add_ground_arguments
+
+    add_ground_arguments(parser)
     parser.add_argument("--max-duration-s", type=float, help="simulated time limit (default: as fly)")
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
     parser.add_argument("--drop-probability", type=float, default=0.0, help=argparse.SUPPRESS)  # tests only
@@ -55,10 +58,12 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools import choices
     from gcs_tools.outdir import ensure_out_dir
     from gcs_tools.sitl.vehicle_id import claim_vehicle_id
+    from simvehicle.groundlink import ground_out_targets
 
     mission = choices.mission(args.mission)  # every option checked before any process starts
     check_run_arguments(args.method, args.seed)
     choices.profile(mission, args.profile)
+    ground_out_targets(args)  # a bad --ground-out too
     ensure_out_dir(args.out)
     if args.signing_key_file is not None and not args.signing_key_file.is_file():
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
@@ -81,6 +86,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
     from gcs_tools.sitl.report import flight_result
     from gcs_tools.summaries import print_summary
+    from simvehicle.groundlink import ground_out_arguments
 
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
@@ -88,6 +94,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         signing=not args.no_signing,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
         telemetry_args=tuple(telemetry.forward_arguments(args)),
+        ground_args=tuple(ground_out_arguments(args)),
     )
     route, max_duration_s = flight_plan(opts)
     bar = None
