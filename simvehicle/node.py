@@ -91,6 +91,7 @@ class _Inbox:
     setpoint: Setpoint | None = None
     beta: float = math.nan
     nis: float = math.nan
+    bias_ned_m: np.ndarray | None = None  # DEBUG_VECT GNSS_BIAS: the estimated GNSS bias [m]
 
 
 class VehicleNode:
@@ -206,6 +207,8 @@ class VehicleNode:
                     if not value.value >= 0.0:
                         raise codec.CodecError("out_of_range", f"{value.name} {value.value}")
                     self.inbox.nis = value.value
+            elif kind == "DEBUG_VECT":
+                self.inbox.bias_ned_m = codec.decode_bias(msg)[1]
             elif kind not in ("HEARTBEAT", "TIMESYNC", "ESTIMATOR_STATUS"):
                 self._count(f"ignored_{kind}")
         except codec.CodecError as exc:
@@ -307,7 +310,7 @@ class VehicleNode:
             else:
                 self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground.link}, self._topics.drain)
             row = self.recorder.record(out, self.inbox.estimate, self.inbox.setpoint, self.inbox.beta,
-                                       self.inbox.nis)
+                                       self.inbox.nis, self.inbox.bias_ned_m)
             self.ground.tick(vehicle_status(self.sim, out, self.ground.gnss_flowing(out.t_us)))
             if out.collided and not was_collided:
                 self.collisions += 1

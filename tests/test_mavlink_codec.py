@@ -217,3 +217,18 @@ def test_bad_outputs_raise_a_counted_codec_error() -> None:
     truth.lon_int = 0
     with pytest.raises(mc.CodecError, match="non_finite"):
         mc.decode_truth(wire(truth), FRAME, 0)
+
+
+def test_bias_debug_vect_round_trip_and_wrong_name():
+    e = NavEstimate(1_234_567, np.zeros(3), np.zeros(3), np.array([0.25, -1.5, 0.125]), np.full(9, 0.1), 0.5,
+                    1.0, "second-order")
+    t_us, b = mc.decode_bias(wire(mc.encode_bias(e)))
+    assert t_us == 1_234_567
+    np.testing.assert_array_equal(b, [0.25, -1.5, 0.125])  # exact in float32
+    other = mc.mavlink.MAVLink_debug_vect_message(b"OTHER", 0, 1.0, 2.0, 3.0)
+    with pytest.raises(mc.CodecError) as exc:
+        mc.decode_bias(wire(other))
+    assert exc.value.reason == "name"
+    nan = mc.mavlink.MAVLink_debug_vect_message(b"GNSS_BIAS", 0, math.nan, 2.0, 3.0)
+    with pytest.raises(mc.CodecError):
+        mc.decode_bias(wire(nan))

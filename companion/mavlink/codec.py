@@ -24,8 +24,9 @@ Units and conventions on the wire (DESIGN §2):
   (NaN first = unknown, as the covariances' convention) and the attitude/rate variances are
   +inf (no information), so ``pose_covariance[0]`` stays a real variance. ``quality`` as the spec
   defines it: -1 while the estimate is not valid (``pos_valid`` False), else 0 (unknown/unset).
-  β, NIS and the bias travel in NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` and
-  ESTIMATOR_STATUS, so a decoded ODOMETRY has NaN β, bias and NIS.
+  β and NIS travel in NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` and ESTIMATOR_STATUS, the
+  estimated bias in DEBUG_VECT ``GNSS_BIAS`` (x, y, z = north, east, down, m; ``time_usec`` boot
+  time), so a decoded ODOMETRY has NaN β, bias and NIS.
 - ESTIMATOR_STATUS: ``flags`` say which outputs are valid now (velocity and position only while
   ``pos_valid``; ``GPS_GLITCH`` while GNSS is rejected by the innovation gate);
   ``pos_horiz_ratio`` = the estimator's last horizontal GNSS innovation test ratio (NIS /
@@ -67,6 +68,7 @@ QUAT_NORM_TOLERANCE = 0.05  # |‖q‖ - 1| beyond this is a corrupt attitude, n
 IMU_FIELDS_ACC_GYRO = 0b111111  # HIGHRES_IMU fields_updated bits for xacc..zgyro
 BELIEF_NAME = "GNSS_BETA"
 NIS_NAME = "GNSS_NIS"
+BIAS_NAME = "GNSS_BIAS"  # DEBUG_VECT: the estimated GNSS bias, x/y/z = north/east/down [m]
 _NAN3 = (math.nan, math.nan, math.nan)
 _SETPOINT_TYPE_MASK = (
     mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
@@ -553,6 +555,21 @@ def encode_belief(e: NavEstimate) -> list[mavlink.MAVLink_named_value_float_mess
         for name, value in ((BELIEF_NAME, e.beta), (NIS_NAME, e.nis))
         if math.isfinite(value)
     ]
+
+
+def encode_bias(e: NavEstimate) -> mavlink.MAVLink_debug_vect_message:
+    """DEBUG_VECT ``GNSS_BIAS``: the estimated GNSS bias, north/east/down [m]."""
+    b = e.b_ned_m
+    return mavlink.MAVLink_debug_vect_message(BIAS_NAME.encode("ascii"), e.t_us, float(b[0]), float(b[1]),
+                                              float(b[2]))
+
+
+def decode_bias(m: Any) -> tuple[int, np.ndarray]:
+    """(boot time [us], bias NED [m]) of a DEBUG_VECT ``GNSS_BIAS``; another name is a CodecError."""
+    name = _text(m.name)
+    if name != BIAS_NAME:
+        raise CodecError("name", f"DEBUG_VECT {name!r} is not {BIAS_NAME}")
+    return int(m.time_usec), _vec("DEBUG_VECT GNSS_BIAS", m.x, m.y, m.z)
 
 
 # --- planner bridge ---------------------------------------------------------------------------

@@ -53,6 +53,7 @@ class OutputRates:
     odometry_period_us: int = 20_000  # ODOMETRY, 50 Hz
     belief_period_us: int = 50_000  # NAMED_VALUE_FLOAT GNSS_BETA / GNSS_NIS, 20 Hz
     status_period_us: int = 200_000  # ESTIMATOR_STATUS, 5 Hz
+    bias_period_us: int = 200_000  # DEBUG_VECT GNSS_BIAS (estimated bias, for the vehicle's record), 5 Hz
     heartbeat_period_s: float = 1.0  # HEARTBEAT, wall clock
 
 
@@ -73,6 +74,7 @@ class _Due:
     odometry_us: int = 0
     belief_us: int = 0
     status_us: int = 0
+    bias_us: int = 0
 
 
 @dataclass(slots=True)
@@ -217,6 +219,11 @@ class EstimatorNode:
             estimate = self._sendable()
             if estimate is not None:
                 self.link.send(codec.encode_estimator_status(estimate))
+        if t_us >= due.bias_us:
+            due.bias_us = _next_multiple(t_us, self.rates.bias_period_us)
+            estimate = self._sendable()
+            if estimate is not None and np.isfinite(estimate.b_ned_m).all():
+                self.link.send(codec.encode_bias(estimate))
 
     def _send_odometry(self) -> NavEstimate | None:
         estimate = self._sendable()

@@ -24,7 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
     parser.add_argument("--scenario", default=None,
                         help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--out", type=Path, default=Path("runs/sitl"),
+                        help="output directory (default runs/sitl)")
+    parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
     parser.add_argument("--signing-key-file", type=Path,
                         help="MAVLink 2 signing key for all three processes (default: a fresh key per run, "
@@ -55,18 +57,19 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from companion.mission import load_mission
+    from companion.mission import with_scenario
+    from gcs_tools import choices
     from gcs_tools.outdir import ensure_out_dir
     from gcs_tools.sitl.vehicle_id import claim_vehicle_id
     from simvehicle.groundlink import ground_out_targets
 
-    mission = load_mission(args.mission, args.scenario)
-    check_run_arguments(args.method, args.seed)  # before any process starts
+    mission = choices.mission(args.mission)  # every option checked before any process starts
+    if args.scenario is not None:
+        mission = with_scenario(mission, args.scenario)
+    check_run_arguments(args.method, args.seed)
+    choices.profile(mission, args.profile)
     ground_out_targets(args)  # a bad --ground-out too
     ensure_out_dir(args.out)
-    if not 0 <= args.profile < len(mission.profiles):
-        last = len(mission.profiles) - 1
-        raise UserError(f"--profile {args.profile}: mission {mission.name!r} has profiles 0..{last}")
     if args.signing_key_file is not None and not args.signing_key_file.is_file():
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
     if args.signing_key_file is not None and args.no_signing:
@@ -87,6 +90,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
     from gcs_tools.fly.output import strict_json, write_outputs
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
     from gcs_tools.sitl.report import flight_result
+    from gcs_tools.summaries import print_summary
     from simvehicle.groundlink import ground_out_arguments
 
     opts = SitlOptions(
@@ -116,24 +120,13 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         write_outputs(result, mission.world, args.out)
     else:
         (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
-    _print(result.summary, args.out)
+    files = sorted(p.name for p in args.out.iterdir() if p.is_file() and p.suffix != ".key")
+    print_summary("sitl", result.summary, args.out, files, args.json)
     reason = failure_reason(run_, result.summary)
     if reason:
         print(f"beliefnav: error: {reason}", file=sys.stderr)
         return 1
     return 0
-
-
-def _print(s: dict, out: Path) -> None:
-    est, trk, sitl = s["estimation_error_m"], s["tracking_error_m"], s["sitl"]
-    print(f"sitl {s['method']} seed {s['seed']} ({sitl['mode']}): {sitl['outcome']} after "
-          f"{s['duration_s']:.1f} s simulated in {s['wall_s']:.1f} s wall (ended by {sitl['ended_by']})")
-    print(f"  estimation error median {est['median']:.2f} m p95 {est['p95']:.2f} m; "
-          f"tracking error median {trk['median']:.2f} m p95 {trk['p95']:.2f} m; "
-          f"min clearance {s['min_clearance_m']:.1f} m")
-    print(f"  GNSS sent {s['gnss']['sent']} fused {s['gnss']['fused']} rejected {s['gnss']['rejected']}; "
-          f"lockstep {json.dumps(sitl['lockstep'])}")
-    print(f"  wrote {out / 'summary.json'}, figures and {out / 'run.tlog'}")
 
 
 def _progress_to(bar: Any) -> Progress:
