@@ -91,7 +91,8 @@ def fig4_trajectories(
         ax.xaxis.label.set_size(8)
         ax.yaxis.label.set_size(8)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
+    if labels:  # rows without naive / first- / second-order draw only the map
+        fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
     fig.suptitle(f"True trajectories per mission profile (seed {seed})", fontsize=10)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     fig.savefig(path, dpi=DPI)
