@@ -16,6 +16,11 @@ if TYPE_CHECKING:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from gcs_tools.ardupilot import cli as ardupilot_cli
+
+    parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot"),
+                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL flying on our GNSS")
+    ardupilot_cli.add_arguments(parser)
     parser.add_argument("--mission", default="default", help="mission name or YAML path")
     parser.add_argument("--profile", type=int, default=0, help="mission profile index")
     parser.add_argument("--method", default="second-order", help="estimator method")
@@ -44,6 +49,10 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.vehicle == "ardupilot":
+        from gcs_tools.ardupilot import cli as ardupilot_cli
+
+        return ardupilot_cli.run(args)
     from companion.mission import load_mission
     from gcs_tools.fly.output import strict_json, write_outputs
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
