@@ -154,3 +154,23 @@ def test_analysis_known_answers():
     e3, eh = errors(np.array([[3.0, 4.0, 12.0]]), np.zeros((1, 3)))
     assert e3[0] == pytest.approx(13.0) and eh[0] == pytest.approx(5.0)
     assert math.isnan(errors(np.full((1, 3), np.nan), np.zeros((1, 3)))[0][0])
+
+
+def test_campaign_aggregate_known_answers(tmp_path):
+    from gcs_tools.evaluate.ardupilot import ApJob, ApResult, aggregate, table_text
+
+    def result(seed: int, ekf: float, comp: float, error: str = "") -> ApResult:
+        job = ApJob("test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig())
+        errs = {} if error else {"ardupilot-ekf3": np.full(10, ekf), "second-order": np.full(10, comp)}
+        return ApResult(job, errs, np.full(10, 1.0), not error, 0, "reached_goal", 10.0, 1.0, error)
+
+    res = aggregate([result(0, 2.0, 1.0), result(1, 4.0, 1.0), result(2, 0, 0, "no SITL")],
+                    ("ardupilot-ekf3", "second-order"), (0, 1, 2))
+    ol = res["open_loop"]
+    assert ol["ardupilot-ekf3"]["median"] == pytest.approx(3.0) and ol["ardupilot-ekf3"]["n"] == 20
+    assert ol["second-order"]["reduction_vs_ekf3"] == pytest.approx(1.0 / 3.0 - 1.0)
+    assert ol["second-order"]["flight_medians"] == [1.0, 1.0]
+    # seed 2 was not flown: its medians are NaN and left out of the paired comparison
+    assert ol["second-order"]["reduction_vs_ekf3_seeds"]["value"] == pytest.approx(1.0 / 3.0 - 1.0)
+    assert res["flying_on_ekf3"]["flights"] == 3 and res["flying_on_ekf3"]["flown"] == 2
+    assert "| second-order | 1.00 |" in table_text(res)

@@ -37,6 +37,7 @@ from simvehicle.config import sim_config_for
 from simvehicle.gnss import NedToGeodetic
 
 FEEDS = ("none",)  # closed loop (gps-input, vision) needs the companion process: not wired yet
+HORIZONTAL_ERROR_PREFIX = "est_error_h_m:"  # series keys of every row's horizontal error (not in the CSV)
 INSTANCE_RANGE = (20, 40)  # -I 20..39: this tool's instances (ports 5960..6153)
 
 
@@ -101,9 +102,20 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
         "sim_s_per_wall_s": sim_s / wall_s if wall_s > 0 else math.nan,
         "messages_received": rec.counts, "rejected": rec.rejected,
         "gps_input_sent": session.gps_sent, "setpoints_sent": session.setpoints_sent,
+        # extra delay (ArduPilot time) of everything we send, from the scheduler: GPS_INPUT reaches
+        # EKF3 this much later than the model's latency says (the companion's fixes do not have it)
+        "command_delay_ms": _delay_stats(session.command_delay_us),
         "statustext": [f"{t * 1e-6:.1f} s {s}" for t, s in rec.statustext[-40:]],
     }
     return evaluate_flight(opts, m, route, rec, source, driver, run_info, sim.vehicle.radius_m)
+
+
+def _delay_stats(delays_us: list[int]) -> dict[str, float]:
+    d = np.asarray(delays_us, dtype=float) * 1e-3
+    if not d.size:
+        return {"median": math.nan, "p95": math.nan, "max": math.nan, "n": 0}
+    return {"median": float(np.median(d)), "p95": float(np.percentile(d, 95)), "max": float(d.max()),
+            "n": int(d.size)}
 
 
 def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec: Recording,
@@ -121,10 +133,12 @@ def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec:
               for name in dict.fromkeys((opts.method, *opts.methods))}
     tracks[AUTOPILOT_ROW] = autopilot_track(rec, times_us)
     per_method = {}
+    method_errors: dict[str, np.ndarray] = {}  # horizontal error per sample, for campaigns
     for name, tr in tracks.items():
         e3, eh = errors(tr.p_ned_m, p_true)
         per_method[name] = {"estimation_error_m": error_stats(e3),
                             "estimation_error_horizontal_m": error_stats(eh)}
+        method_errors[name] = eh
     mine, ekf = tracks[opts.method], tracks[AUTOPILOT_ROW]
     e3, eh = errors(mine.p_ned_m, p_true)
     a3, ah = errors(ekf.p_ned_m, p_true)
@@ -135,6 +149,7 @@ def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec:
         "beta": mine.beta, "nis": mine.nis, "latency_s": np.asarray(rec.truth_latency_s)[sel],
         "clearance_m": clearance, "est_error_m": e3, "track_error_m": track_err,
         "p_autopilot_ned_m": ekf.p_ned_m, "autopilot_error_m": a3,
+        **{f"{HORIZONTAL_ERROR_PREFIX}{name}": e for name, e in method_errors.items()},
     }
     nav = mine.counters
     summary: dict[str, Any] = {

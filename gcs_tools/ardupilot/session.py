@@ -30,6 +30,7 @@ from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields  #
 MSG = mavutil.mavlink
 SETPOINT_TYPE_MASK = MSG.POSITION_TARGET_TYPEMASK_YAW_IGNORE | MSG.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 255, 190
+TIMESYNC_PERIOD_US = 500_000  # ArduPilot time between command-delay probes
 EKF_POS_HORIZ_ABS, EKF_CONST_POS_MODE = 16, 128  # EKF_STATUS_REPORT flags (ardupilotmega EKF_STATUS_FLAGS)
 
 
@@ -66,6 +67,10 @@ class ArduPilotSession:
         self.gps_sent = 0
         self.setpoints_sent = 0
         self.acks: list[tuple[int, int, int]] = []  # (t_us, command, MAV_RESULT) of flight commands
+        # How late what we send reaches ArduPilot, in ITS time: a TIMESYNC request carries the
+        # ArduPilot time we had processed up to (ts1); the reply says when it arrived (tc1).
+        self.command_delay_us: list[int] = []
+        self._next_timesync_us = 0
 
     # ---------------------------------------------------------------- wiring
     def connect(self, alive: Any) -> None:
@@ -164,6 +169,8 @@ class ArduPilotSession:
                 now.mode = msg.custom_mode
                 now.armed = bool(msg.base_mode & MSG.MAV_MODE_FLAG_SAFETY_ARMED)
                 now.takeoff_accepted = now.takeoff_accepted and now.armed
+            elif kind == "TIMESYNC" and msg.tc1 != 0 and msg.ts1 > 0:
+                self.command_delay_us.append(msg.tc1 // 1000 - msg.ts1 // 1000)
             elif kind == "EKF_STATUS_REPORT":
                 flags = msg.flags
                 now.ekf_position_ok = bool(flags & EKF_POS_HORIZ_ABS) and not flags & EKF_CONST_POS_MODE
@@ -194,6 +201,9 @@ class ArduPilotSession:
     def _tick(self) -> None:
         t = self.now.t_us
         mav = self.m.mav
+        if t >= self._next_timesync_us:
+            self._next_timesync_us = t + TIMESYNC_PERIOD_US
+            mav.timesync_send(0, t * 1000)
         for sf in self.source.due(t):
             mav.gps_input_send(**gps_input_fields(sf.fix))
             self.gps_sent += 1
