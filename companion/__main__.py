@@ -1,4 +1,8 @@
-"""``python -m companion estimator|bridge``: the companion computer's processes."""
+"""``python -m companion estimator|bridge``: the companion computer's processes.
+
+``estimator --vehicle-port P`` talks to our own simulated vehicle (``beliefnav sitl``, lockstep);
+``estimator --master URL --out DIR`` sits beside a foreign autopilot (:mod:`companion.autopilot`).
+"""
 
 from __future__ import annotations
 
@@ -10,6 +14,7 @@ from companion.errors import UserError
 
 
 def _parser() -> argparse.ArgumentParser:
+    from companion.autopilot.options import add_master_arguments
     from companion.mavlink.udp_link import add_link_arguments
     from companion.telemetry import pubsub as telemetry
 
@@ -17,7 +22,8 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="process", required=True)
     for name, text in (("estimator", "belief-adaptive estimator"), ("bridge", "planner bridge")):
         p = sub.add_parser(name, help=text)
-        p.add_argument("--vehicle-port", type=int, required=True, help="the vehicle's UDP port for us")
+        p.add_argument("--vehicle-port", type=int, required=name == "bridge",
+                       help="our simulated vehicle's UDP port for us")
         p.add_argument("--bind-port", type=int, default=0, help="our UDP port (0: any free one)")
         p.add_argument("--mission", default="default", help="mission name or YAML path")
         p.add_argument("--stats", type=Path, help="write link/node counters here (JSON) on exit")
@@ -25,6 +31,9 @@ def _parser() -> argparse.ArgumentParser:
         telemetry.add_arguments(p, publisher=True)
         if name == "estimator":
             p.add_argument("--method", default="second-order", help="estimator method")
+            p.add_argument("--step-markers", action="store_true",
+                           help="TIMESYNC requests are our simulated vehicle's step markers (beliefnav sitl)")
+            add_master_arguments(p, master_required=False)
         else:
             p.add_argument("--profile", type=int, default=0, help="mission profile index")
             p.add_argument("--start-delay-s", type=float, default=0.0, help="hover before the route (s)")
@@ -36,6 +45,12 @@ def main(argv: list[str] | None = None) -> int:
 
     args = _parser().parse_args(argv)
     exit_on_sigterm()
+    if args.process == "estimator" and (args.master is None) == (args.vehicle_port is None):
+        print("companion estimator: error: give exactly one of --vehicle-port (our simulated vehicle) "
+              "and --master (a foreign autopilot)", file=sys.stderr)
+        return 2
+    if args.process == "estimator" and args.master is not None:
+        return _run_master(args)
     node = None
     try:
         node = _build(args)
@@ -57,6 +72,26 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _run_master(args: argparse.Namespace) -> int:
+    from companion.autopilot.node import config_from_args, run
+    from companion.telemetry.pubsub import publisher_from_args
+
+    telemetry = None
+    try:
+        config = config_from_args(args)
+        telemetry = publisher_from_args(args, "companion")
+        run(config, telemetry)
+    except UserError as exc:
+        print(f"companion estimator: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if telemetry is not None:
+            telemetry.close()
+    return 0
+
+
 def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNode)
     from companion.mavlink.udp_link import UdpLink, link_settings
     from companion.mission import load_mission
@@ -69,7 +104,8 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
 
         navigator, nis_gate = make_navigator(mission, args.method)
         link = UdpLink(_config(args, ESTIMATOR_COMPONENT_ID, fields, link_id=1), rng)
-        return EstimatorNode(link, navigator, nis_gate, publisher_from_args(args, "companion"))
+        return EstimatorNode(link, navigator, nis_gate, publisher_from_args(args, "companion"),
+                             step_markers=args.step_markers)
     from companion.nodes.bridge_node import BRIDGE_COMPONENT_ID, BridgeNode, route_info
     from companion.planning import plan_route
 

@@ -18,6 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("gcs_tools.replay.cli", "replay a tlog through the estimator"),
     "fly": ("gcs_tools.fly.cli", "fly a mission in-process (vehicle, planner, estimator)"),
     "sitl": ("gcs_tools.sitl.cli", "fly a mission as three processes over MAVLink/UDP"),
+    "companion": ("gcs_tools.companion_cli", "run the estimator beside a real autopilot (--master URL)"),
     "dashboard": ("gcs_tools.dashboard.cli", "live web dashboard fed by Zenoh"),
     "record": ("gcs_tools.recorder.cli", "record Zenoh telemetry to a file"),
     "plot": ("gcs_tools.recorder.plot_cli", "redraw a run's figures from a recording"),

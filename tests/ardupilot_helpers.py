@@ -5,12 +5,20 @@ $BELIEFNAV_ARDUPILOT_BIN). Missing, the tests skip on a developer machine and FA
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
+from pymavlink import mavutil
 
 from companion.errors import UserError
 from gcs_tools.ardupilot.sitl import resolve_binary
+
+M = mavutil.mavlink
+COPTER_MODE_GUIDED = 4
 
 
 def require_ardupilot() -> Path:
@@ -20,3 +28,59 @@ def require_ardupilot() -> Path:
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail(f"ArduPilot SITL is required in CI: {exc}")
         pytest.skip(str(exc))
+
+
+def run_companion(master: str, out: Path, *extra: str) -> subprocess.Popen[str]:
+    """``beliefnav companion --master ...`` as a child process (stops with SIGTERM, summary written)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "gcs_tools", "companion", "--master", master, "--out", str(out),
+         "--no-telemetry", *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def stop(proc: subprocess.Popen[str], timeout_s: float = 15.0) -> tuple[int, str]:
+    """SIGTERM (if still running), wait; (return code, stderr)."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+    try:
+        _, err = proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        _, err = proc.communicate()
+    return proc.returncode, err
+
+
+def tlog_messages(path: Path) -> list[Any]:
+    """Every message of a tlog with its sender ids (pymavlink's reader)."""
+    conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
+    out = []
+    while (msg := conn.recv_match()) is not None:
+        if msg.get_type() != "BAD_DATA":
+            out.append(msg)
+    conn.close()
+    return out
+
+
+class GroundStation:
+    """A minimal GCS on one of the SITL's serial ports (system 255): arm in GUIDED, take off."""
+
+    def __init__(self, url: str, system_id: int = 255) -> None:
+        self.conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=190,
+                                               dialect="ardupilotmega")
+        self.conn.wait_heartbeat(timeout=30)
+        self.conn.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_ALL, 5, 1)
+
+    def heartbeat(self) -> None:
+        self.conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def try_arm_guided(self) -> None:
+        self.conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_MODE_GUIDED)
+        self.conn.mav.command_long_send(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+
+    def takeoff(self, altitude_m: float) -> None:
+        self.conn.mav.command_long_send(1, 1, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, altitude_m)
+
+    def close(self) -> None:
+        self.conn.close()
+
+

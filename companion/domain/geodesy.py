@@ -30,3 +30,18 @@ class LocalNedFrame:
             self.home_lat_deg, self.home_lon_deg, self.home_alt_m,
         )
         return float(lat), float(lon), float(alt)
+
+
+def parse_home(text: str, option: str = "--home") -> LocalNedFrame:
+    """``"lat,lon,alt"`` (degrees, degrees, metres AMSL) -> frame; a one-line UserError otherwise."""
+    import math
+
+    from companion.errors import UserError
+
+    try:
+        lat, lon, alt = (float(v) for v in text.split(","))
+    except ValueError:
+        raise UserError(f"{option} {text!r}: expected lat,lon,alt (degrees, degrees, metres)") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and math.isfinite(alt)):
+        raise UserError(f"{option} {text!r}: latitude/longitude out of range")
+    return LocalNedFrame(lat, lon, alt)

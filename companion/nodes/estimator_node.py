@@ -3,8 +3,10 @@
 Samples are pushed into the :class:`Navigator` in arrival order. Outputs are scheduled on the
 estimate's own clock (boot time of the last IMU sample), so they are the same in lockstep and
 in real time: ODOMETRY at 50 Hz and right after every GNSS fix, ESTIMATOR_STATUS at 5 Hz,
-NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` at 20 Hz. A lockstep step marker is answered with
-ODOMETRY for that time, then the TIMESYNC response. A restarted process starts a fresh
+NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` at 20 Hz. With ``step_markers`` (set only by
+``beliefnav sitl``, whose vehicle ends each step with a TIMESYNC request) a request is a step
+marker, answered with ODOMETRY for that time, then the TIMESYNC response; without it a TIMESYNC
+request is answered as the MAVLink spec says and nothing else happens. A restarted process starts a fresh
 Navigator, which initialises again from the next good GNSS fix.
 """
 
@@ -16,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from companion.autopilot.timesync import answer as timesync_answer
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.estimator import Navigator, mission_estimator_config
 from companion.mavlink import codec as codec
@@ -56,6 +59,7 @@ class EstimatorNode:
     rates: OutputRates = field(default_factory=OutputRates)
     counters: dict[str, int] = field(default_factory=dict)
     gnss_to_odometry_ns: list[int] = field(default_factory=list)
+    step_markers: bool = False  # TIMESYNC requests are beliefnav sitl's step markers
     _due: _Due = field(default_factory=_Due)
     _topics: EstimatorTelemetry = field(init=False)
     _deferred: DeferredPublisher = field(init=False)
@@ -72,13 +76,17 @@ class EstimatorNode:
         self.counters[name] = self.counters.get(name, 0) + 1
 
     def handle(self, msg: Any) -> None:
-        t_marker = marker_time_us(msg)
-        if t_marker is not None:
-            self._count("step_markers")
-            self._send_odometry()
-            self.link.send(step_response(t_marker, time.monotonic_ns()))
-            return
         kind = msg.get_type()
+        if kind == "TIMESYNC":
+            t_marker = marker_time_us(msg)
+            if t_marker is not None and self.step_markers:
+                self._count("step_markers")
+                self._send_odometry()
+                self.link.send(step_response(t_marker, time.monotonic_ns()))
+            elif msg.tc1 == 0:
+                self._count("timesync_answered")
+                self.link.send(timesync_answer(msg, time.monotonic_ns()))
+            return
         if kind in IGNORED_TYPES:
             return
         try:

@@ -5,7 +5,8 @@ from gcs_tools.ardupilot.sitl import ArduPilotSitl, SitlConfig
 with ArduPilotSitl(SitlConfig(work_dir=run_dir / "ardupilot", speedup=10,
                               params={"GPS1_TYPE": 14})) as sitl:
     sitl.url           # "tcp:127.0.0.1:5760+10*I" = SERIAL0 (the simulation waits for a client here)
-    sitl.serial_urls   # SERIAL0..2 (SERIAL1/2 do not block)
+    sitl.serial_urls   # SERIAL0..2 (SERIAL1/2 do not block; they listen once SERIAL0 has a client:
+                       # sitl.wait_serial(1) returns SERIAL1's URL when it does)
     sitl.instance      # the -I chosen (first one whose ports are all free)
 ```
 
@@ -198,6 +199,16 @@ class ArduPilotSitl:
         self.stop()
         raise UserError(f"ArduCopter SITL did not open TCP port {self.ports[0]} within "
                         f"{self.config.start_timeout_s:g} s: {self._tail()}")
+
+    def wait_serial(self, index: int, timeout_s: float = 20.0) -> str:
+        """The URL of SERIAL``index`` once it listens (SERIAL1/2 open only after SERIAL0 has a client)."""
+        deadline = time.monotonic() + timeout_s
+        while not port_listening(self.ports[index]):
+            if not self.running() or time.monotonic() > deadline:
+                raise UserError(f"ArduCopter SITL SERIAL{index} (TCP {self.ports[index]}) is not listening: "
+                                f"{self._tail()}")
+            time.sleep(0.05)
+        return self.serial_urls[index]
 
     def _listening(self) -> bool:
         # Connecting to SERIAL0 would make this probe the firmware's client; ask the kernel instead.

@@ -17,6 +17,7 @@ TARGETS = {
     "telemetry": "gcs_tools.bench.telemetry",
     "evaluate": "gcs_tools.bench.evaluate",
     "plan": "gcs_tools.bench.plan",
+    "autopilot": "gcs_tools.bench.autopilot",
 }
 
 

@@ -104,7 +104,8 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
         vehicle.append("--realtime")
     estimator = [
         "companion", "estimator", "--vehicle-port", str(ports[0]), "--mission", opts.mission,
-        "--method", opts.method, "--stats", str(out / "estimator.json"), *common, *loss_seed(1),
+        "--method", opts.method, "--stats", str(out / "estimator.json"), "--step-markers", *common,
+        *loss_seed(1),
     ]
     bridge = [
         "companion", "bridge", "--vehicle-port", str(ports[1]), "--mission", opts.mission,

@@ -1,0 +1,29 @@
+"""Command-line options of the foreign-autopilot mode, kept light (no pymavlink import), so every
+companion process can offer them without paying for the adapter's imports."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+DEFAULT_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
+FEEDS = ("none", "vision", "odometry", "gps-input")
+
+
+def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool) -> None:
+    """The options of the foreign-autopilot mode (``--master`` and what goes with it)."""
+    parser.add_argument("--master", required=master_required,
+                        help="autopilot connection: tcp:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT, "
+                             "serial:DEVICE:BAUD")
+    parser.add_argument("--out", type=Path, help="output directory (run.tlog, summary.json)")
+    parser.add_argument("--feed", default="none", choices=FEEDS, help="what to send the autopilot")
+    parser.add_argument("--home", help="local frame origin LAT,LON,ALT (default: the autopilot's origin)")
+    parser.add_argument("--duration-s", type=float, help="stop after this many wall seconds")
+    parser.add_argument("--component-id", type=int, default=DEFAULT_COMPONENT_ID,
+                        help="our MAVLink component id")
+    parser.add_argument("--gnss-instance", type=int, default=1, choices=(1, 2),
+                        help="GNSS input: 1 = GPS_RAW_INT, 2 = GPS2_RAW")
+    parser.add_argument("--gnss-delay-ms", type=float, default=0.0,
+                        help="receiver delay: fix validity = the autopilot's stamp minus this")
+    parser.add_argument("--discovery-timeout-s", type=float, default=60.0,
+                        help="give up when no autopilot HEARTBEAT arrives within this (wall s)")

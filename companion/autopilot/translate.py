@@ -1,0 +1,136 @@
+"""The autopilot's messages as estimator samples on ONE time base: the autopilot's boot time (µs).
+
+Sources (one of each kind is used; when a better-ranked source appears the others are counted
+as ``*_other_source`` and not fed twice):
+
+- IMU: HIGHRES_IMU (SI units, ``time_usec`` boot µs) > SCALED_IMU > RAW_IMU > SCALED_IMU2.
+  SCALED_IMU* carry acceleration in mG (1 g = 9.80665 m/s²) and rates in mrad/s, stamped
+  ``time_boot_ms``. RAW_IMU is read in ArduPilot's units, which are the same mG and mrad/s
+  (measured on ArduCopter SITL: ``zacc = -1001`` at rest; ``time_usec`` boot µs); on PX4
+  RAW_IMU is raw sensor counts, so a PX4 companion must use HIGHRES_IMU (PX4 streams it).
+- Attitude: ATTITUDE_QUATERNION (``q1`` = w, body FRD -> NED) > ATTITUDE (Euler ZYX).
+- GNSS: GPS_RAW_INT (receiver 1) or GPS2_RAW (receiver 2), chosen by ``gnss_instance``.
+
+GNSS time: ArduPilot stamps GPS_RAW_INT ``time_usec`` with the boot time at which its GPS driver
+took the fix in (``last_fix_time_ms`` x 1000): an ARRIVAL time, not the receiver's validity
+time; its own EKF3 subtracts ``GPS1_DELAY_MS`` (0 = the driver's default lag) to get the
+validity time. We do the same with ``gnss_delay_us`` (a configured receiver delay: the autopilot
+does not send it). A stamp above :data:`UNIX_STAMP_MIN_US` is UNIX time (MAVLink allows either)
+and is mapped to boot time with the last SYSTEM_TIME pair. A fix repeated at the same stamp
+(the autopilot streams GPS_RAW_INT faster than the receiver updates) is dropped and counted.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
+from companion.mavlink import codec as mc
+
+UNIX_STAMP_MIN_US = 10**15  # ≈ 31.7 years: a larger stamp is UNIX time, not time since boot
+IMU_RANK = {"HIGHRES_IMU": 0, "SCALED_IMU": 1, "RAW_IMU": 2, "SCALED_IMU2": 3}
+ATTITUDE_RANK = {"ATTITUDE_QUATERNION": 0, "ATTITUDE": 1}
+GNSS_TYPES = {1: "GPS_RAW_INT", 2: "GPS2_RAW"}
+_DECODERS = {
+    "HIGHRES_IMU": mc.decode_imu, "SCALED_IMU": mc.decode_scaled_imu, "RAW_IMU": mc.decode_raw_imu,
+    "SCALED_IMU2": mc.decode_scaled_imu, "ATTITUDE_QUATERNION": mc.decode_attitude,
+    "ATTITUDE": mc.decode_attitude_euler,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class TranslateConfig:
+    gnss_instance: int = 1  # 1: GPS_RAW_INT, 2: GPS2_RAW
+    gnss_delay_us: int = 0  # receiver delay: validity time = the autopilot's stamp - this
+
+
+def boot_stamp_us(msg: Any) -> int | None:
+    """The autopilot boot time a message is stamped with (µs), None if it carries none."""
+    t_ms = getattr(msg, "time_boot_ms", None)
+    if t_ms is not None:
+        return int(t_ms) * 1000
+    if msg.get_type() in IMU_RANK:  # HIGHRES_IMU / RAW_IMU: time_usec since boot
+        return int(msg.time_usec)
+    return None
+
+
+@dataclass(slots=True)
+class Translator:
+    config: TranslateConfig = field(default_factory=TranslateConfig)
+    counters: Counter[str] = field(default_factory=Counter)
+    unix_minus_boot_us: int | None = None  # from SYSTEM_TIME
+    last_attitude: AttitudeSample | None = None
+    last_imu: ImuSample | None = None
+    last_fix: GnssFix | None = None  # as received (stamp = arrival), after the time mapping
+    _imu_rank: int = len(IMU_RANK)
+    _attitude_rank: int = len(ATTITUDE_RANK)
+    _last_gnss_stamp_us: int = -1
+
+    def __post_init__(self) -> None:
+        if self.config.gnss_instance not in GNSS_TYPES:
+            raise ValueError(f"gnss_instance must be 1 or 2, got {self.config.gnss_instance}")
+
+    def system_time(self, msg: Any) -> None:
+        if int(msg.time_unix_usec) > UNIX_STAMP_MIN_US:
+            self.unix_minus_boot_us = int(msg.time_unix_usec) - int(msg.time_boot_ms) * 1000
+
+    def reset(self) -> None:
+        """Forget the time-base state (after an autopilot reboot); source choices are kept."""
+        self._last_gnss_stamp_us = -1
+        self.unix_minus_boot_us = None
+        self.last_attitude = self.last_imu = self.last_fix = None
+
+    def sample(self, msg: Any) -> ImuSample | AttitudeSample | GnssFix | None:
+        """The estimator sample in ``msg`` (None for other messages or a counted rejection)."""
+        kind = msg.get_type()
+        if kind == GNSS_TYPES[self.config.gnss_instance]:
+            return self._gnss(msg)
+        if kind in IMU_RANK:
+            rank = IMU_RANK[kind]
+            if rank > self._imu_rank:
+                self.counters["imu_other_source"] += 1
+                return None
+            self._imu_rank = rank
+        elif kind in ATTITUDE_RANK:
+            rank = ATTITUDE_RANK[kind]
+            if rank > self._attitude_rank:
+                self.counters["attitude_other_source"] += 1
+                return None
+            self._attitude_rank = rank
+        else:
+            return None
+        try:
+            sample = _DECODERS[kind](msg)
+        except mc.CodecError as exc:
+            self.counters[f"rejected_{kind.lower()}_{exc.reason}"] += 1
+            return None
+        if isinstance(sample, ImuSample):
+            self.last_imu = sample
+        elif isinstance(sample, AttitudeSample):
+            self.last_attitude = sample
+        return sample  # type: ignore[return-value]
+
+    def _gnss(self, msg: Any) -> GnssFix | None:
+        stamp_us = int(msg.time_usec)
+        if stamp_us == 0:  # ArduPilot before its first fix
+            self.counters["gnss_no_stamp"] += 1
+            return None
+        if stamp_us == self._last_gnss_stamp_us:
+            self.counters["gnss_repeated"] += 1
+            return None
+        self._last_gnss_stamp_us = stamp_us
+        if stamp_us > UNIX_STAMP_MIN_US:
+            if self.unix_minus_boot_us is None:
+                self.counters["gnss_no_time_base"] += 1
+                return None
+            stamp_us -= self.unix_minus_boot_us
+        try:
+            fix = mc.decode_gnss(msg)
+        except mc.CodecError as exc:
+            self.counters[f"rejected_gnss_{exc.reason}"] += 1
+            return None
+        fix = replace(fix, t_validity_us=stamp_us - self.config.gnss_delay_us)
+        self.last_fix = fix
+        return fix
