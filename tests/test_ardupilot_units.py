@@ -157,6 +157,8 @@ def test_analysis_known_answers():
 
 
 def test_campaign_aggregate_known_answers(tmp_path):
+    from dataclasses import replace
+
     from gcs_tools.evaluate.ardupilot import ApJob, ApResult, aggregate, table_text
 
     def result(seed: int, ekf: float, comp: float, error: str = "") -> ApResult:
@@ -164,7 +166,8 @@ def test_campaign_aggregate_known_answers(tmp_path):
         errs = {} if error else {"ardupilot-ekf3": np.full(10, ekf), "second-order": np.full(10, comp)}
         return ApResult(job, errs, np.full(10, 1.0), not error, 0, "reached_goal", 10.0, 1.0, error)
 
-    res = aggregate([result(0, 2.0, 1.0), result(1, 4.0, 1.0), result(2, 0, 0, "no SITL")],
+    res = aggregate([result(0, 2.0, 1.0), result(1, 4.0, 1.0), result(2, 0, 0, "no SITL"),
+                     replace(result(2, 9.0, 9.0), valid=False)],
                     ("ardupilot-ekf3", "second-order"), (0, 1, 2))
     ol = res["open_loop"]
     assert ol["ardupilot-ekf3"]["median"] == pytest.approx(3.0) and ol["ardupilot-ekf3"]["n"] == 20
@@ -172,5 +175,6 @@ def test_campaign_aggregate_known_answers(tmp_path):
     assert ol["second-order"]["flight_medians"] == [1.0, 1.0]
     # seed 2 was not flown: its medians are NaN and left out of the paired comparison
     assert ol["second-order"]["reduction_vs_ekf3_seeds"]["value"] == pytest.approx(1.0 / 3.0 - 1.0)
-    assert res["flying_on_ekf3"]["flights"] == 3 and res["flying_on_ekf3"]["flown"] == 2
+    # the late flight (commands delayed by the scheduler) is counted but not used
+    assert res["flying"]["none"]["flights"] == 4 and res["flying"]["none"]["valid"] == 2
     assert "| second-order | 1.00 |" in table_text(res)

@@ -35,18 +35,19 @@ class Track:
 
 def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: EstimatorConfig,
                     frame: LocalNedFrame, times_us: np.ndarray) -> Track:
-    """Run ``method`` over the recording; its estimate right after the IMU sample at each time."""
+    """Run ``method`` over the recording; its estimate right after the IMU sample (and the fixes
+    released with it) at each time: exactly what the closed loop's live companion computes."""
     nav = Navigator(cfg, method=method, frame=frame)
     n = len(times_us)
     p, b = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
     beta, nis = np.full(n, np.nan), np.full(n, np.nan)
     imu_t = rec.imu_t_us
     k = j = 0
-    for i, t in enumerate(imu_t):
+    for i, t in enumerate(imu_t):  # as the session pushes them: the IMU sample, then the fixes released
+        nav.push_imu_batch(np.array([t]), rec.imu_acc_frd_m_s2[i][None, :], rec.imu_q_ned_frd[i][None, :])
         while k < len(sent) and sent[k].arrival_us <= t:
             nav.push_fix_ned(sent[k].fix.t_validity_us, sent[k].p_ned_m)
             k += 1
-        nav.push_imu_batch(np.array([t]), rec.imu_acc_frd_m_s2[i][None, :], rec.imu_q_ned_frd[i][None, :])
         while j < n and times_us[j] < t:
             j += 1  # an evaluation time without its IMU sample (dropped): skipped, stays NaN
         if j < n and times_us[j] == t:

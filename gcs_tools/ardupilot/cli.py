@@ -13,8 +13,9 @@ from companion.errors import UserError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options only the ArduPilot vehicle takes (``sitl`` adds them to its own)."""
-    parser.add_argument("--feed", default="none", choices=("none", "gps-input", "vision"),
-                        help="ardupilot: what the companion feeds the autopilot (none = it flies on EKF3)")
+    parser.add_argument("--feed", default="none", choices=("none", "gps-input"),
+                        help="ardupilot: none = it flies on EKF3 fed our raw fixes; gps-input = on the "
+                             "companion's cleaned fixes (closed loop)")
     parser.add_argument("--speedup", type=float, help="ardupilot: SITL --speedup (default 10)")
     parser.add_argument("--gnss-rate-hz", type=float, help="ardupilot: GPS_INPUT rate, 5-20 Hz (default 10)")
 
@@ -56,7 +57,7 @@ def _print(s: dict, out: Path) -> None:
         e = s[key]
         print(f"  {name:>15}: horizontal estimation error median {_m(e['median'])} p95 {_m(e['p95'])}")
     t = s["tracking_error_m"]
-    print(f"  tracking error (flying on EKF3) median {_m(t['median'])} p95 {_m(t['p95'])}; "
+    print(f"  tracking error median {_m(t['median'])} p95 {_m(t['p95'])}; "
           f"collisions {s['collisions']}; min clearance {_m(s['min_clearance_m'])}")
     print(f"  GPS_INPUT sent {ap['gps_input_sent']}; "
           f"wrote {out / 'summary.json'}, figures and {out / 'run.tlog'}")

@@ -27,6 +27,10 @@ class ArduPilotConfig:
     setup_timeout_s: float = 180.0  # simulated seconds allowed for boot, EKF3 GPS use, arming, take-off
     connect_timeout_s: float = 20.0  # wall seconds to reach the SITL's TCP port and get a HEARTBEAT
     wall_timeout_s: float = 600.0  # whole flight, wall clock
+    # A flight whose commands (GPS_INPUT, setpoints) reached ArduPilot later than this (p95, in
+    # ArduPilot time) measured the machine's scheduler, not the estimators: it is flagged invalid
+    # (SITL does not wait for us; a loaded machine needs a lower --speedup).
+    max_command_delay_ms: float = 100.0
 
     def validate(self) -> None:
         for name in ("speedup", "stream_rate_hz", "estimate_rate_hz", "gnss_rate_hz", "setpoint_rate_hz",
@@ -39,14 +43,19 @@ class ArduPilotConfig:
             raise ValueError(f"gps_delay_ms: GPS1_DELAY_MS must be 1..250 ms, got {self.gps_delay_ms}")
 
 
-def ardupilot_parameters(cfg: ArduPilotConfig) -> dict[str, float]:
+def ardupilot_parameters(cfg: ArduPilotConfig, feed: str = "none") -> dict[str, float]:
     """Parameters set at boot (a defaults file beside copter.parm, so those needing a reboot apply).
 
     GPS1_TYPE 14 makes GPS_INPUT the ONLY GNSS. EKF3 fuses GNSS position only (EK3_SRC1_VELXY/VELZ
     0), like the companion: our model has no Doppler velocity, and a GPS_INPUT without velocity
     would otherwise be read as zero velocity. Height stays on the barometer (EK3_SRC1_POSZ 1,
     ArduPilot's default), which the companion does not have: compare horizontal errors for that.
+
+    ``feed`` "gps-input" (closed loop): GPS_INPUT carries the companion's cleaned fix, current when
+    sent (``GPS1_DELAY_MS`` 1) and with the filter's velocity, so EKF3 keeps its default sources.
     """
+    if feed == "gps-input":
+        return {"GPS1_TYPE": 14, "GPS1_DELAY_MS": 1}
     return {
         "GPS1_TYPE": 14,
         "GPS1_DELAY_MS": cfg.gps_delay_ms,

@@ -27,6 +27,7 @@ from gcs_tools.ardupilot.analysis import (
     count_collisions,
     errors,
 )
+from gcs_tools.ardupilot.closed_loop import LiveCompanion
 from gcs_tools.ardupilot.config import ArduPilotConfig, ardupilot_parameters
 from gcs_tools.ardupilot.driver import FlightDriver
 from gcs_tools.ardupilot.gnss_source import UrbanGnssSource
@@ -36,7 +37,7 @@ from gcs_tools.fly.core import FlightResult, error_stats, planned_route
 from simvehicle.config import sim_config_for
 from simvehicle.gnss import NedToGeodetic
 
-FEEDS = ("none",)  # closed loop (gps-input, vision) needs the companion process: not wired yet
+FEEDS = ("none", "gps-input")  # vision (ExternalNav) is not wired here
 HORIZONTAL_ERROR_PREFIX = "est_error_h_m:"  # series keys of every row's horizontal error (not in the CSV)
 INSTANCE_RANGE = (20, 40)  # -I 20..39: this tool's instances (ports 5960..6153)
 
@@ -65,8 +66,7 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
     except ValueError as exc:
         raise UserError(f"ardupilot: {exc}") from None
     if opts.feed not in FEEDS:
-        raise UserError(f"--feed {opts.feed}: with --vehicle ardupilot only {', '.join(FEEDS)} is available "
-                        "(closed loop through the companion is not wired yet)")
+        raise UserError(f"--feed {opts.feed}: with --vehicle ardupilot, --feed is one of {', '.join(FEEDS)}")
     if opts.method not in METHODS:
         raise UserError(f"--method {opts.method}: expected one of {', '.join(METHODS)}")
     m = load_mission(opts.mission)
@@ -81,10 +81,13 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
     driver = FlightDriver(cfg, route, m.altitude_m)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
     sitl_cfg = SitlConfig(work_dir=opts.out_dir / "ardupilot", home=(lat, lon, alt, 0.0), speedup=cfg.speedup,
-                          params=ardupilot_parameters(cfg), instance_range=opts.instance_range)
+                          params=ardupilot_parameters(cfg, opts.feed), instance_range=opts.instance_range)
+    companion = (LiveCompanion(opts.estimator, opts.method, m.frame, cfg.gnss_rate_hz)
+                 if opts.feed == "gps-input" else None)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     with ArduPilotSitl(sitl_cfg) as sitl:
-        session = ArduPilotSession(sitl.ports[0], cfg, m.frame, source, driver, opts.out_dir / "run.tlog")
+        session = ArduPilotSession(sitl.ports[0], cfg, m.frame, source, driver, opts.out_dir / "run.tlog",
+                                   companion)
         try:
             session.connect(sitl.running)
             ended_by = session.run(sitl.running)
@@ -96,7 +99,7 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
     sim_s = (rec.imu_t_us[-1] - rec.imu_t_us[0]) * 1e-6 if rec.imu_t_us else 0.0
     run_info = {
         "instance": instance, "speedup": cfg.speedup, "feed": opts.feed, "ended_by": ended_by,
-        "parameters": ardupilot_parameters(cfg),
+        "parameters": ardupilot_parameters(cfg, opts.feed),
         "phase_times_s": {k: v * 1e-6 for k, v in driver.phase_times_us.items()},
         "sim_s": sim_s, "wall_s": wall_s, "session_cpu_s": cpu_s,
         "sim_s_per_wall_s": sim_s / wall_s if wall_s > 0 else math.nan,
@@ -104,7 +107,8 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
         "gps_input_sent": session.gps_sent, "setpoints_sent": session.setpoints_sent,
         # extra delay (ArduPilot time) of everything we send, from the scheduler: GPS_INPUT reaches
         # EKF3 this much later than the model's latency says (the companion's fixes do not have it)
-        "command_delay_ms": _delay_stats(session.command_delay_us),
+        "command_delay_ms": (delay := _delay_stats(session.command_delay_us)),
+        "valid": bool(delay["p95"] <= cfg.max_command_delay_ms),
         "statustext": [f"{t * 1e-6:.1f} s {s}" for t, s in rec.statustext[-40:]],
     }
     return evaluate_flight(opts, m, route, rec, source, driver, run_info, sim.vehicle.radius_m)
@@ -156,6 +160,7 @@ def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec:
         "mission": mission.name, "profile": opts.profile, "method": opts.method, "seed": opts.seed,
         "vehicle": "ardupilot", "feed": opts.feed,
         "reached_goal": driver.outcome == "reached_goal",
+        "valid": run_info["valid"],  # False: our commands reached ArduPilot late (a loaded machine)
         "collisions": count_collisions(clearance, radius_m),
         "duration_s": float(t_s[-1]) if t_s.size else 0.0,
         "route_duration_s": route.duration_s,

@@ -23,6 +23,7 @@ from companion.domain.geodesy import LocalNedFrame  # noqa: E402
 from companion.errors import UserError  # noqa: E402
 from companion.mavlink.codec import CodecError, decode_attitude, decode_imu  # noqa: E402
 from companion.mavlink.tlog import TlogWriter  # noqa: E402
+from gcs_tools.ardupilot.closed_loop import LiveCompanion  # noqa: E402
 from gcs_tools.ardupilot.config import ArduPilotConfig  # noqa: E402
 from gcs_tools.ardupilot.driver import Command, DriverInputs, FlightDriver  # noqa: E402
 from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields  # noqa: E402
@@ -56,8 +57,9 @@ class Recording:
 
 class ArduPilotSession:
     def __init__(self, port: int, cfg: ArduPilotConfig, frame: LocalNedFrame, source: UrbanGnssSource,
-                 driver: FlightDriver, tlog_path: Path) -> None:
+                 driver: FlightDriver, tlog_path: Path, companion: LiveCompanion | None = None) -> None:
         self.cfg, self.frame, self.source, self.driver = cfg, frame, source, driver
+        self.companion = companion  # closed loop: ArduPilot gets its cleaned fixes, not the raw ones
         self.rec = Recording()
         self.port = port
         self.tlog = TlogWriter(tlog_path)
@@ -70,6 +72,7 @@ class ArduPilotSession:
         # How late what we send reaches ArduPilot, in ITS time: a TIMESYNC request carries the
         # ArduPilot time we had processed up to (ts1); the reply says when it arrived (tc1).
         self.command_delay_us: list[int] = []
+        self._satellites = 10
         self._next_timesync_us = 0
 
     # ---------------------------------------------------------------- wiring
@@ -96,8 +99,7 @@ class ArduPilotSession:
         self.m.target_system, self.m.target_component = hb.get_srcSystem(), hb.get_srcComponent()
         fast, est = self.cfg.stream_rate_hz, self.cfg.estimate_rate_hz
         streams = (("HIGHRES_IMU", fast), ("ATTITUDE_QUATERNION", fast), ("SIM_STATE", fast),
-                   ("GLOBAL_POSITION_INT", est), ("LOCAL_POSITION_NED", est), ("GPS_RAW_INT", 5.0),
-                   ("GPS_GLOBAL_ORIGIN", 1.0), ("SYSTEM_TIME", 1.0), ("EKF_STATUS_REPORT", 2.0))
+                   ("GLOBAL_POSITION_INT", est), ("GPS_GLOBAL_ORIGIN", 1.0), ("EKF_STATUS_REPORT", 2.0))
         for name, hz in streams:
             msg_id = getattr(MSG, f"MAVLINK_MSG_ID_{name}")
             self._command(MSG.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz, 0, 0, 0, 0, 0)
@@ -152,6 +154,8 @@ class ArduPilotSession:
                     rec.imu_t_us.append(imu.t_us)
                     rec.imu_acc_frd_m_s2.append(imu.acc_frd_m_s2)
                     rec.imu_q_ned_frd.append(self._q)
+                    if self.companion is not None:
+                        self.companion.push_imu(imu.t_us, imu.acc_frd_m_s2, self._q)
                 self._tick()
             elif kind == "ATTITUDE_QUATERNION":
                 self._q = decode_attitude(msg).q_ned_frd
@@ -204,8 +208,16 @@ class ArduPilotSession:
         if t >= self._next_timesync_us:
             self._next_timesync_us = t + TIMESYNC_PERIOD_US
             mav.timesync_send(0, t * 1000)
+        comp = self.companion
         for sf in self.source.due(t):
-            mav.gps_input_send(**gps_input_fields(sf.fix))
+            if comp is None:
+                mav.gps_input_send(**gps_input_fields(sf.fix))
+                self.gps_sent += 1
+            else:
+                comp.push_fix(sf)
+                self._satellites = sf.fix.satellites_visible
+        if comp is not None and (msg := comp.due(t, self._satellites)) is not None:
+            mav.send(msg)
             self.gps_sent += 1
         for c in self.driver.step(self.now):
             self._send(c)

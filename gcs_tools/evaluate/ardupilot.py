@@ -7,8 +7,10 @@ fixes. Statistics as the simulated campaign's (``aggregate``): pooled 20-50 Hz s
 with two or more seeds, the median of per-seed medians with a percentile-bootstrap 95 % CI over
 seeds and the reduction against EKF3 with its paired bootstrap CI. Errors are HORIZONTAL (EKF3
 holds height on the barometer, which the companion does not have; 3-D figures are in each
-flight's summary). Closed loop (flying on the companion's output) is not wired yet, so its
-rows are absent rather than invented.
+flight's summary). Closed loop (``gps-input``): the same profiles and seeds flown again with
+ArduPilot on the second-order companion's cleaned fixes; compared on tracking error,
+collisions and goals reached. Flights whose commands reached ArduPilot late (the machine's
+scheduler, ``valid`` False) are listed but left out of the statistics.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from gcs_tools.evaluate import stats
 from gcs_tools.jsonvalues import plain_json
 
 BOOTSTRAP_SEED = 20240917
+CLOSED_LOOP_METHOD = "second-order"
 
 
 @dataclass(frozen=True)
@@ -39,6 +42,7 @@ class ApJob:
     methods: tuple[str, ...]
     out_dir: Path
     config: ArduPilotConfig
+    feed: str = "none"  # "gps-input": closed loop, ArduPilot flies on CLOSED_LOOP_METHOD's cleaned fixes
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,8 @@ class ApResult:
     sim_s: float
     wall_s: float
     error: str = ""  # a flight that could not be flown (its rows are absent, the reason kept)
+    valid: bool = True  # False: our commands reached ArduPilot late (scheduler), left out of the statistics
+    command_delay_p95_ms: float = float("nan")
 
 
 def run_job(job: ApJob) -> ApResult:
@@ -59,8 +65,9 @@ def run_job(job: ApJob) -> ApResult:
     from gcs_tools.ardupilot.flight import HORIZONTAL_ERROR_PREFIX, ArduPilotFlightOptions, fly_ardupilot
     from gcs_tools.fly.output import write_outputs
 
-    opts = ArduPilotFlightOptions(mission=job.mission, profile=job.profile, method="second-order",
-                                  seed=job.seed, out_dir=job.out_dir, config=job.config, methods=job.methods)
+    opts = ArduPilotFlightOptions(mission=job.mission, profile=job.profile, method=CLOSED_LOOP_METHOD,
+                                  seed=job.seed, out_dir=job.out_dir, config=job.config, methods=job.methods,
+                                  feed=job.feed)
     try:
         r = fly_ardupilot(opts)
     except UserError as exc:
@@ -74,7 +81,8 @@ def run_job(job: ApJob) -> ApResult:
             if k.startswith(HORIZONTAL_ERROR_PREFIX)}
     ap = s["ardupilot"]
     return ApResult(job, errs, np.asarray(series.get("track_error_m", np.zeros(0))), bool(s["reached_goal"]),
-                    int(s["collisions"]), str(ap["ended_by"]), float(ap["sim_s"]), float(ap["wall_s"]))
+                    int(s["collisions"]), str(ap["ended_by"]), float(ap["sim_s"]), float(ap["wall_s"]),
+                    valid=bool(s["valid"]), command_delay_p95_ms=float(ap["command_delay_ms"]["p95"]))
 
 
 def run(jobs: Sequence[ApJob], workers: int) -> list[ApResult]:
@@ -84,16 +92,20 @@ def run(jobs: Sequence[ApJob], workers: int) -> list[ApResult]:
         return list(pool.map(run_job, jobs))
 
 
+def usable(r: ApResult) -> bool:
+    return not r.error and r.valid
+
+
 def pooled(results: Sequence[ApResult], row: str) -> np.ndarray:
     """Every horizontal-error sample of ``row`` over the flights that were flown."""
-    parts = [r.errors_h_m[row] for r in results if not r.error and row in r.errors_h_m]
+    parts = [r.errors_h_m[row] for r in results if usable(r) and row in r.errors_h_m]
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
 def aggregate(results: Sequence[ApResult], rows: Sequence[str], seeds: Sequence[int]) -> dict[str, Any]:
     """Per row: pooled horizontal error stats, per-seed CI and the reduction against EKF3."""
     rng = np.random.default_rng(BOOTSTRAP_SEED)
-    ok = [r for r in results if not r.error]
+    ok = [r for r in results if usable(r) and r.job.feed == "none"]  # open loop: the estimators compared
 
     def seed_medians(row: str) -> np.ndarray:
         out = []
@@ -121,15 +133,23 @@ def aggregate(results: Sequence[ApResult], rows: Sequence[str], seeds: Sequence[
                 v, lo, hi = stats.paired_reduction_ci(m, ekf_seeds, rng)
                 entry["reduction_vs_ekf3_seeds"] = {"value": v, "ci95": [lo, hi]}
         table[row] = entry
-    track = np.concatenate([r.track_error_m for r in ok] or [np.zeros(0)])
-    return {
-        "open_loop": table,
-        "flying_on_ekf3": {
-            "flights": len(results), "flown": len(ok), "reached_goal": sum(r.reached_goal for r in ok),
-            "collisions": sum(r.collisions for r in ok), "tracking_error_m": stats.summarize(track),
-        },
-        "closed_loop": "not run: flying ArduPilot on the companion's output is not wired yet",
-    }
+    flying = {}
+    labels = {"none": "EKF3 on the raw fixes", "gps-input": f"EKF3 on {CLOSED_LOOP_METHOD}'s cleaned fixes"}
+    for feed, label in labels.items():
+        of_feed = [r for r in results if r.job.feed == feed]
+        if not of_feed:
+            continue
+        good = [r for r in of_feed if usable(r)]
+        track = np.concatenate([r.track_error_m for r in good] or [np.zeros(0)])
+        flying[feed] = {
+            "flies_on": label, "flights": len(of_feed), "valid": len(good),
+            "reached_goal": sum(r.reached_goal for r in good),
+            "collisions": sum(r.collisions for r in good),
+            "tracking_error_m": stats.summarize(track),
+            "flight_tracking_medians": [float(np.median(r.track_error_m))
+                                        for r in good if r.track_error_m.size],
+        }
+    return {"open_loop": table, "flying": flying}
 
 
 def table_text(res: dict[str, Any]) -> str:
@@ -146,12 +166,13 @@ def table_text(res: dict[str, Any]) -> str:
             lo, hi = (100 * x for x in red["ci95"])
             vs += f" (seeds {100 * red['value']:+.0f} % [{lo:+.0f}, {hi:+.0f}])"
         lines.append(f"| {row} | {e['median']:.2f} | {e['p95']:.2f} | {vs} | {seed} |")
-    f = res["flying_on_ekf3"]
-    lines.append("")
-    trk = f["tracking_error_m"]
-    lines.append(f"Flying on EKF3: {f['reached_goal']}/{f['flights']} flights reached the goal, "
-                 f"{f['collisions']} collisions, tracking error median {trk['median']:.2f} m "
-                 f"p95 {trk['p95']:.2f} m.")
+    lines += ["", "| ArduPilot flies on | flights (valid) | reached goal | collisions "
+                  "| tracking median [m] | p95 [m] |",
+              "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for f in res["flying"].values():
+        trk = f["tracking_error_m"]
+        lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) | {f['reached_goal']} "
+                     f"| {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -178,11 +199,13 @@ def error_figure(results: Sequence[ApResult], rows: Sequence[str], path: Path) -
 
 
 def evaluate(mission: str, profiles: Sequence[int], methods: Sequence[str], seeds: Sequence[int],
-             workers: int, out: Path, config: ArduPilotConfig | None = None) -> dict[str, Any]:
+             workers: int, out: Path, config: ArduPilotConfig | None = None,
+             feeds: Sequence[str] = ("none", "gps-input")) -> dict[str, Any]:
     cfg = config or ArduPilotConfig()
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [ApJob(mission, p, s, tuple(methods), out / "flights" / f"profile{p:02d}-seed{s}", cfg)
-            for s in seeds for p in profiles]
+    flights = out / "flights"
+    jobs = [ApJob(mission, p, s, tuple(methods), flights / f"{feed}-profile{p:02d}-seed{s}", cfg, feed)
+            for s in seeds for p in profiles for feed in feeds]
     t0 = time.perf_counter()
     results = run(jobs, workers)
     wall_s = time.perf_counter() - t0
@@ -191,7 +214,8 @@ def evaluate(mission: str, profiles: Sequence[int], methods: Sequence[str], seed
     res["info"] = {
         "mission": mission, "profiles": list(profiles), "seeds": list(seeds), "methods": list(methods),
         "workers": workers, "wall_s": wall_s, "speedup": cfg.speedup, "gnss_rate_hz": cfg.gnss_rate_hz,
-        "flights": [{"profile": r.job.profile, "seed": r.job.seed, "ended_by": r.ended_by,
+        "flights": [{"profile": r.job.profile, "seed": r.job.seed, "feed": r.job.feed, "valid": r.valid,
+                     "command_delay_p95_ms": r.command_delay_p95_ms, "ended_by": r.ended_by,
                      "reached_goal": r.reached_goal, "collisions": r.collisions, "sim_s": r.sim_s,
                      "wall_s": r.wall_s, "error": r.error} for r in results],
     }

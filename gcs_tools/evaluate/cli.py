@@ -23,6 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot"),
                         help="sim: our simulated vehicle; ardupilot: ArduCopter SITL, EKF3 as its own row")
     parser.add_argument("--speedup", type=float, default=None, help="ardupilot: SITL --speedup (default 10)")
+    parser.add_argument("--feeds", default="none,gps-input",
+                        help="ardupilot: open loop (none) and/or closed loop (gps-input) flights")
     parser.add_argument("--mission", default="default",
                         help="mission name (default, test, default-tuning) or YAML path")
     parser.add_argument("--missions", default="10",
@@ -124,7 +126,10 @@ def run_ardupilot(args: argparse.Namespace) -> int:
     methods = parse_methods(args.methods)
     seeds = campaign.parse_seeds(args.seeds)
     cfg = ardupilot.with_speedup(ArduPilotConfig(), args.speedup)
-    res = ardupilot.evaluate(args.mission, profiles, methods, seeds, args.workers, args.out, cfg)
+    feeds = tuple(f.strip() for f in args.feeds.split(",") if f.strip())
+    if not feeds or any(f not in ("none", "gps-input") for f in feeds):
+        raise UserError(f"--feeds: expected none and/or gps-input, got {args.feeds!r}")
+    res = ardupilot.evaluate(args.mission, profiles, methods, seeds, args.workers, args.out, cfg, feeds)
     print(ardupilot.table_text(res), end="")
     print(f"wrote {args.out}/results.json, report.md, errors_horizontal.png and flights/ "
           f"({len(res['info']['flights'])} flights, {res['info']['wall_s']:.1f} s)", file=sys.stderr)
