@@ -1,9 +1,10 @@
 """The MAVLink loop against one ArduCopter SITL: streams in, GPS_INPUT and flight commands out.
 
-One TCP connection (pymavlink, SERIAL0) carries everything; ArduPilot's own boot time (the IMU
+One TCP connection to SERIAL0 (``companion.autopilot.connection.MavConnection``, which records
+every frame both ways to the tlog) carries everything; ArduPilot's own boot time (the IMU
 stamps) is the clock. Each SIM_STATE (truth, no time field) is stamped with the HIGHRES_IMU
 sent in the same scheduler tick (requested at the same rate, it immediately precedes it). What
-arrives is recorded for the analysis (``Recording``) and every frame both ways goes to the tlog.
+arrives is recorded for the analysis (``Recording``).
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")
 
 import numpy as np  # noqa: E402
-from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as MSG  # noqa: E402, N812 - as mavutil.mavlink
 
+from companion.autopilot.connection import MavConnection, parse_connection  # noqa: E402
 from companion.domain.geodesy import LocalNedFrame  # noqa: E402
 from companion.errors import UserError  # noqa: E402
 from companion.mavlink.codec import CodecError, decode_attitude, decode_imu  # noqa: E402
@@ -28,7 +30,6 @@ from gcs_tools.ardupilot.config import ArduPilotConfig  # noqa: E402
 from gcs_tools.ardupilot.driver import Command, DriverInputs, FlightDriver  # noqa: E402
 from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields  # noqa: E402
 
-MSG = mavutil.mavlink
 SETPOINT_TYPE_MASK = MSG.POSITION_TARGET_TYPEMASK_YAW_IGNORE | MSG.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 255, 190
 TIMESYNC_PERIOD_US = 500_000  # ArduPilot time between command-delay probes
@@ -63,7 +64,8 @@ class ArduPilotSession:
         self.rec = Recording()
         self.port = port
         self.tlog = TlogWriter(tlog_path)
-        self.m: Any = None
+        self.conn: MavConnection | None = None
+        self.target: tuple[int, int] | None = None  # the autopilot's (system, component)
         self.now = DriverInputs(t_us=0)
         self._q: np.ndarray | None = None
         self.gps_sent = 0
@@ -77,26 +79,25 @@ class ArduPilotSession:
 
     # ---------------------------------------------------------------- wiring
     def connect(self, alive: Any) -> None:
-        """Connect to SERIAL0 (retrying while the SITL starts) and wait for its HEARTBEAT."""
+        """Connect to SERIAL0 (``companion.autopilot.connection``, recorded both ways to the tlog),
+        wait for the autopilot's HEARTBEAT and ask for the streams."""
         deadline = time.monotonic() + self.cfg.connect_timeout_s
-        while True:
+        url = f"tcp:127.0.0.1:{self.port}"
+        while self.conn is None:
             if not alive():
                 raise UserError("ArduPilot SITL exited before accepting a connection (see arducopter.log)")
             try:
-                self.m = mavutil.mavlink_connection(f"tcp:127.0.0.1:{self.port}", source_system=GCS_SYSTEM_ID,
-                                                    source_component=GCS_COMPONENT_ID, autoreconnect=False)
-                break
-            except OSError:
+                self.conn = MavConnection(parse_connection(url), GCS_SYSTEM_ID, GCS_COMPONENT_ID, self.tlog)
+            except UserError:
                 if time.monotonic() > deadline:
-                    raise UserError(f"ArduPilot SITL: nothing accepts on tcp:127.0.0.1:{self.port}") from None
+                    raise UserError(f"ArduPilot SITL: nothing accepts on {url}") from None
                 time.sleep(0.2)
-        self.m.mav.set_send_callback(self._log_sent)
-        hb = self.m.recv_match(type="HEARTBEAT", blocking=True, timeout=self.cfg.connect_timeout_s)
-        while hb is not None and hb.autopilot == MSG.MAV_AUTOPILOT_INVALID:
-            hb = self.m.recv_match(type="HEARTBEAT", blocking=True, timeout=self.cfg.connect_timeout_s)
-        if hb is None:
-            raise UserError(f"ArduPilot SITL on tcp:127.0.0.1:{self.port}: no HEARTBEAT")
-        self.m.target_system, self.m.target_component = hb.get_srcSystem(), hb.get_srcComponent()
+        while self.target is None:
+            if time.monotonic() > deadline or not alive():
+                raise UserError(f"ArduPilot SITL on {url}: no HEARTBEAT")
+            for msg in self.conn.recv(0.5):
+                if msg.get_type() == "HEARTBEAT" and msg.autopilot != MSG.MAV_AUTOPILOT_INVALID:
+                    self.target = (msg.get_srcSystem(), msg.get_srcComponent())
         fast, est = self.cfg.stream_rate_hz, self.cfg.estimate_rate_hz
         streams = (("HIGHRES_IMU", fast), ("ATTITUDE_QUATERNION", fast), ("SIM_STATE", fast),
                    ("GLOBAL_POSITION_INT", est), ("GPS_GLOBAL_ORIGIN", 1.0), ("EKF_STATUS_REPORT", 2.0))
@@ -104,33 +105,29 @@ class ArduPilotSession:
             msg_id = getattr(MSG, f"MAVLINK_MSG_ID_{name}")
             self._command(MSG.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz, 0, 0, 0, 0, 0)
 
-    def _log_sent(self, msg: Any) -> None:
-        self.tlog.write_frame(time.time_ns() // 1000, bytes(msg.get_msgbuf()))
-
     def _command(self, command: int, *params: float) -> None:
-        self.m.mav.command_long_send(self.m.target_system, self.m.target_component, command, 0, *params)
+        assert self.conn is not None and self.target is not None
+        self.conn.send(MSG.MAVLink_command_long_message(*self.target, command, 0, *params))
 
     def close(self) -> None:
-        if self.m is not None:
-            self.m.close()
+        if self.conn is not None:
+            self.conn.close()
         self.tlog.close()
 
     # ---------------------------------------------------------------- loop
     def run(self, alive: Any) -> str:
         """Pump messages until the driver is done; returns how it ended."""
+        assert self.conn is not None
         wall_end = time.monotonic() + self.cfg.wall_timeout_s
         setup_end_us = round(self.cfg.setup_timeout_s * 1e6)
         while self.driver.phase != "done":
-            msg = self.m.recv_match(blocking=True, timeout=0.5)
-            if msg is None:
-                if not alive():
-                    return "sitl_exited"
-                if time.monotonic() > wall_end:
-                    return "wall_timeout"
-                continue
-            stamp_us = round(getattr(msg, "_timestamp", time.time()) * 1e6)
-            self.tlog.write_frame(stamp_us, bytes(msg.get_msgbuf()))
-            self._handle(msg)
+            batch = self.conn.recv(0.5)
+            if not batch and not alive():
+                return "sitl_exited"
+            for msg in batch:
+                self._handle(msg)
+                if self.driver.phase == "done":
+                    break
             if self.driver.phase in ("guided", "arm", "takeoff") and self.now.t_us > setup_end_us:
                 return f"setup_timeout:{self.driver.phase}"
             if time.monotonic() > wall_end:
@@ -143,7 +140,7 @@ class ArduPilotSession:
     def _handle(self, msg: Any) -> None:
         kind = msg.get_type()
         self._count(kind)
-        if msg.get_srcSystem() != self.m.target_system:
+        if self.target is None or msg.get_srcSystem() != self.target[0]:
             return
         rec, now = self.rec, self.now
         try:
@@ -169,7 +166,7 @@ class ArduPilotSession:
             elif kind == "GPS_GLOBAL_ORIGIN":
                 now.origin_ned_m = self.frame.to_ned_m(msg.latitude * 1e-7, msg.longitude * 1e-7,
                                                        msg.altitude * 1e-3)
-            elif kind == "HEARTBEAT" and msg.get_srcComponent() == self.m.target_component:
+            elif kind == "HEARTBEAT" and msg.get_srcComponent() == self.target[1]:
                 now.mode = msg.custom_mode
                 now.armed = bool(msg.base_mode & MSG.MAV_MODE_FLAG_SAFETY_ARMED)
                 now.takeoff_accepted = now.takeoff_accepted and now.armed
@@ -204,20 +201,20 @@ class ArduPilotSession:
 
     def _tick(self) -> None:
         t = self.now.t_us
-        mav = self.m.mav
+        send = self.conn.send  # type: ignore[union-attr]
         if t >= self._next_timesync_us:
             self._next_timesync_us = t + TIMESYNC_PERIOD_US
-            mav.timesync_send(0, t * 1000)
+            send(MSG.MAVLink_timesync_message(0, t * 1000))
         comp = self.companion
         for sf in self.source.due(t):
             if comp is None:
-                mav.gps_input_send(**gps_input_fields(sf.fix))
+                send(MSG.MAVLink_gps_input_message(**gps_input_fields(sf.fix)))
                 self.gps_sent += 1
             else:
                 comp.push_fix(sf)
                 self._satellites = sf.fix.satellites_visible
         if comp is not None and (msg := comp.due(t, self._satellites)) is not None:
-            mav.send(msg)
+            send(msg)
             self.gps_sent += 1
         for c in self.driver.step(self.now):
             self._send(c)
@@ -226,7 +223,7 @@ class ArduPilotSession:
         if c.kind == "command_long":
             self._command(*c.args)
         elif c.kind == "setpoint":
-            self.m.mav.set_position_target_local_ned_send(
-                c.args[0], self.m.target_system, self.m.target_component, MSG.MAV_FRAME_LOCAL_NED,
-                SETPOINT_TYPE_MASK, *c.args[1:], 0.0, 0.0)
+            assert self.conn is not None and self.target is not None
+            self.conn.send(MSG.MAVLink_set_position_target_local_ned_message(
+                c.args[0], *self.target, MSG.MAV_FRAME_LOCAL_NED, SETPOINT_TYPE_MASK, *c.args[1:], 0.0, 0.0))
             self.setpoints_sent += 1
