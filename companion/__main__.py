@@ -56,9 +56,12 @@ def main(argv: list[str] | None = None) -> int:
         node = _build(args)
         if args.process == "estimator":
             from companion.nodes.estimator_node import serve
+
+            serve(node, stats_path=args.stats)
         else:
-            from companion.nodes.bridge_node import serve  # type: ignore[assignment]
-        serve(node)
+            from companion.nodes.bridge_node import serve as serve_bridge
+
+            serve_bridge(node, stats_path=args.stats)
     except UserError as exc:
         print(f"companion {args.process}: error: {exc}", file=sys.stderr)
         return 2
@@ -100,13 +103,16 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
     mission = load_mission(args.mission)
     fields, rng = link_settings(args)
     if args.process == "estimator":
-        from companion.nodes.estimator_node import ESTIMATOR_COMPONENT_ID, EstimatorNode, make_navigator
+        from companion.mavlink.udp_link import ESTIMATOR_COMPONENT_ID
+        from companion.nodes.estimator_node import EstimatorNode, make_navigator
 
         navigator, nis_gate = make_navigator(mission, args.method)
         link = UdpLink(_config(args, ESTIMATOR_COMPONENT_ID, fields, link_id=1), rng)
         return EstimatorNode(link, navigator, nis_gate, publisher_from_args(args, "companion"),
-                             step_markers=args.step_markers)
-    from companion.nodes.bridge_node import BRIDGE_COMPONENT_ID, BridgeNode, route_info
+                             new_navigator=lambda: make_navigator(mission, args.method)[0],
+                             home=mission.frame, step_markers=args.step_markers)
+    from companion.mavlink.udp_link import BRIDGE_COMPONENT_ID
+    from companion.nodes.bridge_node import BridgeNode, route_info
     from companion.planning import plan_route
 
     route = plan_route(mission, args.profile, t_start_s=args.start_delay_s)
@@ -116,11 +122,12 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
 
 
 def _config(args: argparse.Namespace, component_id: int, fields: dict[str, object], link_id: int):  # noqa: ANN202
-    from companion.mavlink.udp_link import VEHICLE_SYSTEM_ID, LinkConfig
+    from companion.mavlink.udp_link import VEHICLE_COMPONENT_ID, VEHICLE_SYSTEM_ID, LinkConfig
 
     return LinkConfig(
         bind_port=args.bind_port, peer_port=args.vehicle_port, system_id=VEHICLE_SYSTEM_ID,
-        component_id=component_id, accept_system_ids=frozenset({VEHICLE_SYSTEM_ID}), link_id=link_id,
+        component_id=component_id, accept_system_ids=frozenset({VEHICLE_SYSTEM_ID}),
+        accept_component_ids=frozenset({VEHICLE_COMPONENT_ID}), link_id=link_id,
         **fields,  # type: ignore[arg-type]
     )
 

@@ -15,7 +15,7 @@ from companion.errors import UserError
 
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "replay": ("gcs_tools.replay.cli", "replay a tlog through the estimator"),
+    "replay": ("gcs_tools.replay.cli", "replay a flight log (tlog, .bin, .ulg) through the estimator"),
     "fly": ("gcs_tools.fly.cli", "fly a mission in-process (vehicle, planner, estimator)"),
     "sitl": ("gcs_tools.sitl.cli", "fly a mission as three processes over MAVLink/UDP"),
     "companion": ("gcs_tools.companion_cli", "run the estimator beside a real autopilot (--master URL)"),

@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     from companion.errors import UserError
     from companion.mavlink.udp_link import link_settings
     from companion.mission import load_mission
-    from companion.runtime import exit_on_sigterm, write_json
+    from companion.runtime import exit_on_sigterm
     from companion.telemetry.pubsub import publisher_from_args
     from simvehicle import SimVehicle
     from simvehicle.node import VehicleNode, VehicleNodeConfig
@@ -68,8 +68,9 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         if node is not None:
+            result.setdefault("t_s", node.t_us / 1e6)
             node.close()
-            write_json(args.out / "vehicle.json", {**result, **node.stats()})
+            node.write_stats(result)
     return 0
 
 

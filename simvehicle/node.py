@@ -14,12 +14,18 @@ clients, which receive the low-rate telemetry and whose requests are tolerated a
 Every frame sent to or received from a companion goes to ``run.tlog``, stamped with simulated
 time in lockstep (``epoch + t``; SYSTEM_TIME pairs that clock with boot time) and with the wall
 clock in real time.
+
+The vehicle's own clock is the reference for what it flies on: an ODOMETRY, setpoint or belief
+stamped outside a window around it (:mod:`companion.domain.clock_guard`) is ignored and raises
+an alarm (counted as ``clock_alarm_<type>``, the first one of each kind printed on stderr); so
+is a belief outside [0, 1] or a negative NIS. No message can raise out of :meth:`on_message`.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,12 +34,20 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.clock_guard import ClockWindow, within
 from companion.domain.samples import NavEstimate, Setpoint
 from companion.mavlink import codec as codec
 from companion.mavlink.lockstep import LockstepConfig, step_marker
 from companion.mavlink.tlog import TlogWriter
-from companion.mavlink.udp_link import VEHICLE_SYSTEM_ID, LinkConfig, UdpLink
+from companion.mavlink.udp_link import (
+    BRIDGE_COMPONENT_ID,
+    ESTIMATOR_COMPONENT_ID,
+    VEHICLE_SYSTEM_ID,
+    LinkConfig,
+    UdpLink,
+)
 from companion.mission import Mission
+from companion.runtime import write_json
 from companion.telemetry.codec import GnssReport
 from companion.telemetry.pubsub import DeferredPublisher, TelemetryPublisher
 from simvehicle import SimVehicle
@@ -47,6 +61,9 @@ GROUND_FORWARD_TYPES = frozenset(
      "SET_POSITION_TARGET_LOCAL_NED"}
 )
 COMPANIONS = ("estimator", "bridge")
+COMPANION_COMPONENTS = {"estimator": ESTIMATOR_COMPONENT_ID, "bridge": BRIDGE_COMPONENT_ID}
+# what the vehicle flies on must be stamped near its own time (the estimate trails it by latency)
+INPUT_WINDOW = ClockWindow(max_back_us=5_000_000, max_forward_us=100_000)
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +79,7 @@ class VehicleNodeConfig:
     sim_state_period_us: int = 20_000  # SIM_STATE, 50 Hz
     clock_period_us: int = 1_000_000  # SYSTEM_TIME and HEARTBEAT, 1 Hz
     progress_period_s: float = 0.25  # wall time between progress lines on stdout
+    stats_period_s: float = 1.0  # wall time between vehicle.json updates (a kill -9 loses <= this)
 
 
 @dataclass(slots=True)
@@ -100,10 +118,11 @@ class VehicleNode:
         accept = frozenset({VEHICLE_SYSTEM_ID})
         base = {"system_id": VEHICLE_SYSTEM_ID, "component_id": AUTOPILOT_COMPONENT_ID, **link_fields}
         self.links = {
-            "estimator": UdpLink(LinkConfig(bind_port=config.estimator_port, accept_system_ids=accept,
-                                            link_id=10, **base), rng, tee),
-            "bridge": UdpLink(LinkConfig(bind_port=config.bridge_port, accept_system_ids=accept,
-                                         link_id=11, **base), rng, tee),
+            name: UdpLink(LinkConfig(bind_port=port, accept_system_ids=accept, link_id=link_id,
+                                     accept_component_ids=frozenset({COMPANION_COMPONENTS[name]}), **base),
+                          rng, tee)
+            for name, port, link_id in (("estimator", config.estimator_port, 10),
+                                        ("bridge", config.bridge_port, 11))
         }
         ground_fields = {k: v for k, v in base.items() if not k.startswith("drop_")}
         self.ground = UdpLink(LinkConfig(bind_port=config.ground_port, link_id=12, **ground_fields))
@@ -125,6 +144,24 @@ class VehicleNode:
 
     # -- receiving -------------------------------------------------------------------------
     def on_message(self, source: str, msg: Any) -> None:
+        """Handle one message; whatever it holds, it is counted and never raised."""
+        try:
+            self._on_message(source, msg)
+        except Exception as exc:  # noqa: BLE001 - a frame must never end the flight
+            name = f"handler_error_{type(exc).__name__}"
+            if name not in self.counters:
+                print(f"simvehicle: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
+            self._count(name)
+
+    def _alarm(self, kind: str, t_us: int) -> None:
+        """An input stamped outside the window around our own time: ignored, counted, reported."""
+        name = f"clock_alarm_{kind}"
+        if name not in self.counters:
+            print(f"simvehicle: alarm: {kind} stamped {t_us} µs ignored at vehicle time {self.t_us} µs",
+                  file=sys.stderr)
+        self._count(name)
+
+    def _on_message(self, source: str, msg: Any) -> None:
         kind = msg.get_type()
         if source == "ground":
             self._on_ground(msg, kind)
@@ -132,15 +169,29 @@ class VehicleNode:
         try:
             if kind == "ODOMETRY":
                 estimate = codec.decode_odometry(msg)
+                if not within(estimate.t_us, self.t_us, INPUT_WINDOW):
+                    self._alarm(kind, estimate.t_us)
+                    return
                 if self.inbox.estimate is None or estimate.t_us >= self.inbox.estimate.t_us:
                     self.inbox.estimate = estimate
             elif kind == "SET_POSITION_TARGET_LOCAL_NED":
-                self.inbox.setpoint = codec.decode_setpoint(msg)
+                setpoint = codec.decode_setpoint(msg)
+                if not within(setpoint.t_us, self.t_us, INPUT_WINDOW):
+                    self._alarm(kind, setpoint.t_us)
+                    return
+                self.inbox.setpoint = setpoint
             elif kind == "NAMED_VALUE_FLOAT":
                 value = codec.decode_named_value(msg)
+                if not within(value.t_us, self.t_us, INPUT_WINDOW):
+                    self._alarm(kind, value.t_us)
+                    return
                 if value.name == codec.BELIEF_NAME:
+                    if not 0.0 <= value.value <= 1.0:
+                        raise codec.CodecError("out_of_range", f"{value.name} {value.value}")
                     self.inbox.beta = value.value
                 elif value.name == codec.NIS_NAME:
+                    if not value.value >= 0.0:
+                        raise codec.CodecError("out_of_range", f"{value.name} {value.value}")
                     self.inbox.nis = value.value
             elif kind not in ("HEARTBEAT", "TIMESYNC", "ESTIMATOR_STATUS"):
                 self._count(f"ignored_{kind}")
@@ -224,7 +275,7 @@ class VehicleNode:
         max_t_us = round(cfg.max_duration_s * 1e6)
         wall0 = time.perf_counter_ns()
         pace = self._pace(wall0) if cfg.realtime else None
-        next_progress = 0.0
+        next_progress = next_stats = 0.0
         outcome = "timeout"
         was_collided = False
         while self.t_us < max_t_us:
@@ -252,7 +303,14 @@ class VehicleNode:
             if time.monotonic() >= next_progress:
                 next_progress = time.monotonic() + cfg.progress_period_s
                 print(json.dumps({"t_s": out.t_us / 1e6, "goal_distance_m": row.goal_distance_m}), flush=True)
+            if time.monotonic() >= next_stats:
+                next_stats = time.monotonic() + cfg.stats_period_s
+                self.write_stats({"outcome": "running", "t_s": self.t_us / 1e6})
         return {"outcome": outcome, "t_s": self.t_us / 1e6, "wall_s": (time.perf_counter_ns() - wall0) / 1e9}
+
+    def write_stats(self, result: dict[str, Any]) -> None:
+        """``vehicle.json``: the result so far and every counter (atomic: never half a file)."""
+        write_json(self.config.out_dir / "vehicle.json", {**result, **self.stats()})
 
     def stats(self) -> dict[str, Any]:
         periods_ms = np.diff(np.asarray(self.imu_send_ns, dtype=float)) / 1e6

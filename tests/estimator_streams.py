@@ -24,7 +24,7 @@ class Stream:
 
     t_us: np.ndarray  # (n,) IMU times
     a_ned_m_s2: np.ndarray  # (n, 3) gravity-compensated NED acceleration as measured
-    x_true: np.ndarray  # (n, 9) true [p, v, b] at each IMU time
+    x_true: np.ndarray  # (n, 12) true [p, v, b, a] at each IMU time (a: acceleration-input bias)
     fix_index: np.ndarray  # (k,) IMU index at which each fix is valid
     z_ned_m: np.ndarray  # (k, 3) fixes
     bias_std_m: np.ndarray  # (k,) std of the multipath bias in force at each fix (0 = clean)
@@ -51,14 +51,14 @@ def consistent_stream(rng: np.random.Generator, cfg: EstimatorConfig, duration_s
     t_us = np.arange(n, dtype=np.int64) * IMU_PERIOD_US
     a = _input(t_us * 1e-6)
     F = model.transition(dt, cfg)
-    B = np.vstack([0.5 * dt * dt * np.eye(3), dt * np.eye(3), np.zeros((3, 3))])
+    B = model.input_matrix(dt)
     L = np.linalg.cholesky(model.process_noise(dt, cfg.sigma_bias_m(beta), cfg))
     z0 = np.array([10.0, -5.0, -30.0])
-    x_hat0 = np.concatenate([z0, np.zeros(6)])
+    x_hat0 = np.concatenate([z0, np.zeros(9)])
     P0 = model.initial_cov(cfg)
-    x = np.empty((n, 9))
-    x[0] = x_hat0 - np.linalg.cholesky(P0) @ rng.standard_normal(9)
-    w = rng.standard_normal((n, 9)) @ L.T
+    x = np.empty((n, model.N_STATE))
+    x[0] = x_hat0 - np.linalg.cholesky(P0) @ rng.standard_normal(model.N_STATE)
+    w = rng.standard_normal((n, model.N_STATE)) @ L.T
     for k in range(n - 1):
         x[k + 1] = F @ x[k] + B @ a[k] + w[k]
     idx = np.arange(0, n, GNSS_EVERY)
@@ -105,5 +105,5 @@ def multipath_stream(rng: np.random.Generator, cfg: EstimatorConfig, segments: l
     idx = np.arange(0, n, GNSS_EVERY)
     noise = np.where(std[idx] > 0, sigma_degraded_m, sigma_clean_m)[:, None]
     z = p[idx] + b[idx] + noise * rng.standard_normal((len(idx), 3))
-    x = np.hstack([p, v, b])
+    x = np.hstack([p, v, b, np.zeros((n, 3))])
     return Stream(t_us, a_meas, x, idx, z, std[idx])

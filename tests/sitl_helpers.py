@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from gcs_tools.sitl.launcher import SitlOptions, child_specs
+from gcs_tools.sitl.launcher import SitlOptions, child_specs, prepare_signing
 from gcs_tools.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports
 
 
@@ -35,17 +35,19 @@ def route_duration_s(mission: str, profile: int) -> float:
 class Trio:
     """The three processes started by hand (so a test can kill, restart or impersonate one)."""
 
-    def __init__(self, out: Path, opts: SitlOptions, estimator_bind_port: int | None = None) -> None:
+    def __init__(self, out: Path, opts: SitlOptions, estimator_bind_port: int | None = None,
+                 bridge_bind_port: int | None = None) -> None:
         self.out = out
         self.opts = opts
         self.ports = tuple(free_udp_ports(3))
         self.estimator_bind_port = estimator_bind_port
         self.sup = Supervisor(out / "logs")
+        prepare_signing(opts)  # signed as `beliefnav sitl` is by default
         self.specs = {s.name: s for s in child_specs(opts, self.ports)}  # type: ignore[arg-type]
-        if estimator_bind_port is not None:
-            est = self.specs["estimator"]
-            self.specs["estimator"] = ChildSpec("estimator", (*est.module_argv, "--bind-port",
-                                                             str(estimator_bind_port)))
+        for name, port in (("estimator", estimator_bind_port), ("bridge", bridge_bind_port)):
+            if port is not None:
+                spec = self.specs[name]
+                self.specs[name] = ChildSpec(name, (*spec.module_argv, "--bind-port", str(port)))
         self.vehicle = self.sup.start(self.specs["vehicle"], stdout=subprocess.PIPE)
         os.set_blocking(self.vehicle.stdout.fileno(), False)  # type: ignore[union-attr]
         self.start("estimator")

@@ -99,13 +99,16 @@ def _first_time(mask: np.ndarray) -> float:
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("method", ["first-order", "second-order"])
 def test_belief_rises_falls_and_recovers(beliefs, seed, method):
-    """Clean → β > 0.9; 1.2 m-std Gauss-Markov bias → β < 0.5 within 6 s; β > 0.9 again within 12 s."""
+    """Clean → β > 0.9; 1.2 m-std Gauss-Markov bias → β < 0.5 within 7 s; β > 0.9 again within 12 s.
+
+    The bias starts as a step the innovation gate rejects at first (the belief still learns from
+    the rejected fixes), which costs first-order up to ~1 s against fusing them."""
     b = beliefs[seed][method]
     t = np.arange(len(b)) * DT_FIX_S
     clean = b[(t >= 10.0) & (t < CLEAN_S)]
     assert clean.min() > 0.9
     degraded = b[(t >= CLEAN_S) & (t < CLEAN_S + DEGRADED_S)]
-    assert _first_time(degraded < 0.5) < 6.0
+    assert _first_time(degraded < 0.5) < 7.0
     assert np.median(degraded[int(6.0 / DT_FIX_S):]) < 0.5
     after = b[t >= CLEAN_S + DEGRADED_S]
     assert _first_time(after > 0.9) < 12.0
@@ -150,3 +153,20 @@ def test_a_method_registered_elsewhere_is_selectable():
         assert e.snapshot().beta == 0.5
     finally:
         del methods.REGISTRY["test-constant-half"]
+
+
+@pytest.mark.parametrize("method", ["first-order", "second-order"])
+@pytest.mark.parametrize("bias_std_m", [3.0, 10.0])
+def test_belief_recovers_from_its_floor_within_the_stated_time(method, bias_std_m):
+    """60 s of multipath far beyond the model (3 m and 10 m std, partly gated) drive β to its floor
+    σ(θ_min); once GNSS is clean again β > 0.5 within 12 s and > 0.9 within 18 s, so no bad
+    interval leaves a flight pinned at the floor. The bound is the 5 s reset time-out (the end of a
+    10 m bias is a glitch for the filter) plus the climb (measured 2-6 s from the floor to 0.5)."""
+    s = multipath_stream(np.random.default_rng(0), CFG, [(10.0, 0.0), (60.0, bias_std_m), (20.0, 0.0)])
+    b = _betas(s, method)
+    t = np.arange(len(b)) * DT_FIX_S
+    floor = 1.0 / (1.0 + math.exp(-CFG.theta_min))
+    assert b[(t >= 10.0) & (t < 70.0)].min() == pytest.approx(floor, abs=1e-12)
+    after = b[t >= 70.0]
+    assert _first_time(after > 0.5) < 12.0 and _first_time(after > 0.9) < 18.0
+    assert after[-1] > 0.9

@@ -14,7 +14,7 @@ DURATION_S = 10.0
 
 
 def test_naive_nees_and_nis_inside_95_percent_chi2_bounds():
-    """Per fix time, the average over RUNS independent runs of NEES (9 dof) and NIS (3 dof) must
+    """Per fix time, the average over RUNS independent runs of NEES (12 dof) and NIS (3 dof) must
     lie inside the two-sided 95% bounds χ²(RUNS·n, 0.025/0.975) / RUNS in at least 90% of the
     fix times (95% expected), and the grand averages within ±6% of 9 and 3."""
     rng = np.random.default_rng(2024)
@@ -37,7 +37,7 @@ def test_naive_nees_and_nis_inside_95_percent_chi2_bounds():
             run_nis.append(f.nis)
         nees.append(run_nees)
         nis.append(run_nis)
-    for values, dof in ((np.array(nees), 9), (np.array(nis), 3)):
+    for values, dof in ((np.array(nees), model.N_STATE), (np.array(nis), 3)):
         avg = values.mean(axis=0)
         lo, hi = stats.chi2.ppf([0.025, 0.975], RUNS * dof) / RUNS
         inside = np.mean((avg > lo) & (avg < hi))

@@ -1,4 +1,4 @@
-"""Known answers for the 9-state model: predict = F P Fᵀ + Q, update = closed form, exact blocks."""
+"""Known answers for the 12-state model: predict = F P Fᵀ + Q, update = closed form, exact blocks."""
 
 import numpy as np
 import pytest
@@ -13,9 +13,10 @@ CFG = EstimatorConfig()
 def _random_axis_cov(rng: np.random.Generator) -> model.Cov:
     blocks = []
     for _ in range(3):
-        A = rng.standard_normal((3, 3))
-        M = A @ A.T + 0.1 * np.eye(3)
-        blocks.append((M[0, 0], M[0, 1], M[0, 2], M[1, 1], M[1, 2], M[2, 2]))
+        A = rng.standard_normal((4, 4))
+        M = A @ A.T + 0.1 * np.eye(4)
+        blocks.append(tuple(M[u, v] for u, v in ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3),
+                                                 (2, 2), (2, 3), (3, 3))))
     return tuple(blocks)  # type: ignore[return-value]
 
 
@@ -23,20 +24,31 @@ def test_predict_equals_F_P_Ft_plus_Q():
     rng = np.random.default_rng(1)
     P = _random_axis_cov(rng)
     T, sigma_b = 0.005, 0.37
-    F = np.eye(9)
+    F = np.eye(12)
     F[0:3, 3:6] = T * np.eye(3)
+    F[0:3, 9:12] = -T * T / 2 * np.eye(3)  # v̇ = ã − a
+    F[3:6, 9:12] = -T * np.eye(3)
     F[6:9, 6:9] = np.exp(-T / CFG.bias_tau_s) * np.eye(3)
     q = CFG.sigma_acc_m_s2**2
-    Q = np.zeros((9, 9))
+    w = CFG.sigma_acc_bias_rw_m_s2_sqrt_s**2
+    # Q of the random walk a through (p, v, a): ∫ g(s) w g(s)ᵀ ds by quadrature, g(s) = the effect
+    # on (p, v, a) of a unit kick of a, s seconds before T (v̇ = −a)
+    s_grid = np.linspace(0.0, T, 20001)
+    g = np.stack([-s_grid**2 / 2, -s_grid, np.ones_like(s_grid)])
+    Q_rw = w * np.trapezoid(g[:, None, :] * g[None, :, :], s_grid, axis=2)
+    Q = np.zeros((12, 12))
     Q[0:3, 0:3] = q * T**3 / 3 * np.eye(3)
     Q[0:3, 3:6] = Q[3:6, 0:3] = q * T**2 / 2 * np.eye(3)
     Q[3:6, 3:6] = q * T * np.eye(3)
     Q[6:9, 6:9] = (1 - np.exp(-2 * T / CFG.bias_tau_s)) * sigma_b**2 * np.eye(3)
+    for u, iu in enumerate((0, 3, 9)):
+        for v, iv in enumerate((0, 3, 9)):
+            Q[iu:iu + 3, iv:iv + 3] += Q_rw[u, v] * np.eye(3)
     expected = F @ model.cov_to_matrix(P) @ F.T + Q
     reference = model.predict_cov(model.cov_to_matrix(P), T, sigma_b, CFG)
     np.testing.assert_allclose(reference, expected, atol=1e-12)
     alpha = model.bias_decay(T, CFG)
-    fast = model.predict_axes(P, T, alpha, q, model.bias_noise_unit(T, CFG) * sigma_b**2)
+    fast = model.predict_axes(P, T, alpha, q, model.bias_noise_unit(T, CFG) * sigma_b**2, w)
     np.testing.assert_allclose(model.cov_to_matrix(fast), expected, atol=1e-12)
 
 
@@ -53,7 +65,7 @@ def test_update_equals_closed_form():
     rng = np.random.default_rng(3)
     Pa = _random_axis_cov(rng)
     P = model.cov_to_matrix(Pa)
-    x = rng.standard_normal(9)
+    x = rng.standard_normal(12)
     z = rng.standard_normal(3)
     r = (0.01, 0.02, 0.03)
     H = model.H
@@ -61,7 +73,7 @@ def test_update_equals_closed_form():
     K = P @ H.T @ np.linalg.inv(S)
     y = z - H @ x
     x_exp = x + K @ y
-    P_exp = (np.eye(9) - K @ H) @ P
+    P_exp = (np.eye(12) - K @ H) @ P
     xr, Pr, _, _, nis_r = model.update(x, P, z, np.diag(r))
     np.testing.assert_allclose(xr, x_exp, atol=1e-12)
     np.testing.assert_allclose(Pr, P_exp, atol=1e-12)
@@ -81,15 +93,13 @@ def test_mean_from_prefix_integrals_equals_stepping_eq12():
     h = ImuHistory(hold_max_s=0.1)
     for t, ak in zip(t_us.tolist(), a.tolist(), strict=True):
         h.append(t, *ak)
-    x0 = rng.standard_normal(9)
+    x0 = rng.standard_normal(12)
     t_end = int(t_us[-1]) + 2500  # past the last sample: its input is held
     x = x0.copy()
     times = [*t_us.tolist(), t_end]
     for k in range(len(t_us)):
         dt = (times[k + 1] - times[k]) * 1e-6
-        F = model.transition(dt, CFG)
-        B = np.vstack([0.5 * dt * dt * np.eye(3), dt * np.eye(3), np.zeros((3, 3))])
-        x = F @ x + B @ a[k]
+        x = model.transition(dt, CFG) @ x + model.input_matrix(dt) @ a[k]
     alpha = model.bias_decay((t_end - t_us[0]) * 1e-6, CFG)
     got = h.propagate_mean(tuple(x0), int(t_us[0]), t_end, alpha)
     np.testing.assert_allclose(got, x, rtol=1e-10, atol=1e-10)
@@ -104,7 +114,7 @@ def test_gap_coasts_instead_of_holding_a_stale_input():
     h = ImuHistory(hold_max_s=0.1)
     assert not h.append(0, 1.0, 0.0, 0.0)
     assert h.append(1_000_000, 0.0, 0.0, 0.0)  # 1 s gap
-    x = h.propagate_mean((0.0,) * 9, 0, 1_000_000, 1.0)
+    x = h.propagate_mean((0.0,) * 12, 0, 1_000_000, 1.0)
     # 1 m/s² held for 0.1 s only, then constant velocity
     assert x[3] == pytest.approx(0.1)
     assert x[0] == pytest.approx(0.5 * 0.1**2 + 0.1 * 0.9)

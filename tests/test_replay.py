@@ -87,7 +87,7 @@ def test_replay_plumbing_with_known_answers(tmp_path: Path) -> None:
     result = core.replay(log, "naive", home=HOME, rate_hz=0, navigator=factory)
     s = result.summary
     pushed = navs[0].pushed
-    assert s["sources"] == {"imu": "HIGHRES_IMU", "attitude": "ATTITUDE_QUATERNION"}
+    assert s["sources"] == {"imu": "HIGHRES_IMU", "attitude": "ATTITUDE_QUATERNION", "gnss": "GPS_RAW_INT"}
     assert s["samples_used"]["imu"] == 400 - 8 and s["samples_rejected"]["codec"] == {"imu_non_finite": 8}
     assert s["samples_used"]["imu_other_source_ignored"] == 400  # RAW_IMU never fed twice
     assert s["samples_used"]["gnss"] == 20 - 1
@@ -95,11 +95,13 @@ def test_replay_plumbing_with_known_answers(tmp_path: Path) -> None:
     t_imu = [p.t_us for p in pushed if isinstance(p, ImuSample)]
     assert t_imu == sorted(t_imu)
     # the double lags truth by the GNSS delay plus up to one fix period (0.2 .. 0.4 s at 1 m/s)
-    truth = s["errors"]["sim_state_truth"]["error_horizontal_m"]
+    truth = s["errors"]["truth"]["error_horizontal_m"]
     assert 0.19 < truth["median"] < 0.41 and truth["max"] < 0.41
-    assert set(s["errors"]) == {"gnss", "sim_state_truth", "autopilot_global_position"}
-    ap = s["errors"]["autopilot_global_position"]["error_horizontal_m"]
-    assert abs(ap["median"] - truth["median"]) < 0.05
+    assert set(s["errors"]) == {"gnss", "truth", "autopilot_estimate"}
+    assert s["errors"]["truth"]["source"] == "SIM_STATE"
+    ap = s["errors"]["autopilot_estimate"]
+    assert ap["source"] == "GLOBAL_POSITION_INT" and ap["alignment"] == "geodetic"
+    assert abs(ap["error_horizontal_m"]["median"] - truth["median"]) < 0.05
 
 
 def test_cli_writes_csv_and_strict_json(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -275,7 +275,7 @@ def test_launcher_never_leaves_processes_behind(tmp_path, how):
     assert summary["sitl"]["ended_by"] == expected
     assert summary["duration_s"] > 0.2 and (out / "run.tlog").stat().st_size > 1_000
     if how == "crash":
-        assert "estimator process failed" in stderr
+        assert "beliefnav: error: estimator process killed by SIGKILL" in stderr
 
 
 def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):

@@ -36,6 +36,12 @@ class EstimatorConfig:
     bias_tau_s: float = 3.0  # paper Γ_mp: correlation time of the GNSS multipath bias state
     sigma_bias_max_m: float = 1.2  # paper: largest multipath bias std; σ_b(β=0) ≈ this
     sigma_bias_floor_m: float = 0.01  # ε of eq. 13: bias std kept at full trust (β = 1)
+    # Acceleration-input bias state a (NED, model.py): prior std at the first fix and random-walk
+    # density. A MEMS accelerometer bias is tens of mg (0.1-0.3 m/s²) and 1° of attitude error
+    # reads as 0.17 m/s²; EKF2's accelerometer bias noise EKF2_ACC_B_NOISE is 3e-3 m/s³/√Hz, ours is
+    # larger since the state also follows the attitude error. 0 and 0 give the paper's 9-state filter.
+    sigma_acc_bias0_m_s2: float = 0.2
+    sigma_acc_bias_rw_m_s2_sqrt_s: float = 0.01
     gravity_m_s2: float = 9.80665  # added on NED z: a_ned = R f_frd + [0, 0, g]
 
     # --- measurement model (eq. 14)
@@ -56,7 +62,12 @@ class EstimatorConfig:
 
     # --- belief adaptation (eq. 15-21)
     theta0: float = 0.0  # initial belief logit (β0 = 0.5: undecided)
-    theta_max: float = 6.0  # |θ| clamp, keeps β in [0.0025, 0.9975] so the sigmoid never freezes
+    theta_max: float = 6.0  # θ ≤ this: β ≤ 0.9975, so the sigmoid never freezes at full trust
+    # θ ≥ this: β ≥ 0.047. The θ-gradient carries β(1 − β), 0.0025 at θ = −6: a belief that low
+    # takes minutes to come back (first-order stayed at 0.007 through 40 s of clean GNSS after
+    # 60 s of 3 m multipath); at −3 the factor is 18× larger and it recovers in ~10 s (tested).
+    # R(β) and σ_b(β) differ by < 5 % between the two floors.
+    theta_min: float = -3.0
     eta: float = 0.15  # paper: learning rate of the damped Newton step (eq. 20)
     lambda_reg: float = 0.1  # paper: Newton step regulariser λ_reg (eq. 20)
     alpha_fast: float = 0.5  # fast curvature accumulator decay per fix (eq. 18), 0 < α_f ≪ α_s
@@ -69,6 +80,32 @@ class EstimatorConfig:
     student_dof: float = 7.815  # ν of the Student-t loss = χ²₀.₉₅(3 dof), the paper's threshold
     lambda_smooth_1_m: float = 0.1  # weight λ of the smoothness term ‖Δp‖ (1/m)
     chi2_095: float = 7.815  # paper-literal loss: χ²₀.₉₅ for 3 dof
+
+    # --- innovation gate, glitch recovery, validity (what PX4 EKF2 / ArduPilot EKF3 do; docs/estimator.md)
+    # Gate size in standard deviations of the innovation: a fix is rejected when its horizontal
+    # NIS (2 dof) or its vertical NIS (1 dof) exceeds gate². 5 is EKF2_GPS_P_GATE's default and
+    # ArduPilot's EK3_POS_I_GATE = 500 (in percent of 1σ); a consistent filter then rejects a
+    # clean fix with probability exp(−25/2) ≈ 4e-6 (horizontal), so a rejection means a glitch.
+    gnss_gate_sigma: float = 5.0
+    # A fix failing the gate when no fix passed for this long resets position (and the GNSS bias
+    # state) to it, with the fix's R and the initial bias variance: a persistent disagreement is
+    # a real change (or a dead-reckoning drift), not a glitch. EKF2 resets after its 5 s no-aid
+    # time-out (EKF2_NOAID_TOUT), EKF3 after 7-10 s (gpsRetryTime); 5 s bounds the drift.
+    gnss_reset_timeout_s: float = 5.0
+    # The position is flagged invalid (NavEstimate.pos_valid False) when no fix was fused for
+    # longer than this (time of the estimate − validity of the last fused fix). EKF2_NOAID_TOUT.
+    pos_valid_timeout_s: float = 5.0
+    # A fix repeating exactly (lat, lon, alt) a position first received more than gnss_frozen_s
+    # earlier, the estimated horizontal speed having exceeded gnss_frozen_speed_m_s since, is a frozen
+    # receiver output: rejected and counted (gnss_rejected_frozen). The vehicle should have moved
+    # 1 m, 10x the 1e-6 degree resolution of quad106's fixes, which repeat at most 5 fixes (0.8 s)
+    # in a row; a vehicle at rest may repeat for ever and is never rejected. A frozen fix while
+    # moving drags the estimate back (neither EKF2 nor EKF3 checks this).
+    gnss_frozen_s: float = 2.0
+    gnss_frozen_speed_m_s: float = 0.5
+    # Largest R any method may use, as a multiple of the fix's nominal variance (R_nom, or the
+    # receiver-reported accuracy): bounds what adaptive and vbakf learn (10× the nominal std).
+    r_learned_max_factor: float = 100.0
 
     # --- baselines
     beta_fixed: float = 1.0  # naive and adaptive: belief held fixed (full trust; Q_b at its floor)
@@ -83,14 +120,21 @@ class EstimatorConfig:
             "sigma_acc_m_s2", "bias_tau_s", "sigma_bias_max_m", "sigma_bias_floor_m",
             "sigma_gnss_horizontal_m", "sigma_gnss_vertical_m", "sigma_velocity0_m_s",
             "sigma_bias0_m", "imu_hold_max_s", "theta_max", "eta", "lambda_reg", "student_dof",
-            "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor",
+            "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor", "gnss_gate_sigma",
+            "gnss_reset_timeout_s", "pos_valid_timeout_s", "gnss_frozen_s",
+            "gnss_frozen_speed_m_s",
         )
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {value!r}")
+        if not self.theta_min < self.theta0 < self.theta_max:
+            raise ValueError("theta_min, theta0, theta_max: need theta_min < theta0 < theta_max")
         if self.history_s < 1.5:
             raise ValueError(f"history_s: must be >= 1.5 s, got {self.history_s}")
+        k_max = self.r_learned_max_factor
+        if not (math.isfinite(k_max) and k_max >= self.r_inflation_max):
+            raise ValueError("r_learned_max_factor: must be finite and >= r_inflation_max")
         if self.r_inflation_max < 1.0:
             raise ValueError(f"r_inflation_max: must be >= 1, got {self.r_inflation_max}")
         if not 0.0 < self.alpha_fast < self.alpha_slow < 1.0:
@@ -103,7 +147,8 @@ class EstimatorConfig:
             raise ValueError("adaptive_window_fixes: must be >= 2")
         if not (0.0 < self.vb_forgetting <= 1.0 and self.vb_iterations >= 1 and self.vb_prior_dof > 0.0):
             raise ValueError("vb_forgetting, vb_iterations, vb_prior_dof: need 0 < ρ ≤ 1, ≥ 1, > 0")
-        for name in ("future_tolerance_s", "lambda_smooth_1_m", "eta_first_order"):
+        for name in ("future_tolerance_s", "lambda_smooth_1_m", "eta_first_order", "sigma_acc_bias0_m_s2",
+                     "sigma_acc_bias_rw_m_s2_sqrt_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name}: must be a finite number >= 0")
 

@@ -43,7 +43,7 @@ class Fusion(NamedTuple):
 
     t_us: int  # validity time of the fix (or of a re-based anchor)
     z_ned_m: Vec3 | None  # the fix; None for an anchor without a measurement
-    x: model.State  # posterior [p, v, b] (m, m/s, m)
+    x: model.State  # posterior [p, v, b, a] (m, m/s, m, m/s²); the prior when the fix failed the gate
     P: model.Cov  # posterior covariance, per axis (model.py)
     state: Any  # adaptation state after this fix (immutable)
     nis: float  # NIS of this fix (of the last fix for an anchor)
@@ -51,6 +51,13 @@ class Fusion(NamedTuple):
     ints: Integrals  # IMU prefix integrals at t_us (history.py)
     beta: float  # method.beta(state): the belief in force after this entry
     sigma_bias_m: float  # σ_b(β) of eq. 13 for that belief
+    # innovation gate (a deterministic function of the time-ordered fixes: re-fused identically)
+    r_nominal_m2: Vec3  # this fix's nominal R (variances, m²): config or receiver-reported
+    t_fused_us: int  # validity time of the last fix fused (or reset to) up to this entry
+    test_ratio: float  # horizontal NIS / gate² of this fix (NaN for the first)
+    glitch: bool  # this fix failed the gate (not fused)
+    n_rejected: int  # fixes rejected by the gate up to this entry (cumulative)
+    n_resets: int  # resets up to this entry (cumulative)
 
 
 class Snapshot(NamedTuple):
@@ -61,6 +68,11 @@ class Snapshot(NamedTuple):
     P: model.Cov
     beta: float
     nis: float
+    test_ratio: float
+    glitch: bool
+    pos_valid: bool
+    n_rejected: int
+    n_resets: int
 
 
 class FusionEngine:
@@ -70,22 +82,32 @@ class FusionEngine:
         self.cfg = cfg
         self.method_name = method
         self.method = methods.make(method, cfg)
+        # A belief (GNSS trust) learns from a fix the gate rejects: it is evidence against trust.
+        # R-learners (adaptive, vbakf) do not: they estimate the noise of the fixes fused, as the
+        # autopilot EKFs keep gated fixes out of everything.
+        self._learn_rejected = bool(getattr(self.method, "learns_from_rejected", False))
         self.counts = counts if counts is not None else {}
         for name in (
             "imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
             "gnss_fused", "gnss_refused", "gnss_out_of_order", "gnss_rejected_before_imu",
             "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
-            "gnss_rejected_nonfinite",
+            "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets",
         ):
             self.counts.setdefault(name, 0)
         self.imu = ImuHistory(cfg.imu_hold_max_s)
         self.fusions: list[Fusion] = []
         self._fusion_t: list[int] = []
-        self._pending: list[tuple[int, Vec3]] = []  # fixes waiting for the IMU, by time
+        self._pending: list[tuple[int, Vec3, Vec3]] = []  # (t, z, R_nom) waiting for the IMU, by time
+        self._tested = 0  # fixes that reached the innovation test (fused = this − rejected)
         self._history_us = int(round(cfg.history_s * 1e6))
         self._future_us = int(round(cfg.future_tolerance_s * 1e6))
         self._r_nominal: Vec3 = tuple(float(v) for v in cfg.r_nominal_m2().diagonal())  # type: ignore[assignment]
         self._q_acc = cfg.sigma_acc_m_s2**2
+        self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
+        self._gate2 = cfg.gnss_gate_sigma**2
+        self._r_max = cfg.r_learned_max_factor
+        self._reset_us = int(round(cfg.gnss_reset_timeout_s * 1e6))
+        self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
         self._trim_len = _TRIM_EVERY
         self._cache: tuple[Fusion, int, Snapshot] | None = None
@@ -134,11 +156,18 @@ class FusionEngine:
             self._trim()
 
     # ---------------------------------------------------------------- GNSS
-    def push_fix(self, t_us: int, z_ned_m: Any) -> None:
-        """A GNSS position (NED, m; 3 numbers) valid at ``t_us``; fused now, later, or rejected."""
+    def push_fix(self, t_us: int, z_ned_m: Any, r_nominal_m2: Vec3 | None = None) -> None:
+        """A GNSS position (NED, m; 3 numbers) valid at ``t_us``; fused now, later, or rejected.
+
+        ``r_nominal_m2``: this fix's nominal R (NED variances, m²), e.g. from the receiver's
+        reported accuracy; None = the config's ``r_nominal_m2``."""
         c = self.counts
         z = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
         if len(z) != 3 or not finite3(*z):
+            c["gnss_rejected_nonfinite"] += 1
+            return
+        r = self._r_nominal if r_nominal_m2 is None else r_nominal_m2
+        if not (finite3(*r) and min(r) > 0.0):
             c["gnss_rejected_nonfinite"] += 1
             return
         if not self.imu.rows:
@@ -157,25 +186,25 @@ class FusionEngine:
             c["gnss_rejected_duplicate"] += 1
             return
         if t_us > now:
-            bisect.insort(self._pending, (t_us, z), key=lambda item: item[0])
+            bisect.insort(self._pending, (t_us, z, r), key=lambda item: item[0])
             return
-        self._insert(t_us, z)
+        self._insert(t_us, z, r)
 
     def _is_duplicate(self, t_us: int) -> bool:
         i = bisect.bisect_left(self._fusion_t, t_us)
         if i < len(self._fusion_t) and self._fusion_t[i] == t_us and self.fusions[i].z_ned_m is not None:
             return True
-        return bool(self._pending) and any(t == t_us for t, _ in self._pending)
+        return bool(self._pending) and any(item[0] == t_us for item in self._pending)
 
     def _flush_pending(self) -> None:
         now = self.imu.t_us[-1]
         while self._pending and self._pending[0][0] <= now:
-            t_us, z = self._pending.pop(0)
-            self._insert(t_us, z)
+            t_us, z, r = self._pending.pop(0)
+            self._insert(t_us, z, r)
 
-    def _insert(self, t_us: int, z: Vec3) -> None:
+    def _insert(self, t_us: int, z: Vec3, r: Vec3) -> None:
         if not self.fusions:
-            self._initialise(t_us, z)
+            self._initialise(t_us, z, r)
             return
         i = bisect.bisect_right(self._fusion_t, t_us)
         if i == 0:
@@ -186,49 +215,80 @@ class FusionEngine:
             self.counts["gnss_out_of_order"] += 1
             del self.fusions[i:]
             del self._fusion_t[i:]
-        self._fuse(t_us, z)
-        self.counts["gnss_fused"] += 1
+        self._fuse(t_us, z, r)
+        self._tested += 1
         for f in later:
             assert f.z_ned_m is not None  # anchors only ever sit at index 0
-            self._fuse(f.t_us, f.z_ned_m)
+            self._fuse(f.t_us, f.z_ned_m, f.r_nominal_m2)
             self.counts["gnss_refused"] += 1
+        self._count()
 
-    def _initialise(self, t_us: int, z: Vec3) -> None:
-        x = (*z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    def _count(self) -> None:
+        """Gate counters from the newest entry (cumulative there, so exact after a re-fusion)."""
+        last, c = self.fusions[-1], self.counts
+        c["gnss_rejected_innovation"] = last.n_rejected
+        c["gnss_resets"] = last.n_resets
+        c["gnss_fused"] = self._tested - last.n_rejected
+
+    def _initialise(self, t_us: int, z: Vec3, r: Vec3) -> None:
+        x = (*z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         state = self.method.initial_state()
-        P = model.initial_cov_axes(self.cfg)
-        self._append(t_us, z, x, P, state, float("nan"), self.imu.integrals(t_us))
-        self.counts["gnss_fused"] += 1
+        P = model.initial_cov_axes(self.cfg, r)
+        self._append(t_us, z, x, P, state, float("nan"), self.imu.integrals(t_us),
+                     r, t_us, float("nan"), False, 0, 0)
+        self._tested += 1
+        self._count()
 
     def _append(self, t_us: int, z: Vec3 | None, x: model.State, P: model.Cov, state: Any, nis: float,
-                ints: Integrals) -> None:
+                ints: Integrals, r: Vec3, t_fused_us: int, ratio: float, glitch: bool, n_rejected: int,
+                n_resets: int) -> None:
         beta = self.method.beta(state)
-        self.fusions.append(Fusion(t_us, z, x, P, state, nis, ints, beta, self.cfg.sigma_bias_m(beta)))
+        self.fusions.append(Fusion(t_us, z, x, P, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
+                                   r, t_fused_us, ratio, glitch, n_rejected, n_resets))
         self._fusion_t.append(t_us)
 
-    def _fuse(self, t_us: int, z: Vec3) -> None:
-        """Predict the last entry to ``t_us`` and fuse ``z`` there (Algorithm 1, lines 7-17)."""
+    def _fuse(self, t_us: int, z: Vec3, r_nom: Vec3) -> None:
+        """Predict the last entry to ``t_us``, test ``z`` there and fuse it (Algorithm 1, lines
+        7-17) if it passes the innovation gate; a fix failing the gate while none passed for
+        ``gnss_reset_timeout_s`` resets position and bias to it instead."""
         prev = self.fusions[-1]
         T = (t_us - prev.t_us) * 1e-6
         alpha = math.exp(-T / self._tau_s)
         sigma_b = prev.sigma_bias_m
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
-        P_prior = model.predict_axes(prev.P, T, alpha, self._q_acc, q_b)
-        (pp0, _, pb0, _, _, bb0), (pp1, _, pb1, _, _, bb1), (pp2, _, pb2, _, _, bb2) = P_prior
+        P_prior = model.predict_axes(prev.P, T, alpha, self._q_acc, q_b, self._q_rw)
+        (pp0, _, pb0, _, _, _, _, bb0, _, _), (pp1, _, pb1, _, _, _, _, bb1, _, _), \
+            (pp2, _, pb2, _, _, _, _, bb2, _, _) = P_prior
         ints = self.imu.integrals(t_us)
         x_prior = mean_between(prev.x, prev.ints, ints, alpha)
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
+        hph = (pp0 + 2.0 * pb0 + bb0, pp1 + 2.0 * pb1 + bb1, pp2 + 2.0 * pb2 + bb2)
         terms = InnovationTerms(
-            y,
-            (pp0 + 2.0 * pb0 + bb0 - q_b, pp1 + 2.0 * pb1 + bb1 - q_b, pp2 + 2.0 * pb2 + bb2 - q_b),
-            q_bias_unit,
-            self._r_nominal,
+            y, (hph[0] - q_b, hph[1] - q_b, hph[2] - q_b), q_bias_unit, r_nom,
             (pp0 + pb0, pp1 + pb1, pp2 + pb2),
         )
         R = self.method.measurement_cov(prev.state, terms)
-        x_post, P_post, nis = model.update_axes(x_prior, P_prior, z, R)
-        self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints)
+        k = self._r_max
+        if R[0] > k * r_nom[0] or R[1] > k * r_nom[1] or R[2] > k * r_nom[2]:
+            R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
+        # the gate: horizontal NIS (2 dof) and vertical NIS (1 dof) against gate²
+        s0, s1, s2 = hph[0] + R[0], hph[1] + R[1], hph[2] + R[2]
+        nis_h = y[0] * y[0] / s0 + y[1] * y[1] / s1
+        nis_v = y[2] * y[2] / s2
+        ratio = nis_h / self._gate2
+        if ratio <= 1.0 and nis_v <= self._gate2:
+            x_post, P_post, nis = model.update_axes(x_prior, P_prior, z, R)
+            self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints,
+                         r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets)
+        elif t_us - prev.t_fused_us >= self._reset_us:
+            x_reset, P_reset = model.reset_to_fix(x_prior, P_prior, z, r_nom, self.cfg.sigma_bias0_m**2)
+            self._append(t_us, z, x_reset, P_reset, prev.state, nis_h + nis_v, ints,
+                         r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets + 1)
+        else:  # rejected: the entry carries the prior; only a belief learns from the fix
+            state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
+            self._append(t_us, z, x_prior, P_prior, state, nis_h + nis_v, ints,
+                         r_nom, prev.t_fused_us, ratio, True, prev.n_rejected + 1, prev.n_resets)
 
     # ------------------------------------------------------------- history
     def _trim(self) -> None:
@@ -262,7 +322,7 @@ class FusionEngine:
         sigma_b = f.sigma_bias_m
         q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
         x = mean_between(f.x, f.ints, ints, alpha)
-        return x, model.predict_axes(f.P, T, alpha, self._q_acc, q_b)
+        return x, model.predict_axes(f.P, T, alpha, self._q_acc, q_b, self._q_rw)
 
     # -------------------------------------------------------------- output
     def snapshot(self) -> Snapshot | None:
@@ -274,6 +334,7 @@ class FusionEngine:
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]
         x, P = self._predict(last, now, self.imu.last_integrals())
-        snap = Snapshot(now, x, P, last.beta, last.nis)
+        snap = Snapshot(now, x, P, last.beta, last.nis, last.test_ratio, last.glitch,
+                        now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
         self._cache = (last, now, snap)
         return snap

@@ -11,10 +11,11 @@ the mean of eq. 12 over any interval [t_a, t_b] is, exactly (no per-sample loop)
     p_b = p_a + v_a T + t_b (S1(t_b) − S1(t_a)) − (S2(t_b) − S2(t_a)),   T = t_b − t_a
     b_b = α(T) b_a
 
-which equals stepping ``x ← F x + B a`` (eq. 12) sample by sample. A sample arriving more than
-``hold_max_s`` after the previous one is a gap: the previous input is held for ``hold_max_s``
-only, then the filter coasts at constant velocity (a virtual zero-acceleration sample), so a
-stale acceleration is never integrated blindly across a gap.
+and, with the acceleration bias ``a`` (constant in the mean: a random walk), ``v_b −= a T`` and
+``p_b −= a T²/2``; this equals stepping ``x ← F x + B ã`` (eq. 12) sample by sample.
+A sample arriving more than ``hold_max_s`` after the previous one is a gap: the previous input
+is held for ``hold_max_s`` only, then the filter coasts at constant velocity (a virtual
+zero-acceleration sample), so a stale acceleration is never integrated blindly across a gap.
 """
 
 from __future__ import annotations
@@ -132,13 +133,16 @@ def mean_between(x: tuple[float, ...], a: Integrals, b: Integrals, alpha: float)
     ta, a1x, a1y, a1z, a2x, a2y, a2z = a
     tb, b1x, b1y, b1z, b2x, b2y, b2z = b
     T = tb - ta
+    h = 0.5 * T * T
     dx, dy, dz = b1x - a1x, b1y - a1y, b1z - a1z
+    ux, uy, uz = x[9], x[10], x[11]
     return (
-        x[0] + x[3] * T + (tb * dx - (b2x - a2x)),
-        x[1] + x[4] * T + (tb * dy - (b2y - a2y)),
-        x[2] + x[5] * T + (tb * dz - (b2z - a2z)),
-        x[3] + dx, x[4] + dy, x[5] + dz,
+        x[0] + x[3] * T + (tb * dx - (b2x - a2x)) - ux * h,
+        x[1] + x[4] * T + (tb * dy - (b2y - a2y)) - uy * h,
+        x[2] + x[5] * T + (tb * dz - (b2z - a2z)) - uz * h,
+        x[3] + dx - ux * T, x[4] + dy - uy * T, x[5] + dz - uz * T,
         alpha * x[6], alpha * x[7], alpha * x[8],
+        ux, uy, uz,
     )
 
 

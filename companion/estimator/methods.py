@@ -51,6 +51,9 @@ class Adaptation(Protocol):
         """The state after this fix."""
         ...
 
+    # Optional class attribute ``learns_from_rejected: bool`` (default False): whether ``update``
+    # is also called for a fix the innovation gate rejected (the filter state is not updated).
+
 
 REGISTRY: dict[str, Callable[[EstimatorConfig], Adaptation]] = {}
 
@@ -142,12 +145,13 @@ class BeliefState(NamedTuple):
 class _Belief:
     """Sigmoid belief β = σ(θ) driving R(β) and Q_b(β); subclasses choose the θ step."""
 
+    learns_from_rejected = True  # a fix failing the innovation gate still updates β (engine.py)
+
     def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
 
     def _state(self, theta: float, h_fast: float, h_slow: float) -> BeliefState:
-        lim = self.cfg.theta_max
-        theta = min(lim, max(-lim, theta))
+        theta = min(self.cfg.theta_max, max(self.cfg.theta_min, theta))
         return BeliefState(theta, h_fast, h_slow, sigmoid(theta))
 
     def initial_state(self) -> BeliefState:

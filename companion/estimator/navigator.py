@@ -100,8 +100,11 @@ class Navigator:
         self._to_ned = NedConverter(frame) if frame is not None else None
         self._counts: dict[str, int] = {
             "attitude_used": 0, "attitude_rejected_nonfinite": 0, "imu_rejected_no_attitude": 0,
-            "gnss_rejected_fix_type": 0,
+            "gnss_rejected_fix_type": 0, "gnss_rejected_frozen": 0,
         }
+        # frozen-output check: the last fix's (lat, lon, alt) and the validity time it first had
+        self._fix_seen: tuple[tuple[float, float, float], int, bool] | None = None
+        self._frozen_us = int(round(self.cfg.gnss_frozen_s * 1e6))
         self.engine = FusionEngine(self.cfg, method, self._counts)
         self._att: Attitude | None = None  # the latest attitude, (w, x, y, z, 2 / |q|²)
         self._push_acc = self.engine.push_acc
@@ -160,22 +163,56 @@ class Navigator:
                 and abs(fix.lat_deg) <= 90.0 and abs(fix.lon_deg) <= 180.0):
             self._counts["gnss_rejected_nonfinite"] += 1
             return
+        if self._frozen(fix):
+            self._counts["gnss_rejected_frozen"] += 1
+            return
         if self.frame is None:
             if not self.engine.imu.rows:  # home is set by a fix the filter can start from
                 self._counts["gnss_rejected_before_imu"] += 1
                 return
             self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
             self._to_ned = NedConverter(self.frame)
-        self.engine.push_fix(fix.t_validity_us, self._to_ned(fix.lat_deg, fix.lon_deg, fix.alt_m))  # type: ignore[misc]
+        self.engine.push_fix(fix.t_validity_us, self._to_ned(fix.lat_deg, fix.lon_deg, fix.alt_m),  # type: ignore[misc]
+                             self.fix_r_nominal_m2(fix.h_acc_m, fix.v_acc_m))
 
-    def push_fix_ned(self, t_validity_us: int, p_ned_m: np.ndarray) -> None:
+    def _frozen(self, fix: GnssFix) -> bool:
+        """True when this fix repeats the position first received more than ``gnss_frozen_s``
+        before and the vehicle moved faster than ``gnss_frozen_speed_m_s`` at some time since
+        (arrival order, like the other receiver-stream checks)."""
+        where = (fix.lat_deg, fix.lon_deg, fix.alt_m)
+        seen = self._fix_seen
+        if seen is None or seen[0] != where:
+            self._fix_seen = (where, fix.t_validity_us, self._moving())
+            return False
+        if not seen[2] and self._moving():  # moved since: stays so until the position changes
+            seen = self._fix_seen = (where, seen[1], True)
+        return seen[2] and fix.t_validity_us - seen[1] > self._frozen_us
+
+    def _moving(self) -> bool:
+        snap = self.engine.snapshot()
+        return snap is not None and math.hypot(snap.x[3], snap.x[4]) > self.cfg.gnss_frozen_speed_m_s
+
+    def fix_r_nominal_m2(self, h_acc_m: float, v_acc_m: float) -> tuple[float, float, float]:
+        """A fix's nominal R (NED variances, m²): the receiver-reported 1σ accuracy where known,
+        floored at the configured nominal std (as PX4 EKF2: max(hacc, EKF2_GPS_P_NOISE)); the
+        configured std where unknown (NaN, 0 or negative)."""
+        c = self.cfg
+        h = h_acc_m if h_acc_m > c.sigma_gnss_horizontal_m else c.sigma_gnss_horizontal_m  # NaN > x is False
+        v = v_acc_m if v_acc_m > c.sigma_gnss_vertical_m else c.sigma_gnss_vertical_m
+        if not (math.isfinite(h) and math.isfinite(v)):  # +inf reported: unusable accuracy
+            h = h if math.isfinite(h) else c.sigma_gnss_horizontal_m
+            v = v if math.isfinite(v) else c.sigma_gnss_vertical_m
+        return h * h, h * h, v * v
+
+    def push_fix_ned(self, t_validity_us: int, p_ned_m: np.ndarray, h_acc_m: float = math.nan,
+                     v_acc_m: float = math.nan) -> None:
         """A fix already converted to this navigator's frame (e.g. vectorised by a log reader).
 
         Gated like ``push`` after the geodesy (the caller checked ``fix_type``); needs ``frame``.
         """
         if self.frame is None:
             raise ValueError("push_fix_ned needs a navigator with a frame (home)")
-        self.engine.push_fix(t_validity_us, p_ned_m)
+        self.engine.push_fix(t_validity_us, p_ned_m, self.fix_r_nominal_m2(h_acc_m, v_acc_m))
 
     # ------------------------------------------------------------- output
     def estimate(self) -> NavEstimate | None:
@@ -185,10 +222,13 @@ class Navigator:
             return None
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
-        (pp0, _, _, vv0, _, bb0), (pp1, _, _, vv1, _, bb1), (pp2, _, _, vv2, _, bb2) = snap.P
+        P0, P1, P2 = snap.P
+        x = snap.x
         # one array for the state and the variances, handed out as views (one allocation)
-        a = np.array((*snap.x, pp0, pp1, pp2, vv0, vv1, vv2, bb0, bb1, bb2))
-        est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method)
+        a = np.array((x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], P0[0], P1[0], P2[0],
+                      P0[4], P1[4], P2[4], P0[7], P1[7], P2[7]))
+        est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method,
+                          snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets)
         self._last = (snap, est)
         return est
 

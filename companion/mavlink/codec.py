@@ -78,6 +78,28 @@ ROLE_TYPES = {  # HEARTBEAT (type, autopilot) per process role
 }
 
 
+@dataclass(frozen=True, slots=True)
+class WireLimits:
+    """What a decoded (or encoded) value may be; beyond it the frame is rejected as ``out_of_range``.
+
+    Generous for any real quadrotor, tight enough that an absurd value never reaches a filter,
+    the autopilot or a packer (whose fixed-size integer fields would overflow).
+    """
+
+    max_specific_force_m_s2: float = 16.0 * 9.80665  # |f| per axis: 16 g (IMU full scale)
+    max_rate_rad_s: float = 35.0  # |ω| per axis: 2000 °/s gyro full scale
+    max_home_distance_m: float = 50_000.0  # positions (local NED, or a fix) this close to home
+    max_speed_m_s: float = 200.0  # |v| per axis
+    max_accel_m_s2: float = 200.0  # setpoint feed-forward |a| per axis
+    max_variance: float = 1e12  # ODOMETRY covariance diagonal (m², (m/s)²)
+    max_stamp_us: int = 2**62  # µs stamps (int64 headroom); ms stamps must fit uint32 when sent
+
+
+LIMITS = WireLimits()
+UINT32_MAX = 2**32 - 1
+FLOAT32_MAX = 3.4028234663852886e38
+
+
 class CodecError(ValueError):
     """A message that cannot be turned into a domain value; ``reason`` is a stable counter name."""
 
@@ -156,6 +178,25 @@ def _vec(name: str, x: float, y: float, z: float) -> np.ndarray:
     return np.array((x, y, z), dtype=float)
 
 
+def _bounded(name: str, bound: float, x: float, y: float, z: float) -> np.ndarray:
+    v = _vec(name, x, y, z)
+    if not max(abs(x), abs(y), abs(z)) <= bound:
+        raise CodecError("out_of_range", f"{name} beyond {bound:g}")
+    return v
+
+
+def _ms_stamp(name: str, t_us: int) -> None:
+    if not 0 <= t_us // 1000 <= UINT32_MAX:
+        raise CodecError("bad_stamp", f"{name} stamp {t_us} µs beyond uint32 ms")
+
+
+def _stamp_us(name: str, t_us: int) -> int:
+    t = int(t_us)
+    if not 0 <= t <= LIMITS.max_stamp_us:
+        raise CodecError("bad_stamp", f"{name} stamp {t} µs")
+    return t
+
+
 def _unit_quaternion(name: str, w: float, x: float, y: float, z: float) -> np.ndarray:
     norm = math.sqrt(w * w + x * x + y * y + z * z)
     if not abs(norm - 1.0) <= QUAT_NORM_TOLERANCE:  # also catches NaN
@@ -216,18 +257,18 @@ def decode_imu(m: Any) -> ImuSample:
     if m.fields_updated & IMU_FIELDS_ACC_GYRO != IMU_FIELDS_ACC_GYRO:
         raise CodecError("fields_not_updated", f"HIGHRES_IMU fields_updated={m.fields_updated:#x}")
     return ImuSample(
-        int(m.time_usec),
-        _vec("HIGHRES_IMU acc", m.xacc, m.yacc, m.zacc),
-        _vec("HIGHRES_IMU gyro", m.xgyro, m.ygyro, m.zgyro),
+        _stamp_us("HIGHRES_IMU", m.time_usec),
+        _bounded("HIGHRES_IMU acc", LIMITS.max_specific_force_m_s2, m.xacc, m.yacc, m.zacc),
+        _bounded("HIGHRES_IMU gyro", LIMITS.max_rate_rad_s, m.xgyro, m.ygyro, m.zgyro),
     )
 
 
 def _decode_scaled(t_us: int, m: Any) -> ImuSample:
     mg = STANDARD_GRAVITY_M_S2 / 1000.0
     return ImuSample(
-        t_us,
-        np.array((m.xacc * mg, m.yacc * mg, m.zacc * mg)),
-        np.array((m.xgyro * 1e-3, m.ygyro * 1e-3, m.zgyro * 1e-3)),
+        _stamp_us("IMU", t_us),
+        _bounded("IMU acc", LIMITS.max_specific_force_m_s2, m.xacc * mg, m.yacc * mg, m.zacc * mg),
+        _bounded("IMU gyro", LIMITS.max_rate_rad_s, m.xgyro * 1e-3, m.ygyro * 1e-3, m.zgyro * 1e-3),
     )
 
 
@@ -250,13 +291,15 @@ def encode_attitude(s: AttitudeSample) -> mavlink.MAVLink_attitude_quaternion_me
 
 def decode_attitude(m: Any) -> AttitudeSample:
     return AttitudeSample(
-        int(m.time_boot_ms) * 1000, _unit_quaternion("ATTITUDE_QUATERNION", m.q1, m.q2, m.q3, m.q4)
+        _stamp_us("ATTITUDE_QUATERNION", int(m.time_boot_ms) * 1000),
+        _unit_quaternion("ATTITUDE_QUATERNION", m.q1, m.q2, m.q3, m.q4),
     )
 
 
 def decode_attitude_euler(m: Any) -> AttitudeSample:
     _finite("ATTITUDE", m.roll, m.pitch, m.yaw)
-    return AttitudeSample(int(m.time_boot_ms) * 1000, euler_to_quaternion(m.roll, m.pitch, m.yaw))
+    return AttitudeSample(_stamp_us("ATTITUDE", int(m.time_boot_ms) * 1000),
+                          euler_to_quaternion(m.roll, m.pitch, m.yaw))
 
 
 def _mm(value_m: float) -> int:
@@ -278,7 +321,7 @@ def decode_gnss(m: Any) -> GnssFix:
     lat_deg, lon_deg = m.lat / DEG_E7, m.lon / DEG_E7
     _lat_lon("GPS_RAW_INT", lat_deg, lon_deg)
     return GnssFix(
-        t_validity_us=int(m.time_usec),
+        t_validity_us=_stamp_us("GPS_RAW_INT", m.time_usec),
         lat_deg=lat_deg,
         lon_deg=lon_deg,
         alt_m=m.alt / 1000.0,
@@ -301,10 +344,18 @@ SAMPLE_DECODERS: dict[str, Callable[[Any], ImuSample | AttitudeSample | GnssFix]
 }
 
 
-def decode_sample(m: Any) -> ImuSample | AttitudeSample | GnssFix | None:
-    """The estimator input a message carries, None if it carries none; CodecError if it is bad."""
+def decode_sample(m: Any, home: LocalNedFrame | None = None) -> ImuSample | AttitudeSample | GnssFix | None:
+    """The estimator input a message carries, None if it carries none; CodecError if it is bad.
+    With ``home``, a fix farther than ``LIMITS.max_home_distance_m`` from it is ``out_of_range``."""
     decoder = SAMPLE_DECODERS.get(m.get_type())
-    return None if decoder is None else decoder(m)
+    if decoder is None:
+        return None
+    sample = decoder(m)
+    if home is not None and isinstance(sample, GnssFix):
+        d_m = float(np.linalg.norm(home.to_ned_m(sample.lat_deg, sample.lon_deg, sample.alt_m)))
+        if not d_m <= LIMITS.max_home_distance_m:
+            raise CodecError("out_of_range", f"GPS_RAW_INT {d_m:.0f} m from home")
+    return sample
 
 
 # --- truth ------------------------------------------------------------------------------------
@@ -356,7 +407,21 @@ def _cov21(diag3: np.ndarray) -> list[float]:
     return cov
 
 
+def check_sendable(e: NavEstimate) -> None:
+    """CodecError (the sender drops and counts) unless ``e`` is finite and plausible: nothing absurd
+    or non-finite is ever sent, and nothing that would overflow a packed field."""
+    _stamp_us("estimate", e.t_us)
+    _bounded("estimate position", LIMITS.max_home_distance_m, *(float(x) for x in e.p_ned_m))
+    _bounded("estimate velocity", LIMITS.max_speed_m_s, *(float(x) for x in e.v_ned_m_s))
+    var = [float(x) for x in e.cov_diag[0:6]]
+    _finite("estimate covariance", *var)
+    if not 0.0 <= min(var) <= max(var) <= LIMITS.max_variance:
+        raise CodecError("out_of_range", "estimate covariance")
+
+
 def encode_odometry(e: NavEstimate) -> mavlink.MAVLink_odometry_message:
+    """ODOMETRY of ``e``; CodecError unless it passes :func:`check_sendable`."""
+    check_sendable(e)
     p, v = e.p_ned_m, e.v_ned_m_s
     quality = 0 if not math.isfinite(e.beta) else max(1, min(100, round(100.0 * e.beta)))
     nan = math.nan
@@ -373,12 +438,14 @@ def decode_odometry(m: Any) -> NavEstimate:
     pos_var = [m.pose_covariance[i] for i in _COV6_DIAG[:3]]
     vel_var = [m.velocity_covariance[i] for i in _COV6_DIAG[:3]]
     _finite("ODOMETRY covariance", *pos_var, *vel_var)
-    if min(*pos_var, *vel_var) < 0.0:
-        raise CodecError("out_of_range", "ODOMETRY negative variance")
+    if not 0.0 <= min(*pos_var, *vel_var) <= max(*pos_var, *vel_var) <= LIMITS.max_variance:
+        raise CodecError("out_of_range", "ODOMETRY variance")
+    if m.quality > 100:
+        raise CodecError("out_of_range", f"ODOMETRY quality {m.quality}")
     return NavEstimate(
-        t_us=int(m.time_usec),
-        p_ned_m=_vec("ODOMETRY position", m.x, m.y, m.z),
-        v_ned_m_s=_vec("ODOMETRY velocity", m.vx, m.vy, m.vz),
+        t_us=_stamp_us("ODOMETRY", m.time_usec),
+        p_ned_m=_bounded("ODOMETRY position", LIMITS.max_home_distance_m, m.x, m.y, m.z),
+        v_ned_m_s=_bounded("ODOMETRY velocity", LIMITS.max_speed_m_s, m.vx, m.vy, m.vz),
         b_ned_m=np.array(_NAN3),
         cov_diag=np.array([*pos_var, *vel_var, *_NAN3]),
         beta=m.quality / 100.0 if m.quality > 0 else math.nan,
@@ -390,8 +457,9 @@ def decode_odometry(m: Any) -> NavEstimate:
 def encode_estimator_status(
     e: NavEstimate, nis_gate: float, flags: int = ESTIMATOR_HEALTHY_FLAGS
 ) -> mavlink.MAVLink_estimator_status_message:
-    """``pos_horiz_ratio`` = NIS / ``nis_gate`` (the χ² gate); 0 before the first fused fix."""
-    ratio = e.nis / nis_gate if math.isfinite(e.nis) else 0.0
+    """``pos_horiz_ratio`` = NIS / ``nis_gate`` (the χ² gate); 0 before the first fused fix.
+    ``e`` must pass :func:`check_sendable`; a ratio beyond float32 is clamped to its maximum."""
+    ratio = min(e.nis / nis_gate, FLOAT32_MAX) if math.isfinite(e.nis) else 0.0
     horiz = math.sqrt(float(e.cov_diag[0] + e.cov_diag[1]))
     vert = math.sqrt(float(e.cov_diag[2]))
     return mavlink.MAVLink_estimator_status_message(
@@ -408,9 +476,13 @@ def decode_estimator_status(m: Any) -> EstimatorStatus:
 
 
 def encode_named_value(t_us: int, name: str, value: float) -> mavlink.MAVLink_named_value_float_message:
+    """CodecError (drop and count) for a value a float32 cannot hold or a stamp beyond uint32 ms."""
     raw = name.encode("ascii")
     if len(raw) > 10:
         raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} longer than 10 characters")
+    if not abs(value) <= FLOAT32_MAX:
+        raise CodecError("out_of_range", f"NAMED_VALUE_FLOAT {name} value {value!r}")
+    _ms_stamp("NAMED_VALUE_FLOAT", t_us)
     return mavlink.MAVLink_named_value_float_message(t_us // 1000, raw, value)
 
 
@@ -435,7 +507,12 @@ def encode_belief(e: NavEstimate) -> list[mavlink.MAVLink_named_value_float_mess
 def encode_setpoint(
     s: Setpoint, target_system: int = 1, target_component: int = 1
 ) -> mavlink.MAVLink_set_position_target_local_ned_message:
+    """CodecError (drop and count) for a setpoint that is not finite and plausible."""
     p, v, a = s.p_ned_m, s.v_ned_m_s, s.a_ned_m_s2
+    _ms_stamp("setpoint", s.t_us)
+    _bounded("setpoint position", LIMITS.max_home_distance_m, *(float(x) for x in p))
+    _bounded("setpoint velocity", LIMITS.max_speed_m_s, *(float(x) for x in v))
+    _bounded("setpoint acceleration", LIMITS.max_accel_m_s2, *(float(x) for x in a))
     return mavlink.MAVLink_set_position_target_local_ned_message(
         s.t_us // 1000, target_system, target_component, mavlink.MAV_FRAME_LOCAL_NED,
         _SETPOINT_TYPE_MASK, p[0], p[1], p[2], v[0], v[1], v[2], a[0], a[1], a[2], 0.0, 0.0,
@@ -449,11 +526,13 @@ def decode_setpoint(m: Any) -> Setpoint:
     if mask & (_POS_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_FORCE_SET):
         raise CodecError("unsupported_frame", f"SET_POSITION_TARGET_LOCAL_NED type_mask {mask:#x}")
     zero = np.zeros(3)
+    lim = LIMITS
     return Setpoint(
-        int(m.time_boot_ms) * 1000,
-        _vec("setpoint position", m.x, m.y, m.z),
-        zero if mask & _VEL_IGNORE else _vec("setpoint velocity", m.vx, m.vy, m.vz),
-        zero.copy() if mask & _ACC_IGNORE else _vec("setpoint acceleration", m.afx, m.afy, m.afz),
+        _stamp_us("setpoint", int(m.time_boot_ms) * 1000),
+        _bounded("setpoint position", lim.max_home_distance_m, m.x, m.y, m.z),
+        zero if mask & _VEL_IGNORE else _bounded("setpoint velocity", lim.max_speed_m_s, m.vx, m.vy, m.vz),
+        zero.copy() if mask & _ACC_IGNORE
+        else _bounded("setpoint acceleration", lim.max_accel_m_s2, m.afx, m.afy, m.afz),
     )
 
 

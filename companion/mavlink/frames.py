@@ -46,6 +46,7 @@ def _view_class(msgtype: type[mavlink.MAVLink_message], extra: tuple[str, ...]) 
     if extra:
         methods["get_srcSystem"] = lambda self: self[-2]
         methods["get_msgbuf"] = lambda self: self[-1]
+        methods["get_srcComponent"] = lambda self: self[-1][6 if self[-1][0] == MAGIC_V2 else 4]
     return type(name, (base,), methods)
 
 

@@ -6,7 +6,8 @@ CRC (x25 / MCRF4XX with the message's CRC_EXTRA, via ``fastcrc``) and unpacks on
 types asked for into light tuple views with the message's field names (what the decoders of
 :mod:`companion.mavlink.codec` read). A damaged log is read as far as it is readable:
 the reader resynchronises on the next frame whose CRC checks, and counts what it skipped by
-reason (``bad_crc``, ``bad_length``, ``garbage``, ``unknown_msgid``, ``truncated``).
+reason (``bad_crc``, ``bad_length``, ``garbage``, ``unknown_msgid``, ``truncated``, and
+``bad_stamp`` for an arrival stamp beyond int64).
 """
 
 from __future__ import annotations
@@ -20,9 +21,19 @@ from types import TracebackType
 from typing import Any, BinaryIO
 
 from companion.mavlink.codec import mavlink, new_link, pack
-from companion.mavlink.frames import MessageSpec, frame_at, full_payload, message_ids
+from companion.mavlink.frames import (
+    HEADER_V2,
+    SIGNATURE_BYTES,
+    MessageSpec,
+    frame_at,
+    full_payload,
+    message_ids,
+)
 
 STAMP_BYTES = 8
+READ_BLOCK = 1 << 20  # bytes read at a time
+MAX_RECORD = STAMP_BYTES + HEADER_V2 + 255 + 2 + SIGNATURE_BYTES  # the longest stamped frame
+MAX_STAMP_US = 2**63 - 1  # arrival stamps are int64 µs (numpy, JSON and every consumer)
 
 
 class TlogWriter:
@@ -75,32 +86,45 @@ class TlogReader:
     size: int = 0
 
     def __iter__(self) -> Iterator[tuple[int, Any]]:
-        data = self.path.read_bytes()
-        n = self.size = len(data)
+        # Read in blocks (memory flat in the file's length); a frame is parsed only when the
+        # block holds a whole record past it, or at the end of the file.
+        self.size = self.path.stat().st_size
         wanted = self.wanted
-        pos = 0
-        lost_at, lost_reason = -1, ""  # start of the damaged span being skipped (-1: in sync)
-        while pos < n:
-            parsed = self._frame_at(data, pos, n)
-            if isinstance(parsed, str):
-                if lost_at < 0:
-                    lost_at, lost_reason = pos, parsed
-                pos = self._next_candidate(data, pos + 1, n)
-                continue
-            end, msgid, spec, body = parsed
-            if lost_at >= 0:
-                # a "truncated" frame followed by good ones had a corrupt length byte
-                self._skip("bad_length" if lost_reason == "truncated" else lost_reason, pos - lost_at)
-                lost_at = -1
-            self.frames += 1
-            if wanted is None or msgid in wanted:
-                stamp = int.from_bytes(data[pos : pos + STAMP_BYTES], "big")
-                self.position = end
-                yield stamp, spec.view(full_payload(spec, body))
-            pos = end
+        with open(self.path, "rb") as f:
+            data, base, pos, eof = b"", 0, 0, False  # base: file offset of data[0]
+            lost_at, lost_reason = -1, ""  # file offset of the damaged span being skipped (-1: in sync)
+            while True:
+                if not eof and len(data) - pos < MAX_RECORD:
+                    block = f.read(READ_BLOCK)
+                    eof = len(block) < READ_BLOCK
+                    data, base, pos = data[pos:] + block, base + pos, 0
+                n = len(data)
+                if pos >= n:
+                    break
+                parsed = self._frame_at(data, pos, n)
+                if isinstance(parsed, str):
+                    if lost_at < 0:
+                        lost_at, lost_reason = base + pos, parsed
+                    pos = self._next_candidate(data, pos + 1, n)
+                    continue
+                end, msgid, spec, body = parsed
+                if lost_at >= 0:
+                    # a "truncated" frame followed by good ones had a corrupt length byte
+                    reason = "bad_length" if lost_reason == "truncated" else lost_reason
+                    self._skip(reason, base + pos - lost_at)
+                    lost_at = -1
+                self.frames += 1
+                if wanted is None or msgid in wanted:
+                    stamp = int.from_bytes(data[pos : pos + STAMP_BYTES], "big")
+                    self.position = base + end
+                    if stamp > MAX_STAMP_US:  # not an int64 µs time: counted, never passed on
+                        self._skip("bad_stamp", end - pos)
+                    else:
+                        yield stamp, spec.view(full_payload(spec, body))
+                pos = end
         if lost_at >= 0:
-            self._skip(lost_reason, n - lost_at)
-        self.position = n
+            self._skip(lost_reason, self.size - lost_at)
+        self.position = self.size
 
     def _skip(self, reason: str, size: int) -> None:
         self.skipped[reason] += 1
@@ -112,8 +136,9 @@ class TlogReader:
 
     @staticmethod
     def _next_candidate(data: bytes, start: int, n: int) -> int:
-        """Next position whose byte after the stamp is a MAVLink magic (``n`` if none)."""
-        best = n
+        """Next position whose byte after the stamp is a MAVLink magic; if none in ``data``, the
+        first position whose stamp may still end in the next block."""
+        best = max(start, n - STAMP_BYTES)
         for magic in (b"\xfd", b"\xfe"):
             i = data.find(magic, start + STAMP_BYTES)
             if 0 <= i < best + STAMP_BYTES:

@@ -4,8 +4,9 @@ Every datagram is parsed on its own (a broken datagram never poisons the next). 
 used is counted and dropped, never raised: garbage bytes, bad CRCs, message ids outside the
 common dialect, frames from a system id the link does not accept, and — when a signing key is
 set — unsigned frames or frames signed with another key. The peer is either fixed
-(``peer_port``) or learned from the first accepted frame, so a restarted client on a new
-ephemeral port is picked up again.
+(``peer_port``) or learned from the last accepted HEARTBEAT, so a restarted client on a new
+ephemeral port is picked up again (and no other kind of frame can redirect the link).
+Frames are accepted by system id and, where configured, component id.
 
 A closed peer port (its process is gone) is reported: the socket asks for ICMP errors
 (``IP_RECVERR``, Linux), so the next operation after a send to it fails with ECONNREFUSED; that
@@ -27,6 +28,7 @@ import os
 import select
 import socket
 import time
+import types
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -43,6 +45,9 @@ BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this
 SIGNING_EPOCH_UNIX_S = 1_420_070_400  # MAVLink 2 signing timestamps count 10 µs since 2015-01-01
 SIGNING_KEY_BYTES = 32
 VEHICLE_SYSTEM_ID = 1  # the vehicle and its companions share one MAVLink system id
+VEHICLE_COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1: the vehicle process
+ESTIMATOR_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
+BRIDGE_COMPONENT_ID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
 IP_RECVERR = getattr(socket, "IP_RECVERR", 11)  # Linux: report ICMP errors on unconnected sockets
 MSG_ERRQUEUE = getattr(socket, "MSG_ERRQUEUE", 0x2000)
 
@@ -59,6 +64,7 @@ class LinkConfig:
     system_id: int = 1  # our MAVLink system id
     component_id: int = 1  # our MAVLink component id
     accept_system_ids: frozenset[int] | None = None  # None: frames from any system id
+    accept_component_ids: frozenset[int] | None = None  # None: frames from any component id
     signing_key: bytes | None = None  # 32-byte MAVLink 2 signing secret; None: no signing
     link_id: int = 0  # MAVLink 2 signing link id of this endpoint
     drop_probability_tx: float = 0.0  # test-only loss injection on sends, in [0, 1]
@@ -77,6 +83,7 @@ class LinkCounters:
     bad_crc: int = 0
     unknown_message: int = 0  # valid frame, message id not in the common dialect
     wrong_system_id: int = 0
+    wrong_component_id: int = 0  # right system id, but not a component this link talks to
     bad_signature: int = 0  # unsigned, wrong key or replayed timestamp while signing is on
     dropped_rx: int = 0  # loss injector
     dropped_tx: int = 0  # loss injector
@@ -102,6 +109,36 @@ def read_signing_key(path: str | os.PathLike[str]) -> bytes:
         except ValueError:
             pass
     return hashlib.sha256(text.encode("utf-8")).digest()
+
+
+NEW_STREAM_MAX_AGE = 6_000_000  # 60 s in signing ticks (10 µs): an older new stream is a replay
+
+
+def check_signature(mav: mavlink.MAVLink, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+    """MAVLink 2 signature check that verifies the signature BEFORE it trusts the timestamp.
+
+    pymavlink's own ``check_signature`` records a stream's timestamp before comparing the
+    signature, so one forged frame (no key needed) with a huge timestamp makes every later genuine
+    frame of that stream look replayed: the link is cut. Here a frame moves the stream's
+    timestamp only once its signature checks; replays (timestamp not newer) are still refused.
+    """
+    signing = mav.signing
+    h = hashlib.sha256()
+    h.update(signing.secret_key)
+    h.update(msgbuf[:-6])
+    if h.digest()[:6] != bytes(msgbuf[-6:]):
+        return False
+    t_low, t_high = mav.mav_sign_unpacker.unpack(msgbuf[-12:-6])
+    timestamp = t_low + (t_high << 32)
+    stream = (msgbuf[-13], src_system, src_component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None and timestamp <= last:
+        return False
+    if last is None and timestamp + NEW_STREAM_MAX_AGE < signing.timestamp:
+        return False
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True
 
 
 def _signing_timestamp_now() -> int:
@@ -160,6 +197,7 @@ class UdpLink:
             self._mav.signing.sign_outgoing = True
             self._mav.signing.link_id = config.link_id
             self._mav.signing.timestamp = _signing_timestamp_now()
+            self._mav.check_signature = types.MethodType(check_signature, self._mav)
 
     # -- plumbing -------------------------------------------------------------------------
     @property
@@ -346,9 +384,14 @@ class UdpLink:
         if accept_ids is not None:
             accepted = [m for m in msgs if m.get_srcSystem() in accept_ids]
             c.wrong_system_id += len(msgs) - len(accepted)
+        components = self.config.accept_component_ids
+        if components is not None:
+            n = len(accepted)
+            accepted = [m for m in accepted if m.get_srcComponent() in components]
+            c.wrong_component_id += n - len(accepted)
         if accepted:
             c.messages_rx += len(accepted)
-            if self.config.peer_port is None:
+            if self.config.peer_port is None and any(m.get_type() == "HEARTBEAT" for m in accepted):
                 self.peer = addr
             if self.tee is not None:
                 for msg in accepted:

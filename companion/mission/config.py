@@ -26,6 +26,10 @@ class Home:
             raise ValueError(f"lon_deg: must be in [-180, 180], got {self.lon_deg}")
 
 
+MAX_GRID_CELLS = 4_000_000  # occupancy-grid cells (4 km x 4 km at 2 m): grids, EDT and A* take seconds
+MAX_BUILDINGS = 10_000
+
+
 def _check_rect(north_min_m: float, east_min_m: float, north_max_m: float, east_max_m: float) -> None:
     if north_max_m <= north_min_m:
         raise ValueError(f"north_max_m ({north_max_m}) must be > north_min_m ({north_min_m})")
@@ -83,6 +87,13 @@ class WorldConfig:
         span_m = min(b.north_max_m - b.north_min_m, b.east_max_m - b.east_min_m)
         if self.resolution_m > span_m:
             raise ValueError(f"resolution_m ({self.resolution_m}) exceeds the bounds' size ({span_m})")
+        cells = math.ceil((b.north_max_m - b.north_min_m) / self.resolution_m) * math.ceil(
+            (b.east_max_m - b.east_min_m) / self.resolution_m)
+        if cells > MAX_GRID_CELLS:
+            raise ValueError(f"the map needs {cells:,} grid cells at resolution_m {self.resolution_m:g}; "
+                             f"the limit is {MAX_GRID_CELLS:,} (shrink bounds or coarsen resolution_m)")
+        if len(self.buildings) > MAX_BUILDINGS:
+            raise ValueError(f"{len(self.buildings):,} buildings; the limit is {MAX_BUILDINGS:,}")
         for k, bld in enumerate(self.buildings):
             inside = (b.north_min_m <= bld.north_min_m and bld.north_max_m <= b.north_max_m
                       and b.east_min_m <= bld.east_min_m and bld.east_max_m <= b.east_max_m)

@@ -28,15 +28,31 @@ class ConfigError(UserError, ValueError):
     """A user-caused configuration error; its message is one line naming file and field."""
 
 
+MAX_YAML_BYTES = 4 * 1024 * 1024  # a mission or config file larger than this is refused unread
+MAX_YAML_DEPTH = 32  # nesting levels of mappings/lists (missions need about 5)
+
+
 def load_yaml(path: str | Path) -> dict[str, Any]:
-    """Read a YAML mapping, turning every failure into a one-line ConfigError."""
+    """Read a YAML mapping, turning every failure into a one-line ConfigError (size and nesting
+    depth limited: ``MAX_YAML_BYTES``, ``MAX_YAML_DEPTH``)."""
     p = Path(path)
     try:
+        if p.is_file() and p.stat().st_size > MAX_YAML_BYTES:
+            raise ConfigError(f"{p}: {p.stat().st_size:,} bytes; the limit is {MAX_YAML_BYTES:,}")
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{p}: not UTF-8 text") from None
+    if _nesting_depth(text) > MAX_YAML_DEPTH:
+        raise ConfigError(f"{p}: nested deeper than the limit of {MAX_YAML_DEPTH} levels")
     try:
         data = yaml.safe_load(text)
+    except RecursionError:
+        raise ConfigError(f"{p}: nested deeper than the limit of {MAX_YAML_DEPTH} levels") from None
+    except (ValueError, OverflowError) as exc:  # e.g. a timestamp or number YAML cannot represent
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ConfigError(f"{p}: invalid YAML: {first}") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""
@@ -44,7 +60,51 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{p}: invalid YAML{where}: {problem}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level")
+    if _object_depth(data) > MAX_YAML_DEPTH:  # block-style nesting, anchors and aliases
+        raise ConfigError(f"{p}: nested deeper than the limit of {MAX_YAML_DEPTH} levels")
     return data
+
+
+def _nesting_depth(text: str) -> int:
+    """Deepest flow-style bracket nesting (``[[[...`` / ``{{{...``), ignoring quoted text: a cheap
+    guard before the parser, whose recursion such input would exhaust."""
+    depth = deepest = 0
+    quote = ""
+    for ch in text:
+        if quote:
+            if ch == quote:
+                quote = ""
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth = max(depth - 1, 0)
+        elif ch == "\n":
+            quote = ""
+    return deepest
+
+
+def _object_depth(data: Any) -> int:
+    """Nesting depth of parsed YAML (iterative; shared aliases are visited once per path)."""
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(data, 1)]
+    seen = 0
+    while stack:
+        obj, depth = stack.pop()
+        seen += 1
+        if seen > 1_000_000:  # a "billion laughs" of aliases
+            return MAX_YAML_DEPTH + 1
+        if isinstance(obj, dict):
+            deepest = max(deepest, depth)
+            if depth <= MAX_YAML_DEPTH:
+                stack.extend((v, depth + 1) for v in obj.values())
+        elif isinstance(obj, list):
+            deepest = max(deepest, depth)
+            if depth <= MAX_YAML_DEPTH:
+                stack.extend((v, depth + 1) for v in obj)
+    return deepest
 
 
 def build(cls: type[T], data: Any, where: str = "") -> T:

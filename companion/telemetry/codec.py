@@ -93,26 +93,36 @@ def _enc_float(x: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _shown(v: Any) -> str:
+    """``repr`` of an offending value, cut short (a hostile value may be megabytes long)."""
+    text = repr(v) if not isinstance(v, int) or abs(v) < 10**30 else f"<{v.bit_length()}-bit integer>"
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _dec_float(optional: bool) -> _Dec:
     def dec(v: Any, where: str) -> float:
         if v is None and optional:
             return math.nan
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise MalformedPayloadError(f"{where}: expected a finite number, got {v!r}")
+        try:
+            ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+        except OverflowError:  # an integer no float can hold
+            ok = False
+        if not ok:
+            raise MalformedPayloadError(f"{where}: expected a finite number, got {_shown(v)}")
         return float(v)
 
     return dec
 
 
 def _dec_int(v: Any, where: str) -> int:
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise MalformedPayloadError(f"{where}: expected an integer, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, int) or not -(2**63) <= v < 2**63:
+        raise MalformedPayloadError(f"{where}: expected a 64-bit integer, got {_shown(v)}")
     return v
 
 
 def _dec_str(v: Any, where: str) -> str:
     if not isinstance(v, str):
-        raise MalformedPayloadError(f"{where}: expected a string, got {v!r}")
+        raise MalformedPayloadError(f"{where}: expected a string, got {_shown(v)}")
     return v
 
 
@@ -129,7 +139,7 @@ def _dec_array(shape: tuple[int | None, ...], optional: bool = False) -> _Dec:
             raise MalformedPayloadError(f"{where}: expected a list, got {type(v).__name__}")
         try:
             a = np.array(v, dtype=float)  # null -> NaN
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise MalformedPayloadError(f"{where}: expected numbers") from None
         if len(v) == 0 and len(shape) == 2:
             a = a.reshape(0, shape[1] or 0)
@@ -251,11 +261,49 @@ def from_dict(topic: str, d: Any) -> Any:
     return spec.cls(**values)
 
 
+MAX_PAYLOAD_BYTES = 256 * 1024  # the largest real payload (a route) is a few kB
+MAX_JSON_DEPTH = 8  # payloads are flat: object -> list -> list at most
+
+
+def _json_depth(payload: bytes | str) -> int:
+    """Deepest bracket nesting outside strings (cheap: only scanned when brackets are many)."""
+    raw = payload.encode() if isinstance(payload, str) else payload
+    if raw.count(b"[") + raw.count(b"{") <= MAX_JSON_DEPTH:
+        return 0
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in raw:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:  # quote
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):
+            depth += 1
+            if depth > deepest:
+                deepest = depth
+                if deepest > MAX_JSON_DEPTH:
+                    return deepest
+        elif byte in (0x5D, 0x7D):
+            depth -= 1
+    return deepest
+
+
 def decode(topic: str, payload: bytes | str) -> tuple[Any, int | None]:
-    """(domain object, sent_unix_ns or None) from a payload; MalformedPayloadError if it is not valid."""
+    """(domain object, sent_unix_ns or None) from a payload; MalformedPayloadError if it is not valid
+    (including a payload over ``MAX_PAYLOAD_BYTES`` or nested deeper than ``MAX_JSON_DEPTH``)."""
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise MalformedPayloadError(f"{topic}: payload of {len(payload):,} bytes over the limit of "
+                                    f"{MAX_PAYLOAD_BYTES:,}")
+    if _json_depth(payload) > MAX_JSON_DEPTH:
+        raise MalformedPayloadError(f"{topic}: JSON nested deeper than the limit of {MAX_JSON_DEPTH}")
     try:
         d = json.loads(payload)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise MalformedPayloadError(f"{topic}: not JSON ({exc.__class__.__name__})") from None
     obj = from_dict(topic, d)
     sent = d.get("sent_unix_ns")

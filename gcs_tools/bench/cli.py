@@ -18,6 +18,7 @@ TARGETS = {
     "evaluate": "gcs_tools.bench.evaluate",
     "plan": "gcs_tools.bench.plan",
     "autopilot": "gcs_tools.bench.autopilot",
+    "replay": "gcs_tools.bench.replay",
 }
 
 

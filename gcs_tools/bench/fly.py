@@ -6,12 +6,20 @@ alone (truth fed back as the estimate, no estimator) is measured as ``vehicle_re
 to show where the time goes. ``*_cpu`` factors divide by the process's CPU time instead of the
 wall clock (what an idle core would give; on a shared machine the wall clock also counts time
 spent waiting for a core), and ``load_avg_1m`` says how busy the machine was.
+
+``fly_memory_rss_mb_by_sim_min`` (not with --quick): peak resident memory of a fresh process that
+flies the same profile for 10 and for 60 simulated minutes (the goal test disabled, so the vehicle
+hovers at the goal after the route), and ``fly_memory_growth_mb_10_to_60_min`` between them: the
+flight keeps its record as plain floats (136 B per 50 ms step, 9.8 MB per hour).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
+import sys
 import time
 from typing import Any
 
@@ -39,6 +47,29 @@ def vehicle_only_s(mission: Any, sim_s: float) -> tuple[float, float]:
     return time.perf_counter() - t0, time.process_time() - cpu0
 
 
+_MEMORY_CHILD = """
+import json, resource, sys
+from gcs_tools.fly.core import FlyConfig, fly
+duration_s = float(sys.argv[1])
+res = fly("{mission}", {profile}, "{method}", {seed}, max_duration_s=duration_s,
+          config=FlyConfig(goal_radius_m=-1.0, timeout_margin_s=duration_s))
+print(json.dumps({{"sim_s": res.summary["duration_s"],
+                  "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}}))
+"""
+
+
+def fly_memory(minutes: tuple[int, ...] = (10, 60)) -> dict[str, Any]:
+    """Peak RSS of a fresh process flying ``minutes`` of simulated time (one process per length)."""
+    code = _MEMORY_CHILD.format(mission=MISSION, profile=PROFILE, method=METHOD, seed=SEED)
+    marks: dict[str, float] = {}
+    for m in minutes:
+        done = subprocess.run([sys.executable, "-c", code, str(60.0 * m)], capture_output=True, text=True,
+                              check=True)
+        marks[str(m)] = round(json.loads(done.stdout.strip().splitlines()[-1])["max_rss_mb"], 1)
+    return {"fly_memory_rss_mb_by_sim_min": marks,
+            "fly_memory_growth_mb_10_to_60_min": round(marks[str(minutes[-1])] - marks[str(minutes[0])], 1)}
+
+
 def measure(args: argparse.Namespace) -> dict[str, Any]:
     quick = bool(getattr(args, "quick", False))
     mission = load_mission(MISSION)
@@ -62,4 +93,5 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "fly_mission": f"{MISSION} profile {PROFILE} seed {SEED}",
         "fly_method": METHOD,
         "fly_reached_goal": s["reached_goal"],
+        **({} if quick else fly_memory()),
     }

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,11 +21,18 @@ def run(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
     from gcs_tools.fly.core import fly
     from gcs_tools.fly.output import strict_json, write_outputs
+    from gcs_tools.outdir import ensure_out_dir
 
+    ensure_out_dir(args.out)
     mission = load_mission(args.mission)
     result = fly(mission, args.profile, args.method, args.seed, max_duration_s=args.max_duration)
     paths = write_outputs(result, mission.world, args.out)
     s = {k: v for k, v in result.summary.items() if k != "estimator_counters"}
     print(json.dumps(strict_json(s), indent=2))
     print(f"wrote {', '.join(str(p) for p in paths)}")
+    s = result.summary
+    if not s["reached_goal"]:  # time-out or collision: a failure, said in one line
+        why = f"collided {s['collisions']} time(s)" if s["collisions"] else "did not reach the goal in time"
+        print(f"beliefnav: error: the vehicle {why} ({s['duration_s']:.1f} s simulated)", file=sys.stderr)
+        return 1
     return 0

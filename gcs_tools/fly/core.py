@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from dataclasses import dataclass
 from typing import Any
 
@@ -87,6 +88,8 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     m = load_mission(mission) if isinstance(mission, str) else mission
     if method not in METHODS:
         raise UserError(f"method {method!r}: expected one of {', '.join(METHODS)}")
+    if seed < 0:
+        raise UserError(f"--seed must be >= 0, got {seed}")
     route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
     nav = Navigator(mission_estimator_config(m), method=method, frame=m.frame)
@@ -97,7 +100,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     end_us = round(end_s * 1e6)
     arrive_s = route.t_start_s + route.duration_s
     push, push_fix_ned = nav.push, nav.push_fix_ned
-    rows: list[tuple[Any, ...]] = []
+    rows = array("d")  # ROW_FIELDS floats per control step: ~136 B, not two domain objects (~2 kB)
     est, collisions, in_contact, reached = None, 0, False, False
     wall0 = time.perf_counter()
     while sim.t_us < end_us:
@@ -113,7 +116,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
                 k += 1
         est = nav.estimate()
         truth = out.final_truth
-        rows.append((out.t_us, truth, est))
+        rows.extend(_row(out.t_us, truth, est))
         collisions += out.collided and not in_contact
         in_contact = out.collided
         if (out.t_us * 1e-6 >= arrive_s
@@ -129,7 +132,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         "profile": profile_index,
         "method": method,
         "seed": seed,
-        "reached_goal": reached,
+        "reached_goal": reached and collisions == 0,  # never after a collision
         "collisions": int(collisions),
         "duration_s": sim.t_us * 1e-6,
         "route_duration_s": route.duration_s,
@@ -147,23 +150,33 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     return FlightResult(summary, series, route)
 
 
-def _series(rows: list[tuple[Any, ...]], route: Route) -> dict[str, np.ndarray]:
-    nan3 = np.full(3, np.nan)
-    t_s = np.array([r[0] for r in rows]) * 1e-6
-    p_true = np.array([r[1].p_ned_m for r in rows])
-    p_est = np.array([r[2].p_ned_m if r[2] is not None else nan3 for r in rows])
+_NAN_EST = (math.nan,) * 8  # p_est, b_est, beta, nis before the first estimate
+ROW_FIELDS = 17  # t_us, p_true(3), b_true(3), latency, clearance, p_est(3), b_est(3), beta, nis
+
+
+def _row(t_us: int, truth: Any, est: Any) -> tuple[float, ...]:
+    """One control step of the record as plain floats (the flight keeps only these)."""
+    e = _NAN_EST if est is None else (*est.p_ned_m, *est.b_ned_m, est.beta, est.nis)
+    return (t_us, *truth.p_ned_m, *truth.gnss_bias_ned_m, truth.gnss_latency_s, truth.clearance_m, *e)
+
+
+def _series(rows: array, route: Route) -> dict[str, np.ndarray]:
+    """The record's columns as views of the one row buffer (no second copy of an hour of rows)."""
+    r = np.frombuffer(rows, dtype=float).reshape(-1, ROW_FIELDS)
+    t_s = r[:, 0] * 1e-6
+    p_true, p_est = r[:, 1:4], r[:, 9:12]
     p_ref = route.reference(t_s)[0]
     return {
         "t_s": t_s,
         "p_true_ned_m": p_true,
         "p_est_ned_m": p_est,
         "p_ref_ned_m": p_ref,
-        "b_true_ned_m": np.array([r[1].gnss_bias_ned_m for r in rows]),
-        "b_est_ned_m": np.array([r[2].b_ned_m if r[2] is not None else nan3 for r in rows]),
-        "beta": np.array([r[2].beta if r[2] is not None else np.nan for r in rows]),
-        "nis": np.array([r[2].nis if r[2] is not None else np.nan for r in rows]),
-        "latency_s": np.array([r[1].gnss_latency_s for r in rows]),
-        "clearance_m": np.array([r[1].clearance_m for r in rows]),
+        "b_true_ned_m": r[:, 4:7],
+        "b_est_ned_m": r[:, 12:15],
+        "beta": r[:, 15],
+        "nis": r[:, 16],
+        "latency_s": r[:, 7],
+        "clearance_m": r[:, 8],
         "est_error_m": np.linalg.norm(p_est - p_true, axis=1),
         "track_error_m": np.linalg.norm(p_true - p_ref, axis=1),
     }

@@ -27,6 +27,8 @@ from companion.errors import UserError
 from companion.telemetry import codec as zc
 from companion.telemetry.pubsub import Received
 
+MAX_RAW_BYTES = 1024  # of a malformed payload, kept in the recording for diagnosis
+
 
 class RecordingWriter:
     """Appends messages to a JSON Lines file; thread-safe (Zenoh calls back from its own threads)."""
@@ -50,8 +52,10 @@ class RecordingWriter:
             self.count += 1
 
     def write_malformed(self, key: str, payload: bytes, error: str, recv_unix_ns: int) -> None:
+        """Record the error and the first ``MAX_RAW_BYTES`` of the payload (never all of a huge one)."""
         line = json.dumps({"key": key, "recv_unix_ns": recv_unix_ns, "error": error,
-                           "raw": payload.decode("utf-8", "replace")}) + "\n"
+                           "raw_bytes": len(payload),
+                           "raw": payload[:MAX_RAW_BYTES].decode("utf-8", "replace")}) + "\n"
         with self._lock:
             self._f.write(line.encode())
             self.malformed += 1
@@ -89,7 +93,7 @@ def iter_lines(path: str | Path) -> Iterator[tuple[int, dict[str, Any] | None]]:
         for n, line in enumerate(f, 1):
             try:
                 d = json.loads(line)
-            except (UnicodeDecodeError, json.JSONDecodeError):
+            except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
                 yield n, None
                 continue
             yield n, d if isinstance(d, dict) else None

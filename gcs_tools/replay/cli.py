@@ -6,13 +6,17 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
+from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
 from gcs_tools.replay import core
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path, help="tlog to replay (8-byte big-endian µs stamp + MAVLink frame)")
+    parser.add_argument("file", type=Path,
+                        help="log to replay: MAVLink tlog, ArduPilot DataFlash .bin or PX4 ULog .ulg "
+                             "(recognised by its first bytes, else by extension)")
     parser.add_argument("--method", default="second-order", help="estimator method (default: second-order)")
     parser.add_argument("--out", required=True, type=Path,
                         help="output directory for estimates.csv, summary.json")
@@ -30,11 +34,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="publish companion/estimate, belief and health on Zenoh (see README)")
     parser.add_argument("--speed", type=float, default=0.0,
                         help="pace the replay at this many times real time (default 0: as fast as possible)")
+    parser.add_argument("--gps-delay-ms", type=float, default=None,
+                        help="DataFlash logs: how long before its arrival a fix is valid (default: the log's "
+                             "GPS1_DELAY_MS when set, else 120 ms)")
     telemetry.add_arguments(parser, publisher=True)
     parser.set_defaults(vehicle_id="replay")
 
 
 def run(args: argparse.Namespace) -> int:
+    from gcs_tools.outdir import ensure_out_dir
+
+    ensure_out_dir(args.out)  # before the replay, not after it
+    if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
+        raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
     home = core.parse_home(args.home) if args.home else None
     config = None
     if args.mission is not None:
@@ -54,27 +66,49 @@ def run(args: argparse.Namespace) -> int:
     pub = telemetry.publisher_from_args(args, "companion") if args.publish else None
     try:
         result = core.replay(args.file, args.method, home=home, config=config, rate_hz=args.rate_hz,
-                             progress=progress,
-                             on_imu=_on_imu(pub, args.speed))
+                             progress=progress, on_imu=_on_imu(pub, args.speed), out_dir=args.out,
+                             gps_delay_ms=args.gps_delay_ms)
     finally:
         if bar is not None:
             bar.close()
         if pub is not None:
             pub.close()
-    core.write_outputs(result, args.out)
-    s = result.summary
-    beta = s["beta"]
-    gnss = s["errors"]["gnss"]["error_horizontal_m"]
-    print(f"replayed {s['duration_s']:.1f} s of {args.file.name} with {args.method} in {s['wall_s']:.2f} s "
-          f"({s['realtime_factor']:.0f}x real time)")
-    print(f"  samples used {s['samples_used']}  rejected {s['samples_rejected']}")
-    print(f"  beta median {beta.get('median', float('nan')):.3f} min {beta.get('min', float('nan')):.3f}; "
-          f"horizontal distance to GNSS median {gnss['median']:.2f} m p95 {gnss['p95']:.2f} m")
+    core.write_summary(result, args.out)
+    print(report(result.summary, args.file.name))
     print(f"  wrote {args.out / 'estimates.csv'} and {args.out / 'summary.json'}")
     if pub is not None:
         c = pub.counters()
         print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle_id}/companion/*")
     return 0
+
+
+def report(s: dict[str, Any], name: str) -> str:
+    """The printed summary: the navigator's own counters (summed over log restarts)."""
+    nav = s["navigator"]
+    rejected = {k.removeprefix("imu_rejected_"): v for k, v in nav.items()
+                if k.startswith("imu_rejected_") and v}
+    gnss_rejected = {k.removeprefix("gnss_rejected_"): v for k, v in nav.items()
+                     if k.startswith("gnss_rejected_") and v}
+    beta = s["beta"]
+    lines = [
+        f"replayed {s['duration_s']:.1f} s of {name} ({s['format']}) with {s['method']} "
+        f"in {s['wall_s']:.2f} s "
+        f"({s['realtime_factor']:.0f}x real time)"
+        + (f"; {s['log_restarts']} log restart(s): {len(s['segments'])} segments"
+           if s["log_restarts"] else ""),
+        f"  imu used {nav.get('imu_used', 0):,} rejected {rejected or 0}; "
+        f"gnss fused {nav.get('gnss_fused', 0):,} rejected {gnss_rejected or 0}",
+        f"  read from the log {s['samples_used']}; refused while reading {s['samples_rejected']}",
+        f"  beta median {beta.get('median', float('nan')):.3f} min {beta.get('min', float('nan')):.3f}",
+    ]
+    labels = (("gnss", "GNSS"), ("autopilot_estimate", "the autopilot's estimate"), ("truth", "truth"))
+    for key, label in labels:
+        e = s["errors"].get(key)
+        if e and e["n"]:
+            h = e["error_horizontal_m"]
+            lines.append(f"  horizontal distance to {label} ({e['source']}, {e['alignment']}) median "
+                         f"{h['median']:.2f} m p95 {h['p95']:.2f} m max {h['max']:.2f} m")
+    return "\n".join(lines)
 
 
 def _on_imu(pub: telemetry.TelemetryPublisher | None, speed: float) -> core.ImuHook | None:

@@ -1,12 +1,20 @@
-"""Replay a tlog through the estimator: samples in arrival order, estimates and a summary out.
+"""Replay a log through the estimator: samples in arrival order, estimates and a summary out.
 
-The log is read with the fast reader of :mod:`companion.mavlink.tlog`; every message is turned
-into a domain sample by :mod:`companion.mavlink.codec` and pushed to a
-:class:`companion.estimator.Navigator` in the order it arrived. One IMU source (the first of
-HIGHRES_IMU, RAW_IMU, SCALED_IMU to appear) and one attitude source (ATTITUDE_QUATERNION or
-ATTITUDE) are used; messages of the other source of the same kind are counted, not fed twice.
-References present in the log (SIM_STATE truth, the autopilot's GLOBAL_POSITION_INT /
-LOCAL_POSITION_NED) and the GNSS fixes themselves give error statistics, named by reference.
+A reader (:mod:`gcs_tools.replay.logs`: MAVLink tlog, ArduPilot DataFlash ``.bin``, PX4 ULog
+``.ulg``) yields domain samples and reference positions in arrival order; the samples are pushed
+to a :class:`companion.estimator.Navigator`, the references (the autopilot's own estimate, truth)
+and the fixes themselves are compared with the estimate online (:mod:`companion.metrics`).
+
+Streaming: the tlog and DataFlash readers read in blocks; with ``out_dir`` the estimate rows are
+written to ``estimates.csv`` as they come; β and NIS are summarised in fixed-size histograms.
+What is kept grows only by the error vector of each reference sample (12 bytes).
+
+Log restarts: a concatenated log (or an autopilot reboot inside one) makes the IMU time jump
+back. A jump of more than ``RESTART_JUMP_US`` confirmed by ``RESTART_CONSENSUS`` consecutive
+IMU samples on the new time base starts a new segment: a fresh navigator (same frame), the
+comparisons restarted; counters are summed over segments and ``log_restarts`` counts them. A
+lone sample far back is not a restart: it goes to the navigator, which rejects it
+(``imu_rejected_time_backwards``).
 """
 
 from __future__ import annotations
@@ -15,36 +23,43 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import IO, TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
-from companion.mavlink import codec as mc
-from companion.mavlink.tlog import TlogReader, read_tlog
-from gcs_tools.evaluate.stats import summarize
+from companion.metrics import Distribution, PositionErrors
+from gcs_tools.jsonvalues import plain_json
+from gcs_tools.replay.events import AUTOPILOT, MIN_FIX_TYPE_3D, TRUTH, LocalReference, LogReader, Reference
+from gcs_tools.replay.logs import open_log
 
 if TYPE_CHECKING:
     from companion.estimator import EstimatorConfig
 
-IMU_TYPES = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU")
-ATTITUDE_TYPES = ("ATTITUDE_QUATERNION", "ATTITUDE")
-GNSS_TYPE = "GPS_RAW_INT"
-REFERENCE_TYPES = ("SIM_STATE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED")
-MIN_FIX_TYPE_3D = 3
 # Decoded samples fed to the navigator at a time: one timer pair per chunk instead of per sample
 # (the order, and so every estimate and counter, is unchanged).
 FEED_CHUNK = 512
+RESTART_JUMP_US = 1_000_000  # IMU time going back by more than this may be a log restart ...
+RESTART_CONSENSUS = 5  # ... once this many IMU samples in a row continue on the new time base
+RESTART_HOLD_MAX = 4096  # events held while deciding; past this the jump is not a restart
+# β and NIS distributions in bounded memory: quantiles exact to half a bin (β: 5e-5;
+# NIS: 0.05 % relative, log bins from 1e-6 to 1e6)
+BETA_BINS = 10_000
+NIS_RANGE = (1e-6, 1e6)
+NIS_BINS = 27_640
+# a reference between two estimate rows further apart than this (an IMU dropout) is not compared
+MAX_GAP_US = 1_000_000
 CSV_COLUMNS = (
     "t_s", "p_n_m", "p_e_m", "p_d_m", "v_n_m_s", "v_e_m_s", "v_d_m_s", "b_n_m", "b_e_m", "b_d_m",
     "beta", "nis",
     "var_p_n_m2", "var_p_e_m2", "var_p_d_m2", "var_v_n_m2_s2", "var_v_e_m2_s2", "var_v_d_m2_s2",
-    "var_b_n_m2", "var_b_e_m2", "var_b_d_m2",
+    "var_b_n_m2", "var_b_e_m2", "var_b_d_m2", "segment",
 )
+GNSS_NOTE = "estimated position vs the GNSS fixes (at their validity times) in the local frame"
 
 
 class NavigatorLike(Protocol):
@@ -68,36 +83,153 @@ def default_navigator(
     return Navigator(config or EstimatorConfig(), method=method, frame=frame)
 
 
-@dataclass
-class _Series:
-    """Estimates collected during the replay (kept as objects, turned into arrays at the end)."""
+def _rows(estimates: list[NavEstimate], segment: int) -> np.ndarray:
+    """(n, len(CSV_COLUMNS) - 1): the CSV columns after t_s."""
+    e = estimates
+    return np.column_stack((
+        np.array([x.p_ned_m for x in e]), np.array([x.v_ned_m_s for x in e]),
+        np.array([x.b_ned_m for x in e]), np.array([(x.beta, x.nis) for x in e]),
+        np.array([x.cov_diag for x in e]),
+        np.full(len(e), float(segment)),
+    )).astype(float)
 
-    estimates: list[NavEstimate] = field(default_factory=list)
+
+class _MemorySink:
+    """Keeps the rows (API callers that want the arrays)."""
+
+    def __init__(self) -> None:
+        self.t_us: list[np.ndarray] = []
+        self.rows: list[np.ndarray] = []
+
+    def write(self, t_us: np.ndarray, rows: np.ndarray) -> None:
+        self.t_us.append(t_us)
+        self.rows.append(rows)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        est = self.estimates
-        t_us = np.array([e.t_us for e in est], dtype=np.int64)
-        if not est:
-            return t_us, np.zeros((0, len(CSV_COLUMNS) - 1))
-        rows = np.column_stack((
-            np.array([e.p_ned_m for e in est]), np.array([e.v_ned_m_s for e in est]),
-            np.array([e.b_ned_m for e in est]), np.array([(e.beta, e.nis) for e in est]),
-            np.array([e.cov_diag for e in est]),
-        ))
-        return t_us, rows.astype(float)
+        if not self.rows:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, len(CSV_COLUMNS) - 1))
+        return np.concatenate(self.t_us), np.concatenate(self.rows)
+
+    def close(self) -> None:
+        pass
 
 
-class _Feed:
-    """Pushes decoded samples to the navigator in arrival order and takes the estimate rows."""
+class _CsvSink:
+    """Writes ``estimates.csv`` as rows come; the file (and its directory) appear with the first row."""
 
-    def __init__(self, nav: NavigatorLike, period_us: int, series: _Series, on_imu: ImuHook | None) -> None:
-        self.nav, self.period_us, self.series, self.on_imu = nav, period_us, series, on_imu
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._file: IO[str] | None = None
+
+    def write(self, t_us: np.ndarray, rows: np.ndarray) -> None:
+        if not rows.size:
+            return
+        if self._file is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = open(self.path, "w")  # noqa: SIM115 - closed by close()
+            self._file.write(",".join(CSV_COLUMNS) + "\n")
+        table = np.column_stack((t_us / 1e6, rows))
+        np.savetxt(self._file, table, delimiter=",", fmt="%.9g")
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, len(CSV_COLUMNS) - 1))
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+
+
+class _Comparisons:
+    """Online error statistics against the fixes and the log's references.
+
+    Geodetic positions are converted into the frame in batches (one vectorised geodesy call per
+    ``BATCH`` positions or per feed), not one by one."""
+
+    BATCH = 32
+
+    def __init__(self, frame: LocalNedFrame, max_gap_us: int) -> None:
+        self.frame, self.max_gap_us = frame, max_gap_us
+        self.gnss = PositionErrors(max_gap_us=max_gap_us)
+        self.geodetic: dict[str, PositionErrors] = {}
+        self.local: dict[str, PositionErrors] = {}
+        self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
+
+    def estimate(self, t_us: int, p_ned_m: Any) -> None:
+        self.gnss.add_estimate(t_us, p_ned_m)
+        for m in (*self.geodetic.values(), *self.local.values()):
+            m.add_estimate(t_us, p_ned_m)
+
+    def fix(self, fix: GnssFix) -> None:
+        if fix.fix_type >= MIN_FIX_TYPE_3D:
+            self._geodetic(self.gnss, fix.t_validity_us, fix.lat_deg, fix.lon_deg, fix.alt_m)
+
+    def reference(self, ref: Reference | LocalReference) -> None:
+        if type(ref) is Reference:
+            m = self.geodetic.get(ref.kind)
+            if m is None:
+                m = self.geodetic[ref.kind] = PositionErrors(max_gap_us=self.max_gap_us)
+            self._geodetic(m, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
+        else:
+            m = self.local.get(ref.kind)
+            if m is None:
+                m = self.local[ref.kind] = PositionErrors(max_gap_us=self.max_gap_us)
+            m.add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
+
+    def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
+        self._queue.append((m, t_us, lat, lon, alt))
+        if len(self._queue) >= self.BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        queue, self._queue = self._queue, []
+        if not queue:
+            return
+        lla = np.array([q[2:] for q in queue], dtype=float)
+        ned = self.frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
+        for (m, t_us, *_), p in zip(queue, ned, strict=True):
+            m.add_reference(t_us, p)
+
+    def restart(self) -> None:
+        self.flush()
+        for m in (self.gnss, *self.geodetic.values(), *self.local.values()):
+            m.restart()
+
+    def summary(self, reader: LogReader) -> dict[str, Any]:
+        self.flush()
+        out = {"gnss": {"source": reader.sources.get("gnss"), "note": GNSS_NOTE, **self.gnss.statistics()}}
+        for kind in (AUTOPILOT, TRUTH):
+            info = reader.references.get(kind)
+            if info is None:
+                continue
+            m = self.local.get(kind) if info.alignment == "mean_offset" else self.geodetic.get(kind)
+            if m is not None:
+                out[kind] = {"source": info.source, "note": info.note, **m.statistics(info.alignment)}
+        return out
+
+
+class _Run:
+    """The navigator(s) of one replay: feeding, estimate rows, segments."""
+
+    def __init__(self, make_nav: Callable[[], NavigatorLike], period_us: int, sink: Any,
+                 comparisons: _Comparisons, on_imu: ImuHook | None) -> None:
+        self.make_nav, self.period_us, self.sink = make_nav, period_us, sink
+        self.comparisons, self.on_imu = comparisons, on_imu
+        self.nav = make_nav()
+        self.counters: Counter[str] = Counter()
+        self.segments: list[dict[str, Any]] = []
+        self.segment = 0
+        self.first_imu_us: int | None = None
+        self.last_imu_us: int | None = None
+        self.rows = 0
+        self.beta = Distribution(0.0, 1.0, BETA_BINS)
+        self.nis = Distribution(*NIS_RANGE, NIS_BINS, log=True)
         self.next_row_us = -1
         self.estimator_s = 0.0
 
-    def __call__(self, samples: list[Any]) -> None:
-        push, estimate, rows = self.nav.push, self.nav.estimate, self.series.estimates
-        next_row_us, period_us, on_imu = self.next_row_us, self.period_us, self.on_imu
+    def feed(self, samples: list[Any]) -> None:
+        push, estimate, on_imu = self.nav.push, self.nav.estimate, self.on_imu
+        next_row_us, period_us = self.next_row_us, self.period_us
+        out: list[NavEstimate] = []
         hook_s = 0.0
         t0 = time.perf_counter()
         for sample in samples:
@@ -107,7 +239,7 @@ class _Feed:
                     est = estimate()
                     if est is not None:
                         next_row_us = sample.t_us + period_us
-                        rows.append(est)
+                        out.append(est)
                 if on_imu is not None:  # telemetry / pacing: not the estimator's time
                     h0 = time.perf_counter()
                     on_imu(sample.t_us, self.nav)
@@ -115,12 +247,48 @@ class _Feed:
         self.estimator_s += time.perf_counter() - t0 - hook_s
         self.next_row_us = next_row_us
         samples.clear()
+        if out:
+            self._rows(out)
+        self.comparisons.flush()
+
+    def _rows(self, estimates: list[NavEstimate]) -> None:
+        t_us = np.array([e.t_us for e in estimates], dtype=np.int64)
+        rows = _rows(estimates, self.segment)
+        self.sink.write(t_us, rows)
+        comparisons = self.comparisons
+        for e in estimates:
+            comparisons.estimate(e.t_us, e.p_ned_m)
+        self.beta.add(rows[:, 9])
+        self.nis.add(rows[:, 10])
+        self.rows += len(estimates)
+
+    def imu_time(self, t_us: int) -> None:
+        if self.first_imu_us is None:
+            self.first_imu_us = t_us
+        if self.last_imu_us is None or t_us > self.last_imu_us:
+            self.last_imu_us = t_us
+
+    def end_segment(self) -> None:
+        self.counters.update(self.nav.counters())
+        first, last = self.first_imu_us, self.last_imu_us
+        self.segments.append({"first_imu_s": None if first is None else first / 1e6,
+                              "last_imu_s": None if last is None else last / 1e6,
+                              "duration_s": 0.0 if first is None or last is None else (last - first) / 1e6,
+                              "estimates": self.rows - sum(s["estimates"] for s in self.segments)})
+
+    def restart(self) -> None:
+        self.end_segment()
+        self.segment += 1
+        self.nav = self.make_nav()
+        self.first_imu_us = self.last_imu_us = None
+        self.next_row_us = -1
+        self.comparisons.restart()
 
 
 @dataclass
 class ReplayResult:
     summary: dict[str, Any]
-    t_us: np.ndarray  # (N,) estimate times
+    t_us: np.ndarray  # (N,) estimate times (empty when the rows were streamed to a file)
     table: np.ndarray  # (N, len(CSV_COLUMNS) - 1): the CSV columns after t_s
 
 
@@ -135,95 +303,6 @@ def parse_home(text: str) -> LocalNedFrame:
     return LocalNedFrame(lat, lon, alt)
 
 
-def first_good_fix(path: Path) -> GnssFix | None:
-    """The first decodable 3-D fix of the log (reads only until it is found)."""
-    for _, view in read_tlog(path, [GNSS_TYPE]):
-        try:
-            fix = mc.decode_gnss(view)
-        except mc.CodecError:
-            continue
-        if fix.fix_type >= MIN_FIX_TYPE_3D and math.isfinite(fix.alt_m):
-            return fix
-    return None
-
-
-def _describe_skips(reader: TlogReader) -> str:
-    if not reader.skipped:
-        return ""
-    parts = ", ".join(f"{n} {reason}" for reason, n in sorted(reader.skipped.items()))
-    return f" (skipped {reader.skipped_bytes} bytes: {parts})"
-
-
-def _error_stats(
-    t_ref_us: np.ndarray, p_ref: np.ndarray, t_est_us: np.ndarray, p_est: np.ndarray, note: str
-) -> dict[str, Any]:
-    """Horizontal and 3-D error of the estimate, interpolated to the reference times."""
-    inside = (t_ref_us >= t_est_us[0]) & (t_ref_us <= t_est_us[-1]) if t_est_us.size else t_ref_us < 0
-    t, ref = t_ref_us[inside], p_ref[inside]
-    est = np.column_stack([np.interp(t, t_est_us, p_est[:, k]) for k in range(3)]).reshape(-1, 3)
-    err = est - ref
-    e3, eh = np.linalg.norm(err, axis=1), np.linalg.norm(err[:, :2], axis=1)
-    out: dict[str, Any] = {"note": note, "n": int(t.size)}
-    for name, e in (("error_3d_m", e3), ("error_horizontal_m", eh)):
-        stats = summarize(e)
-        stats["rmse"] = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
-        stats["max"] = float(e.max()) if e.size else math.nan
-        out[name] = stats
-    return out
-
-
-def _distribution(x: np.ndarray) -> dict[str, float]:
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return {"n": 0}
-    p5, p50 = np.percentile(x, [5.0, 50.0])
-    return {"n": int(x.size), "mean": float(x.mean()), "min": float(x.min()), "p5": float(p5),
-            "median": float(p50), "max": float(x.max()), "final": float(x[-1])}
-
-
-class _References:
-    """Reference positions found in the log, in the replay's local frame."""
-
-    def __init__(self, frame: LocalNedFrame) -> None:
-        self.frame = frame
-        self.series: dict[str, tuple[list[int], list[np.ndarray]]] = {}
-
-    def add(self, name: str, t_us: int, p_ned_m: np.ndarray) -> None:
-        t, p = self.series.setdefault(name, ([], []))
-        t.append(t_us)
-        p.append(p_ned_m)
-
-    def take(self, view: Any, last_imu_us: int, rejected: Counter[str]) -> None:
-        kind = view.get_type()
-        try:
-            if kind == "SIM_STATE":
-                truth = mc.decode_truth(view, self.frame, last_imu_us)
-                self.add("sim_state_truth", truth.t_us, truth.p_ned_m)
-            elif kind == "GLOBAL_POSITION_INT":
-                lat, lon, alt = view.lat / mc.DEG_E7, view.lon / mc.DEG_E7, view.alt / 1000.0
-                if not (lat or lon) or abs(lat) > 90 or abs(lon) > 180:
-                    raise mc.CodecError("out_of_range", "GLOBAL_POSITION_INT lat/lon")
-                self.add("autopilot_global_position", view.time_boot_ms * 1000,
-                         self.frame.to_ned_m(lat, lon, alt))
-            else:  # LOCAL_POSITION_NED: the autopilot's own origin, compared as-is
-                p = np.array((view.x, view.y, view.z), dtype=float)
-                if not np.isfinite(p).all():
-                    raise mc.CodecError("non_finite", "LOCAL_POSITION_NED")
-                self.add("autopilot_local_position_ned", view.time_boot_ms * 1000, p)
-        except mc.CodecError as exc:
-            rejected[f"{kind.lower()}_{exc.reason}"] += 1
-
-
-NOTES = {
-    "gnss": "estimated position vs the GNSS fixes (at their validity times) in the local frame",
-    "sim_state_truth": "estimated position vs SIM_STATE truth",
-    "autopilot_global_position": "estimated position vs the autopilot's GLOBAL_POSITION_INT "
-    "(its altitude is MSL: vertical error includes the home altitude difference)",
-    "autopilot_local_position_ned": "estimated position vs the autopilot's LOCAL_POSITION_NED "
-    "(about the autopilot's own origin, not aligned)",
-}
-
-
 def replay(
     path: str | Path,
     method: str,
@@ -234,145 +313,170 @@ def replay(
     navigator: NavigatorFactory | None = None,
     progress: Callable[[int, int], None] | None = None,
     on_imu: ImuHook | None = None,
+    out_dir: Path | None = None,
+    gps_delay_ms: float | None = None,
 ) -> ReplayResult:
     """Replay ``path`` through a navigator; ``rate_hz`` limits the estimate rows (0: every IMU).
 
     ``config`` is the real Navigator's configuration (None: ``EstimatorConfig`` defaults); a
-    ``navigator`` factory (tests) replaces the real Navigator and ignores it.
+    ``navigator`` factory (tests) replaces the real Navigator and ignores it. With ``out_dir``
+    the rows are streamed to ``out_dir/estimates.csv`` (the result's arrays are then empty);
+    ``write_summary`` writes the summary. ``gps_delay_ms`` overrides a DataFlash log's GPS delay.
 
     ``progress(position_bytes, size_bytes)`` is called now and then; ``on_imu(t_us, navigator)``
     after every IMU sample is pushed (telemetry, pacing; its time is not the estimator's).
     Raises UserError when the log holds nothing usable (no frames, no IMU, no good fix, no estimate).
     """
     path = Path(path)
-    if not path.is_file():
-        raise UserError(f"{path}: no such file")
-    wall0 = time.perf_counter()
-    fix0 = first_good_fix(path)
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    reader = open_log(path, gps_delay_ms)
     if home is None:
+        fix0 = reader.first_fix()
         if fix0 is None:
-            probe = read_tlog(path)
-            frames = sum(1 for _ in probe)
-            what = "no usable GPS_RAW_INT 3-D fix" if frames else "no readable MAVLink frames"
-            raise UserError(f"{path}: {what} in {frames} frames{_describe_skips(probe)}")
+            raise UserError(f"{path}: {reader.describe_empty()}")
         home = LocalNedFrame(fix0.lat_deg, fix0.lon_deg, fix0.alt_m)
-    nav = navigator(method, home) if navigator is not None else default_navigator(method, home, config)
-    reader = read_tlog(path, (*IMU_TYPES, *ATTITUDE_TYPES, GNSS_TYPE, *REFERENCE_TYPES))
-    refs = _References(home)
-    used: Counter[str] = Counter()
-    rejected: Counter[str] = Counter()
-    series = _Series()
-    fixes: list[GnssFix] = []
-    source = {"imu": "", "attitude": ""}
-    feed = _Feed(nav, int(1e6 / rate_hz) if rate_hz > 0 else 0, series, on_imu)
-    chunk: list[Any] = []
-    last_imu_us = 0
-    first_imu_us: int | None = None
-    count = 0
-    for _, view in reader:
-        count += 1
-        if progress is not None and count % 4096 == 0:
-            progress(reader.position, reader.size)
-        kind = view.get_type()
-        if kind in REFERENCE_TYPES:
-            refs.take(view, last_imu_us, rejected)
-            continue
-        group = "imu" if kind in IMU_TYPES else "attitude" if kind in ATTITUDE_TYPES else "gnss"
-        if group != "gnss":
-            if not source[group]:
-                source[group] = kind
-            elif source[group] != kind:
-                used[f"{group}_other_source_ignored"] += 1
-                continue
-        try:
-            sample = mc.decode_sample(view)
-        except mc.CodecError as exc:
-            rejected[f"{group}_{exc.reason}"] += 1
-            continue
-        used[group] += 1
-        kind_of = type(sample)
-        if kind_of is GnssFix and sample.fix_type >= MIN_FIX_TYPE_3D:  # type: ignore[union-attr]
-            fixes.append(sample)  # type: ignore[arg-type]
-        elif kind_of is ImuSample:
-            last_imu_us = sample.t_us  # type: ignore[union-attr]
-            first_imu_us = last_imu_us if first_imu_us is None else first_imu_us
-        chunk.append(sample)
-        if len(chunk) >= FEED_CHUNK:
-            feed(chunk)
-    feed(chunk)
-    estimator_s = feed.estimator_s
+    frame = home
+
+    def make_nav() -> NavigatorLike:
+        return navigator(method, frame) if navigator is not None else default_navigator(method, frame, config)
+
+    sink: _MemorySink | _CsvSink = _MemorySink() if out_dir is None else _CsvSink(out_dir / "estimates.csv")
+    period_us = int(1e6 / rate_hz) if rate_hz > 0 else 0
+    comparisons = _Comparisons(frame, max(MAX_GAP_US, 4 * period_us))
+    run = _Run(make_nav, period_us, sink, comparisons, on_imu)
+    try:
+        restarts = _stream(reader, run, comparisons, progress)
+    finally:
+        sink.close()
+    run.end_segment()
+    st = reader.stats
     if progress is not None:
-        progress(reader.size, reader.size)
-    read_s = time.perf_counter() - wall0 - estimator_s
-    if reader.frames == 0:
-        raise UserError(f"{path}: no readable MAVLink frames{_describe_skips(reader)}")
-    if not used["imu"]:
-        raise UserError(f"{path}: no usable IMU samples ({'/'.join(IMU_TYPES)}) in {reader.frames} frames"
-                        f"{_describe_skips(reader)}")
-    t_us, table = series.arrays()
-    if t_us.size == 0:
-        raise UserError(f"{path}: the estimator never initialised ({used['gnss']} GNSS fixes, "
-                        f"{used['imu']} IMU samples)")
-    summary = _summary(path, method, home, reader, used, rejected, nav, t_us, table, refs, fixes,
-                       (last_imu_us - (first_imu_us or 0)) / 1e6, read_s, estimator_s, source)
-    summary["wall_s"] = time.perf_counter() - wall0
-    summary["realtime_factor"] = summary["duration_s"] / summary["wall_s"]
-    return ReplayResult(summary, t_us, table)
-
-
-def _gnss_reference(fixes: list[GnssFix], frame: LocalNedFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Validity times and local positions of the 3-D fixes (one vectorised conversion)."""
-    t = np.array([f.t_validity_us for f in fixes], dtype=np.int64)
-    if not fixes:
-        return t, np.zeros((0, 3))
-    lla = np.array([(f.lat_deg, f.lon_deg, f.alt_m) for f in fixes])
-    return t, frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
-
-
-def _summary(
-    path: Path, method: str, home: LocalNedFrame, reader: TlogReader, used: Counter[str],
-    rejected: Counter[str], nav: NavigatorLike, t_us: np.ndarray, table: np.ndarray,
-    refs: _References, fixes: list[GnssFix], duration_s: float, read_s: float, estimator_s: float,
-    source: dict[str, str],
-) -> dict[str, Any]:
-    p_est = table[:, 0:3]
-    references = {"gnss": _gnss_reference(fixes, home)}
-    references.update({k: (np.array(t, dtype=np.int64), np.array(p)) for k, (t, p) in refs.series.items()})
-    return {
+        progress(st.size, st.size)
+    if st.records == 0:
+        raise UserError(f"{path}: no readable records in the {reader.format} log")
+    if not st.decoded["imu"]:
+        raise UserError(f"{path}: no usable IMU samples ({reader.sources.get('imu') or 'none found'}) "
+                        f"in {st.records} records")
+    if run.rows == 0:
+        raise UserError(f"{path}: the estimator never initialised ({st.decoded['gnss']} GNSS fixes, "
+                        f"{st.decoded['imu']} IMU samples)")
+    estimator_s = run.estimator_s
+    wall_s = time.perf_counter() - wall0
+    duration_s = sum(s["duration_s"] for s in run.segments)
+    summary: dict[str, Any] = {
         "file": str(path),
+        "format": reader.format,
         "method": method,
         "home": {"lat_deg": home.home_lat_deg, "lon_deg": home.home_lon_deg, "alt_m": home.home_alt_m},
         "duration_s": duration_s,
-        "sources": {k: v or None for k, v in source.items()},
-        "samples_used": dict(used),
-        "samples_rejected": {"codec": dict(rejected), "reader": dict(reader.skipped),
-                             "reader_skipped_bytes": reader.skipped_bytes},
-        "frames_read": reader.frames,
-        "navigator": dict(nav.counters()),
-        "estimates": int(t_us.size),
-        "beta": _distribution(table[:, 9]),
-        "nis": _distribution(table[:, 10]),
-        "errors": {name: _error_stats(t, p, t_us, p_est, NOTES[name]) for name, (t, p) in references.items()},
-        "timing_s": {"read_decode_output": read_s, "estimator": estimator_s},
+        "sources": dict(reader.sources),
+        "samples_used": dict(st.decoded),
+        "samples_rejected": {"codec": dict(st.rejected), "reader": dict(st.skipped),
+                             "reader_skipped_bytes": st.skipped_bytes},
+        "records_read": st.records,
+        "navigator": dict(run.counters),
+        "log_restarts": restarts,
+        "segments": run.segments,
+        "estimates": run.rows,
+        "beta": run.beta.summary(),
+        "nis": run.nis.summary(),
+        "errors": comparisons.summary(reader),
+        "timing_s": {"read_decode_output": wall_s - estimator_s, "estimator": estimator_s},
+        "wall_s": wall_s,
+        "cpu_s": time.process_time() - cpu0,
+        "realtime_factor": duration_s / wall_s,
     }
+    gps_delay = getattr(reader, "gps_delay_source", "")
+    if gps_delay:
+        summary["gnss_validity"] = {"gps_delay_ms": getattr(reader, "gps_delay_ms", None), "from": gps_delay}
+    t_us, table = sink.arrays()
+    return ReplayResult(summary, t_us, table)
+
+
+def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
+            progress: Callable[[int, int], None] | None) -> int:
+    """Push the reader's events through ``run``; returns the number of log restarts."""
+    chunk: list[Any] = []
+    held: list[Any] = []  # events after a backward IMU jump, while deciding whether it is a restart
+    held_imu_us, held_imu_n = 0, 0
+    restarts = 0
+    count = 0
+    stats = reader.stats
+
+    def process(ev: Any) -> None:
+        kind = type(ev)
+        if kind is Reference or kind is LocalReference:
+            comparisons.reference(ev)
+            return
+        if kind is ImuSample:
+            run.imu_time(ev.t_us)
+        elif kind is GnssFix:
+            comparisons.fix(ev)
+        chunk.append(ev)
+        if len(chunk) >= FEED_CHUNK:
+            run.feed(chunk)
+
+    feed_chunk = FEED_CHUNK
+    for ev in reader:
+        count += 1
+        if progress is not None and count % 4096 == 0:
+            progress(stats.position, stats.size)
+        kind = type(ev)
+        if not held and kind is not ImuSample and kind is not GnssFix and kind is not Reference \
+                and kind is not LocalReference:  # attitude: the common case, inline
+            chunk.append(ev)
+            if len(chunk) >= feed_chunk:
+                run.feed(chunk)
+            continue
+        if held:
+            held.append(ev)
+            if type(ev) is ImuSample:
+                last = run.last_imu_us or 0
+                if ev.t_us >= last - RESTART_JUMP_US:  # back on the old time base: a lone outlier
+                    pending, held = held, []
+                    for e in pending:
+                        process(e)
+                elif held_imu_us <= ev.t_us <= held_imu_us + RESTART_JUMP_US:
+                    held_imu_us, held_imu_n = ev.t_us, held_imu_n + 1
+                    if held_imu_n >= RESTART_CONSENSUS:
+                        run.feed(chunk)
+                        run.restart()
+                        restarts += 1
+                        pending, held = held, []
+                        for e in pending:
+                            process(e)
+            if len(held) > RESTART_HOLD_MAX:
+                pending, held = held, []
+                for e in pending:
+                    process(e)
+            continue
+        last_us = run.last_imu_us
+        if type(ev) is ImuSample and last_us is not None and ev.t_us < last_us - RESTART_JUMP_US:
+            held, held_imu_us, held_imu_n = [ev], ev.t_us, 1
+            continue
+        process(ev)
+    for e in held:
+        process(e)
+    run.feed(chunk)
+    return restarts
 
 
 def json_safe(value: Any) -> Any:
     """NaN/inf -> None, recursively, so the summary is strict JSON."""
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+    return plain_json(value, nan_to_none=True)
+
+
+def write_summary(result: ReplayResult, out_dir: Path) -> None:
+    import json
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").write_text(json.dumps(json_safe(result.summary), indent=2) + "\n")
 
 
 def write_outputs(result: ReplayResult, out_dir: Path) -> None:
-    import json
-
+    """estimates.csv from the in-memory rows, and summary.json."""
     out_dir.mkdir(parents=True, exist_ok=True)
     table = np.column_stack((result.t_us / 1e6, result.table))
     np.savetxt(out_dir / "estimates.csv", table, delimiter=",", fmt="%.9g",
                header=",".join(CSV_COLUMNS), comments="")
-    (out_dir / "summary.json").write_text(json.dumps(json_safe(result.summary), indent=2) + "\n")
+    write_summary(result, out_dir)

@@ -10,8 +10,10 @@ from typing import TYPE_CHECKING, Any
 
 from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
+from gcs_tools.sitl.outcome import check_run_arguments, failure_reason
 
 if TYPE_CHECKING:
+    from companion.mission import Mission
     from gcs_tools.sitl.launcher import Progress
 
 
@@ -27,7 +29,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
-    parser.add_argument("--signing-key-file", type=Path, help="MAVLink 2 signing key for all three processes")
+    parser.add_argument("--signing-key-file", type=Path,
+                        help="MAVLink 2 signing key for all three processes (default: a fresh key per run, "
+                             "OUT/signing.key, mode 0600)")
+    parser.add_argument("--no-signing", action="store_true",
+                        help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
     parser.add_argument("--max-duration-s", type=float, help="simulated time limit (default: as fly)")
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
@@ -54,19 +60,40 @@ def run(args: argparse.Namespace) -> int:
 
         return ardupilot_cli.run(args)
     from companion.mission import load_mission
-    from gcs_tools.fly.output import strict_json, write_outputs
-    from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
-    from gcs_tools.sitl.report import flight_result
+    from gcs_tools.outdir import ensure_out_dir
+    from gcs_tools.sitl.vehicle_id import claim_vehicle_id
 
     mission = load_mission(args.mission)
+    check_run_arguments(args.method, args.seed)  # before any process starts
+    ensure_out_dir(args.out)
     if not 0 <= args.profile < len(mission.profiles):
         last = len(mission.profiles) - 1
         raise UserError(f"--profile {args.profile}: mission {mission.name!r} has profiles 0..{last}")
     if args.signing_key_file is not None and not args.signing_key_file.is_file():
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
+    if args.signing_key_file is not None and args.no_signing:
+        raise UserError("--signing-key-file and --no-signing contradict each other")
+    claim = claim_vehicle_id(telemetry.config_from_args(args), args.vehicle_id)
+    try:
+        if claim is not None:
+            args.vehicle_id = claim.vehicle_id
+            if claim.note:
+                print(f"beliefnav: note: {claim.note}", file=sys.stderr)
+        return _fly(args, mission)
+    finally:
+        if claim is not None:
+            claim.close()
+
+
+def _fly(args: argparse.Namespace, mission: Mission) -> int:
+    from gcs_tools.fly.output import strict_json, write_outputs
+    from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
+    from gcs_tools.sitl.report import flight_result
+
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
         max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
+        signing=not args.no_signing,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
         telemetry_args=tuple(telemetry.forward_arguments(args)),
     )
@@ -83,16 +110,17 @@ def run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     result = flight_result(opts, run_, route, mission.name)
+    result.summary["sitl"]["vehicle_id"] = None if args.no_telemetry else args.vehicle_id
     if result.series:
         write_outputs(result, mission.world, args.out)
     else:
         (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
     _print(result.summary, args.out)
-    if run_.ended_by.startswith("crash"):
-        print(f"beliefnav: error: {run_.ended_by.split(':', 1)[1]} process failed: {run_.crash_detail}",
-              file=sys.stderr)
+    reason = failure_reason(run_, result.summary)
+    if reason:
+        print(f"beliefnav: error: {reason}", file=sys.stderr)
         return 1
-    return 0 if run_.ended_by == "vehicle" else 1
+    return 0
 
 
 def _print(s: dict, out: Path) -> None:

@@ -6,11 +6,17 @@ launcher shows progress from the vehicle's progress lines; when the vehicle ends
 its simulated time limit), when any process dies, on Ctrl-C or on the wall-clock timeout, it
 stops all three (vehicle first, so it flushes the tlog and time series) and then writes what
 was recorded.
+
+MAVLink 2 signing is on by default: every run gets a fresh 32-byte key in ``<out>/signing.key``
+(mode 0600, created before any process starts), or uses ``signing_key_file``; ``signing=False``
+(``--no-signing``) turns it off.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import secrets
 import socket
 import subprocess
 import threading
@@ -39,7 +45,8 @@ class SitlOptions:
     out_dir: Path
     max_duration_s: float | None = None  # None: as ``fly`` (start delay + route + margin)
     realtime: bool = False
-    signing_key_file: Path | None = None
+    signing_key_file: Path | None = None  # None: a fresh key per run in <out>/signing.key
+    signing: bool = True  # False: no MAVLink 2 signing (--no-signing)
     ports: tuple[int, int, int] | None = None  # vehicle's estimator, bridge and ground ports
     wall_timeout_s: float | None = None
     drop_probability: float = 0.0  # TEST ONLY: loss injection on every link, both directions
@@ -58,6 +65,7 @@ class SitlRun:
     estimator: dict[str, Any] = field(default_factory=dict)
     bridge: dict[str, Any] = field(default_factory=dict)
     crash_detail: str = ""
+    exit_code: int | None = None  # of the process that ended the run (crash: negative = signal)
 
 
 def check_ports_free(ports: tuple[int, int, int], host: str = "127.0.0.1") -> None:
@@ -79,13 +87,39 @@ def flight_plan(opts: SitlOptions) -> tuple[Route, float]:
                                                                   0.5 * route.duration_s)
 
 
+SIGNING_KEY_NAME = "signing.key"
+
+
+def signing_key_path(opts: SitlOptions) -> Path | None:
+    """The key file all three processes sign with (None: signing off)."""
+    if not opts.signing:
+        return None
+    return opts.signing_key_file or opts.out_dir / SIGNING_KEY_NAME
+
+
+def write_fresh_key(path: Path) -> None:
+    """A new random 32-byte key as 64 hex characters, readable by its owner only (0600)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.unlink(missing_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w", encoding="ascii") as f:
+        f.write(secrets.token_hex(32) + "\n")
+
+
+def prepare_signing(opts: SitlOptions) -> None:
+    """Create this run's fresh key unless signing is off or the user gave a key file."""
+    if opts.signing and opts.signing_key_file is None:
+        write_fresh_key(opts.out_dir / SIGNING_KEY_NAME)
+
+
 def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpec]:
     out = opts.out_dir
     route, max_duration_s = flight_plan(opts)
     goal = route.waypoints_ned_m[-1]
     common: list[str] = list(opts.telemetry_args)
-    if opts.signing_key_file is not None:
-        common += ["--signing-key-file", str(opts.signing_key_file)]
+    key = signing_key_path(opts)
+    if key is not None:
+        common += ["--signing-key-file", str(key)]
     if opts.drop_probability > 0:
         common += ["--drop-probability", str(opts.drop_probability)]
 
@@ -137,9 +171,11 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
     opts.out_dir.mkdir(parents=True, exist_ok=True)
     for stale in ("vehicle.json", "estimator.json", "bridge.json", "vehicle_series.npz", "run.tlog"):
         (opts.out_dir / stale).unlink(missing_ok=True)
+    prepare_signing(opts)
     supervisor = Supervisor(opts.out_dir / "logs")
     ended_by = "interrupted"
     detail = ""
+    exit_code: int | None = None
     reader: threading.Thread | None = None
     try:
         specs = child_specs(opts, ports)
@@ -152,6 +188,7 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
         while True:
             exited = supervisor.first_exit()
             if exited is not None:
+                exit_code = exited.returncode
                 if exited.name == "vehicle" and exited.returncode == 0:
                     ended_by = "vehicle"
                 else:
@@ -168,7 +205,7 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
         codes = supervisor.stop(order=("vehicle",))
         if reader is not None:
             reader.join(timeout=1.0)
-    run = SitlRun(opts.out_dir, ended_by, codes, crash_detail=detail)
+    run = SitlRun(opts.out_dir, ended_by, codes, crash_detail=detail, exit_code=exit_code)
     run.vehicle = _read_json(opts.out_dir / "vehicle.json")
     run.estimator = _read_json(opts.out_dir / "estimator.json")
     run.bridge = _read_json(opts.out_dir / "bridge.json")

@@ -38,7 +38,7 @@ def flight_result(opts: SitlOptions, run: SitlRun, route: Route, mission_name: s
         "profile": opts.profile,
         "method": opts.method,
         "seed": opts.seed,
-        "reached_goal": v.get("outcome") == "reached_goal",
+        "reached_goal": v.get("outcome") == "reached_goal" and int(v.get("collisions", 0)) == 0,
         "collisions": int(v.get("collisions", 0)),
         "duration_s": float(t_s[-1]) if t_s.size else 0.0,
         "route_duration_s": route.duration_s,

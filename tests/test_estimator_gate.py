@@ -1,0 +1,185 @@
+"""Innovation gate, glitch reset, validity time-out, receiver-reported R and the bound on learned R."""
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
+from companion.estimator import METHODS, Navigator, model
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.engine import FusionEngine
+
+CFG = EstimatorConfig()
+HOME = LocalNedFrame(47.0, 8.0, 400.0)
+
+
+def _still(e: FusionEngine, t0_us: int, t1_us: int) -> None:
+    """Zero acceleration every 5 ms in (t0, t1]."""
+    for t in range(t0_us + 5000, t1_us + 1, 5000):
+        e.push_acc(t, 0.0, 0.0, 0.0)
+
+
+def _engine(method: str = "naive", cfg: EstimatorConfig = CFG) -> FusionEngine:
+    e = FusionEngine(cfg, method)
+    e.push_acc(0, 0.0, 0.0, 0.0)
+    e.push_fix(0, (0.0, 0.0, 0.0))
+    return e
+
+
+def test_test_ratio_is_horizontal_nis_over_gate_squared_and_gate_is_exact():
+    """Known answer: the ratio from the prior covariance and R; just inside fuses, just outside not."""
+    e = _engine()
+    _still(e, 0, 50_000)
+    P = model.predict_axes(e.fusions[0].P, 0.05, math.exp(-0.05 / CFG.bias_tau_s), CFG.sigma_acc_m_s2**2,
+                           (1 - math.exp(-0.1 / CFG.bias_tau_s)) * CFG.sigma_bias_m(CFG.beta_fixed) ** 2,
+                           CFG.sigma_acc_bias_rw_m_s2_sqrt_s**2)
+    s = [c[0] + 2 * c[2] + c[7] + CFG.sigma_gnss_horizontal_m**2 for c in P]
+    edge = CFG.gnss_gate_sigma * math.sqrt(s[0])  # a north innovation exactly at the gate
+    e.push_fix(50_000, (0.999 * edge, 0.0, 0.0))
+    f = e.fusions[-1]
+    assert f.test_ratio == pytest.approx(0.999**2, rel=1e-9) and not f.glitch
+    assert e.counts["gnss_fused"] == 2 and e.counts["gnss_rejected_innovation"] == 0
+    e2 = _engine()
+    _still(e2, 0, 50_000)
+    e2.push_fix(50_000, (1.001 * edge, 0.0, 0.0))
+    g = e2.fusions[-1]
+    assert g.test_ratio == pytest.approx(1.001**2, rel=1e-9) and g.glitch
+    assert e2.counts["gnss_fused"] == 1 and e2.counts["gnss_rejected_innovation"] == 1
+    assert g.x == tuple(e2.fusions[0].x)  # the prior: standing still, nothing fused
+
+
+# paper-literal (comparison only) is left out: its belief climbs on the rejected fixes, and the
+# grown covariance lets it accept the step just before the time-out (the gate works as designed).
+@pytest.mark.parametrize("method", [m for m in METHODS if m != "paper-literal"])
+def test_short_glitch_is_ignored_long_one_ends_in_one_reset(method):
+    """A 20 m step for 3 s: rejected, estimate untouched. Held: one reset at the time-out, with
+    position = fix, bias 0, H P Hᵀ = R; the counters say so; then fixes fuse again."""
+    e = _engine(method)
+    t = 0
+    for _ in range(60):  # 3 s clean at the origin
+        _still(e, t, t + 50_000)
+        t += 50_000
+        e.push_fix(t, (0.0, 0.0, 0.0))
+    t_glitch = t
+    while t < t_glitch + 3_000_000:
+        _still(e, t, t + 50_000)
+        t += 50_000
+        e.push_fix(t, (20.0, 0.0, 0.0))
+        assert e.fusions[-1].glitch
+        assert abs(e.snapshot().x[0]) < 1e-6
+    assert e.counts["gnss_resets"] == 0 and e.counts["gnss_rejected_innovation"] == 60
+    t_reset = None
+    while t < t_glitch + 8_000_000:
+        _still(e, t, t + 50_000)
+        t += 50_000
+        e.push_fix(t, (20.0, 0.0, 0.0))
+        if t_reset is None and e.counts["gnss_resets"]:
+            t_reset = t
+    assert e.counts["gnss_resets"] == 1
+    assert t_reset - t_glitch == CFG.gnss_reset_timeout_s * 1e6  # the first fix at the time-out
+    snap = e.snapshot()
+    assert snap.x[0] == pytest.approx(20.0, abs=0.05) and not snap.glitch and snap.pos_valid
+    assert e.counts["gnss_rejected_innovation"] == 99  # 100 fixes in the 5 s, the 100th reset
+
+
+def test_reset_matches_the_fix_and_its_r():
+    x = tuple(float(v) for v in range(12))
+    P = model.initial_cov_axes(CFG)
+    xr, Pr = model.reset_to_fix(x, P, (1.0, 2.0, 3.0), (0.5, 0.5, 2.0), 0.04)
+    assert xr == (1.0, 2.0, 3.0, 3.0, 4.0, 5.0, 0.0, 0.0, 0.0, 9.0, 10.0, 11.0)
+    M = model.cov_to_matrix(Pr)
+    np.testing.assert_allclose(model.hmh(M), np.diag([0.5, 0.5, 2.0]), atol=1e-15)
+    assert np.all(np.linalg.eigvalsh(M) > 0)
+
+
+def test_position_invalid_after_the_time_out_and_covariance_grows():
+    e = _engine()
+    _still(e, 0, 5_000_000)
+    s = e.snapshot()
+    assert s.pos_valid
+    _still(e, 5_000_000, 5_010_000)
+    s2 = e.snapshot()
+    assert not s2.pos_valid and s2.P[0][0] > s.P[0][0]
+    e.push_fix(5_010_000, (0.0, 0.0, 0.0))
+    assert e.snapshot().pos_valid
+
+
+def _fix(t_us, p_ned_m, h_acc_m=math.nan, v_acc_m=math.nan):
+    lat, lon, alt = HOME.to_geodetic(np.asarray(p_ned_m, dtype=float))
+    return GnssFix(t_us, lat, lon, alt, 3, 12, h_acc_m, v_acc_m)
+
+
+def test_receiver_accuracy_sets_r_floored_at_the_config():
+    nav = Navigator(CFG, "naive", HOME)
+    assert nav.fix_r_nominal_m2(1.5, 3.0) == (2.25, 2.25, 9.0)
+    assert nav.fix_r_nominal_m2(0.01, math.nan) == (CFG.sigma_gnss_horizontal_m**2,) * 2 + (
+        CFG.sigma_gnss_vertical_m**2,)
+    assert nav.fix_r_nominal_m2(math.inf, -1.0)[0] == CFG.sigma_gnss_horizontal_m**2
+    nav.push(AttitudeSample(0, np.array([1.0, 0.0, 0.0, 0.0])))
+    nav.push(ImuSample(0, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
+    nav.push(_fix(0, (0.0, 0.0, 0.0), 2.0, 4.0))
+    est = nav.estimate()
+    np.testing.assert_allclose(est.cov_diag[0:3], [4.0, 4.0, 16.0], rtol=1e-9)  # P₀ = the fix's R
+
+
+def test_learned_r_is_bounded():
+    """adaptive on innovations of ~30 m std (gate widened so they reach it): R ≤ 100 R_nom."""
+    cfg = EstimatorConfig(gnss_gate_sigma=1e6)
+    e = _engine("adaptive", cfg)
+    rng = np.random.default_rng(1)
+    t = 0
+    for _ in range(40):
+        _still(e, t, t + 50_000)
+        t += 50_000
+        e.push_fix(t, tuple(rng.normal(0.0, 30.0, 3)))
+    r_max = cfg.r_learned_max_factor * cfg.sigma_gnss_horizontal_m**2
+    # the last fusion's R: recover it from the update of pp (pp⁺ = pp⁻ R'/(s)) via K
+    terms_r = e.method.measurement_cov(e.fusions[-2].state, _terms_of(e))
+    assert max(terms_r) > r_max  # what adaptive would learn unbounded
+    f_prev, f = e.fusions[-2], e.fusions[-1]
+    assert f.nis == pytest.approx(_nis_with_bounded_r(e, f_prev, f, r_max), rel=1e-9)
+
+
+def _terms_of(e):
+    from companion.estimator.belief import InnovationTerms
+    f = e.fusions[-1]
+    y = tuple(float(a - b) for a, b in zip(f.z_ned_m, np.array(e.fusions[-2].x[0:3]), strict=True))
+    return InnovationTerms(y, (0.0, 0.0, 0.0), 0.0, e._r_nominal, (0.0, 0.0, 0.0))
+
+
+def _nis_with_bounded_r(e, prev, f, r_max):
+    T = (f.t_us - prev.t_us) * 1e-6
+    alpha = math.exp(-T / CFG.bias_tau_s)
+    q_b = (1 - alpha * alpha) * prev.sigma_bias_m**2
+    P = model.predict_axes(prev.P, T, alpha, CFG.sigma_acc_m_s2**2, q_b, CFG.sigma_acc_bias_rw_m_s2_sqrt_s**2)
+    x, _ = e._predict(prev, f.t_us, f.ints)
+    nis = 0.0
+    for i in range(3):
+        y = f.z_ned_m[i] - x[i] - x[6 + i]
+        s = P[i][0] + 2 * P[i][2] + P[i][7] + r_max
+        nis += y * y / s
+    return nis
+
+
+@pytest.mark.parametrize("speed_m_s", [0.0, 2.0])
+def test_frozen_fix_is_rejected_after_the_stated_time_when_moving(speed_m_s):
+    nav = Navigator(CFG, "naive", HOME)
+    nav.push(AttitudeSample(0, np.array([1.0, 0.0, 0.0, 0.0])))
+    nav.push(ImuSample(0, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
+    for k in range(1, 41):  # 2 s at speed_m_s north, fixes at 5 Hz
+        t = k * 50_000
+        nav.push(ImuSample(t, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
+        if k % 4 == 0:
+            nav.push(_fix(t, (speed_m_s * t * 1e-6, 0.0, 0.0)))
+    p_frozen = (speed_m_s * 2.0, 0.0, 0.0)
+    for k in range(41, 101):  # then 3 s of the same position
+        t = k * 50_000
+        nav.push(ImuSample(t, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
+        if k % 4 == 0:
+            nav.push(_fix(t, p_frozen))
+    c = nav.counters()
+    # repeats of the 2.0 s position at 2.2 ... 5.0 s: those > 2 s after it (4.2 ... 5.0 s: 5) are
+    # frozen if the vehicle moved when that position first came
+    assert c["gnss_rejected_frozen"] == (5 if speed_m_s else 0)

@@ -1,0 +1,112 @@
+"""``companion.metrics``: online estimate-vs-reference errors and bounded distributions,
+with known answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.metrics import Distribution, PositionErrors, error_statistics
+
+
+def _ramp(t_us: int) -> np.ndarray:
+    """Estimate moving north at 1 m/s and up at 0.5 m/s."""
+    return np.array([t_us / 1e6, 0.0, -0.5 * t_us / 1e6])
+
+
+def test_references_are_compared_with_the_interpolated_estimate() -> None:
+    """Estimates every 100 ms; references between them, some arriving late (in the past),
+    some early (ahead of the estimates): all compared with the linear interpolation."""
+    m = PositionErrors()
+    offset = np.array([0.3, -0.4, 0.0])  # reference = estimate - offset: error (0.3, -0.4, 0)
+    refs = [(t, _ramp(t) - offset) for t in range(150_000, 2_000_000, 200_000)]
+    est_times = list(range(100_000, 2_100_000, 100_000))
+    for k, t in enumerate(est_times):
+        m.add_estimate(t, _ramp(t))
+        if k % 3 == 0:  # references delivered in bursts: past ones and one ahead
+            while refs and refs[0][0] <= t + 120_000:
+                m.add_reference(*refs.pop(0))
+    for r in refs:
+        m.add_reference(*r)
+    err = m.errors_ned_m()
+    assert err.shape == (10, 3)
+    assert np.allclose(err, offset, atol=1e-6)  # float32 storage
+    s = m.statistics()
+    assert s["error_horizontal_m"]["median"] == pytest.approx(0.5, abs=1e-6)
+    assert s["error_3d_m"]["max"] == pytest.approx(0.5, abs=1e-6) and s["unmatched"] == 0
+
+
+def test_references_outside_the_estimates_are_not_compared() -> None:
+    m = PositionErrors(window_us=1_000_000)
+    m.add_reference(50_000, np.zeros(3))  # before the first estimate
+    for t in range(100_000, 5_100_000, 100_000):
+        m.add_estimate(t, _ramp(t))
+    m.add_reference(1_000_000, _ramp(1_000_000))  # older than the window
+    m.add_reference(4_950_000, _ramp(4_950_000))  # inside: error 0
+    m.add_reference(9_000_000, np.zeros(3))  # after the last estimate
+    s = m.statistics()
+    assert s["n"] == 1 and s["unmatched"] == 3 and s["error_3d_m"]["max"] == pytest.approx(0, abs=1e-6)
+
+
+def test_references_across_a_gap_in_the_estimates_are_not_compared() -> None:
+    m = PositionErrors(max_gap_us=300_000)
+    for t in (0, 100_000, 900_000, 1_000_000):
+        m.add_estimate(t, _ramp(t))
+    for t in (50_000, 500_000, 950_000):
+        m.add_reference(t, _ramp(t))
+    assert m.statistics()["n"] == 2 and m.unmatched == 1
+
+
+def test_restart_keeps_the_errors_and_takes_a_new_time_base() -> None:
+    m = PositionErrors()
+    for t in (0, 100_000):
+        m.add_estimate(t, _ramp(t))
+    m.add_reference(50_000, _ramp(50_000) + [1.0, 0, 0])
+    m.add_reference(500_000, np.zeros(3))  # pending when the log restarts: unmatched
+    m.restart()
+    for t in (0, 100_000):
+        m.add_estimate(t, _ramp(t) + [0, 2.0, 0])
+    m.add_reference(50_000, _ramp(50_000))
+    assert np.allclose(m.errors_ned_m(), [[-1.0, 0, 0], [0, 2.0, 0]], atol=1e-6)
+    assert m.statistics()["unmatched"] == 1
+    with pytest.raises(ValueError, match="time order"):
+        m.add_estimate(0, np.zeros(3))
+
+
+def test_alignments() -> None:
+    rng = np.random.default_rng(4)
+    noise = rng.normal(0, 0.1, (400, 3))
+    err = noise + [5.0, -3.0, 20.0]
+    geo = error_statistics(err, "geodetic")
+    mean = error_statistics(err, "mean_offset")
+    vert = error_statistics(err, "vertical_mean_offset")
+    assert geo["error_horizontal_m"]["median"] == pytest.approx(math.hypot(5, 3), abs=0.05)
+    assert np.allclose(mean["offset_ned_m"], [5, -3, 20], atol=0.02) and mean["error_3d_m"]["median"] < 0.25
+    assert vert["offset_ned_m"][:2] == [0.0, 0.0] and vert["offset_ned_m"][2] == pytest.approx(20, abs=0.02)
+    assert vert["error_horizontal_m"] == geo["error_horizontal_m"]
+    # 3-D norms of N(0, 0.1² I): median of a chi with 3 dof times 0.1 = 0.1538
+    assert mean["error_3d_m"]["median"] == pytest.approx(0.1538, rel=0.08)
+    with pytest.raises(ValueError):
+        error_statistics(err, "best_fit")
+    assert error_statistics(np.zeros((0, 3)))["error_3d_m"]["n"] == 0
+
+
+def test_distribution_quantiles_within_half_a_bin() -> None:
+    rng = np.random.default_rng(8)
+    beta = rng.uniform(0, 1, 50_001)
+    d = Distribution(0.0, 1.0, 10_000)
+    for chunk in np.array_split(beta, 7):
+        d.add(chunk)
+    s = d.summary()
+    assert s["n"] == beta.size and s["final"] == beta[-1]
+    assert s["min"] == beta.min() and s["max"] == beta.max()
+    assert s["mean"] == pytest.approx(beta.mean(), rel=1e-12)
+    assert abs(s["median"] - np.median(beta)) <= 1e-4 and abs(s["p5"] - np.percentile(beta, 5)) <= 1e-4
+    nis = rng.chisquare(2, 20_000)
+    d = Distribution(1e-6, 1e6, 27_640, log=True)
+    d.add(np.append(nis, [np.nan, np.inf]))  # non-finite values are not counted
+    assert d.n == nis.size
+    assert d.quantile(0.5) == pytest.approx(np.median(nis), rel=2e-3)
+    assert Distribution(0, 1, 10).summary() == {"n": 0}
