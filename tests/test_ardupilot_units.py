@@ -178,3 +178,15 @@ def test_campaign_aggregate_known_answers(tmp_path):
     # the late flight (commands delayed by the scheduler) is counted but not used
     assert res["flying"]["none"]["flights"] == 4 and res["flying"]["none"]["valid"] == 2
     assert "| second-order | 1.00 |" in table_text(res)
+
+
+def test_sitl_ardupilot_option_errors_are_one_line(tmp_path, capsys):
+    from gcs_tools.cli import main
+
+    assert main(["sitl", "--vehicle", "ardupilot", "--realtime", "--out", str(tmp_path)]) == 2
+    assert "apply to --vehicle sim only" in capsys.readouterr().err
+    assert main(["sitl", "--vehicle", "ardupilot", "--mission", "test", "--profile", "7",
+                 "--out", str(tmp_path)]) == 2
+    assert "profiles 0..2" in capsys.readouterr().err
+    assert main(["sitl", "--vehicle", "ardupilot", "--gnss-rate-hz", "50", "--out", str(tmp_path)]) == 2
+    assert "gnss_rate_hz" in capsys.readouterr().err
