@@ -26,7 +26,8 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools.fly.output import strict_json, write_outputs
 
     if args.realtime or args.signing_key_file is not None or args.ports is not None or args.max_duration_s:
-        raise UserError("--realtime, --signing-key-file, --ports and --max-duration-s apply to --vehicle sim only")
+        raise UserError("--realtime, --signing-key-file, --ports and --max-duration-s "
+                        "apply to --vehicle sim only")
     changes = {k: v for k, v in (("speedup", args.speedup), ("gnss_rate_hz", args.gnss_rate_hz),
                                   ("wall_timeout_s", args.wall_timeout_s)) if v is not None}
     cfg = dataclasses.replace(ArduPilotConfig(), **changes)
