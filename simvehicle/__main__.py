@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     from companion.telemetry.pubsub import publisher_from_args
     from simvehicle import SimVehicle
     from simvehicle.node import VehicleNode, VehicleNodeConfig
-    from simvehicle.recording import FlightRecorder
+    from simvehicle.recording import SPOOL_NAME, FlightRecorder
 
     exit_on_sigterm()
     node = None
@@ -48,8 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         mission = load_mission(args.mission)
         sim = SimVehicle(mission, args.profile, args.seed)
+        args.out.mkdir(parents=True, exist_ok=True)
         recorder = FlightRecorder(args.goal_ned_m, args.goal_radius_m, args.goal_speed_m_s,
-                                  args.arrive_after_s)
+                                  args.arrive_after_s, spool_path=args.out / SPOOL_NAME)
         fields, rng = link_settings(args)
         config = VehicleNodeConfig(
             estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,

@@ -61,6 +61,7 @@ GROUND_FORWARD_TYPES = frozenset(
      "SET_POSITION_TARGET_LOCAL_NED"}
 )
 COMPANIONS = ("estimator", "bridge")
+MAX_JITTER_SAMPLES = 400_000  # real time: IMU send instants kept for the jitter statistics (200 Hz)
 COMPANION_COMPONENTS = {"estimator": ESTIMATOR_COMPONENT_ID, "bridge": BRIDGE_COMPONENT_ID}
 # what the vehicle flies on must be stamped near its own time (the estimate trails it by latency)
 INPUT_WINDOW = ClockWindow(max_back_us=5_000_000, max_forward_us=100_000)
@@ -250,6 +251,8 @@ class VehicleNode:
                     self.poll()
                     time.sleep(min((target - now) / 1e9 - 0.001, 0.001))
             self.imu_send_ns.append(time.perf_counter_ns())
+            if len(self.imu_send_ns) > MAX_JITTER_SAMPLES:  # bounded: the latest half-hour is kept
+                del self.imu_send_ns[: MAX_JITTER_SAMPLES // 2]
 
         return pace
 
@@ -305,6 +308,7 @@ class VehicleNode:
                 print(json.dumps({"t_s": out.t_us / 1e6, "goal_distance_m": row.goal_distance_m}), flush=True)
             if time.monotonic() >= next_stats:
                 next_stats = time.monotonic() + cfg.stats_period_s
+                self.recorder.flush()  # the record so far is on disk: a kill -9 loses <= 1 s of it
                 self.write_stats({"outcome": "running", "t_s": self.t_us / 1e6})
         return {"outcome": outcome, "t_s": self.t_us / 1e6, "wall_s": (time.perf_counter_ns() - wall0) / 1e9}
 

@@ -42,9 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gcs_tools.outdir import ensure_out_dir
+    from gcs_tools.outdir import check_out_dir
 
-    ensure_out_dir(args.out)  # before the replay, not after it
+    check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
     home = core.parse_home(args.home) if args.home else None

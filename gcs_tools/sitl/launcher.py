@@ -169,7 +169,8 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
     assert len(ports) == 3
     check_ports_free(ports)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
-    for stale in ("vehicle.json", "estimator.json", "bridge.json", "vehicle_series.npz", "run.tlog"):
+    for stale in ("vehicle.json", "estimator.json", "bridge.json", "vehicle_series.npz", "vehicle_series.f64",
+                  "run.tlog"):
         (opts.out_dir / stale).unlink(missing_ok=True)
     prepare_signing(opts)
     supervisor = Supervisor(opts.out_dir / "logs")

@@ -11,15 +11,20 @@ import numpy as np
 from companion.planning import Route
 from gcs_tools.fly.core import FlightResult, error_stats
 from gcs_tools.sitl.launcher import SitlOptions, SitlRun
+from simvehicle.recording import SPOOL_NAME, series_from_spool
 
 
 def load_series(out_dir: Path, route: Route) -> dict[str, np.ndarray]:
-    """The vehicle's 20 Hz record, with the reference taken from the route exactly as ``fly`` does."""
+    """The vehicle's 20 Hz record, with the reference taken from the route exactly as ``fly`` does
+    (from the raw spool file when the vehicle was killed before it could write the ``.npz``)."""
     try:
         with np.load(out_dir / "vehicle_series.npz") as data:
             series = {k: data[k] for k in data.files}
     except (OSError, ValueError):
-        return {}
+        try:
+            series = series_from_spool(out_dir / SPOOL_NAME)
+        except OSError:
+            return {}
     if series["t_s"].size:
         series["p_ref_ned_m"] = route.reference(series["t_s"])[0]
         series["track_error_m"] = np.linalg.norm(series["p_true_ned_m"] - series["p_ref_ned_m"], axis=1)
