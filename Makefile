@@ -25,8 +25,9 @@ demo: $(STAMP)
 	$(BIN)/beliefnav sitl --mission $(MISSION) --profile $(PROFILE) --method $(METHOD) --out $(OUT)
 
 # Headless Chromium for the dashboard's browser test (Debian package; needs root or sudo).
+# Without root: set BELIEFNAV_CHROMIUM to any Chromium binary (see README) and this step is skipped.
 browser:
-	@command -v chromium >/dev/null 2>&1 || { \
+	@[ -n "$$BELIEFNAV_CHROMIUM" ] || command -v chromium >/dev/null 2>&1 || { \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; }
 
@@ -37,9 +38,9 @@ bench: $(STAMP)
 	$(BIN)/beliefnav bench all --json
 
 # README results section: the 10-profile campaign (seed 0, with figures) and the 50-seed run
-# (bootstrap CIs); both write docs/results/<run>/ and splice their table into README.md.
+# (bootstrap CIs); both write docs/results/<run>/ and splice their table into docs/results.md.
 EVAL_METHODS ?= naive,adaptive,first-order,second-order,vbakf
-EVAL = $(BIN)/beliefnav evaluate --missions 10 --methods $(EVAL_METHODS) --workers 2 --readme README.md --no-progress
+EVAL = $(BIN)/beliefnav evaluate --missions 10 --methods $(EVAL_METHODS) --workers 2 --readme docs/results.md --no-progress
 results: $(STAMP)
 	$(EVAL) --seeds 0 --out docs/results/profiles10
 	$(EVAL) --seeds 0-49 --out docs/results/seeds50

@@ -8,15 +8,16 @@ linearly interpolated to the reference's time, once the estimates have passed th
 Memory: a short window of recent estimates (``window_us``) plus three float32 per matched
 reference (exact medians need the values; 0.8 MB for 18 hours of 5 Hz fixes).
 :func:`error_statistics` reduces the error vectors to the summary block
-``{n, alignment, offset_ned_m, error_horizontal_m, error_3d_m}`` (each ``median, p95, max,
-rmse, iqr, n``).
+``{n, alignment, offset_ned_m, mean_error_ned_m, error_horizontal_m, error_3d_m}`` (each
+``median, p95, max, rmse, iqr, n``).
 
 Alignments (how the two origins are made to agree before the norms are taken):
 
 - ``geodetic``: none fitted; both series are in the same frame because the reference's own
   origin (or its geodetic position) was converted into it exactly.
 - ``mean_offset``: the mean error vector is removed (translation-only least squares), for a
-  reference about an origin the log does not state.
+  reference about an origin the log does not state; ``median_offset``: the per-axis median
+  (robust to outliers).
 - ``vertical_mean_offset``: geodetic horizontally, the mean vertical error removed (a reference
   whose altitude datum differs from the fixes', e.g. height above take-off against MSL).
 """
@@ -31,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-ALIGNMENTS = ("geodetic", "mean_offset", "vertical_mean_offset")
+ALIGNMENTS = ("geodetic", "mean_offset", "median_offset", "vertical_mean_offset")
 DEFAULT_WINDOW_US = 10_000_000
 
 
@@ -52,7 +53,7 @@ def error_statistics(err_ned_m: np.ndarray, alignment: str = "geodetic") -> dict
     err = np.asarray(err_ned_m, dtype=float).reshape(-1, 3)
     offset = np.zeros(3)
     if err.shape[0] and alignment != "geodetic":
-        offset = err.mean(axis=0)
+        offset = np.median(err, axis=0) if alignment == "median_offset" else err.mean(axis=0)
         if alignment == "vertical_mean_offset":
             offset[:2] = 0.0
     aligned = err - offset
@@ -60,6 +61,7 @@ def error_statistics(err_ned_m: np.ndarray, alignment: str = "geodetic") -> dict
         "n": int(err.shape[0]),
         "alignment": alignment,
         "offset_ned_m": [float(v) for v in offset],
+        "mean_error_ned_m": [float(v) for v in aligned.mean(axis=0)] if err.shape[0] else [math.nan] * 3,
         "error_horizontal_m": _stats(np.linalg.norm(aligned[:, :2], axis=1)),
         "error_3d_m": _stats(np.linalg.norm(aligned, axis=1)),
     }
@@ -176,3 +178,21 @@ class PositionErrors:
         out = error_statistics(self.errors_ned_m(), alignment)
         out["unmatched"] = self.unmatched + len(self._pending)
         return out
+
+
+def compare_series(
+    t_us: np.ndarray, p_ned_m: np.ndarray, ref_t_us: np.ndarray, ref_ned_m: np.ndarray,
+    alignment: str = "geodetic", max_gap_us: int | None = None,
+) -> dict[str, Any]:
+    """Batch form of :class:`PositionErrors`: estimates (N,) / (N, 3) in time order, references
+    (K,) / (K, 3) at any times; the :func:`error_statistics` block plus ``unmatched``."""
+    m = PositionErrors(window_us=2**62, max_gap_us=max_gap_us)
+    for t, p in zip(np.asarray(t_us).tolist(), np.asarray(p_ned_m, dtype=float).reshape(-1, 3), strict=True):
+        m.add_estimate(int(t), p)
+    for t, r in zip(np.asarray(ref_t_us).tolist(), np.asarray(ref_ned_m, dtype=float).reshape(-1, 3),
+                    strict=True):
+        if np.isfinite(r).all():
+            m.add_reference(int(t), r)
+        else:
+            m.unmatched += 1
+    return m.statistics(alignment)

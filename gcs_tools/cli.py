@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import sys
 from collections.abc import Sequence
 
@@ -24,14 +25,24 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "plot": ("gcs_tools.recorder.plot_cli", "redraw a run's figures from a recording"),
     "top": ("gcs_tools.top", "terminal view of live telemetry"),
     "evaluate": ("gcs_tools.evaluate.cli", "evaluation campaign across missions, methods, seeds"),
+    "export": ("gcs_tools.export.cli", "a run, tlog or recording as MCAP (Foxglove) or CSV"),
     "bench": ("gcs_tools.bench.cli", "benchmarks that print JSON"),
 }
 
 
+def version() -> str:
+    """The installed distribution's version ("unknown" when run from a tree that is not installed)."""
+    try:
+        return importlib.metadata.version("beliefnav")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser(names: Sequence[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="beliefnav", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"beliefnav {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in names or COMMANDS:
+    for name in COMMANDS if names is None else names:
         module_name, help_text = COMMANDS[name]
         p = sub.add_parser(name, help=help_text, description=help_text)
         try:
@@ -50,6 +61,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     # Build only the chosen subcommand's parser when it is named, so others' imports are skipped.
     chosen = [argv[0]] if argv and argv[0] in COMMANDS else None
+    if argv[:1] == ["--version"]:
+        chosen = []  # no subcommand module needs importing to print the version
     parser = build_parser(chosen)
     args = parser.parse_args(argv)
     if getattr(args, "_missing", None):

@@ -11,10 +11,11 @@ from typing import Any
 
 from rich.console import Group
 from rich.live import Live
+from rich.markup import escape  # "[s]", "[m]" in headers are units, not rich markup
 from rich.table import Table
 
 from companion.telemetry import pubsub as telemetry
-from gcs_tools.dashboard.state import LiveState
+from gcs_tools.dashboard.state import STALE_S, LiveState
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,19 +29,27 @@ def _f(x: Any, fmt: str) -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
 
 
+def _state(s: dict[str, Any]) -> str:
+    """live / stale N s / ended (at the goal), as the dashboard's badge."""
+    age = s["age_s"]
+    if age < STALE_S:
+        return "[green]live[/]"
+    return f"ended {age:.0f} s" if s["at_goal"] else f"[yellow]stale {age:.0f} s[/]"
+
+
 def render(state: LiveState) -> Group:
     """One table of headline numbers per vehicle, one of counters, one line of malformed payloads."""
     summary = state.summary()
     main = Table(title="beliefnav vehicles", expand=True)
-    for col in ("vehicle", "t [s]", "method", "β", "NIS", "est. error [m]", "GNSS latency [ms]",
-                "clearance [m]", "messages"):
-        main.add_column(col, justify="right" if col != "method" else "left")
+    for col in ("vehicle", "state", "t [s]", "method", "β [0–1]", "NIS [χ²]", "est. error [m]",
+                "GNSS latency [ms]", "clearance [m]", "messages [count]"):
+        main.add_column(escape(col), justify="left" if col in ("method", "state") else "right")
     counters = Table(title="counters", expand=True)
-    for col in ("vehicle", "process", "counter", "value"):
-        counters.add_column(col, justify="right" if col == "value" else "left")
+    for col in ("vehicle", "process", "counter", "value [count]"):
+        counters.add_column(escape(col), justify="right" if col.startswith("value") else "left")
     for name, s in sorted(summary.items()):
         lat = s.get("gnss_latency_s")
-        main.add_row(name, _f(s.get("t_s"), ".2f"), s.get("method", "–"), _f(s.get("beta"), ".3f"),
+        main.add_row(name, _state(s), _f(s.get("t_s"), ".2f"), s.get("method", "–"), _f(s.get("beta"), ".3f"),
                      _f(s.get("nis"), ".2f"), _f(s.get("est_error_m"), ".2f"),
                      _f(None if lat is None else lat * 1e3, ".0f"), _f(s.get("clearance_m"), ".1f"),
                      str(sum(s["messages"].values())))

@@ -10,6 +10,7 @@ from pathlib import Path
 def _parser() -> argparse.ArgumentParser:
     from companion.mavlink.udp_link import add_link_arguments
     from companion.telemetry import pubsub as telemetry
+    from simvehicle.groundlink import add_ground_arguments
 
     p = argparse.ArgumentParser(prog="python -m simvehicle", description=__doc__.splitlines()[0])
     p.add_argument("--mission", default="default", help="mission name or YAML path")
@@ -25,6 +26,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--goal-speed-m-s", type=float, default=0.5, help="arrival: and this slow")
     p.add_argument("--arrive-after-s", type=float, default=0.0, help="arrival: not before this time")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
+    add_ground_arguments(p)
     add_link_arguments(p)
     telemetry.add_arguments(p, publisher=True)
     return p
@@ -39,6 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     from companion.runtime import exit_on_sigterm
     from companion.telemetry.pubsub import publisher_from_args
     from simvehicle import SimVehicle
+    from simvehicle.groundlink import ground_out_targets
     from simvehicle.node import VehicleNode, VehicleNodeConfig
     from simvehicle.recording import SPOOL_NAME, FlightRecorder
 
@@ -55,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         config = VehicleNodeConfig(
             estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,
             out_dir=args.out, max_duration_s=args.max_duration_s, realtime=args.realtime,
+            ground_out=ground_out_targets(args),
         )
         node = VehicleNode(sim, mission, recorder, config, fields, rng, publisher_from_args(args, "vehicle"))
         result = node.fly()

@@ -9,11 +9,14 @@ waits for the companions' answers (:class:`StepBarrier`); in real time each IMU 
 at its own wall-clock instant and nothing waits.
 
 Three UDP ports: one per companion (estimator, bridge; each learns its peer from the first
-valid frame, so a restarted companion is picked up again) and a ground port for MAVProxy-like
-clients, which receive the low-rate telemetry and whose requests are tolerated and counted.
-Every frame sent to or received from a companion goes to ``run.tlog``, stamped with simulated
-time in lockstep (``epoch + t``; SYSTEM_TIME pairs that clock with boot time) and with the wall
-clock in real time.
+valid frame, so a restarted companion is picked up again) and a ground port where the vehicle
+looks like a small autopilot to QGroundControl, MAVProxy and MAVSDK (:mod:`simvehicle.groundlink`:
+telemetry, parameters, commands, and every companion frame forwarded).
+Every frame sent to or received from a companion goes to ``run.tlog`` once (the frames sent to
+both companions are written for the estimator link only), stamped with ``epoch + t``: ``epoch``
+is the wall clock when the vehicle started, ``t`` the simulated time in lockstep and the
+monotonic time elapsed in real time, so stamps never go backwards and a log viewer shows the
+real date (SYSTEM_TIME pairs that clock with boot time).
 
 The vehicle's own clock is the reference for what it flies on: an ODOMETRY, setpoint or belief
 stamped outside a window around it (:mod:`companion.domain.clock_guard`) is ignored and raises
@@ -52,14 +55,10 @@ from companion.telemetry.codec import GnssReport
 from companion.telemetry.pubsub import DeferredPublisher, TelemetryPublisher
 from simvehicle import SimVehicle
 from simvehicle.barrier import StepBarrier
+from simvehicle.groundlink import GroundConfig, ground_link_for, vehicle_status
 from simvehicle.recording import FlightRecorder
 
 AUTOPILOT_COMPONENT_ID = 1
-LOCKSTEP_EPOCH_UNIX_US = 1_735_689_600_000_000  # 2025-01-01T00:00:00Z: t = 0 of every lockstep run
-GROUND_FORWARD_TYPES = frozenset(
-    {"HEARTBEAT", "GPS_RAW_INT", "SYSTEM_TIME", "ODOMETRY", "ESTIMATOR_STATUS", "NAMED_VALUE_FLOAT",
-     "SET_POSITION_TARGET_LOCAL_NED"}
-)
 COMPANIONS = ("estimator", "bridge")
 MAX_JITTER_SAMPLES = 400_000  # real time: IMU send instants kept for the jitter statistics (200 Hz)
 COMPANION_COMPONENTS = {"estimator": ESTIMATOR_COMPONENT_ID, "bridge": BRIDGE_COMPONENT_ID}
@@ -75,6 +74,7 @@ class VehicleNodeConfig:
     out_dir: Path
     max_duration_s: float
     realtime: bool = False
+    ground_out: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550),)  # udpin ground stations
     lockstep: LockstepConfig = field(default_factory=LockstepConfig)
     startup_timeout_s: float = 60.0  # wall time to wait for both companions' first HEARTBEAT
     sim_state_period_us: int = 20_000  # SIM_STATE, 50 Hz
@@ -91,6 +91,7 @@ class _Inbox:
     setpoint: Setpoint | None = None
     beta: float = math.nan
     nis: float = math.nan
+    bias_ned_m: np.ndarray | None = None  # DEBUG_VECT GNSS_BIAS: the estimated GNSS bias [m]
 
 
 class VehicleNode:
@@ -112,7 +113,8 @@ class VehicleNode:
         self.inbox = _Inbox()
         self.counters: dict[str, int] = {}
         self.t_us = 0
-        self.epoch_us = int(time.time() * 1e6) if config.realtime else LOCKSTEP_EPOCH_UNIX_US
+        self.epoch_us = int(time.time() * 1e6)  # wall clock at start: stamp = epoch + elapsed
+        self._wall0_ns = time.perf_counter_ns()
         config.out_dir.mkdir(parents=True, exist_ok=True)
         self.tlog = TlogWriter(config.out_dir / "run.tlog")
         tee = self._tee
@@ -121,12 +123,12 @@ class VehicleNode:
         self.links = {
             name: UdpLink(LinkConfig(bind_port=port, accept_system_ids=accept, link_id=link_id,
                                      accept_component_ids=frozenset({COMPANION_COMPONENTS[name]}), **base),
-                          rng, tee)
-            for name, port, link_id in (("estimator", config.estimator_port, 10),
-                                        ("bridge", config.bridge_port, 11))
+                          rng, link_tee)
+            for name, port, link_id, link_tee in (("estimator", config.estimator_port, 10, tee),
+                                                  ("bridge", config.bridge_port, 11, self._tee_received))
         }
-        ground_fields = {k: v for k, v in base.items() if not k.startswith("drop_")}
-        self.ground = UdpLink(LinkConfig(bind_port=config.ground_port, link_id=12, **ground_fields))
+        self.ground = ground_link_for(GroundConfig(config.ground_port, config.ground_out), mission, sim,
+                                      {**base, "link_id": 12}, self._boot_ns)
         self.barrier = StepBarrier({n: self.links[n] for n in COMPANIONS}, config.lockstep)
         self.recorder = recorder
         self.imu_send_ns: list[int] = []
@@ -134,11 +136,20 @@ class VehicleNode:
         self.collisions = 0  # control periods that end in contact (counted on entry)
 
     # -- clocks and the tlog ---------------------------------------------------------------
+    def _boot_ns(self) -> int:
+        """Boot time now: simulated in lockstep, elapsed monotonic wall time in real time."""
+        return time.perf_counter_ns() - self._wall0_ns if self.config.realtime else self.t_us * 1000
+
     def _stamp_us(self) -> int:
-        return int(time.time() * 1e6) if self.config.realtime else self.epoch_us + self.t_us
+        return self.epoch_us + self._boot_ns() // 1000
 
     def _tee(self, frame: bytes, sent: bool) -> None:
         self.tlog.write_frame(self._stamp_us(), frame)
+
+    def _tee_received(self, frame: bytes, sent: bool) -> None:
+        """The bridge link sends only copies of what the estimator link sends: tee what it receives."""
+        if not sent:
+            self._tee(frame, sent)
 
     def _count(self, name: str) -> None:
         self.counters[name] = self.counters.get(name, 0) + 1
@@ -165,8 +176,10 @@ class VehicleNode:
     def _on_message(self, source: str, msg: Any) -> None:
         kind = msg.get_type()
         if source == "ground":
-            self._on_ground(msg, kind)
+            self._count(f"ground_{kind}")
+            self.ground.handle(msg)
             return
+        self.ground.forward(bytes(msg.get_msgbuf()))  # all of it: the ground sees no false loss
         try:
             if kind == "ODOMETRY":
                 estimate = codec.decode_odometry(msg)
@@ -194,23 +207,16 @@ class VehicleNode:
                     if not value.value >= 0.0:
                         raise codec.CodecError("out_of_range", f"{value.name} {value.value}")
                     self.inbox.nis = value.value
+            elif kind == "DEBUG_VECT":
+                self.inbox.bias_ned_m = codec.decode_bias(msg)[1]
             elif kind not in ("HEARTBEAT", "TIMESYNC", "ESTIMATOR_STATUS"):
                 self._count(f"ignored_{kind}")
         except codec.CodecError as exc:
             self._count(f"rejected_{kind}_{exc.reason}")
-            return
-        if kind in GROUND_FORWARD_TYPES:
-            self.ground.send_frame(bytes(msg.get_msgbuf()))
-
-    def _on_ground(self, msg: Any, kind: str) -> None:
-        """Tolerate a ground station: acknowledge commands as unsupported, count the rest."""
-        self._count(f"ground_{kind}")
-        if kind == "COMMAND_LONG":
-            self.ground.send(self.ground.mav.command_ack_encode(msg.command, 3))  # MAV_RESULT_UNSUPPORTED
 
     def poll(self) -> None:
         """Handle whatever is waiting on every link (never blocks)."""
-        for name, link in (*self.links.items(), ("ground", self.ground)):
+        for name, link in (*self.links.items(), ("ground", self.ground.link)):
             for msg in link.recv_all():
                 self.on_message(name, msg)
 
@@ -233,15 +239,20 @@ class VehicleNode:
                 self._topics.publish("truth", truth)
             while fixes and fixes[0][0] <= imu.t_us:
                 fix = fixes.pop(0)[1]
-                self._send(codec.encode_gnss(fix), ground=True)
+                if self.ground.gps_disabled:  # SIM_GPS_DISABLE set from the ground: an outage
+                    self._count("gnss_withheld")
+                    continue
+                self._send(codec.encode_gnss(fix))
+                self.ground.send_gnss(fix, imu.t_us)
                 self._topics.publish("gnss", GnssReport(imu.t_us, fix))
                 self.gnss_sent += 1
         if out.t_us % self.config.clock_period_us == 0:
             clock = codec.encode_system_time(self._stamp_us(), out.t_us)
-            beat = codec.encode_heartbeat("vehicle")
-            for msg in (clock, beat):
-                self._send(msg, ground=True)
-                self.links["bridge"].send(msg)
+            self._send(clock, ground=True)
+            self.links["bridge"].send(clock)
+            beat = self.ground.heartbeat()  # the ground link sends its own on its schedule
+            self._send(beat)
+            self.links["bridge"].send(beat)
 
     def _pace(self, wall0_ns: int) -> Callable[[int], None]:
         def pace(t_us: int) -> None:
@@ -269,7 +280,7 @@ class VehicleNode:
             for name in COMPANIONS:
                 if self.links[name].recv(timeout_s=0.05):
                     seen.add(name)
-            for msg in self.ground.recv_all():
+            for msg in self.ground.link.recv_all():
                 self.on_message("ground", msg)
 
     def fly(self) -> dict[str, Any]:
@@ -277,6 +288,9 @@ class VehicleNode:
         self.wait_for_companions()
         max_t_us = round(cfg.max_duration_s * 1e6)
         wall0 = time.perf_counter_ns()
+        if cfg.realtime:  # boot time 0 is now; the stamp clock moves on from the same monotonic base
+            self.epoch_us += (wall0 - self._wall0_ns) // 1000
+        self._wall0_ns = wall0
         pace = self._pace(wall0) if cfg.realtime else None
         next_progress = next_stats = 0.0
         outcome = "timeout"
@@ -294,14 +308,17 @@ class VehicleNode:
                 self.poll()
                 self._topics.drain()
             else:
-                self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground}, self._topics.drain)
+                self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground.link}, self._topics.drain)
             row = self.recorder.record(out, self.inbox.estimate, self.inbox.setpoint, self.inbox.beta,
-                                       self.inbox.nis)
+                                       self.inbox.nis, self.inbox.bias_ned_m)
+            self.ground.tick(vehicle_status(self.sim, out, self.ground.gnss_flowing(out.t_us)))
             if out.collided and not was_collided:
                 self.collisions += 1
+                self.ground.collision(out.t_us)
             was_collided = out.collided
             if self.recorder.reached_goal():
                 outcome = "reached_goal"
+                self.ground.goal_reached(out.t_us)
                 break
             if time.monotonic() >= next_progress:
                 next_progress = time.monotonic() + cfg.progress_period_s
@@ -322,7 +339,8 @@ class VehicleNode:
         jitter = np.abs(periods_ms - period_ms)
         return {
             "links": {name: link.counters.as_dict() for name, link in self.links.items()},
-            "ground": self.ground.counters.as_dict(),
+            "ground": self.ground.link.counters.as_dict(),
+            "ground_requests": {**self.ground.counters, **self.ground.params.counters},
             "node": dict(self.counters),
             "gnss_sent": self.gnss_sent,
             "collisions": self.collisions,
@@ -339,6 +357,7 @@ class VehicleNode:
         """Flush what was recorded (also on SIGTERM): tlog, time series, statistics."""
         self.tlog.close()
         self.recorder.save(self.config.out_dir / "vehicle_series.npz")
-        for link in (*self.links.values(), self.ground):
+        for link in self.links.values():
             link.close()
+        self.ground.close()
         self.telemetry.close()

@@ -1,8 +1,8 @@
 """Per-control-step record of a flight in the vehicle process (truth + what it received).
 
 The series keys are those of ``gcs_tools.fly`` (docs/ARCHITECTURE.md); the launcher turns
-them into the same summary and figures. The estimate's bias never travels on the wire, so
-``b_est_ned_m`` is NaN in SITL.
+them into the same summary and figures. The estimated bias arrives at 5 Hz (DEBUG_VECT
+``GNSS_BIAS``), so ``b_est_ned_m`` holds the latest received (NaN before the first).
 
 Rows are plain float64 (``ROW_LAYOUT``, 176 bytes per control step). With a ``spool_path`` they
 are appended to that file by :meth:`FlightRecorder.flush` (the vehicle calls it every second) and
@@ -46,7 +46,8 @@ class FlightRecorder:
             spool_path.write_bytes(b"")
 
     def record(
-        self, out: Any, estimate: NavEstimate | None, setpoint: Setpoint | None, beta: float, nis: float
+        self, out: Any, estimate: NavEstimate | None, setpoint: Setpoint | None, beta: float, nis: float,
+        bias_ned_m: np.ndarray | None = None,
     ) -> Row:
         truth = out.truth[-1]
         p_true = truth.p_ned_m
@@ -58,7 +59,7 @@ class FlightRecorder:
             "p_est_ned_m": p_est,
             "p_ref_ned_m": p_ref,
             "b_true_ned_m": truth.gnss_bias_ned_m,
-            "b_est_ned_m": np.array(_NAN3),
+            "b_est_ned_m": np.array(_NAN3) if bias_ned_m is None else bias_ned_m,
             "beta": beta,
             "nis": nis,
             "latency_s": truth.gnss_latency_s,

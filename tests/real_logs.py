@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
-from companion.domain.samples import GnssFix, NavEstimate
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.estimator import EstimatorConfig, Navigator
 from companion.mavlink import codec
 from companion.mavlink.tlog import read_tlog
@@ -31,6 +31,12 @@ class Log:
 
     def fix_indices(self) -> list[int]:
         return [i for i, s in enumerate(self.samples) if type(s) is GnssFix]
+
+    def without_gnss_after(self, t_s: float) -> Log:
+        """The log with every fix valid after ``t_s`` s (log time) removed: GNSS ends there."""
+        t_first = _t_us(self.samples[0])
+        return Log(tuple(s for s in self.samples
+                         if type(s) is not GnssFix or s.t_validity_us - t_first <= t_s * 1e6), self.frame)
 
     def window(self, t0_s: float, t1_s: float) -> Log:
         """Samples whose time lies in [t0, t1) s after the first sample (same home)."""
@@ -49,6 +55,17 @@ def load_quad106() -> Log:
         s = codec.decode_sample(msg)
         if s is not None:
             samples.append(s)
+    return _with_home(samples)
+
+
+def load_log(path: Path) -> Log:
+    """Any log ``beliefnav replay`` reads (.ulg, .bin, tlog): its IMU, attitude and GNSS samples."""
+    from gcs_tools.replay.logs import open_log
+
+    return _with_home([e for e in open_log(path) if type(e) in (ImuSample, AttitudeSample, GnssFix)])
+
+
+def _with_home(samples: list) -> Log:
     first = next(s for s in samples if type(s) is GnssFix and s.fix_type >= 3)
     return Log(tuple(samples), LocalNedFrame(first.lat_deg, first.lon_deg, first.alt_m))
 
@@ -82,20 +99,30 @@ class Run:
     beta: np.ndarray
     glitch: np.ndarray
     pos_valid: np.ndarray
+    var_p_m2: np.ndarray  # (n, 3) position variances
+    fix_t_s: np.ndarray  # validity times of the fixes pushed, s after the log's first sample
     counters: dict
 
 
-def run(log: Log, method: str, cfg: EstimatorConfig | None = None) -> Run:
-    """Replay ``log``; one row per GNSS fix arrival (the estimate right after it)."""
+def run(log: Log, method: str, cfg: EstimatorConfig | None = None, every_imu: int = 0) -> Run:
+    """Replay ``log``; one row per GNSS fix arrival (the estimate right after it), or with
+    ``every_imu`` one row per ``every_imu``-th IMU sample."""
     nav = Navigator(cfg or EstimatorConfig(), method, log.frame)
     rows: list[NavEstimate] = []
+    k = 0
     for s in log.samples:
         nav.push(s)
-        if type(s) is GnssFix:
+        if every_imu and type(s) is ImuSample:
+            k += 1
+            if k % every_imu:
+                continue
+        if (type(s) is ImuSample) if every_imu else (type(s) is GnssFix):
             est = nav.estimate()
             if est is not None:
                 rows.append(est)
     t_first = _t_us(log.samples[0])
+    fix_t_s = np.array([(s.t_validity_us - t_first) * 1e-6 for s in log.samples if type(s) is GnssFix])
     return Run(np.array([(e.t_us - t_first) * 1e-6 for e in rows]), np.array([e.p_ned_m for e in rows]),
                np.array([e.beta for e in rows]), np.array([e.gnss_glitch for e in rows]),
-               np.array([e.pos_valid for e in rows]), nav.counters())
+               np.array([e.pos_valid for e in rows]), np.array([e.cov_diag[0:3] for e in rows]), fix_t_s,
+               nav.counters())

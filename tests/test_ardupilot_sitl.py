@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 
 import pytest
 from ardupilot_helpers import require_ardupilot
@@ -44,7 +45,11 @@ def test_sitl_starts_on_a_free_instance_with_boot_params_and_stops(tmp_path):
             hb = conn.wait_heartbeat(timeout=20)
             assert hb is not None and hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
             conn.mav.param_request_read_send(conn.target_system, conn.target_component, b"GPS1_TYPE", -1)
-            value = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=10)
+            deadline = time.monotonic() + 10
+            value = None
+            while time.monotonic() < deadline and (value is None or value.param_id != "GPS1_TYPE"):
+                # (ArduPilot also announces parameters it changes itself, e.g. BARO1_GND_PRESS)
+                value = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=1)
             assert value is not None and value.param_id == "GPS1_TYPE" and value.param_value == 14.0
         finally:
             conn.close()

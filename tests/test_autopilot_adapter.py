@@ -16,7 +16,7 @@ from companion.autopilot.streams import StreamRates, data_stream_requests, inter
 from companion.autopilot.timesync import Timesync
 from companion.autopilot.translate import TranslateConfig, Translator
 from companion.domain.geodesy import LocalNedFrame
-from companion.domain.samples import GnssFix, ImuSample, NavEstimate
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
 from companion.mavlink.codec import euler_to_quaternion
 
@@ -145,17 +145,26 @@ def test_gps_input_is_the_filter_position_with_covariance_accuracy():
     assert msg.speed_accuracy == pytest.approx(math.sqrt(0.04))
     assert (msg.vn, msg.ve, msg.vd) == (1.0, 2.0, -0.5) and msg.ignore_flags == 0
     assert (msg.time_week, msg.time_week_ms) == (2288, 252_818_000)  # 2023-11-14 22:13:20 UTC + 18 leap s
+    from dataclasses import replace
+
+    stale = feeds.gps_input(replace(e, pos_valid=False), HOME, feeds.FeedConfig())
+    assert stale.fix_type == 0 and stale.horiz_accuracy == 0.0 and stale.satellites_visible == 0  # no fix
 
 
 def test_odometry_in_the_frames_ardupilot_fuses_velocity_in_body_frd():
     q = euler_to_quaternion(0.0, 0.0, math.pi / 2)  # nose east
-    msg = feeds.odometry(_estimate((1.0, 2.0, -3.0), v=(0.0, 4.0, 0.0)), q, np.array((0.0, 0.0, 0.1)))
+    config = feeds.FeedConfig()
+    msg = feeds.odometry(_estimate((1.0, 2.0, -3.0), v=(0.0, 4.0, 0.0)), q, np.array((0.0, 0.0, 0.1)), config)
     assert (msg.frame_id, msg.child_frame_id) == (mavlink.MAV_FRAME_LOCAL_FRD, mavlink.MAV_FRAME_BODY_FRD)
     assert msg.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_VIO and msg.quality == 90
     np.testing.assert_allclose((msg.vx, msg.vy, msg.vz), (4.0, 0.0, 0.0), atol=1e-6)  # flying forward
     assert (msg.x, msg.y, msg.z) == (1.0, 2.0, -3.0) and msg.pose_covariance[0] == pytest.approx(0.04)
-    vis = feeds.vision_position(_estimate((1.0, 2.0, -3.0)), q)
+    assert msg.velocity_covariance[11] == pytest.approx(0.02)
+    assert msg.pose_covariance[15] == pytest.approx(config.attitude_sigma_rad**2)
+    vis = feeds.vision_position(_estimate((1.0, 2.0, -3.0)), q, config)
     assert vis.yaw == pytest.approx(math.pi / 2) and vis.covariance[6] == pytest.approx(0.05)
+    for cov in (msg.pose_covariance, msg.velocity_covariance, vis.covariance):  # ArduPilot: NaN = error
+        assert all(math.isfinite(c) for c in cov) and sum(c != 0 for c in cov) == 6
 
 
 def test_compare_known_offset_and_fitted_translation():
@@ -171,3 +180,206 @@ def test_compare_known_offset_and_fitted_translation():
     np.testing.assert_allclose(fitted["fitted_translation_ned_m"], (-0.3, -0.4, -1.2))
     gap_t = np.concatenate((t[:10], t[-10:]))  # a 9 s hole: nothing compared inside it
     assert compare.compare(gap_t, p[np.r_[:10, -10:0]], ref_t, ref)["error_3d_m"]["count"] < 10
+
+
+class _FakeConn:
+    """Stands in for MavConnection: records what the node sends."""
+
+    def __init__(self) -> None:
+        self.sent: list = []
+        self.counters: dict = {}
+        self.source = (0, 0)
+
+    def send(self, msg) -> None:
+        self.sent.append(msg)
+
+    def set_source(self, system_id: int, component_id: int) -> None:
+        self.source = (system_id, component_id)
+
+    def kinds(self) -> list[str]:
+        kinds = [m.get_type() for m in self.sent]
+        self.sent.clear()
+        return kinds
+
+
+def test_node_streams_state_machine_fallback_and_reask(tmp_path):
+    from companion.autopilot.node import AutopilotCompanion, CompanionConfig
+
+    conn = _FakeConn()
+    node = AutopilotCompanion(CompanionConfig(master="udpin::14550", out_dir=tmp_path), conn)  # type: ignore[arg-type]
+    node.tick(0.0)
+    assert conn.kinds() == []  # nothing before discovery
+    hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
+    node.handle(_from(hb, 3, 1), 0.0)
+    assert conn.source == (3, 197)
+    node.tick(0.0)
+    first = conn.kinds()
+    assert first.count("COMMAND_LONG") == 8 and "HEARTBEAT" in first and "TIMESYNC" in first
+    node.tick(2.0)
+    assert "REQUEST_DATA_STREAM" not in conn.kinds()
+    node.tick(3.5)  # no IMU 3 s after asking: the legacy groups too
+    assert conn.kinds().count("REQUEST_DATA_STREAM") == 4
+    node.tick(4.0)
+    assert "REQUEST_DATA_STREAM" not in conn.kinds()  # once
+    node.handle(_from(hb, 3, 1), 6.4)
+    imu = mavlink.MAVLink_highres_imu_message(1_000_000, 0, 0, -9.8, *[0] * 10, 0b111111, 0)
+    node.handle(_from(imu, 3, 1), 6.5)  # no fix yet: counted, the stream is alive all the same
+    node.tick(6.6)
+    assert "COMMAND_LONG" in conn.kinds()  # still no IMU used after 3 s of silence: asked again
+    assert node.counters["samples_before_first_fix"] == 1 and node.counters["stream_requests"] == 2
+
+
+def test_sitl_estimator_answers_timesync_per_spec_unless_step_markers(tmp_path):
+    """The estimator of ``beliefnav sitl`` treats a TIMESYNC request as a lockstep step marker only
+    with ``--step-markers``; otherwise (a real autopilot, MAVSDK, ...) it just answers it."""
+    from companion.mavlink.lockstep import step_marker
+    from companion.mission import load_mission
+    from companion.nodes.estimator_node import EstimatorNode, make_navigator
+
+    class Link:
+        sent: list = []
+        last_rx_ns = 0
+
+        def send(self, msg) -> None:
+            self.sent.append(msg)
+
+    mission = load_mission("test")
+    navigator, gate = make_navigator(mission, "second-order")
+    level, rest = np.array((1.0, 0.0, 0.0, 0.0)), np.array((0.0, 0.0, -9.80665))
+    home = mission.frame
+    for t_us in range(1_000_000, 1_300_000, 5_000):  # an initialised estimate to answer with
+        navigator.push(AttitudeSample(t_us, level))
+        navigator.push(ImuSample(t_us, rest, np.zeros(3)))
+        if t_us == 1_100_000:
+            navigator.push(GnssFix(t_us, home.home_lat_deg, home.home_lon_deg, home.home_alt_m, 3, 10))
+    assert navigator.estimate() is not None
+    for step_markers in (False, True):
+        link = Link()
+        link.sent = []
+        node = EstimatorNode(link, navigator, gate, step_markers=step_markers)  # type: ignore[arg-type]
+        node.handle(step_marker(1_250_000))
+        kinds = [m.get_type() for m in link.sent]
+        assert kinds == (["ODOMETRY", "TIMESYNC"] if step_markers else ["TIMESYNC"])
+        assert link.sent[-1].ts1 == 1_250_000_000 and link.sent[-1].tc1 > 0
+        assert node.counters == ({"step_markers": 1} if step_markers else {"timesync_answered": 1})
+
+
+def _heartbeat_frame(system_id: int) -> bytes:
+    link = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=1)
+    return bytes(mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 3).pack(link))
+
+
+def test_udpout_connection_both_ways_recorded_in_the_tlog(tmp_path):
+    import socket
+
+    from companion.autopilot.connection import open_connection
+    from companion.mavlink.tlog import read_tlog
+
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", 0))
+    peer.settimeout(5)
+    conn = open_connection(f"udpout:127.0.0.1:{peer.getsockname()[1]}", 1, 197, tmp_path / "run.tlog")
+    try:
+        conn.send(mavlink.MAVLink_timesync_message(0, 5))
+        data, ours = peer.recvfrom(512)
+        peer.sendto(_heartbeat_frame(7) + b"\x00junk", ours)
+        got = []
+        for _ in range(50):
+            got += conn.recv(0.05)
+            if got:
+                break
+    finally:
+        conn.close()
+        assert conn.tlog is not None
+        conn.tlog.close()
+        peer.close()
+    assert data[0] == 0xFD and [m.get_type() for m in got] == ["HEARTBEAT"] and got[0].get_srcSystem() == 7
+    assert [m.get_type() for _, m in read_tlog(tmp_path / "run.tlog")] == ["TIMESYNC", "HEARTBEAT"]
+    assert conn.counters["sent"] == 1 and conn.counters["received"] == 1
+
+
+def test_serial_connection_reads_a_pseudo_terminal(tmp_path):
+    """``serial:DEVICE:BAUD`` through pymavlink/pyserial, on a pty pair (no hardware needed)."""
+    import os
+
+    from companion.autopilot.connection import open_connection
+
+    controller, device = os.openpty()
+    conn = open_connection(f"serial:{os.ttyname(device)}:921600", 1, 197, None)
+    try:
+        os.write(controller, _heartbeat_frame(3))
+        got = []
+        for _ in range(50):
+            got += conn.recv(0.05)
+            if got:
+                break
+        conn.send(mavlink.MAVLink_timesync_message(0, 9))
+        echoed = os.read(controller, 512)
+    finally:
+        conn.close()
+        os.close(controller)
+        os.close(device)
+    assert [m.get_type() for m in got] == ["HEARTBEAT"] and got[0].get_srcSystem() == 3
+    assert echoed[0] == 0xFD and echoed[7:10] == bytes((111, 0, 0))  # TIMESYNC, msgid 111
+
+
+def test_node_counts_implausible_and_broken_messages_and_never_raises(tmp_path):
+    from companion.autopilot.node import AutopilotCompanion, CompanionConfig
+
+    conn = _FakeConn()
+    node = AutopilotCompanion(CompanionConfig(master="udpin::14550", out_dir=tmp_path), conn)  # type: ignore[arg-type]
+    hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
+    node.handle(_from(hb, 3, 1), 0.0)
+    node.handle(_from(mavlink.MAVLink_gps_global_origin_message(950_000_000, 0, 0, 0), 3, 1), 0.1)
+    node.handle(_from(mavlink.MAVLink_local_position_ned_message(1000, math.nan, 0, 0, 0, 0, 0), 3, 1), 0.1)
+
+    class Broken:  # a SYSTEM_TIME without its fields
+        def get_type(self):
+            return "SYSTEM_TIME"
+
+        def get_srcSystem(self):
+            return 3
+
+        def get_srcComponent(self):
+            return 1
+
+    node.handle(Broken(), 0.2)
+    node.handle(Broken(), 0.3)
+    assert node.origins == {} and node.series.local_t_us == []
+    assert node.counters["rejected_gps_global_origin"] == 1
+    assert node.counters["rejected_local_position_ned"] == 1
+    assert node.counters["handler_error_SYSTEM_TIME_AttributeError"] == 2 and len(node.errors) == 1
+
+
+def test_receiver_delay_read_from_the_autopilot_unless_given(tmp_path):
+    from companion.autopilot.node import AutopilotCompanion, CompanionConfig
+
+    def node_for(autopilot: int, delay_us: int | None = None):
+        conn = _FakeConn()
+        config = CompanionConfig(master="udpin::14550", out_dir=tmp_path,
+                                 translate=TranslateConfig(gnss_delay_us=delay_us))
+        node = AutopilotCompanion(config, conn)  # type: ignore[arg-type]
+        node.handle(_from(mavlink.MAVLink_heartbeat_message(2, autopilot, 0, 0, 0, 3), 1, 1), 0.0)
+        asked = [m.param_id for m in conn.sent if m.get_type() == "PARAM_REQUEST_READ"]
+        return node, asked
+
+    def value(name: str, v: float):
+        return _from(mavlink.MAVLink_param_value_message(name.encode(), v, 9, 1000, 65535), 1, 1)
+
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
+    tr = node.translator
+    assert asked == ["GPS1_DELAY_MS"] and tr.gnss_delay_us == 120_000  # its default until read
+    node.handle(value("GPS1_DELAY_MS", 0.0), 0.1)
+    assert tr.gnss_delay_us == 120_000 and "= 0" in tr.gnss_delay_source
+    node.handle(value("GPS1_DELAY_MS", 60.0), 0.2)
+    node.handle(value("GPS2_DELAY_MS", 300.0), 0.2)  # not the receiver we read
+    assert tr.gnss_delay_us == 60_000 and tr.gnss_delay_source == "autopilot parameter GPS1_DELAY_MS"
+    fix = tr.sample(_gps(20_000_000))
+    assert fix is not None and fix.t_validity_us == 19_940_000
+
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_PX4)
+    assert asked == ["EKF2_GPS_DELAY"] and node.translator.gnss_delay_us == 110_000
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, delay_us=0)  # --gps-delay-ms 0
+    assert asked == [] and (node.translator.gnss_delay_us, node.translator.gnss_delay_source) == (0, "option")
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_GENERIC)  # who knows: no delay assumed
+    assert asked == [] and (node.translator.gnss_delay_us, node.translator.gnss_delay_source) == (0, "none")

@@ -18,7 +18,7 @@ from gcs_tools import cli
 
 M = mavutil.mavlink
 LOG = Path(__file__).parent / "data" / "quad106.tlog"
-LOG_SECONDS = 60.0  # of the log streamed
+LOG_SECONDS = 40.0  # of the log streamed
 SPEEDUP = 10.0  # x real time
 
 

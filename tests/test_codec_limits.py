@@ -3,6 +3,7 @@ rejected with a counted reason; encoders refuse what they must never send (known
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -83,7 +84,8 @@ def test_belief_values_a_float32_cannot_hold_are_not_encoded():
     assert _reason(mc.encode_named_value, 2**32 * 1000, mc.NIS_NAME, 1.0) == "bad_stamp"
     msgs = mc.encode_belief(_estimate(nis=2.0))
     assert [mc.decode_named_value(wire(m)).value for m in msgs] == [0.5, 2.0]
-    status = mc.decode_estimator_status(wire(mc.encode_estimator_status(_estimate(nis=1e300), 5.99)))
+    huge = dataclasses.replace(_estimate(nis=1e300), pos_horiz_test_ratio=1e300)
+    status = mc.decode_estimator_status(wire(mc.encode_estimator_status(huge)))
     assert status.pos_horiz_ratio == pytest.approx(mc.FLOAT32_MAX, rel=1e-6)  # clamped, finite
 
 

@@ -18,3 +18,6 @@ def test_top_shows_live_numbers():
     last = out[out.rindex("beliefnav vehicles"):]
     assert "uav7" in last and "second-order" in last and "gnss_rejected_stale" in last
     assert "malformed payloads: 1" in last
+    for header in ("t [s]", "est. error [m]", "GNSS latency [ms]", "clearance [m]", "messages [count]"):
+        assert header in last  # a unit in every column header
+    assert "live" in last or "stale" in last

@@ -50,6 +50,8 @@ def test_predict_equals_F_P_Ft_plus_Q():
     alpha = model.bias_decay(T, CFG)
     fast = model.predict_axes(P, T, alpha, q, model.bias_noise_unit(T, CFG) * sigma_b**2, w)
     np.testing.assert_allclose(model.cov_to_matrix(fast), expected, atol=1e-12)
+    var = model.predict_var_axes(P, T, alpha, q, model.bias_noise_unit(T, CFG) * sigma_b**2, w)
+    np.testing.assert_allclose(var, np.diag(expected)[[0, 1, 2, 3, 4, 5, 6, 7, 8]], rtol=1e-12, atol=1e-15)
 
 
 def test_blocks_of_predictions_compose_exactly():

@@ -56,7 +56,7 @@ def test_dask_local_cluster_gives_identical_results(pool_results):
 def test_cli_campaign_writes_every_file(tmp_path, capsys):
     out = tmp_path / "eval"
     code = main(["evaluate", "--mission", "test", "--missions", "2", "--methods", "naive,second-order",
-                 "--seeds", "0-1", "--workers", "2", "--max-duration", str(MAX_DURATION_S),
+                 "--seeds", "0-1", "--workers", "2", "--max-duration-s", str(MAX_DURATION_S),
                  "--out", str(out), "--no-progress"])
     assert code == 0
     res = json.loads((out / "results.json").read_text())

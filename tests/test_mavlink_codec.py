@@ -74,11 +74,11 @@ def test_truth_round_trip_through_geodetic() -> None:
     assert np.isnan(back.gnss_bias_ned_m).all() and math.isnan(back.gnss_latency_s)
 
 
-def _estimate(beta: float, nis: float) -> NavEstimate:
+def _estimate(beta: float, nis: float, **extra) -> NavEstimate:
     return NavEstimate(
         t_us=7_000_000, p_ned_m=f32(10.5, -3.25, -20.0), v_ned_m_s=f32(1.0, 0.5, -0.125),
         b_ned_m=np.array([0.3, -0.2, 0.1]), cov_diag=f32(*(0.01 * np.arange(1, 10))),
-        beta=beta, nis=nis, method="second-order",
+        beta=beta, nis=nis, method="second-order", **extra,
     )
 
 
@@ -90,14 +90,40 @@ def test_odometry_round_trip() -> None:
     np.testing.assert_array_equal(back.v_ned_m_s, e.v_ned_m_s)
     np.testing.assert_array_equal(back.cov_diag[:6], e.cov_diag[:6])
     assert np.isnan(back.cov_diag[6:]).all() and np.isnan(back.b_ned_m).all()
-    assert back.beta == 0.87  # quality percent
+    assert math.isnan(back.beta)  # β is not ODOMETRY's quality: it travels in GNSS_BETA
+
+
+def test_odometry_follows_the_spec_unknown_conventions() -> None:
+    raw = wire(mc.encode_odometry(_estimate(beta=0.874, nis=2.5)))
+    assert math.isnan(raw.q[0]) and list(raw.q[1:]) == [0.0, 0.0, 0.0]  # attitude unknown: NaN first
+    for cov in (raw.pose_covariance, raw.velocity_covariance):
+        assert math.isfinite(cov[0]) and not any(math.isnan(c) for c in cov)  # known: no NaN inside
+        assert [cov[i] for i in (15, 18, 20)] == [math.inf] * 3  # not estimated: no information
+        assert [c for i, c in enumerate(cov) if i not in (0, 6, 11, 15, 18, 20)] == [0.0] * 15
+    assert raw.quality == mc.ODOMETRY_QUALITY_UNKNOWN == 0  # valid estimate, quality not rated
+    invalid = wire(mc.encode_odometry(_estimate(beta=0.9, nis=1.0, pos_valid=False, gnss_resets=258)))
+    assert invalid.quality == -1  # the spec's "odometry has failed"
+    assert invalid.reset_counter == 2  # the estimator's GNSS resets, modulo 256
+    back = mc.decode_odometry(invalid)
+    assert not back.pos_valid and back.gnss_resets == 2
+    assert mc.decode_odometry(raw).pos_valid
 
 
 def test_estimator_status_and_belief_values() -> None:
-    e = _estimate(beta=0.5, nis=3.0)
-    st = mc.decode_estimator_status(wire(mc.encode_estimator_status(e, nis_gate=6.0)))
+    e = _estimate(beta=0.5, nis=3.0, pos_horiz_test_ratio=0.5)
+    st = mc.decode_estimator_status(wire(mc.encode_estimator_status(e)))
     assert st.t_us == e.t_us and st.flags == mc.ESTIMATOR_HEALTHY_FLAGS
     assert st.pos_horiz_ratio == pytest.approx(0.5)
+    raw = wire(mc.encode_estimator_status(e))
+    assert all(math.isnan(getattr(raw, f)) for f in
+               ("vel_ratio", "pos_vert_ratio", "mag_ratio", "hagl_ratio", "tas_ratio"))  # never tested
+    failed = wire(mc.encode_estimator_status(_estimate(0.5, 3.0, pos_horiz_test_ratio=2.6, gnss_glitch=True)))
+    assert failed.pos_horiz_ratio == pytest.approx(2.6)  # the rejected fix's ratio, not the last fused NIS
+    assert failed.flags == mc.ESTIMATOR_HEALTHY_FLAGS | mc.mavlink.ESTIMATOR_GPS_GLITCH
+    untested = mc.decode_estimator_status(wire(mc.encode_estimator_status(_estimate(1.0, math.nan))))
+    assert math.isnan(untested.pos_horiz_ratio) and untested.flags == mc.ESTIMATOR_HEALTHY_FLAGS
+    lost = wire(mc.encode_estimator_status(_estimate(0.5, 3.0, pos_valid=False, gnss_glitch=True)))
+    assert lost.flags == mc.mavlink.ESTIMATOR_GPS_GLITCH  # no output valid: none claimed
     assert st.pos_horiz_accuracy_m == pytest.approx(math.sqrt(0.03), rel=1e-6)
     assert st.pos_vert_accuracy_m == pytest.approx(math.sqrt(0.03), rel=1e-6)
     values = [mc.decode_named_value(wire(m)) for m in mc.encode_belief(e)]
@@ -127,6 +153,15 @@ def test_setpoint_round_trip_and_type_mask() -> None:
 def test_heartbeat_and_system_time() -> None:
     hb = mc.decode_heartbeat(wire(mc.encode_heartbeat("companion")))
     assert (hb.mav_type, hb.autopilot) == mc.ROLE_TYPES["companion"]
+    assert (hb.base_mode, hb.custom_mode, hb.armed) == (0, 0, False)  # not an autopilot
+    v = mc.decode_heartbeat(wire(mc.encode_heartbeat("vehicle", armed=True, mode="OFFBOARD")))
+    assert v.armed and v.base_mode & mc.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert v.custom_mode == 0x0006_0000  # PX4 layout: main mode 6 (OFFBOARD) in bits 16-23
+    from pymavlink import mavutil
+
+    assert mavutil.mode_string_v10(wire(mc.encode_heartbeat("vehicle", armed=True))) == "OFFBOARD"
+    assert mavutil.mode_string_v10(wire(mc.encode_heartbeat("vehicle", mode="HOLD"))) == "LOITER"
+    assert not mc.decode_heartbeat(wire(mc.encode_heartbeat("vehicle", armed=False))).armed
     clock = mc.decode_system_time(wire(mc.encode_system_time(1_700_000_000_123_456, 65_432_000)))
     assert clock == mc.ClockPair(1_700_000_000_123_456, 65_432_000)
     assert mc.decode_sample(wire(mc.encode_heartbeat("vehicle"))) is None
@@ -182,3 +217,18 @@ def test_bad_outputs_raise_a_counted_codec_error() -> None:
     truth.lon_int = 0
     with pytest.raises(mc.CodecError, match="non_finite"):
         mc.decode_truth(wire(truth), FRAME, 0)
+
+
+def test_bias_debug_vect_round_trip_and_wrong_name():
+    e = NavEstimate(1_234_567, np.zeros(3), np.zeros(3), np.array([0.25, -1.5, 0.125]), np.full(9, 0.1), 0.5,
+                    1.0, "second-order")
+    t_us, b = mc.decode_bias(wire(mc.encode_bias(e)))
+    assert t_us == 1_234_567
+    np.testing.assert_array_equal(b, [0.25, -1.5, 0.125])  # exact in float32
+    other = mc.mavlink.MAVLink_debug_vect_message(b"OTHER", 0, 1.0, 2.0, 3.0)
+    with pytest.raises(mc.CodecError) as exc:
+        mc.decode_bias(wire(other))
+    assert exc.value.reason == "name"
+    nan = mc.mavlink.MAVLink_debug_vect_message(b"GNSS_BIAS", 0, math.nan, 2.0, 3.0)
+    with pytest.raises(mc.CodecError):
+        mc.decode_bias(wire(nan))

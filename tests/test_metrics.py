@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.metrics import Distribution, PositionErrors, error_statistics
+from companion.metrics import Distribution, PositionErrors, compare_series, error_statistics
 
 
 def _ramp(t_us: int) -> np.ndarray:
@@ -110,3 +110,27 @@ def test_distribution_quantiles_within_half_a_bin() -> None:
     assert d.n == nis.size
     assert d.quantile(0.5) == pytest.approx(np.median(nis), rel=2e-3)
     assert Distribution(0, 1, 10).summary() == {"n": 0}
+
+
+def test_batch_form_and_median_offset() -> None:
+    """compare_series (what the live companion calls) = the online matcher; the median offset
+    ignores a few outliers that pull the mean."""
+    t = np.arange(0, 2_000_000, 50_000)
+    p = np.array([_ramp(int(x)) for x in t])
+    ref_t = np.arange(25_000, 1_900_000, 100_000)
+    ref = np.array([_ramp(int(x)) for x in ref_t]) - [1.0, 2.0, 0.0]
+    ref[:3] += 50.0  # three outliers
+    ref[5] = np.nan  # not compared
+    med = compare_series(t, p, ref_t, ref, "median_offset")
+    mean = compare_series(t, p, ref_t, ref, "mean_offset")
+    assert med["n"] == ref_t.size - 1 and med["unmatched"] == 1
+    assert np.allclose(med["offset_ned_m"], [1.0, 2.0, 0.0], atol=1e-6)
+    assert med["error_3d_m"]["median"] == pytest.approx(0.0, abs=1e-5)
+    assert mean["error_3d_m"]["median"] > 5.0  # the mean is pulled by the outliers
+    online = PositionErrors()
+    for x, q in zip(t, p, strict=True):
+        online.add_estimate(int(x), q)
+    for x, r in zip(ref_t, ref, strict=True):
+        if np.isfinite(r).all():
+            online.add_reference(int(x), r)
+    assert online.statistics("median_offset")["error_horizontal_m"] == med["error_horizontal_m"]

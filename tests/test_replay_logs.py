@@ -20,9 +20,10 @@ from companion.mavlink import tlog as tlog_module
 from companion.mavlink.tlog import TlogReader, TlogWriter
 from gcs_tools.cli import main
 from gcs_tools.replay import core, dataflash
+from gcs_tools.replay import ulog as ulog_module
 from gcs_tools.replay.dataflash import DataFlashScanner, DataFlashSource
 from gcs_tools.replay.events import ReaderStats
-from gcs_tools.replay.logs import detect_format
+from gcs_tools.replay.logs import detect_format, open_log
 
 DATA = Path(__file__).parent / "data"
 SITL_BIN = DATA / "arducopter_sitl_hover.bin"
@@ -244,6 +245,22 @@ def test_readers_stream_the_file(tmp_path: Path, kind: str, monkeypatch: pytest.
     assert count > 2000 and consumed[0].is_set()
 
 
+@pytest.mark.parametrize("log", [QUAD106, SITL_BIN, PX4_NEW])
+def test_every_reader_yields_before_it_has_read_the_file(log: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A generator over the file: after the first 2000 events, less than half of the
+    file has been read (the ULog reader's definitions are read first, then data in batches)."""
+    monkeypatch.setattr(tlog_module, "READ_BLOCK", 4096)
+    monkeypatch.setattr(dataflash, "READ_BLOCK", 4096)
+    monkeypatch.setattr(ulog_module, "BATCH", 256)
+    reader = open_log(log)
+    events = iter(reader)
+    for _ in range(2000):
+        next(events)
+    assert 0 < reader.stats.position < reader.stats.size / 2, (reader.stats.position, reader.stats.size)
+    rest = sum(1 for _ in events)
+    assert rest > 5000 and reader.stats.position == reader.stats.size
+
+
 def test_block_boundaries_change_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Reading in tiny blocks yields exactly what whole-file reading does, damage included."""
     data = bytearray(QUAD106.read_bytes()[:200_000])
@@ -357,3 +374,27 @@ def test_an_unreadable_optional_message_is_counted_not_fatal(tmp_path: Path) -> 
     assert ap["source"] == "XKF1+ORGN" and ap["alignment"] == "geodetic" and ap["n"] > 1500
     assert ap["error_horizontal_m"]["median"] < 0.05 and ap["error_3d_m"]["p95"] < 0.3
     assert s["errors"]["truth"]["n"] > 1500
+
+
+def test_damaged_ulog_is_read_around_the_damage(tmp_path: Path) -> None:
+    """Bytes overwritten in the ULog data section: counted as skipped, the replay still runs on
+    what is readable (to the next sync message, or to the damage when there is none)."""
+    data = bytearray(PX4_NEW.read_bytes())
+    at = int(len(data) * 0.8)
+    data[at:at + 64] = b"\xee" * 64
+    bad = tmp_path / "damaged.ulg"
+    bad.write_bytes(bytes(data))
+    s = core.replay(bad, "second-order").summary
+    whole = core.replay(PX4_NEW, "second-order").summary
+    skipped = s["samples_rejected"]
+    assert sum(skipped["reader"].values()) >= 1 and skipped["reader_skipped_bytes"] > 0
+    assert 0.5 * whole["samples_used"]["imu"] < s["samples_used"]["imu"] <= whole["samples_used"]["imu"]
+
+
+def test_out_below_a_file_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "file"
+    f.write_text("x")
+    assert main(["replay", str(SITL_BIN), "--out", str(f / "sub")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("beliefnav: error: --out ") and "cannot write estimates.csv" in err
+    assert "\n" not in err

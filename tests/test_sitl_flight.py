@@ -82,6 +82,27 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     assert "SIM_STATE" in json.dumps(result.summary["errors"]) or result.summary["errors"]
 
 
+def test_lockstep_tlog_has_each_frame_once_monotonic_stamps_and_a_real_date(lockstep_flight):
+    from companion.mavlink.codec import mavlink
+    from companion.mavlink.tlog import read_tlog
+
+    frames = list(read_tlog(lockstep_flight / "run.tlog", ("HEARTBEAT", "SYSTEM_TIME", "ODOMETRY")))
+    stamps = [stamp for stamp, _ in read_tlog(lockstep_flight / "run.tlog")]
+    assert all(b >= a for a, b in zip(stamps, stamps[1:], strict=False))  # never backwards
+    assert time.time() - 3600 < stamps[0] / 1e6 <= time.time()  # anchored to the wall clock at start
+    clocks = [m for _, m in frames if m.get_type() == "SYSTEM_TIME"]
+    epochs = {m.time_unix_usec - m.time_boot_ms * 1000 for m in clocks}
+    assert len(epochs) == 1 and abs(epochs.pop() - stamps[0]) < 1_000_000  # stamp = epoch + simulated time
+    boots = [m.time_boot_ms for m in clocks]
+    assert len(boots) == len(set(boots)) > 3  # once each (it is sent to both companions)
+    beats = [m for _, m in frames if m.get_type() == "HEARTBEAT"]
+    vehicle_beats = [b for b in beats if b.type == mavlink.MAV_TYPE_QUADROTOR]
+    assert len(vehicle_beats) == len(clocks)
+    assert all(b.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED for b in vehicle_beats)
+    odometry = [m.time_usec for _, m in frames if m.get_type() == "ODOMETRY"]
+    assert len(odometry) == len(set(odometry)) > 100  # one ODOMETRY per estimate time
+
+
 def test_lockstep_is_reproducible_even_when_a_companion_stalls(lockstep_flight, tmp_path):
     """The same flight again, with the estimator stopped (SIGSTOP) for 1.5 s of wall time mid-flight,
     as a loaded machine may deschedule it: the vehicle waits for it, and every recorded series is
@@ -153,7 +174,7 @@ def test_bad_datagrams_and_wrong_key_are_counted_and_rejected(tmp_path):
     from gcs_tools.sitl.supervisor import free_udp_ports
 
     key_file = tmp_path / "key"
-    key_file.write_text("beliefnav test key")
+    key_file.write_text("beliefnav-test-key")
     out = tmp_path / "run"
     opts = SitlOptions(MISSION, 0, "second-order", 4, out, route_duration_s(MISSION, 0) + 20,
                        signing_key_file=key_file)
@@ -313,3 +334,50 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
     assert "GPS_RAW_INT" in seen and "GNSS_BETA" in seen, seen
     s = _summary(out)
     assert s["sitl"]["links"]["ground"]["messages_rx"] > 0  # MAVProxy talked back and was tolerated
+
+
+def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, tmp_path):
+    """The estimator's bias travels as DEBUG_VECT GNSS_BIAS (5 Hz): every finite row of the vehicle's
+    b_est_ned_m is one of the vectors sent, and each vector sent is the estimator's bias at its stamp
+    (replaying the tlog reproduces it to float32). `beliefnav export` of the tlog carries it on."""
+    from companion.estimator import mission_estimator_config
+    from companion.mavlink import codec
+    from companion.mavlink.tlog import read_tlog
+    from companion.mission import load_mission
+    from gcs_tools.replay.core import CSV_COLUMNS, replay
+
+    tlog = lockstep_flight / "run.tlog"
+    vectors: dict[int, np.ndarray] = {}
+    for _, m in read_tlog(tlog, ["DEBUG_VECT"]):
+        t_us, b = codec.decode_bias(m)
+        vectors.setdefault(t_us, b)
+    sent = {tuple(b) for b in vectors.values()}
+    s = _series(lockstep_flight)
+    b_est = s["b_est_ned_m"]
+    ok = np.isfinite(b_est).all(axis=1)
+    assert ok.mean() > 0.95 and len(sent) > 0.15 * len(b_est) / 4  # 5 Hz of 20 Hz rows, mostly distinct
+    assert all(tuple(row) in sent for row in b_est[ok])
+    mission = load_mission(MISSION)
+    config = mission_estimator_config(mission)
+    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
+    col = CSV_COLUMNS.index("b_n_m") - 1
+    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+    common = sorted(set(vectors) & set(replayed))
+    assert len(common) > 0.9 * len(vectors) > 50
+    diff = np.array([vectors[t] - replayed[t] for t in common])
+    scale = np.array([np.abs(replayed[t]) for t in common]) + 1.0
+    assert np.max(np.abs(diff) / scale) < 2e-7  # float32 of the DEBUG_VECT fields
+
+    from mcap.reader import make_reader
+
+    done = subprocess.run([sys.executable, "-m", "gcs_tools", "export", str(lockstep_flight / "run.tlog"),
+                           "--out", str(tmp_path / "run.mcap"), "--home", "52.52,13.405,35"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    with (tmp_path / "run.mcap").open("rb") as f:
+        states = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/beliefnav/state"])]
+    exported = np.array([[st[f"b_est_{a}_m"] for a in "ned"] for st in states if st["b_est_n_m"] is not None])
+    assert len(exported) > 0.9 * len(states)
+    sent_arr = np.array(sorted(sent))  # linear interpolation between sent vectors stays inside their range
+    assert (exported >= sent_arr.min(axis=0) - 1e-9).all() and (exported <= sent_arr.max(axis=0) + 1e-9).all()
+    assert np.std(exported[:, 0]) > 0.5 * np.std(sent_arr[:, 0])

@@ -121,13 +121,36 @@ def test_signing_key_file(tmp_path):
     hexkey.write_text(KEY.hex())
     assert read_signing_key(hexkey) == KEY
     phrase = tmp_path / "phrase.key"
-    phrase.write_text("correct horse\n")
-    assert read_signing_key(phrase) == hashlib.sha256(b"correct horse").digest()
+    phrase.write_text("correct-horse\n")
+    assert read_signing_key(phrase) == hashlib.sha256(b"correct-horse").digest()
+    from MAVProxy.modules.mavproxy_signing import SigningModule
+
+    assert read_signing_key(phrase) == SigningModule.passphrase_to_key(None, "correct-horse")  # `signing key`
+    for untypable in ("correct horse", "caf\u00e9"):  # MAVProxy keeps one word; it encodes ASCII
+        (tmp_path / "bad.key").write_text(untypable, encoding="utf-8")
+        with pytest.raises(UserError, match="one word of printable ASCII"):
+            read_signing_key(tmp_path / "bad.key")
     (tmp_path / "empty.key").write_text("")
     with pytest.raises(UserError, match="empty"):
         read_signing_key(tmp_path / "empty.key")
     with pytest.raises(UserError, match="cannot read"):
         read_signing_key(tmp_path / "missing.key")
+
+
+def test_fresh_run_key_is_a_passphrase_mavproxy_can_take(tmp_path):
+    from MAVProxy.modules.mavproxy_signing import SigningModule
+
+    from gcs_tools.sitl.launcher import write_fresh_key
+
+    keys = []
+    for name in ("a.key", "b.key"):
+        write_fresh_key(tmp_path / name)
+        word = (tmp_path / name).read_text().strip()
+        assert len(word.split()) == 1 and len(word) == 43
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o600
+        keys.append(read_signing_key(tmp_path / name))
+        assert keys[-1] == SigningModule.passphrase_to_key(None, word)  # `signing key <word>` in MAVProxy
+    assert keys[0] != keys[1]
 
 
 def _normalised(value):

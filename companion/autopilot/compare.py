@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from companion import metrics
+
 
 def distribution(x: np.ndarray) -> dict[str, float | int | None]:
     if x.size == 0:
@@ -27,34 +29,24 @@ def distribution(x: np.ndarray) -> dict[str, float | int | None]:
             "count": int(x.size)}
 
 
-def interpolate(t_us: np.ndarray, p: np.ndarray, at_us: np.ndarray, max_gap_us: int) -> np.ndarray:
-    """``p`` (N, 3) at times ``at_us`` (K,), NaN rows outside the series or across a gap."""
-    out = np.full((at_us.size, 3), np.nan)
-    if t_us.size < 2:
-        return out
-    idx = np.searchsorted(t_us, at_us)
-    ok = (idx > 0) & (idx < t_us.size)
-    i1 = np.where(ok, idx, 1)
-    i0 = i1 - 1
-    gap = t_us[i1] - t_us[i0]
-    ok &= gap <= max_gap_us
-    w = np.where(gap > 0, (at_us - t_us[i0]) / np.maximum(gap, 1), 0.0)[:, None]
-    interp = p[i0] + w * (p[i1] - p[i0])
-    out[ok] = interp[ok]
-    return out
-
-
 def compare(t_us: np.ndarray, p_ned_m: np.ndarray, ref_t_us: np.ndarray, ref_ned_m: np.ndarray,
             max_gap_us: int = 200_000, fit_translation: bool = False) -> dict[str, Any]:
-    """Error statistics of ours against the reference; ``fit_translation`` removes the median offset."""
-    ours = interpolate(t_us, p_ned_m, ref_t_us, max_gap_us)
-    ok = np.all(np.isfinite(ours), axis=1) & np.all(np.isfinite(ref_ned_m), axis=1)
-    diff = ours[ok] - ref_ned_m[ok]
-    offset = np.median(diff, axis=0) if fit_translation and diff.size else np.zeros(3)
-    diff = diff - offset
+    """Error statistics of ours against the reference; ``fit_translation`` removes the median offset.
+
+    Computed by :func:`companion.metrics.compare_series` (the one error-statistics function,
+    shared with ``beliefnav replay``); reported here in the companion's summary layout."""
+    s = metrics.compare_series(t_us, p_ned_m, ref_t_us, ref_ned_m,
+                               "median_offset" if fit_translation else "geodetic", max_gap_us)
+
+    def block(stats: dict[str, Any]) -> dict[str, float | int | None]:
+        if not stats["n"]:
+            return {"median": None, "p95": None, "max": None, "count": 0}
+        return {"median": stats["median"], "p95": stats["p95"], "max": stats["max"], "count": stats["n"]}
+
+    offset = s["offset_ned_m"]
     return {
-        "error_horizontal_m": distribution(np.hypot(diff[:, 0], diff[:, 1])),
-        "error_3d_m": distribution(np.linalg.norm(diff, axis=1)),
-        "mean_offset_ned_m": [float(v) for v in diff.mean(axis=0)] if diff.size else None,
-        "fitted_translation_ned_m": [float(v) for v in offset] if fit_translation else None,
+        "error_horizontal_m": block(s["error_horizontal_m"]),
+        "error_3d_m": block(s["error_3d_m"]),
+        "mean_offset_ned_m": s["mean_error_ned_m"] if s["n"] else None,
+        "fitted_translation_ned_m": offset if fit_translation else None,
     }

@@ -37,7 +37,7 @@ GPS_LEAP_S = 18  # GPS time - UTC since 2017
 WEEK_S = 604_800
 FIX_3D = 3
 UINT16_UNKNOWN = 65535
-_NAN21 = [math.nan] * 21
+COV6_DIAGONAL = (0, 6, 11, 15, 18, 20)  # indices of the diagonal in a 6x6 upper triangle (21 entries)
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,6 +46,10 @@ class FeedConfig:
     vision_hz: float = 20.0  # VISION_POSITION_ESTIMATE / ODOMETRY
     satellites: int = 10  # satellites_visible reported with a valid cleaned fix (the raw fix's if known)
     hdop: float = 0.8  # HDOP sent when the raw fix has none (ArduPilot pre-arm: < GPS_HDOP_GOOD / 100)
+    # Attitude and body rates in VISION/ODOMETRY are the autopilot's own, passed through (the filter
+    # estimates neither); their stated 1-σ (ArduPilot needs finite covariances):
+    attitude_sigma_rad: float = 0.035  # ≈ 2°
+    rate_sigma_rad_s: float = 0.01
 
     def period_us(self, feed: str) -> int:
         hz = self.gps_input_hz if feed == "gps-input" else self.vision_hz
@@ -63,7 +67,7 @@ def gps_input(e: NavEstimate, frame: LocalNedFrame, config: FeedConfig, hdop: fl
               satellites: int = -1, unix_s: float | None = None) -> mavlink.MAVLink_gps_input_message:
     lat, lon, alt = frame.to_geodetic(np.asarray(e.p_ned_m, dtype=float))
     var = np.asarray(e.cov_diag, dtype=float)
-    valid = bool(getattr(e, "pos_valid", True)) and bool(np.all(np.isfinite(var[:6])))
+    valid = bool(e.pos_valid) and bool(np.all(np.isfinite(var[:6])))
     week, week_ms = gps_time(time.time() if unix_s is None else unix_s)
     hdop = hdop if math.isfinite(hdop) else config.hdop
     return mavlink.MAVLink_gps_input_message(
@@ -77,31 +81,41 @@ def gps_input(e: NavEstimate, frame: LocalNedFrame, config: FeedConfig, hdop: fl
         satellites_visible=(satellites if satellites >= 0 else config.satellites) if valid else 0, yaw=0)
 
 
-def _pose_covariance(var: np.ndarray) -> list[float]:
-    """21-entry upper triangle of the 6x6 pose covariance: position variances, attitude unknown."""
-    cov = list(_NAN21)
-    cov[0], cov[6], cov[11] = float(var[0]), float(var[1]), float(var[2])
+def covariance21(diagonal: tuple[float, ...]) -> list[float]:
+    """Upper triangle (21 entries) of a 6x6 covariance with this diagonal and no cross terms.
+
+    Every entry is finite: ArduPilot takes sqrt(c0 + c6 + c11) and sqrt(c15 + c18 + c20) of it
+    and reports a NaN there as an internal error (measured: "PreArm: Internal errors 0x400")."""
+    cov = [0.0] * 21
+    for index, value in zip(COV6_DIAGONAL, diagonal, strict=True):
+        cov[index] = float(value)
     return cov
 
 
-def vision_position(e: NavEstimate,
-                    q_ned_frd: np.ndarray) -> mavlink.MAVLink_vision_position_estimate_message:
+def _pose_covariance(var: np.ndarray, config: FeedConfig) -> list[float]:
+    """Position variances from the filter; attitude (the autopilot's own, passed through) stated."""
+    att = config.attitude_sigma_rad ** 2
+    return covariance21((var[0], var[1], var[2], att, att, att))
+
+
+def vision_position(e: NavEstimate, q_ned_frd: np.ndarray,
+                    config: FeedConfig) -> mavlink.MAVLink_vision_position_estimate_message:
     roll, pitch, yaw = quaternion_to_euler(np.asarray(q_ned_frd, dtype=float))
     p = e.p_ned_m
     return mavlink.MAVLink_vision_position_estimate_message(
         usec=int(e.t_us), x=float(p[0]), y=float(p[1]), z=float(p[2]), roll=roll, pitch=pitch, yaw=yaw,
-        covariance=_pose_covariance(np.asarray(e.cov_diag)), reset_counter=0)
+        covariance=_pose_covariance(np.asarray(e.cov_diag), config), reset_counter=0)
 
 
-def odometry(e: NavEstimate, q_ned_frd: np.ndarray,
-             gyro_frd_rad_s: np.ndarray) -> mavlink.MAVLink_odometry_message:
+def odometry(e: NavEstimate, q_ned_frd: np.ndarray, gyro_frd_rad_s: np.ndarray,
+             config: FeedConfig) -> mavlink.MAVLink_odometry_message:
     q = np.asarray(q_ned_frd, dtype=float)
     r_ned_frd = np.array(rotation_ned_frd(float(q[0]), float(q[1]), float(q[2]), float(q[3]), math.sqrt))
     r_ned_frd = r_ned_frd.reshape(3, 3)
     v_frd = r_ned_frd.T @ np.asarray(e.v_ned_m_s, dtype=float)
     var = np.asarray(e.cov_diag, dtype=float)
-    vel_cov = list(_NAN21)
-    vel_cov[0], vel_cov[6], vel_cov[11] = float(var[3]), float(var[4]), float(var[5])
+    rate = config.rate_sigma_rad_s ** 2
+    vel_cov = covariance21((var[3], var[4], var[5], rate, rate, rate))
     p = e.p_ned_m
     return mavlink.MAVLink_odometry_message(
         time_usec=int(e.t_us), frame_id=mavlink.MAV_FRAME_LOCAL_FRD,
@@ -110,5 +124,5 @@ def odometry(e: NavEstimate, q_ned_frd: np.ndarray,
         vx=float(v_frd[0]), vy=float(v_frd[1]), vz=float(v_frd[2]),
         rollspeed=float(gyro_frd_rad_s[0]), pitchspeed=float(gyro_frd_rad_s[1]),
         yawspeed=float(gyro_frd_rad_s[2]),
-        pose_covariance=_pose_covariance(var), velocity_covariance=vel_cov, reset_counter=0,
+        pose_covariance=_pose_covariance(var, config), velocity_covariance=vel_cov, reset_counter=0,
         estimator_type=mavlink.MAV_ESTIMATOR_TYPE_VIO, quality=max(1, min(100, round(100 * e.beta))))

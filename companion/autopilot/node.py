@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -123,9 +124,21 @@ class AutopilotCompanion:
         self._fallback_sent = False
         self._last_imu_s = math.nan
         self._heartbeat_was_lost = False
+        self._delay_param: str | None = None
 
     # -- incoming -----------------------------------------------------------------------------
     def handle(self, msg: Any, now_s: float) -> None:
+        """Handle one message; whatever it holds, count it and never raise."""
+        try:
+            self._handle(msg, now_s)
+        except Exception as exc:  # noqa: BLE001 - a frame must never end the process
+            name = f"handler_error_{msg.get_type()}_{type(exc).__name__}"
+            if name not in self.counters:
+                print(f"companion: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
+                self.errors.append(f"{msg.get_type()}: {type(exc).__name__}: {exc}")
+            self.counters[name] += 1
+
+    def _handle(self, msg: Any, now_s: float) -> None:
         was_known = self.discovery.autopilot is not None
         if not self.discovery.accept(msg, now_s):
             return
@@ -136,6 +149,10 @@ class AutopilotCompanion:
             assert ap is not None
             self.conn.set_source(ap.system_id, self.config.component_id)
             self._ask_streams = True
+            self._delay_param = self.translator.delay_parameter(ap.autopilot_type)
+            if self._delay_param is not None:
+                self.conn.send(mavlink.MAVLink_param_request_read_message(
+                    ap.system_id, ap.component_id, self._delay_param.encode(), -1))
             self._next_heartbeat_s = self._next_timesync_s = now_s
         stamp = boot_stamp_us(msg)
         if stamp is not None and self.discovery.boot_time(stamp):
@@ -146,16 +163,27 @@ class AutopilotCompanion:
                 self.conn.send(answer)
         elif kind == "COMMAND_ACK":
             self.acks[f"{_enum('MAV_CMD', msg.command)}:{_enum('MAV_RESULT', msg.result)}"] += 1
+        elif kind == "PARAM_VALUE":
+            ap = self.discovery.autopilot
+            if ap is not None and self._delay_param is not None and msg.param_id == self._delay_param:
+                self.translator.delay_parameter_value(ap.autopilot_type, msg.param_id, float(msg.param_value))
         elif kind == "SYSTEM_TIME":
             self.translator.system_time(msg)
-        elif kind == "GPS_GLOBAL_ORIGIN" or kind == "HOME_POSITION":
-            self.origins[kind] = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+        elif kind == "GPS_GLOBAL_ORIGIN" or kind == "HOME_POSITION":  # degE7, mm AMSL
+            lla = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+            if _plausible(*lla):
+                self.origins[kind] = lla
+            else:
+                self.counters[f"rejected_{kind.lower()}"] += 1
         elif kind == "GLOBAL_POSITION_INT":
             self._reference_global(msg)
         elif kind == "LOCAL_POSITION_NED":
-            s = self.series
-            s.local_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
-            s.local_ned_m.append((float(msg.x), float(msg.y), float(msg.z)))
+            p = (float(msg.x), float(msg.y), float(msg.z))
+            if all(math.isfinite(v) for v in p):
+                self.series.local_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
+                self.series.local_ned_m.append(p)
+            else:
+                self.counters["rejected_local_position_ned"] += 1
         else:
             sample = self.translator.sample(msg)
             if sample is not None:
@@ -164,6 +192,9 @@ class AutopilotCompanion:
     def _reference_global(self, msg: Any) -> None:
         if msg.lat == 0 and msg.lon == 0:  # ArduPilot before its EKF has a position
             self.counters["reference_without_position"] += 1
+            return
+        if not _plausible(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3):
+            self.counters["rejected_global_position_int"] += 1
             return
         self.series.global_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
         self.series.global_lla.append((msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3))
@@ -230,9 +261,10 @@ class AutopilotCompanion:
         elif tr.last_attitude is None or tr.last_imu is None:
             return
         elif feed == "vision":
-            msg = feeds.vision_position(est, tr.last_attitude.q_ned_frd)
+            msg = feeds.vision_position(est, tr.last_attitude.q_ned_frd, self.config.feeds)
         else:
-            msg = feeds.odometry(est, tr.last_attitude.q_ned_frd, tr.last_imu.gyro_frd_rad_s)
+            msg = feeds.odometry(est, tr.last_attitude.q_ned_frd, tr.last_imu.gyro_frd_rad_s,
+                                 self.config.feeds)
         self.conn.send(msg)
         self.counters[f"feed_{msg.get_type().lower()}_sent"] += 1
 
@@ -294,6 +326,8 @@ class AutopilotCompanion:
         rejected = Counter({k: v for k, v in nav.items() if "rejected" in k and v})
         rejected.update({k: v for k, v in self.translator.counters.items() if v})
         rejected.update({f"autopilot_{k}": v for k, v in self.discovery.counters.items() if v})
+        rejected.update({k: v for k, v in self.counters.items()
+                         if v and k.startswith(("rejected_", "handler_error_"))})
         if self.counters["samples_before_first_fix"]:
             rejected["before_first_fix"] = self.counters["samples_before_first_fix"]
         if self.conn.counters["bad_frames"]:
@@ -329,7 +363,8 @@ class AutopilotCompanion:
             "timesync": self.timesync.as_dict(),
             "node": dict(sorted(self.counters.items())),
             "link": dict(self.conn.counters),
-            "gnss_delay_ms": c.translate.gnss_delay_us / 1000.0,
+            "gnss_delay": {"ms": self.translator.gnss_delay_us / 1000.0,
+                           "source": self.translator.gnss_delay_source},
             "problems": self.errors,
         }
 
@@ -373,6 +408,11 @@ class AutopilotCompanion:
         return result | {"alignment": alignment}
 
 
+def _plausible(lat_deg: float, lon_deg: float, alt_m: float) -> bool:
+    """A position on (or near) the Earth: the only kind used as a frame origin or a reference."""
+    return abs(lat_deg) <= 90 and abs(lon_deg) <= 180 and -1_000 <= alt_m <= 20_000
+
+
 def _known_satellites(fix: GnssFix | None) -> int:
     """The raw fix's satellite count, -1 when unknown (no fix, or 255 = unknown in MAVLink)."""
     return fix.satellites_visible if fix is not None and fix.satellites_visible < 255 else -1
@@ -389,14 +429,15 @@ def _enum(name: str, value: int) -> str:
 def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     if args.out is None:
         raise UserError("--out DIR is required with --master")
-    if not (math.isfinite(args.gnss_delay_ms) and 0 <= args.gnss_delay_ms <= 1000):
-        raise UserError(f"--gnss-delay-ms {args.gnss_delay_ms}: must be within 0..1000")
+    delay = args.gps_delay_ms
+    if delay is not None and not (math.isfinite(delay) and 0 <= delay <= 1000):
+        raise UserError(f"--gps-delay-ms {delay}: must be within 0..1000")
     return CompanionConfig(
         master=args.master, out_dir=args.out, method=args.method, feed=args.feed,
         home=parse_home(args.home) if args.home else None, duration_s=args.duration_s,
         component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
         translate=TranslateConfig(gnss_instance=args.gnss_instance,
-                                  gnss_delay_us=round(args.gnss_delay_ms * 1000)))
+                                  gnss_delay_us=None if delay is None else round(delay * 1000)))
 
 
 def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) -> dict[str, Any]:

@@ -23,7 +23,8 @@ def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool)
                         help="our MAVLink component id")
     parser.add_argument("--gnss-instance", type=int, default=1, choices=(1, 2),
                         help="GNSS input: 1 = GPS_RAW_INT, 2 = GPS2_RAW")
-    parser.add_argument("--gnss-delay-ms", type=float, default=0.0,
-                        help="receiver delay: fix validity = the autopilot's stamp minus this")
+    parser.add_argument("--gps-delay-ms", type=float, default=None,
+                        help="receiver delay: fix validity = the autopilot's stamp minus this "
+                             "(default: the autopilot's GPS1_DELAY_MS / EKF2_GPS_DELAY)")
     parser.add_argument("--discovery-timeout-s", type=float, default=60.0,
                         help="give up when no autopilot HEARTBEAT arrives within this (wall s)")

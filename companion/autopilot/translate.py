@@ -14,8 +14,10 @@ as ``*_other_source`` and not fed twice):
 GNSS time: ArduPilot stamps GPS_RAW_INT ``time_usec`` with the boot time at which its GPS driver
 took the fix in (``last_fix_time_ms`` x 1000): an ARRIVAL time, not the receiver's validity
 time; its own EKF3 subtracts ``GPS1_DELAY_MS`` (0 = the driver's default lag) to get the
-validity time. We do the same with ``gnss_delay_us`` (a configured receiver delay: the autopilot
-does not send it). A stamp above :data:`UNIX_STAMP_MIN_US` is UNIX time (MAVLink allows either)
+validity time. We do the same with ``gnss_delay_us``: the option if given, else the autopilot's own
+setting, read as a parameter (:data:`DELAY_PARAMS`: ArduPilot ``GPS1_DELAY_MS``/``GPS2_DELAY_MS``,
+where 0 means its driver's default, :data:`ARDUPILOT_DEFAULT_GPS_DELAY_MS`; PX4 ``EKF2_GPS_DELAY``).
+A stamp above :data:`UNIX_STAMP_MIN_US` is UNIX time (MAVLink allows either)
 and is mapped to boot time with the last SYSTEM_TIME pair. A fix repeated at the same stamp
 (the autopilot streams GPS_RAW_INT faster than the receiver updates) is dropped and counted.
 """
@@ -29,6 +31,10 @@ from typing import Any
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.mavlink import codec as mc
 
+ARDUPILOT_DEFAULT_GPS_DELAY_MS = 120.0  # AP_GPS_UBLOX::get_lag, used by EKF3 when GPSn_DELAY_MS = 0
+PX4_DEFAULT_GPS_DELAY_MS = 110.0  # EKF2_GPS_DELAY's default
+# autopilot type -> receiver instance -> parameter holding the receiver delay (ms)
+DELAY_PARAMS = {3: {1: "GPS1_DELAY_MS", 2: "GPS2_DELAY_MS"}, 12: {1: "EKF2_GPS_DELAY", 2: "EKF2_GPS_DELAY"}}
 UNIX_STAMP_MIN_US = 10**15  # ≈ 31.7 years: a larger stamp is UNIX time, not time since boot
 IMU_RANK = {"HIGHRES_IMU": 0, "SCALED_IMU": 1, "RAW_IMU": 2, "SCALED_IMU2": 3}
 ATTITUDE_RANK = {"ATTITUDE_QUATERNION": 0, "ATTITUDE": 1}
@@ -43,7 +49,7 @@ _DECODERS = {
 @dataclass(frozen=True, slots=True)
 class TranslateConfig:
     gnss_instance: int = 1  # 1: GPS_RAW_INT, 2: GPS2_RAW
-    gnss_delay_us: int = 0  # receiver delay: validity time = the autopilot's stamp - this
+    gnss_delay_us: int | None = None  # receiver delay (validity = stamp - this); None: the autopilot's
 
 
 def boot_stamp_us(msg: Any) -> int | None:
@@ -64,6 +70,8 @@ class Translator:
     last_attitude: AttitudeSample | None = None
     last_imu: ImuSample | None = None
     last_fix: GnssFix | None = None  # as received (stamp = arrival), after the time mapping
+    gnss_delay_us: int = 0  # in force (set_gnss_delay)
+    gnss_delay_source: str = "none"
     _imu_rank: int = len(IMU_RANK)
     _attitude_rank: int = len(ATTITUDE_RANK)
     _last_gnss_stamp_us: int = -1
@@ -71,6 +79,32 @@ class Translator:
     def __post_init__(self) -> None:
         if self.config.gnss_instance not in GNSS_TYPES:
             raise ValueError(f"gnss_instance must be 1 or 2, got {self.config.gnss_instance}")
+        if self.config.gnss_delay_us is not None:
+            self.set_gnss_delay(self.config.gnss_delay_us, "option")
+
+    def set_gnss_delay(self, delay_us: int, source: str) -> None:
+        self.gnss_delay_us, self.gnss_delay_source = int(delay_us), source
+
+    def delay_parameter(self, autopilot_type: int) -> str | None:
+        """The autopilot's parameter to read the receiver delay from (None: option given, or unknown);
+        meanwhile that autopilot's default delay is in force."""
+        if self.config.gnss_delay_us is not None:
+            return None
+        if autopilot_type == 3:
+            self.set_gnss_delay(round(ARDUPILOT_DEFAULT_GPS_DELAY_MS * 1000), "ArduPilot default, until read")
+        elif autopilot_type == 12:
+            self.set_gnss_delay(round(PX4_DEFAULT_GPS_DELAY_MS * 1000), "PX4 default, until read")
+        return DELAY_PARAMS.get(autopilot_type, {}).get(self.config.gnss_instance)
+
+    def delay_parameter_value(self, autopilot_type: int, name: str, value_ms: float) -> None:
+        """Take the autopilot's receiver-delay parameter (ArduPilot: 0 = its driver's default)."""
+        if not (0 <= value_ms <= 1000):
+            return
+        if autopilot_type == 3 and value_ms == 0:
+            self.set_gnss_delay(round(ARDUPILOT_DEFAULT_GPS_DELAY_MS * 1000),
+                                f"{name} = 0: ArduPilot's driver default")
+        else:
+            self.set_gnss_delay(round(value_ms * 1000), f"autopilot parameter {name}")
 
     def system_time(self, msg: Any) -> None:
         if int(msg.time_unix_usec) > UNIX_STAMP_MIN_US:
@@ -131,6 +165,6 @@ class Translator:
         except mc.CodecError as exc:
             self.counters[f"rejected_gnss_{exc.reason}"] += 1
             return None
-        fix = replace(fix, t_validity_us=stamp_us - self.config.gnss_delay_us)
+        fix = replace(fix, t_validity_us=stamp_us - self.gnss_delay_us)
         self.last_fix = fix
         return fix

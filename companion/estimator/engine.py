@@ -61,11 +61,11 @@ class Fusion(NamedTuple):
 
 
 class Snapshot(NamedTuple):
-    """The filter carried to the newest IMU time."""
+    """The filter carried to the newest IMU time (the full covariance: ``covariance_now``)."""
 
     t_us: int
     x: model.State
-    P: model.Cov
+    var: tuple[float, ...]  # variances of p, v, b (N, E, D each; m², (m/s)², m²)
     beta: float
     nis: float
     test_ratio: float
@@ -105,6 +105,7 @@ class FusionEngine:
         self._q_acc = cfg.sigma_acc_m_s2**2
         self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
         self._gate2 = cfg.gnss_gate_sigma**2
+        self._gate_r_min = cfg.gnss_gate_r_floor_m**2
         self._r_max = cfg.r_learned_max_factor
         self._reset_us = int(round(cfg.gnss_reset_timeout_s * 1e6))
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
@@ -272,8 +273,12 @@ class FusionEngine:
         k = self._r_max
         if R[0] > k * r_nom[0] or R[1] > k * r_nom[1] or R[2] > k * r_nom[2]:
             R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
-        # the gate: horizontal NIS (2 dof) and vertical NIS (1 dof) against gate²
-        s0, s1, s2 = hph[0] + R[0], hph[1] + R[1], hph[2] + R[2]
+        # the gate: horizontal NIS (2 dof) and vertical NIS (1 dof) against gate², R floored
+        g = self._gate_r_min
+        r0, r1, r2 = R
+        s0 = hph[0] + (r0 if r0 > g else g)
+        s1 = hph[1] + (r1 if r1 > g else g)
+        s2 = hph[2] + (r2 if r2 > g else g)
         nis_h = y[0] * y[0] / s0 + y[1] * y[1] / s1
         nis_v = y[2] * y[2] / s2
         ratio = nis_h / self._gate2
@@ -283,11 +288,11 @@ class FusionEngine:
                          r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets)
         elif t_us - prev.t_fused_us >= self._reset_us:
             x_reset, P_reset = model.reset_to_fix(x_prior, P_prior, z, r_nom, self.cfg.sigma_bias0_m**2)
-            self._append(t_us, z, x_reset, P_reset, prev.state, nis_h + nis_v, ints,
+            self._append(t_us, z, x_reset, P_reset, prev.state, _nis(y, hph, R), ints,
                          r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets + 1)
         else:  # rejected: the entry carries the prior; only a belief learns from the fix
             state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
-            self._append(t_us, z, x_prior, P_prior, state, nis_h + nis_v, ints,
+            self._append(t_us, z, x_prior, P_prior, state, _nis(y, hph, R), ints,
                          r_nom, prev.t_fused_us, ratio, True, prev.n_rejected + 1, prev.n_resets)
 
     # ------------------------------------------------------------- history
@@ -333,8 +338,23 @@ class FusionEngine:
         now = self.imu.t_us[-1]
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]
-        x, P = self._predict(last, now, self.imu.last_integrals())
-        snap = Snapshot(now, x, P, last.beta, last.nis, last.test_ratio, last.glitch,
+        T = (now - last.t_us) * 1e-6
+        alpha = math.exp(-T / self._tau_s)
+        sigma_b = last.sigma_bias_m
+        x = mean_between(last.x, last.ints, self.imu.last_integrals(), alpha)
+        var = model.predict_var_axes(last.P, T, alpha, self._q_acc, (1.0 - alpha * alpha) * sigma_b * sigma_b,
+                                     self._q_rw)
+        snap = Snapshot(now, x, var, last.beta, last.nis, last.test_ratio, last.glitch,
                         now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
         self._cache = (last, now, snap)
         return snap
+
+    def covariance_now(self) -> model.Cov | None:
+        """The full per-axis covariance at the newest IMU time (None before the first fix)."""
+        if not self.fusions:
+            return None
+        return self._predict(self.fusions[-1], self.imu.t_us[-1], self.imu.last_integrals())[1]
+
+def _nis(y: Vec3, hph: Vec3, r: Vec3) -> float:
+    """yᵀ S⁻¹ y for the diagonal S = H P⁻ Hᵀ + R."""
+    return y[0] * y[0] / (hph[0] + r[0]) + y[1] * y[1] / (hph[1] + r[1]) + y[2] * y[2] / (hph[2] + r[2])

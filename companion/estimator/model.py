@@ -162,6 +162,30 @@ def predict_axes(P: Cov, T_s: float, alpha: float, q_acc_m2_s3: float, q_bias_m2
     return (out[0], out[1], out[2])
 
 
+def predict_var_axes(P: Cov, T_s: float, alpha: float, q_acc_m2_s3: float, q_bias_m2: float,
+                     q_rw_m2_s5: float = 0.0) -> tuple[float, ...]:
+    """The variances of p, v and b (N, E, D each: 9 numbers) of ``predict_axes``, computed alone
+    (the output path needs no more)."""
+    T2 = T_s * T_s
+    h = 0.5 * T2
+    qpp = q_acc_m2_s3 * T2 * T_s / 3.0 + q_rw_m2_s5 * T2 * T2 * T_s / 20.0
+    qvv = q_acc_m2_s3 * T_s + q_rw_m2_s5 * T2 * T_s / 3.0
+    a2 = alpha * alpha
+    (pp0, pv0, _, pa0, vv0, _, va0, bb0, _, aa0), (pp1, pv1, _, pa1, vv1, _, va1, bb1, _, aa1), \
+        (pp2, pv2, _, pa2, vv2, _, va2, bb2, _, aa2) = P
+    rva0, rva1, rva2 = va0 - T_s * aa0, va1 - T_s * aa1, va2 - T_s * aa2
+    rpa0, rpa1, rpa2 = pa0 + T_s * va0 - h * aa0, pa1 + T_s * va1 - h * aa1, pa2 + T_s * va2 - h * aa2
+    return (
+        pp0 + T_s * pv0 - h * pa0 + T_s * (pv0 + T_s * vv0 - h * va0) - h * rpa0 + qpp,
+        pp1 + T_s * pv1 - h * pa1 + T_s * (pv1 + T_s * vv1 - h * va1) - h * rpa1 + qpp,
+        pp2 + T_s * pv2 - h * pa2 + T_s * (pv2 + T_s * vv2 - h * va2) - h * rpa2 + qpp,
+        vv0 - T_s * va0 - T_s * rva0 + qvv,
+        vv1 - T_s * va1 - T_s * rva1 + qvv,
+        vv2 - T_s * va2 - T_s * rva2 + qvv,
+        a2 * bb0 + q_bias_m2, a2 * bb1 + q_bias_m2, a2 * bb2 + q_bias_m2,
+    )
+
+
 def hph_axes(P: Cov) -> tuple[float, float, float]:
     """Diagonal of H P Hᵀ (var(p + b)) per axis."""
     return tuple(c[0] + 2.0 * c[2] + c[7] for c in P)  # type: ignore[return-value]

@@ -189,8 +189,12 @@ class Navigator:
         return seen[2] and fix.t_validity_us - seen[1] > self._frozen_us
 
     def _moving(self) -> bool:
-        snap = self.engine.snapshot()
-        return snap is not None and math.hypot(snap.x[3], snap.x[4]) > self.cfg.gnss_frozen_speed_m_s
+        """Horizontal speed at the last fusion above ``gnss_frozen_speed_m_s`` (no prediction)."""
+        fusions = self.engine.fusions
+        if not fusions:
+            return False
+        x = fusions[-1].x
+        return math.hypot(x[3], x[4]) > self.cfg.gnss_frozen_speed_m_s
 
     def fix_r_nominal_m2(self, h_acc_m: float, v_acc_m: float) -> tuple[float, float, float]:
         """A fix's nominal R (NED variances, m²): the receiver-reported 1σ accuracy where known,
@@ -222,11 +226,9 @@ class Navigator:
             return None
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
-        P0, P1, P2 = snap.P
         x = snap.x
         # one array for the state and the variances, handed out as views (one allocation)
-        a = np.array((x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], P0[0], P1[0], P2[0],
-                      P0[4], P1[4], P2[4], P0[7], P1[7], P2[7]))
+        a = np.array((x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], *snap.var))
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method,
                           snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets)
         self._last = (snap, est)

@@ -8,18 +8,30 @@ they raise :class:`CodecError`, whose ``reason`` the caller counts.
 Units and conventions on the wire (DESIGN §2):
 
 - HIGHRES_IMU: ``time_usec`` boot time; body-FRD specific force (m/s²) and rate (rad/s).
-- ATTITUDE_QUATERNION: ``q1..q4`` = w, x, y, z, body FRD -> NED; ``time_boot_ms`` (ms).
-- GPS_RAW_INT: ``time_usec`` = VALIDITY time; lat/lon degE7, alt mm; ``eph`` = HDOP x 100
-  (65535 unknown -> NaN); ``h_acc``/``v_acc`` mm (0 = not sent -> NaN); ``satellites_visible``
-  passed through (255 = unknown, as MAVLink says).
+- ATTITUDE_QUATERNION: ``q1..q4`` = w, x, y, z, body FRD -> NED; ``time_boot_ms`` (ms); body rates
+  NaN (not carried), ``repr_offset_q`` zeros (not supported).
+- GPS_RAW_INT: ``time_usec`` = VALIDITY time (when the fix was true), so in arrival order it may
+  go backwards: a fix with less latency can overtake an older one (the simulated latency varies
+  by up to 1.2 s); receivers order by it, not by arrival. lat/lon degE7, alt mm; ``eph`` = HDOP
+  x 100 (65535 unknown -> NaN); ``h_acc``/``v_acc`` mm (0 = not sent -> NaN);
+  ``satellites_visible`` passed through (255 = unknown, as MAVLink says).
 - SIM_STATE: no time field (the caller supplies the matching IMU time); position as
   ``lat_int``/``lon_int`` degE7 (float ``lat``/``lon`` too, in degrees) and ``alt`` m, converted
   with a :class:`LocalNedFrame`. It carries p, v, q only: bias, latency and clearance of a
   decoded :class:`TruthState` are NaN (unknown), never a made-up zero.
 - ODOMETRY: LOCAL_NED position and NED velocity (``child_frame_id`` = LOCAL_NED), variances on
-  the covariance diagonals, ``quality`` = round(100 β) (1..100), attitude unknown (NaN). The
-  bias, exact β and NIS travel in NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` and
-  ESTIMATOR_STATUS, so a decoded ODOMETRY has NaN bias and NIS.
+  the covariance diagonals (off-diagonals 0). Attitude is not estimated: ``q`` = (NaN, 0, 0, 0)
+  (NaN first = unknown, as the covariances' convention) and the attitude/rate variances are
+  +inf (no information), so ``pose_covariance[0]`` stays a real variance. ``quality`` as the spec
+  defines it: -1 while the estimate is not valid (``pos_valid`` False), else 0 (unknown/unset).
+  β and NIS travel in NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` and ESTIMATOR_STATUS, the
+  estimated bias in DEBUG_VECT ``GNSS_BIAS`` (x, y, z = north, east, down, m; ``time_usec`` boot
+  time), so a decoded ODOMETRY has NaN β, bias and NIS.
+- ESTIMATOR_STATUS: ``flags`` say which outputs are valid now (velocity and position only while
+  ``pos_valid``; ``GPS_GLITCH`` while GNSS is rejected by the innovation gate);
+  ``pos_horiz_ratio`` = the estimator's last horizontal GNSS innovation test ratio (NIS /
+  gate²), NaN until a fix was tested; ratios of tests we never make (velocity, vertical, magnetometer,
+  height above terrain, airspeed) are NaN ("not computed"), never 0 ("perfect").
 - SET_POSITION_TARGET_LOCAL_NED: LOCAL_NED, ``time_boot_ms`` (ms); velocity/acceleration marked
   ignored in ``type_mask`` decode as zero feed-forward; ignored position is an error.
 - RAW_IMU / SCALED_IMU (decode only): acceleration mg, rate mrad/s, body FRD.
@@ -56,6 +68,7 @@ QUAT_NORM_TOLERANCE = 0.05  # |‖q‖ - 1| beyond this is a corrupt attitude, n
 IMU_FIELDS_ACC_GYRO = 0b111111  # HIGHRES_IMU fields_updated bits for xacc..zgyro
 BELIEF_NAME = "GNSS_BETA"
 NIS_NAME = "GNSS_NIS"
+BIAS_NAME = "GNSS_BIAS"  # DEBUG_VECT: the estimated GNSS bias, x/y/z = north/east/down [m]
 _NAN3 = (math.nan, math.nan, math.nan)
 _SETPOINT_TYPE_MASK = (
     mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
@@ -72,10 +85,27 @@ ESTIMATOR_HEALTHY_FLAGS = (
     | mavlink.ESTIMATOR_POS_HORIZ_ABS
     | mavlink.ESTIMATOR_POS_VERT_ABS
 )
+ODOMETRY_QUALITY_FAILED = -1  # ODOMETRY.quality: -1 = failed, 0 = unknown/unset (spec)
+ODOMETRY_QUALITY_UNKNOWN = 0
+# The vehicle identifies as PX4-compatible so that ground stations (QGroundControl, MAVSDK,
+# MAVProxy) decode its custom mode with PX4's layout (main mode in bits 16-23, sub mode in
+# 24-31); it is not PX4: see docs/groundstation.md. Companions are not autopilots (INVALID).
 ROLE_TYPES = {  # HEARTBEAT (type, autopilot) per process role
-    "vehicle": (mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC),
+    "vehicle": (mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4),
     "companion": (mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID),
 }
+PX4_MAIN_MODE_AUTO = 4
+PX4_MAIN_MODE_OFFBOARD = 6
+PX4_AUTO_SUB_MODE_LOITER = 3
+CUSTOM_MODES = {  # our flight modes -> HEARTBEAT custom_mode (PX4 layout)
+    "OFFBOARD": PX4_MAIN_MODE_OFFBOARD << 16,  # flying the companion's setpoints on its estimate
+    "HOLD": (PX4_MAIN_MODE_AUTO << 16) | (PX4_AUTO_SUB_MODE_LOITER << 24),  # holding a point
+}
+VEHICLE_BASE_MODE = (  # HEARTBEAT base_mode of the flying vehicle (SAFETY_ARMED added when armed)
+    mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+    | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -117,7 +147,7 @@ class EstimatorStatus:
 
     t_us: int
     flags: int
-    pos_horiz_ratio: float  # NIS / gate (χ² threshold): > 1 means the fix failed the gate
+    pos_horiz_ratio: float  # NIS / gate (χ² threshold): > 1 means the fix failed the gate; NaN: no test
     pos_horiz_accuracy_m: float
     pos_vert_accuracy_m: float
 
@@ -136,6 +166,12 @@ class Heartbeat:
     mav_type: int
     autopilot: int
     system_status: int
+    base_mode: int = 0
+    custom_mode: int = 0
+
+    @property
+    def armed(self) -> bool:
+        return bool(self.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
 
 @dataclass(frozen=True, slots=True)
@@ -283,9 +319,12 @@ def decode_scaled_imu(m: Any) -> ImuSample:
 
 
 def encode_attitude(s: AttitudeSample) -> mavlink.MAVLink_attitude_quaternion_message:
+    """Attitude only: the body rates are not carried (NaN, unknown; HIGHRES_IMU has the measured
+    ones); ``repr_offset_q`` all zero = not supported, as the spec says."""
     q = s.q_ned_frd
+    nan = math.nan
     return mavlink.MAVLink_attitude_quaternion_message(
-        s.t_us // 1000, q[0], q[1], q[2], q[3], 0.0, 0.0, 0.0, [0.0, 0.0, 0.0, 0.0]
+        s.t_us // 1000, q[0], q[1], q[2], q[3], nan, nan, nan, [0.0, 0.0, 0.0, 0.0]
     )
 
 
@@ -403,7 +442,7 @@ def _cov21(diag3: np.ndarray) -> list[float]:
     for i, var in zip(_COV6_DIAG[:3], diag3, strict=True):
         cov[i] = float(var)
     for i in _COV6_DIAG[3:]:
-        cov[i] = math.nan  # attitude / angular-rate variance: not estimated
+        cov[i] = math.inf  # attitude / angular-rate variance: not estimated, no information
     return cov
 
 
@@ -419,16 +458,22 @@ def check_sendable(e: NavEstimate) -> None:
         raise CodecError("out_of_range", "estimate covariance")
 
 
+def estimate_valid(e: NavEstimate) -> bool:
+    """The estimator says the estimate is valid and its position/velocity variances are finite."""
+    return bool(e.pos_valid) and bool(np.all(np.isfinite(e.cov_diag[0:6])))
+
+
 def encode_odometry(e: NavEstimate) -> mavlink.MAVLink_odometry_message:
     """ODOMETRY of ``e``; CodecError unless it passes :func:`check_sendable`."""
     check_sendable(e)
     p, v = e.p_ned_m, e.v_ned_m_s
-    quality = 0 if not math.isfinite(e.beta) else max(1, min(100, round(100.0 * e.beta)))
+    quality = ODOMETRY_QUALITY_UNKNOWN if estimate_valid(e) else ODOMETRY_QUALITY_FAILED
     nan = math.nan
     return mavlink.MAVLink_odometry_message(
         e.t_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED,
-        p[0], p[1], p[2], [nan, nan, nan, nan], v[0], v[1], v[2], nan, nan, nan,
-        _cov21(e.cov_diag[0:3]), _cov21(e.cov_diag[3:6]), 0, mavlink.MAV_ESTIMATOR_TYPE_GPS_INS, quality,
+        p[0], p[1], p[2], [nan, 0.0, 0.0, 0.0], v[0], v[1], v[2], nan, nan, nan,
+        _cov21(e.cov_diag[0:3]), _cov21(e.cov_diag[3:6]), e.gnss_resets % 256,  # reset_counter
+        mavlink.MAV_ESTIMATOR_TYPE_GPS_INS, quality,
     )
 
 
@@ -448,27 +493,38 @@ def decode_odometry(m: Any) -> NavEstimate:
         v_ned_m_s=_bounded("ODOMETRY velocity", LIMITS.max_speed_m_s, m.vx, m.vy, m.vz),
         b_ned_m=np.array(_NAN3),
         cov_diag=np.array([*pos_var, *vel_var, *_NAN3]),
-        beta=m.quality / 100.0 if m.quality > 0 else math.nan,
+        beta=math.nan,  # β travels in NAMED_VALUE_FLOAT GNSS_BETA; quality is the spec's
         nis=math.nan,
         method="odometry",
+        pos_valid=int(m.quality) != ODOMETRY_QUALITY_FAILED,
+        gnss_resets=int(m.reset_counter),
     )
 
 
-def encode_estimator_status(
-    e: NavEstimate, nis_gate: float, flags: int = ESTIMATOR_HEALTHY_FLAGS
-) -> mavlink.MAVLink_estimator_status_message:
-    """``pos_horiz_ratio`` = NIS / ``nis_gate`` (the χ² gate); 0 before the first fused fix.
-    ``e`` must pass :func:`check_sendable`; a ratio beyond float32 is clamped to its maximum."""
-    ratio = min(e.nis / nis_gate, FLOAT32_MAX) if math.isfinite(e.nis) else 0.0
+def estimator_flags(e: NavEstimate) -> int:
+    """ESTIMATOR_STATUS_FLAGS of ``e``: position/velocity bits while the estimate is valid,
+    GPS_GLITCH while the innovation gate rejects GNSS."""
+    flags = ESTIMATOR_HEALTHY_FLAGS if estimate_valid(e) else 0
+    return flags | (mavlink.ESTIMATOR_GPS_GLITCH if e.gnss_glitch else 0)
+
+
+def encode_estimator_status(e: NavEstimate) -> mavlink.MAVLink_estimator_status_message:
+    """Flags and ratios of the tests actually made (see the module notes); 1-σ accuracies.
+    ``pos_horiz_ratio`` = the estimator's ``pos_horiz_test_ratio`` (NaN: no fix tested yet;
+    clamped to the float32 maximum). ``e`` must pass :func:`check_sendable`."""
+    ratio = min(e.pos_horiz_test_ratio, FLOAT32_MAX)  # NaN stays NaN
     horiz = math.sqrt(float(e.cov_diag[0] + e.cov_diag[1]))
     vert = math.sqrt(float(e.cov_diag[2]))
+    nan = math.nan
     return mavlink.MAVLink_estimator_status_message(
-        e.t_us, flags, 0.0, ratio, 0.0, 0.0, 0.0, 0.0, horiz, vert
+        e.t_us, estimator_flags(e), nan, ratio, nan, nan, nan, nan, horiz, vert,
     )
 
 
 def decode_estimator_status(m: Any) -> EstimatorStatus:
-    _finite("ESTIMATOR_STATUS", m.pos_horiz_ratio, m.pos_horiz_accuracy, m.pos_vert_accuracy)
+    _finite("ESTIMATOR_STATUS", m.pos_horiz_accuracy, m.pos_vert_accuracy)
+    if not (math.isnan(m.pos_horiz_ratio) or 0.0 <= m.pos_horiz_ratio < math.inf):  # NaN: no test made
+        raise CodecError("out_of_range", f"ESTIMATOR_STATUS pos_horiz_ratio {m.pos_horiz_ratio}")
     return EstimatorStatus(
         int(m.time_usec), int(m.flags), float(m.pos_horiz_ratio),
         float(m.pos_horiz_accuracy), float(m.pos_vert_accuracy),
@@ -499,6 +555,21 @@ def encode_belief(e: NavEstimate) -> list[mavlink.MAVLink_named_value_float_mess
         for name, value in ((BELIEF_NAME, e.beta), (NIS_NAME, e.nis))
         if math.isfinite(value)
     ]
+
+
+def encode_bias(e: NavEstimate) -> mavlink.MAVLink_debug_vect_message:
+    """DEBUG_VECT ``GNSS_BIAS``: the estimated GNSS bias, north/east/down [m]."""
+    b = e.b_ned_m
+    return mavlink.MAVLink_debug_vect_message(BIAS_NAME.encode("ascii"), e.t_us, float(b[0]), float(b[1]),
+                                              float(b[2]))
+
+
+def decode_bias(m: Any) -> tuple[int, np.ndarray]:
+    """(boot time [us], bias NED [m]) of a DEBUG_VECT ``GNSS_BIAS``; another name is a CodecError."""
+    name = _text(m.name)
+    if name != BIAS_NAME:
+        raise CodecError("name", f"DEBUG_VECT {name!r} is not {BIAS_NAME}")
+    return int(m.time_usec), _vec("DEBUG_VECT GNSS_BIAS", m.x, m.y, m.z)
 
 
 # --- planner bridge ---------------------------------------------------------------------------
@@ -539,13 +610,21 @@ def decode_setpoint(m: Any) -> Setpoint:
 # --- link housekeeping ------------------------------------------------------------------------
 
 
-def encode_heartbeat(role: str) -> mavlink.MAVLink_heartbeat_message:
+def encode_heartbeat(role: str, armed: bool = False, mode: str | None = None,
+                     system_status: int = mavlink.MAV_STATE_ACTIVE) -> mavlink.MAVLink_heartbeat_message:
+    """A companion's heartbeat (base and custom mode 0: not an autopilot), or the vehicle's with
+    its armed flag and flight ``mode`` (a key of :data:`CUSTOM_MODES`)."""
     mav_type, autopilot = ROLE_TYPES[role]
-    return mavlink.MAVLink_heartbeat_message(mav_type, autopilot, 0, 0, mavlink.MAV_STATE_ACTIVE, 3)
+    base_mode = custom_mode = 0
+    if role == "vehicle":
+        base_mode = VEHICLE_BASE_MODE | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+        custom_mode = CUSTOM_MODES[mode or "OFFBOARD"]
+    return mavlink.MAVLink_heartbeat_message(mav_type, autopilot, base_mode, custom_mode, system_status, 3)
 
 
 def decode_heartbeat(m: Any) -> Heartbeat:
-    return Heartbeat(int(m.type), int(m.autopilot), int(m.system_status))
+    return Heartbeat(int(m.type), int(m.autopilot), int(m.system_status), int(m.base_mode),
+                     int(m.custom_mode))
 
 
 def encode_system_time(time_unix_us: int, t_boot_us: int) -> mavlink.MAVLink_system_time_message:

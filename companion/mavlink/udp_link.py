@@ -95,8 +95,10 @@ class LinkCounters:
 
 
 def read_signing_key(path: str | os.PathLike[str]) -> bytes:
-    """A signing key file holds 64 hex characters (the raw key) or a passphrase (SHA-256 of it,
-    as MAVProxy's ``signing setup`` does)."""
+    """A signing key file holds 64 hex characters (the raw key, for pymavlink-style clients) or a
+    passphrase: one word of printable ASCII, whose SHA-256 is the key exactly as MAVProxy's
+    ``signing key WORD`` computes it (MAVProxy keeps only the first word of a longer phrase and
+    encodes it as ASCII, so anything else could not be typed there)."""
     try:
         text = Path(path).read_text(encoding="utf-8").strip()
     except (OSError, UnicodeDecodeError) as exc:
@@ -108,7 +110,10 @@ def read_signing_key(path: str | os.PathLike[str]) -> bytes:
             return bytes.fromhex(text)
         except ValueError:
             pass
-    return hashlib.sha256(text.encode("utf-8")).digest()
+    if not (text.isascii() and text.isprintable()) or any(c.isspace() for c in text):
+        raise UserError(f"signing key file {path}: a passphrase must be one word of printable ASCII "
+                        "(what MAVProxy's 'signing key' accepts), or give 64 hex characters")
+    return hashlib.sha256(text.encode("ascii")).digest()
 
 
 NEW_STREAM_MAX_AGE = 6_000_000  # 60 s in signing ticks (10 µs): an older new stream is a replay

@@ -6,8 +6,10 @@ in real time: ODOMETRY at 50 Hz and right after every GNSS fix, ESTIMATOR_STATUS
 NAMED_VALUE_FLOAT ``GNSS_BETA``/``GNSS_NIS`` at 20 Hz. With ``step_markers`` (set only by
 ``beliefnav sitl``, whose vehicle ends each step with a TIMESYNC request) a request is a step
 marker, answered with ODOMETRY for that time, then the TIMESYNC response; without it a TIMESYNC
-request is answered as the MAVLink spec says and nothing else happens. A restarted process starts a fresh
-Navigator, which initialises again from the next good GNSS fix.
+request is answered as the MAVLink spec says and nothing else happens. ODOMETRY goes out once per
+estimate time: a trigger that finds the estimate already sent (e.g. a marker right after the 50 Hz
+one) sends nothing new, as the one sent is already ahead of the response on the same socket. A
+restarted process starts a fresh Navigator, which initialises again from the next good GNSS fix.
 
 Time cannot be poisoned (:mod:`companion.domain.clock_guard`): the IMU stream is the time base;
 a lone IMU stamp outside its window is rejected (``rejected_clock_imu``), a consensus of several
@@ -50,6 +52,7 @@ class OutputRates:
     odometry_period_us: int = 20_000  # ODOMETRY, 50 Hz
     belief_period_us: int = 50_000  # NAMED_VALUE_FLOAT GNSS_BETA / GNSS_NIS, 20 Hz
     status_period_us: int = 200_000  # ESTIMATOR_STATUS, 5 Hz
+    bias_period_us: int = 200_000  # DEBUG_VECT GNSS_BIAS (estimated bias, for the vehicle's record), 5 Hz
     heartbeat_period_s: float = 1.0  # HEARTBEAT, wall clock
 
 
@@ -70,6 +73,7 @@ class _Due:
     odometry_us: int = 0
     belief_us: int = 0
     status_us: int = 0
+    bias_us: int = 0
 
 
 @dataclass(slots=True)
@@ -86,6 +90,7 @@ class EstimatorNode:
     gnss_to_odometry_ns: list[int] = field(default_factory=list)
     step_markers: bool = False  # TIMESYNC requests are beliefnav sitl's step markers
     _due: _Due = field(default_factory=_Due)
+    _odometry_sent_t_us: int = -1  # estimate time of the last ODOMETRY sent (one per estimate time)
     _topics: EstimatorTelemetry = field(init=False)
     _deferred: DeferredPublisher = field(init=False)
     _clock: StreamClock = field(init=False)
@@ -183,6 +188,7 @@ class EstimatorNode:
                 self._retired[name] = self._retired.get(name, 0) + n
             self.navigator = self.new_navigator()
         self._due = _Due()
+        self._odometry_sent_t_us = -1
 
     def _sendable(self) -> NavEstimate | None:
         """The current estimate if it may be sent (finite, plausible), else None (counted)."""
@@ -211,11 +217,17 @@ class EstimatorNode:
             due.status_us = _next_multiple(t_us, self.rates.status_period_us)
             estimate = self._sendable()
             if estimate is not None:
-                self.link.send(codec.encode_estimator_status(estimate, self.nis_gate))
+                self.link.send(codec.encode_estimator_status(estimate))
+        if t_us >= due.bias_us:
+            due.bias_us = _next_multiple(t_us, self.rates.bias_period_us)
+            estimate = self._sendable()
+            if estimate is not None and np.isfinite(estimate.b_ned_m).all():
+                self.link.send(codec.encode_bias(estimate))
 
     def _send_odometry(self) -> NavEstimate | None:
         estimate = self._sendable()
-        if estimate is not None:
+        if estimate is not None and estimate.t_us != self._odometry_sent_t_us:
+            self._odometry_sent_t_us = estimate.t_us
             self.link.send(codec.encode_odometry(estimate))
         return estimate
 

@@ -25,7 +25,8 @@ TARGETS = {
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("target", choices=[*TARGETS, "all"], help="what to measure")
-    parser.add_argument("--json", action="store_true", help="print one JSON object (the default output)")
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON object (default: the same figures as aligned lines)")
     parser.add_argument("--quick", action="store_true", help="shorter runs (smoke check, noisier figures)")
 
 
@@ -40,10 +41,21 @@ def machine() -> dict[str, object]:
     }
 
 
+def human_lines(value: object, prefix: str = "") -> list[str]:
+    """Nested figures as ``a.b.c  value`` lines (numbers to 4 significant digits)."""
+    if isinstance(value, dict):
+        return [line for k, v in value.items() for line in human_lines(v, f"{prefix}{k}.")]
+    if isinstance(value, float):
+        text = f"{value:.4g}"
+    else:
+        text = json.dumps(value) if isinstance(value, list) else str(value)
+    return [f"{prefix.rstrip('.'):<48} {text}"]
+
+
 def run(args: argparse.Namespace) -> int:
     names = list(TARGETS) if args.target == "all" else [args.target]
     results = {name: importlib.import_module(TARGETS[name]).measure(args) for name in names}
     out = {"machine": machine(), **(results if len(names) > 1 else results[names[0]])}
-    print(json.dumps(out, indent=2))
+    print(json.dumps(out, indent=2) if args.json else "\n".join(human_lines(out)))
     sys.stdout.flush()
     return 0

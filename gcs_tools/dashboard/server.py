@@ -1,4 +1,9 @@
-"""aiohttp server: the page, its static files, and a Server-Sent Events stream of telemetry frames."""
+"""aiohttp server: the page, its static files, and a Server-Sent Events stream of telemetry frames.
+
+``/snapshot.json`` is the retained history once (the page's ``?snapshot`` mode draws it and goes idle,
+so ``chromium --headless --screenshot`` of ``/?snapshot=1`` returns); ``/palette.json`` is the colour
+of each meaning, shared with the figures (:mod:`gcs_tools.palette`).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +16,7 @@ from pathlib import Path
 from aiohttp import web
 
 from companion.errors import UserError
+from gcs_tools import palette
 from gcs_tools.dashboard.state import LiveState
 
 STATIC = Path(__file__).with_name("static")
@@ -29,12 +35,20 @@ class Dashboard:
         app = web.Application()
         app.router.add_get("/", self.index)
         app.router.add_get("/events", self.events)
+        app.router.add_get("/snapshot.json", self.snapshot)
+        app.router.add_get("/palette.json", self.palette)
         app.router.add_static("/static/", STATIC)
         app.cleanup_ctx.append(self._ticker)
         return app
 
     async def index(self, request: web.Request) -> web.FileResponse:
         return web.FileResponse(STATIC / "index.html")
+
+    async def snapshot(self, request: web.Request) -> web.Response:
+        return web.json_response(self.state.snapshot(), headers={"Cache-Control": "no-cache"})
+
+    async def palette(self, request: web.Request) -> web.Response:
+        return web.json_response(palette.as_json())
 
     async def events(self, request: web.Request) -> web.StreamResponse:
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache"})

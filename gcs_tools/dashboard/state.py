@@ -22,6 +22,8 @@ from companion.telemetry.pubsub import Received
 
 SERIES = ("truth", "est", "ref", "beta", "err", "latency")
 TRUTH_MATCH_US = 30_000  # an estimate is compared with truth stamped within this much of it
+STALE_S = 2.0  # [s] without any message a vehicle is shown stale (the page's STALE_S too)
+AT_GOAL_M = 3.0  # [m] last true position this close to the route's goal: arrived (fly's 2 m radius + margin)
 
 
 def _num(x: float) -> float | None:
@@ -40,6 +42,15 @@ class VehicleView:
     route_new: bool = False
     latest: dict[str, Any] = field(default_factory=dict)  # headline numbers for `top`
     messages: Counter = field(default_factory=Counter)
+    last_mono_s: float = 0.0  # monotonic time of the last message (any process)
+    process_mono_s: dict[str, float] = field(default_factory=dict)  # process -> monotonic time of its last
+    last_truth_ned_m: np.ndarray | None = None
+    goal_ned_m: np.ndarray | None = None
+
+    def at_goal(self) -> bool:
+        if self.last_truth_ned_m is None or self.goal_ned_m is None or not np.isfinite(self.goal_ned_m).all():
+            return False
+        return float(np.linalg.norm(self.last_truth_ned_m - self.goal_ned_m)) <= AT_GOAL_M
 
     def __post_init__(self) -> None:
         for name in SERIES:
@@ -69,6 +80,7 @@ class LiveState:
             if v is None:
                 v = self.vehicles[msg.vehicle] = VehicleView(self.history_len)
             v.messages[f"{msg.process}/{msg.topic}"] += 1
+            v.last_mono_s = v.process_mono_s[msg.process] = time.monotonic()
             self._ingest(v, msg.process, msg.topic, msg.obj)
 
     def ingest_malformed(self, key: str, payload: bytes, error: str) -> None:
@@ -81,6 +93,7 @@ class LiveState:
         t_s = round(obj.t_us * 1e-6, 4)
         if isinstance(obj, TruthState):
             v.truth_recent.append((obj.t_us, obj.p_ned_m))
+            v.last_truth_ned_m = obj.p_ned_m
             v.add("truth", [t_s, _num(obj.p_ned_m[0]), _num(obj.p_ned_m[1])])
             v.latest["clearance_m"] = obj.clearance_m
         elif isinstance(obj, NavEstimate):
@@ -105,16 +118,22 @@ class LiveState:
             route = {"mission": obj.mission, "profile": obj.profile,
                      "waypoints_ne_m": [[_num(p[0]), _num(p[1])] for p in obj.waypoints_ned_m],
                      "buildings_ne_m": [[_num(x) for x in b] for b in obj.buildings_ne_m]}
+            v.goal_ned_m = obj.goal_ned_m
             if route != v.route:
                 v.route, v.route_new = route, True
 
     def _vehicle_json(self, v: VehicleView, series: dict[str, list], route: bool) -> dict[str, Any]:
+        now = time.monotonic()
         return {
             "series": series,
             "counters": v.counters,
             "status": v.status,
             "messages": dict(v.messages),
             "route": v.route if route else None,
+            # freshness, on the server's clock (the page's clock may differ): seconds since the last message
+            "age_s": round(now - v.last_mono_s, 2),
+            "process_age_s": {p: round(now - t, 2) for p, t in v.process_mono_s.items()},
+            "at_goal": v.at_goal(),
         }
 
     def take_frame(self) -> dict[str, Any]:
@@ -146,5 +165,7 @@ class LiveState:
     def summary(self) -> dict[str, dict[str, Any]]:
         """Headline numbers per vehicle (for ``beliefnav top``)."""
         with self._lock:
+            now = time.monotonic()
             return {name: {**v.latest, "counters": {p: dict(c) for p, c in v.counters.items()},
-                           "messages": dict(v.messages)} for name, v in self.vehicles.items()}
+                           "messages": dict(v.messages), "age_s": now - v.last_mono_s,
+                           "at_goal": v.at_goal()} for name, v in self.vehicles.items()}

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
@@ -15,6 +16,7 @@ from typing import Any
 
 from companion.errors import UserError
 from gcs_tools.evaluate import campaign, report, tuning
+from gcs_tools.jsonvalues import plain_json
 
 DEFAULT_METHODS = "naive,adaptive,first-order,second-order"
 
@@ -34,12 +36,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=1, help="local worker processes (default: 1)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="run on this Dask distributed scheduler instead of the local pool")
-    parser.add_argument("--max-duration", type=float, default=None, metavar="S",
+    parser.add_argument("--max-duration-s", type=float, default=None, metavar="S",
                         help="cap each flight at S seconds of simulated time")
+    parser.add_argument("--max-duration", type=float, dest="max_duration_s", help=argparse.SUPPRESS)  # old
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                         help="override one mission config field for every flight (all methods), e.g. "
                              "estimator.r_inflation_max=100; repeatable")
-    parser.add_argument("--out", required=True, type=Path, help="output directory")
+    parser.add_argument("--out", type=Path, default=Path("runs/eval"),
+                        help="output directory (default runs/eval)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the campaign's headline (paper claims, per-method medians) as JSON")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--readme", type=Path, default=None, metavar="PATH",
                         help="also splice the table and figures into this README (block keyed by --out)")
@@ -63,14 +69,9 @@ def parse_profiles(text: str, available: int) -> tuple[int, ...]:
 
 
 def parse_methods(text: str) -> tuple[str, ...]:
-    from companion.estimator import METHODS
+    from gcs_tools import choices
 
-    methods = tuple(m.strip() for m in text.split(",") if m.strip())
-    unknown = [m for m in methods if m not in METHODS]
-    if unknown or not methods:
-        bad = unknown[0] if unknown else text
-        raise UserError(f"--methods: unknown method {bad!r} (known: {', '.join(METHODS)})")
-    return methods
+    return tuple(choices.methods(text))  # each checked: the valid ones and the nearest named
 
 
 def parameters(mission: Any) -> dict[str, Any]:
@@ -94,20 +95,25 @@ def run(args: argparse.Namespace) -> int:
     profiles = parse_profiles(args.missions, len(mission.profiles))
     methods = parse_methods(args.methods)
     seeds = campaign.parse_seeds(args.seeds)
-    jobs = campaign.grid(args.mission, profiles, methods, seeds, args.max_duration, overrides)
+    jobs = campaign.grid(args.mission, profiles, methods, seeds, args.max_duration_s, overrides)
     t0 = time.perf_counter()
     results = campaign.run(jobs, args.workers, args.scheduler, progress=not args.no_progress)
     wall_s = time.perf_counter() - t0
     info = {
         "mission": args.mission, "profiles": list(profiles), "methods": list(methods), "seeds": list(seeds),
-        "max_duration_s": args.max_duration, "flights": len(jobs), "workers": args.workers,
+        "max_duration_s": args.max_duration_s, "flights": len(jobs), "workers": args.workers,
         "scheduler": args.scheduler, "wall_s": wall_s, "overrides": dict(overrides),
         "parameters": parameters(mission),
     }
     res = report.write(args.out, results, methods, info, mission)
     if args.readme is not None:
         report.splice_readme(args.readme, args.out.name, report.readme_section(res, args.out, args.readme))
-    print(report.table(res), end="")
+    if args.json:
+        head = {"out": str(args.out), "flights": len(jobs), "wall_s": wall_s,
+                "paper_claims": res.get("paper_claims"), "methods": res.get("methods")}
+        print(json.dumps(plain_json(head, nan_to_none=True), indent=2, allow_nan=False))
+    else:
+        print(report.table(res), end="")
     print(f"wrote {args.out}/results.json, report.md and {len(res['figures'])} figures "
           f"({len(jobs)} flights, {wall_s:.1f} s)", file=sys.stderr)
     return 0

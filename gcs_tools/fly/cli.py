@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 
@@ -12,25 +11,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", type=int, default=0, help="mission profile index (default 0)")
     parser.add_argument("--method", default="second-order", help="estimator method (default second-order)")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the run (default 0)")
-    parser.add_argument("--max-duration", type=float, default=None, metavar="S",
+    parser.add_argument("--max-duration-s", type=float, default=None, metavar="S",
                         help="stop after S simulated seconds (default: route duration + margin)")
+    parser.add_argument("--max-duration", type=float, dest="max_duration_s", help=argparse.SUPPRESS)  # old
     parser.add_argument("--out", default="runs/fly", help="output directory (default runs/fly)")
+    parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
 
 
 def run(args: argparse.Namespace) -> int:
-    from companion.mission import load_mission
-    from gcs_tools.fly.core import fly
-    from gcs_tools.fly.output import strict_json, write_outputs
-    from gcs_tools.outdir import ensure_out_dir
+    from pathlib import Path
 
+    from gcs_tools import choices
+    from gcs_tools.fly.core import fly
+    from gcs_tools.fly.output import write_outputs
+    from gcs_tools.outdir import ensure_out_dir
+    from gcs_tools.summaries import print_summary
+
+    mission = choices.mission(args.mission)  # every option checked before anything is written
+    choices.profile(mission, args.profile)
+    choices.method(args.method)
     ensure_out_dir(args.out)
-    mission = load_mission(args.mission)
-    result = fly(mission, args.profile, args.method, args.seed, max_duration_s=args.max_duration)
+    result = fly(mission, args.profile, args.method, args.seed, max_duration_s=args.max_duration_s)
     paths = write_outputs(result, mission.world, args.out)
-    s = {k: v for k, v in result.summary.items() if k != "estimator_counters"}
-    print(json.dumps(strict_json(s), indent=2))
-    print(f"wrote {', '.join(str(p) for p in paths)}")
     s = result.summary
+    print_summary("fly", s, Path(args.out), [p.name for p in paths], args.json)
     if not s["reached_goal"]:  # time-out or collision: a failure, said in one line
         why = f"collided {s['collisions']} time(s)" if s["collisions"] else "did not reach the goal in time"
         print(f"beliefnav: error: the vehicle {why} ({s['duration_s']:.1f} s simulated)", file=sys.stderr)

@@ -18,8 +18,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="log to replay: MAVLink tlog, ArduPilot DataFlash .bin or PX4 ULog .ulg "
                              "(recognised by its first bytes, else by extension)")
     parser.add_argument("--method", default="second-order", help="estimator method (default: second-order)")
-    parser.add_argument("--out", required=True, type=Path,
-                        help="output directory for estimates.csv, summary.json")
+    parser.add_argument("--out", type=Path, default=Path("runs/replay"),
+                        help="output directory for estimates.csv, summary.json (default runs/replay)")
+    parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
     parser.add_argument("--home", default=None, metavar="LAT,LON,ALT",
                         help="local-frame origin (degrees, degrees, metres); default: the mission's home "
                              "with --mission, else the first good fix")
@@ -42,8 +43,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gcs_tools import choices
     from gcs_tools.outdir import check_out_dir
 
+    choices.method(args.method)
+    if not args.file.is_file():
+        raise UserError(f"{args.file}: no such file")
     check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
@@ -51,9 +56,8 @@ def run(args: argparse.Namespace) -> int:
     config = None
     if args.mission is not None:
         from companion.estimator import mission_estimator_config
-        from companion.mission import load_mission
 
-        mission = load_mission(args.mission)
+        mission = choices.mission(args.mission)
         config = mission_estimator_config(mission)
         home = home or mission.frame
     bar = None
@@ -74,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
         if pub is not None:
             pub.close()
     core.write_summary(result, args.out)
+    if args.json:
+        print((args.out / "summary.json").read_text(encoding="utf-8"), end="")
+        return 0
     print(report(result.summary, args.file.name))
     print(f"  wrote {args.out / 'estimates.csv'} and {args.out / 'summary.json'}")
     if pub is not None:

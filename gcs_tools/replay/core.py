@@ -125,8 +125,12 @@ class _CsvSink:
         if not rows.size:
             return
         if self._file is None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "w")  # noqa: SIM115 - closed by close()
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self._file = open(self.path, "w")  # noqa: SIM115 - closed by close()
+            except OSError as exc:
+                raise UserError(f"--out {self.path.parent}: cannot write {self.path.name}: "
+                                f"{exc.strerror or exc}") from None
             self._file.write(",".join(CSV_COLUMNS) + "\n")
         table = np.column_stack((t_us / 1e6, rows))
         np.savetxt(self._file, table, delimiter=",", fmt="%.9g")
@@ -150,8 +154,8 @@ class _Comparisons:
     def __init__(self, frame: LocalNedFrame, max_gap_us: int) -> None:
         self.frame, self.max_gap_us = frame, max_gap_us
         self.gnss = PositionErrors(max_gap_us=max_gap_us)
-        self.geodetic: dict[str, PositionErrors] = {}
-        self.local: dict[str, PositionErrors] = {}
+        self.geodetic: dict[tuple[str, str], PositionErrors] = {}
+        self.local: dict[tuple[str, str], PositionErrors] = {}
         self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
 
     def estimate(self, t_us: int, p_ned_m: Any) -> None:
@@ -164,15 +168,16 @@ class _Comparisons:
             self._geodetic(self.gnss, fix.t_validity_us, fix.lat_deg, fix.lon_deg, fix.alt_m)
 
     def reference(self, ref: Reference | LocalReference) -> None:
+        key = (ref.kind, ref.source)
         if type(ref) is Reference:
-            m = self.geodetic.get(ref.kind)
+            m = self.geodetic.get(key)
             if m is None:
-                m = self.geodetic[ref.kind] = PositionErrors(max_gap_us=self.max_gap_us)
+                m = self.geodetic[key] = PositionErrors(max_gap_us=self.max_gap_us)
             self._geodetic(m, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
         else:
-            m = self.local.get(ref.kind)
+            m = self.local.get(key)
             if m is None:
-                m = self.local[ref.kind] = PositionErrors(max_gap_us=self.max_gap_us)
+                m = self.local[key] = PositionErrors(max_gap_us=self.max_gap_us)
             m.add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
 
     def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
@@ -201,7 +206,8 @@ class _Comparisons:
             info = reader.references.get(kind)
             if info is None:
                 continue
-            m = self.local.get(kind) if info.alignment == "mean_offset" else self.geodetic.get(kind)
+            key = (kind, info.source)
+            m = self.local.get(key) if info.alignment == "mean_offset" else self.geodetic.get(key)
             if m is not None:
                 out[kind] = {"source": info.source, "note": info.note, **m.statistics(info.alignment)}
         return out

@@ -16,9 +16,9 @@ What is used (instance/core 0 where a message has several):
   Validity time = ``GPA.SMS`` − the GPS delay (``GPS.TimeUS`` when no GPA follows); the delay is
   the log's ``GPS1_DELAY_MS`` (or ``GPS_DELAY_MS``) when it is set (> 0), else
   :data:`DEFAULT_GPS_DELAY_MS`, or the caller's value.
-- The autopilot's estimate: ``POS`` (``Lat``, ``Lng``, ``Alt`` MSL) or, if ``XKF1``/``NKF1``
-  (core 0, ``PN``/``PE``/``PD`` about the EKF origin) comes first, those with the origin of
-  ``ORGN`` (``Type`` 0): both geodetic, so no offset is fitted.
+- The autopilot's estimate: ``POS`` (``Lat``, ``Lng``, ``Alt`` MSL) or, when the log has none,
+  ``XKF1`` (EKF3) / ``NKF1`` (EKF2) core 0 (``PN``/``PE``/``PD`` about the EKF origin of ``ORGN``
+  ``Type`` 0): both geodetic, so no offset is fitted.
 - Truth (SITL): ``SIM`` (``Lat``, ``Lng``, ``Alt``).
 """
 
@@ -230,7 +230,7 @@ class DataFlashSource:
         delay_us: float | None = None if self.gps_delay_ms is None else self.gps_delay_ms * 1000
         pending_gps: list[Any] | None = None
         origin: tuple[float, float, float] | None = None
-        ap_source = ""
+        seen: set[str] = set()
         for name, v in DataFlashScanner(self.path, FIELDS, st):
             if pending_gps is not None and name != "GPA":
                 yield from self._gnss(pending_gps, None, delay_us)
@@ -265,24 +265,28 @@ class DataFlashSource:
                 if v[0] == 0 and origin is None:
                     origin = (v[1], v[2], v[3])
             elif name == "SIM":
-                ref = _reference(TRUTH, v, rejected)
+                ref = _reference(TRUTH, v, rejected, "SIM")
                 if ref is not None:
-                    self.references.setdefault(TRUTH, INFO["SIM"])
+                    seen.add(name)
                     yield ref
-            elif name == "POS" or origin is not None:  # POS, XKF1, NKF1
-                ap_source = ap_source or name
-                if name != ap_source:
-                    continue
+            elif name == "POS" or origin is not None:  # POS, XKF1, NKF1 (these about the EKF origin)
                 if name == "POS":
-                    ref = _reference(AUTOPILOT, v, rejected)
+                    ref = _reference(AUTOPILOT, v, rejected, INFO[name].source)
                 else:
                     lat, lon, alt = pymap3d.ned2geodetic(v[1], v[2], v[3], *origin)  # type: ignore[misc]
-                    ref = _reference(AUTOPILOT, [v[0], float(lat), float(lon), float(alt)], rejected)
+                    ref = _reference(AUTOPILOT, [v[0], float(lat), float(lon), float(alt)], rejected,
+                                     INFO[name].source)
                 if ref is not None:
-                    self.references.setdefault(AUTOPILOT, INFO[name])
+                    seen.add(name)
                     yield ref
         if pending_gps is not None:
             yield from self._gnss(pending_gps, None, delay_us)
+        if "SIM" in seen:
+            self.references[TRUTH] = INFO["SIM"]
+        for source in ("POS", "XKF1", "NKF1"):  # in order of preference
+            if source in seen:
+                self.references[AUTOPILOT] = INFO[source]
+                break
 
     def _delay_us(self, params: dict[str, float]) -> float:
         for key in DELAY_PARAMS:
@@ -318,13 +322,13 @@ def _fix(gps: list[Any], gpa: list[Any] | None, delay_us: float) -> GnssFix | No
                    h_acc_m=float(h_acc), v_acc_m=float(v_acc), hdop=float(hdop))
 
 
-def _reference(kind: str, v: list[Any], rejected: Any) -> Reference | None:
+def _reference(kind: str, v: list[Any], rejected: Any, source: str) -> Reference | None:
     t, lat, lon, alt = v
     finite = all(math.isfinite(x) for x in (lat, lon, alt))
     if not finite or abs(lat) > 90 or abs(lon) > 180 or not (lat or lon):
         rejected[f"{kind}_out_of_range"] += 1
         return None
-    return Reference(kind, int(t), float(lat), float(lon), float(alt))
+    return Reference(kind, int(t), float(lat), float(lon), float(alt), source)
 
 
 def _vec(x: float, y: float, z: float) -> Any:

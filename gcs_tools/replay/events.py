@@ -30,6 +30,7 @@ class Reference:
     lat_deg: float
     lon_deg: float
     alt_m: float
+    source: str = ""  # message/topic: a reader may yield several sources of one kind
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,6 +40,7 @@ class LocalReference:
     kind: str
     t_us: int
     p_ned_m: tuple[float, float, float]
+    source: str = ""
 
 
 Event = ImuSample | AttitudeSample | GnssFix | Reference | LocalReference
@@ -70,7 +72,7 @@ class LogReader(Protocol):
     format: str  # "tlog", "dataflash", "ulog"
     stats: ReaderStats
     sources: dict[str, str | None]  # imu / attitude / gnss -> the message or topic used
-    references: dict[str, ReferenceInfo]  # filled as references are found
+    references: dict[str, ReferenceInfo]  # kind -> the source the summary reports (final after iterating)
 
     def __iter__(self) -> Iterator[Event]: ...
 

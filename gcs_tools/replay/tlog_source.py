@@ -4,8 +4,9 @@ One IMU source (the first of HIGHRES_IMU, RAW_IMU, SCALED_IMU to appear) and one
 source (ATTITUDE_QUATERNION or ATTITUDE) are used; messages of the other source of the same kind
 are counted (``imu_other_source_ignored``), not fed twice. GPS_RAW_INT ``time_usec`` is the fix's
 validity time. References: SIM_STATE (truth, at the last IMU time: it has no stamp), the
-autopilot's GLOBAL_POSITION_INT (geodetic) or, without it, LOCAL_POSITION_NED (about an origin
-the log does not state: aligned by mean offset).
+autopilot's GLOBAL_POSITION_INT (geodetic) or, when the log has none, LOCAL_POSITION_NED (about
+an origin the log does not state: aligned by mean offset). Both are yielded; ``references``
+names the one reported.
 """
 
 from __future__ import annotations
@@ -78,26 +79,20 @@ class TlogSource:
         decoded, rejected = st.decoded, st.rejected
         decode_sample = mc.decode_sample
         last_imu_us = 0
-        has_global = False
+        seen: set[str] = set()
         count = 0
         for _, view in reader:
             count += 1
-            if count % 4096 == 0:
+            if count & 255 == 0:
                 st.position, st.size = reader.position, reader.size
             kind = view.get_type()
             if kind in REFERENCE_TYPES:
-                if kind == "LOCAL_POSITION_NED" and has_global:
-                    continue
                 try:
                     ref = self._reference(view, kind, last_imu_us)
                 except mc.CodecError as exc:
                     rejected[f"{kind.lower()}_{exc.reason}"] += 1
                     continue
-                has_global = has_global or kind == "GLOBAL_POSITION_INT"
-                if ref.kind == AUTOPILOT and has_global and AUTOPILOT in self.references \
-                        and self.references[AUTOPILOT].source == "LOCAL_POSITION_NED":
-                    self.references[AUTOPILOT] = INFO[kind]  # a global source appeared: it wins
-                self.references.setdefault(ref.kind, INFO[kind])
+                seen.add(kind)
                 yield ref
                 continue
             group = "imu" if kind in IMU_TYPES else "attitude" if kind in ATTITUDE_TYPES else "gnss"
@@ -118,6 +113,12 @@ class TlogSource:
             yield sample  # type: ignore[misc]
         st.records, st.position, st.size = reader.frames, reader.size, reader.size
         st.skipped, st.skipped_bytes = reader.skipped, reader.skipped_bytes
+        if "SIM_STATE" in seen:
+            self.references[TRUTH] = INFO["SIM_STATE"]
+        for source in ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"):  # in order of preference
+            if source in seen:
+                self.references[AUTOPILOT] = INFO[source]
+                break
 
     @staticmethod
     def _reference(view: Any, kind: str, last_imu_us: int) -> Reference | LocalReference:
@@ -131,16 +132,16 @@ class TlogSource:
                 raise mc.CodecError("non_finite", "SIM_STATE")
             if abs(lat) > 90 or abs(lon) > 180:
                 raise mc.CodecError("out_of_range", "SIM_STATE lat/lon")
-            return Reference(TRUTH, last_imu_us, lat, lon, alt)
+            return Reference(TRUTH, last_imu_us, lat, lon, alt, kind)
         if kind == "GLOBAL_POSITION_INT":
             lat, lon, alt = view.lat / mc.DEG_E7, view.lon / mc.DEG_E7, view.alt / 1000.0
             if not (lat or lon) or abs(lat) > 90 or abs(lon) > 180:
                 raise mc.CodecError("out_of_range", "GLOBAL_POSITION_INT lat/lon")
-            return Reference(AUTOPILOT, view.time_boot_ms * 1000, lat, lon, alt)
+            return Reference(AUTOPILOT, view.time_boot_ms * 1000, lat, lon, alt, kind)
         p = (float(view.x), float(view.y), float(view.z))
         if not all(math.isfinite(v) for v in p):
             raise mc.CodecError("non_finite", "LOCAL_POSITION_NED")
-        return LocalReference(AUTOPILOT, view.time_boot_ms * 1000, p)
+        return LocalReference(AUTOPILOT, view.time_boot_ms * 1000, p, kind)
 
 
 def _describe_skips(reader: TlogReader) -> str:

@@ -1,4 +1,11 @@
-"""PX4 ULog ``.ulg`` -> replay events (read with the ``pyulog`` package).
+"""PX4 ULog ``.ulg`` -> replay events, streamed in file order.
+
+The definitions section (message formats, initial parameters) is read by the ``pyulog`` package
+(``ULog(..., parse_header_only=True)``); the data section is then streamed here: each
+subscription (``A``) is laid out by pyulog's own ``_MessageAddLogged`` (the flattened field
+names and numpy dtype pyulog uses), data messages (``D``) of the wanted topics (instance 0) are
+decoded in batches with numpy, and events are yielded in the order the logger wrote them (its
+arrival order). Memory stays flat in the log's length.
 
 Topics and fields, read by name (they change between PX4 releases; a missing one ends the replay
 with a one-line error naming the topic and field). Times are PX4 boot microseconds.
@@ -12,23 +19,20 @@ with a one-line error naming the topic and field). Times are PX4 boot microsecon
   ``eph``/``epv`` (m), ``hdop``. Validity time = ``timestamp_sample`` when logged and non-zero,
   else ``timestamp`` − ``EKF2_GPS_DELAY`` (the log's parameter, ms: what EKF2 itself assumes).
 - The autopilot's estimate: ``vehicle_global_position`` (``lat``, ``lon`` deg, ``alt`` m MSL) or,
-  without it, ``vehicle_local_position`` (``x``, ``y``, ``z`` about ``ref_lat``/``ref_lon``/
-  ``ref_alt``, rows with ``xy_global`` set); both geodetic.
+  when the log has none, ``vehicle_local_position`` (``x``, ``y``, ``z`` about
+  ``ref_lat``/``ref_lon``/``ref_alt``, rows with ``xy_global`` set); both geodetic.
 - Truth (SITL): ``vehicle_global_position_groundtruth`` or ``vehicle_local_position_groundtruth``
   (same fields). PX4 SITL logs the truth's altitude as 0: then only its horizontal position
   is trusted and the vertical mean offset is removed (alignment ``vertical_mean_offset``).
-
-Events are ordered by ``timestamp`` (the time PX4 published each message: its arrival). pyulog
-loads the selected topics whole, so memory grows with the log (the tlog and DataFlash readers
-stream).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+import struct
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import pymap3d
@@ -50,36 +54,190 @@ ATTITUDE_TOPIC = "vehicle_attitude"
 GNSS_TOPIC = "vehicle_gps_position"
 AUTOPILOT_TOPICS = ("vehicle_global_position", "vehicle_local_position")
 TRUTH_TOPICS = ("vehicle_global_position_groundtruth", "vehicle_local_position_groundtruth")
-TOPICS = (IMU_TOPIC, ATTITUDE_TOPIC, GNSS_TOPIC, *AUTOPILOT_TOPICS, *TRUTH_TOPICS)
+INPUT_TOPICS = (IMU_TOPIC, ATTITUDE_TOPIC, GNSS_TOPIC)
+TOPICS = (*INPUT_TOPICS, *AUTOPILOT_TOPICS, *TRUTH_TOPICS)
+LOCAL_FIELDS = (("x",), ("y",), ("z",), ("ref_lat",), ("ref_lon",), ("ref_alt",), ("xy_global",))
+REQUIRED_FIELDS: dict[str, tuple[tuple[str, ...], ...]] = {
+    IMU_TOPIC: (*((f"gyro_rad[{i}]",) for i in range(3)), *((f"accelerometer_m_s2[{i}]",) for i in range(3))),
+    ATTITUDE_TOPIC: tuple((f"q[{i}]",) for i in range(4)),
+    GNSS_TOPIC: (("latitude_deg", "lat"), ("longitude_deg", "lon"), ("altitude_msl_m", "alt"), ("fix_type",),
+                 ("satellites_used", "satellites_visible"), ("eph",), ("epv",)),
+    "vehicle_global_position": (("lat",), ("lon",), ("alt",)),
+    "vehicle_global_position_groundtruth": (("lat",), ("lon",), ("alt",)),
+    "vehicle_local_position": LOCAL_FIELDS,
+    "vehicle_local_position_groundtruth": LOCAL_FIELDS,
+}
 DEFAULT_EKF2_GPS_DELAY_MS = 110.0  # PX4's default, used when the log has no EKF2_GPS_DELAY
 ULOG_MAGIC = b"ULog\x01\x12\x35"
+BATCH = 2048  # data messages decoded together
+MSG_DATA, MSG_ADD, MSG_SYNC = ord("D"), ord("A"), ord("S")
+KNOWN_TYPES = frozenset(ord(c) for c in "FDIMPQARSOLCB")
+SYNC_BYTES = b"\x2f\x73\x13\x20\x25\x0c\xbb\x12"
 
 
 def is_ulog(head: bytes) -> bool:
     return head[:7] == ULOG_MAGIC
 
 
-class _Topic:
-    def __init__(self, path: Path, name: str, data: dict[str, np.ndarray]) -> None:
-        self.path, self.name, self.data = path, name, data
+class _KeepOpen:
+    """A file for pyulog's header parser that remembers where it stopped instead of closing."""
 
-    def field(self, *names: str) -> np.ndarray:
-        """The first of ``names`` present (alternatives across PX4 releases)."""
-        for n in names:
-            if n in self.data:
-                return self.data[n]
-        raise UserError(f"{self.path}: ULog topic {self.name} has no field {' or '.join(names)}")
+    def __init__(self, f: IO[bytes]) -> None:
+        self.f, self.stopped_at = f, -1
 
-    def has(self, name: str) -> bool:
-        return name in self.data
+    def read(self, n: int = -1) -> bytes:
+        return self.f.read(n)
 
-    def sample_time_us(self) -> np.ndarray:
-        """``timestamp_sample`` where logged and non-zero, else ``timestamp``."""
-        t = self.data["timestamp"].astype(np.int64)
-        if "timestamp_sample" in self.data:
-            ts = self.data["timestamp_sample"].astype(np.int64)
-            t = np.where(ts > 0, ts, t)
-        return t
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self.f.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self.f.tell()
+
+    def close(self) -> None:
+        self.stopped_at = self.f.tell()
+
+
+class _Sub:
+    """One wanted subscription: topic name and the numpy dtype of its data messages."""
+
+    def __init__(self, name: str, dtype: np.dtype[Any]) -> None:
+        self.name, self.dtype, self.size = name, dtype, dtype.itemsize
+        self.payloads: list[bytes] = []
+
+
+def _field(names: tuple[str, ...], arr: np.ndarray) -> np.ndarray:
+    for n in names:
+        if n in arr.dtype.names:  # type: ignore[operator]
+            return arr[n]
+    raise KeyError(names[0])
+
+
+class ULogScanner:
+    """Stream batches of ``(topic, structured rows)`` in file order: ``order`` lists, per data
+    message, (topic, row) within the batch. Definitions are read once (``params``)."""
+
+    def __init__(self, path: Path, wanted: tuple[str, ...], stats: ReaderStats) -> None:
+        self.path, self.wanted, self.stats = path, frozenset(wanted), stats
+        self.subscribed: set[str] = set()
+        self.params: dict[str, float] = {}
+
+    def _definitions(self, f: IO[bytes]) -> Any:
+        from pyulog import ULog
+
+        handle = _KeepOpen(f)
+        try:
+            ulog = ULog(handle, parse_header_only=True)
+        except Exception as exc:  # noqa: BLE001 - pyulog raises many kinds on a damaged file
+            detail = str(exc).splitlines()[0] if str(exc) else "no detail"
+            raise UserError(f"{self.path}: not a readable ULog ({type(exc).__name__}: {detail})") from None
+        self.params = {k: float(v) for k, v in ulog.initial_parameters.items() if isinstance(v, int | float)}
+        f.seek(handle.stopped_at)
+        return ulog
+
+    def batches(self) -> Iterator[tuple[dict[str, np.ndarray], list[tuple[str, int]]]]:
+        from pyulog import ULog
+
+        st = self.stats
+        st.size = self.path.stat().st_size
+        with open(self.path, "rb") as f:
+            ulog = self._definitions(f)
+            formats = ulog.message_formats
+            subs: dict[int, _Sub] = {}
+            order: list[tuple[str, int]] = []
+            counts: dict[str, int] = {}
+            while True:
+                head = f.read(3)
+                if len(head) < 3:
+                    if head:
+                        self._skip("truncated", len(head))
+                    break
+                size, mtype = struct.unpack("<HB", head)
+                if mtype not in KNOWN_TYPES:
+                    if not self._resync(f, f.tell() - 3):
+                        break
+                    continue
+                body = f.read(size)
+                if len(body) < size:
+                    self._skip("truncated", 3 + len(body))
+                    break
+                st.records += 1
+                if mtype == MSG_DATA:
+                    sub = subs.get(body[0] | body[1] << 8) if size >= 2 else None
+                    if sub is None:
+                        continue
+                    if size - 2 < sub.size:
+                        st.rejected[f"{sub.name}_short_message"] += 1
+                        continue
+                    k = counts.get(sub.name, 0)
+                    counts[sub.name] = k + 1
+                    sub.payloads.append(body[2 : 2 + sub.size])
+                    order.append((sub.name, k))
+                    if len(order) >= BATCH:
+                        st.position = f.tell()
+                        yield self._decode(subs), order
+                        order, counts = [], {}
+                elif mtype == MSG_ADD:
+                    try:
+                        added = ULog._MessageAddLogged(body, None, formats)  # noqa: SLF001 - pyulog's layout
+                    except (KeyError, IndexError, ValueError, struct.error):
+                        st.rejected["subscription_unknown_format"] += 1
+                        continue
+                    name = added.message_name
+                    if name in self.wanted and added.multi_id == 0 and self._usable(name, added.dtype):
+                        same = next((x for x in subs.values() if x.name == name), None)
+                        if same is not None and same.dtype != added.dtype:
+                            st.rejected[f"{name}_layout_changed"] += 1
+                            continue
+                        subs[added.msg_id] = same or _Sub(name, added.dtype)
+                        self.subscribed.add(name)
+        st.position = st.size
+        if order:
+            yield self._decode(subs), order
+
+    def _usable(self, name: str, dtype: np.dtype[Any]) -> bool:
+        """True if the topic has the fields this reader needs. A missing field of an estimator
+        input is a UserError naming it; of a reference topic, counted (the topic is not used)."""
+        names = dtype.names or ()
+        for alternatives in REQUIRED_FIELDS.get(name, ()):
+            if not any(a in names for a in alternatives):
+                if name in INPUT_TOPICS:
+                    missing = " or ".join(alternatives)
+                    raise UserError(f"{self.path}: ULog topic {name} has no field {missing}")
+                self.stats.rejected[f"{name}_unknown_layout"] += 1
+                return False
+        return True
+
+    @staticmethod
+    def _decode(subs: dict[int, _Sub]) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        for sub in subs.values():
+            if sub.payloads:
+                out[sub.name] = np.frombuffer(b"".join(sub.payloads), dtype=sub.dtype)
+                sub.payloads = []
+        return out
+
+    def _skip(self, reason: str, size: int) -> None:
+        self.stats.skipped[reason] += 1
+        self.stats.skipped_bytes += size
+
+    def _resync(self, f: IO[bytes], at: int) -> bool:
+        """Skip to the next sync message after a corrupt header; False at the end of the file."""
+        f.seek(at + 1)
+        tail = b""
+        while True:
+            block = f.read(1 << 16)
+            if not block:
+                self._skip("garbage", f.tell() - at)
+                return False
+            data = tail + block
+            i = data.find(SYNC_BYTES)
+            if i >= 3:
+                start = f.tell() - len(data) + i - 3  # the sync message's own header
+                self._skip("garbage", start - at)
+                f.seek(start)
+                return True
+            tail = data[-(len(SYNC_BYTES) + 3) :]
 
 
 class ULogSource:
@@ -93,156 +251,156 @@ class ULogSource:
         self.references: dict[str, ReferenceInfo] = {}
         self.gps_delay_ms: float | None = None
         self.gps_delay_source = ""
-        self._topics: dict[str, _Topic] | None = None
-        self._params: dict[str, float] = {}
-
-    def _load(self) -> dict[str, _Topic]:
-        if self._topics is None:
-            from pyulog import ULog
-
-            try:
-                ulog = ULog(str(self.path), list(TOPICS))
-            except Exception as exc:  # noqa: BLE001 - pyulog raises many kinds on a damaged file
-                raise UserError(f"{self.path}: not a readable ULog ({type(exc).__name__}: "
-                                f"{str(exc).splitlines()[0] if str(exc) else 'no detail'})") from None
-            topics: dict[str, _Topic] = {}
-            for d in ulog.data_list:
-                if d.multi_id == 0 and d.name not in topics:
-                    topics[d.name] = _Topic(self.path, d.name, d.data)
-            self._topics = topics
-            self._params = {k: float(v) for k, v in ulog.initial_parameters.items()
-                            if isinstance(v, int | float)}
-            self.stats.size = self.stats.position = self.path.stat().st_size
-            self.stats.records = sum(len(t.data["timestamp"]) for t in topics.values())
-            if ulog.file_corruption:
-                self.stats.skipped["file_corruption"] += 1
-        return self._topics
-
-    def _topic(self, name: str) -> _Topic:
-        topics = self._load()
-        if name not in topics:
-            raise UserError(f"{self.path}: ULog has no topic {name} (logged: "
-                            f"{', '.join(sorted(topics)) or 'none of ' + ', '.join(TOPICS)})")
-        return topics[name]
-
-    def _fixes(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Arrival times and the GnssFix columns of every logged fix."""
-        g = self._topic(GNSS_TOPIC)
-        newer = g.has("latitude_deg")  # newer PX4: degrees and metres; older: 1e-7 deg and mm
-        lat = g.field("latitude_deg", "lat").astype(float) * (1.0 if newer else 1e-7)
-        lon = g.field("longitude_deg", "lon").astype(float) * (1.0 if newer else 1e-7)
-        alt = g.field("altitude_msl_m", "alt").astype(float) * (1.0 if newer else 1e-3)
-        t_arrival = g.data["timestamp"].astype(np.int64)
-        ts = g.data.get("timestamp_sample")
-        delay_ms = self._params.get("EKF2_GPS_DELAY", DEFAULT_EKF2_GPS_DELAY_MS)
-        if ts is not None and np.all(ts > 0):
-            t_valid = ts.astype(np.int64)
-            self.gps_delay_ms, self.gps_delay_source = None, "timestamp_sample"
-        else:
-            t_valid = t_arrival - int(round(delay_ms * 1000))
-            self.gps_delay_ms = delay_ms
-            self.gps_delay_source = ("log parameter EKF2_GPS_DELAY" if "EKF2_GPS_DELAY" in self._params
-                                     else "default EKF2_GPS_DELAY") + " (timestamp_sample not logged)"
-        cols = {"t": t_valid, "lat": lat, "lon": lon, "alt": alt, "fix": g.field("fix_type").astype(int),
-                "sats": g.field("satellites_used", "satellites_visible").astype(int),
-                "eph": g.field("eph").astype(float), "epv": g.field("epv").astype(float),
-                "hdop": g.field("hdop").astype(float) if g.has("hdop") else np.full(lat.shape, math.nan)}
-        return t_arrival, cols
+        self._gps_rows = 0
 
     def first_fix(self) -> GnssFix | None:
-        _, c = self._fixes()
-        good = np.flatnonzero((c["fix"] >= MIN_FIX_TYPE_3D) & np.isfinite(c["lat"]) & np.isfinite(c["alt"]))
-        return None if good.size == 0 else _fix(c, int(good[0]))
+        scanner = ULogScanner(self.path, (GNSS_TOPIC,), ReaderStats())
+        decode = _GnssDecoder(scanner)
+        for rows, _ in scanner.batches():
+            arr = rows.get(GNSS_TOPIC)
+            if arr is None:
+                continue
+            self._gps_rows += arr.size
+            for fix in decode(arr):
+                if isinstance(fix, GnssFix) and fix.fix_type >= MIN_FIX_TYPE_3D and math.isfinite(fix.alt_m):
+                    return fix
+        if GNSS_TOPIC not in scanner.subscribed:
+            raise UserError(f"{self.path}: ULog has no topic {GNSS_TOPIC}")
+        return None
 
     def describe_empty(self) -> str:
-        t, _ = self._fixes()
-        return f"no usable {GNSS_TOPIC} 3-D fix (fix_type >= 3) in {t.size} messages"
-
-    def _references(
-        self, kind: str, topics: tuple[str, str]
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """(arrival t, validity t, (n, 3) lat/lon/alt) of the first topic present, or None."""
-        loaded = self._load()
-        glob, local = topics
-        alignment = "geodetic"
-        if glob in loaded:
-            tp = loaded[glob]
-            lla = np.column_stack((tp.field("lat"), tp.field("lon"), tp.field("alt"))).astype(float)
-            name = glob
-        elif local in loaded:
-            tp = loaded[local]
-            ok = tp.field("xy_global").astype(bool) & np.isfinite(tp.field("ref_lat"))
-            lat, lon, alt = pymap3d.ned2geodetic(tp.field("x")[ok], tp.field("y")[ok], tp.field("z")[ok],
-                                                 tp.field("ref_lat")[ok], tp.field("ref_lon")[ok],
-                                                 tp.field("ref_alt")[ok])
-            lla = np.full((ok.size, 3), math.nan)
-            lla[ok] = np.column_stack((lat, lon, alt))
-            name = local
-        else:
-            return None
-        if kind == TRUTH and lla.size and np.all(lla[:, 2] == 0):
-            alignment = "vertical_mean_offset"
-        what = {AUTOPILOT: "PX4's own estimate", TRUTH: "PX4 SITL ground truth"}[kind]
-        note = f"estimated position vs {what} ({name}, converted into the replay's frame)"
-        if alignment != "geodetic":
-            note += "; the truth's altitude is logged as 0: vertical mean offset removed"
-        self.references[kind] = ReferenceInfo(name, alignment, note)
-        return tp.data["timestamp"].astype(np.int64), tp.sample_time_us(), lla
+        return f"no usable {GNSS_TOPIC} 3-D fix (fix_type >= 3) in {self._gps_rows} messages"
 
     def __iter__(self) -> Iterator[Event]:
-        imu = self._topic(IMU_TOPIC)
-        att = self._topic(ATTITUDE_TOPIC)
-        gyro = np.column_stack([imu.field(f"gyro_rad[{i}]") for i in range(3)]).astype(float)
-        acc = np.column_stack([imu.field(f"accelerometer_m_s2[{i}]") for i in range(3)]).astype(float)
-        t_imu = imu.data["timestamp"].astype(np.int64)
-        q = np.column_stack([att.field(f"q[{i}]") for i in range(4)]).astype(float)
-        t_att_arrival, t_att = att.data["timestamp"].astype(np.int64), att.sample_time_us()
-        t_gps_arrival, fixes = self._fixes()
-        streams: list[tuple[np.ndarray, int]] = [(t_imu, 0), (t_att_arrival, 1), (t_gps_arrival, 2)]
-        refs: list[tuple[str, np.ndarray, np.ndarray]] = []
+        scanner = ULogScanner(self.path, TOPICS, self.stats)
+        gnss = _GnssDecoder(scanner)
+        decoders: dict[str, Callable[[np.ndarray], list[Any]]] = {
+            IMU_TOPIC: _imu, ATTITUDE_TOPIC: _attitude, GNSS_TOPIC: gnss}
+        seen: dict[str, bool] = {}  # reference topic -> all its altitudes were 0 so far
+        rejected, decoded = self.stats.rejected, self.stats.decoded
+        group = {IMU_TOPIC: "imu", ATTITUDE_TOPIC: "attitude", GNSS_TOPIC: "gnss"}
+        for rows, order in scanner.batches():
+            events: dict[str, list[Any]] = {}
+            for name, arr in rows.items():
+                if name in decoders:
+                    events[name] = decoders[name](arr)
+                    continue
+                kind = AUTOPILOT if name in AUTOPILOT_TOPICS else TRUTH
+                local = name.startswith("vehicle_local")
+                events[name] = _references(kind, arr, local, name)
+                alt = arr["ref_alt"] if local else arr["alt"]
+                seen[name] = seen.get(name, True) and bool(np.all(alt == 0))
+            for name, k in order:
+                evs = events.get(name)
+                if evs is None:
+                    continue
+                ev = evs[k]
+                if isinstance(ev, str):
+                    rejected[ev] += 1
+                    continue
+                if name in group:
+                    decoded[group[name]] += 1
+                yield ev
+        for topic in INPUT_TOPICS:
+            if topic not in scanner.subscribed:
+                raise UserError(f"{self.path}: ULog has no topic {topic}")
         for kind, topics in ((AUTOPILOT, AUTOPILOT_TOPICS), (TRUTH, TRUTH_TOPICS)):
-            found = self._references(kind, topics)
-            if found is not None:
-                streams.append((found[0], 3 + len(refs)))
-                refs.append((kind, found[1], found[2]))
-        arrival = np.concatenate([t for t, _ in streams])
-        which = np.concatenate([np.full(t.size, k, dtype=np.int8) for t, k in streams])
-        row = np.concatenate([np.arange(t.size) for t, _ in streams])
-        order = np.argsort(arrival, kind="stable")
-        st = self.stats
-        decoded, rejected = st.decoded, st.rejected
-        for k, i in zip(which[order].tolist(), row[order].tolist(), strict=True):
-            if k == 0:
-                a, w = acc[i], gyro[i]
-                if not (np.isfinite(a).all() and np.isfinite(w).all()):
-                    rejected["imu_non_finite"] += 1
-                    continue
-                decoded["imu"] += 1
-                yield ImuSample(int(t_imu[i]), a, w)
-            elif k == 1:
-                qi = q[i]
-                norm = float(np.linalg.norm(qi))
-                if not (math.isfinite(norm) and abs(norm - 1.0) < 0.1):
-                    rejected["attitude_not_unit"] += 1
-                    continue
-                decoded["attitude"] += 1
-                yield AttitudeSample(int(t_att[i]), qi / norm)
-            elif k == 2:
-                if not (math.isfinite(fixes["lat"][i]) and math.isfinite(fixes["lon"][i])):
-                    rejected["gnss_non_finite"] += 1
-                    continue
-                decoded["gnss"] += 1
-                yield _fix(fixes, i)
-            else:
-                kind, t_ref, lla = refs[k - 3]
-                lat, lon, alt = lla[i]
-                if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(alt)) or not (lat or lon):
-                    rejected[f"{kind}_not_global"] += 1
-                    continue
-                yield Reference(kind, int(t_ref[i]), float(lat), float(lon), float(alt))
+            found = [t for t in topics if t in seen]  # the global one first when logged
+            if found:
+                zero_alt = kind == TRUTH and seen[found[0]]
+                alignment = "vertical_mean_offset" if zero_alt else "geodetic"
+                self.references[kind] = _info(kind, found[0], alignment)
+        self.gps_delay_ms, self.gps_delay_source = gnss.delay_ms, gnss.describe()
 
 
-def _fix(c: dict[str, Any], i: int) -> GnssFix:
-    return GnssFix(int(c["t"][i]), float(c["lat"][i]), float(c["lon"][i]), float(c["alt"][i]),
-                   int(c["fix"][i]), int(c["sats"][i]), h_acc_m=float(c["eph"][i]),
-                   v_acc_m=float(c["epv"][i]), hdop=float(c["hdop"][i]))
+def _info(kind: str, topic: str, alignment: str) -> ReferenceInfo:
+    what = {AUTOPILOT: "PX4's own estimate", TRUTH: "PX4 SITL ground truth"}[kind]
+    note = f"estimated position vs {what} ({topic}, converted into the replay's frame)"
+    if alignment != "geodetic":
+        note += "; the truth's altitude is logged as 0: vertical mean offset removed"
+    return ReferenceInfo(topic, alignment, note)
+
+
+def _imu(arr: np.ndarray) -> list[Any]:
+    t = arr["timestamp"].astype(np.int64)
+    gyro = np.column_stack([arr[f"gyro_rad[{i}]"] for i in range(3)]).astype(float)
+    acc = np.column_stack([arr[f"accelerometer_m_s2[{i}]"] for i in range(3)]).astype(float)
+    ok = np.isfinite(gyro).all(axis=1) & np.isfinite(acc).all(axis=1)
+    return [ImuSample(int(t[i]), acc[i], gyro[i]) if ok[i] else "imu_non_finite" for i in range(t.size)]
+
+
+def _sample_time_us(arr: np.ndarray) -> np.ndarray:
+    """``timestamp_sample`` where logged and non-zero, else ``timestamp``."""
+    t = arr["timestamp"].astype(np.int64)
+    if "timestamp_sample" in (arr.dtype.names or ()):
+        ts = arr["timestamp_sample"].astype(np.int64)
+        t = np.where(ts > 0, ts, t)
+    return t
+
+
+def _attitude(arr: np.ndarray) -> list[Any]:
+    t = _sample_time_us(arr)
+    q = np.column_stack([arr[f"q[{i}]"] for i in range(4)]).astype(float)
+    norm = np.linalg.norm(q, axis=1)
+    ok = np.isfinite(norm) & (np.abs(norm - 1.0) < 0.1)
+    return [AttitudeSample(int(t[i]), q[i] / norm[i]) if ok[i] else "attitude_not_unit"
+            for i in range(t.size)]
+
+
+class _GnssDecoder:
+    """vehicle_gps_position rows -> GnssFix (validity time per row, see the module doc)."""
+
+    def __init__(self, scanner: ULogScanner) -> None:
+        self.scanner = scanner
+        self.with_sample_time = self.with_delay = 0
+
+    @property
+    def delay_ms(self) -> float:
+        return self.scanner.params.get("EKF2_GPS_DELAY", DEFAULT_EKF2_GPS_DELAY_MS)
+
+    def describe(self) -> str:
+        parts = []
+        if self.with_sample_time:
+            parts.append(f"timestamp_sample for {self.with_sample_time} fixes")
+        if self.with_delay:
+            where = "log parameter" if "EKF2_GPS_DELAY" in self.scanner.params else "default"
+            parts.append(f"timestamp minus the {where} EKF2_GPS_DELAY for {self.with_delay} fixes "
+                         "(timestamp_sample not logged)")
+        return "; ".join(parts)
+
+    def __call__(self, arr: np.ndarray) -> list[Any]:
+        names = arr.dtype.names or ()
+        newer = "latitude_deg" in names  # newer PX4: degrees and metres; older: 1e-7 deg and mm
+        lat = _field(("latitude_deg", "lat"), arr).astype(float) * (1.0 if newer else 1e-7)
+        lon = _field(("longitude_deg", "lon"), arr).astype(float) * (1.0 if newer else 1e-7)
+        alt = _field(("altitude_msl_m", "alt"), arr).astype(float) * (1.0 if newer else 1e-3)
+        t = arr["timestamp"].astype(np.int64)
+        ts = arr["timestamp_sample"].astype(np.int64) if "timestamp_sample" in names else np.zeros_like(t)
+        delay_us = int(round(self.delay_ms * 1000))
+        t_valid = np.where(ts > 0, ts, t - delay_us)
+        self.with_sample_time += int(np.count_nonzero(ts > 0))
+        self.with_delay += int(np.count_nonzero(ts <= 0))
+        fix = _field(("fix_type",), arr).astype(int)
+        sats = _field(("satellites_used", "satellites_visible"), arr).astype(int)
+        eph, epv = arr["eph"].astype(float), arr["epv"].astype(float)
+        hdop = arr["hdop"].astype(float) if "hdop" in names else np.full(t.size, math.nan)
+        ok = np.isfinite(lat) & np.isfinite(lon) & (np.abs(lat) <= 90) & (np.abs(lon) <= 180)
+        return [GnssFix(int(t_valid[i]), float(lat[i]), float(lon[i]), float(alt[i]), int(fix[i]),
+                        int(sats[i]), h_acc_m=float(eph[i]), v_acc_m=float(epv[i]), hdop=float(hdop[i]))
+                if ok[i] else "gnss_non_finite" for i in range(t.size)]
+
+
+def _references(kind: str, arr: np.ndarray, local: bool, source: str) -> list[Any]:
+    t = _sample_time_us(arr)
+    if local:
+        lat, lon, alt = pymap3d.ned2geodetic(arr["x"].astype(float), arr["y"].astype(float),
+                                             arr["z"].astype(float), arr["ref_lat"].astype(float),
+                                             arr["ref_lon"].astype(float), arr["ref_alt"].astype(float))
+        ok = arr["xy_global"].astype(bool)
+    else:
+        lat, lon, alt = arr["lat"].astype(float), arr["lon"].astype(float), arr["alt"].astype(float)
+        ok = np.ones(t.size, dtype=bool)
+    lat, lon, alt = np.atleast_1d(lat), np.atleast_1d(lon), np.atleast_1d(alt)
+    ok &= np.isfinite(lat) & np.isfinite(lon) & np.isfinite(alt) & ((lat != 0) | (lon != 0))
+    return [Reference(kind, int(t[i]), float(lat[i]), float(lon[i]), float(alt[i]), source) if ok[i]
+            else f"{kind}_not_global" for i in range(t.size)]

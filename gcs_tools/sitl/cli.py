@@ -27,7 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", type=int, default=0, help="mission profile index")
     parser.add_argument("--method", default="second-order", help="estimator method")
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--out", type=Path, default=Path("runs/sitl"),
+                        help="output directory (default runs/sitl)")
+    parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
     parser.add_argument("--signing-key-file", type=Path,
                         help="MAVLink 2 signing key for all three processes (default: a fresh key per run, "
@@ -35,6 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-signing", action="store_true",
                         help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
+    from simvehicle.groundlink import add_ground_arguments
+
+    add_ground_arguments(parser)
     parser.add_argument("--max-duration-s", type=float, help="simulated time limit (default: as fly)")
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
     parser.add_argument("--drop-probability", type=float, default=0.0, help=argparse.SUPPRESS)  # tests only
@@ -59,16 +64,16 @@ def run(args: argparse.Namespace) -> int:
         from gcs_tools.ardupilot import cli as ardupilot_cli
 
         return ardupilot_cli.run(args)
-    from companion.mission import load_mission
+    from gcs_tools import choices
     from gcs_tools.outdir import ensure_out_dir
     from gcs_tools.sitl.vehicle_id import claim_vehicle_id
+    from simvehicle.groundlink import ground_out_targets
 
-    mission = load_mission(args.mission)
-    check_run_arguments(args.method, args.seed)  # before any process starts
+    mission = choices.mission(args.mission)  # every option checked before any process starts
+    check_run_arguments(args.method, args.seed)
+    choices.profile(mission, args.profile)
+    ground_out_targets(args)  # a bad --ground-out too
     ensure_out_dir(args.out)
-    if not 0 <= args.profile < len(mission.profiles):
-        last = len(mission.profiles) - 1
-        raise UserError(f"--profile {args.profile}: mission {mission.name!r} has profiles 0..{last}")
     if args.signing_key_file is not None and not args.signing_key_file.is_file():
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
     if args.signing_key_file is not None and args.no_signing:
@@ -89,6 +94,8 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
     from gcs_tools.fly.output import strict_json, write_outputs
     from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
     from gcs_tools.sitl.report import flight_result
+    from gcs_tools.summaries import print_summary
+    from simvehicle.groundlink import ground_out_arguments
 
     opts = SitlOptions(
         mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
@@ -96,6 +103,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         signing=not args.no_signing,
         ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
         telemetry_args=tuple(telemetry.forward_arguments(args)),
+        ground_args=tuple(ground_out_arguments(args)),
     )
     route, max_duration_s = flight_plan(opts)
     bar = None
@@ -115,24 +123,13 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         write_outputs(result, mission.world, args.out)
     else:
         (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
-    _print(result.summary, args.out)
+    files = sorted(p.name for p in args.out.iterdir() if p.is_file() and p.suffix != ".key")
+    print_summary("sitl", result.summary, args.out, files, args.json)
     reason = failure_reason(run_, result.summary)
     if reason:
         print(f"beliefnav: error: {reason}", file=sys.stderr)
         return 1
     return 0
-
-
-def _print(s: dict, out: Path) -> None:
-    est, trk, sitl = s["estimation_error_m"], s["tracking_error_m"], s["sitl"]
-    print(f"sitl {s['method']} seed {s['seed']} ({sitl['mode']}): {sitl['outcome']} after "
-          f"{s['duration_s']:.1f} s simulated in {s['wall_s']:.1f} s wall (ended by {sitl['ended_by']})")
-    print(f"  estimation error median {est['median']:.2f} m p95 {est['p95']:.2f} m; "
-          f"tracking error median {trk['median']:.2f} m p95 {trk['p95']:.2f} m; "
-          f"min clearance {s['min_clearance_m']:.1f} m")
-    print(f"  GNSS sent {s['gnss']['sent']} fused {s['gnss']['fused']} rejected {s['gnss']['rejected']}; "
-          f"lockstep {json.dumps(sitl['lockstep'])}")
-    print(f"  wrote {out / 'summary.json'}, figures and {out / 'run.tlog'}")
 
 
 def _progress_to(bar: Any) -> Progress:

@@ -51,6 +51,7 @@ class SitlOptions:
     wall_timeout_s: float | None = None
     drop_probability: float = 0.0  # TEST ONLY: loss injection on every link, both directions
     telemetry_args: tuple[str, ...] = ()  # Zenoh flags for every process (--vehicle-id, --no-telemetry)
+    ground_args: tuple[str, ...] = ()  # vehicle's --ground-out / --no-ground-out flags (default: 14550)
     fly: FlyConfig = field(default_factory=FlyConfig)  # start delay, arrival test, time limit: as ``fly``
 
 
@@ -98,12 +99,14 @@ def signing_key_path(opts: SitlOptions) -> Path | None:
 
 
 def write_fresh_key(path: Path) -> None:
-    """A new random 32-byte key as 64 hex characters, readable by its owner only (0600)."""
+    """A new random passphrase (one word of 43 URL-safe characters, 256 random bits; the key is its
+    SHA-256), readable by its owner only (0600). One word, so a ground station operator can type
+    it into MAVProxy's ``signing key`` (which hashes what it is given the same way)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.unlink(missing_ok=True)
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     with os.fdopen(fd, "w", encoding="ascii") as f:
-        f.write(secrets.token_hex(32) + "\n")
+        f.write(secrets.token_urlsafe(32) + "\n")
 
 
 def prepare_signing(opts: SitlOptions) -> None:
@@ -132,7 +135,8 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
         "--out", str(out), "--max-duration-s", str(max_duration_s),
         "--goal-ned-m", *(repr(float(c)) for c in goal), "--goal-radius-m", str(opts.fly.goal_radius_m),
         "--goal-speed-m-s", str(opts.fly.goal_speed_m_s),
-        "--arrive-after-s", str(route.t_start_s + route.duration_s), *common, *loss_seed(0),
+        "--arrive-after-s", str(route.t_start_s + route.duration_s), *opts.ground_args, *common,
+        *loss_seed(0),
     ]
     if opts.realtime:
         vehicle.append("--realtime")

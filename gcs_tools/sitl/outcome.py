@@ -16,10 +16,9 @@ from companion.errors import UserError
 
 def check_run_arguments(method: str, seed: int) -> None:
     """Refuse what would only fail once the processes run (one line, exit 2)."""
-    from companion.estimator import METHODS
+    from gcs_tools import choices
 
-    if method not in METHODS:
-        raise UserError(f"--method {method!r}: expected one of {', '.join(METHODS)}")
+    choices.method(method)  # names every method and the nearest
     if seed < 0:
         raise UserError(f"--seed must be >= 0, got {seed}")
 

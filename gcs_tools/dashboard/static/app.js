@@ -1,25 +1,48 @@
-// beliefnav dashboard: Server-Sent Events -> per-vehicle buffers -> canvas plots (no libraries).
+// beliefnav dashboard: Server-Sent Events -> per-vehicle buffers -> uPlot charts and a canvas map.
+// Colours come from /palette.json (the figures' palette: one colour per meaning).
+// /?snapshot=1 draws the server's retained history once and opens no event stream, so the page goes
+// idle (what `chromium --headless --screenshot` needs).
 "use strict";
 
-const WINDOW_S = 60;          // time plots show the last minute
+const WINDOW_S = 60;          // "follow live" shows the last minute
 const MAX_POINTS = 6000;      // per series, per vehicle
-const COLORS = { truth: "#1f6fd0", est: "#e67e00", ref: "#444", beta: "#2a9d3a", nis: "#c23b3b",
-                 err: "#e67e00", latency: "#7b3fb5" };
+const STALE_S = 2.0;          // a vehicle or process silent this long is marked stale
+const REDRAW_MS = 100;        // charts are redrawn at most this often
+const SNAPSHOT = new URLSearchParams(location.search).has("snapshot");
 
-const vehicles = {};          // name -> {series: {name: [[t, a, b]...]}, counters, route, messages}
+const vehicles = {};          // name -> {series: {name: [[t, a, b]...]}, counters, status, route, messages, age}
 const stats = { frames: 0, snapshots: 0, points: 0, malformed: 0, received: 0, draws: 0, lastFrameMs: 0 };
 window.dashboardStats = stats; // read by the browser test
 window.dashboardVehicles = vehicles;
+let P = null;                 // palette: {quantity: {...}, method: {...}}
 let selected = null;
+let live = false;             // true once the first message was merged: later vehicles are "new"
 let dirty = true;
+let follow = true;            // x range follows the newest data; a user zoom or pan turns it off
+let lastDraw = 0;
+const charts = {};
+const order = [];             // vehicle names in order of appearance
+window.dashboardView = () => ({ selected, follow, order,
+  x: Object.fromEntries(Object.entries(charts).map(([id, c]) => [id, [c.scales.x.min, c.scales.x.max]])) });
+
+// ---- data -----------------------------------------------------------------------------------------
+
+function select(name) {
+  selected = name;
+  document.getElementById("vehicle").value = name;
+  follow = true;
+  dirty = true;
+}
 
 function vehicle(name) {
   if (!vehicles[name]) {
-    vehicles[name] = { series: {}, counters: {}, status: {}, route: null, messages: {} };
+    vehicles[name] = { series: {}, counters: {}, status: {}, route: null, messages: {}, age_s: Infinity,
+                       process_age_s: {}, at_goal: false, ageAtMs: performance.now() };
+    order.push(name);
     const opt = document.createElement("option");
     opt.value = opt.textContent = name;
     document.getElementById("vehicle").appendChild(opt);
-    if (selected === null) selected = name;
+    if (selected === null || live) select(name);   // the newest vehicle is shown
   }
   return vehicles[name];
 }
@@ -35,7 +58,12 @@ function merge(msg) {
     }
     if (data.route) v.route = data.route;
     v.counters = data.counters; v.status = data.status; v.messages = data.messages;
+    v.age_s = data.age_s; v.process_age_s = data.process_age_s; v.at_goal = data.at_goal;
+    v.ageAtMs = performance.now();
   }
+  const names = Object.keys(msg.vehicles);  // the server lists vehicles in order of first message
+  if (msg.type === "snapshot" && names.length > 1) select(names[names.length - 1]);  // the newest
+  live = true;
   stats.malformed = msg.malformed;
   stats.received = msg.received;
   const m = document.getElementById("malformed");
@@ -44,69 +72,163 @@ function merge(msg) {
   dirty = true;
 }
 
-// ---- drawing ------------------------------------------------------------------------------------
+function ageNow(v, age) { return age + (SNAPSHOT ? 0 : (performance.now() - v.ageAtMs) / 1000); }
 
-function axes(ctx, w, h, x0, x1, y0, y1, pad) {
-  ctx.strokeStyle = "#ccc"; ctx.fillStyle = "#666"; ctx.lineWidth = 1; ctx.font = "10px sans-serif";
-  ctx.strokeRect(pad.l, pad.t, w - pad.l - pad.r, h - pad.t - pad.b);
-  for (let i = 0; i <= 4; i++) {
-    const y = y0 + (y1 - y0) * i / 4, py = pad.t + (h - pad.t - pad.b) * (1 - i / 4);
-    ctx.fillText(fmt(y), 2, py + 3);
-    ctx.beginPath(); ctx.moveTo(pad.l, py); ctx.lineTo(w - pad.r, py); ctx.stroke();
-  }
-  ctx.fillText(`${fmt(x0)} s`, pad.l, h - 2);
-  ctx.fillText(`${fmt(x1)} s`, w - pad.r - 40, h - 2);
+// ---- charts (uPlot) ---------------------------------------------------------------------------------
+
+const fmt = (digits, unit = "") => (u, x) => (x === null || x === undefined ? "–" : x.toFixed(digits) + unit);
+
+function applyX(min, max, except) {
+  for (const c of Object.values(charts)) if (c !== except) c.setScale("x", { min, max });
 }
 
-function fmt(x) { return Math.abs(x) >= 100 ? x.toFixed(0) : x.toFixed(2); }
+function userRange(u, min, max) {
+  follow = false;
+  u.setScale("x", { min, max });
+  applyX(min, max, u);
+}
 
-function timePlot(id, lines, fixedRange) {
-  const c = document.getElementById(id), ctx = c.getContext("2d"), w = c.width, h = c.height;
-  const pad = { l: 40, r: 8, t: 6, b: 14 };
-  ctx.clearRect(0, 0, w, h);
-  let tmax = -Infinity, tfirst = Infinity;
-  for (const l of lines) if (l.pts.length) { tmax = Math.max(tmax, l.pts[l.pts.length - 1][0]); tfirst = Math.min(tfirst, l.pts[0][0]); }
-  if (!isFinite(tmax)) { ctx.fillStyle = "#999"; ctx.fillText("no data yet", w / 2 - 30, h / 2); return; }
-  const tmin = Math.max(tfirst, tmax - WINDOW_S), span = Math.max(tmax - tmin, 1e-3);
-  for (const l of lines) {
-    let lo = l.range ? l.range[0] : Infinity, hi = l.range ? l.range[1] : -Infinity;
-    if (!l.range) for (const p of l.pts) { const y = p[l.col] === null ? null : p[l.col] * l.scale; if (p[0] >= tmin && y !== null) { lo = Math.min(lo, y); hi = Math.max(hi, y); } }
-    if (!isFinite(lo)) { lo = 0; hi = 1; }
-    if (hi - lo < 1e-9) { hi = lo + 1; }
-    l.lo = lo; l.hi = hi;
-  }
-  axes(ctx, w, h, tmin, tmax, lines[0].lo, lines[0].hi, pad);
-  for (const l of lines) {
-    ctx.strokeStyle = l.color; ctx.lineWidth = 1.5; ctx.beginPath();
-    let pen = false;
-    for (const p of l.pts) {
-      if (p[0] < tmin || p[l.col] === null) { pen = false; continue; }
-      const x = pad.l + (p[0] - tmin) / span * (w - pad.l - pad.r);
-      const y = pad.t + (1 - (p[l.col] * l.scale - l.lo) / (l.hi - l.lo)) * (h - pad.t - pad.b);
-      if (pen) ctx.lineTo(x, y); else ctx.moveTo(x, y);
-      pen = true;
+function panZoomPlugin() {
+  return { hooks: { ready: [(u) => {
+    const over = u.over;
+    over.addEventListener("wheel", (e) => {
+      e.preventDefault();
+      const x = u.posToVal(e.offsetX, "x"), { min, max } = u.scales.x, f = e.deltaY < 0 ? 0.8 : 1.25;
+      userRange(u, x - (x - min) * f, x + (max - x) * f);
+    }, { passive: false });
+    over.addEventListener("mousedown", (e) => {
+      if (!e.shiftKey) return;
+      e.preventDefault(); e.stopPropagation();
+      const x0 = e.clientX, { min, max } = u.scales.x, perPx = (max - min) / over.clientWidth;
+      const move = (ev) => userRange(u, min - (ev.clientX - x0) * perPx, max - (ev.clientX - x0) * perPx);
+      const up = () => { document.removeEventListener("mousemove", move); document.removeEventListener("mouseup", up); };
+      document.addEventListener("mousemove", move); document.addEventListener("mouseup", up);
+    }, true);
+    over.addEventListener("dblclick", () => { follow = true; dirty = true; });
+  }], setSelect: [(u) => {  // a drag selection: zoom every chart to it (uPlot's own zoom is off)
+    if (u.select.width < 3) return;
+    const min = u.posToVal(u.select.left, "x"), max = u.posToVal(u.select.left + u.select.width, "x");
+    u.setSelect({ left: 0, top: 0, width: 0, height: 0 }, false);
+    userRange(u, min, max);
+  }] } };
+}
+
+function makeChart(id, series, scales, axes) {
+  const el = document.getElementById(id);
+  const opts = {
+    width: Math.max(el.clientWidth, 200), height: 190,
+    scales: { x: { time: false }, ...scales },
+    series: [{ label: "t", value: fmt(2, " s") }, ...series],
+    axes: [{ label: "time [s]", labelSize: 18, size: 36 }, ...axes],
+    cursor: { sync: { key: "t" }, drag: { x: true, y: false, setScale: false } },
+    legend: { live: true },
+    plugins: [panZoomPlugin()],
+  };
+  charts[id] = new uPlot(opts, [[], ...series.map(() => [])], el);
+}
+
+function buildCharts() {
+  const q = P.quantity;
+  makeChart("beta",
+    [{ label: "β", scale: "beta", stroke: q.beta, width: 1.5, value: fmt(3) },
+     { label: "NIS", scale: "nis", stroke: q.nis, width: 1.2, value: fmt(2) }],
+    { beta: { range: [0, 1] }, nis: { auto: true, range: (u, lo, hi) => [0, Math.max(hi, 1)] } },
+    [{ scale: "beta", label: "β", stroke: q.beta, size: 44 },
+     { scale: "nis", label: "NIS", side: 1, stroke: q.nis, grid: { show: false }, size: 48 }]);
+  makeChart("err", [{ label: "‖p̂ − p‖", scale: "m", stroke: q.est_error, width: 1.5, value: fmt(2, " m") }],
+    { m: { auto: true, range: (u, lo, hi) => [0, Math.max(hi, 0.1)] } },
+    [{ scale: "m", label: "error [m]", size: 48 }]);
+  makeChart("latency", [{ label: "latency", scale: "ms", stroke: q.latency, width: 1.5, value: fmt(0, " ms") }],
+    { ms: { auto: true, range: (u, lo, hi) => [0, Math.max(hi, 1)] } },
+    [{ scale: "ms", label: "latency [ms]", size: 48 }]);
+  new ResizeObserver(() => {
+    for (const [id, c] of Object.entries(charts)) c.setSize({ width: document.getElementById(id).clientWidth, height: 190 });
+    dirty = true;
+  }).observe(document.querySelector("main"));
+}
+
+function columns(pts, cols, scale = 1) {
+  const out = [pts.map((p) => p[0])];
+  for (const c of cols) out.push(pts.map((p) => (p[c] === null ? null : p[c] * scale)));
+  return out;
+}
+
+function drawCharts(v) {
+  const s = v.series;
+  const data = {
+    beta: columns(s.beta || [], [1, 2]),
+    err: columns(s.err || [], [1]),
+    latency: columns(s.latency || [], [1], 1000),
+  };
+  const why = { beta: "no belief messages from this vehicle", err: "not available: needs the simulation's truth",
+                latency: "not available: needs the vehicle's GNSS topic" };
+  for (const id of Object.keys(data)) document.getElementById(`${id}-nodata`).textContent = data[id][0].length ? "" : `— ${why[id]}`;
+  let tmax = -Infinity, tmin = Infinity;
+  for (const d of Object.values(data)) if (d[0].length) { tmax = Math.max(tmax, d[0][d[0].length - 1]); tmin = Math.min(tmin, d[0][0]); }
+  for (const [id, c] of Object.entries(charts)) {
+    c.setData(data[id], false);
+    // setting x (even to its current range) re-fits every y scale to the data in view
+    if (follow || c.scales.x.min === null || c.scales.x.min === undefined) {
+      if (isFinite(tmax)) {
+        const lo = Math.max(tmin, tmax - WINDOW_S);
+        c.setScale("x", { min: lo, max: Math.max(tmax, lo + 1) });
+      }
+    } else {
+      c.setScale("x", { min: c.scales.x.min, max: c.scales.x.max });
     }
-    ctx.stroke();
   }
+}
+
+// ---- map (canvas, north up) -----------------------------------------------------------------------
+
+function niceStep(span) {
+  const raw = span / 5, p = Math.pow(10, Math.floor(Math.log10(raw))), m = raw / p;
+  return (m < 1.5 ? 1 : m < 3.5 ? 2 : m < 7.5 ? 5 : 10) * p;
 }
 
 function drawMap(v) {
-  const c = document.getElementById("map"), ctx = c.getContext("2d"), w = c.width, h = c.height;
+  const c = document.getElementById("map"), dpr = window.devicePixelRatio || 1;
+  const w = c.clientWidth, h = c.clientHeight;
+  if (c.width !== Math.round(w * dpr) || c.height !== Math.round(h * dpr)) { c.width = Math.round(w * dpr); c.height = Math.round(h * dpr); }
+  const ctx = c.getContext("2d");
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.clearRect(0, 0, w, h);
-  // bounds (north, east) over everything drawn
+  ctx.font = "11px system-ui, sans-serif";
+  const q = P.quantity;
   let nmin = Infinity, nmax = -Infinity, emin = Infinity, emax = -Infinity;
   const grow = (n, e) => { if (n === null || e === null) return; nmin = Math.min(nmin, n); nmax = Math.max(nmax, n); emin = Math.min(emin, e); emax = Math.max(emax, e); };
   const route = v.route || { buildings_ne_m: [], waypoints_ne_m: [] };
   for (const b of route.buildings_ne_m) { grow(b[0], b[1]); grow(b[2], b[3]); }
   for (const p of route.waypoints_ne_m) grow(p[0], p[1]);
-  for (const s of ["truth", "est"]) for (const p of v.series[s] || []) grow(p[1], p[2]);
-  if (!isFinite(nmin)) { ctx.fillStyle = "#999"; ctx.fillText("no data yet", w / 2 - 30, h / 2); return; }
-  const m = 10, span = Math.max(nmax - nmin, emax - emin, 1);
-  const k = Math.min(w, h) / (span + 2 * m);
-  const ox = w / 2 - k * (emin + emax) / 2, oy = h / 2 + k * (nmin + nmax) / 2;
-  const X = (e) => ox + k * e, Y = (n) => oy - k * n;
-  ctx.fillStyle = "#9aa3ad";
-  for (const b of route.buildings_ne_m) ctx.fillRect(X(b[1]), Y(b[2]), k * (b[3] - b[1]), k * (b[2] - b[0]));
+  for (const s of ["truth", "est", "ref"]) for (const p of v.series[s] || []) grow(p[1], p[2]);
+  if (!isFinite(nmin)) { ctx.fillStyle = "#999"; ctx.fillText("no position yet", w / 2 - 40, h / 2); return; }
+  const pad = { l: 52, r: 10, t: 10, b: 28 };
+  const span = Math.max(nmax - nmin, emax - emin, 2) * 1.08;
+  const k = Math.min(w - pad.l - pad.r, h - pad.t - pad.b) / span;   // px per metre, equal on both axes
+  const cx = pad.l + (w - pad.l - pad.r) / 2, cy = pad.t + (h - pad.t - pad.b) / 2;
+  const X = (e) => cx + k * (e - (emin + emax) / 2), Y = (n) => cy - k * (n - (nmin + nmax) / 2);
+  // metric grid with labels (a real log has no map: the grid is its reference)
+  const step = niceStep(span);
+  ctx.strokeStyle = "#e4e6ea"; ctx.fillStyle = "#666"; ctx.lineWidth = 1;
+  const eLo = (emin + emax) / 2 - (w / 2) / k, eHi = (emin + emax) / 2 + (w / 2) / k;
+  const nLo = (nmin + nmax) / 2 - (h / 2) / k, nHi = (nmin + nmax) / 2 + (h / 2) / k;
+  for (let e = Math.ceil(eLo / step) * step; e <= eHi; e += step) {
+    const x = X(e); if (x < pad.l || x > w - pad.r) continue;
+    ctx.beginPath(); ctx.moveTo(x, pad.t); ctx.lineTo(x, h - pad.b); ctx.stroke();
+    ctx.fillText(`${+e.toFixed(6)}`, x - 8, h - pad.b + 12);
+  }
+  for (let n = Math.ceil(nLo / step) * step; n <= nHi; n += step) {
+    const y = Y(n); if (y < pad.t || y > h - pad.b) continue;
+    ctx.beginPath(); ctx.moveTo(pad.l, y); ctx.lineTo(w - pad.r, y); ctx.stroke();
+    ctx.fillText(`${+n.toFixed(6)}`, pad.l - 26, y + 4);
+  }
+  ctx.fillText("east [m] →", w - pad.r - 62, h - 3);
+  ctx.save(); ctx.translate(pad.l - 32, cy + 30); ctx.rotate(-Math.PI / 2); ctx.fillText("north [m] →", 0, 0); ctx.restore();
+  ctx.fillStyle = q.building; ctx.strokeStyle = "#666";
+  for (const b of route.buildings_ne_m) {
+    ctx.fillRect(X(b[1]), Y(b[2]), k * (b[3] - b[1]), k * (b[2] - b[0]));
+    ctx.strokeRect(X(b[1]), Y(b[2]), k * (b[3] - b[1]), k * (b[2] - b[0]));
+  }
   const poly = (pts, color, width, dash, ni, ei) => {
     ctx.strokeStyle = color; ctx.lineWidth = width; ctx.setLineDash(dash); ctx.beginPath();
     let pen = false;
@@ -117,26 +239,60 @@ function drawMap(v) {
     }
     ctx.stroke(); ctx.setLineDash([]);
   };
-  poly(route.waypoints_ne_m, COLORS.ref, 1.5, [6, 4], 0, 1);
-  poly(v.series.est || [], COLORS.est, 1.2, [], 1, 2);
-  poly(v.series.truth || [], COLORS.truth, 1.5, [], 1, 2);
-  for (const s of ["truth", "est"]) {
+  poly(route.waypoints_ne_m, q.reference, 1.5, [6, 4], 0, 1);
+  poly(v.series.est || [], q.estimated, 1.3, [], 1, 2);
+  poly(v.series.truth || [], q.true, 1.5, [], 1, 2);
+  const wp = route.waypoints_ne_m;
+  if (wp.length) {
+    ctx.fillStyle = "#000"; ctx.fillRect(X(wp[0][1]) - 4, Y(wp[0][0]) - 4, 8, 8);
+    ctx.font = "16px system-ui"; ctx.fillText("★", X(wp[wp.length - 1][1]) - 7, Y(wp[wp.length - 1][0]) + 6);
+    ctx.font = "11px system-ui, sans-serif";
+  }
+  for (const [s, color] of [["truth", q.true], ["est", q.estimated]]) {
     const pts = v.series[s] || [];
     if (!pts.length) continue;
     const p = pts[pts.length - 1];
-    ctx.fillStyle = COLORS[s]; ctx.beginPath(); ctx.arc(X(p[2]), Y(p[1]), 4, 0, 2 * Math.PI); ctx.fill();
+    if (p[1] === null || p[2] === null) continue;
+    ctx.fillStyle = color; ctx.beginPath(); ctx.arc(X(p[2]), Y(p[1]), 4, 0, 2 * Math.PI); ctx.fill();
   }
-  // scale bar
-  const bar = Math.pow(10, Math.floor(Math.log10(span / 3)));
-  ctx.strokeStyle = "#333"; ctx.lineWidth = 2; ctx.beginPath(); ctx.moveTo(10, h - 10); ctx.lineTo(10 + k * bar, h - 10); ctx.stroke();
-  ctx.fillStyle = "#333"; ctx.fillText(`${bar} m`, 12, h - 14);
+  // north arrow and scale bar
+  ctx.fillStyle = "#222"; ctx.strokeStyle = "#222"; ctx.lineWidth = 2;
+  const ax = w - pad.r - 16, ay = pad.t + 8;
+  ctx.beginPath(); ctx.moveTo(ax, ay + 26); ctx.lineTo(ax, ay); ctx.stroke();
+  ctx.beginPath(); ctx.moveTo(ax - 5, ay + 8); ctx.lineTo(ax, ay); ctx.lineTo(ax + 5, ay + 8); ctx.fill();
+  ctx.fillText("N", ax - 4, ay + 40);
+  const bar = niceStep(span / 1.5);
+  ctx.beginPath(); ctx.moveTo(pad.l + 10, h - pad.b - 10); ctx.lineTo(pad.l + 10 + k * bar, h - pad.b - 10); ctx.stroke();
+  ctx.fillText(`${+bar.toFixed(6)} m`, pad.l + 12, h - pad.b - 14);
+}
+
+function mapLegend() {
+  const q = P.quantity;
+  document.getElementById("map-legend").innerHTML =
+    [["true", q.true], ["estimated", q.estimated], ["planned", q.reference]]
+      .map(([n, c]) => `<span class="k" style="--c:${c}">${n}</span>`).join("") +
+    `<span class="k" style="--c:#000">■ start ★ goal</span>`;
+}
+
+// ---- status -------------------------------------------------------------------------------------------
+
+function drawFreshness(v) {
+  const el = document.getElementById("freshness");
+  const age = ageNow(v, v.age_s);
+  if (!isFinite(age)) { el.className = "fresh none"; el.textContent = "no data"; return; }
+  if (age < STALE_S) { el.className = "fresh live"; el.textContent = "live"; }
+  else if (v.at_goal) { el.className = "fresh ended"; el.textContent = `ended at goal · last data ${age.toFixed(0)} s ago`; }
+  else { el.className = "fresh stale"; el.textContent = `stale · no data for ${age.toFixed(0)} s`; }
 }
 
 function drawCounters(v) {
   const rows = [];
-  for (const [proc, counters] of Object.entries(v.counters)) {
-    rows.push(`<tr><td colspan="2"><b>${proc}</b> ${v.status[proc] || ""}</td></tr>`);
-    for (const [k, n] of Object.entries(counters)) {
+  const procs = new Set([...Object.keys(v.process_age_s || {}), ...Object.keys(v.counters)]);
+  for (const proc of procs) {
+    const age = ageNow(v, (v.process_age_s || {})[proc] ?? Infinity);
+    const fresh = age < STALE_S ? (v.status[proc] || "ok") : `<span class="proc-stale">stale (${isFinite(age) ? age.toFixed(0) + " s" : "never"})</span>`;
+    rows.push(`<tr><td colspan="2"><b>${proc}</b> ${fresh}</td></tr>`);
+    for (const [k, n] of Object.entries(v.counters[proc] || {})) {
       const bad = k.includes("reject") && n > 0 ? " class=\"bad\"" : "";
       rows.push(`<tr><td>${k}</td><td${bad}>${n}</td></tr>`);
     }
@@ -147,17 +303,20 @@ function drawCounters(v) {
 }
 
 function draw() {
-  requestAnimationFrame(draw);
-  if (!dirty || selected === null) return;
-  dirty = false;
-  const v = vehicles[selected], s = v.series;
+  if (selected === null) return;
+  const v = vehicles[selected];
   drawMap(v);
-  timePlot("beta", [{ pts: s.beta || [], col: 1, color: COLORS.beta, range: [0, 1], scale: 1 },
-                    { pts: s.beta || [], col: 2, color: COLORS.nis, scale: 1 }]);
-  timePlot("err", [{ pts: s.err || [], col: 1, color: COLORS.err, scale: 1 }]);
-  timePlot("latency", [{ pts: s.latency || [], col: 1, color: COLORS.latency, scale: 1000 }]);
+  drawCharts(v);
   drawCounters(v);
+  drawFreshness(v);
   stats.draws++;
+  dirty = false;
+  lastDraw = performance.now();
+}
+
+function loop() {
+  requestAnimationFrame(loop);
+  if (dirty && performance.now() - lastDraw >= REDRAW_MS) draw();
 }
 
 function connect() {
@@ -168,11 +327,29 @@ function connect() {
     stats.lastFrameMs = performance.now();
     merge(msg);
     document.getElementById("status").textContent =
-      `${stats.received} messages · ${Object.keys(vehicles).length} vehicle(s) · up ${msg.uptime_s} s`;
+      `${stats.received} messages · ${Object.keys(vehicles).length} vehicle(s) · server up ${msg.uptime_s} s`;
   };
   es.onerror = () => { document.getElementById("status").textContent = "disconnected — retrying…"; };
 }
 
-document.getElementById("vehicle").addEventListener("change", (e) => { selected = e.target.value; dirty = true; });
-connect();
-requestAnimationFrame(draw);
+async function main() {
+  P = await (await fetch("/palette.json")).json();
+  mapLegend();
+  buildCharts();
+  document.getElementById("vehicle").addEventListener("change", (e) => select(e.target.value));
+  document.getElementById("follow").addEventListener("click", () => { follow = true; dirty = true; });
+  if (SNAPSHOT) {
+    const msg = await (await fetch("/snapshot.json")).json();
+    stats.snapshots++;
+    merge(msg);
+    document.getElementById("status").textContent = `snapshot of ${msg.received} messages · ${Object.keys(vehicles).length} vehicle(s)`;
+    draw();
+    document.body.dataset.ready = "1";
+    return;
+  }
+  connect();
+  setInterval(() => { if (selected !== null) { drawFreshness(vehicles[selected]); drawCounters(vehicles[selected]); } }, 500);
+  requestAnimationFrame(loop);
+}
+
+main();

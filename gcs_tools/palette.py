@@ -1,0 +1,56 @@
+"""One colour per meaning, for every figure (matplotlib) and the dashboard (served as /palette.json).
+
+A colour names one thing everywhere: black is always the truth, blue always the estimate, green
+always the belief β. Methods have their own colours, used only where methods are compared.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+QUANTITY: dict[str, str] = {
+    "true": "#000000",  # true position / true GNSS bias (simulation truth)
+    "estimated": "#1f77b4",  # the companion's estimate (position, bias)
+    "reference": "#7f7f7f",  # planned path / setpoint (drawn dashed)
+    "gnss": "#17becf",  # GNSS fixes
+    "autopilot": "#8c6d31",  # a flight controller's own estimate (logs)
+    "beta": "#2ca02c",  # GNSS trust belief β
+    "nis": "#bcbd22",  # normalised innovation squared
+    "clearance": "#8c564b",  # distance to the nearest building
+    "latency": "#9467bd",  # GNSS latency
+    "est_error": "#ff7f0e",  # estimation error ‖p̂ − p‖
+    "track_error": "#e377c2",  # tracking error ‖p − p_ref‖
+    "building": "#bfbfbf",  # map rectangles (fill)
+}
+
+METHOD: dict[str, str] = {
+    "naive": "#d62728",
+    "adaptive": "#e6ab02",
+    "first-order": "#1b9e77",
+    "second-order": "#3f007d",
+    "vbakf": "#a6761d",
+    "paper-literal": "#fb9a99",
+}
+OTHER_METHOD = "#b15928"
+
+# Line styles for methods drawn over each other (Fig. 4): dashes keep a lower line visible.
+METHOD_DASH: dict[str, Any] = {
+    "naive": "-",
+    "adaptive": (0, (6, 2)),
+    "first-order": (0, (5, 2.5)),
+    "second-order": (0, (1.2, 1.2)),
+    "vbakf": (0, (3, 1, 1, 1)),
+}
+
+
+def quantity(name: str) -> str:
+    return QUANTITY[name]
+
+
+def method(name: str) -> str:
+    return METHOD.get(name, OTHER_METHOD)
+
+
+def as_json() -> dict[str, Any]:
+    """What the dashboard reads (so page and figures never disagree)."""
+    return {"quantity": dict(QUANTITY), "method": dict(METHOD)}
