@@ -58,7 +58,7 @@ def write_outputs(result: FlightResult, world: Any, out_dir: str | Path) -> list
     title = f"{s['mission']} profile {s['profile']}, {s['method']}, seed {s['seed']}"
     tracks = {"true": result.series["p_true_ned_m"], "estimated": result.series["p_est_ned_m"]}
     if "p_autopilot_ned_m" in result.series:
-        tracks["autopilot (EKF3)"] = result.series["p_autopilot_ned_m"]
+        tracks["autopilot"] = result.series["p_autopilot_ned_m"]
     map_figure(paths[2], world, result.route.waypoints_ned_m, tracks, title)
     belief_figure(paths[3], result.series, title)
     return paths
