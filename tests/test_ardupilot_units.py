@@ -190,3 +190,12 @@ def test_sitl_ardupilot_option_errors_are_one_line(tmp_path, capsys):
     assert "profiles 0..2" in capsys.readouterr().err
     assert main(["sitl", "--vehicle", "ardupilot", "--gnss-rate-hz", "50", "--out", str(tmp_path)]) == 2
     assert "gnss_rate_hz" in capsys.readouterr().err
+
+
+def test_evaluate_ardupilot_option_errors_are_one_line(tmp_path, capsys):
+    from gcs_tools.cli import main
+
+    assert main(["evaluate", "--vehicle", "ardupilot", "--max-duration-s", "5", "--out", str(tmp_path)]) == 2
+    assert "--max-duration-s apply to --vehicle sim only" in capsys.readouterr().err
+    assert main(["evaluate", "--vehicle", "ardupilot", "--feeds", "vision", "--out", str(tmp_path)]) == 2
+    assert "--feeds: expected none and/or gps-input" in capsys.readouterr().err

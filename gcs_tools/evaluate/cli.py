@@ -125,8 +125,8 @@ def run_ardupilot(args: argparse.Namespace) -> int:
     from gcs_tools.ardupilot.config import ArduPilotConfig
     from gcs_tools.evaluate import ardupilot
 
-    if args.set or args.scheduler or args.readme or args.max_duration is not None:
-        raise UserError("--set, --scheduler, --readme and --max-duration apply to --vehicle sim only")
+    if args.set or args.scheduler or args.readme or args.max_duration_s is not None:
+        raise UserError("--set, --scheduler, --readme and --max-duration-s apply to --vehicle sim only")
     mission = load_mission(args.mission)
     profiles = parse_profiles(args.missions, len(mission.profiles))
     methods = parse_methods(args.methods)
