@@ -19,6 +19,7 @@ TARGETS = {
     "plan": "gcs_tools.bench.plan",
     "autopilot": "gcs_tools.bench.autopilot",
     "replay": "gcs_tools.bench.replay",
+    "ardupilot": "gcs_tools.bench.ardupilot",
 }
 
 

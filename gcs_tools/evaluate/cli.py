@@ -23,6 +23,11 @@ DEFAULT_METHODS = "naive,adaptive,first-order,second-order"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot"),
+                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL, EKF3 as its own row")
+    parser.add_argument("--speedup", type=float, default=None, help="ardupilot: SITL --speedup (default 10)")
+    parser.add_argument("--feeds", default="none,gps-input",
+                        help="ardupilot: open loop (none) and/or closed loop (gps-input) flights")
     parser.add_argument("--mission", default="default",
                         help="mission name (default, test, default-tuning) or YAML path")
     parser.add_argument("--missions", default="10",
@@ -93,6 +98,8 @@ def parameters(mission: Any) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.vehicle == "ardupilot":
+        return run_ardupilot(args)
     overrides = tuple(tuning.parse_override(text) for text in args.set)
     mission = campaign.mission(args.mission, overrides, args.scenario)
     tuning.check(mission)
@@ -134,3 +141,25 @@ def run(args: argparse.Namespace) -> int:
           f"({len(jobs)} flights, {wall_s:.1f} s)", file=sys.stderr)
     return 0
 
+
+
+def run_ardupilot(args: argparse.Namespace) -> int:
+    from companion.mission import load_mission
+    from gcs_tools.ardupilot.config import ArduPilotConfig
+    from gcs_tools.evaluate import ardupilot
+
+    if args.set or args.scheduler or args.readme or args.max_duration_s is not None:
+        raise UserError("--set, --scheduler, --readme and --max-duration-s apply to --vehicle sim only")
+    mission = load_mission(args.mission)
+    profiles = parse_profiles(args.missions, len(mission.profiles))
+    methods = parse_methods(args.methods)
+    seeds = campaign.parse_seeds(args.seeds)
+    cfg = ardupilot.with_speedup(ArduPilotConfig(), args.speedup)
+    feeds = tuple(f.strip() for f in args.feeds.split(",") if f.strip())
+    if not feeds or any(f not in ("none", "gps-input") for f in feeds):
+        raise UserError(f"--feeds: expected none and/or gps-input, got {args.feeds!r}")
+    res = ardupilot.evaluate(args.mission, profiles, methods, seeds, args.workers, args.out, cfg, feeds)
+    print(ardupilot.table_text(res), end="")
+    print(f"wrote {args.out}/results.json, report.md, errors_horizontal.png and flights/ "
+          f"({len(res['info']['flights'])} flights, {res['info']['wall_s']:.1f} s)", file=sys.stderr)
+    return 0

@@ -28,6 +28,11 @@ COLUMNS = {
     "est_error_m": ["est_error_m"],
     "track_error_m": ["track_error_m"],
 }
+# Written when the series has them: the autopilot's own estimate (``sitl --vehicle ardupilot``).
+OPTIONAL_COLUMNS = {
+    "p_autopilot_ned_m": ["p_autopilot_n_m", "p_autopilot_e_m", "p_autopilot_d_m"],
+    "autopilot_error_m": ["autopilot_error_m"],
+}
 
 
 def strict_json(value: Any) -> Any:
@@ -45,12 +50,15 @@ def write_outputs(result: FlightResult, world: Any, out_dir: str | Path) -> list
     s = result.summary
     paths = [out / "summary.json", out / "timeseries.csv", out / "map.png", out / "belief.png"]
     paths[0].write_text(json.dumps(strict_json(s), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    columns = COLUMNS | {k: v for k, v in OPTIONAL_COLUMNS.items() if k in result.series}
     table = np.column_stack([np.asarray(result.series[k], dtype=float).reshape(len(result.series["t_s"]), -1)
-                             for k in COLUMNS])
-    header = ",".join(c for cols in COLUMNS.values() for c in cols)
+                             for k in columns])
+    header = ",".join(c for cols in columns.values() for c in cols)
     np.savetxt(paths[1], table, delimiter=",", header=header, comments="", fmt="%.6g")
     title = f"{s['mission']} profile {s['profile']}, {s['method']}, seed {s['seed']}"
-    map_figure(paths[2], world, result.route.waypoints_ned_m,
-               {"true": result.series["p_true_ned_m"], "estimated": result.series["p_est_ned_m"]}, title)
+    tracks = {"true": result.series["p_true_ned_m"], "estimated": result.series["p_est_ned_m"]}
+    if "p_autopilot_ned_m" in result.series:
+        tracks["autopilot"] = result.series["p_autopilot_ned_m"]
+    map_figure(paths[2], world, result.route.waypoints_ned_m, tracks, title)
     belief_figure(paths[3], result.series, title)
     return paths

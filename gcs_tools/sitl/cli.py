@@ -18,6 +18,11 @@ if TYPE_CHECKING:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from gcs_tools.ardupilot import cli as ardupilot_cli
+
+    parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot"),
+                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL flying on our GNSS")
+    ardupilot_cli.add_arguments(parser)
     parser.add_argument("--mission", default="default", help="mission name or YAML path")
     parser.add_argument("--profile", type=int, default=0, help="mission profile index")
     parser.add_argument("--method", default="second-order", help="estimator method")
@@ -57,6 +62,10 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.vehicle == "ardupilot":
+        from gcs_tools.ardupilot import cli as ardupilot_cli
+
+        return ardupilot_cli.run(args)
     from companion.mission import with_scenario
     from gcs_tools import choices
     from gcs_tools.outdir import ensure_out_dir

@@ -1,0 +1,201 @@
+"""Pure parts of the ArduPilot flight: GNSS source, GPS_INPUT fields, flight driver, analysis."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.mavlink.codec import mavlink, new_link, pack
+from companion.mission import load_mission
+from gcs_tools.ardupilot.analysis import autopilot_track, count_collisions, errors
+from gcs_tools.ardupilot.config import ArduPilotConfig, ardupilot_parameters
+from gcs_tools.ardupilot.driver import (
+    COPTER_MODE_GUIDED,
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_CMD_DO_SET_MODE,
+    MAV_CMD_NAV_TAKEOFF,
+    DriverInputs,
+    FlightDriver,
+)
+from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields
+from gcs_tools.ardupilot.session import Recording
+from gcs_tools.fly.core import planned_route
+from simvehicle.config import GnssConfig
+from simvehicle.gnss import GnssModel
+
+
+def _line(t_us: np.ndarray) -> np.ndarray:
+    """A straight pass along the test city's cross street (north 52 m), 3 m/s east."""
+    t = t_us * 1e-6
+    return np.column_stack([np.full_like(t, 52.0), 5.0 + 3.0 * t, np.full_like(t, -15.0)])
+
+
+def test_source_is_our_model_sampled_on_the_truth_stream():
+    """Driven by 50 Hz truth, the source makes exactly the fixes GnssModel makes when stepped at the
+    same validity times (one per 100 ms), and releases each once its modelled latency has elapsed."""
+    m = load_mission("test")
+    cfg = GnssConfig()
+    t_us = np.arange(0, 20_000_000, 20_000)  # 50 Hz truth
+    p = _line(t_us)
+    d0 = float(m.world.clearance_m(p[0, 0], p[0, 1]))
+    src = UrbanGnssSource(cfg, m.world, m.frame, 10.0, np.random.default_rng(7), d0)
+    ref = GnssModel(cfg, 0.1, m.frame, np.random.default_rng(7), d0)
+    expected = []
+    for t, pk in zip(t_us.tolist(), p, strict=True):
+        src.on_truth(t, pk)
+        src.due(t)
+        if t % 100_000 == 0:
+            expected.append(ref.sample(t, pk, float(m.world.clearance_m(pk[0], pk[1]))))
+    sent = sorted(src.sent, key=lambda s: s.fix.t_validity_us)
+    assert len(expected) == 200 and len(sent) >= 195  # the last few are still in flight
+    for sf, nf in zip(sent, expected, strict=False):
+        assert sf.fix.t_validity_us == nf.t_validity_us
+        np.testing.assert_array_equal(sf.p_ned_m, nf.p_ned_m)
+        assert sf.arrival_us >= sf.fix.t_validity_us  # never early
+        assert sf.arrival_us - sf.fix.t_validity_us <= cfg.latency_cap_s * 1e6 + 20_000  # <= cap + 1 tick
+    lat = np.array([s.arrival_us - s.fix.t_validity_us for s in sent]) * 1e-6
+    assert lat.max() > 0.3  # the canyon's latency shows (street between buildings)
+    # the geodetic wire form is the NED fix in the mission frame (to 1 mm)
+    back = m.frame.to_ned_m(sent[50].fix.lat_deg, sent[50].fix.lon_deg, sent[50].fix.alt_m)
+    np.testing.assert_allclose(back, sent[50].p_ned_m, atol=1e-3)
+
+
+def test_gps_input_fields_pack_and_mean_what_they_say():
+    m = load_mission("test")
+    src = UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(1), 20.0)
+    src.on_truth(1_234_567, np.array([10.0, 10.0, -15.0]))
+    (sf,) = src.due(10_000_000)
+    f = gps_input_fields(sf.fix)
+    assert f["time_week_ms"] == 1234 and f["time_usec"] == 1_234_567  # validity time, not arrival
+    assert f["lat"] == round(sf.fix.lat_deg * 1e7) and f["lon"] == round(sf.fix.lon_deg * 1e7)
+    assert f["fix_type"] == 3 and f["horiz_accuracy"] == pytest.approx(sf.fix.h_acc_m)
+    assert f["ignore_flags"] == (mavlink.GPS_INPUT_IGNORE_FLAG_VEL_HORIZ
+                                 | mavlink.GPS_INPUT_IGNORE_FLAG_VEL_VERT
+                                 | mavlink.GPS_INPUT_IGNORE_FLAG_SPEED_ACCURACY)
+    link = new_link(255, 190)
+    frame = pack(link, mavlink.MAVLink_gps_input_message(**f))
+    msg = mavlink.MAVLink(None).decode(bytearray(frame))
+    assert msg.get_type() == "GPS_INPUT" and msg.lat == f["lat"] and msg.time_week == f["time_week"]
+
+
+def test_parameters_make_gps_input_the_only_gnss_position_only():
+    p = ardupilot_parameters(ArduPilotConfig(gps_delay_ms=120))
+    assert p == {"GPS1_TYPE": 14, "GPS1_DELAY_MS": 120, "EK3_SRC1_VELXY": 0, "EK3_SRC1_VELZ": 0}
+    with pytest.raises(ValueError, match="gnss_rate_hz"):
+        ArduPilotConfig(gnss_rate_hz=50).validate()
+
+
+def test_driver_guided_arm_takeoff_then_the_route_in_the_autopilots_frame():
+    m = load_mission("test")
+    route = planned_route(m, 2, 0.0)
+    cfg = ArduPilotConfig()
+    drv = FlightDriver(cfg, route, m.altitude_m)
+    now = DriverInputs(t_us=1_000_000)
+    assert drv.step(now) == []  # EKF3 has no position yet: nothing asked
+    now.ekf_position_ok = True
+    (c,) = drv.step(now)
+    assert c.args[:3] == (MAV_CMD_DO_SET_MODE, 1, COPTER_MODE_GUIDED)
+    now.t_us += 100_000
+    assert drv.step(now) == []  # retried once a second only
+    now.mode = COPTER_MODE_GUIDED
+    (c,) = drv.step(now)
+    assert drv.phase == "arm" and c.args[:2] == (MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    now.armed, now.t_us = True, now.t_us + 1_000_000
+    (c,) = drv.step(now)
+    assert drv.phase == "takeoff" and c.args[0] == MAV_CMD_NAV_TAKEOFF and c.args[7] == m.altitude_m
+    now.takeoff_accepted, now.t_us = True, now.t_us + 2_000_000
+    assert drv.step(now) == []  # accepted: not sent again
+    origin = np.array([52.3, 4.6, -0.4])
+    now.origin_ned_m = origin
+    now.ekf_ned_m = np.array([52.0, 5.0, -m.altitude_m + 0.5])
+    assert drv.step(now) == []  # at altitude: hover first
+    now.t_us += round(cfg.hover_before_route_s * 1e6)
+    (c,) = drv.step(now)
+    assert drv.phase == "route" and c.kind == "setpoint" and drv.route_t0_us == now.t_us
+    p0, v0, a0 = route.reference(0.0)
+    np.testing.assert_allclose(c.args[1:4], p0 - origin)  # mission NED -> ArduPilot local NED
+    np.testing.assert_allclose(c.args[4:7], v0)
+    now.t_us += 10_000
+    assert drv.step(now) == []  # 20 Hz
+    now.t_us += 40_000
+    (c,) = drv.step(now)
+    np.testing.assert_allclose(c.args[1:4], route.reference(0.05)[0] - origin)
+    goal = route.waypoints_ned_m[-1]
+    now.truth_ned_m, now.truth_v_ned_m_s = goal + 0.5, np.zeros(3)
+    drv.step(now)
+    assert drv.phase == "route"  # at the goal before the reference arrived: not done
+    now.t_us = drv.route_t0_us + round(route.duration_s * 1e6) + 1
+    assert drv.step(now) == [] and drv.outcome == "reached_goal"
+
+
+def test_driver_back_to_arming_when_disarmed_and_timeout():
+    m = load_mission("test")
+    route = planned_route(m, 2, 0.0)
+    drv = FlightDriver(ArduPilotConfig(), route, m.altitude_m)
+    drv.phase = "takeoff"
+    assert drv.step(DriverInputs(t_us=5_000_000, armed=False, ekf_position_ok=True)) == []
+    assert drv.phase == "arm"
+    drv.phase, drv.route_t0_us = "route", 0
+    drv.step(DriverInputs(t_us=int(drv.route_end_us) + 1, origin_ned_m=np.zeros(3)))
+    assert drv.outcome == "timeout"
+
+
+def test_analysis_known_answers():
+    assert count_collisions(np.array([5.0, 0.2, 0.1, 3.0, 0.25, 4.0]), 0.3) == 2
+    assert count_collisions(np.array([0.1, 1.0]), 0.3) == 1
+    rec = Recording()
+    rec.ekf_t_us = [1_000_000, 0]  # out of order on purpose
+    rec.ekf_p_ned_m = [np.array([10.0, 0.0, -5.0]), np.array([0.0, 0.0, -5.0])]
+    tr = autopilot_track(rec, np.array([0, 250_000, 1_000_000, 1_500_000]))
+    np.testing.assert_allclose(tr.p_ned_m[:3, 0], [0.0, 2.5, 10.0])
+    assert np.isnan(tr.p_ned_m[3]).all()  # after its last sample: unknown, not extrapolated
+    e3, eh = errors(np.array([[3.0, 4.0, 12.0]]), np.zeros((1, 3)))
+    assert e3[0] == pytest.approx(13.0) and eh[0] == pytest.approx(5.0)
+    assert math.isnan(errors(np.full((1, 3), np.nan), np.zeros((1, 3)))[0][0])
+
+
+def test_campaign_aggregate_known_answers(tmp_path):
+    from dataclasses import replace
+
+    from gcs_tools.evaluate.ardupilot import ApJob, ApResult, aggregate, table_text
+
+    def result(seed: int, ekf: float, comp: float, error: str = "") -> ApResult:
+        job = ApJob("test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig())
+        errs = {} if error else {"ardupilot-ekf3": np.full(10, ekf), "second-order": np.full(10, comp)}
+        return ApResult(job, errs, np.full(10, 1.0), not error, 0, "reached_goal", 10.0, 1.0, error)
+
+    res = aggregate([result(0, 2.0, 1.0), result(1, 4.0, 1.0), result(2, 0, 0, "no SITL"),
+                     replace(result(2, 9.0, 9.0), valid=False)],
+                    ("ardupilot-ekf3", "second-order"), (0, 1, 2))
+    ol = res["open_loop"]
+    assert ol["ardupilot-ekf3"]["median"] == pytest.approx(3.0) and ol["ardupilot-ekf3"]["n"] == 20
+    assert ol["second-order"]["reduction_vs_ekf3"] == pytest.approx(1.0 / 3.0 - 1.0)
+    assert ol["second-order"]["flight_medians"] == [1.0, 1.0]
+    # seed 2 was not flown: its medians are NaN and left out of the paired comparison
+    assert ol["second-order"]["reduction_vs_ekf3_seeds"]["value"] == pytest.approx(1.0 / 3.0 - 1.0)
+    # the late flight (commands delayed by the scheduler) is counted but not used
+    assert res["flying"]["none"]["flights"] == 4 and res["flying"]["none"]["valid"] == 2
+    assert "| second-order | 1.00 |" in table_text(res)
+
+
+def test_sitl_ardupilot_option_errors_are_one_line(tmp_path, capsys):
+    from gcs_tools.cli import main
+
+    assert main(["sitl", "--vehicle", "ardupilot", "--realtime", "--out", str(tmp_path)]) == 2
+    assert "apply to --vehicle sim only" in capsys.readouterr().err
+    assert main(["sitl", "--vehicle", "ardupilot", "--mission", "test", "--profile", "7",
+                 "--out", str(tmp_path)]) == 2
+    assert "profiles 0..2" in capsys.readouterr().err
+    assert main(["sitl", "--vehicle", "ardupilot", "--gnss-rate-hz", "50", "--out", str(tmp_path)]) == 2
+    assert "gnss_rate_hz" in capsys.readouterr().err
+
+
+def test_evaluate_ardupilot_option_errors_are_one_line(tmp_path, capsys):
+    from gcs_tools.cli import main
+
+    assert main(["evaluate", "--vehicle", "ardupilot", "--max-duration-s", "5", "--out", str(tmp_path)]) == 2
+    assert "--max-duration-s apply to --vehicle sim only" in capsys.readouterr().err
+    assert main(["evaluate", "--vehicle", "ardupilot", "--feeds", "vision", "--out", str(tmp_path)]) == 2
+    assert "--feeds: expected none and/or gps-input" in capsys.readouterr().err
