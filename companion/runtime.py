@@ -35,3 +35,12 @@ def _jsonable(value: Any) -> Any:
     if hasattr(value, "item"):
         return value.item()
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def count_handler_error(counters: dict[str, int], process: str, msg: Any, exc: Exception) -> None:
+    """Count a message that made a handler raise (``handler_error_<exception>``); the first of each
+    kind is printed to stderr with the process name. A frame must never end a process."""
+    name = f"handler_error_{type(exc).__name__}"
+    if name not in counters:
+        print(f"{process}: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
+    counters[name] = counters.get(name, 0) + 1

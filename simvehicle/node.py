@@ -50,7 +50,7 @@ from companion.mavlink.udp_link import (
     UdpLink,
 )
 from companion.mission import Mission
-from companion.runtime import write_json
+from companion.runtime import count_handler_error, write_json
 from companion.telemetry.codec import GnssReport
 from companion.telemetry.pubsub import DeferredPublisher, TelemetryPublisher
 from simvehicle import SimVehicle
@@ -160,10 +160,7 @@ class VehicleNode:
         try:
             self._on_message(source, msg)
         except Exception as exc:  # noqa: BLE001 - a frame must never end the flight
-            name = f"handler_error_{type(exc).__name__}"
-            if name not in self.counters:
-                print(f"simvehicle: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
-            self._count(name)
+            count_handler_error(self.counters, "simvehicle", msg, exc)
 
     def _alarm(self, kind: str, t_us: int) -> None:
         """An input stamped outside the window around our own time: ignored, counted, reported."""

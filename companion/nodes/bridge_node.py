@@ -10,7 +10,6 @@ vehicle reboot (``clock_resets``). A setpoint that cannot be sent is counted, ne
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -22,7 +21,7 @@ from companion.mavlink.lockstep import marker_time_us, step_response
 from companion.mavlink.udp_link import UdpLink
 from companion.mission import Mission
 from companion.planning import Route
-from companion.runtime import write_json
+from companion.runtime import count_handler_error, write_json
 from companion.telemetry.codec import RouteInfo
 from companion.telemetry.pubsub import TelemetryPublisher
 
@@ -55,10 +54,7 @@ class BridgeNode:
         try:
             self._handle(msg)
         except Exception as exc:  # noqa: BLE001 - a frame must never end the process
-            name = f"handler_error_{type(exc).__name__}"
-            if name not in self.counters:
-                print(f"bridge: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
-            self._count(name)
+            count_handler_error(self.counters, "bridge", msg, exc)
 
     def _handle(self, msg: Any) -> None:
         t_us = marker_time_us(msg)

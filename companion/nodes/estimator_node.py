@@ -21,7 +21,6 @@ handler raise is counted (``handler_error_<type>``), never fatal.
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -40,7 +39,7 @@ from companion.mavlink import codec as codec
 from companion.mavlink.lockstep import marker_time_us, step_response
 from companion.mavlink.udp_link import UdpLink
 from companion.mission import Mission
-from companion.runtime import write_json
+from companion.runtime import count_handler_error, write_json
 from companion.telemetry.pubsub import DeferredPublisher, EstimatorTelemetry, TelemetryPublisher
 
 IGNORED_TYPES = frozenset({"HEARTBEAT", "SIM_STATE", "SYSTEM_TIME", "TIMESYNC"})
@@ -114,10 +113,7 @@ class EstimatorNode:
         try:
             self._handle(msg)
         except Exception as exc:  # noqa: BLE001 - a frame must never end the process
-            name = f"handler_error_{type(exc).__name__}"
-            if name not in self.counters:
-                print(f"estimator: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
-            self._count(name)
+            count_handler_error(self.counters, "estimator", msg, exc)
 
     def _in_window(self, t_us: int, window: ClockWindow) -> bool:
         base = self._clock.base_us
