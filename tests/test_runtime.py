@@ -15,4 +15,7 @@ def test_handler_errors_are_counted_by_type_and_printed_once(capsys):
     count_handler_error(counters, "estimator", _Msg(), OverflowError("big"))
     assert counters == {"imu_used": 3, "handler_error_ValueError": 3, "handler_error_OverflowError": 1}
     err = capsys.readouterr().err.splitlines()
-    assert err == ["estimator: HIGHRES_IMU raised ValueError: bad", "estimator: HIGHRES_IMU raised OverflowError: big"]
+    assert err == [
+        "estimator: HIGHRES_IMU raised ValueError: bad",
+        "estimator: HIGHRES_IMU raised OverflowError: big",
+    ]
