@@ -196,6 +196,6 @@ def test_evaluate_ardupilot_option_errors_are_one_line(tmp_path, capsys):
     from gcs_tools.cli import main
 
     assert main(["evaluate", "--vehicle", "ardupilot", "--max-duration-s", "5", "--out", str(tmp_path)]) == 2
-    assert "--max-duration-s apply to --vehicle sim only" in capsys.readouterr().err
+    assert "--max-duration-s and --rows apply to --vehicle sim only" in capsys.readouterr().err
     assert main(["evaluate", "--vehicle", "ardupilot", "--feeds", "vision", "--out", str(tmp_path)]) == 2
     assert "--feeds: expected none and/or gps-input" in capsys.readouterr().err

@@ -111,3 +111,16 @@ def test_malformed_payloads_raise_one_named_error(topic, payload, field):
 def test_encode_rejects_wrong_type():
     with pytest.raises(TypeError, match="carries Setpoint"):
         zc.encode("setpoint", zc.Belief(1, 0.5, 1.0, "x"), 0)
+
+
+def test_nesting_depth_is_counted_on_the_parsed_payload():
+    """Known answers: the top level is depth 1; brackets inside strings do not count."""
+    import json
+
+    from companion.telemetry.codec import _nested_deeper_than
+
+    assert not _nested_deeper_than(json.loads('{"a": "[[[[[[[[[[[[", "b": [[1, 2], [3]]}'), 3)
+    assert _nested_deeper_than(json.loads('{"b": [[1, 2], [3]]}'), 2)
+    assert _nested_deeper_than(json.loads("[" * 9 + "]" * 9), 8)
+    assert not _nested_deeper_than(json.loads("[" * 8 + "]" * 8), 8)
+    assert not _nested_deeper_than(5, 0)

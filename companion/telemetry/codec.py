@@ -265,32 +265,18 @@ MAX_PAYLOAD_BYTES = 256 * 1024  # the largest real payload (a route) is a few kB
 MAX_JSON_DEPTH = 8  # payloads are flat: object -> list -> list at most
 
 
-def _json_depth(payload: bytes | str) -> int:
-    """Deepest bracket nesting outside strings (cheap: only scanned when brackets are many)."""
-    raw = payload.encode() if isinstance(payload, str) else payload
-    if raw.count(b"[") + raw.count(b"{") <= MAX_JSON_DEPTH:
-        return 0
-    depth = deepest = 0
-    in_string = escaped = False
-    for byte in raw:
-        if in_string:
-            if escaped:
-                escaped = False
-            elif byte == 0x5C:  # backslash
-                escaped = True
-            elif byte == 0x22:  # quote
-                in_string = False
-        elif byte == 0x22:
-            in_string = True
-        elif byte in (0x5B, 0x7B):
-            depth += 1
-            if depth > deepest:
-                deepest = depth
-                if deepest > MAX_JSON_DEPTH:
-                    return deepest
-        elif byte in (0x5D, 0x7D):
-            depth -= 1
-    return deepest
+def _nested_deeper_than(obj: Any, limit: int) -> bool:
+    """True if the parsed JSON ``obj`` nests containers deeper than ``limit`` (the top level is 1).
+    Walked after parsing (json strings need no special care) and only through containers, with an
+    early exit: a flat payload costs one pass over its lists."""
+    stack = [(obj, 1)] if isinstance(obj, (dict, list)) else []
+    while stack:
+        item, depth = stack.pop()
+        if depth > limit:
+            return True
+        children = item.values() if isinstance(item, dict) else item
+        stack.extend((c, depth + 1) for c in children if isinstance(c, (dict, list)))
+    return False
 
 
 def decode(topic: str, payload: bytes | str) -> tuple[Any, int | None]:
@@ -299,12 +285,15 @@ def decode(topic: str, payload: bytes | str) -> tuple[Any, int | None]:
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise MalformedPayloadError(f"{topic}: payload of {len(payload):,} bytes over the limit of "
                                     f"{MAX_PAYLOAD_BYTES:,}")
-    if _json_depth(payload) > MAX_JSON_DEPTH:
-        raise MalformedPayloadError(f"{topic}: JSON nested deeper than the limit of {MAX_JSON_DEPTH}")
+    too_deep = f"{topic}: JSON nested deeper than the limit of {MAX_JSON_DEPTH}"
     try:
         d = json.loads(payload)
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise MalformedPayloadError(f"{topic}: not JSON ({exc.__class__.__name__})") from None
+    except RecursionError:  # nested past the parser's own limit
+        raise MalformedPayloadError(too_deep) from None
+    if _nested_deeper_than(d, MAX_JSON_DEPTH):
+        raise MalformedPayloadError(too_deep)
     obj = from_dict(topic, d)
     sent = d.get("sent_unix_ns")
     return obj, (sent if isinstance(sent, int) and not isinstance(sent, bool) else None)

@@ -148,11 +148,13 @@ def run_ardupilot(args: argparse.Namespace) -> int:
     from gcs_tools.ardupilot.config import ArduPilotConfig
     from gcs_tools.evaluate import ardupilot
 
-    if args.set or args.scheduler or args.readme or args.max_duration_s is not None:
-        raise UserError("--set, --scheduler, --readme and --max-duration-s apply to --vehicle sim only")
+    if args.set or args.scheduler or args.readme or args.rows is not None \
+            or args.max_duration_s is not None:
+        raise UserError("--set, --scheduler, --readme, --max-duration-s and --rows apply to --vehicle sim "
+                        "only")
     mission = load_mission(args.mission)
     profiles = parse_profiles(args.missions, len(mission.profiles))
-    methods = parse_methods(args.methods)
+    methods = parse_methods(args.methods or DEFAULT_METHODS)
     seeds = campaign.parse_seeds(args.seeds)
     cfg = ardupilot.with_speedup(ArduPilotConfig(), args.speedup)
     feeds = tuple(f.strip() for f in args.feeds.split(",") if f.strip())
