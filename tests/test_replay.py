@@ -191,3 +191,14 @@ def test_mission_option_sets_home_and_the_missions_estimator_config(tmp_path, ca
         mission.frame.home_lat_deg, mission.frame.home_lon_deg)
     assert main(["replay", str(short), "--out", str(tmp_path / "x"), "--mission", "nonexistent"]) == 2
     assert "nonexistent" in capsys.readouterr().err
+
+
+def test_bad_home_is_one_line_for_replay_and_export(tmp_path, capsys):
+    """replay and export share the one --home parser (companion.domain.geodesy.parse_home)."""
+    from gcs_tools.cli import main
+
+    log = str(Path(__file__).parent / "data" / "quad106.tlog")
+    assert main(["replay", log, "--home", "91,0,0", "--out", str(tmp_path / "r")]) == 2
+    assert "--home '91,0,0': latitude/longitude out of range" in capsys.readouterr().err
+    assert main(["export", log, "--home", "1,2", "--format", "csv", "--out", str(tmp_path / "e.csv")]) == 2
+    assert "--home '1,2': expected lat,lon,alt" in capsys.readouterr().err

@@ -25,10 +25,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from companion.domain.geodesy import parse_home
     from gcs_tools.export.flight import load_flight
     from gcs_tools.export.mcap_out import write_mcap
 
-    home = _parse_home(args.home) if args.home else None
+    home = parse_home(args.home) if args.home else None
     flight = load_flight(args.run, args.vehicle, home)
     out = args.out or (args.run / f"export.{args.format}" if args.run.is_dir()
                        else args.run.with_suffix(f".{args.format}"))
@@ -53,14 +54,3 @@ def run(args: argparse.Namespace) -> int:
         print("  topics: " + ", ".join(f"{k} ({n})" for k, n in counts.items()))
     return 0
 
-
-def _parse_home(text: str):  # -> LocalNedFrame
-    from companion.domain.geodesy import LocalNedFrame
-
-    try:
-        lat, lon, alt = (float(x) for x in text.split(","))
-    except ValueError:
-        raise UserError(f"--home {text!r}: expected LAT,LON,ALT in degrees, degrees, metres") from None
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
-        raise UserError(f"--home {text!r}: latitude or longitude out of range")
-    return LocalNedFrame(lat, lon, alt)

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from companion.domain.geodesy import parse_home
 from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
 from gcs_tools.replay import core
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
-    home = core.parse_home(args.home) if args.home else None
+    home = parse_home(args.home) if args.home else None
     config = None
     if args.mission is not None:
         from companion.estimator import mission_estimator_config

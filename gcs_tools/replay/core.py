@@ -19,7 +19,6 @@ lone sample far back is not a restart: it goes to the navigator, which rejects i
 
 from __future__ import annotations
 
-import math
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -296,17 +295,6 @@ class ReplayResult:
     summary: dict[str, Any]
     t_us: np.ndarray  # (N,) estimate times (empty when the rows were streamed to a file)
     table: np.ndarray  # (N, len(CSV_COLUMNS) - 1): the CSV columns after t_s
-
-
-def parse_home(text: str) -> LocalNedFrame:
-    """``"lat,lon,alt"`` (degrees, degrees, metres) -> frame; UserError on anything else."""
-    try:
-        lat, lon, alt = (float(v) for v in text.split(","))
-    except ValueError:
-        raise UserError(f"--home {text!r}: expected lat,lon,alt (degrees, degrees, metres)") from None
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and math.isfinite(alt)):
-        raise UserError(f"--home {text!r}: latitude/longitude out of range")
-    return LocalNedFrame(lat, lon, alt)
 
 
 def replay(
