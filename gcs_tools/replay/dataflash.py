@@ -33,6 +33,7 @@ from typing import Any
 import pymap3d
 from pymavlink.DFReader import DFFormat
 
+from companion.autopilot.translate import ARDUPILOT_DEFAULT_GPS_DELAY_MS
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.errors import UserError
 from companion.mavlink.codec import euler_to_quaternion
@@ -51,9 +52,9 @@ FMT_TYPE = 128
 FMT_LAYOUT = struct.Struct("<BB4s16s64s")  # Type, Length, Name, Format, Columns
 READ_BLOCK = 1 << 20
 MAX_MESSAGE = 3 + 255
-# ArduPilot's lag for a u-blox M8-class receiver when GPS*_DELAY_MS is 0 (AP_GPS_UBLOX::get_lag);
+# ArduPilot's lag for a u-blox M8-class receiver when GPS*_DELAY_MS is 0 (the live adapter's constant);
 # on the SITL log in tests/data the fix that fits truth best is ~85 ms old (SIM_GPS1_LAG_MS 100).
-DEFAULT_GPS_DELAY_MS = 120.0
+DEFAULT_GPS_DELAY_MS = ARDUPILOT_DEFAULT_GPS_DELAY_MS
 DELAY_PARAMS = ("GPS1_DELAY_MS", "GPS_DELAY_MS")
 
 FIELDS = {
