@@ -71,6 +71,21 @@ def test_predict_at_a_constant_attitude_equals_F_P_Ft_plus_exact_Q():
     np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-12)
 
 
+def test_fast_block_propagator_equals_the_reference():
+    rng = np.random.default_rng(7)
+    w, e = 0.3**2, 0.2**2
+    prop = model.BlockPropagator(0.1, w, e)
+    for _ in range(3):
+        P = _random_cov(rng)
+        A, B = rng.standard_normal(9), rng.standard_normal(9)
+        T, alpha, q_b = 0.05 + rng.uniform(), 0.97, 0.01
+        ref = model.predict_block(P, T, A.reshape(3, 3), B.reshape(3, 3), alpha, 0.1, q_b, w, e)
+        got = prop.predict(P, T, A.tolist(), B.tolist(), alpha, q_b)
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
+        var = prop.variances(P, T, A.tolist(), B.tolist(), alpha, q_b)
+        np.testing.assert_allclose(var, np.diag(ref)[0:9], rtol=1e-12, atol=1e-12)
+
+
 def test_blocks_compose_exactly_at_a_constant_attitude():
     rng = np.random.default_rng(2)
     P = _random_cov(rng)
@@ -122,7 +137,8 @@ def test_update_equals_closed_form():
     xr, Pr, _, _, nis_r = model.update(x, P, z, np.diag(r))
     np.testing.assert_allclose(xr, x_exp, atol=1e-12)
     np.testing.assert_allclose(Pr, P_exp, atol=1e-12)
-    xf, Pf, nis = model.update_fast(tuple(x), P, tuple(y), model.hph_of(P), r)
+    PHt, hph = model.innovation_gain_terms(P)
+    xf, Pf, nis = model.update_fast(tuple(x), P, tuple(y), PHt, hph, r)
     np.testing.assert_allclose(xf, x_exp, atol=1e-12)
     np.testing.assert_allclose(Pf, P_exp, atol=1e-12)
     assert nis == pytest.approx(float(y @ np.linalg.solve(S, y)), rel=1e-12)

@@ -109,6 +109,7 @@ class FusionEngine:
         self._q_acc = cfg.sigma_acc_m_s2**2
         self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
         self._q_ned = cfg.sigma_acc_ned_rw_m_s2_sqrt_s**2
+        self._prop = model.BlockPropagator(self._q_acc, self._q_rw, self._q_ned)
         self._gate2 = cfg.gnss_gate_sigma**2
         self._gate_r_min = cfg.gnss_gate_r_floor_m**2
         self._r_max = cfg.r_learned_max_factor
@@ -269,15 +270,13 @@ class FusionEngine:
         q_b = q_bias_unit * sigma_b * sigma_b
         ints = self.imu.integrals(t_us)
         x_prior, A, B = mean_between(prev.x, prev.ints, ints, alpha)
-        P_prior = self._predict_cov(prev.P, T, A, B, alpha, q_b)
-        hph = model.hph_of(P_prior)  # H P⁻ Hᵀ (3×3): the body-frame bias correlates the axes
+        P_prior = self._prop.predict(prev.P, T, A, B, alpha, q_b)
+        PHt, hph = model.innovation_gain_terms(P_prior)  # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
         h0, h1, h2 = hph[0][0], hph[1][1], hph[2][2]
-        terms = InnovationTerms(
-            y, (h0 - q_b, h1 - q_b, h2 - q_b), q_bias_unit, r_nom,
-            (float(P_prior[0, 0] + P_prior[0, 6]), float(P_prior[1, 1] + P_prior[1, 7]),
-             float(P_prior[2, 2] + P_prior[2, 8])),
-        )
+        pht = PHt[0:3].tolist()
+        terms = InnovationTerms(y, (h0 - q_b, h1 - q_b, h2 - q_b), q_bias_unit, r_nom,
+                                (pht[0][0], pht[1][1], pht[2][2]))
         R = self.method.measurement_cov(prev.state, terms)
         k = self._r_max
         if R[0] > k * r_nom[0] or R[1] > k * r_nom[1] or R[2] > k * r_nom[2]:
@@ -292,7 +291,7 @@ class FusionEngine:
         nis_v = y[2] * y[2] / s2
         ratio = nis_h / self._gate2
         if ratio <= 1.0 and nis_v <= self._gate2:
-            x_post, P_post, nis = model.update_fast(x_prior, P_prior, y, hph, R)
+            x_post, P_post, nis = model.update_fast(x_prior, P_prior, y, PHt, hph, R)
             self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints,
                          r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets)
         elif t_us - prev.t_fused_us >= self._reset_us:
@@ -303,11 +302,6 @@ class FusionEngine:
             state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
             self._append(t_us, z, x_prior, P_prior, state, _nis(y, hph, R), ints,
                          r_nom, prev.t_fused_us, ratio, True, prev.n_rejected + 1, prev.n_resets)
-
-    def _predict_cov(self, P: model.Cov, T: float, A: list[float], B: list[float], alpha: float,
-                     q_b: float) -> model.Cov:
-        return model.predict_block(P, T, np.array(A).reshape(3, 3), np.array(B).reshape(3, 3), alpha,
-                                   self._q_acc, q_b, self._q_rw, self._q_ned)
 
     # ------------------------------------------------------------- history
     def _trim(self) -> None:
@@ -341,7 +335,7 @@ class FusionEngine:
         sigma_b = f.sigma_bias_m
         q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
         x, A, B = mean_between(f.x, f.ints, ints, alpha)
-        return x, self._predict_cov(f.P, T, A, B, alpha, q_b)
+        return x, self._prop.predict(f.P, T, A, B, alpha, q_b)
 
     # -------------------------------------------------------------- output
     def snapshot(self) -> Snapshot | None:
@@ -352,8 +346,11 @@ class FusionEngine:
         now = self.imu.t_us[-1]
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]
-        x, P = self._predict(last, now, self.imu.last_integrals())
-        var = tuple(P.diagonal()[0:9].tolist())
+        T = (now - last.t_us) * 1e-6
+        alpha = math.exp(-T / self._tau_s)
+        sigma_b = last.sigma_bias_m
+        x, A, B = mean_between(last.x, last.ints, self.imu.last_integrals(), alpha)
+        var = tuple(self._prop.variances(last.P, T, A, B, alpha, (1.0 - alpha * alpha) * sigma_b * sigma_b))
         snap = Snapshot(now, x, var, last.beta, last.nis, last.test_ratio, last.glitch,
                         now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
         self._cache = (last, now, snap)

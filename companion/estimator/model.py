@@ -43,6 +43,7 @@ everything reduces to the per-axis model of the first wave (tested).
 from __future__ import annotations
 
 import math
+from operator import add as _add
 
 import numpy as np
 
@@ -185,6 +186,70 @@ def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = 
 
 
 # ------------------------------------------------------------------- the engine's fast forms
+class BlockPropagator:
+    """``predict_block`` and the nine output variances of it, with fewer numpy calls (the
+    engine's hot path; equal to the reference forms above to rounding, tested).
+
+    F is written into one reused buffer with a single fancy assignment (its 30 variable entries),
+    and Q is added to F P Fᵀ with a single fancy add (its 69 non-zero entries); both index lists
+    are built once here. ``A``, ``B`` are row-major lists of 9 (``history.rotation_blocks``)."""
+
+    def __init__(self, q_acc_m2_s3: float, q_rw_m2_s5: float, q_ned_m2_s5: float) -> None:
+        self.q_acc, self.q_rw, self.q_ned = q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5
+        self.F = np.eye(N_STATE)
+        self._F_flat = self.F.reshape(-1)  # a view: writes go to F
+        n = N_STATE
+        self._f_idx = np.array([*_flat(0, 3), *_flat(6, 6), *_flat(0, 12), *_flat(3, 12),
+                                *(r * n + 9 + c for r in range(3) for c in range(3)),
+                                *((3 + r) * n + 9 + c for r in range(3) for c in range(3))])
+        pa = [r * n + 9 + c for r in range(3) for c in range(3)]
+        ap = [(9 + c) * n + r for r in range(3) for c in range(3)]
+        va = [(3 + r) * n + 9 + c for r in range(3) for c in range(3)]
+        av = [(9 + c) * n + 3 + r for r in range(3) for c in range(3)]
+        self._q_idx = np.concatenate([_Q_FLAT, pa, ap, va, av])
+        self._Q = np.zeros((N_STATE, N_STATE))  # Q's entries outside _q_idx stay 0
+        self._Q_flat = self._Q.reshape(-1)
+
+    def _write_f(self, T_s: float, A: list[float], B: list[float], alpha: float) -> None:
+        h = -0.5 * T_s * T_s
+        self._F_flat[self._f_idx] = (T_s, T_s, T_s, alpha, alpha, alpha, h, h, h, -T_s, -T_s, -T_s,
+                                     *[-v for v in B], *[-v for v in A])
+
+    def _q_diag(self, T_s: float, q_b: float) -> tuple[float, float, float, float, float, float, float, float]:
+        T2 = T_s * T_s
+        q, w, e = self.q_acc, self.q_rw, self.q_ned
+        we = w + e
+        return (q * T2 * T_s / 3.0 + we * T2 * T2 * T_s / 20.0, q * T2 / 2.0 + we * T2 * T2 / 8.0,
+                q * T_s + we * T2 * T_s / 3.0, q_b, w * T_s, e * T_s, -e * T2 * T_s / 6.0, -e * T2 / 2.0)
+
+    def predict(self, P: np.ndarray, T_s: float, A: list[float], B: list[float], alpha: float,
+                q_b: float) -> np.ndarray:
+        """F P Fᵀ + Q over a block (a new array)."""
+        self._write_f(T_s, A, B, alpha)
+        pp, pv, vv, bb, aa, dd, pd, vd = self._q_diag(T_s, q_b)
+        # the random-walk terms with the block's mean rotation R̄ = A / T (module docstring)
+        kp, kv = -self.q_rw * T_s * T_s / 6.0, -self.q_rw * T_s / 2.0
+        pa = [kp * v for v in A]
+        va = [kv * v for v in A]
+        self._Q_flat[self._q_idx] = (pp, pp, pp, pv, pv, pv, pv, pv, pv, vv, vv, vv, bb, bb, bb, aa, aa, aa,
+                                     dd, dd, dd, pd, pd, pd, pd, pd, pd, vd, vd, vd, vd, vd, vd,
+                                     *pa, *pa, *va, *va)
+        F = self.F
+        out = F @ P @ F.T
+        out += self._Q
+        return out
+
+    def variances(self, P: np.ndarray, T_s: float, A: list[float], B: list[float], alpha: float,
+                  q_b: float) -> list[float]:
+        """The variances of p, v and b (N, E, D each: 9 numbers) of ``predict``, computed alone."""
+        self._write_f(T_s, A, B, alpha)
+        F9 = self.F[0:9]
+        var = np.einsum("ij,ij->i", F9 @ P, F9).tolist()
+        pp, _, vv, bb = self._q_diag(T_s, q_b)[0:4]
+        return [var[0] + pp, var[1] + pp, var[2] + pp, var[3] + vv, var[4] + vv, var[5] + vv,
+                var[6] + bb, var[7] + bb, var[8] + bb]
+
+
 def inv3(s: list[list[float]]) -> tuple[float, ...]:
     """Row-major inverse of a symmetric positive-definite 3×3 (closed form, floats)."""
     (a, b, c), (_, d, e), (_, _, f) = s
@@ -194,23 +259,25 @@ def inv3(s: list[list[float]]) -> tuple[float, ...]:
     return (c0 * u, c1 * u, c2 * u, c1 * u, i11, i12, c2 * u, i12, i22)
 
 
-def update_fast(x: State, P: np.ndarray, y: tuple[float, float, float], hph: list[list[float]],
-                r_m2: tuple[float, float, float]) -> tuple[State, np.ndarray, float]:
-    """Kalman update with z = p + b + ν, ν ~ N(0, diag r), innovation ``y`` and H P Hᵀ ``hph``
-    (3×3, floats). Returns (x⁺, P⁺, NIS)."""
-    s = [[hph[0][0] + r_m2[0], hph[0][1], hph[0][2]], [hph[1][0], hph[1][1] + r_m2[1], hph[1][2]],
-         [hph[2][0], hph[2][1], hph[2][2] + r_m2[2]]]
-    i = inv3(s)
+def innovation_gain_terms(P: np.ndarray) -> tuple[np.ndarray, list[list[float]]]:
+    """(P Hᵀ (15×3), H P Hᵀ (3×3) as nested float lists) for H = [I 0 I 0 0]."""
+    PHt = P[:, 0:3] + P[:, 6:9]
+    return PHt, (PHt[0:3] + PHt[6:9]).tolist()
+
+
+def update_fast(x: State, P: np.ndarray, y: tuple[float, float, float], PHt: np.ndarray,
+                hph: list[list[float]], r_m2: tuple[float, float, float]) -> tuple[State, np.ndarray, float]:
+    """Kalman update with z = p + b + ν, ν ~ N(0, diag r), innovation ``y``, P Hᵀ ``PHt`` and
+    H P Hᵀ ``hph`` (``innovation_gain_terms``). Returns (x⁺, P⁺, NIS)."""
+    (h00, h01, h02), (_, h11, h12), (_, _, h22) = hph
+    i = inv3([[h00 + r_m2[0], h01, h02], [h01, h11 + r_m2[1], h12], [h02, h12, h22 + r_m2[2]]])
     y0, y1, y2 = y
     g0, g1, g2 = i[0] * y0 + i[1] * y1 + i[2] * y2, i[3] * y0 + i[4] * y1 + i[5] * y2, \
         i[6] * y0 + i[7] * y1 + i[8] * y2
-    PHt = P[:, 0:3] + P[:, 6:9]
-    dx = (PHt @ (g0, g1, g2)).tolist()
-    K = PHt @ np.array(i).reshape(3, 3)
-    P_post = P - K @ PHt.T
-    P_post += P_post.T
-    P_post *= 0.5
-    return tuple(a + b for a, b in zip(x, dx, strict=True)), P_post, y0 * g0 + y1 * g1 + y2 * g2
+    # [K | K y] = P Hᵀ [S⁻¹ | S⁻¹ y] in one product
+    Kg = PHt @ np.array(((i[0], i[1], i[2], g0), (i[3], i[4], i[5], g1), (i[6], i[7], i[8], g2)))
+    P_post = P - Kg[:, 0:3] @ PHt.T  # K S Kᵀ = P Hᵀ S⁻¹ H P: symmetric to rounding
+    return tuple(map(_add, x, Kg[:, 3].tolist())), P_post, y0 * g0 + y1 * g1 + y2 * g2
 
 
 def hph_of(P: np.ndarray) -> list[list[float]]:
