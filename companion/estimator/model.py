@@ -215,7 +215,7 @@ class BlockPropagator:
         self._F_flat[self._f_idx] = (T_s, T_s, T_s, alpha, alpha, alpha, h, h, h, -T_s, -T_s, -T_s,
                                      *[-v for v in B], *[-v for v in A])
 
-    def _q_diag(self, T_s: float, q_b: float) -> tuple[float, float, float, float, float, float, float, float]:
+    def _q_diag(self, T_s: float, q_b: float) -> tuple[float, ...]:
         T2 = T_s * T_s
         q, w, e = self.q_acc, self.q_rw, self.q_ned
         we = w + e
