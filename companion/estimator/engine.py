@@ -118,6 +118,7 @@ class FusionEngine:
         self._tau_s = cfg.bias_tau_s
         self._trim_len = _TRIM_EVERY
         self._cache: tuple[Fusion, int, Snapshot] | None = None
+        self._var_blocks: tuple[Any, np.ndarray] = (None, np.empty(0))  # (P, model.variance_blocks(P))
 
     # ----------------------------------------------------------------- IMU
     def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
@@ -350,7 +351,10 @@ class FusionEngine:
         alpha = math.exp(-T / self._tau_s)
         sigma_b = last.sigma_bias_m
         x, A, B = mean_between(last.x, last.ints, self.imu.last_integrals(), alpha)
-        var = tuple(self._prop.variances(last.P, T, A, B, alpha, (1.0 - alpha * alpha) * sigma_b * sigma_b))
+        if self._var_blocks[0] is not last.P:
+            self._var_blocks = (last.P, model.variance_blocks(last.P))
+        var = tuple(self._prop.variances(last.P, T, A, B, alpha, (1.0 - alpha * alpha) * sigma_b * sigma_b,
+                                         self._var_blocks[1]))
         snap = Snapshot(now, x, var, last.beta, last.nis, last.test_ratio, last.glitch,
                         now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
         self._cache = (last, now, snap)

@@ -240,14 +240,36 @@ class BlockPropagator:
         return out
 
     def variances(self, P: np.ndarray, T_s: float, A: list[float], B: list[float], alpha: float,
-                  q_b: float) -> list[float]:
-        """The variances of p, v and b (N, E, D each: 9 numbers) of ``predict``, computed alone."""
-        self._write_f(T_s, A, B, alpha)
-        F9 = self.F[0:9]
-        var = np.einsum("ij,ij->i", F9 @ P, F9).tolist()
+                  q_b: float, blocks: np.ndarray | None = None) -> list[float]:
+        """The variances of p, v and b (N, E, D each: 9 numbers) of ``predict``, computed alone.
+
+        A row of F for p or v has 6 or 5 non-zero entries (p_i: [1, T, −B_i, −T²/2] on
+        (p_i, v_i, a, d_i); v_i: [1, −A_i, −T] on (v_i, a, d_i)), so each variance is a quadratic
+        form on a 6×6 block of P: ``blocks`` = ``variance_blocks(P)``, which depends on P alone
+        (the output path computes it once per fusion)."""
+        M = variance_blocks(P) if blocks is None else blocks
+        h = -0.5 * T_s * T_s
+        b0, b1, b2, b3, b4, b5, b6, b7, b8 = B
+        a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
+        C = np.array(((1.0, T_s, -b0, -b1, -b2, h), (1.0, T_s, -b3, -b4, -b5, h),
+                      (1.0, T_s, -b6, -b7, -b8, h), (1.0, -a0, -a1, -a2, -T_s, 0.0), (1.0, -a3, -a4, -a5, -T_s, 0.0),
+                      (1.0, -a6, -a7, -a8, -T_s, 0.0)))
+        v = np.einsum("ij,ijk,ik->i", C, M, C).tolist()
         pp, _, vv, bb = self._q_diag(T_s, q_b)[0:4]
-        return [var[0] + pp, var[1] + pp, var[2] + pp, var[3] + vv, var[4] + vv, var[5] + vv,
-                var[6] + bb, var[7] + bb, var[8] + bb]
+        a2 = alpha * alpha
+        return [v[0] + pp, v[1] + pp, v[2] + pp, v[3] + vv, v[4] + vv, v[5] + vv,
+                a2 * float(P[6, 6]) + bb, a2 * float(P[7, 7]) + bb, a2 * float(P[8, 8]) + bb]
+
+
+# the state indices of the non-zero entries of F's rows for p (N, E, D) and v (N, E, D); v's row
+# has 5 (its sixth index repeats d_i with coefficient 0)
+_VAR_IDX = np.array([[i, 3 + i, 9, 10, 11, 12 + i] for i in range(3)]
+                    + [[3 + i, 9, 10, 11, 12 + i, 12 + i] for i in range(3)])
+
+
+def variance_blocks(P: np.ndarray) -> np.ndarray:
+    """The six 6×6 blocks of P that ``BlockPropagator.variances`` needs, (6, 6, 6)."""
+    return P[_VAR_IDX[:, :, None], _VAR_IDX[:, None, :]]  # type: ignore[no-any-return]
 
 
 def inv3(s: list[list[float]]) -> tuple[float, ...]:

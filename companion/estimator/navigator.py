@@ -124,8 +124,9 @@ class Navigator:
                 self._counts["imu_rejected_no_attitude"] += 1
                 return
             fx, fy, fz = sample.acc_frd_m_s2.tolist()  # type: ignore[union-attr]
-            self._push_acc(sample.t_us, r[0] * fx + r[1] * fy + r[2] * fz,  # type: ignore[union-attr]
-                           r[3] * fx + r[4] * fy + r[5] * fz, r[6] * fx + r[7] * fy + r[8] * fz + self._g, r)
+            r0, r1, r2, r3, r4, r5, r6, r7, r8 = r
+            self._push_acc(sample.t_us, r0 * fx + r1 * fy + r2 * fz,  # type: ignore[union-attr]
+                           r3 * fx + r4 * fy + r5 * fz, r6 * fx + r7 * fy + r8 * fz + self._g, r)
         elif kind is AttitudeSample:
             w, x, y, z = sample.q_ned_frd.tolist()  # type: ignore[union-attr]
             n2 = w * w + x * x + y * y + z * z
