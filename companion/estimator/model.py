@@ -252,8 +252,8 @@ class BlockPropagator:
         b0, b1, b2, b3, b4, b5, b6, b7, b8 = B
         a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
         C = np.array(((1.0, T_s, -b0, -b1, -b2, h), (1.0, T_s, -b3, -b4, -b5, h),
-                      (1.0, T_s, -b6, -b7, -b8, h), (1.0, -a0, -a1, -a2, -T_s, 0.0), (1.0, -a3, -a4, -a5, -T_s, 0.0),
-                      (1.0, -a6, -a7, -a8, -T_s, 0.0)))
+                      (1.0, T_s, -b6, -b7, -b8, h), (1.0, -a0, -a1, -a2, -T_s, 0.0),
+                      (1.0, -a3, -a4, -a5, -T_s, 0.0), (1.0, -a6, -a7, -a8, -T_s, 0.0)))
         v = np.einsum("ij,ijk,ik->i", C, M, C).tolist()
         pp, _, vv, bb = self._q_diag(T_s, q_b)[0:4]
         a2 = alpha * alpha
