@@ -269,7 +269,7 @@ _VAR_IDX = np.array([[i, 3 + i, 9, 10, 11, 12 + i] for i in range(3)]
 
 def variance_blocks(P: np.ndarray) -> np.ndarray:
     """The six 6×6 blocks of P that ``BlockPropagator.variances`` needs, (6, 6, 6)."""
-    return P[_VAR_IDX[:, :, None], _VAR_IDX[:, None, :]]  # type: ignore[no-any-return]
+    return P[_VAR_IDX[:, :, None], _VAR_IDX[:, None, :]]
 
 
 def inv3(s: list[list[float]]) -> tuple[float, ...]:
