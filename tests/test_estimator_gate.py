@@ -52,36 +52,72 @@ def test_test_ratio_is_horizontal_nis_over_gate_squared_and_gate_is_exact():
 
 # paper-literal (comparison only) is left out: its belief climbs on the rejected fixes, and the
 # grown covariance lets it accept the step just before the time-out (the gate works as designed).
-@pytest.mark.parametrize("method", [m for m in METHODS if m != "paper-literal"])
-def test_short_glitch_is_ignored_long_one_ends_in_one_reset(method):
-    """A 20 m step for 3 s: rejected, estimate untouched. Held: one reset at the time-out, with
-    position = fix, bias 0, H P Hᵀ = R; the counters say so; then fixes fuse again."""
-    e = _engine(method)
-    t = 0
-    for _ in range(60):  # 3 s clean at the origin
+def _clean_then(e: FusionEngine, t: int, seconds: float, z) -> int:
+    """Fixes ``z`` at 20 Hz for ``seconds`` after ``t`` (zero acceleration); returns the end time."""
+    t_end = t + int(seconds * 1e6)
+    while t < t_end:
         _still(e, t, t + 50_000)
         t += 50_000
-        e.push_fix(t, (0.0, 0.0, 0.0))
+        e.push_fix(t, z)
+    return t
+
+
+# paper-literal (comparison only) is left out: its belief climbs on the rejected fixes, and the
+# grown covariance lets it accept the step just before the time-out (the gate works as designed).
+@pytest.mark.parametrize("method", [m for m in METHODS if m != "paper-literal"])
+def test_a_step_opens_an_offset_and_leaves_the_estimate_alone_until_it_steps_back(method):
+    """A 20 m step for 3 s in a consistent stream: the first stepped fix opens the offset (not
+    fused), the others are fused relative to it (flagged, estimate untouched, position valid);
+    the fix that steps back closes it. No reset."""
+    e = _engine(method)
+    t = _clean_then(e, 0, 3.0, (0.0, 0.0, 0.0))
     t_glitch = t
     while t < t_glitch + 3_000_000:
-        _still(e, t, t + 50_000)
-        t += 50_000
-        e.push_fix(t, (20.0, 0.0, 0.0))
-        assert e.fusions[-1].glitch
-        assert abs(e.snapshot().x[0]) < 1e-6
-    assert e.counts["gnss_resets"] == 0 and e.counts["gnss_rejected_innovation"] == 60
+        t = _clean_then(e, t, 0.05, (20.0, 0.0, 0.0))
+        f = e.fusions[-1]
+        assert f.glitch and f.offset == pytest.approx((20.0, 0.0, 0.0), abs=1e-6)
+        assert f.t_offset_us == t_glitch + 50_000
+        snap = e.snapshot()
+        assert abs(snap.x[0]) < 1e-6 and snap.pos_valid
+    c = e.counts
+    assert c["gnss_offsets"] == 1 and c["gnss_rejected_innovation"] == 1 and c["gnss_resets"] == 0
+    t = _clean_then(e, t, 0.05, (0.0, 0.0, 0.0))
+    f = e.fusions[-1]
+    assert not f.glitch and f.offset is None and c["gnss_fused"] == 60 + 59 + 1 + 1
+
+
+@pytest.mark.parametrize("method", ["naive", "second-order"])
+def test_a_step_held_past_the_offset_limit_ends_in_one_reset(method):
+    cfg = EstimatorConfig(gnss_offset_max_s=4.0)
+    e = _engine(method, cfg)
+    t = _clean_then(e, 0, 3.0, (0.0, 0.0, 0.0))
+    t_glitch = t
     t_reset = None
-    while t < t_glitch + 8_000_000:
-        _still(e, t, t + 50_000)
-        t += 50_000
-        e.push_fix(t, (20.0, 0.0, 0.0))
+    while t < t_glitch + 6_000_000:
+        t = _clean_then(e, t, 0.05, (20.0, 0.0, 0.0))
         if t_reset is None and e.counts["gnss_resets"]:
             t_reset = t
-    assert e.counts["gnss_resets"] == 1
-    assert t_reset - t_glitch == CFG.gnss_reset_timeout_s * 1e6  # the first fix at the time-out
+    assert e.counts["gnss_resets"] == 1 and e.counts["gnss_offsets"] == 1
+    assert t_reset - (t_glitch + 50_000) == cfg.gnss_offset_max_s * 1e6  # the offset opened at the first
     snap = e.snapshot()
     assert snap.x[0] == pytest.approx(20.0, abs=0.05) and not snap.glitch and snap.pos_valid
-    assert e.counts["gnss_rejected_innovation"] == 99  # 100 fixes in the 5 s, the 100th reset
+
+
+@pytest.mark.parametrize("method", ["naive", "second-order"])
+def test_gnss_returning_after_an_outage_opens_no_offset(method):
+    """2 s without fixes, then fixes 20 m away (a dead-reckoning drift, as far as the filter can
+    tell): rejected without an offset (the stream was not consistent a moment ago), then one reset
+    at the time-out: the returning GNSS wins."""
+    e = _engine(method)
+    t = _clean_then(e, 0, 3.0, (0.0, 0.0, 0.0))
+    t_last = t
+    _still(e, t, t + 2_000_000)
+    t += 2_000_000
+    while t < t_last + 6_000_000:
+        t = _clean_then(e, t, 0.05, (20.0, 0.0, 0.0))
+    c = e.counts
+    assert c["gnss_offsets"] == 0 and c["gnss_resets"] == 1
+    assert e.snapshot().x[0] == pytest.approx(20.0, abs=0.05)
 
 
 def test_reset_matches_the_fix_and_its_r():

@@ -11,9 +11,9 @@ from tests.estimator_streams import multipath_stream
 CFG = EstimatorConfig()
 
 
-def _run(stream, method: str, arrival_us: np.ndarray) -> FusionEngine:
+def _run(stream, method: str, arrival_us: np.ndarray, cfg: EstimatorConfig = CFG) -> FusionEngine:
     """Push IMU in time order and each fix once the IMU clock reaches its arrival time."""
-    e = FusionEngine(CFG, method)
+    e = FusionEngine(cfg, method)
     order = np.argsort(arrival_us, kind="stable")
     j = 0
     for k, t in enumerate(stream.t_us.tolist()):
@@ -80,7 +80,8 @@ def test_history_stays_bounded_through_a_gnss_outage(stream):
 
 @pytest.fixture(scope="module")
 def glitch_stream():
-    """Clean GNSS with a 1 s 8 m step (rejected, no reset) and a 9 s 20 m step (reset twice)."""
+    """Clean GNSS with a 1 s 8 m step (an offset, no reset) and a 9 s 20 m step (with offsets limited
+    to 4 s: an offset, a reset into the step, an offset at its end, a reset out of it)."""
     s = multipath_stream(np.random.default_rng(3), CFG, [(24.0, 0.0)])
     t = s.fix_t_us * 1e-6
     z = s.z_ned_m.copy()
@@ -91,18 +92,19 @@ def glitch_stream():
 
 @pytest.mark.parametrize("method", METHODS)
 def test_gate_and_reset_are_exact_under_out_of_order_fusion(glitch_stream, method):
-    """Rejections and resets are a function of the time-ordered fixes: random delays (up to 1.2 s)
-    give the same decisions, counters and estimate as in-order processing."""
+    """Rejections, offsets and resets are a function of the time-ordered fixes: random delays (up
+    to 1.2 s) give the same decisions, counters and estimate as in-order processing."""
     s = glitch_stream
+    cfg = EstimatorConfig(gnss_offset_max_s=4.0)
     rng = np.random.default_rng(5)
     delay_us = rng.uniform(0.0, 1.2e6, size=len(s.fix_t_us)).astype(np.int64)
     delay_us[0] = 0
-    late = _run(s, method, np.minimum(s.fix_t_us + delay_us, s.t_us[-1]))
-    ref = _run(s, method, s.fix_t_us.copy())
+    late = _run(s, method, np.minimum(s.fix_t_us + delay_us, s.t_us[-1]), cfg)
+    ref = _run(s, method, s.fix_t_us.copy(), cfg)
     assert late.counts["gnss_out_of_order"] > 50
-    for name in ("gnss_rejected_innovation", "gnss_resets", "gnss_fused"):
+    for name in ("gnss_rejected_innovation", "gnss_resets", "gnss_offsets", "gnss_fused"):
         assert late.counts[name] == ref.counts[name], name
-    assert ref.counts["gnss_resets"] == 2 and ref.counts["gnss_rejected_innovation"] > 20 + 2 * 40
+    assert ref.counts["gnss_resets"] == 2 and ref.counts["gnss_offsets"] == 3
     a, b = late.snapshot(), ref.snapshot()
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(a.var, b.var, rtol=0, atol=1e-9)
@@ -110,5 +112,8 @@ def test_gate_and_reset_are_exact_under_out_of_order_fusion(glitch_stream, metho
                                rtol=0, atol=1e-9)
     assert abs(a.beta - b.beta) < 1e-9 and a.pos_valid and not a.glitch
     for f, g in zip(late.fusions[1:], ref.fusions[-len(late.fusions) + 1:], strict=True):
-        assert (f.t_us, f.glitch, f.n_rejected, f.n_resets, f.t_fused_us) == (
-            g.t_us, g.glitch, g.n_rejected, g.n_resets, g.t_fused_us)
+        assert (f.t_us, f.glitch, f.n_rejected, f.n_resets, f.t_fused_us, f.n_offsets, f.t_offset_us) == (
+            g.t_us, g.glitch, g.n_rejected, g.n_resets, g.t_fused_us, g.n_offsets, g.t_offset_us)
+        assert (f.offset is None) == (g.offset is None)
+        if f.offset is not None:
+            np.testing.assert_allclose(f.offset, g.offset, rtol=0, atol=1e-9)

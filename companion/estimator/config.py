@@ -105,6 +105,16 @@ class EstimatorConfig:
     # a real change (or a dead-reckoning drift), not a glitch. EKF2 resets after its 5 s no-aid
     # time-out (EKF2_NOAID_TOUT), EKF3 after 7-10 s (gpsRetryTime); 5 s bounds the drift.
     gnss_reset_timeout_s: float = 5.0
+    # GNSS step hypothesis: a fix failing the gate within gnss_offset_open_s of a fused fix (the
+    # stream was consistent a moment ago: no dead-reckoning drift can explain a 5-sigma jump) is a
+    # step of the receiver's output: its innovation becomes an offset subtracted from the following
+    # fixes, which are fused (they still observe velocity) until a fix passes the gate without it
+    # (the step ended) or the offset has been open gnss_offset_max_s: then one reset accepts the
+    # GNSS. 1 s spans 5 fixes at 5 Hz; 60 s is the longest glitch of issue #11's tests. A GNSS
+    # that returns after an outage longer than 1 s opens no offset: its fixes pass the gate grown
+    # by dead reckoning, or reset after gnss_reset_timeout_s.
+    gnss_offset_open_s: float = 1.0
+    gnss_offset_max_s: float = 60.0
     # The position is flagged invalid (NavEstimate.pos_valid False) when no fix was fused for
     # longer than this (time of the estimate − validity of the last fused fix). EKF2_NOAID_TOUT.
     pos_valid_timeout_s: float = 5.0
@@ -134,7 +144,8 @@ class EstimatorConfig:
             "sigma_gnss_horizontal_m", "sigma_gnss_vertical_m", "sigma_velocity0_m_s",
             "sigma_bias0_m", "imu_hold_max_s", "theta_max", "eta", "lambda_reg", "student_dof",
             "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor", "gnss_gate_sigma", "gnss_gate_r_floor_m",
-            "gnss_reset_timeout_s", "pos_valid_timeout_s", "gnss_frozen_s",
+            "gnss_reset_timeout_s", "gnss_offset_open_s", "gnss_offset_max_s", "pos_valid_timeout_s",
+            "gnss_frozen_s",
             "gnss_frozen_speed_m_s",
         )
         for name in positive:

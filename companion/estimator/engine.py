@@ -59,9 +59,14 @@ class Fusion(NamedTuple):
     r_nominal_m2: Vec3  # this fix's nominal R (variances, m²): config or receiver-reported
     t_fused_us: int  # validity time of the last fix fused (or reset to) up to this entry
     test_ratio: float  # horizontal NIS / gate² of this fix (NaN for the first)
-    glitch: bool  # this fix failed the gate (not fused)
+    glitch: bool  # this fix failed the gate (rejected, or fused only relative to an open GNSS offset)
     n_rejected: int  # fixes rejected by the gate up to this entry (cumulative)
     n_resets: int  # resets up to this entry (cumulative)
+    # GNSS step hypothesis (docs/estimator.md): the offset (NED, m) subtracted from the fixes while
+    # it is open (None: closed), when it opened, and how many opened up to this entry
+    offset: Vec3 | None = None
+    t_offset_us: int = 0
+    n_offsets: int = 0
 
 
 class Snapshot(NamedTuple):
@@ -95,7 +100,7 @@ class FusionEngine:
             "imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
             "gnss_fused", "gnss_refused", "gnss_out_of_order", "gnss_rejected_before_imu",
             "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
-            "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets",
+            "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets", "gnss_offsets",
         ):
             self.counts.setdefault(name, 0)
         self.imu = ImuHistory(cfg.imu_hold_max_s)
@@ -114,6 +119,8 @@ class FusionEngine:
         self._gate_r_min = cfg.gnss_gate_r_floor_m**2
         self._r_max = cfg.r_learned_max_factor
         self._reset_us = int(round(cfg.gnss_reset_timeout_s * 1e6))
+        self._offset_open_us = int(round(cfg.gnss_offset_open_s * 1e6))
+        self._offset_max_us = int(round(cfg.gnss_offset_max_s * 1e6))
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
         self._trim_len = _TRIM_EVERY
@@ -240,6 +247,7 @@ class FusionEngine:
         last, c = self.fusions[-1], self.counts
         c["gnss_rejected_innovation"] = last.n_rejected
         c["gnss_resets"] = last.n_resets
+        c["gnss_offsets"] = last.n_offsets
         c["gnss_fused"] = self._tested - last.n_rejected
 
     def _initialise(self, t_us: int, z: Vec3, r: Vec3) -> None:
@@ -253,16 +261,25 @@ class FusionEngine:
 
     def _append(self, t_us: int, z: Vec3 | None, x: model.State, P: model.Cov, state: Any, nis: float,
                 ints: Integrals, r: Vec3, t_fused_us: int, ratio: float, glitch: bool, n_rejected: int,
-                n_resets: int) -> None:
+                n_resets: int, offset: Vec3 | None = None, t_offset_us: int = 0, n_offsets: int = 0) -> None:
         beta = self.method.beta(state)
         self.fusions.append(Fusion(t_us, z, x, P, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
-                                   r, t_fused_us, ratio, glitch, n_rejected, n_resets))
+                                   r, t_fused_us, ratio, glitch, n_rejected, n_resets, offset, t_offset_us,
+                                   n_offsets))
         self._fusion_t.append(t_us)
 
     def _fuse(self, t_us: int, z: Vec3, r_nom: Vec3) -> None:
         """Predict the last entry to ``t_us``, test ``z`` there and fuse it (Algorithm 1, lines
-        7-17) if it passes the innovation gate; a fix failing the gate while none passed for
-        ``gnss_reset_timeout_s`` resets position and bias to it instead."""
+        7-17) if it passes the innovation gate. A fix failing the gate
+
+        * while an offset hypothesis is open and ``z`` − offset passes: fused as ``z`` − offset
+          (the step's fixes still observe velocity);
+        * while no fix passed for ``gnss_reset_timeout_s``, or the offset has been open for
+          ``gnss_offset_max_s``: resets position and bias to it;
+        * right after a fused fix (within ``gnss_offset_open_s``): a step, opens the offset
+          hypothesis (offset = its innovation; the fix itself is not fused);
+        * otherwise: rejected.
+        A fix that passes the gate without the offset closes it (the fixes stepped back)."""
         prev = self.fusions[-1]
         T = (t_us - prev.t_us) * 1e-6
         alpha = math.exp(-T / self._tau_s)
@@ -274,35 +291,62 @@ class FusionEngine:
         P_prior = self._prop.predict(prev.P, T, A, B, alpha, q_b)
         PHt, hph = model.innovation_gain_terms(P_prior)  # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
-        h0, h1, h2 = hph[0][0], hph[1][1], hph[2][2]
         pht = PHt[0:3].tolist()
-        terms = InnovationTerms(y, (h0 - q_b, h1 - q_b, h2 - q_b), q_bias_unit, r_nom,
-                                (pht[0][0], pht[1][1], pht[2][2]))
-        R = self.method.measurement_cov(prev.state, terms)
+        s0 = (hph[0][0] - q_b, hph[1][1] - q_b, hph[2][2] - q_b)
+        pht_p = (pht[0][0], pht[1][1], pht[2][2])
+        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p)
+        R = self._r_of(prev.state, terms, r_nom)
+        ratio, passes = self._gate(y, hph, R)
+        n_rej, n_res, n_off = prev.n_rejected, prev.n_resets, prev.n_offsets
+        if passes:  # closes an open offset: the fixes stepped back
+            x_post, P_post, nis = model.update_fast(x_prior, P_prior, y, PHt, hph, R)
+            self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints,
+                         r_nom, t_us, ratio, False, n_rej, n_res, None, 0, n_off)
+            return
+        off = prev.offset
+        expired = off is not None and t_us - prev.t_offset_us >= self._offset_max_us
+        if off is not None and not expired:
+            y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
+            terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
+            R_off = self._r_of(prev.state, terms_off, r_nom)
+            if self._gate(y_off, hph, R_off)[1]:
+                x_post, P_post, nis = model.update_fast(x_prior, P_prior, y_off, PHt, hph, R_off)
+                self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms_off), nis, ints,
+                             r_nom, t_us, ratio, True, n_rej, n_res, off, prev.t_offset_us, n_off)
+                return
+        since_fused = t_us - prev.t_fused_us
+        if since_fused >= self._reset_us or expired:
+            x_reset, P_reset = model.reset_to_fix(x_prior, P_prior, z, r_nom, self.cfg.sigma_bias0_m**2)
+            self._append(t_us, z, x_reset, P_reset, prev.state, _nis(y, hph, R), ints,
+                         r_nom, t_us, ratio, False, n_rej, n_res + 1, None, 0, n_off)
+            return
+        # rejected: the entry carries the prior; only a belief learns from the fix
+        state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
+        if since_fused <= self._offset_open_us:  # a step in a consistent stream: (re)open the offset
+            off, t_off, n_off = y, t_us, n_off + 1
+        else:
+            t_off = prev.t_offset_us
+        self._append(t_us, z, x_prior, P_prior, state, _nis(y, hph, R), ints,
+                     r_nom, prev.t_fused_us, ratio, True, n_rej + 1, n_res, off, t_off, n_off)
+
+    def _r_of(self, state: Any, terms: InnovationTerms, r_nom: Vec3) -> Vec3:
+        """The method's R for this fix, bounded by ``r_learned_max_factor`` × the nominal R."""
+        R = self.method.measurement_cov(state, terms)
         k = self._r_max
         if R[0] > k * r_nom[0] or R[1] > k * r_nom[1] or R[2] > k * r_nom[2]:
             R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
-        # the gate: horizontal NIS (2 dof, the 2×2 block of S) and vertical NIS (1 dof) against
-        # gate², R floored
+        return R
+
+    def _gate(self, y: Vec3, hph: list[list[float]], R: Vec3) -> tuple[float, bool]:
+        """(horizontal NIS / gate², passed): horizontal NIS (2 dof, the 2×2 block of S) and
+        vertical NIS (1 dof) against gate², R floored at ``gnss_gate_r_floor_m``."""
         g = self._gate_r_min
         r0, r1, r2 = R
-        s00, s01, s11 = h0 + (r0 if r0 > g else g), hph[0][1], h1 + (r1 if r1 > g else g)
-        s2 = h2 + (r2 if r2 > g else g)
+        s00, s01, s11 = hph[0][0] + (r0 if r0 > g else g), hph[0][1], hph[1][1] + (r1 if r1 > g else g)
+        s2 = hph[2][2] + (r2 if r2 > g else g)
         nis_h = (s11 * y[0] * y[0] - 2.0 * s01 * y[0] * y[1] + s00 * y[1] * y[1]) / (s00 * s11 - s01 * s01)
-        nis_v = y[2] * y[2] / s2
         ratio = nis_h / self._gate2
-        if ratio <= 1.0 and nis_v <= self._gate2:
-            x_post, P_post, nis = model.update_fast(x_prior, P_prior, y, PHt, hph, R)
-            self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints,
-                         r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets)
-        elif t_us - prev.t_fused_us >= self._reset_us:
-            x_reset, P_reset = model.reset_to_fix(x_prior, P_prior, z, r_nom, self.cfg.sigma_bias0_m**2)
-            self._append(t_us, z, x_reset, P_reset, prev.state, _nis(y, hph, R), ints,
-                         r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets + 1)
-        else:  # rejected: the entry carries the prior; only a belief learns from the fix
-            state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
-            self._append(t_us, z, x_prior, P_prior, state, _nis(y, hph, R), ints,
-                         r_nom, prev.t_fused_us, ratio, True, prev.n_rejected + 1, prev.n_resets)
+        return ratio, ratio <= 1.0 and y[2] * y[2] / s2 <= self._gate2
 
     # ------------------------------------------------------------- history
     def _trim(self) -> None:
