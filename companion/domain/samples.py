@@ -68,7 +68,7 @@ class NavEstimate:
     method: str
     # GNSS innovation gate and validity (estimator: ``EstimatorConfig`` gate/time-out fields):
     pos_horiz_test_ratio: float = float("nan")  # horizontal NIS / gate² of the last fix tested (NaN = none)
-    gnss_glitch: bool = False  # the last fix tested failed the innovation gate (not fused)
+    gnss_glitch: bool = False  # the last fix failed the gate (rejected, or fused relative to a GNSS offset)
     pos_valid: bool = True  # False when no fix was fused for longer than the validity time-out
     gnss_rejected_innovation: int = 0  # fixes rejected by the innovation gate so far
     gnss_resets: int = 0  # resets of position and GNSS bias to the GNSS after a sustained rejection
