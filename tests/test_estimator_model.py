@@ -80,9 +80,9 @@ def test_fast_block_propagator_equals_the_reference():
         A, B = rng.standard_normal(9), rng.standard_normal(9)
         T, alpha, q_b = 0.05 + rng.uniform(), 0.97, 0.01
         ref = model.predict_block(P, T, A.reshape(3, 3), B.reshape(3, 3), alpha, 0.1, q_b, w, e)
-        got = prop.predict(P, T, A.tolist(), B.tolist(), alpha, q_b)
+        got = prop.predict(P, T, (-A).tolist(), (-B).tolist(), alpha, q_b)
         np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
-        var = prop.variances(P, T, A.tolist(), B.tolist(), alpha, q_b)
+        var = prop.variances(P, T, (-A).tolist(), (-B).tolist(), alpha, q_b)
         np.testing.assert_allclose(var, np.diag(ref)[0:9], rtol=1e-12, atol=1e-12)
 
 
@@ -104,8 +104,8 @@ def test_rotating_block_transition_is_exact_and_its_q_close_and_psd():
     h = ImuHistory(hold_max_s=0.1)
     for k in range(n + 1):
         h.append(k * 5000, 0.0, 0.0, 0.0, tuple(rots[min(k, n - 1)].ravel().tolist()))
-    A, B = rotation_blocks(h.integrals(0), h.integrals(n * 5000))
-    A, B = np.array(A).reshape(3, 3), np.array(B).reshape(3, 3)
+    nA, nB = rotation_blocks(h.integrals(0), h.integrals(n * 5000))
+    A, B = -np.array(nA).reshape(3, 3), -np.array(nB).reshape(3, 3)
     F_prod = np.eye(N)
     for k in range(n):
         F_prod = model.transition(dt, CFG, tuple(rots[k].ravel())) @ F_prod

@@ -154,31 +154,32 @@ class ImuHistory:
 
 
 def rotation_blocks(a: Integrals, b: Integrals) -> tuple[list[float], list[float]]:
-    """(A, B) row-major between the integrals ``a`` and ``b``: A = ∫R, B = ∫(t_b − s) R."""
+    """(−A, −B) row-major between the integrals ``a`` and ``b``: A = ∫R, B = ∫(t_b − s) R (negated:
+    as they enter the mean and F)."""
     tb = b[0]
-    A = [q - p for p, q in zip(a[7:16], b[7:16], strict=True)]
-    B = [tb * d - (q - p) for d, p, q in zip(A, a[16:25], b[16:25], strict=True)]
-    return A, B
+    nA = [p - q for p, q in zip(a[7:16], b[7:16], strict=True)]
+    nB = [tb * d + (q - p) for d, p, q in zip(nA, a[16:25], b[16:25], strict=True)]
+    return nA, nB
 
 
 def mean_between(x: tuple[float, ...], a: Integrals, b: Integrals, alpha: float
                  ) -> tuple[tuple[float, ...], list[float], list[float]]:
     """Mean of the model carried between the times of the integrals ``a`` and ``b`` (a before b),
-    with the block's rotation integrals (A, B) (row-major 3×3 each; ``rotation_blocks``)."""
+    with the block's negated rotation integrals (−A, −B) (row-major 3×3 each; ``rotation_blocks``)."""
     ta, a1x, a1y, a1z, a2x, a2y, a2z = a[0:7]
     tb, b1x, b1y, b1z, b2x, b2y, b2z = b[0:7]
-    A, B = rotation_blocks(a, b)
+    A, B = rotation_blocks(a, b)  # negated
     T = tb - ta
     h = 0.5 * T * T
     dx, dy, dz = b1x - a1x, b1y - a1y, b1z - a1z
     ux, uy, uz, ex, ey, ez = x[9:15]
     return (
-        x[0] + x[3] * T + (tb * dx - (b2x - a2x)) - (B[0] * ux + B[1] * uy + B[2] * uz) - ex * h,
-        x[1] + x[4] * T + (tb * dy - (b2y - a2y)) - (B[3] * ux + B[4] * uy + B[5] * uz) - ey * h,
-        x[2] + x[5] * T + (tb * dz - (b2z - a2z)) - (B[6] * ux + B[7] * uy + B[8] * uz) - ez * h,
-        x[3] + dx - (A[0] * ux + A[1] * uy + A[2] * uz) - ex * T,
-        x[4] + dy - (A[3] * ux + A[4] * uy + A[5] * uz) - ey * T,
-        x[5] + dz - (A[6] * ux + A[7] * uy + A[8] * uz) - ez * T,
+        x[0] + x[3] * T + (tb * dx - (b2x - a2x)) + (B[0] * ux + B[1] * uy + B[2] * uz) - ex * h,
+        x[1] + x[4] * T + (tb * dy - (b2y - a2y)) + (B[3] * ux + B[4] * uy + B[5] * uz) - ey * h,
+        x[2] + x[5] * T + (tb * dz - (b2z - a2z)) + (B[6] * ux + B[7] * uy + B[8] * uz) - ez * h,
+        x[3] + dx + (A[0] * ux + A[1] * uy + A[2] * uz) - ex * T,
+        x[4] + dy + (A[3] * ux + A[4] * uy + A[5] * uz) - ey * T,
+        x[5] + dz + (A[6] * ux + A[7] * uy + A[8] * uz) - ez * T,
         alpha * x[6], alpha * x[7], alpha * x[8],
         ux, uy, uz, ex, ey, ez,
     ), A, B

@@ -191,8 +191,9 @@ class BlockPropagator:
     engine's hot path; equal to the reference forms above to rounding, tested).
 
     F is written into one reused buffer with a single fancy assignment (its 30 variable entries),
-    and Q is added to F P Fᵀ with a single fancy add (its 69 non-zero entries); both index lists
-    are built once here. ``A``, ``B`` are row-major lists of 9 (``history.rotation_blocks``)."""
+    and Q is written into a reused buffer with a single fancy assignment (its 69 non-zero
+    entries); both index lists are built once here. ``nA``, ``nB`` are −A and −B, row-major lists
+    of 9 (``history.rotation_blocks``)."""
 
     def __init__(self, q_acc_m2_s3: float, q_rw_m2_s5: float, q_ned_m2_s5: float) -> None:
         self.q_acc, self.q_rw, self.q_ned = q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5
@@ -209,11 +210,16 @@ class BlockPropagator:
         self._q_idx = np.concatenate([_Q_FLAT, pa, ap, va, av])
         self._Q = np.zeros((N_STATE, N_STATE))  # Q's entries outside _q_idx stay 0
         self._Q_flat = self._Q.reshape(-1)
+        # the coefficient rows of ``variances`` (9 × 6; column 0 is 1, the b rows only that)
+        self._C = np.zeros((9, 6))
+        self._C[:, 0] = 1.0
+        self._C_flat = self._C.reshape(-1)
+        self._c_idx = np.array([r * 6 + c for r in range(3) for c in range(1, 6)]
+                               + [r * 6 + c for r in range(3, 6) for c in range(1, 5)])
 
-    def _write_f(self, T_s: float, A: list[float], B: list[float], alpha: float) -> None:
+    def _write_f(self, T_s: float, nA: list[float], nB: list[float], alpha: float) -> None:
         h = -0.5 * T_s * T_s
-        self._F_flat[self._f_idx] = (T_s, T_s, T_s, alpha, alpha, alpha, h, h, h, -T_s, -T_s, -T_s,
-                                     *[-v for v in B], *[-v for v in A])
+        self._F_flat[self._f_idx] = (T_s, T_s, T_s, alpha, alpha, alpha, h, h, h, -T_s, -T_s, -T_s, *nB, *nA)
 
     def _q_diag(self, T_s: float, q_b: float) -> tuple[float, ...]:
         T2 = T_s * T_s
@@ -222,15 +228,15 @@ class BlockPropagator:
         return (q * T2 * T_s / 3.0 + we * T2 * T2 * T_s / 20.0, q * T2 / 2.0 + we * T2 * T2 / 8.0,
                 q * T_s + we * T2 * T_s / 3.0, q_b, w * T_s, e * T_s, -e * T2 * T_s / 6.0, -e * T2 / 2.0)
 
-    def predict(self, P: np.ndarray, T_s: float, A: list[float], B: list[float], alpha: float,
+    def predict(self, P: np.ndarray, T_s: float, nA: list[float], nB: list[float], alpha: float,
                 q_b: float) -> np.ndarray:
         """F P Fᵀ + Q over a block (a new array)."""
-        self._write_f(T_s, A, B, alpha)
+        self._write_f(T_s, nA, nB, alpha)
         pp, pv, vv, bb, aa, dd, pd, vd = self._q_diag(T_s, q_b)
         # the random-walk terms with the block's mean rotation R̄ = A / T (module docstring)
-        kp, kv = -self.q_rw * T_s * T_s / 6.0, -self.q_rw * T_s / 2.0
-        pa = [kp * v for v in A]
-        va = [kv * v for v in A]
+        kp, kv = self.q_rw * T_s * T_s / 6.0, self.q_rw * T_s / 2.0
+        pa = [kp * v for v in nA]
+        va = [kv * v for v in nA]
         self._Q_flat[self._q_idx] = (pp, pp, pp, pv, pv, pv, pv, pv, pv, vv, vv, vv, bb, bb, bb, aa, aa, aa,
                                      dd, dd, dd, pd, pd, pd, pd, pd, pd, vd, vd, vd, vd, vd, vd,
                                      *pa, *pa, *va, *va)
@@ -239,7 +245,7 @@ class BlockPropagator:
         out += self._Q
         return out
 
-    def variances(self, P: np.ndarray, T_s: float, A: list[float], B: list[float], alpha: float,
+    def variances(self, P: np.ndarray, T_s: float, nA: list[float], nB: list[float], alpha: float,
                   q_b: float, blocks: np.ndarray | None = None) -> list[float]:
         """The variances of p, v and b (N, E, D each: 9 numbers) of ``predict``, computed alone.
 
@@ -248,27 +254,30 @@ class BlockPropagator:
         form on a 6×6 block of P: ``blocks`` = ``variance_blocks(P)``, which depends on P alone
         (the output path computes it once per fusion)."""
         M = variance_blocks(P) if blocks is None else blocks
-        h = -0.5 * T_s * T_s
-        b0, b1, b2, b3, b4, b5, b6, b7, b8 = B
-        a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
-        C = np.array(((1.0, T_s, -b0, -b1, -b2, h), (1.0, T_s, -b3, -b4, -b5, h),
-                      (1.0, T_s, -b6, -b7, -b8, h), (1.0, -a0, -a1, -a2, -T_s, 0.0),
-                      (1.0, -a3, -a4, -a5, -T_s, 0.0), (1.0, -a6, -a7, -a8, -T_s, 0.0)))
+        h, m = -0.5 * T_s * T_s, -T_s
+        b0, b1, b2, b3, b4, b5, b6, b7, b8 = nB
+        C = self._C
+        self._C_flat[self._c_idx] = (T_s, b0, b1, b2, h, T_s, b3, b4, b5, h, T_s, b6, b7, b8, h, *nA[0:3], m,
+                                     *nA[3:6], m, *nA[6:9], m)
         v = np.einsum("ij,ijk,ik->i", C, M, C).tolist()
-        pp, _, vv, bb = self._q_diag(T_s, q_b)[0:4]
+        T2 = T_s * T_s
+        we = self.q_rw + self.q_ned
+        pp = self.q_acc * T2 * T_s / 3.0 + we * T2 * T2 * T_s / 20.0
+        vv = self.q_acc * T_s + we * T2 * T_s / 3.0
         a2 = alpha * alpha
         return [v[0] + pp, v[1] + pp, v[2] + pp, v[3] + vv, v[4] + vv, v[5] + vv,
-                a2 * float(P[6, 6]) + bb, a2 * float(P[7, 7]) + bb, a2 * float(P[8, 8]) + bb]
+                a2 * v[6] + q_b, a2 * v[7] + q_b, a2 * v[8] + q_b]
 
 
-# the state indices of the non-zero entries of F's rows for p (N, E, D) and v (N, E, D); v's row
-# has 5 (its sixth index repeats d_i with coefficient 0)
+# the state indices of the non-zero entries of F's rows for p (N, E, D), v (N, E, D) and b (N, E,
+# D); v's row has 5 (its sixth index repeats d_i with coefficient 0), b's 1 (α, applied after)
 _VAR_IDX = np.array([[i, 3 + i, 9, 10, 11, 12 + i] for i in range(3)]
-                    + [[3 + i, 9, 10, 11, 12 + i, 12 + i] for i in range(3)])
+                    + [[3 + i, 9, 10, 11, 12 + i, 12 + i] for i in range(3)]
+                    + [[6 + i] * 6 for i in range(3)])
 
 
 def variance_blocks(P: np.ndarray) -> np.ndarray:
-    """The six 6×6 blocks of P that ``BlockPropagator.variances`` needs, (6, 6, 6)."""
+    """The nine 6×6 blocks of P that ``BlockPropagator.variances`` needs, (9, 6, 6)."""
     return P[_VAR_IDX[:, :, None], _VAR_IDX[:, None, :]]
 
 
