@@ -52,6 +52,7 @@ def test_random_delays_and_order_equal_in_order(stream, method):
     for f, g in zip(late.fusions[1:], ref.fusions[-len(late.fusions) + 1:], strict=True):
         np.testing.assert_allclose(f.x, g.x, atol=1e-9)
         assert late.method.beta(f.state) == pytest.approx(ref.method.beta(g.state), abs=1e-9)
+        np.testing.assert_array_equal(f.P, f.P.T)  # symmetric exactly (model.update_fast)
 
 
 def test_fix_older_than_history_is_rejected_and_counted(stream):

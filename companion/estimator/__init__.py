@@ -3,7 +3,7 @@
     from companion.estimator import EstimatorConfig, Navigator, METHODS
     nav = Navigator(EstimatorConfig(), method="second-order", frame=None)
 
-Modules: ``config`` (parameters), ``model`` (the linear 9-state model), ``history`` (held IMU
+Modules: ``config`` (parameters), ``model`` (the linear 15-state model), ``history`` (held IMU
 inputs with prefix integrals), ``belief`` (loss and ∂ℓ/∂β), ``methods`` (adaptation strategies
 and their registry), ``engine`` (filter + out-of-sequence fusion), ``navigator`` (front end).
 """
