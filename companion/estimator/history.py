@@ -156,10 +156,14 @@ class ImuHistory:
 def rotation_blocks(a: Integrals, b: Integrals) -> tuple[list[float], list[float]]:
     """(−A, −B) row-major between the integrals ``a`` and ``b``: A = ∫R, B = ∫(t_b − s) R (negated:
     as they enter the mean and F)."""
-    tb = b[0]
-    nA = [p - q for p, q in zip(a[7:16], b[7:16], strict=True)]
-    nB = [tb * d + (q - p) for d, p, q in zip(nA, a[16:25], b[16:25], strict=True)]
-    return nA, nB
+    (_, _, _, _, _, _, _, p0, p1, p2, p3, p4, p5, p6, p7, p8, r0, r1, r2, r3, r4, r5, r6, r7, r8) = a
+    (tb, _, _, _, _, _, _, q0, q1, q2, q3, q4, q5, q6, q7, q8, s0, s1, s2, s3, s4, s5, s6, s7, s8) = b
+    d0, d1, d2, d3, d4, d5, d6, d7, d8 = p0 - q0, p1 - q1, p2 - q2, p3 - q3, p4 - q4, p5 - q5, p6 - q6, \
+        p7 - q7, p8 - q8
+    return [d0, d1, d2, d3, d4, d5, d6, d7, d8], [
+        tb * d0 + (s0 - r0), tb * d1 + (s1 - r1), tb * d2 + (s2 - r2), tb * d3 + (s3 - r3),
+        tb * d4 + (s4 - r4), tb * d5 + (s5 - r5), tb * d6 + (s6 - r6), tb * d7 + (s7 - r7),
+        tb * d8 + (s8 - r8)]
 
 
 def mean_between(x: tuple[float, ...], a: Integrals, b: Integrals, alpha: float
