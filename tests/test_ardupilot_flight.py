@@ -114,3 +114,63 @@ def test_closed_loop_ardupilot_flies_on_the_companion_process(tmp_path, feed):
     apart = np.hypot(*(ekf - ours).T)
     assert np.nanmedian(apart) < 2.0  # EKF3 follows the companion (blended with its own IMU)
 
+
+
+def _processes_under(path) -> list[str]:
+    """Processes whose working directory or command line is inside ``path`` (SITLs, companions)."""
+    import os
+    from pathlib import Path
+
+    found = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cwd = os.readlink(proc / "cwd")
+            cmd = (proc / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if (cwd.startswith(str(path)) or str(path) in cmd) and "pytest" not in cmd:
+            found.append(f"{proc.name}: {cmd[:120]}")
+    return found
+
+
+@pytest.mark.timeout(120)
+def test_ctrl_c_stops_an_ardupilot_campaign_within_seconds(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's process group) while two workers fly: the run ends within a
+    few seconds with exit 130, and no SITL or companion is left running; the queued flights are skipped."""
+    import os
+    import signal
+    import time
+
+    require_ardupilot()
+    out = tmp_path / "eval"
+    cmd = [sys.executable, "-m", "gcs_tools", "evaluate", "--vehicle", "ardupilot", "--mission", "test",
+           "--missions", "3", "--seeds", "0-1", "--workers", "2", "--feeds", "none,gps-input", "--speedup", "5",
+           "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # its own group, as a terminal's foreground job
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # both workers are flying: SITLs and the closed loop's companion
+            logs = list(out.glob("flights/*/ardupilot/arducopter.log"))
+            if len(logs) >= 2 and list(out.glob("flights/*/companion/run.tlog")):
+                break
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.2)
+        else:
+            pytest.fail(f"the campaign did not start two flights within 60 s: {_processes_under(out)}")
+        time.sleep(2.0)
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        stopped_s = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130 and "interrupted" in err, err
+    assert stopped_s < 8.0, stopped_s
+    time.sleep(0.5)
+    assert _processes_under(out) == []
+    assert len(list(out.glob("flights/*/ardupilot"))) <= 3  # 12 flights queued: the rest were skipped

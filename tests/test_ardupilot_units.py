@@ -221,6 +221,35 @@ def test_campaign_aggregate_known_answers(tmp_path):
     # the late flight (commands delayed by the scheduler) is counted but not used
     assert res["flying"]["none"]["flights"] == 4 and res["flying"]["none"]["valid"] == 2
     assert "| second-order | 1.00 |" in table_text(res)
+    assert "ardupilot-ekf3-posonly" not in ol  # no such flights: no row
+
+
+def test_campaign_rows_of_the_position_only_and_closed_loops(tmp_path):
+    """EKF3 without velocity is its own open-loop row (paired with EKF3 by seed); closed loops add
+    no open-loop row but report EKF3's error (what it flew on) and what the companion sent."""
+    from gcs_tools.evaluate.ardupilot import ApJob, ApResult, aggregate, table_text
+
+    def result(seed: int, loop: str, errs: dict) -> ApResult:
+        job = ApJob("test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig(), loop)
+        errs = {k: np.full(10, v) for k, v in errs.items()}
+        return ApResult(job, errs, np.full(10, 2.0), True, 1, "reached_goal", 10.0, 1.0)
+
+    results = [result(s, "none", {"ardupilot-ekf3": 2.0 + s, "second-order": 1.0}) for s in (0, 1)]
+    results += [result(s, "none-posonly", {"ardupilot-ekf3-posonly": 4.0 + 2 * s}) for s in (0, 1)]
+    results += [result(s, "vision", {"ardupilot-ekf3": 1.5, "companion-live": 1.25}) for s in (0, 1)]
+    rows = ("ardupilot-ekf3", "ardupilot-ekf3-posonly", "second-order")
+    res = aggregate(results, rows, (0, 1))
+    ol = res["open_loop"]
+    assert list(ol) == list(rows) and ol["ardupilot-ekf3"]["median"] == pytest.approx(2.5)
+    assert ol["ardupilot-ekf3-posonly"]["reduction_vs_ekf3"] == pytest.approx(5.0 / 2.5 - 1.0)
+    v = res["flying"]["vision"]
+    assert v["flights"] == 2 and v["collisions"] == 2
+    assert v["flown_estimate_error_horizontal_m"]["median"] == pytest.approx(1.5)
+    assert v["companion_sent_error_horizontal_m"]["median"] == pytest.approx(1.25)
+    assert res["flying"]["none-posonly"]["flown_estimate_error_horizontal_m"]["median"] == pytest.approx(5.0)
+    assert res["flying"]["none"]["companion_sent_error_horizontal_m"]["n"] == 0
+    text = table_text(res)
+    assert "ExternalNav | 2 (2) | 2 | 2 | 2.00 | 2.00 | 1.50 | 1.25 |" in text
 
 
 def test_sitl_ardupilot_option_errors_are_one_line(tmp_path, capsys):
@@ -240,5 +269,7 @@ def test_evaluate_ardupilot_option_errors_are_one_line(tmp_path, capsys):
 
     assert main(["evaluate", "--vehicle", "ardupilot", "--max-duration-s", "5", "--out", str(tmp_path)]) == 2
     assert "--max-duration-s and --rows apply to --vehicle sim only" in capsys.readouterr().err
-    assert main(["evaluate", "--vehicle", "ardupilot", "--feeds", "vision", "--out", str(tmp_path)]) == 2
-    assert "--feeds: expected none and/or gps-input" in capsys.readouterr().err
+    for feeds in ("radar", "none,vision,none"):
+        assert main(["evaluate", "--vehicle", "ardupilot", "--feeds", feeds, "--out", str(tmp_path)]) == 2
+        assert "--feeds: expected distinct values of none, none-posonly, gps-input, vision" in \
+            capsys.readouterr().err
