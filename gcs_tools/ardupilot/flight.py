@@ -136,7 +136,10 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
         # extra delay (ArduPilot time) of everything we send, from the scheduler: GPS_INPUT reaches
         # EKF3 this much later than the model's latency says (the companion's fixes do not have it)
         "command_delay_ms": (delay := _delay_stats(session.command_delay_us)),
-        "valid": bool(delay["p95"] <= cfg.max_command_delay_ms),
+        # closed loop: the companion's estimates reach ArduPilot this late (its process's lag)
+        "feed_delay_ms": (feed_delay := _delay_stats(session.feed_delay_us)),
+        "valid": bool(delay["p95"] <= cfg.max_command_delay_ms
+                      and (not closed or feed_delay["p95"] <= cfg.max_command_delay_ms)),
         "statustext": [f"{t * 1e-6:.1f} s {s}" for t, s in rec.statustext[-40:]],
     }
     live = None

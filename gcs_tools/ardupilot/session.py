@@ -34,6 +34,7 @@ from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields  #
 SETPOINT_TYPE_MASK = MSG.POSITION_TARGET_TYPEMASK_YAW_IGNORE | MSG.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 255, 190
 TIMESYNC_PERIOD_US = 500_000  # ArduPilot time between command-delay probes
+FEED_STAMPS = {"GPS_INPUT": "time_usec", "VISION_POSITION_ESTIMATE": "usec"}  # the companion's, boot µs
 EKF_POS_HORIZ_ABS, EKF_CONST_POS_MODE = 16, 128  # EKF_STATUS_REPORT flags (ardupilotmega EKF_STATUS_FLAGS)
 
 
@@ -75,6 +76,9 @@ class ArduPilotSession:
         # How late what we send reaches ArduPilot, in ITS time: a TIMESYNC request carries the
         # ArduPilot time we had processed up to (ts1); the reply says when it arrived (tc1).
         self.command_delay_us: list[int] = []
+        # Closed loop: how old the companion process's estimate is when ArduPilot forwards it to us
+        # (our ArduPilot time then minus the estimate's stamp): its feed's lateness, in ArduPilot time.
+        self.feed_delay_us: list[int] = []
         self._next_timesync_us = 0
 
     # ---------------------------------------------------------------- wiring
@@ -140,6 +144,9 @@ class ArduPilotSession:
     def _handle(self, msg: Any) -> None:
         kind = msg.get_type()
         self._count(kind)
+        if kind in FEED_STAMPS and self.target is not None and msg.get_srcComponent() != self.target[1] \
+                and self.now.t_us > 0:
+            self.feed_delay_us.append(self.now.t_us - int(getattr(msg, FEED_STAMPS[kind])))
         if self.target is None or (msg.get_srcSystem(), msg.get_srcComponent()) != self.target:
             return  # not the autopilot (ArduPilot forwards the companion's broadcasts to every link)
         rec, now = self.rec, self.now
