@@ -95,6 +95,14 @@ class _Series:
     local_t_us: list[int] = field(default_factory=list)
     local_ned_m: list[tuple[float, float, float]] = field(default_factory=list)
 
+    def trim(self) -> None:
+        """Equal lengths in each group again: SIGTERM (SystemExit) can land between two appends."""
+        groups = (("t_us", "p_ned_m", "beta"), ("global_t_us", "global_lla"), ("local_t_us", "local_ned_m"))
+        for group in groups:
+            n = min(len(getattr(self, name)) for name in group)
+            for name in group:
+                del getattr(self, name)[n:]
+
 
 class AutopilotCompanion:
     """Everything but the socket loop: handle(msg) and tick(now) (testable without a network)."""
@@ -359,6 +367,7 @@ class AutopilotCompanion:
         return total
 
     def summary(self, wall_s: float) -> dict[str, Any]:
+        self.series.trim()
         c = self.config
         nav = self.nav_counters()
         rejected = Counter({k: v for k, v in nav.items() if "rejected" in k and v})

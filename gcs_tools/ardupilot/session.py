@@ -168,6 +168,7 @@ class ArduPilotSession:
                 rec.ekf_t_us.append(msg.time_boot_ms * 1000)
                 rec.ekf_p_ned_m.append(p)
                 now.ekf_ned_m = p
+                now.ekf_height_m = msg.relative_alt * 1e-3
             elif kind == "GPS_GLOBAL_ORIGIN":
                 now.origin_ned_m = self.frame.to_ned_m(msg.latitude * 1e-7, msg.longitude * 1e-7,
                                                        msg.altitude * 1e-3)
