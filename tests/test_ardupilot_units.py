@@ -67,7 +67,8 @@ def test_gps_input_fields_pack_and_mean_what_they_say():
     src = UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(1), 20.0)
     src.on_truth(1_234_567, np.array([10.0, 10.0, -15.0]))
     (sf,) = src.due(10_000_000)
-    f = gps_input_fields(sf.fix)
+    f = gps_input_fields(sf)
+    assert f["gps_id"] == 0  # GPS1 (open loop)
     assert f["time_week_ms"] == 1234 and f["time_usec"] == 1_234_567  # validity time, not arrival
     assert f["lat"] == round(sf.fix.lat_deg * 1e7) and f["lon"] == round(sf.fix.lon_deg * 1e7)
     assert f["fix_type"] == 3 and f["horiz_accuracy"] == pytest.approx(sf.fix.h_acc_m)
@@ -81,10 +82,52 @@ def test_gps_input_fields_pack_and_mean_what_they_say():
 
 
 def test_parameters_make_gps_input_the_only_gnss_position_only():
-    p = ardupilot_parameters(ArduPilotConfig(gps_delay_ms=120))
+    p = ardupilot_parameters(ArduPilotConfig(gps_delay_ms=120, gnss_velocity=False))
     assert p == {"GPS1_TYPE": 14, "GPS1_DELAY_MS": 120, "EK3_SRC1_VELXY": 0, "EK3_SRC1_VELZ": 0}
     with pytest.raises(ValueError, match="gnss_rate_hz"):
         ArduPilotConfig(gnss_rate_hz=50).validate()
+
+
+def test_parameters_of_velocity_and_of_each_closed_loop():
+    cfg = ArduPilotConfig(gps_delay_ms=100)
+    assert ardupilot_parameters(cfg) == {"GPS1_TYPE": 14, "GPS1_DELAY_MS": 100, "EK3_SRC1_VELXY": 3,
+                                         "EK3_SRC1_VELZ": 3}
+    second = {"GPS2_TYPE": 14, "GPS2_DELAY_MS": 100, "GPS_AUTO_SWITCH": 0}
+    gi = ardupilot_parameters(cfg, "gps-input")
+    assert gi == {"GPS1_TYPE": 14, "GPS1_DELAY_MS": 1, **second, "GPS_PRIMARY": 0}
+    vision = ardupilot_parameters(cfg, "vision")
+    assert vision["GPS1_TYPE"] == 0 and vision["GPS_PRIMARY"] == 1 and vision["EK3_SRC1_POSXY"] == 6
+    assert vision["VISO_TYPE"] == 1 and vision["EK3_SRC1_VELXY"] == 0 and vision["EK3_SRC1_POSZ"] == 1
+    assert all(vision[k] == v for k, v in second.items())
+
+
+def test_velocity_is_truth_plus_the_stated_noise_and_leaves_the_positions_alone():
+    """With a Doppler velocity the fixes' positions are the same draws as without; the velocity of
+    each fix is the truth at its validity time plus N(0, σ) (σ from 2000 fixes within 10 %)."""
+    m = load_mission("test")
+    t_us = np.arange(0, 200_000_000, 20_000)
+    p = _line(t_us)
+    v_true = np.array([0.0, 3.0, 0.0])
+    d0 = float(m.world.clearance_m(p[0, 0], p[0, 1]))
+    plain = UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(3), d0)
+    vel = UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(3), d0, 0.1,
+                          np.random.default_rng([3, 1]))
+    for t, pk in zip(t_us.tolist(), p, strict=True):
+        for src in (plain, vel):
+            src.on_truth(t, pk, v_true)
+            src.due(t)
+    assert len(plain.sent) == len(vel.sent) > 1900
+    for a, b in zip(plain.sent, vel.sent, strict=True):
+        np.testing.assert_array_equal(a.p_ned_m, b.p_ned_m)
+        assert a.v_ned_m_s is None
+    v = np.array([sf.v_ned_m_s for sf in vel.sent])
+    noise = v - v_true
+    assert abs(noise.mean()) < 0.01 and 0.09 < noise.std() < 0.11
+    f = gps_input_fields(vel.sent[0], gps_id=1, velocity_sigma_m_s=0.1)
+    assert f["gps_id"] == 1 and f["ignore_flags"] == 0 and f["speed_accuracy"] == pytest.approx(0.1)
+    assert (f["vn"], f["ve"], f["vd"]) == pytest.approx(tuple(v[0]))
+    with pytest.raises(ValueError, match="generator"):
+        UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(3), d0, 0.1)
 
 
 def test_driver_guided_arm_takeoff_then_the_route_in_the_autopilots_frame():
@@ -109,7 +152,12 @@ def test_driver_guided_arm_takeoff_then_the_route_in_the_autopilots_frame():
     assert drv.step(now) == []  # accepted: not sent again
     origin = np.array([52.3, 4.6, -0.4])
     now.origin_ned_m = origin
-    now.ekf_ned_m = np.array([52.0, 5.0, -m.altitude_m + 0.5])
+    # EKF3's AMSL height off by more than the tolerance (the origin fix's vertical error): the
+    # take-off is judged on its height above home
+    now.ekf_ned_m = np.array([52.0, 5.0, -m.altitude_m - 3.0])
+    now.ekf_height_m = m.altitude_m - 2.0
+    assert drv.step(now) == [] and drv.phase == "takeoff"  # below: still climbing
+    now.ekf_height_m = m.altitude_m - 0.5
     assert drv.step(now) == []  # at altitude: hover first
     now.t_us += round(cfg.hover_before_route_s * 1e6)
     (c,) = drv.step(now)
@@ -178,6 +226,35 @@ def test_campaign_aggregate_known_answers(tmp_path):
     # the late flight (commands delayed by the scheduler) is counted but not used
     assert res["flying"]["none"]["flights"] == 4 and res["flying"]["none"]["valid"] == 2
     assert "| second-order | 1.00 |" in table_text(res)
+    assert "ardupilot-ekf3-posonly" not in ol  # no such flights: no row
+
+
+def test_campaign_rows_of_the_position_only_and_closed_loops(tmp_path):
+    """EKF3 without velocity is its own open-loop row (paired with EKF3 by seed); closed loops add
+    no open-loop row but report EKF3's error (what it flew on) and what the companion sent."""
+    from gcs_tools.evaluate.ardupilot import ApJob, ApResult, aggregate, table_text
+
+    def result(seed: int, loop: str, errs: dict) -> ApResult:
+        job = ApJob("test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig(), loop)
+        errs = {k: np.full(10, v) for k, v in errs.items()}
+        return ApResult(job, errs, np.full(10, 2.0), True, 1, "reached_goal", 10.0, 1.0)
+
+    results = [result(s, "none", {"ardupilot-ekf3": 2.0 + s, "second-order": 1.0}) for s in (0, 1)]
+    results += [result(s, "none-posonly", {"ardupilot-ekf3-posonly": 4.0 + 2 * s}) for s in (0, 1)]
+    results += [result(s, "vision", {"ardupilot-ekf3": 1.5, "companion-live": 1.25}) for s in (0, 1)]
+    rows = ("ardupilot-ekf3", "ardupilot-ekf3-posonly", "second-order")
+    res = aggregate(results, rows, (0, 1))
+    ol = res["open_loop"]
+    assert list(ol) == list(rows) and ol["ardupilot-ekf3"]["median"] == pytest.approx(2.5)
+    assert ol["ardupilot-ekf3-posonly"]["reduction_vs_ekf3"] == pytest.approx(5.0 / 2.5 - 1.0)
+    v = res["flying"]["vision"]
+    assert v["flights"] == 2 and v["collisions"] == 2
+    assert v["flown_estimate_error_horizontal_m"]["median"] == pytest.approx(1.5)
+    assert v["companion_sent_error_horizontal_m"]["median"] == pytest.approx(1.25)
+    assert res["flying"]["none-posonly"]["flown_estimate_error_horizontal_m"]["median"] == pytest.approx(5.0)
+    assert res["flying"]["none"]["companion_sent_error_horizontal_m"]["n"] == 0
+    text = table_text(res)
+    assert "ExternalNav | 2 (2) | 2 | 2 | 2.00 | 2.00 | 1.50 | 1.25 |" in text
 
 
 def test_sitl_ardupilot_option_errors_are_one_line(tmp_path, capsys):
@@ -197,5 +274,7 @@ def test_evaluate_ardupilot_option_errors_are_one_line(tmp_path, capsys):
 
     assert main(["evaluate", "--vehicle", "ardupilot", "--max-duration-s", "5", "--out", str(tmp_path)]) == 2
     assert "--max-duration-s and --rows apply to --vehicle sim only" in capsys.readouterr().err
-    assert main(["evaluate", "--vehicle", "ardupilot", "--feeds", "vision", "--out", str(tmp_path)]) == 2
-    assert "--feeds: expected none and/or gps-input" in capsys.readouterr().err
+    for feeds in ("radar", "none,vision,none"):
+        assert main(["evaluate", "--vehicle", "ardupilot", "--feeds", feeds, "--out", str(tmp_path)]) == 2
+        assert "--feeds: expected distinct values of none, none-posonly, gps-input, vision" in \
+            capsys.readouterr().err

@@ -42,7 +42,9 @@ COV6_DIAGONAL = (0, 6, 11, 15, 18, 20)  # indices of the diagonal in a 6x6 upper
 
 @dataclass(frozen=True, slots=True)
 class FeedConfig:
-    gps_input_hz: float = 5.0  # a GNSS receiver's rate (ArduPilot expects >= 4 Hz)
+    # a GNSS receiver's rate: ArduPilot calls a GPS unhealthy when its fixes arrive more than 215 ms
+    # apart on average (AP_GPS::is_healthy), so 5 Hz is at the edge; 10 Hz leaves room for jitter
+    gps_input_hz: float = 10.0
     vision_hz: float = 20.0  # VISION_POSITION_ESTIMATE / ODOMETRY
     satellites: int = 10  # satellites_visible reported with a valid cleaned fix (the raw fix's if known)
     hdop: float = 0.8  # HDOP sent when the raw fix has none (ArduPilot pre-arm: < GPS_HDOP_GOOD / 100)

@@ -8,8 +8,12 @@ requests (1 Hz) and answers, and ask for the streams. The local frame is fixed a
 fix: ``--home`` if given, else the autopilot's GPS_GLOBAL_ORIGIN, else its HOME_POSITION, else that
 fix; the Navigator starts there. Samples (one boot-time base, :mod:`.translate`) go to the
 Navigator in arrival order; the estimate is kept at 25 Hz for the comparison with the autopilot's
-own estimate and fed back (``--feed``) on the estimate's clock. A reboot of the autopilot (its
-boot time going back) starts a fresh Navigator in the same frame and asks for the streams again.
+own estimate and fed back (``--feed``) on the estimate's clock. With ``vision``/``odometry`` our
+positions are local NED about our frame's origin, which must be the autopilot's EKF origin: while
+the autopilot reports no GPS_GLOBAL_ORIGIN (no GPS of its own), we set it to our frame's origin
+with SET_GPS_GLOBAL_ORIGIN once a second (``--home`` fixes that frame from the start). A reboot of
+the autopilot (its boot time going back) starts a fresh Navigator in the same frame and asks for
+the streams again.
 
 Outputs in ``--out DIR``: ``run.tlog`` (every frame both ways) and ``summary.json`` (written on
 exit, also after Ctrl-C/SIGTERM or an error).
@@ -91,6 +95,14 @@ class _Series:
     local_t_us: list[int] = field(default_factory=list)
     local_ned_m: list[tuple[float, float, float]] = field(default_factory=list)
 
+    def trim(self) -> None:
+        """Equal lengths in each group again: SIGTERM (SystemExit) can land between two appends."""
+        groups = (("t_us", "p_ned_m", "beta"), ("global_t_us", "global_lla"), ("local_t_us", "local_ned_m"))
+        for group in groups:
+            n = min(len(getattr(self, name)) for name in group)
+            for name in group:
+                del getattr(self, name)[n:]
+
 
 class AutopilotCompanion:
     """Everything but the socket loop: handle(msg) and tick(now) (testable without a network)."""
@@ -125,6 +137,7 @@ class AutopilotCompanion:
         self._last_imu_s = math.nan
         self._heartbeat_was_lost = False
         self._delay_param: str | None = None
+        self._next_origin_s = 0.0
 
     # -- incoming -----------------------------------------------------------------------------
     def handle(self, msg: Any, now_s: float) -> None:
@@ -173,6 +186,7 @@ class AutopilotCompanion:
             lla = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
             if _plausible(*lla):
                 self.origins[kind] = lla
+                self._check_origin(kind, lla)
             else:
                 self.counters[f"rejected_{kind.lower()}"] += 1
         elif kind == "GLOBAL_POSITION_INT":
@@ -247,7 +261,11 @@ class AutopilotCompanion:
             s.p_ned_m.append(np.asarray(est.p_ned_m, dtype=float))
             s.beta.append(float(est.beta))
         if due_feed:
-            self._next_feed_us = t_us + self.config.feeds.period_us(self.config.feed)
+            # on a fixed cadence (next = previous + period), not "period after the IMU sample that
+            # was due": at 50 Hz IMU that would add up to 20 ms to every period
+            period = self.config.feeds.period_us(self.config.feed)
+            nxt = self._next_feed_us + period
+            self._next_feed_us = nxt if nxt > t_us else t_us + period
             self._send_feed(est)
 
     def _send_feed(self, est: NavEstimate) -> None:
@@ -255,9 +273,13 @@ class AutopilotCompanion:
         if feed == "gps-input":
             assert self.frame is not None
             fix = tr.last_fix
+            # GPS time on the AUTOPILOT's clock (its SYSTEM_TIME), at the estimate's time: its jitter
+            # correction maps these stamps to its clock, which need not run at wall speed (SITL)
+            offset_us = tr.unix_minus_boot_us
             msg: Any = feeds.gps_input(est, self.frame, self.config.feeds,
                                        hdop=fix.hdop if fix else math.nan,
-                                       satellites=_known_satellites(fix))
+                                       satellites=_known_satellites(fix),
+                                       unix_s=None if offset_us is None else (est.t_us + offset_us) * 1e-6)
         elif tr.last_attitude is None or tr.last_imu is None:
             return
         elif feed == "vision":
@@ -296,6 +318,7 @@ class AutopilotCompanion:
         if now_s >= self._next_timesync_s:
             self._next_timesync_s = now_s + self.config.timesync.request_period_s
             self.conn.send(self.timesync.request(time.monotonic_ns()))
+        self._set_origin(now_s, ap.system_id)
         rates = self.config.rates
         if self._ask_streams:
             self._ask_streams, self._asked_s, self._fallback_sent = False, now_s, False
@@ -313,6 +336,29 @@ class AutopilotCompanion:
         elif now_s - self._asked_s > rates.silence_s and not (now_s - self._last_imu_s <= rates.silence_s):
             self._ask_streams = True  # still (or again) no IMU: ask again
 
+    def _check_origin(self, kind: str, lla: tuple[float, float, float]) -> None:
+        """Local-position feeds are about our frame's origin: say so once if the EKF's is elsewhere."""
+        local = self.config.feed in ("vision", "odometry")
+        if kind != "GPS_GLOBAL_ORIGIN" or not local or self.frame is None:
+            return
+        offset_m = float(np.linalg.norm(self.frame.to_ned_m(*lla)))
+        if offset_m > 1.0 and not self.counters["origin_mismatch"]:
+            self.errors.append(f"the autopilot's EKF origin is {offset_m:.1f} m from our frame's origin: "
+                               f"its local position is offset by that much")
+        self.counters["origin_mismatch"] += offset_m > 1.0
+
+    def _set_origin(self, now_s: float, target_system: int) -> None:
+        """Local-position feeds: give an autopilot without an EKF origin ours (1 Hz until it reports one)."""
+        frame = self.frame or self.config.home
+        if (self.config.feed not in ("vision", "odometry") or frame is None or now_s < self._next_origin_s
+                or "GPS_GLOBAL_ORIGIN" in self.origins):
+            return
+        self._next_origin_s = now_s + 1.0
+        self.counters["set_gps_global_origin_sent"] += 1
+        self.conn.send(mavlink.MAVLink_set_gps_global_origin_message(
+            target_system, round(frame.home_lat_deg * 1e7), round(frame.home_lon_deg * 1e7),
+            round(frame.home_alt_m * 1e3), 0))
+
     # -- results ------------------------------------------------------------------------------
     def nav_counters(self) -> Counter[str]:
         total = Counter(self.past_nav_counters)
@@ -321,6 +367,7 @@ class AutopilotCompanion:
         return total
 
     def summary(self, wall_s: float) -> dict[str, Any]:
+        self.series.trim()
         c = self.config
         nav = self.nav_counters()
         rejected = Counter({k: v for k, v in nav.items() if "rejected" in k and v})

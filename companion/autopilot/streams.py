@@ -20,7 +20,8 @@ US_PER_S = 1_000_000
 class StreamRates:
     imu_hz: float = 50.0  # HIGHRES_IMU (50-200 Hz; the estimator holds each sample <= 50 ms)
     attitude_hz: float = 50.0  # ATTITUDE_QUATERNION
-    gnss_hz: float = 10.0  # GPS_RAW_INT / GPS2_RAW: at least the receiver's rate (repeats are dropped)
+    # GPS_RAW_INT / GPS2_RAW: twice a 10 Hz receiver's rate, so no fix is missed (repeats are dropped)
+    gnss_hz: float = 20.0
     system_time_hz: float = 1.0  # SYSTEM_TIME (boot time <-> UNIX time)
     position_hz: float = 10.0  # GLOBAL_POSITION_INT, LOCAL_POSITION_NED (the autopilot's own estimate)
     origin_hz: float = 1.0  # GPS_GLOBAL_ORIGIN, HOME_POSITION

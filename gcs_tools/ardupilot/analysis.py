@@ -20,6 +20,7 @@ from gcs_tools.ardupilot.gnss_source import SentFix
 from gcs_tools.ardupilot.session import Recording
 
 AUTOPILOT_ROW = "ardupilot-ekf3"
+LIVE_ROW = "companion-live"  # closed loop: what the companion process sent ArduPilot (its tlog)
 
 
 @dataclass(frozen=True)
@@ -60,12 +61,17 @@ def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: Estim
 
 def autopilot_track(rec: Recording, times_us: np.ndarray) -> Track:
     """EKF3's GLOBAL_POSITION_INT, interpolated to ``times_us`` (NaN outside its span)."""
+    return interpolated_track(np.asarray(rec.ekf_t_us, dtype=float), np.asarray(rec.ekf_p_ned_m), times_us)
+
+
+def interpolated_track(t_us: np.ndarray, p_ned_m: np.ndarray, times_us: np.ndarray) -> Track:
+    """A position series (any order) interpolated linearly to ``times_us`` (NaN outside its span)."""
     n = len(times_us)
     p = np.full((n, 3), np.nan)
-    if len(rec.ekf_t_us) >= 2:
-        t_e = np.asarray(rec.ekf_t_us, dtype=float)
+    if len(t_us) >= 2:
+        t_e = np.asarray(t_us, dtype=float)
         order = np.argsort(t_e, kind="stable")
-        t_e, p_e = t_e[order], np.asarray(rec.ekf_p_ned_m)[order]
+        t_e, p_e = t_e[order], np.asarray(p_ned_m, dtype=float).reshape(-1, 3)[order]
         inside = (times_us >= t_e[0]) & (times_us <= t_e[-1])
         for axis in range(3):
             p[inside, axis] = np.interp(times_us[inside], t_e, p_e[:, axis])

@@ -13,9 +13,13 @@ from companion.errors import UserError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options only the ArduPilot vehicle takes (``sitl`` adds them to its own)."""
-    parser.add_argument("--feed", default="none", choices=("none", "gps-input"),
+    parser.add_argument("--feed", default="none", choices=("none", "gps-input", "vision"),
                         help="ardupilot: none = it flies on EKF3 fed our raw fixes; gps-input = on the "
-                             "companion's cleaned fixes (closed loop)")
+                             "companion's cleaned fixes, vision = on the companion's position as "
+                             "ExternalNav (closed loop: `beliefnav companion` runs beside it)")
+    parser.add_argument("--no-gnss-velocity", action="store_true",
+                        help="ardupilot: send EKF3 positions only (default: with a Doppler velocity, "
+                             "truth + 0.1 m/s noise)")
     parser.add_argument("--speedup", type=float, help="ardupilot: SITL --speedup (default 10)")
     parser.add_argument("--gnss-rate-hz", type=float, help="ardupilot: GPS_INPUT rate, 5-20 Hz (default 10)")
 
@@ -30,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
                         "apply to --vehicle sim only")
     changes = {k: v for k, v in (("speedup", args.speedup), ("gnss_rate_hz", args.gnss_rate_hz),
                                   ("wall_timeout_s", args.wall_timeout_s)) if v is not None}
-    cfg = dataclasses.replace(ArduPilotConfig(), **changes)
+    cfg = dataclasses.replace(ArduPilotConfig(), gnss_velocity=not args.no_gnss_velocity, **changes)
     opts = ArduPilotFlightOptions(mission=args.mission, profile=args.profile, method=args.method,
                                   seed=args.seed, out_dir=Path(args.out), feed=args.feed, config=cfg)
     result = fly_ardupilot(opts)

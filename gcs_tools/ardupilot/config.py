@@ -7,6 +7,10 @@ from dataclasses import dataclass
 # ArduPilot's GPS_INPUT ignore_flags: velocity (horizontal, vertical) and speed accuracy are not sent.
 GPS_INPUT_IGNORE_VELOCITY = 8 | 16 | 32
 GPS_WEEK = 2400  # any plausible GPS week: ArduPilot uses week/ms only as a clock (jitter correction)
+# GPS_INPUT gps_id = ArduPilot's receiver instance (GPS1 = 0, GPS2 = 1). Closed loop: the raw
+# degraded fixes go to GPS2, which EKF3 does not use, and the companion reads them as GPS2_RAW.
+GPS1_ID, GPS2_ID = 0, 1
+FEEDS = ("none", "gps-input", "vision")  # what ArduPilot flies on: EKF3 on the raw fixes, or the companion
 
 
 @dataclass(frozen=True)
@@ -18,6 +22,11 @@ class ArduPilotConfig:
     estimate_rate_hz: float = 10.0  # GLOBAL_POSITION_INT, LOCAL_POSITION_NED (EKF3's estimate)
     gnss_rate_hz: float = 10.0  # GPS_INPUT rate from our degradation model (ArduPilot takes 5-20 Hz)
     gps_delay_ms: int = 100  # GPS1_DELAY_MS: the receiver delay EKF3 assumes (our open-sky mean latency)
+    # Doppler velocity in the raw GPS_INPUT (our model makes positions only): ArduPilot's TRUE velocity
+    # at the fix's validity time plus white noise of this std per axis, sent with the fix (same
+    # latency) and fused by EKF3 (EK3_SRC1_VELXY/VELZ 3, its defaults). False: position only.
+    gnss_velocity: bool = True
+    gnss_velocity_sigma_m_s: float = 0.1  # a u-blox M8/M9's typical 0.05-0.1 m/s speed accuracy
     setpoint_rate_hz: float = 20.0  # SET_POSITION_TARGET_LOCAL_NED rate
     takeoff_tolerance_m: float = 1.0  # take-off done once within this of the mission altitude
     hover_before_route_s: float = 3.0  # settle after take-off before the route's clock starts
@@ -41,24 +50,36 @@ class ArduPilotConfig:
             raise ValueError(f"gnss_rate_hz: GPS_INPUT is taken at 5-20 Hz, got {self.gnss_rate_hz!r}")
         if not 0 < self.gps_delay_ms <= 250:
             raise ValueError(f"gps_delay_ms: GPS1_DELAY_MS must be 1..250 ms, got {self.gps_delay_ms}")
+        if not self.gnss_velocity_sigma_m_s >= 0:
+            raise ValueError(f"gnss_velocity_sigma_m_s: must be >= 0, got {self.gnss_velocity_sigma_m_s!r}")
 
 
 def ardupilot_parameters(cfg: ArduPilotConfig, feed: str = "none") -> dict[str, float]:
     """Parameters set at boot (a defaults file beside copter.parm, so those needing a reboot apply).
 
-    GPS1_TYPE 14 makes GPS_INPUT the ONLY GNSS. EKF3 fuses GNSS position only (EK3_SRC1_VELXY/VELZ
-    0), like the companion: our model has no Doppler velocity, and a GPS_INPUT without velocity
-    would otherwise be read as zero velocity. Height stays on the barometer (EK3_SRC1_POSZ 1,
-    ArduPilot's default), which the companion does not have: compare horizontal errors for that.
+    Open loop (``none``): GPS1_TYPE 14 makes our raw GPS_INPUT EKF3's ONLY GNSS. With
+    ``gnss_velocity`` it fuses position and the Doppler velocity (EK3_SRC1_VELXY/VELZ 3, the
+    defaults); without, position only (VELXY/VELZ 0: a GPS_INPUT without velocity would otherwise
+    be read as zero velocity). Height stays on the barometer (EK3_SRC1_POSZ 1, ArduPilot's
+    default), which the companion does not have: compare horizontal errors for that.
 
-    ``feed`` "gps-input" (closed loop): GPS_INPUT carries the companion's cleaned fix, current when
-    sent (``GPS1_DELAY_MS`` 1) and with the filter's velocity, so EKF3 keeps its default sources.
+    Closed loop: the raw fixes go to a SECOND MAVLink receiver (GPS2_TYPE 14, gps_id 1) that EKF3
+    does not use (GPS_AUTO_SWITCH 0, GPS_PRIMARY 0: EKF3 takes the primary, GPS1); the companion
+    reads it back as GPS2_RAW. ``gps-input``: GPS1 = the companion's cleaned fix, current when sent
+    (GPS1_DELAY_MS 1) and with the filter's velocity, so EKF3 keeps its default sources.
+    ``vision``: no GPS1 (GPS1_TYPE 0); EKF3 fuses the companion's VISION_POSITION_ESTIMATE as
+    ExternalNav (VISO_TYPE 1, EK3_SRC1_POSXY 6, VELXY 0, POSZ 1 barometer, YAW 1 compass) and its
+    origin is set by the companion (SET_GPS_GLOBAL_ORIGIN).
     """
+    second_receiver = {"GPS2_TYPE": 14, "GPS2_DELAY_MS": cfg.gps_delay_ms, "GPS_AUTO_SWITCH": 0,
+                       "GPS_PRIMARY": 0}
     if feed == "gps-input":
-        return {"GPS1_TYPE": 14, "GPS1_DELAY_MS": 1}
-    return {
-        "GPS1_TYPE": 14,
-        "GPS1_DELAY_MS": cfg.gps_delay_ms,
-        "EK3_SRC1_VELXY": 0,
-        "EK3_SRC1_VELZ": 0,
-    }
+        return {"GPS1_TYPE": 14, "GPS1_DELAY_MS": 1, **second_receiver}
+    if feed == "vision":
+        # ArduPilot refuses to arm with a primary of TYPE 0 ("GPS 1: primary but TYPE 0"): GPS2 is the
+        # primary, which EKF3 only reads as a position/velocity source if told to (it is not here)
+        return {"GPS1_TYPE": 0, **second_receiver, "GPS_PRIMARY": 1, "VISO_TYPE": 1, "EK3_SRC1_POSXY": 6,
+                "EK3_SRC1_VELXY": 0, "EK3_SRC1_POSZ": 1, "EK3_SRC1_VELZ": 0, "EK3_SRC1_YAW": 1}
+    if cfg.gnss_velocity:
+        return {"GPS1_TYPE": 14, "GPS1_DELAY_MS": cfg.gps_delay_ms, "EK3_SRC1_VELXY": 3, "EK3_SRC1_VELZ": 3}
+    return {"GPS1_TYPE": 14, "GPS1_DELAY_MS": cfg.gps_delay_ms, "EK3_SRC1_VELXY": 0, "EK3_SRC1_VELZ": 0}

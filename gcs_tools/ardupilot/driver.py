@@ -49,6 +49,10 @@ class DriverInputs:
     ekf_position_ok: bool = False  # EKF_STATUS_REPORT: absolute horizontal position, not const-pos mode
     origin_ned_m: np.ndarray | None = None  # EKF origin in the mission frame (GPS_GLOBAL_ORIGIN)
     ekf_ned_m: np.ndarray | None = None  # EKF3's position in the mission frame
+    # EKF3's height above home (GLOBAL_POSITION_INT.relative_alt): the take-off check. Its AMSL
+    # height carries the vertical error of the fix that set the EKF origin, which in a canyon can
+    # exceed the take-off tolerance for the whole flight.
+    ekf_height_m: float | None = None
     truth_ned_m: np.ndarray | None = None
     truth_v_ned_m_s: np.ndarray | None = None
 
@@ -113,7 +117,7 @@ class FlightDriver:
             self._hover_from_us = None
             return []
         tol_m, hover_us = self.cfg.takeoff_tolerance_m, self.cfg.hover_before_route_s * 1e6
-        if now.ekf_ned_m is not None and abs(-now.ekf_ned_m[2] - self.altitude_m) <= tol_m:
+        if now.ekf_height_m is not None and abs(now.ekf_height_m - self.altitude_m) <= tol_m:
             if self._hover_from_us is None:
                 self._hover_from_us = t
             if t - self._hover_from_us >= hover_us and now.origin_ned_m is not None:

@@ -1,9 +1,11 @@
 """The MAVLink loop against one ArduCopter SITL: streams in, GPS_INPUT and flight commands out.
 
 One TCP connection to SERIAL0 (``companion.autopilot.connection.MavConnection``, which records
-every frame both ways to the tlog) carries everything; ArduPilot's own boot time (the IMU
-stamps) is the clock. Each SIM_STATE (truth, no time field) is stamped with the HIGHRES_IMU
-sent in the same scheduler tick (requested at the same rate, it immediately precedes it). What
+every frame both ways to the tlog) carries the GNSS source and the flight driver; ArduPilot's own
+boot time (the IMU stamps) is the clock. The raw fixes go to receiver ``raw_gps_id``: GPS1 in
+open loop (EKF3 flies on them), GPS2 in closed loop (read by the companion process, which has its
+own connection and feeds ArduPilot itself). Each SIM_STATE (truth, no time field) is stamped with
+the HIGHRES_IMU sent in the same scheduler tick (requested at the same rate, it immediately precedes it). What
 arrives is recorded for the analysis (``Recording``).
 """
 
@@ -25,14 +27,14 @@ from companion.domain.geodesy import LocalNedFrame  # noqa: E402
 from companion.errors import UserError  # noqa: E402
 from companion.mavlink.codec import CodecError, decode_attitude, decode_imu  # noqa: E402
 from companion.mavlink.tlog import TlogWriter  # noqa: E402
-from gcs_tools.ardupilot.closed_loop import LiveCompanion  # noqa: E402
-from gcs_tools.ardupilot.config import ArduPilotConfig  # noqa: E402
+from gcs_tools.ardupilot.config import GPS1_ID, ArduPilotConfig  # noqa: E402
 from gcs_tools.ardupilot.driver import Command, DriverInputs, FlightDriver  # noqa: E402
 from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields  # noqa: E402
 
 SETPOINT_TYPE_MASK = MSG.POSITION_TARGET_TYPEMASK_YAW_IGNORE | MSG.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 255, 190
 TIMESYNC_PERIOD_US = 500_000  # ArduPilot time between command-delay probes
+FEED_STAMPS = {"GPS_INPUT": "time_usec", "VISION_POSITION_ESTIMATE": "usec"}  # the companion's, boot µs
 EKF_POS_HORIZ_ABS, EKF_CONST_POS_MODE = 16, 128  # EKF_STATUS_REPORT flags (ardupilotmega EKF_STATUS_FLAGS)
 
 
@@ -58,9 +60,9 @@ class Recording:
 
 class ArduPilotSession:
     def __init__(self, port: int, cfg: ArduPilotConfig, frame: LocalNedFrame, source: UrbanGnssSource,
-                 driver: FlightDriver, tlog_path: Path, companion: LiveCompanion | None = None) -> None:
+                 driver: FlightDriver, tlog_path: Path, raw_gps_id: int = GPS1_ID) -> None:
         self.cfg, self.frame, self.source, self.driver = cfg, frame, source, driver
-        self.companion = companion  # closed loop: ArduPilot gets its cleaned fixes, not the raw ones
+        self.raw_gps_id = raw_gps_id  # the receiver our raw fixes go to (GPS2 in closed loop)
         self.rec = Recording()
         self.port = port
         self.tlog = TlogWriter(tlog_path)
@@ -74,7 +76,9 @@ class ArduPilotSession:
         # How late what we send reaches ArduPilot, in ITS time: a TIMESYNC request carries the
         # ArduPilot time we had processed up to (ts1); the reply says when it arrived (tc1).
         self.command_delay_us: list[int] = []
-        self._satellites = 10
+        # Closed loop: how old the companion process's estimate is when ArduPilot forwards it to us
+        # (our ArduPilot time then minus the estimate's stamp): its feed's lateness, in ArduPilot time.
+        self.feed_delay_us: list[int] = []
         self._next_timesync_us = 0
 
     # ---------------------------------------------------------------- wiring
@@ -140,8 +144,11 @@ class ArduPilotSession:
     def _handle(self, msg: Any) -> None:
         kind = msg.get_type()
         self._count(kind)
-        if self.target is None or msg.get_srcSystem() != self.target[0]:
-            return
+        if kind in FEED_STAMPS and self.target is not None and msg.get_srcComponent() != self.target[1] \
+                and self.now.t_us > 0:
+            self.feed_delay_us.append(self.now.t_us - int(getattr(msg, FEED_STAMPS[kind])))
+        if self.target is None or (msg.get_srcSystem(), msg.get_srcComponent()) != self.target:
+            return  # not the autopilot (ArduPilot forwards the companion's broadcasts to every link)
         rec, now = self.rec, self.now
         try:
             if kind == "HIGHRES_IMU":
@@ -151,8 +158,6 @@ class ArduPilotSession:
                     rec.imu_t_us.append(imu.t_us)
                     rec.imu_acc_frd_m_s2.append(imu.acc_frd_m_s2)
                     rec.imu_q_ned_frd.append(self._q)
-                    if self.companion is not None:
-                        self.companion.push_imu(imu.t_us, imu.acc_frd_m_s2, self._q)
                 self._tick()
             elif kind == "ATTITUDE_QUATERNION":
                 self._q = decode_attitude(msg).q_ned_frd
@@ -163,10 +168,11 @@ class ArduPilotSession:
                 rec.ekf_t_us.append(msg.time_boot_ms * 1000)
                 rec.ekf_p_ned_m.append(p)
                 now.ekf_ned_m = p
+                now.ekf_height_m = msg.relative_alt * 1e-3
             elif kind == "GPS_GLOBAL_ORIGIN":
                 now.origin_ned_m = self.frame.to_ned_m(msg.latitude * 1e-7, msg.longitude * 1e-7,
                                                        msg.altitude * 1e-3)
-            elif kind == "HEARTBEAT" and msg.get_srcComponent() == self.target[1]:
+            elif kind == "HEARTBEAT":
                 now.mode = msg.custom_mode
                 now.armed = bool(msg.base_mode & MSG.MAV_MODE_FLAG_SAFETY_ARMED)
                 now.takeoff_accepted = now.takeoff_accepted and now.armed
@@ -189,7 +195,7 @@ class ArduPilotSession:
             return  # no IMU time yet to stamp it with
         p = self.frame.to_ned_m(msg.lat_int * 1e-7, msg.lon_int * 1e-7, float(msg.alt))
         v = np.array([msg.vn, msg.ve, msg.vd], dtype=float)
-        g = self.source.on_truth(self.now.t_us, p)
+        g = self.source.on_truth(self.now.t_us, p, v)
         rec = self.rec
         rec.truth_t_us.append(self.now.t_us)
         rec.truth_p_ned_m.append(p)
@@ -205,16 +211,9 @@ class ArduPilotSession:
         if t >= self._next_timesync_us:
             self._next_timesync_us = t + TIMESYNC_PERIOD_US
             send(MSG.MAVLink_timesync_message(0, t * 1000))
-        comp = self.companion
+        sigma = self.source.velocity_sigma_m_s or 0.0
         for sf in self.source.due(t):
-            if comp is None:
-                send(MSG.MAVLink_gps_input_message(**gps_input_fields(sf.fix)))
-                self.gps_sent += 1
-            else:
-                comp.push_fix(sf)
-                self._satellites = sf.fix.satellites_visible
-        if comp is not None and (msg := comp.due(t, self._satellites)) is not None:
-            send(msg)
+            send(MSG.MAVLink_gps_input_message(**gps_input_fields(sf, self.raw_gps_id, sigma)))
             self.gps_sent += 1
         for c in self.driver.step(self.now):
             self._send(c)

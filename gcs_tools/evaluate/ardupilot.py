@@ -7,31 +7,54 @@ fixes. Statistics as the simulated campaign's (``aggregate``): pooled 20-50 Hz s
 with two or more seeds, the median of per-seed medians with a percentile-bootstrap 95 % CI over
 seeds and the reduction against EKF3 with its paired bootstrap CI. Errors are HORIZONTAL (EKF3
 holds height on the barometer, which the companion does not have; 3-D figures are in each
-flight's summary). Closed loop (``gps-input``): the same profiles and seeds flown again with
-ArduPilot on the second-order companion's cleaned fixes; compared on tracking error,
-collisions and goals reached. Flights whose commands reached ArduPilot late (the machine's
-scheduler, ``valid`` False) are listed but left out of the statistics.
+flight's summary).
+
+Loops (``--feeds``), each the same profiles and seeds flown again:
+
+- ``none``: open loop, EKF3 fed our raw fixes WITH a Doppler velocity (truth + 0.1 m/s noise);
+- ``none-posonly``: open loop, EKF3 fed positions only; only its EKF3 row is kept
+  (``ardupilot-ekf3-posonly``: the companion rows would repeat those of ``none``);
+- ``gps-input`` / ``vision``: closed loop, ArduPilot flies on the second-order companion PROCESS
+  (its cleaned fixes as GPS1, or its position as ExternalNav); row ``companion-live`` = what it sent.
+
+Closed loops are compared on tracking error, collisions, goals reached and the estimate ArduPilot
+flew on. Flights whose commands reached ArduPilot late (the machine's scheduler, ``valid`` False)
+are listed but left out of the statistics.
+
+Ctrl-C: every worker stops its SITL and companion and skips its remaining flights; the run ends
+within seconds with "interrupted" (exit 130).
 """
 
 from __future__ import annotations
 
 import json
+import os
+import signal
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numpy as np
 
-from gcs_tools.ardupilot.analysis import AUTOPILOT_ROW
+from gcs_tools.ardupilot.analysis import AUTOPILOT_ROW, LIVE_ROW
 from gcs_tools.ardupilot.config import ArduPilotConfig
 from gcs_tools.evaluate import stats
 from gcs_tools.jsonvalues import plain_json
 
 BOOTSTRAP_SEED = 20240917
 CLOSED_LOOP_METHOD = "second-order"
+POSONLY_ROW = "ardupilot-ekf3-posonly"  # EKF3 without the GNSS velocity
+LOOPS = ("none", "none-posonly", "gps-input", "vision")
+OPEN_LOOPS = ("none", "none-posonly")
+LOOP_LABELS = {"none": "EKF3 on the raw fixes (+ Doppler velocity)",
+               "none-posonly": "EKF3 on the raw fixes, position only",
+               "gps-input": f"EKF3 on {CLOSED_LOOP_METHOD}'s cleaned fixes (GPS_INPUT)",
+               "vision": f"EKF3 on {CLOSED_LOOP_METHOD}'s position as ExternalNav"}
+_interrupted = False  # a worker that got Ctrl-C flies nothing more
 
 
 @dataclass(frozen=True)
@@ -42,7 +65,11 @@ class ApJob:
     methods: tuple[str, ...]
     out_dir: Path
     config: ArduPilotConfig
-    feed: str = "none"  # "gps-input": closed loop, ArduPilot flies on CLOSED_LOOP_METHOD's cleaned fixes
+    loop: str = "none"  # one of LOOPS
+
+    @property
+    def feed(self) -> str:
+        return "none" if self.loop in OPEN_LOOPS else self.loop
 
 
 @dataclass(frozen=True)
@@ -59,14 +86,23 @@ class ApResult:
     valid: bool = True  # False: our commands reached ArduPilot late (scheduler), left out of the statistics
     command_delay_p95_ms: float = float("nan")
 
+    @property
+    def flown_on(self) -> np.ndarray:
+        """Horizontal error of the estimate ArduPilot flew on (EKF3 in every loop)."""
+        return self.errors_h_m.get(POSONLY_ROW if self.job.loop == "none-posonly" else AUTOPILOT_ROW,
+                                   np.zeros(0))
+
 
 def run_job(job: ApJob) -> ApResult:
     from companion.errors import UserError
     from gcs_tools.ardupilot.flight import HORIZONTAL_ERROR_PREFIX, ArduPilotFlightOptions, fly_ardupilot
     from gcs_tools.fly.output import write_outputs
 
+    if _interrupted:
+        return ApResult(job, {}, np.zeros(0), False, 0, "interrupted", 0.0, 0.0, "interrupted")
+    cfg = replace(job.config, gnss_velocity=job.loop != "none-posonly")
     opts = ArduPilotFlightOptions(mission=job.mission, profile=job.profile, method=CLOSED_LOOP_METHOD,
-                                  seed=job.seed, out_dir=job.out_dir, config=job.config, methods=job.methods,
+                                  seed=job.seed, out_dir=job.out_dir, config=cfg, methods=job.methods,
                                   feed=job.feed)
     try:
         r = fly_ardupilot(opts)
@@ -79,17 +115,44 @@ def run_job(job: ApJob) -> ApResult:
         write_outputs(r, load_mission(job.mission).world, job.out_dir)
     errs = {k[len(HORIZONTAL_ERROR_PREFIX):]: np.asarray(v) for k, v in series.items()
             if k.startswith(HORIZONTAL_ERROR_PREFIX)}
+    if job.loop == "none-posonly":  # the companion rows are those of the "none" loop
+        errs = {POSONLY_ROW: errs[AUTOPILOT_ROW]} if AUTOPILOT_ROW in errs else {}
     ap = s["ardupilot"]
     return ApResult(job, errs, np.asarray(series.get("track_error_m", np.zeros(0))), bool(s["reached_goal"]),
                     int(s["collisions"]), str(ap["ended_by"]), float(ap["sim_s"]), float(ap["wall_s"]),
                     valid=bool(s["valid"]), command_delay_p95_ms=float(ap["command_delay_ms"]["p95"]))
 
 
+def _worker_init() -> None:
+    """In each worker: the first Ctrl-C (the terminal's, or the parent's) ends the current flight
+    (its SITL and companion are stopped on the way out); later ones are ignored, so that clean-up
+    is not cut short, and every remaining flight is skipped."""
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        global _interrupted
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _interrupted = True
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, interrupt)
+
+
 def run(jobs: Sequence[ApJob], workers: int) -> list[ApResult]:
     if workers <= 1:
         return [run_job(j) for j in jobs]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(run_job, jobs))
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
+    futures: list[Any] = []
+    try:
+        futures = [pool.submit(run_job, j) for j in jobs]
+        return [f.result() for f in futures]
+    except KeyboardInterrupt:
+        for f in futures:
+            f.cancel()
+        for proc in list(getattr(pool, "_processes", {}).values()):  # SIGINT only reached us (kill -INT)
+            if proc.is_alive() and proc.pid is not None:
+                os.kill(proc.pid, signal.SIGINT)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def usable(r: ApResult) -> bool:
@@ -105,7 +168,7 @@ def pooled(results: Sequence[ApResult], row: str) -> np.ndarray:
 def aggregate(results: Sequence[ApResult], rows: Sequence[str], seeds: Sequence[int]) -> dict[str, Any]:
     """Per row: pooled horizontal error stats, per-seed CI and the reduction against EKF3."""
     rng = np.random.default_rng(BOOTSTRAP_SEED)
-    ok = [r for r in results if usable(r) and r.job.feed == "none"]  # open loop: the estimators compared
+    ok = [r for r in results if usable(r) and r.job.loop in OPEN_LOOPS]  # open loop: the estimators compared
 
     def seed_medians(row: str) -> np.ndarray:
         out = []
@@ -120,6 +183,8 @@ def aggregate(results: Sequence[ApResult], rows: Sequence[str], seeds: Sequence[
     ekf_pooled = stats.summarize(pooled(ok, AUTOPILOT_ROW))
     table: dict[str, Any] = {}
     for row in rows:
+        if not any(row in r.errors_h_m for r in ok):
+            continue
         entry: dict[str, Any] = dict(stats.summarize(pooled(ok, row)))
         entry["reduction_vs_ekf3"] = stats.reduction(entry["median"], ekf_pooled["median"])
         per_flight = [float(np.nanmedian(r.errors_h_m[row])) for r in ok if row in r.errors_h_m
@@ -134,18 +199,23 @@ def aggregate(results: Sequence[ApResult], rows: Sequence[str], seeds: Sequence[
                 entry["reduction_vs_ekf3_seeds"] = {"value": v, "ci95": [lo, hi]}
         table[row] = entry
     flying = {}
-    labels = {"none": "EKF3 on the raw fixes", "gps-input": f"EKF3 on {CLOSED_LOOP_METHOD}'s cleaned fixes"}
-    for feed, label in labels.items():
-        of_feed = [r for r in results if r.job.feed == feed]
-        if not of_feed:
+    for loop, label in LOOP_LABELS.items():
+        of_loop = [r for r in results if r.job.loop == loop]
+        if not of_loop:
             continue
-        good = [r for r in of_feed if usable(r)]
+        good = [r for r in of_loop if usable(r)]
         track = np.concatenate([r.track_error_m for r in good] or [np.zeros(0)])
-        flying[feed] = {
-            "flies_on": label, "flights": len(of_feed), "valid": len(good),
+        flown = np.concatenate([r.flown_on for r in good] or [np.zeros(0)])
+        live = np.concatenate([r.errors_h_m.get(LIVE_ROW, np.zeros(0)) for r in good] or [np.zeros(0)])
+        flying[loop] = {
+            "flies_on": label, "flights": len(of_loop), "valid": len(good),
+            "invalid_late_commands": sum(not r.valid for r in of_loop if not r.error),
+            "errors": sum(bool(r.error) for r in of_loop),
             "reached_goal": sum(r.reached_goal for r in good),
             "collisions": sum(r.collisions for r in good),
             "tracking_error_m": stats.summarize(track),
+            "flown_estimate_error_horizontal_m": stats.summarize(flown),  # EKF3's, in every loop
+            "companion_sent_error_horizontal_m": stats.summarize(live),  # closed loop: what it sent
             "flight_tracking_medians": [float(np.median(r.track_error_m))
                                         for r in good if r.track_error_m.size],
         }
@@ -167,12 +237,15 @@ def table_text(res: dict[str, Any]) -> str:
             vs += f" (seeds {100 * red['value']:+.0f} % [{lo:+.0f}, {hi:+.0f}])"
         lines.append(f"| {row} | {e['median']:.2f} | {e['p95']:.2f} | {vs} | {seed} |")
     lines += ["", "| ArduPilot flies on | flights (valid) | reached goal | collisions "
-                  "| tracking median [m] | p95 [m] |",
-              "| --- | ---: | ---: | ---: | ---: | ---: |"]
+                  "| tracking median [m] | p95 [m] | EKF3 horizontal median [m] | companion sent [m] |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for f in res["flying"].values():
-        trk = f["tracking_error_m"]
+        trk, fl, cs = (f["tracking_error_m"], f["flown_estimate_error_horizontal_m"],
+                       f["companion_sent_error_horizontal_m"])
+        sent = f"{cs['median']:.2f}" if cs["n"] else "—"
         lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) | {f['reached_goal']} "
-                     f"| {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} |")
+                     f"| {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} | {fl['median']:.2f} "
+                     f"| {sent} |")
     return "\n".join(lines) + "\n"
 
 
@@ -183,8 +256,10 @@ def error_figure(results: Sequence[ApResult], rows: Sequence[str], path: Path) -
     import matplotlib.pyplot as plt
 
     data = []
+    ok = [r for r in results if r.job.loop in OPEN_LOOPS]
+    rows = [row for row in rows if any(row in r.errors_h_m for r in ok)]
     for row in rows:
-        x = pooled(results, row)
+        x = pooled(ok, row)
         data.append(x[np.isfinite(x)])
     fig, ax = plt.subplots(figsize=(7.0, 3.8))
     ax.boxplot(data, whis=(5, 95), showfliers=False)
@@ -200,21 +275,23 @@ def error_figure(results: Sequence[ApResult], rows: Sequence[str], path: Path) -
 
 def evaluate(mission: str, profiles: Sequence[int], methods: Sequence[str], seeds: Sequence[int],
              workers: int, out: Path, config: ArduPilotConfig | None = None,
-             feeds: Sequence[str] = ("none", "gps-input")) -> dict[str, Any]:
+             feeds: Sequence[str] = LOOPS) -> dict[str, Any]:
     cfg = config or ArduPilotConfig()
     out.mkdir(parents=True, exist_ok=True)
     flights = out / "flights"
-    jobs = [ApJob(mission, p, s, tuple(methods), flights / f"{feed}-profile{p:02d}-seed{s}", cfg, feed)
-            for s in seeds for p in profiles for feed in feeds]
+    jobs = [ApJob(mission, p, s, tuple(methods), flights / f"{loop}-profile{p:02d}-seed{s}", cfg, loop)
+            for s in seeds for p in profiles for loop in feeds]
     t0 = time.perf_counter()
     results = run(jobs, workers)
     wall_s = time.perf_counter() - t0
-    rows = (AUTOPILOT_ROW, *methods)
+    rows = (AUTOPILOT_ROW, POSONLY_ROW, *methods)
     res = aggregate(results, rows, seeds)
     res["info"] = {
         "mission": mission, "profiles": list(profiles), "seeds": list(seeds), "methods": list(methods),
         "workers": workers, "wall_s": wall_s, "speedup": cfg.speedup, "gnss_rate_hz": cfg.gnss_rate_hz,
-        "flights": [{"profile": r.job.profile, "seed": r.job.seed, "feed": r.job.feed, "valid": r.valid,
+        "gnss_velocity": f"truth + N(0, {cfg.gnss_velocity_sigma_m_s:g} m/s) per axis "
+                         "(loops none, gps-input, vision); none-posonly: none",
+        "flights": [{"profile": r.job.profile, "seed": r.job.seed, "feed": r.job.loop, "valid": r.valid,
                      "command_delay_p95_ms": r.command_delay_p95_ms, "ended_by": r.ended_by,
                      "reached_goal": r.reached_goal, "collisions": r.collisions, "sim_s": r.sim_s,
                      "wall_s": r.wall_s, "error": r.error} for r in results],

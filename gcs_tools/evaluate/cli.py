@@ -26,8 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot"),
                         help="sim: our simulated vehicle; ardupilot: ArduCopter SITL, EKF3 as its own row")
     parser.add_argument("--speedup", type=float, default=None, help="ardupilot: SITL --speedup (default 10)")
-    parser.add_argument("--feeds", default="none,gps-input",
-                        help="ardupilot: open loop (none) and/or closed loop (gps-input) flights")
+    parser.add_argument("--feeds", default="none,none-posonly,gps-input,vision",
+                        help="ardupilot: loops flown, any of none (open loop, EKF3 with GNSS velocity), "
+                             "none-posonly (EKF3 position only), gps-input, vision (closed loop on the "
+                             "companion process); default all four")
     parser.add_argument("--mission", default="default",
                         help="mission name (default, test, default-tuning) or YAML path")
     parser.add_argument("--missions", default="10",
@@ -158,8 +160,9 @@ def run_ardupilot(args: argparse.Namespace) -> int:
     seeds = campaign.parse_seeds(args.seeds)
     cfg = ardupilot.with_speedup(ArduPilotConfig(), args.speedup)
     feeds = tuple(f.strip() for f in args.feeds.split(",") if f.strip())
-    if not feeds or any(f not in ("none", "gps-input") for f in feeds):
-        raise UserError(f"--feeds: expected none and/or gps-input, got {args.feeds!r}")
+    if not feeds or any(f not in ardupilot.LOOPS for f in feeds) or len(set(feeds)) != len(feeds):
+        raise UserError(f"--feeds: expected distinct values of {', '.join(ardupilot.LOOPS)}, "
+                        f"got {args.feeds!r}")
     res = ardupilot.evaluate(args.mission, profiles, methods, seeds, args.workers, args.out, cfg, feeds)
     print(ardupilot.table_text(res), end="")
     print(f"wrote {args.out}/results.json, report.md, errors_horizontal.png and flights/ "
