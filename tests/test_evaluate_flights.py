@@ -149,5 +149,6 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     ablation.figure(sev, abl / "severity" / "fig_where_adaptation_pays.png")
     text = ablation.report(abl)
     assert "## `realistic`" in text and "`map-beta` = `map-beta`: defaults" in text
+    assert "Paired against `map-beta` (`map-beta` − row" in text and "| `fixed-beta-0.5` | 2 |" in text
     assert "| 1.0 | 0.900 [0.700, 1.000] | 1.500 |" in text
     assert (abl / "severity" / "fig_where_adaptation_pays.png").stat().st_size > 1000

@@ -257,6 +257,7 @@ def report(out: Path) -> str:
                   f"{c['workers']} workers, {c.get('flight_cpu_s', float('nan')):.0f} s of flight CPU "
                   f"(full report: [{scenario}/report.md]({scenario}/report.md)).", "",
                   flights.markdown(res["flights"]),
+                  *_more_tables(res["flights"]),
                   "Rows (hyper-parameters chosen on the tuning set, "
                   f"[rows-{scenario}.yaml](rows-{scenario}.yaml), sweep records "
                   f"[tuning-{scenario}.jsonl](tuning-{scenario}.jsonl)):", ""]
@@ -284,6 +285,16 @@ def report(out: Path) -> str:
     text = "\n".join(parts) + "\n"
     (out / "report.md").write_text(text, encoding="utf-8")
     return text
+
+
+def _more_tables(block: dict[str, Any]) -> list[str]:
+    """A paired table against each further reference row of the campaign (``--reference A,B``)."""
+    out: list[str] = []
+    for ref in block.get("paired_by_reference", {}):
+        if ref != block["reference"]:
+            out += [f"Paired against `{ref}` (`{ref}` − row; * = interval excludes 0):", "",
+                    flights.markdown_paired(block, ref)]
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
