@@ -14,6 +14,7 @@ from companion.estimator.hmm_trust import (
     HmmTrust,
     interval_s,
     levels_of,
+    posterior,
     predict,
     relaxation_factor,
     stationary,
@@ -64,7 +65,7 @@ def test_two_level_posterior_by_hand():
     stay = math.exp(-T_S / 2.0)
     p_clean = 0.5  # stationary law of two levels with the same dwell time
     state = m.initial_state()
-    assert state == pytest.approx((0.5, 0.5))
+    assert state[0] == pytest.approx((0.5, 0.5)) and len(state) == 1  # one chain over all axes
     trajectory = []
     for y in ys:
         prior = p_clean * stay + (1.0 - p_clean) * (1.0 - stay)
@@ -75,7 +76,7 @@ def test_two_level_posterior_by_hand():
         k = p_clean * 1.0 + (1.0 - p_clean) * k_deg
         assert pytest.approx((k * r, k * r, k * r), rel=1e-10) == R
         state = m.update(state, _terms(y))
-        assert state[0] == pytest.approx(p_clean, rel=1e-10)
+        assert state[0][0] == pytest.approx(p_clean, rel=1e-10)
         assert m.beta(state) == pytest.approx(p_clean, rel=1e-10)  # β = P(clean) here
         trajectory.append(p_clean)
     # the sequence really moved the belief both ways: up on a small innovation, down on 1 m, up on 0
@@ -110,7 +111,7 @@ def test_recovery_is_bounded_after_any_run_of_bad_fixes():
     state = m.initial_state()
     for _ in range(1000):
         state = m.update(state, _terms((30.0, -30.0, 30.0)))
-        assert predict(state, levels, T_S)[0] >= floor * (1 - 1e-12)
+        assert predict(state[0], levels, T_S)[0] >= floor * (1 - 1e-12)
     assert m.beta(state) < 1e-6
     clean = _terms((0.0, 0.0, 0.0))
     ll = [sum(-0.5 * math.log(s0 + Q_UNIT * lv.sigma_bias_m**2 + lv.r_factor * r)
@@ -122,7 +123,7 @@ def test_recovery_is_bounded_after_any_run_of_bad_fixes():
         state = m.update(state, clean)
         q = max(stay[0] * p_bound, floor)
         p_bound = lr_min * q / (lr_min * q + 1.0 - q)
-        assert state[0] >= p_bound - 1e-12
+        assert state[0][0] >= p_bound - 1e-12
         if n_bound is None and p_bound > 0.9:
             n_bound = n
     assert n_bound is not None and n_bound <= 20  # back above 0.9 within 1 s of clean fixes at 20 Hz
@@ -147,10 +148,25 @@ def test_an_outlier_fix_is_downweighted_at_once():
                 if j == jump_at:
                     moved[name] = e.snapshot().x[0] - before
                     if name == "hmm-trust":
-                        post = e.fusions[-1].state
+                        post = e.fusions[-1].state[0]
                         assert post[2] > 0.99  # outlier level
                 j += 1
     assert abs(moved["hmm-trust"]) < 0.2 * abs(moved["fixed-beta"])
+
+
+def test_split_chains_keep_a_vertical_step_out_of_the_horizontal_trust():
+    """With hmm_split_vertical a vertical outlier inflates only the vertical R; the joint chain
+    inflates all three axes and drops β."""
+    y = (0.01, -0.01, 2.0)
+    split, joint = _method(_plugin(hmm_split_vertical=True)), _method(PluginConfig())
+    s0, j0 = split.initial_state(), joint.initial_state()
+    r_split, r_joint = split.measurement_cov(s0, _terms(y)), joint.measurement_cov(j0, _terms(y))
+    assert len(s0) == 2 and r_split[2] > 10 * 0.0064 and r_joint[0] > 10 * 0.0064
+    assert r_split[0] == r_split[1] < 1.5 * 0.0064
+    assert split.beta(split.update(s0, _terms(y))) > 0.5 > joint.beta(joint.update(j0, _terms(y)))
+    # the horizontal chain alone is the joint rule on the horizontal axes
+    h = posterior(s0[0], _terms(y), split.levels, CFG, (0, 1))
+    assert split.update(s0, _terms(y))[0] == h
 
 
 def test_belief_follows_multipath_and_recovers():

@@ -10,7 +10,10 @@ factor R_j = k_j R_nom. Levels (``PluginConfig.hmm_*``):
     outlier   β = 0                    σ_b(0)                k = hmm_outlier_r_factor      (NLOS steps,
                                                                                        heavy tails)
 
-(``hmm_levels: 2`` drops the outlier level.) Per fix, over the interval T since the last one:
+(``hmm_levels: 2`` drops the outlier level.) With ``hmm_split_vertical`` there are two such chains,
+one on the horizontal axes and one on the vertical (a reflection lengthens the path, so NLOS
+errors are mostly vertical): each axis is fused with its own chain's R, and β is the horizontal
+chain's. Per fix, over the interval T since the last one:
 
 1. predict with a stated Markov chain: level j is kept with probability exp(−T / D_j) (its mean
    dwell time D_j in seconds: ``hmm_dwell_s`` for clean and degraded, ``hmm_outlier_dwell_s`` for
@@ -30,7 +33,7 @@ intervals; ``stationary``) at the rate of its second eigenvalue (``relaxation_fa
 initial belief is that law.
 
 T is not handed to an adaptation method; it is recovered exactly from the bias decay the engine
-used, q = 1 − exp(−2T/τ): T = −(τ/2) ln(1 − q). State: the posterior π (a tuple), immutable.
+used, q = 1 − exp(−2T/τ): T = −(τ/2) ln(1 − q). State: one posterior π per chain (tuples), immutable.
 """
 
 from __future__ import annotations
@@ -45,6 +48,10 @@ from companion.estimator.methods import register
 from companion.estimator.plugin_config import PluginConfig
 
 _LOG_2PI = math.log(2.0 * math.pi)
+ALL_AXES = (0, 1, 2)
+SPLIT_AXES = ((0, 1), (2,))  # hmm_split_vertical: horizontal (N, E) and vertical (D) chains
+
+State = tuple[tuple[float, ...], ...]  # one posterior over the levels per chain
 
 
 class Level(NamedTuple):
@@ -81,13 +88,14 @@ def predict(pi: tuple[float, ...], levels: tuple[Level, ...], T_s: float) -> tup
     return tuple(pi[j] * stay[j] + total_leave - leave[j] for j in range(n))
 
 
-def log_likelihoods(terms: InnovationTerms, levels: tuple[Level, ...]) -> tuple[float, ...]:
-    """log N(y; 0, S_j) summed over the three axes, per level."""
+def log_likelihoods(terms: InnovationTerms, levels: tuple[Level, ...],
+                    axes: tuple[int, ...] = ALL_AXES) -> tuple[float, ...]:
+    """log N(y; 0, S_j) summed over ``axes`` (NED indices), per level."""
     out = []
     for lv in levels:
         q = terms.q_bias_unit * lv.sigma_bias_m * lv.sigma_bias_m
         ll = 0.0
-        for i in range(3):
+        for i in axes:
             s = terms.s0[i] + q + lv.r_factor * terms.r_nominal[i]
             ll -= 0.5 * (_LOG_2PI + math.log(s) + terms.y[i] * terms.y[i] / s)
         out.append(ll)
@@ -95,10 +103,10 @@ def log_likelihoods(terms: InnovationTerms, levels: tuple[Level, ...]) -> tuple[
 
 
 def posterior(pi: tuple[float, ...], terms: InnovationTerms, levels: tuple[Level, ...],
-              cfg: EstimatorConfig) -> tuple[float, ...]:
-    """π⁺ after the fix whose ``terms`` are given (prediction over its interval, then Bayes)."""
+              cfg: EstimatorConfig, axes: tuple[int, ...] = ALL_AXES) -> tuple[float, ...]:
+    """π⁺ after the fix whose ``terms`` are given (prediction over its interval, then Bayes on ``axes``)."""
     prior = predict(pi, levels, interval_s(terms, cfg))
-    ll = log_likelihoods(terms, levels)
+    ll = log_likelihoods(terms, levels, axes)
     top = max(ll)
     w = [p * math.exp(v - top) for p, v in zip(prior, ll, strict=True)]
     total = sum(w)
@@ -134,17 +142,23 @@ class HmmTrust:
     def bind(self, mission: Any, plugin: PluginConfig, position: Callable[[], Any]) -> None:
         self.plugin = plugin
         self.levels = levels_of(self.cfg, plugin)
+        self.chains = SPLIT_AXES if plugin.hmm_split_vertical else (ALL_AXES,)
 
-    def initial_state(self) -> tuple[float, ...]:
-        return stationary(self.levels)
+    def initial_state(self) -> State:
+        return tuple(stationary(self.levels) for _ in self.chains)
 
-    def beta(self, state: tuple[float, ...]) -> float:
-        return sum(p * lv.beta for p, lv in zip(state, self.levels, strict=True))
+    def beta(self, state: State) -> float:
+        """The first chain's (all axes, or horizontal) posterior mean trust."""
+        return sum(p * lv.beta for p, lv in zip(state[0], self.levels, strict=True))
 
-    def measurement_cov(self, state: tuple[float, ...], terms: InnovationTerms) -> Vec3:
-        post = posterior(state, terms, self.levels, self.cfg)
-        k = sum(p * lv.r_factor for p, lv in zip(post, self.levels, strict=True))
-        return (k * terms.r_nominal[0], k * terms.r_nominal[1], k * terms.r_nominal[2])
+    def measurement_cov(self, state: State, terms: InnovationTerms) -> Vec3:
+        r = list(terms.r_nominal)
+        for pi, axes in zip(self.update(state, terms), self.chains, strict=True):
+            k = sum(p * lv.r_factor for p, lv in zip(pi, self.levels, strict=True))
+            for i in axes:
+                r[i] *= k
+        return (r[0], r[1], r[2])
 
-    def update(self, state: tuple[float, ...], terms: InnovationTerms) -> tuple[float, ...]:
-        return posterior(state, terms, self.levels, self.cfg)
+    def update(self, state: State, terms: InnovationTerms) -> State:
+        return tuple(posterior(pi, terms, self.levels, self.cfg, axes)
+                     for pi, axes in zip(state, self.chains, strict=True))

@@ -35,6 +35,7 @@ class PluginConfig:
     hmm_beta_degraded: float = 0.0  # trust of the degraded level: σ_b(β), R(β) of the trust model
     hmm_dwell_s: float = 2.0  # mean dwell time (s) of the clean and degraded levels
     hmm_outlier_dwell_s: float = 0.25  # mean dwell time (s) of the outlier level (NLOS episodes, tails)
+    hmm_split_vertical: bool = False  # separate chains for the horizontal and the vertical axes
     hmm_outlier_r_factor: float = 25.0  # R / R_nom of the outlier level (25: 5x the nominal std)
 
     def validate(self) -> None:
