@@ -24,10 +24,11 @@ class Stream:
 
     t_us: np.ndarray  # (n,) IMU times
     a_ned_m_s2: np.ndarray  # (n, 3) gravity-compensated NED acceleration as measured
-    x_true: np.ndarray  # (n, 12) true [p, v, b, a] at each IMU time (a: acceleration-input bias)
+    x_true: np.ndarray  # (n, 15) true [p, v, b, a, d] (a: accelerometer bias, body axes; d: NED acc. error)
     fix_index: np.ndarray  # (k,) IMU index at which each fix is valid
     z_ned_m: np.ndarray  # (k, 3) fixes
     bias_std_m: np.ndarray  # (k,) std of the multipath bias in force at each fix (0 = clean)
+    rot: np.ndarray | None = None  # (n, 9) R_ned_frd held with each IMU sample (row-major); None = identity
 
     @property
     def fix_t_us(self) -> np.ndarray:
@@ -40,32 +41,41 @@ def _input(t_s: np.ndarray) -> np.ndarray:
 
 
 def consistent_stream(rng: np.random.Generator, cfg: EstimatorConfig, duration_s: float,
-                      beta: float) -> tuple[Stream, np.ndarray, np.ndarray]:
+                      beta: float, yaw_rate_rad_s: float = 0.0) -> tuple[Stream, np.ndarray, np.ndarray]:
     """The filter's model exactly, with belief ``beta`` held: returns (stream, x̂₀, P₀).
 
     The truth starts from N(x̂₀, P₀) around the filter's own initial estimate at the first
-    fix (time 0), so the filter's initial belief is correct by construction.
+    fix (time 0), so the filter's initial belief is correct by construction. With
+    ``yaw_rate_rad_s`` the body yaws and rolls (a body-frame accelerometer bias then moves in
+    NED); the attitude is held over each 5 ms step, where the model is exact.
     """
     n = int(round(duration_s * 1e6 / IMU_PERIOD_US)) + 1
     dt = IMU_PERIOD_US * 1e-6
     t_us = np.arange(n, dtype=np.int64) * IMU_PERIOD_US
     a = _input(t_us * 1e-6)
-    F = model.transition(dt, cfg)
     B = model.input_matrix(dt)
-    L = np.linalg.cholesky(model.process_noise(dt, cfg.sigma_bias_m(beta), cfg))
+    yaw, roll = yaw_rate_rad_s * t_us * 1e-6, 0.3 * np.sin(yaw_rate_rad_s * t_us * 1e-6)
+    cy, sy, cr, sr = np.cos(yaw), np.sin(yaw), np.cos(roll), np.sin(roll)
+    zero = np.zeros(n)
+    rot = np.stack([cy, -sy * cr, sy * sr, sy, cy * cr, -cy * sr, zero, sr, cr], axis=1)  # Rz(yaw) Rx(roll)
     z0 = np.array([10.0, -5.0, -30.0])
-    x_hat0 = np.concatenate([z0, np.zeros(9)])
+    x_hat0 = np.concatenate([z0, np.zeros(model.N_STATE - 3)])
     P0 = model.initial_cov(cfg)
     x = np.empty((n, model.N_STATE))
     x[0] = x_hat0 - np.linalg.cholesky(P0) @ rng.standard_normal(model.N_STATE)
-    w = rng.standard_normal((n, model.N_STATE)) @ L.T
+    w = rng.standard_normal((n, model.N_STATE))
+    F, L = model.transition(dt, cfg), np.linalg.cholesky(model.process_noise(dt, cfg.sigma_bias_m(beta), cfg))
     for k in range(n - 1):
-        x[k + 1] = F @ x[k] + B @ a[k] + w[k]
+        if yaw_rate_rad_s != 0.0:
+            r9 = tuple(rot[k])
+            F = model.transition(dt, cfg, r9)
+            L = np.linalg.cholesky(model.process_noise(dt, cfg.sigma_bias_m(beta), cfg, r9))
+        x[k + 1] = F @ x[k] + B @ a[k] + L @ w[k]
     idx = np.arange(0, n, GNSS_EVERY)
     Lr = np.linalg.cholesky(cfg.r_nominal_m2())
     z = x[idx, 0:3] + x[idx, 6:9] + rng.standard_normal((len(idx), 3)) @ Lr.T
     z[0] = z0  # the filter starts from the first fix
-    return Stream(t_us, a, x, idx, z, np.zeros(len(idx))), x_hat0, P0
+    return Stream(t_us, a, x, idx, z, np.zeros(len(idx)), None if yaw_rate_rad_s == 0.0 else rot), x_hat0, P0
 
 
 def multipath_stream(rng: np.random.Generator, cfg: EstimatorConfig, segments: list[tuple[float, float]],
@@ -105,5 +115,5 @@ def multipath_stream(rng: np.random.Generator, cfg: EstimatorConfig, segments: l
     idx = np.arange(0, n, GNSS_EVERY)
     noise = np.where(std[idx] > 0, sigma_degraded_m, sigma_clean_m)[:, None]
     z = p[idx] + b[idx] + noise * rng.standard_normal((len(idx), 3))
-    x = np.hstack([p, v, b, np.zeros((n, 3))])
+    x = np.hstack([p, v, b, np.zeros((n, model.N_STATE - 9))])
     return Stream(t_us, a_meas, x, idx, z, std[idx])

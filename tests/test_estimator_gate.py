@@ -33,11 +33,9 @@ def test_test_ratio_is_horizontal_nis_over_gate_squared_and_gate_is_exact():
     outside not."""
     e = _engine()
     _still(e, 0, 50_000)
-    P = model.predict_axes(e.fusions[0].P, 0.05, math.exp(-0.05 / CFG.bias_tau_s), CFG.sigma_acc_m_s2**2,
-                           (1 - math.exp(-0.1 / CFG.bias_tau_s)) * CFG.sigma_bias_m(CFG.beta_fixed) ** 2,
-                           CFG.sigma_acc_bias_rw_m_s2_sqrt_s**2)
+    P = model.predict_cov(e.fusions[0].P, 0.05, CFG.sigma_bias_m(CFG.beta_fixed), CFG)
     # the gate's S: H P⁻ Hᵀ + R with R floored at gnss_gate_r_floor_m (0.5 m > the nominal 0.08 m)
-    s = [c[0] + 2 * c[2] + c[7] + max(CFG.sigma_gnss_horizontal_m, CFG.gnss_gate_r_floor_m) ** 2 for c in P]
+    s = np.diag(model.hmh(P)) + max(CFG.sigma_gnss_horizontal_m, CFG.gnss_gate_r_floor_m) ** 2
     edge = CFG.gnss_gate_sigma * math.sqrt(s[0])  # a north innovation exactly at the gate
     e.push_fix(50_000, (0.999 * edge, 0.0, 0.0))
     f = e.fusions[-1]
@@ -87,11 +85,14 @@ def test_short_glitch_is_ignored_long_one_ends_in_one_reset(method):
 
 
 def test_reset_matches_the_fix_and_its_r():
-    x = tuple(float(v) for v in range(12))
-    P = model.initial_cov_axes(CFG)
-    xr, Pr = model.reset_to_fix(x, P, (1.0, 2.0, 3.0), (0.5, 0.5, 2.0), 0.04)
-    assert xr == (1.0, 2.0, 3.0, 3.0, 4.0, 5.0, 0.0, 0.0, 0.0, 9.0, 10.0, 11.0)
-    M = model.cov_to_matrix(Pr)
+    x = tuple(float(v) for v in range(15))
+    rng = np.random.default_rng(0)
+    G = rng.standard_normal((15, 15))
+    P = G @ G.T + 0.1 * np.eye(15)
+    xr, M = model.reset_to_fix(x, P, (1.0, 2.0, 3.0), (0.5, 0.5, 2.0), 0.04)
+    assert xr == (1.0, 2.0, 3.0, 3.0, 4.0, 5.0, 0.0, 0.0, 0.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0)
+    keep = np.r_[3:6, 9:15]  # velocity and the IMU error states keep their joint covariance
+    np.testing.assert_array_equal(M[np.ix_(keep, keep)], P[np.ix_(keep, keep)])
     np.testing.assert_allclose(model.hmh(M), np.diag([0.5, 0.5, 2.0]), atol=1e-15)
     assert np.all(np.linalg.eigvalsh(M) > 0)
 
@@ -153,16 +154,10 @@ def _terms_of(e):
 
 def _nis_with_bounded_r(e, prev, f, r_max):
     T = (f.t_us - prev.t_us) * 1e-6
-    alpha = math.exp(-T / CFG.bias_tau_s)
-    q_b = (1 - alpha * alpha) * prev.sigma_bias_m**2
-    P = model.predict_axes(prev.P, T, alpha, CFG.sigma_acc_m_s2**2, q_b, CFG.sigma_acc_bias_rw_m_s2_sqrt_s**2)
-    x, _ = e._predict(prev, f.t_us, f.ints)
-    nis = 0.0
-    for i in range(3):
-        y = f.z_ned_m[i] - x[i] - x[6 + i]
-        s = P[i][0] + 2 * P[i][2] + P[i][7] + r_max
-        nis += y * y / s
-    return nis
+    x, P = e._predict(prev, f.t_us, f.ints)
+    np.testing.assert_allclose(P, model.predict_cov(prev.P, T, prev.sigma_bias_m, CFG), rtol=1e-12)  # no turn
+    y = np.array(f.z_ned_m) - np.array(x[0:3]) - np.array(x[6:9])
+    return float(y @ np.linalg.solve(model.hmh(P) + r_max * np.eye(3), y))
 
 
 @pytest.mark.parametrize("speed_m_s", [0.0, 2.0])

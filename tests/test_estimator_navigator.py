@@ -8,7 +8,7 @@ import pytest
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.estimator import EstimatorConfig, Navigator
-from companion.estimator.navigator import frd_to_ned, rotation_ned_frd
+from companion.estimator.navigator import rotation_ned_frd, rotation_scaled
 from tests.estimator_streams import multipath_stream
 
 CFG = EstimatorConfig()
@@ -43,17 +43,16 @@ def test_rotation_matches_axis_angle():
 
 
 def test_folded_quaternion_rotation_equals_the_matrix():
-    """frd_to_ned (normalisation folded into s = 2/|q|²) = R(q/|q|) f, floats and arrays alike."""
+    """rotation_scaled (normalisation folded into s = 2/|q|²) = R(q/|q|), floats and arrays alike."""
     rng = np.random.default_rng(11)
     q = rng.normal(size=(50, 4)) * rng.uniform(0.5, 2.0, size=(50, 1))  # not unit norm
-    f = rng.normal(scale=10.0, size=(50, 3))
     w, x, y, z = q.T
     s = 2.0 / (w * w + x * x + y * y + z * z)
-    got = np.stack(frd_to_ned(w, x, y, z, s, *f.T), axis=1)
+    got = np.stack(rotation_scaled(w, x, y, z, s), axis=1)
     for k in range(50):
-        R = np.array(rotation_ned_frd(*q[k], math.sqrt)).reshape(3, 3)
-        np.testing.assert_allclose(got[k], R @ f[k], rtol=0, atol=1e-13)
-        assert frd_to_ned(*q[k].tolist(), float(s[k]), *f[k].tolist()) == tuple(got[k])  # same bits
+        R = np.array(rotation_ned_frd(*q[k], math.sqrt))
+        np.testing.assert_allclose(got[k], R, rtol=0, atol=1e-14)
+        assert rotation_scaled(*q[k].tolist(), float(s[k])) == tuple(got[k])  # same bits
 
 
 def test_hover_is_zero_acceleration_and_pitched_thrust_accelerates_north():

@@ -1,12 +1,14 @@
 """The belief-adaptive EKF with out-of-sequence GNSS fusion (Algorithm 1), in the local NED frame.
 
-Inputs are NED accelerations (gravity-compensated) and NED position fixes stamped with their
-validity time; no frames, attitude or geodesy here (``navigator.py`` does those).
+Inputs are NED accelerations (gravity-compensated) with the attitude they were rotated by (the
+accelerometer bias is a body-frame state) and NED position fixes stamped with their validity
+time; no quaternions or geodesy here (``navigator.py`` does those).
 
 The filter is a time-ordered list of fusions. Each entry keeps the posterior (x⁺, P⁺) at the
 fix's validity time, the adaptation state after it (so β too) and the fix itself. Between two
 entries nothing but the prediction happens, and the prediction over any interval is one closed-
-form step (``model.py``: exact F(T), Q(T); ``history.py``: exact mean from prefix integrals),
+form step (``model.py``: F and Q of a block from the rotation integrals; ``history.py``: exact
+mean and those integrals from prefix sums),
 so neither the state nor the covariance is propagated per IMU sample:
 
 * an on-time or late fix whose validity is after the last fusion: one prediction from the last
@@ -34,6 +36,7 @@ from companion.estimator import methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.history import ImuHistory, Integrals, finite3, mean_between
+from companion.estimator.model import IDENTITY9, Rot9
 
 _TRIM_EVERY = 256  # IMU samples between two trims of the histories
 
@@ -43,8 +46,9 @@ class Fusion(NamedTuple):
 
     t_us: int  # validity time of the fix (or of a re-based anchor)
     z_ned_m: Vec3 | None  # the fix; None for an anchor without a measurement
-    x: model.State  # posterior [p, v, b, a] (m, m/s, m, m/s²); the prior when the fix failed the gate
-    P: model.Cov  # posterior covariance, per axis (model.py)
+    # posterior [p, v, b (NED), a (FRD), d (NED)] (m, m/s, m, m/s², m/s²); prior if the fix failed the gate
+    x: model.State
+    P: model.Cov  # posterior covariance (15×15, never written again)
     state: Any  # adaptation state after this fix (immutable)
     nis: float  # NIS of this fix (of the last fix for an anchor)
     # per-fusion constants, computed once (each prediction from this entry needs them)
@@ -104,6 +108,7 @@ class FusionEngine:
         self._r_nominal: Vec3 = tuple(float(v) for v in cfg.r_nominal_m2().diagonal())  # type: ignore[assignment]
         self._q_acc = cfg.sigma_acc_m_s2**2
         self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
+        self._q_ned = cfg.sigma_acc_ned_rw_m_s2_sqrt_s**2
         self._gate2 = cfg.gnss_gate_sigma**2
         self._gate_r_min = cfg.gnss_gate_r_floor_m**2
         self._r_max = cfg.r_learned_max_factor
@@ -114,8 +119,10 @@ class FusionEngine:
         self._cache: tuple[Fusion, int, Snapshot] | None = None
 
     # ----------------------------------------------------------------- IMU
-    def push_acc(self, t_us: int, ax: float, ay: float, az: float) -> None:
-        """One NED acceleration (m/s², gravity-compensated) at ``t_us``."""
+    def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
+        """One NED acceleration (m/s², gravity-compensated: R f̃ + g) at ``t_us``, with the
+        rotation R_ned_frd (row-major 9-tuple) it was measured with (the body-frame bias state
+        needs it; identity = the body axes are NED)."""
         c = self.counts
         if (ax - ax) + (ay - ay) + (az - az) != 0.0:  # NaN or ±inf somewhere
             c["imu_rejected_nonfinite"] += 1
@@ -124,7 +131,7 @@ class FusionEngine:
         if imu.t_us and t_us <= imu.t_us[-1]:
             c["imu_rejected_time_backwards"] += 1
             return
-        if imu.append(t_us, ax, ay, az):
+        if imu.append(t_us, ax, ay, az, rot):
             c["imu_gaps"] += 1
         c["imu_used"] += 1
         if self._pending and self._pending[0][0] <= t_us:
@@ -132,8 +139,9 @@ class FusionEngine:
         if len(imu.rows) > self._trim_len:
             self._trim()
 
-    def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray) -> None:
-        """Many NED accelerations at once; the same result as ``push_acc`` one by one."""
+    def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
+        """Many NED accelerations (with their rotations, (n, 9) row-major; None = identity) at
+        once; the same result as ``push_acc`` one by one."""
         t_us = np.asarray(t_us, dtype=np.int64)
         a_ned = np.asarray(a_ned, dtype=float)
         n = len(t_us)
@@ -146,10 +154,11 @@ class FusionEngine:
             dt_s = (t_us - imu.t0_us) * 1e-6 - (t_prev - imu.t0_us) * 1e-6
             clean = bool((t_us > t_prev).all()) and bool((dt_s <= imu.hold_max_s).all())
         if not clean:  # anything to gate or count: take the per-sample path
-            for t, (ax, ay, az) in zip(t_us.tolist(), a_ned.tolist(), strict=True):
-                self.push_acc(t, ax, ay, az)
+            rots = [IDENTITY9] * n if rot is None else [tuple(r) for r in np.asarray(rot, float).tolist()]
+            for t, (ax, ay, az), r in zip(t_us.tolist(), a_ned.tolist(), rots, strict=True):
+                self.push_acc(t, ax, ay, az, r)
             return
-        imu.append_batch(t_us, a_ned)
+        imu.append_batch(t_us, a_ned, None if rot is None else np.asarray(rot, dtype=float))
         self.counts["imu_used"] += n
         if self._pending and self._pending[0][0] <= imu.t_us[-1]:
             self._flush_pending()
@@ -232,9 +241,9 @@ class FusionEngine:
         c["gnss_fused"] = self._tested - last.n_rejected
 
     def _initialise(self, t_us: int, z: Vec3, r: Vec3) -> None:
-        x = (*z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        x = (*z, *(0.0,) * (model.N_STATE - 3))
         state = self.method.initial_state()
-        P = model.initial_cov_axes(self.cfg, r)
+        P = model.initial_cov(self.cfg, r)
         self._append(t_us, z, x, P, state, float("nan"), self.imu.integrals(t_us),
                      r, t_us, float("nan"), False, 0, 0)
         self._tested += 1
@@ -258,32 +267,32 @@ class FusionEngine:
         sigma_b = prev.sigma_bias_m
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
-        P_prior = model.predict_axes(prev.P, T, alpha, self._q_acc, q_b, self._q_rw)
-        (pp0, _, pb0, _, _, _, _, bb0, _, _), (pp1, _, pb1, _, _, _, _, bb1, _, _), \
-            (pp2, _, pb2, _, _, _, _, bb2, _, _) = P_prior
         ints = self.imu.integrals(t_us)
-        x_prior = mean_between(prev.x, prev.ints, ints, alpha)
+        x_prior, A, B = mean_between(prev.x, prev.ints, ints, alpha)
+        P_prior = self._predict_cov(prev.P, T, A, B, alpha, q_b)
+        hph = model.hph_of(P_prior)  # H P⁻ Hᵀ (3×3): the body-frame bias correlates the axes
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
-        hph = (pp0 + 2.0 * pb0 + bb0, pp1 + 2.0 * pb1 + bb1, pp2 + 2.0 * pb2 + bb2)
+        h0, h1, h2 = hph[0][0], hph[1][1], hph[2][2]
         terms = InnovationTerms(
-            y, (hph[0] - q_b, hph[1] - q_b, hph[2] - q_b), q_bias_unit, r_nom,
-            (pp0 + pb0, pp1 + pb1, pp2 + pb2),
+            y, (h0 - q_b, h1 - q_b, h2 - q_b), q_bias_unit, r_nom,
+            (float(P_prior[0, 0] + P_prior[0, 6]), float(P_prior[1, 1] + P_prior[1, 7]),
+             float(P_prior[2, 2] + P_prior[2, 8])),
         )
         R = self.method.measurement_cov(prev.state, terms)
         k = self._r_max
         if R[0] > k * r_nom[0] or R[1] > k * r_nom[1] or R[2] > k * r_nom[2]:
             R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
-        # the gate: horizontal NIS (2 dof) and vertical NIS (1 dof) against gate², R floored
+        # the gate: horizontal NIS (2 dof, the 2×2 block of S) and vertical NIS (1 dof) against
+        # gate², R floored
         g = self._gate_r_min
         r0, r1, r2 = R
-        s0 = hph[0] + (r0 if r0 > g else g)
-        s1 = hph[1] + (r1 if r1 > g else g)
-        s2 = hph[2] + (r2 if r2 > g else g)
-        nis_h = y[0] * y[0] / s0 + y[1] * y[1] / s1
+        s00, s01, s11 = h0 + (r0 if r0 > g else g), hph[0][1], h1 + (r1 if r1 > g else g)
+        s2 = h2 + (r2 if r2 > g else g)
+        nis_h = (s11 * y[0] * y[0] - 2.0 * s01 * y[0] * y[1] + s00 * y[1] * y[1]) / (s00 * s11 - s01 * s01)
         nis_v = y[2] * y[2] / s2
         ratio = nis_h / self._gate2
         if ratio <= 1.0 and nis_v <= self._gate2:
-            x_post, P_post, nis = model.update_axes(x_prior, P_prior, z, R)
+            x_post, P_post, nis = model.update_fast(x_prior, P_prior, y, hph, R)
             self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints,
                          r_nom, t_us, ratio, False, prev.n_rejected, prev.n_resets)
         elif t_us - prev.t_fused_us >= self._reset_us:
@@ -294,6 +303,11 @@ class FusionEngine:
             state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
             self._append(t_us, z, x_prior, P_prior, state, _nis(y, hph, R), ints,
                          r_nom, prev.t_fused_us, ratio, True, prev.n_rejected + 1, prev.n_resets)
+
+    def _predict_cov(self, P: model.Cov, T: float, A: list[float], B: list[float], alpha: float,
+                     q_b: float) -> model.Cov:
+        return model.predict_block(P, T, np.array(A).reshape(3, 3), np.array(B).reshape(3, 3), alpha,
+                                   self._q_acc, q_b, self._q_rw, self._q_ned)
 
     # ------------------------------------------------------------- history
     def _trim(self) -> None:
@@ -326,8 +340,8 @@ class FusionEngine:
         alpha = math.exp(-T / self._tau_s)
         sigma_b = f.sigma_bias_m
         q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
-        x = mean_between(f.x, f.ints, ints, alpha)
-        return x, model.predict_axes(f.P, T, alpha, self._q_acc, q_b, self._q_rw)
+        x, A, B = mean_between(f.x, f.ints, ints, alpha)
+        return x, self._predict_cov(f.P, T, A, B, alpha, q_b)
 
     # -------------------------------------------------------------- output
     def snapshot(self) -> Snapshot | None:
@@ -338,23 +352,24 @@ class FusionEngine:
         now = self.imu.t_us[-1]
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]
-        T = (now - last.t_us) * 1e-6
-        alpha = math.exp(-T / self._tau_s)
-        sigma_b = last.sigma_bias_m
-        x = mean_between(last.x, last.ints, self.imu.last_integrals(), alpha)
-        var = model.predict_var_axes(last.P, T, alpha, self._q_acc, (1.0 - alpha * alpha) * sigma_b * sigma_b,
-                                     self._q_rw)
+        x, P = self._predict(last, now, self.imu.last_integrals())
+        var = tuple(P.diagonal()[0:9].tolist())
         snap = Snapshot(now, x, var, last.beta, last.nis, last.test_ratio, last.glitch,
                         now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
         self._cache = (last, now, snap)
         return snap
 
     def covariance_now(self) -> model.Cov | None:
-        """The full per-axis covariance at the newest IMU time (None before the first fix)."""
+        """The full covariance (15×15) at the newest IMU time (None before the first fix)."""
         if not self.fusions:
             return None
         return self._predict(self.fusions[-1], self.imu.t_us[-1], self.imu.last_integrals())[1]
 
-def _nis(y: Vec3, hph: Vec3, r: Vec3) -> float:
-    """yᵀ S⁻¹ y for the diagonal S = H P⁻ Hᵀ + R."""
-    return y[0] * y[0] / (hph[0] + r[0]) + y[1] * y[1] / (hph[1] + r[1]) + y[2] * y[2] / (hph[2] + r[2])
+
+def _nis(y: Vec3, hph: list[list[float]], r: Vec3) -> float:
+    """yᵀ S⁻¹ y for S = H P⁻ Hᵀ + diag(r)."""
+    i = model.inv3([[hph[0][0] + r[0], hph[0][1], hph[0][2]], [hph[1][0], hph[1][1] + r[1], hph[1][2]],
+                    [hph[2][0], hph[2][1], hph[2][2] + r[2]]])
+    y0, y1, y2 = y
+    return (y0 * (i[0] * y0 + i[1] * y1 + i[2] * y2) + y1 * (i[3] * y0 + i[4] * y1 + i[5] * y2)
+            + y2 * (i[6] * y0 + i[7] * y1 + i[8] * y2))

@@ -1,29 +1,43 @@
-"""The linear 12-state model x = [p, v, b, a] (NED; m, m/s, m, m/s²) of eq. 12-14, as pure functions.
+"""The linear 15-state model x = [p, v, b, a, d] of eq. 12-14 with IMU error states.
 
-``b`` is the GNSS multipath bias of the paper; ``a`` is an acceleration-input bias (ours, issue
-#11: IMU error states): the filter's input is the measured NED acceleration ``ã = a_true + a``,
-so ``v̇ = ã − a``. ``a`` is a random walk of density ``σ_w`` (m/s² per √s) and absorbs the
-accelerometer bias and the slowly varying attitude error × g (docs/estimator.md says why it is
-kept in NED, not body, axes). With ``σ_a0 = σ_w = 0`` it is never excited and the model is
-exactly the paper's 9-state one.
+``p``, ``v`` (NED; m, m/s) and the GNSS multipath bias ``b`` (NED, m) are the paper's; ``a`` is
+the accelerometer bias in BODY axes (FRD, m/s²; issue #11: IMU error states), a random walk of
+density ``σ_w`` (m/s² per √s), and ``d`` a NED acceleration error (m/s²), a random walk of
+density ``σ_d``: the autopilot's attitude error × g (1° of tilt reads as 0.17 m/s² horizontal,
+fixed in NED, not in the body). The IMU measures ``f̃ = f + a`` in body axes, so with the
+autopilot's attitude ``R(t) = R_ned_frd``
 
-The discretisation is the exact one of the continuous-time model (white acceleration noise of
-density ``σ_a²``, first-order Gauss-Markov bias with time constant ``τ_b``, random-walk ``a``):
+    v̇ = R(t) (f̃ − a) + g − d = ã(t) − R(t) a − d,       ã = R f̃ + g (what ``history.py`` integrates)
 
-    F(T) = [[I, T I, 0, −T²/2 I], [0, I, 0, −T I], [0, 0, α(T) I, 0], [0, 0, 0, I]],  α(T) = exp(−T/τ_b)
-    Q(T) = σ_a² [[T³/3, T²/2], [T²/2, T]] on (p, v)  +  (1 − α(T)²) σ_b² on b
-         + σ_w² [[T⁵/20, T⁴/8, −T³/6], [T⁴/8, T³/3, −T²/2], [−T³/6, −T²/2, T]] on (p, v, a)
+With both priors and densities 0, ``a`` and ``d`` are never excited and the model is exactly the
+paper's 9-state one.
 
-For a 5 ms step this is eq. 12-13 with ``Δt = T``. Because it is exact, ``F(T₂)F(T₁) = F(T₁+T₂)``
-and ``F(T₂) Q(T₁) F(T₂)ᵀ + Q(T₂) = Q(T₁+T₂)`` while σ_b is constant: a block of n predictions
-between two fusions (β, hence σ_b, changes only at fusions) collapses into one step of length
-T = n Δt, whatever the delay — this is what makes out-of-sequence fusion cost O(1) in time.
+Over an interval [t_a, t_b] (T = t_b − t_a) with the rotation prefix integrals of
+``history.py``, ``A = ∫ R ds`` and ``B = ∫ (t_b − s) R(s) ds`` (both 3×3), the transition is
+exact for any attitude history:
 
-The three axes are independent (F, Q, H and the diagonal R act per axis, P₀ is diagonal), so
-P stays block-diagonal: the filter keeps, per axis, the ten distinct entries of the 4×4
-covariance of (p, v, b, a) and runs on plain floats (``*_axes`` functions; ~20× cheaper than
-12×12 numpy on this size). The 12×12 numpy functions are the reference the fast ones are
-tested against.
+    F = [[I, T I, 0, −B, −T²/2 I], [0, I, 0, −A, −T I], [0, 0, α(T) I, 0, 0], [0, 0, 0, I, 0],
+         [0, 0, 0, 0, I]],   α(T) = exp(−T/τ_b)
+
+Process noise (white acceleration of density σ_q² in NED, first-order Gauss-Markov GNSS bias,
+random-walk ``a`` and ``d``):
+
+    Q = σ_q² [[T³/3, T²/2], [T²/2, T]] ⊗ I on (p, v)  +  (1 − α(T)²) σ_b² I on b
+      + σ_w² [[T⁵/20 I, T⁴/8 I, −T³/6 R̄], [T⁴/8 I, T³/3 I, −T²/2 R̄], [·, ·, T I]] on (p, v, a)
+      + σ_d² [[T⁵/20, T⁴/8, −T³/6], [T⁴/8, T³/3, −T²/2], [·, ·, T]] ⊗ I on (p, v, d)
+
+All terms but the third are exact. The random-walk term is exact for a constant attitude (R̄ = R);
+over a block whose attitude changes we use the block's mean rotation R̄ = A / T (deterministic:
+a function of the block's end points only). This is the documented approximation: it is PSD for
+every attitude history (the set of matrices M for which the block is PSD is convex and holds
+every rotation, so it holds their mean R̄), it equals the exact value for a constant attitude,
+and the exact p-p, p-v and v-v terms are bounded by the isotropic ones we use (‖∫R‖ ≤ T). Blocks
+are the intervals between fusions (50 ms at 20 Hz), and σ_w² T³ is tiny there, so the
+difference is far below the other noise terms.
+
+The covariance is a 15×15 numpy array: a body-frame bias couples the NED axes through R(t), so
+the per-axis float form of the NED-bias model no longer applies. With the identity attitude
+everything reduces to the per-axis model of the first wave (tested).
 """
 
 from __future__ import annotations
@@ -34,16 +48,28 @@ import numpy as np
 
 from companion.estimator.config import EstimatorConfig
 
-# Per-axis covariance: (pp, pv, pb, pa, vv, vb, va, bb, ba, aa) of (p, v, b, a) on one axis; a
-# filter covariance is one per NED axis. States are 12-tuples (p NED, v NED, b NED, a NED).
-AxisCov = tuple[float, float, float, float, float, float, float, float, float, float]
-Cov = tuple[AxisCov, AxisCov, AxisCov]
-State = tuple[float, ...]
+State = tuple[float, ...]  # [p NED, v NED, b NED, a FRD, d NED] (m, m/s, m, m/s², m/s²)
+Cov = np.ndarray  # (15, 15), never written after it is stored (out-of-sequence roll-back keeps it)
+Rot9 = tuple[float, float, float, float, float, float, float, float, float]  # row-major R_ned_frd
 
-N_STATE = 12
-H = np.hstack([np.eye(3), np.zeros((3, 3)), np.eye(3), np.zeros((3, 3))])  # z = p + b + ν
+N_STATE = 15
+H = np.hstack([np.eye(3), np.zeros((3, 3)), np.eye(3), np.zeros((3, 6))])  # z = p + b + ν
+IDENTITY9: Rot9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 _I3 = np.eye(3)
-_PAIRS = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
+_EYE = np.eye(N_STATE)
+
+
+def _flat(row0: int, col0: int) -> list[int]:
+    """Flat indices (15×15) of the diagonal of the 3×3 block at (row0, col0)."""
+    return [(row0 + i) * N_STATE + col0 + i for i in range(3)]
+
+
+# the diagonal-per-axis Q terms: pp, pv, vp, vv, bb, aa, dd, pd, dp, vd, dv (three axes each)
+_Q_FLAT = np.array([*_flat(0, 0), *_flat(0, 3), *_flat(3, 0), *_flat(3, 3), *_flat(6, 6), *_flat(9, 9),
+                    *_flat(12, 12), *_flat(0, 12), *_flat(12, 0), *_flat(3, 12), *_flat(12, 3)])
+_F_T_FLAT = np.array(_flat(0, 3))  # F[p, v] = T I
+_F_ALPHA_FLAT = np.array(_flat(6, 6))  # F[b, b] = α I
+_F_D_FLAT = np.array(_flat(0, 12) + _flat(3, 12))  # F[p, d] = −T²/2 I, F[v, d] = −T I
 
 
 def bias_decay(T_s: float, cfg: EstimatorConfig) -> float:
@@ -51,51 +77,81 @@ def bias_decay(T_s: float, cfg: EstimatorConfig) -> float:
     return math.exp(-T_s / cfg.bias_tau_s)
 
 
-def transition(T_s: float, cfg: EstimatorConfig) -> np.ndarray:
-    """F(T) of eq. 12 (with the acceleration bias) for an interval of T seconds."""
-    F = np.eye(N_STATE)
-    F[0:3, 3:6] = T_s * _I3
-    F[0:3, 9:12] = -0.5 * T_s * T_s * _I3
-    F[3:6, 9:12] = -T_s * _I3
-    F[6:9, 6:9] = bias_decay(T_s, cfg) * _I3
+def rot_matrix(r9: Rot9 | np.ndarray) -> np.ndarray:
+    return np.asarray(r9, dtype=float).reshape(3, 3)
+
+
+def transition_block(T_s: float, A: np.ndarray, B: np.ndarray, alpha: float) -> np.ndarray:
+    """F over a block with rotation integrals A = ∫R, B = ∫(t_b − s) R (3×3 each)."""
+    F = _EYE.copy()
+    F.flat[_F_T_FLAT] = T_s
+    F.flat[_F_ALPHA_FLAT] = alpha
+    h = -0.5 * T_s * T_s
+    F.flat[_F_D_FLAT] = (h, h, h, -T_s, -T_s, -T_s)
+    F[0:3, 9:12] = -B
+    F[3:6, 9:12] = -A
     return F
 
 
+def add_process_noise(P: np.ndarray, T_s: float, R_mean: np.ndarray, q_acc_m2_s3: float, q_bias_m2: float,
+                      q_rw_m2_s5: float, q_ned_m2_s5: float) -> None:
+    """P += Q (in place, on a fresh array) for a block of T s whose mean rotation is ``R_mean``;
+    ``q_bias_m2`` is the whole GNSS-bias noise (1 − α²) σ_b², ``q_rw_m2_s5`` and ``q_ned_m2_s5``
+    the densities σ_w² (body accelerometer bias) and σ_d² (NED acceleration error)."""
+    T2 = T_s * T_s
+    q, w, e = q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5
+    pp = q * T2 * T_s / 3.0 + (w + e) * T2 * T2 * T_s / 20.0
+    pv = q * T2 / 2.0 + (w + e) * T2 * T2 / 8.0
+    vv = q * T_s + (w + e) * T2 * T_s / 3.0
+    aa, dd, pd, vd = w * T_s, e * T_s, -e * T2 * T_s / 6.0, -e * T2 / 2.0
+    P.flat[_Q_FLAT] += (pp, pp, pp, pv, pv, pv, pv, pv, pv, vv, vv, vv, q_bias_m2, q_bias_m2, q_bias_m2,
+                        aa, aa, aa, dd, dd, dd, pd, pd, pd, pd, pd, pd, vd, vd, vd, vd, vd, vd)
+    if w > 0.0:
+        pa = (-w * T2 * T_s / 6.0) * R_mean
+        va = (-w * T2 / 2.0) * R_mean
+        P[0:3, 9:12] += pa
+        P[9:12, 0:3] += pa.T
+        P[3:6, 9:12] += va
+        P[9:12, 3:6] += va.T
+
+
+def predict_block(P: np.ndarray, T_s: float, A: np.ndarray, B: np.ndarray, alpha: float, q_acc_m2_s3: float,
+                  q_bias_m2: float, q_rw_m2_s5: float, q_ned_m2_s5: float) -> np.ndarray:
+    """F P Fᵀ + Q over a block (a new array)."""
+    F = transition_block(T_s, A, B, alpha)
+    out = F @ P @ F.T
+    R_mean = A / T_s if T_s > 0.0 else _I3
+    add_process_noise(out, T_s, R_mean, q_acc_m2_s3, q_bias_m2, q_rw_m2_s5, q_ned_m2_s5)
+    return out
+
+
+# -------------------------------------------- constant-attitude reference forms (tests, streams)
+def transition(T_s: float, cfg: EstimatorConfig, r9: Rot9 = IDENTITY9) -> np.ndarray:
+    """F(T) for an attitude held constant at ``r9`` over T (A = T R, B = T²/2 R)."""
+    R = rot_matrix(r9)
+    return transition_block(T_s, T_s * R, 0.5 * T_s * T_s * R, bias_decay(T_s, cfg))
+
+
 def input_matrix(T_s: float) -> np.ndarray:
-    """B(T): how a NED acceleration held over T enters x (x ← F x + B ã)."""
-    return np.vstack([0.5 * T_s * T_s * _I3, T_s * _I3, np.zeros((6, 3))])
+    """B(T): how a NED acceleration ã held over T enters x (x ← F x + B ã)."""
+    return np.vstack([0.5 * T_s * T_s * _I3, T_s * _I3, np.zeros((N_STATE - 6, 3))])
 
 
-def process_noise_pv(T_s: float, cfg: EstimatorConfig) -> np.ndarray:
-    """Q(T) without the GNSS-bias block (the part that does not depend on β)."""
-    q = cfg.sigma_acc_m_s2**2
-    w = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
+def process_noise(T_s: float, sigma_bias_m: float, cfg: EstimatorConfig,
+                  r9: Rot9 = IDENTITY9) -> np.ndarray:
+    """Q(T) of eq. 13 (with the accelerometer-bias random walk) for a bias std σ_b, attitude ``r9``."""
     Q = np.zeros((N_STATE, N_STATE))
-    Q[0:3, 0:3] = (q * T_s**3 / 3.0 + w * T_s**5 / 20.0) * _I3
-    Q[0:3, 3:6] = Q[3:6, 0:3] = (q * T_s**2 / 2.0 + w * T_s**4 / 8.0) * _I3
-    Q[3:6, 3:6] = (q * T_s + w * T_s**3 / 3.0) * _I3
-    Q[0:3, 9:12] = Q[9:12, 0:3] = -w * T_s**3 / 6.0 * _I3
-    Q[3:6, 9:12] = Q[9:12, 3:6] = -w * T_s**2 / 2.0 * _I3
-    Q[9:12, 9:12] = w * T_s * _I3
+    q_b = (1.0 - bias_decay(T_s, cfg) ** 2) * sigma_bias_m**2
+    w, e = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2, cfg.sigma_acc_ned_rw_m_s2_sqrt_s**2
+    add_process_noise(Q, T_s, rot_matrix(r9), cfg.sigma_acc_m_s2**2, q_b, w, e)
     return Q
 
 
-def bias_noise_unit(T_s: float, cfg: EstimatorConfig) -> float:
-    """1 − α(T)²: the bias block of Q(T) is this times σ_b(β)² I (eq. 13)."""
-    return 1.0 - bias_decay(T_s, cfg) ** 2
-
-
-def process_noise(T_s: float, sigma_bias_m: float, cfg: EstimatorConfig) -> np.ndarray:
-    """Q(T) of eq. 13 for a bias std σ_b (m)."""
-    Q = process_noise_pv(T_s, cfg)
-    Q[6:9, 6:9] = bias_noise_unit(T_s, cfg) * sigma_bias_m**2 * _I3
-    return Q
-
-
-def predict_cov(P: np.ndarray, T_s: float, sigma_bias_m: float, cfg: EstimatorConfig) -> np.ndarray:
-    """P ← F P Fᵀ + Q over T seconds."""
-    F = transition(T_s, cfg)
-    return F @ P @ F.T + process_noise(T_s, sigma_bias_m, cfg)
+def predict_cov(P: np.ndarray, T_s: float, sigma_bias_m: float, cfg: EstimatorConfig,
+                r9: Rot9 = IDENTITY9) -> np.ndarray:
+    """P ← F P Fᵀ + Q over T seconds at a constant attitude."""
+    F = transition(T_s, cfg, r9)
+    return F @ P @ F.T + process_noise(T_s, sigma_bias_m, cfg, r9)
 
 
 def hmh(M: np.ndarray) -> np.ndarray:
@@ -106,7 +162,7 @@ def hmh(M: np.ndarray) -> np.ndarray:
 def update(
     x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-    """Kalman update with z = p + b + ν, ν ~ N(0, R). Returns (x⁺, P⁺, y, S, NIS)."""
+    """Reference Kalman update with z = p + b + ν, ν ~ N(0, R). Returns (x⁺, P⁺, y, S, NIS)."""
     y = z - (x[0:3] + x[6:9])
     PHt = P[:, 0:3] + P[:, 6:9]
     S = hmh(P) + R
@@ -124,132 +180,61 @@ def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = 
     r = np.diag(cfg.r_nominal_m2()) if r_m2 is None else np.asarray(r_m2, dtype=float)
     v, b = np.full(3, cfg.sigma_velocity0_m_s**2), np.full(3, cfg.sigma_bias0_m**2)
     a = np.full(3, cfg.sigma_acc_bias0_m_s2**2)
-    return np.diag(np.concatenate([r, v, b, a]))
+    d = np.full(3, cfg.sigma_acc_ned0_m_s2**2)
+    return np.diag(np.concatenate([r, v, b, a, d]))
 
 
-# ---------------------------------------------------------------- per-axis fast path (floats)
-def predict_axes(P: Cov, T_s: float, alpha: float, q_acc_m2_s3: float, q_bias_m2: float,
-                 q_rw_m2_s5: float = 0.0) -> Cov:
-    """F P Fᵀ + Q per axis; ``q_bias_m2`` is the whole GNSS-bias noise (1 − α²) σ_b², ``q_rw_m2_s5``
-    the acceleration-bias random-walk density σ_w²."""
-    T2 = T_s * T_s
-    h = 0.5 * T2
-    qpp = q_acc_m2_s3 * T2 * T_s / 3.0 + q_rw_m2_s5 * T2 * T2 * T_s / 20.0
-    qpv = q_acc_m2_s3 * h + q_rw_m2_s5 * T2 * T2 / 8.0
-    qvv = q_acc_m2_s3 * T_s + q_rw_m2_s5 * T2 * T_s / 3.0
-    qpa = -q_rw_m2_s5 * T2 * T_s / 6.0
-    qva = -q_rw_m2_s5 * h
-    qaa = q_rw_m2_s5 * T_s
-    a2 = alpha * alpha
-    out = []
-    for pp, pv, pb, pa, vv, vb, va, bb, ba, aa in P:
-        # rows of F P: p-row = P_p + T P_v − h P_a, v-row = P_v − T P_a
-        rpp, rpv, rpb, rpa = pp + T_s * pv - h * pa, pv + T_s * vv - h * va, pb + T_s * vb - h * ba, \
-            pa + T_s * va - h * aa
-        rvv, rvb, rva = vv - T_s * va, vb - T_s * ba, va - T_s * aa
-        out.append((
-            rpp + T_s * rpv - h * rpa + qpp,
-            rpv - T_s * rpa + qpv,
-            alpha * rpb,
-            rpa + qpa,
-            rvv - T_s * rva + qvv,
-            alpha * rvb,
-            rva + qva,
-            a2 * bb + q_bias_m2,
-            alpha * ba,
-            aa + qaa,
-        ))
-    return (out[0], out[1], out[2])
+# ------------------------------------------------------------------- the engine's fast forms
+def inv3(s: list[list[float]]) -> tuple[float, ...]:
+    """Row-major inverse of a symmetric positive-definite 3×3 (closed form, floats)."""
+    (a, b, c), (_, d, e), (_, _, f) = s
+    c0, c1, c2 = d * f - e * e, c * e - b * f, b * e - c * d
+    u = 1.0 / (a * c0 + b * c1 + c * c2)
+    i11, i12, i22 = (a * f - c * c) * u, (b * c - a * e) * u, (a * d - b * b) * u
+    return (c0 * u, c1 * u, c2 * u, c1 * u, i11, i12, c2 * u, i12, i22)
 
 
-def predict_var_axes(P: Cov, T_s: float, alpha: float, q_acc_m2_s3: float, q_bias_m2: float,
-                     q_rw_m2_s5: float = 0.0) -> tuple[float, ...]:
-    """The variances of p, v and b (N, E, D each: 9 numbers) of ``predict_axes``, computed alone
-    (the output path needs no more)."""
-    T2 = T_s * T_s
-    h = 0.5 * T2
-    qpp = q_acc_m2_s3 * T2 * T_s / 3.0 + q_rw_m2_s5 * T2 * T2 * T_s / 20.0
-    qvv = q_acc_m2_s3 * T_s + q_rw_m2_s5 * T2 * T_s / 3.0
-    a2 = alpha * alpha
-    (pp0, pv0, _, pa0, vv0, _, va0, bb0, _, aa0), (pp1, pv1, _, pa1, vv1, _, va1, bb1, _, aa1), \
-        (pp2, pv2, _, pa2, vv2, _, va2, bb2, _, aa2) = P
-    rva0, rva1, rva2 = va0 - T_s * aa0, va1 - T_s * aa1, va2 - T_s * aa2
-    rpa0, rpa1, rpa2 = pa0 + T_s * va0 - h * aa0, pa1 + T_s * va1 - h * aa1, pa2 + T_s * va2 - h * aa2
-    return (
-        pp0 + T_s * pv0 - h * pa0 + T_s * (pv0 + T_s * vv0 - h * va0) - h * rpa0 + qpp,
-        pp1 + T_s * pv1 - h * pa1 + T_s * (pv1 + T_s * vv1 - h * va1) - h * rpa1 + qpp,
-        pp2 + T_s * pv2 - h * pa2 + T_s * (pv2 + T_s * vv2 - h * va2) - h * rpa2 + qpp,
-        vv0 - T_s * va0 - T_s * rva0 + qvv,
-        vv1 - T_s * va1 - T_s * rva1 + qvv,
-        vv2 - T_s * va2 - T_s * rva2 + qvv,
-        a2 * bb0 + q_bias_m2, a2 * bb1 + q_bias_m2, a2 * bb2 + q_bias_m2,
-    )
+def update_fast(x: State, P: np.ndarray, y: tuple[float, float, float], hph: list[list[float]],
+                r_m2: tuple[float, float, float]) -> tuple[State, np.ndarray, float]:
+    """Kalman update with z = p + b + ν, ν ~ N(0, diag r), innovation ``y`` and H P Hᵀ ``hph``
+    (3×3, floats). Returns (x⁺, P⁺, NIS)."""
+    s = [[hph[0][0] + r_m2[0], hph[0][1], hph[0][2]], [hph[1][0], hph[1][1] + r_m2[1], hph[1][2]],
+         [hph[2][0], hph[2][1], hph[2][2] + r_m2[2]]]
+    i = inv3(s)
+    y0, y1, y2 = y
+    g0, g1, g2 = i[0] * y0 + i[1] * y1 + i[2] * y2, i[3] * y0 + i[4] * y1 + i[5] * y2, \
+        i[6] * y0 + i[7] * y1 + i[8] * y2
+    PHt = P[:, 0:3] + P[:, 6:9]
+    dx = (PHt @ (g0, g1, g2)).tolist()
+    K = PHt @ np.array(i).reshape(3, 3)
+    P_post = P - K @ PHt.T
+    P_post += P_post.T
+    P_post *= 0.5
+    return tuple(a + b for a, b in zip(x, dx, strict=True)), P_post, y0 * g0 + y1 * g1 + y2 * g2
 
 
-def hph_axes(P: Cov) -> tuple[float, float, float]:
-    """Diagonal of H P Hᵀ (var(p + b)) per axis."""
-    return tuple(c[0] + 2.0 * c[2] + c[7] for c in P)  # type: ignore[return-value]
+def hph_of(P: np.ndarray) -> list[list[float]]:
+    """H P Hᵀ (3×3) as nested float lists."""
+    return hmh(P).tolist()
 
 
-def update_axes(x: State, P: Cov, z: tuple[float, float, float], r_m2: tuple[float, float, float]
-                ) -> tuple[State, Cov, float]:
-    """Kalman update with z = p + b + ν, ν ~ N(0, diag r), per axis. Returns (x⁺, P⁺, NIS)."""
-    xs = list(x)
-    out = []
-    nis = 0.0
-    for i in range(3):
-        pp, pv, pb, pa, vv, vb, va, bb, ba, aa = P[i]
-        kp, kv, kb, ka = pp + pb, pv + vb, pb + bb, pa + ba  # P Hᵀ
-        s = kp + kb + r_m2[i]
-        y = z[i] - (x[i] + x[6 + i])
-        g = y / s
-        xs[i] += kp * g
-        xs[3 + i] += kv * g
-        xs[6 + i] += kb * g
-        xs[9 + i] += ka * g
-        nis += y * g
-        u = 1.0 / s
-        out.append((pp - kp * kp * u, pv - kp * kv * u, pb - kp * kb * u, pa - kp * ka * u,
-                    vv - kv * kv * u, vb - kv * kb * u, va - kv * ka * u,
-                    bb - kb * kb * u, ba - kb * ka * u, aa - ka * ka * u))
-    return tuple(xs), (out[0], out[1], out[2]), nis
+def reset_to_fix(x: State, P: np.ndarray, z: tuple[float, float, float], r_m2: tuple[float, float, float],
+                 bias_var_m2: float) -> tuple[State, np.ndarray]:
+    """Position and GNSS bias reset to the fix ``z`` (glitch recovery); velocity and the IMU
+    error states kept.
 
-
-def cov_to_matrix(P: Cov) -> np.ndarray:
-    """The 12×12 covariance of [p, v, b, a] (NED) from the per-axis form."""
-    M = np.zeros((N_STATE, N_STATE))
-    for i, c in enumerate(P):
-        idx = (i, 3 + i, 6 + i, 9 + i)
-        for value, (u, v) in zip(c, _PAIRS, strict=True):
-            M[idx[u], idx[v]] = M[idx[v], idx[u]] = value
-    return M
-
-
-def matrix_to_cov(M: np.ndarray) -> Cov:
-    """The per-axis form of a 12×12 covariance (cross-axis terms must be zero)."""
-    out = []
-    for i in range(3):
-        idx = (i, 3 + i, 6 + i, 9 + i)
-        out.append(tuple(float(M[idx[u], idx[v]]) for u, v in _PAIRS))
-    return (out[0], out[1], out[2])  # type: ignore[return-value]
-
-
-def initial_cov_axes(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = None) -> Cov:
-    return matrix_to_cov(initial_cov(cfg, r_m2))
-
-
-def reset_to_fix(x: State, P: Cov, z: tuple[float, float, float], r_m2: tuple[float, float, float],
-                 bias_var_m2: float) -> tuple[State, Cov]:
-    """Position and GNSS bias reset to the fix ``z`` (glitch recovery); velocity and the
-    acceleration bias kept.
-
-    The bias restarts at 0 with variance ``bias_var_m2``; since z = p + b + ν, the position is
-    z with variance R + var(b) and covariance −var(b) with the bias (H P Hᵀ = R: the reset
-    trusts the fix exactly as much as its R says). Velocity and acceleration bias keep their
-    (grown) covariance and lose their correlation with the reset states.
+    The GNSS bias restarts at 0 with variance ``bias_var_m2``; since z = p + b + ν, the position
+    is z with variance R + var(b) and covariance −var(b) with the bias (H P Hᵀ = R: the reset
+    trusts the fix exactly as much as its R says). Velocity and the IMU error states keep their
+    (grown) joint covariance and lose their correlation with the reset states.
     """
-    out = []
+    out = np.zeros((N_STATE, N_STATE))
+    out[np.ix_(_KEPT, _KEPT)] = P[np.ix_(_KEPT, _KEPT)]
     for i in range(3):
-        vv, va, aa = P[i][4], P[i][6], P[i][9]
-        out.append((r_m2[i] + bias_var_m2, 0.0, -bias_var_m2, 0.0, vv, 0.0, va, bias_var_m2, 0.0, aa))
-    return (z[0], z[1], z[2], x[3], x[4], x[5], 0.0, 0.0, 0.0, x[9], x[10], x[11]), (out[0], out[1], out[2])
+        out[i, i] = r_m2[i] + bias_var_m2
+        out[i, 6 + i] = out[6 + i, i] = -bias_var_m2
+        out[6 + i, 6 + i] = bias_var_m2
+    return (z[0], z[1], z[2], x[3], x[4], x[5], 0.0, 0.0, 0.0, *x[9:]), out
+
+
+_KEPT = np.r_[3:6, 9:N_STATE]  # what a reset keeps: velocity and the IMU error states
