@@ -59,7 +59,7 @@ results-ablation: $(STAMP)
 	$(ABLATE) --scenario realistic --rows $(ABL)/rows-realistic.yaml --out $(ABL)/realistic
 	$(ABLATE) --scenario mismatch --rows $(ABL)/rows-mismatch.yaml --out $(ABL)/mismatch
 	$(BIN)/python -m gcs_tools.evaluate.ablation severity --rows $(ABL)/rows-mismatch.yaml \
-	  --methods fixed-beta-best,second-order,hmm-trust --missions 10 --seeds 0 --out $(ABL)/severity
+	  --methods fixed-beta-best,second-order,hmm-trust --missions 10 --seeds 0-1 --out $(ABL)/severity
 	$(BIN)/python -m gcs_tools.evaluate.ablation report --out $(ABL)
 
 lint: $(STAMP)
