@@ -48,16 +48,18 @@ results: $(STAMP)
 # The ablation (docs/results/ablation/): every row tuned alike on the tuning set per scenario, the
 # campaign on the 10 reported profiles, and the mismatch-severity sweep. Cost: see its report.md.
 ABL = docs/results/ablation
-ABL_SEEDS ?= 0-1
-ABLATE = $(BIN)/beliefnav evaluate --missions 10 --seeds $(ABL_SEEDS) --workers 2 --no-progress
+ABL_SEEDS ?= 0-4
+ABL_TUNE_SEEDS ?= 1000-1002
+ABLATE = $(BIN)/beliefnav evaluate --missions 10 --seeds $(ABL_SEEDS) --workers 2 --no-progress \
+  --reference hmm-trust,second-order
 results-ablation: $(STAMP)
 	rm -f $(ABL)/tuning-realistic.jsonl $(ABL)/tuning-mismatch.jsonl
-	$(BIN)/python -m gcs_tools.evaluate.ablation tune --scenario realistic --seeds 1000 --out $(ABL)
-	$(BIN)/python -m gcs_tools.evaluate.ablation tune --scenario mismatch --seeds 1000 --out $(ABL)
+	$(BIN)/python -m gcs_tools.evaluate.ablation tune --scenario realistic --seeds $(ABL_TUNE_SEEDS) --out $(ABL)
+	$(BIN)/python -m gcs_tools.evaluate.ablation tune --scenario mismatch --seeds $(ABL_TUNE_SEEDS) --out $(ABL)
 	$(ABLATE) --scenario realistic --rows $(ABL)/rows-realistic.yaml --out $(ABL)/realistic
 	$(ABLATE) --scenario mismatch --rows $(ABL)/rows-mismatch.yaml --out $(ABL)/mismatch
 	$(BIN)/python -m gcs_tools.evaluate.ablation severity --rows $(ABL)/rows-mismatch.yaml \
-	  --methods fixed-beta-best,second-order,windowed-ml --missions 5 --seeds 0 --out $(ABL)/severity
+	  --methods fixed-beta-best,second-order,hmm-trust --missions 10 --seeds 0-1 --out $(ABL)/severity
 	$(BIN)/python -m gcs_tools.evaluate.ablation report --out $(ABL)
 
 lint: $(STAMP)

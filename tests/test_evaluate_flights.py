@@ -64,13 +64,19 @@ def test_paired_differences_match_flights_and_flag_significance():
             res.append(_result(p, s, "second-order", "second-order", base))
             res.append(_result(p, s, "fixed-beta-0.5", "fixed-beta", base + 0.2 + 0.01 * rng.normal()))
             res.append(_result(p, s, "same", "naive", base))
-    block = flights.build(res, ["second-order", "fixed-beta-0.5", "same"], "second-order")
+    block = flights.build(res, ["second-order", "fixed-beta-0.5", "same"], "second-order", ["fixed-beta-0.5"])
     d = block["paired_reference_minus_row"]["fixed-beta-0.5"]["est_h_median_m"]
     assert d["mean_difference"] == pytest.approx(-0.2, abs=0.01) and d["significant"]
     assert d["ci95"][1] < 0
     same = block["paired_reference_minus_row"]["same"]["est_h_median_m"]
     assert same["mean_difference"] == 0.0 and same["ci95"] == [0.0, 0.0] and not same["significant"]
     assert flights.best_row(block, ["second-order", "fixed-beta-0.5"]) == "second-order"
+    # a second reference: the same pairs with the sign flipped; every flight kept for recomputation
+    e = block["paired_by_reference"]["fixed-beta-0.5"]["second-order"]["est_h_median_m"]
+    assert e["mean_difference"] == pytest.approx(-d["mean_difference"], abs=1e-12)
+    assert block["paired_by_reference"]["second-order"] is block["paired_reference_minus_row"]
+    assert len(block["per_flight"]["same"]) == 24 and "| `same` | 24 |" in flights.markdown_paired(
+        block, "fixed-beta-0.5")
     assert "| `fixed-beta-0.5` | 24 |" in flights.markdown(block)
     # the ratio against the base row for the severity figure, with its paired interval
     r, lo, hi = ablation.ratio_ci(res, "fixed-beta-0.5", "second-order", np.random.default_rng(0), 500)
@@ -120,9 +126,12 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
             "--max-duration", "4", "--out", str(out), "--no-progress"]
     assert main([*args, "--scenario", "urban"]) == 2
     assert "unknown scenario 'urban'" in capsys.readouterr().err
-    assert main([*args, "--scenario", "mismatch"]) == 0
+    assert main([*args, "--scenario", "mismatch", "--reference", "fixed-beta-0.5,nope"]) == 2
+    assert "--reference 'nope': not among the rows" in capsys.readouterr().err
+    assert main([*args, "--scenario", "mismatch", "--reference", "fixed-beta-0.5,map-beta"]) == 0
     res = json.loads((out / "results.json").read_text())
     assert res["campaign"]["scenario"] == "mismatch" and res["campaign"]["reference"] == "fixed-beta-0.5"
+    assert set(res["flights"]["paired_by_reference"]) == {"fixed-beta-0.5", "map-beta"}
     block = res["flights"]
     assert set(block["rows"]) == {"fixed-beta-0.5", "map-beta"} and block["rows"]["map-beta"]["flights"] == 2
     assert block["rows"]["map-beta"]["nees_mean"]["mean"] > 0
@@ -140,5 +149,6 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     ablation.figure(sev, abl / "severity" / "fig_where_adaptation_pays.png")
     text = ablation.report(abl)
     assert "## `realistic`" in text and "`map-beta` = `map-beta`: defaults" in text
+    assert "Paired against `map-beta` (`map-beta` − row" in text and "| `fixed-beta-0.5` | 2 |" in text
     assert "| 1.0 | 0.900 [0.700, 1.000] | 1.500 |" in text
     assert (abl / "severity" / "fig_where_adaptation_pays.png").stat().st_size > 1000

@@ -1,4 +1,4 @@
-"""Hyper-parameters of the ablation plugins (``fixed-beta``, ``map-beta``, ``windowed-ml``).
+"""Hyper-parameters of the ablation plugins (``fixed-beta``, ``map-beta``, ``windowed-ml``, ``hmm-trust``).
 
 They live in their own mission section ``belief_plugins:`` (``--set belief_plugins.FIELD=V``), so
 the estimator's ``EstimatorConfig`` stays as it is. A plugin that needs them (or the mission's map)
@@ -8,6 +8,7 @@ from a mission calls (fly / evaluate, the companion's estimator node).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,6 +29,14 @@ class PluginConfig:
     window_beta_min: float = 0.0
     window_beta_max: float = 1.0
     window_gain: float = 0.5  # β ← β + gain · (β* − β) per fix (1 = jump to the window optimum)
+    # --- hmm-trust: posterior over discrete trust levels (hmm_trust.py)
+    hmm_levels: int = 3  # 2 = clean + degraded; 3 adds the outlier level
+    hmm_beta_clean: float = 1.0  # trust of the clean level: σ_b(β), R(β) of the trust model
+    hmm_beta_degraded: float = 0.0  # trust of the degraded level: σ_b(β), R(β) of the trust model
+    hmm_dwell_s: float = 2.0  # mean dwell time (s) of the clean and degraded levels
+    hmm_outlier_dwell_s: float = 0.25  # mean dwell time (s) of the outlier level (NLOS episodes, tails)
+    hmm_split_vertical: bool = False  # separate chains for the horizontal and the vertical axes
+    hmm_outlier_r_factor: float = 25.0  # R / R_nom of the outlier level (25: 5x the nominal std)
 
     def validate(self) -> None:
         for name in ("map_beta_open", "map_beta_canyon", "window_beta_min", "window_beta_max"):
@@ -39,6 +48,18 @@ class PluginConfig:
             raise ValueError("window_fixes: must be >= 1, window_grid >= 2")
         if self.window_beta_max <= self.window_beta_min:
             raise ValueError("window_beta_max: must exceed window_beta_min")
+        if self.hmm_levels not in (2, 3):
+            raise ValueError(f"hmm_levels: must be 2 or 3, got {self.hmm_levels!r}")
+        if not 0.0 <= self.hmm_beta_degraded < self.hmm_beta_clean <= 1.0:
+            raise ValueError("hmm_beta_degraded, hmm_beta_clean: need 0 <= degraded < clean <= 1, got "
+                             f"{self.hmm_beta_degraded!r}, {self.hmm_beta_clean!r}")
+        for name in ("hmm_dwell_s", "hmm_outlier_dwell_s"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0.0):
+                raise ValueError(f"{name}: must be a finite number of seconds > 0, "
+                                 f"got {getattr(self, name)!r}")
+        if not (math.isfinite(self.hmm_outlier_r_factor) and self.hmm_outlier_r_factor >= 1.0):
+            raise ValueError(f"hmm_outlier_r_factor: must be finite and >= 1, "
+                             f"got {self.hmm_outlier_r_factor!r}")
         if not 0.0 < self.window_gain <= 1.0:
             raise ValueError(f"window_gain: must be in (0, 1], got {self.window_gain!r}")
 

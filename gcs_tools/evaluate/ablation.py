@@ -44,20 +44,33 @@ from gcs_tools.evaluate.campaign import Row
 SCORE = "est_h_median_m"
 SIGMA_ACC = "estimator.sigma_acc_m_s2"
 SIGMA_ACC_VALUES = (0.1, 0.2, 0.4)
-# Each method's own hyper-parameters: (row label, method, {override key: values}), 2-4 points each
-# (the shared machine's budget: 18 points × 4 flights per scenario).
-SWEEPS: tuple[tuple[str, str, dict[str, tuple[Any, ...]]], ...] = (
+GATE_OFF = ("estimator.gnss_gate_sigma", 1.0e3)  # a 1000σ gate: no fix is ever rejected
+_HMM = "belief_plugins.hmm_"
+# Each method's own hyper-parameters: (row label, method, axes), where axes is either
+# {override key: values} (their cartesian product) or an explicit tuple of points. 2-8 points each.
+SWEEPS: tuple[tuple[str, str, Any], ...] = (
     ("naive", "naive", {"estimator.beta_fixed": (0.5, 1.0)}),
     ("fixed-beta-best", "fixed-beta", {"estimator.beta_fixed": (0.3, 0.5, 0.7, 0.9)}),
     ("map-beta", "map-beta", {"belief_plugins.map_beta_canyon": (0.2, 0.5)}),
     ("first-order", "first-order", {"estimator.eta_first_order": (0.15, 0.5, 1.5)}),
     ("second-order", "second-order", {"estimator.eta": (0.15, 0.5, 1.5)}),
-    ("vbakf", "vbakf", {"estimator.vb_forgetting": (0.95, 0.98)}),
+    ("second-order-gate-off", "second-order", {"estimator.eta": (0.15, 0.5, 1.5),
+                                               GATE_OFF[0]: (GATE_OFF[1],)}),
+    ("adaptive", "adaptive", {"estimator.beta_fixed": (0.5, 1.0),
+                              "estimator.adaptive_window_fixes": (20, 60)}),
+    ("vbakf", "vbakf", {"estimator.beta_fixed": (0.5, 1.0), "estimator.vb_forgetting": (0.95, 0.98)}),
     ("windowed-ml", "windowed-ml", {"belief_plugins.window_fixes": (20, 60)}),
+    # hmm-trust: the (clean, degraded) trust pair, the outlier level's R factor and the dwell time
+    ("hmm-trust", "hmm-trust", tuple(
+        ((_HMM + "beta_clean", c), (_HMM + "beta_degraded", d), (_HMM + "outlier_r_factor", o),
+         (_HMM + "dwell_s", w))
+        for c, d, o, w in ((1.0, 0.0, 25.0, 2.0), (0.8, 0.2, 25.0, 2.0), (0.7, 0.3, 25.0, 2.0),
+                           (0.6, 0.4, 25.0, 2.0), (0.7, 0.3, 100.0, 2.0), (0.6, 0.4, 100.0, 2.0),
+                           (0.7, 0.3, 25.0, 5.0), (0.6, 0.4, 25.0, 5.0)))),
 )
-ROW_ORDER = ("naive", "fixed-beta-0.5", "fixed-beta-best", "map-beta", "first-order", "second-order", "vbakf",
-             "windowed-ml")
-BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta")
+ROW_ORDER = ("naive", "fixed-beta-0.5", "fixed-beta-best", "map-beta", "first-order", "second-order",
+             "second-order-gate-off", "adaptive", "vbakf", "windowed-ml", "hmm-trust")
+BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta", "hmm-trust")
 SEVERITIES = (0.0, 1.0, 2.0)
 
 
@@ -73,9 +86,12 @@ def severity_overrides(s: float) -> tuple[tuple[str, Any], ...]:
             ("gnss.gamma_canyon_s", 3.0 + 7.0 * s), ("gnss.heavy_tail_dof", 2.0 + 1.0 / s))
 
 
-def _points(axes: dict[str, tuple[Any, ...]]) -> list[tuple[tuple[str, Any], ...]]:
+def _points(axes: Any) -> list[tuple[tuple[str, Any], ...]]:
+    """The points of a sweep: an explicit tuple of points, or the product of a {key: values} map."""
     import itertools
 
+    if not isinstance(axes, dict):
+        return [tuple(p) for p in axes]
     keys = list(axes)
     return [tuple(zip(keys, values, strict=True)) for values in itertools.product(*(axes[k] for k in keys))]
 
@@ -241,6 +257,7 @@ def report(out: Path) -> str:
                   f"{c['workers']} workers, {c.get('flight_cpu_s', float('nan')):.0f} s of flight CPU "
                   f"(full report: [{scenario}/report.md]({scenario}/report.md)).", "",
                   flights.markdown(res["flights"]),
+                  *_more_tables(res["flights"]),
                   "Rows (hyper-parameters chosen on the tuning set, "
                   f"[rows-{scenario}.yaml](rows-{scenario}.yaml), sweep records "
                   f"[tuning-{scenario}.jsonl](tuning-{scenario}.jsonl)):", ""]
@@ -268,6 +285,16 @@ def report(out: Path) -> str:
     text = "\n".join(parts) + "\n"
     (out / "report.md").write_text(text, encoding="utf-8")
     return text
+
+
+def _more_tables(block: dict[str, Any]) -> list[str]:
+    """A paired table against each further reference row of the campaign (``--reference A,B``)."""
+    out: list[str] = []
+    for ref in block.get("paired_by_reference", {}):
+        if ref != block["reference"]:
+            out += [f"Paired against `{ref}` (`{ref}` − row; * = interval excludes 0):", "",
+                    flights.markdown_paired(block, ref)]
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:

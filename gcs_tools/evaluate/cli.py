@@ -42,9 +42,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(each method with its own hyper-parameters)")
     parser.add_argument("--scenario", default=None,
                         help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
-    parser.add_argument("--reference", default=None, metavar="ROW",
+    parser.add_argument("--reference", default=None, metavar="ROW[,ROW...]",
                         help="row the paired per-flight differences are taken against "
-                             "(default second-order if present, else the first row)")
+                             "(default second-order if present, else the first row); more rows after "
+                             "a comma get their own paired table in results.json")
     parser.add_argument("--seeds", default="0", help="seeds, e.g. 0-49 or 0,3,7 (default: 0)")
     parser.add_argument("--workers", type=int, default=1, help="local worker processes (default: 1)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -113,9 +114,12 @@ def run(args: argparse.Namespace) -> int:
     for row in rows:
         tuning.check(campaign.mission(args.mission, overrides + row.overrides, args.scenario))
     methods = tuple(row.label for row in rows)
-    reference = args.reference or ("second-order" if "second-order" in methods else methods[0])
-    if reference not in methods:
-        raise UserError(f"--reference {reference!r}: not among the rows ({', '.join(methods)})")
+    references = [r.strip() for r in (args.reference or "").split(",") if r.strip()] or [
+        "second-order" if "second-order" in methods else methods[0]]
+    for ref in references:
+        if ref not in methods:
+            raise UserError(f"--reference {ref!r}: not among the rows ({', '.join(methods)})")
+    reference = references[0]
     seeds = campaign.parse_seeds(args.seeds)
     jobs = campaign.grid_rows(args.mission, profiles, rows, seeds, args.max_duration_s, overrides,
                               args.scenario)
@@ -127,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
         "max_duration_s": args.max_duration_s, "flights": len(jobs), "workers": args.workers,
         "scheduler": args.scheduler, "wall_s": wall_s, "overrides": dict(overrides),
         "parameters": parameters(mission), "scenario": mission.scenario, "reference": reference,
+        "more_references": references[1:],
         "rows": {row.label: {"method": row.method, "overrides": dict(row.overrides)} for row in rows},
         "flight_cpu_s": sum(r.flight.get("cpu_s", 0.0) for r in results),
     }

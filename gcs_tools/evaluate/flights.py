@@ -60,17 +60,24 @@ def paired(results: Sequence[JobResult], ref: str, other: str, rng: np.random.Ge
     return out
 
 
-def build(results: Sequence[JobResult], rows: Sequence[str], reference: str) -> dict[str, Any]:
-    """The ``flights`` block of results.json: per row, and paired ``reference − row`` for every row."""
+def build(results: Sequence[JobResult], rows: Sequence[str], reference: str,
+          more_references: Sequence[str] = ()) -> dict[str, Any]:
+    """The ``flights`` block of results.json: per row, paired ``reference − row`` for every row (and
+    against each of ``more_references`` in ``paired_by_reference``), and every flight's statistics."""
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     per_row = {row: row_entry(results, row, rng) for row in rows}
     pairs = {row: paired(results, reference, row, rng) for row in rows if row != reference}
+    by_ref = {ref: {row: paired(results, ref, row, rng) for row in rows if row != ref}
+              for ref in more_references if ref != reference}
     return {
         "unit": "flight (profile x seed); row value = mean over flights of the per-flight statistic",
         "bootstrap": {"seed": BOOTSTRAP_SEED, "resamples": 2000, "strata": "profile", "resampled": "seeds"},
         "reference": reference,
         "rows": per_row,
         "paired_reference_minus_row": pairs,
+        "paired_by_reference": {reference: pairs, **by_ref},
+        "per_flight": {row: {f"{k[0]}/{k[1]}": {key: v.get(key) for key in KEYS}
+                             for k, v in sorted(table_of(results, row).items())} for row in rows},
     }
 
 
@@ -95,11 +102,28 @@ def markdown(block: dict[str, Any]) -> str:
             if p is None:
                 cells.append("—")
                 continue
-            d = p[key]
-            star = " *" if d["significant"] else ""
-            cells.append(f"{d['mean_difference']:+.3f} [{d['ci95'][0]:+.3f}, {d['ci95'][1]:+.3f}]{star}")
+            cells.append(_diff(p[key]))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def markdown_paired(block: dict[str, Any], ref: str) -> str:
+    """Table: ``ref − row`` per matched flight for every other row (horizontal and 3-D)."""
+    pairs = block.get("paired_by_reference", {}).get(ref)
+    if pairs is None:
+        return ""
+    head = ["row", "pairs", f"`{ref}` − row, horiz. [m]", "ratio", "3-D [m]"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for row, p in pairs.items():
+        h, d = p["est_h_median_m"], p["est_3d_median_m"]
+        cells = [f"`{row}`", str(p["pairs"]), _diff(h), f"{h['ratio_of_means']:.3f}", _diff(d)]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _diff(d: dict[str, Any]) -> str:
+    star = " *" if d["significant"] else ""
+    return f"{d['mean_difference']:+.3f} [{d['ci95'][0]:+.3f}, {d['ci95'][1]:+.3f}]{star}"
 
 
 def _ci(e: dict[str, Any]) -> str:

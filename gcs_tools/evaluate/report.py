@@ -59,7 +59,7 @@ def write(
     res = aggregate.build_results(results, methods, seeds, campaign)
     if results and all(r.flight for r in results):
         reference = campaign.get("reference") or ("second-order" if "second-order" in methods else methods[0])
-        res["flights"] = flights.build(results, methods, reference)
+        res["flights"] = flights.build(results, methods, reference, campaign.get("more_references", ()))
     figures = plots.draw_all(results, methods, mission, profiles, seeds[0], out_dir)
     res["figures"] = figures
     (out_dir / "results.json").write_text(json.dumps(_finite_or_null(res), indent=2) + "\n", encoding="utf-8")
