@@ -8,6 +8,7 @@ it; truth is returned beside the inputs and never fed to the filter.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -117,3 +118,17 @@ def multipath_stream(rng: np.random.Generator, cfg: EstimatorConfig, segments: l
     z = p[idx] + b[idx] + noise * rng.standard_normal((len(idx), 3))
     x = np.hstack([p, v, b, np.zeros((n, model.N_STATE - 9))])
     return Stream(t_us, a_meas, x, idx, z, std[idx])
+
+
+def drive(stream: Stream, engine: Any, arrival_us: np.ndarray) -> Any:
+    """Push the IMU in time order into a ``FusionEngine`` and each fix once the IMU clock reaches
+    its arrival time (``arrival_us[i]`` for fix i; equal to ``stream.fix_t_us`` = in order)."""
+    order = np.argsort(arrival_us, kind="stable")
+    j = 0
+    for k, t in enumerate(stream.t_us.tolist()):
+        engine.push_acc(t, *stream.a_ned_m_s2[k].tolist())
+        while j < len(order) and arrival_us[order[j]] <= t:
+            i = order[j]
+            engine.push_fix(int(stream.fix_t_us[i]), stream.z_ned_m[i])
+            j += 1
+    return engine

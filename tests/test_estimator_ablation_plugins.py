@@ -13,21 +13,9 @@ from companion.estimator.map_beta import scheduled_beta
 from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
 from companion.estimator.windowed_ml import window_nll
 from companion.mission import ConfigError, load_mission
-from tests.estimator_streams import multipath_stream
+from tests.estimator_streams import drive, multipath_stream
 
 CFG = EstimatorConfig()
-
-
-def _run(stream, engine: FusionEngine, arrival_us: np.ndarray) -> FusionEngine:
-    order = np.argsort(arrival_us, kind="stable")
-    j = 0
-    for k, t in enumerate(stream.t_us.tolist()):
-        engine.push_acc(t, *stream.a_ned_m_s2[k].tolist())
-        while j < len(order) and arrival_us[order[j]] <= t:
-            i = order[j]
-            engine.push_fix(int(stream.fix_t_us[i]), stream.z_ned_m[i])
-            j += 1
-    return engine
 
 
 @pytest.fixture(scope="module")
@@ -41,11 +29,11 @@ def test_registered():
 
 def test_fixed_beta_at_full_trust_is_naive_exactly(stream):
     """β = 1: R(1) = R_nom and σ_b(1) — the naive filter, bit for bit."""
-    a = _run(stream, FusionEngine(CFG, "fixed-beta"), stream.fix_t_us.copy()).snapshot()
-    b = _run(stream, FusionEngine(CFG, "naive"), stream.fix_t_us.copy()).snapshot()
+    a = drive(stream, FusionEngine(CFG, "fixed-beta"), stream.fix_t_us.copy()).snapshot()
+    b = drive(stream, FusionEngine(CFG, "naive"), stream.fix_t_us.copy()).snapshot()
     assert a.x == b.x and a.var == b.var
     half = dataclasses.replace(CFG, beta_fixed=0.5)
-    c = _run(stream, FusionEngine(half, "fixed-beta"), stream.fix_t_us.copy())
+    c = drive(stream, FusionEngine(half, "fixed-beta"), stream.fix_t_us.copy())
     assert c.snapshot().beta == 0.5 and c.snapshot().x != a.x
 
 
@@ -66,7 +54,7 @@ def _mission_stream_engine(method: str, plugin_section: dict | None = None) -> t
 
 def test_map_beta_follows_the_clearance_of_the_previous_posterior(stream):
     engine, m = _mission_stream_engine("map-beta", {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0})
-    _run(stream, engine, stream.fix_t_us.copy())
+    drive(stream, engine, stream.fix_t_us.copy())
     cfg = mission_plugin_config(m)
     fusions = engine.fusions
     assert len(fusions) > 20
@@ -78,7 +66,7 @@ def test_map_beta_follows_the_clearance_of_the_previous_posterior(stream):
 
 
 def test_map_beta_without_a_map_is_open_sky(stream):
-    e = _run(stream, FusionEngine(CFG, "map-beta"), stream.fix_t_us.copy())
+    e = drive(stream, FusionEngine(CFG, "map-beta"), stream.fix_t_us.copy())
     assert {f.beta for f in e.fusions} == {PluginConfig().map_beta_open}
 
 
@@ -87,9 +75,9 @@ def test_out_of_order_equals_in_order(stream, method):
     rng = np.random.default_rng(5)
     delay_us = rng.uniform(0.0, 1.0e6, size=len(stream.fix_t_us)).astype(np.int64)
     delay_us[0] = 0
-    late = _run(stream, _mission_stream_engine(method, {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0})[0],
+    late = drive(stream, _mission_stream_engine(method, {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0})[0],
                 np.minimum(stream.fix_t_us + delay_us, stream.t_us[-1]))
-    ref = _run(stream, _mission_stream_engine(method, {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0})[0],
+    ref = drive(stream, _mission_stream_engine(method, {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0})[0],
                stream.fix_t_us.copy())
     assert late.counts["gnss_out_of_order"] > 20
     a, b = late.snapshot(), ref.snapshot()

@@ -6,23 +6,14 @@ import pytest
 from companion.estimator import METHODS
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
-from tests.estimator_streams import multipath_stream
+from tests.estimator_streams import drive, multipath_stream
 
 CFG = EstimatorConfig()
 
 
 def _run(stream, method: str, arrival_us: np.ndarray, cfg: EstimatorConfig = CFG) -> FusionEngine:
     """Push IMU in time order and each fix once the IMU clock reaches its arrival time."""
-    e = FusionEngine(cfg, method)
-    order = np.argsort(arrival_us, kind="stable")
-    j = 0
-    for k, t in enumerate(stream.t_us.tolist()):
-        e.push_acc(t, *stream.a_ned_m_s2[k].tolist())
-        while j < len(order) and arrival_us[order[j]] <= t:
-            i = order[j]
-            e.push_fix(int(stream.fix_t_us[i]), stream.z_ned_m[i])
-            j += 1
-    return e
+    return drive(stream, FusionEngine(cfg, method), arrival_us)
 
 
 @pytest.fixture(scope="module")

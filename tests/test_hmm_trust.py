@@ -21,7 +21,7 @@ from companion.estimator.hmm_trust import (
 )
 from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
 from companion.mission import ConfigError, load_mission
-from tests.estimator_streams import multipath_stream
+from tests.estimator_streams import drive, multipath_stream
 
 CFG = EstimatorConfig()
 T_S = 0.05
@@ -191,17 +191,7 @@ def test_out_of_order_equals_in_order():
     m = load_mission("test")
 
     def run(arrival_us):
-        nav = bind(Navigator(CFG, method="hmm-trust", frame=m.frame), m)
-        e = nav.engine
-        order = np.argsort(arrival_us, kind="stable")
-        j = 0
-        for k, t in enumerate(stream.t_us.tolist()):
-            e.push_acc(t, *stream.a_ned_m_s2[k].tolist())
-            while j < len(order) and arrival_us[order[j]] <= t:
-                i = order[j]
-                e.push_fix(int(stream.fix_t_us[i]), stream.z_ned_m[i])
-                j += 1
-        return e
+        return drive(stream, bind(Navigator(CFG, method="hmm-trust", frame=m.frame), m).engine, arrival_us)
 
     delay = np.random.default_rng(5).uniform(0.0, 1.0e6, size=len(stream.fix_t_us)).astype(np.int64)
     delay[0] = 0
