@@ -6,7 +6,7 @@ that acceleration with R (its accelerometer bias is in body axes), converts fixe
 from geodetic to local NED (``LocalNedFrame``; with ``frame=None`` the first good fix is home),
 gates bad input with counted rejections and feeds ``FusionEngine``. No I/O.
 
-The per-sample IMU path is plain float arithmetic; ``push_imu_batch`` is a vectorised path for
+The per-sample IMU path runs in the C core (``_core.c``); ``push_imu_batch`` is a vectorised path for
 recorded or simulated blocks that gives the same result as pushing attitude + IMU one by one.
 """
 
@@ -22,6 +22,7 @@ from pymap3d.ellipsoid import Ellipsoid
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
 from companion.mission.schema import ConfigError
@@ -34,8 +35,9 @@ def rotation_scaled(w: Any, x: Any, y: Any, z: Any, s: Any) -> Rot:
     """Row-major R_ned_frd of the quaternion (w, x, y, z) with ``s = 2 / |q|²``; floats or arrays.
 
     Every term of R is quadratic in q, so the normalisation is folded into ``s``: no square root.
-    Equal to ``rotation_ned_frd`` up to rounding (tested). Computed once per attitude sample; each
-    IMU sample then costs R f̃ (9 products).
+    Equal to ``rotation_ned_frd`` up to rounding (tested). The per-sample path computes the same
+    expression in the core (``_core.rotation_q``, the same bits: tested); this form serves the
+    vectorised ``push_imu_batch``.
     """
     xs, ys, zs = x * s, y * s, z * s
     wx, wy, wz = w * xs, w * ys, w * zs
@@ -110,7 +112,7 @@ class Navigator:
         self._frozen_us = int(round(self.cfg.gnss_frozen_s * 1e6))
         self.engine = FusionEngine(self.cfg, method, self._counts)
         self._rot: Rot | None = None  # the latest attitude as R_ned_frd (row-major)
-        self._push_acc = self.engine.push_acc
+        self._push_frd = self.engine.push_frd
         self._last: tuple[Any, NavEstimate] | None = None
         self._g = self.cfg.gravity_m_s2
 
@@ -123,17 +125,13 @@ class Navigator:
             if r is None:
                 self._counts["imu_rejected_no_attitude"] += 1
                 return
-            fx, fy, fz = sample.acc_frd_m_s2.tolist()  # type: ignore[union-attr]
-            r0, r1, r2, r3, r4, r5, r6, r7, r8 = r
-            self._push_acc(sample.t_us, r0 * fx + r1 * fy + r2 * fz,  # type: ignore[union-attr]
-                           r3 * fx + r4 * fy + r5 * fz, r6 * fx + r7 * fy + r8 * fz + self._g, r)
+            self._push_frd(sample.t_us, sample.acc_frd_m_s2, r)  # type: ignore[union-attr]
         elif kind is AttitudeSample:
-            w, x, y, z = sample.q_ned_frd.tolist()  # type: ignore[union-attr]
-            n2 = w * w + x * x + y * y + z * z
-            if not (math.isfinite(n2) and n2 > 1e-12):
+            r = rotation_q(sample.q_ned_frd)  # type: ignore[union-attr]
+            if r is None:  # |q|² not finite or ≈ 0
                 self._counts["attitude_rejected_nonfinite"] += 1
                 return
-            self._rot = rotation_scaled(w, x, y, z, 2.0 / n2)
+            self._rot = r
             self._counts["attitude_used"] += 1
         elif kind is GnssFix:
             self._push_fix(sample)  # type: ignore[arg-type]
@@ -175,7 +173,7 @@ class Navigator:
             self._counts["gnss_rejected_frozen"] += 1
             return
         if self.frame is None:
-            if not self.engine.imu.rows:  # home is set by a fix the filter can start from
+            if not len(self.engine.imu):  # home is set by a fix the filter can start from
                 self._counts["gnss_rejected_before_imu"] += 1
                 return
             self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
@@ -234,9 +232,7 @@ class Navigator:
             return None
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
-        x = snap.x
-        # one array for the state and the variances, handed out as views (one allocation)
-        a = np.array((x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], *snap.var))
+        a = snap.out  # one array for the state and the variances, handed out as views (one allocation)
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method,
                           snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets)
         self._last = (snap, est)

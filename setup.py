@@ -1,0 +1,16 @@
+"""Build of the estimator's C core (companion/estimator/_core.c); everything else is in pyproject.toml.
+
+-ffp-contract=off: no fused multiply-add, so the core computes the same bits as the float
+expressions it replaced (docs/estimator.md, Speed)."""
+
+from setuptools import Extension, setup
+
+setup(
+    ext_modules=[
+        Extension(
+            "companion.estimator._core",
+            ["companion/estimator/_core.c"],
+            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
+        )
+    ]
+)
