@@ -118,21 +118,24 @@ def test_history_trim_keeps_every_integral_after_the_cut_and_grows_past_its_buff
         core.integrals(core.first_t_us - 1)
 
 
-def test_gated_push_codes_and_the_frd_path():
+def test_gated_push_counts_and_the_frd_path():
     core = ImuHistory(0.05)
     r = _rot9(np.random.default_rng(3))
     f = np.array([0.3, -0.2, -9.7])
-    assert core.push_frd(0, f, r, 9.80665) == 0
+    assert core.push_frd(0, f, r, 9.80665) is False
     fx, fy, fz = f.tolist()
     expected = (r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
                 r[6] * fx + r[7] * fy + r[8] * fz + 9.80665)  # the navigator's float expression
     assert core.rows[0][1:4] == expected
-    assert core.push(0, 0.0, 0.0, 0.0, r) == 3  # not later than the last sample
-    assert core.push(5000, math.nan, 0.0, 0.0, r) == 2
-    assert core.push_frd(5000, np.array([math.inf, 0.0, 0.0]), r, 9.8) == 2
-    assert core.push(200_000, 0.0, 0.0, 0.0, r) == 1  # a gap: held, then coasting
-    assert core.push_frd(205_000, f[::-1].copy(), list(r), 9.8) == 0  # lists and any 3-array work
-    assert len(core) == 4
+    core.push(0, 0.0, 0.0, 0.0, r)  # not later than the last sample
+    core.push(5000, math.nan, 0.0, 0.0, r)
+    core.push_frd(5000, np.array([math.inf, 0.0, 0.0]), r, 9.8)
+    core.push(200_000, 0.0, 0.0, 0.0, r)  # a gap: held, then coasting (a virtual sample)
+    core.trim_len = 4
+    assert core.push_frd(205_000, f[::-1].copy(), list(r), 9.8) is False  # lists and any 3-array work
+    assert len(core) == 4 and core.t_us == [0, 50_000, 200_000, 205_000]
+    assert core.counts == (3, 1, 2, 1)  # used, gaps, not finite, time not increasing
+    assert core.push(210_000, 0.0, 0.0, 0.0, r) is True  # longer than trim_len: time to trim
     with pytest.raises(ValueError):
         core.push(300_000, 0.0, 0.0, 0.0, r[:8])
 

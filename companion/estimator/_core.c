@@ -13,6 +13,7 @@
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <structmember.h>
 #include <math.h>
 #include <string.h>
 
@@ -478,6 +479,8 @@ typedef struct {
     long long *t;     /* sample times (us) */
     double *rows;     /* ROW doubles per sample: t_s, a (3), S1 (3), S2 (3), R (9), M1 (9), M2 (9) */
     Py_ssize_t start, n, cap;
+    Py_ssize_t trim_len;  /* push returns 1 once the history is longer (the engine trims) */
+    long long n_used, n_gaps, n_nonfinite, n_backwards;  /* samples pushed, by outcome */
 } History;
 
 static int hist_init(History *self, PyObject *args, PyObject *kw) {
@@ -488,6 +491,8 @@ static int hist_init(History *self, PyObject *args, PyObject *kw) {
     self->hold_us = (long long)nearbyint(hold * 1e6);  /* round half to even, as Python's round */
     self->started = 0;
     self->start = self->n = 0;
+    self->trim_len = PY_SSIZE_T_MAX;
+    self->n_used = self->n_gaps = self->n_nonfinite = self->n_backwards = 0;
     if (!self->t) {
         self->cap = 1024;
         self->t = PyMem_Malloc(sizeof(long long) * self->cap);
@@ -593,17 +598,26 @@ static PyObject *hist_append(History *self, PyObject *const *args, Py_ssize_t na
     return PyBool_FromLong(g);
 }
 
-/* the engine's per-sample path with its gates: 0 used, 1 used after a gap, 2 not finite,
- * 3 not later than the last sample */
+/* the engine's per-sample path with its gates, counted (``counts``): not finite, not later
+ * than the last sample, used (after a gap); returns True when the history is longer than
+ * ``trim_len`` (time to trim), else False */
 static PyObject *push_checked(History *self, long long t, double ax, double ay, double az, const double *rot) {
-    if (!(isfinite(ax) && isfinite(ay) && isfinite(az))) return PyLong_FromLong(2);
-    if (self->n && t <= HT(self, self->n - 1)) return PyLong_FromLong(3);
+    if (!(isfinite(ax) && isfinite(ay) && isfinite(az))) {
+        self->n_nonfinite++;
+        Py_RETURN_FALSE;
+    }
+    if (self->n && t <= HT(self, self->n - 1)) {
+        self->n_backwards++;
+        Py_RETURN_FALSE;
+    }
     int g = hist_append_c(self, t, ax, ay, az, rot);
     if (g < 0) return NULL;
-    return PyLong_FromLong(g);
+    self->n_used++;
+    self->n_gaps += g;
+    return PyBool_FromLong(self->n > self->trim_len);
 }
 
-/* push(t_us, ax, ay, az, rot) -> 0 used, 1 used after a gap, 2 not finite, 3 time not increasing */
+/* push(t_us, ax, ay, az, rot) -> time to trim (push_checked) */
 static PyObject *hist_push(History *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 5) { PyErr_SetString(PyExc_TypeError, "push(t_us, ax, ay, az, rot)"); return NULL; }
     long long t = PyLong_AsLongLong(args[0]);
@@ -653,7 +667,10 @@ static PyObject *hist_append_batch(History *self, PyObject *const *args, Py_ssiz
         for (k = 0; k < n; k++)
             if (hist_append_c(self, t[k], a[3 * k], a[3 * k + 1], a[3 * k + 2],
                               have_rot ? (const double *)br.buf + 9 * k : IDENT9) < 0) break;
-        if (k == n) res = Py_NewRef(Py_None);
+        if (k == n) {
+            self->n_used += n;
+            res = Py_NewRef(Py_None);
+        }
     }
     PyBuffer_Release(&bt);
     PyBuffer_Release(&ba);
@@ -769,11 +786,20 @@ static PyObject *hist_get_hold(History *self, void *c) { return PyFloat_FromDoub
 
 static Py_ssize_t hist_len(History *self) { return self->n; }
 
+static PyObject *hist_get_counts(History *self, void *c) {
+    return Py_BuildValue("(LLLL)", self->n_used, self->n_gaps, self->n_nonfinite, self->n_backwards);
+}
+
+static PyMemberDef hist_members[] = {
+    {"trim_len", T_PYSSIZET, offsetof(History, trim_len), 0, "push returns True above this many samples"},
+    {NULL, 0, 0, 0, NULL},
+};
+
 static PyMethodDef hist_methods[] = {
     {"append", (PyCFunction)(void (*)(void))hist_append, METH_FASTCALL,
      "append(t_us, ax, ay, az, rot=identity) -> gap: add a sample (the caller gates)"},
     {"push", (PyCFunction)(void (*)(void))hist_push, METH_FASTCALL,
-     "push(t_us, ax, ay, az, rot) -> 0 used, 1 used after a gap, 2 not finite, 3 time not increasing"},
+     "push(t_us, ax, ay, az, rot) -> time to trim: a gated, counted sample"},
     {"push_frd", (PyCFunction)(void (*)(void))hist_push_frd, METH_FASTCALL,
      "push_frd(t_us, f_frd, rot, g): push with the NED acceleration R f + [0, 0, g]"},
     {"append_batch", (PyCFunction)(void (*)(void))hist_append_batch, METH_FASTCALL,
@@ -791,6 +817,7 @@ static PyGetSetDef hist_getset[] = {
     {"last_t_us", (getter)hist_get_last, NULL, "newest sample time", NULL},
     {"t0_us", (getter)hist_get_t0, NULL, "time of the first sample ever (None before)", NULL},
     {"hold_max_s", (getter)hist_get_hold, NULL, "longest hold of an input", NULL},
+    {"counts", (getter)hist_get_counts, NULL, "samples pushed: (used, gaps, not finite, time not increasing)", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 
@@ -807,6 +834,7 @@ static PyTypeObject HistoryType = {
     .tp_dealloc = (destructor)hist_dealloc,
     .tp_methods = hist_methods,
     .tp_getset = hist_getset,
+    .tp_members = hist_members,
     .tp_as_sequence = &hist_seq,
 };
 

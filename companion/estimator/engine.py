@@ -39,8 +39,8 @@ from companion.estimator.history import ImuHistory, Integrals, finite3
 from companion.estimator.model import IDENTITY9, Rot9
 
 _TRIM_EVERY = 256  # IMU samples between two trims of the histories
-# what ``ImuHistory.push``/``push_frd`` return for a sample not used: the counter it goes to
-_IMU_REJECTED = {2: "imu_rejected_nonfinite", 3: "imu_rejected_time_backwards"}
+# the IMU counters (``ImuHistory.counts``, counted by the core), in that order
+_IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 
 
 class Fusion(NamedTuple):
@@ -94,6 +94,12 @@ class Snapshot(NamedTuple):
 class FusionEngine:
     """Belief-adaptive EKF on NED inputs; counts every rejection in ``counts``."""
 
+    @property
+    def counts(self) -> dict[str, int]:
+        """Samples used and rejected by reason (the dict given to the constructor, updated)."""
+        self._counts.update(zip(_IMU_COUNTS, self.imu.counts, strict=True))
+        return self._counts
+
     def __init__(self, cfg: EstimatorConfig, method: str, counts: dict[str, int] | None = None) -> None:
         self.cfg = cfg
         self.method_name = method
@@ -102,15 +108,16 @@ class FusionEngine:
         # R-learners (adaptive, vbakf) do not: they estimate the noise of the fixes fused, as the
         # autopilot EKFs keep gated fixes out of everything.
         self._learn_rejected = bool(getattr(self.method, "learns_from_rejected", False))
-        self.counts = counts if counts is not None else {}
+        self._counts = counts if counts is not None else {}
         for name in (
             "imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
             "gnss_fused", "gnss_refused", "gnss_out_of_order", "gnss_rejected_before_imu",
             "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
             "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets", "gnss_offsets",
         ):
-            self.counts.setdefault(name, 0)
+            self._counts.setdefault(name, 0)
         self.imu = ImuHistory(cfg.imu_hold_max_s)
+        self.imu.trim_len = _TRIM_EVERY
         self.fusions: list[Fusion] = []
         self._fusion_t: list[int] = []
         self._pending: list[tuple[int, Vec3, Vec3]] = []  # (t, z, R_nom) waiting for the IMU, by time
@@ -130,7 +137,6 @@ class FusionEngine:
         self._offset_max_us = int(round(cfg.gnss_offset_max_s * 1e6))
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
-        self._trim_len = _TRIM_EVERY
         self._cache: tuple[Fusion, int, Snapshot] | None = None
         self._g = cfg.gravity_m_s2
 
@@ -138,26 +144,23 @@ class FusionEngine:
     def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
         """One NED acceleration (m/s², gravity-compensated: R f̃ + g) at ``t_us``, with the
         rotation R_ned_frd (row-major 9-tuple) it was measured with (the body-frame bias state
-        needs it; identity = the body axes are NED)."""
-        self._imu_used(self.imu.push(t_us, ax, ay, az, rot), t_us)
+        needs it; identity = the body axes are NED). Gated and counted by the core
+        (``ImuHistory.push``)."""
+        if self.imu.push(t_us, ax, ay, az, rot) or self._pending:
+            self._imu_pushed()
 
     def push_frd(self, t_us: int, f_frd_m_s2: Any, rot: Rot9) -> None:
         """One body specific force f̃ (FRD, m/s²; 3 numbers or an array) measured with the attitude
         R_ned_frd: ``push_acc`` of R f̃ + [0, 0, g] (computed by the core, the navigator's path)."""
-        self._imu_used(self.imu.push_frd(t_us, f_frd_m_s2, rot, self._g), t_us)
+        if self.imu.push_frd(t_us, f_frd_m_s2, rot, self._g) or self._pending:
+            self._imu_pushed()
 
-    def _imu_used(self, code: int, t_us: int) -> None:
-        """Count what ``ImuHistory.push`` did; fuse the fixes the IMU has now passed."""
-        c = self.counts
-        if code:
-            if code > 1:
-                c[_IMU_REJECTED[code]] += 1
-                return
-            c["imu_gaps"] += 1
-        c["imu_used"] += 1
-        if self._pending and self._pending[0][0] <= t_us:
+    def _imu_pushed(self) -> None:
+        """Fuse the fixes the IMU has now passed; trim when the history is due."""
+        imu = self.imu
+        if self._pending and self._pending[0][0] <= imu.last_t_us:
             self._flush_pending()
-        if len(self.imu) > self._trim_len:
+        if len(imu) > imu.trim_len:
             self._trim()
 
     def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
@@ -181,11 +184,7 @@ class FusionEngine:
             return
         imu.append_batch(np.ascontiguousarray(t_us), np.ascontiguousarray(a_ned),
                          None if rot is None else np.ascontiguousarray(rot, dtype=float))
-        self.counts["imu_used"] += n
-        if self._pending and self._pending[0][0] <= imu.last_t_us:
-            self._flush_pending()
-        if len(imu) > self._trim_len:
-            self._trim()
+        self._imu_pushed()
 
     # ---------------------------------------------------------------- GNSS
     def push_fix(self, t_us: int, z_ned_m: Any, r_nominal_m2: Vec3 | None = None) -> None:
@@ -193,7 +192,7 @@ class FusionEngine:
 
         ``r_nominal_m2``: this fix's nominal R (NED variances, m²), e.g. from the receiver's
         reported accuracy; None = the config's ``r_nominal_m2``."""
-        c = self.counts
+        c = self._counts
         z = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
         if len(z) != 3 or not finite3(*z):
             c["gnss_rejected_nonfinite"] += 1
@@ -241,11 +240,11 @@ class FusionEngine:
             return
         i = bisect.bisect_right(self._fusion_t, t_us)
         if i == 0:
-            self.counts["gnss_rejected_too_old"] += 1
+            self._counts["gnss_rejected_too_old"] += 1
             return
         later = self.fusions[i:]
         if later:
-            self.counts["gnss_out_of_order"] += 1
+            self._counts["gnss_out_of_order"] += 1
             del self.fusions[i:]
             del self._fusion_t[i:]
         self._fuse(t_us, z, r)
@@ -253,12 +252,12 @@ class FusionEngine:
         for f in later:
             assert f.z_ned_m is not None  # anchors only ever sit at index 0
             self._fuse(f.t_us, f.z_ned_m, f.r_nominal_m2)
-            self.counts["gnss_refused"] += 1
+            self._counts["gnss_refused"] += 1
         self._count()
 
     def _count(self) -> None:
         """Gate counters from the newest entry (cumulative there, so exact after a re-fusion)."""
-        last, c = self.fusions[-1], self.counts
+        last, c = self.fusions[-1], self._counts
         c["gnss_rejected_innovation"] = last.n_rejected
         c["gnss_resets"] = last.n_resets
         c["gnss_offsets"] = last.n_offsets
@@ -363,7 +362,7 @@ class FusionEngine:
     def _trim(self) -> None:
         """Drop what no fix inside the history can need; re-base an old base to the horizon."""
         self._trim_history()
-        self._trim_len = len(self.imu) + _TRIM_EVERY
+        self.imu.trim_len = len(self.imu) + _TRIM_EVERY
 
     def _trim_history(self) -> None:
         horizon = self.imu.last_t_us - self._history_us

@@ -51,11 +51,14 @@ class ImuHistory(_core.History):
 
     * ``append(t_us, ax, ay, az, rot=identity) -> gap``: add a sample (strictly later than the
       last; the caller gates);
-    * ``push(t_us, ax, ay, az, rot) -> code`` and ``push_frd(t_us, f_frd, rot, g) -> code``: the
-      engine's gated per-sample path (0 used, 1 used after a gap, 2 not finite, 3 time not
-      increasing); ``push_frd`` rotates the body specific force first (R f̃ + [0, 0, g]);
+    * ``push(t_us, ax, ay, az, rot)`` and ``push_frd(t_us, f_frd, rot, g)``: the engine's gated
+      per-sample path: a sample not finite or not later than the last is not used; each outcome
+      is counted in ``counts`` (used, gaps, not finite, time not increasing); returns True when
+      the history has grown past ``trim_len`` (the engine trims). ``push_frd`` rotates the body
+      specific force first (R f̃ + [0, 0, g]);
     * ``append_batch(t_us, a_ned, rot)``: many samples (int64 (n,), float64 (n, 3), (n, 9) or None),
-      already checked increasing and gap-free; the same rows as appending one by one;
+      already checked increasing and gap-free; the same rows as appending one by one (counted
+      as used);
     * ``integrals(t_us)``: (t_s, S1, S2, M1, M2) at a time inside the history (held input
       extrapolated past the last); rows are never rewritten once appended, so the value for a
       given time never changes: the engine keeps it with each fusion;

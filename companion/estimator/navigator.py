@@ -28,6 +28,7 @@ from companion.estimator.engine import FusionEngine
 from companion.mission.schema import ConfigError
 
 Rot = tuple[Any, Any, Any, Any, Any, Any, Any, Any, Any]
+_np_cos, _np_sin, _np_hypot = np.cos, np.sin, np.hypot  # pymap3d's trigonometry (numpy's, for its bits)
 BATCH_MIN = 64  # below this many samples the per-sample float path is faster than numpy
 
 
@@ -65,12 +66,17 @@ class NedConverter:
 
     pymap3d's geodetic → NED is ECEF(fix) − ECEF(home), rotated into the home's tangent plane;
     both the home ECEF and the rotation (from pymap3d, on the unit vectors) are constant, so
-    each fix costs one ``pymap3d.geodetic2ecef`` and a 3×3 product in floats. The ellipsoid is
-    built once and the degrees converted with ``math.radians`` (the same product as numpy's):
-    2.5 instead of 4.3 µs per fix, the same bits.
+    each fix costs pymap3d's ``geodetic2ecef`` formula and a 3×3 product in floats. The degrees
+    are converted with ``math.radians`` (the same product as numpy's) and the formula is written
+    out with each trigonometric value computed once by the same numpy functions pymap3d calls
+    (it calls cos(lat) three times): 1.5 instead of 4.3 µs per fix, the same bits (tested).
     """
 
     WGS84 = Ellipsoid.from_name("wgs84")
+    _A = WGS84.semimajor_axis
+    _A2 = _A**2
+    _B = WGS84.semiminor_axis
+    _B_A_2 = (WGS84.semiminor_axis / WGS84.semimajor_axis) ** 2
 
     def __init__(self, frame: LocalNedFrame) -> None:
         self.home_ecef_m = tuple(float(v) for v in pymap3d.geodetic2ecef(
@@ -83,9 +89,14 @@ class NedConverter:
 
     def __call__(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
         lat, lon = math.radians(lat_deg), math.radians(lon_deg)
-        x, y, z = pymap3d.geodetic2ecef(lat, lon, alt_m, self.WGS84, deg=False)
+        # pymap3d.geodetic2ecef(lat, lon, alt_m, WGS84, deg=False), operation for operation
+        cos_lat, sin_lat = float(_np_cos(lat)), float(_np_sin(lat))
+        n = self._A2 / float(_np_hypot(self._A * cos_lat, self._B * sin_lat))
+        x = (n + alt_m) * cos_lat * float(_np_cos(lon))
+        y = (n + alt_m) * cos_lat * float(_np_sin(lon))
+        z = (n * self._B_A_2 + alt_m) * sin_lat
         hx, hy, hz = self.home_ecef_m
-        dx, dy, dz = float(x) - hx, float(y) - hy, float(z) - hz
+        dx, dy, dz = x - hx, y - hy, z - hz
         (a, b, c), (d, e, f), (g, h, i) = self.r_ned_ecef
         return (a * dx + b * dy + c * dz, d * dx + e * dy + f * dz, g * dx + h * dy + i * dz)
 
@@ -240,4 +251,4 @@ class Navigator:
 
     def counters(self) -> dict[str, int]:
         """Samples used and rejected by reason (stable names)."""
-        return dict(self._counts)
+        return dict(self.engine.counts)  # the same dict, with the core's IMU counters
