@@ -193,3 +193,23 @@ def test_block_prediction_output_and_update_equal_the_numpy_reference():
         prop.predict(np.eye(9), 0.1, nA, nB, 0.9, 0.0)
     with pytest.raises(ValueError):
         prop.output_from(x[:14], P, a, b, 0.1, 0.9, 0.0)
+
+
+def test_the_core_holds_no_memory_on_the_callers_arrays():
+    """numpy keeps a buffer description on every array that exported its buffer, for the array's
+    life: a sample list kept by the caller (a replay, the bench's one-hour flight) would grow by
+    it. The per-sample path reads arrays without the buffer protocol."""
+    import tracemalloc
+
+    rng = np.random.default_rng(8)
+    f, q = list(rng.standard_normal((4000, 3))), list(rng.standard_normal((4000, 4)))  # kept alive
+    core = ImuHistory(0.05)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    for k in range(4000):
+        core.push_frd(5000 * k, f[k], _core.rotation_q(q[k]), 9.8)
+        if k % 256 == 0:
+            core.trim_before(5000 * k - 100_000)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    assert grown < 50_000  # the history's own buffer; 36 bytes × 8000 arrays if descriptions were kept

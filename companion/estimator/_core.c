@@ -27,45 +27,41 @@ static PyObject *shape_cov = NULL;  /* (15, 15) */
 static PyObject *shape_out = NULL;  /* (18,) */
 
 /* ------------------------------------------------------------------ helpers */
+/* n floats from a tuple, a list or anything with tolist() (a numpy array: its buffer is not
+ * used, as numpy keeps a buffer description on every array it exports one from, for the
+ * array's lifetime) or any sequence of numbers */
 static int read_doubles(PyObject *obj, double *out, Py_ssize_t n, const char *what) {
+    PyObject *seq;
     if (PyTuple_CheckExact(obj) || PyList_CheckExact(obj)) {
-        PyObject *seq = obj;
-        if (PySequence_Fast_GET_SIZE(seq) != n) {
+        seq = Py_NewRef(obj);
+    } else {
+        static PyObject *tolist = NULL;
+        if (!tolist && !(tolist = PyUnicode_InternFromString("tolist"))) return -1;
+        PyObject *meth = PyObject_GetAttr(obj, tolist);
+        if (meth) {
+            seq = PyObject_CallNoArgs(meth);
+            Py_DECREF(meth);
+        } else {
+            PyErr_Clear();
+            seq = PySequence_Fast(obj, what);
+        }
+        if (!seq) return -1;
+        if (!PyTuple_Check(seq) && !PyList_Check(seq)) {
+            Py_DECREF(seq);
             PyErr_Format(PyExc_ValueError, "%s: expected %zd numbers", what, n);
             return -1;
         }
-        PyObject **items = PySequence_Fast_ITEMS(seq);
-        for (Py_ssize_t i = 0; i < n; i++) {
-            PyObject *it = items[i];
-            out[i] = PyFloat_CheckExact(it) ? PyFloat_AS_DOUBLE(it) : PyFloat_AsDouble(it);
-        }
-        return PyErr_Occurred() ? -1 : 0;
     }
-    if (PyObject_CheckBuffer(obj)) {
-        Py_buffer v;
-        if (PyObject_GetBuffer(obj, &v, PyBUF_STRIDES | PyBUF_FORMAT) == 0) {
-            int ok = v.itemsize == 8 && v.format && (v.format[0] == 'd' || (v.format[0] == '<' && v.format[1] == 'd')
-                     || (v.format[0] == '=' && v.format[1] == 'd')) && v.ndim == 1 && v.shape[0] == n;
-            if (ok) {
-                const char *p = (const char *)v.buf;
-                for (Py_ssize_t i = 0; i < n; i++) out[i] = *(const double *)(p + i * v.strides[0]);
-                PyBuffer_Release(&v);
-                return 0;
-            }
-            PyBuffer_Release(&v);
-        } else {
-            PyErr_Clear();
-        }
-    }
-    PyObject *seq = PySequence_Fast(obj, what);
-    if (!seq) return -1;
     if (PySequence_Fast_GET_SIZE(seq) != n) {
         Py_DECREF(seq);
         PyErr_Format(PyExc_ValueError, "%s: expected %zd numbers", what, n);
         return -1;
     }
     PyObject **items = PySequence_Fast_ITEMS(seq);
-    for (Py_ssize_t i = 0; i < n; i++) out[i] = PyFloat_AsDouble(items[i]);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *it = items[i];
+        out[i] = PyFloat_CheckExact(it) ? PyFloat_AS_DOUBLE(it) : PyFloat_AsDouble(it);
+    }
     Py_DECREF(seq);
     return PyErr_Occurred() ? -1 : 0;
 }
