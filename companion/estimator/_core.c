@@ -16,42 +16,35 @@
 #include <structmember.h>
 #include <math.h>
 #include <string.h>
+#define NPY_NO_DEPRECATED_API NPY_1_22_API_VERSION
+#include <numpy/arrayobject.h>
 
 #define NS 15
 #define NN (NS * NS)
 #define ROW 37
 #define NINT 25
 
-static PyObject *np_empty = NULL;   /* numpy.empty */
-static PyObject *shape_cov = NULL;  /* (15, 15) */
-static PyObject *shape_out = NULL;  /* (18,) */
 
 /* ------------------------------------------------------------------ helpers */
-/* n floats from a tuple, a list or anything with tolist() (a numpy array: its buffer is not
- * used, as numpy keeps a buffer description on every array it exports one from, for the
- * array's lifetime) or any sequence of numbers */
+/* a float64 array of the given shape, aligned and in native byte order: read it directly */
+static int plain_doubles(PyObject *obj, int nd, npy_intp d0, npy_intp d1) {
+    if (!PyArray_Check(obj)) return 0;
+    PyArrayObject *a = (PyArrayObject *)obj;
+    return PyArray_TYPE(a) == NPY_DOUBLE && PyArray_NDIM(a) == nd && PyArray_DIM(a, 0) == d0
+           && (nd == 1 || PyArray_DIM(a, 1) == d1) && PyArray_ISALIGNED(a) && PyArray_ISNOTSWAPPED(a);
+}
+
+/* n floats from a 1-D float64 array, a tuple, a list or any sequence of numbers */
 static int read_doubles(PyObject *obj, double *out, Py_ssize_t n, const char *what) {
-    PyObject *seq;
-    if (PyTuple_CheckExact(obj) || PyList_CheckExact(obj)) {
-        seq = Py_NewRef(obj);
-    } else {
-        static PyObject *tolist = NULL;
-        if (!tolist && !(tolist = PyUnicode_InternFromString("tolist"))) return -1;
-        PyObject *meth = PyObject_GetAttr(obj, tolist);
-        if (meth) {
-            seq = PyObject_CallNoArgs(meth);
-            Py_DECREF(meth);
-        } else {
-            PyErr_Clear();
-            seq = PySequence_Fast(obj, what);
-        }
-        if (!seq) return -1;
-        if (!PyTuple_Check(seq) && !PyList_Check(seq)) {
-            Py_DECREF(seq);
-            PyErr_Format(PyExc_ValueError, "%s: expected %zd numbers", what, n);
-            return -1;
-        }
+    if (plain_doubles(obj, 1, n, 0)) {
+        PyArrayObject *a = (PyArrayObject *)obj;
+        const char *p = PyArray_BYTES(a);
+        npy_intp st = PyArray_STRIDE(a, 0);
+        for (Py_ssize_t i = 0; i < n; i++) out[i] = *(const double *)(p + i * st);
+        return 0;
     }
+    PyObject *seq = PySequence_Fast(obj, what);  /* tuples and lists as they are */
+    if (!seq) return -1;
     if (PySequence_Fast_GET_SIZE(seq) != n) {
         Py_DECREF(seq);
         PyErr_Format(PyExc_ValueError, "%s: expected %zd numbers", what, n);
@@ -83,52 +76,40 @@ static PyObject *list_of(const double *v, Py_ssize_t n) { return floats_of(v, n,
 
 /* P (15x15 float64) into out[225], any layout numpy accepts. */
 static int read_cov(PyObject *obj, double *out) {
-    Py_buffer v;
-    if (PyObject_GetBuffer(obj, &v, PyBUF_STRIDES | PyBUF_FORMAT) == 0) {
-        int ok = v.itemsize == 8 && v.format && (v.format[0] == 'd' || ((v.format[0] == '<' || v.format[0] == '=')
-                 && v.format[1] == 'd')) && v.ndim == 2 && v.shape[0] == NS && v.shape[1] == NS;
-        if (ok) {
-            const char *p = (const char *)v.buf;
-            if (v.strides[1] == 8 && v.strides[0] == 8 * NS) {
-                memcpy(out, p, sizeof(double) * NN);
-            } else {
-                for (int i = 0; i < NS; i++)
-                    for (int j = 0; j < NS; j++) out[i * NS + j] = *(const double *)(p + i * v.strides[0] + j * v.strides[1]);
-            }
-            PyBuffer_Release(&v);
-            return 0;
+    PyArrayObject *a;
+    if (plain_doubles(obj, 2, NS, NS)) {
+        a = (PyArrayObject *)Py_NewRef(obj);
+    } else {  /* anything else (nested lists, other dtypes): through numpy */
+        a = (PyArrayObject *)PyArray_FROMANY(obj, NPY_DOUBLE, 2, 2, NPY_ARRAY_ALIGNED | NPY_ARRAY_NOTSWAPPED);
+        if (!a) return -1;
+        if (PyArray_DIM(a, 0) != NS || PyArray_DIM(a, 1) != NS) {
+            Py_DECREF(a);
+            PyErr_SetString(PyExc_ValueError, "covariance: expected 15x15");
+            return -1;
         }
-        PyBuffer_Release(&v);
-    } else {
-        PyErr_Clear();
     }
-    /* anything else (nested lists, other dtypes): through numpy */
-    PyObject *np = PyImport_ImportModule("numpy");
-    if (!np) return -1;
-    PyObject *arr = PyObject_CallMethod(np, "ascontiguousarray", "Os", obj, "float64");
-    Py_DECREF(np);
-    if (!arr) return -1;
-    if (PyObject_GetBuffer(arr, &v, PyBUF_C_CONTIGUOUS) != 0) { Py_DECREF(arr); return -1; }
-    int bad = v.len != (Py_ssize_t)sizeof(double) * NN;
-    if (!bad) memcpy(out, v.buf, sizeof(double) * NN);
-    PyBuffer_Release(&v);
-    Py_DECREF(arr);
-    if (bad) { PyErr_SetString(PyExc_ValueError, "covariance: expected 15x15"); return -1; }
+    const char *p = PyArray_BYTES(a);
+    npy_intp s0 = PyArray_STRIDE(a, 0), s1 = PyArray_STRIDE(a, 1);
+    if (s1 == 8 && s0 == 8 * NS) {
+        memcpy(out, p, sizeof(double) * NN);
+    } else {
+        for (int i = 0; i < NS; i++)
+            for (int j = 0; j < NS; j++) out[i * NS + j] = *(const double *)(p + i * s0 + j * s1);
+    }
+    Py_DECREF(a);
     return 0;
 }
 
-/* A new float64 ndarray of the given shape holding n numbers from c. */
-static PyObject *new_array(PyObject *shape, const double *c, Py_ssize_t n) {
-    PyObject *arr = PyObject_CallOneArg(np_empty, shape);
+/* A new float64 ndarray of shape (d0,) or (d0, d1) holding its numbers from c. */
+static PyObject *new_array(int nd, npy_intp d0, npy_intp d1, const double *c) {
+    npy_intp dims[2] = {d0, d1};
+    PyObject *arr = PyArray_SimpleNew(nd, dims, NPY_DOUBLE);
     if (!arr) return NULL;
-    Py_buffer v;
-    if (PyObject_GetBuffer(arr, &v, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) != 0) { Py_DECREF(arr); return NULL; }
-    memcpy(v.buf, c, sizeof(double) * n);
-    PyBuffer_Release(&v);
+    memcpy(PyArray_DATA((PyArrayObject *)arr), c, sizeof(double) * (size_t)(nd == 1 ? d0 : d0 * d1));
     return arr;
 }
 
-static PyObject *new_cov(const double *c) { return new_array(shape_cov, c, NN); }
+static PyObject *new_cov(const double *c) { return new_array(2, NS, NS, c); }
 
 /* ---------------------------------------------------------- rotation blocks and the mean */
 /* (-A, -B) row-major between integrals a and b (history.rotation_blocks). */
@@ -314,17 +295,17 @@ static void pht_of(const double *P, double *PHt, double *hph) {
 
 /* model.update_fast: x+, P+ (symmetrised), NIS for z = p + b + nu, nu ~ N(0, diag r). */
 static double update_c(const double *x, const double *P, const double *y, const double *r, double *xo, double *Po) {
-    double PHt[NS * 3], hph[9], I[9];
+    double PHt[NS * 3], hph[9], Si[9];
     pht_of(P, PHt, hph);
-    inv3_c(hph[0] + r[0], hph[1], hph[2], hph[4] + r[1], hph[5], hph[8] + r[2], I);
-    double g0 = I[0] * y[0] + I[1] * y[1] + I[2] * y[2], g1 = I[3] * y[0] + I[4] * y[1] + I[5] * y[2],
-           g2 = I[6] * y[0] + I[7] * y[1] + I[8] * y[2];
+    inv3_c(hph[0] + r[0], hph[1], hph[2], hph[4] + r[1], hph[5], hph[8] + r[2], Si);
+    double g0 = Si[0] * y[0] + Si[1] * y[1] + Si[2] * y[2], g1 = Si[3] * y[0] + Si[4] * y[1] + Si[5] * y[2],
+           g2 = Si[6] * y[0] + Si[7] * y[1] + Si[8] * y[2];
     double K[NS * 3];
     for (int i = 0; i < NS; i++) {
         const double *h = PHt + 3 * i;
-        K[3 * i] = h[0] * I[0] + h[1] * I[3] + h[2] * I[6];
-        K[3 * i + 1] = h[0] * I[1] + h[1] * I[4] + h[2] * I[7];
-        K[3 * i + 2] = h[0] * I[2] + h[1] * I[5] + h[2] * I[8];
+        K[3 * i] = h[0] * Si[0] + h[1] * Si[3] + h[2] * Si[6];
+        K[3 * i + 1] = h[0] * Si[1] + h[1] * Si[4] + h[2] * Si[7];
+        K[3 * i + 2] = h[0] * Si[2] + h[1] * Si[5] + h[2] * Si[8];
         xo[i] = x[i] + (h[0] * g0 + h[1] * g1 + h[2] * g2);
     }
     double A[NN];
@@ -400,7 +381,7 @@ static PyObject *prop_output_from(Propagator *self, PyObject *const *args, Py_ss
     mean_between_c(x, a, b, alpha, xo, nA, nB);
     memcpy(out, xo, sizeof(double) * 9);
     variances_c(self, P, T, nA, nB, alpha, q_b, out + 9);
-    return Py_BuildValue("(NN)", tuple_of(xo, NS), new_array(shape_out, out, 18));
+    return Py_BuildValue("(NN)", tuple_of(xo, NS), new_array(1, 18, 0, out));
 }
 
 static PyMethodDef prop_methods[] = {
@@ -639,38 +620,36 @@ static PyObject *hist_push_frd(History *self, PyObject *const *args, Py_ssize_t 
 }
 
 /* append_batch(t_us int64 (n,), a_ned float64 (n, 3), rot float64 (n, 9) or None): append one by
- * one (C-contiguous arrays; the caller gates order, gaps and finiteness) */
+ * one (the caller gates order, gaps and finiteness); counted as used */
 static PyObject *hist_append_batch(History *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 3) { PyErr_SetString(PyExc_TypeError, "append_batch(t_us, a_ned, rot)"); return NULL; }
-    Py_buffer bt, ba, br;
     int have_rot = args[2] != Py_None;
-    if (PyObject_GetBuffer(args[0], &bt, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) return NULL;
-    if (PyObject_GetBuffer(args[1], &ba, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) { PyBuffer_Release(&bt); return NULL; }
-    if (have_rot && PyObject_GetBuffer(args[2], &br, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) {
-        PyBuffer_Release(&bt); PyBuffer_Release(&ba); return NULL;
-    }
-    Py_ssize_t n = bt.len / 8;
-    int ok = bt.itemsize == 8 && strchr("lq", bt.format[strlen(bt.format) - 1]) && ba.itemsize == 8
-             && ba.format[strlen(ba.format) - 1] == 'd' && ba.len == n * 24;
-    if (have_rot) ok = ok && br.itemsize == 8 && br.format[strlen(br.format) - 1] == 'd' && br.len == n * 72;
+    PyArrayObject *t = (PyArrayObject *)PyArray_FROMANY(args[0], NPY_INT64, 1, 1, NPY_ARRAY_CARRAY_RO);
+    PyArrayObject *a = (PyArrayObject *)PyArray_FROMANY(args[1], NPY_DOUBLE, 2, 2, NPY_ARRAY_CARRAY_RO);
+    PyArrayObject *r = have_rot ? (PyArrayObject *)PyArray_FROMANY(args[2], NPY_DOUBLE, 2, 2, NPY_ARRAY_CARRAY_RO)
+                                : NULL;
     PyObject *res = NULL;
-    if (!ok) {
+    if (!t || !a || (have_rot && !r)) goto done;
+    npy_intp n = PyArray_DIM(t, 0);
+    if (PyArray_DIM(a, 0) != n || PyArray_DIM(a, 1) != 3
+        || (have_rot && (PyArray_DIM(r, 0) != n || PyArray_DIM(r, 1) != 9))) {
         PyErr_SetString(PyExc_ValueError, "append_batch: int64 (n,), float64 (n, 3), float64 (n, 9)");
-    } else {
-        const long long *t = bt.buf;
-        const double *a = ba.buf;
-        Py_ssize_t k;
-        for (k = 0; k < n; k++)
-            if (hist_append_c(self, t[k], a[3 * k], a[3 * k + 1], a[3 * k + 2],
-                              have_rot ? (const double *)br.buf + 9 * k : IDENT9) < 0) break;
-        if (k == n) {
-            self->n_used += n;
-            res = Py_NewRef(Py_None);
-        }
+        goto done;
     }
-    PyBuffer_Release(&bt);
-    PyBuffer_Release(&ba);
-    if (have_rot) PyBuffer_Release(&br);
+    const npy_int64 *tv = (const npy_int64 *)PyArray_DATA(t);
+    const double *av = (const double *)PyArray_DATA(a), *rv = have_rot ? (const double *)PyArray_DATA(r) : NULL;
+    npy_intp k;
+    for (k = 0; k < n; k++)
+        if (hist_append_c(self, tv[k], av[3 * k], av[3 * k + 1], av[3 * k + 2], have_rot ? rv + 9 * k : IDENT9) < 0)
+            break;
+    if (k == n) {
+        self->n_used += n;
+        res = Py_NewRef(Py_None);
+    }
+done:
+    Py_XDECREF(t);
+    Py_XDECREF(a);
+    Py_XDECREF(r);
     return res;
 }
 
@@ -851,15 +830,8 @@ static struct PyModuleDef core_module = {
 };
 
 PyMODINIT_FUNC PyInit__core(void) {
+    import_array();
     if (PyType_Ready(&HistoryType) < 0 || PyType_Ready(&PropagatorType) < 0) return NULL;
-    PyObject *np = PyImport_ImportModule("numpy");
-    if (!np) return NULL;
-    np_empty = PyObject_GetAttrString(np, "empty");
-    Py_DECREF(np);
-    if (!np_empty) return NULL;
-    shape_cov = Py_BuildValue("(ii)", NS, NS);
-    shape_out = Py_BuildValue("(i)", 18);
-    if (!shape_cov || !shape_out) return NULL;
     PyObject *m = PyModule_Create(&core_module);
     if (!m) return NULL;
     if (PyModule_AddObjectRef(m, "History", (PyObject *)&HistoryType) < 0
