@@ -173,6 +173,8 @@ def test_block_prediction_output_and_update_equal_the_numpy_reference():
         np.testing.assert_allclose(pht_p, np.diag(P_ref[0:3, 0:3] + P_ref[0:3, 6:9]), rtol=1e-12, atol=1e-12)
         x_o, out = prop.output_from(x, P, a, b, T, alpha, q_b)
         assert x_o == x_ref and out[0:9].tolist() == list(x_ref[0:9])
+        newest = prop.output_from(x, P, a, h, T, alpha, q_b)  # the history itself: its newest sample
+        assert newest[1].tolist() == prop.output_from(x, P, a, h.last_integrals(), T, alpha, q_b)[1].tolist()
         np.testing.assert_allclose(out[9:18], np.diag(P_ref)[0:9], rtol=1e-12, atol=1e-12)
         # the update at that prior
         z = rng.standard_normal(3)

@@ -170,6 +170,9 @@ static PyObject *py_rotation_blocks(PyObject *self, PyObject *const *args, Py_ss
     return Py_BuildValue("(NN)", ao, bo);
 }
 
+/* the integrals at the newest sample of a History (defined below); 0 if o is not one */
+static int newest_integrals(PyObject *o, double *out);
+
 /* ------------------------------------------------------------------ the model */
 typedef struct {
     PyObject_HEAD
@@ -371,11 +374,15 @@ static PyObject *prop_predict_from(Propagator *self, PyObject *const *args, Py_s
 }
 
 /* output_from(x, P, a, b, T, alpha, q_b) -> (x at b, [p, v, b, their 9 variances] (ndarray (18,))):
- * the engine's snapshot */
+ * the engine's snapshot; b may be the History itself (its newest sample) */
 static PyObject *prop_output_from(Propagator *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 7) { PyErr_SetString(PyExc_TypeError, "output_from(x, P, a, b, T, alpha, q_b)"); return NULL; }
     double x[NS], a[NINT], b[NINT], P[NN], xo[NS], nA[9], nB[9], out[18];
-    if (read_x_ints(args[0], args[2], args[3], x, a, b) < 0 || read_cov(args[1], P) < 0) return NULL;
+    int newest = newest_integrals(args[3], b);
+    if (newest < 0) return NULL;
+    if (read_doubles(args[0], x, NS, "state") < 0 || read_doubles(args[2], a, NINT, "integrals") < 0
+        || (!newest && read_doubles(args[3], b, NINT, "integrals") < 0) || read_cov(args[1], P) < 0)
+        return NULL;
     double T = PyFloat_AsDouble(args[4]), alpha = PyFloat_AsDouble(args[5]), q_b = PyFloat_AsDouble(args[6]);
     if (PyErr_Occurred()) return NULL;
     mean_between_c(x, a, b, alpha, xo, nA, nB);
@@ -503,6 +510,8 @@ static int hist_reserve(History *h) {
     h->cap = cap;
     return 0;
 }
+
+static PyTypeObject HistoryType;
 
 #define HROW(h, k) ((h)->rows + ((h)->start + (k)) * ROW)
 #define HT(h, k) ((h)->t[(h)->start + (k)])
@@ -699,13 +708,20 @@ static PyObject *hist_integrals(History *self, PyObject *arg) {
     return tuple_of(o, NINT);
 }
 
+static int newest_integrals(PyObject *o, double *out) {
+    if (!PyObject_TypeCheck(o, &HistoryType)) return 0;
+    History *h = (History *)o;
+    if (!h->n) { PyErr_SetString(PyExc_IndexError, "empty IMU history"); return -1; }
+    const double *r = HROW(h, h->n - 1);
+    out[0] = r[0];
+    memcpy(out + 1, r + 4, sizeof(double) * 6);
+    memcpy(out + 7, r + 19, sizeof(double) * 18);
+    return 1;
+}
+
 static PyObject *hist_last_integrals(History *self, PyObject *unused) {
-    if (!self->n) { PyErr_SetString(PyExc_IndexError, "empty IMU history"); return NULL; }
-    const double *r = HROW(self, self->n - 1);
     double o[NINT];
-    o[0] = r[0];
-    memcpy(o + 1, r + 4, sizeof(double) * 6);
-    memcpy(o + 7, r + 19, sizeof(double) * 18);
+    if (newest_integrals((PyObject *)self, o) < 0) return NULL;
     return tuple_of(o, NINT);
 }
 

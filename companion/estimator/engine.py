@@ -193,7 +193,9 @@ class FusionEngine:
         ``r_nominal_m2``: this fix's nominal R (NED variances, m²), e.g. from the receiver's
         reported accuracy; None = the config's ``r_nominal_m2``."""
         c = self._counts
-        z = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
+        if type(z_ned_m) is not tuple:  # the navigator's are tuples of floats already
+            z_ned_m = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
+        z = z_ned_m
         if len(z) != 3 or not finite3(*z):
             c["gnss_rejected_nonfinite"] += 1
             return
@@ -404,7 +406,7 @@ class FusionEngine:
         T = (now - last.t_us) * 1e-6
         alpha = math.exp(-T / self._tau_s)
         sigma_b = last.sigma_bias_m
-        x, out = self._prop.output_from(last.x, last.P, last.ints, self.imu.last_integrals(), T, alpha,
+        x, out = self._prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
                                         (1.0 - alpha * alpha) * sigma_b * sigma_b)
         snap = Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch,
                         now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
