@@ -94,12 +94,6 @@ class Snapshot(NamedTuple):
 class FusionEngine:
     """Belief-adaptive EKF on NED inputs; counts every rejection in ``counts``."""
 
-    @property
-    def counts(self) -> dict[str, int]:
-        """Samples used and rejected by reason (the dict given to the constructor, updated)."""
-        self._counts.update(zip(_IMU_COUNTS, self.imu.counts, strict=True))
-        return self._counts
-
     def __init__(self, cfg: EstimatorConfig, method: str, counts: dict[str, int] | None = None) -> None:
         self.cfg = cfg
         self.method_name = method
@@ -139,6 +133,12 @@ class FusionEngine:
         self._tau_s = cfg.bias_tau_s
         self._cache: tuple[Fusion, int, Snapshot] | None = None
         self._g = cfg.gravity_m_s2
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Samples used and rejected by reason (the dict given to the constructor, updated)."""
+        self._counts.update(zip(_IMU_COUNTS, self.imu.counts, strict=True))
+        return self._counts
 
     # ----------------------------------------------------------------- IMU
     def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
@@ -182,8 +182,7 @@ class FusionEngine:
             for t, (ax, ay, az), r in zip(t_us.tolist(), a_ned.tolist(), rots, strict=True):
                 self.push_acc(t, ax, ay, az, r)
             return
-        imu.append_batch(np.ascontiguousarray(t_us), np.ascontiguousarray(a_ned),
-                         None if rot is None else np.ascontiguousarray(rot, dtype=float))
+        imu.append_batch(t_us, a_ned, None if rot is None else np.asarray(rot, dtype=float))
         self._imu_pushed()
 
     # ---------------------------------------------------------------- GNSS
