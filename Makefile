@@ -10,7 +10,7 @@ OUT     ?= runs/demo
 
 .PHONY: venv demo test bench lint browser clean results results-ablation
 
-$(STAMP): requirements.lock pyproject.toml
+$(STAMP): requirements.lock pyproject.toml setup.py companion/estimator/_core.c
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -r requirements.lock

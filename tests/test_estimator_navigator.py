@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pymap3d
 import pytest
 
 from companion.domain.geodesy import LocalNedFrame
@@ -203,3 +204,9 @@ def test_ned_converter_equals_local_ned_frame():
     for p in rng.uniform(-3000.0, 3000.0, size=(20, 3)):
         lat, lon, alt = HOME.to_geodetic(p)
         np.testing.assert_allclose(conv(lat, lon, alt), HOME.to_ned_m(lat, lon, alt), rtol=0, atol=1e-8)
+        # pymap3d's geodetic2ecef, operation for operation: the same bits
+        x, y, z = (float(v) for v in pymap3d.geodetic2ecef(lat, lon, alt))
+        hx, hy, hz = conv.home_ecef_m
+        d = (x - hx, y - hy, z - hz)
+        assert conv(lat, lon, alt) == tuple(sum(r * v for r, v in zip(row, d, strict=True))
+                                            for row in conv.r_ned_ecef)

@@ -1,11 +1,13 @@
-"""The belief-adaptive EKF (eq. 12-21, Algorithm 1): pure numpy, no I/O.
+"""The belief-adaptive EKF (eq. 12-21, Algorithm 1): numpy and a small C core, no I/O.
 
     from companion.estimator import EstimatorConfig, Navigator, METHODS
     nav = Navigator(EstimatorConfig(), method="second-order", frame=None)
 
 Modules: ``config`` (parameters), ``model`` (the linear 15-state model), ``history`` (held IMU
 inputs with prefix integrals), ``belief`` (loss and ∂ℓ/∂β), ``methods`` (adaptation strategies
-and their registry), ``engine`` (filter + out-of-sequence fusion), ``navigator`` (front end).
+and their registry), ``engine`` (filter + out-of-sequence fusion), ``navigator`` (front end);
+``_core`` (C, ``_core.c``, built by ``make venv``): the numeric hot path of ``history`` and
+``model``.
 """
 
 import importlib

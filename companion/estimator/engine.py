@@ -32,13 +32,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.estimator import methods, model
+from companion.estimator import _core, methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.history import ImuHistory, Integrals, finite3, mean_between
+from companion.estimator.history import ImuHistory, Integrals, finite3
 from companion.estimator.model import IDENTITY9, Rot9
 
 _TRIM_EVERY = 256  # IMU samples between two trims of the histories
+# the IMU counters (``ImuHistory.counts``, counted by the core), in that order
+_IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 
 
 class Fusion(NamedTuple):
@@ -74,7 +76,7 @@ class Snapshot(NamedTuple):
 
     t_us: int
     x: model.State
-    var: tuple[float, ...]  # variances of p, v, b (N, E, D each; m², (m/s)², m²)
+    out: np.ndarray  # (18,) p, v, b, their variances (N, E, D each; m, m/s, m, m², (m/s)², m²); never written
     beta: float
     nis: float
     test_ratio: float
@@ -82,6 +84,11 @@ class Snapshot(NamedTuple):
     pos_valid: bool
     n_rejected: int
     n_resets: int
+
+    @property
+    def var(self) -> tuple[float, ...]:
+        """Variances of p, v, b (N, E, D each; m², (m/s)², m²)."""
+        return tuple(self.out[9:18].tolist())
 
 
 class FusionEngine:
@@ -95,15 +102,16 @@ class FusionEngine:
         # R-learners (adaptive, vbakf) do not: they estimate the noise of the fixes fused, as the
         # autopilot EKFs keep gated fixes out of everything.
         self._learn_rejected = bool(getattr(self.method, "learns_from_rejected", False))
-        self.counts = counts if counts is not None else {}
+        self._counts = counts if counts is not None else {}
         for name in (
             "imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
             "gnss_fused", "gnss_refused", "gnss_out_of_order", "gnss_rejected_before_imu",
             "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
             "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets", "gnss_offsets",
         ):
-            self.counts.setdefault(name, 0)
+            self._counts.setdefault(name, 0)
         self.imu = ImuHistory(cfg.imu_hold_max_s)
+        self.imu.trim_len = _TRIM_EVERY
         self.fusions: list[Fusion] = []
         self._fusion_t: list[int] = []
         self._pending: list[tuple[int, Vec3, Vec3]] = []  # (t, z, R_nom) waiting for the IMU, by time
@@ -123,29 +131,36 @@ class FusionEngine:
         self._offset_max_us = int(round(cfg.gnss_offset_max_s * 1e6))
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
-        self._trim_len = _TRIM_EVERY
         self._cache: tuple[Fusion, int, Snapshot] | None = None
-        self._var_blocks: tuple[Any, np.ndarray] = (None, np.empty(0))  # (P, model.variance_blocks(P))
+        self._g = cfg.gravity_m_s2
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Samples used and rejected by reason (the dict given to the constructor, updated)."""
+        self._counts.update(zip(_IMU_COUNTS, self.imu.counts, strict=True))
+        return self._counts
 
     # ----------------------------------------------------------------- IMU
     def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
         """One NED acceleration (m/s², gravity-compensated: R f̃ + g) at ``t_us``, with the
         rotation R_ned_frd (row-major 9-tuple) it was measured with (the body-frame bias state
-        needs it; identity = the body axes are NED)."""
-        c = self.counts
-        if (ax - ax) + (ay - ay) + (az - az) != 0.0:  # NaN or ±inf somewhere
-            c["imu_rejected_nonfinite"] += 1
-            return
+        needs it; identity = the body axes are NED). Gated and counted by the core
+        (``ImuHistory.push``)."""
+        if self.imu.push(t_us, ax, ay, az, rot) or self._pending:
+            self._imu_pushed()
+
+    def push_frd(self, t_us: int, f_frd_m_s2: Any, rot: Rot9) -> None:
+        """One body specific force f̃ (FRD, m/s²; 3 numbers or an array) measured with the attitude
+        R_ned_frd: ``push_acc`` of R f̃ + [0, 0, g] (computed by the core, the navigator's path)."""
+        if self.imu.push_frd(t_us, f_frd_m_s2, rot, self._g) or self._pending:
+            self._imu_pushed()
+
+    def _imu_pushed(self) -> None:
+        """Fuse the fixes the IMU has now passed; trim when the history is due."""
         imu = self.imu
-        if imu.t_us and t_us <= imu.t_us[-1]:
-            c["imu_rejected_time_backwards"] += 1
-            return
-        if imu.append(t_us, ax, ay, az, rot):
-            c["imu_gaps"] += 1
-        c["imu_used"] += 1
-        if self._pending and self._pending[0][0] <= t_us:
+        if self._pending and self._pending[0][0] <= imu.last_t_us:
             self._flush_pending()
-        if len(imu.rows) > self._trim_len:
+        if len(imu) > imu.trim_len:
             self._trim()
 
     def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
@@ -157,9 +172,9 @@ class FusionEngine:
         if n == 0:
             return
         imu = self.imu
-        clean = bool(np.isfinite(a_ned).all()) and bool(imu.rows)
+        clean = bool(np.isfinite(a_ned).all()) and len(imu) > 0
         if clean:
-            t_prev = np.concatenate(([imu.t_us[-1]], t_us[:-1]))
+            t_prev = np.concatenate(([imu.last_t_us], t_us[:-1]))
             dt_s = (t_us - imu.t0_us) * 1e-6 - (t_prev - imu.t0_us) * 1e-6
             clean = bool((t_us > t_prev).all()) and bool((dt_s <= imu.hold_max_s).all())
         if not clean:  # anything to gate or count: take the per-sample path
@@ -168,11 +183,7 @@ class FusionEngine:
                 self.push_acc(t, ax, ay, az, r)
             return
         imu.append_batch(t_us, a_ned, None if rot is None else np.asarray(rot, dtype=float))
-        self.counts["imu_used"] += n
-        if self._pending and self._pending[0][0] <= imu.t_us[-1]:
-            self._flush_pending()
-        if len(imu.rows) > self._trim_len:
-            self._trim()
+        self._imu_pushed()
 
     # ---------------------------------------------------------------- GNSS
     def push_fix(self, t_us: int, z_ned_m: Any, r_nominal_m2: Vec3 | None = None) -> None:
@@ -180,8 +191,10 @@ class FusionEngine:
 
         ``r_nominal_m2``: this fix's nominal R (NED variances, m²), e.g. from the receiver's
         reported accuracy; None = the config's ``r_nominal_m2``."""
-        c = self.counts
-        z = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
+        c = self._counts
+        if type(z_ned_m) is not tuple:  # the navigator's are tuples of floats already
+            z_ned_m = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
+        z = z_ned_m
         if len(z) != 3 or not finite3(*z):
             c["gnss_rejected_nonfinite"] += 1
             return
@@ -189,14 +202,15 @@ class FusionEngine:
         if not (finite3(*r) and min(r) > 0.0):
             c["gnss_rejected_nonfinite"] += 1
             return
-        if not self.imu.rows:
+        imu = self.imu
+        if not len(imu):
             c["gnss_rejected_before_imu"] += 1
             return
-        now = self.imu.t_us[-1]
+        now = imu.last_t_us
         if t_us > now + self._future_us:
             c["gnss_rejected_future"] += 1
             return
-        if t_us < now - self._history_us or t_us < self.imu.t_us[0] or (
+        if t_us < now - self._history_us or t_us < imu.first_t_us or (
             self._fusion_t and t_us < self._fusion_t[0]
         ):
             c["gnss_rejected_too_old"] += 1
@@ -216,7 +230,7 @@ class FusionEngine:
         return bool(self._pending) and any(item[0] == t_us for item in self._pending)
 
     def _flush_pending(self) -> None:
-        now = self.imu.t_us[-1]
+        now = self.imu.last_t_us
         while self._pending and self._pending[0][0] <= now:
             t_us, z, r = self._pending.pop(0)
             self._insert(t_us, z, r)
@@ -227,11 +241,11 @@ class FusionEngine:
             return
         i = bisect.bisect_right(self._fusion_t, t_us)
         if i == 0:
-            self.counts["gnss_rejected_too_old"] += 1
+            self._counts["gnss_rejected_too_old"] += 1
             return
         later = self.fusions[i:]
         if later:
-            self.counts["gnss_out_of_order"] += 1
+            self._counts["gnss_out_of_order"] += 1
             del self.fusions[i:]
             del self._fusion_t[i:]
         self._fuse(t_us, z, r)
@@ -239,12 +253,12 @@ class FusionEngine:
         for f in later:
             assert f.z_ned_m is not None  # anchors only ever sit at index 0
             self._fuse(f.t_us, f.z_ned_m, f.r_nominal_m2)
-            self.counts["gnss_refused"] += 1
+            self._counts["gnss_refused"] += 1
         self._count()
 
     def _count(self) -> None:
         """Gate counters from the newest entry (cumulative there, so exact after a re-fusion)."""
-        last, c = self.fusions[-1], self.counts
+        last, c = self.fusions[-1], self._counts
         c["gnss_rejected_innovation"] = last.n_rejected
         c["gnss_resets"] = last.n_resets
         c["gnss_offsets"] = last.n_offsets
@@ -287,19 +301,16 @@ class FusionEngine:
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
         ints = self.imu.integrals(t_us)
-        x_prior, A, B = mean_between(prev.x, prev.ints, ints, alpha)
-        P_prior = self._prop.predict(prev.P, T, A, B, alpha, q_b)
-        PHt, hph = model.innovation_gain_terms(P_prior)  # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
+        # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
+        x_prior, P_prior, hph, pht_p = self._prop.predict_from(prev.x, prev.P, prev.ints, ints, T, alpha, q_b)
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
-        pht = PHt[0:3].tolist()
         s0 = (hph[0][0] - q_b, hph[1][1] - q_b, hph[2][2] - q_b)
-        pht_p = (pht[0][0], pht[1][1], pht[2][2])
         terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p)
         R = self._r_of(prev.state, terms, r_nom)
         ratio, passes = self._gate(y, hph, R)
         n_rej, n_res, n_off = prev.n_rejected, prev.n_resets, prev.n_offsets
         if passes:  # closes an open offset: the fixes stepped back
-            x_post, P_post, nis = model.update_fast(x_prior, P_prior, y, PHt, hph, R)
+            x_post, P_post, nis = _update(x_prior, P_prior, y, R)
             self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints,
                          r_nom, t_us, ratio, False, n_rej, n_res, None, 0, n_off)
             return
@@ -310,7 +321,7 @@ class FusionEngine:
             terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
             R_off = self._r_of(prev.state, terms_off, r_nom)
             if self._gate(y_off, hph, R_off)[1]:
-                x_post, P_post, nis = model.update_fast(x_prior, P_prior, y_off, PHt, hph, R_off)
+                x_post, P_post, nis = _update(x_prior, P_prior, y_off, R_off)
                 self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms_off), nis, ints,
                              r_nom, t_us, ratio, True, n_rej, n_res, off, prev.t_offset_us, n_off)
                 return
@@ -337,7 +348,7 @@ class FusionEngine:
             R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
         return R
 
-    def _gate(self, y: Vec3, hph: list[list[float]], R: Vec3) -> tuple[float, bool]:
+    def _gate(self, y: Vec3, hph: _Hph, R: Vec3) -> tuple[float, bool]:
         """(horizontal NIS / gate², passed): horizontal NIS (2 dof, the 2×2 block of S) and
         vertical NIS (1 dof) against gate², R floored at ``gnss_gate_r_floor_m``."""
         g = self._gate_r_min
@@ -352,10 +363,10 @@ class FusionEngine:
     def _trim(self) -> None:
         """Drop what no fix inside the history can need; re-base an old base to the horizon."""
         self._trim_history()
-        self._trim_len = len(self.imu.rows) + _TRIM_EVERY
+        self.imu.trim_len = len(self.imu) + _TRIM_EVERY
 
     def _trim_history(self) -> None:
-        horizon = self.imu.t_us[-1] - self._history_us
+        horizon = self.imu.last_t_us - self._history_us
         if not self.fusions:
             self.imu.trim_before(horizon)
             return
@@ -379,8 +390,8 @@ class FusionEngine:
         alpha = math.exp(-T / self._tau_s)
         sigma_b = f.sigma_bias_m
         q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
-        x, A, B = mean_between(f.x, f.ints, ints, alpha)
-        return x, self._prop.predict(f.P, T, A, B, alpha, q_b)
+        x, P = self._prop.predict_from(f.x, f.P, f.ints, ints, T, alpha, q_b)[0:2]
+        return x, P
 
     # -------------------------------------------------------------- output
     def snapshot(self) -> Snapshot | None:
@@ -388,18 +399,15 @@ class FusionEngine:
         if not self.fusions:
             return None
         last = self.fusions[-1]
-        now = self.imu.t_us[-1]
+        now = self.imu.last_t_us
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]
         T = (now - last.t_us) * 1e-6
         alpha = math.exp(-T / self._tau_s)
         sigma_b = last.sigma_bias_m
-        x, A, B = mean_between(last.x, last.ints, self.imu.last_integrals(), alpha)
-        if self._var_blocks[0] is not last.P:
-            self._var_blocks = (last.P, model.variance_blocks(last.P))
-        var = tuple(self._prop.variances(last.P, T, A, B, alpha, (1.0 - alpha * alpha) * sigma_b * sigma_b,
-                                         self._var_blocks[1]))
-        snap = Snapshot(now, x, var, last.beta, last.nis, last.test_ratio, last.glitch,
+        x, out = self._prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
+                                        (1.0 - alpha * alpha) * sigma_b * sigma_b)
+        snap = Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch,
                         now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
         self._cache = (last, now, snap)
         return snap
@@ -408,10 +416,14 @@ class FusionEngine:
         """The full covariance (15×15) at the newest IMU time (None before the first fix)."""
         if not self.fusions:
             return None
-        return self._predict(self.fusions[-1], self.imu.t_us[-1], self.imu.last_integrals())[1]
+        return self._predict(self.fusions[-1], self.imu.last_t_us, self.imu.last_integrals())[1]
 
 
-def _nis(y: Vec3, hph: list[list[float]], r: Vec3) -> float:
+_Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
+_update = _core.update  # (x⁻, P⁻, y, R) -> (x⁺, P⁺, NIS): model.update_fast
+
+
+def _nis(y: Vec3, hph: _Hph, r: Vec3) -> float:
     """yᵀ S⁻¹ y for S = H P⁻ Hᵀ + diag(r)."""
     i = model.inv3([[hph[0][0] + r[0], hph[0][1], hph[0][2]], [hph[1][0], hph[1][1] + r[1], hph[1][2]],
                     [hph[2][0], hph[2][1], hph[2][2] + r[2]]])

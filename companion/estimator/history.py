@@ -24,12 +24,9 @@ acceleration is never integrated blindly across a gap.
 
 from __future__ import annotations
 
-import bisect
 import math
 
-import numpy as np
-
-from companion.estimator.model import IDENTITY9, Rot9
+from companion.estimator import _core
 
 # A row: (t_s, ã (3), S1 (3), S2 (3), R (9, row-major), M1 (9), M2 (9)); time in s since the first sample.
 Row = tuple[float, ...]
@@ -37,165 +34,43 @@ Row = tuple[float, ...]
 Integrals = tuple[float, ...]
 ROW_LEN = 37
 
+# The numeric core is C (``_core.c``: the formulas above, the same operations in the same order
+# as the float expressions they replaced; tested against a pure-Python history in the tests).
+# (−A, −B) row-major between two integrals (A = ∫R, B = ∫(t_b − s) R, negated as they enter the
+# mean and F):  rotation_blocks(a, b) -> (list of 9, list of 9)
+rotation_blocks = _core.rotation_blocks
+# The mean of the model carried between the times of the integrals ``a`` and ``b`` (a before b),
+# with the block's (−A, −B):  mean_between(x, a, b, alpha) -> (x at b, −A, −B)
+mean_between = _core.mean_between
 
-class ImuHistory:
-    """Append-only (then trimmed) record of held inputs and their prefix integrals."""
 
-    def __init__(self, hold_max_s: float) -> None:
-        self.hold_max_s = hold_max_s
-        self._hold_us = int(round(hold_max_s * 1e6))
-        self.t0_us: int | None = None
-        self.t_us: list[int] = []
-        self.rows: list[Row] = []
+class ImuHistory(_core.History):
+    """Append-only (then trimmed) record of held inputs and their prefix integrals.
 
-    def __len__(self) -> int:
-        return len(self.rows)
+    ``ImuHistory(hold_max_s)``. The core's methods (``_core.History``):
 
-    @property
-    def first_t_us(self) -> int:
-        return self.t_us[0]
-
-    @property
-    def last_t_us(self) -> int:
-        return self.t_us[-1]
-
-    def append(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> bool:
-        """Add a sample (strictly later than the last; the caller gates). Returns True on a gap."""
-        rows = self.rows
-        if not rows:
-            self.t0_us = t_us
-            self.t_us.append(t_us)
-            rows.append((0.0, ax, ay, az, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *rot, *(0.0,) * 18))
-            return False
-        r = rows[-1]
-        t = (t_us - self.t0_us) * 1e-6  # type: ignore[operator]
-        gap = t - r[0] > self.hold_max_s
-        if gap:
-            tv_us = self.t_us[-1] + self._hold_us
-            self.t_us.append(tv_us)
-            rows.append(_next_row(r, (tv_us - self.t0_us) * 1e-6, 0.0, 0.0, 0.0, r[10:19]))  # type: ignore[operator]
-            r = rows[-1]
-        self.t_us.append(t_us)
-        # _next_row, inlined: this is the per-sample hot path
-        (tp, hx, hy, hz, s1x, s1y, s1z, s2x, s2y, s2z, r0, r1, r2, r3, r4, r5, r6, r7, r8,
-         m0, m1, m2, m3, m4, m5, m6, m7, m8, n0, n1, n2, n3, n4, n5, n6, n7, n8) = r
-        dt = t - tp
-        dm = dt * (tp + t) * 0.5
-        rows.append((t, ax, ay, az, s1x + hx * dt, s1y + hy * dt, s1z + hz * dt,
-                     s2x + hx * dm, s2y + hy * dm, s2z + hz * dm, *rot,
-                     m0 + r0 * dt, m1 + r1 * dt, m2 + r2 * dt, m3 + r3 * dt, m4 + r4 * dt, m5 + r5 * dt,
-                     m6 + r6 * dt, m7 + r7 * dt, m8 + r8 * dt,
-                     n0 + r0 * dm, n1 + r1 * dm, n2 + r2 * dm, n3 + r3 * dm, n4 + r4 * dm, n5 + r5 * dm,
-                     n6 + r6 * dm, n7 + r7 * dm, n8 + r8 * dm))
-        return gap
-
-    def append_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
-        """Vectorised ``append`` for samples already checked to be increasing and gap-free;
-        ``rot`` (n, 9) row-major R_ned_frd, None = identity.
-
-        Bit-for-bit the same rows as appending one by one (same operations in the same order;
-        ``np.cumsum`` adds sequentially).
-        """
-        r = self.rows[-1]
-        n = len(t_us)
-        if rot is None:
-            rot = np.tile(np.array(IDENTITY9), (n, 1))
-        t = (t_us - self.t0_us) * 1e-6
-        t_prev = np.concatenate(([r[0]], t[:-1]))
-        held = np.hstack((a_ned, rot))
-        held_prev = np.vstack((np.array(r[1:4] + r[10:19]), held[:-1]))
-        dt = t - t_prev
-        dm = dt * (t_prev + t) * 0.5
-        inc1 = held_prev * dt[:, None]
-        inc2 = held_prev * dm[:, None]
-        i1 = np.cumsum(np.vstack((np.array(r[4:7] + r[19:28]), inc1)), axis=0)[1:]
-        i2 = np.cumsum(np.vstack((np.array(r[7:10] + r[28:37]), inc2)), axis=0)[1:]
-        block = np.hstack((t[:, None], a_ned, i1[:, 0:3], i2[:, 0:3], rot, i1[:, 3:12], i2[:, 3:12]))
-        self.t_us.extend(t_us.tolist())
-        self.rows.extend(map(tuple, block.tolist()))
-
-    def integrals(self, t_us: int) -> Integrals:
-        """(t_s, S1 (3), S2 (3), M1 (9), M2 (9)) at a time inside the history (held input
-        extrapolated past the last).
-
-        Rows are never rewritten once appended (trimming only drops old ones), so the value for a
-        given time never changes: the engine keeps it with each fusion instead of recomputing it.
-        """
-        k = bisect.bisect_right(self.t_us, t_us) - 1
-        r = self.rows[k]
-        t = (t_us - self.t0_us) * 1e-6  # type: ignore[operator]
-        tau = t - r[0]
-        if tau == 0.0:
-            return (t, *r[4:10], *r[19:37])
-        dm = tau * (r[0] + t) * 0.5
-        held = r[1:4] + r[10:19]
-        s1 = r[4:7] + r[19:28]
-        s2 = r[7:10] + r[28:37]
-        i1 = [s + h * tau for s, h in zip(s1, held, strict=True)]
-        i2 = [s + h * dm for s, h in zip(s2, held, strict=True)]
-        return (t, *i1[0:3], *i2[0:3], *i1[3:12], *i2[3:12])
-
-    def last_integrals(self) -> Integrals:
-        """``integrals(last_t_us)``, read straight from the newest row (the held input adds 0)."""
-        r = self.rows[-1]
-        return (r[0], *r[4:10], *r[19:37])
+    * ``append(t_us, ax, ay, az, rot=identity) -> gap``: add a sample (strictly later than the
+      last; the caller gates);
+    * ``push(t_us, ax, ay, az, rot)`` and ``push_frd(t_us, f_frd, rot, g)``: the engine's gated
+      per-sample path: a sample not finite or not later than the last is not used; each outcome
+      is counted in ``counts`` (used, gaps, not finite, time not increasing); returns True when
+      the history has grown past ``trim_len`` (the engine trims). ``push_frd`` rotates the body
+      specific force first (R f̃ + [0, 0, g]);
+    * ``append_batch(t_us, a_ned, rot)``: many samples (int64 (n,), float64 (n, 3), (n, 9) or None),
+      already checked increasing and gap-free; the same rows as appending one by one (counted
+      as used);
+    * ``integrals(t_us)``: (t_s, S1, S2, M1, M2) at a time inside the history (held input
+      extrapolated past the last); rows are never rewritten once appended, so the value for a
+      given time never changes: the engine keeps it with each fusion;
+    * ``last_integrals()``, ``trim_before(t_us)`` (drop samples not needed from ``t_us`` on);
+    * ``len()``, ``first_t_us``, ``last_t_us``, ``t0_us``, ``hold_max_s``, and copies ``rows``,
+      ``t_us`` (for tests).
+    """
 
     def propagate_mean(self, x: tuple[float, ...], t_a_us: int, t_b_us: int, alpha: float
                        ) -> tuple[float, ...]:
         """Mean of the model carried from t_a to t_b (t_a ≤ t_b, both inside the history)."""
         return mean_between(x, self.integrals(t_a_us), self.integrals(t_b_us), alpha)[0]
-
-    def trim_before(self, t_us: int) -> None:
-        """Drop samples no longer needed to integrate from ``t_us`` onwards."""
-        k = bisect.bisect_right(self.t_us, t_us) - 1
-        if k > 0:
-            del self.t_us[:k]
-            del self.rows[:k]
-
-
-def rotation_blocks(a: Integrals, b: Integrals) -> tuple[list[float], list[float]]:
-    """(−A, −B) row-major between the integrals ``a`` and ``b``: A = ∫R, B = ∫(t_b − s) R (negated:
-    as they enter the mean and F)."""
-    (_, _, _, _, _, _, _, p0, p1, p2, p3, p4, p5, p6, p7, p8, r0, r1, r2, r3, r4, r5, r6, r7, r8) = a
-    (tb, _, _, _, _, _, _, q0, q1, q2, q3, q4, q5, q6, q7, q8, s0, s1, s2, s3, s4, s5, s6, s7, s8) = b
-    d0, d1, d2, d3, d4, d5, d6, d7, d8 = p0 - q0, p1 - q1, p2 - q2, p3 - q3, p4 - q4, p5 - q5, p6 - q6, \
-        p7 - q7, p8 - q8
-    return [d0, d1, d2, d3, d4, d5, d6, d7, d8], [
-        tb * d0 + (s0 - r0), tb * d1 + (s1 - r1), tb * d2 + (s2 - r2), tb * d3 + (s3 - r3),
-        tb * d4 + (s4 - r4), tb * d5 + (s5 - r5), tb * d6 + (s6 - r6), tb * d7 + (s7 - r7),
-        tb * d8 + (s8 - r8)]
-
-
-def mean_between(x: tuple[float, ...], a: Integrals, b: Integrals, alpha: float
-                 ) -> tuple[tuple[float, ...], list[float], list[float]]:
-    """Mean of the model carried between the times of the integrals ``a`` and ``b`` (a before b),
-    with the block's negated rotation integrals (−A, −B) (row-major 3×3 each; ``rotation_blocks``)."""
-    ta, a1x, a1y, a1z, a2x, a2y, a2z = a[0:7]
-    tb, b1x, b1y, b1z, b2x, b2y, b2z = b[0:7]
-    A, B = rotation_blocks(a, b)  # negated
-    T = tb - ta
-    h = 0.5 * T * T
-    dx, dy, dz = b1x - a1x, b1y - a1y, b1z - a1z
-    ux, uy, uz, ex, ey, ez = x[9:15]
-    return (
-        x[0] + x[3] * T + (tb * dx - (b2x - a2x)) + (B[0] * ux + B[1] * uy + B[2] * uz) - ex * h,
-        x[1] + x[4] * T + (tb * dy - (b2y - a2y)) + (B[3] * ux + B[4] * uy + B[5] * uz) - ey * h,
-        x[2] + x[5] * T + (tb * dz - (b2z - a2z)) + (B[6] * ux + B[7] * uy + B[8] * uz) - ez * h,
-        x[3] + dx + (A[0] * ux + A[1] * uy + A[2] * uz) - ex * T,
-        x[4] + dy + (A[3] * ux + A[4] * uy + A[5] * uz) - ey * T,
-        x[5] + dz + (A[6] * ux + A[7] * uy + A[8] * uz) - ez * T,
-        alpha * x[6], alpha * x[7], alpha * x[8],
-        ux, uy, uz, ex, ey, ez,
-    ), A, B
-
-
-def _next_row(r: Row, t: float, ax: float, ay: float, az: float, rot: tuple[float, ...]) -> Row:
-    dt = t - r[0]
-    dm = dt * (r[0] + t) * 0.5
-    held = r[1:4] + r[10:19]
-    i1 = [s + h * dt for s, h in zip(r[4:7] + r[19:28], held, strict=True)]
-    i2 = [s + h * dm for s, h in zip(r[7:10] + r[28:37], held, strict=True)]
-    return (t, ax, ay, az, *i1[0:3], *i2[0:3], *rot, *i1[3:12], *i2[3:12])
 
 
 def finite3(x: float, y: float, z: float) -> bool:

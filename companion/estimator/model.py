@@ -43,10 +43,10 @@ everything reduces to the per-axis model of the first wave (tested).
 from __future__ import annotations
 
 import math
-from operator import add as _add
 
 import numpy as np
 
+from companion.estimator import _core
 from companion.estimator.config import EstimatorConfig
 
 State = tuple[float, ...]  # [p NED, v NED, b NED, a FRD, d NED] (m, m/s, m, m/s², m/s²)
@@ -186,108 +186,22 @@ def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = 
 
 
 # ------------------------------------------------------------------- the engine's fast forms
-class BlockPropagator:
-    """``predict_block`` and the nine output variances of it, with fewer numpy calls (the
-    engine's hot path; equal to the reference forms above to rounding, tested).
-
-    F is written into one reused buffer with a single fancy assignment (its 30 variable entries),
-    and Q is written into a reused buffer with a single fancy assignment (its 69 non-zero
-    entries); both index lists are built once here. ``nA``, ``nB`` are −A and −B, row-major lists
-    of 9 (``history.rotation_blocks``)."""
-
-    def __init__(self, q_acc_m2_s3: float, q_rw_m2_s5: float, q_ned_m2_s5: float) -> None:
-        self.q_acc, self.q_rw, self.q_ned = q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5
-        self.F = np.eye(N_STATE)
-        self._F_flat = self.F.reshape(-1)  # a view: writes go to F
-        n = N_STATE
-        self._f_idx = np.array([*_flat(0, 3), *_flat(6, 6), *_flat(0, 12), *_flat(3, 12),
-                                *(r * n + 9 + c for r in range(3) for c in range(3)),
-                                *((3 + r) * n + 9 + c for r in range(3) for c in range(3))])
-        pa = [r * n + 9 + c for r in range(3) for c in range(3)]
-        ap = [(9 + c) * n + r for r in range(3) for c in range(3)]
-        va = [(3 + r) * n + 9 + c for r in range(3) for c in range(3)]
-        av = [(9 + c) * n + 3 + r for r in range(3) for c in range(3)]
-        self._q_idx = np.concatenate([_Q_FLAT, pa, ap, va, av])
-        self._Q = np.zeros((N_STATE, N_STATE))  # Q's entries outside _q_idx stay 0
-        self._Q_flat = self._Q.reshape(-1)
-        # the coefficient rows of ``variances`` (9 × 6; column 0 is 1, the b rows only that)
-        self._C = np.zeros((9, 6))
-        self._C[:, 0] = 1.0
-        self._C_flat = self._C.reshape(-1)
-        self._c_idx = np.array([r * 6 + c for r in range(3) for c in range(1, 6)]
-                               + [r * 6 + c for r in range(3, 6) for c in range(1, 5)])
-
-    def _write_f(self, T_s: float, nA: list[float], nB: list[float], alpha: float) -> None:
-        h = -0.5 * T_s * T_s
-        self._F_flat[self._f_idx] = (T_s, T_s, T_s, alpha, alpha, alpha, h, h, h, -T_s, -T_s, -T_s, *nB, *nA)
-
-    def _q_diag(self, T_s: float, q_b: float) -> tuple[float, ...]:
-        T2 = T_s * T_s
-        q, w, e = self.q_acc, self.q_rw, self.q_ned
-        we = w + e
-        return (q * T2 * T_s / 3.0 + we * T2 * T2 * T_s / 20.0, q * T2 / 2.0 + we * T2 * T2 / 8.0,
-                q * T_s + we * T2 * T_s / 3.0, q_b, w * T_s, e * T_s, -e * T2 * T_s / 6.0, -e * T2 / 2.0)
-
-    def predict(self, P: np.ndarray, T_s: float, nA: list[float], nB: list[float], alpha: float,
-                q_b: float) -> np.ndarray:
-        """F P Fᵀ + Q over a block (a new array)."""
-        self._write_f(T_s, nA, nB, alpha)
-        pp, pv, vv, bb, aa, dd, pd, vd = self._q_diag(T_s, q_b)
-        # the random-walk terms with the block's mean rotation R̄ = A / T (module docstring)
-        kp, kv = self.q_rw * T_s * T_s / 6.0, self.q_rw * T_s / 2.0
-        pa = [kp * v for v in nA]
-        va = [kv * v for v in nA]
-        self._Q_flat[self._q_idx] = (pp, pp, pp, pv, pv, pv, pv, pv, pv, vv, vv, vv, bb, bb, bb, aa, aa, aa,
-                                     dd, dd, dd, pd, pd, pd, pd, pd, pd, vd, vd, vd, vd, vd, vd,
-                                     *pa, *pa, *va, *va)
-        F = self.F
-        out = F @ P @ F.T
-        out += self._Q
-        return out
-
-    def variances(self, P: np.ndarray, T_s: float, nA: list[float], nB: list[float], alpha: float,
-                  q_b: float, blocks: np.ndarray | None = None) -> list[float]:
-        """The variances of p, v and b (N, E, D each: 9 numbers) of ``predict``, computed alone.
-
-        A row of F for p or v has 6 or 5 non-zero entries (p_i: [1, T, −B_i, −T²/2] on
-        (p_i, v_i, a, d_i); v_i: [1, −A_i, −T] on (v_i, a, d_i)), so each variance is a quadratic
-        form on a 6×6 block of P: ``blocks`` = ``variance_blocks(P)``, which depends on P alone
-        (the output path computes it once per fusion)."""
-        M = variance_blocks(P) if blocks is None else blocks
-        h, m = -0.5 * T_s * T_s, -T_s
-        b0, b1, b2, b3, b4, b5, b6, b7, b8 = nB
-        C = self._C
-        self._C_flat[self._c_idx] = (T_s, b0, b1, b2, h, T_s, b3, b4, b5, h, T_s, b6, b7, b8, h, *nA[0:3], m,
-                                     *nA[3:6], m, *nA[6:9], m)
-        v = np.einsum("ij,ijk,ik->i", C, M, C).tolist()
-        T2 = T_s * T_s
-        we = self.q_rw + self.q_ned
-        pp = self.q_acc * T2 * T_s / 3.0 + we * T2 * T2 * T_s / 20.0
-        vv = self.q_acc * T_s + we * T2 * T_s / 3.0
-        a2 = alpha * alpha
-        return [v[0] + pp, v[1] + pp, v[2] + pp, v[3] + vv, v[4] + vv, v[5] + vv,
-                a2 * v[6] + q_b, a2 * v[7] + q_b, a2 * v[8] + q_b]
-
-
-# the state indices of the non-zero entries of F's rows for p (N, E, D), v (N, E, D) and b (N, E,
-# D); v's row has 5 (its sixth index repeats d_i with coefficient 0), b's 1 (α, applied after)
-_VAR_IDX = np.array([[i, 3 + i, 9, 10, 11, 12 + i] for i in range(3)]
-                    + [[3 + i, 9, 10, 11, 12 + i, 12 + i] for i in range(3)]
-                    + [[6 + i] * 6 for i in range(3)])
-
-
-def variance_blocks(P: np.ndarray) -> np.ndarray:
-    """The nine 6×6 blocks of P that ``BlockPropagator.variances`` needs, (9, 6, 6)."""
-    return P[_VAR_IDX[:, :, None], _VAR_IDX[:, None, :]]
-
-
-def inv3(s: list[list[float]]) -> tuple[float, ...]:
-    """Row-major inverse of a symmetric positive-definite 3×3 (closed form, floats)."""
-    (a, b, c), (_, d, e), (_, _, f) = s
-    c0, c1, c2 = d * f - e * e, c * e - b * f, b * e - c * d
-    u = 1.0 / (a * c0 + b * c1 + c * c2)
-    i11, i12, i22 = (a * f - c * c) * u, (b * c - a * e) * u, (a * d - b * b) * u
-    return (c0 * u, c1 * u, c2 * u, c1 * u, i11, i12, c2 * u, i12, i22)
+# The engine's hot path is C (``_core.c``), equal to the reference forms above to rounding
+# (tested here and in tests/test_estimator_core.py):
+#
+# ``BlockPropagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5)``:
+#   ``predict(P, T, nA, nB, alpha, q_b)``: ``predict_block`` (F P Fᵀ + Q, a new array) from the
+#     block's −A, −B (row-major lists of 9, ``history.rotation_blocks``), using F's sparsity (a row
+#     of F for p or v has 6 or 5 non-zero entries) instead of two dense 15×15 products;
+#   ``variances(P, T, nA, nB, alpha, q_b)``: the variances of p, v and b (9) of ``predict``
+#     alone: each a quadratic form on the 6×6 block of P that row of F touches;
+#   ``predict_from(x, P, a, b, T, alpha, q_b)`` -> (x⁻, P⁻, H P⁻ Hᵀ (3×3 nested tuples), the
+#     position diagonal of P⁻ Hᵀ): the mean (``history.mean_between``) and ``predict`` from the
+#     integrals ``a``, ``b`` of the block's ends, with the innovation terms, in one call;
+#   ``output_from(x, P, a, b, T, alpha, q_b)`` -> (x, the 9 variances): the same for the output.
+BlockPropagator = _core.Propagator
+# Row-major inverse of a symmetric positive-definite 3×3 (closed form; the upper triangle is read).
+inv3 = _core.inv3
 
 
 def innovation_gain_terms(P: np.ndarray) -> tuple[np.ndarray, list[list[float]]]:
@@ -298,21 +212,12 @@ def innovation_gain_terms(P: np.ndarray) -> tuple[np.ndarray, list[list[float]]]
 
 def update_fast(x: State, P: np.ndarray, y: tuple[float, float, float], PHt: np.ndarray,
                 hph: list[list[float]], r_m2: tuple[float, float, float]) -> tuple[State, np.ndarray, float]:
-    """Kalman update with z = p + b + ν, ν ~ N(0, diag r), innovation ``y``, P Hᵀ ``PHt`` and
-    H P Hᵀ ``hph`` (``innovation_gain_terms``). Returns (x⁺, P⁺, NIS)."""
-    (h00, h01, h02), (_, h11, h12), (_, _, h22) = hph
-    i = inv3([[h00 + r_m2[0], h01, h02], [h01, h11 + r_m2[1], h12], [h02, h12, h22 + r_m2[2]]])
-    y0, y1, y2 = y
-    g0, g1, g2 = i[0] * y0 + i[1] * y1 + i[2] * y2, i[3] * y0 + i[4] * y1 + i[5] * y2, \
-        i[6] * y0 + i[7] * y1 + i[8] * y2
-    # [K | K y] = P Hᵀ [S⁻¹ | S⁻¹ y] in one product
-    Kg = PHt @ np.array(((i[0], i[1], i[2], g0), (i[3], i[4], i[5], g1), (i[6], i[7], i[8], g2)))
-    P_post = P - Kg[:, 0:3] @ PHt.T
-    # K S Kᵀ is symmetric but its rounding is not: left alone, the asymmetry grew to 5e-6 of P's
-    # largest entry over 36,000 fusions (a 30 min flight); symmetrised it stays at rounding
-    P_post += P_post.T
-    P_post *= 0.5
-    return tuple(map(_add, x, Kg[:, 3].tolist())), P_post, y0 * g0 + y1 * g1 + y2 * g2
+    """Kalman update with z = p + b + ν, ν ~ N(0, diag r), innovation ``y``: (x⁺, P⁺, NIS), by the
+    core (``_core.update(x, P, y, r)``, which forms P Hᵀ and H P Hᵀ itself; ``PHt``, ``hph`` are
+    accepted for the reference form's signature). K S Kᵀ is symmetric but its rounding is not:
+    left alone, the asymmetry grew to 5e-6 of P's largest entry over 36,000 fusions (a 30 min
+    flight), so P⁺ is symmetrised ((A + Aᵀ)/2, exactly symmetric)."""
+    return _core.update(x, P, y, r_m2)
 
 
 def hph_of(P: np.ndarray) -> list[list[float]]:

@@ -1,0 +1,859 @@
+/* The estimator's numeric core in C: the IMU history with prefix integrals (history.py), the
+ * block mean and covariance of the 15-state model (model.py) and the Kalman update.
+ *
+ * Pure numerics, no state beyond the IMU history's arrays. Every formula is the one documented
+ * in history.py and model.py, written with the same operations in the same order where a
+ * Python float expression existed before (so those give the same bits; compiled with
+ * -ffp-contract=off, no fused multiply-add); the matrix products sum the non-zero terms of
+ * F P F^T and K (H P) in their own order (equal to numpy's to rounding). Tested against the
+ * numpy reference forms of model.py and a pure-Python history kept in the tests.
+ *
+ * State x = [p, v, b (NED), a (FRD), d (NED)] (15), covariance P 15x15 (C order, float64).
+ * Integrals = (t_s, S1 (3), S2 (3), M1 (9), M2 (9)) (25 floats, history.py).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <structmember.h>
+#include <math.h>
+#include <string.h>
+#define NPY_NO_DEPRECATED_API NPY_1_22_API_VERSION
+#include <numpy/arrayobject.h>
+
+#define NS 15
+#define NN (NS * NS)
+#define ROW 37
+#define NINT 25
+
+
+/* ------------------------------------------------------------------ helpers */
+/* a float64 array of the given shape, aligned and in native byte order: read it directly */
+static int plain_doubles(PyObject *obj, int nd, npy_intp d0, npy_intp d1) {
+    if (!PyArray_Check(obj)) return 0;
+    PyArrayObject *a = (PyArrayObject *)obj;
+    return PyArray_TYPE(a) == NPY_DOUBLE && PyArray_NDIM(a) == nd && PyArray_DIM(a, 0) == d0
+           && (nd == 1 || PyArray_DIM(a, 1) == d1) && PyArray_ISALIGNED(a) && PyArray_ISNOTSWAPPED(a);
+}
+
+/* n floats from a 1-D float64 array, a tuple, a list or any sequence of numbers */
+static int read_doubles(PyObject *obj, double *out, Py_ssize_t n, const char *what) {
+    if (plain_doubles(obj, 1, n, 0)) {
+        PyArrayObject *a = (PyArrayObject *)obj;
+        const char *p = PyArray_BYTES(a);
+        npy_intp st = PyArray_STRIDE(a, 0);
+        for (Py_ssize_t i = 0; i < n; i++) out[i] = *(const double *)(p + i * st);
+        return 0;
+    }
+    PyObject *seq = PySequence_Fast(obj, what);  /* tuples and lists as they are */
+    if (!seq) return -1;
+    if (PySequence_Fast_GET_SIZE(seq) != n) {
+        Py_DECREF(seq);
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd numbers", what, n);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(seq);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *it = items[i];
+        out[i] = PyFloat_CheckExact(it) ? PyFloat_AS_DOUBLE(it) : PyFloat_AsDouble(it);
+    }
+    Py_DECREF(seq);
+    return PyErr_Occurred() ? -1 : 0;
+}
+
+/* a new tuple (or list) of n floats */
+static PyObject *floats_of(const double *v, Py_ssize_t n, int as_list) {
+    PyObject *t = as_list ? PyList_New(n) : PyTuple_New(n);
+    if (!t) return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *f = PyFloat_FromDouble(v[i]);
+        if (!f) { Py_DECREF(t); return NULL; }
+        if (as_list) PyList_SET_ITEM(t, i, f); else PyTuple_SET_ITEM(t, i, f);
+    }
+    return t;
+}
+
+static PyObject *tuple_of(const double *v, Py_ssize_t n) { return floats_of(v, n, 0); }
+static PyObject *list_of(const double *v, Py_ssize_t n) { return floats_of(v, n, 1); }
+
+/* P (15x15 float64) into out[225], any layout numpy accepts. */
+static int read_cov(PyObject *obj, double *out) {
+    PyArrayObject *a;
+    if (plain_doubles(obj, 2, NS, NS)) {
+        a = (PyArrayObject *)Py_NewRef(obj);
+    } else {  /* anything else (nested lists, other dtypes): through numpy */
+        a = (PyArrayObject *)PyArray_FROMANY(obj, NPY_DOUBLE, 2, 2, NPY_ARRAY_ALIGNED | NPY_ARRAY_NOTSWAPPED);
+        if (!a) return -1;
+        if (PyArray_DIM(a, 0) != NS || PyArray_DIM(a, 1) != NS) {
+            Py_DECREF(a);
+            PyErr_SetString(PyExc_ValueError, "covariance: expected 15x15");
+            return -1;
+        }
+    }
+    const char *p = PyArray_BYTES(a);
+    npy_intp s0 = PyArray_STRIDE(a, 0), s1 = PyArray_STRIDE(a, 1);
+    if (s1 == 8 && s0 == 8 * NS) {
+        memcpy(out, p, sizeof(double) * NN);
+    } else {
+        for (int i = 0; i < NS; i++)
+            for (int j = 0; j < NS; j++) out[i * NS + j] = *(const double *)(p + i * s0 + j * s1);
+    }
+    Py_DECREF(a);
+    return 0;
+}
+
+/* A new float64 ndarray of shape (d0,) or (d0, d1) holding its numbers from c. */
+static PyObject *new_array(int nd, npy_intp d0, npy_intp d1, const double *c) {
+    npy_intp dims[2] = {d0, d1};
+    PyObject *arr = PyArray_SimpleNew(nd, dims, NPY_DOUBLE);
+    if (!arr) return NULL;
+    memcpy(PyArray_DATA((PyArrayObject *)arr), c, sizeof(double) * (size_t)(nd == 1 ? d0 : d0 * d1));
+    return arr;
+}
+
+static PyObject *new_cov(const double *c) { return new_array(2, NS, NS, c); }
+
+/* ---------------------------------------------------------- rotation blocks and the mean */
+/* (-A, -B) row-major between integrals a and b (history.rotation_blocks). */
+static void rot_blocks(const double *a, const double *b, double *nA, double *nB) {
+    double tb = b[0];
+    for (int k = 0; k < 9; k++) {
+        double d = a[7 + k] - b[7 + k];
+        nA[k] = d;
+        nB[k] = tb * d + (b[16 + k] - a[16 + k]);
+    }
+}
+
+/* history.mean_between: x carried between the times of integrals a and b. */
+static void mean_between_c(const double *x, const double *a, const double *b, double alpha, double *out,
+                           double *nA, double *nB) {
+    rot_blocks(a, b, nA, nB);
+    double ta = a[0], tb = b[0];
+    double T = tb - ta;
+    double h = 0.5 * T * T;
+    double d[3] = {b[1] - a[1], b[2] - a[2], b[3] - a[3]};
+    double ux = x[9], uy = x[10], uz = x[11];
+    for (int i = 0; i < 3; i++) {
+        const double *Bi = nB + 3 * i, *Ai = nA + 3 * i;
+        out[i] = x[i] + x[3 + i] * T + (tb * d[i] - (b[4 + i] - a[4 + i])) + (Bi[0] * ux + Bi[1] * uy + Bi[2] * uz)
+                 - x[12 + i] * h;
+        out[3 + i] = x[3 + i] + d[i] + (Ai[0] * ux + Ai[1] * uy + Ai[2] * uz) - x[12 + i] * T;
+        out[6 + i] = alpha * x[6 + i];
+    }
+    for (int i = 9; i < NS; i++) out[i] = x[i];
+}
+
+static int read_x_ints(PyObject *x_o, PyObject *a_o, PyObject *b_o, double *x, double *a, double *b) {
+    if (read_doubles(x_o, x, NS, "state") < 0) return -1;
+    if (read_doubles(a_o, a, NINT, "integrals") < 0) return -1;
+    return read_doubles(b_o, b, NINT, "integrals");
+}
+
+static PyObject *py_mean_between(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "mean_between(x, a, b, alpha)"); return NULL; }
+    double x[NS], a[NINT], b[NINT], out[NS], nA[9], nB[9];
+    if (read_x_ints(args[0], args[1], args[2], x, a, b) < 0) return NULL;
+    double alpha = PyFloat_AsDouble(args[3]);
+    if (alpha == -1.0 && PyErr_Occurred()) return NULL;
+    mean_between_c(x, a, b, alpha, out, nA, nB);
+    PyObject *xo = tuple_of(out, NS), *ao = list_of(nA, 9), *bo = list_of(nB, 9);
+    if (!xo || !ao || !bo) { Py_XDECREF(xo); Py_XDECREF(ao); Py_XDECREF(bo); return NULL; }
+    return Py_BuildValue("(NNN)", xo, ao, bo);
+}
+
+static PyObject *py_rotation_blocks(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 2) { PyErr_SetString(PyExc_TypeError, "rotation_blocks(a, b)"); return NULL; }
+    double a[NINT], b[NINT], nA[9], nB[9];
+    if (read_doubles(args[0], a, NINT, "integrals") < 0 || read_doubles(args[1], b, NINT, "integrals") < 0)
+        return NULL;
+    rot_blocks(a, b, nA, nB);
+    PyObject *ao = list_of(nA, 9), *bo = list_of(nB, 9);
+    if (!ao || !bo) { Py_XDECREF(ao); Py_XDECREF(bo); return NULL; }
+    return Py_BuildValue("(NN)", ao, bo);
+}
+
+/* the integrals at the newest sample of a History (defined below); 0 if o is not one */
+static int newest_integrals(PyObject *o, double *out);
+
+/* ------------------------------------------------------------------ the model */
+typedef struct {
+    PyObject_HEAD
+    double q_acc, q_rw, q_ned;
+} Propagator;
+
+/* out = F P F^T + Q for a block (model.BlockPropagator.predict); F's non-zero structure:
+ * p_i row: 1 at p_i, T at v_i, -B_i (nB row i) on a, h = -T^2/2 at d_i;
+ * v_i row: 1 at v_i, -A_i (nA row i) on a, -T at d_i;  b_i row: alpha at b_i;  a, d rows: 1. */
+static void apply_f_rows(const double *M, double *out, double T, const double *nA, const double *nB, double alpha) {
+    double h = -0.5 * T * T, m = -T;
+    for (int i = 0; i < 3; i++) {
+        const double *Bi = nB + 3 * i, *Ai = nA + 3 * i;
+        const double *mp = M + i * NS, *mv = M + (3 + i) * NS, *md = M + (12 + i) * NS;
+        const double *m9 = M + 9 * NS, *m10 = M + 10 * NS, *m11 = M + 11 * NS;
+        double *op = out + i * NS, *ov = out + (3 + i) * NS, *ob = out + (6 + i) * NS;
+        const double *mb = M + (6 + i) * NS;
+        for (int j = 0; j < NS; j++) {
+            double ua = Bi[0] * m9[j] + Bi[1] * m10[j] + Bi[2] * m11[j];
+            double va = Ai[0] * m9[j] + Ai[1] * m10[j] + Ai[2] * m11[j];
+            op[j] = mp[j] + T * mv[j] + ua + h * md[j];
+            ov[j] = mv[j] + va + m * md[j];
+            ob[j] = alpha * mb[j];
+        }
+    }
+    memcpy(out + 9 * NS, M + 9 * NS, sizeof(double) * 6 * NS);
+}
+
+static void transpose(const double *M, double *out) {
+    for (int i = 0; i < NS; i++)
+        for (int j = 0; j < NS; j++) out[j * NS + i] = M[i * NS + j];
+}
+
+static void predict_c(const Propagator *pr, const double *P, double T, const double *nA, const double *nB,
+                      double alpha, double q_b, double *out) {
+    double FP[NN], FPt[NN], G[NN];
+    apply_f_rows(P, FP, T, nA, nB, alpha);   /* F P */
+    transpose(FP, FPt);                      /* (F P)^T = P F^T */
+    apply_f_rows(FPt, G, T, nA, nB, alpha);  /* F (F P)^T = F P F^T (symmetric P) */
+    transpose(G, out);                       /* (F P F^T)^T: as F @ P @ F.T is laid out */
+    /* Q (BlockPropagator._q_diag and the random-walk terms with the block's mean rotation) */
+    double T2 = T * T;
+    double q = pr->q_acc, w = pr->q_rw, e = pr->q_ned;
+    double we = w + e;
+    double pp = q * T2 * T / 3.0 + we * T2 * T2 * T / 20.0, pv = q * T2 / 2.0 + we * T2 * T2 / 8.0;
+    double vv = q * T + we * T2 * T / 3.0, aa = w * T, dd = e * T, pd = -e * T2 * T / 6.0, vd = -e * T2 / 2.0;
+    double kp = pr->q_rw * T * T / 6.0, kv = pr->q_rw * T / 2.0;
+    for (int i = 0; i < 3; i++) {
+        out[i * NS + i] += pp;
+        out[i * NS + 3 + i] += pv;
+        out[(3 + i) * NS + i] += pv;
+        out[(3 + i) * NS + 3 + i] += vv;
+        out[(6 + i) * NS + 6 + i] += q_b;
+        out[(9 + i) * NS + 9 + i] += aa;
+        out[(12 + i) * NS + 12 + i] += dd;
+        out[i * NS + 12 + i] += pd;
+        out[(12 + i) * NS + i] += pd;
+        out[(3 + i) * NS + 12 + i] += vd;
+        out[(12 + i) * NS + 3 + i] += vd;
+        for (int c = 0; c < 3; c++) {
+            double pa = kp * nA[3 * i + c], va = kv * nA[3 * i + c];
+            out[i * NS + 9 + c] += pa;
+            out[(9 + c) * NS + i] += pa;
+            out[(3 + i) * NS + 9 + c] += va;
+            out[(9 + c) * NS + 3 + i] += va;
+        }
+    }
+}
+
+/* The variances of p, v, b of predict_c, alone (BlockPropagator.variances). */
+static void variances_c(const Propagator *pr, const double *P, double T, const double *nA, const double *nB,
+                        double alpha, double q_b, double *var) {
+    double h = -0.5 * T * T, m = -T;
+    for (int i = 0; i < 3; i++) {
+        int ip[6] = {i, 3 + i, 9, 10, 11, 12 + i};
+        double cp[6] = {1.0, T, nB[3 * i], nB[3 * i + 1], nB[3 * i + 2], h};
+        int iv[5] = {3 + i, 9, 10, 11, 12 + i};
+        double cv[5] = {1.0, nA[3 * i], nA[3 * i + 1], nA[3 * i + 2], m};
+        double sp = 0.0, sv = 0.0;
+        for (int r = 0; r < 6; r++) {
+            double s = 0.0;
+            for (int c = 0; c < 6; c++) s += P[ip[r] * NS + ip[c]] * cp[c];
+            sp += cp[r] * s;
+        }
+        for (int r = 0; r < 5; r++) {
+            double s = 0.0;
+            for (int c = 0; c < 5; c++) s += P[iv[r] * NS + iv[c]] * cv[c];
+            sv += cv[r] * s;
+        }
+        var[i] = sp;
+        var[3 + i] = sv;
+        var[6 + i] = P[(6 + i) * NS + 6 + i];
+    }
+    double T2 = T * T;
+    double we = pr->q_rw + pr->q_ned;
+    double pp = pr->q_acc * T2 * T / 3.0 + we * T2 * T2 * T / 20.0;
+    double vv = pr->q_acc * T + we * T2 * T / 3.0;
+    double a2 = alpha * alpha;
+    for (int i = 0; i < 3; i++) {
+        var[i] = var[i] + pp;
+        var[3 + i] = var[3 + i] + vv;
+        var[6 + i] = a2 * var[6 + i] + q_b;
+    }
+}
+
+/* model.inv3: row-major inverse of a symmetric 3x3 given by its upper triangle. */
+static void inv3_c(double a, double b, double c, double d, double e, double f, double *out) {
+    double c0 = d * f - e * e, c1 = c * e - b * f, c2 = b * e - c * d;
+    double u = 1.0 / (a * c0 + b * c1 + c * c2);
+    double i11 = (a * f - c * c) * u, i12 = (b * c - a * e) * u, i22 = (a * d - b * b) * u;
+    out[0] = c0 * u; out[1] = c1 * u; out[2] = c2 * u;
+    out[3] = c1 * u; out[4] = i11; out[5] = i12;
+    out[6] = c2 * u; out[7] = i12; out[8] = i22;
+}
+
+/* H P H^T (3x3, full) and P H^T (15x3) for H = [I 0 I 0 0]. */
+static void pht_of(const double *P, double *PHt, double *hph) {
+    for (int i = 0; i < NS; i++)
+        for (int j = 0; j < 3; j++) PHt[i * 3 + j] = P[i * NS + j] + P[i * NS + 6 + j];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) hph[i * 3 + j] = PHt[i * 3 + j] + PHt[(6 + i) * 3 + j];
+}
+
+/* model.update_fast: x+, P+ (symmetrised), NIS for z = p + b + nu, nu ~ N(0, diag r). */
+static double update_c(const double *x, const double *P, const double *y, const double *r, double *xo, double *Po) {
+    double PHt[NS * 3], hph[9], Si[9];
+    pht_of(P, PHt, hph);
+    inv3_c(hph[0] + r[0], hph[1], hph[2], hph[4] + r[1], hph[5], hph[8] + r[2], Si);
+    double g0 = Si[0] * y[0] + Si[1] * y[1] + Si[2] * y[2], g1 = Si[3] * y[0] + Si[4] * y[1] + Si[5] * y[2],
+           g2 = Si[6] * y[0] + Si[7] * y[1] + Si[8] * y[2];
+    double K[NS * 3];
+    for (int i = 0; i < NS; i++) {
+        const double *h = PHt + 3 * i;
+        K[3 * i] = h[0] * Si[0] + h[1] * Si[3] + h[2] * Si[6];
+        K[3 * i + 1] = h[0] * Si[1] + h[1] * Si[4] + h[2] * Si[7];
+        K[3 * i + 2] = h[0] * Si[2] + h[1] * Si[5] + h[2] * Si[8];
+        xo[i] = x[i] + (h[0] * g0 + h[1] * g1 + h[2] * g2);
+    }
+    double A[NN];
+    for (int i = 0; i < NS; i++)
+        for (int j = 0; j < NS; j++)
+            A[i * NS + j] = P[i * NS + j] - (K[3 * i] * PHt[3 * j] + K[3 * i + 1] * PHt[3 * j + 1]
+                                             + K[3 * i + 2] * PHt[3 * j + 2]);
+    /* K S K^T is symmetric but its rounding is not: symmetrise (model.update_fast) */
+    for (int i = 0; i < NS; i++)
+        for (int j = 0; j < NS; j++) Po[i * NS + j] = (A[i * NS + j] + A[j * NS + i]) * 0.5;
+    return y[0] * g0 + y[1] * g1 + y[2] * g2;
+}
+
+static int prop_init(Propagator *self, PyObject *args, PyObject *kw) {
+    if (!PyArg_ParseTuple(args, "ddd", &self->q_acc, &self->q_rw, &self->q_ned)) return -1;
+    return 0;
+}
+
+static int parse_block(PyObject *const *args, double *T, double *nA, double *nB, double *alpha, double *q_b) {
+    *T = PyFloat_AsDouble(args[0]);
+    if (read_doubles(args[1], nA, 9, "-A") < 0 || read_doubles(args[2], nB, 9, "-B") < 0) return -1;
+    *alpha = PyFloat_AsDouble(args[3]);
+    *q_b = PyFloat_AsDouble(args[4]);
+    return PyErr_Occurred() ? -1 : 0;
+}
+
+/* predict(P, T, nA, nB, alpha, q_b) -> F P F^T + Q (a new array) */
+static PyObject *prop_predict(Propagator *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 6) { PyErr_SetString(PyExc_TypeError, "predict(P, T, nA, nB, alpha, q_b)"); return NULL; }
+    double P[NN], out[NN], T, nA[9], nB[9], alpha, q_b;
+    if (read_cov(args[0], P) < 0 || parse_block(args + 1, &T, nA, nB, &alpha, &q_b) < 0) return NULL;
+    predict_c(self, P, T, nA, nB, alpha, q_b, out);
+    return new_cov(out);
+}
+
+/* variances(P, T, nA, nB, alpha, q_b[, unused]) -> the 9 variances of p, v, b of predict */
+static PyObject *prop_variances(Propagator *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 6 && nargs != 7) {
+        PyErr_SetString(PyExc_TypeError, "variances(P, T, nA, nB, alpha, q_b)");
+        return NULL;
+    }
+    double P[NN], var[9], T, nA[9], nB[9], alpha, q_b;
+    if (read_cov(args[0], P) < 0 || parse_block(args + 1, &T, nA, nB, &alpha, &q_b) < 0) return NULL;
+    variances_c(self, P, T, nA, nB, alpha, q_b, var);
+    return list_of(var, 9);
+}
+
+/* predict_from(x, P, a, b, T, alpha, q_b) -> (x-, P-, hph (3x3 nested tuples), pht_p (3)):
+ * the engine's prediction of an entry to a fix (mean from the integrals a, b; covariance;
+ * the innovation terms H P- H^T and the position diagonal of P- H^T). */
+static PyObject *prop_predict_from(Propagator *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 7) { PyErr_SetString(PyExc_TypeError, "predict_from(x, P, a, b, T, alpha, q_b)"); return NULL; }
+    double x[NS], a[NINT], b[NINT], P[NN], xo[NS], nA[9], nB[9], out[NN], PHt[NS * 3], hph[9];
+    if (read_x_ints(args[0], args[2], args[3], x, a, b) < 0 || read_cov(args[1], P) < 0) return NULL;
+    double T = PyFloat_AsDouble(args[4]), alpha = PyFloat_AsDouble(args[5]), q_b = PyFloat_AsDouble(args[6]);
+    if (PyErr_Occurred()) return NULL;
+    mean_between_c(x, a, b, alpha, xo, nA, nB);
+    predict_c(self, P, T, nA, nB, alpha, q_b, out);
+    pht_of(out, PHt, hph);
+    double pp[3] = {PHt[0], PHt[4], PHt[8]};
+    return Py_BuildValue("(NN((ddd)(ddd)(ddd))N)", tuple_of(xo, NS), new_cov(out), hph[0], hph[1], hph[2], hph[3],
+                         hph[4], hph[5], hph[6], hph[7], hph[8], tuple_of(pp, 3));
+}
+
+/* output_from(x, P, a, b, T, alpha, q_b) -> (x at b, [p, v, b, their 9 variances] (ndarray (18,))):
+ * the engine's snapshot; b may be the History itself (its newest sample) */
+static PyObject *prop_output_from(Propagator *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 7) { PyErr_SetString(PyExc_TypeError, "output_from(x, P, a, b, T, alpha, q_b)"); return NULL; }
+    double x[NS], a[NINT], b[NINT], P[NN], xo[NS], nA[9], nB[9], out[18];
+    int newest = newest_integrals(args[3], b);
+    if (newest < 0) return NULL;
+    if (read_doubles(args[0], x, NS, "state") < 0 || read_doubles(args[2], a, NINT, "integrals") < 0
+        || (!newest && read_doubles(args[3], b, NINT, "integrals") < 0) || read_cov(args[1], P) < 0)
+        return NULL;
+    double T = PyFloat_AsDouble(args[4]), alpha = PyFloat_AsDouble(args[5]), q_b = PyFloat_AsDouble(args[6]);
+    if (PyErr_Occurred()) return NULL;
+    mean_between_c(x, a, b, alpha, xo, nA, nB);
+    memcpy(out, xo, sizeof(double) * 9);
+    variances_c(self, P, T, nA, nB, alpha, q_b, out + 9);
+    return Py_BuildValue("(NN)", tuple_of(xo, NS), new_array(1, 18, 0, out));
+}
+
+static PyMethodDef prop_methods[] = {
+    {"predict", (PyCFunction)(void (*)(void))prop_predict, METH_FASTCALL, "F P F^T + Q over a block"},
+    {"variances", (PyCFunction)(void (*)(void))prop_variances, METH_FASTCALL, "the 9 variances of predict"},
+    {"predict_from", (PyCFunction)(void (*)(void))prop_predict_from, METH_FASTCALL, "mean, covariance, gain terms"},
+    {"output_from", (PyCFunction)(void (*)(void))prop_output_from, METH_FASTCALL, "mean and 9 variances"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject PropagatorType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "companion.estimator._core.Propagator",
+    .tp_basicsize = sizeof(Propagator),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE,
+    .tp_doc = "Propagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5): the 15-state block prediction",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)prop_init,
+    .tp_methods = prop_methods,
+};
+
+/* update(x, P, y, r) -> (x+, P+, NIS) */
+static PyObject *py_update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "update(x, P, y, r)"); return NULL; }
+    double x[NS], P[NN], y[3], r[3], xo[NS], Po[NN];
+    if (read_doubles(args[0], x, NS, "state") < 0 || read_cov(args[1], P) < 0
+        || read_doubles(args[2], y, 3, "innovation") < 0 || read_doubles(args[3], r, 3, "R") < 0)
+        return NULL;
+    double nis = update_c(x, P, y, r, xo, Po);
+    return Py_BuildValue("(NNd)", tuple_of(xo, NS), new_cov(Po), nis);
+}
+
+/* inv3(s) -> row-major inverse (9-tuple) of a symmetric 3x3 (nested sequences, upper triangle read) */
+static PyObject *py_inv3(PyObject *self, PyObject *s) {
+    double m[9];
+    PyObject *rows = PySequence_Fast(s, "inv3: a 3x3");
+    if (!rows) return NULL;
+    if (PySequence_Fast_GET_SIZE(rows) != 3) { Py_DECREF(rows); PyErr_SetString(PyExc_ValueError, "inv3: 3x3"); return NULL; }
+    for (int i = 0; i < 3; i++)
+        if (read_doubles(PySequence_Fast_GET_ITEM(rows, i), m + 3 * i, 3, "inv3 row") < 0) { Py_DECREF(rows); return NULL; }
+    Py_DECREF(rows);
+    double out[9];
+    inv3_c(m[0], m[1], m[2], m[4], m[5], m[8], out);
+    return tuple_of(out, 9);
+}
+
+/* rotation_q(q) -> R_ned_frd row-major (9-tuple) of the quaternion (w, x, y, z), or None when
+ * |q|^2 is not finite or <= 1e-12 (navigator.rotation_scaled with s = 2 / |q|^2). */
+static PyObject *py_rotation_q(PyObject *self, PyObject *q_o) {
+    double q[4];
+    if (read_doubles(q_o, q, 4, "quaternion") < 0) return NULL;
+    double w = q[0], x = q[1], y = q[2], z = q[3];
+    double n2 = w * w + x * x + y * y + z * z;
+    if (!(isfinite(n2) && n2 > 1e-12)) Py_RETURN_NONE;
+    double s = 2.0 / n2;
+    double xs = x * s, ys = y * s, zs = z * s;
+    double wx = w * xs, wy = w * ys, wz = w * zs;
+    double xx = x * xs, xy = x * ys, xz = x * zs;
+    double yy = y * ys, yz = y * zs, zz = z * zs;
+    double r[9] = {1.0 - (yy + zz), xy - wz, xz + wy, xy + wz, 1.0 - (xx + zz), yz - wx, xz - wy, yz + wx,
+                   1.0 - (xx + yy)};
+    return tuple_of(r, 9);
+}
+
+/* ------------------------------------------------------------------ the IMU history */
+typedef struct {
+    PyObject_HEAD
+    double hold_max_s;
+    long long hold_us;
+    long long t0;
+    int started;
+    long long *t;     /* sample times (us) */
+    double *rows;     /* ROW doubles per sample: t_s, a (3), S1 (3), S2 (3), R (9), M1 (9), M2 (9) */
+    Py_ssize_t start, n, cap;
+    Py_ssize_t trim_len;  /* push returns 1 once the history is longer (the engine trims) */
+    long long n_used, n_gaps, n_nonfinite, n_backwards;  /* samples pushed, by outcome */
+} History;
+
+static int hist_init(History *self, PyObject *args, PyObject *kw) {
+    static char *kwlist[] = {"hold_max_s", NULL};
+    double hold;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "d", kwlist, &hold)) return -1;
+    self->hold_max_s = hold;
+    self->hold_us = (long long)nearbyint(hold * 1e6);  /* round half to even, as Python's round */
+    self->started = 0;
+    self->start = self->n = 0;
+    self->trim_len = PY_SSIZE_T_MAX;
+    self->n_used = self->n_gaps = self->n_nonfinite = self->n_backwards = 0;
+    if (!self->t) {
+        self->cap = 1024;
+        self->t = PyMem_Malloc(sizeof(long long) * self->cap);
+        self->rows = PyMem_Malloc(sizeof(double) * ROW * self->cap);
+        if (!self->t || !self->rows) { PyErr_NoMemory(); return -1; }
+    }
+    return 0;
+}
+
+static void hist_dealloc(History *self) {
+    PyMem_Free(self->t);
+    PyMem_Free(self->rows);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int hist_reserve(History *h) {
+    if (h->start + h->n < h->cap) return 0;
+    if (h->start > h->cap / 2) {  /* room at the front (trimmed): move down */
+        memmove(h->t, h->t + h->start, sizeof(long long) * h->n);
+        memmove(h->rows, h->rows + h->start * ROW, sizeof(double) * ROW * h->n);
+        h->start = 0;
+        return 0;
+    }
+    Py_ssize_t cap = h->cap * 2;
+    long long *t = PyMem_Realloc(h->t, sizeof(long long) * cap);
+    if (!t) { PyErr_NoMemory(); return -1; }
+    h->t = t;
+    double *rows = PyMem_Realloc(h->rows, sizeof(double) * ROW * cap);
+    if (!rows) { PyErr_NoMemory(); return -1; }
+    h->rows = rows;
+    h->cap = cap;
+    return 0;
+}
+
+static PyTypeObject HistoryType;
+
+#define HROW(h, k) ((h)->rows + ((h)->start + (k)) * ROW)
+#define HT(h, k) ((h)->t[(h)->start + (k)])
+
+/* the row after r at time t (s) holding a (3) and R (9): history._next_row */
+static void next_row(const double *r, double t, double ax, double ay, double az, const double *rot, double *o) {
+    double tp = r[0];
+    double dt = t - tp;
+    double dm = dt * (tp + t) * 0.5;
+    o[0] = t; o[1] = ax; o[2] = ay; o[3] = az;
+    for (int i = 0; i < 3; i++) {
+        o[4 + i] = r[4 + i] + r[1 + i] * dt;
+        o[7 + i] = r[7 + i] + r[1 + i] * dm;
+    }
+    for (int i = 0; i < 9; i++) {
+        o[10 + i] = rot[i];
+        o[19 + i] = r[19 + i] + r[10 + i] * dt;
+        o[28 + i] = r[28 + i] + r[10 + i] * dm;
+    }
+}
+
+/* append (the caller gates time order and finiteness): 1 on a gap, 0 otherwise, -1 on error */
+static int hist_append_c(History *h, long long t_us, double ax, double ay, double az, const double *rot) {
+    if (hist_reserve(h) < 0) return -1;
+    if (h->n == 0 && !h->started) {
+        h->t0 = t_us;
+        h->started = 1;
+        double *o = HROW(h, 0);
+        memset(o, 0, sizeof(double) * ROW);
+        o[1] = ax; o[2] = ay; o[3] = az;
+        memcpy(o + 10, rot, sizeof(double) * 9);
+        HT(h, 0) = t_us;
+        h->n = 1;
+        return 0;
+    }
+    double *r = HROW(h, h->n - 1);
+    double t = (double)(t_us - h->t0) * 1e-6;
+    int gap = t - r[0] > h->hold_max_s;
+    if (gap) {
+        long long tv = HT(h, h->n - 1) + h->hold_us;
+        double *o = HROW(h, h->n);
+        next_row(r, (double)(tv - h->t0) * 1e-6, 0.0, 0.0, 0.0, r + 10, o);
+        HT(h, h->n) = tv;
+        h->n++;
+        if (hist_reserve(h) < 0) return -1;
+        r = HROW(h, h->n - 1);
+    }
+    next_row(r, t, ax, ay, az, rot, HROW(h, h->n));
+    HT(h, h->n) = t_us;
+    h->n++;
+    return gap;
+}
+
+static const double IDENT9[9] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+
+/* append(t_us, ax, ay, az, rot=identity) -> gap (bool) */
+static PyObject *hist_append(History *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4 && nargs != 5) { PyErr_SetString(PyExc_TypeError, "append(t_us, ax, ay, az, rot)"); return NULL; }
+    long long t = PyLong_AsLongLong(args[0]);
+    double ax = PyFloat_AsDouble(args[1]), ay = PyFloat_AsDouble(args[2]), az = PyFloat_AsDouble(args[3]);
+    double rot[9];
+    if (nargs == 5) {
+        if (read_doubles(args[4], rot, 9, "rotation") < 0) return NULL;
+    } else {
+        memcpy(rot, IDENT9, sizeof rot);
+    }
+    if (PyErr_Occurred()) return NULL;
+    int g = hist_append_c(self, t, ax, ay, az, rot);
+    if (g < 0) return NULL;
+    return PyBool_FromLong(g);
+}
+
+/* the engine's per-sample path with its gates, counted (``counts``): not finite, not later
+ * than the last sample, used (after a gap); returns True when the history is longer than
+ * ``trim_len`` (time to trim), else False */
+static PyObject *push_checked(History *self, long long t, double ax, double ay, double az, const double *rot) {
+    if (!(isfinite(ax) && isfinite(ay) && isfinite(az))) {
+        self->n_nonfinite++;
+        Py_RETURN_FALSE;
+    }
+    if (self->n && t <= HT(self, self->n - 1)) {
+        self->n_backwards++;
+        Py_RETURN_FALSE;
+    }
+    int g = hist_append_c(self, t, ax, ay, az, rot);
+    if (g < 0) return NULL;
+    self->n_used++;
+    self->n_gaps += g;
+    return PyBool_FromLong(self->n > self->trim_len);
+}
+
+/* push(t_us, ax, ay, az, rot) -> time to trim (push_checked) */
+static PyObject *hist_push(History *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 5) { PyErr_SetString(PyExc_TypeError, "push(t_us, ax, ay, az, rot)"); return NULL; }
+    long long t = PyLong_AsLongLong(args[0]);
+    double ax = PyFloat_AsDouble(args[1]), ay = PyFloat_AsDouble(args[2]), az = PyFloat_AsDouble(args[3]);
+    double rot[9];
+    if (read_doubles(args[4], rot, 9, "rotation") < 0) return NULL;
+    if (PyErr_Occurred()) return NULL;
+    return push_checked(self, t, ax, ay, az, rot);
+}
+
+/* push_frd(t_us, f_frd, rot, g) -> as push, with the NED acceleration R f + [0, 0, g] */
+static PyObject *hist_push_frd(History *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "push_frd(t_us, f_frd, rot, g)"); return NULL; }
+    long long t = PyLong_AsLongLong(args[0]);
+    if (t == -1 && PyErr_Occurred()) return NULL;
+    double f[3], r[9];
+    if (read_doubles(args[1], f, 3, "specific force") < 0 || read_doubles(args[2], r, 9, "rotation") < 0) return NULL;
+    double g = PyFloat_AsDouble(args[3]);
+    if (g == -1.0 && PyErr_Occurred()) return NULL;
+    double fx = f[0], fy = f[1], fz = f[2];
+    return push_checked(self, t, r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
+                        r[6] * fx + r[7] * fy + r[8] * fz + g, r);
+}
+
+/* append_batch(t_us int64 (n,), a_ned float64 (n, 3), rot float64 (n, 9) or None): append one by
+ * one (the caller gates order, gaps and finiteness); counted as used */
+static PyObject *hist_append_batch(History *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 3) { PyErr_SetString(PyExc_TypeError, "append_batch(t_us, a_ned, rot)"); return NULL; }
+    int have_rot = args[2] != Py_None;
+    PyArrayObject *t = (PyArrayObject *)PyArray_FROMANY(args[0], NPY_INT64, 1, 1, NPY_ARRAY_CARRAY_RO);
+    PyArrayObject *a = (PyArrayObject *)PyArray_FROMANY(args[1], NPY_DOUBLE, 2, 2, NPY_ARRAY_CARRAY_RO);
+    PyArrayObject *r = have_rot ? (PyArrayObject *)PyArray_FROMANY(args[2], NPY_DOUBLE, 2, 2, NPY_ARRAY_CARRAY_RO)
+                                : NULL;
+    PyObject *res = NULL;
+    if (!t || !a || (have_rot && !r)) goto done;
+    npy_intp n = PyArray_DIM(t, 0);
+    if (PyArray_DIM(a, 0) != n || PyArray_DIM(a, 1) != 3
+        || (have_rot && (PyArray_DIM(r, 0) != n || PyArray_DIM(r, 1) != 9))) {
+        PyErr_SetString(PyExc_ValueError, "append_batch: int64 (n,), float64 (n, 3), float64 (n, 9)");
+        goto done;
+    }
+    const npy_int64 *tv = (const npy_int64 *)PyArray_DATA(t);
+    const double *av = (const double *)PyArray_DATA(a), *rv = have_rot ? (const double *)PyArray_DATA(r) : NULL;
+    npy_intp k;
+    for (k = 0; k < n; k++)
+        if (hist_append_c(self, tv[k], av[3 * k], av[3 * k + 1], av[3 * k + 2], have_rot ? rv + 9 * k : IDENT9) < 0)
+            break;
+    if (k == n) {
+        self->n_used += n;
+        res = Py_NewRef(Py_None);
+    }
+done:
+    Py_XDECREF(t);
+    Py_XDECREF(a);
+    Py_XDECREF(r);
+    return res;
+}
+
+/* index of the last sample at or before t (bisect_right - 1); -1 if none */
+static Py_ssize_t hist_find(const History *h, long long t) {
+    Py_ssize_t lo = 0, hi = h->n;
+    const long long *ts = h->t + h->start;
+    while (lo < hi) {
+        Py_ssize_t mid = (lo + hi) / 2;
+        if (t < ts[mid]) hi = mid; else lo = mid + 1;
+    }
+    return lo - 1;
+}
+
+static int hist_integrals_c(const History *h, long long t_us, double *o) {
+    Py_ssize_t k = hist_find(h, t_us);
+    if (k < 0) {
+        PyErr_SetString(PyExc_ValueError, "integrals: time before the IMU history");
+        return -1;
+    }
+    const double *r = HROW(h, k);
+    double t = (double)(t_us - h->t0) * 1e-6;
+    double tau = t - r[0];
+    o[0] = t;
+    if (tau == 0.0) {
+        memcpy(o + 1, r + 4, sizeof(double) * 6);
+        memcpy(o + 7, r + 19, sizeof(double) * 18);
+        return 0;
+    }
+    double dm = tau * (r[0] + t) * 0.5;
+    for (int i = 0; i < 3; i++) {
+        o[1 + i] = r[4 + i] + r[1 + i] * tau;
+        o[4 + i] = r[7 + i] + r[1 + i] * dm;
+    }
+    for (int i = 0; i < 9; i++) {
+        o[7 + i] = r[19 + i] + r[10 + i] * tau;
+        o[16 + i] = r[28 + i] + r[10 + i] * dm;
+    }
+    return 0;
+}
+
+static PyObject *hist_integrals(History *self, PyObject *arg) {
+    long long t = PyLong_AsLongLong(arg);
+    if (t == -1 && PyErr_Occurred()) return NULL;
+    double o[NINT];
+    if (hist_integrals_c(self, t, o) < 0) return NULL;
+    return tuple_of(o, NINT);
+}
+
+static int newest_integrals(PyObject *o, double *out) {
+    if (!PyObject_TypeCheck(o, &HistoryType)) return 0;
+    History *h = (History *)o;
+    if (!h->n) { PyErr_SetString(PyExc_IndexError, "empty IMU history"); return -1; }
+    const double *r = HROW(h, h->n - 1);
+    out[0] = r[0];
+    memcpy(out + 1, r + 4, sizeof(double) * 6);
+    memcpy(out + 7, r + 19, sizeof(double) * 18);
+    return 1;
+}
+
+static PyObject *hist_last_integrals(History *self, PyObject *unused) {
+    double o[NINT];
+    if (newest_integrals((PyObject *)self, o) < 0) return NULL;
+    return tuple_of(o, NINT);
+}
+
+static PyObject *hist_trim_before(History *self, PyObject *arg) {
+    long long t = PyLong_AsLongLong(arg);
+    if (t == -1 && PyErr_Occurred()) return NULL;
+    Py_ssize_t k = hist_find(self, t);
+    if (k > 0) {
+        self->start += k;
+        self->n -= k;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyObject *hist_get_rows(History *self, void *c) {
+    PyObject *l = PyList_New(self->n);
+    if (!l) return NULL;
+    for (Py_ssize_t k = 0; k < self->n; k++) {
+        PyObject *r = tuple_of(HROW(self, k), ROW);
+        if (!r) { Py_DECREF(l); return NULL; }
+        PyList_SET_ITEM(l, k, r);
+    }
+    return l;
+}
+
+static PyObject *hist_get_t_us(History *self, void *c) {
+    PyObject *l = PyList_New(self->n);
+    if (!l) return NULL;
+    for (Py_ssize_t k = 0; k < self->n; k++) {
+        PyObject *v = PyLong_FromLongLong(HT(self, k));
+        if (!v) { Py_DECREF(l); return NULL; }
+        PyList_SET_ITEM(l, k, v);
+    }
+    return l;
+}
+
+static PyObject *hist_get_first(History *self, void *c) {
+    if (!self->n) { PyErr_SetString(PyExc_IndexError, "empty IMU history"); return NULL; }
+    return PyLong_FromLongLong(HT(self, 0));
+}
+
+static PyObject *hist_get_last(History *self, void *c) {
+    if (!self->n) { PyErr_SetString(PyExc_IndexError, "empty IMU history"); return NULL; }
+    return PyLong_FromLongLong(HT(self, self->n - 1));
+}
+
+static PyObject *hist_get_t0(History *self, void *c) {
+    if (!self->started) Py_RETURN_NONE;
+    return PyLong_FromLongLong(self->t0);
+}
+
+static PyObject *hist_get_hold(History *self, void *c) { return PyFloat_FromDouble(self->hold_max_s); }
+
+static Py_ssize_t hist_len(History *self) { return self->n; }
+
+static PyObject *hist_get_counts(History *self, void *c) {
+    return Py_BuildValue("(LLLL)", self->n_used, self->n_gaps, self->n_nonfinite, self->n_backwards);
+}
+
+static PyMemberDef hist_members[] = {
+    {"trim_len", T_PYSSIZET, offsetof(History, trim_len), 0, "push returns True above this many samples"},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyMethodDef hist_methods[] = {
+    {"append", (PyCFunction)(void (*)(void))hist_append, METH_FASTCALL,
+     "append(t_us, ax, ay, az, rot=identity) -> gap: add a sample (the caller gates)"},
+    {"push", (PyCFunction)(void (*)(void))hist_push, METH_FASTCALL,
+     "push(t_us, ax, ay, az, rot) -> time to trim: a gated, counted sample"},
+    {"push_frd", (PyCFunction)(void (*)(void))hist_push_frd, METH_FASTCALL,
+     "push_frd(t_us, f_frd, rot, g): push with the NED acceleration R f + [0, 0, g]"},
+    {"append_batch", (PyCFunction)(void (*)(void))hist_append_batch, METH_FASTCALL,
+     "append_batch(t_us, a_ned, rot): append row by row"},
+    {"integrals", (PyCFunction)hist_integrals, METH_O, "(t_s, S1, S2, M1, M2) at a time inside the history"},
+    {"last_integrals", (PyCFunction)hist_last_integrals, METH_NOARGS, "integrals at the newest sample"},
+    {"trim_before", (PyCFunction)hist_trim_before, METH_O, "drop samples not needed from t_us on"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyGetSetDef hist_getset[] = {
+    {"rows", (getter)hist_get_rows, NULL, "the rows as tuples (a copy)", NULL},
+    {"t_us", (getter)hist_get_t_us, NULL, "the sample times (a copy)", NULL},
+    {"first_t_us", (getter)hist_get_first, NULL, "oldest sample time", NULL},
+    {"last_t_us", (getter)hist_get_last, NULL, "newest sample time", NULL},
+    {"t0_us", (getter)hist_get_t0, NULL, "time of the first sample ever (None before)", NULL},
+    {"hold_max_s", (getter)hist_get_hold, NULL, "longest hold of an input", NULL},
+    {"counts", (getter)hist_get_counts, NULL, "samples pushed: (used, gaps, not finite, time not increasing)", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PySequenceMethods hist_seq = {.sq_length = (lenfunc)hist_len};
+
+static PyTypeObject HistoryType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "companion.estimator._core.History",
+    .tp_basicsize = sizeof(History),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE,
+    .tp_doc = "History(hold_max_s): held IMU inputs with prefix integrals",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)hist_init,
+    .tp_dealloc = (destructor)hist_dealloc,
+    .tp_methods = hist_methods,
+    .tp_getset = hist_getset,
+    .tp_members = hist_members,
+    .tp_as_sequence = &hist_seq,
+};
+
+static PyMethodDef module_methods[] = {
+    {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
+     "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
+    {"rotation_blocks", (PyCFunction)(void (*)(void))py_rotation_blocks, METH_FASTCALL,
+     "rotation_blocks(a, b) -> (-A, -B) row-major"},
+    {"update", (PyCFunction)(void (*)(void))py_update, METH_FASTCALL, "update(x, P, y, r) -> (x+, P+, NIS)"},
+    {"inv3", (PyCFunction)py_inv3, METH_O, "inverse of a symmetric 3x3, row-major"},
+    {"rotation_q", (PyCFunction)py_rotation_q, METH_O, "R_ned_frd of a quaternion, or None"},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef core_module = {
+    PyModuleDef_HEAD_INIT, "_core", "The estimator's numeric core (history, block prediction, update).", -1,
+    module_methods,
+};
+
+PyMODINIT_FUNC PyInit__core(void) {
+    import_array();
+    if (PyType_Ready(&HistoryType) < 0 || PyType_Ready(&PropagatorType) < 0) return NULL;
+    PyObject *m = PyModule_Create(&core_module);
+    if (!m) return NULL;
+    if (PyModule_AddObjectRef(m, "History", (PyObject *)&HistoryType) < 0
+        || PyModule_AddObjectRef(m, "Propagator", (PyObject *)&PropagatorType) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

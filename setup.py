@@ -1,0 +1,18 @@
+"""Build of the estimator's C core (companion/estimator/_core.c); everything else is in pyproject.toml.
+
+It uses numpy's C API (numpy is a build requirement). -ffp-contract=off: no fused multiply-add,
+so the core computes the same bits as the float expressions it replaced (docs/estimator.md, Speed)."""
+
+import numpy
+from setuptools import Extension, setup
+
+setup(
+    ext_modules=[
+        Extension(
+            "companion.estimator._core",
+            ["companion/estimator/_core.c"],
+            include_dirs=[numpy.get_include()],
+            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
+        )
+    ]
+)

@@ -1,0 +1,217 @@
+"""The C core (companion/estimator/_core.c) against independent references kept only here: a
+pure-Python IMU history (the prefix integrals as plain float expressions, the form the core
+replaced) and the numpy reference forms of model.py (F P Fᵀ + Q with dense F, the textbook
+Kalman update)."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from companion.estimator import _core, model
+from companion.estimator.history import ImuHistory
+from companion.estimator.navigator import rotation_scaled
+
+N = model.N_STATE
+IDENTITY9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+Row = tuple[float, ...]
+
+
+class ReferenceHistory:
+    """history.py's formulas as Python floats: rows (t_s, ã, S1, S2, R, M1, M2), zero-order hold,
+    a gap held for ``hold_max_s`` then a virtual zero-acceleration sample."""
+
+    def __init__(self, hold_max_s: float) -> None:
+        self.hold_max_s, self.hold_us = hold_max_s, int(round(hold_max_s * 1e6))
+        self.t0_us = 0
+        self.t_us: list[int] = []
+        self.rows: list[tuple[float, ...]] = []
+
+    @staticmethod
+    def _next(r: Row, t: float, a: Row, rot: Row) -> Row:
+        dt = t - r[0]
+        dm = dt * (r[0] + t) * 0.5
+        held = r[1:4] + r[10:19]
+        i1 = [s + h * dt for s, h in zip(r[4:7] + r[19:28], held, strict=True)]
+        i2 = [s + h * dm for s, h in zip(r[7:10] + r[28:37], held, strict=True)]
+        return (t, *a, *i1[0:3], *i2[0:3], *rot, *i1[3:12], *i2[3:12])
+
+    def append(self, t_us: int, ax: float, ay: float, az: float, rot: tuple[float, ...] = IDENTITY9) -> bool:
+        if not self.rows:
+            self.t0_us = t_us
+            self.t_us.append(t_us)
+            self.rows.append((0.0, ax, ay, az, *(0.0,) * 6, *rot, *(0.0,) * 18))
+            return False
+        r = self.rows[-1]
+        t = (t_us - self.t0_us) * 1e-6
+        gap = t - r[0] > self.hold_max_s
+        if gap:
+            tv_us = self.t_us[-1] + self.hold_us
+            self.t_us.append(tv_us)
+            self.rows.append(self._next(r, (tv_us - self.t0_us) * 1e-6, (0.0, 0.0, 0.0), r[10:19]))
+        self.t_us.append(t_us)
+        self.rows.append(self._next(self.rows[-1], t, (ax, ay, az), tuple(rot)))
+        return gap
+
+    def integrals(self, t_us: int) -> tuple[float, ...]:
+        k = max(i for i, t in enumerate(self.t_us) if t <= t_us)
+        r = self.rows[k]
+        t = (t_us - self.t0_us) * 1e-6
+        nxt = self._next(r, t, r[1:4], r[10:19]) if t != r[0] else r
+        return (t, *nxt[4:10], *nxt[19:37])
+
+
+def _rot9(rng: np.random.Generator) -> tuple[float, ...]:
+    return tuple(Rotation.random(random_state=rng).as_matrix().ravel().tolist())
+
+
+def _stream(rng: np.random.Generator, n: int = 400):
+    """Irregular times (3-9 ms) with three gaps (0.08-0.5 s), random accelerations and attitudes."""
+    dts = rng.integers(3000, 9000, size=n)
+    dts[[n // 8, n // 8 + 1, n // 2]] = (80_000, 120_000, 500_000)
+    t_us = (1_000_000 + np.concatenate([[0], np.cumsum(dts[1:])])).tolist()
+    return t_us, rng.standard_normal((n, 3)).tolist(), [_rot9(rng) for _ in range(n)]
+
+
+def _random_cov(rng: np.random.Generator) -> np.ndarray:
+    A = rng.standard_normal((N, N))
+    return A @ A.T + 0.1 * np.eye(N)
+
+
+def test_history_rows_and_integrals_equal_the_float_reference_bit_for_bit():
+    rng = np.random.default_rng(11)
+    t_us, acc, rots = _stream(rng)
+    core, ref = ImuHistory(0.05), ReferenceHistory(0.05)
+    gaps = []
+    for t, a, r in zip(t_us, acc, rots, strict=True):
+        gaps.append(core.append(t, *a, r))
+        assert ref.append(t, *a, r) == gaps[-1]
+    assert sum(gaps) == 3 and core.rows == ref.rows and core.t_us == ref.t_us
+    assert (core.first_t_us, core.last_t_us, core.t0_us) == (t_us[0], t_us[-1], t_us[0])
+    assert len(core) == len(ref.rows)
+    for t in [*rng.integers(t_us[0], t_us[-1] + 40_000, size=200).tolist(), *t_us[::37]]:
+        assert core.integrals(t) == ref.integrals(t)
+    assert core.last_integrals() == ref.integrals(t_us[-1])
+    # the batch path: the same rows as one by one
+    batch = ImuHistory(0.05)
+    batch.append(t_us[0], *acc[0], rots[0])
+    batch.append_batch(np.array(t_us[1:50]), np.array(acc[1:50]), np.array(rots[1:50]))
+    assert batch.rows == ref.rows[:50]
+
+
+def test_history_trim_keeps_every_integral_after_the_cut_and_grows_past_its_buffer():
+    rng = np.random.default_rng(12)
+    core, ref = ImuHistory(0.05), ReferenceHistory(0.05)
+    t = 0
+    for k in range(5000):  # beyond the core's initial buffer, trimmed as the engine does
+        t += 5000
+        a, r = rng.standard_normal(3).tolist(), IDENTITY9 if k % 2 else _rot9(rng)
+        core.append(t, *a, r)
+        ref.append(t, *a, r)
+        if k % 700 == 0:
+            core.trim_before(t - 1_000_000)
+    assert core.first_t_us <= t - 1_000_000 and len(core) < 600
+    for q in range(t - 900_000, t + 1, 12_345):
+        assert core.integrals(q) == ref.integrals(q)
+    with pytest.raises(ValueError, match="before the IMU history"):
+        core.integrals(core.first_t_us - 1)
+
+
+def test_gated_push_counts_and_the_frd_path():
+    core = ImuHistory(0.05)
+    r = _rot9(np.random.default_rng(3))
+    f = np.array([0.3, -0.2, -9.7])
+    assert core.push_frd(0, f, r, 9.80665) is False
+    fx, fy, fz = f.tolist()
+    expected = (r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
+                r[6] * fx + r[7] * fy + r[8] * fz + 9.80665)  # the navigator's float expression
+    assert core.rows[0][1:4] == expected
+    core.push(0, 0.0, 0.0, 0.0, r)  # not later than the last sample
+    core.push(5000, math.nan, 0.0, 0.0, r)
+    core.push_frd(5000, np.array([math.inf, 0.0, 0.0]), r, 9.8)
+    core.push(200_000, 0.0, 0.0, 0.0, r)  # a gap: held, then coasting (a virtual sample)
+    core.trim_len = 4
+    assert core.push_frd(205_000, f[::-1].copy(), list(r), 9.8) is False  # lists and any 3-array work
+    assert len(core) == 4 and core.t_us == [0, 50_000, 200_000, 205_000]
+    assert core.counts == (3, 1, 2, 1)  # used, gaps, not finite, time not increasing
+    assert core.push(210_000, 0.0, 0.0, 0.0, r) is True  # longer than trim_len: time to trim
+    with pytest.raises(ValueError):
+        core.push(300_000, 0.0, 0.0, 0.0, r[:8])
+
+
+def test_quaternion_rotation_equals_the_float_form_bit_for_bit():
+    rng = np.random.default_rng(4)
+    for q in rng.standard_normal((200, 4)).tolist():
+        n2 = sum(v * v for v in q)
+        assert _core.rotation_q(np.array(q)) == rotation_scaled(*q, 2.0 / n2)
+    assert _core.rotation_q((0.0, 0.0, 0.0, 0.0)) is None
+    assert _core.rotation_q((math.nan, 0.0, 0.0, 1.0)) is None
+
+
+def test_block_prediction_output_and_update_equal_the_numpy_reference():
+    rng = np.random.default_rng(5)
+    w, e, q = 0.3**2, 0.2**2, 0.08**2
+    prop = model.BlockPropagator(q, w, e)
+    h = ImuHistory(0.05)
+    t_us, acc, rots = _stream(rng, 60)
+    for t, a, r in zip(t_us, acc, rots, strict=True):
+        h.append(t, *a, r)
+    for k in range(20):
+        P = _random_cov(rng)
+        x = tuple(rng.standard_normal(N).tolist())
+        t_a, t_b = sorted(rng.integers(t_us[0], t_us[-1], size=2).tolist())
+        a, b = h.integrals(t_a), h.integrals(t_b)
+        T, alpha, q_b = (t_b - t_a) * 1e-6, 0.98, 0.01 * k
+        x_ref, nA, nB = h.propagate_mean(x, t_a, t_b, alpha), *_core.rotation_blocks(a, b)
+        A, B = -np.array(nA).reshape(3, 3), -np.array(nB).reshape(3, 3)
+        P_ref = model.predict_block(P, T, A, B, alpha, q, q_b, w, e)
+        x_p, P_p, hph, pht_p = prop.predict_from(x, P, a, b, T, alpha, q_b)
+        assert x_p == x_ref
+        np.testing.assert_allclose(P_p, P_ref, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(np.array(hph), model.hmh(P_ref), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(pht_p, np.diag(P_ref[0:3, 0:3] + P_ref[0:3, 6:9]), rtol=1e-12, atol=1e-12)
+        x_o, out = prop.output_from(x, P, a, b, T, alpha, q_b)
+        assert x_o == x_ref and out[0:9].tolist() == list(x_ref[0:9])
+        newest = prop.output_from(x, P, a, h, T, alpha, q_b)  # the history itself: its newest sample
+        assert newest[1].tolist() == prop.output_from(x, P, a, h.last_integrals(), T, alpha, q_b)[1].tolist()
+        np.testing.assert_allclose(out[9:18], np.diag(P_ref)[0:9], rtol=1e-12, atol=1e-12)
+        # the update at that prior
+        z = rng.standard_normal(3)
+        r = tuple(rng.uniform(0.01, 1.0, 3).tolist())
+        xr, Pr, _, _, nis_r = model.update(np.array(x_p), P_p, z, np.diag(r))
+        y = tuple((z - (np.array(x_p[0:3]) + np.array(x_p[6:9]))).tolist())
+        xu, Pu, nis = _core.update(x_p, P_p, y, r)
+        np.testing.assert_allclose(xu, xr, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(Pu, Pr, rtol=1e-10, atol=1e-12)
+        np.testing.assert_array_equal(Pu, Pu.T)
+        assert nis == pytest.approx(nis_r, rel=1e-12)
+    # the output path reads any layout of P; bad shapes are errors, not garbage
+    P = _random_cov(rng)
+    a, b = h.integrals(t_us[3]), h.integrals(t_us[9])
+    assert prop.output_from(x, np.asfortranarray(P), a, b, 0.1, 0.9, 0.0)[1].tolist() == \
+        prop.output_from(x, P, a, b, 0.1, 0.9, 0.0)[1].tolist()
+    with pytest.raises(ValueError):
+        prop.predict(np.eye(9), 0.1, nA, nB, 0.9, 0.0)
+    with pytest.raises(ValueError):
+        prop.output_from(x[:14], P, a, b, 0.1, 0.9, 0.0)
+
+
+def test_the_core_holds_no_memory_on_the_callers_arrays():
+    """numpy keeps a buffer description on every array that exported its buffer, for the array's
+    life: a sample list kept by the caller (a replay, the bench's one-hour flight) would grow by
+    it. The per-sample path reads arrays without the buffer protocol."""
+    import tracemalloc
+
+    rng = np.random.default_rng(8)
+    f, q = list(rng.standard_normal((4000, 3))), list(rng.standard_normal((4000, 4)))  # kept alive
+    core = ImuHistory(0.05)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    for k in range(4000):
+        core.push_frd(5000 * k, f[k], _core.rotation_q(q[k]), 9.8)
+        if k % 256 == 0:
+            core.trim_before(5000 * k - 100_000)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    assert grown < 50_000  # the history's own buffer; 36 bytes × 8000 arrays if descriptions were kept
