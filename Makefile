@@ -1,4 +1,5 @@
-# Every target builds or refreshes .venv itself: a fresh machine needs only python3 and make.
+# Every target builds or refreshes .venv itself: a fresh machine needs only python3 and make (a C
+# compiler and the Python headers are installed through apt-get when missing; see $(STAMP)).
 PY      ?= python3
 VENV    := .venv
 BIN     := $(VENV)/bin
@@ -10,7 +11,16 @@ OUT     ?= runs/demo
 
 .PHONY: venv demo test bench lint browser clean results results-ablation
 
+# The estimator's C core (companion/estimator/_core.c) is compiled by the editable install: it needs
+# a C compiler and the Python headers. When either is missing, Debian's gcc and python3-dev are
+# installed with apt-get (as root, or through sudo), as `browser` does for Chromium.
+CHECK_CC = printf '\043include <Python.h>\n' | $${CC:-cc} -E -I"$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["include"])')" - >/dev/null 2>&1
+
 $(STAMP): requirements.lock pyproject.toml setup.py companion/estimator/_core.c
+	@$(CHECK_CC) || { echo "installing gcc and python3-dev for the estimator's C core"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gcc python3-dev >/dev/null; }
+	@$(CHECK_CC) || { echo "error: no C compiler or no Python headers for $(PY): install them (Debian: gcc python3-dev)"; exit 2; }
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -r requirements.lock
