@@ -50,7 +50,7 @@ _HMM = "belief_plugins.hmm_"
 # {override key: values} (their cartesian product) or an explicit tuple of points. 2-8 points each.
 SWEEPS: tuple[tuple[str, str, Any], ...] = (
     ("naive", "naive", {"estimator.beta_fixed": (0.5, 1.0)}),
-    ("fixed-beta-best", "fixed-beta", {"estimator.beta_fixed": (0.3, 0.4, 0.5, 0.6, 0.7, 0.9)}),
+    ("fixed-beta-best", "fixed-beta", {"estimator.beta_fixed": (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.9)}),
     ("map-beta", "map-beta", {"belief_plugins.map_beta_open": (0.9, 1.0),
                               "belief_plugins.map_beta_canyon": (0.2, 0.35, 0.5)}),
     ("first-order", "first-order", {"estimator.eta_first_order": (0.15, 0.5, 1.5)}),
