@@ -195,3 +195,29 @@ def test_tune_only_retunes_some_rows_pairs_the_points_and_inherits(tmp_path, mon
         lo_gap = r["paired_gap_to_winner_m"]
         assert lo_gap[0] == pytest.approx(lo_gap[1], abs=1e-4) == pytest.approx(lo_gap[2], abs=1e-4)
         assert lo_gap[0] >= 0.0
+
+
+def test_shared_setting_is_chosen_alike_for_every_row(tmp_path, monkeypatch, capsys):
+    """``ablation shared``: each value flies every row on the same flights; the lowest mean of the
+    rows' scores wins and every value is recorded."""
+    rows = [Row("a", "fixed-beta", (("estimator.beta_fixed", 0.5),)), Row("b", "map-beta")]
+
+    def fake_fly(cands, scenario, profiles, seeds, workers, *a, **k):
+        out = []
+        for c in cands:
+            v = dict(c.overrides)["estimator.gnss_offset_max_s"]
+            base = {"a": 1.0, "b": 2.0}[c.label.split("@")[0]]
+            h = base + (0.1 if v == 60.0 else 0.0) + (0.05 if v == 5.0 and c.label.startswith("a") else 0.0)
+            out += [_result(p, s, c.label, c.method, h) for p in profiles for s in seeds]
+        return out
+
+    monkeypatch.setattr(ablation, "_fly", fake_fly)
+    best = ablation.shared_sweep("mismatch", rows, "estimator.gnss_offset_max_s", [60.0, 10.0, 5.0],
+                                 [1000, 1001], [0, 1], 1, tmp_path)
+    assert best == 10.0  # 60: means 1.6; 10: 1.5; 5: 1.525
+    recs = [json.loads(line) for line in (tmp_path / "tuning-mismatch.jsonl").read_text().splitlines()]
+    assert [r["value"] for r in recs] == [60.0, 10.0, 5.0] and recs[1]["rows"] == {"a": 1.0, "b": 2.0}
+    assert recs[2]["score_mean_est_h_median_m"] == pytest.approx(1.525) and recs[0]["flights"] == 8
+    assert ablation.main(["shared", "--scenario", "mismatch", "--rows", str(tmp_path / "none.yaml"),
+                          "--vary", "estimator.gnss_offset_max_s=5", "--seeds", "0-1"]) == 2
+    assert "tuning seeds are 1000" in capsys.readouterr().err

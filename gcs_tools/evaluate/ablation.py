@@ -78,6 +78,8 @@ ROW_ORDER = ("naive", "fixed-beta-0.5", "fixed-beta-best", "map-beta", "first-or
              "second-order-gate-off", "adaptive", "vbakf", "windowed-ml", "hmm-trust", "map-hmm")
 BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta", "hmm-trust", "map-hmm")
 SEVERITIES = (0.0, 1.0, 2.0)
+# campaign directories the report picks up: the two scenarios, and mismatch with the step offset limited
+CAMPAIGNS = ("realistic", "mismatch", "mismatch-offset5s")
 
 
 def severity_overrides(s: float) -> tuple[tuple[str, Any], ...]:
@@ -205,6 +207,33 @@ def tune(scenario: str, seeds: Sequence[int], profiles: Sequence[int], workers: 
     return rows
 
 
+def shared_sweep(scenario: str, rows: Sequence[Row], key: str, values: Sequence[Any], seeds: Sequence[int],
+                 profiles: Sequence[int], workers: int, out: Path) -> Any:
+    """A setting shared by every row (e.g. ``estimator.gnss_offset_max_s``), chosen on the tuning set
+    alike for all: each value flies every given row on the same flights; the value with the lowest
+    mean of the rows' scores wins. Records go to ``tuning-<scenario>.jsonl`` (stage ``shared``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    candidates = [Row(f"{r.label}@{i}", r.method, r.overrides + ((key, v),))
+                  for i, v in enumerate(values) for r in rows]
+    t0 = time.perf_counter()
+    res = _fly(candidates, scenario, profiles, seeds, workers)
+    wall_s = time.perf_counter() - t0
+    means = {}
+    with (out / f"tuning-{scenario}.jsonl").open("a", encoding="utf-8") as f:
+        for i, v in enumerate(values):
+            scores = {r.label: _score(res, f"{r.label}@{i}") for r in rows}
+            means[v] = float(np.mean(list(scores.values())))
+            f.write(json.dumps({"scenario": scenario, "stage": "shared", "key": key, "value": v,
+                                "rows": scores, "score_mean_" + SCORE: means[v], "profiles": list(profiles),
+                                "seeds": list(seeds), "flights": len(res) // len(values),
+                                "wall_s": round(wall_s / len(values), 1)}) + "\n")
+            print(f"{scenario} shared {key}={v}: " + ", ".join(f"{k} {x:.3f}" for k, x in scores.items())
+                  + f" -> mean {means[v]:.3f}", flush=True)
+    best = min(values, key=lambda v: means[v])
+    print(f"{scenario} shared {key}: chosen {best}", flush=True)
+    return best
+
+
 def write_rows(path: Path, rows: Sequence[Row], scenario: str, profiles: Sequence[int],
                seeds: Sequence[int], only: Sequence[str] = ()) -> None:
     body = {"rows": {r.label: {"method": r.method, "set": dict(r.overrides)} for r in rows}}
@@ -296,7 +325,7 @@ def report(out: Path) -> str:
     findings = out / "findings.md"
     if findings.exists():
         parts += [findings.read_text(encoding="utf-8").strip(), ""]
-    for scenario in ("realistic", "mismatch"):
+    for scenario in CAMPAIGNS:
         res_path = out / scenario / "results.json"
         if not res_path.exists():
             continue
@@ -306,7 +335,9 @@ def report(out: Path) -> str:
                   f"Mission `{c['mission']}`, profiles {c['profiles'][0]}–{c['profiles'][-1]}, seeds "
                   f"{', '.join(map(str, c['seeds']))}: {c['flights']} flights, {c['wall_s']:.0f} s wall on "
                   f"{c['workers']} workers, {c.get('flight_cpu_s', float('nan')):.0f} s of flight CPU "
-                  f"(full report: [{scenario}/report.md]({scenario}/report.md)).", "",
+                  f"(full report: [{scenario}/report.md]({scenario}/report.md))"
+                  + "".join(f"; every row with `{k}={v}`" for k, v in dict(c.get("overrides") or {}).items())
+                  + ".", "",
                   flights.markdown(res["flights"]),
                   *_more_tables(res["flights"]),
                   "Rows (hyper-parameters chosen on the tuning set, "
@@ -348,6 +379,13 @@ def _more_tables(block: dict[str, Any]) -> list[str]:
     return out
 
 
+def _tuning_seeds(text: str) -> tuple[int, ...]:
+    seeds = campaign.parse_seeds(text)
+    if not set(seeds) <= set(tuning.TUNING_SEEDS):
+        raise UserError(f"--seeds: tuning seeds are {tuning.TUNING_SEEDS[0]}–{tuning.TUNING_SEEDS[-1]}")
+    return seeds
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.ablation",
                                 description=__doc__.split("\n")[0])
@@ -369,17 +407,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     s.add_argument("--seeds", default="0")
     s.add_argument("--workers", type=int, default=2)
     s.add_argument("--out", type=Path, default=Path("docs/results/ablation/severity"))
+    h = sub.add_parser("shared", help="choose one setting shared by every row, on the tuning set alike")
+    h.add_argument("--scenario", required=True)
+    h.add_argument("--rows", type=Path, required=True)
+    h.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
+    h.add_argument("--vary", required=True, metavar="SECTION.FIELD=V1,V2,...")
+    h.add_argument("--seeds", default="1000-1004")
+    h.add_argument("--profiles", default=f"0-{len(tuning.TUNING_PROFILES) - 1}")
+    h.add_argument("--workers", type=int, default=2)
+    h.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     r = sub.add_parser("report", help="write OUT/report.md from the steps' outputs")
     r.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     args = p.parse_args(argv)
     try:
         if args.command == "report":
             report(args.out)
+        elif args.command == "shared":
+            key, _, raw = args.vary.partition("=")
+            values = [tuning.parse_override(f"{key}={v}")[1] for v in raw.split(",") if v]
+            if not values:
+                raise UserError(f"--vary: expected SECTION.FIELD=V1,V2,..., got {args.vary!r}")
+            seeds = _tuning_seeds(args.seeds)
+            rows = rows_mod.select(rows_mod.load_rows(args.rows), args.methods)
+            shared_sweep(args.scenario, rows, tuning.parse_override(f"{key}={values[0]}")[0], values, seeds,
+                         campaign.parse_seeds(args.profiles), args.workers, args.out)
         elif args.command == "tune":
-            seeds = campaign.parse_seeds(args.seeds)
-            if not set(seeds) <= set(tuning.TUNING_SEEDS):
-                first, last = tuning.TUNING_SEEDS[0], tuning.TUNING_SEEDS[-1]
-                raise UserError(f"--seeds: tuning seeds are {first}–{last}")
+            seeds = _tuning_seeds(args.seeds)
             profiles = campaign.parse_seeds(args.profiles)
             only = [v for v in args.only.split(",") if v]
             tune(args.scenario, seeds, profiles, args.workers, args.out, only)
