@@ -325,17 +325,18 @@ def report(out: Path) -> str:
     findings = out / "findings.md"
     if findings.exists():
         parts += [findings.read_text(encoding="utf-8").strip(), ""]
-    for scenario in CAMPAIGNS:
-        res_path = out / scenario / "results.json"
+    for campaign_dir in CAMPAIGNS:
+        res_path = out / campaign_dir / "results.json"
         if not res_path.exists():
             continue
         res = json.loads(res_path.read_text(encoding="utf-8"))
         c = res["campaign"]
-        parts += [f"## `{scenario}`", "",
+        scenario = c.get("scenario") or campaign_dir  # whose rows and tuning records the campaign flew
+        parts += [f"## `{campaign_dir}`", "",
                   f"Mission `{c['mission']}`, profiles {c['profiles'][0]}–{c['profiles'][-1]}, seeds "
                   f"{', '.join(map(str, c['seeds']))}: {c['flights']} flights, {c['wall_s']:.0f} s wall on "
                   f"{c['workers']} workers, {c.get('flight_cpu_s', float('nan')):.0f} s of flight CPU "
-                  f"(full report: [{scenario}/report.md]({scenario}/report.md))"
+                  f"(full report: [{campaign_dir}/report.md]({campaign_dir}/report.md))"
                   + "".join(f"; every row with `{k}={v}`" for k, v in dict(c.get("overrides") or {}).items())
                   + ".", "",
                   flights.markdown(res["flights"]),
