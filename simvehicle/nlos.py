@@ -19,7 +19,13 @@ once per flight. At each fix, from the true position:
 * **heavy tails** (``heavy_tail_dof = ν > 2``): the white-noise vector of a fix is multiplied by
   ``sqrt((ν − 2) / χ²_ν)``: multivariate Student-t with the same covariance.
 
-Its own seeded generator: the eq. 22-27 stream of ``GnssModel`` is untouched.
+Its own seeded generator: the eq. 22-27 stream of ``GnssModel`` is untouched. The draws do not
+depend on the path flown (common random numbers): each satellite draws its blocked episodes'
+(tracked, delay) pairs from its own stream, the k-th episode of satellite i always the same pair,
+and the heavy tail draws one number per fix from another. Two estimators flying the same seed
+along slightly different paths therefore meet the same reflections, so a paired comparison of
+the two measures the estimators, not which reflections a random stream happened to hand out
+(with one shared stream, a satellite blocked one fix earlier shifted every later draw).
 """
 
 from __future__ import annotations
@@ -98,23 +104,26 @@ class UnmodelledGnss:
     def __init__(self, cfg: GnssConfig, rects_m: np.ndarray, heights_m: np.ndarray,
                  rng: np.random.Generator) -> None:
         self.cfg = cfg
-        self.rng = rng
         self.sky = Constellation(cfg, rects_m, heights_m, rng)
         n = cfg.constellation_size
+        streams = rng.spawn(n + 1)  # common random numbers: one stream per satellite, one for the tails
+        self._episode_rngs = streams[:n]
+        self._tail_rng = streams[n]
         self._blocked = np.zeros(n, dtype=bool)
         self._tracked = np.zeros(n, dtype=bool)  # a blocked satellite tracked by its reflection
         self._delay_m = np.zeros(n)
         self.pdop_all = position_error(self.sky.u_ned, np.ones(n, dtype=bool), np.zeros(n))[1]
 
     def step(self, p_ned_m: np.ndarray) -> Unmodelled:
-        cfg, rng = self.cfg, self.rng
+        cfg = self.cfg
         sees = cfg.nlos or cfg.satellite_noise
         blocked = self.sky.blocked(p_ned_m) if sees else np.zeros_like(self._blocked)
         fresh = blocked & ~self._blocked
-        k = int(fresh.sum())
-        if k and cfg.nlos:
-            self._tracked[fresh] = rng.uniform(size=k) < cfg.nlos_reflect_prob
-            self._delay_m[fresh] = rng.exponential(cfg.nlos_delay_mean_m, size=k)
+        if cfg.nlos:
+            for i in np.flatnonzero(fresh).tolist():  # each satellite's next episode, from its own stream
+                g = self._episode_rngs[i]
+                self._tracked[i] = g.uniform() < cfg.nlos_reflect_prob
+                self._delay_m[i] = g.exponential(cfg.nlos_delay_mean_m)
         self._tracked[~blocked] = False
         self._delay_m[~blocked] = 0.0
         self._blocked = blocked
@@ -127,6 +136,6 @@ class UnmodelledGnss:
         tail = 1.0
         if cfg.heavy_tail_dof > 0.0:
             nu = cfg.heavy_tail_dof
-            tail = math.sqrt((nu - 2.0) / float(rng.chisquare(nu)))
+            tail = math.sqrt((nu - 2.0) / float(self._tail_rng.chisquare(nu)))
         n_nlos = int((used & blocked).sum())
         return Unmodelled(offset, sigma_scale * tail, sigma_scale, int(used.sum()), n_nlos)

@@ -58,7 +58,8 @@ def test_sitl_typo_fails_at_once_naming_the_choices(tmp_path):
     assert done.returncode == 2
     assert done.stderr.splitlines() == [
         "beliefnav: error: --method 'secnd': not one of naive, adaptive, first-order, second-order, "
-        "paper-literal, vbakf, fixed-beta, map-beta, windowed-ml, hmm-trust (did you mean 'second-order'?)"]
+        "paper-literal, vbakf, fixed-beta, map-beta, windowed-ml, hmm-trust, map-hmm "
+        "(did you mean 'second-order'?)"]
     assert not out.exists()  # nothing was started or written
     assert time.monotonic() - t0 < 30
     done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--mission", "defualt", "--out",

@@ -152,3 +152,72 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     assert "Paired against `map-beta` (`map-beta` − row" in text and "| `fixed-beta-0.5` | 2 |" in text
     assert "| 1.0 | 0.900 [0.700, 1.000] | 1.500 |" in text
     assert (abl / "severity" / "fig_where_adaptation_pays.png").stat().st_size > 1000
+
+
+def test_tune_only_retunes_some_rows_pairs_the_points_and_inherits(tmp_path, monkeypatch):
+    """``tune --only``: the named rows are swept (every point on the same flights, the winner by
+    the lowest mean), map-hmm starts from map-beta's winner, the other rows stay as the file has them."""
+    shared = (("estimator.sigma_acc_m_s2", 0.4),)
+    kept = [Row("fixed-beta-0.5", "fixed-beta", shared + (("estimator.beta_fixed", 0.5),)),
+            Row("second-order", "second-order", shared + (("estimator.eta", 0.5),))]
+    ablation.write_rows(tmp_path / "rows-mismatch.yaml", kept, "mismatch", [0], [1000])
+    flights_flown = []
+
+    def fake_fly(rows, scenario, profiles, seeds, workers, *a, **k):
+        out = []
+        for row in rows:
+            o = dict(row.overrides)
+            assert o["estimator.sigma_acc_m_s2"] == 0.4  # the shared value from the rows file
+            score = (abs(o.get("belief_plugins.map_beta_canyon", 0.5) - 0.35)
+                     + abs(o.get("belief_plugins.mhmm_evidence", 0.3) - 0.3)
+                     + 0.01 * o.get("belief_plugins.map_beta_open", 0))
+            for p in profiles:
+                for s in seeds:  # a flight effect shared by every point: pairing removes it
+                    out.append(_result(p, s, row.label, row.method, score + 0.5 * np.sin(7 * p + s)))
+                    flights_flown.append((row.label, p, s))
+        return out
+
+    monkeypatch.setattr(ablation, "_fly", fake_fly)
+    with pytest.raises(UserError, match="--only: no sweep for nope"):
+        ablation.tune("mismatch", [1000, 1001], [0, 1], 1, tmp_path, ["nope"])
+    rows = {r.label: r for r in ablation.tune("mismatch", [1000, 1001], [0, 1], 1, tmp_path,
+                                              ["map-beta", "map-hmm"])}
+    assert dict(rows["map-beta"].overrides)["belief_plugins.map_beta_canyon"] == 0.35
+    assert dict(rows["map-beta"].overrides)["belief_plugins.map_beta_open"] == 0.9
+    hmm = dict(rows["map-hmm"].overrides)
+    assert hmm["belief_plugins.map_beta_canyon"] == 0.35 and hmm["belief_plugins.mhmm_evidence"] == 0.3
+    assert rows["second-order"] == kept[1] and set(rows) == {"fixed-beta-0.5", "second-order", "map-beta",
+                                                             "map-hmm"}
+    assert load_rows(tmp_path / "rows-mismatch.yaml") == list(rows.values())
+    records = [json.loads(line) for line in (tmp_path / "tuning-mismatch.jsonl").read_text().splitlines()]
+    assert len(records) == 6 + 6 and len(flights_flown) == 12 * 4
+    for r in records:  # the paired gap is the score difference exactly: the flight effect cancels
+        lo_gap = r["paired_gap_to_winner_m"]
+        assert lo_gap[0] == pytest.approx(lo_gap[1], abs=1e-4) == pytest.approx(lo_gap[2], abs=1e-4)
+        assert lo_gap[0] >= 0.0
+
+
+def test_shared_setting_is_chosen_alike_for_every_row(tmp_path, monkeypatch, capsys):
+    """``ablation shared``: each value flies every row on the same flights; the lowest mean of the
+    rows' scores wins and every value is recorded."""
+    rows = [Row("a", "fixed-beta", (("estimator.beta_fixed", 0.5),)), Row("b", "map-beta")]
+
+    def fake_fly(cands, scenario, profiles, seeds, workers, *a, **k):
+        out = []
+        for c in cands:
+            v = dict(c.overrides)["estimator.gnss_offset_max_s"]
+            base = {"a": 1.0, "b": 2.0}[c.label.split("@")[0]]
+            h = base + (0.1 if v == 60.0 else 0.0) + (0.05 if v == 5.0 and c.label.startswith("a") else 0.0)
+            out += [_result(p, s, c.label, c.method, h) for p in profiles for s in seeds]
+        return out
+
+    monkeypatch.setattr(ablation, "_fly", fake_fly)
+    best = ablation.shared_sweep("mismatch", rows, "estimator.gnss_offset_max_s", [60.0, 10.0, 5.0],
+                                 [1000, 1001], [0, 1], 1, tmp_path)
+    assert best == 10.0  # 60: means 1.6; 10: 1.5; 5: 1.525
+    recs = [json.loads(line) for line in (tmp_path / "tuning-mismatch.jsonl").read_text().splitlines()]
+    assert [r["value"] for r in recs] == [60.0, 10.0, 5.0] and recs[1]["rows"] == {"a": 1.0, "b": 2.0}
+    assert recs[2]["score_mean_est_h_median_m"] == pytest.approx(1.525) and recs[0]["flights"] == 8
+    assert ablation.main(["shared", "--scenario", "mismatch", "--rows", str(tmp_path / "none.yaml"),
+                          "--vary", "estimator.gnss_offset_max_s=5", "--seeds", "0-1"]) == 2
+    assert "tuning seeds are 1000" in capsys.readouterr().err

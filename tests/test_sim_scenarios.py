@@ -120,6 +120,35 @@ def test_heavy_tail_keeps_the_variance_and_fattens_the_tails():
     assert np.mean(np.abs(z) > 4.0) > 20 * 6.3e-5  # P(|N| > 4) = 6.3e-5; unit-variance t₅: 3.6e-3
 
 
+def test_nlos_draws_do_not_depend_on_the_path_flown():
+    """Common random numbers: satellite i's k-th blocked episode gets the same (tracked, delay)
+    whatever other satellites did before, so two paths through the same seed meet the same
+    reflections (one shared stream would shift every later draw)."""
+    cfg = GnssConfig(constellation_size=4, nlos=True, nlos_reflect_prob=1.0, heavy_tail_dof=4.0)
+
+    def episodes(order: list[list[int]]) -> tuple[dict[int, list[float]], list[float]]:
+        u = UnmodelledGnss(cfg, np.zeros((0, 4)), np.zeros(0), np.random.default_rng(11))
+        seen: dict[int, list[float]] = {}
+        tails = []
+        for blocked in order:  # drive the blocked pattern directly, one fix per entry
+            mask = np.zeros(4, dtype=bool)
+            mask[blocked] = True
+            u.sky.blocked = lambda p, m=mask: m  # type: ignore[method-assign]
+            tails.append(u.step(np.zeros(3)).noise_scale)
+            for i in np.flatnonzero(mask & (u._delay_m > 0)).tolist():
+                if not seen.get(i) or seen[i][-1] != u._delay_m[i]:
+                    seen.setdefault(i, []).append(float(u._delay_m[i]))
+        return seen, tails
+
+    # path A: satellite 0 blocked twice, then 1; path B: 1 first, 0 blocked in between, different timing
+    a, tails_a = episodes([[0], [], [0], [0, 1], [], []])
+    b, tails_b = episodes([[1], [1], [], [0], [], [0]])
+    assert a[0] == b[0] and len(a[0]) == 2  # satellite 0's two episodes: the same delays
+    assert a[1] == b[1] and len(a[1]) == 1
+    assert a[0][0] != a[0][1] and a[0][0] != a[1][0]  # fresh draws per episode and per satellite
+    assert tails_a == tails_b  # the heavy tail: one draw per fix from its own stream
+
+
 def test_scenarios_configure_the_simulator_and_reject_unknown_names():
     m = load_mission("test")
     paper = sim_config_for(m)

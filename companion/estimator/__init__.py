@@ -17,7 +17,7 @@ from companion.estimator.methods import REGISTRY, register
 from companion.estimator.navigator import Navigator
 
 # Modules that register extra adaptation methods (see ``methods``' docstring), by name.
-PLUGINS: tuple[str, ...] = ("vbakf", "fixed_beta", "map_beta", "windowed_ml", "hmm_trust")
+PLUGINS: tuple[str, ...] = ("vbakf", "fixed_beta", "map_beta", "windowed_ml", "hmm_trust", "map_hmm")
 for _plugin in PLUGINS:
     importlib.import_module(f"companion.estimator.{_plugin}")
 

@@ -25,10 +25,14 @@ from companion.estimator.methods import register
 from companion.estimator.plugin_config import PluginConfig
 
 
+def canyon_weight(cfg: PluginConfig, clearance_m: float) -> float:
+    """w(d) = clip((d_near − d) / ramp, 0, 1): 0 in open sky, 1 deep in a street canyon."""
+    return min(1.0, max(0.0, (cfg.map_d_near_m - clearance_m) / cfg.map_ramp_m))
+
+
 def scheduled_beta(cfg: PluginConfig, clearance_m: float) -> float:
     """β(d) of the schedule."""
-    w = min(1.0, max(0.0, (cfg.map_d_near_m - clearance_m) / cfg.map_ramp_m))
-    return cfg.map_beta_open + (cfg.map_beta_canyon - cfg.map_beta_open) * w
+    return cfg.map_beta_open + (cfg.map_beta_canyon - cfg.map_beta_open) * canyon_weight(cfg, clearance_m)
 
 
 @register("map-beta")

@@ -1,4 +1,5 @@
-"""Hyper-parameters of the ablation plugins (``fixed-beta``, ``map-beta``, ``windowed-ml``, ``hmm-trust``).
+"""Hyper-parameters of the ablation plugins (``fixed-beta``, ``map-beta``, ``windowed-ml``, ``hmm-trust``,
+``map-hmm``).
 
 They live in their own mission section ``belief_plugins:`` (``--set belief_plugins.FIELD=V``), so
 the estimator's ``EstimatorConfig`` stays as it is. A plugin that needs them (or the mission's map)
@@ -23,6 +24,11 @@ class PluginConfig:
     map_beta_canyon: float = 0.2  # belief deep in a street canyon
     map_d_near_m: float = 15.0  # clearance below which the belief starts to drop
     map_ramp_m: float = 10.0  # the belief reaches beta_canyon at d_near − ramp
+    # --- map-hmm: a clean (map_beta_open) / degraded (map_beta_canyon) chain whose prior is the
+    # schedule's weight at the estimated position, updated by tempered innovation likelihoods (map_hmm.py)
+    mhmm_dwell_s: float = 1.0  # mean time (s) before the level is re-drawn from the map's prior
+    mhmm_evidence: float = 0.3  # κ: power of each fix's likelihood (0 = the map alone, 1 = full Bayes)
+    mhmm_prior_floor: float = 0.05  # ε: the map's prior of either level is at least this
     # --- windowed-ml: β = argmin over a grid of the innovation NLL summed over the last N fixes
     window_fixes: int = 40  # N (2 s at 20 Hz)
     window_grid: int = 41  # β grid points in [window_beta_min, window_beta_max]
@@ -53,7 +59,11 @@ class PluginConfig:
         if not 0.0 <= self.hmm_beta_degraded < self.hmm_beta_clean <= 1.0:
             raise ValueError("hmm_beta_degraded, hmm_beta_clean: need 0 <= degraded < clean <= 1, got "
                              f"{self.hmm_beta_degraded!r}, {self.hmm_beta_clean!r}")
-        for name in ("hmm_dwell_s", "hmm_outlier_dwell_s"):
+        if not 0.0 <= self.mhmm_evidence <= 1.0:
+            raise ValueError(f"mhmm_evidence: must be in [0, 1], got {self.mhmm_evidence!r}")
+        if not 0.0 <= self.mhmm_prior_floor < 0.5:
+            raise ValueError(f"mhmm_prior_floor: must be in [0, 0.5), got {self.mhmm_prior_floor!r}")
+        for name in ("hmm_dwell_s", "hmm_outlier_dwell_s", "mhmm_dwell_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0.0):
                 raise ValueError(f"{name}: must be a finite number of seconds > 0, "
                                  f"got {getattr(self, name)!r}")

@@ -50,8 +50,9 @@ _HMM = "belief_plugins.hmm_"
 # {override key: values} (their cartesian product) or an explicit tuple of points. 2-8 points each.
 SWEEPS: tuple[tuple[str, str, Any], ...] = (
     ("naive", "naive", {"estimator.beta_fixed": (0.5, 1.0)}),
-    ("fixed-beta-best", "fixed-beta", {"estimator.beta_fixed": (0.3, 0.5, 0.7, 0.9)}),
-    ("map-beta", "map-beta", {"belief_plugins.map_beta_canyon": (0.2, 0.5)}),
+    ("fixed-beta-best", "fixed-beta", {"estimator.beta_fixed": (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.9)}),
+    ("map-beta", "map-beta", {"belief_plugins.map_beta_open": (0.9, 1.0),
+                              "belief_plugins.map_beta_canyon": (0.2, 0.35, 0.5)}),
     ("first-order", "first-order", {"estimator.eta_first_order": (0.15, 0.5, 1.5)}),
     ("second-order", "second-order", {"estimator.eta": (0.15, 0.5, 1.5)}),
     ("second-order-gate-off", "second-order", {"estimator.eta": (0.15, 0.5, 1.5),
@@ -67,11 +68,18 @@ SWEEPS: tuple[tuple[str, str, Any], ...] = (
         for c, d, o, w in ((1.0, 0.0, 25.0, 2.0), (0.8, 0.2, 25.0, 2.0), (0.7, 0.3, 25.0, 2.0),
                            (0.6, 0.4, 25.0, 2.0), (0.7, 0.3, 100.0, 2.0), (0.6, 0.4, 100.0, 2.0),
                            (0.7, 0.3, 25.0, 5.0), (0.6, 0.4, 25.0, 5.0)))),
+    # map-hmm: the evidence weight κ and the dwell time, at the trust levels map-beta's sweep chose
+    ("map-hmm", "map-hmm", {"belief_plugins.mhmm_evidence": (0.1, 0.3, 1.0),
+                            "belief_plugins.mhmm_dwell_s": (1.0, 3.0)}),
 )
+# A row whose sweep starts from another row's chosen point (its own keys override that point's).
+INHERITS = {"map-hmm": "map-beta"}
 ROW_ORDER = ("naive", "fixed-beta-0.5", "fixed-beta-best", "map-beta", "first-order", "second-order",
-             "second-order-gate-off", "adaptive", "vbakf", "windowed-ml", "hmm-trust")
-BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta", "hmm-trust")
+             "second-order-gate-off", "adaptive", "vbakf", "windowed-ml", "hmm-trust", "map-hmm")
+BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta", "hmm-trust", "map-hmm")
 SEVERITIES = (0.0, 1.0, 2.0)
+# campaign directories the report picks up: the two scenarios, and mismatch with the step offset limited
+CAMPAIGNS = ("realistic", "mismatch", "mismatch-offset5s")
 
 
 def severity_overrides(s: float) -> tuple[tuple[str, Any], ...]:
@@ -110,57 +118,129 @@ def _score(results: Sequence[campaign.JobResult], label: str) -> float:
     return float(np.nanmean(v)) if v else float("nan")
 
 
-def tune(scenario: str, seeds: Sequence[int], profiles: Sequence[int], workers: int, out: Path) -> list[Row]:
+def paired_gap(results: Sequence[campaign.JobResult], label: str, winner: str,
+               rng: np.random.Generator, n_resamples: int = 2000) -> tuple[float, float, float]:
+    """mean(label − winner) of the per-flight score over the same flights, with a 95 % paired
+    stratified bootstrap interval: how far a candidate is behind the chosen point, and whether
+    the tuning set can tell them apart."""
+    a, b = flights.table_of(results, label), flights.table_of(results, winner)
+    keys = sorted(set(a) & set(b))
+    if not keys:
+        return (float("nan"),) * 3
+    d = np.array([a[k][SCORE] - b[k][SCORE] for k in keys])
+    idx = stats.stratified_indices(np.array([k[0] for k in keys]), rng, n_resamples)
+    lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
+    return float(d.mean()), float(lo), float(hi)
+
+
+def tune(scenario: str, seeds: Sequence[int], profiles: Sequence[int], workers: int, out: Path,
+         only: Sequence[str] = ()) -> list[Row]:
+    """Tune every row (or re-tune the rows ``only`` names, keeping the others and the shared IMU
+    noise density from ``rows-<scenario>.yaml``). Every point of a sweep flies the same flights
+    (profiles × seeds; common random numbers), so the point with the lowest mean is the lowest
+    paired mean; each record also carries its paired gap to the winner with a 95 % interval."""
     out.mkdir(parents=True, exist_ok=True)
     log = out / f"tuning-{scenario}.jsonl"
+    rows_path = out / f"rows-{scenario}.yaml"
+    unknown = sorted(set(only) - {label for label, _, _ in SWEEPS})
+    if unknown:
+        known = ", ".join(s[0] for s in SWEEPS)
+        raise UserError(f"--only: no sweep for {', '.join(unknown)} (known: {known})")
+    rng = np.random.default_rng(flights.BOOTSTRAP_SEED)
 
-    def record(stage: str, row: Row, score: float, n: int, wall_s: float) -> None:
+    def record(stage: str, row: Row, score: float, n: int, wall_s: float,
+               gap: tuple[float, float, float] | None = None) -> None:
+        entry = {"scenario": scenario, "stage": stage, "row": row.label, "method": row.method,
+                 "overrides": dict(row.overrides), "profiles": list(profiles), "seeds": list(seeds),
+                 "flights": n, "score_" + SCORE: score, "wall_s": round(wall_s, 1)}
+        if gap is not None:
+            entry["paired_gap_to_winner_m"] = [round(v, 4) for v in gap]
         with log.open("a", encoding="utf-8") as f:
-            f.write(json.dumps({"scenario": scenario, "stage": stage, "row": row.label, "method": row.method,
-                                "overrides": dict(row.overrides), "profiles": list(profiles),
-                                "seeds": list(seeds), "flights": n, "score_" + SCORE: score,
-                                "wall_s": round(wall_s, 1)}) + "\n")
-        print(f"{scenario} {stage} {row.label} {dict(row.overrides)} -> {score:.3f}", flush=True)
+            f.write(json.dumps(entry) + "\n")
+        tail = f" (vs winner {gap[0]:+.3f} [{gap[1]:+.3f}, {gap[2]:+.3f}])" if gap is not None else ""
+        print(f"{scenario} {stage} {row.label} {dict(row.overrides)} -> {score:.3f}{tail}", flush=True)
 
-    # 1. the shared IMU noise model
-    best_sigma, best = SIGMA_ACC_VALUES[0], float("inf")
-    for sigma in SIGMA_ACC_VALUES:
-        o = ((SIGMA_ACC, sigma),)
-        rows = [Row("fixed-beta-0.5", "fixed-beta", o + (("estimator.beta_fixed", 0.5),)),
-                Row("second-order", "second-order", o)]
-        t0 = time.perf_counter()
-        res = _fly(rows, scenario, profiles, seeds, workers)
-        score = 0.5 * (_score(res, "fixed-beta-0.5") + _score(res, "second-order"))
-        wall_s = time.perf_counter() - t0
-        record("shared", Row("fixed-beta-0.5+second-order", "-", o), score, len(res), wall_s)
-        if score < best:
-            best_sigma, best = sigma, score
-    shared = ((SIGMA_ACC, best_sigma),)
+    if only:  # re-tune some rows: the shared value and the other rows as the rows file has them
+        kept = {r.label: r for r in rows_mod.load_rows(rows_path)} if rows_path.exists() else {}
+        if "fixed-beta-0.5" not in kept:
+            raise UserError(f"--only needs {rows_path} from a full tuning run (its fixed-beta-0.5 row)")
+        shared = tuple(o for o in kept["fixed-beta-0.5"].overrides if o[0] == SIGMA_ACC)
+        chosen = dict(kept)
+    else:
+        # 1. the shared IMU noise model
+        best_sigma, best = SIGMA_ACC_VALUES[0], float("inf")
+        for sigma in SIGMA_ACC_VALUES:
+            o = ((SIGMA_ACC, sigma),)
+            rows = [Row("fixed-beta-0.5", "fixed-beta", o + (("estimator.beta_fixed", 0.5),)),
+                    Row("second-order", "second-order", o)]
+            t0 = time.perf_counter()
+            res = _fly(rows, scenario, profiles, seeds, workers)
+            score = 0.5 * (_score(res, "fixed-beta-0.5") + _score(res, "second-order"))
+            wall_s = time.perf_counter() - t0
+            record("shared", Row("fixed-beta-0.5+second-order", "-", o), score, len(res), wall_s)
+            if score < best:
+                best_sigma, best = sigma, score
+        shared = ((SIGMA_ACC, best_sigma),)
+        chosen = {}
+    chosen["fixed-beta-0.5"] = Row("fixed-beta-0.5", "fixed-beta", shared + (("estimator.beta_fixed", 0.5),))
 
     # 2. every method's own hyper-parameters, on the shared value
-    chosen: dict[str, Row] = {"fixed-beta-0.5": Row("fixed-beta-0.5", "fixed-beta",
-                                                    shared + (("estimator.beta_fixed", 0.5),))}
     for label, method, axes in SWEEPS:
-        candidates = [Row(f"{label}#{i}", method, shared + p) for i, p in enumerate(_points(axes))]
+        if only and label not in only:
+            continue
+        base: tuple[tuple[str, Any], ...] = shared
+        if label in INHERITS:  # start from the chosen point of the row it builds on
+            parent = chosen[INHERITS[label]].overrides
+            base = tuple(o for o in parent if not any(o[0] == k for k, _ in _points(axes)[0]))
+        candidates = [Row(f"{label}#{i}", method, base + p) for i, p in enumerate(_points(axes))]
         t0 = time.perf_counter()
         res = _fly(candidates, scenario, profiles, seeds, workers)
         wall = (time.perf_counter() - t0) / len(candidates)
         scores = {c.label: _score(res, c.label) for c in candidates}
-        for c in candidates:
-            record("own", Row(label, method, c.overrides), scores[c.label], len(res) // len(candidates), wall)
         win = min(candidates, key=lambda c: scores[c.label])
+        for c in candidates:
+            record("own", Row(label, method, c.overrides), scores[c.label], len(res) // len(candidates), wall,
+                   paired_gap(res, c.label, win.label, rng))
         chosen[label] = Row(label, method, win.overrides)
-    rows = [chosen[label] for label in ROW_ORDER]
-    write_rows(out / f"rows-{scenario}.yaml", rows, scenario, profiles, seeds)
+    rows = [chosen[label] for label in ROW_ORDER if label in chosen]
+    write_rows(rows_path, rows, scenario, profiles, seeds, only)
     return rows
 
 
+def shared_sweep(scenario: str, rows: Sequence[Row], key: str, values: Sequence[Any], seeds: Sequence[int],
+                 profiles: Sequence[int], workers: int, out: Path) -> Any:
+    """A setting shared by every row (e.g. ``estimator.gnss_offset_max_s``), chosen on the tuning set
+    alike for all: each value flies every given row on the same flights; the value with the lowest
+    mean of the rows' scores wins. Records go to ``tuning-<scenario>.jsonl`` (stage ``shared``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    candidates = [Row(f"{r.label}@{i}", r.method, r.overrides + ((key, v),))
+                  for i, v in enumerate(values) for r in rows]
+    t0 = time.perf_counter()
+    res = _fly(candidates, scenario, profiles, seeds, workers)
+    wall_s = time.perf_counter() - t0
+    means = {}
+    with (out / f"tuning-{scenario}.jsonl").open("a", encoding="utf-8") as f:
+        for i, v in enumerate(values):
+            scores = {r.label: _score(res, f"{r.label}@{i}") for r in rows}
+            means[v] = float(np.mean(list(scores.values())))
+            f.write(json.dumps({"scenario": scenario, "stage": "shared", "key": key, "value": v,
+                                "rows": scores, "score_mean_" + SCORE: means[v], "profiles": list(profiles),
+                                "seeds": list(seeds), "flights": len(res) // len(values),
+                                "wall_s": round(wall_s / len(values), 1)}) + "\n")
+            print(f"{scenario} shared {key}={v}: " + ", ".join(f"{k} {x:.3f}" for k, x in scores.items())
+                  + f" -> mean {means[v]:.3f}", flush=True)
+    best = min(values, key=lambda v: means[v])
+    print(f"{scenario} shared {key}: chosen {best}", flush=True)
+    return best
+
+
 def write_rows(path: Path, rows: Sequence[Row], scenario: str, profiles: Sequence[int],
-               seeds: Sequence[int]) -> None:
+               seeds: Sequence[int], only: Sequence[str] = ()) -> None:
     body = {"rows": {r.label: {"method": r.method, "set": dict(r.overrides)} for r in rows}}
+    which = f"rows {', '.join(only)} re-tuned" if only else "every row tuned"
     head = (f"# Rows of the {scenario!r} ablation, each at the hyper-parameters the tuning sweep chose\n"
-            f"# (python -m gcs_tools.evaluate.ablation tune; mission {tuning.TUNING_MISSION}, profiles "
-            f"{list(profiles)}, seeds {list(seeds)}; records in tuning-{scenario}.jsonl).\n")
+            f"# (python -m gcs_tools.evaluate.ablation tune; mission {tuning.TUNING_MISSION}, {which} on "
+            f"profiles {list(profiles)}, seeds {list(seeds)}; records in tuning-{scenario}.jsonl).\n")
     path.write_text(head + yaml.safe_dump(body, sort_keys=False), encoding="utf-8")
 
 
@@ -245,17 +325,20 @@ def report(out: Path) -> str:
     findings = out / "findings.md"
     if findings.exists():
         parts += [findings.read_text(encoding="utf-8").strip(), ""]
-    for scenario in ("realistic", "mismatch"):
-        res_path = out / scenario / "results.json"
+    for campaign_dir in CAMPAIGNS:
+        res_path = out / campaign_dir / "results.json"
         if not res_path.exists():
             continue
         res = json.loads(res_path.read_text(encoding="utf-8"))
         c = res["campaign"]
-        parts += [f"## `{scenario}`", "",
+        scenario = c.get("scenario") or campaign_dir  # whose rows and tuning records the campaign flew
+        parts += [f"## `{campaign_dir}`", "",
                   f"Mission `{c['mission']}`, profiles {c['profiles'][0]}–{c['profiles'][-1]}, seeds "
                   f"{', '.join(map(str, c['seeds']))}: {c['flights']} flights, {c['wall_s']:.0f} s wall on "
                   f"{c['workers']} workers, {c.get('flight_cpu_s', float('nan')):.0f} s of flight CPU "
-                  f"(full report: [{scenario}/report.md]({scenario}/report.md)).", "",
+                  f"(full report: [{campaign_dir}/report.md]({campaign_dir}/report.md))"
+                  + "".join(f"; every row with `{k}={v}`" for k, v in dict(c.get("overrides") or {}).items())
+                  + ".", "",
                   flights.markdown(res["flights"]),
                   *_more_tables(res["flights"]),
                   "Rows (hyper-parameters chosen on the tuning set, "
@@ -297,6 +380,13 @@ def _more_tables(block: dict[str, Any]) -> list[str]:
     return out
 
 
+def _tuning_seeds(text: str) -> tuple[int, ...]:
+    seeds = campaign.parse_seeds(text)
+    if not set(seeds) <= set(tuning.TUNING_SEEDS):
+        raise UserError(f"--seeds: tuning seeds are {tuning.TUNING_SEEDS[0]}–{tuning.TUNING_SEEDS[-1]}")
+    return seeds
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.ablation",
                                 description=__doc__.split("\n")[0])
@@ -307,6 +397,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument("--profiles", default=f"0-{len(tuning.TUNING_PROFILES) - 1}")
     t.add_argument("--workers", type=int, default=2)
     t.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
+    t.add_argument("--only", default="", metavar="ROW[,ROW...]",
+                   help="re-tune these rows only; the others and the shared value stay as "
+                        "rows-<scenario>.yaml has them")
     s = sub.add_parser("severity", help="error ratio against the best fixed β over mismatch severity")
     s.add_argument("--rows", type=Path, required=True)
     s.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
@@ -315,19 +408,35 @@ def main(argv: Sequence[str] | None = None) -> int:
     s.add_argument("--seeds", default="0")
     s.add_argument("--workers", type=int, default=2)
     s.add_argument("--out", type=Path, default=Path("docs/results/ablation/severity"))
+    h = sub.add_parser("shared", help="choose one setting shared by every row, on the tuning set alike")
+    h.add_argument("--scenario", required=True)
+    h.add_argument("--rows", type=Path, required=True)
+    h.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
+    h.add_argument("--vary", required=True, metavar="SECTION.FIELD=V1,V2,...")
+    h.add_argument("--seeds", default="1000-1004")
+    h.add_argument("--profiles", default=f"0-{len(tuning.TUNING_PROFILES) - 1}")
+    h.add_argument("--workers", type=int, default=2)
+    h.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     r = sub.add_parser("report", help="write OUT/report.md from the steps' outputs")
     r.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     args = p.parse_args(argv)
     try:
         if args.command == "report":
             report(args.out)
+        elif args.command == "shared":
+            key, _, raw = args.vary.partition("=")
+            values = [tuning.parse_override(f"{key}={v}")[1] for v in raw.split(",") if v]
+            if not values:
+                raise UserError(f"--vary: expected SECTION.FIELD=V1,V2,..., got {args.vary!r}")
+            seeds = _tuning_seeds(args.seeds)
+            rows = rows_mod.select(rows_mod.load_rows(args.rows), args.methods)
+            shared_sweep(args.scenario, rows, tuning.parse_override(f"{key}={values[0]}")[0], values, seeds,
+                         campaign.parse_seeds(args.profiles), args.workers, args.out)
         elif args.command == "tune":
-            seeds = campaign.parse_seeds(args.seeds)
-            if not set(seeds) <= set(tuning.TUNING_SEEDS):
-                first, last = tuning.TUNING_SEEDS[0], tuning.TUNING_SEEDS[-1]
-                raise UserError(f"--seeds: tuning seeds are {first}–{last}")
+            seeds = _tuning_seeds(args.seeds)
             profiles = campaign.parse_seeds(args.profiles)
-            tune(args.scenario, seeds, profiles, args.workers, args.out)
+            only = [v for v in args.only.split(",") if v]
+            tune(args.scenario, seeds, profiles, args.workers, args.out, only)
         else:
             from gcs_tools.evaluate.cli import parse_profiles
 
