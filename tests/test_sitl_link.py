@@ -84,7 +84,37 @@ def test_signing_rejects_wrong_key_and_unsigned(links):
         got += rx.recv(timeout_s=1.0)
     assert [m.get_type() for m in got] == ["GPS_RAW_INT"]
     assert rx.counters.bad_signature == 2
-    assert got[0]._signed
+    assert got[0].get_msgbuf()[2] & 0x01  # the signed flag
+    assert got[0].get_msgbuf()[-13] == 4  # good's link id
+
+
+def test_signed_frames_are_byte_equal_to_pymavlink_and_replays_are_refused(links):
+    """The fast signed packer against pymavlink's own signing (same key, link id, timestamps),
+    and a replayed datagram (same signature timestamp) counted, not accepted."""
+    rx = links(signing_key=KEY, accept_system_ids=frozenset({7}))
+    tx = links(peer_port=rx.port, signing_key=KEY, system_id=7, component_id=197, link_id=9)
+    ref = codec.new_link(7, 197)
+    ref.signing.secret_key, ref.signing.sign_outgoing, ref.signing.link_id = KEY, True, 9
+    ref.signing.timestamp = tx.mav.signing.timestamp
+    sent: list[bytes] = []
+    tx.tee = lambda frame, outgoing: sent.append(bytes(frame))
+    fix = GnssFix(1_000_000, 48.0, 11.0, 500.0, 3, 12)
+    msgs = [codec.encode_heartbeat("companion"), codec.encode_gnss(fix), step_response(1_250_000, 99)]
+    for m in msgs:
+        tx.send(m)
+    expected = []
+    for m in msgs:  # pack() signs and advances ref's timestamp; send() would advance its seq
+        expected.append(bytes(m.pack(ref)))
+        ref.seq += 1
+    assert sent == expected
+    got = []
+    for _ in msgs:
+        got += rx.recv(timeout_s=1.0)
+    assert [m.get_type() for m in got] == ["HEARTBEAT", "GPS_RAW_INT", "TIMESYNC"]
+    for m, frame in zip(got, sent, strict=True):
+        assert m.get_msgbuf() == frame
+    _raw(rx.port, sent[1])  # a replay: its timestamp is not newer than the stream's last
+    assert rx.recv(timeout_s=1.0) == [] and rx.counters.bad_signature == 1
 
 
 def test_port_in_use_is_one_line_user_error(links):

@@ -5,11 +5,14 @@ message; this ~2 µs). A frame is checked with its message's CRC_EXTRA (x25 / MC
 ``fastcrc``) and unpacked only when asked for, into a namedtuple with the message's field
 names and ``get_type()`` (what the decoders of :mod:`companion.mavlink.codec` read).
 Link views also carry the sender's system id and the frame's bytes (``get_srcSystem()``,
-``get_msgbuf()``). Signatures are skipped, not checked: a signing link parses with pymavlink.
+``get_msgbuf()``). The scanner does not check signatures: a signing link checks each signed
+frame's signature itself (``companion.mavlink.udp_link.check_signature``) and signs what it packs
+with :func:`signature_block`.
 """
 
 from __future__ import annotations
 
+import hashlib
 import struct
 from collections import namedtuple
 from collections.abc import Iterable
@@ -170,9 +173,12 @@ def _payload_only(mav: Any, crc_extra: int, payload: bytes, force_mavlink1: bool
     return payload
 
 
-def pack_frame(msg: mavlink.MAVLink_message, seq: int, system_id: int, component_id: int) -> bytes:
-    """The unsigned MAVLink 2 frame of a pymavlink message, byte-equal to pymavlink's ``pack``
-    (its generated code builds the payload; header, zero trimming and CRC are done here)."""
+def pack_frame(msg: mavlink.MAVLink_message, seq: int, system_id: int, component_id: int,
+               signed: bool = False) -> bytes:
+    """The MAVLink 2 frame of a pymavlink message, byte-equal to pymavlink's ``pack`` (its
+    generated code builds the payload; header, zero trimming and CRC are done here). ``signed``:
+    the header's signed flag is set and the frame ends at its CRC, ready for
+    :func:`signature_block`."""
     msg._pack = _payload_only  # the instance's packer returns the payload
     try:
         payload = msg.pack(None)
@@ -180,7 +186,18 @@ def pack_frame(msg: mavlink.MAVLink_message, seq: int, system_id: int, component
         del msg._pack
     body = payload.rstrip(b"\x00") or payload[:1]  # MAVLink 2 trims trailing zeros (keeps one byte)
     msgid = msg.get_msgId()
-    header = _HEADER_V2.pack(MAGIC_V2, len(body), 0, 0, seq, system_id, component_id,
-                             msgid & 0xFFFF, msgid >> 16)
+    header = _HEADER_V2.pack(MAGIC_V2, len(body), IFLAG_SIGNED if signed else 0, 0, seq, system_id,
+                             component_id, msgid & 0xFFFF, msgid >> 16)
     crc = mcrf4xx(bytes((msg.crc_extra,)), mcrf4xx(header[1:] + body, CRC_INIT))
     return header + body + _CRC.pack(crc)
+
+
+_LINK_TIMESTAMP = struct.Struct("<BQ")
+
+
+def signature_block(frame: bytes, secret_key: bytes, link_id: int, timestamp: int) -> bytes:
+    """The 13 bytes that sign ``frame`` (packed with ``signed=True``): link id, 48-bit timestamp
+    (10 µs ticks since 2015) and the first 6 bytes of SHA-256(key + frame + link id + timestamp),
+    as pymavlink's ``sign_packet``."""
+    tail = _LINK_TIMESTAMP.pack(link_id, timestamp)[:7]
+    return tail + hashlib.sha256(secret_key + frame + tail).digest()[:6]

@@ -28,7 +28,6 @@ import os
 import select
 import socket
 import time
-import types
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -38,7 +37,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.errors import UserError
-from companion.mavlink.frames import pack_frame, parse_datagram
+from companion.mavlink.frames import IFLAG_SIGNED, MAGIC_V2, pack_frame, parse_datagram, signature_block
 
 MAX_DATAGRAM_BYTES = 65_535
 BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this size
@@ -202,7 +201,6 @@ class UdpLink:
             self._mav.signing.sign_outgoing = True
             self._mav.signing.link_id = config.link_id
             self._mav.signing.timestamp = _signing_timestamp_now()
-            self._mav.check_signature = types.MethodType(check_signature, self._mav)
 
     # -- plumbing -------------------------------------------------------------------------
     @property
@@ -232,11 +230,15 @@ class UdpLink:
         if self.peer is None:
             return
         mav = self._mav
-        if self.config.signing_key is None:  # the fast packer, byte-equal to pymavlink's
+        key = self.config.signing_key
+        if key is None:  # the fast packer, byte-equal to pymavlink's (signed too, below)
             self._send_datagram(pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent))
-            mav.seq = (mav.seq + 1) & 0xFF
         else:
-            mav.send(msg)
+            frame = pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent, signed=True)
+            signing = mav.signing
+            self._send_datagram(frame + signature_block(frame, key, signing.link_id, signing.timestamp))
+            signing.timestamp += 1
+        mav.seq = (mav.seq + 1) & 0xFF
         self.counters.messages_tx += 1
 
     def begin_batch(self) -> None:
@@ -336,50 +338,34 @@ class UdpLink:
             out.extend(self.accept_datagram(data, addr))
 
     def accept_datagram(self, data: bytes, addr: tuple[str, int]) -> list[Any]:
-        """Parse one datagram; count and drop what cannot be used (never raises). Without signing
-        the fast scanner of :mod:`companion.mavlink.frames` parses (messages are its light views);
-        with signing pymavlink does, as it checks signatures."""
+        """Parse one datagram with the fast scanner of :mod:`companion.mavlink.frames` (messages
+        are its light views); count and drop what cannot be used (never raises). With signing,
+        a frame is kept only if it is MAVLink 2, signed, and its signature checks
+        (:func:`check_signature`: unsigned, wrong key or replayed frames count as bad_signature)."""
         c = self.counters
         c.datagrams_rx += 1
         if self.config.drop_probability_rx and self._drop(self.config.drop_probability_rx):
             c.dropped_rx += 1
             return []
-        if self.config.signing_key is None:
-            views, skipped = parse_datagram(data)
-            for reason in skipped:
-                if reason == "bad_crc":
-                    c.bad_crc += 1
-                elif reason == "unknown_msgid":
-                    c.unknown_message += 1
-                else:
-                    c.garbage += 1
-            return self._accept(views, addr)
-        mav = self._mav
-        try:
-            parsed = mav.parse_buffer(data) or []
-        except Exception:  # robust parsing should not raise; be defensive about odd inputs
-            parsed = []
-            c.garbage += 1
-        if mav.buf_len() > 0:  # a frame cut short by the datagram's end
-            c.garbage += 1
-        mav.buf = bytearray()
-        mav.buf_index = 0
-        mav.expected_length = mavlink.HEADER_LEN_V1 + 2
-        good: list[mavlink.MAVLink_message] = []
-        for msg in parsed:
-            if isinstance(msg, mavlink.MAVLink_bad_data):
-                reason = str(getattr(msg, "reason", "")).lower()
-                if "crc" in reason:
-                    c.bad_crc += 1
-                elif "signature" in reason:
-                    c.bad_signature += 1
-                else:
-                    c.garbage += 1
-            elif isinstance(msg, mavlink.MAVLink_unknown):
+        views, skipped = parse_datagram(data)
+        for reason in skipped:
+            if reason == "bad_crc":
+                c.bad_crc += 1
+            elif reason == "unknown_msgid":
                 c.unknown_message += 1
             else:
-                good.append(msg)
-        return self._accept(good, addr)
+                c.garbage += 1
+        if self.config.signing_key is not None:
+            mav, signed = self._mav, []
+            for v in views:
+                buf = v.get_msgbuf()
+                if buf[0] == MAGIC_V2 and buf[2] & IFLAG_SIGNED and check_signature(
+                        mav, buf, v.get_srcSystem(), buf[6]):
+                    signed.append(v)
+                else:
+                    c.bad_signature += 1
+            views = signed
+        return self._accept(views, addr)
 
     def _accept(self, msgs: list[Any], addr: tuple[str, int]) -> list[Any]:
         """Keep the messages from accepted system ids; learn the peer; tee what is kept."""
