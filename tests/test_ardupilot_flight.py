@@ -161,6 +161,7 @@ def test_ctrl_c_stops_an_ardupilot_campaign_within_seconds(tmp_path):
         else:
             pytest.fail(f"the campaign did not start two flights within 60 s: {_processes_under(out)}")
         time.sleep(2.0)
+        started = len(list(out.glob("flights/*/ardupilot")))  # an open-loop flight may have ended meanwhile
         t0 = time.monotonic()
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=30)
@@ -173,4 +174,5 @@ def test_ctrl_c_stops_an_ardupilot_campaign_within_seconds(tmp_path):
     assert stopped_s < 8.0, (stopped_s, err[-2000:])
     time.sleep(0.5)
     assert _processes_under(out) == []
-    assert len(list(out.glob("flights/*/ardupilot"))) <= 3  # 12 flights queued: the rest were skipped
+    # 12 flights queued: none starts after the interrupt (one may have been setting up at its instant)
+    assert len(list(out.glob("flights/*/ardupilot"))) <= min(started + 1, 11)
