@@ -298,6 +298,7 @@ class VehicleNode:
             if not cfg.realtime:
                 for name in COMPANIONS:
                     self.links[name].begin_batch()
+                self.ground.link.begin_batch()  # lockstep: the step's ground traffic in one datagram
             self._send_step(out, pace)
             if cfg.realtime:
                 for name in COMPANIONS:
@@ -313,9 +314,12 @@ class VehicleNode:
                 self.collisions += 1
                 self.ground.collision(out.t_us)
             was_collided = out.collided
-            if self.recorder.reached_goal():
+            reached = self.recorder.reached_goal()
+            if reached:
                 outcome = "reached_goal"
                 self.ground.goal_reached(out.t_us)
+            self.ground.link.flush()  # (no batch in real time: nothing to send)
+            if reached:
                 break
             if time.monotonic() >= next_progress:
                 next_progress = time.monotonic() + cfg.progress_period_s
