@@ -13,7 +13,12 @@ from companion.estimator.map_beta import scheduled_beta
 from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
 from companion.estimator.windowed_ml import window_nll
 from companion.mission import ConfigError, load_mission
-from tests.estimator_streams import drive, multipath_stream
+from tests.estimator_streams import (
+    assert_out_of_order_equals_in_order,
+    drive,
+    late_and_in_order,
+    multipath_stream,
+)
 
 CFG = EstimatorConfig()
 
@@ -72,17 +77,9 @@ def test_map_beta_without_a_map_is_open_sky(stream):
 
 @pytest.mark.parametrize("method", ["map-beta", "windowed-ml"])
 def test_out_of_order_equals_in_order(stream, method):
-    rng = np.random.default_rng(5)
-    delay_us = rng.uniform(0.0, 1.0e6, size=len(stream.fix_t_us)).astype(np.int64)
-    delay_us[0] = 0
-    late = drive(stream, _mission_stream_engine(method, {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0})[0],
-                np.minimum(stream.fix_t_us + delay_us, stream.t_us[-1]))
-    ref = drive(stream, _mission_stream_engine(method, {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0})[0],
-               stream.fix_t_us.copy())
-    assert late.counts["gnss_out_of_order"] > 20
-    a, b = late.snapshot(), ref.snapshot()
-    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
-    assert a.beta == pytest.approx(b.beta, abs=1e-9)
+    far = {"map_d_near_m": 1000.0, "map_ramp_m": 2000.0}
+    late, ref = late_and_in_order(stream, lambda: _mission_stream_engine(method, far)[0])
+    assert_out_of_order_equals_in_order(late, ref)
 
 
 def test_windowed_likelihood_is_minimal_at_the_consistent_trust():

@@ -21,7 +21,11 @@ from companion.estimator.hmm_trust import (
 )
 from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
 from companion.mission import ConfigError, load_mission
-from tests.estimator_streams import drive, multipath_stream
+from tests.estimator_streams import (
+    assert_out_of_order_equals_in_order,
+    late_and_in_order,
+    multipath_stream,
+)
 
 CFG = EstimatorConfig()
 T_S = 0.05
@@ -190,16 +194,9 @@ def test_out_of_order_equals_in_order():
     stream = multipath_stream(np.random.default_rng(3), CFG, [(4.0, 0.0), (4.0, 1.2)])
     m = load_mission("test")
 
-    def run(arrival_us):
-        return drive(stream, bind(Navigator(CFG, method="hmm-trust", frame=m.frame), m).engine, arrival_us)
-
-    delay = np.random.default_rng(5).uniform(0.0, 1.0e6, size=len(stream.fix_t_us)).astype(np.int64)
-    delay[0] = 0
-    late = run(np.minimum(stream.fix_t_us + delay, stream.t_us[-1]))
-    ref = run(stream.fix_t_us.copy())
-    assert late.counts["gnss_out_of_order"] > 20
-    np.testing.assert_allclose(late.snapshot().x, ref.snapshot().x, rtol=0, atol=1e-9)
-    assert late.snapshot().beta == pytest.approx(ref.snapshot().beta, abs=1e-9)
+    late, ref = late_and_in_order(
+        stream, lambda: bind(Navigator(CFG, method="hmm-trust", frame=m.frame), m).engine)
+    assert_out_of_order_equals_in_order(late, ref)
 
 
 @pytest.mark.parametrize("section, message", [

@@ -14,7 +14,12 @@ from companion.estimator.map_beta import canyon_weight, scheduled_beta
 from companion.estimator.map_hmm import MapHmm, map_levels, map_posterior
 from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
 from companion.mission import ConfigError, load_mission
-from tests.estimator_streams import drive, multipath_stream
+from tests.estimator_streams import (
+    assert_out_of_order_equals_in_order,
+    drive,
+    late_and_in_order,
+    multipath_stream,
+)
 
 CFG = EstimatorConfig()
 T_S = 0.05
@@ -135,16 +140,9 @@ def test_out_of_order_equals_in_order(evidence):
     m = load_mission("test")
     m = dataclasses.replace(m, sections={**m.sections, "belief_plugins": {**FAR, "mhmm_evidence": evidence}})
 
-    def run(arrival_us):
-        return drive(stream, bind(Navigator(CFG, method="map-hmm", frame=m.frame), m).engine, arrival_us)
-
-    delay = np.random.default_rng(5).uniform(0.0, 1.0e6, size=len(stream.fix_t_us)).astype(np.int64)
-    delay[0] = 0
-    late = run(np.minimum(stream.fix_t_us + delay, stream.t_us[-1]))
-    ref = run(stream.fix_t_us.copy())
-    assert late.counts["gnss_out_of_order"] > 20
-    np.testing.assert_allclose(late.snapshot().x, ref.snapshot().x, rtol=0, atol=1e-9)
-    assert late.snapshot().beta == pytest.approx(ref.snapshot().beta, abs=1e-9)
+    late, ref = late_and_in_order(
+        stream, lambda: bind(Navigator(CFG, method="map-hmm", frame=m.frame), m).engine)
+    assert_out_of_order_equals_in_order(late, ref)
     assert len({round(f.beta, 6) for f in ref.fusions}) > 5  # β really moves
 
 
