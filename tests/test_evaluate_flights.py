@@ -221,3 +221,58 @@ def test_shared_setting_is_chosen_alike_for_every_row(tmp_path, monkeypatch, cap
     assert ablation.main(["shared", "--scenario", "mismatch", "--rows", str(tmp_path / "none.yaml"),
                           "--vary", "estimator.gnss_offset_max_s=5", "--seeds", "0-1"]) == 2
     assert "tuning seeds are 1000" in capsys.readouterr().err
+
+
+def test_effects_pair_each_effect_switched_off_with_all_on(tmp_path, monkeypatch):
+    """``ablation effects``: every variant flies every row on the same flights with the shared
+    settings; an effect's cost is the paired difference to all on (the flight effect cancels)."""
+    rows = [Row("a", "fixed-beta", (("estimator.beta_fixed", 0.5),)), Row("b", "map-beta")]
+    cost = {("a", "gnss.nlos"): 0.4, ("b", "gnss.nlos"): 0.3, ("a", "gnss.heavy_tail_dof"): -0.02}
+    flown = []
+
+    def fake_fly(cands, scenario, profiles, seeds, workers, mission, overrides):
+        o = dict(overrides)
+        assert scenario == "mismatch" and o.pop("estimator.gnss_offset_max_s") == 5.0
+        flown.append(tuple(o))
+        return [_result(p, s, c.label, c.method,
+                        1.5 + np.sin(7 * p + s) - sum(cost.get((c.label, k), 0.0) for k in o))
+                for c in cands for p in profiles for s in seeds]
+
+    monkeypatch.setattr(ablation, "_fly", fake_fly)
+    table = ablation.effects(rows, [0, 1], [0, 1, 2], 1, tmp_path / "effects",
+                             shared=[("estimator.gnss_offset_max_s", 5.0)])
+    assert flown == [(), *((k,) for k, _ in (dict(e[2]).popitem() for e in ablation.EFFECTS))]
+    eff = table["effects"]
+    assert eff["all on"]["rows"]["a"]["minus_all_on"] == [0.0, 0.0, 0.0]
+    for row, gap in (("a", -0.4), ("b", -0.3)):
+        assert eff["no reflections"]["rows"][row]["minus_all_on"] == pytest.approx([gap] * 3, abs=1e-9)
+    assert eff["Gaussian noise"]["rows"]["a"]["minus_all_on"] == pytest.approx([0.02] * 3, abs=1e-9)
+    all_on_b = eff["all on"]["rows"]["b"]["mean_m"]
+    assert eff["canyon bias 3 s"]["rows"]["b"]["mean_m"] == pytest.approx(all_on_b)
+    assert json.loads((tmp_path / "effects" / "effects.json").read_text())["shared"] == {
+        "estimator.gnss_offset_max_s": 5.0}
+    text = ablation.report(tmp_path)
+    assert "## What each unmodelled GNSS effect costs" in text
+    assert "| no reflections: a blocked satellite is lost, never tracked by its reflection | " in text
+    assert "(-0.400 [-0.400, -0.400])" in text and "every row with `estimator.gnss_offset_max_s=5.0`" in text
+
+
+def test_severity_flies_every_level_with_the_shared_settings(tmp_path, monkeypatch):
+    rows = [Row("fixed-beta-best", "fixed-beta"), Row("map-beta", "map-beta")]
+
+    def fake_fly(cands, scenario, profiles, seeds, workers, mission, overrides):
+        o = dict(overrides)
+        assert scenario == "realistic" and o["estimator.gnss_offset_max_s"] == 5.0
+        s = o.get("gnss.nlos_delay_mean_m", 0.0)  # the severity level
+        k = {"map-beta": 0.9, "fixed-beta-best": 1.0}
+        return [_result(p, q, c.label, c.method, (1.0 + s) * k[c.label] + 0.1 * p)
+                for c in cands for p in profiles for q in seeds]
+
+    monkeypatch.setattr(ablation, "_fly", fake_fly)
+    table = ablation.severity(rows, [0.0, 1.0], [0, 1], [0, 1], 1, tmp_path,
+                              shared=[("estimator.gnss_offset_max_s", 5.0)])
+    assert table["shared"] == {"estimator.gnss_offset_max_s": 5.0}
+    assert table["levels"]["0.0"]["fixed-beta-best"]["mean_m"] == pytest.approx(1.05)
+    # ratio of means, not mean of ratios: (0.9 + 0.95) / (1.0 + 1.1) at s = 0, the flight effect kept
+    assert table["levels"]["0.0"]["map-beta"]["ratio"] == pytest.approx((0.9 + 1.0) / (1.0 + 1.1))
+    assert table["levels"]["1.0"]["map-beta"]["ratio"] == pytest.approx((1.8 + 1.9) / (2.0 + 2.1))

@@ -17,6 +17,9 @@ Score of a point: the mean over its flights of the per-flight median horizontal 
 campaign's headline statistic). Every point is appended to ``tuning-<scenario>.jsonl``; the rows
 go to ``rows-<scenario>.yaml`` (``beliefnav evaluate --rows``).
 
+``effects`` flies the given rows on ``mismatch`` with each unmodelled GNSS effect switched off in
+turn (``EFFECTS``): what each effect costs each row, paired by flight (``effects.json``).
+
 ``severity`` flies the given rows under the ``realistic`` scenario plus the unmodelled GNSS effects
 scaled by a severity ``s`` (``severity_overrides``; s = 1 is the ``mismatch`` scenario, s = 0 is
 ``realistic``), and draws the error ratio of each belief row over the best fixed-β row against s,
@@ -78,6 +81,16 @@ ROW_ORDER = ("naive", "fixed-beta-0.5", "fixed-beta-best", "map-beta", "first-or
              "second-order-gate-off", "adaptive", "vbakf", "windowed-ml", "hmm-trust", "map-hmm")
 BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta", "hmm-trust", "map-hmm")
 SEVERITIES = (0.0, 1.0, 2.0)
+# The mismatch scenario's unmodelled GNSS effects, each switched off in turn (``effects``)
+EFFECTS: tuple[tuple[str, str, tuple[tuple[str, Any], ...]], ...] = (
+    ("no reflections", "a blocked satellite is lost, never tracked by its reflection",
+     (("gnss.nlos", False),)),
+    ("canyon bias 3 s", "the canyon bias correlation time the filter assumes (3 s, not 10 s)",
+     (("gnss.gamma_canyon_s", 3.0),)),
+    ("Gaussian noise", "no Student-t tail", (("gnss.heavy_tail_dof", 0.0),)),
+    ("fixed geometry", "the white noise does not grow with the satellites lost",
+     (("gnss.satellite_noise", False),)),
+)
 # campaign directories the report picks up: the two scenarios, and mismatch with the step offset limited
 CAMPAIGNS = ("realistic", "mismatch", "mismatch-offset5s")
 
@@ -123,7 +136,13 @@ def paired_gap(results: Sequence[campaign.JobResult], label: str, winner: str,
     """mean(label − winner) of the per-flight score over the same flights, with a 95 % paired
     stratified bootstrap interval: how far a candidate is behind the chosen point, and whether
     the tuning set can tell them apart."""
-    a, b = flights.table_of(results, label), flights.table_of(results, winner)
+    return table_gap(flights.table_of(results, label), flights.table_of(results, winner), rng, n_resamples)
+
+
+def table_gap(a: dict[tuple[int, int], dict[str, float]], b: dict[tuple[int, int], dict[str, float]],
+              rng: np.random.Generator, n_resamples: int = 2000) -> tuple[float, float, float]:
+    """mean(a − b) of the per-flight score over the flights both tables hold ((profile, seed) →
+    statistics), with its 95 % paired stratified bootstrap interval."""
     keys = sorted(set(a) & set(b))
     if not keys:
         return (float("nan"),) * 3
@@ -260,17 +279,21 @@ def ratio_ci(results: Sequence[campaign.JobResult], row: str, base: str, rng: np
 
 
 def severity(rows: Sequence[Row], levels: Sequence[float], profiles: Sequence[int], seeds: Sequence[int],
-             workers: int, out: Path, mission: str = "default") -> dict[str, Any]:
+             workers: int, out: Path, mission: str = "default",
+             shared: Sequence[tuple[str, Any]] = ()) -> dict[str, Any]:
+    """``shared``: overrides every flight gets (a setting chosen for every row alike, e.g. the
+    GNSS step offset's limit)."""
     out.mkdir(parents=True, exist_ok=True)
     base = "fixed-beta-best"
     if base not in {r.label for r in rows}:
         raise UserError(f"severity: the rows need a {base!r} row")
     rng = np.random.default_rng(flights.BOOTSTRAP_SEED)
     table: dict[str, Any] = {"base": base, "score": SCORE, "profiles": list(profiles), "seeds": list(seeds),
-                             "mission": mission, "levels": {}}
+                             "mission": mission, "shared": dict(shared), "levels": {}}
     t0 = time.perf_counter()
     for s in levels:
-        res = _fly(rows, "realistic", profiles, seeds, workers, mission, severity_overrides(s))
+        overrides = tuple(shared) + severity_overrides(s)
+        res = _fly(rows, "realistic", profiles, seeds, workers, mission, overrides)
         entry = {r.label: dict(zip(("ratio", "lo", "hi"), ratio_ci(res, r.label, base, rng), strict=True))
                  for r in rows if r.label != base}
         entry[base] = {"mean_m": _score(res, base)}
@@ -284,6 +307,33 @@ def severity(rows: Sequence[Row], levels: Sequence[float], profiles: Sequence[in
     table["wall_s"] = round(time.perf_counter() - t0, 1)
     (out / "severity.json").write_text(json.dumps(table, indent=2) + "\n", encoding="utf-8")
     figure(table, out / "fig_where_adaptation_pays.png")
+    return table
+
+
+def effects(rows: Sequence[Row], profiles: Sequence[int], seeds: Sequence[int], workers: int, out: Path,
+            mission: str = "default", shared: Sequence[tuple[str, Any]] = ()) -> dict[str, Any]:
+    """Fly ``rows`` on ``mismatch`` with every unmodelled GNSS effect on, then with each of ``EFFECTS``
+    switched off in turn: each row's mean score, and the paired difference (effect off − all on)
+    with its 95 % interval, which is what that effect costs the row (``effects.json``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(flights.BOOTSTRAP_SEED)
+    table: dict[str, Any] = {"score": SCORE, "profiles": list(profiles), "seeds": list(seeds),
+                             "mission": mission, "shared": dict(shared), "effects": {}}
+    t0 = time.perf_counter()
+    all_on: dict[str, Any] = {}
+    for name, what, off in (("all on", "the mismatch scenario", ()), *EFFECTS):
+        res = _fly(rows, "mismatch", profiles, seeds, workers, mission, tuple(shared) + off)
+        entry: dict[str, Any] = {"what": what, "overrides": dict(off), "rows": {}}
+        for r in rows:
+            t = flights.table_of(res, r.label)
+            all_on.setdefault(r.label, t)
+            gap = table_gap(t, all_on[r.label], rng) if off else (0.0, 0.0, 0.0)
+            entry["rows"][r.label] = {"mean_m": _score(res, r.label), "minus_all_on": list(gap)}
+        table["effects"][name] = entry
+        print(f"effects {name}: " + ", ".join(f"{k} {v['mean_m']:.3f}" for k, v in entry["rows"].items()),
+              flush=True)
+    table["wall_s"] = round(time.perf_counter() - t0, 1)
+    (out / "effects.json").write_text(json.dumps(table, indent=2) + "\n", encoding="utf-8")
     return table
 
 
@@ -365,9 +415,36 @@ def report(out: Path) -> str:
             cells = [f"{e[k]['ratio']:.3f} [{e[k]['lo']:.3f}, {e[k]['hi']:.3f}]" for k in labels]
             parts.append(f"| {s} | " + " | ".join(cells) + f" | {e[sev['base']]['mean_m']:.3f} |")
         parts += ["", "![where adaptation pays](severity/fig_where_adaptation_pays.png)", ""]
+    eff_path = out / "effects" / "effects.json"
+    if eff_path.exists():
+        parts += _effects_section(json.loads(eff_path.read_text(encoding="utf-8")))
     text = "\n".join(parts) + "\n"
     (out / "report.md").write_text(text, encoding="utf-8")
     return text
+
+
+def _effects_section(eff: dict[str, Any]) -> list[str]:
+    """The ``effects`` table: each row's mean error with every effect on, and with one switched off
+    (the paired difference to all on, with its interval)."""
+    names = list(eff["effects"])
+    labels = list(eff["effects"][names[0]]["rows"])
+    shared = "".join(f"; every row with `{k}={v}`" for k, v in eff.get("shared", {}).items())
+    lines = ["## What each unmodelled GNSS effect costs", "",
+             f"Mean per-flight median horizontal error (m) on `mismatch`, then with one effect switched off "
+             f"(off − all on, paired by flight, 95 % interval); mission `{eff['mission']}`, profiles "
+             f"{eff['profiles'][0]}–{eff['profiles'][-1]}, seeds {', '.join(map(str, eff['seeds']))}, "
+             f"{eff['wall_s']:.0f} s wall{shared}.", "",
+             "| GNSS | " + " | ".join(f"`{k}`" for k in labels) + " |", "|---|" + "---|" * len(labels)]
+    for name in names:
+        e = eff["effects"][name]
+        cells = []
+        for k in labels:
+            v = e["rows"][k]
+            d, lo, hi = v["minus_all_on"]
+            gap = f" ({d:+.3f} [{lo:+.3f}, {hi:+.3f}])" if e["overrides"] else ""
+            cells.append(f"{v['mean_m']:.3f}{gap}")
+        lines.append(f"| {name}: {e['what']} | " + " | ".join(cells) + " |")
+    return lines + [""]
 
 
 def _more_tables(block: dict[str, Any]) -> list[str]:
@@ -408,6 +485,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     s.add_argument("--seeds", default="0")
     s.add_argument("--workers", type=int, default=2)
     s.add_argument("--out", type=Path, default=Path("docs/results/ablation/severity"))
+    s.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="override for every flight (a setting shared by every row); repeatable")
+    e = sub.add_parser("effects", help="mismatch with each unmodelled GNSS effect switched off in turn")
+    e.add_argument("--rows", type=Path, required=True)
+    e.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
+    e.add_argument("--missions", default="10")
+    e.add_argument("--seeds", default="0")
+    e.add_argument("--workers", type=int, default=2)
+    e.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="override for every flight (a setting shared by every row); repeatable")
+    e.add_argument("--out", type=Path, default=Path("docs/results/ablation/effects"))
     h = sub.add_parser("shared", help="choose one setting shared by every row, on the tuning set alike")
     h.add_argument("--scenario", required=True)
     h.add_argument("--rows", type=Path, required=True)
@@ -442,8 +530,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             rows = rows_mod.select(rows_mod.load_rows(args.rows), args.methods)
             profiles = parse_profiles(args.missions, len(campaign.mission("default").profiles))
-            levels = [float(v) for v in args.levels.split(",")]
-            severity(rows, levels, profiles, campaign.parse_seeds(args.seeds), args.workers, args.out)
+            seeds = campaign.parse_seeds(args.seeds)
+            shared = [tuning.parse_override(v) for v in args.set]
+            if args.command == "effects":
+                effects(rows, profiles, seeds, args.workers, args.out, shared=shared)
+            else:
+                levels = [float(v) for v in args.levels.split(",")]
+                severity(rows, levels, profiles, seeds, args.workers, args.out, shared=shared)
     except UserError as exc:
         print(f"ablation: error: {exc}", file=sys.stderr)
         return 2
