@@ -3,7 +3,9 @@
 Per control period (20 Hz): ``out = sim.advance(est, sp)``; the period's attitude, IMU and
 released GNSS samples go to the ``Navigator`` in arrival order (fixes as ``out.gnss_ned`` via
 ``push_fix_ned``: in one process both sides share the mission frame, so the geodetic wire form,
-exact to ~1 µm, is skipped; SITL flies it); ``est = nav.estimate()``;
+exact to ~1 µm, is skipped; SITL flies it), each with the accuracy the receiver reports on the wire
+(GPS_RAW_INT ``h_acc``/``v_acc``, NaN when the mission's GNSS reports none), so the filter gets the
+per-fix R the SITL companion gets; ``est = nav.estimate()``;
 ``sp = route.setpoint(t)``. The flight ends once the reference has arrived and the vehicle is
 within ``goal_radius_m`` of the goal and slower than ``goal_speed_m_s``, or at the timeout.
 No files here: see ``output``.
@@ -101,6 +103,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     end_us = round(end_s * 1e6)
     arrive_s = route.t_start_s + route.duration_s
     push, push_fix_ned = nav.push, nav.push_fix_ned
+    reports_accuracy = sim.gnss.cfg.report_accuracy  # as GnssModel.to_fix puts it on the wire
     rows = array("d")  # ROW_FIELDS floats per control step: ~160 B, not two domain objects (~2 kB)
     est, collisions, in_contact, reached = None, 0, False, False
     wall0 = time.perf_counter()
@@ -113,7 +116,8 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
             push(imu)
             while k < len(fixes) and fixes[k][0] <= imu.t_us:
                 fix = fixes[k][1]
-                push_fix_ned(fix.t_validity_us, fix.p_ned_m)  # in the mission frame: no geodesy
+                acc = fix.sigma_noise_m if reports_accuracy else math.nan
+                push_fix_ned(fix.t_validity_us, fix.p_ned_m, acc, acc)  # in the mission frame: no geodesy
                 k += 1
         est = nav.estimate()
         truth = out.final_truth
