@@ -75,3 +75,33 @@ def test_routes_are_planned_once_per_mission_object_and_profile():
     assert b is not a
     np.testing.assert_array_equal(b.waypoints_ned_m, plan_route(TEST_CITY, 1, t_start_s=2.0).waypoints_ned_m)
     assert planned_route(TEST_CITY, 1, 3.0).t_start_s == 3.0
+
+
+def test_fixes_carry_the_accuracy_the_receiver_reports(monkeypatch):
+    """fly hands each fix to the filter with the h_acc/v_acc the simulated receiver puts on the wire
+    (its white-noise std in force; NaN when the mission's GNSS reports none), as SITL does."""
+    from companion.estimator import Navigator
+    from gcs_tools.evaluate.tuning import with_overrides
+    from simvehicle.gnss import GnssModel
+
+    made, pushed = {}, []
+    sample, push = GnssModel.sample, Navigator.push_fix_ned
+
+    def spy_sample(self, t_validity_us, *a):
+        fix = sample(self, t_validity_us, *a)
+        made[fix.t_validity_us] = fix.sigma_noise_m
+        return fix
+
+    def spy_push(self, t_validity_us, p_ned_m, h_acc_m=np.nan, v_acc_m=np.nan):
+        pushed.append((t_validity_us, h_acc_m, v_acc_m))
+        return push(self, t_validity_us, p_ned_m, h_acc_m, v_acc_m)
+
+    monkeypatch.setattr(GnssModel, "sample", spy_sample)
+    monkeypatch.setattr(Navigator, "push_fix_ned", spy_push)
+    noisy = with_overrides(TEST_CITY, [("gnss.sigma_noise_m", 0.25)])  # not the filter's configured 0.08
+    fly(noisy, 0, "second-order", 4, max_duration_s=3.0)
+    assert len(pushed) > 40 and all(h == v == made[t] >= 0.25 for t, h, v in pushed)
+    pushed.clear()
+    silent = with_overrides(TEST_CITY, [("gnss.report_accuracy", False)])
+    fly(silent, 0, "second-order", 4, max_duration_s=3.0)
+    assert pushed and all(np.isnan(h) and np.isnan(v) for _, h, v in pushed)
