@@ -92,7 +92,7 @@ EFFECTS: tuple[tuple[str, str, tuple[tuple[str, Any], ...]], ...] = (
      (("gnss.satellite_noise", False),)),
 )
 # campaign directories the report picks up: the two scenarios, and mismatch with the step offset limited
-CAMPAIGNS = ("realistic", "mismatch", "mismatch-offset5s")
+CAMPAIGNS = ("realistic", "mismatch", "mismatch-offset-limited")
 
 
 def severity_overrides(s: float) -> tuple[tuple[str, Any], ...]:
