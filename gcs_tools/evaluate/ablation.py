@@ -387,8 +387,7 @@ def report(out: Path) -> str:
                   f"{', '.join(map(str, c['seeds']))}: {c['flights']} flights, {c['wall_s']:.0f} s wall on "
                   f"{c['workers']} workers, {c.get('flight_cpu_s', float('nan')):.0f} s of flight CPU "
                   f"(full report: [{campaign_dir}/report.md]({campaign_dir}/report.md))"
-                  + "".join(f"; every row with `{k}={v}`" for k, v in dict(c.get("overrides") or {}).items())
-                  + ".", "",
+                  + _every_row(c.get("overrides")) + ".", "",
                   flights.markdown(res["flights"]),
                   *_more_tables(res["flights"]),
                   "Rows (hyper-parameters chosen on the tuning set, "
@@ -407,7 +406,8 @@ def report(out: Path) -> str:
                   f"Error ratio (mean per-flight median horizontal error, row / `{sev['base']}`) over the "
                   f"severity of the unmodelled GNSS (0 = `realistic`, 1 = `mismatch`); 95 % paired bootstrap "
                   f"intervals; profiles {sev['profiles'][0]}–{sev['profiles'][-1]}, seeds "
-                  f"{', '.join(map(str, sev['seeds']))}, {sev['wall_s']:.0f} s wall.", "",
+                  f"{', '.join(map(str, sev['seeds']))}, {sev['wall_s']:.0f} s wall"
+                  f"{_every_row(sev.get('shared'))}.", "",
                   "| severity | " + " | ".join(f"`{k}`" for k in labels) + f" | `{sev['base']}` [m] |",
                   "|---|" + "---|" * (len(labels) + 1)]
         for s in levels:
@@ -423,12 +423,17 @@ def report(out: Path) -> str:
     return text
 
 
+def _every_row(settings: Any) -> str:
+    """The report's "; every row with `k=v`" for each setting all rows shared ({k: v} or pairs)."""
+    return "".join(f"; every row with `{k}={v}`" for k, v in dict(settings or {}).items())
+
+
 def _effects_section(eff: dict[str, Any]) -> list[str]:
     """The ``effects`` table: each row's mean error with every effect on, and with one switched off
     (the paired difference to all on, with its interval)."""
     names = list(eff["effects"])
     labels = list(eff["effects"][names[0]]["rows"])
-    shared = "".join(f"; every row with `{k}={v}`" for k, v in eff.get("shared", {}).items())
+    shared = _every_row(eff.get("shared"))
     lines = ["## What each unmodelled GNSS effect costs", "",
              f"Mean per-flight median horizontal error (m) on `mismatch`, then with one effect switched off "
              f"(off − all on, paired by flight, 95 % interval); mission `{eff['mission']}`, profiles "
