@@ -152,10 +152,15 @@ class GnssModel:
         self.sent += 1
         return fix
 
+    def reported_accuracy_m(self, fix: NedFix) -> float:
+        """The 1σ accuracy the receiver reports for ``fix`` (h_acc = v_acc): the white-noise std in
+        force, NaN when the mission's GNSS reports none."""
+        return fix.sigma_noise_m if self.cfg.report_accuracy else float("nan")
+
     def to_fix(self, fix: NedFix) -> GnssFix:
         """The wire form of a fix: geodetic position (``frame``), fix type and accuracies."""
         lat, lon, alt = self.to_geodetic(fix.p_ned_m)
-        acc = fix.sigma_noise_m if self.cfg.report_accuracy else float("nan")
+        acc = self.reported_accuracy_m(fix)
         return GnssFix(
             t_validity_us=fix.t_validity_us,
             lat_deg=lat,

@@ -276,3 +276,19 @@ def test_severity_flies_every_level_with_the_shared_settings(tmp_path, monkeypat
     # ratio of means, not mean of ratios: (0.9 + 0.95) / (1.0 + 1.1) at s = 0, the flight effect kept
     assert table["levels"]["0.0"]["map-beta"]["ratio"] == pytest.approx((0.9 + 1.0) / (1.0 + 1.1))
     assert table["levels"]["1.0"]["map-beta"]["ratio"] == pytest.approx((1.8 + 1.9) / (2.0 + 2.1))
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--set", "estimator"], "--set: expected SECTION.FIELD=VALUE"),
+    (["--set", "estimator.no_such_field=1"], "no_such_field"),
+    (["--methods", "nope"], "nope"),
+    (["--missions", "0-99"], "--missions"),
+])
+def test_effects_and_severity_bad_arguments_are_one_line_errors(tmp_path, extra, message, capsys):
+    rows = tmp_path / "rows.yaml"
+    rows.write_text("rows:\n  fixed-beta-best: {method: fixed-beta}\n")
+    for command in ("effects", "severity"):
+        out = tmp_path / command
+        assert ablation.main([command, "--rows", str(rows), "--out", str(out), *extra]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1 and not out.exists()  # nothing flown or written

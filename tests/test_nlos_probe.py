@@ -45,8 +45,20 @@ def test_twin_reproduces_the_offsets_of_the_flight(monkeypatch):
 
 
 def test_cli_prints_one_record_per_flight(capsys):
-    assert main(["--mission", "test", "--missions", "0", "--seeds", "1"]) == 0
+    assert main(["--mission", "test", "--missions", "1", "--seeds", "1"]) == 0
     import json
 
     rows = json.loads(capsys.readouterr().out)
     assert [(r["profile"], r["seed"]) for r in rows] == [(0, 1)] and rows[0]["duration_s"] > 0
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--missions", "x"], "--missions: expected a count or a range, got 'x'"),
+    (["--missions", "0-99"], "--missions"),
+    (["--seeds", "3-1"], "--seeds: expected e.g. 0-49"),
+    (["--mission", "atlantis"], "atlantis"),
+])
+def test_cli_bad_arguments_are_one_line_errors(args, message, capsys):
+    assert main([*args]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and message in captured.err and captured.err.count("\n") == 1

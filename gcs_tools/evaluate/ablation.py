@@ -283,7 +283,6 @@ def severity(rows: Sequence[Row], levels: Sequence[float], profiles: Sequence[in
              shared: Sequence[tuple[str, Any]] = ()) -> dict[str, Any]:
     """``shared``: overrides every flight gets (a setting chosen for every row alike, e.g. the
     GNSS step offset's limit)."""
-    out.mkdir(parents=True, exist_ok=True)
     base = "fixed-beta-best"
     if base not in {r.label for r in rows}:
         raise UserError(f"severity: the rows need a {base!r} row")
@@ -305,6 +304,7 @@ def severity(rows: Sequence[Row], levels: Sequence[float], profiles: Sequence[in
         cells = [f"{k} {v.get('ratio', v.get('mean_m')):.3f}" for k, v in entry.items()]
         print(f"severity {s}: " + ", ".join(cells), flush=True)
     table["wall_s"] = round(time.perf_counter() - t0, 1)
+    out.mkdir(parents=True, exist_ok=True)
     (out / "severity.json").write_text(json.dumps(table, indent=2) + "\n", encoding="utf-8")
     figure(table, out / "fig_where_adaptation_pays.png")
     return table
@@ -315,7 +315,6 @@ def effects(rows: Sequence[Row], profiles: Sequence[int], seeds: Sequence[int], 
     """Fly ``rows`` on ``mismatch`` with every unmodelled GNSS effect on, then with each of ``EFFECTS``
     switched off in turn: each row's mean score, and the paired difference (effect off − all on)
     with its 95 % interval, which is what that effect costs the row (``effects.json``)."""
-    out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(flights.BOOTSTRAP_SEED)
     table: dict[str, Any] = {"score": SCORE, "profiles": list(profiles), "seeds": list(seeds),
                              "mission": mission, "shared": dict(shared), "effects": {}}
@@ -333,6 +332,7 @@ def effects(rows: Sequence[Row], profiles: Sequence[int], seeds: Sequence[int], 
         print(f"effects {name}: " + ", ".join(f"{k} {v['mean_m']:.3f}" for k, v in entry["rows"].items()),
               flush=True)
     table["wall_s"] = round(time.perf_counter() - t0, 1)
+    out.mkdir(parents=True, exist_ok=True)
     (out / "effects.json").write_text(json.dumps(table, indent=2) + "\n", encoding="utf-8")
     return table
 
@@ -469,6 +469,20 @@ def _tuning_seeds(text: str) -> tuple[int, ...]:
     return seeds
 
 
+def _campaign_parser(sub: Any, name: str, help_text: str) -> argparse.ArgumentParser:
+    """A subcommand that flies rows of a rows file on the reported profiles (severity, effects)."""
+    c: argparse.ArgumentParser = sub.add_parser(name, help=help_text)
+    c.add_argument("--rows", type=Path, required=True)
+    c.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
+    c.add_argument("--missions", default="10")
+    c.add_argument("--seeds", default="0")
+    c.add_argument("--workers", type=int, default=2)
+    c.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="override for every flight (a setting shared by every row); repeatable")
+    c.add_argument("--out", type=Path, default=Path(f"docs/results/ablation/{name}"))
+    return c
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.ablation",
                                 description=__doc__.split("\n")[0])
@@ -482,25 +496,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument("--only", default="", metavar="ROW[,ROW...]",
                    help="re-tune these rows only; the others and the shared value stay as "
                         "rows-<scenario>.yaml has them")
-    s = sub.add_parser("severity", help="error ratio against the best fixed β over mismatch severity")
-    s.add_argument("--rows", type=Path, required=True)
-    s.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
+    s = _campaign_parser(sub, "severity", "error ratio against the best fixed β over mismatch severity")
     s.add_argument("--levels", default=",".join(str(v) for v in SEVERITIES))
-    s.add_argument("--missions", default="10")
-    s.add_argument("--seeds", default="0")
-    s.add_argument("--workers", type=int, default=2)
-    s.add_argument("--out", type=Path, default=Path("docs/results/ablation/severity"))
-    s.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                   help="override for every flight (a setting shared by every row); repeatable")
-    e = sub.add_parser("effects", help="mismatch with each unmodelled GNSS effect switched off in turn")
-    e.add_argument("--rows", type=Path, required=True)
-    e.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
-    e.add_argument("--missions", default="10")
-    e.add_argument("--seeds", default="0")
-    e.add_argument("--workers", type=int, default=2)
-    e.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                   help="override for every flight (a setting shared by every row); repeatable")
-    e.add_argument("--out", type=Path, default=Path("docs/results/ablation/effects"))
+    _campaign_parser(sub, "effects", "mismatch with each unmodelled GNSS effect switched off in turn")
     h = sub.add_parser("shared", help="choose one setting shared by every row, on the tuning set alike")
     h.add_argument("--scenario", required=True)
     h.add_argument("--rows", type=Path, required=True)

@@ -65,10 +65,10 @@ def probe(profiles: Sequence[int], seeds: Sequence[int],
     from gcs_tools.fly import fly
     from simvehicle import SimVehicle
 
+    m = campaign.mission(mission, (("estimator.beta_fixed", 0.5),), "mismatch")
     out = []
     for p in profiles:
         for s in seeds:
-            m = campaign.mission(mission, (("estimator.beta_fixed", 0.5),), "mismatch")
             series = fly(m, p, "fixed-beta", s).series
             twin = SimVehicle(m, p, s).gnss.unmodelled
             if twin is None:
@@ -82,11 +82,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.nlos_probe",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--mission", default=tuning.TUNING_MISSION)
-    ap.add_argument("--missions", default="0-3", help="profiles, e.g. 0-3 or 0,2")
+    ap.add_argument("--missions", default="0-3", help="profiles: a count N (0..N-1) or e.g. 0-3, 0,2")
     ap.add_argument("--seeds", default="1000-1001")
     args = ap.parse_args(argv)
     try:
-        rows = probe(campaign.parse_seeds(args.missions), campaign.parse_seeds(args.seeds), args.mission)
+        from gcs_tools.evaluate.cli import parse_profiles
+
+        profiles = parse_profiles(args.missions, len(campaign.mission(args.mission).profiles))
+        rows = probe(profiles, campaign.parse_seeds(args.seeds), args.mission)
     except UserError as exc:
         print(f"nlos_probe: error: {exc}", file=sys.stderr)
         return 2

@@ -103,7 +103,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     end_us = round(end_s * 1e6)
     arrive_s = route.t_start_s + route.duration_s
     push, push_fix_ned = nav.push, nav.push_fix_ned
-    reports_accuracy = sim.gnss.cfg.report_accuracy  # as GnssModel.to_fix puts it on the wire
+    accuracy_m = sim.gnss.reported_accuracy_m  # what GnssModel.to_fix puts on the wire
     rows = array("d")  # ROW_FIELDS floats per control step: ~160 B, not two domain objects (~2 kB)
     est, collisions, in_contact, reached = None, 0, False, False
     wall0 = time.perf_counter()
@@ -116,7 +116,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
             push(imu)
             while k < len(fixes) and fixes[k][0] <= imu.t_us:
                 fix = fixes[k][1]
-                acc = fix.sigma_noise_m if reports_accuracy else math.nan
+                acc = accuracy_m(fix)
                 push_fix_ned(fix.t_validity_us, fix.p_ned_m, acc, acc)  # in the mission frame: no geodesy
                 k += 1
         est = nav.estimate()
