@@ -37,7 +37,9 @@ class GnssFix:
     """A GNSS position fix as received (GPS_RAW_INT), stamped with its validity time.
 
     ``h_acc_m``/``v_acc_m`` (1-σ accuracies) and ``hdop`` are NaN when the receiver does not
-    report them.
+    report them. ``v_ned_m_s`` is the receiver's velocity valid at the same time (None when the
+    source gives none; a component it does not report, e.g. GPS_RAW_INT's vertical, is NaN) and
+    ``vel_acc_m_s`` its 1-σ speed accuracy (NaN when not reported).
     """
 
     t_validity_us: int
@@ -49,6 +51,8 @@ class GnssFix:
     h_acc_m: float = float("nan")
     v_acc_m: float = float("nan")
     hdop: float = float("nan")
+    v_ned_m_s: Vec3 | None = None
+    vel_acc_m_s: float = float("nan")
 
 
 Sample = ImuSample | AttitudeSample | GnssFix
