@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from companion.errors import UserError
+from companion.estimator.methods import DEFAULT_METHOD
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -30,7 +31,8 @@ def _parser() -> argparse.ArgumentParser:
         add_link_arguments(p)
         telemetry.add_arguments(p, publisher=True)
         if name == "estimator":
-            p.add_argument("--method", default="second-order", help="estimator method")
+            p.add_argument("--method", default=DEFAULT_METHOD,
+                           help=f"estimator method (default {DEFAULT_METHOD})")
             p.add_argument("--step-markers", action="store_true",
                            help="TIMESYNC requests are our simulated vehicle's step markers (beliefnav sitl)")
             add_master_arguments(p, master_required=False)

@@ -3,31 +3,29 @@ valid choices (and the nearest one) for a mistyped method, mission or profile.""
 
 from __future__ import annotations
 
+import argparse
 import difflib
-from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from companion.errors import UserError
+from companion.estimator.methods import DEFAULT_METHOD
 
 if TYPE_CHECKING:
     from companion.mission import Mission
 
 
-def unknown(option: str, value: str, valid: Sequence[str]) -> UserError:
-    """``--method 'secnd': not one of naive, ... (did you mean 'second-order'?)``."""
-    near = difflib.get_close_matches(value, valid, n=1, cutoff=0.5)
-    hint = f" (did you mean {near[0]!r}?)" if near else ""
-    return UserError(f"{option} {value!r}: not one of {', '.join(valid)}{hint}")
+def add_method_argument(parser: argparse.ArgumentParser) -> None:
+    """``--method`` with the one default (``companion.estimator.DEFAULT_METHOD``)."""
+    parser.add_argument("--method", default=DEFAULT_METHOD,
+                        help=f"estimator method (default {DEFAULT_METHOD})")
 
 
 def method(name: str, option: str = "--method") -> str:
-    """An estimator method registered in :mod:`companion.estimator` (plugins included)."""
-    from companion.estimator import METHODS
+    """An estimator method registered in :mod:`companion.estimator` (plugins included): its one check."""
+    from companion.estimator import check_method
 
-    if name not in METHODS:
-        raise unknown(option, name, METHODS)
-    return name
+    return check_method(name, option)
 
 
 def methods(text: str, option: str = "--methods") -> list[str]:

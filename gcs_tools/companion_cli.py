@@ -10,11 +10,12 @@ from companion.autopilot.node import config_from_args
 from companion.autopilot.node import run as run_companion
 from companion.autopilot.options import add_master_arguments
 from companion.telemetry import pubsub as telemetry
+from gcs_tools import choices
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_master_arguments(parser, master_required=True)
-    parser.add_argument("--method", default="second-order", help="estimator method")
+    choices.add_method_argument(parser)
     telemetry.add_arguments(parser, publisher=True)
 
 

@@ -28,10 +28,31 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--goal-speed-m-s", type=float, default=0.5, help="arrival: and this slow")
     p.add_argument("--arrive-after-s", type=float, default=0.0, help="arrival: not before this time")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
+    p.add_argument("--estimator-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a companion estimator parameter shown on the ground link (EST_*; repeatable)")
     add_ground_arguments(p)
     add_link_arguments(p)
     telemetry.add_arguments(p, publisher=True)
     return p
+
+
+def estimator_params(items: list[str]) -> tuple[tuple[str, float], ...]:
+    """``["EST_ETA=0.5", ...]`` -> ``(("EST_ETA", 0.5), ...)``; a bad item is a one-line UserError."""
+    from companion.errors import UserError
+    from simvehicle.params import ESTIMATOR_PARAMS
+
+    out = []
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = float("nan")
+        if name not in ESTIMATOR_PARAMS or number != number:
+            raise UserError(f"--estimator-param {item!r}: expected NAME=NUMBER, NAME one of "
+                            f"{', '.join(ESTIMATOR_PARAMS)}")
+        out.append((name, number))
+    return tuple(out)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         config = VehicleNodeConfig(
             estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,
             out_dir=args.out, max_duration_s=args.max_duration_s, realtime=args.realtime,
-            ground_out=ground_out_targets(args),
+            ground_out=ground_out_targets(args), estimator_params=estimator_params(args.estimator_param),
         )
         node = VehicleNode(sim, mission, recorder, config, fields, rng, publisher_from_args(args, "vehicle"))
         result = node.fly()

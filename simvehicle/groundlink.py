@@ -27,7 +27,7 @@ import argparse
 import math
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -363,14 +363,15 @@ def vehicle_status(sim: Any, out: Any, gnss_ok: bool) -> gt.VehicleStatus:
 
 
 def ground_link_for(config: GroundConfig, mission: Any, sim: Any, link_fields: dict[str, Any],
-                    clock_ns: Callable[[], int]) -> GroundLink:
-    """The ground link of a vehicle flying ``mission`` with ``sim``: parameters from the mission's
-    estimator section and the vehicle's GNSS model, home under the flight's start."""
-    from companion.estimator import mission_estimator_config
-    from simvehicle.params import mission_params
+                    clock_ns: Callable[[], int], estimator_params: Mapping[str, float] | None = None
+                    ) -> GroundLink:
+    """The ground link of a vehicle flying ``mission`` with ``sim``: parameters from the companion
+    estimator's values (``EST_*``, given by whoever started both) and the vehicle's GNSS model, home
+    under the flight's start."""
+    from simvehicle.params import vehicle_params
 
     fields = {k: v for k, v in link_fields.items() if not k.startswith("drop_")}  # no loss injection
-    params = ParamServer(mission_params(mission_estimator_config(mission), sim.config.gnss),
+    params = ParamServer(vehicle_params(estimator_params or {}, sim.config.gnss),
                          int(fields.get("system_id", 1)), int(fields.get("component_id", 1)))
     home_ned_m = np.array([sim.start_ned_m[0], sim.start_ned_m[1], 0.0])
     return GroundLink(config, fields, params, gt.Home(mission.frame, home_ned_m), clock_ns)

@@ -81,6 +81,8 @@ class VehicleNodeConfig:
     clock_period_us: int = 1_000_000  # SYSTEM_TIME and HEARTBEAT, 1 Hz
     progress_period_s: float = 0.25  # wall time between progress lines on stdout
     stats_period_s: float = 1.0  # wall time between vehicle.json updates (a kill -9 loses <= this)
+    # the companion estimator's parameters shown on the ground link (``simvehicle.params``: EST_* names)
+    estimator_params: tuple[tuple[str, float], ...] = ()
 
 
 @dataclass(slots=True)
@@ -128,7 +130,7 @@ class VehicleNode:
                                                   ("bridge", config.bridge_port, 11, self._tee_received))
         }
         self.ground = ground_link_for(GroundConfig(config.ground_port, config.ground_out), mission, sim,
-                                      {**base, "link_id": 12}, self._boot_ns)
+                                      {**base, "link_id": 12}, self._boot_ns, dict(config.estimator_params))
         self.barrier = StepBarrier({n: self.links[n] for n in COMPANIONS}, config.lockstep)
         self.recorder = recorder
         self.imu_send_ns: list[int] = []

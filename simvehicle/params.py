@@ -1,11 +1,12 @@
 """The vehicle's parameters as a ground station sees them (MAVLink parameter protocol).
 
-The table publishes the mission's estimator parameters (what the companion estimator was
-started with: the same mission file) and the GNSS degradation parameters of the simulated
-vehicle, all read-only: the estimator reads its parameters once at start, and changing the
-degradation model mid-flight would silently change the seeded experiment. One parameter is
-writable because changing it in flight is the point: ``SIM_GPS_DISABLE`` (1 = the vehicle
-withholds every GNSS fix, a total outage; 0 = fixes flow again).
+The table publishes the companion estimator's parameters (handed to the vehicle process by
+whoever starts both, ``--estimator-param NAME=VALUE``: the vehicle itself knows nothing of the
+estimator) and the GNSS degradation parameters of the simulated vehicle, all read-only: the
+estimator reads its parameters once at start, and changing the degradation model mid-flight
+would silently change the seeded experiment. One parameter is writable because changing it in
+flight is the point: ``SIM_GPS_DISABLE`` (1 = the vehicle withholds every GNSS fix, a total
+outage; 0 = fixes flow again).
 
 :class:`ParamServer` is pure: it answers PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET
 messages with the PARAM_VALUE messages to send (the caller sends them). As the protocol says,
@@ -16,7 +17,7 @@ an unknown name or index gets no answer (counted). Every value is a REAL32 param
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -74,9 +75,21 @@ def _text(raw: str | bytes) -> str:
     return raw.split("\x00", 1)[0]
 
 
+def estimator_param_values(estimator: Any) -> dict[str, float]:
+    """``EST_*`` name -> value of an EstimatorConfig (AttributeError if a field was renamed)."""
+    return {name: float(getattr(estimator, f)) for name, f in ESTIMATOR_PARAMS.items()}
+
+
 def mission_params(estimator: Any, gnss: Any) -> list[Param]:
     """The table for an EstimatorConfig and a GnssConfig (AttributeError if a field was renamed)."""
-    params = [Param(name, float(getattr(estimator, f))) for name, f in ESTIMATOR_PARAMS.items()]
+    return vehicle_params(estimator_param_values(estimator), gnss)
+
+
+def vehicle_params(estimator_values: Mapping[str, float], gnss: Any) -> list[Param]:
+    """The table: the estimator's values given (``EST_*`` names, in ``ESTIMATOR_PARAMS`` order; none
+    when the vehicle flies without them), then the GnssConfig's degradation parameters."""
+    params = [Param(name, float(estimator_values[name]))
+              for name in ESTIMATOR_PARAMS if name in estimator_values]
     params += [Param(name, float(getattr(gnss, f))) for name, f in DEGRADATION_PARAMS.items()]
     params.append(Param(GPS_DISABLE, 0.0, writable=True, valid=lambda v: v in (0.0, 1.0)))
     for p in params:

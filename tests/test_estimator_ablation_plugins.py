@@ -5,14 +5,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from companion.estimator import METHODS, Navigator
+from companion.estimator import METHODS
 from companion.estimator.belief import InnovationTerms, s_of_beta
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
 from companion.estimator.map_beta import scheduled_beta
-from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
+from companion.estimator.methods import MethodContext
+from companion.estimator.plugin_config import PluginConfig
 from companion.estimator.windowed_ml import window_nll
 from companion.mission import ConfigError, load_mission
+from companion.wiring import mission_plugin_config, navigator_for
 from tests.estimator_streams import (
     assert_out_of_order_equals_in_order,
     drive,
@@ -53,7 +55,7 @@ def _mission_stream_engine(method: str, plugin_section: dict | None = None) -> t
     m = load_mission("test")
     if plugin_section:
         m = dataclasses.replace(m, sections={**m.sections, "belief_plugins": plugin_section})
-    nav = bind(Navigator(CFG, method=method, frame=m.frame), m)
+    nav = navigator_for(m, method, config=CFG)
     return nav.engine, m
 
 
@@ -71,8 +73,15 @@ def test_map_beta_follows_the_clearance_of_the_previous_posterior(stream):
 
 
 def test_map_beta_without_a_map_is_open_sky(stream):
-    e = drive(stream, FusionEngine(CFG, "map-beta"), stream.fix_t_us.copy())
+    """Open sky everywhere only when asked for (a map without buildings); no map at all is an error."""
+    open_sky = MethodContext(clearance_m=lambda north_m, east_m: float("inf"))
+    e = drive(stream, FusionEngine(CFG, "map-beta", context=open_sky), stream.fix_t_us.copy())
     assert {f.beta for f in e.fusions} == {PluginConfig().map_beta_open}
+    for method in ("map-beta", "map-hmm"):
+        with pytest.raises(ConfigError, match=f"'{method}' needs the mission's map"):
+            FusionEngine(CFG, method)
+        with pytest.raises(ConfigError, match="needs the mission's map"):
+            navigator_for(None, method)
 
 
 @pytest.mark.parametrize("method", ["map-beta", "windowed-ml"])

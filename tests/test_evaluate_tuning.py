@@ -3,8 +3,8 @@
 import pytest
 
 from companion.errors import UserError
-from companion.estimator import mission_estimator_config
 from companion.mission import ConfigError
+from companion.wiring import mission_estimator_config
 from gcs_tools.cli import main
 from gcs_tools.evaluate import campaign, tune, tuning
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.estimator import METHODS, Navigator
+from companion.estimator import METHODS
 from companion.estimator.belief import InnovationTerms
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
@@ -19,8 +19,10 @@ from companion.estimator.hmm_trust import (
     relaxation_factor,
     stationary,
 )
-from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
+from companion.estimator.methods import MethodContext
+from companion.estimator.plugin_config import PluginConfig
 from companion.mission import ConfigError, load_mission
+from companion.wiring import mission_plugin_config, navigator_for
 from tests.estimator_streams import (
     assert_out_of_order_equals_in_order,
     late_and_in_order,
@@ -41,9 +43,7 @@ def _plugin(**kw) -> PluginConfig:
 
 
 def _method(plugin: PluginConfig) -> HmmTrust:
-    m = HmmTrust(CFG)
-    m.bind(None, plugin, lambda: None)
-    return m
+    return HmmTrust(CFG, MethodContext(plugin=plugin))
 
 
 def _pdf(y: float, s: float) -> float:
@@ -195,7 +195,7 @@ def test_out_of_order_equals_in_order():
     m = load_mission("test")
 
     late, ref = late_and_in_order(
-        stream, lambda: bind(Navigator(CFG, method="hmm-trust", frame=m.frame), m).engine)
+        stream, lambda: navigator_for(m, "hmm-trust", config=CFG).engine)
     assert_out_of_order_equals_in_order(late, ref)
 
 

@@ -6,14 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from companion.estimator import METHODS, Navigator
+from companion.estimator import METHODS
 from companion.estimator.belief import InnovationTerms
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
 from companion.estimator.map_beta import canyon_weight, scheduled_beta
 from companion.estimator.map_hmm import MapHmm, map_levels, map_posterior
-from companion.estimator.plugin_config import PluginConfig, bind, mission_plugin_config
+from companion.estimator.methods import MethodContext
+from companion.estimator.plugin_config import PluginConfig
 from companion.mission import ConfigError, load_mission
+from companion.wiring import mission_plugin_config, navigator_for
 from tests.estimator_streams import (
     assert_out_of_order_equals_in_order,
     drive,
@@ -47,9 +49,7 @@ class _Place:
 
 
 def _method(plugin: PluginConfig, place: _Place) -> MapHmm:
-    m = MapHmm(CFG)
-    m.bind(place, plugin, lambda: (0.0, 0.0, 0.0))
-    return m
+    return MapHmm(CFG, MethodContext(plugin, place.world.clearance_m, lambda: (0.0, 0.0, 0.0)))
 
 
 def _pdf(y: float, s: float) -> float:
@@ -129,7 +129,8 @@ def test_evidence_can_overrule_the_map_and_recovery_is_bounded():
 
 def test_without_a_map_it_is_open_sky():
     stream = multipath_stream(np.random.default_rng(3), CFG, [(2.0, 0.0)])
-    e = FusionEngine(CFG, "map-hmm")  # no bind: PluginConfig defaults, no clearance reader
+    open_sky = MethodContext(clearance_m=lambda north_m, east_m: float("inf"))  # a map without buildings
+    e = FusionEngine(CFG, "map-hmm", context=open_sky)  # PluginConfig defaults
     drive(stream, e, stream.fix_t_us.copy())
     assert e.fusions[-1].beta > 0.5  # clean prior, clean fixes
 
@@ -141,7 +142,7 @@ def test_out_of_order_equals_in_order(evidence):
     m = dataclasses.replace(m, sections={**m.sections, "belief_plugins": {**FAR, "mhmm_evidence": evidence}})
 
     late, ref = late_and_in_order(
-        stream, lambda: bind(Navigator(CFG, method="map-hmm", frame=m.frame), m).engine)
+        stream, lambda: navigator_for(m, "map-hmm", config=CFG).engine)
     assert_out_of_order_equals_in_order(late, ref)
     assert len({round(f.beta, 6) for f in ref.fusions}) > 5  # β really moves
 

@@ -12,6 +12,7 @@ import pytest
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, TruthState
+from companion.errors import UserError
 from companion.mavlink import codec as mc
 from companion.mavlink.tlog import TlogWriter
 from gcs_tools.cli import main
@@ -108,7 +109,7 @@ def test_cli_writes_csv_and_strict_json(tmp_path: Path, monkeypatch: pytest.Monk
     log = tmp_path / "flight.tlog"
     write_flight(log)
     monkeypatch.setattr(core, "default_navigator",
-                        lambda method, frame, config=None: LastFixNavigator(method, frame))
+                        lambda method, frame, *setup: LastFixNavigator(method, frame))
     out = tmp_path / "out"
     assert main(["replay", str(log), "--method", "naive", "--out", str(out), "--rate-hz", "10"]) == 0
     table = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)
@@ -152,6 +153,10 @@ def test_real_log_every_method() -> None:
     if not hasattr(estimator, "Navigator"):
         pytest.skip("companion.estimator.Navigator has not landed yet")
     for method in estimator.METHODS:
+        if method in ("map-beta", "map-hmm"):  # a foreign log has no map: refused, not "open sky"
+            with pytest.raises(UserError, match=f"'{method}' needs the mission's map"):
+                core.replay(QUAD106, method)
+            continue
         result = core.replay(QUAD106, method)
         s, table = result.summary, result.table
         assert s["samples_used"]["imu"] == 32936 and s["samples_used"]["gnss"] == 3339, method
@@ -165,8 +170,9 @@ def test_real_log_every_method() -> None:
 
 def test_mission_option_sets_home_and_the_missions_estimator_config(tmp_path, capsys):
     """``--mission`` replays with the filter the SITL estimator ran (its ``estimator:`` section)."""
-    from companion.estimator import EstimatorConfig, mission_estimator_config
+    from companion.estimator import EstimatorConfig
     from companion.mission import load_mission
+    from companion.wiring import mission_estimator_config
 
     mission = load_mission("default")
     assert mission_estimator_config(mission) != EstimatorConfig()

@@ -59,9 +59,9 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     assert dump.returncode == 0
     assert "GPS_RAW_INT" in dump.stdout and "ODOMETRY" in dump.stdout and "SYSTEM_TIME" in dump.stdout
 
-    from companion.estimator import mission_estimator_config
     from companion.mavlink.tlog import read_tlog
     from companion.mission import load_mission
+    from companion.wiring import mission_estimator_config
     from gcs_tools.replay.core import CSV_COLUMNS, replay
 
     live: dict[int, tuple[float, float, float]] = {}
@@ -340,10 +340,10 @@ def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, 
     """The estimator's bias travels as DEBUG_VECT GNSS_BIAS (5 Hz): every finite row of the vehicle's
     b_est_ned_m is one of the vectors sent, and each vector sent is the estimator's bias at its stamp
     (replaying the tlog reproduces it to float32). `beliefnav export` of the tlog carries it on."""
-    from companion.estimator import mission_estimator_config
     from companion.mavlink import codec
     from companion.mavlink.tlog import read_tlog
     from companion.mission import load_mission
+    from companion.wiring import mission_estimator_config
     from gcs_tools.replay.core import CSV_COLUMNS, replay
 
     tlog = lockstep_flight / "run.tlog"

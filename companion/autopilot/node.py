@@ -43,9 +43,10 @@ from companion.autopilot.translate import TranslateConfig, Translator, boot_stam
 from companion.domain.geodesy import LocalNedFrame, parse_home
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
-from companion.estimator import METHODS, EstimatorConfig, Navigator
+from companion.estimator import DEFAULT_METHOD, EstimatorConfig, Navigator, check_method
 from companion.mavlink import codec
 from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
+from companion.wiring import navigator_for
 
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
 MIN_FIX_TYPE = 3
@@ -56,7 +57,7 @@ REASK_MIN_S = 2.0  # a reboot seen this soon after asking for the streams does n
 class CompanionConfig:
     master: str  # connection string (companion.autopilot.connection)
     out_dir: Path
-    method: str = "second-order"
+    method: str = DEFAULT_METHOD
     feed: str = "none"  # one of FEEDS
     home: LocalNedFrame | None = None  # None: GPS_GLOBAL_ORIGIN, else HOME_POSITION, else first good fix
     duration_s: float | None = None  # wall seconds to run; None: until interrupted
@@ -73,8 +74,7 @@ class CompanionConfig:
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise UserError(f"unknown method {self.method!r} (choose from {', '.join(METHODS)})")
+        check_method(self.method)
         if self.feed not in FEEDS:
             raise UserError(f"--feed {self.feed!r}: choose from {', '.join(FEEDS)}")
         if not 1 <= self.component_id <= 255:
@@ -241,7 +241,7 @@ class AutopilotCompanion:
                 else:
                     self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
                     self.home_source = "first good fix"
-        self.nav = Navigator(self.config.estimator, method=self.config.method, frame=self.frame)
+        self.nav = navigator_for(None, self.config.method, config=self.config.estimator, frame=self.frame)
         self._topics = EstimatorTelemetry(self.telemetry)
 
     def _after_imu(self, t_us: int) -> None:

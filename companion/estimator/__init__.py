@@ -7,13 +7,14 @@ Modules: ``config`` (parameters), ``model`` (the linear 15-state model), ``histo
 inputs with prefix integrals), ``belief`` (loss and ∂ℓ/∂β), ``methods`` (adaptation strategies
 and their registry), ``engine`` (filter + out-of-sequence fusion), ``navigator`` (front end);
 ``_core`` (C, ``_core.c``, built by ``make venv``): the numeric hot path of ``history`` and
-``model``.
+``model``. Nothing here reads missions, YAML, MAVLink or Zenoh (an import-linter contract):
+``companion.wiring.navigator_for`` assembles a navigator from a mission.
 """
 
 import importlib
 
-from companion.estimator.config import EstimatorConfig, mission_estimator_config
-from companion.estimator.methods import REGISTRY, register
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.methods import DEFAULT_METHOD, REGISTRY, MethodContext, check_method, register
 from companion.estimator.navigator import Navigator
 
 # Modules that register extra adaptation methods (see ``methods``' docstring), by name.
@@ -23,4 +24,5 @@ for _plugin in PLUGINS:
 
 METHODS: tuple[str, ...] = tuple(REGISTRY)
 
-__all__ = ["METHODS", "EstimatorConfig", "Navigator", "mission_estimator_config", "register"]
+__all__ = ["DEFAULT_METHOD", "METHODS", "EstimatorConfig", "MethodContext", "Navigator", "check_method",
+           "register"]

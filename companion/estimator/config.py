@@ -1,7 +1,7 @@
 """The estimator's parameters: one frozen dataclass, every field with its unit.
 
 Paper values (Section V.A, DESIGN §4) are marked "paper"; every other value is our choice and
-says why. Mission YAML files override fields through ``companion.mission.schema.build``.
+says why. Mission YAML files override fields (``companion.wiring.mission_estimator_config``).
 
 Trust model (the paper gives ``Q_b(β)`` but not ``R(β)``):
 
@@ -21,8 +21,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-
-from companion.mission import Mission, build
 
 
 @dataclass(frozen=True)
@@ -207,12 +205,3 @@ SCENARIO_IMU_PRIOR: dict[str, dict[str, float]] = {
     "mismatch": {"sigma_acc_m_s2": 0.4},
 }
 
-
-def mission_estimator_config(mission: Mission) -> EstimatorConfig:
-    """``EstimatorConfig`` defaults, then the mission's scenario's IMU prior
-    (``SCENARIO_IMU_PRIOR``), then the mission's ``estimator:`` section.
-
-    Used by every wiring that flies or replays a mission (``fly``, the SITL estimator node,
-    ``replay --mission``), so a replayed SITL log runs the filter the live one ran."""
-    overrides = {**SCENARIO_IMU_PRIOR.get(mission.scenario, {}), **mission.section("estimator")}
-    return build(EstimatorConfig, overrides, f"{mission.source}: estimator")

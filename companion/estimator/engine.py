@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from dataclasses import replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -94,10 +95,13 @@ class Snapshot(NamedTuple):
 class FusionEngine:
     """Belief-adaptive EKF on NED inputs; counts every rejection in ``counts``."""
 
-    def __init__(self, cfg: EstimatorConfig, method: str, counts: dict[str, int] | None = None) -> None:
+    def __init__(self, cfg: EstimatorConfig, method: str, counts: dict[str, int] | None = None,
+                 context: methods.MethodContext | None = None) -> None:
         self.cfg = cfg
         self.method_name = method
-        self.method = methods.make(method, cfg)
+        # the method's map and plugin parameters, and a reader of this filter's latest posterior
+        self.method = methods.make(method, cfg, replace(context or methods.MethodContext(),
+                                                        posterior=lambda: self.fusions[-1].x))
         # A belief (GNSS trust) learns from a fix the gate rejects: it is evidence against trust.
         # R-learners (adaptive, vbakf) do not: they estimate the noise of the fixes fused, as the
         # autopilot EKFs keep gated fixes out of everything.

@@ -39,12 +39,11 @@ used, q = 1 − exp(−2T/τ): T = −(τ/2) ln(1 − q). State: one posterior �
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.methods import register
+from companion.estimator.methods import MethodContext, register
 from companion.estimator.plugin_config import PluginConfig
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -135,12 +134,9 @@ def relaxation_factor(levels: tuple[Level, ...], T_s: float) -> float:
 class HmmTrust:
     learns_from_rejected = True  # a gated-out fix is evidence about the trust level too
 
-    def __init__(self, cfg: EstimatorConfig) -> None:
+    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
         self.cfg = cfg
-        self.bind(None, PluginConfig(), lambda: None)
-
-    def bind(self, mission: Any, plugin: PluginConfig, position: Callable[[], Any]) -> None:
-        self.plugin = plugin
+        self.plugin = plugin = (context or MethodContext()).plugin
         self.levels = levels_of(self.cfg, plugin)
         self.chains = SPLIT_AXES if plugin.hmm_split_vertical else (ALL_AXES,)
 

@@ -7,21 +7,18 @@ latest posterior position; R(β) and Q_b(β) as for the belief methods.
 
 The state is the β in force (a float). At each fix the NEW β is computed from the posterior of
 the previous fix (one fix, 50 ms, behind the fix being fused): the engine hands an adaptation
-method no position, so ``bind`` gives it a reader of the engine's latest fusion. That reader sees
-the history the out-of-sequence buffer rolled back to, so re-fusion reproduces in-order results.
-Without ``bind`` there is no map (e.g. ``replay`` of a foreign log without ``--mission``): every
-place then counts as open sky, β = ``map_beta_open`` throughout — the method degenerates to
-``fixed-beta`` at that β, as a vehicle without a map would.
+method no position, so its ``MethodContext`` carries a reader of the engine's latest fusion. That
+reader sees the history the out-of-sequence buffer rolled back to, so re-fusion reproduces in-order
+results. The map (``MethodContext.clearance_m``) is required: without one (e.g. ``replay`` of a
+foreign log without ``--mission``) building the method is a one-line ``ConfigError``, never a
+silent "open sky everywhere".
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.methods import register
+from companion.estimator.methods import MethodContext, register
 from companion.estimator.plugin_config import PluginConfig
 
 
@@ -38,20 +35,15 @@ def scheduled_beta(cfg: PluginConfig, clearance_m: float) -> float:
 @register("map-beta")
 class MapBeta:
     learns_from_rejected = True  # β follows the position whether or not the fix passed the gate
-    def __init__(self, cfg: EstimatorConfig) -> None:
-        self.cfg = cfg
-        self.plugin = PluginConfig()
-        self._clearance: Callable[[float, float], Any] | None = None
-        self._position: Callable[[], Any] | None = None
 
-    def bind(self, mission: Any, plugin: PluginConfig, position: Callable[[], Any]) -> None:
-        self.plugin = plugin
-        self._clearance = mission.world.clearance_m
-        self._position = position
+    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
+        context = context or MethodContext()
+        self.cfg = cfg
+        self.plugin = context.plugin
+        self._clearance = context.require_map("map-beta")
+        self._position = context.posterior
 
     def _beta_here(self) -> float:
-        if self._clearance is None or self._position is None:
-            return self.plugin.map_beta_open  # no map: open sky everywhere
         x = self._position()
         return scheduled_beta(self.plugin, float(self._clearance(float(x[0]), float(x[1]))))
 

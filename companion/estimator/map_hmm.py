@@ -20,21 +20,19 @@ Per fix, over the interval T since the last one:
 κ = 0 and ε = 0 is ``map-beta`` with its β smoothed over D (after a time ≫ D at one place, β = the
 schedule's β(d) exactly; tested); κ = 1 is ``hmm-trust``'s two-level chain with the map's prior in
 place of uniform jumps. Recovery is bounded: after the prediction each level keeps at least
-(1 − e) × its map prior, at least (1 − e) ε. Without a map (no ``bind`` with a mission), every
-place is open sky: the prior is *clean*. State: the posterior (π_c, π_d), immutable.
+(1 − e) × its map prior, at least (1 − e) ε. The map is required (``MethodContext.clearance_m``;
+without one, building the method is a ``ConfigError``). State: the posterior (π_c, π_d), immutable.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any
 
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.hmm_trust import ALL_AXES, Level, interval_s, log_likelihoods
 from companion.estimator.map_beta import canyon_weight
-from companion.estimator.methods import register
+from companion.estimator.methods import MethodContext, register
 from companion.estimator.plugin_config import PluginConfig
 
 State = tuple[float, float]  # posterior (clean, degraded)
@@ -66,24 +64,15 @@ def map_posterior(pi: State, prior_degraded: float, terms: InnovationTerms, leve
 class MapHmm:
     learns_from_rejected = True  # a gated-out fix is evidence about the trust level too
 
-    def __init__(self, cfg: EstimatorConfig) -> None:
+    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
+        context = context or MethodContext()
         self.cfg = cfg
-        self._clearance: Callable[[float, float], Any] | None = None
-        self._position: Callable[[], Any] | None = None
-        self._use(PluginConfig())
-
-    def _use(self, plugin: PluginConfig) -> None:
-        self.plugin = plugin
-        self.levels = map_levels(self.cfg, plugin)
-
-    def bind(self, mission: Any, plugin: PluginConfig, position: Callable[[], Any]) -> None:
-        self._use(plugin)
-        self._clearance = mission.world.clearance_m
-        self._position = position
+        self.plugin = context.plugin
+        self.levels = map_levels(cfg, context.plugin)
+        self._clearance = context.require_map("map-hmm")
+        self._position = context.posterior
 
     def _prior_degraded(self) -> float:
-        if self._clearance is None or self._position is None:
-            return self.plugin.mhmm_prior_floor  # no map: open sky everywhere
         x = self._position()
         eps = self.plugin.mhmm_prior_floor
         w = canyon_weight(self.plugin, float(self._clearance(float(x[0]), float(x[1]))))

@@ -14,7 +14,7 @@ module ``companion/estimator/vb.py``::
 
     @register("variational-bayes")
     class VariationalBayes:
-        def __init__(self, cfg): ...
+        def __init__(self, cfg, context): ...  # context: MethodContext (plugin config, map, posterior)
         def initial_state(self): ...
         def beta(self, state): ...
         def measurement_cov(self, state, terms): ...
@@ -22,16 +22,49 @@ module ``companion/estimator/vb.py``::
 
 then add ``vb`` to ``PLUGINS`` in ``companion/estimator/__init__.py`` so it is imported and
 appears in ``METHODS``; ``Navigator(cfg, method="variational-bayes")`` then works everywhere.
+
+What a method needs beyond ``EstimatorConfig`` is handed in at construction, in a ``MethodContext``:
+the plugin parameters (``PluginConfig``, the mission's ``belief_plugins:`` section), the map (a
+clearance function; ``companion.wiring.navigator_for`` passes the mission's) and a reader of the
+filter's latest posterior state (set by ``FusionEngine``). Nothing is patched in afterwards.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol
 
+from companion.errors import ConfigError, not_one_of
 from companion.estimator.belief import InnovationTerms, Vec3, loss_grad, paper_loss_grad, sigmoid
 from companion.estimator.config import EstimatorConfig
-from companion.mission.schema import ConfigError
+from companion.estimator.plugin_config import PluginConfig
+
+DEFAULT_METHOD = "second-order"  # the paper's method: what every command and node runs unless told
+
+Clearance = Callable[[float, float], Any]  # (north_m, east_m) -> distance to the nearest building (m)
+
+
+def _no_posterior() -> Sequence[float]:
+    raise ConfigError("this adaptation method reads the filter's posterior: build it through FusionEngine")
+
+
+@dataclass(frozen=True)
+class MethodContext:
+    """What an adaptation method may need beyond ``EstimatorConfig``, handed in at construction."""
+
+    plugin: PluginConfig = field(default_factory=PluginConfig)  # the ablation plugins' parameters
+    clearance_m: Clearance | None = None  # the map (``World.clearance_m``); None: no map
+    # the filter's latest posterior state x (``FusionEngine`` sets it: its newest fusion, which
+    # out-of-sequence re-fusion rolls back with the rest of the history)
+    posterior: Callable[[], Sequence[float]] = _no_posterior
+
+    def require_map(self, method: str) -> Clearance:
+        """The map, or a one-line error: a map method without a map must not fly "open sky everywhere"."""
+        if self.clearance_m is None:
+            raise ConfigError(f"estimator method {method!r} needs the mission's map: give a mission "
+                              "(e.g. replay --mission NAME), or choose a method without a map")
+        return self.clearance_m
 
 
 class Adaptation(Protocol):
@@ -55,13 +88,14 @@ class Adaptation(Protocol):
     # is also called for a fix the innovation gate rejected (the filter state is not updated).
 
 
-REGISTRY: dict[str, Callable[[EstimatorConfig], Adaptation]] = {}
+Factory = Callable[[EstimatorConfig, MethodContext], Adaptation]
+REGISTRY: dict[str, Factory] = {}
 
 
-def register(name: str) -> Callable[[Callable[[EstimatorConfig], Adaptation]], Any]:
+def register(name: str) -> Callable[[Factory], Any]:
     """Class decorator: make a strategy selectable as ``name``."""
 
-    def deco(factory: Callable[[EstimatorConfig], Adaptation]) -> Any:
+    def deco(factory: Factory) -> Any:
         if name in REGISTRY:
             raise ValueError(f"adaptation method {name!r} registered twice")
         REGISTRY[name] = factory
@@ -70,20 +104,24 @@ def register(name: str) -> Callable[[Callable[[EstimatorConfig], Adaptation]], A
     return deco
 
 
-def make(name: str, cfg: EstimatorConfig) -> Adaptation:
+def check_method(name: str, what: str = "--method") -> str:
+    """``name`` if it is a registered method, else a one-line ``ConfigError`` naming every method and
+    the nearest (``what``: where the name came from). The one check every command and node calls."""
+    if name not in REGISTRY:
+        raise not_one_of(what, name, tuple(REGISTRY))
+    return name
+
+
+def make(name: str, cfg: EstimatorConfig, context: MethodContext | None = None) -> Adaptation:
     """Build the strategy called ``name``; unknown names are a user error naming the choices."""
-    try:
-        factory = REGISTRY[name]
-    except KeyError:
-        raise ConfigError(f"estimator method {name!r} is unknown (known: {', '.join(REGISTRY)})") from None
-    return factory(cfg)
+    return REGISTRY[check_method(name, "estimator: unknown method")](cfg, context or MethodContext())
 
 
 @register("naive")
 class Naive:
     """Fixed R = R_nom and fixed Q (β held at ``beta_fixed``)."""
 
-    def __init__(self, cfg: EstimatorConfig) -> None:
+    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
         self.cfg = cfg
 
     def initial_state(self) -> None:
@@ -110,7 +148,7 @@ class InnovationAdaptive(Naive):
     N innovations.
     """
 
-    def __init__(self, cfg: EstimatorConfig) -> None:
+    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
         super().__init__(cfg)
         sigma_min_m = min(cfg.sigma_gnss_horizontal_m, cfg.sigma_gnss_vertical_m)
         self.floor_m2 = cfg.adaptive_r_floor * sigma_min_m**2
@@ -147,7 +185,7 @@ class _Belief:
 
     learns_from_rejected = True  # a fix failing the innovation gate still updates β (engine.py)
 
-    def __init__(self, cfg: EstimatorConfig) -> None:
+    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
         self.cfg = cfg
 
     def _state(self, theta: float, h_fast: float, h_slow: float) -> BeliefState:

@@ -22,10 +22,11 @@ from pymap3d.ellipsoid import Ellipsoid
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
-from companion.mission.schema import ConfigError
+from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
 Rot = tuple[Any, Any, Any, Any, Any, Any, Any, Any, Any]
 _np_cos, _np_sin, _np_hypot = np.cos, np.sin, np.hypot  # pymap3d's trigonometry (numpy's, for its bits)
@@ -104,8 +105,10 @@ class NedConverter:
 class Navigator:
     """Belief-adaptive GNSS/IMU navigation on wire samples pushed in arrival order."""
 
-    def __init__(self, cfg: EstimatorConfig | None = None, method: str = "second-order",
-                 frame: LocalNedFrame | None = None) -> None:
+    def __init__(self, cfg: EstimatorConfig | None = None, method: str = DEFAULT_METHOD,
+                 frame: LocalNedFrame | None = None, context: MethodContext | None = None) -> None:
+        """``context``: what the method needs beyond ``cfg`` (plugin parameters, the map); from a
+        mission, ``companion.wiring.navigator_for`` builds the whole navigator."""
         self.cfg = cfg if cfg is not None else EstimatorConfig()
         try:
             self.cfg.validate()
@@ -121,7 +124,7 @@ class Navigator:
         # frozen-output check: the last fix's (lat, lon, alt) and the validity time it first had
         self._fix_seen: tuple[tuple[float, float, float], int, bool] | None = None
         self._frozen_us = int(round(self.cfg.gnss_frozen_s * 1e6))
-        self.engine = FusionEngine(self.cfg, method, self._counts)
+        self.engine = FusionEngine(self.cfg, method, self._counts, context)
         self._rot: Rot | None = None  # the latest attitude as R_ned_frd (row-major)
         self._push_frd = self.engine.push_frd
         self._last: tuple[Any, NavEstimate] | None = None

@@ -2,18 +2,15 @@
 ``map-hmm``).
 
 They live in their own mission section ``belief_plugins:`` (``--set belief_plugins.FIELD=V``), so
-the estimator's ``EstimatorConfig`` stays as it is. A plugin that needs them (or the mission's map)
-receives them through ``bind(navigator, mission)``, which every wiring that builds a navigator
-from a mission calls (fly / evaluate, the companion's estimator node).
+the estimator's ``EstimatorConfig`` stays as it is. A plugin receives them (and the mission's map)
+at construction in its ``methods.MethodContext``; ``companion.wiring.navigator_for`` builds that
+from a mission.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
-
-from companion.mission import Mission, build
 
 
 @dataclass(frozen=True)
@@ -72,17 +69,3 @@ class PluginConfig:
                              f"got {self.hmm_outlier_r_factor!r}")
         if not 0.0 < self.window_gain <= 1.0:
             raise ValueError(f"window_gain: must be in (0, 1], got {self.window_gain!r}")
-
-
-def mission_plugin_config(mission: Mission) -> PluginConfig:
-    """``PluginConfig`` defaults overridden by the mission's ``belief_plugins:`` section."""
-    return build(PluginConfig, mission.section("belief_plugins"), f"{mission.source}: belief_plugins")
-
-
-def bind(navigator: Any, mission: Mission) -> Any:
-    """Give the navigator's adaptation method the mission (map, plugin section) if it takes one."""
-    method = navigator.engine.method
-    if hasattr(method, "bind"):
-        engine = navigator.engine
-        method.bind(mission, mission_plugin_config(mission), lambda: engine.fusions[-1].x)
-    return navigator

@@ -10,21 +10,19 @@ term) summed over the window on a grid of β, takes the minimiser β*, and moves
 the loss's scale, no oscillation from a curvature estimate, and it cannot run away on one outlier.
 
 State: (β, the last N fixes' terms) — an immutable tuple, as the out-of-sequence buffer needs.
-Hyper-parameters: ``PluginConfig.window_*`` (mission section ``belief_plugins:``, via ``bind``).
+Hyper-parameters: ``PluginConfig.window_*`` (mission section ``belief_plugins:``, in its ``MethodContext``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.methods import register
-from companion.estimator.plugin_config import PluginConfig
+from companion.estimator.methods import MethodContext, register
 
 
 class WindowState(NamedTuple):
@@ -55,12 +53,9 @@ def window_nll(betas: np.ndarray, window: tuple[InnovationTerms, ...], cfg: Esti
 @register("windowed-ml")
 class WindowedMl:
     learns_from_rejected = True  # a gated-out fix is evidence about the trust level too
-    def __init__(self, cfg: EstimatorConfig) -> None:
+    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
         self.cfg = cfg
-        self.bind(None, PluginConfig(), lambda: None)
-
-    def bind(self, mission: Any, plugin: PluginConfig, position: Callable[[], Any]) -> None:
-        self.plugin = plugin
+        self.plugin = plugin = (context or MethodContext()).plugin
         self.grid = np.linspace(plugin.window_beta_min, plugin.window_beta_max, plugin.window_grid)
 
     def initial_state(self) -> WindowState:

@@ -19,14 +19,11 @@ from typing import Any, TypeVar
 
 import yaml
 
-from companion.errors import UserError
+from companion.errors import ConfigError
+
+__all__ = ["ConfigError", "build", "load_yaml"]
 
 T = TypeVar("T")
-
-
-class ConfigError(UserError, ValueError):
-    """A user-caused configuration error; its message is one line naming file and field."""
-
 
 MAX_YAML_BYTES = 4 * 1024 * 1024  # a mission or config file larger than this is refused unread
 MAX_YAML_DEPTH = 32  # nesting levels of mappings/lists (missions need about 5)

@@ -33,8 +33,7 @@ from companion.autopilot.timesync import answer as timesync_answer
 from companion.domain.clock_guard import ClockWindow, StreamClock, Verdict, within
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
-from companion.estimator import Navigator, mission_estimator_config
-from companion.estimator.plugin_config import bind
+from companion.estimator import Navigator
 from companion.mavlink import codec as codec
 from companion.mavlink.lockstep import marker_time_us, step_response
 from companion.mavlink.udp_link import UdpLink
@@ -260,8 +259,10 @@ def _next_multiple(t_us: int, period_us: int) -> int:
 
 def make_navigator(mission: Mission, method: str) -> tuple[Navigator, float]:
     """The mission's Navigator (home = the mission's home point) and its χ² NIS gate."""
-    config = mission_estimator_config(mission)
-    return bind(Navigator(config, method=method, frame=mission.frame), mission), config.chi2_095
+    from companion.wiring import navigator_for
+
+    nav = navigator_for(mission, method)
+    return nav, nav.cfg.chi2_095
 
 
 def serve(node: EstimatorNode, stop_after_s: float | None = None, stats_path: Path | None = None) -> None:

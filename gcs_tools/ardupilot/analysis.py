@@ -14,8 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.domain.geodesy import LocalNedFrame
-from companion.estimator import EstimatorConfig, Navigator
+from companion.estimator import EstimatorConfig
+from companion.mission import Mission
+from companion.wiring import navigator_for
 from gcs_tools.ardupilot.gnss_source import SentFix
 from gcs_tools.ardupilot.session import Recording
 
@@ -35,10 +36,11 @@ class Track:
 
 
 def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: EstimatorConfig,
-                    frame: LocalNedFrame, times_us: np.ndarray) -> Track:
-    """Run ``method`` over the recording; its estimate right after the IMU sample (and the fixes
-    released with it) at each time: exactly what the closed loop's live companion computes."""
-    nav = Navigator(cfg, method=method, frame=frame)
+                    mission: Mission, times_us: np.ndarray) -> Track:
+    """Run ``method`` (``cfg``, the mission's plugin parameters, map and frame) over the recording; its
+    estimate right after the IMU sample (and the fixes released with it) at each time: exactly what
+    the closed loop's live companion computes."""
+    nav = navigator_for(mission, method, config=cfg)
     n = len(times_us)
     p, b = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
     beta, nis = np.full(n, np.nan), np.full(n, np.nan)

@@ -177,7 +177,7 @@ def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec:
     clearance = np.asarray(rec.truth_clearance_m)[sel]
     t_s = (times_us - (t0 or 0)) * 1e-6
     p_ref = route.reference(t_s)[0] if t_s.size else np.zeros((0, 3))
-    tracks = {name: companion_track(rec, source.sent, name, opts.estimator, mission.frame, times_us)
+    tracks = {name: companion_track(rec, source.sent, name, opts.estimator, mission, times_us)
               for name in dict.fromkeys((opts.method, *opts.methods))}
     tracks[AUTOPILOT_ROW] = autopilot_track(rec, times_us)
     if live is not None:

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from companion.estimator.methods import DEFAULT_METHOD
 from gcs_tools.ardupilot.config import ArduPilotConfig
 
 MISSION, PROFILE, SEED = "test", 2, 0
@@ -32,7 +33,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="beliefnav-bench-ardupilot-") as tmp:
         load0 = os.getloadavg()[0]
         cpu0 = time.process_time()
-        r = fly_ardupilot(ArduPilotFlightOptions(MISSION, PROFILE, "second-order", SEED, Path(tmp) / "one",
+        r = fly_ardupilot(ArduPilotFlightOptions(MISSION, PROFILE, DEFAULT_METHOD, SEED, Path(tmp) / "one",
                                                  config=cfg))
         ap = r.summary["ardupilot"]
         out.update({

@@ -32,12 +32,14 @@ import pymap3d
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, Sample
-from companion.estimator import EstimatorConfig, Navigator
+from companion.estimator import Navigator
+from companion.estimator.methods import DEFAULT_METHOD
+from companion.wiring import navigator_for
 
 IMU_PERIOD_US = 5_000
 GNSS_EVERY = 10  # 20 Hz
 HOME = LocalNedFrame(-37.8136, 144.9631, 40.0)
-METHOD = "second-order"
+METHOD = DEFAULT_METHOD
 SEED = 0
 
 
@@ -85,7 +87,7 @@ def flight(duration_s: float, latency: float | None, seed: int = SEED) -> list[S
 
 
 def streaming_wall_s(samples: list[Sample]) -> tuple[float, float, Navigator]:
-    nav = Navigator(EstimatorConfig(), METHOD, HOME)
+    nav = navigator_for(None, METHOD, frame=HOME)
     push, estimate = nav.push, nav.estimate
     imu_count = 0
     t0, c0 = time.perf_counter(), time.process_time()
@@ -107,7 +109,7 @@ def rss_mb() -> float:
 def memory_over_flight(duration_s: float = 3600.0, every_s: float = 600.0) -> dict[str, Any]:
     """RSS every ``every_s`` of simulated time while a Navigator flies ``duration_s`` (50 Hz estimates)."""
     samples = flight(duration_s, None)
-    nav = Navigator(EstimatorConfig(), METHOD, HOME)
+    nav = navigator_for(None, METHOD, frame=HOME)
     marks: dict[str, float] = {}
     imu_count, per_mark = 0, int(every_s * 1e6 / IMU_PERIOD_US)
     for s in samples:
@@ -146,7 +148,7 @@ def batched_wall_s(samples: list[Sample], block_s: float = 0.5) -> tuple[float, 
         else:
             fixes.append(s)  # type: ignore[arg-type]
     blocks.append((np.array(t_l), np.array(f_l), np.array(q_l), fixes))
-    nav = Navigator(EstimatorConfig(), METHOD, HOME)
+    nav = navigator_for(None, METHOD, frame=HOME)
     t0, c0 = time.perf_counter(), time.process_time()
     for t_us, f, q, block_fixes in blocks:
         nav.push_imu_batch(t_us, f, q)
@@ -163,7 +165,7 @@ def batched_wall_s(samples: list[Sample], block_s: float = 0.5) -> tuple[float, 
 
 def fix_costs_us(samples: list[Sample]) -> np.ndarray:
     """Wall µs of each ``push(fix)`` (after the first), everything else untimed."""
-    nav = Navigator(EstimatorConfig(), METHOD, HOME)
+    nav = navigator_for(None, METHOD, frame=HOME)
     costs = []
     clock = time.perf_counter
     first = True
@@ -179,7 +181,7 @@ def fix_costs_us(samples: list[Sample]) -> np.ndarray:
 
 
 def imu_only_us(n: int) -> float:
-    nav = Navigator(EstimatorConfig(), METHOD, HOME)
+    nav = navigator_for(None, METHOD, frame=HOME)
     nav.push(AttitudeSample(0, np.array([1.0, 0.0, 0.0, 0.0])))
     nav.push(ImuSample(0, np.array([0.0, 0.0, -9.8]), np.zeros(3)))
     nav.push(GnssFix(0, HOME.home_lat_deg, HOME.home_lon_deg, HOME.home_alt_m, 3, 12))

@@ -26,12 +26,13 @@ from typing import Any
 import numpy as np
 
 from companion.domain.samples import NavEstimate
+from companion.estimator.methods import DEFAULT_METHOD
 from companion.mission import load_mission
 from companion.planning import plan_route
 from gcs_tools.fly import fly
 from simvehicle import SimVehicle
 
-MISSION, PROFILE, METHOD, SEED = "default", 0, "second-order", 0
+MISSION, PROFILE, METHOD, SEED = "default", 0, DEFAULT_METHOD, 0
 
 
 def vehicle_only_s(mission: Any, sim_s: float) -> tuple[float, float]:

@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from companion.estimator.methods import DEFAULT_METHOD
 from gcs_tools.replay import core
 from gcs_tools.replay.tlog_source import TlogSource
 
@@ -55,7 +56,7 @@ def measure_read(path: Path) -> float:
     return time.perf_counter() - t0
 
 
-def measure_replay(path: str | Path = REAL_LOG, method: str = "second-order") -> dict[str, Any]:
+def measure_replay(path: str | Path = REAL_LOG, method: str = DEFAULT_METHOD) -> dict[str, Any]:
     path = Path(path)
     read_s = measure_read(path)
     cpu0 = time.process_time()
@@ -84,7 +85,7 @@ def _child(path: str, method: str, out: Path) -> dict[str, Any]:
 
 
 def measure(args: Any) -> dict[str, Any]:
-    method = "second-order"
+    method = DEFAULT_METHOD
     copies = 5 if getattr(args, "quick", False) else 20
     with tempfile.TemporaryDirectory() as tmp:
         big = Path(tmp) / f"quad106x{copies}.tlog"

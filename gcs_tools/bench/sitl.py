@@ -15,9 +15,10 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from companion.estimator.methods import DEFAULT_METHOD
 from gcs_tools.sitl.launcher import SitlOptions, launch
 
-MISSION, PROFILE, METHOD, SEED = "default", 0, "second-order", 0
+MISSION, PROFILE, METHOD, SEED = "default", 0, DEFAULT_METHOD, 0
 
 
 def measure(args: argparse.Namespace) -> dict[str, Any]:

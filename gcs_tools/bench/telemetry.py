@@ -216,9 +216,9 @@ def run_estimator(samples: list[Any], pub: TelemetryPublisher | None,
     time; faster than that it keeps the latest); otherwise at the simulated rate (a stress test).
     """
     from companion.domain.samples import ImuSample
-    from companion.estimator import Navigator
+    from companion.wiring import navigator_for
 
-    nav = Navigator(method="second-order")
+    nav = navigator_for(None)
     k = 0
     kept: list[Any] = []
     next_s = dict.fromkeys(RATES_HZ, 0.0)

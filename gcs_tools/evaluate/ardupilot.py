@@ -40,13 +40,14 @@ from typing import Any
 
 import numpy as np
 
+from companion.estimator.methods import DEFAULT_METHOD
 from gcs_tools.ardupilot.analysis import AUTOPILOT_ROW, LIVE_ROW
 from gcs_tools.ardupilot.config import ArduPilotConfig
 from gcs_tools.evaluate import stats
 from gcs_tools.jsonvalues import plain_json
 
 BOOTSTRAP_SEED = 20240917
-CLOSED_LOOP_METHOD = "second-order"
+CLOSED_LOOP_METHOD = DEFAULT_METHOD
 POSONLY_ROW = "ardupilot-ekf3-posonly"  # EKF3 without the GNSS velocity
 LOOPS = ("none", "none-posonly", "gps-input", "vision")
 OPEN_LOOPS = ("none", "none-posonly")

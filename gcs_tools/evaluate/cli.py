@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
+from companion.estimator.methods import DEFAULT_METHOD
 from gcs_tools.evaluate import campaign, report, tuning
 from gcs_tools.evaluate import rows as rows_mod
 from gcs_tools.jsonvalues import plain_json
@@ -115,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         tuning.check(campaign.mission(args.mission, overrides + row.overrides, args.scenario))
     methods = tuple(row.label for row in rows)
     references = [r.strip() for r in (args.reference or "").split(",") if r.strip()] or [
-        "second-order" if "second-order" in methods else methods[0]]
+        DEFAULT_METHOD if DEFAULT_METHOD in methods else methods[0]]
     for ref in references:
         if ref not in methods:
             raise UserError(f"--reference {ref!r}: not among the rows ({', '.join(methods)})")

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
+from companion.estimator.methods import DEFAULT_METHOD
 from gcs_tools.evaluate import aggregate, flights, plots, tuning
 from gcs_tools.evaluate.campaign import JobResult
 
@@ -58,7 +59,7 @@ def write(
     }
     res = aggregate.build_results(results, methods, seeds, campaign)
     if results and all(r.flight for r in results):
-        reference = campaign.get("reference") or ("second-order" if "second-order" in methods else methods[0])
+        reference = campaign.get("reference") or (DEFAULT_METHOD if DEFAULT_METHOD in methods else methods[0])
         res["flights"] = flights.build(results, methods, reference, campaign.get("more_references", ()))
     figures = plots.draw_all(results, methods, mission, profiles, seeds[0], out_dir)
     res["figures"] = figures

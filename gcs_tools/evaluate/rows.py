@@ -31,13 +31,12 @@ def load_rows(path: Path) -> list[Row]:
 
 
 def _row(label: str, body: Any, where: str) -> Row:
-    from companion.estimator import METHODS
+    from companion.estimator import check_method
 
     if not isinstance(body, dict) or "method" not in body or set(body) - {"method", "set"}:
         raise UserError(f"{where}: expected {{method: NAME, set: {{SECTION.FIELD: VALUE}}}}")
     method = body["method"]
-    if method not in METHODS:
-        raise UserError(f"{where}: unknown method {method!r} (known: {', '.join(METHODS)})")
+    check_method(str(method), f"{where}: unknown method")
     sets = body.get("set") or {}
     if not isinstance(sets, dict):
         raise UserError(f"{where}.set: expected a mapping SECTION.FIELD: VALUE")

@@ -78,8 +78,7 @@ def with_overrides(mission: Mission, overrides: Sequence[Override]) -> Mission:
 
 def check(mission: Mission) -> None:
     """Build every config a flight builds from ``mission``: a bad override fails here, in one line."""
-    from companion.estimator import mission_estimator_config
-    from companion.estimator.plugin_config import mission_plugin_config
+    from companion.wiring import mission_estimator_config, mission_plugin_config
     from simvehicle.config import sim_config_for
 
     mission_estimator_config(mission)

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from gcs_tools import choices
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mission", default="default", help="mission YAML file, or 'default' / 'test'")
     parser.add_argument("--profile", type=int, default=0, help="mission profile index (default 0)")
-    parser.add_argument("--method", default="second-order", help="estimator method (default second-order)")
+    choices.add_method_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="random seed of the run (default 0)")
     parser.add_argument("--scenario", default=None,
                         help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")

@@ -22,10 +22,9 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
-from companion.estimator import METHODS, Navigator, mission_estimator_config
-from companion.estimator.plugin_config import bind
 from companion.mission import Mission, load_mission
 from companion.planning import Route, plan_route
+from companion.wiring import navigator_for
 from simvehicle import SimVehicle
 
 
@@ -89,13 +88,11 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     """Fly one profile of ``mission`` with estimator ``method``; deterministic given ``seed``."""
     cfg = config or FlyConfig()
     m = load_mission(mission) if isinstance(mission, str) else mission
-    if method not in METHODS:
-        raise UserError(f"method {method!r}: expected one of {', '.join(METHODS)}")
     if seed < 0:
         raise UserError(f"--seed must be >= 0, got {seed}")
+    nav = navigator_for(m, method)  # checks the method first
     route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
-    nav = bind(Navigator(mission_estimator_config(m), method=method, frame=m.frame), m)
     goal_ned_m = route.waypoints_ned_m[-1]
     end_s = cfg.start_delay_s + route.duration_s + max(cfg.timeout_margin_s, 0.5 * route.duration_s)
     if max_duration_s is not None:

@@ -11,6 +11,7 @@ from typing import Any
 from companion.domain.geodesy import parse_home
 from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
+from gcs_tools import choices
 from gcs_tools.replay import core
 
 
@@ -18,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", type=Path,
                         help="log to replay: MAVLink tlog, ArduPilot DataFlash .bin or PX4 ULog .ulg "
                              "(recognised by its first bytes, else by extension)")
-    parser.add_argument("--method", default="second-order", help="estimator method (default: second-order)")
+    choices.add_method_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("runs/replay"),
                         help="output directory for estimates.csv, summary.json (default runs/replay)")
     parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
@@ -54,12 +55,9 @@ def run(args: argparse.Namespace) -> int:
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
     home = parse_home(args.home) if args.home else None
-    config = None
+    mission = None
     if args.mission is not None:
-        from companion.estimator import mission_estimator_config
-
         mission = choices.mission(args.mission)
-        config = mission_estimator_config(mission)
         home = home or mission.frame
     bar = None
     if not args.no_progress and sys.stderr.isatty():
@@ -70,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     progress = None if bar is None else (lambda pos, size: bar.update(pos - bar.n))
     pub = telemetry.publisher_from_args(args, "companion") if args.publish else None
     try:
-        result = core.replay(args.file, args.method, home=home, config=config, rate_hz=args.rate_hz,
+        result = core.replay(args.file, args.method, home=home, mission=mission, rate_hz=args.rate_hz,
                              progress=progress, on_imu=_on_imu(pub, args.speed), out_dir=args.out,
                              gps_delay_ms=args.gps_delay_ms)
     finally:

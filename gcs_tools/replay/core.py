@@ -38,6 +38,7 @@ from gcs_tools.replay.logs import open_log
 
 if TYPE_CHECKING:
     from companion.estimator import EstimatorConfig
+    from companion.mission import Mission
 
 # Decoded samples fed to the navigator at a time: one timer pair per chunk instead of per sample
 # (the order, and so every estimate and counter, is unchanged).
@@ -71,15 +72,14 @@ NavigatorFactory = Callable[[str, LocalNedFrame], NavigatorLike]
 ImuHook = Callable[[int, NavigatorLike], None]
 
 
-def default_navigator(
-    method: str, frame: LocalNedFrame, config: EstimatorConfig | None = None
-) -> NavigatorLike:
-    """The real Navigator; ``config`` None = ``EstimatorConfig`` defaults (the real-log values)."""
-    from companion.estimator import METHODS, EstimatorConfig, Navigator
+def default_navigator(method: str, frame: LocalNedFrame, config: EstimatorConfig | None = None,
+                      mission: Mission | None = None) -> NavigatorLike:
+    """The real Navigator (``companion.wiring.navigator_for``): with ``mission`` its estimator config,
+    plugin parameters and map; without, no map; ``config`` replaces the estimator config (None: the
+    mission's, or the ``EstimatorConfig`` defaults, the real-log values)."""
+    from companion.wiring import navigator_for
 
-    if method not in METHODS:
-        raise UserError(f"unknown method {method!r} (choose from {', '.join(METHODS)})")
-    return Navigator(config or EstimatorConfig(), method=method, frame=frame)
+    return navigator_for(mission, method, config=config, frame=frame)
 
 
 def _rows(estimates: list[NavEstimate], segment: int) -> np.ndarray:
@@ -302,6 +302,7 @@ def replay(
     method: str,
     *,
     home: LocalNedFrame | None = None,
+    mission: Mission | None = None,
     config: EstimatorConfig | None = None,
     rate_hz: float = 20.0,
     navigator: NavigatorFactory | None = None,
@@ -312,10 +313,11 @@ def replay(
 ) -> ReplayResult:
     """Replay ``path`` through a navigator; ``rate_hz`` limits the estimate rows (0: every IMU).
 
-    ``config`` is the real Navigator's configuration (None: ``EstimatorConfig`` defaults); a
-    ``navigator`` factory (tests) replaces the real Navigator and ignores it. With ``out_dir``
-    the rows are streamed to ``out_dir/estimates.csv`` (the result's arrays are then empty);
-    ``write_summary`` writes the summary. ``gps_delay_ms`` overrides a DataFlash log's GPS delay.
+    ``mission`` configures the real Navigator (estimator section, plugins, map; None: the
+    ``EstimatorConfig`` defaults, no map), ``config`` replaces its estimator config; a ``navigator``
+    factory (tests) replaces the real Navigator. With ``out_dir`` the rows are streamed to
+    ``out_dir/estimates.csv`` (the result's arrays are then empty); ``write_summary`` writes the
+    summary. ``gps_delay_ms`` overrides a DataFlash log's GPS delay.
 
     ``progress(position_bytes, size_bytes)`` is called now and then; ``on_imu(t_us, navigator)``
     after every IMU sample is pushed (telemetry, pacing; its time is not the estimator's).
@@ -332,7 +334,9 @@ def replay(
     frame = home
 
     def make_nav() -> NavigatorLike:
-        return navigator(method, frame) if navigator is not None else default_navigator(method, frame, config)
+        if navigator is not None:
+            return navigator(method, frame)
+        return default_navigator(method, frame, config, mission)
 
     sink: _MemorySink | _CsvSink = _MemorySink() if out_dir is None else _CsvSink(out_dir / "estimates.csv")
     period_us = int(1e6 / rate_hz) if rate_hz > 0 else 0

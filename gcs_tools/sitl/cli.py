@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
+from gcs_tools import choices
 from gcs_tools.sitl.outcome import check_run_arguments, failure_reason
 
 if TYPE_CHECKING:
@@ -25,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ardupilot_cli.add_arguments(parser)
     parser.add_argument("--mission", default="default", help="mission name or YAML path")
     parser.add_argument("--profile", type=int, default=0, help="mission profile index")
-    parser.add_argument("--method", default="second-order", help="estimator method")
+    choices.add_method_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
     parser.add_argument("--scenario", default=None,
                         help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")

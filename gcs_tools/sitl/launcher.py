@@ -89,6 +89,16 @@ def flight_plan(opts: SitlOptions) -> tuple[Route, float]:
                                                                   0.5 * route.duration_s)
 
 
+def estimator_param_args(mission: str) -> list[str]:
+    """``--estimator-param EST_*=VALUE`` for the vehicle's ground link: the parameters the estimator
+    process builds from the same mission file (``companion.wiring``; the vehicle knows no estimator)."""
+    from companion.wiring import mission_estimator_config
+    from simvehicle.params import estimator_param_values
+
+    values = estimator_param_values(mission_estimator_config(load_mission(mission)))
+    return [f"--estimator-param={name}={value!r}" for name, value in values.items()]
+
+
 SIGNING_KEY_NAME = "signing.key"
 
 
@@ -137,7 +147,7 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
         "--goal-ned-m", *(repr(float(c)) for c in goal), "--goal-radius-m", str(opts.fly.goal_radius_m),
         "--goal-speed-m-s", str(opts.fly.goal_speed_m_s),
         "--arrive-after-s", str(route.t_start_s + route.duration_s), *opts.ground_args, *common,
-        *loss_seed(0),
+        *loss_seed(0), *estimator_param_args(opts.mission),
     ]
     if opts.realtime:
         vehicle.append("--realtime")

@@ -16,9 +16,9 @@ from companion.errors import UserError
 
 def check_run_arguments(method: str, seed: int) -> None:
     """Refuse what would only fail once the processes run (one line, exit 2)."""
-    from gcs_tools import choices
+    from companion.estimator import check_method
 
-    choices.method(method)  # names every method and the nearest
+    check_method(method)  # names every method and the nearest
     if seed < 0:
         raise UserError(f"--seed must be >= 0, got {seed}")
 

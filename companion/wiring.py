@@ -1,0 +1,59 @@
+"""The one place a ``Navigator`` is assembled from a mission: every flight, node, replay and bench calls it.
+
+``companion.estimator`` knows no missions (it is pure numerics); this module reads the mission's
+sections and hands the estimator what it needs at construction, as navlie's filters get their
+models handed in:
+
+* ``mission_estimator_config(mission)``: ``EstimatorConfig`` defaults, then the mission's scenario's
+  estimator settings, then the mission's own ``estimator:`` section;
+* ``mission_plugin_config(mission)``: ``PluginConfig`` defaults, then ``belief_plugins:``;
+* ``navigator_for(mission, method, config=, frame=)``: the navigator with both, the mission's map
+  (``World.clearance_m``, which ``map-beta`` and ``map-hmm`` need) and its home as the frame.
+
+Without a mission (a foreign log, an autopilot we do not plan for) there is no map: ``map-beta`` and
+``map-hmm`` then refuse to start with a one-line ``ConfigError``.
+"""
+
+from __future__ import annotations
+
+from companion.domain.geodesy import LocalNedFrame
+from companion.estimator import DEFAULT_METHOD, EstimatorConfig, MethodContext, Navigator, check_method
+from companion.estimator.config import SCENARIO_IMU_PRIOR
+from companion.estimator.plugin_config import PluginConfig
+from companion.mission import Mission, build
+
+_MISSION_HOME = LocalNedFrame(0.0, 0.0, 0.0)  # sentinel: "the mission's home" (compared by identity)
+
+
+def mission_estimator_config(mission: Mission) -> EstimatorConfig:
+    """``EstimatorConfig`` defaults, then the mission's scenario's IMU prior (``SCENARIO_IMU_PRIOR``),
+    then the mission's ``estimator:`` section (fly, the SITL estimator node, ``replay --mission``: a
+    replayed SITL log runs the filter the live one ran)."""
+    overrides = {**SCENARIO_IMU_PRIOR.get(mission.scenario, {}), **mission.section("estimator")}
+    return build(EstimatorConfig, overrides, f"{mission.source}: estimator")
+
+
+def mission_plugin_config(mission: Mission) -> PluginConfig:
+    """``PluginConfig`` defaults overridden by the mission's ``belief_plugins:`` section."""
+    return build(PluginConfig, mission.section("belief_plugins"), f"{mission.source}: belief_plugins")
+
+
+def navigator_for(mission: Mission | None, method: str = DEFAULT_METHOD, *,
+                  config: EstimatorConfig | None = None,
+                  frame: LocalNedFrame | None = _MISSION_HOME) -> Navigator:
+    """A ``Navigator`` running ``method`` (checked: one line naming the methods when unknown).
+
+    ``mission``: the estimator config (unless ``config`` is given: e.g. ArduPilot's real sensors, not
+    our simulated ones), the plugin parameters, the map, and the frame (unless ``frame`` is given).
+    ``None``: ``config`` or the ``EstimatorConfig`` defaults, default plugin parameters, no map, and
+    ``frame`` (default None = home at the first good fix).
+    """
+    check_method(method)
+    if mission is None:
+        context = MethodContext()
+        home = None if frame is _MISSION_HOME else frame
+    else:
+        context = MethodContext(plugin=mission_plugin_config(mission), clearance_m=mission.world.clearance_m)
+        config = config if config is not None else mission_estimator_config(mission)
+        home = mission.frame if frame is _MISSION_HOME else frame
+    return Navigator(config, method=method, frame=home, context=context)
