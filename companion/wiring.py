@@ -18,7 +18,6 @@ from __future__ import annotations
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.estimator import DEFAULT_METHOD, EstimatorConfig, MethodContext, Navigator, check_method
-from companion.estimator.config import SCENARIO_IMU_PRIOR
 from companion.estimator.plugin_config import PluginConfig
 from companion.mission import Mission, build
 
@@ -26,11 +25,11 @@ _MISSION_HOME = LocalNedFrame(0.0, 0.0, 0.0)  # sentinel: "the mission's home" (
 
 
 def mission_estimator_config(mission: Mission) -> EstimatorConfig:
-    """``EstimatorConfig`` defaults, then the mission's scenario's IMU prior (``SCENARIO_IMU_PRIOR``),
-    then the mission's ``estimator:`` section (fly, the SITL estimator node, ``replay --mission``: a
-    replayed SITL log runs the filter the live one ran)."""
-    overrides = {**SCENARIO_IMU_PRIOR.get(mission.scenario, {}), **mission.section("estimator")}
-    return build(EstimatorConfig, overrides, f"{mission.source}: estimator")
+    """``EstimatorConfig`` defaults, then the mission's scenario's ``estimator`` settings (what the
+    filter is told about the simulated IMU: ``companion.mission.scenarios``), then the mission's own
+    ``estimator:`` section (fly, the SITL estimator node, ``replay --mission``: a replayed SITL log
+    runs the filter the live one ran)."""
+    return build(EstimatorConfig, mission.settings("estimator"), f"{mission.source}: estimator")
 
 
 def mission_plugin_config(mission: Mission) -> PluginConfig:

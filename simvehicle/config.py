@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from companion.domain.physics import STANDARD_GRAVITY_M_S2
 from companion.mission.schema import build
 
 
@@ -33,7 +34,7 @@ class VehicleConfig:
 
     mass_kg: float = 5.0  # paper
     inertia_kg_m2: tuple[float, float, float] = (0.02, 0.02, 0.04)  # paper, diagonal (FRD axes)
-    gravity_m_s2: float = 9.80665  # standard gravity (the estimator uses the same)
+    gravity_m_s2: float = STANDARD_GRAVITY_M_S2  # (the estimator uses the same)
     drag_n_s_m: float = 0.25  # (ours) linear air drag, force = -drag * v
     max_thrust_n: float = 98.1  # (ours) thrust-to-weight 2
     max_torque_nm: float = 2.0  # (ours) per axis
@@ -103,7 +104,7 @@ class ImuConfig:
     ``sqrt(sigma² + density² * rate / 2)`` per sample (``sigma_*``: vibration and other white
     noise; ``*_noise_density_*``: the sensor's own noise density over the Nyquist band), a bias
     drawn once at turn-on and then a random walk, and a per-axis scale-factor error drawn once.
-    Defaults (white noise only) are the paper's IMU; ``simvehicle.scenarios`` holds a named MEMS part.
+    Defaults (white noise only) are the paper's IMU; ``companion.mission.scenarios`` holds a named MEMS part.
     """
 
     sigma_acc_m_s2: float = 0.08  # paper
@@ -242,25 +243,9 @@ _SECTION_TYPES: dict[str, type] = {
 }
 
 
-def sim_config_from(sections: dict[str, Any], where: str, scenario: str = "paper") -> SimConfig:
-    """Build a SimConfig from raw override sections (missing or None = defaults) on top of the
-    settings of ``scenario`` (``simvehicle.scenarios``; a section's fields override the scenario's)."""
-    from simvehicle.scenarios import scenario_sections
-
-    base = scenario_sections(scenario)
-
-    def merged(name: str) -> Any:
-        own = sections.get(name) or {}
-        return {**base.get(name, {}), **own} if isinstance(own, dict) else own  # a non-mapping: build says so
-
-    parts: dict[str, Any] = {
-        name: build(_SECTION_TYPES[name], merged(name), f"{where}: {name}") for name in SECTIONS
-    }
-    return SimConfig(**parts)
-
-
 def sim_config_for(mission: Any) -> SimConfig:
-    """The SimConfig of a mission (``mission.section(name)`` per part, on its ``scenario``)."""
+    """The SimConfig of a mission: each part built from ``mission.settings(name)`` (its sensor
+    scenario's fields, ``companion.mission.scenarios``, under the mission's own section)."""
     where = str(getattr(mission, "source", None) or getattr(mission, "name", "mission"))
-    scenario = str(getattr(mission, "scenario", "paper"))
-    return sim_config_from({name: mission.section(name) for name in SECTIONS}, where, scenario)
+    return SimConfig(**{name: build(_SECTION_TYPES[name], mission.settings(name), f"{where}: {name}")
+                        for name in SECTIONS})

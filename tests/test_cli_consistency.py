@@ -64,5 +64,6 @@ def test_sitl_typo_fails_at_once_naming_the_choices(tmp_path):
     assert time.monotonic() - t0 < 30
     done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--mission", "defualt", "--out",
                            str(out)], capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and "(packaged: default, test; did you mean 'default'?)" in done.stderr
+    assert done.returncode == 2
+    assert "(packaged: default, test, default-tuning; did you mean 'default'?)" in done.stderr
     assert not out.exists()

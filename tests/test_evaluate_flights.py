@@ -108,7 +108,7 @@ def test_rows_file_and_grid(tmp_path):
 def test_severity_levels_scale_the_unmodelled_gnss():
     assert ablation.severity_overrides(0.0) == ()
     one = dict(ablation.severity_overrides(1.0))
-    from simvehicle.scenarios import UNMODELLED_GNSS
+    from companion.mission.scenarios import UNMODELLED_GNSS
 
     for key, value in UNMODELLED_GNSS.items():  # s = 1 is the mismatch scenario's GNSS
         assert one[f"gnss.{key}"] == value

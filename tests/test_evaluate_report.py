@@ -9,6 +9,7 @@ from gcs_tools.evaluate import report, tuning
 def test_tuning_set_is_the_default_city_with_other_checked_profiles():
     reported = load_mission("default")
     tuned = tuning.load(tuning.TUNING_MISSION)
+    assert tuple(range(len(tuned.profiles))) == tuning.TUNING_PROFILES
     assert np.array_equal(tuned.world.rects_m, reported.world.rects_m)
     ends = {tuple(p.start_ne_m) for p in reported.profiles} | {tuple(p.goal_ne_m) for p in reported.profiles}
     for p in tuned.profiles:

@@ -137,3 +137,21 @@ def test_overlapping_buildings_are_fine():
     data["world"]["buildings"].append(extra)
     m = build_mission(data, "x.yaml")
     assert m.world.clearance_m(40.0, 42.0) == 0.0 and m.world.clearance_m(40.0, 47.0) == pytest.approx(2.0)
+
+
+def test_a_mission_extends_another_and_cycles_are_refused(tmp_path):
+    """``extends:``: the base's keys, replaced by the file's own (``default-tuning`` is one such file)."""
+    tuned, base = load_mission("default-tuning"), load_mission("default")
+    assert tuned.name == base.name and tuned.sections == base.sections and len(tuned.profiles) == 4
+    assert not set(tuned.profiles) & set(base.profiles)
+    mine = tmp_path / "mine.yaml"
+    mine.write_text("extends: test\nflight: {altitude_m: 12.0}\n")
+    m = load_mission(mine)
+    assert m.altitude_m == 12.0 and m.profiles == load_mission("test").profiles
+    (tmp_path / "a.yaml").write_text("extends: b.yaml\n")
+    (tmp_path / "b.yaml").write_text("extends: a.yaml\n")
+    with pytest.raises(ConfigError, match="b.yaml: extends: 'a.yaml' makes a chain deeper than 4 or a cycle"):
+        load_mission(tmp_path / "a.yaml")
+    (tmp_path / "c.yaml").write_text("extends: [test]\n")
+    with pytest.raises(ConfigError, match="extends: expected a packaged mission name or a file path"):
+        load_mission(tmp_path / "c.yaml")

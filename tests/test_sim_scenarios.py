@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from companion.mission import ConfigError, load_mission, with_scenario
+from companion.mission.scenarios import ICM_42688_P
 from simvehicle import SimVehicle
 from simvehicle.ahrs import Ahrs, attitude_error_rad, yaw_of
 from simvehicle.config import AhrsConfig, GnssConfig, ImuConfig, sim_config_for
 from simvehicle.imu import Imu
 from simvehicle.nlos import Constellation, UnmodelledGnss, position_error
-from simvehicle.scenarios import ICM_42688_P
 
 G = 9.80665
 

@@ -22,6 +22,8 @@ from typing import Literal
 
 import numpy as np
 
+from companion.domain.physics import STANDARD_GRAVITY_M_S2
+
 
 @dataclass(frozen=True)
 class EstimatorConfig:
@@ -47,7 +49,7 @@ class EstimatorConfig:
     # scenario (onboard AHRS attitude) flew with 4.2 m median estimation error instead of 0.75 m.
     sigma_acc_ned0_m_s2: float = 0.2
     sigma_acc_ned_rw_m_s2_sqrt_s: float = 0.01
-    gravity_m_s2: float = 9.80665  # added on NED z: a_ned = R f_frd + [0, 0, g]
+    gravity_m_s2: float = STANDARD_GRAVITY_M_S2  # added on NED z: a_ned = R f_frd + [0, 0, g]
 
     # --- measurement model (eq. 14)
     sigma_gnss_horizontal_m: float = 0.08  # paper: nominal GNSS noise std, north and east
@@ -73,7 +75,11 @@ class EstimatorConfig:
     # 60 s of 3 m multipath); at −3 the factor is 18× larger and it recovers in ~10 s (tested).
     # R(β) and σ_b(β) differ by < 5 % between the two floors.
     theta_min: float = -3.0
-    eta: float = 0.15  # paper: learning rate of the damped Newton step (eq. 20)
+    # paper: learning rate of the damped Newton step (eq. 20). Where eta's value comes from, by layer:
+    # this default (the paper's; replay of a foreign log), then a mission's estimator: section (the
+    # packaged cities set 0.5, tuned on default-tuning for the simulated sensors), then a campaign
+    # row's or --set override (``estimator.eta``; the ablation's rows-*.yaml). Later layers win.
+    eta: float = 0.15
     lambda_reg: float = 0.1  # paper: Newton step regulariser λ_reg (eq. 20)
     alpha_fast: float = 0.5  # fast curvature accumulator decay per fix (eq. 18), 0 < α_f ≪ α_s
     alpha_slow: float = 0.95  # slow curvature accumulator decay per fix (eq. 18)
@@ -187,21 +193,4 @@ class EstimatorConfig:
     def r_factor(self, beta: float) -> float:
         """R(β) / R_nom = r_inflation_max ** (1 − β): 1 at full trust, r_inflation_max at none."""
         return float(self.r_inflation_max ** (1.0 - beta))
-
-
-# What the filter is told about the simulated IMU of each sensor scenario (``scenario:`` in the
-# mission, ``--scenario``), under the mission's own ``estimator:`` section (which wins). The paper's
-# IMU is white noise with no bias: a bias state with a real MEMS prior would only add noise there
-# (make demo's median estimation error 0.26 m without it, 0.42 m with the 0.2 m/s² prior; docs/
-# estimator.md), and its 0.08 m/s² per 200 Hz sample with the true attitude is a noise density of
-# 0.0057 m/s²/√Hz (0.006 was the best of the first wave's tuning sweep). The realistic scenarios'
-# MEMS IMU has a bias (the defaults, real-log values, stay) and an onboard AHRS's attitude errors:
-# 0.4 m/s² is what the ablation's tuning sweep chose for both (docs/results/ablation/rows-*.yaml);
-# with the paper's 0.006 a realistic flight's median error was 1.42 m instead of 1.02 m there.
-SCENARIO_IMU_PRIOR: dict[str, dict[str, float]] = {
-    "paper": {"sigma_acc_m_s2": 0.006, "sigma_acc_bias0_m_s2": 0.0, "sigma_acc_bias_rw_m_s2_sqrt_s": 0.0,
-              "sigma_acc_ned0_m_s2": 0.0, "sigma_acc_ned_rw_m_s2_sqrt_s": 0.0},
-    "realistic": {"sigma_acc_m_s2": 0.4},
-    "mismatch": {"sigma_acc_m_s2": 0.4},
-}
 

@@ -52,6 +52,7 @@ import numpy as np  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from companion.domain.geodesy import LocalNedFrame  # noqa: E402
+from companion.domain.physics import STANDARD_GRAVITY_M_S2  # noqa: E402
 from companion.domain.samples import (  # noqa: E402
     AttitudeSample,
     GnssFix,
@@ -61,7 +62,6 @@ from companion.domain.samples import (  # noqa: E402
     TruthState,
 )
 
-STANDARD_GRAVITY_M_S2 = 9.80665
 UINT16_UNKNOWN = 65535
 DEG_E7 = 1e7
 QUAT_NORM_TOLERANCE = 0.05  # |‖q‖ - 1| beyond this is a corrupt attitude, not rounding
@@ -116,7 +116,7 @@ class WireLimits:
     the autopilot or a packer (whose fixed-size integer fields would overflow).
     """
 
-    max_specific_force_m_s2: float = 16.0 * 9.80665  # |f| per axis: 16 g (IMU full scale)
+    max_specific_force_m_s2: float = 16.0 * STANDARD_GRAVITY_M_S2  # |f| per axis: 16 g (IMU full scale)
     max_rate_rad_s: float = 35.0  # |ω| per axis: 2000 °/s gyro full scale
     max_home_distance_m: float = 50_000.0  # positions (local NED, or a fix) this close to home
     max_speed_m_s: float = 200.0  # |v| per axis

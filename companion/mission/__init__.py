@@ -2,7 +2,6 @@
 
 from companion.mission.config import (
     OVERRIDE_SECTIONS,
-    SCENARIOS,
     Bounds,
     Building,
     FlightConfig,
@@ -12,6 +11,7 @@ from companion.mission.config import (
     WorldConfig,
 )
 from companion.mission.loader import BUILTIN_MISSIONS, Mission, build_mission, load_mission, with_scenario
+from companion.mission.scenarios import SCENARIOS
 from companion.mission.schema import ConfigError, build, load_yaml
 from companion.mission.world import World
 

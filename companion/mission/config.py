@@ -164,9 +164,6 @@ OVERRIDE_SECTIONS: tuple[str, ...] = (
     "vehicle", "autopilot", "imu", "gnss", "estimator", "ahrs", "belief_plugins",
 )
 
-# Sensor-realism scenarios (``scenario:`` in the mission, ``--scenario`` on fly/sitl/evaluate); their
-# sensor settings live with the simulator (``simvehicle.scenarios``), which checks it knows each name.
-SCENARIOS: tuple[str, ...] = ("paper", "realistic", "mismatch")
 
 
 @dataclass(frozen=True)

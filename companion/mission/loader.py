@@ -21,16 +21,17 @@ from scipy import ndimage
 from companion.domain.geodesy import LocalNedFrame
 from companion.mission.config import (
     OVERRIDE_SECTIONS,
-    SCENARIOS,
     FlightConfig,
     MissionFile,
     PlannerConfig,
     Profile,
 )
+from companion.mission.scenarios import SCENARIOS, scenario_sections
 from companion.mission.schema import ConfigError, build, load_yaml
 from companion.mission.world import World
 
-BUILTIN_MISSIONS = ("default", "test")
+BUILTIN_MISSIONS = ("default", "test", "default-tuning")  # companion/mission/data/<name>.yaml
+MAX_EXTENDS = 4  # a mission file may extend another (``extends:``) this many levels deep
 
 
 @dataclass(frozen=True)
@@ -45,7 +46,7 @@ class Mission:
     profiles: tuple[Profile, ...]
     sections: dict[str, dict[str, Any]]
     source: str  # file the mission came from, for messages
-    scenario: str = "paper"  # sensor realism (simvehicle.scenarios), one of SCENARIOS
+    scenario: str = "paper"  # sensor realism (companion.mission.scenarios), one of SCENARIOS
 
     @property
     def altitude_m(self) -> float:
@@ -57,17 +58,43 @@ class Mission:
             raise KeyError(f"no override section {name!r} (known: {', '.join(OVERRIDE_SECTIONS)})")
         return dict(self.sections.get(name, {}))
 
+    def settings(self, name: str) -> dict[str, Any]:
+        """The fields in force for section ``name``: the scenario's (``scenarios.SCENARIO_SECTIONS``),
+        overridden by the mission's own section. What the simulator and the filter are built from."""
+        return {**scenario_sections(self.scenario).get(name, {}), **self.section(name)}
+
 
 def load_mission(which: str | Path, scenario: str | None = None) -> Mission:
-    """Load ``"default"``, ``"test"`` (the packaged cities) or a YAML file path; ``scenario``
-    (``--scenario``) replaces the file's ``scenario:``."""
+    """Load a packaged mission (``BUILTIN_MISSIONS``: ``"default"``, ``"test"``, ``"default-tuning"``)
+    or a YAML file path; ``scenario`` (``--scenario``) replaces the file's ``scenario:``.
+
+    A file may start from another with ``extends: NAME|PATH`` (a packaged name, or a path relative
+    to the file): its top-level keys replace the base's (``default-tuning`` is the default city
+    with other profiles)."""
+    data, source = _mission_data(which, ())
+    mission = build_mission(data, source)
+    return mission if scenario is None else with_scenario(mission, scenario)
+
+
+def _mission_data(which: str | Path, seen: tuple[str, ...]) -> tuple[dict[str, Any], str]:
+    """The file's mapping with its ``extends:`` chain resolved, and its name for messages."""
     if str(which) in BUILTIN_MISSIONS:
         ref = resources.files("companion.mission") / "data" / f"{which}.yaml"
         with resources.as_file(ref) as path:
-            mission = build_mission(load_yaml(path), path.name)
+            data, source = load_yaml(path), path.name
     else:
-        mission = build_mission(load_yaml(which), str(which))
-    return mission if scenario is None else with_scenario(mission, scenario)
+        data, source = load_yaml(which), str(which)
+    base = data.pop("extends", None)
+    if base is None:
+        return data, source
+    if not isinstance(base, str) or not base:
+        raise ConfigError(f"{source}: extends: expected a packaged mission name or a file path")
+    where = base if base in BUILTIN_MISSIONS else str((Path(str(which)).parent / base).resolve())
+    here = str(which) if str(which) in BUILTIN_MISSIONS else str(Path(which).resolve())
+    if where in (*seen, here) or len(seen) >= MAX_EXTENDS:
+        raise ConfigError(f"{source}: extends: {base!r} makes a chain deeper than {MAX_EXTENDS} or a cycle")
+    base_data, _ = _mission_data(where, (*seen, here))
+    return {**base_data, **data}, source
 
 
 def with_scenario(mission: Mission, scenario: str) -> Mission:

@@ -39,7 +39,12 @@ from companion.mavlink.lockstep import marker_time_us, step_response
 from companion.mavlink.udp_link import UdpLink
 from companion.mission import Mission
 from companion.runtime import count_handler_error, write_json
-from companion.telemetry.pubsub import DeferredPublisher, EstimatorTelemetry, TelemetryPublisher
+from companion.telemetry.pubsub import (
+    DeferredPublisher,
+    EstimatorRates,
+    EstimatorTelemetry,
+    TelemetryPublisher,
+)
 
 IGNORED_TYPES = frozenset({"HEARTBEAT", "SIM_STATE", "SYSTEM_TIME", "TIMESYNC"})
 MAX_LATENCY_SAMPLES = 200_000
@@ -48,10 +53,12 @@ MAX_LATENCY_SAMPLES = 200_000
 
 @dataclass(frozen=True, slots=True)
 class OutputRates:
-    odometry_period_us: int = 20_000  # ODOMETRY, 50 Hz
-    belief_period_us: int = 50_000  # NAMED_VALUE_FLOAT GNSS_BETA / GNSS_NIS, 20 Hz
-    status_period_us: int = 200_000  # ESTIMATOR_STATUS, 5 Hz
-    bias_period_us: int = 200_000  # DEBUG_VECT GNSS_BIAS (estimated bias, for the vehicle's record), 5 Hz
+    """MAVLink output periods: those of the estimator's Zenoh topics (``EstimatorRates``, written once)."""
+
+    odometry_period_us: int = EstimatorRates.estimate_period_us  # ODOMETRY, 50 Hz
+    belief_period_us: int = EstimatorRates.belief_period_us  # NAMED_VALUE_FLOAT GNSS_BETA / GNSS_NIS, 20 Hz
+    status_period_us: int = EstimatorRates.health_period_us  # ESTIMATOR_STATUS, 5 Hz
+    bias_period_us: int = EstimatorRates.health_period_us  # DEBUG_VECT GNSS_BIAS (vehicle's record), 5 Hz
     heartbeat_period_s: float = 1.0  # HEARTBEAT, wall clock
 
 

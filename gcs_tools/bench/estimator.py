@@ -31,6 +31,7 @@ import numpy as np
 import pymap3d
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.physics import STANDARD_GRAVITY_M_S2
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, Sample
 from companion.estimator import Navigator
 from companion.estimator.methods import DEFAULT_METHOD
@@ -68,7 +69,7 @@ def flight(duration_s: float, latency: float | None, seed: int = SEED) -> list[S
     p = np.vstack([np.zeros(3), np.cumsum(v[:-1] * dt, axis=0)]) + [0.0, 0.0, -30.0]
     yaw = 0.5 * t
     q = np.stack([np.cos(yaw / 2), np.zeros(n), np.zeros(n), np.sin(yaw / 2)], axis=1)
-    f = a_ned - [0.0, 0.0, 9.80665] + 0.02 * rng.standard_normal((n, 3))
+    f = a_ned - [0.0, 0.0, STANDARD_GRAVITY_M_S2] + 0.02 * rng.standard_normal((n, 3))
     c, s = np.cos(yaw), np.sin(yaw)
     f_frd = np.stack([c * f[:, 0] + s * f[:, 1], -s * f[:, 0] + c * f[:, 1], f[:, 2]], axis=1)
     idx = np.arange(0, n, GNSS_EVERY)

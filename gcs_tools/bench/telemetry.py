@@ -40,10 +40,11 @@ import numpy as np
 
 from companion.domain.samples import AttitudeSample, ImuSample, Setpoint
 from companion.telemetry import codec as zc
-from companion.telemetry.pubsub import TelemetryConfig, TelemetryPublisher
+from companion.telemetry.pubsub import EstimatorRates, TelemetryConfig, TelemetryPublisher
 
 N_SUBSCRIBERS = 10
-RATES_HZ = {"estimate": 50, "belief": 20, "health": 5}  # the estimator node's publishing rates
+RATES_HZ = {topic: 1_000_000 // getattr(EstimatorRates, f"{topic}_period_us")  # the node's publishing rates
+            for topic in ("estimate", "belief", "health")}
 IMU_HZ = 200
 FANOUT_VEHICLE, RTF_VEHICLE = "fanout", "rtf"  # separate keys for the phases
 SETTLE_S = 2.0  # after starting 9 processes at once: their imports and mutual gossip links load the host

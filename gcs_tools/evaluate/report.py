@@ -35,7 +35,7 @@ class TuningSet:
         return same_profiles or bool(set(seeds) & set(self.seeds))
 
 
-TUNING = TuningSet(tuning.TUNING_MISSION, tuple(range(len(tuning.TUNING_PROFILES))), tuning.TUNING_SEEDS)
+TUNING = TuningSet(tuning.TUNING_MISSION, tuning.TUNING_PROFILES, tuning.TUNING_SEEDS)
 
 
 def write(

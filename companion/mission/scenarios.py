@@ -1,7 +1,10 @@
-"""Named sensor-realism scenarios: the sensor settings each one lays under a mission's own sections.
+"""Named sensor-realism scenarios, the ONE table: what each lays under a mission's own sections.
 
 A mission picks one with ``scenario:`` (or ``--scenario`` on fly / sitl / evaluate); a field the
-mission's own ``imu:`` / ``gnss:`` / ``ahrs:`` section sets wins over the scenario's.
+mission's own ``imu:`` / ``gnss:`` / ``ahrs:`` / ``estimator:`` section sets wins over the scenario's
+(``Mission.settings(section)``). Each scenario holds the simulated sensors (read by
+``simvehicle.config``) AND what the filter is told about them (its ``estimator`` section, read by
+``companion.wiring.mission_estimator_config``), so the two cannot drift apart.
 
 - ``paper``: the paper's idealised sensors (white-noise IMU, TRUE attitude sent, the GNSS
   degradation of eq. 22-27, which is exactly the Gauss-Markov bias the filter carries). The
@@ -25,9 +28,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from companion.mission import SCENARIOS, ConfigError
+from companion.domain.physics import STANDARD_GRAVITY_M_S2 as G0_M_S2
+from companion.errors import not_one_of
 
-G0_M_S2 = 9.80665
 _DEG = math.pi / 180.0
 
 ICM_42688_P: dict[str, Any] = {
@@ -49,18 +52,31 @@ UNMODELLED_GNSS: dict[str, Any] = {
     "gamma_canyon_s": 10.0,  # the filter's bias_tau_s is 3 s
 }
 
-_SCENARIOS: dict[str, dict[str, dict[str, Any]]] = {
-    "paper": {},
-    "realistic": {"imu": ICM_42688_P, "ahrs": {"enabled": True}},
-    "mismatch": {"imu": ICM_42688_P, "ahrs": {"enabled": True}, "gnss": UNMODELLED_GNSS},
+# What the filter is told about the simulated IMU of each scenario (under the mission's own
+# ``estimator:`` section, which wins). The paper's IMU is white noise with no bias: a bias state with
+# a real MEMS prior would only add noise there (make demo's median estimation error 0.26 m without
+# it, 0.42 m with the 0.2 m/s² prior; docs/estimator.md), and its 0.08 m/s² per 200 Hz sample with
+# the true attitude is a noise density of 0.0057 m/s²/√Hz (0.006 was the best of the first wave's
+# tuning sweep). The realistic scenarios' MEMS IMU has a bias (the EstimatorConfig defaults, real-log
+# values, stay) and an onboard AHRS's attitude errors: 0.4 m/s² is what the ablation's tuning sweep
+# chose for both (docs/results/ablation/rows-*.yaml).
+PAPER_IMU_PRIOR: dict[str, Any] = {
+    "sigma_acc_m_s2": 0.006, "sigma_acc_bias0_m_s2": 0.0, "sigma_acc_bias_rw_m_s2_sqrt_s": 0.0,
+    "sigma_acc_ned0_m_s2": 0.0, "sigma_acc_ned_rw_m_s2_sqrt_s": 0.0,
 }
-assert tuple(_SCENARIOS) == SCENARIOS, "scenario names: companion.mission.SCENARIOS and this table differ"
+MEMS_IMU_PRIOR: dict[str, Any] = {"sigma_acc_m_s2": 0.4}
+
+SCENARIO_SECTIONS: dict[str, dict[str, dict[str, Any]]] = {
+    "paper": {"estimator": PAPER_IMU_PRIOR},
+    "realistic": {"imu": ICM_42688_P, "ahrs": {"enabled": True}, "estimator": MEMS_IMU_PRIOR},
+    "mismatch": {"imu": ICM_42688_P, "ahrs": {"enabled": True}, "gnss": UNMODELLED_GNSS,
+                 "estimator": MEMS_IMU_PRIOR},
+}
+SCENARIOS: tuple[str, ...] = tuple(SCENARIO_SECTIONS)  # the names (``paper`` is the default)
 
 
 def scenario_sections(name: str) -> dict[str, dict[str, Any]]:
-    """The sensor sections of scenario ``name`` (copies); unknown names are a one-line error."""
-    try:
-        sections = _SCENARIOS[name]
-    except KeyError:
-        raise ConfigError(f"scenario {name!r} is unknown (known: {', '.join(_SCENARIOS)})") from None
-    return {section: dict(fields) for section, fields in sections.items()}
+    """The sections of scenario ``name`` (copies); unknown names are a one-line error."""
+    if name not in SCENARIO_SECTIONS:
+        raise not_one_of("scenario", name, SCENARIOS)
+    return {section: dict(fields) for section, fields in SCENARIO_SECTIONS[name].items()}
