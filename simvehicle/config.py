@@ -2,7 +2,7 @@
 
 Each section is a frozen dataclass built from the mission's override section of the same
 name (``vehicle``, ``autopilot``, ``imu``, ``gnss``) with ``companion.mission.schema.build``.
-Defaults are the paper's values (Section V.A, DESIGN §4) where it gives them; the rest are
+Defaults are the paper's values (Section V.A) where it gives them; the rest are
 our documented choices, marked "(ours)".
 """
 

@@ -1,6 +1,6 @@
 """Per-control-step record of a flight in the vehicle process (truth + what it received).
 
-The series keys are those of ``gcs_tools.fly`` (docs/ARCHITECTURE.md); the launcher turns
+The series keys are those of ``simvehicle.harness.fly`` (docs/ARCHITECTURE.md); the launcher turns
 them into the same summary and figures. The estimated bias arrives at 5 Hz (DEBUG_VECT
 ``GNSS_BIAS``), so ``b_est_ned_m`` holds the latest received (NaN before the first).
 

@@ -15,7 +15,7 @@ import pytest
 from pymavlink import mavutil
 
 from companion.errors import UserError
-from gcs_tools.ardupilot.sitl import resolve_binary
+from simvehicle.harness.ardupilot.sitl import resolve_binary
 
 M = mavutil.mavlink
 COPTER_MODE_GUIDED = 4

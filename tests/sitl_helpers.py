@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from gcs_tools.sitl.launcher import SitlOptions, child_specs, prepare_signing
-from gcs_tools.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports
+from simvehicle.harness.sitl.launcher import SitlOptions, child_specs, prepare_signing
+from simvehicle.harness.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports
 
 
 def require_pieces() -> None:

@@ -10,7 +10,7 @@ from ardupilot_helpers import require_ardupilot
 from pymavlink import mavutil
 
 from companion.errors import UserError
-from gcs_tools.ardupilot.sitl import (
+from simvehicle.harness.ardupilot.sitl import (
     ArduPilotSitl,
     SitlConfig,
     instance_ports,

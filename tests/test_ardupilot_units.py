@@ -9,9 +9,11 @@ import pytest
 
 from companion.mavlink.codec import mavlink, new_link, pack
 from companion.mission import load_mission
-from gcs_tools.ardupilot.analysis import autopilot_track, count_collisions, errors
-from gcs_tools.ardupilot.config import ArduPilotConfig, ardupilot_parameters
-from gcs_tools.ardupilot.driver import (
+from simvehicle.config import GnssConfig
+from simvehicle.gnss import GnssModel
+from simvehicle.harness.ardupilot.analysis import autopilot_track, count_collisions, errors
+from simvehicle.harness.ardupilot.config import ArduPilotConfig, ardupilot_parameters
+from simvehicle.harness.ardupilot.driver import (
     COPTER_MODE_GUIDED,
     MAV_CMD_COMPONENT_ARM_DISARM,
     MAV_CMD_DO_SET_MODE,
@@ -19,11 +21,9 @@ from gcs_tools.ardupilot.driver import (
     DriverInputs,
     FlightDriver,
 )
-from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields
-from gcs_tools.ardupilot.session import Recording
-from gcs_tools.fly.core import planned_route
-from simvehicle.config import GnssConfig
-from simvehicle.gnss import GnssModel
+from simvehicle.harness.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields
+from simvehicle.harness.ardupilot.session import Recording
+from simvehicle.harness.fly import planned_route
 
 
 def _line(t_us: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from ardupilot_helpers import GroundStation, require_ardupilot, run_companion, s
 from pymavlink import mavutil
 
 from companion.autopilot.translate import Translator
-from gcs_tools.ardupilot.sitl import CANBERRA_HOME, ArduPilotSitl, SitlConfig
+from simvehicle.harness.ardupilot.sitl import CANBERRA_HOME, ArduPilotSitl, SitlConfig
 
 M = mavutil.mavlink
 

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-pytest.importorskip("gcs_tools.fly")
+pytest.importorskip("simvehicle.harness.fly")
 
 from gcs_tools.cli import main  # noqa: E402
 from gcs_tools.evaluate import campaign, plots  # noqa: E402

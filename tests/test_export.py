@@ -19,8 +19,8 @@ QUAD106 = Path(__file__).parent / "data" / "quad106.tlog"
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory) -> Path:
     """One in-process flight of the small test mission (its outputs, as `beliefnav fly` writes them)."""
-    from gcs_tools.fly.core import fly
     from gcs_tools.fly.output import write_outputs
+    from simvehicle.harness.fly import fly
 
     mission = load_mission("test")
     out = tmp_path_factory.mktemp("fly")

@@ -9,8 +9,8 @@ import pytest
 from companion.errors import UserError
 from companion.mission import load_mission
 from gcs_tools.cli import main
-from gcs_tools.fly import fly
 from gcs_tools.fly.output import COLUMNS
+from simvehicle.harness.fly import fly
 
 TEST_CITY = load_mission("test")
 
@@ -66,7 +66,7 @@ def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
 
 def test_routes_are_planned_once_per_mission_object_and_profile():
     from companion.planning import plan_route
-    from gcs_tools.fly.core import planned_route
+    from simvehicle.harness.fly import planned_route
 
     a = planned_route(TEST_CITY, 1, 2.0)
     assert planned_route(TEST_CITY, 1, 2.0) is a

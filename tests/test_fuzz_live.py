@@ -56,8 +56,8 @@ LINK_REJECTIONS = ("garbage", "bad_crc", "unknown_message", "bad_signature", "wr
 def test_hostile_frames_at_every_port_are_counted_and_the_signed_flight_still_arrives(tmp_path):
     require_pieces()
     from companion.mavlink.udp_link import read_signing_key
-    from gcs_tools.sitl.launcher import SitlOptions, write_fresh_key
-    from gcs_tools.sitl.supervisor import free_udp_ports
+    from simvehicle.harness.sitl.launcher import SitlOptions, write_fresh_key
+    from simvehicle.harness.sitl.supervisor import free_udp_ports
 
     key_file = tmp_path / "signing.key"
     write_fresh_key(key_file)

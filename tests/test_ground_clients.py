@@ -27,7 +27,7 @@ class Flight:
     """The SITL run, the probes' results and the pymavlink (udpin) client's observations."""
 
     def __init__(self, root: Path) -> None:
-        from gcs_tools.sitl.supervisor import free_udp_ports
+        from simvehicle.harness.sitl.supervisor import free_udp_ports
 
         self.root = root
         *self.ports, self.udpin_port = free_udp_ports(4)

@@ -22,8 +22,8 @@ def test_stats_of_a_known_offset_series():
 
 
 def test_twin_reproduces_the_offsets_of_the_flight(monkeypatch):
-    from gcs_tools.fly import fly
     from simvehicle import SimVehicle
+    from simvehicle.harness.fly import fly
     from simvehicle.nlos import UnmodelledGnss
 
     seen = []

@@ -182,7 +182,7 @@ def test_realistic_flight_sends_an_estimated_attitude_and_mismatch_fixes_step():
 
 
 def test_sitl_passes_the_scenario_to_the_vehicle_process(tmp_path):
-    from gcs_tools.sitl.launcher import SitlOptions, child_specs
+    from simvehicle.harness.sitl.launcher import SitlOptions, child_specs
 
     specs = child_specs(SitlOptions("test", 0, "naive", 0, tmp_path, scenario="mismatch"), (1, 2, 3))
     vehicle = next(s for s in specs if s.name == "vehicle").module_argv

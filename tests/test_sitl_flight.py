@@ -107,7 +107,7 @@ def test_lockstep_is_reproducible_even_when_a_companion_stalls(lockstep_flight, 
     """The same flight again, with the estimator stopped (SIGSTOP) for 1.5 s of wall time mid-flight,
     as a loaded machine may deschedule it: the vehicle waits for it, and every recorded series is
     bit-identical to the undisturbed flight."""
-    from gcs_tools.sitl.launcher import SitlOptions
+    from simvehicle.harness.sitl.launcher import SitlOptions
 
     out = tmp_path / "stalled"
     trio = Trio(out, SitlOptions(MISSION, 0, "second-order", SEED, out))
@@ -132,7 +132,7 @@ def test_lockstep_is_reproducible_even_when_a_companion_stalls(lockstep_flight, 
 
 
 def test_lockstep_sitl_agrees_with_in_process_fly(lockstep_flight):
-    fly_mod = pytest.importorskip("gcs_tools.fly")
+    fly_mod = pytest.importorskip("simvehicle.harness.fly")
     from companion.mission import load_mission
 
     sitl = _summary(lockstep_flight)
@@ -170,8 +170,8 @@ def test_bad_datagrams_and_wrong_key_are_counted_and_rejected(tmp_path):
     from companion.mavlink import codec as codec
     from companion.mavlink.udp_link import read_signing_key
     from companion.mission import load_mission
-    from gcs_tools.sitl.launcher import SitlOptions
-    from gcs_tools.sitl.supervisor import free_udp_ports
+    from simvehicle.harness.sitl.launcher import SitlOptions
+    from simvehicle.harness.sitl.supervisor import free_udp_ports
 
     key_file = tmp_path / "key"
     key_file.write_text("beliefnav-test-key")
@@ -223,7 +223,7 @@ def test_companion_killed_and_restarted_vehicle_holds_and_flight_continues(tmp_p
     Stated bounds: from 2 s after the hold began the true velocity is within 0.3 m/s of minus the
     estimate's velocity error at the loss, and braking from cruise takes less than 8 m."""
     from companion.mavlink.tlog import read_tlog
-    from gcs_tools.sitl.launcher import SitlOptions
+    from simvehicle.harness.sitl.launcher import SitlOptions
 
     out = tmp_path / "run"
     opts = SitlOptions(MISSION, 0, "second-order", 6, out, route_duration_s(MISSION, 0) + 30)
@@ -303,7 +303,7 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
     mavproxy = Path(sys.executable).parent / "mavproxy.py"
     if not mavproxy.exists():
         pytest.skip("MAVProxy not installed (pip install --no-deps mavproxy)")
-    from gcs_tools.sitl.supervisor import free_udp_ports
+    from simvehicle.harness.sitl.supervisor import free_udp_ports
 
     ports = free_udp_ports(3)
     out = tmp_path / "run"

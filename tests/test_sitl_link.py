@@ -170,7 +170,7 @@ def test_signing_key_file(tmp_path):
 def test_fresh_run_key_is_a_passphrase_mavproxy_can_take(tmp_path):
     from MAVProxy.modules.mavproxy_signing import SigningModule
 
-    from gcs_tools.sitl.launcher import write_fresh_key
+    from simvehicle.harness.sitl.launcher import write_fresh_key
 
     keys = []
     for name in ("a.key", "b.key"):

@@ -8,7 +8,7 @@ import subprocess
 import sys
 
 from companion.telemetry.pubsub import TelemetryConfig
-from gcs_tools.sitl.vehicle_id import claim_vehicle_id
+from simvehicle.harness.sitl.vehicle_id import claim_vehicle_id
 
 
 def test_a_held_id_is_not_taken_again_and_is_free_once_released():

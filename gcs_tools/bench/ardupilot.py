@@ -18,14 +18,14 @@ from pathlib import Path
 from typing import Any
 
 from companion.estimator.methods import DEFAULT_METHOD
-from gcs_tools.ardupilot.config import ArduPilotConfig
+from simvehicle.harness.ardupilot.config import ArduPilotConfig
 
 MISSION, PROFILE, SEED = "test", 2, 0
 
 
 def measure(args: argparse.Namespace) -> dict[str, Any]:
-    from gcs_tools.ardupilot.flight import ArduPilotFlightOptions, fly_ardupilot
     from gcs_tools.evaluate.ardupilot import evaluate
+    from simvehicle.harness.backend import FlightRequest, backend
 
     quick = bool(getattr(args, "quick", False))
     cfg = ArduPilotConfig()
@@ -33,8 +33,8 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="beliefnav-bench-ardupilot-") as tmp:
         load0 = os.getloadavg()[0]
         cpu0 = time.process_time()
-        r = fly_ardupilot(ArduPilotFlightOptions(MISSION, PROFILE, DEFAULT_METHOD, SEED, Path(tmp) / "one",
-                                                 config=cfg))
+        r = backend("ardupilot", config=cfg).fly(FlightRequest(MISSION, PROFILE, DEFAULT_METHOD, SEED,
+                                                               Path(tmp) / "one"))
         ap = r.summary["ardupilot"]
         out.update({
             "outcome": ap["ended_by"], "sim_s": ap["sim_s"], "wall_s": ap["wall_s"],

@@ -16,7 +16,7 @@ the estimator is timed. Figures:
 * ``replay_realtime_factor`` and its break-down: ``gcs_tools.bench.replay`` on quad106;
 * ``memory_rss_mb_by_sim_min``: resident memory of this process while one Navigator flies a
   one-hour stream (built beforehand, so growth between the marks is the estimator's own), and
-  ``memory_growth_mb_10_to_60_min`` (DESIGN §6: flat over a one-hour flight). Not with --quick.
+  ``memory_growth_mb_10_to_60_min`` (flat over a one-hour flight). Not with --quick.
 """
 
 from __future__ import annotations

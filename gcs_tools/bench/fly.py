@@ -29,8 +29,8 @@ from companion.domain.samples import NavEstimate
 from companion.estimator.methods import DEFAULT_METHOD
 from companion.mission import load_mission
 from companion.planning import plan_route
-from gcs_tools.fly import fly
 from simvehicle import SimVehicle
+from simvehicle.harness.backend import FlightRequest, backend
 
 MISSION, PROFILE, METHOD, SEED = "default", 0, DEFAULT_METHOD, 0
 
@@ -50,7 +50,7 @@ def vehicle_only_s(mission: Any, sim_s: float) -> tuple[float, float]:
 
 _MEMORY_CHILD = """
 import json, resource, sys
-from gcs_tools.fly.core import FlyConfig, fly
+from simvehicle.harness.fly import FlyConfig, fly
 duration_s = float(sys.argv[1])
 res = fly("{mission}", {profile}, "{method}", {seed}, max_duration_s=duration_s,
           config=FlyConfig(goal_radius_m=-1.0, timeout_margin_s=duration_s))
@@ -78,7 +78,8 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     plan_route(mission, PROFILE, t_start_s=2.0)
     plan_s, plan_cpu_s = time.perf_counter() - t0, time.process_time() - cpu0
     cpu0 = time.process_time()
-    res = fly(mission, PROFILE, METHOD, SEED, max_duration_s=30.0 if quick else None)
+    res = backend("inprocess").fly(FlightRequest(mission, PROFILE, METHOD, SEED,
+                                                 max_duration_s=30.0 if quick else None))
     fly_cpu_s = time.process_time() - cpu0 - plan_cpu_s  # fly() plans the route again
     s = res.summary
     vehicle_s, vehicle_cpu_s = vehicle_only_s(mission, s["duration_s"])

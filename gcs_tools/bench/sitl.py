@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.estimator.methods import DEFAULT_METHOD
-from gcs_tools.sitl.launcher import SitlOptions, launch
+from simvehicle.harness.sitl.launcher import SitlOptions, launch
 
 MISSION, PROFILE, METHOD, SEED = "default", 0, DEFAULT_METHOD, 0
 

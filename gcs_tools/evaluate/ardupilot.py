@@ -41,10 +41,10 @@ from typing import Any
 import numpy as np
 
 from companion.estimator.methods import DEFAULT_METHOD
-from gcs_tools.ardupilot.analysis import AUTOPILOT_ROW, LIVE_ROW
-from gcs_tools.ardupilot.config import ArduPilotConfig
 from gcs_tools.evaluate import stats
 from gcs_tools.jsonvalues import plain_json
+from simvehicle.harness.ardupilot.analysis import AUTOPILOT_ROW, LIVE_ROW
+from simvehicle.harness.ardupilot.config import ArduPilotConfig
 
 BOOTSTRAP_SEED = 20240917
 CLOSED_LOOP_METHOD = DEFAULT_METHOD
@@ -96,17 +96,16 @@ class ApResult:
 
 def run_job(job: ApJob) -> ApResult:
     from companion.errors import UserError
-    from gcs_tools.ardupilot.flight import HORIZONTAL_ERROR_PREFIX, ArduPilotFlightOptions, fly_ardupilot
     from gcs_tools.fly.output import write_outputs
+    from simvehicle.harness.ardupilot.flight import HORIZONTAL_ERROR_PREFIX
+    from simvehicle.harness.backend import FlightRequest, backend
 
     if _interrupted:
         return ApResult(job, {}, np.zeros(0), False, 0, "interrupted", 0.0, 0.0, "interrupted")
     cfg = replace(job.config, gnss_velocity=job.loop != "none-posonly")
-    opts = ArduPilotFlightOptions(mission=job.mission, profile=job.profile, method=CLOSED_LOOP_METHOD,
-                                  seed=job.seed, out_dir=job.out_dir, config=cfg, methods=job.methods,
-                                  feed=job.feed)
+    vehicle = backend("ardupilot", config=cfg, methods=job.methods, feed=job.feed)
     try:
-        r = fly_ardupilot(opts)
+        r = vehicle.fly(FlightRequest(job.mission, job.profile, CLOSED_LOOP_METHOD, job.seed, job.out_dir))
     except UserError as exc:
         return ApResult(job, {}, np.zeros(0), False, 0, "error", 0.0, 0.0, str(exc))
     s, series = r.summary, r.series

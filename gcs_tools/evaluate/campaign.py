@@ -1,7 +1,7 @@
 """The campaign grid (mission profiles × methods × seeds) on a process pool or a Dask cluster.
 
-Each job flies one in-process flight (``gcs_tools.fly.fly``) and returns a compact
-``JobResult``: the flight summary, belief metrics computed at full rate, the 20 Hz error
+Each job flies one in-process flight (``backend("inprocess")``: ``simvehicle.harness.fly``) and
+returns a compact ``JobResult``: the flight summary, belief metrics computed at full rate, the 20 Hz error
 samples (float32) and 5 Hz belief and trajectory series for the figures — never the full
 arrays. Every job is a pure function of its ``Job`` (the seed drives all randomness), so the
 local pool and a Dask cluster give identical results for the same grid, returned in grid
@@ -158,11 +158,12 @@ def compact(job: Job, summary: dict[str, Any], series: dict[str, np.ndarray]) ->
 
 def run_job(job: Job) -> JobResult:
     """Fly one job in this process (the default job function, importable by pool workers)."""
-    from gcs_tools.fly import fly
+    from simvehicle.harness.backend import FlightRequest, backend
 
     cpu0 = time.process_time()
     m = mission(job.mission, job.overrides, job.scenario)
-    res = fly(m, job.profile_index, job.method, job.seed, max_duration_s=job.max_duration_s)
+    res = backend("inprocess").fly(FlightRequest(m, job.profile_index, job.method, job.seed,
+                                                 max_duration_s=job.max_duration_s))
     out = compact(job, res.summary, res.series)
     out.flight["cpu_s"] = time.process_time() - cpu0
     return out

@@ -153,8 +153,8 @@ def run(args: argparse.Namespace) -> int:
 
 def run_ardupilot(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
-    from gcs_tools.ardupilot.config import ArduPilotConfig
     from gcs_tools.evaluate import ardupilot
+    from simvehicle.harness.ardupilot.config import ArduPilotConfig
 
     if args.set or args.scheduler or args.readme or args.rows is not None \
             or args.max_duration_s is not None:

@@ -62,8 +62,8 @@ def _correlation_time(x: np.ndarray, dt_s: float) -> float:
 def probe(profiles: Sequence[int], seeds: Sequence[int],
           mission: str = tuning.TUNING_MISSION) -> list[dict[str, Any]]:
     """Fly each (profile, seed) and return its ``nlos_stats`` (with ``profile`` and ``seed``)."""
-    from gcs_tools.fly import fly
     from simvehicle import SimVehicle
+    from simvehicle.harness.fly import fly
 
     m = campaign.mission(mission, (("estimator.beta_fixed", 0.5),), "mismatch")
     out = []

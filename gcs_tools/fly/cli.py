@@ -27,10 +27,10 @@ def run(args: argparse.Namespace) -> int:
 
     from companion.mission import with_scenario
     from gcs_tools import choices
-    from gcs_tools.fly.core import fly
     from gcs_tools.fly.output import write_outputs
     from gcs_tools.outdir import ensure_out_dir
     from gcs_tools.summaries import print_summary
+    from simvehicle.harness.fly import fly
 
     mission = choices.mission(args.mission)  # every option checked before anything is written
     if args.scenario is not None:

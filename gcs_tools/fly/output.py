@@ -10,8 +10,8 @@ import numpy as np
 
 from companion.errors import UserError
 from gcs_tools.figures import belief_figure, map_figure
-from gcs_tools.fly.core import FlightResult
 from gcs_tools.jsonvalues import plain_json
+from simvehicle.harness.backend import FlightResult
 
 # CSV column groups: series key -> column names
 COLUMNS = {

@@ -140,7 +140,7 @@ def _interp(t_s: np.ndarray, t_src_s: np.ndarray, values: np.ndarray) -> np.ndar
 
 
 def series(rec: Recording, vehicle: str) -> dict[str, np.ndarray]:
-    """Flight series at the estimate's timestamps, with the keys of ``gcs_tools.fly`` results.
+    """Flight series at the estimate's timestamps, with the keys of ``simvehicle.harness.fly`` results.
 
     Truth and setpoint are interpolated onto estimate times; ``latency_s`` is the latency of the
     most recent GNSS fix released at or before each time.

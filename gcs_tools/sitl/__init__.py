@@ -1,1 +1,2 @@
-"""SITL: three processes over MAVLink/UDP, supervised (``beliefnav sitl``)."""
+"""``beliefnav sitl``: the command (``cli``) and the ArduPilot vehicle's options (``ardupilot_cli``);
+the processes themselves are flown by ``simvehicle.harness`` (``backend("sim" | "ardupilot")``)."""

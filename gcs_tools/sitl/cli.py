@@ -11,18 +11,20 @@ from typing import TYPE_CHECKING, Any
 from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
 from gcs_tools import choices
-from gcs_tools.sitl.outcome import check_run_arguments, failure_reason
+from simvehicle.harness.sitl.outcome import check_run_arguments
 
 if TYPE_CHECKING:
     from companion.mission import Mission
-    from gcs_tools.sitl.launcher import Progress
+    from simvehicle.harness.sitl.launcher import Progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gcs_tools.ardupilot import cli as ardupilot_cli
+    from gcs_tools.sitl import ardupilot_cli
+    from simvehicle.harness.backend import SITL_VEHICLES
 
-    parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot"),
-                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL flying on our GNSS")
+    parser.add_argument("--vehicle", default="sim", choices=SITL_VEHICLES,
+                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL flying on our GNSS "
+                             "(simvehicle.harness.backend.BACKENDS)")
     ardupilot_cli.add_arguments(parser)
     parser.add_argument("--mission", default="default", help="mission name or YAML path")
     parser.add_argument("--profile", type=int, default=0, help="mission profile index")
@@ -64,14 +66,14 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 
 def run(args: argparse.Namespace) -> int:
     if args.vehicle == "ardupilot":
-        from gcs_tools.ardupilot import cli as ardupilot_cli
+        from gcs_tools.sitl import ardupilot_cli
 
         return ardupilot_cli.run(args)
     from companion.mission import with_scenario
     from gcs_tools import choices
     from gcs_tools.outdir import ensure_out_dir
-    from gcs_tools.sitl.vehicle_id import claim_vehicle_id
     from simvehicle.groundlink import ground_out_targets
+    from simvehicle.harness.sitl.vehicle_id import claim_vehicle_id
 
     mission = choices.mission(args.mission)  # every option checked before any process starts
     if args.scenario is not None:
@@ -98,33 +100,31 @@ def run(args: argparse.Namespace) -> int:
 
 def _fly(args: argparse.Namespace, mission: Mission) -> int:
     from gcs_tools.fly.output import strict_json, write_outputs
-    from gcs_tools.sitl.launcher import SitlOptions, flight_plan, launch
-    from gcs_tools.sitl.report import flight_result
     from gcs_tools.summaries import print_summary
     from simvehicle.groundlink import ground_out_arguments
+    from simvehicle.harness.backend import FlightRequest, backend
+    from simvehicle.harness.sitl.launcher import SitlOptions, flight_plan
 
-    opts = SitlOptions(
-        mission=args.mission, profile=args.profile, method=args.method, seed=args.seed, out_dir=args.out,
-        scenario=args.scenario,
-        max_duration_s=args.max_duration_s, realtime=args.realtime, signing_key_file=args.signing_key_file,
-        signing=not args.no_signing,
-        ports=_ports(args.ports), wall_timeout_s=args.wall_timeout_s, drop_probability=args.drop_probability,
-        telemetry_args=tuple(telemetry.forward_arguments(args)),
-        ground_args=tuple(ground_out_arguments(args)),
-    )
-    route, max_duration_s = flight_plan(opts)
+    request = FlightRequest(args.mission, args.profile, args.method, args.seed, args.out, args.max_duration_s,
+                            args.scenario)
+    options: dict[str, Any] = {
+        "realtime": args.realtime, "signing_key_file": args.signing_key_file, "signing": not args.no_signing,
+        "ports": _ports(args.ports), "wall_timeout_s": args.wall_timeout_s,
+        "drop_probability": args.drop_probability, "telemetry_args": tuple(telemetry.forward_arguments(args)),
+        "ground_args": tuple(ground_out_arguments(args)),
+    }
+    _, max_duration_s = flight_plan(SitlOptions(args.mission, args.profile, args.method, args.seed, args.out,
+                                                args.max_duration_s))
     bar = None
     if not args.no_progress and sys.stderr.isatty():
         from tqdm import tqdm
 
         bar = tqdm(total=round(max_duration_s, 1), unit="s sim", desc=f"sitl {args.method}", leave=False)
-    progress = None if bar is None else _progress_to(bar)
     try:
-        run_ = launch(opts, progress)
+        result = backend("sim", progress=None if bar is None else _progress_to(bar), **options).fly(request)
     finally:
         if bar is not None:
             bar.close()
-    result = flight_result(opts, run_, route, mission.name)
     result.summary["sitl"]["vehicle_id"] = None if args.no_telemetry else args.vehicle_id
     if result.series:
         write_outputs(result, mission.world, args.out)
@@ -132,9 +132,8 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
     files = sorted(p.name for p in args.out.iterdir() if p.is_file() and p.suffix != ".key")
     print_summary("sitl", result.summary, args.out, files, args.json)
-    reason = failure_reason(run_, result.summary)
-    if reason:
-        print(f"beliefnav: error: {reason}", file=sys.stderr)
+    if result.failure:
+        print(f"beliefnav: error: {result.failure}", file=sys.stderr)
         return 1
     return 0
 

@@ -8,7 +8,8 @@ exact to ~1 µm, is skipped; SITL flies it), each with the accuracy the receiver
 per-fix R the SITL companion gets; ``est = nav.estimate()``;
 ``sp = route.setpoint(t)``. The flight ends once the reference has arrived and the vehicle is
 within ``goal_radius_m`` of the goal and slower than ``goal_speed_m_s``, or at the timeout.
-No files here: see ``output``.
+No files here: ``gcs_tools.fly.output`` writes them. ``InProcessBackend`` is this loop as a
+``VehicleBackend`` (``backend("inprocess")``).
 """
 
 from __future__ import annotations
@@ -22,10 +23,11 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
-from companion.mission import Mission, load_mission
+from companion.mission import Mission, load_mission, with_scenario
 from companion.planning import Route, plan_route
 from companion.wiring import navigator_for
 from simvehicle import SimVehicle
+from simvehicle.harness.backend import FlightRequest, FlightResult
 
 
 @dataclass(frozen=True)
@@ -41,12 +43,6 @@ class FlyConfig:
     goal_speed_m_s: float = 1.0
     timeout_margin_s: float = 30.0  # timeout = start delay + route duration + max(margin, 50 % of duration)
 
-
-@dataclass(frozen=True)
-class FlightResult:
-    summary: dict[str, Any]
-    series: dict[str, np.ndarray]  # 20 Hz, see docs/ARCHITECTURE.md
-    route: Route
 
 
 def error_stats(err_m: np.ndarray) -> dict[str, float]:
@@ -150,6 +146,24 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         "estimator_counters": counters,
     }
     return FlightResult(summary, series, route)
+
+
+class InProcessBackend:
+    """Our simulator in this process (``fly``); the request's mission may be a loaded ``Mission``
+    (a campaign's, with its overrides)."""
+
+    name = "inprocess"
+
+    def __init__(self, config: FlyConfig | None = None) -> None:
+        self.config = config
+
+    def fly(self, request: FlightRequest) -> FlightResult:
+        m = request.mission
+        if isinstance(m, str):
+            m = load_mission(m)
+        if request.scenario is not None:
+            m = with_scenario(m, request.scenario)
+        return fly(m, request.profile, request.method, request.seed, request.max_duration_s, self.config)
 
 
 _NAN_EST = (math.nan,) * 11  # p_est, b_est, beta, nis, p_var before the first estimate

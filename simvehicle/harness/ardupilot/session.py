@@ -27,9 +27,9 @@ from companion.domain.geodesy import LocalNedFrame  # noqa: E402
 from companion.errors import UserError  # noqa: E402
 from companion.mavlink.codec import CodecError, decode_attitude, decode_imu  # noqa: E402
 from companion.mavlink.tlog import TlogWriter  # noqa: E402
-from gcs_tools.ardupilot.config import GPS1_ID, ArduPilotConfig  # noqa: E402
-from gcs_tools.ardupilot.driver import Command, DriverInputs, FlightDriver  # noqa: E402
-from gcs_tools.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields  # noqa: E402
+from simvehicle.harness.ardupilot.config import GPS1_ID, ArduPilotConfig  # noqa: E402
+from simvehicle.harness.ardupilot.driver import Command, DriverInputs, FlightDriver  # noqa: E402
+from simvehicle.harness.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields  # noqa: E402
 
 SETPOINT_TYPE_MASK = MSG.POSITION_TARGET_TYPEMASK_YAW_IGNORE | MSG.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 255, 190

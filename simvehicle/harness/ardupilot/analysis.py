@@ -17,8 +17,8 @@ import numpy as np
 from companion.estimator import EstimatorConfig
 from companion.mission import Mission
 from companion.wiring import navigator_for
-from gcs_tools.ardupilot.gnss_source import SentFix
-from gcs_tools.ardupilot.session import Recording
+from simvehicle.harness.ardupilot.gnss_source import SentFix
+from simvehicle.harness.ardupilot.session import Recording
 
 AUTOPILOT_ROW = "ardupilot-ekf3"
 LIVE_ROW = "companion-live"  # closed loop: what the companion process sent ArduPilot (its tlog)

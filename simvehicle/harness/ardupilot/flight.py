@@ -21,9 +21,11 @@ import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.errors import UserError
-from companion.estimator import METHODS, EstimatorConfig
+from companion.estimator import METHODS, EstimatorConfig, check_method
 from companion.mission import load_mission
-from gcs_tools.ardupilot.analysis import (
+from simvehicle.config import sim_config_for
+from simvehicle.gnss import NedToGeodetic
+from simvehicle.harness.ardupilot.analysis import (
     AUTOPILOT_ROW,
     LIVE_ROW,
     Track,
@@ -33,20 +35,19 @@ from gcs_tools.ardupilot.analysis import (
     errors,
     interpolated_track,
 )
-from gcs_tools.ardupilot.companion_process import (
+from simvehicle.harness.ardupilot.companion_process import (
     CompanionProcess,
     companion_command,
     read_summary,
     sent_track,
 )
-from gcs_tools.ardupilot.config import FEEDS, GPS1_ID, GPS2_ID, ArduPilotConfig, ardupilot_parameters
-from gcs_tools.ardupilot.driver import FlightDriver
-from gcs_tools.ardupilot.gnss_source import UrbanGnssSource
-from gcs_tools.ardupilot.session import ArduPilotSession, Recording
-from gcs_tools.ardupilot.sitl import ArduPilotSitl, SitlConfig
-from gcs_tools.fly.core import FlightResult, error_stats, planned_route
-from simvehicle.config import sim_config_for
-from simvehicle.gnss import NedToGeodetic
+from simvehicle.harness.ardupilot.config import FEEDS, GPS1_ID, GPS2_ID, ArduPilotConfig, ardupilot_parameters
+from simvehicle.harness.ardupilot.driver import FlightDriver
+from simvehicle.harness.ardupilot.gnss_source import UrbanGnssSource
+from simvehicle.harness.ardupilot.session import ArduPilotSession, Recording
+from simvehicle.harness.ardupilot.sitl import ArduPilotSitl, SitlConfig
+from simvehicle.harness.backend import FlightResult
+from simvehicle.harness.fly import error_stats, planned_route
 
 VELOCITY_SEED_STREAM = 1  # velocity noise: default_rng([seed, this]); positions: default_rng(seed)
 HORIZONTAL_ERROR_PREFIX = "est_error_h_m:"  # series keys of every row's horizontal error (not in the CSV)
@@ -78,8 +79,7 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
         raise UserError(f"ardupilot: {exc}") from None
     if opts.feed not in FEEDS:
         raise UserError(f"--feed {opts.feed}: with --vehicle ardupilot, --feed is one of {', '.join(FEEDS)}")
-    if opts.method not in METHODS:
-        raise UserError(f"--method {opts.method}: expected one of {', '.join(METHODS)}")
+    check_method(opts.method)
     m = load_mission(opts.mission)
     if not 0 <= opts.profile < len(m.profiles):
         raise UserError(f"--profile {opts.profile}: mission {m.name!r} has profiles 0..{len(m.profiles) - 1}")

@@ -29,8 +29,8 @@ from typing import Any
 from companion.errors import UserError
 from companion.mission import load_mission
 from companion.planning import Route, plan_route
-from gcs_tools.fly.core import FlyConfig
-from gcs_tools.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports, read_tail
+from simvehicle.harness.fly import FlyConfig
+from simvehicle.harness.sitl.supervisor import ChildSpec, Supervisor, free_udp_ports, read_tail
 
 PORT_NAMES = ("estimator", "bridge", "ground")
 POLL_S = 0.05

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from companion.planning import Route
-from gcs_tools.ardupilot.config import ArduPilotConfig
+from simvehicle.harness.ardupilot.config import ArduPilotConfig
 
 COPTER_MODE_GUIDED = 4
 MAV_CMD_NAV_TAKEOFF = 22

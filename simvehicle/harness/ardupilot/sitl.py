@@ -1,7 +1,7 @@
 """Start ArduCopter SITL (the real autopilot firmware built for Linux) as a context manager.
 
 ```python
-from gcs_tools.ardupilot.sitl import ArduPilotSitl, SitlConfig
+from simvehicle.harness.ardupilot.sitl import ArduPilotSitl, SitlConfig
 with ArduPilotSitl(SitlConfig(work_dir=run_dir / "ardupilot", speedup=10,
                               params={"GPS1_TYPE": 14})) as sitl:
     sitl.url           # "tcp:127.0.0.1:5760+10*I" = SERIAL0 (the simulation waits for a client here)

@@ -9,8 +9,9 @@ from typing import Any
 import numpy as np
 
 from companion.planning import Route
-from gcs_tools.fly.core import FlightResult, error_stats
-from gcs_tools.sitl.launcher import SitlOptions, SitlRun
+from simvehicle.harness.backend import FlightResult
+from simvehicle.harness.fly import error_stats
+from simvehicle.harness.sitl.launcher import SitlOptions, SitlRun
 from simvehicle.recording import SPOOL_NAME, series_from_spool
 
 

@@ -31,9 +31,9 @@ import numpy as np
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix
 from companion.mission.world import World
-from gcs_tools.ardupilot.config import GPS1_ID, GPS_INPUT_IGNORE_VELOCITY, GPS_WEEK
 from simvehicle.config import GnssConfig
 from simvehicle.gnss import GnssModel, NedFix
+from simvehicle.harness.ardupilot.config import GPS1_ID, GPS_INPUT_IGNORE_VELOCITY, GPS_WEEK
 
 
 @dataclass(frozen=True, slots=True)

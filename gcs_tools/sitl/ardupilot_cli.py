@@ -25,9 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gcs_tools.ardupilot.config import ArduPilotConfig
-    from gcs_tools.ardupilot.flight import ArduPilotFlightOptions, fly_ardupilot
     from gcs_tools.fly.output import strict_json, write_outputs
+    from simvehicle.harness.ardupilot.config import ArduPilotConfig
+    from simvehicle.harness.backend import FlightRequest, backend
 
     if args.realtime or args.signing_key_file is not None or args.ports is not None or args.max_duration_s:
         raise UserError("--realtime, --signing-key-file, --ports and --max-duration-s "
@@ -35,9 +35,9 @@ def run(args: argparse.Namespace) -> int:
     changes = {k: v for k, v in (("speedup", args.speedup), ("gnss_rate_hz", args.gnss_rate_hz),
                                   ("wall_timeout_s", args.wall_timeout_s)) if v is not None}
     cfg = dataclasses.replace(ArduPilotConfig(), gnss_velocity=not args.no_gnss_velocity, **changes)
-    opts = ArduPilotFlightOptions(mission=args.mission, profile=args.profile, method=args.method,
-                                  seed=args.seed, out_dir=Path(args.out), feed=args.feed, config=cfg)
-    result = fly_ardupilot(opts)
+    request = FlightRequest(args.mission, args.profile, args.method, args.seed, Path(args.out),
+                            scenario=args.scenario)
+    result = backend("ardupilot", feed=args.feed, config=cfg).fly(request)
     if result.series:
         write_outputs(result, _world(args.mission), args.out)
     else:
