@@ -1,0 +1,175 @@
+"""The single-point baseline against truth: per-epoch solutions, errors in a local NED frame and
+the statistics that characterise real urban GNSS (distribution, steps, correlation time, residuals
+at the true position by elevation and system, reported vs actual accuracy). Pure numpy on arrays;
+the CSV writer is the only I/O."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from companion.gnss.constants import C_M_S
+from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.spp import SppConfig, SppSolution, sigma_model_m, solve_position
+from companion.gnss.systems import SHORT_NAME, System
+
+ERROR_CSV_HEADER = "t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m"
+ELEVATION_BINS_DEG = (0.0, 15.0, 30.0, 50.0, 90.01)
+THRESHOLD_M = 5.0
+ACF_GRID_S = 0.1
+
+
+@dataclass
+class SppSeries:
+    """Solutions of a sequence of epochs (all epochs; ``ok`` marks those with a solution)."""
+
+    t_s: np.ndarray  # (n,) epoch times (the epochs' own time base)
+    p_ecef_m: np.ndarray  # (n, 3) NaN without a solution
+    h_acc_m: np.ndarray  # (n,)
+    v_acc_m: np.ndarray
+    ok: np.ndarray  # (n,) bool
+    n_used: np.ndarray  # (n,) int
+    n_excluded: np.ndarray  # (n,) RAIM exclusions
+    hdop: np.ndarray
+    solutions: list[SppSolution]
+
+
+def solve_series(epochs: Sequence[GnssEpoch], config: SppConfig,
+                 klobuchar: tuple[np.ndarray, np.ndarray] | None = None) -> SppSeries:
+    """Solve every epoch, each starting from the previous solution (the Earth's centre at first)."""
+    sols: list[SppSolution] = []
+    prev: np.ndarray | None = None
+    for e in epochs:
+        s = solve_position(e, config, p0_ecef_m=prev, klobuchar=klobuchar)
+        if s.ok:
+            prev = s.p_ecef_m
+        sols.append(s)
+    return SppSeries(
+        np.array([s.t_gps_s for s in sols]), np.array([s.p_ecef_m for s in sols]).reshape(-1, 3),
+        np.array([s.h_acc_m for s in sols]), np.array([s.v_acc_m for s in sols]),
+        np.array([s.ok for s in sols], dtype=bool), np.array([s.n_used for s in sols]),
+        np.array([int(s.excluded.sum()) for s in sols]), np.array([s.dops.hdop for s in sols]), sols)
+
+
+def ned_errors(p_ecef_m: np.ndarray, truth_ecef_m: np.ndarray, origin_ecef_m: np.ndarray) -> np.ndarray:
+    """(n, 3) position − truth in the NED frame tangent at ``origin_ecef_m``."""
+    lat, lon, _ = (float(v) for v in ecef_to_geodetic(origin_ecef_m))
+    return (p_ecef_m - truth_ecef_m) @ ecef_to_ned_matrix(lat, lon).T
+
+
+def correlation_time_s(t_s: np.ndarray, x: np.ndarray, max_lag_s: float = 60.0) -> float:
+    """Lag (s) where the autocorrelation of the demeaned series, resampled on a 0.1 s grid, first
+    falls below 1/e (NaN if it never does within ``max_lag_s``)."""
+    ok = np.isfinite(x)
+    t, x = t_s[ok], x[ok]
+    if len(t) < 10:
+        return math.nan
+    grid = np.arange(t[0], t[-1], ACF_GRID_S)
+    y = np.interp(grid, t, x)
+    y = y - y.mean()
+    var = float(np.dot(y, y))
+    if var <= 0:
+        return math.nan
+    n = len(y)
+    f = np.fft.rfft(y, 2 * n)
+    acf = np.fft.irfft(f * np.conj(f))[:n] / var
+    below = np.nonzero(acf[: int(max_lag_s / ACF_GRID_S)] < math.exp(-1.0))[0]
+    return float(below[0] * ACF_GRID_S) if len(below) else math.nan
+
+
+def _quantiles(v: np.ndarray) -> dict[str, float]:
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return {"median": math.nan, "p95": math.nan, "mean": math.nan, "n": 0}
+    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "mean": float(v.mean()),
+            "n": int(len(v))}
+
+
+def error_statistics(t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray, v_acc_m: np.ndarray
+                     ) -> dict[str, object]:
+    """Horizontal/vertical error distribution, % above 5 m, epoch-to-epoch steps, correlation
+    times and reported vs actual accuracy (RMS actual / RMS reported; > 1 = optimistic)."""
+    ok = np.isfinite(err_ned_m).all(axis=1)
+    e, t = err_ned_m[ok], t_s[ok]
+    h = np.hypot(e[:, 0], e[:, 1])
+    steps = np.hypot(*np.diff(e[:, :2], axis=0).T) if len(e) > 1 else np.zeros(0)
+    ha, va = h_acc_m[ok], v_acc_m[ok]
+    good = np.isfinite(ha) & (ha > 0)
+    h_ratio = math.sqrt(float(np.mean(h[good] ** 2) / np.mean(2.0 * ha[good] ** 2))) if good.any() else math.nan
+    vgood = np.isfinite(va) & (va > 0)
+    v_ratio = math.sqrt(float(np.mean(e[vgood, 2] ** 2) / np.mean(va[vgood] ** 2))) if vgood.any() else math.nan
+    return {
+        "epochs": int(len(e)),
+        "horizontal_m": _quantiles(h),
+        "vertical_abs_m": _quantiles(np.abs(e[:, 2])),
+        "mean_ned_m": [float(v) for v in e.mean(axis=0)] if len(e) else [math.nan] * 3,
+        "percent_above_5m": float(100.0 * np.mean(h > THRESHOLD_M)) if len(h) else math.nan,
+        "step_horizontal_m": _quantiles(steps),
+        "correlation_time_s": {"north": correlation_time_s(t, e[:, 0]), "east": correlation_time_s(t, e[:, 1]),
+                               "down": correlation_time_s(t, e[:, 2])},
+        "reported_h_acc_m": _quantiles(ha),
+        "accuracy_ratio_horizontal": h_ratio,
+        "accuracy_ratio_vertical": v_ratio,
+    }
+
+
+def residuals_at_truth(epochs: Sequence[GnssEpoch], truth_ecef_m: np.ndarray, config: SppConfig
+                       ) -> dict[str, dict[str, dict[str, float]]]:
+    """Pseudorange residuals at the TRUE position, by system and elevation bin (median, p95, n).
+
+    Per epoch and system the receiver clock is the weighted mean (the SPP's σ model at the true
+    elevations) of ``y − ρ(truth)``; a system with a single satellite that epoch is left out (its
+    residual would be zero by construction). Positive = the signal arrived late (NLOS, multipath)."""
+    res: list[np.ndarray] = []
+    el_all: list[np.ndarray] = []
+    sys_all: list[np.ndarray] = []
+    for e, p in zip(epochs, truth_ecef_m, strict=True):
+        if not np.isfinite(p).all():
+            continue
+        y = e.pseudorange_m if e.corrected else e.pseudorange_m + C_M_S * e.sat_clock_s
+        rho, los = sagnac_range_m(e.sat_pos_ecef_m, p, config.earth_rotation)
+        lat, lon, _ = (float(v) for v in ecef_to_geodetic(p))
+        up = los @ ecef_to_ned_matrix(lat, lon).T
+        el = np.arcsin(np.clip(-up[:, 2], -1.0, 1.0))
+        w = 1.0 / sigma_model_m(e, el, config) ** 2
+        d = y - rho
+        r = np.full(e.n, np.nan)
+        for s in np.unique(e.system):
+            m = (e.system == s) & np.isfinite(d)
+            if m.sum() >= 2:
+                r[m] = d[m] - np.sum(w[m] * d[m]) / np.sum(w[m])
+        res.append(r)
+        el_all.append(np.rad2deg(el))
+        sys_all.append(e.system)
+    if not res:
+        return {}
+    r, el, sy = np.concatenate(res), np.concatenate(el_all), np.concatenate(sys_all)
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for s in np.unique(sy):
+        name = SHORT_NAME[System(int(s))]
+        out[name] = {}
+        for lo, hi in zip(ELEVATION_BINS_DEG[:-1], ELEVATION_BINS_DEG[1:], strict=True):
+            m = (sy == s) & (el >= lo) & (el < hi) & np.isfinite(r)
+            q = _quantiles(r[m])
+            out[name][f"{lo:g}-{min(hi, 90):g}deg"] = {"median": q["median"], "p95": q["p95"], "n": q["n"]}
+    return out
+
+
+def write_error_csv(path: Path, t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray,
+                    v_acc_m: np.ndarray) -> int:
+    """``t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m``; t from the first row; an epoch without a
+    solution is left out; unknown accuracies are empty fields. Returns the number of rows."""
+    ok = np.isfinite(err_ned_m).all(axis=1)
+    t0 = float(t_s[ok][0]) if ok.any() else 0.0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", encoding="ascii") as f:
+        f.write(ERROR_CSV_HEADER + "\n")
+        for t, e, ha, va in zip(t_s[ok], err_ned_m[ok], h_acc_m[ok], v_acc_m[ok], strict=True):
+            acc = ",".join(f"{a:.3f}" if math.isfinite(a) else "" for a in (ha, va))
+            f.write(f"{t - t0:.3f},{e[0]:.3f},{e[1]:.3f},{e[2]:.3f},{acc}\n")
+    return int(ok.sum())

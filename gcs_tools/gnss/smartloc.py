@@ -1,0 +1,152 @@
+"""The smartLoc data set's text format (TU Chemnitz; CC BY-SA 4.0): pseudoranges and truth.
+
+``*_Input.txt`` rows ``pseudorange3 t pr var x y z id system el cn0`` (pseudoranges with satellite
+clock and atmosphere already removed, satellite ECEF positions at transmission) and ``odom3``
+rows (speed, yaw rate); ``*_GT.txt`` rows ``point3 t x y z …`` (truth in ECEF at 5 Hz). Times are
+the data set's own seconds from the drive's start (no GPS time is given), so epochs carry
+``time_base="dataset"``. smartLoc system codes: 1 GPS, 2 SBAS, 4 GLONASS, 8 Galileo, 16 QZSS,
+32 BeiDou; GLONASS ids are 300 + slot.
+
+A row that does not parse, holds NaN/inf or names an unknown system is skipped and counted in
+``rejected`` (by reason); a file with no usable epoch is a ``UserError``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from companion.errors import UserError
+from companion.gnss.observations import GnssEpoch, make_epoch
+from companion.gnss.systems import System
+
+SYSTEMS = {1: System.GPS, 2: System.SBAS, 4: System.GLONASS, 8: System.GALILEO, 16: System.QZSS,
+           32: System.BEIDOU}
+EPOCH_GAP_S = 1e-6  # rows with stamps closer than this belong to one epoch
+
+
+@dataclass
+class SmartLocInput:
+    epochs: list[GnssEpoch]
+    odometry: np.ndarray  # (m, 3): t_s, forward speed m/s, yaw rate rad/s
+    rejected: Counter[str] = field(default_factory=Counter)
+    rows: int = 0
+
+
+@dataclass
+class Truth:
+    t_s: np.ndarray  # (n,)
+    p_ecef_m: np.ndarray  # (n, 3)
+
+    def at(self, t_s: np.ndarray, max_gap_s: float = 0.5) -> np.ndarray:
+        """Truth linearly interpolated at ``t_s`` (k, 3); NaN outside or across a gap > max_gap_s."""
+        t_s = np.asarray(t_s, dtype=float)
+        out = np.column_stack([np.interp(t_s, self.t_s, self.p_ecef_m[:, i]) for i in range(3)])
+        j = np.clip(np.searchsorted(self.t_s, t_s), 1, len(self.t_s) - 1)
+        bad = (t_s < self.t_s[0] - 1e-6) | (t_s > self.t_s[-1] + 1e-6) | \
+            (self.t_s[j] - self.t_s[j - 1] > max_gap_s)
+        out[bad] = np.nan
+        return out
+
+
+def _lines(path: Path) -> list[str]:
+    try:
+        return path.read_text(encoding="ascii", errors="replace").splitlines()
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def read_input(path: str | Path) -> SmartLocInput:
+    path = Path(path)
+    rejected: Counter[str] = Counter()
+    pr_rows: list[list[float]] = []
+    odo: list[list[float]] = []
+    n = 0
+    for line in _lines(path):
+        parts = line.split()
+        if not parts:
+            continue
+        n += 1
+        tag = parts[0]
+        if tag == "pseudorange3":
+            try:
+                vals = [float(v) for v in parts[1:11]]
+            except ValueError:
+                rejected["unparsable"] += 1
+                continue
+            if len(vals) < 10:
+                rejected["short_row"] += 1
+            elif not all(math.isfinite(v) for v in vals):
+                rejected["nonfinite"] += 1
+            elif int(vals[7]) not in SYSTEMS:
+                rejected["unknown_system"] += 1
+            else:
+                pr_rows.append(vals)
+        elif tag == "odom3":
+            try:
+                v = [float(parts[1]), float(parts[2]), float(parts[7])]
+            except (ValueError, IndexError):
+                rejected["unparsable"] += 1
+                continue
+            if all(math.isfinite(x) for x in v):
+                odo.append(v)
+            else:
+                rejected["nonfinite"] += 1
+        else:
+            rejected["unknown_row_type"] += 1
+    if not pr_rows:
+        raise UserError(f"{path}: no usable smartLoc pseudorange3 rows in {n} lines "
+                        f"(rejected: {dict(rejected) or 'none'})")
+    a = np.array(pr_rows)
+    order = np.argsort(a[:, 0], kind="stable")
+    a = a[order]
+    starts = np.r_[0, np.nonzero(np.diff(a[:, 0]) > EPOCH_GAP_S)[0] + 1, len(a)]
+    epochs = []
+    for i0, i1 in zip(starts[:-1], starts[1:], strict=True):
+        r = a[i0:i1]
+        system = np.array([SYSTEMS[int(c)] for c in r[:, 7]], dtype=np.int8)
+        ident = r[:, 6].astype(int)
+        prn = np.where((system == System.GLONASS) & (ident > 300), ident - 300, ident)
+        epochs.append(make_epoch(r[0, 0], system, prn, r[:, 1], pseudorange_var_m2=r[:, 2],
+                                 sat_pos_ecef_m=r[:, 3:6], elevation_deg=r[:, 8], cn0_dbhz=r[:, 9],
+                                 corrected=True, time_base="dataset"))
+    return SmartLocInput(epochs, np.array(odo).reshape(-1, 3), rejected, n)
+
+
+def read_truth(path: str | Path) -> Truth:
+    path = Path(path)
+    rows: list[list[float]] = []
+    for line in _lines(path):
+        parts = line.split()
+        if len(parts) >= 5 and parts[0] == "point3":
+            try:
+                v = [float(x) for x in parts[1:5]]
+            except ValueError:
+                continue
+            if all(math.isfinite(x) for x in v):
+                rows.append(v)
+    if len(rows) < 2:
+        raise UserError(f"{path}: fewer than 2 usable smartLoc point3 (truth) rows")
+    a = np.array(rows)
+    a = a[np.argsort(a[:, 0], kind="stable")]
+    return Truth(a[:, 0], a[:, 1:4])
+
+
+def default_truth_path(input_path: Path) -> Path | None:
+    """``X_Input.txt`` -> ``X_GT.txt`` when that file exists."""
+    name = input_path.name
+    if "_Input" in name:
+        cand = input_path.with_name(name.replace("_Input", "_GT"))
+        if cand.is_file():
+            return cand
+    return None
+
+
+def is_smartloc(path: Path) -> bool:
+    with open(path, "rb") as f:
+        head = f.read(64).lstrip()
+    return head.startswith((b"pseudorange3", b"odom3", b"point3"))
