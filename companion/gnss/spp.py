@@ -343,7 +343,10 @@ def _velocity(epoch: GnssEpoch, x: np.ndarray, geo: _Geometry, used: np.ndarray,
     r = np.zeros(len(los))
     for _ in range(3):
         sagnac = OMEGA_E_RAD_S / C_M_S * (vs[:, 1] * x[0] + rs[:, 1] * v[0] - vs[:, 0] * x[1] - rs[:, 0] * v[1])
-        model = np.einsum("ij,ij->i", vs - v[:3], los) + sagnac + v[3] - clk_drift
+        sat_los = np.einsum("ij,ij->i", vs, los)
+        geo_rate = sat_los - los @ v[:3]
+        # light-time rate: the signal left the satellite at t − ρ/c, so its velocity enters × (1 − ρ̇/c)
+        model = geo_rate - sat_los * geo_rate / C_M_S + sagnac + v[3] - clk_drift
         r = prr - model
         dv, q = _wls(h, r, 1.0 / sigma ** 2)
         v = v + dv
