@@ -61,6 +61,7 @@ class UbxDecoder:
     counters: Counter[str] = field(default_factory=Counter)
     lnav: LnavDecoder = field(default_factory=LnavDecoder)
     week: int | None = None  # from the last RAWX
+    t_gps_s: float | None = None  # the last RAWX's receiver time (resolves LNAV's 10-bit week)
     _sat: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)  # el, az (deg)
 
     @property
@@ -89,6 +90,7 @@ class UbxDecoder:
             return None
         self.week = week
         t = gps_from_week_tow(week, tow)
+        self.t_gps_s = t
         sysv, prnv, pr, var, rate, cn0, el, az = [], [], [], [], [], [], [], []
         for i in range(1, n + 1):
             s = f"_{i:02d}"
@@ -134,7 +136,7 @@ class UbxDecoder:
             self.counters[f"sfrbx_not_decoded_{name}"] += 1
             return None
         words = [int(getattr(m, f"dwrd_{i:02d}")) for i in range(1, int(m.numWords) + 1)]
-        t_ref = gps_from_week_tow(self.week, 0.0) if self.week else None
+        t_ref = self.t_gps_s
         if t_ref is None:
             self.counters["sfrbx_before_week"] += 1  # the 10-bit week needs a full week first
             return None

@@ -410,9 +410,11 @@ def write_nav(path: Path, kepler: Sequence[KeplerEphemeris], glonass: Sequence[G
 
 
 def write_obs(path: Path, epochs: Sequence[GnssEpoch], time_system: str = "GPS",
-              approx_position_ecef_m: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+              approx_position_ecef_m: Sequence[float] = (0.0, 0.0, 0.0),
+              glonass_channels: dict[int, int] | None = None) -> None:
     """A RINEX 3.04 mixed observation file with one code, Doppler and C/N0 per system (the
-    signals :data:`CODE_PREFERENCE` reads first). Epoch times are written in ``time_system``."""
+    signals :data:`CODE_PREFERENCE` reads first). Epoch times are written in ``time_system``;
+    GLONASS Dopplers on each slot's channel frequency (``glonass_channels``: slot -> k, default 0)."""
     signals = {System.GPS: "1C", System.QZSS: "1C", System.GLONASS: "1C", System.GALILEO: "1C",
                System.BEIDOU: "2I"}
     freq = {System.GPS: FREQ_L1_HZ, System.QZSS: FREQ_L1_HZ, System.GLONASS: FREQ_G1_HZ,
@@ -434,7 +436,10 @@ def write_obs(path: Path, epochs: Sequence[GnssEpoch], time_system: str = "GPS",
         out.append(f"> {y_:4d} {mo:02d} {d:02d} {h:02d} {mi:02d}{sec:11.7f}  0{e.n:3d}")
         for i in range(e.n):
             s = System(int(e.system[i]))
-            dop = -e.pseudorange_rate_m_s[i] * freq[s] / C_M_S
+            f = freq[s]
+            if s == System.GLONASS:
+                f += (glonass_channels or {}).get(int(e.prn[i]), 0) * DFREQ_G1_HZ
+            dop = -e.pseudorange_rate_m_s[i] * f / C_M_S
             cells = [e.pseudorange_m[i], dop, e.cn0_dbhz[i]]
             out.append(f"{RINEX_LETTER[s]}{int(e.prn[i]):02d}"
                        + "".join(f"{c:14.3f}  " if math.isfinite(c) else " " * 16 for c in cells).rstrip())
