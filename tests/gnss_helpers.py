@@ -41,20 +41,22 @@ def _kepler(system: System, prn: int, toe_gps: float, toe_sow: float, **over: fl
                            iode=prn, **clk, **p)
 
 
-def constellation() -> tuple[list[KeplerEphemeris], list[GlonassEphemeris]]:
+def constellation(t0: float = T0) -> tuple[list[KeplerEphemeris], list[GlonassEphemeris]]:
+    """The constellation with every toe at GPS time ``t0`` (default: the published example's)."""
+    toe_sow = t0 % 604800.0
     kep = []
     for j in range(6):
         for k in range(4):
-            kep.append(_kepler(System.GPS, 1 + 4 * j + k, T0, TOE_SOW, omega0_rad=BASE["omega0_rad"] + j * math.pi / 3,
+            kep.append(_kepler(System.GPS, 1 + 4 * j + k, t0, toe_sow, omega0_rad=BASE["omega0_rad"] + j * math.pi / 3,
                                m0_rad=BASE["m0_rad"] + k * math.pi / 2 + j * 0.26))
     for k in range(6):
-        kep.append(_kepler(System.GALILEO, 1 + k, T0, TOE_SOW, sqrt_a_m05=5440.6, e=2e-4, i0_rad=math.radians(56),
+        kep.append(_kepler(System.GALILEO, 1 + k, t0, toe_sow, sqrt_a_m05=5440.6, e=2e-4, i0_rad=math.radians(56),
                            omega0_rad=k * 2.1, m0_rad=k * 1.3, delta_n_rad_s=3e-9, omega_dot_rad_s=-5.5e-9))
-    bdt_sow = TOE_SOW - GPS_MINUS_BDT_S  # the same instant as BDT seconds of (BDT) week
+    bdt_sow = toe_sow - GPS_MINUS_BDT_S  # the same instant as BDT seconds of (BDT) week
     for prn, sqa, inc, om0, m0 in ((3, 6493.4, 0.03, 1.0, 2.0), (8, 6493.5, 0.96, 0.5, 1.2),
                                    (20, 5282.6, 0.96, 2.5, 0.4), (23, 5282.6, 0.96, 4.6, 2.2),
                                    (27, 5282.6, 0.96, 0.2, 4.0)):
-        kep.append(_kepler(System.BEIDOU, prn, T0, bdt_sow, sqrt_a_m05=sqa, e=5e-4, i0_rad=inc, omega0_rad=om0,
+        kep.append(_kepler(System.BEIDOU, prn, t0, bdt_sow, sqrt_a_m05=sqa, e=5e-4, i0_rad=inc, omega0_rad=om0,
                            m0_rad=m0, omega_dot_rad_s=-6e-9))
     glo = []
     r = 25_510_000.0
@@ -69,14 +71,14 @@ def constellation() -> tuple[list[KeplerEphemeris], list[GlonassEphemeris]]:
                            -math.sin(node) * math.sin(u) + math.cos(node) * math.cos(u) * math.cos(inc),
                            math.cos(u) * math.sin(inc)])
         v = v - np.cross([0.0, 0.0, 7.292115e-5], p)  # inertial -> rotating (PZ-90) velocity
-        glo.append(GlonassEphemeris(prn=k + 1, channel=k - 3, toe_gps_s=T0, pos_ecef_m=tuple(p),
+        glo.append(GlonassEphemeris(prn=k + 1, channel=k - 3, toe_gps_s=t0, pos_ecef_m=tuple(p),
                                     vel_ecef_m_s=tuple(v), acc_ecef_m_s2=(1e-7, -2e-7, 3e-7),
                                     clock_bias_s=2e-5 * (k - 2), gamma_n=1e-12 * (k - 2)))
     return kep, glo
 
 
-def store() -> EphemerisStore:
-    kep, glo = constellation()
+def store(t0: float = T0) -> EphemerisStore:
+    kep, glo = constellation(t0)
     return EphemerisStore(kep, glo, KLOBUCHAR)
 
 
@@ -90,7 +92,7 @@ def observe(st: EphemerisStore, t_true_s: float, rx_ecef: np.ndarray, v_rx_ecef:
     The receiver clock is ``CLOCKS_M[GPS]`` (its time tag is true time + that / c); other systems add
     their offset. Pseudorange rates by central difference of the generator over ±1 s (the
     receiver moving at ``v_rx_ecef``), with clock drift ``drift_m_s``."""
-    kep, glo = constellation()
+    kep, glo = st.kepler, st.glonass
     sysv = np.array([e.system for e in kep] + [int(System.GLONASS)] * len(glo))
     prn = np.array([e.prn for e in kep] + [g.prn for g in glo])
     v = np.zeros(3) if v_rx_ecef is None else np.asarray(v_rx_ecef, float)

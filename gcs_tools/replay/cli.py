@@ -16,9 +16,9 @@ from gcs_tools.replay import core
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path,
+    parser.add_argument("file", type=Path, nargs="?",
                         help="log to replay: MAVLink tlog, ArduPilot DataFlash .bin or PX4 ULog .ulg "
-                             "(recognised by its first bytes, else by extension)")
+                             "(recognised by its first bytes, else by extension); not with --smartloc")
     choices.add_method_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("runs/replay"),
                         help="output directory for estimates.csv, summary.json (default runs/replay)")
@@ -40,6 +40,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gps-delay-ms", type=float, default=None,
                         help="DataFlash logs: how long before its arrival a fix is valid (default: the log's "
                              "GPS1_DELAY_MS when set, else 120 ms)")
+    g = parser.add_argument_group("raw GNSS (docs/gnss.md)")
+    g.add_argument("--rinex-obs", type=Path, default=None,
+                   help="RINEX 3 observations: their single-point fixes replace the log's (joined to boot time "
+                        "through the log's SYSTEM_TIME / GPS time)")
+    g.add_argument("--rinex-nav", type=Path, action="append", default=[],
+                   help="RINEX 3 navigation file(s) for --rinex-obs (repeatable)")
+    g.add_argument("--smartloc", type=Path, default=None, metavar="INPUT",
+                   help="GNSS-only replay of a smartLoc *_Input.txt (no IMU), scored against its *_GT.txt")
+    g.add_argument("--truth", type=Path, default=None, help="smartLoc truth file (default: beside --smartloc)")
+    g.add_argument("--coupling", default="loose", help="loose: SPP fixes into the estimator (default); "
+                                                       "tight: pseudoranges into the estimator (not available yet)")
     telemetry.add_arguments(parser, publisher=True)
     parser.set_defaults(vehicle_id="replay")
 
@@ -49,6 +60,11 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools.outdir import check_out_dir
 
     choices.method(args.method)
+    gnss_reader, gnss_note = _raw_gnss(args)
+    if args.smartloc is not None:
+        args.file = args.smartloc
+    elif args.file is None:
+        raise UserError("replay needs a log file (or --smartloc INPUT)")
     if not args.file.is_file():
         raise UserError(f"{args.file}: no such file")
     check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
@@ -70,12 +86,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = core.replay(args.file, args.method, home=home, mission=mission, rate_hz=args.rate_hz,
                              progress=progress, on_imu=_on_imu(pub, args.speed), out_dir=args.out,
-                             gps_delay_ms=args.gps_delay_ms)
+                             gps_delay_ms=args.gps_delay_ms, reader=gnss_reader)
     finally:
         if bar is not None:
             bar.close()
         if pub is not None:
             pub.close()
+    if gnss_note:
+        result.summary["raw_gnss"] = gnss_note
     core.write_summary(result, args.out)
     if args.json:
         print((args.out / "summary.json").read_text(encoding="utf-8"), end="")
@@ -86,6 +104,34 @@ def run(args: argparse.Namespace) -> int:
         c = pub.counters()
         print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle_id}/companion/*")
     return 0
+
+
+def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None]:
+    """The reader for --rinex-obs / --smartloc (None: the log's own), and a summary note."""
+    if args.rinex_obs is None and args.smartloc is None:
+        if args.rinex_nav or args.coupling != "loose" or args.truth is not None:
+            raise UserError("--rinex-nav, --coupling and --truth go with --rinex-obs or --smartloc")
+        return None, None
+    from companion.gnss.spp import SppConfig
+    from gcs_tools.gnss import replay as gnss_replay
+
+    gnss_replay.check_coupling(args.coupling)
+    config = SppConfig()
+    if args.smartloc is not None:
+        if args.file is not None or args.rinex_obs is not None:
+            raise UserError("--smartloc replays the smartLoc drive alone: no log file, no --rinex-obs")
+        if not args.smartloc.is_file():
+            raise UserError(f"{args.smartloc}: no such file")
+        src = gnss_replay.smartloc_source(args.smartloc, args.truth, config)
+        return src, {"smartloc": str(args.smartloc), "coupling": args.coupling, "fixes": len(src.fixes),
+                     "imu": "none: zero acceleration and level attitude (a GNSS-only constant-velocity filter)"}
+    if args.file is None or not args.file.is_file():
+        raise UserError(f"--rinex-obs needs the flight log to replay ({args.file}: no such file)")
+    if not args.rinex_nav:
+        raise UserError("--rinex-obs needs --rinex-nav (broadcast ephemerides)")
+    reader, note = gnss_replay.rinex_log_reader(args.file, args.rinex_obs, args.rinex_nav, config, args.gps_delay_ms)
+    note["coupling"] = args.coupling
+    return reader, note
 
 
 def report(s: dict[str, Any], name: str) -> str:

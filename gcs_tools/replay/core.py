@@ -310,6 +310,7 @@ def replay(
     on_imu: ImuHook | None = None,
     out_dir: Path | None = None,
     gps_delay_ms: float | None = None,
+    reader: LogReader | None = None,
 ) -> ReplayResult:
     """Replay ``path`` through a navigator; ``rate_hz`` limits the estimate rows (0: every IMU).
 
@@ -319,13 +320,16 @@ def replay(
     ``out_dir/estimates.csv`` (the result's arrays are then empty); ``write_summary`` writes the
     summary. ``gps_delay_ms`` overrides a DataFlash log's GPS delay.
 
+    ``reader`` replaces the log's own reader (e.g. ``gcs_tools.gnss.replay``: the log with SPP fixes
+    from RINEX, or smartLoc); ``path`` then only names the input in the summary.
+
     ``progress(position_bytes, size_bytes)`` is called now and then; ``on_imu(t_us, navigator)``
     after every IMU sample is pushed (telemetry, pacing; its time is not the estimator's).
     Raises UserError when the log holds nothing usable (no frames, no IMU, no good fix, no estimate).
     """
     path = Path(path)
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    reader = open_log(path, gps_delay_ms)
+    reader = open_log(path, gps_delay_ms) if reader is None else reader
     if home is None:
         fix0 = reader.first_fix()
         if fix0 is None:

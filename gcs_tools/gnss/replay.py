@@ -1,0 +1,188 @@
+"""Raw GNSS into ``beliefnav replay``: single-point fixes in place of the log's own (loose coupling),
+and smartLoc as a GNSS-only replay scored against its truth.
+
+``LogWithFixes(reader, fixes)`` wraps a log reader: the log's GnssFix events are dropped (counted
+as ``stats.rejected['log_fix_replaced']``) and the given fixes are inserted, in validity order, as
+soon as the log's IMU time reaches their validity time. ``SmartLocSource`` is a reader of its own:
+a constant level attitude and a zero-acceleration IMU at 50 Hz (no inertial data: the filter runs
+as a constant-velocity GNSS filter), the SPP fixes, and the smartLoc truth as references.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
+from companion.errors import UserError
+from companion.gnss.constants import C_M_S
+from companion.gnss.fix import to_fix
+from companion.gnss.geometry import ecef_to_geodetic
+from companion.gnss.spp import SppConfig
+from companion.gnss.systems import System
+from companion.gnss.timescale import BootTimeMap
+from gcs_tools.gnss.baseline import SppSeries, solve_series
+from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Reference, ReferenceInfo
+
+COUPLINGS = ("loose", "tight")
+SMARTLOC_IMU_HZ = 50.0
+SMARTLOC_T0_US = 1_000_000  # boot time of the drive's first epoch (IMU starts at 0)
+GRAVITY_M_S2 = 9.80665
+
+
+def check_coupling(coupling: str) -> None:
+    if coupling == "tight":
+        raise UserError("--coupling tight: the tightly coupled estimator is not available yet; use --coupling loose")
+    if coupling not in COUPLINGS:
+        raise UserError(f"--coupling {coupling!r}: choose from {', '.join(COUPLINGS)}")
+
+
+def validity_gps_s(series: SppSeries) -> np.ndarray:
+    """GPS time each solution is valid at: the receiver's time tag minus its (GPS) clock offset."""
+    out = series.t_s.copy()
+    for i, s in enumerate(series.solutions):
+        if s.ok and len(s.clock_bias_m):
+            k = s.clock_systems.index(System.GPS) if System.GPS in s.clock_systems else 0
+            out[i] -= s.clock_bias_m[k] / C_M_S
+    return out
+
+
+def fixes_on_boot_time(series: SppSeries, time_map: BootTimeMap) -> list[GnssFix]:
+    t_valid = validity_gps_s(series)
+    fixes = []
+    for t, s in zip(t_valid, series.solutions, strict=True):
+        f = to_fix(s, time_map.boot_us(float(t)))
+        if f is not None:
+            fixes.append(f)
+    return fixes
+
+
+class LogWithFixes:
+    """A log reader whose GNSS fixes are replaced by ``fixes`` (validity-stamped on boot time)."""
+
+    def __init__(self, inner: LogReader, fixes: Sequence[GnssFix], source: str) -> None:
+        self.inner = inner
+        self.fixes = sorted(fixes, key=lambda f: f.t_validity_us)
+        self.format = inner.format
+        self.stats: ReaderStats = inner.stats
+        self.sources = dict(inner.sources)
+        self.sources["gnss"] = source
+        self._source = source
+
+    @property
+    def references(self) -> dict[str, ReferenceInfo]:  # type: ignore[override]
+        return self.inner.references
+
+    def first_fix(self) -> GnssFix | None:
+        return self.fixes[0] if self.fixes else None
+
+    def describe_empty(self) -> str:
+        return f"no fix from {self._source}"
+
+    def __iter__(self) -> Iterator[Event]:
+        fixes, i, n = self.fixes, 0, len(self.fixes)
+        for ev in self.inner:
+            kind = type(ev)
+            if kind is GnssFix:
+                self.stats.rejected["log_fix_replaced"] += 1
+                continue
+            if kind is ImuSample:
+                while i < n and fixes[i].t_validity_us <= ev.t_us:
+                    self.stats.decoded["gnss_external"] += 1
+                    yield fixes[i]
+                    i += 1
+            yield ev
+        self.stats.rejected["external_fix_after_log"] += n - i
+
+
+@dataclass
+class SmartLocSource:
+    """smartLoc as a replay reader (GNSS only: see the module doc)."""
+
+    fixes: list[GnssFix]
+    truth_t_s: np.ndarray
+    truth_ecef_m: np.ndarray
+    t0_s: float  # the drive's first epoch time (data set seconds) = boot SMARTLOC_T0_US
+
+    format: str = "smartloc"
+
+    def __post_init__(self) -> None:
+        self.stats = ReaderStats()
+        self.sources: dict[str, str | None] = {"imu": "none (zero acceleration, level)", "attitude": "none (level)",
+                                               "gnss": "smartLoc pseudoranges -> SPP"}
+        self.references = {TRUTH: ReferenceInfo("smartLoc point3", "geodetic",
+                                                "estimated position vs the smartLoc truth (ECEF -> geodetic)")}
+
+    def first_fix(self) -> GnssFix | None:
+        return self.fixes[0] if self.fixes else None
+
+    def describe_empty(self) -> str:
+        return "no single-point solution in the smartLoc input"
+
+    def __iter__(self) -> Iterator[Event]:
+        lat, lon, h = ecef_to_geodetic(self.truth_ecef_m)
+        t_ref_us = ((self.truth_t_s - self.t0_s) * 1e6 + SMARTLOC_T0_US).astype(np.int64)
+        ends = [f.t_validity_us for f in self.fixes[-1:]] + [int(t_ref_us[-1])]
+        t_end = max(ends) + 1_000_000
+        step = int(1e6 / SMARTLOC_IMU_HZ)
+        q = np.array([1.0, 0.0, 0.0, 0.0])
+        acc = np.array([0.0, 0.0, -GRAVITY_M_S2])
+        gyro = np.zeros(3)
+        fi = ri = 0
+        nf, nr = len(self.fixes), len(t_ref_us)
+        for t in range(0, t_end, step):
+            while ri < nr and t_ref_us[ri] <= t:
+                yield Reference(TRUTH, int(t_ref_us[ri]), float(np.degrees(lat[ri])), float(np.degrees(lon[ri])),
+                                float(h[ri]), "smartLoc point3")
+                ri += 1
+            while fi < nf and self.fixes[fi].t_validity_us <= t:
+                self.stats.decoded["gnss"] += 1
+                yield self.fixes[fi]
+                fi += 1
+            self.stats.decoded["imu"] += 1
+            self.stats.records += 1
+            yield AttitudeSample(t, q)
+            yield ImuSample(t, acc, gyro)
+
+
+def smartloc_source(input_path: Path, truth_path: Path | None, config: SppConfig) -> SmartLocSource:
+    from gcs_tools.gnss import smartloc
+
+    data = smartloc.read_input(input_path)
+    truth_path = truth_path or smartloc.default_truth_path(input_path)
+    if truth_path is None:
+        raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
+    truth = smartloc.read_truth(truth_path)
+    series = solve_series(data.epochs, config)
+    t0 = float(series.t_s[0])
+    fixes = []
+    for t, s in zip(series.t_s, series.solutions, strict=True):
+        f = to_fix(s, int(round((t - t0) * 1e6)) + SMARTLOC_T0_US)
+        if f is not None:
+            fixes.append(f)
+    return SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0)
+
+
+def rinex_log_reader(log_path: Path, obs: Path, navs: Sequence[Path], config: SppConfig,
+                     gps_delay_ms: float | None = None) -> tuple[LogWithFixes, dict[str, object]]:
+    """The log's reader with its fixes replaced by SPP fixes from RINEX, and a note for the summary."""
+    from gcs_tools.gnss.sources import rinex_input
+    from gcs_tools.gnss.timebase import log_time_map
+    from gcs_tools.replay.logs import open_log
+
+    data = rinex_input(obs, navs)
+    time_map = log_time_map(log_path)
+    series = solve_series(data.epochs, config, data.klobuchar)
+    fixes = fixes_on_boot_time(series, time_map)
+    if not fixes:
+        raise UserError(f"{obs}: no single-point solution ({int(series.ok.sum())} of {len(series.ok)} epochs)")
+    reader = LogWithFixes(open_log(log_path, gps_delay_ms), fixes, f"RINEX {obs.name} -> SPP")
+    note = {"rinex_obs": str(obs), "rinex_nav": [str(p) for p in navs], "epochs": len(data.epochs),
+            "solutions": int(series.ok.sum()), "rejected": dict(data.rejected),
+            "time_join": {"pairs_used": time_map.pairs_used, "pairs_rejected": time_map.rejected,
+                          "residual_rms_us": time_map.residual_rms_us, "drift": time_map.drift},
+            "first_fix_boot_s": fixes[0].t_validity_us / 1e6, "last_fix_boot_s": fixes[-1].t_validity_us / 1e6}
+    return reader, note

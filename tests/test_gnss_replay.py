@@ -1,0 +1,96 @@
+"""``beliefnav replay LOG --rinex-obs OBS --rinex-nav NAV``: SPP fixes from RINEX, joined to the log's
+boot time through SYSTEM_TIME, replace the log's fixes; ``--smartloc`` GNSS-only; ``--coupling``."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.gnss.constants import C_M_S
+from companion.gnss.geometry import geodetic_to_ecef
+from companion.gnss.systems import System
+from companion.gnss.timescale import BootTimeMap, unix_to_gps_s
+from companion.mavlink.tlog import read_tlog
+from gcs_tools.gnss.rinex import write_nav, write_obs
+from gcs_tools.gnss.timebase import log_time_map
+from tests.gnss_helpers import CLOCKS_M, constellation, observe, store
+
+QUAD106 = Path(__file__).parent / "data" / "quad106.tlog"
+UNIX0_S = 1_700_000_000.0  # quad106's SYSTEM_TIME: time_unix_usec = 1.7e15 + time_boot_ms * 1000
+
+
+def test_log_time_map_from_system_time():
+    m = log_time_map(QUAD106)
+    assert m.pairs_used > 600 and m.rejected == 0 and abs(m.drift) < 1e-9
+    t_gps = unix_to_gps_s(UNIX0_S + 100.0)
+    assert m.boot_us(t_gps) == 100_000_000  # Unix 1.7e9 s is 2023-11-14: GPST − UTC = 18 s applied
+
+
+@pytest.fixture(scope="module")
+def rinex_for_quad106(tmp_path_factory):
+    """RINEX files seen from quad106's own GPS_RAW_INT positions once per second (receiver clock 10 µs)."""
+    out = tmp_path_factory.mktemp("rinex")
+    tmap = BootTimeMap.from_system_time(np.array([UNIX0_S * 1e6]), np.array([0.0]))
+    t_mid = tmap.gps_s(300e6)
+    st = store(t_mid)
+    fixes = [(m.time_usec, m.lat * 1e-7, m.lon * 1e-7, m.alt * 1e-3)
+             for _, m in read_tlog(QUAD106, types=("GPS_RAW_INT",)) if m.fix_type >= 3]
+    epochs, truth = [], []
+    last_s = -1
+    for t_us, lat, lon, alt in fixes:
+        if t_us // 1_000_000 == last_s:
+            continue
+        last_s = t_us // 1_000_000
+        p = geodetic_to_ecef(math.radians(lat), math.radians(lon), alt)
+        epochs.append(observe(st, tmap.gps_s(t_us), p, atmosphere=False)[0])
+        truth.append((t_us, p))
+    kep, glo = constellation(t_mid)
+    write_nav(out / "q.nav", kep, glo)
+    write_obs(out / "q.obs", epochs, "GPS", glonass_channels={g.prn: g.channel for g in glo})
+    return out / "q.obs", out / "q.nav", truth
+
+
+def test_rinex_fixes_land_on_the_log_fixes(rinex_for_quad106):
+    from companion.gnss.spp import SppConfig
+    from gcs_tools.gnss.replay import rinex_log_reader
+
+    obs, nav, truth = rinex_for_quad106
+    reader, note = rinex_log_reader(QUAD106, obs, [nav], SppConfig(tropo=False))
+    assert note["solutions"] == note["epochs"] == len(truth)
+    got = {f.t_validity_us: f for f in reader.fixes}
+    for t_us, p in truth[::50]:
+        f = got[t_us]  # validity = the receiver's tag − its clock offset, on boot time, to the µs
+        q = geodetic_to_ecef(math.radians(f.lat_deg), math.radians(f.lon_deg), f.alt_m)
+        assert np.linalg.norm(q - p) < 0.01 and f.fix_type == 3 and f.h_acc_m > 0
+    assert CLOCKS_M[System.GPS] / C_M_S > 5e-6  # (the tag really was offset)
+    events = list(reader)
+    assert reader.stats.rejected["log_fix_replaced"] > 600
+    assert reader.stats.decoded["gnss_external"] == len(truth)
+    n_fix = sum(1 for e in events if type(e).__name__ == "GnssFix")
+    assert n_fix == len(truth)
+
+
+def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path):
+    obs, nav, _ = rinex_for_quad106
+    out = tmp_path / "rep"
+    cmd = [sys.executable, "-m", "gcs_tools", "replay", str(QUAD106), "--rinex-obs", str(obs), "--rinex-nav", str(nav),
+           "--coupling", "loose", "--out", str(out), "--no-progress", "--no-telemetry"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["sources"]["gnss"].startswith("RINEX q.obs") and s["raw_gnss"]["coupling"] == "loose"
+    assert s["navigator"]["gnss_fused"] > 600
+    # SPP fixes without the troposphere model error would be metres off: with it, the estimate
+    # follows them as it follows the log's own fixes
+    assert s["errors"]["gnss"]["error_horizontal_m"]["median"] < 2.0
+    tight = subprocess.run(cmd[:9] + ["--coupling", "tight", "--out", str(tmp_path / "t"), "--no-progress"],
+                           capture_output=True, text=True, timeout=60)
+    assert tight.returncode == 2 and "not available yet" in tight.stderr and tight.stderr.count("\n") == 1
+    nonav = subprocess.run(cmd[:7] + ["--out", str(tmp_path / "n")], capture_output=True, text=True, timeout=60)
+    assert nonav.returncode == 2 and "--rinex-nav" in nonav.stderr
