@@ -27,7 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("gcs_tools.evaluate.cli", "evaluation campaign across missions, methods, seeds"),
     "export": ("gcs_tools.export.cli", "a run, tlog or recording as MCAP (Foxglove) or CSV"),
     "bench": ("gcs_tools.bench.cli", "benchmarks that print JSON"),
-    "gnss": ("gcs_tools.gnss.cli", "raw GNSS (smartLoc, RINEX 3, UBX): single-point solutions scored against truth"),
+    "gnss": ("gcs_tools.gnss.cli", "raw GNSS (smartLoc, RINEX 3, UBX): single-point solutions vs truth"),
 }
 
 

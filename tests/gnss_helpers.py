@@ -23,22 +23,45 @@ from companion.gnss.timescale import GPS_MINUS_BDT_S, gps_from_week_tow
 WEEK, TOE_SOW = 2304, 424800.0
 T0 = gps_from_week_tow(WEEK, TOE_SOW)
 RX_ECEF = geodetic_to_ecef(math.radians(52.5), math.radians(13.4), 60.0)
-KLOBUCHAR = (np.array([1.1176e-08, 7.4506e-09, -5.9605e-08, -5.9605e-08]),
-             np.array([9.0112e04, 4.9152e04, -1.3107e05, -3.2768e05]))
+KLOBUCHAR = (
+    np.array([1.1176e-08, 7.4506e-09, -5.9605e-08, -5.9605e-08]),
+    np.array([9.0112e04, 4.9152e04, -1.3107e05, -3.2768e05]),
+)
 
 # the published GPS ephemeris (IS-GPS-200 example values, week 2304)
-BASE = dict(crs_m=134.75, delta_n_rad_s=4.12374319903e-9, m0_rad=-2.23037324521, cuc_rad=7.25500285625e-6,
-            e=1.61300709005e-2, cus_rad=8.00378620625e-6, sqrt_a_m05=5153.71900558, cic_rad=7.07805156708e-8,
-            omega0_rad=-2.84371723002, cis_rad=2.6635825634e-7, i0_rad=0.967821256634, crc_m=226.75,
-            omega_rad=-1.2251476939, omega_dot_rad_s=-7.73246494535e-9, idot_rad_s=2.60367988229e-10)
+BASE = dict(
+    crs_m=134.75,
+    delta_n_rad_s=4.12374319903e-9,
+    m0_rad=-2.23037324521,
+    cuc_rad=7.25500285625e-6,
+    e=1.61300709005e-2,
+    cus_rad=8.00378620625e-6,
+    sqrt_a_m05=5153.71900558,
+    cic_rad=7.07805156708e-8,
+    omega0_rad=-2.84371723002,
+    cis_rad=2.6635825634e-7,
+    i0_rad=0.967821256634,
+    crc_m=226.75,
+    omega_rad=-1.2251476939,
+    omega_dot_rad_s=-7.73246494535e-9,
+    idot_rad_s=2.60367988229e-10,
+)
 
 
 def _kepler(system: System, prn: int, toe_gps: float, toe_sow: float, **over: float) -> KeplerEphemeris:
     p = dict(BASE)
     p.update(over)
     clk = dict(af0_s=1e-5 * ((prn * 7) % 11 - 5), af1_s_s=1e-12 * (prn % 5 - 2), af2_s_s2=0.0, tgd_s=-5e-9)
-    return KeplerEphemeris(system=int(system), prn=prn, toe_gps_s=toe_gps, toc_gps_s=toe_gps, toe_sow_s=toe_sow,
-                           iode=prn, **clk, **p)
+    return KeplerEphemeris(
+        system=int(system),
+        prn=prn,
+        toe_gps_s=toe_gps,
+        toc_gps_s=toe_gps,
+        toe_sow_s=toe_sow,
+        iode=prn,
+        **clk,
+        **p,
+    )
 
 
 def constellation(t0: float = T0) -> tuple[list[KeplerEphemeris], list[GlonassEphemeris]]:
@@ -47,33 +70,87 @@ def constellation(t0: float = T0) -> tuple[list[KeplerEphemeris], list[GlonassEp
     kep = []
     for j in range(6):
         for k in range(4):
-            kep.append(_kepler(System.GPS, 1 + 4 * j + k, t0, toe_sow, omega0_rad=BASE["omega0_rad"] + j * math.pi / 3,
-                               m0_rad=BASE["m0_rad"] + k * math.pi / 2 + j * 0.26))
+            kep.append(
+                _kepler(
+                    System.GPS,
+                    1 + 4 * j + k,
+                    t0,
+                    toe_sow,
+                    omega0_rad=BASE["omega0_rad"] + j * math.pi / 3,
+                    m0_rad=BASE["m0_rad"] + k * math.pi / 2 + j * 0.26,
+                )
+            )
     for k in range(6):
-        kep.append(_kepler(System.GALILEO, 1 + k, t0, toe_sow, sqrt_a_m05=5440.6, e=2e-4, i0_rad=math.radians(56),
-                           omega0_rad=k * 2.1, m0_rad=k * 1.3, delta_n_rad_s=3e-9, omega_dot_rad_s=-5.5e-9))
+        kep.append(
+            _kepler(
+                System.GALILEO,
+                1 + k,
+                t0,
+                toe_sow,
+                sqrt_a_m05=5440.6,
+                e=2e-4,
+                i0_rad=math.radians(56),
+                omega0_rad=k * 2.1,
+                m0_rad=k * 1.3,
+                delta_n_rad_s=3e-9,
+                omega_dot_rad_s=-5.5e-9,
+            )
+        )
     bdt_sow = toe_sow - GPS_MINUS_BDT_S  # the same instant as BDT seconds of (BDT) week
-    for prn, sqa, inc, om0, m0 in ((3, 6493.4, 0.03, 1.0, 2.0), (8, 6493.5, 0.96, 0.5, 1.2),
-                                   (20, 5282.6, 0.96, 2.5, 0.4), (23, 5282.6, 0.96, 4.6, 2.2),
-                                   (27, 5282.6, 0.96, 0.2, 4.0)):
-        kep.append(_kepler(System.BEIDOU, prn, t0, bdt_sow, sqrt_a_m05=sqa, e=5e-4, i0_rad=inc, omega0_rad=om0,
-                           m0_rad=m0, omega_dot_rad_s=-6e-9))
+    for prn, sqa, inc, om0, m0 in (
+        (3, 6493.4, 0.03, 1.0, 2.0),
+        (8, 6493.5, 0.96, 0.5, 1.2),
+        (20, 5282.6, 0.96, 2.5, 0.4),
+        (23, 5282.6, 0.96, 4.6, 2.2),
+        (27, 5282.6, 0.96, 0.2, 4.0),
+    ):
+        kep.append(
+            _kepler(
+                System.BEIDOU,
+                prn,
+                t0,
+                bdt_sow,
+                sqrt_a_m05=sqa,
+                e=5e-4,
+                i0_rad=inc,
+                omega0_rad=om0,
+                m0_rad=m0,
+                omega_dot_rad_s=-6e-9,
+            )
+        )
     glo = []
     r = 25_510_000.0
     vi = math.sqrt(3.9860044e14 / r)
     for k in range(6):
         node, u = k * 1.05, k * 0.7 + 0.3
         inc = math.radians(64.8)
-        p = r * np.array([math.cos(node) * math.cos(u) - math.sin(node) * math.sin(u) * math.cos(inc),
-                          math.sin(node) * math.cos(u) + math.cos(node) * math.sin(u) * math.cos(inc),
-                          math.sin(u) * math.sin(inc)])
-        v = vi * np.array([-math.cos(node) * math.sin(u) - math.sin(node) * math.cos(u) * math.cos(inc),
-                           -math.sin(node) * math.sin(u) + math.cos(node) * math.cos(u) * math.cos(inc),
-                           math.cos(u) * math.sin(inc)])
+        p = r * np.array(
+            [
+                math.cos(node) * math.cos(u) - math.sin(node) * math.sin(u) * math.cos(inc),
+                math.sin(node) * math.cos(u) + math.cos(node) * math.sin(u) * math.cos(inc),
+                math.sin(u) * math.sin(inc),
+            ]
+        )
+        v = vi * np.array(
+            [
+                -math.cos(node) * math.sin(u) - math.sin(node) * math.cos(u) * math.cos(inc),
+                -math.sin(node) * math.sin(u) + math.cos(node) * math.cos(u) * math.cos(inc),
+                math.cos(u) * math.sin(inc),
+            ]
+        )
         v = v - np.cross([0.0, 0.0, 7.292115e-5], p)  # inertial -> rotating (PZ-90) velocity
-        glo.append(GlonassEphemeris(prn=k + 1, channel=k - 3, toe_gps_s=t0, pos_ecef_m=tuple(p),
-                                    vel_ecef_m_s=tuple(v), acc_ecef_m_s2=(1e-7, -2e-7, 3e-7),
-                                    clock_bias_s=2e-5 * (k - 2), gamma_n=1e-12 * (k - 2)))
+        glo.append(
+            GlonassEphemeris(
+                prn=k + 1,
+                channel=k - 3,
+                toe_gps_s=t0,
+                pos_ecef_m=tuple(p),
+                vel_ecef_m_s=tuple(v),
+                acc_ecef_m_s2=(1e-7, -2e-7, 3e-7),
+                clock_bias_s=2e-5 * (k - 2),
+                gamma_n=1e-12 * (k - 2),
+            )
+        )
     return kep, glo
 
 
@@ -85,8 +162,15 @@ def store(t0: float = T0) -> EphemerisStore:
 CLOCKS_M = {System.GPS: 3000.0, System.GALILEO: 3012.5, System.BEIDOU: 2990.0, System.GLONASS: 3031.0}
 
 
-def observe(st: EphemerisStore, t_true_s: float, rx_ecef: np.ndarray, v_rx_ecef: np.ndarray | None = None,
-            mask_deg: float = 10.0, atmosphere: bool = True, drift_m_s: float = 0.0):
+def observe(
+    st: EphemerisStore,
+    t_true_s: float,
+    rx_ecef: np.ndarray,
+    v_rx_ecef: np.ndarray | None = None,
+    mask_deg: float = 10.0,
+    atmosphere: bool = True,
+    drift_m_s: float = 0.0,
+):
     """(epoch, visible mask) of every satellite above ``mask_deg`` at TRUE receive time ``t_true_s``.
 
     The receiver clock is ``CLOCKS_M[GPS]`` (its time tag is true time + that / c); other systems add
@@ -105,8 +189,13 @@ def observe(st: EphemerisStore, t_true_s: float, rx_ecef: np.ndarray, v_rx_ecef:
             s = st.states(sysv, prn, t - tau)
             ang = OMEGA_E_RAD_S * tau
             c, sn = np.cos(ang), np.sin(ang)
-            rot = np.column_stack((c * s.pos_ecef_m[:, 0] + sn * s.pos_ecef_m[:, 1],
-                                   -sn * s.pos_ecef_m[:, 0] + c * s.pos_ecef_m[:, 1], s.pos_ecef_m[:, 2]))
+            rot = np.column_stack(
+                (
+                    c * s.pos_ecef_m[:, 0] + sn * s.pos_ecef_m[:, 1],
+                    -sn * s.pos_ecef_m[:, 0] + c * s.pos_ecef_m[:, 1],
+                    s.pos_ecef_m[:, 2],
+                )
+            )
             rho = np.linalg.norm(rot - rx, axis=1)
             tau = rho / C_M_S
         clk = np.array([CLOCKS_M[System(int(x))] for x in sysv]) + drift_m_s * dt
@@ -124,8 +213,9 @@ def observe(st: EphemerisStore, t_true_s: float, rx_ecef: np.ndarray, v_rx_ecef:
     if atmosphere:
         from companion.gnss.timescale import week_tow
 
-        atm = saastamoinen_m(lat, hgt, el) + klobuchar_m(*KLOBUCHAR, lat, lon, az, el, week_tow(t_true_s)[1]) \
-            * iono_frequency_scale(sysv)
+        atm = saastamoinen_m(lat, hgt, el) + klobuchar_m(
+            *KLOBUCHAR, lat, lon, az, el, week_tow(t_true_s)[1]
+        ) * iono_frequency_scale(sysv)
         pr = pr + atm
     vis = np.degrees(el) > mask_deg
     t_tag = t_true_s + CLOCKS_M[System.GPS] / C_M_S

@@ -24,9 +24,15 @@ def test_gps_week_and_calendar_known_answers():
     assert ts.week_tow(t) == (2086, 3 * 86400.0)
     assert ts.gps_from_calendar(1980, 1, 6, 0, 0, 0.0) == 0.0
     # GPST and UTC: 18 s since 2017-01-01, 17 s just before
-    assert ts.gps_from_calendar(2017, 1, 1, 0, 0, 0.0, "UTC") - ts.gps_from_calendar(2017, 1, 1, 0, 0, 0.0) == 18.0
-    assert ts.gps_from_calendar(2016, 12, 31, 23, 59, 59.0, "UTC") - \
-        ts.gps_from_calendar(2016, 12, 31, 23, 59, 59.0) == 17.0
+    assert (
+        ts.gps_from_calendar(2017, 1, 1, 0, 0, 0.0, "UTC") - ts.gps_from_calendar(2017, 1, 1, 0, 0, 0.0)
+        == 18.0
+    )
+    assert (
+        ts.gps_from_calendar(2016, 12, 31, 23, 59, 59.0, "UTC")
+        - ts.gps_from_calendar(2016, 12, 31, 23, 59, 59.0)
+        == 17.0
+    )
     assert ts.gps_from_calendar(2020, 1, 1, 0, 0, 0.0, "GLO") == t + 18.0  # RINEX GLO epochs are UTC
     # Unix: 2020-01-01T00:00:00Z = 1577836800
     assert ts.gps_to_unix_s(t + 18.0) == 1_577_836_800.0
@@ -70,12 +76,19 @@ def test_gps_position_published_known_answer():
     """IS-GPS-200 eph2pos example: week 2304, toe 424800 s, evaluated 30 s after toe."""
     kep, _ = constellation()
     e = next(x for x in kep if x.system == System.GPS)
-    e = type(e)(**{**{f: getattr(e, f) for f in e.__slots__}, **BASE, "m0_rad": BASE["m0_rad"],
-                   "omega0_rad": BASE["omega0_rad"]})
+    e = type(e)(
+        **{
+            **{f: getattr(e, f) for f in e.__slots__},
+            **BASE,
+            "m0_rad": BASE["m0_rad"],
+            "omega0_rad": BASE["omega0_rad"],
+        }
+    )
     st = EphemerisStore([e])
     s = st.states(np.array([0]), np.array([e.prn]), np.array([T0 + 30.0]))
-    np.testing.assert_allclose(s.pos_ecef_m[0], [22151566.575334515, 13275548.286060918, 7260529.645377433],
-                               atol=1e-3)
+    np.testing.assert_allclose(
+        s.pos_ecef_m[0], [22151566.575334515, 13275548.286060918, 7260529.645377433], atol=1e-3
+    )
     assert ts.week_tow(T0 + 30.0) == (WEEK, TOE_SOW + 30.0)
 
 
@@ -83,9 +96,9 @@ def _independent_kepler(e, t):
     """IS-GPS-200 20.3.3.4.3 written out separately (scalar, bisection for Kepler, matrices for GEO)."""
     mu = {0: 3.986005e14, 2: 3.986004418e14, 3: 3.986004418e14}[e.system]
     we = {0: 7.2921151467e-5, 2: 7.2921151467e-5, 3: 7.2921150e-5}[e.system]
-    a = e.sqrt_a_m05 ** 2
+    a = e.sqrt_a_m05**2
     tk = t - e.toe_gps_s
-    mk = e.m0_rad + (math.sqrt(mu / a ** 3) + e.delta_n_rad_s) * tk
+    mk = e.m0_rad + (math.sqrt(mu / a**3) + e.delta_n_rad_s) * tk
     lo, hi = mk - 1.0, mk + 1.0
     for _ in range(200):
         mid = 0.5 * (lo + hi)
@@ -136,7 +149,7 @@ def test_clock_includes_relativity_and_group_delay():
     _, _, clk, _ = kepler_states(tab, np.array([0]), np.array([T0 + 100.0]))
     tk = 100.0
     mu = 3.986005e14
-    n = math.sqrt(mu / e.sqrt_a_m05 ** 6) + e.delta_n_rad_s
+    n = math.sqrt(mu / e.sqrt_a_m05**6) + e.delta_n_rad_s
     m = e.m0_rad + n * tk
     ek = m
     for _ in range(30):
@@ -149,11 +162,22 @@ def test_glonass_rk4_grid_against_an_adaptive_integrator():
     st = store()
     _, glo = constellation()
     for g in glo[:3]:
+        acc = np.array([g.acc_ecef_m_s2])
         for dt in (-1700.0, -7.5, 0.0, 412.3, 1799.0):
             s = st.states(np.array([6]), np.array([g.prn]), np.array([g.toe_gps_s + dt]))
             y0 = np.r_[g.pos_ecef_m, g.vel_ecef_m_s]
-            sol = solve_ivp(lambda t, y: glonass_derivative(y[None, :], np.array([g.acc_ecef_m_s2]))[0],
-                            (0.0, dt), y0, method="DOP853", rtol=1e-12, atol=1e-6) if dt else None
+            sol = (
+                solve_ivp(
+                    lambda t, y, acc=acc: glonass_derivative(y[None, :], acc)[0],
+                    (0.0, dt),
+                    y0,
+                    method="DOP853",
+                    rtol=1e-12,
+                    atol=1e-6,
+                )
+                if dt
+                else None
+            )
             ref = sol.y[:, -1] if sol is not None else y0
             np.testing.assert_allclose(s.pos_ecef_m[0], ref[:3], atol=5e-3)
             np.testing.assert_allclose(s.vel_ecef_m_s[0], ref[3:], atol=1e-5)
@@ -163,12 +187,22 @@ def test_glonass_rk4_grid_against_an_adaptive_integrator():
 def test_ephemeris_selection_nearest_toe_within_age():
     kep, glo = constellation()
     e0 = kep[0]
-    later = type(e0)(**{**{f: getattr(e0, f) for f in e0.__slots__}, "toe_gps_s": T0 + 7200.0,
-                        "toc_gps_s": T0 + 7200.0, "toe_sow_s": TOE_SOW + 7200.0, "af0_s": 1.0})
+    later = type(e0)(
+        **{
+            **{f: getattr(e0, f) for f in e0.__slots__},
+            "toe_gps_s": T0 + 7200.0,
+            "toc_gps_s": T0 + 7200.0,
+            "toe_sow_s": TOE_SOW + 7200.0,
+            "af0_s": 1.0,
+        }
+    )
     sick = type(e0)(**{**{f: getattr(e0, f) for f in e0.__slots__}, "prn": 30, "health": 1})
     st = EphemerisStore([e0, later, sick], glo[:1])
-    rows = st.select(np.array([0, 0, 0, 0, 0, 6, 6]), np.array([1, 1, 1, 1, 30, 1, 1]),
-                     np.array([T0, T0 + 3599.0, T0 + 3601.0, T0 + 7200.0 * 2 + 1, T0, T0 + 1799.0, T0 + 1801.0]))
+    rows = st.select(
+        np.array([0, 0, 0, 0, 0, 6, 6]),
+        np.array([1, 1, 1, 1, 30, 1, 1]),
+        np.array([T0, T0 + 3599.0, T0 + 3601.0, T0 + 7200.0 * 2 + 1, T0, T0 + 1799.0, T0 + 1801.0]),
+    )
     assert list(rows) == [0, 0, 1, -1, -1, 2, -1]
     assert st.dropped_unhealthy == 1
 
@@ -186,8 +220,14 @@ def test_lnav_subframes_known_answer():
     assert (e.prn, e.iode, e.health) == (21, 78, 0)
     assert ts.week_tow(e.toe_gps_s) == (2062, 597600.0) and e.toe_gps_s == e.toc_gps_s
     assert e.sqrt_a_m05 == pytest.approx(math.sqrt(26560606.593836), abs=1e-6)
-    for value, expected in ((e.e, 0.024511), (e.i0_rad, 0.949169), (e.omega0_rad, 2.358914),
-                            (e.omega_rad, -1.427803), (e.m0_rad, 2.311086), (e.af0_s, -0.000151)):
+    for value, expected in (
+        (e.e, 0.024511),
+        (e.i0_rad, 0.949169),
+        (e.omega0_rad, 2.358914),
+        (e.omega_rad, -1.427803),
+        (e.m0_rad, 2.311086),
+        (e.af0_s, -0.000151),
+    ):
         assert value == pytest.approx(expected, abs=1e-6)
     assert (e.crc_m, e.crs_m) == (340.96875, -21.46875)
     bad = list(SUBFRAMES_PRN21[0])
@@ -261,7 +301,9 @@ def test_bad_observations_are_not_used(scene):
     s = solve_position(ep.replace(pseudorange_m=pr, sat_pos_ecef_m=pos), SppConfig(), klobuchar=st.klobuchar)
     assert s.ok and not s.used[0] and not s.used[1]
     np.testing.assert_allclose(s.p_ecef_m, RX_ECEF, atol=2e-3)
-    few = solve_position(ep.select(np.array([0, 1, 2, ep.n - 1])), SppConfig())  # GPS x3 + GLONASS: 5 unknowns
+    few = solve_position(
+        ep.select(np.array([0, 1, 2, ep.n - 1])), SppConfig()
+    )  # GPS x3 + GLONASS: 5 unknowns
     assert not few.ok and few.reason == "too few satellites" and np.isnan(few.p_ecef_m).all()
     with pytest.raises(ValueError, match="weighting"):
         SppConfig(weighting="magic")
@@ -275,8 +317,16 @@ def test_corrected_epoch_uses_given_positions_only():
     ep, _ = observe(st, T0 + 50.0, RX_ECEF, atmosphere=False)
     ep, _ = attach_broadcast(ep, st)
     y = ep.pseudorange_m + 299_792_458.0 * ep.sat_clock_s
-    corrected = make_epoch(12.3, ep.system, ep.prn, y, sat_pos_ecef_m=ep.sat_pos_ecef_m, cn0_dbhz=ep.cn0_dbhz,
-                           corrected=True, time_base="dataset")
+    corrected = make_epoch(
+        12.3,
+        ep.system,
+        ep.prn,
+        y,
+        sat_pos_ecef_m=ep.sat_pos_ecef_m,
+        cn0_dbhz=ep.cn0_dbhz,
+        corrected=True,
+        time_base="dataset",
+    )
     s = solve_position(corrected, SppConfig())
     np.testing.assert_allclose(s.p_ecef_m, RX_ECEF, atol=2e-3)
     with pytest.raises(ValueError, match="GPS time"):

@@ -53,8 +53,13 @@ def test_rinex_nav_values_round_trip():
     kep, glo = constellation()
     assert len(nav.kepler) == len(kep) and len(nav.glonass) == len(glo)
     for a, b in zip(nav.kepler, kep, strict=True):
-        assert (a.system, a.prn, a.toe_gps_s, a.toc_gps_s, a.toe_sow_s) == (b.system, b.prn, b.toe_gps_s,
-                                                                             b.toc_gps_s, b.toe_sow_s)
+        assert (a.system, a.prn, a.toe_gps_s, a.toc_gps_s, a.toe_sow_s) == (
+            b.system,
+            b.prn,
+            b.toe_gps_s,
+            b.toc_gps_s,
+            b.toe_sow_s,
+        )
         assert a.sqrt_a_m05 == pytest.approx(b.sqrt_a_m05, rel=1e-12) and a.tgd_s == b.tgd_s
     for a, b in zip(nav.glonass, glo, strict=True):
         assert a.toe_gps_s == b.toe_gps_s and a.channel == b.channel
@@ -86,8 +91,9 @@ def test_rinex_epoch_time_systems_and_bad_records(tmp_path, system, offset_s):
     week, tow = ts.week_tow(obs.epochs[0].t_gps_s)
     assert (week, tow) == (2086, 259200.0 + offset_s)  # never shifted by leap seconds in GPS time
     assert len(obs.epochs) == 1 and obs.epochs[0].n == 2
-    assert obs.rejected == {"unknown_system": 0, "event_flag_4": 1, "truncated": 1} or \
-        (obs.rejected["event_flag_4"] == 1 and obs.rejected["truncated"] == 1)
+    assert obs.rejected == {"unknown_system": 0, "event_flag_4": 1, "truncated": 1} or (
+        obs.rejected["event_flag_4"] == 1 and obs.rejected["truncated"] == 1
+    )
     assert obs.epochs[0].pseudorange_rate_m_s[0] == pytest.approx(1000.0 * 299_792_458.0 / 1575.42e6)
 
 
@@ -116,6 +122,7 @@ def test_rinex_bad_files_are_one_line_errors(tmp_path):
 
 # --- smartLoc ---------------------------------------------------------------------------------
 
+
 def _write_smartloc(tmp_path: Path) -> tuple[Path, Path]:
     """A smartLoc-format drive from the synthetic constellation: corrected pseudoranges + truth."""
     st = store()
@@ -132,12 +139,18 @@ def _write_smartloc(tmp_path: Path) -> tuple[Path, Path]:
         for i in range(ep.n):
             sid = ep.prn[i] + (300 if ep.system[i] == 6 else 0)
             x = ep.sat_pos_ecef_m[i]
-            inp.append(f"pseudorange3 {t} {y[i]:.4f} 25 {x[0]:.4f} {x[1]:.4f} {x[2]:.4f} {sid} "
-                       f"{code[int(ep.system[i])]} 40 {ep.cn0_dbhz[i]:.0f}")
+            inp.append(
+                f"pseudorange3 {t} {y[i]:.4f} 25 {x[0]:.4f} {x[1]:.4f} {x[2]:.4f} {sid} "
+                f"{code[int(ep.system[i])]} 40 {ep.cn0_dbhz[i]:.0f}"
+            )
         inp.append(f"odom3 {t} 5.9 0 0 0 0 0.01 0.0025 0.0009 0.0009 4e-06 4e-06 4e-06")
         gt.append(f"point3 {t} {p[0]:.4f} {p[1]:.4f} {p[2]:.4f} 0 0 0 0 0 0 0 0 0")
-    inp += ["pseudorange3 1.0 nan 25 1 2 3 5 1 40 40", "pseudorange3 1.0 2e7 25 1 2 3 5 64 40 40",
-            "pseudorange3 oops", "weird 1 2 3"]
+    inp += [
+        "pseudorange3 1.0 nan 25 1 2 3 5 1 40 40",
+        "pseudorange3 1.0 2e7 25 1 2 3 5 64 40 40",
+        "pseudorange3 oops",
+        "weird 1 2 3",
+    ]
     a, b = tmp_path / "Drive_Input.txt", tmp_path / "Drive_GT.txt"
     a.write_text("\n".join(inp) + "\n")
     b.write_text("\n".join(gt) + "\n")
@@ -148,7 +161,12 @@ def test_smartloc_reader_counts_bad_rows(tmp_path):
     a, b = _write_smartloc(tmp_path)
     data = smartloc.read_input(a)
     assert len(data.epochs) == 8 and data.odometry.shape == (8, 3)
-    assert dict(data.rejected) == {"nonfinite": 1, "unknown_system": 1, "unparsable": 1, "unknown_row_type": 1}
+    assert dict(data.rejected) == {
+        "nonfinite": 1,
+        "unknown_system": 1,
+        "unparsable": 1,
+        "unknown_row_type": 1,
+    }
     e = data.epochs[0]
     assert e.corrected and e.time_base == "dataset" and (e.system == System.GLONASS).any()
     assert e.prn[e.system == System.GLONASS].max() < 30
@@ -163,8 +181,12 @@ def test_smartloc_reader_counts_bad_rows(tmp_path):
 def test_gnss_spp_cli_writes_the_error_csv(tmp_path):
     a, _ = _write_smartloc(tmp_path)
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "gcs_tools", "gnss", "spp", str(a), "--out", str(out), "--variants"],
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "gcs_tools", "gnss", "spp", str(a), "--out", str(out), "--variants"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     lines = (out / "spp_errors.csv").read_text().splitlines()
     assert lines[0] == "t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m" and len(lines) == 9
@@ -172,8 +194,12 @@ def test_gnss_spp_cli_writes_the_error_csv(tmp_path):
     np.testing.assert_allclose(rows[:, 0], 0.2 * np.arange(8), atol=1e-6)
     assert np.abs(rows[:, 1:4]).max() < 0.01 and (rows[:, 4] > 0).all()
     assert "no Earth rotation" in r.stdout
-    bad = subprocess.run([sys.executable, "-m", "gcs_tools", "gnss", "spp", str(tmp_path / "none.txt")],
-                         capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        [sys.executable, "-m", "gcs_tools", "gnss", "spp", str(tmp_path / "none.txt")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such file" in bad.stderr
 
 
@@ -200,6 +226,7 @@ def test_smartloc_real_drive_baseline():
 
 # --- UBX ----------------------------------------------------------------------------------------
 
+
 def _ubx_frames() -> bytes:
     from pyubx2 import GET, UBXMessage
 
@@ -207,24 +234,46 @@ def _ubx_frames() -> bytes:
 
     week, tow = 2062, 597000.5
     meas = {"rcvTow": tow, "week": week, "leapS": 18, "numMeas": 3, "version": 1}
-    rows = [(0, 21, 0, 0, 21_000_000.25, -500.0, 41, 3), (6, 4, 0, 13, 20_500_000.0, 1000.0, 35, 5),
-            (0, 21, 3, 0, 21_000_010.0, -400.0, 30, 4)]  # the third: GPS L2C, not taken
+    rows = [
+        (0, 21, 0, 0, 21_000_000.25, -500.0, 41, 3),
+        (6, 4, 0, 13, 20_500_000.0, 1000.0, 35, 5),
+        (0, 21, 3, 0, 21_000_010.0, -400.0, 30, 4),
+    ]  # the third: GPS L2C, not taken
     for i, (g, sv, sig, fid, pr, do, cno, prstd) in enumerate(rows, 1):
-        meas.update({f"gnssId_{i:02d}": g, f"svId_{i:02d}": sv, f"sigId_{i:02d}": sig, f"freqId_{i:02d}": fid,
-                     f"prMes_{i:02d}": pr, f"doMes_{i:02d}": do, f"cno_{i:02d}": cno, f"prStd_{i:02d}": prstd,
-                     f"prValid_{i:02d}": 1, f"locktime_{i:02d}": 1000})
-    frames = [UBXMessage("NAV", "NAV-SAT", GET, iTOW=int(tow * 1000), version=1, numSvs=1, gnssId_01=0, svId_01=21,
-                         cno_01=41, elev_01=33, azim_01=250).serialize(),
-              UBXMessage("RXM", "RXM-RAWX", GET, **meas).serialize(), b"line noise between frames"]
+        meas.update(
+            {
+                f"gnssId_{i:02d}": g,
+                f"svId_{i:02d}": sv,
+                f"sigId_{i:02d}": sig,
+                f"freqId_{i:02d}": fid,
+                f"prMes_{i:02d}": pr,
+                f"doMes_{i:02d}": do,
+                f"cno_{i:02d}": cno,
+                f"prStd_{i:02d}": prstd,
+                f"prValid_{i:02d}": 1,
+                f"locktime_{i:02d}": 1000,
+            }
+        )
+    frames = [
+        UBXMessage("NAV", "NAV-SAT", GET, iTOW=int(tow * 1000), version=1, numSvs=1, gnssId_01=0,
+                   svId_01=21, cno_01=41, elev_01=33, azim_01=250).serialize(),
+        UBXMessage("RXM", "RXM-RAWX", GET, **meas).serialize(),
+        b"line noise between frames",
+    ]
     for words in SUBFRAMES_PRN21:
-        frames.append(UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=0, svId=21, numWords=10, version=2,
-                                 **{f"dwrd_{i:02d}": w for i, w in enumerate(words, 1)}).serialize())
-    frames.append(UBXMessage("NAV", "NAV-PVT", GET, iTOW=int(tow * 1000), year=2019, month=7, day=20, hour=21,
-                             min=50, second=0, validDate=1, validTime=1, fixType=3, lat=50.8, lon=12.9,
-                             height=350_000, hMSL=305_000, hAcc=2500, vAcc=4000, numSV=9, velN=1000, velE=-500,
-                             velD=20, sAcc=150, pDOP=1.8).serialize())
-    frames.append(UBXMessage("RXM", "RXM-RAWX", GET, **{**meas, "week": week,
-                                                       "rcvTow": tow + 1.0}).serialize())
+        frames.append(
+            UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=0, svId=21, numWords=10, version=2,
+                       **{f"dwrd_{i:02d}": w for i, w in enumerate(words, 1)}).serialize()
+        )
+    frames.append(
+        UBXMessage("NAV", "NAV-PVT", GET, iTOW=int(tow * 1000), year=2019, month=7, day=20, hour=21, min=50,
+                   second=0, validDate=1, validTime=1, fixType=3, lat=50.8, lon=12.9, height=350_000,
+                   hMSL=305_000, hAcc=2500, vAcc=4000, numSV=9, velN=1000, velE=-500, velD=20, sAcc=150,
+                   pDOP=1.8).serialize()
+    )
+    frames.append(
+        UBXMessage("RXM", "RXM-RAWX", GET, **{**meas, "week": week, "rcvTow": tow + 1.0}).serialize()
+    )
     return b"".join(frames)
 
 
@@ -242,7 +291,9 @@ def test_ubx_frames_decode_to_epochs_fixes_and_ephemerides(tmp_path):
     assert ep.t_gps_s == ts.gps_from_week_tow(2062, 597000.5) and ep.n == 2
     assert list(ep.system) == [System.GPS, System.GLONASS] and dec.counters["rawx_other_signal"] == 2
     lam_glo = 299_792_458.0 / (1602e6 + (13 - 7) * 0.5625e6)
-    np.testing.assert_allclose(ep.pseudorange_rate_m_s, [500.0 * 299_792_458.0 / 1575.42e6, -1000.0 * lam_glo])
+    np.testing.assert_allclose(
+        ep.pseudorange_rate_m_s, [500.0 * 299_792_458.0 / 1575.42e6, -1000.0 * lam_glo]
+    )
     np.testing.assert_allclose(ep.pseudorange_var_m2, [(0.01 * 8) ** 2, (0.01 * 32) ** 2])
     assert ep.elevation_deg[0] == 33.0 and np.isnan(ep.elevation_deg[1])
     assert (eph.prn, eph.iode) == (21, 78) and ts.week_tow(eph.toe_gps_s) == (2062, 597600.0)
@@ -266,7 +317,7 @@ def test_ubx_from_a_tcp_stream():
     def serve() -> None:
         conn, _ = srv.accept()
         for i in range(0, len(payload), 97):  # in odd-sized pieces
-            conn.sendall(payload[i:i + 97])
+            conn.sendall(payload[i : i + 97])
         conn.close()
 
     th = threading.Thread(target=serve, daemon=True)

@@ -39,8 +39,11 @@ def rinex_for_quad106(tmp_path_factory):
     tmap = BootTimeMap.from_system_time(np.array([UNIX0_S * 1e6]), np.array([0.0]))
     t_mid = tmap.gps_s(300e6)
     st = store(t_mid)
-    fixes = [(m.time_usec, m.lat * 1e-7, m.lon * 1e-7, m.alt * 1e-3)
-             for _, m in read_tlog(QUAD106, types=("GPS_RAW_INT",)) if m.fix_type >= 3]
+    fixes = [
+        (m.time_usec, m.lat * 1e-7, m.lon * 1e-7, m.alt * 1e-3)
+        for _, m in read_tlog(QUAD106, types=("GPS_RAW_INT",))
+        if m.fix_type >= 3
+    ]
     epochs, truth = [], []
     last_s = -1
     for t_us, lat, lon, alt in fixes:
@@ -79,8 +82,23 @@ def test_rinex_fixes_land_on_the_log_fixes(rinex_for_quad106):
 def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path):
     obs, nav, _ = rinex_for_quad106
     out = tmp_path / "rep"
-    cmd = [sys.executable, "-m", "gcs_tools", "replay", str(QUAD106), "--rinex-obs", str(obs), "--rinex-nav", str(nav),
-           "--coupling", "loose", "--out", str(out), "--no-progress", "--no-telemetry"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "gcs_tools",
+        "replay",
+        str(QUAD106),
+        "--rinex-obs",
+        str(obs),
+        "--rinex-nav",
+        str(nav),
+        "--coupling",
+        "loose",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--no-telemetry",
+    ]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
@@ -89,8 +107,14 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
     # SPP fixes without the troposphere model error would be metres off: with it, the estimate
     # follows them as it follows the log's own fixes
     assert s["errors"]["gnss"]["error_horizontal_m"]["median"] < 2.0
-    tight = subprocess.run(cmd[:9] + ["--coupling", "tight", "--out", str(tmp_path / "t"), "--no-progress"],
-                           capture_output=True, text=True, timeout=60)
+    tight = subprocess.run(
+        cmd[:9] + ["--coupling", "tight", "--out", str(tmp_path / "t"), "--no-progress"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert tight.returncode == 2 and "not available yet" in tight.stderr and tight.stderr.count("\n") == 1
-    nonav = subprocess.run(cmd[:7] + ["--out", str(tmp_path / "n")], capture_output=True, text=True, timeout=60)
+    nonav = subprocess.run(
+        cmd[:7] + ["--out", str(tmp_path / "n")], capture_output=True, text=True, timeout=60
+    )
     assert nonav.returncode == 2 and "--rinex-nav" in nonav.stderr

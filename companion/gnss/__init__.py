@@ -25,7 +25,18 @@ from companion.gnss.spp import Dops, SppConfig, SppSolution, solve_position
 from companion.gnss.systems import System, sv_name
 
 __all__ = [
-    "Dops", "EphemerisStore", "GlonassEphemeris", "GnssEpoch", "KeplerEphemeris", "SatStates", "SppConfig",
-    "SppSolution", "System", "attach_broadcast", "make_epoch", "solve_position", "sv_name",
+    "Dops",
+    "EphemerisStore",
+    "GlonassEphemeris",
+    "GnssEpoch",
+    "KeplerEphemeris",
+    "SatStates",
+    "SppConfig",
+    "SppSolution",
+    "System",
+    "attach_broadcast",
+    "make_epoch",
+    "solve_position",
+    "sv_name",
     "transmission_states",
 ]

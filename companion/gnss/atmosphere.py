@@ -14,8 +14,15 @@ from companion.gnss.systems import System
 REL_HUMIDITY = 0.7  # Saastamoinen with the standard atmosphere (RTKLIB's default)
 
 
-def klobuchar_m(alpha: np.ndarray, beta: np.ndarray, lat_rad: float, lon_rad: float,
-                az_rad: np.ndarray, el_rad: np.ndarray, tow_s: float) -> np.ndarray:
+def klobuchar_m(
+    alpha: np.ndarray,
+    beta: np.ndarray,
+    lat_rad: float,
+    lon_rad: float,
+    az_rad: np.ndarray,
+    el_rad: np.ndarray,
+    tow_s: float,
+) -> np.ndarray:
     """GPS L1 ionospheric delay (m), IS-GPS-200 20.3.3.5.2.5; ``tow_s`` GPS seconds of week."""
     el = el_rad / np.pi  # semicircles
     psi = 0.0137 / (el + 0.11) - 0.022
@@ -27,7 +34,7 @@ def klobuchar_m(alpha: np.ndarray, beta: np.ndarray, lat_rad: float, lon_rad: fl
     amp = np.maximum(np.polyval(np.asarray(alpha)[::-1], phim), 0.0)
     per = np.maximum(np.polyval(np.asarray(beta)[::-1], phim), 72000.0)
     x = 2.0 * np.pi * (t - 50400.0) / per
-    delay_s = f * np.where(np.abs(x) < 1.57, 5e-9 + amp * (1.0 - x * x / 2.0 + x ** 4 / 24.0), 5e-9)
+    delay_s = f * np.where(np.abs(x) < 1.57, 5e-9 + amp * (1.0 - x * x / 2.0 + x**4 / 24.0), 5e-9)
     return C_M_S * delay_s
 
 
@@ -41,8 +48,9 @@ def iono_frequency_scale(system: np.ndarray, glonass_channel: np.ndarray | None 
     return (FREQ_L1_HZ / f) ** 2
 
 
-def saastamoinen_m(lat_rad: float, h_m: float, el_rad: np.ndarray,
-                   humidity: float = REL_HUMIDITY) -> np.ndarray:
+def saastamoinen_m(
+    lat_rad: float, h_m: float, el_rad: np.ndarray, humidity: float = REL_HUMIDITY
+) -> np.ndarray:
     """Tropospheric delay (m) with the standard atmosphere (Saastamoinen 1972; RTKLIB tropmodel);
     0 below the horizon or outside −100 m … 10 km of height."""
     el_rad = np.asarray(el_rad, dtype=float)

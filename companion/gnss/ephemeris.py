@@ -28,7 +28,10 @@ from companion.gnss.systems import System, is_beidou_geo
 
 # Longest |t − toe| an ephemeris is used for (RTKLIB MAXDTOE*: s)
 MAX_AGE_S: dict[System, float] = {
-    System.GPS: 7200.0, System.QZSS: 7200.0, System.GALILEO: 10800.0, System.BEIDOU: 21600.0,
+    System.GPS: 7200.0,
+    System.QZSS: 7200.0,
+    System.GALILEO: 10800.0,
+    System.BEIDOU: 21600.0,
     System.GLONASS: 1800.0,
 }
 GLONASS_GRID_S = 30.0  # RK4 grid step of the cached GLONASS states (one ≤ 15 s step per query)
@@ -102,16 +105,29 @@ class SatStates(NamedTuple):
 def _kepler_tables(ephs: list[KeplerEphemeris]) -> dict[str, np.ndarray]:
     t = {f.name: np.array([getattr(e, f.name) for e in ephs], dtype=float) for f in fields(KeplerEphemeris)}
     sys_ = t["system"].astype(int)
-    mu = np.where(sys_ == System.GPS, k.MU_GPS_M3_S2,
-                  np.where(sys_ == System.QZSS, k.MU_GPS_M3_S2,
-                           np.where(sys_ == System.GALILEO, k.MU_GAL_M3_S2, k.MU_BDS_M3_S2)))
-    we = np.where(sys_ == System.BEIDOU, k.OMEGA_E_BDS_RAD_S,
-                  np.where(sys_ == System.GALILEO, k.OMEGA_E_GAL_RAD_S, k.OMEGA_E_GPS_RAD_S))
+    mu = np.where(
+        sys_ == System.GPS,
+        k.MU_GPS_M3_S2,
+        np.where(
+            sys_ == System.QZSS,
+            k.MU_GPS_M3_S2,
+            np.where(sys_ == System.GALILEO, k.MU_GAL_M3_S2, k.MU_BDS_M3_S2),
+        ),
+    )
+    we = np.where(
+        sys_ == System.BEIDOU,
+        k.OMEGA_E_BDS_RAD_S,
+        np.where(sys_ == System.GALILEO, k.OMEGA_E_GAL_RAD_S, k.OMEGA_E_GPS_RAD_S),
+    )
     a = t["sqrt_a_m05"] ** 2
     geo = (sys_ == System.BEIDOU) & is_beidou_geo(t["prn"].astype(int))
     t.update(
-        a_m=a, n_rad_s=np.sqrt(mu / a ** 3) + t["delta_n_rad_s"], sq1e2=np.sqrt(1.0 - t["e"] ** 2),
-        we_rad_s=we, geo=geo.astype(float), f_rel=-2.0 * np.sqrt(mu) / k.C_M_S ** 2,
+        a_m=a,
+        n_rad_s=np.sqrt(mu / a**3) + t["delta_n_rad_s"],
+        sq1e2=np.sqrt(1.0 - t["e"] ** 2),
+        we_rad_s=we,
+        geo=geo.astype(float),
+        f_rel=-2.0 * np.sqrt(mu) / k.C_M_S**2,
         # node longitude at toe in the (rotating) frame; rate: Ω̇ − ω_e (GEO: Ω̇, rotated afterwards)
         node0=t["omega0_rad"] - we * t["toe_sow_s"],
         node_rate=np.where(geo, t["omega_dot_rad_s"], t["omega_dot_rad_s"] - we),
@@ -119,8 +135,9 @@ def _kepler_tables(ephs: list[KeplerEphemeris]) -> dict[str, np.ndarray]:
     return t
 
 
-def kepler_states(tab: dict[str, np.ndarray], rows: np.ndarray, t_gps_s: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def kepler_states(
+    tab: dict[str, np.ndarray], rows: np.ndarray, t_gps_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Position, velocity, clock, clock drift of Keplerian ephemeris ``rows`` at ``t_gps_s``."""
     g = {name: v[rows] for name, v in tab.items()}
     tk = t_gps_s - g["toe_gps_s"]
@@ -167,16 +184,18 @@ def kepler_states(tab: dict[str, np.ndarray], rows: np.ndarray, t_gps_s: np.ndar
     return pos, vel, clock, drift
 
 
-def _beidou_geo(pg: np.ndarray, vg: np.ndarray, angle: np.ndarray, we: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
+def _beidou_geo(
+    pg: np.ndarray, vg: np.ndarray, angle: np.ndarray, we: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """BeiDou GEO: inertial-like coordinates -> ECEF, ``Rz(ω_e t_k) · Rx(−5°)`` (ICD B1I 5.2.4.12)."""
     # Rx(−5°)
     px, py, pz = pg[:, 0], _COS5 * pg[:, 1] + _SIN5 * pg[:, 2], -_SIN5 * pg[:, 1] + _COS5 * pg[:, 2]
     vx, vy, vz = vg[:, 0], _COS5 * vg[:, 1] + _SIN5 * vg[:, 2], -_SIN5 * vg[:, 1] + _COS5 * vg[:, 2]
     s, c = np.sin(angle), np.cos(angle)
     pos = np.column_stack((c * px + s * py, -s * px + c * py, pz))
-    vel = np.column_stack((c * vx + s * vy + we * (-s * px + c * py),
-                           -s * vx + c * vy + we * (-c * px - s * py), vz))
+    vel = np.column_stack(
+        (c * vx + s * vy + we * (-s * px + c * py), -s * vx + c * vy + we * (-c * px - s * py), vz)
+    )
     return pos, vel
 
 
@@ -186,7 +205,7 @@ def glonass_derivative(state: np.ndarray, acc_m_s2: np.ndarray) -> np.ndarray:
     vx, vy = state[:, 3], state[:, 4]
     r2 = x * x + y * y + z * z
     r3 = r2 * np.sqrt(r2)
-    a = 1.5 * k.J2_GLO * k.MU_GLO_M3_S2 * k.A_E_GLO_M ** 2 / r2 / r3
+    a = 1.5 * k.J2_GLO * k.MU_GLO_M3_S2 * k.A_E_GLO_M**2 / r2 / r3
     b = 5.0 * z * z / r2
     c = -k.MU_GLO_M3_S2 / r3 - a * (1.0 - b)
     w = k.OMEGA_E_GLO_RAD_S
@@ -220,8 +239,12 @@ class _GlonassGrid:
         self.half = half
         m = len(ephs)
         grid = np.empty((m, 2 * half + 1, 6))
-        s0 = np.hstack((np.array([e.pos_ecef_m for e in ephs], dtype=float).reshape(-1, 3),
-                        np.array([e.vel_ecef_m_s for e in ephs], dtype=float).reshape(-1, 3)))
+        s0 = np.hstack(
+            (
+                np.array([e.pos_ecef_m for e in ephs], dtype=float).reshape(-1, 3),
+                np.array([e.vel_ecef_m_s for e in ephs], dtype=float).reshape(-1, 3),
+            )
+        )
         grid[:, half] = s0
         for sign in (1.0, -1.0):
             s, h = s0, np.full(m, sign * GLONASS_GRID_S)
@@ -230,8 +253,9 @@ class _GlonassGrid:
                 grid[:, half + int(sign) * j] = s
         self.grid = grid
 
-    def states(self, rows: np.ndarray, t_gps_s: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def states(
+        self, rows: np.ndarray, t_gps_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         tk = t_gps_s - self.toe[rows]
         j = np.clip(np.rint(tk / GLONASS_GRID_S).astype(int), -self.half, self.half)
         s = rk4_step(self.grid[rows, j + self.half], self.acc[rows], tk - j * GLONASS_GRID_S)
@@ -246,9 +270,12 @@ class EphemerisStore:
     within ``MAX_AGE_S`` (RTKLIB's rule); unhealthy ones are dropped when the store is built
     (``dropped_unhealthy``). Build once (O(m log m)); queries are vectorised (see module doc)."""
 
-    def __init__(self, kepler: list[KeplerEphemeris] = (),  # type: ignore[assignment]
-                 glonass: list[GlonassEphemeris] = (),  # type: ignore[assignment]
-                 klobuchar: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        kepler: list[KeplerEphemeris] = (),  # type: ignore[assignment]
+        glonass: list[GlonassEphemeris] = (),  # type: ignore[assignment]
+        klobuchar: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
         n_in = len(kepler) + len(glonass)
         self.kepler = [e for e in kepler if e.health == 0]
         self.glonass = [e for e in glonass if e.health == 0]
@@ -294,10 +321,15 @@ class EphemerisStore:
 
     def select(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> np.ndarray:
         """Global ephemeris row per query (n,), −1 where none is within its age limit."""
-        q = (np.asarray(system, dtype=np.int64) * 1000 + np.asarray(prn, dtype=np.int64)) * _KEY_SCALE \
-            + (np.asarray(t_gps_s, dtype=float) - self.t_ref_s)
+        q = (np.asarray(system, dtype=np.int64) * 1000 + np.asarray(prn, dtype=np.int64)) * _KEY_SCALE + (
+            np.asarray(t_gps_s, dtype=float) - self.t_ref_s
+        )
         i = np.searchsorted(self._sel_start, q, side="right") - 1
-        ok = (i >= 0) & (q < self._sel_end[np.maximum(i, 0)]) if len(self._sel_start) else np.zeros(len(q), bool)
+        ok = (
+            (i >= 0) & (q < self._sel_end[np.maximum(i, 0)])
+            if len(self._sel_start)
+            else np.zeros(len(q), bool)
+        )
         return np.where(ok, self._sel_row[np.maximum(i, 0)] if len(self._sel_row) else -1, -1)
 
     def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
@@ -342,7 +374,11 @@ def attach_broadcast(epoch: GnssEpoch, store: EphemerisStore) -> tuple[GnssEpoch
     if epoch.time_base != "gps":
         raise ValueError("attach_broadcast needs an epoch in GPS time")
     st, _ = transmission_states(store, epoch)
-    out = epoch.replace(sat_pos_ecef_m=st.pos_ecef_m, sat_vel_ecef_m_s=st.vel_ecef_m_s,
-                        sat_clock_s=st.clock_s, sat_clock_drift_s_s=st.clock_drift_s_s)
+    out = epoch.replace(
+        sat_pos_ecef_m=st.pos_ecef_m,
+        sat_vel_ecef_m_s=st.vel_ecef_m_s,
+        sat_clock_s=st.clock_s,
+        sat_clock_drift_s_s=st.clock_drift_s_s,
+    )
     ok = st.valid & np.isfinite(epoch.pseudorange_m)
     return out.select(ok), int((~ok).sum())

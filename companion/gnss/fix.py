@@ -26,5 +26,16 @@ def to_fix(solution: SppSolution, t_validity_us: int) -> GnssFix | None:
     v_ned = None
     if np.isfinite(solution.v_ecef_m_s).all():
         v_ned = ecef_to_ned_matrix(lat, lon) @ solution.v_ecef_m_s
-    return GnssFix(int(t_validity_us), math.degrees(lat), math.degrees(lon), h, FIX_3D, solution.n_used,
-                   solution.h_acc_m, solution.v_acc_m, solution.dops.hdop, v_ned, solution.vel_acc_m_s)
+    return GnssFix(
+        int(t_validity_us),
+        math.degrees(lat),
+        math.degrees(lon),
+        h,
+        FIX_3D,
+        solution.n_used,
+        solution.h_acc_m,
+        solution.v_acc_m,
+        solution.dops.hdop,
+        v_ned,
+        solution.vel_acc_m_s,
+    )

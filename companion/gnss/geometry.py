@@ -32,12 +32,15 @@ def ecef_to_geodetic(p_ecef_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     return lat, np.arctan2(y, x), h
 
 
-def geodetic_to_ecef(lat_rad: np.ndarray | float, lon_rad: np.ndarray | float,
-                     h_m: np.ndarray | float) -> np.ndarray:
+def geodetic_to_ecef(
+    lat_rad: np.ndarray | float, lon_rad: np.ndarray | float, h_m: np.ndarray | float
+) -> np.ndarray:
     s, c = np.sin(lat_rad), np.cos(lat_rad)
     n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * s * s)
-    return np.stack([(n + h_m) * c * np.cos(lon_rad), (n + h_m) * c * np.sin(lon_rad),
-                     (n * (1.0 - WGS84_E2) + h_m) * s], axis=-1)
+    return np.stack(
+        [(n + h_m) * c * np.cos(lon_rad), (n + h_m) * c * np.sin(lon_rad), (n * (1.0 - WGS84_E2) + h_m) * s],
+        axis=-1,
+    )
 
 
 def ecef_to_enu_matrix(lat_rad: float, lon_rad: float) -> np.ndarray:
@@ -53,8 +56,9 @@ def ecef_to_ned_matrix(lat_rad: float, lon_rad: float) -> np.ndarray:
     return np.array([enu[1], enu[0], -enu[2]])
 
 
-def sagnac_range_m(sat_ecef_m: np.ndarray, rx_ecef_m: np.ndarray, earth_rotation: bool = True
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def sagnac_range_m(
+    sat_ecef_m: np.ndarray, rx_ecef_m: np.ndarray, earth_rotation: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """Geometric ranges (n,) and unit line-of-sight vectors receiver→satellite (n, 3).
 
     ``sat_ecef_m`` (n, 3) are the positions at transmission in the transmission-time ECEF frame;
@@ -67,8 +71,9 @@ def sagnac_range_m(sat_ecef_m: np.ndarray, rx_ecef_m: np.ndarray, earth_rotation
     return r, los
 
 
-def azimuth_elevation_rad(los_ecef: np.ndarray, lat_rad: float, lon_rad: float
-                          ) -> tuple[np.ndarray, np.ndarray]:
+def azimuth_elevation_rad(
+    los_ecef: np.ndarray, lat_rad: float, lon_rad: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Azimuth (rad, from north, clockwise) and elevation (rad) of unit vectors (n, 3) at a site."""
     enu = los_ecef @ ecef_to_enu_matrix(lat_rad, lon_rad).T
     el = np.arcsin(np.clip(enu[:, 2], -1.0, 1.0))

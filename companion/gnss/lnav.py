@@ -92,44 +92,47 @@ class LnavDecoder:
         r = _Reader(words)
         if r.u(50, 6) != 56:  # page 18: ionosphere and UTC
             return
-        alpha = np.array([r.s(56, 8) * 2.0 ** -30, r.s(64, 8) * 2.0 ** -27, r.s(72, 8) * 2.0 ** -24,
-                          r.s(80, 8) * 2.0 ** -24])
-        beta = np.array([r.s(88, 8) * 2.0 ** 11, r.s(96, 8) * 2.0 ** 14, r.s(104, 8) * 2.0 ** 16,
-                         r.s(112, 8) * 2.0 ** 16])
+        alpha = np.array(
+            [r.s(56, 8) * 2.0**-30, r.s(64, 8) * 2.0**-27, r.s(72, 8) * 2.0**-24, r.s(80, 8) * 2.0**-24]
+        )
+        beta = np.array(
+            [r.s(88, 8) * 2.0**11, r.s(96, 8) * 2.0**14, r.s(104, 8) * 2.0**16, r.s(112, 8) * 2.0**16]
+        )
         self.klobuchar = (alpha, beta)
         self._count("lnav_klobuchar")
 
 
-def decode_ephemeris(prn: int, sf1: Sequence[int], sf2: Sequence[int], sf3: Sequence[int],
-                     t_ref_gps_s: float) -> KeplerEphemeris | None:
+def decode_ephemeris(
+    prn: int, sf1: Sequence[int], sf2: Sequence[int], sf3: Sequence[int], t_ref_gps_s: float
+) -> KeplerEphemeris | None:
     """Subframes 1, 2, 3 -> ephemeris; None when their issues of data differ (a cut-over)."""
     a, b, c = _Reader(sf1), _Reader(sf2), _Reader(sf3)
     week10 = a.u(48, 10)
     health = a.u(64, 6)
     iodc = (a.u(70, 2) << 8) | a.u(168, 8)
-    tgd = a.s(160, 8) * 2.0 ** -31
+    tgd = a.s(160, 8) * 2.0**-31
     toc_sow = a.u(176, 16) * 16.0
-    af2 = a.s(192, 8) * 2.0 ** -55
-    af1 = a.s(200, 16) * 2.0 ** -43
-    af0 = a.s(216, 22) * 2.0 ** -31
+    af2 = a.s(192, 8) * 2.0**-55
+    af1 = a.s(200, 16) * 2.0**-43
+    af0 = a.s(216, 22) * 2.0**-31
     iode2 = b.u(48, 8)
-    crs = b.s(56, 16) * 2.0 ** -5
-    deln = b.s(72, 16) * 2.0 ** -43 * SC2RAD
-    m0 = b.s(88, 32) * 2.0 ** -31 * SC2RAD
-    cuc = b.s(120, 16) * 2.0 ** -29
-    e = b.u(136, 32) * 2.0 ** -33
-    cus = b.s(168, 16) * 2.0 ** -29
-    sqrt_a = b.u(184, 32) * 2.0 ** -19
+    crs = b.s(56, 16) * 2.0**-5
+    deln = b.s(72, 16) * 2.0**-43 * SC2RAD
+    m0 = b.s(88, 32) * 2.0**-31 * SC2RAD
+    cuc = b.s(120, 16) * 2.0**-29
+    e = b.u(136, 32) * 2.0**-33
+    cus = b.s(168, 16) * 2.0**-29
+    sqrt_a = b.u(184, 32) * 2.0**-19
     toe_sow = b.u(216, 16) * 16.0
-    cic = c.s(48, 16) * 2.0 ** -29
-    omega0 = c.s(64, 32) * 2.0 ** -31 * SC2RAD
-    cis = c.s(96, 16) * 2.0 ** -29
-    i0 = c.s(112, 32) * 2.0 ** -31 * SC2RAD
-    crc = c.s(144, 16) * 2.0 ** -5
-    omega = c.s(160, 32) * 2.0 ** -31 * SC2RAD
-    omega_dot = c.s(192, 24) * 2.0 ** -43 * SC2RAD
+    cic = c.s(48, 16) * 2.0**-29
+    omega0 = c.s(64, 32) * 2.0**-31 * SC2RAD
+    cis = c.s(96, 16) * 2.0**-29
+    i0 = c.s(112, 32) * 2.0**-31 * SC2RAD
+    crc = c.s(144, 16) * 2.0**-5
+    omega = c.s(160, 32) * 2.0**-31 * SC2RAD
+    omega_dot = c.s(192, 24) * 2.0**-43 * SC2RAD
     iode3 = c.u(216, 8)
-    idot = c.s(224, 14) * 2.0 ** -43 * SC2RAD
+    idot = c.s(224, 14) * 2.0**-43 * SC2RAD
     if not (iode2 == iode3 == (iodc & 0xFF)):
         return None
     week = resolve_week(week10, 1024, t_ref_gps_s)
@@ -140,7 +143,6 @@ def decode_ephemeris(prn: int, sf1: Sequence[int], sf2: Sequence[int], sf3: Sequ
     toc += 604800.0 * round((toe - toc) / 604800.0)
     return KeplerEphemeris(
         system=int(System.GPS), prn=int(prn), toe_gps_s=toe, toc_gps_s=toc, toe_sow_s=toe_sow,
-        sqrt_a_m05=sqrt_a, e=e, i0_rad=i0, omega0_rad=omega0, omega_rad=omega, m0_rad=m0,
-        delta_n_rad_s=deln, omega_dot_rad_s=omega_dot, idot_rad_s=idot, cuc_rad=cuc, cus_rad=cus,
-        crc_m=crc, crs_m=crs, cic_rad=cic, cis_rad=cis, af0_s=af0, af1_s_s=af1, af2_s_s2=af2, tgd_s=tgd,
-        iode=iode2, health=health)
+        sqrt_a_m05=sqrt_a, e=e, i0_rad=i0, omega0_rad=omega0, omega_rad=omega, m0_rad=m0, delta_n_rad_s=deln,
+        omega_dot_rad_s=omega_dot, idot_rad_s=idot, cuc_rad=cuc, cus_rad=cus, crc_m=crc, crs_m=crs,
+        cic_rad=cic, cis_rad=cis, af0_s=af0, af1_s_s=af1, af2_s_s2=af2, tgd_s=tgd, iode=iode2, health=health)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +34,9 @@ class GnssEpoch:
     system: np.ndarray  # (n,) int8, companion.gnss.systems.System values
     prn: np.ndarray  # (n,) int16: PRN / slot number within the system
     pseudorange_m: np.ndarray  # (n,)
-    pseudorange_var_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,) given variance, NaN = none
+    pseudorange_var_m2: np.ndarray = field(
+        default_factory=lambda: np.zeros(0)
+    )  # (n,) given variance, NaN = none
     pseudorange_rate_m_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,) −λ·Doppler
     cn0_dbhz: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,)
     elevation_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,) as given by the source
@@ -66,8 +69,10 @@ class GnssEpoch:
 
     def select(self, mask: np.ndarray) -> GnssEpoch:
         """The epoch restricted to the rows where ``mask`` (bool (n,) or an index array)."""
-        rows = {name: getattr(self, name)[mask] for name in ("system", "prn", "pseudorange_m",
-                                                             *(f for f, _ in _FIELDS))}
+        rows = {
+            name: getattr(self, name)[mask]
+            for name in ("system", "prn", "pseudorange_m", *(f for f, _ in _FIELDS))
+        }
         return dataclasses.replace(self, **rows)
 
     def replace(self, **changes: object) -> GnssEpoch:
@@ -78,17 +83,29 @@ class GnssEpoch:
 
 
 _FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
-    ("pseudorange_var_m2", ()), ("pseudorange_rate_m_s", ()), ("cn0_dbhz", ()), ("elevation_deg", ()),
-    ("azimuth_deg", ()), ("sat_pos_ecef_m", (3,)), ("sat_vel_ecef_m_s", (3,)), ("sat_clock_s", ()),
+    ("pseudorange_var_m2", ()),
+    ("pseudorange_rate_m_s", ()),
+    ("cn0_dbhz", ()),
+    ("elevation_deg", ()),
+    ("azimuth_deg", ()),
+    ("sat_pos_ecef_m", (3,)),
+    ("sat_vel_ecef_m_s", (3,)),
+    ("sat_clock_s", ()),
     ("sat_clock_drift_s_s", ()),
 )
 
 
-def make_epoch(t_gps_s: float, system: object, prn: object, pseudorange_m: object,
-               **arrays: object) -> GnssEpoch:
+def make_epoch(
+    t_gps_s: float, system: object, prn: object, pseudorange_m: object, **arrays: object
+) -> GnssEpoch:
     """Build an epoch from sequences (converted to the documented dtypes); other fields by name."""
-    conv: dict[str, object] = {}
+    conv: dict[str, Any] = {}
     for k, v in arrays.items():
         conv[k] = np.asarray(v, dtype=float) if k not in ("corrected", "time_base") else v
-    return GnssEpoch(float(t_gps_s), np.asarray(system, dtype=np.int8), np.asarray(prn, dtype=np.int16),
-                     np.asarray(pseudorange_m, dtype=float), **conv)  # type: ignore[arg-type]
+    return GnssEpoch(
+        float(t_gps_s),
+        np.asarray(system, dtype=np.int8),
+        np.asarray(prn, dtype=np.int16),
+        np.asarray(pseudorange_m, dtype=float),
+        **conv,
+    )

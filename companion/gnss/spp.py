@@ -131,21 +131,24 @@ def sigma_model_m(epoch: GnssEpoch, el_rad: np.ndarray, config: SppConfig) -> np
     w = config.weighting
     n = epoch.n
     if w == "given":
-        var = np.where(np.isfinite(epoch.pseudorange_var_m2) & (epoch.pseudorange_var_m2 > 0),
-                       epoch.pseudorange_var_m2, config.sigma_uniform_m ** 2)
+        var = np.where(
+            np.isfinite(epoch.pseudorange_var_m2) & (epoch.pseudorange_var_m2 > 0),
+            epoch.pseudorange_var_m2,
+            config.sigma_uniform_m**2,
+        )
     elif w == "uniform":
-        var = np.full(n, config.sigma_uniform_m ** 2)
+        var = np.full(n, config.sigma_uniform_m**2)
     else:
         cn0 = np.where(np.isfinite(epoch.cn0_dbhz), epoch.cn0_dbhz, config.cn0_ref_dbhz)
         weak = 10.0 ** ((config.cn0_ref_dbhz - cn0) / 10.0)  # 1 / (C/N0 linear), 1 at the reference
         slant = 1.0 / np.maximum(np.sin(el_rad), 0.05) ** 2
-        var = np.full(n, config.sigma_floor_m ** 2)
+        var = np.full(n, config.sigma_floor_m**2)
         if w == "elevation":
-            var = var + config.sigma_zenith_m ** 2 * slant
+            var = var + config.sigma_zenith_m**2 * slant
         elif w == "cn0":
-            var = var + config.sigma_cn0_m ** 2 * weak
+            var = var + config.sigma_cn0_m**2 * weak
         else:  # both: a weak AND low signal is worse than either alone
-            var = var + config.sigma_zenith_m ** 2 * weak * slant
+            var = var + config.sigma_zenith_m**2 * weak * slant
     sigma = np.sqrt(var)
     return np.where(epoch.system == System.GLONASS, sigma * config.glonass_sigma_factor, sigma)
 
@@ -153,8 +156,13 @@ def sigma_model_m(epoch: GnssEpoch, el_rad: np.ndarray, config: SppConfig) -> np
 class _Geometry:
     """Ranges, line of sight, elevation and atmosphere at one receiver position."""
 
-    def __init__(self, epoch: GnssEpoch, x: np.ndarray, config: SppConfig,
-                 klobuchar: tuple[np.ndarray, np.ndarray] | None) -> None:
+    def __init__(
+        self,
+        epoch: GnssEpoch,
+        x: np.ndarray,
+        config: SppConfig,
+        klobuchar: tuple[np.ndarray, np.ndarray] | None,
+    ) -> None:
         self.rho, self.los = sagnac_range_m(epoch.sat_pos_ecef_m, x, config.earth_rotation)
         self.on_earth = float(np.linalg.norm(x)) > _ON_EARTH_M
         n = epoch.n
@@ -169,9 +177,9 @@ class _Geometry:
                 if config.tropo:
                     self.atm = self.atm + saastamoinen_m(lat, h, self.el)
                 if config.iono and klobuchar is not None:
-                    self.atm = self.atm + klobuchar_m(klobuchar[0], klobuchar[1], lat, lon, self.az,
-                                                      self.el, week_tow(epoch.t_gps_s)[1]) \
-                        * iono_frequency_scale(epoch.system)
+                    self.atm = self.atm + klobuchar_m(
+                        klobuchar[0], klobuchar[1], lat, lon, self.az, self.el, week_tow(epoch.t_gps_s)[1]
+                    ) * iono_frequency_scale(epoch.system)
         else:
             self.enu = np.eye(3)
             given = np.deg2rad(epoch.elevation_deg)
@@ -193,9 +201,13 @@ def _wls(h: np.ndarray, r: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.nd
     return q @ (hw.T @ r), q
 
 
-def solve_position(epoch: GnssEpoch, config: SppConfig = SppConfig(), *,
-                   p0_ecef_m: np.ndarray | None = None,
-                   klobuchar: tuple[np.ndarray, np.ndarray] | None = None) -> SppSolution:
+def solve_position(
+    epoch: GnssEpoch,
+    config: SppConfig = SppConfig(),
+    *,
+    p0_ecef_m: np.ndarray | None = None,
+    klobuchar: tuple[np.ndarray, np.ndarray] | None = None,
+) -> SppSolution:
     """Weighted least-squares position (and, when pseudorange rates are given, velocity)."""
     n = epoch.n
     y = epoch.pseudorange_m if epoch.corrected else epoch.pseudorange_m + C_M_S * epoch.sat_clock_s
@@ -229,8 +241,14 @@ def solve_position(epoch: GnssEpoch, config: SppConfig = SppConfig(), *,
     return _solution(epoch, res, excluded, raim_passed, total_iter, config)
 
 
-def _iterate(epoch: GnssEpoch, y: np.ndarray, candidate: np.ndarray, x0: np.ndarray, config: SppConfig,
-             klobuchar: tuple[np.ndarray, np.ndarray] | None) -> dict:
+def _iterate(
+    epoch: GnssEpoch,
+    y: np.ndarray,
+    candidate: np.ndarray,
+    x0: np.ndarray,
+    config: SppConfig,
+    klobuchar: tuple[np.ndarray, np.ndarray] | None,
+) -> dict:
     x = x0.copy()
     systems = tuple(System(int(s)) for s in np.unique(epoch.system[candidate]))
     k = len(systems)
@@ -238,8 +256,17 @@ def _iterate(epoch: GnssEpoch, y: np.ndarray, candidate: np.ndarray, x0: np.ndar
     cols_all = np.array([col_of.get(System(int(s)), 0) for s in epoch.system], dtype=int)
     clocks = np.zeros(k)
     mask_rad = np.deg2rad(config.elevation_mask_deg)
-    out: dict = {"ok": False, "reason": "too few satellites", "x": x, "clocks": clocks, "systems": systems,
-                 "iterations": 0, "used": np.zeros(epoch.n, bool), "dof": 0, "chi2": math.nan}
+    out: dict = {
+        "ok": False,
+        "reason": "too few satellites",
+        "x": x,
+        "clocks": clocks,
+        "systems": systems,
+        "iterations": 0,
+        "used": np.zeros(epoch.n, bool),
+        "dof": 0,
+        "chi2": math.nan,
+    }
     it = 0
     geo: _Geometry | None = None
     used = candidate.copy()
@@ -271,7 +298,7 @@ def _iterate(epoch: GnssEpoch, y: np.ndarray, candidate: np.ndarray, x0: np.ndar
     resid = y - (geo.rho + clocks[cols_all] + geo.atm)
     present = np.array([bool((used & (epoch.system == s)).any()) for s in systems], dtype=bool)
     h_full = _design(geo.los, cols_all, k)[:, np.r_[True, True, True, present]]
-    w = 1.0 / sigma ** 2
+    w = 1.0 / sigma**2
     hu = h_full[used]
     n_mat = hu.T @ (hu * w[used][:, None])
     q = np.linalg.inv(n_mat)
@@ -283,23 +310,54 @@ def _iterate(epoch: GnssEpoch, y: np.ndarray, candidate: np.ndarray, x0: np.ndar
     qg = np.linalg.inv(hu.T @ hu)  # unweighted, for DOPs
     penu = geo.enu @ qg[:3, :3] @ geo.enu.T
     tdop = math.sqrt(float(np.mean(np.diag(qg)[3:]))) if qg.shape[0] > 3 else math.nan
-    dops = Dops(math.sqrt(float(np.trace(qg))), math.sqrt(float(np.trace(penu))),
-                math.sqrt(float(penu[0, 0] + penu[1, 1])), math.sqrt(float(penu[2, 2])), tdop)
-    out.update(ok=dops.gdop <= config.max_gdop, reason="" if dops.gdop <= config.max_gdop else "gdop",
-               x=x, clocks=clocks, iterations=it, used=used, dof=dof, chi2=chi2, q=q, geo=geo,
-               sigma=sigma, resid=resid, standardised=standardised, dops=dops, present=present)
+    dops = Dops(
+        math.sqrt(float(np.trace(qg))),
+        math.sqrt(float(np.trace(penu))),
+        math.sqrt(float(penu[0, 0] + penu[1, 1])),
+        math.sqrt(float(penu[2, 2])),
+        tdop,
+    )
+    ok = dops.gdop <= config.max_gdop
+    out.update(ok=ok, reason="" if ok else "gdop", x=x, clocks=clocks, iterations=it, used=used, dof=dof,
+               chi2=chi2, q=q, geo=geo, sigma=sigma, resid=resid, standardised=standardised, dops=dops,
+               present=present)
     return out
 
 
-def _solution(epoch: GnssEpoch, res: dict, excluded: np.ndarray, raim_passed: bool | None,
-              iterations: int, config: SppConfig) -> SppSolution:
+def _solution(
+    epoch: GnssEpoch,
+    res: dict,
+    excluded: np.ndarray,
+    raim_passed: bool | None,
+    iterations: int,
+    config: SppConfig,
+) -> SppSolution:
     n = epoch.n
     nan3 = np.full(3, np.nan)
     if "geo" not in res:
-        return SppSolution(epoch.t_gps_s, False, res["reason"], nan3, (), np.zeros(0), np.full((3, 3), np.nan),
-                           math.nan, math.nan, _NO_DOPS, np.full(n, np.nan), np.full(n, np.nan),
-                           np.zeros(n, bool), excluded, np.full(n, np.nan), np.full(n, np.nan), math.nan, 0,
-                           math.nan, raim_passed, iterations)
+        return SppSolution(
+            epoch.t_gps_s,
+            False,
+            res["reason"],
+            nan3,
+            (),
+            np.zeros(0),
+            np.full((3, 3), np.nan),
+            math.nan,
+            math.nan,
+            _NO_DOPS,
+            np.full(n, np.nan),
+            np.full(n, np.nan),
+            np.zeros(n, bool),
+            excluded,
+            np.full(n, np.nan),
+            np.full(n, np.nan),
+            math.nan,
+            0,
+            math.nan,
+            raim_passed,
+            iterations,
+        )
     geo: _Geometry = res["geo"]
     dof = res["dof"]
     unit_var = res["chi2"] / dof if dof > 0 else math.nan
@@ -312,10 +370,31 @@ def _solution(epoch: GnssEpoch, res: dict, excluded: np.ndarray, raim_passed: bo
     if res["ok"] and np.isfinite(epoch.pseudorange_rate_m_s).any():
         v, drift, vacc = _velocity(epoch, res["x"], geo, res["used"], config)
     return SppSolution(
-        epoch.t_gps_s, bool(res["ok"]), res["reason"], res["x"].copy(), systems, res["clocks"][present].copy(),
-        cov, math.sqrt(0.5 * float(cov_enu[0, 0] + cov_enu[1, 1])), math.sqrt(float(cov_enu[2, 2])),
-        res["dops"], res["resid"], res["sigma"], res["used"], excluded, np.rad2deg(geo.el),
-        np.rad2deg(geo.az), res["chi2"], dof, unit_var, raim_passed, iterations, v, drift, vacc)
+        epoch.t_gps_s,
+        bool(res["ok"]),
+        res["reason"],
+        res["x"].copy(),
+        systems,
+        res["clocks"][present].copy(),
+        cov,
+        math.sqrt(0.5 * float(cov_enu[0, 0] + cov_enu[1, 1])),
+        math.sqrt(float(cov_enu[2, 2])),
+        res["dops"],
+        res["resid"],
+        res["sigma"],
+        res["used"],
+        excluded,
+        np.rad2deg(geo.el),
+        np.rad2deg(geo.az),
+        res["chi2"],
+        dof,
+        unit_var,
+        raim_passed,
+        iterations,
+        v,
+        drift,
+        vacc,
+    )
 
 
 def _sigma_reference_m(config: SppConfig) -> float:
@@ -323,32 +402,41 @@ def _sigma_reference_m(config: SppConfig) -> float:
     w = config.weighting
     if w in ("uniform", "given"):
         return config.sigma_uniform_m
-    return math.sqrt(config.sigma_floor_m ** 2 + (config.sigma_cn0_m if w == "cn0" else config.sigma_zenith_m) ** 2)
+    return math.sqrt(
+        config.sigma_floor_m**2 + (config.sigma_cn0_m if w == "cn0" else config.sigma_zenith_m) ** 2
+    )
 
 
-def _velocity(epoch: GnssEpoch, x: np.ndarray, geo: _Geometry, used: np.ndarray, config: SppConfig
-              ) -> tuple[np.ndarray, float, float]:
+def _velocity(
+    epoch: GnssEpoch, x: np.ndarray, geo: _Geometry, used: np.ndarray, config: SppConfig
+) -> tuple[np.ndarray, float, float]:
     """Receiver velocity (ECEF) and clock drift (m/s) from pseudorange rates (RTKLIB resdop)."""
     ok = used & np.isfinite(epoch.pseudorange_rate_m_s) & np.isfinite(epoch.sat_vel_ecef_m_s).all(axis=1)
     if ok.sum() < 4:
         return np.full(3, np.nan), math.nan, math.nan
     los, vs, rs = geo.los[ok], epoch.sat_vel_ecef_m_s[ok], epoch.sat_pos_ecef_m[ok]
-    clk_drift = np.zeros(int(ok.sum())) if epoch.corrected else C_M_S * np.nan_to_num(epoch.sat_clock_drift_s_s[ok])
+    clk_drift = (
+        np.zeros(int(ok.sum())) if epoch.corrected else C_M_S * np.nan_to_num(epoch.sat_clock_drift_s_s[ok])
+    )
     # the pseudorange σ model's shape, scaled so that an ideal observation has sigma_range_rate_m_s
-    sigma = sigma_model_m(epoch, geo.el, config)[ok] * (config.sigma_range_rate_m_s / _sigma_reference_m(config))
+    sigma = sigma_model_m(epoch, geo.el, config)[ok] * (
+        config.sigma_range_rate_m_s / _sigma_reference_m(config)
+    )
     prr = epoch.pseudorange_rate_m_s[ok]
     v = np.zeros(4)
     h = np.column_stack((-los, np.ones(len(los))))
     q = np.eye(4)
     r = np.zeros(len(los))
     for _ in range(3):
-        sagnac = OMEGA_E_RAD_S / C_M_S * (vs[:, 1] * x[0] + rs[:, 1] * v[0] - vs[:, 0] * x[1] - rs[:, 0] * v[1])
+        sagnac = (
+            OMEGA_E_RAD_S / C_M_S * (vs[:, 1] * x[0] + rs[:, 1] * v[0] - vs[:, 0] * x[1] - rs[:, 0] * v[1])
+        )
         sat_los = np.einsum("ij,ij->i", vs, los)
         geo_rate = sat_los - los @ v[:3]
         # light-time rate: the signal left the satellite at t − ρ/c, so its velocity enters × (1 − ρ̇/c)
         model = geo_rate - sat_los * geo_rate / C_M_S + sagnac + v[3] - clk_drift
         r = prr - model
-        dv, q = _wls(h, r, 1.0 / sigma ** 2)
+        dv, q = _wls(h, r, 1.0 / sigma**2)
         v = v + dv
     dof = len(r) - 4
     if config.accuracy == "a-posteriori" and dof > 0:

@@ -19,13 +19,21 @@ class System(IntEnum):
 
 
 RINEX_LETTER: dict[System, str] = {
-    System.GPS: "G", System.SBAS: "S", System.GALILEO: "E", System.BEIDOU: "C",
-    System.QZSS: "J", System.GLONASS: "R",
+    System.GPS: "G",
+    System.SBAS: "S",
+    System.GALILEO: "E",
+    System.BEIDOU: "C",
+    System.QZSS: "J",
+    System.GLONASS: "R",
 }
 FROM_RINEX_LETTER: dict[str, System] = {v: k for k, v in RINEX_LETTER.items()}
 SHORT_NAME: dict[System, str] = {
-    System.GPS: "GPS", System.SBAS: "SBAS", System.GALILEO: "GAL", System.BEIDOU: "BDS",
-    System.QZSS: "QZS", System.GLONASS: "GLO",
+    System.GPS: "GPS",
+    System.SBAS: "SBAS",
+    System.GALILEO: "GAL",
+    System.BEIDOU: "BDS",
+    System.QZSS: "QZS",
+    System.GLONASS: "GLO",
 }
 
 # Satellites on Keplerian broadcast orbits (GLONASS broadcasts a state vector; SBAS neither here)
@@ -39,8 +47,11 @@ def sv_name(system: int, prn: int) -> str:
 
 def sv_key(system: np.ndarray | int, prn: np.ndarray | int) -> np.ndarray | int:
     """One integer per satellite (``system * 1000 + prn``), vectorised: a dictionary/sort key."""
-    return np.asarray(system, dtype=np.int64) * 1000 + np.asarray(prn, dtype=np.int64) \
-        if isinstance(system, np.ndarray) else int(system) * 1000 + int(prn)
+    return (
+        np.asarray(system, dtype=np.int64) * 1000 + np.asarray(prn, dtype=np.int64)
+        if isinstance(system, np.ndarray)
+        else int(system) * 1000 + int(prn)
+    )
 
 
 def is_beidou_geo(prn: np.ndarray) -> np.ndarray:

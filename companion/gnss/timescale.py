@@ -32,10 +32,24 @@ GLONASS_MINUS_UTC_S = 3 * 3600.0
 
 # (UTC date the offset takes effect, GPST − UTC from then on), IERS Bulletin C
 _LEAP_DATES = (
-    ((1981, 7, 1), 1), ((1982, 7, 1), 2), ((1983, 7, 1), 3), ((1985, 7, 1), 4), ((1988, 1, 1), 5),
-    ((1990, 1, 1), 6), ((1991, 1, 1), 7), ((1992, 7, 1), 8), ((1993, 7, 1), 9), ((1994, 7, 1), 10),
-    ((1996, 1, 1), 11), ((1997, 7, 1), 12), ((1999, 1, 1), 13), ((2006, 1, 1), 14), ((2009, 1, 1), 15),
-    ((2012, 7, 1), 16), ((2015, 7, 1), 17), ((2017, 1, 1), 18),
+    ((1981, 7, 1), 1),
+    ((1982, 7, 1), 2),
+    ((1983, 7, 1), 3),
+    ((1985, 7, 1), 4),
+    ((1988, 1, 1), 5),
+    ((1990, 1, 1), 6),
+    ((1991, 1, 1), 7),
+    ((1992, 7, 1), 8),
+    ((1993, 7, 1), 9),
+    ((1994, 7, 1), 10),
+    ((1996, 1, 1), 11),
+    ((1997, 7, 1), 12),
+    ((1999, 1, 1), 13),
+    ((2006, 1, 1), 14),
+    ((2009, 1, 1), 15),
+    ((2012, 7, 1), 16),
+    ((2015, 7, 1), 17),
+    ((2017, 1, 1), 18),
 )
 # the same instants as Unix seconds and as GPS seconds
 LEAP_UNIX_S = np.array([calendar.timegm((*d, 0, 0, 0)) for d, _ in _LEAP_DATES], dtype=float)
@@ -86,14 +100,21 @@ def gps_to_bdt_s(t_gps_s: float) -> float:
     return t_gps_s - BDT_WEEK_OFFSET * float(SECONDS_PER_WEEK) - GPS_MINUS_BDT_S
 
 
-def gps_from_calendar(year: int, month: int, day: int, hour: int, minute: int, second: float,
-                      scale: str = "GPS") -> float:
+def gps_from_calendar(
+    year: int, month: int, day: int, hour: int, minute: int, second: float, scale: str = "GPS"
+) -> float:
     """A calendar date read in time scale ``scale`` (``SCALES``) -> GPS time.
 
     ``GLO`` is UTC as RINEX writes GLONASS epochs; Moscow time (UTC + 3 h, the GLONASS navigation
     message's own) is :data:`GLONASS_MINUS_UTC_S` away and is the caller's to remove."""
-    if not (1980 <= year <= 2200 and 1 <= month <= 12 and 1 <= day <= 31 and 0 <= hour < 24
-            and 0 <= minute < 60 and 0 <= second < 61):
+    if not (
+        1980 <= year <= 2200
+        and 1 <= month <= 12
+        and 1 <= day <= 31
+        and 0 <= hour < 24
+        and 0 <= minute < 60
+        and 0 <= second < 61
+    ):
         raise UserError(f"date {year}-{month}-{day} {hour}:{minute}:{second} out of range")
     whole = calendar.timegm((year, month, day, hour, minute, 0)) - GPS_EPOCH_UNIX_S
     t = whole + float(second)  # seconds since 1980-01-06 in the calendar's own scale
@@ -138,8 +159,9 @@ class BootTimeMap:
     t_gps_last_s: float
 
     @classmethod
-    def from_gps_pairs(cls, t_gps_s: np.ndarray, boot_us: np.ndarray,
-                       tolerance_us: float = 50_000.0) -> BootTimeMap:
+    def from_gps_pairs(
+        cls, t_gps_s: np.ndarray, boot_us: np.ndarray, tolerance_us: float = 50_000.0
+    ) -> BootTimeMap:
         t_gps_s = np.asarray(t_gps_s, dtype=float)
         boot_us = np.asarray(boot_us, dtype=float)
         ok = np.isfinite(t_gps_s) & np.isfinite(boot_us) & (t_gps_s > 0)
@@ -156,12 +178,20 @@ class BootTimeMap:
             drift, icpt = 0.0, float(np.median(b - (t - t0) * 1e6))
         offset = icpt - (1.0 + drift) * t0 * 1e6
         res = b - (offset + (1.0 + drift) * t * 1e6)
-        return cls(float(offset), float(drift), int(len(t)), int(ok.sum() - len(t) + (~ok).sum()),
-                   float(np.sqrt(np.mean(res ** 2))), t0, float(t[-1]))
+        return cls(
+            float(offset),
+            float(drift),
+            int(len(t)),
+            int(ok.sum() - len(t) + (~ok).sum()),
+            float(np.sqrt(np.mean(res**2))),
+            t0,
+            float(t[-1]),
+        )
 
     @classmethod
-    def from_system_time(cls, time_unix_us: np.ndarray, time_boot_us: np.ndarray,
-                         tolerance_us: float = 50_000.0) -> BootTimeMap:
+    def from_system_time(
+        cls, time_unix_us: np.ndarray, time_boot_us: np.ndarray, tolerance_us: float = 50_000.0
+    ) -> BootTimeMap:
         """From SYSTEM_TIME pairs (``time_unix_usec``, ``time_boot_ms * 1000``); Unix 0 (clock not
         set) is dropped. Leap seconds from the table at each stamp."""
         unix_us = np.asarray(time_unix_us, dtype=float)

@@ -94,7 +94,11 @@ class UbxDecoder:
         sysv, prnv, pr, var, rate, cn0, el, az = [], [], [], [], [], [], [], []
         for i in range(1, n + 1):
             s = f"_{i:02d}"
-            gnss, sv, sig = int(getattr(m, "gnssId" + s)), int(getattr(m, "svId" + s)), int(getattr(m, "sigId" + s, 0))
+            gnss, sv, sig = (
+                int(getattr(m, "gnssId" + s)),
+                int(getattr(m, "svId" + s)),
+                int(getattr(m, "sigId" + s, 0)),
+            )
             if gnss not in KNOWN_SYSTEMS or gnss == System.SBAS:
                 self.counters["rawx_unknown_system"] += 1
                 continue
@@ -126,8 +130,17 @@ class UbxDecoder:
             self.counters["rawx_empty"] += 1
             return None
         self.counters["rawx_epochs"] += 1
-        return make_epoch(t, sysv, prnv, pr, pseudorange_var_m2=var, pseudorange_rate_m_s=rate, cn0_dbhz=cn0,
-                          elevation_deg=el, azimuth_deg=az)
+        return make_epoch(
+            t,
+            sysv,
+            prnv,
+            pr,
+            pseudorange_var_m2=var,
+            pseudorange_rate_m_s=rate,
+            cn0_dbhz=cn0,
+            elevation_deg=el,
+            azimuth_deg=az,
+        )
 
     def _sfrbx(self, m: Any) -> KeplerEphemeris | None:
         gnss = int(m.gnssId)
@@ -150,19 +163,39 @@ class UbxDecoder:
         t_utc = math.nan
         if int(getattr(m, "validDate", 0)) and int(getattr(m, "validTime", 0)):
             try:
-                t_utc = gps_from_calendar(int(m.year), int(m.month), int(m.day), int(m.hour), int(m.min),
-                                          int(m.second) + int(getattr(m, "nano", 0)) * 1e-9, "UTC")
+                t_utc = gps_from_calendar(
+                    int(m.year),
+                    int(m.month),
+                    int(m.day),
+                    int(m.hour),
+                    int(m.min),
+                    int(m.second) + int(getattr(m, "nano", 0)) * 1e-9,
+                    "UTC",
+                )
             except Exception:  # noqa: BLE001 - an impossible date is only not used
                 self.counters["pvt_bad_date"] += 1
         self.counters["pvt"] += 1
-        return ReceiverPvt(t, int(m.fixType), float(m.lat), float(m.lon), float(m.height) / 1e3,
-                           float(m.hMSL) / 1e3, float(m.hAcc) / 1e3, float(m.vAcc) / 1e3,
-                           (float(m.velN) / 1e3, float(m.velE) / 1e3, float(m.velD) / 1e3),
-                           float(m.sAcc) / 1e3, int(m.numSV), float(m.pDOP), t_utc)
+        return ReceiverPvt(
+            t,
+            int(m.fixType),
+            float(m.lat),
+            float(m.lon),
+            float(m.height) / 1e3,
+            float(m.hMSL) / 1e3,
+            float(m.hAcc) / 1e3,
+            float(m.vAcc) / 1e3,
+            (float(m.velN) / 1e3, float(m.velE) / 1e3, float(m.velD) / 1e3),
+            float(m.sAcc) / 1e3,
+            int(m.numSV),
+            float(m.pDOP),
+            t_utc,
+        )
 
     def _navsat(self, m: Any) -> None:
         for i in range(1, int(m.numSvs) + 1):
             s = f"_{i:02d}"
             self._sat[(int(getattr(m, "gnssId" + s)), int(getattr(m, "svId" + s)))] = (
-                float(getattr(m, "elev" + s)), float(getattr(m, "azim" + s)))
+                float(getattr(m, "elev" + s)),
+                float(getattr(m, "azim" + s)),
+            )
         self.counters["navsat"] += 1

@@ -39,8 +39,9 @@ class SppSeries:
     solutions: list[SppSolution]
 
 
-def solve_series(epochs: Sequence[GnssEpoch], config: SppConfig,
-                 klobuchar: tuple[np.ndarray, np.ndarray] | None = None) -> SppSeries:
+def solve_series(
+    epochs: Sequence[GnssEpoch], config: SppConfig, klobuchar: tuple[np.ndarray, np.ndarray] | None = None
+) -> SppSeries:
     """Solve every epoch, each starting from the previous solution (the Earth's centre at first)."""
     sols: list[SppSolution] = []
     prev: np.ndarray | None = None
@@ -50,10 +51,16 @@ def solve_series(epochs: Sequence[GnssEpoch], config: SppConfig,
             prev = s.p_ecef_m
         sols.append(s)
     return SppSeries(
-        np.array([s.t_gps_s for s in sols]), np.array([s.p_ecef_m for s in sols]).reshape(-1, 3),
-        np.array([s.h_acc_m for s in sols]), np.array([s.v_acc_m for s in sols]),
-        np.array([s.ok for s in sols], dtype=bool), np.array([s.n_used for s in sols]),
-        np.array([int(s.excluded.sum()) for s in sols]), np.array([s.dops.hdop for s in sols]), sols)
+        np.array([s.t_gps_s for s in sols]),
+        np.array([s.p_ecef_m for s in sols]).reshape(-1, 3),
+        np.array([s.h_acc_m for s in sols]),
+        np.array([s.v_acc_m for s in sols]),
+        np.array([s.ok for s in sols], dtype=bool),
+        np.array([s.n_used for s in sols]),
+        np.array([int(s.excluded.sum()) for s in sols]),
+        np.array([s.dops.hdop for s in sols]),
+        sols,
+    )
 
 
 def ned_errors(p_ecef_m: np.ndarray, truth_ecef_m: np.ndarray, origin_ecef_m: np.ndarray) -> np.ndarray:
@@ -86,12 +93,17 @@ def _quantiles(v: np.ndarray) -> dict[str, float]:
     v = v[np.isfinite(v)]
     if not len(v):
         return {"median": math.nan, "p95": math.nan, "mean": math.nan, "n": 0}
-    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "mean": float(v.mean()),
-            "n": int(len(v))}
+    return {
+        "median": float(np.median(v)),
+        "p95": float(np.percentile(v, 95)),
+        "mean": float(v.mean()),
+        "n": int(len(v)),
+    }
 
 
-def error_statistics(t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray, v_acc_m: np.ndarray
-                     ) -> dict[str, object]:
+def error_statistics(
+    t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray, v_acc_m: np.ndarray
+) -> dict[str, object]:
     """Horizontal/vertical error distribution, % above 5 m, epoch-to-epoch steps, correlation
     times and reported vs actual accuracy (RMS actual / RMS reported; > 1 = optimistic)."""
     ok = np.isfinite(err_ned_m).all(axis=1)
@@ -100,9 +112,13 @@ def error_statistics(t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray
     steps = np.hypot(*np.diff(e[:, :2], axis=0).T) if len(e) > 1 else np.zeros(0)
     ha, va = h_acc_m[ok], v_acc_m[ok]
     good = np.isfinite(ha) & (ha > 0)
-    h_ratio = math.sqrt(float(np.mean(h[good] ** 2) / np.mean(2.0 * ha[good] ** 2))) if good.any() else math.nan
+    h_ratio = (
+        math.sqrt(float(np.mean(h[good] ** 2) / np.mean(2.0 * ha[good] ** 2))) if good.any() else math.nan
+    )
     vgood = np.isfinite(va) & (va > 0)
-    v_ratio = math.sqrt(float(np.mean(e[vgood, 2] ** 2) / np.mean(va[vgood] ** 2))) if vgood.any() else math.nan
+    v_ratio = (
+        math.sqrt(float(np.mean(e[vgood, 2] ** 2) / np.mean(va[vgood] ** 2))) if vgood.any() else math.nan
+    )
     return {
         "epochs": int(len(e)),
         "horizontal_m": _quantiles(h),
@@ -110,16 +126,20 @@ def error_statistics(t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray
         "mean_ned_m": [float(v) for v in e.mean(axis=0)] if len(e) else [math.nan] * 3,
         "percent_above_5m": float(100.0 * np.mean(h > THRESHOLD_M)) if len(h) else math.nan,
         "step_horizontal_m": _quantiles(steps),
-        "correlation_time_s": {"north": correlation_time_s(t, e[:, 0]), "east": correlation_time_s(t, e[:, 1]),
-                               "down": correlation_time_s(t, e[:, 2])},
+        "correlation_time_s": {
+            "north": correlation_time_s(t, e[:, 0]),
+            "east": correlation_time_s(t, e[:, 1]),
+            "down": correlation_time_s(t, e[:, 2]),
+        },
         "reported_h_acc_m": _quantiles(ha),
         "accuracy_ratio_horizontal": h_ratio,
         "accuracy_ratio_vertical": v_ratio,
     }
 
 
-def residuals_at_truth(epochs: Sequence[GnssEpoch], truth_ecef_m: np.ndarray, config: SppConfig
-                       ) -> dict[str, dict[str, dict[str, float]]]:
+def residuals_at_truth(
+    epochs: Sequence[GnssEpoch], truth_ecef_m: np.ndarray, config: SppConfig
+) -> dict[str, dict[str, dict[str, float]]]:
     """Pseudorange residuals at the TRUE position, by system and elevation bin (median, p95, n).
 
     Per epoch and system the receiver clock is the weighted mean (the SPP's σ model at the true
@@ -160,8 +180,9 @@ def residuals_at_truth(epochs: Sequence[GnssEpoch], truth_ecef_m: np.ndarray, co
     return out
 
 
-def write_error_csv(path: Path, t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray,
-                    v_acc_m: np.ndarray) -> int:
+def write_error_csv(
+    path: Path, t_s: np.ndarray, err_ned_m: np.ndarray, h_acc_m: np.ndarray, v_acc_m: np.ndarray
+) -> int:
     """``t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m``; t from the first row; an epoch without a
     solution is left out; unknown accuracies are empty fields. Returns the number of rows."""
     ok = np.isfinite(err_ned_m).all(axis=1)

@@ -33,24 +33,48 @@ VARIANTS: tuple[tuple[str, dict[str, Any]], ...] = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="gnss_command", required=True, metavar="ACTION")
-    p = sub.add_parser("spp", help="single-point solutions (weighted least squares), errors vs truth",
-                       description=__doc__.splitlines()[0])
+    p = sub.add_parser(
+        "spp",
+        help="single-point solutions (weighted least squares), errors vs truth",
+        description=__doc__.splitlines()[0],
+    )
     p.add_argument("input", type=Path, help="smartLoc *_Input.txt, RINEX 3 observation file or UBX log")
-    p.add_argument("--nav", type=Path, action="append", default=[],
-                   help="RINEX 3 navigation file(s) for a RINEX observation input (repeatable)")
-    p.add_argument("--truth", type=Path, default=None,
-                   help="smartLoc *_GT.txt truth (default: the _GT.txt beside a smartLoc input)")
-    p.add_argument("--truth-ecef", default=None, metavar="X,Y,Z",
-                   help="a static receiver's true ECEF position (m) instead of a truth file")
+    p.add_argument(
+        "--nav",
+        type=Path,
+        action="append",
+        default=[],
+        help="RINEX 3 navigation file(s) for a RINEX observation input (repeatable)",
+    )
+    p.add_argument(
+        "--truth",
+        type=Path,
+        default=None,
+        help="smartLoc *_GT.txt truth (default: the _GT.txt beside a smartLoc input)",
+    )
+    p.add_argument(
+        "--truth-ecef",
+        default=None,
+        metavar="X,Y,Z",
+        help="a static receiver's true ECEF position (m) instead of a truth file",
+    )
     p.add_argument("--out", type=Path, default=Path("runs/gnss-spp"), help="output directory")
-    p.add_argument("--weighting", default="cn0-elevation", choices=WEIGHTINGS,
-                   help="pseudorange σ model (default cn0-elevation)")
+    p.add_argument(
+        "--weighting",
+        default="cn0-elevation",
+        choices=WEIGHTINGS,
+        help="pseudorange σ model (default cn0-elevation)",
+    )
     p.add_argument("--raim", action="store_true", help="RAIM/FDE: χ² test, exclude the worst satellite")
-    p.add_argument("--no-earth-rotation", action="store_true",
-                   help="leave the Sagnac term out (to see what it is worth)")
+    p.add_argument(
+        "--no-earth-rotation", action="store_true", help="leave the Sagnac term out (to see what it is worth)"
+    )
     p.add_argument("--elevation-mask-deg", type=float, default=SppConfig.elevation_mask_deg)
-    p.add_argument("--variants", action="store_true",
-                   help="also solve the weighting on/off x RAIM on/off table (summary.json 'variants')")
+    p.add_argument(
+        "--variants",
+        action="store_true",
+        help="also solve the weighting on/off x RAIM on/off table (summary.json 'variants')",
+    )
     p.add_argument("--json", action="store_true", help="print summary.json")
 
 
@@ -63,12 +87,18 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--elevation-mask-deg {args.elevation_mask_deg}: expected 0 to 90")
     check_out_dir(args.out)
     data = load_input(args.input, args.nav, args.truth, args.truth_ecef)
-    config = SppConfig(weighting=args.weighting, raim=args.raim, earth_rotation=not args.no_earth_rotation,
-                       elevation_mask_deg=args.elevation_mask_deg)
+    config = SppConfig(
+        weighting=args.weighting,
+        raim=args.raim,
+        earth_rotation=not args.no_earth_rotation,
+        elevation_mask_deg=args.elevation_mask_deg,
+    )
     summary, series, err = evaluate(data, config)
     if args.variants:
-        summary["variants"] = {name: evaluate(data, dataclasses.replace(config, **changes))[0]["errors"]
-                               for name, changes in VARIANTS}
+        summary["variants"] = {
+            name: evaluate(data, dataclasses.replace(config, **changes))[0]["errors"]
+            for name, changes in VARIANTS
+        }
     args.out.mkdir(parents=True, exist_ok=True)
     _write_fixes(args.out / "fixes.csv", series, err)
     files = [args.out / "fixes.csv", args.out / "summary.json"]
@@ -84,15 +114,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def evaluate(data: GnssInput, config: SppConfig) -> tuple[dict[str, Any], baseline.SppSeries, np.ndarray | None]:
+def evaluate(
+    data: GnssInput, config: SppConfig
+) -> tuple[dict[str, Any], baseline.SppSeries, np.ndarray | None]:
     """Solve every epoch; with truth, the errors and the residuals at the true position."""
     series = baseline.solve_series(data.epochs, config, data.klobuchar)
     summary: dict[str, Any] = {
-        "input": str(data.path), "format": data.format, "config": dataclasses.asdict(config),
-        "epochs": len(data.epochs), "solutions": int(series.ok.sum()),
-        "satellites_used": {"median": float(np.median(series.n_used[series.ok])) if series.ok.any() else None},
+        "input": str(data.path),
+        "format": data.format,
+        "config": dataclasses.asdict(config),
+        "epochs": len(data.epochs),
+        "solutions": int(series.ok.sum()),
+        "satellites_used": {
+            "median": float(np.median(series.n_used[series.ok])) if series.ok.any() else None
+        },
         "raim_exclusions": int(series.n_excluded.sum()),
-        "rejected": dict(data.rejected), "reasons_no_solution": _reasons(series),
+        "rejected": dict(data.rejected),
+        "reasons_no_solution": _reasons(series),
     }
     err = None
     truth = data.truth_at(series.t_s)
@@ -117,10 +155,23 @@ def _write_fixes(path: Path, series: baseline.SppSeries, err: np.ndarray | None)
     from companion.gnss.geometry import ecef_to_geodetic
 
     lat, lon, h = ecef_to_geodetic(series.p_ecef_m)
-    cols = [series.t_s, series.p_ecef_m[:, 0], series.p_ecef_m[:, 1], series.p_ecef_m[:, 2],
-            np.rad2deg(lat), np.rad2deg(lon), h, series.h_acc_m, series.v_acc_m, series.hdop,
-            series.n_used, series.n_excluded]
-    header = "t_s,x_ecef_m,y_ecef_m,z_ecef_m,lat_deg,lon_deg,h_ellipsoid_m,h_acc_m,v_acc_m,hdop,n_used,n_excluded"
+    cols = [
+        series.t_s,
+        series.p_ecef_m[:, 0],
+        series.p_ecef_m[:, 1],
+        series.p_ecef_m[:, 2],
+        np.rad2deg(lat),
+        np.rad2deg(lon),
+        h,
+        series.h_acc_m,
+        series.v_acc_m,
+        series.hdop,
+        series.n_used,
+        series.n_excluded,
+    ]
+    header = (
+        "t_s,x_ecef_m,y_ecef_m,z_ecef_m,lat_deg,lon_deg,h_ellipsoid_m,h_acc_m,v_acc_m,hdop,n_used,n_excluded"
+    )
     if err is not None:
         cols += [err[:, 0], err[:, 1], err[:, 2]]
         header += ",err_n_m,err_e_m,err_d_m"
@@ -130,19 +181,25 @@ def _write_fixes(path: Path, series: baseline.SppSeries, err: np.ndarray | None)
 
 def report(s: dict[str, Any]) -> str:
     c = s["config"]
-    lines = [f"spp on {Path(s['input']).name} ({s['format']}): {s['epochs']} epochs, {s['solutions']} solutions "
-             f"(weighting {c['weighting']}, RAIM {'on' if c['raim'] else 'off'}"
-             f"{', no Earth rotation' if not c['earth_rotation'] else ''}; "
-             f"{s['raim_exclusions']} exclusions)"]
+    lines = [
+        f"spp on {Path(s['input']).name} ({s['format']}): {s['epochs']} epochs, {s['solutions']} solutions "
+        f"(weighting {c['weighting']}, RAIM {'on' if c['raim'] else 'off'}"
+        f"{', no Earth rotation' if not c['earth_rotation'] else ''}; "
+        f"{s['raim_exclusions']} exclusions)"
+    ]
     e = s.get("errors")
     if e:
         lines.append(_row_text(e))
         ct = e["correlation_time_s"]
-        lines.append(f"  epoch-to-epoch horizontal step median {e['step_horizontal_m']['median']:.1f} m; "
-                     f"correlation time N {ct['north']:.1f} s E {ct['east']:.1f} s D {ct['down']:.1f} s; "
-                     f"mean error NED {', '.join(f'{v:+.1f}' for v in e['mean_ned_m'])} m")
-        lines.append(f"  actual / reported accuracy (RMS): horizontal {e['accuracy_ratio_horizontal']:.2f}, "
-                     f"vertical {e['accuracy_ratio_vertical']:.2f}")
+        lines.append(
+            f"  epoch-to-epoch horizontal step median {e['step_horizontal_m']['median']:.1f} m; "
+            f"correlation time N {ct['north']:.1f} s E {ct['east']:.1f} s D {ct['down']:.1f} s; "
+            f"mean error NED {', '.join(f'{v:+.1f}' for v in e['mean_ned_m'])} m"
+        )
+        lines.append(
+            f"  actual / reported accuracy (RMS): horizontal {e['accuracy_ratio_horizontal']:.2f}, "
+            f"vertical {e['accuracy_ratio_vertical']:.2f}"
+        )
         for name, bins in s.get("residuals_at_truth_m", {}).items():
             cells = "  ".join(f"{k} {v['median']:+.1f} (n {v['n']})" for k, v in bins.items() if v["n"])
             lines.append(f"  residual at truth, median m, {name}: {cells}")
@@ -153,5 +210,7 @@ def report(s: dict[str, Any]) -> str:
 
 def _row_text(e: dict[str, Any]) -> str:
     h = e["horizontal_m"]
-    return (f"  horizontal error median {h['median']:.1f} m p95 {h['p95']:.1f} m, "
-            f"{e['percent_above_5m']:.0f} % > 5 m; vertical |error| median {e['vertical_abs_m']['median']:.1f} m")
+    return (
+        f"  horizontal error median {h['median']:.1f} m p95 {h['p95']:.1f} m, "
+        f"{e['percent_above_5m']:.0f} % > 5 m; vertical |error| median {e['vertical_abs_m']['median']:.1f} m"
+    )

@@ -35,7 +35,9 @@ GRAVITY_M_S2 = 9.80665
 
 def check_coupling(coupling: str) -> None:
     if coupling == "tight":
-        raise UserError("--coupling tight: the tightly coupled estimator is not available yet; use --coupling loose")
+        raise UserError(
+            "--coupling tight: the tightly coupled estimator is not available yet; use --coupling loose"
+        )
     if coupling not in COUPLINGS:
         raise UserError(f"--coupling {coupling!r}: choose from {', '.join(COUPLINGS)}")
 
@@ -73,7 +75,7 @@ class LogWithFixes:
         self._source = source
 
     @property
-    def references(self) -> dict[str, ReferenceInfo]:  # type: ignore[override]
+    def references(self) -> dict[str, ReferenceInfo]:
         return self.inner.references
 
     def first_fix(self) -> GnssFix | None:
@@ -89,7 +91,7 @@ class LogWithFixes:
             if kind is GnssFix:
                 self.stats.rejected["log_fix_replaced"] += 1
                 continue
-            if kind is ImuSample:
+            if isinstance(ev, ImuSample):
                 while i < n and fixes[i].t_validity_us <= ev.t_us:
                     self.stats.decoded["gnss_external"] += 1
                     yield fixes[i]
@@ -111,10 +113,16 @@ class SmartLocSource:
 
     def __post_init__(self) -> None:
         self.stats = ReaderStats()
-        self.sources: dict[str, str | None] = {"imu": "none (zero acceleration, level)", "attitude": "none (level)",
-                                               "gnss": "smartLoc pseudoranges -> SPP"}
-        self.references = {TRUTH: ReferenceInfo("smartLoc point3", "geodetic",
-                                                "estimated position vs the smartLoc truth (ECEF -> geodetic)")}
+        self.sources: dict[str, str | None] = {
+            "imu": "none (zero acceleration, level)",
+            "attitude": "none (level)",
+            "gnss": "smartLoc pseudoranges -> SPP",
+        }
+        self.references = {
+            TRUTH: ReferenceInfo(
+                "smartLoc point3", "geodetic", "estimated position vs the smartLoc truth (ECEF -> geodetic)"
+            )
+        }
 
     def first_fix(self) -> GnssFix | None:
         return self.fixes[0] if self.fixes else None
@@ -135,8 +143,14 @@ class SmartLocSource:
         nf, nr = len(self.fixes), len(t_ref_us)
         for t in range(0, t_end, step):
             while ri < nr and t_ref_us[ri] <= t:
-                yield Reference(TRUTH, int(t_ref_us[ri]), float(np.degrees(lat[ri])), float(np.degrees(lon[ri])),
-                                float(h[ri]), "smartLoc point3")
+                yield Reference(
+                    TRUTH,
+                    int(t_ref_us[ri]),
+                    float(np.degrees(lat[ri])),
+                    float(np.degrees(lon[ri])),
+                    float(h[ri]),
+                    "smartLoc point3",
+                )
                 ri += 1
             while fi < nf and self.fixes[fi].t_validity_us <= t:
                 self.stats.decoded["gnss"] += 1
@@ -166,8 +180,9 @@ def smartloc_source(input_path: Path, truth_path: Path | None, config: SppConfig
     return SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0)
 
 
-def rinex_log_reader(log_path: Path, obs: Path, navs: Sequence[Path], config: SppConfig,
-                     gps_delay_ms: float | None = None) -> tuple[LogWithFixes, dict[str, object]]:
+def rinex_log_reader(
+    log_path: Path, obs: Path, navs: Sequence[Path], config: SppConfig, gps_delay_ms: float | None = None
+) -> tuple[LogWithFixes, dict[str, object]]:
     """The log's reader with its fixes replaced by SPP fixes from RINEX, and a note for the summary."""
     from gcs_tools.gnss.sources import rinex_input
     from gcs_tools.gnss.timebase import log_time_map
@@ -178,11 +193,23 @@ def rinex_log_reader(log_path: Path, obs: Path, navs: Sequence[Path], config: Sp
     series = solve_series(data.epochs, config, data.klobuchar)
     fixes = fixes_on_boot_time(series, time_map)
     if not fixes:
-        raise UserError(f"{obs}: no single-point solution ({int(series.ok.sum())} of {len(series.ok)} epochs)")
+        raise UserError(
+            f"{obs}: no single-point solution ({int(series.ok.sum())} of {len(series.ok)} epochs)"
+        )
     reader = LogWithFixes(open_log(log_path, gps_delay_ms), fixes, f"RINEX {obs.name} -> SPP")
-    note = {"rinex_obs": str(obs), "rinex_nav": [str(p) for p in navs], "epochs": len(data.epochs),
-            "solutions": int(series.ok.sum()), "rejected": dict(data.rejected),
-            "time_join": {"pairs_used": time_map.pairs_used, "pairs_rejected": time_map.rejected,
-                          "residual_rms_us": time_map.residual_rms_us, "drift": time_map.drift},
-            "first_fix_boot_s": fixes[0].t_validity_us / 1e6, "last_fix_boot_s": fixes[-1].t_validity_us / 1e6}
+    note = {
+        "rinex_obs": str(obs),
+        "rinex_nav": [str(p) for p in navs],
+        "epochs": len(data.epochs),
+        "solutions": int(series.ok.sum()),
+        "rejected": dict(data.rejected),
+        "time_join": {
+            "pairs_used": time_map.pairs_used,
+            "pairs_rejected": time_map.rejected,
+            "residual_rms_us": time_map.residual_rms_us,
+            "drift": time_map.drift,
+        },
+        "first_fix_boot_s": fixes[0].t_validity_us / 1e6,
+        "last_fix_boot_s": fixes[-1].t_validity_us / 1e6,
+    }
     return reader, note

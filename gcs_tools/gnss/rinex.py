@@ -40,8 +40,11 @@ from companion.gnss.timescale import (
 
 # preferred code observation per system (first present wins); Doppler/C/N0 share the code's suffix
 CODE_PREFERENCE: dict[System, tuple[str, ...]] = {
-    System.GPS: ("C1C",), System.QZSS: ("C1C",), System.GLONASS: ("C1C",),
-    System.GALILEO: ("C1C", "C1X", "C1B"), System.BEIDOU: ("C2I", "C1I"),
+    System.GPS: ("C1C",),
+    System.QZSS: ("C1C",),
+    System.GLONASS: ("C1C",),
+    System.GALILEO: ("C1C", "C1X", "C1B"),
+    System.BEIDOU: ("C2I", "C1I"),
 }
 TIME_SYSTEMS = {"GPS": "GPS", "GAL": "GAL", "BDT": "BDT", "GLO": "GLO", "QZS": "QZS", "UTC": "UTC"}
 
@@ -118,14 +121,15 @@ def read_obs(path: str | Path) -> RinexObs:
             if current is not None:
                 obs_types[current] += line[7:60].split()
         elif label == "TIME OF FIRST OBS":
-            ts = line[48:51].strip() or ("GPS" if lines[0][40:41] in ("G", "M", " ") else "")
-            ts = {"E": "GAL", "C": "BDT", "R": "GLO", "J": "QZS"}.get(lines[0][40:41], ts) if not ts else ts
+            # blank: the file's system's own time (RINEX 3.05 table A2); mixed files must state it
+            own = {"E": "GAL", "C": "BDT", "R": "GLO", "J": "QZS"}.get(lines[0][40:41], "GPS")
+            ts = line[48:51].strip() or own
             if ts not in TIME_SYSTEMS:
                 raise UserError(f"{path}: unknown time system {ts!r} in TIME OF FIRST OBS")
             time_system = ts
         elif label == "APPROX POSITION XYZ":
             try:
-                approx = np.array([float(line[i:i + 14]) for i in (0, 14, 28)])
+                approx = np.array([float(line[i : i + 14]) for i in (0, 14, 28)])
             except ValueError:
                 approx = np.zeros(3)
     if not obs_types:
@@ -156,13 +160,12 @@ def read_obs(path: str | Path) -> RinexObs:
             rejected["truncated"] += 1
             break
         try:
-            t = gps_from_calendar(int(line[2:6]), int(line[7:9]), int(line[10:12]), int(line[13:15]),
-                                  int(line[16:18]), float(line[18:29]), time_system)
+            t = gps_from_calendar(*_date(line, (2, 7, 10, 13, 16, 18, 29)), time_system)
         except (ValueError, UserError):
             rejected["bad_epoch_line"] += 1
             i += 1 + nsat
             continue
-        epoch = _epoch(t, lines[i + 1: i + 1 + nsat], cols, rejected, flag)
+        epoch = _epoch(t, lines[i + 1 : i + 1 + nsat], cols, rejected, flag)
         if epoch is not None:
             epochs.append(epoch)
         i += 1 + nsat
@@ -178,17 +181,26 @@ def _columns(types: list[str], preference: Sequence[str]) -> tuple[int, int, int
             sig = code[1:]
             d = f"D{sig}"
             s = f"S{sig}"
-            return types.index(code), types.index(d) if d in types else -1, types.index(s) if s in types else -1
+            return (
+                types.index(code),
+                types.index(d) if d in types else -1,
+                types.index(s) if s in types else -1,
+            )
     return None
 
 
 def _obs_value(line: str, k: int) -> float:
-    v = line[3 + 16 * k: 3 + 16 * k + 14].strip()
+    v = line[3 + 16 * k : 3 + 16 * k + 14].strip()
     return float(v) if v else math.nan
 
 
-def _epoch(t: float, sat_lines: list[str], cols: dict[System, tuple[int, int, int] | None],
-           rejected: Counter[str], flag: int) -> GnssEpoch | None:
+def _epoch(
+    t: float,
+    sat_lines: list[str],
+    cols: dict[System, tuple[int, int, int] | None],
+    rejected: Counter[str],
+    flag: int,
+) -> GnssEpoch | None:
     sysv, prnv, prv, dv, snr = [], [], [], [], []
     for line in sat_lines:
         system = FROM_RINEX_LETTER.get(line[0:1])
@@ -219,11 +231,13 @@ def _epoch(t: float, sat_lines: list[str], cols: dict[System, tuple[int, int, in
         rejected["power_failure_epoch"] += 1
     if not sysv:
         return None
-    system = np.array(sysv, dtype=np.int8)
+    sys_arr = np.array(sysv, dtype=np.int8)
     # Doppler (Hz) -> pseudorange rate (m/s), −λ·D; GLONASS: the channel is applied by the caller
     # (glonass_rates) once the navigation data give it, here the G1 centre frequency
-    freq = np.where(system == System.BEIDOU, FREQ_B1I_HZ, np.where(system == System.GLONASS, FREQ_G1_HZ, FREQ_L1_HZ))
-    return make_epoch(t, system, prnv, prv, pseudorange_rate_m_s=-np.array(dv) * C_M_S / freq, cn0_dbhz=snr)
+    freq = np.where(
+        sys_arr == System.BEIDOU, FREQ_B1I_HZ, np.where(sys_arr == System.GLONASS, FREQ_G1_HZ, FREQ_L1_HZ)
+    )
+    return make_epoch(t, sys_arr, prnv, prv, pseudorange_rate_m_s=-np.array(dv) * C_M_S / freq, cn0_dbhz=snr)
 
 
 def fix_glonass_rates(epoch: GnssEpoch, channel: np.ndarray) -> GnssEpoch:
@@ -243,8 +257,10 @@ def read_nav(paths: str | Path | Iterable[str | Path]) -> RinexNav:
     for p in paths:
         _read_nav_file(Path(p), out)
     if not out.kepler and not out.glonass:
-        raise UserError(f"{', '.join(str(p) for p in paths)}: no usable ephemeris "
-                        f"(rejected: {dict(out.rejected) or 'none'})")
+        raise UserError(
+            f"{', '.join(str(p) for p in paths)}: no usable ephemeris "
+            f"(rejected: {dict(out.rejected) or 'none'})"
+        )
     return out
 
 
@@ -258,16 +274,14 @@ def _read_nav_file(path: Path, out: RinexNav) -> None:
     for line in lines[: body - 1]:
         label = line[60:].strip()
         if label == "IONOSPHERIC CORR":
-            vals = [_float(line[5 + 12 * j: 17 + 12 * j]) for j in range(4)]
+            vals = [_float(line[5 + 12 * j : 17 + 12 * j]) for j in range(4)]
             if line.startswith("GPSA"):
                 alpha = np.array(vals)
             elif line.startswith("GPSB"):
                 beta = np.array(vals)
         elif label == "LEAP SECONDS":
-            try:
-                out.leap_seconds = int(line[:6])
-            except ValueError:
-                pass
+            text = line[:6].strip()
+            out.leap_seconds = int(text) if text.lstrip("-").isdigit() else None
     if alpha is not None and beta is not None:
         out.klobuchar = (alpha, beta)
     glo_lines = 5 if version >= 3.05 else 4
@@ -286,7 +300,7 @@ def _read_nav_file(path: Path, out: RinexNav) -> None:
             while i < len(lines) and not lines[i][0:1].strip():
                 i += 1
             continue
-        block = lines[i: i + n]
+        block = lines[i : i + n]
         i += n
         if len(block) < n:
             out.rejected["truncated"] += 1
@@ -299,17 +313,22 @@ def _read_nav_file(path: Path, out: RinexNav) -> None:
 
 def _nav_values(block: list[str]) -> list[float]:
     """The record's numbers: three on the first line, four on each following line."""
-    vals = [_float(block[0][23 + 19 * j: 42 + 19 * j]) for j in range(3)]
+    vals = [_float(block[0][23 + 19 * j : 42 + 19 * j]) for j in range(3)]
     for line in block[1:]:
-        vals += [_float(line[4 + 19 * j: 23 + 19 * j]) for j in range(4)]
+        vals += [_float(line[4 + 19 * j : 23 + 19 * j]) for j in range(4)]
     return vals
+
+
+def _date(line: str, cols: tuple[int, ...]) -> tuple[int, int, int, int, int, float]:
+    """Year, month, day, hour, minute (integers) and seconds from fixed columns (field starts, end)."""
+    y, mo, d, h, mi = (int(line[a:b]) for a, b in zip(cols[:5], cols[1:6], strict=True))
+    return y, mo, d, h, mi, float(line[cols[5]:cols[6]])
 
 
 def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
     head = block[0]
     prn = int(head[1:3])
-    cal = (int(head[4:8]), int(head[9:11]), int(head[12:14]), int(head[15:17]), int(head[18:20]),
-           float(head[21:23]))
+    cal = _date(head, (4, 9, 12, 15, 18, 21, 23))
     v = _nav_values(block)
     if not all(math.isfinite(x) for x in v):
         out.rejected["nonfinite"] += 1
@@ -320,20 +339,25 @@ def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
         return
     if system == System.GLONASS:
         toe = gps_from_calendar(*cal, "UTC")
-        out.glonass.append(GlonassEphemeris(
-            prn=prn, channel=int(v[10]), toe_gps_s=toe,
-            pos_ecef_m=(v[3] * 1e3, v[7] * 1e3, v[11] * 1e3), vel_ecef_m_s=(v[4] * 1e3, v[8] * 1e3, v[12] * 1e3),
-            acc_ecef_m_s2=(v[5] * 1e3, v[9] * 1e3, v[13] * 1e3), clock_bias_s=v[0], gamma_n=v[1],
-            health=int(v[6])))
+        out.glonass.append(
+            GlonassEphemeris(
+                prn=prn,
+                channel=int(v[10]),
+                toe_gps_s=toe,
+                pos_ecef_m=(v[3] * 1e3, v[7] * 1e3, v[11] * 1e3),
+                vel_ecef_m_s=(v[4] * 1e3, v[8] * 1e3, v[12] * 1e3),
+                acc_ecef_m_s2=(v[5] * 1e3, v[9] * 1e3, v[13] * 1e3),
+                clock_bias_s=v[0],
+                gamma_n=v[1],
+                health=int(v[6]),
+            )
+        )
         return
     scale = "BDT" if system == System.BEIDOU else "GPS"
     toc = gps_from_calendar(*cal, scale)
     toe_sow = v[11]
     week = int(v[21])
-    if system == System.BEIDOU:
-        toe = bdt_to_gps_s(week * 604800.0 + toe_sow)
-    else:
-        toe = week * 604800.0 + toe_sow
+    toe = bdt_to_gps_s(week * 604800.0 + toe_sow) if system == System.BEIDOU else week * 604800.0 + toe_sow
     toe += 604800.0 * round((toc - toe) / 604800.0)  # a week number off by one at a crossover
     tgd = v[25]
     health = int(v[24])
@@ -343,15 +367,40 @@ def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
             out.rejected["galileo_fnav_skipped"] += 1
             return
         tgd = v[26]  # BGD E5b/E1
-    out.kepler.append(KeplerEphemeris(
-        system=int(system), prn=prn, toe_gps_s=toe, toc_gps_s=toc, toe_sow_s=toe_sow,
-        sqrt_a_m05=v[10], e=v[8], i0_rad=v[15], omega0_rad=v[13], omega_rad=v[17], m0_rad=v[6],
-        delta_n_rad_s=v[5], omega_dot_rad_s=v[18], idot_rad_s=v[19], cuc_rad=v[7], cus_rad=v[9],
-        crc_m=v[16], crs_m=v[4], cic_rad=v[12], cis_rad=v[14], af0_s=v[0], af1_s_s=v[1], af2_s_s2=v[2],
-        tgd_s=tgd, iode=int(v[3]), health=health))
+    out.kepler.append(
+        KeplerEphemeris(
+            system=int(system),
+            prn=prn,
+            toe_gps_s=toe,
+            toc_gps_s=toc,
+            toe_sow_s=toe_sow,
+            sqrt_a_m05=v[10],
+            e=v[8],
+            i0_rad=v[15],
+            omega0_rad=v[13],
+            omega_rad=v[17],
+            m0_rad=v[6],
+            delta_n_rad_s=v[5],
+            omega_dot_rad_s=v[18],
+            idot_rad_s=v[19],
+            cuc_rad=v[7],
+            cus_rad=v[9],
+            crc_m=v[16],
+            crs_m=v[4],
+            cic_rad=v[12],
+            cis_rad=v[14],
+            af0_s=v[0],
+            af1_s_s=v[1],
+            af2_s_s2=v[2],
+            tgd_s=tgd,
+            iode=int(v[3]),
+            health=health,
+        )
+    )
 
 
 # --- writer (tests and tools: synthetic scenarios) ---------------------------------------------
+
 
 def _d(x: float) -> str:
     """D19.12 as RINEX writes it."""
@@ -372,14 +421,23 @@ def _calendar(t_gps_s: float, scale: str) -> tuple[int, int, int, int, int, floa
     return d.year, d.month, d.day, d.hour, d.minute, d.second + (t - whole)
 
 
-def write_nav(path: Path, kepler: Sequence[KeplerEphemeris], glonass: Sequence[GlonassEphemeris] = (),
-              klobuchar: tuple[Sequence[float], Sequence[float]] | None = None, leap_seconds: int = 18) -> None:
+def write_nav(
+    path: Path,
+    kepler: Sequence[KeplerEphemeris],
+    glonass: Sequence[GlonassEphemeris] = (),
+    klobuchar: tuple[Sequence[float], Sequence[float]] | None = None,
+    leap_seconds: int = 18,
+) -> None:
     """A RINEX 3.04 mixed navigation file."""
     out = [f"{3.04:9.2f}{'':11s}{'N: GNSS NAV DATA':20s}{'M: MIXED':20s}RINEX VERSION / TYPE"]
     if klobuchar is not None:
         for name, vals in (("GPSA", klobuchar[0]), ("GPSB", klobuchar[1])):
-            out.append(f"{name} " + "".join(f"{v:12.4E}".replace("E", "D") for v in vals) + f"{'':7s}"
-                       + "IONOSPHERIC CORR")
+            out.append(
+                f"{name} "
+                + "".join(f"{v:12.4E}".replace("E", "D") for v in vals)
+                + f"{'':7s}"
+                + "IONOSPHERIC CORR"
+            )
     out.append(f"{leap_seconds:6d}{'':54s}LEAP SECONDS")
     out.append(f"{'':60s}END OF HEADER")
     for e in kepler:
@@ -388,37 +446,66 @@ def write_nav(path: Path, kepler: Sequence[KeplerEphemeris], glonass: Sequence[G
         y, mo, d, h, mi, sec = _calendar(e.toc_gps_s, scale)
         week = week_tow(e.toe_gps_s - (GPS_MINUS_BDT_S + 1356 * 604800.0 if s == System.BEIDOU else 0.0))[0]
         sources = 517.0 if s == System.GALILEO else 0.0
-        rows = [[e.af0_s, e.af1_s_s, e.af2_s_s2],
-                [e.iode, e.crs_m, e.delta_n_rad_s, e.m0_rad], [e.cuc_rad, e.e, e.cus_rad, e.sqrt_a_m05],
-                [e.toe_sow_s, e.cic_rad, e.omega0_rad, e.cis_rad], [e.i0_rad, e.crc_m, e.omega_rad, e.omega_dot_rad_s],
-                [e.idot_rad_s, sources, week, 0.0],
-                [2.0, e.health, e.tgd_s if s != System.GALILEO else 0.0, e.tgd_s if s == System.GALILEO else e.iode],
-                [e.toe_sow_s, 4.0 if s != System.GALILEO else 0.0, 0.0, 0.0]]
-        out.append(f"{RINEX_LETTER[s]}{e.prn:02d} {y:4d} {mo:02d} {d:02d} {h:02d} {mi:02d} {int(sec):02d}"
-                   + "".join(_d(x) for x in rows[0]))
+        rows = [
+            [e.af0_s, e.af1_s_s, e.af2_s_s2],
+            [e.iode, e.crs_m, e.delta_n_rad_s, e.m0_rad],
+            [e.cuc_rad, e.e, e.cus_rad, e.sqrt_a_m05],
+            [e.toe_sow_s, e.cic_rad, e.omega0_rad, e.cis_rad],
+            [e.i0_rad, e.crc_m, e.omega_rad, e.omega_dot_rad_s],
+            [e.idot_rad_s, sources, week, 0.0],
+            [
+                2.0,
+                e.health,
+                e.tgd_s if s != System.GALILEO else 0.0,
+                e.tgd_s if s == System.GALILEO else e.iode,
+            ],
+            [e.toe_sow_s, 4.0 if s != System.GALILEO else 0.0, 0.0, 0.0],
+        ]
+        out.append(
+            f"{RINEX_LETTER[s]}{e.prn:02d} {y:4d} {mo:02d} {d:02d} {h:02d} {mi:02d} {int(sec):02d}"
+            + "".join(_d(x) for x in rows[0])
+        )
         out += ["    " + "".join(_d(x) for x in r) for r in rows[1:]]
     for g in glonass:
         y, mo, d, h, mi, sec = _calendar(g.toe_gps_s, "UTC")
-        rows = [[g.clock_bias_s, g.gamma_n, week_tow(g.toe_gps_s)[1] % 86400.0],
-                [g.pos_ecef_m[0] / 1e3, g.vel_ecef_m_s[0] / 1e3, g.acc_ecef_m_s2[0] / 1e3, g.health],
-                [g.pos_ecef_m[1] / 1e3, g.vel_ecef_m_s[1] / 1e3, g.acc_ecef_m_s2[1] / 1e3, g.channel],
-                [g.pos_ecef_m[2] / 1e3, g.vel_ecef_m_s[2] / 1e3, g.acc_ecef_m_s2[2] / 1e3, 0.0]]
-        out.append(f"R{g.prn:02d} {y:4d} {mo:02d} {d:02d} {h:02d} {mi:02d} {int(sec):02d}"
-                   + "".join(_d(x) for x in rows[0]))
+        rows = [
+            [g.clock_bias_s, g.gamma_n, week_tow(g.toe_gps_s)[1] % 86400.0],
+            [g.pos_ecef_m[0] / 1e3, g.vel_ecef_m_s[0] / 1e3, g.acc_ecef_m_s2[0] / 1e3, g.health],
+            [g.pos_ecef_m[1] / 1e3, g.vel_ecef_m_s[1] / 1e3, g.acc_ecef_m_s2[1] / 1e3, g.channel],
+            [g.pos_ecef_m[2] / 1e3, g.vel_ecef_m_s[2] / 1e3, g.acc_ecef_m_s2[2] / 1e3, 0.0],
+        ]
+        out.append(
+            f"R{g.prn:02d} {y:4d} {mo:02d} {d:02d} {h:02d} {mi:02d} {int(sec):02d}"
+            + "".join(_d(x) for x in rows[0])
+        )
         out += ["    " + "".join(_d(x) for x in r) for r in rows[1:]]
     path.write_text("\n".join(out) + "\n", encoding="ascii")
 
 
-def write_obs(path: Path, epochs: Sequence[GnssEpoch], time_system: str = "GPS",
-              approx_position_ecef_m: Sequence[float] = (0.0, 0.0, 0.0),
-              glonass_channels: dict[int, int] | None = None) -> None:
+def write_obs(
+    path: Path,
+    epochs: Sequence[GnssEpoch],
+    time_system: str = "GPS",
+    approx_position_ecef_m: Sequence[float] = (0.0, 0.0, 0.0),
+    glonass_channels: dict[int, int] | None = None,
+) -> None:
     """A RINEX 3.04 mixed observation file with one code, Doppler and C/N0 per system (the
     signals :data:`CODE_PREFERENCE` reads first). Epoch times are written in ``time_system``;
     GLONASS Dopplers on each slot's channel frequency (``glonass_channels``: slot -> k, default 0)."""
-    signals = {System.GPS: "1C", System.QZSS: "1C", System.GLONASS: "1C", System.GALILEO: "1C",
-               System.BEIDOU: "2I"}
-    freq = {System.GPS: FREQ_L1_HZ, System.QZSS: FREQ_L1_HZ, System.GLONASS: FREQ_G1_HZ,
-            System.GALILEO: FREQ_L1_HZ, System.BEIDOU: FREQ_B1I_HZ}
+    signals = {
+        System.GPS: "1C",
+        System.QZSS: "1C",
+        System.GLONASS: "1C",
+        System.GALILEO: "1C",
+        System.BEIDOU: "2I",
+    }
+    freq = {
+        System.GPS: FREQ_L1_HZ,
+        System.QZSS: FREQ_L1_HZ,
+        System.GLONASS: FREQ_G1_HZ,
+        System.GALILEO: FREQ_L1_HZ,
+        System.BEIDOU: FREQ_B1I_HZ,
+    }
     present = sorted({System(int(s)) for e in epochs for s in e.system})
     out = [f"{3.04:9.2f}{'':11s}{'O: OBSERVATION DATA':20s}{'M: MIXED':20s}RINEX VERSION / TYPE"]
     x, y, z = approx_position_ecef_m
@@ -428,8 +515,10 @@ def write_obs(path: Path, epochs: Sequence[GnssEpoch], time_system: str = "GPS",
         types = f"C{sig} D{sig} S{sig}"
         out.append(f"{RINEX_LETTER[s]}  {3:3d} {types:53s}SYS / # / OBS TYPES")
     t0 = _calendar(epochs[0].t_gps_s, time_system)
-    out.append(f"{t0[0]:6d}{t0[1]:6d}{t0[2]:6d}{t0[3]:6d}{t0[4]:6d}{t0[5]:13.7f}     {time_system:3s}"
-               f"{'':9s}TIME OF FIRST OBS")
+    out.append(
+        f"{t0[0]:6d}{t0[1]:6d}{t0[2]:6d}{t0[3]:6d}{t0[4]:6d}{t0[5]:13.7f}     {time_system:3s}"
+        f"{'':9s}TIME OF FIRST OBS"
+    )
     out.append(f"{'':60s}END OF HEADER")
     for e in epochs:
         y_, mo, d, h, mi, sec = _calendar(e.t_gps_s, time_system)
@@ -441,6 +530,8 @@ def write_obs(path: Path, epochs: Sequence[GnssEpoch], time_system: str = "GPS",
                 f += (glonass_channels or {}).get(int(e.prn[i]), 0) * DFREQ_G1_HZ
             dop = -e.pseudorange_rate_m_s[i] * f / C_M_S
             cells = [e.pseudorange_m[i], dop, e.cn0_dbhz[i]]
-            out.append(f"{RINEX_LETTER[s]}{int(e.prn[i]):02d}"
-                       + "".join(f"{c:14.3f}  " if math.isfinite(c) else " " * 16 for c in cells).rstrip())
+            out.append(
+                f"{RINEX_LETTER[s]}{int(e.prn[i]):02d}"
+                + "".join(f"{c:14.3f}  " if math.isfinite(c) else " " * 16 for c in cells).rstrip()
+            )
     path.write_text("\n".join(out) + "\n", encoding="ascii")

@@ -24,8 +24,14 @@ from companion.errors import UserError
 from companion.gnss.observations import GnssEpoch, make_epoch
 from companion.gnss.systems import System
 
-SYSTEMS = {1: System.GPS, 2: System.SBAS, 4: System.GLONASS, 8: System.GALILEO, 16: System.QZSS,
-           32: System.BEIDOU}
+SYSTEMS = {
+    1: System.GPS,
+    2: System.SBAS,
+    4: System.GLONASS,
+    8: System.GALILEO,
+    16: System.QZSS,
+    32: System.BEIDOU,
+}
 EPOCH_GAP_S = 1e-6  # rows with stamps closer than this belong to one epoch
 
 
@@ -47,8 +53,11 @@ class Truth:
         t_s = np.asarray(t_s, dtype=float)
         out = np.column_stack([np.interp(t_s, self.t_s, self.p_ecef_m[:, i]) for i in range(3)])
         j = np.clip(np.searchsorted(self.t_s, t_s), 1, len(self.t_s) - 1)
-        bad = (t_s < self.t_s[0] - 1e-6) | (t_s > self.t_s[-1] + 1e-6) | \
-            (self.t_s[j] - self.t_s[j - 1] > max_gap_s)
+        bad = (
+            (t_s < self.t_s[0] - 1e-6)
+            | (t_s > self.t_s[-1] + 1e-6)
+            | (self.t_s[j] - self.t_s[j - 1] > max_gap_s)
+        )
         out[bad] = np.nan
         return out
 
@@ -99,8 +108,10 @@ def read_input(path: str | Path) -> SmartLocInput:
         else:
             rejected["unknown_row_type"] += 1
     if not pr_rows:
-        raise UserError(f"{path}: no usable smartLoc pseudorange3 rows in {n} lines "
-                        f"(rejected: {dict(rejected) or 'none'})")
+        raise UserError(
+            f"{path}: no usable smartLoc pseudorange3 rows in {n} lines "
+            f"(rejected: {dict(rejected) or 'none'})"
+        )
     a = np.array(pr_rows)
     order = np.argsort(a[:, 0], kind="stable")
     a = a[order]
@@ -111,9 +122,20 @@ def read_input(path: str | Path) -> SmartLocInput:
         system = np.array([SYSTEMS[int(c)] for c in r[:, 7]], dtype=np.int8)
         ident = r[:, 6].astype(int)
         prn = np.where((system == System.GLONASS) & (ident > 300), ident - 300, ident)
-        epochs.append(make_epoch(r[0, 0], system, prn, r[:, 1], pseudorange_var_m2=r[:, 2],
-                                 sat_pos_ecef_m=r[:, 3:6], elevation_deg=r[:, 8], cn0_dbhz=r[:, 9],
-                                 corrected=True, time_base="dataset"))
+        epochs.append(
+            make_epoch(
+                r[0, 0],
+                system,
+                prn,
+                r[:, 1],
+                pseudorange_var_m2=r[:, 2],
+                sat_pos_ecef_m=r[:, 3:6],
+                elevation_deg=r[:, 8],
+                cn0_dbhz=r[:, 9],
+                corrected=True,
+                time_base="dataset",
+            )
+        )
     return SmartLocInput(epochs, np.array(odo).reshape(-1, 3), rejected, n)
 
 

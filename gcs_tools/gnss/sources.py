@@ -65,8 +65,9 @@ def parse_ecef(text: str, option: str = "--truth-ecef") -> np.ndarray:
     return v
 
 
-def load_input(path: Path, navs: Sequence[Path] = (), truth: Path | None = None,
-               truth_ecef: str | None = None) -> GnssInput:
+def load_input(
+    path: Path, navs: Sequence[Path] = (), truth: Path | None = None, truth_ecef: str | None = None
+) -> GnssInput:
     fmt = detect(path)
     if fmt == "smartloc":
         data = smartloc.read_input(path)
@@ -112,6 +113,8 @@ def rinex_input(obs_path: Path, nav_paths: Sequence[Path]) -> GnssInput:
         if e.n:
             epochs.append(e)
     if not epochs:
-        raise UserError(f"{obs_path}: no observation has a broadcast ephemeris in "
-                        f"{', '.join(str(p) for p in nav_paths)} (times or satellites do not match)")
+        raise UserError(
+            f"{obs_path}: no observation has a broadcast ephemeris in "
+            f"{', '.join(str(p) for p in nav_paths)} (times or satellites do not match)"
+        )
     return GnssInput(obs_path, "rinex", epochs, nav.klobuchar, rejected, store=store)

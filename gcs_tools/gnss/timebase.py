@@ -22,7 +22,9 @@ def log_time_map(path: Path) -> BootTimeMap:
     if fmt == "tlog":
         from companion.mavlink.tlog import read_tlog
 
-        pairs = [(m.time_unix_usec, m.time_boot_ms * 1000.0) for _, m in read_tlog(path, types=("SYSTEM_TIME",))]
+        pairs = [
+            (m.time_unix_usec, m.time_boot_ms * 1000.0) for _, m in read_tlog(path, types=("SYSTEM_TIME",))
+        ]
         what = "SYSTEM_TIME"
         if pairs:
             a = np.array(pairs, dtype=float)

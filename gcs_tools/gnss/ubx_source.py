@@ -1,6 +1,6 @@
 """u-blox UBX from a file, a serial port or a TCP stream, through ``pyubx2``, into epochs.
 
-    for item in ubx_items(open_stream("tcp:127.0.0.1:5000")): ...   # GnssEpoch | ReceiverPvt | KeplerEphemeris
+    for item in ubx_items(open_stream("tcp:127.0.0.1:5000")): ...  # epoch, PVT or ephemeris
 
 Stream URLs: a file path, ``serial:/dev/ttyACM0:115200``, ``tcp:HOST:PORT``. Malformed frames are
 skipped and counted by pyubx2's error handling (``quitonerror=ERR_LOG`` semantics: counted here).
@@ -74,8 +74,13 @@ def ubx_items(stream: IO[bytes] | Any, decoder: UbxDecoder | None = None) -> Ite
     from pyubx2 import UBX_PROTOCOL, UBXReader
 
     dec = decoder if decoder is not None else UbxDecoder()
-    reader = UBXReader(stream, protfilter=UBX_PROTOCOL, quitonerror=2, validate=1,
-                       errorhandler=lambda exc: dec.counters.update(["bad_frame"]))
+    reader = UBXReader(
+        stream,
+        protfilter=UBX_PROTOCOL,
+        quitonerror=2,
+        validate=1,
+        errorhandler=lambda exc: dec.counters.update(["bad_frame"]),
+    )
     while True:
         try:
             raw, msg = reader.read()

@@ -42,15 +42,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "GPS1_DELAY_MS when set, else 120 ms)")
     g = parser.add_argument_group("raw GNSS (docs/gnss.md)")
     g.add_argument("--rinex-obs", type=Path, default=None,
-                   help="RINEX 3 observations: their single-point fixes replace the log's (joined to boot time "
-                        "through the log's SYSTEM_TIME / GPS time)")
+                   help="RINEX 3 observations: their single-point fixes replace the log's (joined to "
+                        "boot time through the log's SYSTEM_TIME / GPS time)")
     g.add_argument("--rinex-nav", type=Path, action="append", default=[],
                    help="RINEX 3 navigation file(s) for --rinex-obs (repeatable)")
     g.add_argument("--smartloc", type=Path, default=None, metavar="INPUT",
-                   help="GNSS-only replay of a smartLoc *_Input.txt (no IMU), scored against its *_GT.txt")
-    g.add_argument("--truth", type=Path, default=None, help="smartLoc truth file (default: beside --smartloc)")
-    g.add_argument("--coupling", default="loose", help="loose: SPP fixes into the estimator (default); "
-                                                       "tight: pseudoranges into the estimator (not available yet)")
+                   help="GNSS-only replay of a smartLoc *_Input.txt (no IMU), scored against its _GT.txt")
+    g.add_argument("--truth", type=Path, default=None,
+                   help="smartLoc truth file (default: beside --smartloc)")
+    g.add_argument("--coupling", default="loose",
+                   help="loose: SPP fixes into the estimator (default); tight: pseudoranges into the "
+                        "estimator (not available yet)")
     telemetry.add_arguments(parser, publisher=True)
     parser.set_defaults(vehicle_id="replay")
 
@@ -124,12 +126,13 @@ def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None]:
             raise UserError(f"{args.smartloc}: no such file")
         src = gnss_replay.smartloc_source(args.smartloc, args.truth, config)
         return src, {"smartloc": str(args.smartloc), "coupling": args.coupling, "fixes": len(src.fixes),
-                     "imu": "none: zero acceleration and level attitude (a GNSS-only constant-velocity filter)"}
+                     "imu": "none: zero acceleration, level attitude (a GNSS-only constant-velocity filter)"}
     if args.file is None or not args.file.is_file():
         raise UserError(f"--rinex-obs needs the flight log to replay ({args.file}: no such file)")
     if not args.rinex_nav:
         raise UserError("--rinex-obs needs --rinex-nav (broadcast ephemerides)")
-    reader, note = gnss_replay.rinex_log_reader(args.file, args.rinex_obs, args.rinex_nav, config, args.gps_delay_ms)
+    reader, note = gnss_replay.rinex_log_reader(args.file, args.rinex_obs, args.rinex_nav, config,
+                                                args.gps_delay_ms)
     note["coupling"] = args.coupling
     return reader, note
 

@@ -20,7 +20,9 @@ V_RX = np.array([5.0, -3.0, 1.0])
 
 def epochs():
     st = store()
-    return [observe(st, T0 + 100.0 + k, RX_ECEF + V_RX * k, v_rx_ecef=V_RX, drift_m_s=0.3)[0] for k in range(3)]
+    return [
+        observe(st, T0 + 100.0 + k, RX_ECEF + V_RX * k, v_rx_ecef=V_RX, drift_m_s=0.3)[0] for k in range(3)
+    ]
 
 
 def main(out: Path = Path(__file__).parent) -> None:
