@@ -19,8 +19,9 @@ redundancy remains, the satellite with the largest standardised residual
 Velocity: from pseudorange rates (−λ·Doppler) with the satellite velocities, one receiver clock
 drift, the Sagnac rate term (RTKLIB ``resdop``), weighted alike.
 
-Cost per epoch (20 satellites, 2 systems; ``beliefnav bench gnss``): a few Gauss–Newton iterations
-of (20 × 5) numpy algebra ≈ 0.3 ms without RAIM; each RAIM exclusion adds one solve.
+Cost per epoch (``beliefnav bench gnss``, this project's 2-core machine): 0.4 ms for a smartLoc
+epoch (15 satellites, pre-corrected) to 1 ms with the atmosphere models; each RAIM exclusion adds a
+solve. Vectorised over satellites; the per-iteration Python overhead dominates.
 """
 
 from __future__ import annotations

@@ -20,6 +20,7 @@ TARGETS = {
     "autopilot": "gcs_tools.bench.autopilot",
     "replay": "gcs_tools.bench.replay",
     "ardupilot": "gcs_tools.bench.ardupilot",
+    "gnss": "gcs_tools.bench.gnss",
 }
 
 
