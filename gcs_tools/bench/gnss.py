@@ -32,7 +32,8 @@ def measure(args: argparse.Namespace) -> dict[str, object]:
     idx = np.argsort(-ep.cn0_dbhz)[:20]  # 20 satellites (some below the horizon: the cost is the same)
     ep20 = ep.select(idx)
     prepared, _ = attach_broadcast(ep20, st)
-    visible, _ = attach_broadcast(observe(st, T0 + 100.0, RX_ECEF, v_rx_ecef=np.array([5.0, -3.0, 1.0]))[0], st)
+    above, _ = observe(st, T0 + 100.0, RX_ECEF, v_rx_ecef=np.array([5.0, -3.0, 1.0]))
+    visible, _ = attach_broadcast(above, st)
     t20 = np.full(20, T0 + 100.0)
     return {
         "satellites": 20,
@@ -40,7 +41,7 @@ def measure(args: argparse.Namespace) -> dict[str, object]:
         "transmission_states_us": _per_call_us(lambda: transmission_states(st, ep20), seconds),
         "spp_satellites": visible.n,
         "spp_us": _per_call_us(lambda: solve_position(visible, SppConfig(), klobuchar=st.klobuchar), seconds),
-        "spp_raim_us": _per_call_us(lambda: solve_position(visible, SppConfig(raim=True), klobuchar=st.klobuchar),
-                                    seconds),
+        "spp_raim_us": _per_call_us(
+            lambda: solve_position(visible, SppConfig(raim=True), klobuchar=st.klobuchar), seconds),
         "prepared_satellites": prepared.n,
     }
