@@ -10,6 +10,7 @@ first-order Sagnac term), satellite clocks, Klobuchar and Saastamoinen delays.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -49,9 +50,9 @@ BASE = dict(
 
 
 def _kepler(system: System, prn: int, toe_gps: float, toe_sow: float, **over: float) -> KeplerEphemeris:
-    p = dict(BASE)
+    p: dict[str, Any] = dict(BASE)
     p.update(over)
-    clk = dict(af0_s=1e-5 * ((prn * 7) % 11 - 5), af1_s_s=1e-12 * (prn % 5 - 2), af2_s_s2=0.0, tgd_s=-5e-9)
+    clk: dict[str, Any] = dict(af0_s=1e-5 * ((prn * 7) % 11 - 5), af1_s_s=1e-12 * (prn % 5 - 2), af2_s_s2=0.0, tgd_s=-5e-9)
     return KeplerEphemeris(
         system=int(system),
         prn=prn,
