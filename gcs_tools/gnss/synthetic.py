@@ -52,7 +52,8 @@ BASE = dict(
 def _kepler(system: System, prn: int, toe_gps: float, toe_sow: float, **over: float) -> KeplerEphemeris:
     p: dict[str, Any] = dict(BASE)
     p.update(over)
-    clk: dict[str, Any] = dict(af0_s=1e-5 * ((prn * 7) % 11 - 5), af1_s_s=1e-12 * (prn % 5 - 2), af2_s_s2=0.0, tgd_s=-5e-9)
+    clk: dict[str, Any] = dict(af0_s=1e-5 * ((prn * 7) % 11 - 5), af1_s_s=1e-12 * (prn % 5 - 2), af2_s_s2=0.0,
+                               tgd_s=-5e-9)
     return KeplerEphemeris(
         system=int(system),
         prn=prn,
