@@ -14,6 +14,7 @@ import numpy as np
 
 from companion.estimator import model
 from companion.estimator.config import EstimatorConfig
+from companion.estimator.methods import MethodContext
 
 IMU_PERIOD_US = 5_000  # 200 Hz
 GNSS_EVERY = 10  # one fix per 10 IMU samples: 20 Hz
@@ -149,3 +150,7 @@ def assert_out_of_order_equals_in_order(late: Any, ref: Any) -> None:
     a, b = late.snapshot(), ref.snapshot()
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
     assert abs(a.beta - b.beta) <= 1e-9
+
+
+# The map methods need a map: a world without buildings (clearance infinite everywhere) is open sky.
+OPEN_SKY = MethodContext(clearance_m=lambda north_m, east_m: float("inf"))

@@ -10,6 +10,7 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.estimator import METHODS, Navigator, model
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
+from tests.estimator_streams import OPEN_SKY
 
 CFG = EstimatorConfig()
 HOME = LocalNedFrame(47.0, 8.0, 400.0)
@@ -22,7 +23,7 @@ def _still(e: FusionEngine, t0_us: int, t1_us: int) -> None:
 
 
 def _engine(method: str = "naive", cfg: EstimatorConfig = CFG) -> FusionEngine:
-    e = FusionEngine(cfg, method)
+    e = FusionEngine(cfg, method, context=OPEN_SKY)
     e.push_acc(0, 0.0, 0.0, 0.0)
     e.push_fix(0, (0.0, 0.0, 0.0))
     return e

@@ -6,14 +6,14 @@ import pytest
 from companion.estimator import METHODS
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
-from tests.estimator_streams import drive, multipath_stream
+from tests.estimator_streams import OPEN_SKY, drive, multipath_stream
 
 CFG = EstimatorConfig()
 
 
 def _run(stream, method: str, arrival_us: np.ndarray, cfg: EstimatorConfig = CFG) -> FusionEngine:
     """Push IMU in time order and each fix once the IMU clock reaches its arrival time."""
-    return drive(stream, FusionEngine(cfg, method), arrival_us)
+    return drive(stream, FusionEngine(cfg, method, context=OPEN_SKY), arrival_us)
 
 
 @pytest.fixture(scope="module")

@@ -42,7 +42,7 @@ from types import TracebackType
 from companion.errors import UserError
 
 BINARY_ENV = "BELIEFNAV_ARDUPILOT_BIN"
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_BINARY = REPO_ROOT.parent / "shared" / "tools" / "ardupilot" / "arducopter"
 DEFAULTS_NAME = "copter.parm"
 SERIAL0_BASE_PORT = 5760  # SERIAL0 TCP; SERIAL1 = +2, SERIAL2 = +3; -I N adds 10 N to each
