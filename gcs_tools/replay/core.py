@@ -39,6 +39,7 @@ from gcs_tools.replay.logs import open_log
 if TYPE_CHECKING:
     from companion.estimator import EstimatorConfig
     from companion.mission import Mission
+    from gcs_tools.replay.synthetic_gnss import GnssErrorOptions
 
 # Decoded samples fed to the navigator at a time: one timer pair per chunk instead of per sample
 # (the order, and so every estimate and counter, is unchanged).
@@ -60,6 +61,8 @@ CSV_COLUMNS = (
     "var_b_n_m2", "var_b_e_m2", "var_b_d_m2", "segment",
 )
 GNSS_NOTE = "estimated position vs the GNSS fixes (at their validity times) in the local frame"
+RAW_FIXES_NOTE = ("the synthetic fixes' own position vs the reference at their validity times and at "
+                  "their arrival times (what a consumer of the raw fixes has, latency counted)")
 
 
 class NavigatorLike(Protocol):
@@ -206,7 +209,7 @@ class _Comparisons:
             if info is None:
                 continue
             key = (kind, info.source)
-            m = self.local.get(key) if info.alignment == "mean_offset" else self.geodetic.get(key)
+            m = self.local.get(key) if key in self.local else self.geodetic.get(key)
             if m is not None:
                 out[kind] = {"source": info.source, "note": info.note, **m.statistics(info.alignment)}
         return out
@@ -310,6 +313,7 @@ def replay(
     on_imu: ImuHook | None = None,
     out_dir: Path | None = None,
     gps_delay_ms: float | None = None,
+    gnss: GnssErrorOptions | None = None,
 ) -> ReplayResult:
     """Replay ``path`` through a navigator; ``rate_hz`` limits the estimate rows (0: every IMU).
 
@@ -318,6 +322,9 @@ def replay(
     factory (tests) replaces the real Navigator. With ``out_dir`` the rows are streamed to
     ``out_dir/estimates.csv`` (the result's arrays are then empty); ``write_summary`` writes the
     summary. ``gps_delay_ms`` overrides a DataFlash log's GPS delay.
+    ``gnss`` replaces the log's fixes by fixes made from its truth (or its own fixes) plus errors
+    (:mod:`gcs_tools.replay.synthetic_gnss`); the summary then has ``synthetic_gnss`` and
+    ``errors.raw_fixes`` (the fixes' own errors at their validity and arrival times).
 
     ``progress(position_bytes, size_bytes)`` is called now and then; ``on_imu(t_us, navigator)``
     after every IMU sample is pushed (telemetry, pacing; its time is not the estimator's).
@@ -325,7 +332,17 @@ def replay(
     """
     path = Path(path)
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    reader = open_log(path, gps_delay_ms)
+    reader: Any = open_log(path, gps_delay_ms, home)
+    synthetic = None
+    if gnss is not None:
+        from gcs_tools.replay.synthetic_gnss import replace_gnss
+
+        synthetic, home = replace_gnss(reader, open_log(path, gps_delay_ms, home), gnss, home)
+        reader = synthetic
+    elif reader.sources.get("gnss") is None:
+        raise UserError(f"{path}: {reader.describe_empty()}")
+    if home is None:
+        home = reader.anchor
     if home is None:
         fix0 = reader.first_fix()
         if fix0 is None:
@@ -384,9 +401,17 @@ def replay(
         "cpu_s": time.process_time() - cpu0,
         "realtime_factor": duration_s / wall_s,
     }
-    gps_delay = getattr(reader, "gps_delay_source", "")
+    if synthetic is not None:
+        summary["synthetic_gnss"] = synthetic.synthetic.info
+        summary["errors"]["raw_fixes"] = {"note": RAW_FIXES_NOTE, **synthetic.raw_errors}
+    log_reader = reader.inner if synthetic is not None else reader
+    clock = getattr(log_reader, "clock", None)
+    if clock is not None:
+        summary["clock_alignment"] = clock
+    gps_delay = getattr(log_reader, "gps_delay_source", "")
     if gps_delay:
-        summary["gnss_validity"] = {"gps_delay_ms": getattr(reader, "gps_delay_ms", None), "from": gps_delay}
+        summary["gnss_validity"] = {"gps_delay_ms": getattr(log_reader, "gps_delay_ms", None),
+                                    "from": gps_delay}
     t_us, table = sink.arrays()
     return ReplayResult(summary, t_us, table)
 

@@ -200,6 +200,7 @@ class DataFlashScanner:
 
 class DataFlashSource:
     format = "dataflash"
+    anchor = None  # home: the first 3-D fix
 
     def __init__(self, path: Path, gps_delay_ms: float | None = None) -> None:
         self.path = path

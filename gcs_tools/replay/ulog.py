@@ -242,6 +242,7 @@ class ULogScanner:
 
 class ULogSource:
     format = "ulog"
+    anchor = None  # home: the first 3-D fix
 
     def __init__(self, path: Path) -> None:
         self.path = path
