@@ -31,6 +31,7 @@ makes them (``--gnss-errors``, :mod:`gcs_tools.replay.synthetic_gnss`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -139,6 +140,14 @@ def _clean(t: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 
 def load_flight(imu_path: Path, truth_path: Path) -> AnsflFlight:
+    """The flight of these two files (read and fitted once per process while they are unchanged:
+    a campaign replays each flight many times)."""
+    stamp = tuple((p.stat().st_mtime_ns, p.stat().st_size) for p in (imu_path, truth_path))
+    return _load_flight(imu_path.resolve(), truth_path.resolve(), stamp)
+
+
+@functools.lru_cache(maxsize=16)
+def _load_flight(imu_path: Path, truth_path: Path, stamp: tuple[tuple[int, int], ...]) -> AnsflFlight:
     imu = _read_csv(imu_path, IMU_COLUMNS)
     gt = _read_csv(truth_path, TRUTH_COLUMNS)
     keep_imu, keep_gt = _clean(imu[:, 0], imu), _clean(gt[:, 0], gt)
@@ -157,7 +166,10 @@ def load_flight(imu_path: Path, truth_path: Path) -> AnsflFlight:
         clock = fit_clock_offset(t, a_ned, gt[:, 0], gt[:, 1:4])
     except UserError as exc:
         raise UserError(f"{imu_path.parent}: {exc}") from None
-    return AnsflFlight(t, q, acc, gyro, gt[:, 0] + clock.offset_s, gt[:, 1:4], clock, dropped_imu, dropped_gt)
+    arrays = (t, q, acc, gyro, gt[:, 0] + clock.offset_s, gt[:, 1:4].copy())
+    for a in arrays:
+        a.setflags(write=False)  # shared by every replay of the flight
+    return AnsflFlight(*arrays, clock, dropped_imu, dropped_gt)
 
 
 def _us(t_s: np.ndarray) -> list[int]:

@@ -58,7 +58,7 @@ ACCURACY_MODES = ("reported", "none", "eph")
 BASES = ("truth", "log")
 HDOP_UERE_M = 5.0  # (ours) user-equivalent range error: HDOP = h_acc / this in --gnss-accuracy eph
 MAX_BASE_GAP_S = 1.0  # no fix valid inside a longer gap of the base track
-SERIES_GAP_FACTOR = 1.5  # a series gap longer than this × its median period is an outage
+SERIES_GAP_FACTOR = 1.6  # a series gap longer than this × its median period (an epoch missing) is an outage
 MAX_RATE_HZ = 50.0
 MAX_SERIES_ROWS = 10_000_000
 
