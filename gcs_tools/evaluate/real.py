@@ -191,8 +191,8 @@ def markdown(result: dict[str, Any]) -> str:
         lines += ["Per flight, median [m] (mean over seeds):", "",
                   "| row | " + " | ".join(flights) + " |", "|---|" + "---|" * len(flights)]
         for row, e in t.items():
-            cells = " | ".join(f"{e['per_flight_median'][f]:.2f}" for f in flights)
-            lines.append(f"| `{row}` | {cells} |")
+            per_flight = " | ".join(f"{e['per_flight_median'][f]:.2f}" for f in flights)
+            lines.append(f"| `{row}` | {per_flight} |")
         lines.append("")
     return "\n".join(lines)
 
