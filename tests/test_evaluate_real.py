@@ -44,6 +44,8 @@ def test_campaign_tables_pairing_and_goals(flights: list[Path]) -> None:
         diff = t["second-order"]["minus_raw_at_arrival_median"]["mean"]
         assert diff == pytest.approx(t["second-order"]["median"]["mean"] - t[real.RAW[0]]["median"]["mean"])
         assert t["naive"]["vs_naive_median"]["value"] == 0.0
+        ratio = t["second-order"]["median"]["mean"] / t["naive"]["median"]["mean"] - 1
+        assert t["second-order"]["vs_naive_median"]["value"] == pytest.approx(ratio)
         g = cond["goals"]
         best = g["best_method"]
         below = t[best]["median"]["mean"] < t[real.RAW[0]]["median"]["mean"]
@@ -74,6 +76,7 @@ def test_cli_writes_json_and_report_and_refuses_bad_arguments(flights: list[Path
                       "--methods", "second-order", "--seeds", "0", "--out", str(out)]) == 0
     res = json.loads((out / "results.json").read_text())
     assert res["campaign"]["methods"] == ["naive", "second-order"] and (out / "report.md").is_file()
+    assert len(res["runs"]) == 4 and {r["row"] for r in res["runs"]} == {"naive", "second-order", *real.RAW}
     capsys.readouterr()
     for bad, words in ((["--flights", "nowhere"], "not an ANSFL flight directory"),
                        (["--flights", str(a), "--errors", "cloudy"], "--gnss-errors 'cloudy'"),
