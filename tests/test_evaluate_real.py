@@ -82,7 +82,8 @@ def test_cli_writes_json_and_report_and_refuses_bad_arguments(flights: list[Path
                        (["--flights", str(a), "--errors", "cloudy"], "--gnss-errors 'cloudy'"),
                        (["--flights", str(a), "--accuracy", "some"], "--gnss-accuracy 'some'"),
                        (["--flights", str(a), "--methods", "secnd-order"], "did you mean"),
-                       (["--flights", str(a), "--seeds", "x"], "--seeds")):
+                       (["--flights", str(a), "--seeds", "x"], "--seeds"),
+                       (["--flights", str(a), "--methods", "map-beta"], "needs a mission's map")):
         assert real.main([*bad, "--out", str(tmp_path / "bad")]) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("real: error: ") and words in err and "\n" not in err, err

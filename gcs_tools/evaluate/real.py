@@ -62,6 +62,18 @@ class Job:
     methods: tuple[str, ...]
 
 
+def needs_map(method: str) -> bool:
+    """True when ``method`` cannot run without a mission's map (a real flight has none)."""
+    from companion.errors import ConfigError
+    from companion.wiring import navigator_for
+
+    try:
+        navigator_for(None, method)
+    except ConfigError:
+        return True
+    return False
+
+
 def errors_label(errors: str) -> str:
     return errors if errors in ("model", "none") else f"series {Path(errors).name}"
 
@@ -281,7 +293,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="comma-separated: model, none, or error series CSV files")
     p.add_argument("--accuracy", default="reported,none",
                    help=f"comma-separated of {', '.join(ACCURACY_MODES)}")
-    p.add_argument("--methods", default="all", help="comma-separated methods (default: all)")
+    p.add_argument("--methods", default="all",
+                   help="comma-separated methods (default: all that run without a map)")
     p.add_argument("--seeds", default="0-4")
     p.add_argument("--rate-hz", type=float, default=5.0)
     p.add_argument("--latency-ms", type=float, default=None,
@@ -291,7 +304,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     try:
         check_out_dir(args.out)
-        methods = list(METHODS) if args.methods == "all" else choices.methods(args.methods)
+        methods = [m for m in METHODS if not needs_map(m)] if args.methods == "all" else \
+            choices.methods(args.methods)
+        for m in methods:
+            if needs_map(m):
+                raise UserError(f"--methods {m}: needs a mission's map, and a real flight has none")
         split, flights = flight_dirs(args.corpus, args.flights)
         errors = [e.strip() for e in args.errors.split(",") if e.strip()]
         accuracies = [a.strip() for a in args.accuracy.split(",") if a.strip()]

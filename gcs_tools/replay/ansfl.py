@@ -95,7 +95,8 @@ def rotate(q_ned_frd: np.ndarray, v_frd: np.ndarray) -> np.ndarray:
     """(n, 3) FRD vectors in NED."""
     from scipy.spatial.transform import Rotation
 
-    return Rotation.from_quat(np.asarray(q_ned_frd)[:, [1, 2, 3, 0]]).apply(v_frd)
+    # copies: scipy's Rotation wants writable buffers, and the cached flight's arrays are read-only
+    return Rotation.from_quat(np.array(q_ned_frd)[:, [1, 2, 3, 0]]).apply(np.array(v_frd, dtype=float))
 
 
 def attitude_ned_frd(roll_deg: np.ndarray, pitch_deg: np.ndarray, yaw_enu_deg: np.ndarray) -> np.ndarray:
