@@ -53,7 +53,7 @@ def test_dataflash_reader_equals_pymavlink_dfreader() -> None:
     while (m := log.recv_msg()) is not None:
         kind = m.get_type()
         if kind in ref and getattr(m, "I", 0) == 0:
-            ref[kind].append(tuple(float(getattr(m, f)) for f in dataflash.FIELDS[kind]))
+            ref[kind].append(tuple(float(getattr(m, f.names[0])) for f in dataflash.FIELDS[kind]))
     ours: dict[str, list[tuple[float, ...]]] = {"IMU": [], "ATT": [], "GPS": []}
     for name, values in DataFlashScanner(SITL_BIN, ref, ReaderStats()):
         ours[name].append(tuple(float(v) for v in values))

@@ -13,12 +13,14 @@ from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
 from gcs_tools import choices
 from gcs_tools.replay import core
+from gcs_tools.replay.synthetic_gnss import ACCURACY_MODES, BASES, GnssErrorOptions
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", type=Path, nargs="?",
                         help="log to replay: MAVLink tlog, ArduPilot DataFlash .bin or PX4 ULog .ulg "
-                             "(recognised by its first bytes, else by extension); not with --smartloc")
+                             "(recognised by its first bytes, else by extension), or an ANSFL flight "
+                             "(a directory with IMU_1.csv and GT.csv, or its IMU_1.csv); not with --smartloc")
     choices.add_method_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("runs/replay"),
                         help="output directory for estimates.csv, summary.json (default runs/replay)")
@@ -40,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gps-delay-ms", type=float, default=None,
                         help="DataFlash logs: how long before its arrival a fix is valid (default: the log's "
                              "GPS1_DELAY_MS when set, else 120 ms)")
+    add_gnss_arguments(parser)
     g = parser.add_argument_group("raw GNSS (docs/gnss.md)")
     g.add_argument("--rinex-obs", type=Path, default=None,
                    help="RINEX 3 observations: their single-point fixes replace the log's (joined to "
@@ -57,8 +60,71 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(vehicle_id="replay")
 
 
+def add_gnss_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options that replace the log's GNSS by synthetic fixes (docs/replay.md)."""
+    g = parser.add_argument_group("synthetic GNSS (replace the log's fixes; docs/replay.md)")
+    g.add_argument("--gnss-errors", default=None, metavar="none|model|SERIES.csv",
+                   help="replace the log's fixes by fixes made from its truth (or --gnss-base log) plus: no "
+                        "error, the project's urban GNSS model, or a recorded error series (CSV "
+                        "t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m)")
+    g.add_argument("--gnss-rate-hz", type=float, default=5.0, help="fixes per second (default 5)")
+    g.add_argument("--gnss-accuracy", default="reported", choices=ACCURACY_MODES,
+                   help="what each fix reports: its accuracy (model or series), nothing, or only an HDOP "
+                        "(h_acc / 5 m) (default reported)")
+    g.add_argument("--gnss-latency-ms", type=float, default=None,
+                   help="fixed latency from validity to arrival (default: the model's latency process, "
+                        "0.6 s mean in a canyon)")
+    g.add_argument("--gnss-base", default=None, choices=BASES,
+                   help="what the errors are added to (default: truth when the log has it, else its own "
+                        "fixes)")
+    g.add_argument("--gnss-clearance-m", type=float, default=0.0,
+                   help="the model's distance to the nearest building (default 0: a street canyon "
+                        "throughout)")
+    g.add_argument("--gnss-set", action="append", default=[], metavar="gnss.FIELD=VALUE",
+                   help="override a field of the model's GnssConfig (repeatable), e.g. "
+                        "gnss.sigma_bias_max_m=5")
+    g.add_argument("--gnss-velocity", default="0.2", metavar="STD_M_S|none",
+                   help="the fixes' velocity: the base's plus white noise of this std per axis (default 0.2 "
+                        "m/s), or none")
+    g.add_argument("--gnss-series-start-s", type=float, default=None,
+                   help="error series time of the first fix (default: drawn from --seed)")
+    g.add_argument("--seed", type=int, default=0, help="seed of the synthetic GNSS (default 0)")
+
+
+def gnss_options(args: argparse.Namespace) -> GnssErrorOptions | None:
+    """The synthetic GNSS the options ask for (None without --gnss-errors); one-line errors."""
+    from gcs_tools.evaluate.tuning import parse_override
+
+    if args.gnss_errors is None:
+        given = [name for name in ("gnss_set", "gnss_latency_ms", "gnss_base", "gnss_series_start_s")
+                 if getattr(args, name) not in (None, [])]
+        if given:
+            raise UserError(f"--{given[0].replace('_', '-')} needs --gnss-errors")
+        return None
+    overrides = []
+    for text in args.gnss_set:
+        key, value = parse_override(text)
+        section, _, name = key.partition(".")
+        if section != "gnss":
+            raise UserError(f"--gnss-set {text!r}: only gnss.FIELD (the GNSS model's fields)")
+        overrides.append((name, value))
+    velocity = None
+    if args.gnss_velocity != "none":
+        try:
+            velocity = float(args.gnss_velocity)
+        except ValueError:
+            raise UserError(f"--gnss-velocity {args.gnss_velocity!r}: expected a std in m/s or 'none'"
+                            ) from None
+    opts = GnssErrorOptions(args.gnss_errors, rate_hz=args.gnss_rate_hz, accuracy=args.gnss_accuracy,
+                            latency_ms=args.gnss_latency_ms, base=args.gnss_base,
+                            clearance_m=args.gnss_clearance_m, model_overrides=tuple(overrides),
+                            velocity_std_m_s=velocity, seed=args.seed,
+                            series_start_s=args.gnss_series_start_s)
+    opts.check()
+    return opts
+
+
 def run(args: argparse.Namespace) -> int:
-    from gcs_tools import choices
     from gcs_tools.outdir import check_out_dir
 
     choices.method(args.method)
@@ -67,8 +133,9 @@ def run(args: argparse.Namespace) -> int:
         args.file = args.smartloc
     elif args.file is None:
         raise UserError("replay needs a log file (or --smartloc INPUT)")
-    if not args.file.is_file():
+    if not args.file.exists():
         raise UserError(f"{args.file}: no such file")
+    gnss = gnss_options(args)
     check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
@@ -88,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = core.replay(args.file, args.method, home=home, mission=mission, rate_hz=args.rate_hz,
                              progress=progress, on_imu=_on_imu(pub, args.speed), out_dir=args.out,
-                             gps_delay_ms=args.gps_delay_ms, reader=gnss_reader)
+                             gps_delay_ms=args.gps_delay_ms, reader=gnss_reader, gnss=gnss)
     finally:
         if bar is not None:
             bar.close()
@@ -163,6 +230,19 @@ def report(s: dict[str, Any], name: str) -> str:
             h = e["error_horizontal_m"]
             lines.append(f"  horizontal distance to {label} ({e['source']}, {e['alignment']}) median "
                          f"{h['median']:.2f} m p95 {h['p95']:.2f} m max {h['max']:.2f} m")
+    raw = s["errors"].get("raw_fixes")
+    if raw:
+        for when in ("at_validity", "at_arrival"):
+            h = raw[when]["error_horizontal_m"]
+            lines.append(f"  the raw fixes' own horizontal error ({raw['reference']}, "
+                         f"{when.replace('_', ' ')}) "
+                         f"median {h['median']:.2f} m p95 {h['p95']:.2f} m max {h['max']:.2f} m")
+    clock = s.get("clock_alignment")
+    if clock:
+        lines.append(f"  clock: IMU = truth + {clock['offset_s']:.3f} s (fit residual "
+                     f"{clock['residual_rms_m_s2']:.2f} "
+                     f"m/s² of {clock['signal_rms_m_s2']:.2f}); IMU heading vs the truth track "
+                     f"{-clock['yaw_deg']:+.1f}°")
     return "\n".join(lines)
 
 

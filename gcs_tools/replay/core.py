@@ -39,6 +39,7 @@ from gcs_tools.replay.logs import open_log
 if TYPE_CHECKING:
     from companion.estimator import EstimatorConfig
     from companion.mission import Mission
+    from gcs_tools.replay.synthetic_gnss import GnssErrorOptions
 
 # Decoded samples fed to the navigator at a time: one timer pair per chunk instead of per sample
 # (the order, and so every estimate and counter, is unchanged).
@@ -60,6 +61,8 @@ CSV_COLUMNS = (
     "var_b_n_m2", "var_b_e_m2", "var_b_d_m2", "segment",
 )
 GNSS_NOTE = "estimated position vs the GNSS fixes (at their validity times) in the local frame"
+RAW_FIXES_NOTE = ("the synthetic fixes' own position vs the reference at their validity times and at "
+                  "their arrival times (what a consumer of the raw fixes has, latency counted)")
 
 
 class NavigatorLike(Protocol):
@@ -206,7 +209,7 @@ class _Comparisons:
             if info is None:
                 continue
             key = (kind, info.source)
-            m = self.local.get(key) if info.alignment == "mean_offset" else self.geodetic.get(key)
+            m = self.local.get(key) if key in self.local else self.geodetic.get(key)
             if m is not None:
                 out[kind] = {"source": info.source, "note": info.note, **m.statistics(info.alignment)}
         return out
@@ -311,6 +314,7 @@ def replay(
     out_dir: Path | None = None,
     gps_delay_ms: float | None = None,
     reader: LogReader | None = None,
+    gnss: GnssErrorOptions | None = None,
 ) -> ReplayResult:
     """Replay ``path`` through a navigator; ``rate_hz`` limits the estimate rows (0: every IMU).
 
@@ -319,6 +323,9 @@ def replay(
     factory (tests) replaces the real Navigator. With ``out_dir`` the rows are streamed to
     ``out_dir/estimates.csv`` (the result's arrays are then empty); ``write_summary`` writes the
     summary. ``gps_delay_ms`` overrides a DataFlash log's GPS delay.
+    ``gnss`` replaces the log's fixes by fixes made from its truth (or its own fixes) plus errors
+    (:mod:`gcs_tools.replay.synthetic_gnss`); the summary then has ``synthetic_gnss`` and
+    ``errors.raw_fixes`` (the fixes' own errors at their validity and arrival times).
 
     ``reader`` replaces the log's own reader (e.g. ``gcs_tools.gnss.replay``: the log with SPP fixes
     from RINEX, or smartLoc); ``path`` then only names the input in the summary.
@@ -329,7 +336,22 @@ def replay(
     """
     path = Path(path)
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    reader = open_log(path, gps_delay_ms) if reader is None else reader
+    synthetic = None
+    if reader is not None:  # raw GNSS: the log with SPP fixes, or smartLoc
+        if gnss is not None:
+            raise UserError("synthetic GNSS (--gnss-errors) and raw GNSS both replace the log's fixes: "
+                            "choose one")
+    else:
+        reader = open_log(path, gps_delay_ms, home)
+        if gnss is not None:
+            from gcs_tools.replay.synthetic_gnss import replace_gnss
+
+            synthetic, home = replace_gnss(reader, open_log(path, gps_delay_ms, home), gnss, home)
+            reader = synthetic
+        elif reader.sources.get("gnss") is None:
+            raise UserError(f"{path}: {reader.describe_empty()}")
+    if home is None:
+        home = getattr(reader, "anchor", None)
     if home is None:
         fix0 = reader.first_fix()
         if fix0 is None:
@@ -388,9 +410,17 @@ def replay(
         "cpu_s": time.process_time() - cpu0,
         "realtime_factor": duration_s / wall_s,
     }
-    gps_delay = getattr(reader, "gps_delay_source", "")
+    if synthetic is not None:
+        summary["synthetic_gnss"] = synthetic.synthetic.info
+        summary["errors"]["raw_fixes"] = {"note": RAW_FIXES_NOTE, **synthetic.raw_errors}
+    log_reader = reader.inner if synthetic is not None else reader
+    clock = getattr(log_reader, "clock", None)
+    if clock is not None:
+        summary["clock_alignment"] = clock
+    gps_delay = getattr(log_reader, "gps_delay_source", "")
     if gps_delay:
-        summary["gnss_validity"] = {"gps_delay_ms": getattr(reader, "gps_delay_ms", None), "from": gps_delay}
+        summary["gnss_validity"] = {"gps_delay_ms": getattr(log_reader, "gps_delay_ms", None),
+                                    "from": gps_delay}
     t_us, table = sink.arrays()
     return ReplayResult(summary, t_us, table)
 

@@ -11,11 +11,22 @@ What is used (instance/core 0 where a message has several):
 - ``IMU`` (``TimeUS``, ``GyrX..Z`` rad/s, ``AccX..Z`` m/s², body FRD): one ImuSample each.
 - ``ATT`` (``Roll``, ``Pitch``, ``Yaw`` in degrees): the AHRS attitude the autopilot flies
   with (the DataFlash twin of MAVLink ATTITUDE) -> AttitudeSample.
-- ``GPS`` (``Status`` = fix type, ``Lat``/``Lng`` degrees, ``Alt`` m MSL, ``NSats``, ``HDop``)
-  with its ``GPA`` (``HAcc``/``VAcc`` m, ``SMS`` = the ms boot time the fix was received).
+- ``GPS`` (``Status`` = fix type, ``Lat``/``Lng`` degrees, ``Alt`` m MSL, ``NSats``, ``HDop``;
+  velocity from ``Spd`` m/s, ``GCrs`` degrees from north, ``VZ`` m/s down) with its ``GPA``
+  (``HAcc``/``VAcc`` m, ``SMS`` = the ms boot time the fix was received, ``SAcc`` speed accuracy
+  m/s, ``VV`` 0 when the receiver has no vertical velocity).
   Validity time = ``GPA.SMS`` − the GPS delay (``GPS.TimeUS`` when no GPA follows); the delay is
-  the log's ``GPS1_DELAY_MS`` (or ``GPS_DELAY_MS``) when it is set (> 0), else
-  :data:`DEFAULT_GPS_DELAY_MS`, or the caller's value.
+  the log's ``GPS1_DELAY_MS`` (or ``GPS_DELAY_MS``, or ArduCopter <= 3.2's ``EKF_POS_DELAY``)
+  when it is set (> 0), else :data:`DEFAULT_GPS_DELAY_MS` (:data:`OLD_DEFAULT_GPS_DELAY_MS` for a
+  log whose GPS has no ``TimeUS``), or the caller's value.
+
+Old logs (ArduCopter <= 3.2) stamp in milliseconds: ``TimeMS`` instead of ``TimeUS`` (read as
+µs = ms × 1000) in IMU, ATT, SIM; their GPS's ``TimeMS`` is the GPS time of week, so its boot
+time is ``T`` (ms); a GPS with neither (before 3.2) is stamped when it arrives (the latest IMU
+or ATT time, counted ``gnss_stamped_on_arrival``, as pymavlink's DFReader does). They have no GPA,
+POS, XKF1 or ORGN: no accuracies and no autopilot estimate. Which field was read for each is in
+``DataFlashScanner.resolved``; a message lacking every alternative of a needed field ends the
+replay in one line naming them (``IMU has no field TimeUS or TimeMS``).
 - The autopilot's estimate: ``POS`` (``Lat``, ``Lng``, ``Alt`` MSL) or, when the log has none,
   ``XKF1`` (EKF3) / ``NKF1`` (EKF2) core 0 (``PN``/``PE``/``PD`` about the EKF origin of ``ORGN``
   ``Type`` 0): both geodetic, so no offset is fitted.
@@ -27,9 +38,11 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pymap3d
 from pymavlink.DFReader import DFFormat
 
@@ -55,19 +68,46 @@ MAX_MESSAGE = 3 + 255
 # ArduPilot's lag for a u-blox M8-class receiver when GPS*_DELAY_MS is 0 (the live adapter's constant);
 # on the SITL log in tests/data the fix that fits truth best is ~85 ms old (SIM_GPS1_LAG_MS 100).
 DEFAULT_GPS_DELAY_MS = ARDUPILOT_DEFAULT_GPS_DELAY_MS
-DELAY_PARAMS = ("GPS1_DELAY_MS", "GPS_DELAY_MS")
+DELAY_PARAMS = ("GPS1_DELAY_MS", "GPS_DELAY_MS", "EKF_POS_DELAY")  # the last: ArduCopter <= 3.2's EKF
+OLD_DEFAULT_GPS_DELAY_MS = 220.0  # EKF_POS_DELAY's default in ArduCopter <= 3.2 (NavEKF)
 
-FIELDS = {
-    "IMU": ("TimeUS", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"),
-    "ATT": ("TimeUS", "Roll", "Pitch", "Yaw"),
-    "GPS": ("TimeUS", "Status", "NSats", "HDop", "Lat", "Lng", "Alt"),
-    "GPA": ("TimeUS", "HAcc", "VAcc", "SMS"),
-    "POS": ("TimeUS", "Lat", "Lng", "Alt"),
-    "XKF1": ("TimeUS", "PN", "PE", "PD"),
-    "NKF1": ("TimeUS", "PN", "PE", "PD"),
-    "ORGN": ("Type", "Lat", "Lng", "Alt"),
-    "SIM": ("TimeUS", "Lat", "Lng", "Alt"),
-    "PARM": ("Name", "Value"),
+
+
+@dataclass(frozen=True)
+class Field:
+    """A value read from a message: the first of ``names`` its FMT has, times ``factor`` (after the
+    format's own scale); ``optional``: NaN when none is there (else a one-line error)."""
+
+    names: tuple[str, ...]
+    factors: tuple[float, ...] = ()
+    optional: bool = False
+
+    def alternatives(self) -> Iterator[tuple[str, float]]:
+        for k, name in enumerate(self.names):
+            yield name, self.factors[k] if k < len(self.factors) else 1.0
+
+
+def _f(*names: str, optional: bool = False) -> Field:
+    return Field(names, optional=optional)
+
+
+# microseconds of boot time: TimeUS, or TimeMS (ArduPilot <= 3.2) in ms
+TIME_US = Field(("TimeUS", "TimeMS"), (1.0, 1000.0))
+# GPS boot time: TimeUS, or T in ms (3.2: its TimeMS is the GPS time of week, not boot time);
+# older GPS have neither (then the fix is stamped on arrival)
+GPS_TIME_US = Field(("TimeUS", "T"), (1.0, 1000.0), optional=True)
+FIELDS: dict[str, tuple[Field, ...]] = {
+    "IMU": (TIME_US, *(_f(n) for n in ("GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"))),
+    "ATT": (TIME_US, _f("Roll"), _f("Pitch"), _f("Yaw")),
+    "GPS": (GPS_TIME_US, *(_f(n) for n in ("Status", "NSats", "HDop", "Lat", "Lng", "Alt")),
+            *(_f(n, optional=True) for n in ("Spd", "GCrs", "VZ"))),
+    "GPA": (TIME_US, _f("HAcc"), _f("VAcc"), _f("SMS"), _f("SAcc", optional=True), _f("VV", optional=True)),
+    "POS": (TIME_US, _f("Lat"), _f("Lng"), _f("Alt")),
+    "XKF1": (TIME_US, _f("PN"), _f("PE"), _f("PD")),
+    "NKF1": (TIME_US, _f("PN"), _f("PE"), _f("PD")),
+    "ORGN": (_f("Type"), _f("Lat"), _f("Lng"), _f("Alt")),
+    "SIM": (TIME_US, _f("Lat"), _f("Lng"), _f("Alt")),
+    "PARM": (_f("Name"), _f("Value")),
 }
 REQUIRED = frozenset({"IMU", "ATT", "GPS"})  # the estimator's inputs; the rest only adds comparisons
 INSTANCE_FIELD = {"IMU": "I", "GPS": "I", "GPA": "I", "XKF1": "C", "NKF1": "C"}
@@ -83,30 +123,42 @@ INFO = {
 
 
 class _Layout:
-    """How to unpack one message type: the wanted fields' indices and scales."""
+    """How to unpack one message type: the wanted fields' indices and scales (``None``: an
+    optional field the message does not have, read as NaN)."""
 
-    def __init__(self, fmt: DFFormat, wanted: tuple[str, ...], path: Path) -> None:
+    def __init__(self, fmt: DFFormat, wanted: tuple[Field, ...], path: Path) -> None:
         self.struct = struct.Struct(fmt.msg_struct)
         self.length = fmt.len
-        missing = [f for f in wanted if f not in fmt.colhash]
-        if missing:
-            raise UserError(f"{path}: DataFlash message {fmt.name} has no field {missing[0]} "
-                            f"(its fields: {','.join(fmt.columns)})")
-        self.index = tuple(fmt.colhash[f] for f in wanted)
+        index: list[int | None] = []
+        factor: list[float] = []
+        self.names: list[str | None] = []
+        for field in wanted:
+            found = next(((fmt.colhash[n], f, n) for n, f in field.alternatives() if n in fmt.colhash), None)
+            if found is None and not field.optional:
+                raise UserError(f"{path}: DataFlash message {fmt.name} has no field "
+                                f"{' or '.join(field.names)} (its fields: {','.join(fmt.columns)})")
+            index.append(None if found is None else found[0])
+            factor.append(1.0 if found is None else found[1])
+            self.names.append(None if found is None else found[2])
+        self.index = tuple(index)
         # scaled as DFReader does: divide by 1/m for m < 1 (1e-7 degrees, centi-units: exact
-        # decimal results), multiply otherwise
-        self.divisor = tuple(None if m is None else (1 / m if 0 < m < 1 else 1 / m)
-                             for m in (fmt.msg_mults[i] for i in self.index))
-        self.multiplier = tuple(None if m is None or 0 < m < 1 else m
-                                for m in (fmt.msg_mults[i] for i in self.index))
+        # decimal results), multiply otherwise; then the unit factor (ms -> µs)
+        mults = [None if i is None else fmt.msg_mults[i] for i in self.index]
+        self.divisor = tuple(None if m is None else 1 / m for m in mults)
+        self.multiplier = tuple(None if m is None or 0 < m < 1 else m for m in mults)
+        self.factor = tuple(factor)
         inst = INSTANCE_FIELD.get(fmt.name)
         self.instance = fmt.colhash.get(inst) if inst else None
 
     def values(self, raw: tuple[Any, ...]) -> list[Any]:
         out = []
-        for i, d, m in zip(self.index, self.divisor, self.multiplier, strict=True):
+        for i, d, m, f in zip(self.index, self.divisor, self.multiplier, self.factor, strict=True):
+            if i is None:
+                out.append(math.nan)
+                continue
             v = raw[i]
-            out.append(v if d is None else v * m if m is not None else v / d)
+            v = v if d is None else v * m if m is not None else v / d
+            out.append(v if f == 1.0 else v * f)
         return out
 
 
@@ -116,6 +168,7 @@ class DataFlashScanner:
 
     def __init__(self, path: Path, wanted: Iterable[str], stats: ReaderStats) -> None:
         self.path, self.wanted, self.stats = path, frozenset(wanted), stats
+        self.resolved: dict[str, list[str | None]] = {}  # message -> the field read for each of FIELDS'
 
     def __iter__(self) -> Iterator[tuple[str, list[Any]]]:
         st = self.stats
@@ -191,6 +244,7 @@ class DataFlashScanner:
             return
         try:
             layouts[mtype] = (name, _Layout(fmt, FIELDS[name], self.path))
+            self.resolved[name] = layouts[mtype][1].names
         except UserError:
             if name in REQUIRED:
                 raise
@@ -200,6 +254,7 @@ class DataFlashScanner:
 
 class DataFlashSource:
     format = "dataflash"
+    anchor = None  # home: the first 3-D fix
 
     def __init__(self, path: Path, gps_delay_ms: float | None = None) -> None:
         self.path = path
@@ -212,7 +267,7 @@ class DataFlashSource:
     def first_fix(self) -> GnssFix | None:
         for name, v in DataFlashScanner(self.path, ("GPS",), ReaderStats()):
             if name == "GPS" and v[1] >= MIN_FIX_TYPE_3D:
-                fix = _fix(v, None, 0.0)
+                fix = _fix([0 if math.isnan(v[0]) else v[0], *v[1:]], None, 0.0)
                 if fix is not None:
                     return fix
         return None
@@ -232,7 +287,9 @@ class DataFlashSource:
         pending_gps: list[Any] | None = None
         origin: tuple[float, float, float] | None = None
         seen: set[str] = set()
-        for name, v in DataFlashScanner(self.path, FIELDS, st):
+        last_us = 0  # the latest IMU/ATT time: a GPS without a boot time (ArduPilot < 3.2) arrived then
+        scanner = DataFlashScanner(self.path, FIELDS, st)
+        for name, v in scanner:
             if pending_gps is not None and name != "GPA":
                 yield from self._gnss(pending_gps, None, delay_us)
                 pending_gps = None
@@ -242,18 +299,23 @@ class DataFlashSource:
                     rejected["imu_non_finite"] += 1
                     continue
                 decoded["imu"] += 1
-                yield ImuSample(int(t), _vec(ax, ay, az), _vec(gx, gy, gz))
+                last_us = int(t)
+                yield ImuSample(last_us, _vec(ax, ay, az), _vec(gx, gy, gz))
             elif name == "ATT":
                 t, roll, pitch, yaw = v
                 if not all(math.isfinite(x) for x in (roll, pitch, yaw)):
                     rejected["attitude_non_finite"] += 1
                     continue
                 decoded["attitude"] += 1
-                yield AttitudeSample(int(t), euler_to_quaternion(
+                last_us = int(t)
+                yield AttitudeSample(last_us, euler_to_quaternion(
                     math.radians(roll), math.radians(pitch), math.radians(yaw)))
             elif name == "GPS":
                 if delay_us is None:
-                    delay_us = self._delay_us(params)
+                    delay_us = self._delay_us(params, old=scanner.resolved["GPS"][0] != "TimeUS")
+                if math.isnan(v[0]):
+                    v[0] = last_us
+                    decoded["gnss_stamped_on_arrival"] += 1
                 pending_gps = v
             elif name == "GPA":
                 if pending_gps is not None and pending_gps[0] == v[0]:
@@ -289,14 +351,18 @@ class DataFlashSource:
                 self.references[AUTOPILOT] = INFO[source]
                 break
 
-    def _delay_us(self, params: dict[str, float]) -> float:
+    def _delay_us(self, params: dict[str, float], old: bool) -> float:
         for key in DELAY_PARAMS:
             if params.get(key, 0.0) > 0:
                 self.gps_delay_ms, self.gps_delay_source = params[key], f"log parameter {key}"
                 return params[key] * 1000
-        self.gps_delay_ms = DEFAULT_GPS_DELAY_MS
-        self.gps_delay_source = "default (the log sets no GPS delay)"
-        return DEFAULT_GPS_DELAY_MS * 1000
+        if old:
+            self.gps_delay_ms = OLD_DEFAULT_GPS_DELAY_MS
+            self.gps_delay_source = "default of ArduCopter <= 3.2 (EKF_POS_DELAY 220 ms; the log sets none)"
+        else:
+            self.gps_delay_ms = DEFAULT_GPS_DELAY_MS
+            self.gps_delay_source = "default (the log sets no GPS delay)"
+        return self.gps_delay_ms * 1000
 
     def _gnss(self, gps: list[Any], gpa: list[Any] | None, delay_us: float | None) -> Iterator[GnssFix]:
         fix = _fix(gps, gpa, delay_us or 0.0)
@@ -310,17 +376,32 @@ class DataFlashSource:
 
 
 def _fix(gps: list[Any], gpa: list[Any] | None, delay_us: float) -> GnssFix | None:
-    t_us, status, nsats, hdop, lat, lon, alt = gps
+    t_us, status, nsats, hdop, lat, lon, alt, spd, course_deg, vz = gps
     if not all(math.isfinite(x) for x in (lat, lon, alt)) or abs(lat) > 90 or abs(lon) > 180:
         return None
-    h_acc = v_acc = math.nan
+    h_acc = v_acc = vel_acc = math.nan
     t_rx_us = int(t_us)
+    have_vv = True
     if gpa is not None:
         h_acc = gpa[1] if gpa[1] > 0 else math.nan
         v_acc = gpa[2] if gpa[2] > 0 else math.nan
         t_rx_us = int(gpa[3]) * 1000
+        vel_acc = gpa[4] if gpa[4] > 0 else math.nan  # NaN > 0 is False: not logged
+        have_vv = gpa[5] != 0  # VV: the receiver gives a vertical velocity (NaN: not logged)
     return GnssFix(int(t_rx_us - delay_us), float(lat), float(lon), float(alt), int(status), int(nsats),
-                   h_acc_m=float(h_acc), v_acc_m=float(v_acc), hdop=float(hdop))
+                   h_acc_m=float(h_acc), v_acc_m=float(v_acc), hdop=float(hdop),
+                   v_ned_m_s=_velocity(spd, course_deg, vz if have_vv else math.nan),
+                   vel_acc_m_s=float(vel_acc))
+
+
+def _velocity(speed_m_s: float, course_deg: float, v_down_m_s: float) -> np.ndarray | None:
+    """NED velocity from ground speed, course over ground (degrees from north) and the vertical
+    speed (down positive, as ArduPilot logs ``VZ``); None without speed and course."""
+    if not (math.isfinite(speed_m_s) and math.isfinite(course_deg)):
+        return None
+    c = math.radians(course_deg)
+    return np.array((speed_m_s * math.cos(c), speed_m_s * math.sin(c),
+                     v_down_m_s if math.isfinite(v_down_m_s) else math.nan))
 
 
 def _reference(kind: str, v: list[Any], rejected: Any, source: str) -> Reference | None:
@@ -333,8 +414,6 @@ def _reference(kind: str, v: list[Any], rejected: Any, source: str) -> Reference
 
 
 def _vec(x: float, y: float, z: float) -> Any:
-    import numpy as np
-
     return np.array((x, y, z), dtype=float)
 
 

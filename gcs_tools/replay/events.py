@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 
 AUTOPILOT = "autopilot_estimate"
@@ -35,7 +36,9 @@ class Reference:
 
 @dataclass(frozen=True, slots=True)
 class LocalReference:
-    """A reference position in NED metres about an origin the log does not state."""
+    """A reference position in NED metres in a local frame: about an origin the log does not state
+    (its ``ReferenceInfo.alignment`` fits one), or the replay's own frame (alignment ``geodetic``:
+    a reader with an ``anchor``, whose local data define the frame)."""
 
     kind: str
     t_us: int
@@ -69,10 +72,16 @@ class ReaderStats:
 
 
 class LogReader(Protocol):
-    format: str  # "tlog", "dataflash", "ulog"
+    format: str  # "tlog", "dataflash", "ulog", "ansfl"
     stats: ReaderStats
     sources: dict[str, str | None]  # imu / attitude / gnss -> the message or topic used
     references: dict[str, ReferenceInfo]  # kind -> the source the summary reports (final after iterating)
+
+    @property
+    def anchor(self) -> LocalNedFrame | None:
+        """The frame the log's local data are in (a log with no geodetic position, e.g. ANSFL):
+        the replay's home; None: the home is the log's first 3-D fix."""
+        ...
 
     def __iter__(self) -> Iterator[Event]: ...
 

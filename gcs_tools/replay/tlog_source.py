@@ -49,6 +49,7 @@ INFO = {
 
 class TlogSource:
     format = "tlog"
+    anchor = None  # home: the first 3-D fix
 
     def __init__(self, path: Path) -> None:
         self.path = path

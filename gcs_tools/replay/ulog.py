@@ -16,8 +16,10 @@ with a one-line error naming the topic and field). Times are PX4 boot microsecon
   logged (non-zero), else ``timestamp`` -> AttitudeSample.
 - ``vehicle_gps_position``: ``latitude_deg``/``longitude_deg``/``altitude_msl_m`` (newer) or
   ``lat``/``lon`` (1e-7 deg)/``alt`` (mm MSL) (older), ``fix_type``, ``satellites_used``,
-  ``eph``/``epv`` (m), ``hdop``. Validity time = ``timestamp_sample`` when logged and non-zero,
-  else ``timestamp`` − ``EKF2_GPS_DELAY`` (the log's parameter, ms: what EKF2 itself assumes).
+  ``eph``/``epv`` (m), ``hdop``; velocity ``vel_n_m_s``/``vel_e_m_s``/``vel_d_m_s`` where
+  ``vel_ned_valid``, with ``s_variance_m_s`` (the speed accuracy, m/s) as its accuracy.
+  Validity time = ``timestamp_sample`` when logged and non-zero, else ``timestamp`` −
+  ``EKF2_GPS_DELAY`` (the log's parameter, ms: what EKF2 itself assumes).
 - The autopilot's estimate: ``vehicle_global_position`` (``lat``, ``lon`` deg, ``alt`` m MSL) or,
   when the log has none, ``vehicle_local_position`` (``x``, ``y``, ``z`` about
   ``ref_lat``/``ref_lon``/``ref_alt``, rows with ``xy_global`` set); both geodetic.
@@ -242,6 +244,7 @@ class ULogScanner:
 
 class ULogSource:
     format = "ulog"
+    anchor = None  # home: the first 3-D fix
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -385,9 +388,27 @@ class _GnssDecoder:
         eph, epv = arr["eph"].astype(float), arr["epv"].astype(float)
         hdop = arr["hdop"].astype(float) if "hdop" in names else np.full(t.size, math.nan)
         ok = np.isfinite(lat) & np.isfinite(lon) & (np.abs(lat) <= 90) & (np.abs(lon) <= 180)
+        vel, vel_ok, vel_acc = _velocity(arr)
         return [GnssFix(int(t_valid[i]), float(lat[i]), float(lon[i]), float(alt[i]), int(fix[i]),
-                        int(sats[i]), h_acc_m=float(eph[i]), v_acc_m=float(epv[i]), hdop=float(hdop[i]))
+                        int(sats[i]), h_acc_m=float(eph[i]), v_acc_m=float(epv[i]), hdop=float(hdop[i]),
+                        v_ned_m_s=vel[i].copy() if vel_ok[i] else None, vel_acc_m_s=float(vel_acc[i]))
                 if ok[i] else "gnss_non_finite" for i in range(t.size)]
+
+
+def _velocity(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """vehicle_gps_position's NED velocity (n, 3), where it is valid (``vel_ned_valid``, and the
+    fields logged), and its speed accuracy (``s_variance_m_s``, a 1-σ speed in m/s despite its
+    name: EKF2 reads it as the speed accuracy; NaN when not logged or not > 0)."""
+    names = arr.dtype.names or ()
+    n = arr.shape[0]
+    fields = ("vel_n_m_s", "vel_e_m_s", "vel_d_m_s")
+    if not all(f in names for f in fields):
+        return np.full((n, 3), math.nan), np.zeros(n, dtype=bool), np.full(n, math.nan)
+    vel = np.column_stack([arr[f].astype(float) for f in fields])
+    valid = arr["vel_ned_valid"].astype(bool) if "vel_ned_valid" in names else np.ones(n, dtype=bool)
+    valid &= np.isfinite(vel).all(axis=1)
+    acc = arr["s_variance_m_s"].astype(float) if "s_variance_m_s" in names else np.full(n, math.nan)
+    return vel, valid, np.where(acc > 0, acc, math.nan)
 
 
 def _references(kind: str, arr: np.ndarray, local: bool, source: str) -> list[Any]:
