@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.mission.scenarios import scenario_sections
 
 
 @dataclass(frozen=True)
@@ -44,5 +45,14 @@ class FixtureMission:
     frame: LocalNedFrame = LocalNedFrame(47.3769, 8.5417, 408.0)
     sections: dict[str, Any] = field(default_factory=dict)
 
+    scenario: str = "paper"
+
     def section(self, name: str) -> Any:
         return self.sections.get(name, {})
+
+    def settings(self, name: str) -> Any:
+        """As ``Mission.settings``: the scenario's fields under the fixture's own section."""
+        own = self.section(name)
+        if not isinstance(own, dict):
+            return own  # left to the config builder's one-line error (a mission file is checked at load)
+        return {**scenario_sections(self.scenario).get(name, {}), **own}

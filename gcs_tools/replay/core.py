@@ -413,7 +413,7 @@ def replay(
     if synthetic is not None:
         summary["synthetic_gnss"] = synthetic.synthetic.info
         summary["errors"]["raw_fixes"] = {"note": RAW_FIXES_NOTE, **synthetic.raw_errors}
-    log_reader = reader.inner if synthetic is not None else reader
+    log_reader = synthetic.inner if synthetic is not None else reader
     clock = getattr(log_reader, "clock", None)
     if clock is not None:
         summary["clock_alignment"] = clock
