@@ -24,15 +24,10 @@ import math
 
 import numpy as np
 
+from companion.domain.rotation import rotation_terms, yaw_of
 from simvehicle.config import AhrsConfig
 
 _TWO_PI = 2.0 * math.pi
-
-
-def yaw_of(q: tuple[float, float, float, float] | np.ndarray) -> float:
-    """Yaw (rad, about NED down) of a body FRD → NED quaternion (w, x, y, z)."""
-    w, x, y, z = (float(c) for c in q)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def _wrap(a: float) -> float:
@@ -84,7 +79,7 @@ class Ahrs:
         for i, ((fx, fy, fz), (gx, gy, gz)) in enumerate(zip(acc_frd_m_s2.tolist(), gyro_frd_rad_s.tolist(),
                                                              strict=True)):
             # estimated down axis in body: third row of R_ned_frd
-            vx, vy, vz = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)
+            vx, vy, vz = rotation_terms(w, x, y, z)[6:]
             norm = math.sqrt(fx * fx + fy * fy + fz * fz)
             ex = ey = ez = 0.0
             if norm > 1e-6:
@@ -96,8 +91,7 @@ class Ahrs:
                 k = self._heading_every
                 psi_ref = yaw_of(q_true_ned_frd[i]) + self.heading_bias_rad + heading_noise[h]
                 h += 1
-                psi = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-                e_psi = _wrap(psi_ref - psi)
+                e_psi = _wrap(psi_ref - yaw_of((w, x, y, z)))
                 cx, cy, cz = cx + kpy * k * e_psi * vx, cy + kpy * k * e_psi * vy, cz + kpy * k * e_psi * vz
                 ix, iy, iz = ix + kiy * k * e_psi * vx, iy + kiy * k * e_psi * vy, iz + kiy * k * e_psi * vz
             bx, by, bz = bx - ix * dt, by - iy * dt, bz - iz * dt

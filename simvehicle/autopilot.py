@@ -22,10 +22,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from companion.domain.rotation import quaternion_to_euler, rotation_matrix
 from companion.domain.samples import NavEstimate, Setpoint
 from simvehicle.config import AutopilotConfig, VehicleConfig
-from simvehicle.dynamics import quat_to_euler
-from simvehicle.imu import rotations
 
 
 def _finite(*arrays: np.ndarray) -> bool:
@@ -133,7 +132,7 @@ class Autopilot:
     def dead_reckon(self, q_ned_frd: np.ndarray, acc_frd_m_s2: np.ndarray) -> None:
         """Propagate the own navigation state over one period of IMU samples (physics rate)."""
         dt_s = self._physics_dt_s
-        acc_ned_m_s2 = np.einsum("nij,nj->ni", rotations(q_ned_frd), acc_frd_m_s2) + self._g_ned
+        acc_ned_m_s2 = np.einsum("nij,nj->ni", rotation_matrix(q_ned_frd), acc_frd_m_s2) + self._g_ned
         v = self.nav_v_ned_m_s + dt_s * np.cumsum(acc_ned_m_s2, axis=0)
         self.nav_p_ned_m = self.nav_p_ned_m + dt_s * v.sum(axis=0)
         self.nav_v_ned_m_s = v[-1].copy()
@@ -142,7 +141,7 @@ class Autopilot:
     def inner(self, x: Sequence[float]) -> tuple[float, float, float, float]:
         """Eq. 11: (thrust_n, tau_roll, tau_pitch, tau_yaw) from the attitude and body rates of the
         rigid-body state ``x`` (``RigidBody.x`` layout: quaternion at 6-9, body rates at 10-12)."""
-        roll, pitch, yaw = quat_to_euler(x[6:10])
+        roll, pitch, yaw = quaternion_to_euler(x[6:10])
         p, q, r = x[10], x[11], x[12]
         tilt_cos = max(0.5, math.cos(roll) * math.cos(pitch))
         thrust = min(self._t_max, max(0.0, self._m * (self._g - self.accel_down_cmd_m_s2) / tilt_cos))

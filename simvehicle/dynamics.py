@@ -18,44 +18,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from companion.domain.rotation import euler_to_quaternion, quaternion_to_euler, rotation_matrix
 from simvehicle.config import VehicleConfig
 
 # state layout: 0-2 p_ned_m, 3-5 v_ned_m_s, 6-9 q_ned_frd (w, x, y, z), 10-12 omega_frd_rad_s
 STATE_SIZE = 13
-
-
-def quat_to_rot(q: Sequence[float]) -> np.ndarray:
-    """Rotation matrix R_ned_frd of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def quat_to_euler(q: Sequence[float]) -> tuple[float, float, float]:
-    """ZYX Euler angles (roll φ, pitch θ, yaw ψ) in radians of a unit quaternion."""
-    w, x, y, z = q
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
-
-
-def euler_to_quat(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z) of ZYX Euler angles; ``quat_to_rot`` of it is the paper's ϱ."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
 
 
 class RigidBody:
@@ -68,7 +35,7 @@ class RigidBody:
         self._g = cfg.gravity_m_s2
         self._drag_per_kg = cfg.drag_n_s_m / cfg.mass_kg
         self._ixx, self._iyy, self._izz = cfg.inertia_kg_m2
-        q = euler_to_quat(0.0, 0.0, yaw_rad)
+        q = euler_to_quaternion(0.0, 0.0, yaw_rad)
         self.x: list[float] = [*map(float, p_ned_m), 0.0, 0.0, 0.0, *q, 0.0, 0.0, 0.0]
 
     # -- the model ---------------------------------------------------------------------
@@ -186,9 +153,9 @@ class RigidBody:
 
     def rotation(self) -> np.ndarray:
         """R_ned_frd (body FRD to NED), the paper's ϱ(φ, θ, ψ)."""
-        return quat_to_rot(self.q_ned_frd)
+        return rotation_matrix(self.q_ned_frd)
 
     def state12(self) -> np.ndarray:
         """The paper's state (eq. 6): [n, e, d, v_n, v_e, v_d, φ, θ, ψ, p, q, r]."""
         x = self.x
-        return np.array([*x[0:6], *quat_to_euler(x[6:10]), *x[10:13]])
+        return np.array([*x[0:6], *quaternion_to_euler(x[6:10]), *x[10:13]])

@@ -21,7 +21,8 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.domain.geodesy import LocalNedFrame
-from companion.mavlink.codec import DEG_E7, quaternion_to_euler
+from companion.domain.rotation import quaternion_to_euler, yaw_of
+from companion.mavlink.codec import DEG_E7
 
 UINT16_MAX = 65535
 INT16_MAX = 32767
@@ -87,7 +88,7 @@ def _deg_e7(deg: float) -> int:
 
 
 def _heading_deg(q: np.ndarray) -> float:
-    return math.degrees(quaternion_to_euler(q)[2]) % 360.0
+    return math.degrees(yaw_of(q)) % 360.0
 
 
 def encode_global_position(s: VehicleStatus, home: Home) -> mavlink.MAVLink_global_position_int_message:

@@ -14,34 +14,20 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from companion.domain.rotation import rotation_terms
 from simvehicle.config import ImuConfig, VehicleConfig
 from simvehicle.noise import NormalBlocks
-
-
-def rotations(q_ned_frd: np.ndarray) -> np.ndarray:
-    """R_ned_frd for a block of unit quaternions (n, 4) -> (n, 3, 3)."""
-    w, x, y, z = q_ned_frd.T
-    R = np.empty((q_ned_frd.shape[0], 3, 3))
-    R[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    R[:, 0, 1] = 2 * (x * y - w * z)
-    R[:, 0, 2] = 2 * (x * z + w * y)
-    R[:, 1, 0] = 2 * (x * y + w * z)
-    R[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    R[:, 1, 2] = 2 * (y * z - w * x)
-    R[:, 2, 0] = 2 * (x * z - w * y)
-    R[:, 2, 1] = 2 * (y * z + w * x)
-    R[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
 
 
 def specific_force_frd(vehicle: VehicleConfig, thrust_n: float,
                        x: Sequence[float]) -> tuple[float, float, float]:
     """True specific force in body FRD for thrust and state ``x`` (RigidBody layout): (-c Rᵀv - T e_3) / m."""
     _, _, _, vn, ve, vd, w, qx, qy, qz = x[:10]
+    r = rotation_terms(w, qx, qy, qz)
     # Rᵀ v, the NED velocity in body axes
-    bx = (1 - 2 * (qy * qy + qz * qz)) * vn + 2 * (qx * qy + w * qz) * ve + 2 * (qx * qz - w * qy) * vd
-    by = 2 * (qx * qy - w * qz) * vn + (1 - 2 * (qx * qx + qz * qz)) * ve + 2 * (qy * qz + w * qx) * vd
-    bz = 2 * (qx * qz + w * qy) * vn + 2 * (qy * qz - w * qx) * ve + (1 - 2 * (qx * qx + qy * qy)) * vd
+    bx = r[0] * vn + r[3] * ve + r[6] * vd
+    by = r[1] * vn + r[4] * ve + r[7] * vd
+    bz = r[2] * vn + r[5] * ve + r[8] * vd
     c = vehicle.drag_n_s_m
     inv_m = 1.0 / vehicle.mass_kg
     return -c * bx * inv_m, -c * by * inv_m, (-thrust_n - c * bz) * inv_m

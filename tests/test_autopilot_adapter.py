@@ -16,9 +16,9 @@ from companion.autopilot.streams import StreamRates, data_stream_requests, inter
 from companion.autopilot.timesync import Timesync
 from companion.autopilot.translate import TranslateConfig, Translator
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.rotation import euler_to_quaternion
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
-from companion.mavlink.codec import euler_to_quaternion
 
 HOME = LocalNedFrame(-35.363261, 149.165230, 584.0)
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from companion.domain.rotation import rotation_scaled
 from companion.estimator import _core, model
 from companion.estimator.history import ImuHistory
-from companion.estimator.navigator import rotation_scaled
 
 N = model.N_STATE
 IDENTITY9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)

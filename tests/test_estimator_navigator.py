@@ -7,9 +7,9 @@ import pymap3d
 import pytest
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.rotation import rotation_ned_frd, rotation_scaled
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.estimator import EstimatorConfig, Navigator
-from companion.estimator.navigator import rotation_ned_frd, rotation_scaled
 from tests.estimator_streams import multipath_stream
 
 CFG = EstimatorConfig()

@@ -13,6 +13,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 
 from companion.domain.geodesy import LocalNedFrame  # noqa: E402
+from companion.domain.rotation import euler_to_quaternion  # noqa: E402
 from companion.estimator.config import EstimatorConfig  # noqa: E402
 from companion.mavlink import codec  # noqa: E402
 from simvehicle import ground_telemetry as gt  # noqa: E402
@@ -33,7 +34,7 @@ def wire(msg):
 def _status(**over) -> gt.VehicleStatus:
     fields = dict(t_us=12_340_000, p_ned_m=np.array([105.0, 47.0, -20.0]),
                   v_ned_m_s=np.array([1.5, -0.25, 0.5]),
-                  q_ned_frd=codec.euler_to_quaternion(0.0, 0.0, math.radians(90.0)),
+                  q_ned_frd=euler_to_quaternion(0.0, 0.0, math.radians(90.0)),
                   rates_frd_rad_s=np.array([0.01, -0.02, 0.03]), thrust_fraction=0.5, armed=True,
                   mode="OFFBOARD", estimate_ok=True, gnss_ok=True)
     return gt.VehicleStatus(**{**fields, **over})
@@ -91,7 +92,7 @@ def test_global_position_known_answer():
     assert g.relative_alt == 20_000  # 20 m above the home on the ground (down = 0)
     assert (g.vx, g.vy, g.vz) == (150, -25, 50)  # cm/s, NED
     assert g.hdg == 9000 and g.time_boot_ms == 12_340
-    west_q = codec.euler_to_quaternion(0, 0, -math.pi / 2)
+    west_q = euler_to_quaternion(0, 0, -math.pi / 2)
     west = wire(gt.encode_global_position(_status(q_ned_frd=west_q), HOME))
     assert west.hdg == 27000  # -90° is 270°, never negative
     fast = wire(gt.encode_global_position(_status(v_ned_m_s=np.array([400.0, 0, 0])), HOME))

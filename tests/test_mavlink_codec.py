@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.rotation import quaternion_to_euler
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, Setpoint, TruthState
 from companion.mavlink import codec as mc
 
@@ -184,7 +185,7 @@ def test_attitude_euler_matches_scipy() -> None:
     s = mc.decode_sample(wire(mc.mavlink.MAVLink_attitude_message(1500, roll, pitch, yaw, 0, 0, 0)))
     x, y, z, w = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()
     np.testing.assert_allclose(s.q_ned_frd, [w, x, y, z], atol=1e-12)
-    np.testing.assert_allclose(mc.quaternion_to_euler(s.q_ned_frd), (roll, pitch, yaw), atol=1e-12)
+    np.testing.assert_allclose(quaternion_to_euler(s.q_ned_frd), (roll, pitch, yaw), atol=1e-12)
 
 
 @pytest.mark.parametrize(

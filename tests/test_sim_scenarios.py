@@ -6,10 +6,11 @@ import math
 import numpy as np
 import pytest
 
+from companion.domain.rotation import rotation_matrix, yaw_of
 from companion.mission import ConfigError, load_mission, with_scenario
 from companion.mission.scenarios import ICM_42688_P
 from simvehicle import SimVehicle
-from simvehicle.ahrs import Ahrs, attitude_error_rad, yaw_of
+from simvehicle.ahrs import Ahrs, attitude_error_rad
 from simvehicle.config import AhrsConfig, GnssConfig, ImuConfig, sim_config_for
 from simvehicle.imu import Imu
 from simvehicle.nlos import Constellation, UnmodelledGnss, position_error
@@ -71,9 +72,8 @@ def test_ahrs_converges_to_the_accelerometer_tilt_and_heading_reference():
     for _ in range(300):  # 300 s: 30 roll/pitch time constants (1/kp), 6 of the bias loop (kp/ki = 50 s)
         q = ahrs.update(f, w, q_blk)
     tilt_expected = math.atan(np.hypot(*b_acc[:2]) / G)
-    from simvehicle.imu import rotations
 
-    down_est, down_true = rotations(q[-1:])[0][2], rotations(q_true[None])[0][2]
+    down_est, down_true = rotation_matrix(q[-1:])[0][2], rotation_matrix(q_true[None])[0][2]
     tilt = math.acos(min(1.0, float(down_est @ down_true)))
     assert tilt == pytest.approx(tilt_expected, abs=0.1 * tilt_expected)
     assert yaw_of(q[-1]) - yaw == pytest.approx(ahrs.heading_bias_rad, abs=2e-3)

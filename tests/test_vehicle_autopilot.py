@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from vehicle_world import FixtureMission
 
+from companion.domain.rotation import euler_to_quaternion, rotation_matrix
 from companion.domain.samples import NavEstimate, Setpoint
 from simvehicle import SimVehicle
 from simvehicle.autopilot import Autopilot
 from simvehicle.config import AutopilotConfig, VehicleConfig
-from simvehicle.dynamics import euler_to_quat, quat_to_rot
 
 MISSION = FixtureMission()
 
@@ -82,7 +82,7 @@ def test_small_angle_mapping_signs_in_ned(yaw):
     ap = Autopilot(AutopilotConfig(), VehicleConfig(), np.zeros(3), yaw_hold_rad=yaw)
     for a_ref in ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-0.7, 0.4, 0.0]):
         ap.track(np.zeros(3), np.zeros(3), np.array(a_ref))
-        R = quat_to_rot(euler_to_quat(ap.roll_cmd_rad, ap.pitch_cmd_rad, yaw))
+        R = rotation_matrix(euler_to_quaternion(ap.roll_cmd_rad, ap.pitch_cmd_rad, yaw))
         a_horizontal = (-9.81 * R[:, 2])[:2]  # thrust acceleration (body -z) at hover thrust
         np.testing.assert_allclose(a_horizontal, a_ref[:2], rtol=0.02, atol=0.01)
 

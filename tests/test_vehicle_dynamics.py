@@ -5,8 +5,9 @@ import math
 import numpy as np
 import pytest
 
+from companion.domain.rotation import euler_to_quaternion, quaternion_to_euler, rotation_matrix
 from simvehicle.config import VehicleConfig
-from simvehicle.dynamics import RigidBody, euler_to_quat, quat_to_euler, quat_to_rot
+from simvehicle.dynamics import RigidBody
 
 CFG = VehicleConfig()
 DT = 0.005
@@ -28,9 +29,9 @@ def test_quaternion_matches_paper_rotation_and_euler_round_trip():
     rng = np.random.default_rng(3)
     for _ in range(50):
         phi, theta, psi = rng.uniform(-1.4, 1.4), rng.uniform(-1.4, 1.4), rng.uniform(-3.1, 3.1)
-        q = euler_to_quat(phi, theta, psi)
-        np.testing.assert_allclose(quat_to_rot(q), paper_rotation(phi, theta, psi), atol=1e-14)
-        np.testing.assert_allclose(quat_to_euler(q), (phi, theta, psi), atol=1e-12)
+        q = euler_to_quaternion(phi, theta, psi)
+        np.testing.assert_allclose(rotation_matrix(q), paper_rotation(phi, theta, psi), atol=1e-14)
+        np.testing.assert_allclose(quaternion_to_euler(q), (phi, theta, psi), atol=1e-12)
 
 
 def test_hover_with_exact_thrust_stays_put():

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 from vehicle_world import FixtureMission, RectWorld
 
+from companion.domain.rotation import rotation_matrix
 from simvehicle import SimVehicle
 from simvehicle.config import GnssConfig, ImuConfig, VehicleConfig
 from simvehicle.gnss import GnssModel, NedToGeodetic, conditions
-from simvehicle.imu import Imu, rotations, specific_force_frd
+from simvehicle.imu import Imu, specific_force_frd
 
 PERIOD_S = 0.05
 FRAME = FixtureMission().frame
@@ -44,7 +45,7 @@ def test_specific_force_is_rotated_drag_plus_thrust():
     q /= np.linalg.norm(q)
     v = np.array([3.0, -1.0, 0.5])
     f = np.array([specific_force_frd(cfg, 50.0, [0.0, 0.0, 0.0, *v, *q, 0.0, 0.0, 0.0])])
-    R = rotations(q[None, :])[0]
+    R = rotation_matrix(q[None, :])[0]
     np.testing.assert_allclose(f[0], R.T @ (-2.0 * v) / 5.0 + [0, 0, -10.0], atol=1e-14)
     noisy, _ = Imu(ImuConfig(sigma_acc_m_s2=0.0), np.random.default_rng(0)).measure(f, np.zeros((1, 3)))
     np.testing.assert_array_equal(noisy, f)

@@ -28,9 +28,8 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.rotation import quaternion_to_euler, rotation_ned_frd
 from companion.domain.samples import NavEstimate
-from companion.estimator.navigator import rotation_ned_frd
-from companion.mavlink.codec import quaternion_to_euler
 
 GPS_EPOCH_UNIX_S = 315_964_800  # 1980-01-06T00:00:00Z
 GPS_LEAP_S = 18  # GPS time - UTC since 2017

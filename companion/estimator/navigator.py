@@ -13,7 +13,6 @@ recorded or simulated blocks that gives the same result as pushing attitude + IM
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -21,6 +20,7 @@ import pymap3d
 from pymap3d.ellipsoid import Ellipsoid
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.rotation import Rot, rotation_scaled
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
@@ -28,38 +28,8 @@ from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
-Rot = tuple[Any, Any, Any, Any, Any, Any, Any, Any, Any]
 _np_cos, _np_sin, _np_hypot = np.cos, np.sin, np.hypot  # pymap3d's trigonometry (numpy's, for its bits)
 BATCH_MIN = 64  # below this many samples the per-sample float path is faster than numpy
-
-
-def rotation_scaled(w: Any, x: Any, y: Any, z: Any, s: Any) -> Rot:
-    """Row-major R_ned_frd of the quaternion (w, x, y, z) with ``s = 2 / |q|²``; floats or arrays.
-
-    Every term of R is quadratic in q, so the normalisation is folded into ``s``: no square root.
-    Equal to ``rotation_ned_frd`` up to rounding (tested). The per-sample path computes the same
-    expression in the core (``_core.rotation_q``, the same bits: tested); this form serves the
-    vectorised ``push_imu_batch``.
-    """
-    xs, ys, zs = x * s, y * s, z * s
-    wx, wy, wz = w * xs, w * ys, w * zs
-    xx, xy, xz = x * xs, x * ys, x * zs
-    yy, yz, zz = y * ys, y * zs, z * zs
-    return (1.0 - (yy + zz), xy - wz, xz + wy,
-            xy + wz, 1.0 - (xx + zz), yz - wx,
-            xz - wy, yz + wx, 1.0 - (xx + yy))
-
-
-def rotation_ned_frd(w: Any, x: Any, y: Any, z: Any, sqrt: Callable[[Any], Any]) -> Rot:
-    """Row-major R_ned_frd of a quaternion (normalised here); floats or arrays alike (the matrix
-    form of ``frd_to_ned``)."""
-    n = sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return (
-        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
-        2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
-        2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y),
-    )
 
 
 class NedConverter:

@@ -53,6 +53,7 @@ from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from companion.domain.geodesy import LocalNedFrame  # noqa: E402
 from companion.domain.physics import STANDARD_GRAVITY_M_S2  # noqa: E402
+from companion.domain.rotation import euler_to_quaternion, normalised, quaternion_to_euler  # noqa: E402
 from companion.domain.samples import (  # noqa: E402
     AttitudeSample,
     GnssFix,
@@ -234,12 +235,12 @@ def _stamp_us(name: str, t_us: int) -> int:
 
 
 def _unit_quaternion(name: str, w: float, x: float, y: float, z: float) -> np.ndarray:
-    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    norm, q = normalised(w, x, y, z)
     if not abs(norm - 1.0) <= QUAT_NORM_TOLERANCE:  # also catches NaN
         if not math.isfinite(norm):
             raise CodecError("non_finite", f"{name} has a non-finite field")
         raise CodecError("out_of_range", f"{name} quaternion norm {norm:.3f}")
-    return np.array((w / norm, x / norm, y / norm, z / norm))
+    return np.array(q)
 
 
 def _lat_lon(name: str, lat_deg: float, lon_deg: float) -> None:
@@ -251,31 +252,6 @@ def _text(raw: str | bytes) -> str:
     if isinstance(raw, bytes):
         return raw.split(b"\x00", 1)[0].decode("ascii", errors="replace")
     return raw
-
-
-# --- rotations (ZYX Euler, body FRD -> NED) ---------------------------------------------------
-
-
-def euler_to_quaternion(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
-    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
-    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
-    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
-    return np.array(
-        (
-            cr * cp * cy + sr * sp * sy,
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-        )
-    )
-
-
-def quaternion_to_euler(q: np.ndarray) -> tuple[float, float, float]:
-    w, x, y, z = (float(c) for c in q)
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
 
 
 # --- estimator inputs ---------------------------------------------------------------------------
@@ -338,7 +314,7 @@ def decode_attitude(m: Any) -> AttitudeSample:
 def decode_attitude_euler(m: Any) -> AttitudeSample:
     _finite("ATTITUDE", m.roll, m.pitch, m.yaw)
     return AttitudeSample(_stamp_us("ATTITUDE", int(m.time_boot_ms) * 1000),
-                          euler_to_quaternion(m.roll, m.pitch, m.yaw))
+                          np.array(euler_to_quaternion(m.roll, m.pitch, m.yaw)))
 
 
 def _mm(value_m: float) -> int:

@@ -47,9 +47,9 @@ import pymap3d
 from pymavlink.DFReader import DFFormat
 
 from companion.autopilot.translate import ARDUPILOT_DEFAULT_GPS_DELAY_MS
+from companion.domain.rotation import euler_to_quaternion
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.errors import UserError
-from companion.mavlink.codec import euler_to_quaternion
 from gcs_tools.replay.events import (
     AUTOPILOT,
     MIN_FIX_TYPE_3D,
@@ -308,8 +308,8 @@ class DataFlashSource:
                     continue
                 decoded["attitude"] += 1
                 last_us = int(t)
-                yield AttitudeSample(last_us, euler_to_quaternion(
-                    math.radians(roll), math.radians(pitch), math.radians(yaw)))
+                yield AttitudeSample(last_us, np.array(euler_to_quaternion(
+                    math.radians(roll), math.radians(pitch), math.radians(yaw))))
             elif name == "GPS":
                 if delay_us is None:
                     delay_us = self._delay_us(params, old=scanner.resolved["GPS"][0] != "TimeUS")
