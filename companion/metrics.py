@@ -32,18 +32,15 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.statistics import describe
+
 ALIGNMENTS = ("geodetic", "mean_offset", "median_offset", "vertical_mean_offset")
 DEFAULT_WINDOW_US = 10_000_000
+ERROR_BLOCK = ("median", "p95", "max", "rmse", "iqr", "n")  # companion.domain.statistics names
 
 
 def _stats(e: np.ndarray) -> dict[str, float]:
-    e = e[np.isfinite(e)]
-    if e.size == 0:
-        nan = math.nan
-        return {"median": nan, "p95": nan, "max": nan, "rmse": nan, "iqr": nan, "n": 0}
-    p25, p50, p75, p95 = np.percentile(e, [25.0, 50.0, 75.0, 95.0])
-    return {"median": float(p50), "p95": float(p95), "max": float(e.max()),
-            "rmse": float(np.sqrt(np.mean(e**2))), "iqr": float(p75 - p25), "n": int(e.size)}
+    return describe(e, ERROR_BLOCK)
 
 
 def error_statistics(err_ned_m: np.ndarray, alignment: str = "geodetic") -> dict[str, Any]:

@@ -39,6 +39,7 @@ import numpy as np
 
 from companion.domain.clock_guard import ClockWindow, within
 from companion.domain.samples import NavEstimate, Setpoint
+from companion.domain.statistics import LATENCY_STATISTICS, describe
 from companion.mavlink import codec as codec
 from companion.mavlink.lockstep import LockstepConfig, step_marker
 from companion.mavlink.tlog import TlogWriter
@@ -349,11 +350,7 @@ class VehicleNode:
             "collisions": self.collisions,
             "telemetry": self.telemetry.counters(),
             "lockstep": dict(self.barrier.counters),
-            "imu_period_jitter": (
-                {"count": int(jitter.size), "p50_ms": float(np.percentile(jitter, 50)),
-                 "p99_ms": float(np.percentile(jitter, 99)), "max_ms": float(jitter.max())}
-                if jitter.size else {"count": 0}
-            ),
+            "imu_period_jitter_ms": describe(jitter, LATENCY_STATISTICS),
         }
 
     def close(self) -> None:

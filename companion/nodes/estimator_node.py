@@ -33,6 +33,7 @@ from companion.autopilot.timesync import answer as timesync_answer
 from companion.domain.clock_guard import ClockWindow, StreamClock, Verdict, within
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+from companion.domain.statistics import LATENCY_STATISTICS, describe
 from companion.estimator import Navigator
 from companion.mavlink import codec as codec
 from companion.mavlink.lockstep import marker_time_us, step_response
@@ -246,17 +247,12 @@ class EstimatorNode:
 
     def stats(self) -> dict[str, Any]:
         lat_ms = np.asarray(self.gnss_to_odometry_ns, dtype=float) / 1e6
-        latency = (
-            {"count": int(lat_ms.size), "p50_ms": float(np.percentile(lat_ms, 50)),
-             "p99_ms": float(np.percentile(lat_ms, 99)), "max_ms": float(lat_ms.max())}
-            if lat_ms.size else {"count": 0}
-        )
         return {
             "link": self.link.counters.as_dict(),
             "node": dict(self.counters),
             "navigator": self.navigator_counters(),
             "telemetry": self.telemetry.counters(),
-            "gnss_to_odometry_latency": latency,
+            "gnss_to_odometry_latency_ms": describe(lat_ms, LATENCY_STATISTICS),
         }
 
 

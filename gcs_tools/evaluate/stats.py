@@ -2,8 +2,9 @@
 
 Definitions used in ``results.json`` and the report:
 
-- **median / IQR / p95** of an error sample: ``np.percentile`` with linear interpolation;
-  IQR = p75 − p25.
+- **median / IQR / p95** of an error sample: the project's statistics vocabulary
+  (``companion.domain.statistics``: ``np.median``; percentiles with linear interpolation;
+  IQR = p75 − p25).
 - **percentile bootstrap 95 % CI** of a statistic of a sample of independent units
   (seeds): resample the units with replacement ``n_resamples`` times with an injected
   ``numpy.random.Generator``, evaluate the statistic on each resample and take the 2.5th
@@ -23,16 +24,14 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
+from companion.domain.statistics import describe, finite
+
 Statistic = Callable[..., np.ndarray]
 
 
 def summarize(samples: np.ndarray) -> dict[str, float]:
-    """``{median, iqr, p95, n}`` of a 1-D sample (non-finite values dropped)."""
-    x = _finite(samples)
-    if x.size == 0:
-        return {"median": float("nan"), "iqr": float("nan"), "p95": float("nan"), "n": 0}
-    p25, p50, p75, p95 = np.percentile(x, [25.0, 50.0, 75.0, 95.0])
-    return {"median": float(p50), "iqr": float(p75 - p25), "p95": float(p95), "n": int(x.size)}
+    """``{median, iqr, p95, n}`` of a 1-D sample (``companion.domain.statistics``; non-finite dropped)."""
+    return describe(samples, ("median", "iqr", "p95", "n"))
 
 
 def bootstrap_ci(
@@ -46,7 +45,7 @@ def bootstrap_ci(
 
     ``statistic(a, axis=1)`` must reduce each row of an (n_resamples, n) array.
     """
-    a = _finite(x)
+    a = finite(x)
     if a.size < 2:
         return (float("nan"), float("nan"))
     values = statistic(a[rng.integers(0, a.size, size=(n_resamples, a.size))], axis=1)
@@ -138,11 +137,6 @@ def rank_order(medians: Mapping[str, float], order: Sequence[str]) -> bool:
     return all(a > b for a, b in zip(values, values[1:], strict=False))
 
 
-def _finite(x: np.ndarray) -> np.ndarray:
-    a = np.asarray(x, dtype=float).ravel()
-    return a[np.isfinite(a)]
-
-
 def _percentile_interval(values: np.ndarray, level: float) -> tuple[float, float]:
     tail = 50.0 * (1.0 - level)
     lo, hi = np.percentile(values, [tail, 100.0 - tail])
@@ -180,10 +174,10 @@ def flight_stats(series: Mapping[str, np.ndarray]) -> dict[str, float]:
     out["nees_mean"] = float(np.mean(nees)) if nees.size else nan
     out["nees_median"] = float(np.median(nees)) if nees.size else nan
     out["nees_out95"] = float(np.mean(nees > CHI2_3DOF_95)) if nees.size else nan
-    nis = _finite(series["nis"]) if "nis" in series else np.empty(0)
+    nis = finite(series["nis"]) if "nis" in series else np.empty(0)
     out["nis_mean"] = float(np.mean(nis)) if nis.size else nan
     out["nis_median"] = float(np.median(nis)) if nis.size else nan
-    track = _finite(series["track_error_m"]) if "track_error_m" in series else np.empty(0)
+    track = finite(series["track_error_m"]) if "track_error_m" in series else np.empty(0)
     out["track_median_m"] = float(np.median(track)) if track.size else nan
     return out
 

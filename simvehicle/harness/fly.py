@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.statistics import describe
 from companion.errors import UserError
 from companion.mission import Mission, load_mission, with_scenario
 from companion.planning import Route, plan_route
@@ -43,18 +44,6 @@ class FlyConfig:
     goal_speed_m_s: float = 1.0
     timeout_margin_s: float = 30.0  # timeout = start delay + route duration + max(margin, 50 % of duration)
 
-
-
-def error_stats(err_m: np.ndarray) -> dict[str, float]:
-    """median, p95 and RMS of the finite entries (NaN when there are none)."""
-    e = err_m[np.isfinite(err_m)]
-    if e.size == 0:
-        return {"median": math.nan, "p95": math.nan, "rmse": math.nan}
-    return {
-        "median": float(np.median(e)),
-        "p95": float(np.percentile(e, 95)),
-        "rmse": float(np.sqrt(np.mean(e * e))),
-    }
 
 
 _ROUTES: dict[tuple[int, int, float], tuple[Mission, Route]] = {}
@@ -135,8 +124,8 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         "duration_s": sim.t_us * 1e-6,
         "route_duration_s": route.duration_s,
         "wall_s": wall_s,
-        "estimation_error_m": error_stats(series["est_error_m"]),
-        "tracking_error_m": error_stats(series["track_error_m"]),
+        "estimation_error_m": describe(series["est_error_m"]),
+        "tracking_error_m": describe(series["track_error_m"]),
         "min_clearance_m": float(np.min(series["clearance_m"])),
         "gnss": {
             "sent": sim.gnss.sent,

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.statistics import describe
 from companion.errors import UserError
 from companion.estimator import METHODS, EstimatorConfig, check_method
 from companion.mission import load_mission
@@ -47,7 +48,7 @@ from simvehicle.harness.ardupilot.gnss_source import UrbanGnssSource
 from simvehicle.harness.ardupilot.session import ArduPilotSession, Recording
 from simvehicle.harness.ardupilot.sitl import ArduPilotSitl, SitlConfig
 from simvehicle.harness.backend import FlightResult
-from simvehicle.harness.fly import error_stats, planned_route
+from simvehicle.harness.fly import planned_route
 
 VELOCITY_SEED_STREAM = 1  # velocity noise: default_rng([seed, this]); positions: default_rng(seed)
 HORIZONTAL_ERROR_PREFIX = "est_error_h_m:"  # series keys of every row's horizontal error (not in the CSV)
@@ -157,11 +158,7 @@ def _alive(sitl: ArduPilotSitl, companion: CompanionProcess | None) -> Any:
 
 
 def _delay_stats(delays_us: list[int]) -> dict[str, float]:
-    d = np.asarray(delays_us, dtype=float) * 1e-3
-    if not d.size:
-        return {"median": math.nan, "p95": math.nan, "max": math.nan, "n": 0}
-    return {"median": float(np.median(d)), "p95": float(np.percentile(d, 95)), "max": float(d.max()),
-            "n": int(d.size)}
+    return describe(np.asarray(delays_us, dtype=float) * 1e-3, ("median", "p95", "max", "n"))
 
 
 def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec: Recording,
@@ -186,8 +183,8 @@ def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec:
     method_errors: dict[str, np.ndarray] = {}  # horizontal error per sample, for campaigns
     for name, tr in tracks.items():
         e3, eh = errors(tr.p_ned_m, p_true)
-        per_method[name] = {"estimation_error_m": error_stats(e3),
-                            "estimation_error_horizontal_m": error_stats(eh)}
+        per_method[name] = {"estimation_error_m": describe(e3),
+                            "estimation_error_horizontal_m": describe(eh)}
         method_errors[name] = eh
     mine: Track = tracks[opts.method]
     if live is not None:  # what ArduPilot got; bias, β and NIS from the replay of the same method
@@ -214,11 +211,11 @@ def evaluate_flight(opts: ArduPilotFlightOptions, mission: Any, route: Any, rec:
         "duration_s": float(t_s[-1]) if t_s.size else 0.0,
         "route_duration_s": route.duration_s,
         "wall_s": run_info["wall_s"],
-        "estimation_error_m": error_stats(e3),
-        "estimation_error_horizontal_m": error_stats(eh),
-        "autopilot_estimation_error_m": error_stats(a3),
-        "autopilot_estimation_error_horizontal_m": error_stats(ah),
-        "tracking_error_m": error_stats(track_err),
+        "estimation_error_m": describe(e3),
+        "estimation_error_horizontal_m": describe(eh),
+        "autopilot_estimation_error_m": describe(a3),
+        "autopilot_estimation_error_horizontal_m": describe(ah),
+        "tracking_error_m": describe(track_err),
         "min_clearance_m": float(np.min(clearance)) if clearance.size else math.nan,
         "methods": per_method,
         "gnss": {"sent": len(source.sent), "fused": int(nav.get("gnss_fused", 0)),

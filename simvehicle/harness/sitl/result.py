@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.statistics import describe
 from companion.planning import Route
 from simvehicle.harness.backend import FlightResult
-from simvehicle.harness.fly import error_stats
 from simvehicle.harness.sitl.launcher import SitlOptions, SitlRun
 from simvehicle.recording import SPOOL_NAME, series_from_spool
 
@@ -49,8 +49,8 @@ def flight_result(opts: SitlOptions, run: SitlRun, route: Route, mission_name: s
         "duration_s": float(t_s[-1]) if t_s.size else 0.0,
         "route_duration_s": route.duration_s,
         "wall_s": float(v.get("wall_s", math.nan)),
-        "estimation_error_m": error_stats(series.get("est_error_m", empty)),
-        "tracking_error_m": error_stats(series.get("track_error_m", empty)),
+        "estimation_error_m": describe(series.get("est_error_m", empty)),
+        "tracking_error_m": describe(series.get("track_error_m", empty)),
         "min_clearance_m": float(np.min(clearance)) if clearance.size else math.nan,
         "gnss": {
             "sent": int(v.get("gnss_sent", 0)),
@@ -68,8 +68,8 @@ def flight_result(opts: SitlOptions, run: SitlRun, route: Route, mission_name: s
                       "estimator": e.get("link", {}), "bridge": run.bridge.get("link", {})},
             "vehicle_node": v.get("node", {}),
             "estimator_node": e.get("node", {}),
-            "gnss_to_odometry_latency": e.get("gnss_to_odometry_latency", {}),
-            "imu_period_jitter": v.get("imu_period_jitter", {}),
+            "gnss_to_odometry_latency_ms": e.get("gnss_to_odometry_latency_ms", {}),
+            "imu_period_jitter_ms": v.get("imu_period_jitter_ms", {}),
         },
     }
     if not t_s.size:
