@@ -14,11 +14,9 @@ No files here: ``gcs_tools.fly.output`` writes them. ``InProcessBackend`` is thi
 
 from __future__ import annotations
 
-import math
 import time
 from array import array
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -29,6 +27,7 @@ from companion.planning import Route, plan_route
 from companion.wiring import navigator_for
 from simvehicle import SimVehicle
 from simvehicle.harness.backend import FlightRequest, FlightResult
+from simvehicle.recording import COLUMNS, ROW_FLOATS, Goal, row, series_from_rows
 
 
 @dataclass(frozen=True)
@@ -78,15 +77,15 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     nav = navigator_for(m, method)  # checks the method first
     route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
-    goal_ned_m = route.waypoints_ned_m[-1]
     end_s = cfg.start_delay_s + route.duration_s + max(cfg.timeout_margin_s, 0.5 * route.duration_s)
     if max_duration_s is not None:
         end_s = min(end_s, max_duration_s)
     end_us = round(end_s * 1e6)
-    arrive_s = route.t_start_s + route.duration_s
+    goal = Goal(route.waypoints_ned_m[-1], cfg.goal_radius_m, cfg.goal_speed_m_s,
+                arrive_after_s=route.t_start_s + route.duration_s)
     push, push_fix_ned = nav.push, nav.push_fix_ned
     accuracy_m = sim.gnss.reported_accuracy_m  # what GnssModel.to_fix puts on the wire
-    rows = array("d")  # ROW_FIELDS floats per control step: ~160 B, not two domain objects (~2 kB)
+    rows = array("d")  # recording.ROW_FLOATS floats per control step: ~180 B, not two domain objects (~2 kB)
     est, collisions, in_contact, reached = None, 0, False, False
     wall0 = time.perf_counter()
     while sim.t_us < end_us:
@@ -103,16 +102,16 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
                 k += 1
         est = nav.estimate()
         truth = out.final_truth
-        rows.extend(_row(out.t_us, truth, est))
+        rows.extend(row(out.t_us, truth, est))  # p_ref: filled from the route below
         collisions += out.collided and not in_contact
         in_contact = out.collided
-        if (out.t_us * 1e-6 >= arrive_s
-                and np.linalg.norm(truth.p_ned_m - goal_ned_m) <= cfg.goal_radius_m
-                and np.linalg.norm(truth.v_ned_m_s) <= cfg.goal_speed_m_s):
+        if goal.reached(out.t_us * 1e-6, truth.p_ned_m, truth.v_ned_m_s):
             reached = True
             break
     wall_s = time.perf_counter() - wall0
-    series = _series(rows, route)
+    r = np.frombuffer(rows, dtype=float).reshape(-1, ROW_FLOATS)
+    r[:, COLUMNS["p_ref_ned_m"]] = route.reference(r[:, COLUMNS["t_s"].start])[0]
+    series = series_from_rows(rows)
     counters = nav.counters()
     summary = {
         "mission": m.name,
@@ -153,36 +152,3 @@ class InProcessBackend:
         if request.scenario is not None:
             m = with_scenario(m, request.scenario)
         return fly(m, request.profile, request.method, request.seed, request.max_duration_s, self.config)
-
-
-_NAN_EST = (math.nan,) * 11  # p_est, b_est, beta, nis, p_var before the first estimate
-ROW_FIELDS = 20  # t_us, p_true(3), b_true(3), latency, clearance, p_est(3), b_est(3), beta, nis, p_var(3)
-
-
-def _row(t_us: int, truth: Any, est: Any) -> tuple[float, ...]:
-    """One control step of the record as plain floats (the flight keeps only these)."""
-    e = _NAN_EST if est is None else (*est.p_ned_m, *est.b_ned_m, est.beta, est.nis, *est.cov_diag[0:3])
-    return (t_us, *truth.p_ned_m, *truth.gnss_bias_ned_m, truth.gnss_latency_s, truth.clearance_m, *e)
-
-
-def _series(rows: array, route: Route) -> dict[str, np.ndarray]:
-    """The record's columns as views of the one row buffer (no second copy of an hour of rows)."""
-    r = np.frombuffer(rows, dtype=float).reshape(-1, ROW_FIELDS)
-    t_s = r[:, 0] * 1e-6
-    p_true, p_est = r[:, 1:4], r[:, 9:12]
-    p_ref = route.reference(t_s)[0]
-    return {
-        "t_s": t_s,
-        "p_true_ned_m": p_true,
-        "p_est_ned_m": p_est,
-        "p_ref_ned_m": p_ref,
-        "b_true_ned_m": r[:, 4:7],
-        "b_est_ned_m": r[:, 12:15],
-        "beta": r[:, 15],
-        "nis": r[:, 16],
-        "p_var_ned_m2": r[:, 17:20],
-        "latency_s": r[:, 7],
-        "clearance_m": r[:, 8],
-        "est_error_m": np.linalg.norm(p_est - p_true, axis=1),
-        "track_error_m": np.linalg.norm(p_true - p_ref, axis=1),
-    }

@@ -24,6 +24,7 @@ import numpy as np
 
 from companion.planning import Route
 from simvehicle.harness.ardupilot.config import ArduPilotConfig
+from simvehicle.recording import Goal
 
 COPTER_MODE_GUIDED = 4
 MAV_CMD_NAV_TAKEOFF = 22
@@ -132,10 +133,10 @@ class FlightDriver:
     def _route(self, now: DriverInputs) -> list[Command]:
         t = now.t_us
         rt = self.route_time_s(t)
-        goal = self.route.waypoints_ned_m[-1]
-        if (rt >= self.route.duration_s and now.truth_ned_m is not None and now.truth_v_ned_m_s is not None
-                and np.linalg.norm(now.truth_ned_m - goal) <= self.cfg.goal_radius_m
-                and np.linalg.norm(now.truth_v_ned_m_s) <= self.cfg.goal_speed_m_s):
+        goal = Goal(self.route.waypoints_ned_m[-1], self.cfg.goal_radius_m, self.cfg.goal_speed_m_s,
+                    arrive_after_s=self.route.duration_s)  # on the route's clock
+        if (now.truth_ned_m is not None and now.truth_v_ned_m_s is not None
+                and goal.reached(rt, now.truth_ned_m, now.truth_v_ned_m_s)):
             self._set("done", t)
             self.outcome = "reached_goal"
             return []
