@@ -50,7 +50,7 @@ bench: $(STAMP)
 # README results section: the 10-profile campaign (seed 0, with figures) and the 50-seed run
 # (bootstrap CIs); both write docs/results/<run>/ and splice their table into docs/results.md.
 EVAL_METHODS ?= naive,adaptive,first-order,second-order,vbakf
-EVAL = $(BIN)/beliefnav evaluate --missions 10 --methods $(EVAL_METHODS) --workers 2 --readme docs/results.md --no-progress
+EVAL = $(BIN)/beliefnav evaluate --profiles 10 --methods $(EVAL_METHODS) --workers 2 --readme docs/results.md --no-progress
 results: $(STAMP)
 	$(EVAL) --seeds 0 --out docs/results/profiles10
 	$(EVAL) --seeds 0-49 --out docs/results/seeds50
@@ -69,7 +69,7 @@ ABL_ROWS ?= naive,fixed-beta-0.5,fixed-beta-best,map-beta,$(ABL_BELIEF)
 ABL_SHARED = --set estimator.gnss_offset_max_s=10
 ABL_FOCUS = fixed-beta-best,fixed-beta-0.5,map-beta,second-order,vbakf
 TUNE = $(BIN)/python -m gcs_tools.evaluate.ablation tune --workers 2 --out $(ABL)
-ABLATE = $(BIN)/beliefnav evaluate --missions 10 --seeds $(ABL_SEEDS) --workers 2 --no-progress \
+ABLATE = $(BIN)/beliefnav evaluate --profiles 10 --seeds $(ABL_SEEDS) --workers 2 --no-progress \
   --methods $(ABL_ROWS) --reference map-beta,map-hmm,second-order
 results-ablation: $(STAMP)
 	$(TUNE) --scenario realistic --only fixed-beta-best,map-beta,map-hmm --seeds 1000-1004
@@ -84,14 +84,14 @@ results-ablation: $(STAMP)
 	  --seeds 1000-1004 --workers 2 --out $(ABL)
 	$(ABLATE) --scenario mismatch --rows $(ABL)/rows-mismatch.yaml $(ABL_SHARED) --out $(ABL)/mismatch-offset-limited
 	$(BIN)/python -m gcs_tools.evaluate.ablation effects --rows $(ABL)/rows-mismatch.yaml --methods $(ABL_FOCUS) \
-	  --missions 10 --seeds 0-1 $(ABL_SHARED) --out $(ABL)/effects
+	  --profiles 10 --seeds 0-1 $(ABL_SHARED) --out $(ABL)/effects
 	$(BIN)/python -m gcs_tools.evaluate.ablation report --out $(ABL)
 
 # The severity sweep: the error ratio against the best fixed β from realistic (0) over mismatch (1) to
 # twice its unmodelled GNSS (2), the step offset limited as in the mismatch campaign
 results-ablation-severity: $(STAMP)
 	$(BIN)/python -m gcs_tools.evaluate.ablation severity --rows $(ABL)/rows-mismatch.yaml \
-	  --methods $(ABL_FOCUS) --missions 10 --seeds 0-1 $(ABL_SHARED) --out $(ABL)/severity
+	  --methods $(ABL_FOCUS) --profiles 10 --seeds 0-1 $(ABL_SHARED) --out $(ABL)/severity
 	$(BIN)/python -m gcs_tools.evaluate.ablation report --out $(ABL)
 
 lint: $(STAMP)

@@ -1,12 +1,19 @@
 """Checks of the options every command shares, done before anything starts: one line naming the
-valid choices (and the nearest one) for a mistyped method, mission or profile."""
+valid choices (and the nearest one) for a mistyped method, mission or profile.
+
+One meaning per option name across commands: ``--mission`` a mission (name or YAML path),
+``--profile`` one of its profiles, ``--profiles`` a set of them (a count or a list/range: ``profiles``),
+``--method``/``--methods``, ``--seed``/``--seeds``. An old spelling stays as a hidden alias that
+prints one note (``add_deprecated_alias``)."""
 
 from __future__ import annotations
 
 import argparse
 import difflib
+import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from companion.errors import UserError
 from companion.estimator.methods import DEFAULT_METHOD
@@ -60,3 +67,59 @@ def profile(m: Mission, index: int, option: str = "--profile") -> int:
         listed = ", ".join(f"{i} {p.name}" for i, p in enumerate(m.profiles))
         raise UserError(f"{option} {index}: mission {m.name!r} has profiles {listed}")
     return index
+
+
+def profiles(text: str, available: int, option: str = "--profiles") -> tuple[int, ...]:
+    """``"10"`` → profiles 0..9; ``"10-13"`` or ``"0,4"`` → those profiles; checked against the
+    ``available`` profiles of the mission."""
+    if "-" in text or "," in text:
+        picked = _int_list(text.replace(" ", ""), option)
+    else:
+        try:
+            n = int(text)
+        except ValueError:
+            raise UserError(f"{option}: expected a count or a range, got {text!r}") from None
+        if n < 1:
+            raise UserError(f"{option}: expected ≥ 1, got {n}")
+        picked = tuple(range(n))
+    if max(picked) >= available:
+        raise UserError(f"{option}: the mission has {available} profiles (0–{available - 1}), got {text}")
+    return picked
+
+
+def _int_list(text: str, option: str) -> tuple[int, ...]:
+    """``"0-49"``, ``"3"`` or ``"0,2,5-7"`` → sorted unique integers ≥ 0; one-line error otherwise."""
+    values: set[int] = set()
+    try:
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            a = int(lo)
+            b = int(hi) if hi else a
+            if b < a or a < 0:
+                raise ValueError
+            values.update(range(a, b + 1))
+    except ValueError:
+        raise UserError(f"{option}: expected e.g. 0-49 or 0,3,7, got {text!r}") from None
+    return tuple(sorted(values))
+
+
+def seeds(text: str, option: str = "--seeds") -> tuple[int, ...]:
+    """``"0-49"``, ``"3"`` or ``"0,2,5-7"`` → sorted unique seeds."""
+    return _int_list(text, option)
+
+
+class _DeprecatedAlias(argparse.Action):
+    def __init__(self, option_strings: Sequence[str], dest: str, new: str = "", **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, **kwargs)
+        self.new = new
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        print(f"{parser.prog}: note: {option_string} is now {self.new}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+def add_deprecated_alias(parser: argparse.ArgumentParser, old: str, new: str, dest: str,
+                         **kwargs: Any) -> None:
+    """``old`` as a hidden spelling of ``new`` (same ``dest``): works, and prints one note."""
+    parser.add_argument(old, dest=dest, action=_DeprecatedAlias, new=new, help=argparse.SUPPRESS, **kwargs)

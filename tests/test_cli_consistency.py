@@ -67,3 +67,11 @@ def test_sitl_typo_fails_at_once_naming_the_choices(tmp_path):
     assert done.returncode == 2
     assert "(packaged: default, test, default-tuning; did you mean 'default'?)" in done.stderr
     assert not out.exists()
+
+
+def test_profiles_is_one_option_with_one_meaning():
+    """A set of mission profiles is --profiles in every command (evaluate's old --missions is a hidden
+    alias): --mission names a mission, never a count of profiles."""
+    opts = _options()
+    assert not [cmd for cmd, actions in opts.items() if "--missions" in actions]
+    assert "--profiles" in opts["evaluate"] and "--mission" in opts["evaluate"]

@@ -55,7 +55,7 @@ def test_dask_local_cluster_gives_identical_results(pool_results):
 @pytest.mark.timeout(120)
 def test_cli_campaign_writes_every_file(tmp_path, capsys):
     out = tmp_path / "eval"
-    code = main(["evaluate", "--mission", "test", "--missions", "2", "--methods", "naive,second-order",
+    code = main(["evaluate", "--mission", "test", "--profiles", "2", "--methods", "naive,second-order",
                  "--seeds", "0-1", "--workers", "2", "--max-duration-s", str(MAX_DURATION_S),
                  "--out", str(out), "--no-progress"])
     assert code == 0
@@ -80,7 +80,15 @@ def test_cli_campaign_writes_every_file(tmp_path, capsys):
 
 
 def test_cli_rejects_bad_arguments_in_one_line(tmp_path, capsys):
-    for args in (["--seeds", "5-2"], ["--missions", "99"], ["--methods", "naive,bogus"]):
+    for args in (["--seeds", "5-2"], ["--profiles", "99"], ["--methods", "naive,bogus"]):
         code = main(["evaluate", "--mission", "test", "--out", str(tmp_path), *args])
         err = capsys.readouterr().err.strip()
         assert code == 2 and err.startswith("beliefnav: error: --") and "\n" not in err
+
+
+def test_old_option_spellings_still_work_with_one_note(tmp_path, capsys):
+    code = main(["evaluate", "--mission", "test", "--out", str(tmp_path), "--missions", "99"])
+    lines = capsys.readouterr().err.strip().split("\n")
+    assert code == 2 and len(lines) == 2
+    assert lines[0].endswith("note: --missions is now --profiles")
+    assert lines[1].startswith("beliefnav: error: --profiles: the mission has")

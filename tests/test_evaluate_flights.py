@@ -122,7 +122,7 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     rows.write_text("rows:\n  fixed-beta-0.5: {method: fixed-beta, set: {estimator.beta_fixed: 0.5}}\n"
                     "  map-beta: {method: map-beta}\n")
     out = tmp_path / "out"
-    args = ["evaluate", "--mission", "test", "--missions", "1", "--rows", str(rows), "--seeds", "0-1",
+    args = ["evaluate", "--mission", "test", "--profiles", "1", "--rows", str(rows), "--seeds", "0-1",
             "--max-duration", "4", "--out", str(out), "--no-progress"]
     assert main([*args, "--scenario", "urban"]) == 2
     assert "unknown scenario 'urban'" in capsys.readouterr().err

@@ -9,12 +9,12 @@ from gcs_tools.evaluate import report, tuning
 def test_tuning_set_is_the_default_city_with_other_checked_profiles():
     reported = load_mission("default")
     tuned = tuning.load(tuning.TUNING_MISSION)
-    assert tuple(range(len(tuned.profiles))) == tuning.TUNING_PROFILES
+    assert tuple(range(len(tuned.profiles))) == tuning.profiles()
     assert np.array_equal(tuned.world.rects_m, reported.world.rects_m)
     ends = {tuple(p.start_ne_m) for p in reported.profiles} | {tuple(p.goal_ne_m) for p in reported.profiles}
     for p in tuned.profiles:
         assert tuple(p.start_ne_m) not in ends and tuple(p.goal_ne_m) not in ends
-    t = report.TUNING
+    t = report.tuning_set()
     assert not t.overlap("default", range(10), range(50))
     assert t.overlap("default", range(10), [3, 1004])
     assert t.overlap(tuning.TUNING_MISSION, [0], [0])

@@ -45,7 +45,7 @@ def test_twin_reproduces_the_offsets_of_the_flight(monkeypatch):
 
 
 def test_cli_prints_one_record_per_flight(capsys):
-    assert main(["--mission", "test", "--missions", "1", "--seeds", "1"]) == 0
+    assert main(["--mission", "test", "--profiles", "1", "--seeds", "1"]) == 0
     import json
 
     rows = json.loads(capsys.readouterr().out)
@@ -53,8 +53,8 @@ def test_cli_prints_one_record_per_flight(capsys):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--missions", "x"], "--missions: expected a count or a range, got 'x'"),
-    (["--missions", "0-99"], "--missions"),
+    (["--profiles", "x"], "--profiles: expected a count or a range, got 'x'"),
+    (["--profiles", "0-99"], "--profiles"),
     (["--seeds", "3-1"], "--seeds: expected e.g. 0-49"),
     (["--mission", "atlantis"], "atlantis"),
 ])

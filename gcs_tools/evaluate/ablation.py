@@ -40,6 +40,7 @@ import numpy as np
 import yaml
 
 from companion.errors import UserError
+from gcs_tools import choices
 from gcs_tools.evaluate import campaign, flights, stats, tuning
 from gcs_tools.evaluate import rows as rows_mod
 from gcs_tools.evaluate.campaign import Row
@@ -463,7 +464,7 @@ def _more_tables(block: dict[str, Any]) -> list[str]:
 
 
 def _tuning_seeds(text: str) -> tuple[int, ...]:
-    seeds = campaign.parse_seeds(text)
+    seeds = choices.seeds(text)
     if not set(seeds) <= set(tuning.TUNING_SEEDS):
         raise UserError(f"--seeds: tuning seeds are {tuning.TUNING_SEEDS[0]}–{tuning.TUNING_SEEDS[-1]}")
     return seeds
@@ -474,7 +475,8 @@ def _campaign_parser(sub: Any, name: str, help_text: str) -> argparse.ArgumentPa
     c: argparse.ArgumentParser = sub.add_parser(name, help=help_text)
     c.add_argument("--rows", type=Path, required=True)
     c.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
-    c.add_argument("--missions", default="10")
+    c.add_argument("--profiles", default="10", help="reported profiles: a count N (0..N-1) or a list/range")
+    choices.add_deprecated_alias(c, "--missions", "--profiles", "profiles")
     c.add_argument("--seeds", default="0")
     c.add_argument("--workers", type=int, default=2)
     c.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
@@ -490,7 +492,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     t = sub.add_parser("tune", help="tune every row alike on the tuning set; write rows-<scenario>.yaml")
     t.add_argument("--scenario", required=True)
     t.add_argument("--seeds", default="1000")
-    t.add_argument("--profiles", default=f"0-{len(tuning.TUNING_PROFILES) - 1}")
+    t.add_argument("--profiles", default=None, help=f"profiles of {tuning.TUNING_MISSION} (default: all)")
     t.add_argument("--workers", type=int, default=2)
     t.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     t.add_argument("--only", default="", metavar="ROW[,ROW...]",
@@ -505,7 +507,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     h.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
     h.add_argument("--vary", required=True, metavar="SECTION.FIELD=V1,V2,...")
     h.add_argument("--seeds", default="1000-1004")
-    h.add_argument("--profiles", default=f"0-{len(tuning.TUNING_PROFILES) - 1}")
+    h.add_argument("--profiles", default=None, help=f"profiles of {tuning.TUNING_MISSION} (default: all)")
     h.add_argument("--workers", type=int, default=2)
     h.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     r = sub.add_parser("report", help="write OUT/report.md from the steps' outputs")
@@ -522,18 +524,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             seeds = _tuning_seeds(args.seeds)
             rows = rows_mod.select(rows_mod.load_rows(args.rows), args.methods)
             shared_sweep(args.scenario, rows, tuning.parse_override(f"{key}={values[0]}")[0], values, seeds,
-                         campaign.parse_seeds(args.profiles), args.workers, args.out)
+                         tuning.profiles(args.profiles), args.workers, args.out)
         elif args.command == "tune":
             seeds = _tuning_seeds(args.seeds)
-            profiles = campaign.parse_seeds(args.profiles)
+            profiles = tuning.profiles(args.profiles)
             only = [v for v in args.only.split(",") if v]
             tune(args.scenario, seeds, profiles, args.workers, args.out, only)
         else:
-            from gcs_tools.evaluate.cli import parse_profiles
-
             rows = rows_mod.select(rows_mod.load_rows(args.rows), args.methods)
-            profiles = parse_profiles(args.missions, len(campaign.mission("default").profiles))
-            seeds = campaign.parse_seeds(args.seeds)
+            profiles = choices.profiles(args.profiles, len(campaign.mission("default").profiles))
+            seeds = choices.seeds(args.seeds)
             shared = [tuning.parse_override(v) for v in args.set]
             if args.command == "effects":
                 effects(rows, profiles, seeds, args.workers, args.out, shared=shared)

@@ -76,22 +76,6 @@ class JobResult:
 JobFn = Callable[[Job], JobResult]
 
 
-def parse_seeds(text: str) -> tuple[int, ...]:
-    """``"0-49"``, ``"3"`` or ``"0,2,5-7"`` → sorted unique seeds; one-line error otherwise."""
-    seeds: set[int] = set()
-    try:
-        for part in text.split(","):
-            lo, _, hi = part.strip().partition("-")
-            a = int(lo)
-            b = int(hi) if hi else a
-            if b < a or a < 0:
-                raise ValueError
-            seeds.update(range(a, b + 1))
-    except ValueError:
-        raise UserError(f"--seeds: expected e.g. 0-49 or 0,3,7, got {text!r}") from None
-    return tuple(sorted(seeds))
-
-
 def grid(
     mission: str,
     profiles: Sequence[int],

@@ -1,6 +1,6 @@
 """``beliefnav evaluate``: argument parsing and wiring only.
 
-    beliefnav evaluate --missions 10 --methods naive,adaptive,first-order,second-order \\
+    beliefnav evaluate --profiles 10 --methods naive,adaptive,first-order,second-order \\
         --seeds 0-49 --workers 2 --out runs/eval [--scheduler tcp://127.0.0.1:8786]
 """
 
@@ -16,6 +16,7 @@ from typing import Any
 
 from companion.errors import UserError
 from companion.estimator.methods import DEFAULT_METHOD
+from gcs_tools import choices
 from gcs_tools.evaluate import campaign, report, tuning
 from gcs_tools.evaluate import rows as rows_mod
 from gcs_tools.jsonvalues import plain_json
@@ -33,8 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "companion process); default all four")
     parser.add_argument("--mission", default="default",
                         help="mission name (default, test, default-tuning) or YAML path")
-    parser.add_argument("--missions", default="10",
+    parser.add_argument("--profiles", default="10",
                         help="mission profiles: a count N (profiles 0..N-1) or a list/range like 10-13")
+    choices.add_deprecated_alias(parser, "--missions", "--profiles", "profiles")
     parser.add_argument("--methods", default=None,
                         help=f"comma-separated estimator methods (default {DEFAULT_METHODS}), "
                              "or row labels of --rows")
@@ -53,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run on this Dask distributed scheduler instead of the local pool")
     parser.add_argument("--max-duration-s", type=float, default=None, metavar="S",
                         help="cap each flight at S seconds of simulated time")
-    parser.add_argument("--max-duration", type=float, dest="max_duration_s", help=argparse.SUPPRESS)  # old
+    choices.add_deprecated_alias(parser, "--max-duration", "--max-duration-s", "max_duration_s", type=float)
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                         help="override one mission config field for every flight (all methods), e.g. "
                              "estimator.r_inflation_max=100; repeatable")
@@ -66,26 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also splice the table and figures into this README (block keyed by --out)")
 
 
-def parse_profiles(text: str, available: int) -> tuple[int, ...]:
-    """``"10"`` → 0..9; ``"10-13"`` or ``"0,4"`` → those profiles; checked against the mission."""
-    if "-" in text or "," in text:
-        profiles = campaign.parse_seeds(text.replace(" ", ""))
-    else:
-        try:
-            n = int(text)
-        except ValueError:
-            raise UserError(f"--missions: expected a count or a range, got {text!r}") from None
-        if n < 1:
-            raise UserError(f"--missions: expected ≥ 1, got {n}")
-        profiles = tuple(range(n))
-    if max(profiles) >= available:
-        raise UserError(f"--missions: the mission has {available} profiles (0–{available - 1}), got {text}")
-    return profiles
-
-
 def parse_methods(text: str) -> tuple[str, ...]:
-    from gcs_tools import choices
-
     return tuple(choices.methods(text))  # each checked: the valid ones and the nearest named
 
 
@@ -107,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     overrides = tuple(tuning.parse_override(text) for text in args.set)
     mission = campaign.mission(args.mission, overrides, args.scenario)
     tuning.check(mission)
-    profiles = parse_profiles(args.missions, len(mission.profiles))
+    profiles = choices.profiles(args.profiles, len(mission.profiles))
     if args.rows is not None:
         rows = rows_mod.select(rows_mod.load_rows(args.rows), args.methods)
     else:
@@ -121,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         if ref not in methods:
             raise UserError(f"--reference {ref!r}: not among the rows ({', '.join(methods)})")
     reference = references[0]
-    seeds = campaign.parse_seeds(args.seeds)
+    seeds = choices.seeds(args.seeds)
     jobs = campaign.grid_rows(args.mission, profiles, rows, seeds, args.max_duration_s, overrides,
                               args.scenario)
     t0 = time.perf_counter()
@@ -161,9 +144,9 @@ def run_ardupilot(args: argparse.Namespace) -> int:
         raise UserError("--set, --scheduler, --readme, --max-duration-s and --rows apply to --vehicle sim "
                         "only")
     mission = load_mission(args.mission)
-    profiles = parse_profiles(args.missions, len(mission.profiles))
+    profiles = choices.profiles(args.profiles, len(mission.profiles))
     methods = parse_methods(args.methods or DEFAULT_METHODS)
-    seeds = campaign.parse_seeds(args.seeds)
+    seeds = choices.seeds(args.seeds)
     cfg = ardupilot.with_speedup(ArduPilotConfig(), args.speedup)
     feeds = tuple(f.strip() for f in args.feeds.split(",") if f.strip())
     if not feeds or any(f not in ardupilot.LOOPS for f in feeds) or len(set(feeds)) != len(feeds):

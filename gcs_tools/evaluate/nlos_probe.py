@@ -1,6 +1,6 @@
 """How the ``mismatch`` scenario's NLOS error looks along flown paths: the simulator's truth.
 
-    python -m gcs_tools.evaluate.nlos_probe --missions 0-3 --seeds 1000-1001
+    python -m gcs_tools.evaluate.nlos_probe --profiles 0-3 --seeds 1000-1001
 
 Each (profile, seed) is flown with ``fixed-beta`` (β 0.5) on ``mismatch``; then a twin of the
 flight's ``UnmodelledGnss`` (same seed, hence the same constellation and the same per-satellite
@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
+from gcs_tools import choices
 from gcs_tools.evaluate import campaign, tuning
 
 STEP_M = 0.5  # a "large" step / offset (m)
@@ -82,14 +83,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.nlos_probe",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--mission", default=tuning.TUNING_MISSION)
-    ap.add_argument("--missions", default="0-3", help="profiles: a count N (0..N-1) or e.g. 0-3, 0,2")
+    ap.add_argument("--profiles", default=None,
+                    help="a count N (0..N-1) or e.g. 0-3, 0,2 (default: every profile of --mission)")
+    choices.add_deprecated_alias(ap, "--missions", "--profiles", "profiles")
     ap.add_argument("--seeds", default="1000-1001")
     args = ap.parse_args(argv)
     try:
-        from gcs_tools.evaluate.cli import parse_profiles
-
-        profiles = parse_profiles(args.missions, len(campaign.mission(args.mission).profiles))
-        rows = probe(profiles, campaign.parse_seeds(args.seeds), args.mission)
+        available = len(campaign.mission(args.mission).profiles)
+        profiles = choices.profiles(args.profiles or str(available), available)
+        rows = probe(profiles, choices.seeds(args.seeds), args.mission)
     except UserError as exc:
         print(f"nlos_probe: error: {exc}", file=sys.stderr)
         return 2

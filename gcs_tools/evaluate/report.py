@@ -1,7 +1,7 @@
 """Write a campaign's ``results.json``, ``report.md`` and figures into one directory.
 
 The tuning protocol lives here: hyper-parameters of the estimator were tuned only on
-``TUNING`` (mission profiles and seeds that are never reported); a run that overlaps it
+``tuning_set()`` (mission profiles and seeds that are never reported); a run that overlaps it
 says so in its report.
 """
 
@@ -35,7 +35,8 @@ class TuningSet:
         return same_profiles or bool(set(seeds) & set(self.seeds))
 
 
-TUNING = TuningSet(tuning.TUNING_MISSION, tuning.TUNING_PROFILES, tuning.TUNING_SEEDS)
+def tuning_set() -> TuningSet:
+    return TuningSet(tuning.TUNING_MISSION, tuning.profiles(), tuning.TUNING_SEEDS)
 
 
 def write(
@@ -52,10 +53,11 @@ def write(
         raise UserError(f"--out: cannot create {out_dir}: {exc.strerror or exc}") from None
     seeds = campaign["seeds"]
     profiles = campaign["profiles"]
+    tuned = tuning_set()
     campaign = {
         **campaign,
-        "tuning": {"mission": TUNING.mission, "profiles": list(TUNING.profiles), "seeds": list(TUNING.seeds)},
-        "overlaps_tuning_set": TUNING.overlap(campaign["mission"], profiles, seeds),
+        "tuning": {"mission": tuned.mission, "profiles": list(tuned.profiles), "seeds": list(tuned.seeds)},
+        "overlaps_tuning_set": tuned.overlap(campaign["mission"], profiles, seeds),
     }
     res = aggregate.build_results(results, methods, seeds, campaign)
     if results and all(r.flight for r in results):

@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
+from gcs_tools import choices
 from gcs_tools.evaluate import aggregate, campaign, report, stats, tuning
-from gcs_tools.evaluate.cli import DEFAULT_METHODS, parse_methods, parse_profiles
+from gcs_tools.evaluate.cli import DEFAULT_METHODS, parse_methods
 
 RECORDS = "sweeps.jsonl"
 TABLE = "README.md"
@@ -110,15 +111,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="values to sweep (cartesian product over repeats)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                    help="fixed override for every point")
-    p.add_argument("--profiles", default=f"0-{len(tuning.TUNING_PROFILES) - 1}", help="tuning profiles")
+    p.add_argument("--profiles", default=None,
+                   help=f"profiles of {tuning.TUNING_MISSION} (default: all of them)")
     p.add_argument("--seeds", default="1000-1002", help="tuning seeds (within 1000-1009)")
     p.add_argument("--methods", default=DEFAULT_METHODS)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", type=Path, default=Path("docs/results/tuning"))
     args = p.parse_args(argv)
     try:
-        profiles = parse_profiles(args.profiles, len(tuning.TUNING_PROFILES))
-        seeds = campaign.parse_seeds(args.seeds)
+        profiles = tuning.profiles(args.profiles)
+        seeds = choices.seeds(args.seeds)
         if not set(seeds) <= set(tuning.TUNING_SEEDS):
             raise UserError(f"--seeds: tuning seeds are {tuning.TUNING_SEEDS[0]}–{tuning.TUNING_SEEDS[-1]}")
         methods = parse_methods(args.methods)

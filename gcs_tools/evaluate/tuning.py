@@ -21,12 +21,19 @@ import yaml
 
 from companion.errors import UserError
 from companion.mission import OVERRIDE_SECTIONS, Mission, load_mission
+from gcs_tools import choices
 
 TUNING_MISSION = "default-tuning"
 TUNING_SEEDS = tuple(range(1000, 1010))
-TUNING_PROFILES = (0, 1, 2, 3)  # every profile of default-tuning.yaml (tested)
 
 Override = tuple[str, Any]  # ("estimator.sigma_acc_m_s2", 0.02)
+
+
+def profiles(text: str | None = None) -> tuple[int, ...]:
+    """Profiles of the tuning mission: ``text`` as ``--profiles`` (a count or a list/range), or all of
+    them (the mission file is the one source of how many there are)."""
+    available = len(load_mission(TUNING_MISSION).profiles)
+    return choices.profiles(text, available) if text else tuple(range(available))
 
 
 def load(name: str, overrides: Sequence[Override] = ()) -> Mission:

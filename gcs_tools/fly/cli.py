@@ -17,7 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
     parser.add_argument("--max-duration-s", type=float, default=None, metavar="S",
                         help="stop after S simulated seconds (default: route duration + margin)")
-    parser.add_argument("--max-duration", type=float, dest="max_duration_s", help=argparse.SUPPRESS)  # old
+    choices.add_deprecated_alias(parser, "--max-duration", "--max-duration-s", "max_duration_s", type=float)
     parser.add_argument("--out", default="runs/fly", help="output directory (default runs/fly)")
     parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
 
