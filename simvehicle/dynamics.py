@@ -22,7 +22,6 @@ from companion.domain.rotation import euler_to_quaternion, quaternion_to_euler, 
 from simvehicle.config import VehicleConfig
 
 # state layout: 0-2 p_ned_m, 3-5 v_ned_m_s, 6-9 q_ned_frd (w, x, y, z), 10-12 omega_frd_rad_s
-STATE_SIZE = 13
 
 
 class RigidBody:

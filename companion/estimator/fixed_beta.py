@@ -9,12 +9,12 @@ from __future__ import annotations
 
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.methods import MethodContext, register
+from companion.estimator.methods import register
 
 
 @register("fixed-beta")
 class FixedBeta:
-    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
+    def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
         self._beta = cfg.beta_fixed
         self._factor = cfg.r_factor(cfg.beta_fixed)

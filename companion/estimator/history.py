@@ -32,7 +32,6 @@ from companion.estimator import _core
 Row = tuple[float, ...]
 # The prefix integrals at one time: (t_s, S1 (3), S2 (3), M1 (9), M2 (9)).
 Integrals = tuple[float, ...]
-ROW_LEN = 37
 
 # The numeric core is C (``_core.c``: the formulas above, the same operations in the same order
 # as the float expressions they replaced; tested against a pure-Python history in the tests).

@@ -14,7 +14,7 @@ module ``companion/estimator/vb.py``::
 
     @register("variational-bayes")
     class VariationalBayes:
-        def __init__(self, cfg, context): ...  # context: MethodContext (plugin config, map, posterior)
+        def __init__(self, cfg, context): ...  # context (if needed): MethodContext (plugins, map, posterior)
         def initial_state(self): ...
         def beta(self, state): ...
         def measurement_cov(self, state, terms): ...
@@ -23,7 +23,8 @@ module ``companion/estimator/vb.py``::
 then add ``vb`` to ``PLUGINS`` in ``companion/estimator/__init__.py`` so it is imported and
 appears in ``METHODS``; ``Navigator(cfg, method="variational-bayes")`` then works everywhere.
 
-What a method needs beyond ``EstimatorConfig`` is handed in at construction, in a ``MethodContext``:
+What a method needs beyond ``EstimatorConfig`` is handed in at construction, in a ``MethodContext``
+(to a constructor with a ``context`` parameter; the methods that need nothing more take ``cfg`` alone):
 the plugin parameters (``PluginConfig``, the mission's ``belief_plugins:`` section), the map (a
 clearance function; ``companion.wiring.navigator_for`` passes the mission's) and a reader of the
 filter's latest posterior state (set by ``FusionEngine``). Nothing is patched in afterwards.
@@ -31,6 +32,7 @@ filter's latest posterior state (set by ``FusionEngine``). Nothing is patched in
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol
@@ -88,7 +90,7 @@ class Adaptation(Protocol):
     # is also called for a fix the innovation gate rejected (the filter state is not updated).
 
 
-Factory = Callable[[EstimatorConfig, MethodContext], Adaptation]
+Factory = Callable[..., Adaptation]  # (cfg) or (cfg, context)
 REGISTRY: dict[str, Factory] = {}
 
 
@@ -113,15 +115,19 @@ def check_method(name: str, what: str = "--method") -> str:
 
 
 def make(name: str, cfg: EstimatorConfig, context: MethodContext | None = None) -> Adaptation:
-    """Build the strategy called ``name``; unknown names are a user error naming the choices."""
-    return REGISTRY[check_method(name, "estimator: unknown method")](cfg, context or MethodContext())
+    """Build the strategy called ``name``; unknown names are a user error naming the choices. The
+    context goes to the constructors that take one (a ``context`` parameter)."""
+    factory = REGISTRY[check_method(name, "estimator: unknown method")]
+    if "context" in inspect.signature(factory).parameters:
+        return factory(cfg, context or MethodContext())
+    return factory(cfg)
 
 
 @register("naive")
 class Naive:
     """Fixed R = R_nom and fixed Q (β held at ``beta_fixed``)."""
 
-    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
+    def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
 
     def initial_state(self) -> None:
@@ -148,7 +154,7 @@ class InnovationAdaptive(Naive):
     N innovations.
     """
 
-    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
+    def __init__(self, cfg: EstimatorConfig) -> None:
         super().__init__(cfg)
         sigma_min_m = min(cfg.sigma_gnss_horizontal_m, cfg.sigma_gnss_vertical_m)
         self.floor_m2 = cfg.adaptive_r_floor * sigma_min_m**2
@@ -185,7 +191,7 @@ class _Belief:
 
     learns_from_rejected = True  # a fix failing the innovation gate still updates β (engine.py)
 
-    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
+    def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
 
     def _state(self, theta: float, h_fast: float, h_slow: float) -> BeliefState:

@@ -204,25 +204,13 @@ BlockPropagator = _core.Propagator
 inv3 = _core.inv3
 
 
-def innovation_gain_terms(P: np.ndarray) -> tuple[np.ndarray, list[list[float]]]:
-    """(P Hᵀ (15×3), H P Hᵀ (3×3) as nested float lists) for H = [I 0 I 0 0]."""
-    PHt = P[:, 0:3] + P[:, 6:9]
-    return PHt, (PHt[0:3] + PHt[6:9]).tolist()
-
-
-def update_fast(x: State, P: np.ndarray, y: tuple[float, float, float], PHt: np.ndarray,
-                hph: list[list[float]], r_m2: tuple[float, float, float]) -> tuple[State, np.ndarray, float]:
+def update_fast(x: State, P: np.ndarray, y: tuple[float, float, float],
+                r_m2: tuple[float, float, float]) -> tuple[State, np.ndarray, float]:
     """Kalman update with z = p + b + ν, ν ~ N(0, diag r), innovation ``y``: (x⁺, P⁺, NIS), by the
-    core (``_core.update(x, P, y, r)``, which forms P Hᵀ and H P Hᵀ itself; ``PHt``, ``hph`` are
-    accepted for the reference form's signature). K S Kᵀ is symmetric but its rounding is not:
-    left alone, the asymmetry grew to 5e-6 of P's largest entry over 36,000 fusions (a 30 min
-    flight), so P⁺ is symmetrised ((A + Aᵀ)/2, exactly symmetric)."""
+    core (``_core.update``, which forms P Hᵀ and H P Hᵀ itself). K S Kᵀ is symmetric but its
+    rounding is not: left alone, the asymmetry grows fusion after fusion over a long flight, so P⁺
+    is symmetrised ((A + Aᵀ)/2, exactly symmetric)."""
     return _core.update(x, P, y, r_m2)
-
-
-def hph_of(P: np.ndarray) -> list[list[float]]:
-    """H P Hᵀ (3×3) as nested float lists."""
-    return hmh(P).tolist()
 
 
 def reset_to_fix(x: State, P: np.ndarray, z: tuple[float, float, float], r_m2: tuple[float, float, float],

@@ -23,7 +23,7 @@ import numpy as np
 
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.methods import MethodContext, register
+from companion.estimator.methods import register
 
 
 @dataclass(frozen=True)
@@ -110,7 +110,7 @@ class VariationalBayesAKF:
     state is the ``NoisePosterior`` after the last fix (immutable, as the OOSM buffer needs).
     """
 
-    def __init__(self, cfg: EstimatorConfig, context: MethodContext | None = None) -> None:
+    def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
         self.vb = VbConfig.of(cfg)
         self.sigma_bias_m = cfg.sigma_bias_m(cfg.beta_fixed)

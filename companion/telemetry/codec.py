@@ -24,7 +24,6 @@ import numpy as np
 from companion.domain.samples import GnssFix, NavEstimate, Setpoint, TruthState
 
 KEY_PREFIX = "beliefnav"
-ENCODING = "application/json"
 
 
 class MalformedPayloadError(ValueError):

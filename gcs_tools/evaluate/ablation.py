@@ -80,7 +80,6 @@ SWEEPS: tuple[tuple[str, str, Any], ...] = (
 INHERITS = {"map-hmm": "map-beta"}
 ROW_ORDER = ("naive", "fixed-beta-0.5", "fixed-beta-best", "map-beta", "first-order", "second-order",
              "second-order-gate-off", "adaptive", "vbakf", "windowed-ml", "hmm-trust", "map-hmm")
-BELIEF_ROWS = ("first-order", "second-order", "windowed-ml", "map-beta", "hmm-trust", "map-hmm")
 SEVERITIES = (0.0, 1.0, 2.0)
 # The mismatch scenario's unmodelled GNSS effects, each switched off in turn (``effects``)
 EFFECTS: tuple[tuple[str, str, tuple[tuple[str, Any], ...]], ...] = (

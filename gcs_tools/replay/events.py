@@ -18,7 +18,6 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 
 AUTOPILOT = "autopilot_estimate"
 TRUTH = "truth"
-REFERENCE_KINDS = (AUTOPILOT, TRUTH)
 MIN_FIX_TYPE_3D = 3
 
 

@@ -32,7 +32,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix
 from companion.mission.world import World
 from simvehicle.config import GnssConfig
-from simvehicle.gnss import GnssModel, NedFix
+from simvehicle.gnss import GnssModel
 from simvehicle.harness.ardupilot.config import GPS1_ID, GPS_INPUT_IGNORE_VELOCITY, GPS_WEEK
 
 
@@ -100,9 +100,6 @@ class UrbanGnssSource:
             out.append(sf)
         return out
 
-    @staticmethod
-    def ned_fix(sf: SentFix) -> NedFix:
-        return NedFix(sf.fix.t_validity_us, sf.p_ned_m, sf.fix.h_acc_m, sf.fix.satellites_visible)
 
 
 def gps_input_fields(sf: SentFix, gps_id: int = GPS1_ID,
