@@ -4,10 +4,11 @@ R_ned_frd, and ZYX Euler angles (roll φ, pitch θ, yaw ψ; R = Rz(ψ) Ry(θ) Rx
 Every caller (the simulator's 200 Hz inner loop and IMU blocks, the estimator's batch path, the
 MAVLink codec, log readers, ground telemetry, the autopilot feeds) uses these functions. They
 are plain arithmetic rather than ``scipy.spatial.transform.Rotation`` because most callers are
-per-sample hot paths (a scipy object costs ~30 µs, these under 1 µs) and because the estimator's
-C core computes the same expressions and must give the same bits; scipy's ``Rotation`` is the
-reference they are tested against (``tests/test_rotation.py``). The matrix functions take floats
-or numpy arrays alike (one quaternion or a block of them, element by element: the same bits).
+per-sample hot paths (building one scipy ``Rotation`` costs more than the filter's whole step per
+IMU sample) and because the estimator's C core computes the same expressions and must give the
+same bits; scipy's ``Rotation`` is the reference they are tested against (``tests/test_rotation.py``).
+The matrix functions take floats or numpy arrays alike (one quaternion or a block of them,
+element by element: the same bits).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The belief loss ℓ(β) and its analytic derivative ∂ℓ/∂β (DESIGN §3), as pure functions.
+"""The belief loss ℓ(β) (the paper's eq. 16, in a form whose minimum is at consistency) and its
+analytic derivative ∂ℓ/∂β, as pure functions.
 
 At a fix, everything but the belief is fixed: the innovation ``y``, the posterior of the
 previous fusion propagated over the interval T, the nominal R. The belief enters the

@@ -1,6 +1,6 @@
 """The estimator's parameters: one frozen dataclass, every field with its unit.
 
-Paper values (Section V.A, DESIGN §4) are marked "paper"; every other value is our choice and
+Paper values (the paper's Section V.A) are marked "paper"; every other value is our choice and
 says why. Mission YAML files override fields (``companion.wiring.mission_estimator_config``).
 
 Trust model (the paper gives ``Q_b(β)`` but not ``R(β)``):
@@ -45,8 +45,8 @@ class EstimatorConfig:
     sigma_acc_bias_rw_m_s2_sqrt_s: float = 0.003
     # NED acceleration error state d (model.py): the autopilot's attitude error × g (1° of tilt is
     # 0.17 m/s² horizontal), fixed in NED, which a body-frame bias cannot follow through a yaw turn.
-    # Prior std and random-walk density (the first wave's NED-bias values). Without it the realistic
-    # scenario (onboard AHRS attitude) flew with 4.2 m median estimation error instead of 0.75 m.
+    # Prior std and random-walk density (the first wave's NED-bias values); kept for quad106's dead
+    # reckoning (measured: docs/estimator.md, IMU error states).
     sigma_acc_ned0_m_s2: float = 0.2
     sigma_acc_ned_rw_m_s2_sqrt_s: float = 0.01
     gravity_m_s2: float = STANDARD_GRAVITY_M_S2  # added on NED z: a_ned = R f_frd + [0, 0, g]
@@ -87,7 +87,7 @@ class EstimatorConfig:
     h_fast0: float = 1.0  # initial accumulators (> 0, Algorithm 1 line 3)
     h_slow0: float = 1.0
     eta_first_order: float = 0.15  # first-order baseline: θ ← θ − η₁ ∇θ (same gradient, plain step)
-    loss: Literal["student-t", "gaussian"] = "student-t"  # innovation NLL form (DESIGN §3)
+    loss: Literal["student-t", "gaussian"] = "student-t"  # innovation NLL form (companion.estimator.belief)
     student_dof: float = 7.815  # ν of the Student-t loss = χ²₀.₉₅(3 dof), the paper's threshold
     lambda_smooth_1_m: float = 0.1  # weight λ of the smoothness term ‖Δp‖ (1/m)
     chi2_095: float = 7.815  # paper-literal loss: χ²₀.₉₅ for 3 dof

@@ -5,7 +5,7 @@ object with the message's field names as attributes — a pymavlink message or t
 views of :mod:`companion.mavlink.tlog`. Decoders never pass on a non-finite or out-of-range value:
 they raise :class:`CodecError`, whose ``reason`` the caller counts.
 
-Units and conventions on the wire (DESIGN §2):
+Units and conventions on the wire:
 
 - HIGHRES_IMU: ``time_usec`` boot time; body-FRD specific force (m/s²) and rate (rad/s).
 - ATTITUDE_QUATERNION: ``q1..q4`` = w, x, y, z, body FRD -> NED; ``time_boot_ms`` (ms); body rates

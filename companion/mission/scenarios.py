@@ -53,13 +53,13 @@ UNMODELLED_GNSS: dict[str, Any] = {
 }
 
 # What the filter is told about the simulated IMU of each scenario (under the mission's own
-# ``estimator:`` section, which wins). The paper's IMU is white noise with no bias: a bias state with
-# a real MEMS prior would only add noise there (make demo's median estimation error 0.26 m without
-# it, 0.42 m with the 0.2 m/s² prior; docs/estimator.md), and its 0.08 m/s² per 200 Hz sample with
-# the true attitude is a noise density of 0.0057 m/s²/√Hz (0.006 was the best of the first wave's
-# tuning sweep). The realistic scenarios' MEMS IMU has a bias (the EstimatorConfig defaults, real-log
-# values, stay) and an onboard AHRS's attitude errors: 0.4 m/s² is what the ablation's tuning sweep
-# chose for both (docs/results/ablation/rows-*.yaml).
+# ``estimator:`` section, which wins). The paper's IMU is white noise with no bias, so the filter
+# carries no IMU error states there (a bias state with a real MEMS prior can only add noise: measured
+# in docs/estimator.md, "What the paper scenario's filter is told"), and its 0.08 m/s² per 200 Hz
+# sample with the true attitude is a noise density of 0.08 / √200 ≈ 0.006 m/s²/√Hz. The realistic
+# scenarios' MEMS IMU has a bias (the EstimatorConfig defaults, real-log values, stay) and an
+# onboard AHRS's attitude errors: the density is the ablation tuning sweep's choice for both
+# (docs/results/ablation/rows-*.yaml).
 PAPER_IMU_PRIOR: dict[str, Any] = {
     "sigma_acc_m_s2": 0.006, "sigma_acc_bias0_m_s2": 0.0, "sigma_acc_bias_rw_m_s2_sqrt_s": 0.0,
     "sigma_acc_ned0_m_s2": 0.0, "sigma_acc_ned_rw_m_s2_sqrt_s": 0.0,
