@@ -38,8 +38,8 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
+from gcs_tools.choices import seeds as parse_seeds
 from gcs_tools.evaluate import stats
-from gcs_tools.evaluate.campaign import parse_seeds
 
 TUNING_FLIGHTS = ("path_1", "path_2", "path_3")
 REPORTING_FLIGHTS = ("path_5", "path_6", "path_7", "path_8", "path_10")

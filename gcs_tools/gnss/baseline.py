@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from companion.domain.statistics import describe
 from companion.gnss.constants import C_M_S
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
 from companion.gnss.observations import GnssEpoch
@@ -90,15 +91,7 @@ def correlation_time_s(t_s: np.ndarray, x: np.ndarray, max_lag_s: float = 60.0) 
 
 
 def _quantiles(v: np.ndarray) -> dict[str, float]:
-    v = v[np.isfinite(v)]
-    if not len(v):
-        return {"median": math.nan, "p95": math.nan, "mean": math.nan, "n": 0}
-    return {
-        "median": float(np.median(v)),
-        "p95": float(np.percentile(v, 95)),
-        "mean": float(v.mean()),
-        "n": int(len(v)),
-    }
+    return describe(v, ("median", "p95", "mean", "n"))
 
 
 def error_statistics(
