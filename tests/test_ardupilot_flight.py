@@ -146,7 +146,7 @@ def test_ctrl_c_stops_an_ardupilot_campaign_within_seconds(tmp_path):
     require_ardupilot()
     out = tmp_path / "eval"
     cmd = [sys.executable, "-m", "gcs_tools", "evaluate", "--vehicle", "ardupilot", "--mission", "test",
-           "--missions", "3", "--seeds", "0-1", "--workers", "2", "--feeds", "none,gps-input",
+           "--profiles", "3", "--seeds", "0-1", "--workers", "2", "--feeds", "none,gps-input",
            "--speedup", "5", "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)  # its own group, as a terminal's foreground job

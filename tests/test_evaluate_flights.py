@@ -282,7 +282,7 @@ def test_severity_flies_every_level_with_the_shared_settings(tmp_path, monkeypat
     (["--set", "estimator"], "--set: expected SECTION.FIELD=VALUE"),
     (["--set", "estimator.no_such_field=1"], "no_such_field"),
     (["--methods", "nope"], "nope"),
-    (["--missions", "0-99"], "--missions"),
+    (["--profiles", "0-99"], "--profiles"),
 ])
 def test_effects_and_severity_bad_arguments_are_one_line_errors(tmp_path, extra, message, capsys):
     rows = tmp_path / "rows.yaml"
