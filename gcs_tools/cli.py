@@ -1,7 +1,8 @@
 """``beliefnav``: one CLI, one module per subcommand (argument parsing and wiring only).
 
 Each subcommand module defines ``add_arguments(parser)`` and ``run(args) -> int`` and is
-imported only when its command runs, so a slow import never slows the others.
+imported only when its command runs (``beliefnav --help`` imports none of them), so a slow
+import never slows the others. Every parse error is one line (``beliefnav: error: ...``, exit 2).
 """
 
 from __future__ import annotations
@@ -11,24 +12,59 @@ import importlib
 import importlib.metadata
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
-from companion.errors import UserError
+from companion.errors import UserError, not_one_of
+
+DESCRIPTION = """\
+beliefnav: GNSS/IMU navigation for quadrotors between buildings. An extended Kalman filter keeps
+a belief in the GNSS and adapts it online, so late and multipath-biased fixes do not drag the
+vehicle into a wall. Fly it in a simulated city, replay real flight logs through it, run it on a
+companion computer beside an ArduPilot or PX4 autopilot, and watch it live or in Foxglove."""
+
+EPILOG = """\
+examples:
+  beliefnav fly --mission default --profile 3 --out runs/fly     one flight in seconds
+  beliefnav sitl --mission test --out runs/sitl                  three processes over MAVLink
+  beliefnav replay tests/data/quad106.tlog --out runs/replay     a real 668 s flight log
+  beliefnav companion --config companion.yaml                    beside a real autopilot
+  beliefnav dashboard --port 8080                                live view on http://127.0.0.1:8080/
+  beliefnav export runs/sitl                                     -> runs/sitl/export.mcap (Foxglove)
+
+`beliefnav COMMAND --help` for a command's options."""
 
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "replay": ("gcs_tools.replay.cli", "replay a flight log (tlog, .bin, .ulg) through the estimator"),
-    "fly": ("gcs_tools.fly.cli", "fly a mission in-process (vehicle, planner, estimator)"),
-    "sitl": ("gcs_tools.sitl.cli", "fly a mission as three processes over MAVLink/UDP"),
-    "companion": ("gcs_tools.companion_cli", "run the estimator beside a real autopilot (--master URL)"),
-    "dashboard": ("gcs_tools.dashboard.cli", "live web dashboard fed by Zenoh"),
-    "record": ("gcs_tools.recorder.cli", "record Zenoh telemetry to a file"),
-    "plot": ("gcs_tools.recorder.plot_cli", "redraw a run's figures from a recording"),
-    "top": ("gcs_tools.top", "terminal view of live telemetry"),
-    "evaluate": ("gcs_tools.evaluate.cli", "evaluation campaign across missions, methods, seeds"),
+    "fly": ("gcs_tools.fly.cli", "fly a mission in one process: vehicle, planner, estimator (seeded)"),
+    "sitl": ("gcs_tools.sitl.cli", "fly a mission as processes over MAVLink 2/UDP (or ArduCopter SITL)"),
+    "replay": ("gcs_tools.replay.cli", "run the estimator on a flight log (tlog, .bin, .ulg)"),
+    "companion": ("gcs_tools.companion_cli", "the estimator beside a real autopilot (--master, --config)"),
+    "evaluate": ("gcs_tools.evaluate.cli", "campaign: missions x methods x seeds, report, figures"),
+    "dashboard": ("gcs_tools.dashboard.cli", "live web dashboard: map, belief, errors, health"),
+    "top": ("gcs_tools.top", "live telemetry in the terminal"),
+    "record": ("gcs_tools.recorder.cli", "record live telemetry to a JSON Lines file"),
+    "plot": ("gcs_tools.recorder.plot_cli", "draw a recording's map and belief figures"),
     "export": ("gcs_tools.export.cli", "a run, tlog or recording as MCAP (Foxglove) or CSV"),
     "bench": ("gcs_tools.bench.cli", "benchmarks that print JSON"),
     "gnss": ("gcs_tools.gnss.cli", "raw GNSS (smartLoc, RINEX 3, UBX): single-point solutions vs truth"),
 }
+
+
+class Parser(argparse.ArgumentParser):
+    """An argparse parser whose errors are one line naming the command (no usage block)."""
+
+    def error(self, message: str) -> NoReturn:
+        command = self.prog.removeprefix("beliefnav").strip()
+        where = f"{command}: " if command else ""
+        self.exit(2, f"beliefnav: error: {where}{message} (see `{self.prog} --help`)\n")
+
+
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """Every command's help on its own line, whatever the terminal's width."""
+
+    def __init__(self, prog: str) -> None:
+        super().__init__(prog, max_help_position=20, width=100)
+        self._action_max_length = 16  # "    companion" + margin: no command name wraps
 
 
 def version() -> str:
@@ -39,13 +75,18 @@ def version() -> str:
         return "unknown"
 
 
-def build_parser(names: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="beliefnav", description=__doc__.splitlines()[0])
+def build_parser(names: Sequence[str] | None = None, options: bool = True) -> argparse.ArgumentParser:
+    """The parser with every command (``names``: only these get their options; ``options=False``:
+    none do, so no command module is imported, as for ``beliefnav --help``)."""
+    parser = Parser(prog="beliefnav", description=DESCRIPTION, epilog=EPILOG,
+                    formatter_class=_Formatter)
     parser.add_argument("--version", action="version", version=f"beliefnav {version()}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS if names is None else names:
-        module_name, help_text = COMMANDS[name]
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                title="commands")
+    for name, (module_name, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
+        if not options or (names is not None and name not in names):
+            continue
         try:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:
@@ -60,11 +101,13 @@ def build_parser(names: Sequence[str] | None = None) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    # Build only the chosen subcommand's parser when it is named, so others' imports are skipped.
-    chosen = [argv[0]] if argv and argv[0] in COMMANDS else None
-    if argv[:1] == ["--version"]:
-        chosen = []  # no subcommand module needs importing to print the version
-    parser = build_parser(chosen)
+    # Only the chosen command's module is imported; without one (--help, --version, a typo) none is.
+    chosen = argv[0] if argv and argv[0] in COMMANDS else None
+    if argv and chosen is None and not argv[0].startswith("-"):
+        print(f"beliefnav: error: {not_one_of('command', argv[0], tuple(COMMANDS))} (see `beliefnav --help`)",
+              file=sys.stderr)
+        return 2
+    parser = build_parser([chosen] if chosen else [], options=chosen is not None)
     args = parser.parse_args(argv)
     if getattr(args, "_missing", None):
         print(f"beliefnav: error: command {args.command!r} is not available in this build", file=sys.stderr)

@@ -21,6 +21,8 @@ QUANTITY: dict[str, str] = {
     "est_error": "#ff7f0e",  # estimation error ‖p̂ − p‖
     "track_error": "#e377c2",  # tracking error ‖p − p_ref‖
     "building": "#bfbfbf",  # map rectangles (fill)
+    "rejected": "#d62728",  # a GNSS fix the filter rejected (its innovation gate)
+    "uncertainty": "#1f77b4",  # the estimate's 95 % horizontal uncertainty ellipse (as the estimate)
 }
 
 METHOD: dict[str, str] = {
@@ -41,6 +43,19 @@ METHOD_DASH: dict[str, Any] = {
     "second-order": (0, (1.2, 1.2)),
     "vbakf": (0, (3, 1, 1, 1)),
 }
+
+
+# Categorical colours for items of one kind drawn together (mission profiles in Fig. 3): Okabe-Ito
+# and Tableau colours that stay apart for colour-blind readers, in an order that keeps neighbours apart.
+CATEGORICAL: tuple[str, ...] = (
+    "#0072b2", "#e69f00", "#009e73", "#cc79a7", "#56b4e9", "#d55e00", "#000000", "#8c564b",
+    "#999933", "#7f7f7f", "#17becf", "#6a3d9a",
+)
+
+
+def category(index: int) -> str:
+    """The colour of item ``index`` among items of one kind (cycles after 12)."""
+    return CATEGORICAL[index % len(CATEGORICAL)]
 
 
 def quantity(name: str) -> str:

@@ -12,8 +12,34 @@ from typing import Any
 from gcs_tools.jsonvalues import plain_json
 
 
+def run_info(mission: Any, given: str, start_unix_s: float) -> dict[str, Any]:
+    """What a run records about itself beside the flight's summary (export's metadata): the mission
+    as given on the command line, the sensor scenario, the wall clock of the start, the version."""
+    from gcs_tools.cli import version
+
+    return {"mission_source": given, "scenario": mission.scenario, "start_unix_s": start_unix_s,
+            "beliefnav_version": version()}
+
+
 def _m(x: Any) -> str:
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.2f} m"
+
+
+def _collisions(n: int) -> str:
+    return "no collision" if n == 0 else f"{n} collision{'s' if n > 1 else ''}"
+
+
+def gnss_line(g: dict[str, int]) -> str:
+    """``GNSS fixes: 2,665 sent, 2,651 fused, none rejected, 14 not yet delivered at the end``: the
+    parts add up (a fix still inside the simulated receiver latency when the flight ends is neither
+    fused nor rejected)."""
+    sent, fused, rejected = g["sent"], g["fused"], g["rejected"]
+    pending = sent - fused - rejected
+    text = (f"GNSS fixes: {sent:,} sent, {fused:,} fused, "
+            + (f"{rejected:,} rejected" if rejected else "none rejected"))
+    if pending > 0:
+        text += f", {pending:,} not yet delivered at the end"
+    return text
 
 
 def flight_lines(command: str, s: dict[str, Any], out: Path, files: Sequence[str]) -> list[str]:
@@ -28,11 +54,13 @@ def flight_lines(command: str, s: dict[str, Any], out: Path, files: Sequence[str
         + (f" (ended by {sitl['ended_by']})" if sitl else ""),
         f"  estimation error median {_m(est['median'])} p95 {_m(est['p95'])}; tracking error median "
         f"{_m(trk['median'])} p95 {_m(trk['p95'])}; min clearance {_m(s['min_clearance_m'])}",
-        f"  GNSS fixes sent {s['gnss']['sent']} fused {s['gnss']['fused']} rejected {s['gnss']['rejected']};"
-        f" collisions {s['collisions']}"
-        + (f"; lockstep waits {lock.get('retries', 0)}, gave up {lock.get('gave_up', 0)}" if lock else ""),
+        "  " + gnss_line(s["gnss"]) + "; " + _collisions(s["collisions"])
+        + (f"; lockstep: {lock.get('retries', 0)} waits, {lock.get('gave_up', 0)} give-ups" if lock else ""),
         f"  wrote {out}/: {', '.join(files)}",
     ]
+    unclean = {n: p["exit"] for n, p in (sitl or {}).get("processes", {}).items() if not p["clean"]}
+    if unclean:  # a clean run's processes are stopped by the launcher (143): nothing to say then
+        lines.insert(-1, "  processes: " + "; ".join(f"{n} {e}" for n, e in unclean.items()))
     return lines
 
 

@@ -16,7 +16,9 @@ Every frame sent to or received from a companion goes to ``run.tlog`` once (the 
 both companions are written for the estimator link only), stamped with ``epoch + t``: ``epoch``
 is the wall clock when the vehicle started, ``t`` the simulated time in lockstep and the
 monotonic time elapsed in real time, so stamps never go backwards and a log viewer shows the
-real date (SYSTEM_TIME pairs that clock with boot time).
+real date (SYSTEM_TIME pairs that clock with boot time). The log starts with the vehicle's
+GPS_GLOBAL_ORIGIN (the mission's home: the local frame's origin) and HOME_POSITION, as an
+autopilot's log does, so a tool reading it alone knows the frame.
 
 The vehicle's own clock is the reference for what it flies on: an ODOMETRY, setpoint or belief
 stamped outside a window around it (:mod:`companion.domain.clock_guard`) is ignored and raises
@@ -55,6 +57,7 @@ from companion.runtime import count_handler_error, write_json
 from companion.telemetry.codec import GnssReport
 from companion.telemetry.pubsub import DeferredPublisher, TelemetryPublisher
 from simvehicle import SimVehicle
+from simvehicle import ground_telemetry as gt
 from simvehicle.barrier import StepBarrier
 from simvehicle.groundlink import GroundConfig, ground_link_for, vehicle_status
 from simvehicle.recording import FlightRecorder
@@ -132,6 +135,10 @@ class VehicleNode:
         }
         self.ground = ground_link_for(GroundConfig(config.ground_port, config.ground_out), mission, sim,
                                       {**base, "link_id": 12}, self._boot_ns, dict(config.estimator_params))
+        # run.tlog says where its local frame is, as an autopilot's log does (export and replay read it)
+        home = self.ground.home
+        for msg in (gt.encode_gps_global_origin(home, 0), gt.encode_home_position(home, 0)):
+            self.tlog.write_frame(self._stamp_us(), codec.pack(self.ground.link.mav, msg))
         self.barrier = StepBarrier({n: self.links[n] for n in COMPANIONS}, config.lockstep)
         self.recorder = recorder
         self.imu_send_ns: list[int] = []

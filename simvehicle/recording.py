@@ -2,7 +2,7 @@
 ``series_from_rows``) and the goal test (``Goal``), used by the in-process loop
 (``simvehicle.harness.fly``), the vehicle process (``FlightRecorder``) and the ArduPilot driver.
 
-A control step is one row of plain float64 (``ROW_LAYOUT``, ``ROW_FLOATS`` floats, 184 bytes);
+A control step is one row of plain float64 (``ROW_LAYOUT``, ``ROW_FLOATS`` floats, 216 bytes);
 ``series_from_rows`` gives the columns by key plus the two derived errors (``DERIVED``). In the
 vehicle process the estimated bias arrives at 5 Hz (DEBUG_VECT ``GNSS_BIAS``), so ``b_est_ned_m``
 holds the latest received (NaN before the first), β and NIS their NAMED_VALUE_FLOATs, the
@@ -32,6 +32,7 @@ _NAN3 = (math.nan, math.nan, math.nan)
 ROW_LAYOUT = (
     ("t_s", 1), ("p_true_ned_m", 3), ("p_est_ned_m", 3), ("p_ref_ned_m", 3), ("b_true_ned_m", 3),
     ("b_est_ned_m", 3), ("beta", 1), ("nis", 1), ("p_var_ned_m2", 3), ("latency_s", 1), ("clearance_m", 1),
+    ("q_true_ned_frd", 4),
 )
 DERIVED = ("est_error_m", "track_error_m")  # |p_est - p_true|, |p_true - p_ref|
 SERIES_KEYS = (*(key for key, _ in ROW_LAYOUT), *DERIVED)
@@ -68,7 +69,7 @@ def row(t_us: int, truth: TruthState, estimate: NavEstimate | None, p_ref_ned_m:
     if b_est_ned_m is not None:
         b_est = b_est_ned_m
     return (t_us * 1e-6, *truth.p_ned_m, *p_est, *p_ref_ned_m, *truth.gnss_bias_ned_m, *b_est, beta, nis,
-            *p_var, truth.gnss_latency_s, truth.clearance_m)
+            *p_var, truth.gnss_latency_s, truth.clearance_m, *truth.q_ned_frd)
 
 
 def series_from_rows(raw: bytes | array) -> dict[str, np.ndarray]:

@@ -125,7 +125,7 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     args = ["evaluate", "--mission", "test", "--profiles", "1", "--rows", str(rows), "--seeds", "0-1",
             "--max-duration", "4", "--out", str(out), "--no-progress"]
     assert main([*args, "--scenario", "urban"]) == 2
-    assert "unknown scenario 'urban'" in capsys.readouterr().err
+    assert "--scenario 'urban': not one of paper, realistic, mismatch" in capsys.readouterr().err
     assert main([*args, "--scenario", "mismatch", "--reference", "fixed-beta-0.5,nope"]) == 2
     assert "--reference 'nope': not among the rows" in capsys.readouterr().err
     assert main([*args, "--scenario", "mismatch", "--reference", "fixed-beta-0.5,map-beta"]) == 0

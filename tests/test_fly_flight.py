@@ -9,7 +9,7 @@ import pytest
 from companion.errors import UserError
 from companion.mission import load_mission
 from gcs_tools.cli import main
-from gcs_tools.fly.output import COLUMNS
+from gcs_tools.fly.output import COLUMNS, OPTIONAL_COLUMNS
 from simvehicle.harness.fly import fly
 
 TEST_CITY = load_mission("test")
@@ -37,10 +37,25 @@ def test_short_flight_reaches_the_goal_and_writes_every_file(flight):
     assert summary["min_clearance_m"] > 0.3
     with open(flight / "timeseries.csv", newline="") as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == [c for cols in COLUMNS.values() for c in cols]
+    assert rows[0] == [c for cols in COLUMNS.values() for c in cols] + OPTIONAL_COLUMNS["q_true_ned_frd"]
     assert len(rows) - 1 == g["sent"]  # one row per control period
+    # gnss.csv: every fix the filter received (those still in the receiver's latency at the end are not)
+    fixes = np.genfromtxt(flight / "gnss.csv", delimiter=",", names=True)
+    assert len(fixes) == g["fused"] + g["rejected"] and (np.diff(fixes["t_s"]) >= 0).all()
+    assert (fixes["t_validity_s"] <= fixes["t_s"]).all()  # a fix arrives once it was valid
     for name in ("map.png", "belief.png"):
         assert (flight / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_rejected_fixes_add_up_to_the_gate_counter():
+    """Each fix carries whether the innovation gate refused it (what map.png and belief.png mark):
+    they add up to the navigator's counter (this flight has one)."""
+    from companion.mission import with_scenario
+
+    res = fly(with_scenario(TEST_CITY, "mismatch"), 0, "second-order", 0)
+    n = res.summary["estimator_counters"]["gnss_rejected_innovation"]
+    assert n >= 1 and res.fixes["rejected"].sum() == n
+    assert len(res.fixes["t_s"]) == res.summary["gnss"]["fused"] + res.summary["gnss"]["rejected"]
 
 
 def test_same_seed_same_flight_bit_for_bit_and_seeds_differ():

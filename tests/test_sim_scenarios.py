@@ -161,7 +161,7 @@ def test_scenarios_configure_the_simulator_and_reject_unknown_names():
     # the mission's own section wins over the scenario's
     own = with_scenario(dataclasses.replace(m, sections={"gnss": {"gamma_canyon_s": 5.0}}), "mismatch")
     assert sim_config_for(own).gnss.gamma_canyon_s == 5.0 and sim_config_for(own).gnss.nlos
-    with pytest.raises(ConfigError, match="unknown scenario 'urban'"):
+    with pytest.raises(ConfigError, match="'urban': not one of paper, realistic, mismatch"):
         with_scenario(m, "urban")
 
 

@@ -20,7 +20,8 @@ from simvehicle.recording import ROW_FLOATS, SERIES_KEYS, FlightRecorder, series
 
 def _out(t_s: float):
     truth = SimpleNamespace(p_ned_m=np.array([t_s, 0.0, -10.0]), v_ned_m_s=np.zeros(3),
-                            gnss_bias_ned_m=np.array([0.1, 0.2, 0.0]), gnss_latency_s=0.3, clearance_m=5.0)
+                            gnss_bias_ned_m=np.array([0.1, 0.2, 0.0]), gnss_latency_s=0.3, clearance_m=5.0,
+                            q_ned_frd=np.array([1.0, 0.0, 0.0, 0.0]))
     return SimpleNamespace(truth=[truth], t_us=round(t_s * 1e6))
 
 

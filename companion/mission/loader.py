@@ -19,6 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.errors import not_one_of
 from companion.mission.config import (
     OVERRIDE_SECTIONS,
     FlightConfig,
@@ -105,7 +106,7 @@ def with_scenario(mission: Mission, scenario: str) -> Mission:
 
 def _check_scenario(name: str, where: str) -> None:
     if name not in SCENARIOS:
-        raise ConfigError(f"{where}: unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+        raise not_one_of(where, name, SCENARIOS)  # "--scenario 'realstic': not one of ... (did you mean ...)"
 
 
 def build_mission(data: dict[str, Any], source: str = "mission") -> Mission:

@@ -1,6 +1,6 @@
 """The paper's Figs. 3–6 drawn from campaign results (matplotlib, Agg; files only).
 
-- ``fig3_belief.png``: β over time, first- vs second-order, one line per mission profile.
+- ``fig3_belief.png``: β over time, first- vs second-order, one line (and colour) per mission profile.
 - ``fig4_trajectories.png``: true trajectories on the map for naive, first- and second-order, one
   small map per profile.
 - ``fig5_tracking_error.png`` / ``fig6_estimation_error.png``: box plots per method.
@@ -37,19 +37,31 @@ def color(method: str) -> str:
     return palette.method(method)
 
 
-def fig3_belief(results: Sequence[JobResult], seed: int, path: Path) -> None:
+def fig3_belief(results: Sequence[JobResult], seed: int, path: Path,
+                profile_names: Sequence[str] = ()) -> None:
+    """β over time for first- and second-order, one panel each; one colour per mission profile (the
+    same colour in both panels) and one legend naming the profiles."""
     methods = [m for m in ("first-order", "second-order") if of_method(results, m)]
-    fig, axes = plt.subplots(len(methods) or 1, 1, figsize=(7, 2.6 * max(1, len(methods))), sharex=True)
-    for ax, method in zip(np.atleast_1d(axes), methods, strict=False):
-        for r in of_method(results, method):
+    fig, axes = plt.subplots(len(methods) or 1, 1, figsize=(8.6, 2.7 * max(1, len(methods))), sharex=True,
+                             squeeze=False)
+    axes = axes[:, 0]
+    seen: dict[int, Any] = {}
+    for ax, method in zip(axes, methods, strict=False):
+        for r in sorted(of_method(results, method), key=lambda r: r.job.profile_index):
             if r.job.seed == seed:
-                ax.plot(r.t_fig_s, r.beta_fig, color=color(method), lw=0.9, alpha=0.75)
+                p = r.job.profile_index
+                line, = ax.plot(r.t_fig_s, r.beta_fig, color=palette.category(p), lw=0.9, alpha=0.85)
+                seen.setdefault(p, line)
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel("belief β")
-        ax.set_title(f"{method}: one line per mission profile (seed {seed})", fontsize=9)
+        ax.set_title(f"{method} (seed {seed})", fontsize=9)
         ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[-1].set_xlabel("time [s]")
-    fig.tight_layout()
+    axes[-1].set_xlabel("time [s]")
+    if seen:
+        labels = [f"{p} {profile_names[p]}" if p < len(profile_names) else f"profile {p}" for p in seen]
+        fig.legend(list(seen.values()), labels, loc="center right", fontsize=7.5, frameon=False,
+                   title="mission profile", title_fontsize=8)
+    fig.tight_layout(rect=(0, 0, 0.78 if seen else 1, 1))
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
 
@@ -69,6 +81,7 @@ def fig4_trajectories(
     for ax, profile in zip(axes.flat, profiles, strict=False):
         if mission is not None:
             draw_world(ax, mission.world)
+            ax.set_aspect("equal", adjustable="box")  # the limits below are the route's: keep them
         ref_drawn = False
         for method in methods:
             for r in of_method(results, method):
@@ -80,10 +93,11 @@ def fig4_trajectories(
                     ref_drawn = True
                     # zoom to the route (the city is the same in every panel): metre-scale
                     # differences between methods become visible
-                    lo = r.p_ref_ne_m.min(axis=0) - ZOOM_MARGIN_M
-                    hi = r.p_ref_ne_m.max(axis=0) + ZOOM_MARGIN_M
-                    ax.set_xlim(lo[1], hi[1])
-                    ax.set_ylim(lo[0], hi[0])
+                    # (a square view about the route: equal axes without squeezing the panel)
+                    lo, hi = r.p_ref_ne_m.min(axis=0), r.p_ref_ne_m.max(axis=0)
+                    mid, half = (lo + hi) / 2, float((hi - lo).max()) / 2 + ZOOM_MARGIN_M
+                    ax.set_xlim(mid[1] - half, mid[1] + half)
+                    ax.set_ylim(mid[0] - half, mid[0] + half)
                 ax.plot(r.p_true_ne_m[:, 1], r.p_true_ne_m[:, 0], color=color(method), lw=1.3,
                         ls=palette.METHOD_DASH.get(method, "-"), label=f"{method} (true track)")
         ax.set_title(f"profile {profile}", fontsize=9)
@@ -136,7 +150,8 @@ def draw_all(
 ) -> dict[str, str]:
     """Write the four figures into ``out_dir``; returns {fig key: file name}."""
     n_prof = len({r.job.profile_index for r in results})
-    fig3_belief(results, seed, out_dir / FIGURES["fig3"])
+    names = [p.name for p in mission.profiles] if mission is not None else []
+    fig3_belief(results, seed, out_dir / FIGURES["fig3"], names)
     map_list = list(profiles)[:map_profiles] if map_profiles else list(profiles)
     fig4_trajectories(results, mission, map_list, seed, out_dir / FIGURES["fig4"])
     error_boxes(results, methods, "track_error_m", "tracking error ‖p − p_ref‖ [m]",

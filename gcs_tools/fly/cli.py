@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from gcs_tools import choices
 
@@ -29,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools import choices
     from gcs_tools.fly.output import write_outputs
     from gcs_tools.outdir import ensure_out_dir
-    from gcs_tools.summaries import print_summary
+    from gcs_tools.summaries import print_summary, run_info
     from simvehicle.harness.fly import fly
 
     mission = choices.mission(args.mission)  # every option checked before anything is written
@@ -38,7 +39,9 @@ def run(args: argparse.Namespace) -> int:
     choices.profile(mission, args.profile)
     choices.method(args.method)
     ensure_out_dir(args.out)
+    start_unix_s = time.time()
     result = fly(mission, args.profile, args.method, args.seed, max_duration_s=args.max_duration_s)
+    result.summary.update(run_info(mission, args.mission, start_unix_s))
     paths = write_outputs(result, mission.world, args.out)
     s = result.summary
     print_summary("fly", s, Path(args.out), [p.name for p in paths], args.json)

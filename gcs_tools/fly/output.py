@@ -1,4 +1,5 @@
-"""Files of a flight: ``summary.json`` (strict JSON), ``timeseries.csv``, ``map.png``, ``belief.png``."""
+"""Files of a flight: ``summary.json`` (strict JSON), ``timeseries.csv``, ``gnss.csv`` (every fix the
+filter received, when the backend knows them), ``map.png``, ``belief.png``."""
 
 from __future__ import annotations
 
@@ -28,11 +29,32 @@ COLUMNS = {
     "est_error_m": ["est_error_m"],
     "track_error_m": ["track_error_m"],
 }
-# Written when the series has them: the autopilot's own estimate (``sitl --vehicle ardupilot``).
+# Written when the series has them: the true attitude (body FRD -> NED quaternion w, x, y, z: fly and
+# sitl), the autopilot's own estimate (``sitl --vehicle ardupilot``).
 OPTIONAL_COLUMNS = {
+    "q_true_ned_frd": ["q_true_w", "q_true_x", "q_true_y", "q_true_z"],
     "p_autopilot_ned_m": ["p_autopilot_n_m", "p_autopilot_e_m", "p_autopilot_d_m"],
     "autopilot_error_m": ["autopilot_error_m"],
 }
+
+
+# gnss.csv: one row per fix received (FlightResult.fixes)
+GNSS_COLUMNS = {
+    "t_s": ["t_s"],  # arrival at the filter [s]
+    "t_validity_s": ["t_validity_s"],  # when the position was true [s]
+    "p_ned_m": ["p_n_m", "p_e_m", "p_d_m"],
+    "h_acc_m": ["h_acc_m"],  # the accuracy the receiver reported (NaN: none)
+    "rejected": ["rejected"],  # 1: refused by the filter's innovation gate (empty: not known)
+}
+GNSS_FILE = "gnss.csv"
+
+
+def write_table(path: Path, table: dict[str, np.ndarray], columns: dict[str, list[str]]) -> None:
+    """The named arrays as CSV: one header row, 6 significant digits, NaN written as ``nan``."""
+    n = len(table["t_s"])
+    data = np.column_stack([np.asarray(table[k], dtype=float).reshape(n, -1) for k in columns])
+    header = ",".join(c for cols in columns.values() for c in cols)
+    np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.6g")
 
 
 def strict_json(value: Any) -> Any:
@@ -41,7 +63,7 @@ def strict_json(value: Any) -> Any:
 
 
 def write_outputs(result: FlightResult, world: Any, out_dir: str | Path) -> list[Path]:
-    """Write the four files into ``out_dir`` (created); returns their paths."""
+    """Write the files into ``out_dir`` (created); returns their paths."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -51,14 +73,17 @@ def write_outputs(result: FlightResult, world: Any, out_dir: str | Path) -> list
     paths = [out / "summary.json", out / "timeseries.csv", out / "map.png", out / "belief.png"]
     paths[0].write_text(json.dumps(strict_json(s), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     columns = COLUMNS | {k: v for k, v in OPTIONAL_COLUMNS.items() if k in result.series}
-    table = np.column_stack([np.asarray(result.series[k], dtype=float).reshape(len(result.series["t_s"]), -1)
-                             for k in columns])
-    header = ",".join(c for cols in columns.values() for c in cols)
-    np.savetxt(paths[1], table, delimiter=",", header=header, comments="", fmt="%.6g")
+    write_table(paths[1], result.series, columns)
+    fixes = result.fixes
+    if fixes:
+        paths.insert(2, out / GNSS_FILE)
+        write_table(paths[2], fixes, GNSS_COLUMNS)
     title = f"{s['mission']} profile {s['profile']}, {s['method']}, seed {s['seed']}"
     tracks = {"true": result.series["p_true_ned_m"], "estimated": result.series["p_est_ned_m"]}
     if "p_autopilot_ned_m" in result.series:
         tracks["autopilot"] = result.series["p_autopilot_ned_m"]
-    map_figure(paths[2], world, result.route.waypoints_ned_m, tracks, title)
-    belief_figure(paths[3], result.series, title)
+    map_figure(out / "map.png", world, result.route.waypoints_ned_m, tracks, title,
+               fixes_ned_m=fixes.get("p_ned_m"), error_m=result.series["est_error_m"],
+               rejected=np.nan_to_num(fixes["rejected"]) > 0 if fixes else None)
+    belief_figure(out / "belief.png", result.series, title, fixes)
     return paths

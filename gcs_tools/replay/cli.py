@@ -204,13 +204,33 @@ def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None]:
     return reader, note
 
 
+def counts_text(counts: dict[str, Any], none: str = "none") -> str:
+    """``{'no_attitude': 1, 'time_backwards': 0}`` as ``no attitude 1`` (zeros left out; nested
+    mappings flattened): counters a reader takes in at a glance."""
+    flat: dict[str, int] = {}
+
+    def walk(d: dict[str, Any]) -> None:
+        for k, v in d.items():
+            if isinstance(v, dict):
+                walk(v)
+            elif v:
+                flat[k] = flat.get(k, 0) + int(v)
+
+    walk(counts)
+    return ", ".join(f"{k.replace('_', ' ')} {n:,}" for k, n in flat.items()) or none
+
+
 def report(s: dict[str, Any], name: str) -> str:
     """The printed summary: the navigator's own counters (summed over log restarts)."""
     nav = s["navigator"]
-    rejected = {k.removeprefix("imu_rejected_"): v for k, v in nav.items()
-                if k.startswith("imu_rejected_") and v}
+    imu_rejected = {k.removeprefix("imu_rejected_"): v for k, v in nav.items()
+                    if k.startswith("imu_rejected_")}
     gnss_rejected = {k.removeprefix("gnss_rejected_"): v for k, v in nav.items()
-                     if k.startswith("gnss_rejected_") and v}
+                     if k.startswith("gnss_rejected_")}
+    n_imu_rej, n_gnss_rej = sum(imu_rejected.values()), sum(gnss_rejected.values())
+    used = s["samples_used"]
+    refused = dict(s["samples_rejected"])
+    skipped_bytes = refused.pop("reader_skipped_bytes", 0)
     beta = s["beta"]
     lines = [
         f"replayed {s['duration_s']:.1f} s of {name} ({s['format']}) with {s['method']} "
@@ -218,10 +238,14 @@ def report(s: dict[str, Any], name: str) -> str:
         f"({s['realtime_factor']:.0f}x real time)"
         + (f"; {s['log_restarts']} log restart(s): {len(s['segments'])} segments"
            if s["log_restarts"] else ""),
-        f"  imu used {nav.get('imu_used', 0):,} rejected {rejected or 0}; "
-        f"gnss fused {nav.get('gnss_fused', 0):,} rejected {gnss_rejected or 0}",
-        f"  read from the log {s['samples_used']}; refused while reading {s['samples_rejected']}",
-        f"  beta median {beta.get('median', float('nan')):.3f} min {beta.get('min', float('nan')):.3f}",
+        f"  read {used.get('imu', 0):,} IMU, {used.get('attitude', 0):,} attitude and "
+        f"{used.get('gnss', 0):,} GNSS samples; refused while reading: {counts_text(refused)}"
+        + (f" ({skipped_bytes:,} bytes skipped)" if skipped_bytes else ""),
+        f"  IMU samples used {nav.get('imu_used', 0):,}, rejected {n_imu_rej:,}"
+        + (f" ({counts_text(imu_rejected)})" if n_imu_rej else "")
+        + f"; GNSS fixes fused {nav.get('gnss_fused', 0):,}, rejected {n_gnss_rej:,}"
+        + (f" ({counts_text(gnss_rejected)})" if n_gnss_rej else ""),
+        f"  belief β median {beta.get('median', float('nan')):.3f}, min {beta.get('min', float('nan')):.3f}",
     ]
     labels = (("gnss", "GNSS"), ("autopilot_estimate", "the autopilot's estimate"), ("truth", "truth"))
     for key, label in labels:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -100,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _fly(args: argparse.Namespace, mission: Mission) -> int:
     from gcs_tools.fly.output import strict_json, write_outputs
-    from gcs_tools.summaries import print_summary
+    from gcs_tools.summaries import print_summary, run_info
     from simvehicle.groundlink import ground_out_arguments
     from simvehicle.harness.backend import FlightRequest, backend
     from simvehicle.harness.sitl.launcher import SitlOptions, flight_plan
@@ -120,12 +122,16 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         from tqdm import tqdm
 
         bar = tqdm(total=round(max_duration_s, 1), unit="s sim", desc=f"sitl {args.method}", leave=False)
+    start_unix_s = time.time()
     try:
         result = backend("sim", progress=None if bar is None else _progress_to(bar), **options).fly(request)
     finally:
         if bar is not None:
             bar.close()
     result.summary["sitl"]["vehicle_id"] = None if args.no_telemetry else args.vehicle_id
+    result.summary.update(run_info(mission, args.mission, start_unix_s))
+    if (args.out / "run.tlog").is_file():
+        result = dataclasses.replace(result, fixes=tlog_fixes(args.out / "run.tlog", mission))
     if result.series:
         write_outputs(result, mission.world, args.out)
     else:
@@ -136,6 +142,21 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         print(f"beliefnav: error: {result.failure}", file=sys.stderr)
         return 1
     return 0
+
+
+def tlog_fixes(tlog: Path, mission: Mission) -> dict[str, Any]:
+    """The fixes the vehicle sent (run.tlog's GPS_RAW_INT) as ``FlightResult.fixes`` in the
+    mission's frame; whether the estimator's gate rejected each one is not known here (NaN)."""
+    import numpy as np
+
+    from gcs_tools.export.tlog_flight import read_fixes, tlog_epoch
+
+    fixes = read_fixes(tlog, tlog_epoch(tlog))
+    lla = np.array([(f.lat_deg, f.lon_deg, f.alt_m) for f in fixes]).reshape(-1, 3)
+    ned = np.asarray(mission.frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]), dtype=float).T.reshape(-1, 3)
+    return {"t_s": np.array([f.t_s for f in fixes]),
+            "t_validity_s": np.array([f.t_validity_s for f in fixes]), "p_ned_m": ned,
+            "h_acc_m": np.array([f.h_acc_m for f in fixes]), "rejected": np.full(len(fixes), np.nan)}
 
 
 def _progress_to(bar: Any) -> Progress:

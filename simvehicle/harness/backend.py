@@ -17,7 +17,7 @@ is one module with a class following ``VehicleBackend`` and one line in ``BACKEN
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
@@ -51,6 +51,9 @@ class FlightResult:
     series: dict[str, np.ndarray]  # 20 Hz, see docs/ARCHITECTURE.md
     route: Route
     failure: str = ""  # a process backend's one-line reason the flight failed ("" = none recorded)
+    # every GNSS fix received, when the backend knows (see simvehicle.harness.fly._fixes): t_s, t_validity_s,
+    # p_ned_m (K, 3), h_acc_m, rejected (1: the innovation gate refused it; NaN: not known)
+    fixes: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class VehicleBackend(Protocol):

@@ -86,6 +86,8 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     push, push_fix_ned = nav.push, nav.push_fix_ned
     accuracy_m = sim.gnss.reported_accuracy_m  # what GnssModel.to_fix puts on the wire
     rows = array("d")  # recording.ROW_FLOATS floats per control step: ~180 B, not two domain objects (~2 kB)
+    fix_rows = array("d")  # FIX_FIELDS floats per fix received
+    engine, rejected_before = nav.engine, 0  # its gate counter, read after each fix
     est, collisions, in_contact, reached = None, 0, False, False
     wall0 = time.perf_counter()
     while sim.t_us < end_us:
@@ -99,6 +101,10 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
                 fix = fixes[k][1]
                 acc = accuracy_m(fix)
                 push_fix_ned(fix.t_validity_us, fix.p_ned_m, acc, acc)  # in the mission frame: no geodesy
+                n_rejected = engine.counts["gnss_rejected_innovation"]
+                fix_rows.extend((fixes[k][0], fix.t_validity_us, *fix.p_ned_m, acc,
+                                 n_rejected - rejected_before))
+                rejected_before = n_rejected
                 k += 1
         est = nav.estimate()
         truth = out.final_truth
@@ -133,7 +139,19 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
         },
         "estimator_counters": counters,
     }
-    return FlightResult(summary, series, route)
+    return FlightResult(summary, series, route, fixes=_fixes(fix_rows))
+
+
+FIX_FIELDS = 7  # t_arrival_us, t_validity_us, p_ned_m(3), h_acc_m, rejected
+
+
+def _fixes(fix_rows: array) -> dict[str, np.ndarray]:
+    """Every fix the filter received: arrival and validity times [s], position in the mission
+    frame [m], the accuracy it reported [m] and whether the innovation gate rejected it (the
+    change of the gate's count as it arrived: they add up to ``gnss_rejected_innovation``)."""
+    r = np.frombuffer(fix_rows, dtype=float).reshape(-1, FIX_FIELDS)
+    return {"t_s": r[:, 0] * 1e-6, "t_validity_s": r[:, 1] * 1e-6, "p_ned_m": r[:, 2:5], "h_acc_m": r[:, 5],
+            "rejected": r[:, 6]}
 
 
 class InProcessBackend:

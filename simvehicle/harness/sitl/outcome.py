@@ -37,6 +37,27 @@ def describe_exit(returncode: int | None) -> str:
     return f"exited with status {returncode}"
 
 
+def process_exits(return_codes: dict[str, int | None], ended_by: str) -> dict[str, dict[str, Any]]:
+    """Each process's return code with what it means. The launcher stops every process with
+    SIGTERM once the run is over, so 143 (128 + SIGTERM: our processes exit through
+    ``SystemExit``) or -15 is the planned stop, not a failure; ``clean`` says so."""
+    crashed = ended_by.split(":", 1)[1] if ended_by.startswith("crash:") else None
+    out: dict[str, dict[str, Any]] = {}
+    for name, rc in return_codes.items():
+        if name == crashed:
+            exit_, clean = f"ended the run: {describe_exit(rc)}", False
+        elif rc == 0:
+            exit_, clean = "exited normally", True
+        elif rc in (128 + signal.SIGTERM, -signal.SIGTERM):
+            exit_, clean = "stopped by the launcher (SIGTERM), as planned", True
+        elif rc == -signal.SIGKILL:
+            exit_, clean = "killed by SIGKILL: did not stop within the launcher's grace period", False
+        else:
+            exit_, clean = describe_exit(rc), False
+        out[name] = {"return_code": rc, "exit": exit_, "clean": clean}
+    return out
+
+
 def failure_reason(run: Any, summary: dict[str, Any]) -> str:
     """Why the run failed ('' when it reached the goal without a collision). ``run`` is a SitlRun."""
     ended_by: str = run.ended_by

@@ -12,6 +12,7 @@ from companion.domain.statistics import describe
 from companion.planning import Route
 from simvehicle.harness.backend import FlightResult
 from simvehicle.harness.sitl.launcher import SitlOptions, SitlRun
+from simvehicle.harness.sitl.outcome import process_exits
 from simvehicle.recording import SPOOL_NAME, series_from_spool
 
 
@@ -62,7 +63,7 @@ def flight_result(opts: SitlOptions, run: SitlRun, route: Route, mission_name: s
             "mode": "realtime" if opts.realtime else "lockstep",
             "ended_by": run.ended_by,
             "outcome": v.get("outcome", "unknown"),
-            "return_codes": run.return_codes,
+            "processes": process_exits(run.return_codes, run.ended_by),
             "lockstep": v.get("lockstep", {}),
             "links": {"vehicle": v.get("links", {}), "ground": v.get("ground", {}),
                       "estimator": e.get("link", {}), "bridge": run.bridge.get("link", {})},
