@@ -9,7 +9,7 @@ PROFILE ?= 0
 METHOD  ?= second-order
 OUT     ?= runs/demo
 
-.PHONY: venv demo test bench lint browser clean results results-ablation results-ablation-severity
+.PHONY: venv demo test bench lint docs browser clean results results-ablation results-ablation-severity
 
 # The estimator's C core (companion/estimator/_core.c) is compiled by the editable install: it needs
 # a C compiler and the Python headers. When either is missing, Debian's gcc and python3-dev are
@@ -97,6 +97,10 @@ results-ablation-severity: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
+
+# docs/parameters.md from the configuration dataclasses and the companion's options
+docs: $(STAMP)
+	$(BIN)/python -m gcs_tools.paramdoc
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

@@ -71,6 +71,9 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         if node is not None:
+            crashed = sys.exc_info()[0] not in (None, SystemExit)  # SIGTERM ends through SystemExit
+            if hasattr(node, "telemetry_ended") and not crashed:  # the estimator says it ended cleanly
+                node.telemetry_ended()
             node.telemetry.close()
             if args.stats is not None:
                 write_json(args.stats, node.stats())

@@ -1,29 +1,42 @@
 """``beliefnav companion``: the estimator beside a real autopilot (= ``python -m companion estimator
---master``): discovery, stream requests, estimates, optional feed back, run.tlog + summary.json."""
+--master``): discovery, stream requests, estimates, optional feed back, run.tlog + summary.json.
+``--config FILE`` gives any option in a YAML file (:mod:`gcs_tools.companion_config`)."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 
-from companion.autopilot.node import config_from_args
-from companion.autopilot.node import run as run_companion
 from companion.autopilot.options import add_master_arguments
+from companion.errors import UserError
 from companion.telemetry import pubsub as telemetry
-from gcs_tools import choices
+from gcs_tools import choices, companion_config
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_master_arguments(parser, master_required=True)
+    add_master_arguments(parser, master_required=False)  # required, but it may come from --config
     choices.add_method_argument(parser)
     telemetry.add_arguments(parser, publisher=True)
+    companion_config.add_config_argument(parser)
+    parser.set_defaults(_option_defaults=companion_config.defer_defaults(parser), _config_parser=parser)
 
 
 def run(args: argparse.Namespace) -> int:
+    from companion.autopilot.node import config_from_args
+    from companion.autopilot.node import run as run_companion
     from companion.runtime import exit_on_sigterm
 
     exit_on_sigterm()  # SIGTERM ends the run like Ctrl-C: summary.json is still written
+    sections = companion_config.merge(args, args._config_parser, args._option_defaults)
+    if args.master is None:
+        raise UserError("--master URL is required (or `master:` in the --config file)")
     config = config_from_args(args)
+    if sections:
+        estimator = companion_config.estimator_config(sections, args.config)
+        config = dataclasses.replace(config, estimator=estimator)
+    print(f"companion: waiting for a HEARTBEAT on {args.master} (up to {args.discovery_timeout_s:g} s)",
+          flush=True)
     publisher = telemetry.publisher_from_args(args, "companion")
     try:
         summary = run_companion(config, publisher)

@@ -2,7 +2,7 @@
 
 For tests and benchmarks of the ground tools without a simulator:
 ``python -m gcs_tools.synth --vehicle uav1 --duration-s 5``. Topic rates follow the nodes:
-truth/estimate 50 Hz, gnss/belief/setpoint 20 Hz, health 5 Hz, route 1 Hz (all in simulated time;
+truth/estimate 50 Hz, gnss 10 Hz, belief/setpoint 5 Hz, health 2 Hz, route and status 1 Hz (simulated time;
 ``--speed`` runs faster than real time). Every random draw comes from one seeded generator.
 """
 
@@ -18,11 +18,13 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, NavEstimate, Setpoint, TruthState
 from companion.telemetry import codec as zc
 from companion.telemetry.pubsub import TelemetryConfig, TelemetryPublisher
 
 TICK_US = 20_000  # 50 Hz base tick
+HOME = LocalNedFrame(47.0, 8.0, 400.0)  # the synthetic city's origin
 RADIUS_M, SPEED_M_S, ALT_M = 40.0, 5.0, 20.0
 BUILDINGS_NE_M = np.array([[-15.0, -15.0, 15.0, 15.0], [50.0, -30.0, 70.0, -10.0],
                            [-70.0, 20.0, -55.0, 45.0]])  # n0, e0, n1, e1 [m]
@@ -33,10 +35,11 @@ def messages(duration_s: float, rng: np.random.Generator) -> Iterator[tuple[str,
     omega = SPEED_M_S / RADIUS_M
     angles = np.linspace(0, 2 * np.pi, 33)
     waypoints = np.column_stack([RADIUS_M * np.cos(angles), RADIUS_M * np.sin(angles), np.full(33, -ALT_M)])
-    route = zc.RouteInfo(0, "synthetic", 0, waypoints, 2 * np.pi / omega, BUILDINGS_NE_M, waypoints[-1])
+    route = zc.RouteInfo(0, "synthetic", 0, waypoints, 2 * np.pi / omega, BUILDINGS_NE_M, waypoints[-1],
+                         np.array([HOME.home_lat_deg, HOME.home_lon_deg, HOME.home_alt_m]))
     bias = np.zeros(3)
     beta = 0.9
-    counters = {"imu_used": 0, "gnss_fused": 0, "gnss_rejected_fix_type": 0, "gnss_rejected_stale": 0}
+    counters = {"imu_used": 0, "gnss_fused": 0, "gnss_rejected_fix_type": 0, "gnss_rejected_innovation": 0}
     for k in range(int(duration_s * 1e6 / TICK_US)):
         t_us = k * TICK_US
         a = omega * t_us * 1e-6
@@ -50,21 +53,26 @@ def messages(duration_s: float, rng: np.random.Generator) -> Iterator[tuple[str,
         counters["imu_used"] += 4
         if k % 50 == 0:
             yield "bridge", "route", dataclasses.replace(route, t_us=t_us)
+            yield "vehicle", "status", zc.FlightStatus(t_us, "HOLD" if near > 0.95 else "OFFBOARD", True)
         q = np.array([1.0, 0, 0, 0])
         yield "vehicle", "truth", TruthState(t_us, p, v, q, bias, latency_s, 10 * (1 - near))
-        yield "companion", "estimate", NavEstimate(t_us, p + err, v, bias * beta, np.full(9, 0.1), beta,
-                                                   float(rng.chisquare(2)), "second-order")
+        yield "companion", "estimate", NavEstimate(
+            t_us, p + err, v, bias * beta, np.full(9, 0.1), beta, float(rng.chisquare(2)), "second-order",
+            gnss_rejected_innovation=counters["gnss_rejected_innovation"])
         if k % 5 == 0:
-            counters["gnss_fused"] += 1
-            counters["gnss_rejected_stale"] += int(near > 0.9)
+            rejected = near > 0.9 and rng.random() < 0.2
+            counters["gnss_fused"] += not rejected
+            counters["gnss_rejected_innovation"] += rejected
             t_valid_us = t_us - int(latency_s * 1e6)
-            fix = GnssFix(t_valid_us, 47.0 + p[0] * 1e-5, 8.0 + p[1] * 1e-5, ALT_M, 3, 12, 0.8)
+            lat, lon, alt = HOME.to_geodetic(p + bias + rng.normal(0, 0.3, 3))
+            fix = GnssFix(t_valid_us, lat, lon, alt, 3, 12, 0.8, 0.8, hdop=0.9)
             yield "vehicle", "gnss", zc.GnssReport(t_us, fix)
         if k % 10 == 0:
             yield "companion", "belief", zc.Belief(t_us, beta, float(rng.chisquare(2)), "second-order")
             yield "bridge", "setpoint", Setpoint(t_us, p, v, np.zeros(3))
         if k % 25 == 0:
             yield "companion", "health", zc.Health(t_us, dict(counters))
+    yield "companion", "health", zc.Health(t_us, dict(counters), status="ended")  # a clean finish
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,7 +15,8 @@ from rich.markup import escape  # "[s]", "[m]" in headers are units, not rich ma
 from rich.table import Table
 
 from companion.telemetry import pubsub as telemetry
-from gcs_tools.dashboard.state import STALE_S, LiveState
+from gcs_tools.dashboard.labels import headline
+from gcs_tools.dashboard.state import FIX_TYPES, STALE_S, LiveState, ended
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,33 +31,44 @@ def _f(x: Any, fmt: str) -> str:
 
 
 def _state(s: dict[str, Any]) -> str:
-    """live / stale N s / ended (at the goal), as the dashboard's badge."""
+    """live / ended (after a clean finish) / stale N s, as the dashboard's badge."""
     age = s["age_s"]
     if age < STALE_S:
         return "[green]live[/]"
-    return f"ended {age:.0f} s" if s["at_goal"] else f"[yellow]stale {age:.0f} s[/]"
+    if ended(s["at_goal"], s["status"]):
+        return f"ended{' at goal' if s['at_goal'] else ''} {age:.0f} s"
+    return f"[yellow]stale {age:.0f} s[/]"
+
+
+def _gps(s: dict[str, Any]) -> str:
+    fix = s.get("fix_type")
+    if fix is None:
+        return "–"
+    sats = s.get("satellites")
+    return FIX_TYPES.get(fix, f"type {fix}") + (f", {sats} sats" if sats is not None and sats < 255 else "")
 
 
 def render(state: LiveState) -> Group:
-    """One table of headline numbers per vehicle, one of counters, one line of malformed payloads."""
+    """One table of headline numbers per vehicle (what a ground station shows first, then the
+    belief), one of the key counters with their labels, one line of malformed payloads."""
     summary = state.summary()
     main = Table(title="beliefnav vehicles", expand=True)
-    for col in ("vehicle", "state", "t [s]", "method", "β [0–1]", "NIS [χ²]", "est. error [m]",
-                "GNSS latency [ms]", "clearance [m]", "messages [count]"):
-        main.add_column(escape(col), justify="left" if col in ("method", "state") else "right")
+    for col in ("vehicle", "state", "mode", "GPS", "t [s]", "method", "β [0–1]", "NIS [χ²]", "est. error [m]",
+                "GNSS latency [s]", "altitude [m]", "messages [count]"):
+        main.add_column(escape(col), justify="left" if col in ("method", "state", "mode", "GPS") else "right")
     counters = Table(title="counters", expand=True)
     for col in ("vehicle", "process", "counter", "value [count]"):
         counters.add_column(escape(col), justify="right" if col.startswith("value") else "left")
     for name, s in sorted(summary.items()):
-        lat = s.get("gnss_latency_s")
-        main.add_row(name, _state(s), _f(s.get("t_s"), ".2f"), s.get("method", "–"), _f(s.get("beta"), ".3f"),
-                     _f(s.get("nis"), ".2f"), _f(s.get("est_error_m"), ".2f"),
-                     _f(None if lat is None else lat * 1e3, ".0f"), _f(s.get("clearance_m"), ".1f"),
+        armed = s.get("armed")
+        mode = s.get("mode", "–") + ("" if armed is None else " armed" if armed else " disarmed")
+        main.add_row(name, _state(s), mode, _gps(s), _f(s.get("t_s"), ".2f"), s.get("method", "–"),
+                     _f(s.get("beta"), ".3f"), _f(s.get("nis"), ".2f"), _f(s.get("est_error_m"), ".2f"),
+                     _f(s.get("gnss_latency_s"), ".2f"), _f(s.get("altitude_m"), ".1f"),
                      str(sum(s["messages"].values())))
         for proc, cs in sorted(s["counters"].items()):
-            for k, n in sorted(cs.items()):
-                style = "bold red" if "reject" in k and n else ""
-                counters.add_row(name, proc, k, f"[{style}]{n}[/]" if style else str(n))
+            for label, n, alarm in headline(cs):
+                counters.add_row(name, proc, label, f"[bold red]{n}[/]" if alarm else str(n))
     bad = sum(state.malformed.values())
     note = f"malformed payloads: {bad}" + (f" (last: {state.last_malformed})" if bad else "")
     return Group(main, counters, f"[bold red]{note}[/]" if bad else note)

@@ -54,7 +54,7 @@ from companion.mavlink.udp_link import (
 )
 from companion.mission import Mission
 from companion.runtime import count_handler_error, write_json
-from companion.telemetry.codec import GnssReport
+from companion.telemetry.codec import FlightStatus, GnssReport
 from companion.telemetry.pubsub import DeferredPublisher, TelemetryPublisher
 from simvehicle import SimVehicle
 from simvehicle import ground_telemetry as gt
@@ -66,6 +66,7 @@ AUTOPILOT_COMPONENT_ID = 1
 COMPANIONS = ("estimator", "bridge")
 MAX_JITTER_SAMPLES = 400_000  # real time: IMU send instants kept for the jitter statistics (200 Hz)
 COMPANION_COMPONENTS = {"estimator": ESTIMATOR_COMPONENT_ID, "bridge": BRIDGE_COMPONENT_ID}
+STATUS_PERIOD_US = 1_000_000  # vehicle/status telemetry: 1 Hz of boot time (and on a change), as HEARTBEAT
 # what the vehicle flies on must be stamped near its own time (the estimate trails it by latency)
 INPUT_WINDOW = ClockWindow(max_back_us=5_000_000, max_forward_us=100_000)
 
@@ -142,8 +143,17 @@ class VehicleNode:
         self.barrier = StepBarrier({n: self.links[n] for n in COMPANIONS}, config.lockstep)
         self.recorder = recorder
         self.imu_send_ns: list[int] = []
+        self._status_sent: tuple[str, bool] | None = None
+        self._next_status_us = 0
         self.gnss_sent = 0
         self.collisions = 0  # control periods that end in contact (counted on entry)
+
+    def _publish_status(self, status: Any) -> None:
+        """``vehicle/status`` (mode, armed) once a second of boot time and on every change."""
+        now = (status.mode, status.armed)
+        if now != self._status_sent or status.t_us >= self._next_status_us:
+            self._status_sent, self._next_status_us = now, status.t_us + STATUS_PERIOD_US
+            self._topics.publish("status", FlightStatus(status.t_us, status.mode, status.armed))
 
     # -- clocks and the tlog ---------------------------------------------------------------
     def _boot_ns(self) -> int:
@@ -319,7 +329,9 @@ class VehicleNode:
                 self.barrier.wait(out.t_us, self.on_message, {"ground": self.ground.link}, self._topics.drain)
             row = self.recorder.record(out, self.inbox.estimate, self.inbox.setpoint, self.inbox.beta,
                                        self.inbox.nis, self.inbox.bias_ned_m)
-            self.ground.tick(vehicle_status(self.sim, out, self.ground.gnss_flowing(out.t_us)))
+            status = vehicle_status(self.sim, out, self.ground.gnss_flowing(out.t_us))
+            self.ground.tick(status)
+            self._publish_status(status)
             if out.collided and not was_collided:
                 self.collisions += 1
                 self.ground.collision(out.t_us)

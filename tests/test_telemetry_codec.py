@@ -12,7 +12,8 @@ from companion.telemetry import codec as zc
 
 def samples(rng: np.random.Generator) -> dict[str, object]:
     v = lambda: rng.normal(size=3)  # noqa: E731
-    est = NavEstimate(123_456, v(), v(), v(), rng.uniform(0.01, 1, 9), 0.73, float("nan"), "second-order")
+    est = NavEstimate(123_456, v(), v(), v(), rng.uniform(0.01, 1, 9), 0.73, float("nan"), "second-order",
+                      pos_horiz_test_ratio=0.42, gnss_rejected_innovation=3)
     fix = GnssFix(1_000_000, 47.3977419, 8.5455938, 488.25, 3, 12, 0.8, float("nan"))
     return {
         "estimate": est,
@@ -22,7 +23,9 @@ def samples(rng: np.random.Generator) -> dict[str, object]:
         "gnss": zc.GnssReport(1_250_000, fix),
         "setpoint": Setpoint(9_000, v(), v(), v()),
         "route": zc.RouteInfo(0, "test", 2, rng.normal(size=(5, 3)), 42.5,
-                              np.array([[0.0, 0, 10, 20], [30, 5, 40, 15]]), v()),
+                              np.array([[0.0, 0, 10, 20], [30, 5, 40, 15]]), v(),
+                              np.array([52.52, 13.405, 35.0])),
+        "status": zc.FlightStatus(11_000, "HOLD", True),
     }
 
 
@@ -50,6 +53,27 @@ def test_all_topics_round_trip_exactly():
         assert_same(obj, back)
         # and the other way: JSON -> object -> JSON is the identity
         assert zc.encode(topic, back, sent_unix_ns=17) == payload
+
+
+def test_fields_added_later_may_be_missing_from_older_payloads():
+    """An older publisher (or recording) sends no estimate gate fields and no route home: decoded
+    with the type's defaults; any other missing field is still malformed."""
+    objs = samples(np.random.default_rng(3))
+    later = {"estimate": ("pos_horiz_test_ratio", "gnss_rejected_innovation"), "route": ("home_lla",)}
+    for topic, added in later.items():
+        d = json.loads(zc.encode(topic, objs[topic], 5))
+        for name in added:
+            del d[name]
+        back, _ = zc.decode(topic, json.dumps(d).encode())
+        default = type(objs[topic])(**{k: getattr(back, k) for k in back.__slots__ if k not in added})
+        assert_same(back, default)
+    d = json.loads(zc.encode("status", objs["status"], 5))
+    assert d["armed"] is True and d["mode"] == "HOLD"
+    with pytest.raises(zc.MalformedPayloadError, match=r"status\.armed: expected true or false"):
+        zc.decode("status", json.dumps({**d, "armed": 1}).encode())
+    del d["mode"]
+    with pytest.raises(zc.MalformedPayloadError, match=r"status\.mode: missing"):
+        zc.decode("status", json.dumps(d).encode())
 
 
 def test_payload_is_plain_json_with_documented_fields():

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from companion.domain.clock_guard import ClockWindow, StreamClock, Verdict
 from companion.mavlink import codec as codec
 from companion.mavlink.lockstep import marker_time_us, step_response
@@ -33,7 +35,9 @@ MARKER_WINDOW = ClockWindow(max_back_us=5_000_000, max_forward_us=2_000_000)  # 
 def route_info(mission: Mission, profile: int, route: Route) -> RouteInfo:
     """The ``bridge/route`` telemetry message of a planned route (stamped when published)."""
     wp = route.waypoints_ned_m
-    return RouteInfo(0, mission.name, profile, wp, route.duration_s, mission.world.rects_m, wp[-1])
+    f = mission.frame
+    return RouteInfo(0, mission.name, profile, wp, route.duration_s, mission.world.rects_m, wp[-1],
+                     np.array([f.home_lat_deg, f.home_lon_deg, f.home_alt_m]))
 
 
 @dataclass(slots=True)

@@ -108,6 +108,11 @@ class EstimatorNode:
         self._deferred = DeferredPublisher(self.telemetry)  # published once a datagram is answered
         self._topics = EstimatorTelemetry(self._deferred)  # Zenoh: estimate, belief, health
 
+    def telemetry_ended(self) -> None:
+        """On a clean stop: what is queued, then the last ``health`` (status ``ended``)."""
+        self._topics.finish(self.navigator)
+        self._deferred.drain()
+
     def publish_telemetry(self) -> None:
         """Publish the telemetry queued while handling (call after the answer has left)."""
         self._deferred.drain()

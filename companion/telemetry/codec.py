@@ -79,6 +79,18 @@ class RouteInfo:
     duration_s: float
     buildings_ne_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # (K, 4) n0, e0, n1, e1
     goal_ned_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    # the origin of the NED frame (lat, lon [deg], alt [m] AMSL): NaN when not sent
+    home_lla: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+
+
+@dataclass(frozen=True, slots=True)
+class FlightStatus:
+    """What an autopilot's HEARTBEAT says: its flight mode and whether it is armed (1 Hz and on
+    every change)."""
+
+    t_us: int
+    mode: str  # e.g. OFFBOARD, HOLD
+    armed: bool
 
 
 # --- field kinds: (encode, decode) ----------------------------------------------------------------
@@ -152,6 +164,12 @@ def _dec_array(shape: tuple[int | None, ...], optional: bool = False) -> _Dec:
     return dec
 
 
+def _dec_bool(v: Any, where: str) -> bool:
+    if not isinstance(v, bool):
+        raise MalformedPayloadError(f"{where}: expected true or false, got {_shown(v)}")
+    return v
+
+
 def _dec_counters(v: Any, where: str) -> dict[str, int]:
     if not isinstance(v, dict):
         raise MalformedPayloadError(f"{where}: expected an object, got {type(v).__name__}")
@@ -160,6 +178,7 @@ def _dec_counters(v: Any, where: str) -> dict[str, int]:
 
 INT = (int, _dec_int)
 STR = (str, _dec_str)
+BOOL = (bool, _dec_bool)
 FLOAT = (_enc_float, _dec_float(False))
 FLOAT_OPT = (_enc_float, _dec_float(True))  # null <-> NaN (not available)
 VEC3 = (_enc_array, _dec_array((3,)))
@@ -173,6 +192,9 @@ class TopicSpec:
     cls: type
     fields: dict[str, tuple[_Enc, _Dec]]
     extras: Callable[[Any], dict[str, Any]] = lambda obj: {}
+    # fields added after the first release: a payload without them (an older publisher, an older
+    # recording) decodes with the type's default
+    added: frozenset[str] = frozenset()
 
 
 _GNSS_FIELDS: dict[str, tuple[_Enc, _Dec]] = {
@@ -183,7 +205,9 @@ _GNSS_FIELDS: dict[str, tuple[_Enc, _Dec]] = {
 TOPICS: dict[str, TopicSpec] = {
     "estimate": TopicSpec(NavEstimate, {
         "t_us": INT, "p_ned_m": VEC3, "v_ned_m_s": VEC3, "b_ned_m": VEC3,
-        "cov_diag": (_enc_array, _dec_array((9,))), "beta": FLOAT, "nis": FLOAT_OPT, "method": STR}),
+        "cov_diag": (_enc_array, _dec_array((9,))), "beta": FLOAT, "nis": FLOAT_OPT, "method": STR,
+        "pos_horiz_test_ratio": FLOAT_OPT, "gnss_rejected_innovation": INT},
+        added=frozenset({"pos_horiz_test_ratio", "gnss_rejected_innovation"})),
     "belief": TopicSpec(Belief, {"t_us": INT, "beta": FLOAT, "nis": FLOAT_OPT, "method": STR}),
     "health": TopicSpec(Health, {"t_us": INT, "counters": COUNTERS, "status": STR}),
     "truth": TopicSpec(TruthState, {
@@ -195,7 +219,9 @@ TOPICS: dict[str, TopicSpec] = {
     "route": TopicSpec(RouteInfo, {
         "t_us": INT, "mission": STR, "profile": INT, "waypoints_ned_m": (_enc_array, _dec_array((None, 3))),
         "duration_s": FLOAT, "buildings_ne_m": (_enc_array, _dec_array((None, 4))),
-        "goal_ned_m": (_enc_array, _dec_array((3,), optional=True))}),
+        "goal_ned_m": (_enc_array, _dec_array((3,), optional=True)),
+        "home_lla": (_enc_array, _dec_array((3,), optional=True))}, added=frozenset({"home_lla"})),
+    "status": TopicSpec(FlightStatus, {"t_us": INT, "mode": STR, "armed": BOOL}),
 }
 
 
@@ -251,6 +277,8 @@ def from_dict(topic: str, d: Any) -> Any:
         raise MalformedPayloadError(f"{topic}: expected a JSON object")
     values = {}
     for name, (_enc, dec) in spec.fields.items():
+        if name not in d and name in spec.added:
+            continue  # the type's default
         if name not in d:
             raise MalformedPayloadError(f"{topic}.{name}: missing")
         values[name] = dec(d[name], f"{topic}.{name}")

@@ -353,6 +353,13 @@ class EstimatorTelemetry:
                 zc.Health(est.t_us, nav.counters()))
             self.publisher.publish(topic, obj)
 
+    def finish(self, nav: Any) -> None:
+        """A last ``health`` with status ``ended``: the run is over and this process stops cleanly
+        (a viewer then says "ended" instead of "stale"). Nothing without an estimate yet."""
+        est = None if nav is None else nav.estimate()
+        if est is not None:
+            self.publisher.publish("health", zc.Health(est.t_us, nav.counters(), status="ended"))
+
 
 @dataclass(frozen=True)
 class Received:

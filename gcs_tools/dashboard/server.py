@@ -1,8 +1,10 @@
 """aiohttp server: the page, its static files, and a Server-Sent Events stream of telemetry frames.
 
-``/snapshot.json`` is the retained history once (the page's ``?snapshot`` mode draws it and goes idle,
-so ``chromium --headless --screenshot`` of ``/?snapshot=1`` returns); ``/palette.json`` is the colour
-of each meaning, shared with the figures (:mod:`gcs_tools.palette`).
+The page (``/``) carries what it needs to start inline (``window.BOOT``: the palette, the counter
+labels and, for ``/?snapshot=1``, the retained history), so it draws while it loads, without a
+request of its own: ``chromium --headless --screenshot`` of ``/?snapshot=1`` shows the data at
+once. ``/snapshot.json`` is the retained history once; ``/palette.json`` the colour of each
+meaning, shared with the figures (:mod:`gcs_tools.palette`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from aiohttp import web
 
 from companion.errors import UserError
 from gcs_tools import palette
+from gcs_tools.dashboard import labels
 from gcs_tools.dashboard.state import LiveState
 
 STATIC = Path(__file__).with_name("static")
@@ -41,8 +44,15 @@ class Dashboard:
         app.cleanup_ctx.append(self._ticker)
         return app
 
-    async def index(self, request: web.Request) -> web.FileResponse:
-        return web.FileResponse(STATIC / "index.html")
+    async def index(self, request: web.Request) -> web.Response:
+        boot: dict[str, object] = {"palette": palette.as_json(), "labels": labels.as_json()}
+        if "snapshot" in request.query:
+            boot["snapshot"] = self.state.snapshot()
+        # JSON inside <script>: "</" is escaped so no payload text can close the element
+        inline = json.dumps(boot, allow_nan=False).replace("</", "<\\/")
+        html = (STATIC / "index.html").read_text(encoding="utf-8").replace(
+            "<!--BOOT-->", f"<script>window.BOOT = {inline};</script>")
+        return web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-cache"})
 
     async def snapshot(self, request: web.Request) -> web.Response:
         return web.json_response(self.state.snapshot(), headers={"Cache-Control": "no-cache"})

@@ -3,6 +3,13 @@
 ``ingest`` is called from Zenoh threads with decoded messages; ``take_frame`` (10 Hz or faster)
 returns what arrived since the previous frame as plain JSON-able data and keeps a bounded history
 that ``snapshot`` hands to a newly connected viewer.
+
+Besides the plotted series a vehicle has its ``latest`` headline values, what a ground station
+shows first: flight mode and armed state (``vehicle/status``), GNSS fix type, satellites, HDOP and
+reported accuracy (``vehicle/gnss``), altitude above home, the estimate's horizontal variances
+(the map's uncertainty ellipse), β, NIS, errors. GNSS fixes are placed on the map in the local
+frame of the route's home (``bridge/route`` ``home_lla``); a fix is marked rejected when the next
+estimate's ``gnss_rejected_innovation`` count went up (the fix the filter just refused).
 """
 
 from __future__ import annotations
@@ -16,14 +23,18 @@ from typing import Any
 
 import numpy as np
 
+from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import NavEstimate, Setpoint, TruthState
 from companion.telemetry import codec as zc
 from companion.telemetry.pubsub import Received
 
-SERIES = ("truth", "est", "ref", "beta", "err", "latency")
+SERIES = ("truth", "est", "ref", "beta", "err", "latency", "fix", "rejected")
 TRUTH_MATCH_US = 30_000  # an estimate is compared with truth stamped within this much of it
 STALE_S = 2.0  # [s] without any message a vehicle is shown stale (the page's STALE_S too)
 AT_GOAL_M = 3.0  # [m] last true position this close to the route's goal: arrived (fly's 2 m radius + margin)
+HISTORY_LEN = 30_000  # points per series kept for a new viewer (10 min of 50 Hz estimates)
+MAX_UNPLACED_FIXES = 600  # fixes kept until the route's home places them on the map (30 s at 20 Hz)
+FIX_TYPES = {0: "no GPS", 1: "no fix", 2: "2D fix", 3: "3D fix", 4: "DGPS", 5: "RTK float", 6: "RTK fixed"}
 
 
 def _num(x: float) -> float | None:
@@ -40,12 +51,16 @@ class VehicleView:
     status: dict[str, str] = field(default_factory=dict)
     route: dict[str, Any] | None = None
     route_new: bool = False
-    latest: dict[str, Any] = field(default_factory=dict)  # headline numbers for `top`
+    latest: dict[str, Any] = field(default_factory=dict)  # headline numbers (status bar, `top`)
     messages: Counter = field(default_factory=Counter)
     last_mono_s: float = 0.0  # monotonic time of the last message (any process)
     process_mono_s: dict[str, float] = field(default_factory=dict)  # process -> monotonic time of its last
     last_truth_ned_m: np.ndarray | None = None
     goal_ned_m: np.ndarray | None = None
+    frame: LocalNedFrame | None = None  # the route's home: places the fixes
+    unplaced: deque = field(default_factory=lambda: deque(maxlen=MAX_UNPLACED_FIXES))  # GnssReports
+    last_fix: list | None = None  # [t_s, n, e] of the newest placed fix
+    rejected_count: int | None = None  # the estimate's gnss_rejected_innovation so far
 
     def at_goal(self) -> bool:
         if self.last_truth_ned_m is None or self.goal_ned_m is None or not np.isfinite(self.goal_ned_m).all():
@@ -60,11 +75,21 @@ class VehicleView:
     def add(self, name: str, point: list) -> None:
         self.pending[name].append(point)
 
+    def place(self, report: zc.GnssReport) -> None:
+        """A fix on the map (local NED about the route's home), or kept until that home is known."""
+        if self.frame is None:
+            self.unplaced.append(report)
+            return
+        f = report.fix
+        n, e, _ = (float(v) for v in self.frame.to_ned_m(f.lat_deg, f.lon_deg, f.alt_m))
+        self.last_fix = [round(report.t_us * 1e-6, 4), _num(n), _num(e)]
+        self.add("fix", self.last_fix)
+
 
 class LiveState:
-    """Per-vehicle bounded histories of tracks, belief, errors, latency and counters."""
+    """Per-vehicle bounded histories of tracks, fixes, belief, errors, latency and counters."""
 
-    def __init__(self, history_len: int = 6000):
+    def __init__(self, history_len: int = HISTORY_LEN):
         self.history_len = history_len
         self.vehicles: dict[str, VehicleView] = {}
         self.malformed: Counter[str] = Counter()
@@ -98,17 +123,31 @@ class LiveState:
             v.latest["clearance_m"] = obj.clearance_m
         elif isinstance(obj, NavEstimate):
             v.add("est", [t_s, _num(obj.p_ned_m[0]), _num(obj.p_ned_m[1])])
-            v.latest.update(t_s=t_s, beta=obj.beta, nis=obj.nis, method=obj.method)
+            v.latest.update(t_s=t_s, beta=obj.beta, nis=obj.nis, method=obj.method,
+                            altitude_m=-float(obj.p_ned_m[2]), var_n_m2=float(obj.cov_diag[0]),
+                            var_e_m2=float(obj.cov_diag[1]), est_n_m=float(obj.p_ned_m[0]),
+                            est_e_m=float(obj.p_ned_m[1]))
             match = min(v.truth_recent, key=lambda tp: abs(tp[0] - obj.t_us), default=None)
             if match is not None and abs(match[0] - obj.t_us) <= TRUTH_MATCH_US:
                 err = float(np.linalg.norm(obj.p_ned_m - match[1]))
                 v.add("err", [t_s, _num(err)])
                 v.latest["est_error_m"] = err
+            count = obj.gnss_rejected_innovation
+            if v.rejected_count is not None and count > v.rejected_count and v.last_fix is not None:
+                v.add("rejected", list(v.last_fix))  # the fix just refused by the gate
+            v.rejected_count = count
         elif isinstance(obj, zc.Belief):
             v.add("beta", [t_s, _num(obj.beta), _num(obj.nis)])
         elif isinstance(obj, zc.GnssReport):
             v.add("latency", [t_s, _num(obj.latency_s)])
-            v.latest["gnss_latency_s"] = obj.latency_s
+            fix = obj.fix
+            v.latest.update(gnss_latency_s=obj.latency_s, fix_type=fix.fix_type,
+                            satellites=fix.satellites_visible, hdop=fix.hdop, h_acc_m=fix.h_acc_m,
+                            gnss_alt_m=fix.alt_m)
+            if fix.fix_type >= 2:
+                v.place(obj)
+        elif isinstance(obj, zc.FlightStatus):
+            v.latest.update(mode=obj.mode, armed=obj.armed)
         elif isinstance(obj, Setpoint):
             v.add("ref", [t_s, _num(obj.p_ned_m[0]), _num(obj.p_ned_m[1])])
         elif isinstance(obj, zc.Health):
@@ -119,6 +158,10 @@ class LiveState:
                      "waypoints_ne_m": [[_num(p[0]), _num(p[1])] for p in obj.waypoints_ned_m],
                      "buildings_ne_m": [[_num(x) for x in b] for b in obj.buildings_ne_m]}
             v.goal_ned_m = obj.goal_ned_m
+            if v.frame is None and np.isfinite(obj.home_lla).all():
+                v.frame = LocalNedFrame(*(float(x) for x in obj.home_lla))
+                while v.unplaced:
+                    v.place(v.unplaced.popleft())
             if route != v.route:
                 v.route, v.route_new = route, True
 
@@ -128,6 +171,7 @@ class LiveState:
             "series": series,
             "counters": v.counters,
             "status": v.status,
+            "latest": {k: (_num(x) if isinstance(x, float) else x) for k, x in v.latest.items()},
             "messages": dict(v.messages),
             "route": v.route if route else None,
             # freshness, on the server's clock (the page's clock may differ): seconds since the last message
@@ -167,5 +211,11 @@ class LiveState:
         with self._lock:
             now = time.monotonic()
             return {name: {**v.latest, "counters": {p: dict(c) for p, c in v.counters.items()},
-                           "messages": dict(v.messages), "age_s": now - v.last_mono_s,
+                           "status": dict(v.status), "messages": dict(v.messages),
+                           "age_s": now - v.last_mono_s,
                            "at_goal": v.at_goal()} for name, v in self.vehicles.items()}
+
+
+def ended(at_goal: bool, status: dict[str, str]) -> bool:
+    """The run is over (not stale): the vehicle arrived, or the estimator said it stopped cleanly."""
+    return at_goal or "ended" in status.values()

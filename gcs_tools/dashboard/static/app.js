@@ -1,11 +1,11 @@
 // beliefnav dashboard: Server-Sent Events -> per-vehicle buffers -> uPlot charts and a canvas map.
-// Colours come from /palette.json (the figures' palette: one colour per meaning).
-// /?snapshot=1 draws the server's retained history once and opens no event stream, so the page goes
-// idle (what `chromium --headless --screenshot` needs).
+// The page starts from window.BOOT (inline in the HTML: the palette, the figures' colours, one per
+// meaning; the counter labels; for /?snapshot=1 the server's retained history), so the snapshot view
+// is drawn while the page loads and opens no event stream: `chromium --headless --screenshot` of it
+// shows the data without waiting.
 "use strict";
 
-const WINDOW_S = 60;          // "follow live" shows the last minute
-const MAX_POINTS = 6000;      // per series, per vehicle
+const MAX_POINTS = 30000;     // per series, per vehicle (the server keeps as many)
 const STALE_S = 2.0;          // a vehicle or process silent this long is marked stale
 const REDRAW_MS = 100;        // charts are redrawn at most this often
 const SNAPSHOT = new URLSearchParams(location.search).has("snapshot");
@@ -15,14 +15,17 @@ const stats = { frames: 0, snapshots: 0, points: 0, malformed: 0, received: 0, d
 window.dashboardStats = stats; // read by the browser test
 window.dashboardVehicles = vehicles;
 let P = null;                 // palette: {quantity: {...}, method: {...}}
+let LABELS = null;            // counter labels: {key: [[name, label, red]...], other_rejected}
 let selected = null;
 let live = false;             // true once the first message was merged: later vehicles are "new"
 let dirty = true;
 let follow = true;            // x range follows the newest data; a user zoom or pan turns it off
+let windowS = 120;            // how much of the past "follow live" shows (0: everything retained)
+let hovering = false;         // the cursor is over a chart: its legend shows the values there
 let lastDraw = 0;
 const charts = {};
 const order = [];             // vehicle names in order of appearance
-window.dashboardView = () => ({ selected, follow, order,
+window.dashboardView = () => ({ selected, follow, order, windowS,
   x: Object.fromEntries(Object.entries(charts).map(([id, c]) => [id, [c.scales.x.min, c.scales.x.max]])) });
 
 // ---- data -----------------------------------------------------------------------------------------
@@ -36,8 +39,8 @@ function select(name) {
 
 function vehicle(name) {
   if (!vehicles[name]) {
-    vehicles[name] = { series: {}, counters: {}, status: {}, route: null, messages: {}, age_s: Infinity,
-                       process_age_s: {}, at_goal: false, ageAtMs: performance.now() };
+    vehicles[name] = { series: {}, counters: {}, status: {}, latest: {}, route: null, messages: {},
+                       age_s: Infinity, process_age_s: {}, at_goal: false, ageAtMs: performance.now() };
     order.push(name);
     const opt = document.createElement("option");
     opt.value = opt.textContent = name;
@@ -57,7 +60,7 @@ function merge(msg) {
       stats.points += pts.length;
     }
     if (data.route) v.route = data.route;
-    v.counters = data.counters; v.status = data.status; v.messages = data.messages;
+    v.counters = data.counters; v.status = data.status; v.messages = data.messages; v.latest = data.latest || {};
     v.age_s = data.age_s; v.process_age_s = data.process_age_s; v.at_goal = data.at_goal;
     v.ageAtMs = performance.now();
   }
@@ -105,6 +108,11 @@ function panZoomPlugin() {
       document.addEventListener("mousemove", move); document.addEventListener("mouseup", up);
     }, true);
     over.addEventListener("dblclick", () => { follow = true; dirty = true; });
+    over.addEventListener("mouseenter", () => { hovering = true; });
+    over.addEventListener("mouseleave", () => { hovering = false; dirty = true; });
+  }], draw: [(u) => {  // after each redraw: the legend shows the newest values unless the cursor is over a chart
+    const n = u.data[0].length;
+    if (!hovering && n) u.setLegend({ idx: n - 1 });
   }], setSelect: [(u) => {  // a drag selection: zoom every chart to it (uPlot's own zoom is off)
     if (u.select.width < 3) return;
     const min = u.posToVal(u.select.left, "x"), max = u.posToVal(u.select.left + u.select.width, "x");
@@ -138,9 +146,9 @@ function buildCharts() {
   makeChart("err", [{ label: "‖p̂ − p‖", scale: "m", stroke: q.est_error, width: 1.5, value: fmt(2, " m") }],
     { m: { auto: true, range: (u, lo, hi) => [0, Math.max(hi, 0.1)] } },
     [{ scale: "m", label: "error [m]", size: 48 }]);
-  makeChart("latency", [{ label: "latency", scale: "ms", stroke: q.latency, width: 1.5, value: fmt(0, " ms") }],
-    { ms: { auto: true, range: (u, lo, hi) => [0, Math.max(hi, 1)] } },
-    [{ scale: "ms", label: "latency [ms]", size: 48 }]);
+  makeChart("latency", [{ label: "latency", scale: "s", stroke: q.latency, width: 1.5, value: fmt(3, " s") }],
+    { s: { auto: true, range: (u, lo, hi) => [0, Math.max(hi, 0.05)] } },
+    [{ scale: "s", label: "latency [s]", size: 48 }]);
   new ResizeObserver(() => {
     for (const [id, c] of Object.entries(charts)) c.setSize({ width: document.getElementById(id).clientWidth, height: 190 });
     dirty = true;
@@ -158,7 +166,7 @@ function drawCharts(v) {
   const data = {
     beta: columns(s.beta || [], [1, 2]),
     err: columns(s.err || [], [1]),
-    latency: columns(s.latency || [], [1], 1000),
+    latency: columns(s.latency || [], [1]),
   };
   const why = { beta: "no belief messages from this vehicle", err: "not available: needs the simulation's truth",
                 latency: "not available: needs the vehicle's GNSS topic" };
@@ -170,7 +178,7 @@ function drawCharts(v) {
     // setting x (even to its current range) re-fits every y scale to the data in view
     if (follow || c.scales.x.min === null || c.scales.x.min === undefined) {
       if (isFinite(tmax)) {
-        const lo = Math.max(tmin, tmax - WINDOW_S);
+        const lo = windowS > 0 ? Math.max(tmin, tmax - windowS) : tmin;
         c.setScale("x", { min: lo, max: Math.max(tmax, lo + 1) });
       }
     } else {
@@ -239,6 +247,14 @@ function drawMap(v) {
     }
     ctx.stroke(); ctx.setLineDash([]);
   };
+  // GNSS fixes of the time window (dots), under the tracks
+  const tNow = Math.max(...["est", "truth", "fix"].map((k) => { const a = v.series[k] || []; return a.length ? a[a.length - 1][0] : -Infinity; }));
+  const since = windowS > 0 ? tNow - windowS : -Infinity;
+  ctx.fillStyle = q.gnss;
+  for (const p of v.series.fix || []) {
+    if (p[0] < since || p[1] === null) continue;
+    ctx.beginPath(); ctx.arc(X(p[2]), Y(p[1]), 1.8, 0, 2 * Math.PI); ctx.fill();
+  }
   poly(route.waypoints_ne_m, q.reference, 1.5, [6, 4], 0, 1);
   poly(v.series.est || [], q.estimated, 1.3, [], 1, 2);
   poly(v.series.truth || [], q.true, 1.5, [], 1, 2);
@@ -247,6 +263,21 @@ function drawMap(v) {
     ctx.fillStyle = "#000"; ctx.fillRect(X(wp[0][1]) - 4, Y(wp[0][0]) - 4, 8, 8);
     ctx.font = "16px system-ui"; ctx.fillText("★", X(wp[wp.length - 1][1]) - 7, Y(wp[wp.length - 1][0]) + 6);
     ctx.font = "11px system-ui, sans-serif";
+  }
+  // fixes the filter's gate rejected, over the tracks
+  ctx.strokeStyle = q.rejected; ctx.lineWidth = 2;
+  for (const p of v.series.rejected || []) {
+    if (p[1] === null) continue;
+    const x = X(p[2]), y = Y(p[1]);
+    ctx.beginPath(); ctx.moveTo(x - 5, y - 5); ctx.lineTo(x + 5, y + 5); ctx.moveTo(x - 5, y + 5); ctx.lineTo(x + 5, y - 5); ctx.stroke();
+  }
+  // 95 % horizontal uncertainty of the newest estimate (axis-aligned: the telemetry has the variances only)
+  const L = v.latest || {};
+  if (L.var_n_m2 != null && L.var_e_m2 != null && L.est_n_m != null) {
+    const k95 = Math.sqrt(5.991);   // chi-square, 2 degrees of freedom, 95 %
+    const rx = Math.max(k * k95 * Math.sqrt(L.var_e_m2), 2), ry = Math.max(k * k95 * Math.sqrt(L.var_n_m2), 2);
+    ctx.strokeStyle = q.uncertainty; ctx.fillStyle = q.uncertainty + "22"; ctx.lineWidth = 1.5;
+    ctx.beginPath(); ctx.ellipse(X(L.est_e_m), Y(L.est_n_m), rx, ry, 0, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
   }
   for (const [s, color] of [["truth", q.true], ["est", q.estimated]]) {
     const pts = v.series[s] || [];
@@ -271,35 +302,91 @@ function mapLegend() {
   document.getElementById("map-legend").innerHTML =
     [["true", q.true], ["estimated", q.estimated], ["planned", q.reference]]
       .map(([n, c]) => `<span class="k" style="--c:${c}">${n}</span>`).join("") +
+    `<span class="dot" style="--c:${q.gnss}">GNSS fixes (window)</span>` +
+    `<span class="cross" style="--c:${q.rejected}">rejected fix</span>` +
+    `<span class="ell" style="--c:${q.uncertainty}">95 % uncertainty</span>` +
     `<span class="k" style="--c:#000">■ start ★ goal</span>`;
 }
 
 // ---- status -------------------------------------------------------------------------------------------
+
+function isEnded(v) {
+  // the vehicle arrived, or the estimator said it stopped cleanly (its last health says "ended")
+  return v.at_goal || Object.values(v.status || {}).includes("ended");
+}
 
 function drawFreshness(v) {
   const el = document.getElementById("freshness");
   const age = ageNow(v, v.age_s);
   if (!isFinite(age)) { el.className = "fresh none"; el.textContent = "no data"; return; }
   if (age < STALE_S) { el.className = "fresh live"; el.textContent = "live"; }
-  else if (v.at_goal) { el.className = "fresh ended"; el.textContent = `ended at goal · last data ${age.toFixed(0)} s ago`; }
-  else { el.className = "fresh stale"; el.textContent = `stale · no data for ${age.toFixed(0)} s`; }
+  else if (isEnded(v)) {
+    el.className = "fresh ended";
+    el.textContent = `ended${v.at_goal ? " at goal" : ""} · last data ${age.toFixed(0)} s ago`;
+  } else { el.className = "fresh stale"; el.textContent = `stale · no data for ${age.toFixed(0)} s`; }
 }
 
+const FIX_TYPES = { 0: "no GPS", 1: "no fix", 2: "2D fix", 3: "3D fix", 4: "DGPS", 5: "RTK float", 6: "RTK fixed" };
+
+function tile(id, text, cls = "") {
+  const el = document.getElementById(id);
+  el.textContent = text;
+  el.className = "v " + cls;
+}
+
+function drawFlight(v) {
+  // what QGroundControl shows first: mode, armed, GPS fix, satellites, HDOP, altitude; then the belief
+  const L = v.latest || {}, has = (x) => x !== null && x !== undefined;
+  tile("f-mode", has(L.mode) ? L.mode : "–", L.mode === "HOLD" ? "warn" : "");
+  tile("f-armed", has(L.armed) ? (L.armed ? "ARMED" : "disarmed") : "–", L.armed ? "good" : "");
+  tile("f-fix", has(L.fix_type) ? (FIX_TYPES[L.fix_type] || `type ${L.fix_type}`) : "–",
+       has(L.fix_type) ? (L.fix_type >= 3 ? "good" : "bad") : "");
+  tile("f-sats", has(L.satellites) && L.satellites < 255 ? String(L.satellites) : "–");
+  tile("f-hdop", has(L.hdop) ? L.hdop.toFixed(1) : "–");
+  tile("f-hacc", has(L.h_acc_m) ? `${L.h_acc_m.toFixed(2)} m` : "–");
+  tile("f-alt", has(L.altitude_m) ? `${L.altitude_m.toFixed(1)} m` : "–");
+  tile("f-beta", has(L.beta) ? L.beta.toFixed(2) : "–", has(L.beta) && L.beta < 0.3 ? "warn" : "");
+  tile("f-err", has(L.est_error_m) ? `${L.est_error_m.toFixed(2)} m` : "–");
+  tile("f-lat", has(L.gnss_latency_s) ? `${L.gnss_latency_s.toFixed(2)} s` : "–");
+}
+
+const esc = (t) => String(t).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
+
 function drawCounters(v) {
+  // processes: live, ended (after a clean finish) or stale, and when each was last heard
+  const ended = isEnded(v);
   const rows = [];
   const procs = new Set([...Object.keys(v.process_age_s || {}), ...Object.keys(v.counters)]);
   for (const proc of procs) {
     const age = ageNow(v, (v.process_age_s || {})[proc] ?? Infinity);
-    const fresh = age < STALE_S ? (v.status[proc] || "ok") : `<span class="proc-stale">stale (${isFinite(age) ? age.toFixed(0) + " s" : "never"})</span>`;
-    rows.push(`<tr><td colspan="2"><b>${proc}</b> ${fresh}</td></tr>`);
-    for (const [k, n] of Object.entries(v.counters[proc] || {})) {
-      const bad = k.includes("reject") && n > 0 ? " class=\"bad\"" : "";
-      rows.push(`<tr><td>${k}</td><td${bad}>${n}</td></tr>`);
-    }
+    const heard = isFinite(age) ? `last heard ${age.toFixed(0)} s ago` : "never heard";
+    const state = age < STALE_S ? `<span class="proc-live">live</span>`
+      : ended ? `<span class="proc-ended">ended</span>` : `<span class="proc-stale">stale</span>`;
+    rows.push(`<tr><td><b>${esc(proc)}</b></td><td>${state}</td><td>${age < STALE_S ? "" : heard}</td></tr>`);
   }
   const total = Object.values(v.messages).reduce((a, b) => a + b, 0);
-  rows.push(`<tr><td><b>messages received</b></td><td>${total}</td></tr>`);
-  document.getElementById("counters").innerHTML = rows.join("");
+  rows.push(`<tr><td>messages received</td><td colspan="2">${total.toLocaleString("en")}</td></tr>`);
+  document.getElementById("processes").innerHTML = rows.join("");
+  // the key counters with their labels; the rest on demand
+  const key = [], raw = [];
+  for (const [proc, counters] of Object.entries(v.counters)) {
+    const known = new Set(LABELS.key.map((k) => k[0]));
+    let other = 0;
+    for (const [name, label, red] of LABELS.key) {
+      if (!(name in counters)) continue;
+      const n = counters[name];
+      key.push(`<tr><td>${esc(label)}</td><td${red && n > 0 ? ' class="bad"' : ""}>${n.toLocaleString("en")}</td></tr>`);
+    }
+    for (const [name, n] of Object.entries(counters)) {
+      if (!known.has(name) && name.includes("rejected")) other += n;
+      raw.push(`<tr><td class="raw">${esc(proc)}/${esc(name)}</td><td${name.includes("reject") && n > 0 ? ' class="bad"' : ""}>${n.toLocaleString("en")}</td></tr>`);
+    }
+    if (Object.keys(counters).some((k) => known.has(k) || k.includes("rejected")))
+      key.push(`<tr><td>${esc(LABELS.other_rejected)}</td><td${other > 0 ? ' class="bad"' : ""}>${other.toLocaleString("en")}</td></tr>`);
+  }
+  document.getElementById("counters").innerHTML = key.join("") || `<tr><td class="nodata">no estimator counters yet</td></tr>`;
+  document.getElementById("raw-counters").innerHTML = raw.join("");
+  document.querySelector("#all-counters summary").textContent = `all counters (${raw.length})`;
 }
 
 function draw() {
@@ -309,6 +396,7 @@ function draw() {
   drawCharts(v);
   drawCounters(v);
   drawFreshness(v);
+  drawFlight(v);
   stats.draws++;
   dirty = false;
   lastDraw = performance.now();
@@ -332,14 +420,21 @@ function connect() {
   es.onerror = () => { document.getElementById("status").textContent = "disconnected — retrying…"; };
 }
 
-async function main() {
-  P = await (await fetch("/palette.json")).json();
+function main() {
+  const boot = window.BOOT;
+  P = boot.palette;
+  LABELS = boot.labels;
   mapLegend();
   buildCharts();
   document.getElementById("vehicle").addEventListener("change", (e) => select(e.target.value));
   document.getElementById("follow").addEventListener("click", () => { follow = true; dirty = true; });
-  if (SNAPSHOT) {
-    const msg = await (await fetch("/snapshot.json")).json();
+  const win = document.getElementById("window");
+  const chosen = new URLSearchParams(location.search).get("window");
+  if (chosen !== null && [...win.options].some((o) => o.value === chosen)) win.value = chosen;
+  windowS = Number(win.value);
+  win.addEventListener("change", () => { windowS = Number(win.value); follow = true; dirty = true; });
+  if (SNAPSHOT) {  // drawn now, while the page loads: nothing to wait for
+    const msg = boot.snapshot;
     stats.snapshots++;
     merge(msg);
     document.getElementById("status").textContent = `snapshot of ${msg.received} messages · ${Object.keys(vehicles).length} vehicle(s)`;
