@@ -93,3 +93,24 @@ def euler_to_quaternion(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Qu
         cr * sp * cy + sr * cp * sy,
         cr * cp * sy - sr * sp * cy,
     )
+
+
+def quaternion_product(a: Any, b: Any) -> np.ndarray:
+    """Hamilton product a ⊗ b of (..., 4) quaternions (w, x, y, z)."""
+    aw, ax, ay, az = np.moveaxis(np.asarray(a, dtype=float), -1, 0)
+    bw, bx, by, bz = np.moveaxis(np.asarray(b, dtype=float), -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+_S = math.sqrt(0.5)
+Q_ENU_NED = (0.0, _S, _S, 0.0)  # NED -> ENU: swap north and east, flip down
+Q_FRD_FLU = (0.0, 1.0, 0.0, 0.0)  # FLU -> FRD: half a turn about the forward axis
+
+
+def enu_flu(q_ned_frd: Any) -> np.ndarray:
+    """(n, 4) body FRD -> NED quaternions as body FLU -> ENU (the ROS and Foxglove convention),
+    ``q_enu_flu = Q_ENU_NED ⊗ q_ned_frd ⊗ Q_FRD_FLU``, with w >= 0."""
+    q = quaternion_product(quaternion_product(Q_ENU_NED, np.asarray(q_ned_frd, dtype=float).reshape(-1, 4)),
+                           Q_FRD_FLU)
+    return np.where(q[:, :1] < 0, -q, q)

@@ -7,21 +7,11 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 from companion.errors import UserError
+from gcs_tools import choices
 
 FORMATS = ("mcap", "csv")
-
-
-class _OldVehicleOption(argparse.Action):
-    """``--vehicle ID``, the old spelling of ``--vehicle-id``: still works, with a note."""
-
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
-                 option_string: str | None = None) -> None:
-        print("beliefnav: note: export --vehicle is now --vehicle-id (the old spelling still works)",
-              file=sys.stderr)
-        setattr(namespace, self.dest, values)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,8 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "format's suffix)")
     parser.add_argument("--vehicle-id", default=None, metavar="ID",
                         help="telemetry vehicle id of a recording (default: the first)")
-    parser.add_argument("--vehicle", dest="vehicle_id", default=None, action=_OldVehicleOption,
-                        help=argparse.SUPPRESS)  # deprecated spelling (`sitl --vehicle` is a backend)
+    # the old spelling (`sitl --vehicle` names a backend, not a telemetry id): works, with a note
+    choices.add_deprecated_alias(parser, "--vehicle", "--vehicle-id", "vehicle_id")
     parser.add_argument("--home", default=None, metavar="LAT,LON,ALT",
                         help="local frame origin (default: the flight's own: the log's GPS_GLOBAL_ORIGIN or "
                              "HOME_POSITION, the run's mission, else the first 3-D fix); a --home far from "

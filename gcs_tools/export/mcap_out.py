@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from mcap.writer import Writer
 
+from companion.domain.rotation import enu_flu
 from gcs_tools import palette
 from gcs_tools.export.flight import SCALARS, TRACKS, Flight, ned_to_lla
 
@@ -42,10 +43,6 @@ PATH_MAX_POSES = 2000  # /path/* messages are decimated to at most this many pos
 MAP_MAX_POINTS = 5000  # /map/* tracks are decimated to at most this many fixes
 PROFILE = "beliefnav"
 BUILDING_ALPHA = 0.55
-# NED -> ENU and FRD -> FLU: q_enu_flu = Q_ENU_NED * q_ned_frd * Q_FRD_FLU (w, x, y, z)
-_S = math.sqrt(0.5)
-Q_ENU_NED = np.array([0.0, _S, _S, 0.0])
-Q_FRD_FLU = np.array([0.0, 1.0, 0.0, 0.0])
 
 
 def foxglove_schemas() -> dict[str, Any]:
@@ -59,20 +56,6 @@ STATE_SCHEMA = {
     "type": "object",
     "properties": {c: {"type": ["number", "null"]} for c in SCALARS},
 }
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (..., 4) quaternions (w, x, y, z)."""
-    aw, ax, ay, az = np.moveaxis(np.asarray(a, dtype=float), -1, 0)
-    bw, bx, by, bz = np.moveaxis(np.asarray(b, dtype=float), -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
-
-
-def enu_flu(q_ned_frd: np.ndarray) -> np.ndarray:
-    """(N, 4) body FRD -> NED quaternions as body FLU -> ENU (what Foxglove and ROS draw), w >= 0."""
-    q = quat_mul(quat_mul(Q_ENU_NED, np.asarray(q_ned_frd, dtype=float).reshape(-1, 4)), Q_FRD_FLU)
-    return np.where(q[:, :1] < 0, -q, q)
 
 
 def _num(x: float) -> float | None:
