@@ -120,6 +120,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("beliefnav: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `beliefnav ... | head`: the reader left; nothing more to say
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

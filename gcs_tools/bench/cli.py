@@ -21,6 +21,7 @@ TARGETS = {
     "replay": "gcs_tools.bench.replay",
     "ardupilot": "gcs_tools.bench.ardupilot",
     "gnss": "gcs_tools.bench.gnss",
+    "cli": "gcs_tools.bench.cli_start",
 }
 
 

@@ -9,8 +9,6 @@ import signal
 import sys
 
 from companion.telemetry import pubsub as telemetry
-from gcs_tools.dashboard.server import Dashboard, serve
-from gcs_tools.dashboard.state import LiveState
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,6 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 async def _main(args: argparse.Namespace) -> None:
+    from gcs_tools.dashboard.server import Dashboard, serve  # aiohttp: not for --help
+    from gcs_tools.dashboard.state import LiveState
+
     state = LiveState()
     dashboard = Dashboard(state)
     runner = await serve(dashboard, args.host, args.port)  # before Zenoh: a busy port fails fast

@@ -17,7 +17,7 @@ from typing import Any
 from companion.errors import UserError
 from companion.estimator.methods import DEFAULT_METHOD
 from gcs_tools import choices
-from gcs_tools.evaluate import campaign, report, tuning
+from gcs_tools.evaluate import campaign, tuning
 from gcs_tools.evaluate import rows as rows_mod
 from gcs_tools.jsonvalues import plain_json
 
@@ -119,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
         "rows": {row.label: {"method": row.method, "overrides": dict(row.overrides)} for row in rows},
         "flight_cpu_s": sum(r.flight.get("cpu_s", 0.0) for r in results),
     }
+    from gcs_tools.evaluate import report  # (matplotlib: imported only when there is something to draw)
+
     res = report.write(args.out, results, methods, info, mission)
     if args.readme is not None:
         report.splice_readme(args.readme, args.out.name, report.readme_section(res, args.out, args.readme))
