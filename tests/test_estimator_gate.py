@@ -7,7 +7,7 @@ import pytest
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
-from companion.estimator import METHODS, Navigator, model
+from companion.estimator import METHODS, Navigator, engine, model
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY
@@ -121,17 +121,26 @@ def test_gnss_returning_after_an_outage_opens_no_offset(method):
     assert e.snapshot().x[0] == pytest.approx(20.0, abs=0.05)
 
 
-def test_reset_matches_the_fix_and_its_r():
+def test_reset_matches_the_fix_and_its_r_and_reopens_velocity_and_imu_errors():
     x = tuple(float(v) for v in range(15))
     rng = np.random.default_rng(0)
     G = rng.standard_normal((15, 15))
     P = G @ G.T + 0.1 * np.eye(15)
-    xr, M = model.reset_to_fix(x, P, (1.0, 2.0, 3.0), (0.5, 0.5, 2.0), 0.04)
+    d = P.diagonal()
+    xr, M = model.reset_to_fix(x, P, (1.0, 2.0, 3.0), (0.5, 0.5, 2.0), 0.04, vel_var_min_m2_s2=25.0,
+                               imu_var_m2_s4=(d[9] + 1.0, 0.0))
+    # without a receiver velocity: velocity and IMU error states keep their means
     assert xr == (1.0, 2.0, 3.0, 3.0, 4.0, 5.0, 0.0, 0.0, 0.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0)
-    keep = np.r_[3:6, 9:15]  # velocity and the IMU error states keep their joint covariance
-    np.testing.assert_array_equal(M[np.ix_(keep, keep)], P[np.ix_(keep, keep)])
     np.testing.assert_allclose(model.hmh(M), np.diag([0.5, 0.5, 2.0]), atol=1e-15)
-    assert np.all(np.linalg.eigvalsh(M) > 0)
+    assert M[3:6, 3:6].diagonal().tolist() == [max(d[i], 25.0) for i in range(3, 6)]
+    assert M[9, 9] == d[9] + 1.0 and M[12:15, 12:15].diagonal().tolist() == d[12:15].tolist()
+    # everything but the position-bias pair decorrelated
+    off = M - np.diag(M.diagonal())
+    assert np.count_nonzero(off) == 6 and np.all(np.linalg.eigvalsh(M) > 0)
+    # with the receiver's velocity: north and east from it with its variance, the missing down kept
+    xv, Mv = model.reset_to_fix(x, P, (1.0, 2.0, 3.0), (0.5, 0.5, 2.0), 0.04, (7.0, -8.0, math.nan),
+                                (0.09, 0.09, math.nan), 25.0)
+    assert xv[3:6] == (7.0, -8.0, 5.0) and Mv[3:6, 3:6].diagonal().tolist() == [0.09, 0.09, max(d[5], 25.0)]
 
 
 def test_position_invalid_after_the_time_out_and_covariance_grows():
@@ -151,12 +160,15 @@ def _fix(t_us, p_ned_m, h_acc_m=math.nan, v_acc_m=math.nan):
     return GnssFix(t_us, lat, lon, alt, 3, 12, h_acc_m, v_acc_m)
 
 
-def test_receiver_accuracy_sets_r_floored_at_the_config():
+def test_receiver_accuracy_sets_r_floored_at_the_config_else_hdop_else_learned():
     nav = Navigator(CFG, "naive", HOME)
     assert nav.fix_r_nominal_m2(1.5, 3.0) == (2.25, 2.25, 9.0)
-    assert nav.fix_r_nominal_m2(0.01, math.nan) == (CFG.sigma_gnss_horizontal_m**2,) * 2 + (
-        CFG.sigma_gnss_vertical_m**2,)
-    assert nav.fix_r_nominal_m2(math.inf, -1.0)[0] == CFG.sigma_gnss_horizontal_m**2
+    inf = math.inf
+    assert nav.fix_r_nominal_m2(0.01, math.nan) == (CFG.sigma_gnss_horizontal_m**2,) * 2 + (inf,)
+    assert nav.fix_r_nominal_m2(inf, -1.0) == (inf, inf, inf) == engine.LEARN
+    h = 1.2 * CFG.gnss_uere_m  # HDOP 1.2, no accuracy: HDOP × UERE, vertical 1.5× that
+    assert nav.fix_r_nominal_m2(math.nan, math.nan, 1.2) == pytest.approx((h * h, h * h, 2.25 * h * h))
+    assert nav.fix_r_nominal_m2(0.5, math.nan, 1.2) == (0.25, 0.25, inf)  # the reported one wins
     nav.push(AttitudeSample(0, np.array([1.0, 0.0, 0.0, 0.0])))
     nav.push(ImuSample(0, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
     nav.push(_fix(0, (0.0, 0.0, 0.0), 2.0, 4.0))

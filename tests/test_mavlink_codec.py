@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.rotation import quaternion_to_euler
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, Setpoint, TruthState
 from companion.mavlink import codec as mc
+from companion.mavlink.codec import mavlink
 
 FRAME = LocalNedFrame(-37.8594910, 144.7647800, 10.0)
 
@@ -53,15 +55,52 @@ def test_attitude_round_trip() -> None:
 
 
 def test_gnss_round_trip_and_unknown_fields() -> None:
-    fix = GnssFix(987_654, -37.8594911, 144.7647801, 12.345, 3, 11, h_acc_m=0.812, v_acc_m=1.5, hdop=0.9)
+    v = np.array([3.0, -4.0, 0.7])
+    fix = GnssFix(987_654, -37.8594911, 144.7647801, 12.345, 3, 11, h_acc_m=0.812, v_acc_m=1.5, hdop=0.9,
+                  v_ned_m_s=v, vel_acc_m_s=0.25)
     back = mc.decode_gnss(wire(mc.encode_gnss(fix)))
-    assert back == fix
+    # ground speed (cm/s) and course (cdeg): the horizontal velocity to < 1 cm/s; no vertical field
+    np.testing.assert_allclose(back.v_ned_m_s[0:2], v[0:2], atol=0.005)
+    assert math.isnan(back.v_ned_m_s[2])
+    assert back == dataclasses.replace(fix, v_ned_m_s=back.v_ned_m_s)
+    raw = wire(mc.encode_gnss(fix))
+    cog = round(math.degrees(math.atan2(-4.0, 3.0)) * 100) % 36000
+    assert (raw.vel, raw.cog, raw.vel_acc) == (500, cog, 250)
     unknown = GnssFix(1000, 1.0, 2.0, 3.0, 3, 255)
     back = mc.decode_gnss(wire(mc.encode_gnss(unknown)))
     assert math.isnan(back.hdop) and math.isnan(back.h_acc_m) and math.isnan(back.v_acc_m)
-    assert back.satellites_visible == 255
+    assert back.satellites_visible == 255 and back.v_ned_m_s is None and math.isnan(back.vel_acc_m_s)
     raw = wire(mc.encode_gnss(unknown))
-    assert raw.eph == 65535 and raw.h_acc == 0
+    assert raw.eph == 65535 and raw.h_acc == 0 and (raw.vel, raw.cog, raw.vel_acc) == (65535, 65535, 0)
+    still = mc.decode_gnss(wire(mc.encode_gnss(dataclasses.replace(unknown, v_ned_m_s=np.zeros(3)))))
+    assert still.v_ned_m_s[0:2].tolist() == [0.0, 0.0]  # speed 0: no course needed
+
+
+def test_gps2_raw_gps_input_and_hil_gps_carry_the_velocity() -> None:
+    """GPS2_RAW decodes as GPS_RAW_INT; GPS_INPUT and HIL_GPS carry a NED velocity (GPS_INPUT's
+    ignore_flags say which parts are unset); an absurd velocity is out of range."""
+    g2 = mavlink.MAVLink_gps2_raw_message(5_000, 3, 10_000_000, 20_000_000, 3000, 120, 65535, 250, 9000, 9,
+                                          0, 0, 0, 0, 900, 1500, 300, 0)
+    f = mc.GNSS_DECODERS["GPS2_RAW"](wire(g2))
+    np.testing.assert_allclose(f.v_ned_m_s[0:2], [0.0, 2.5], atol=1e-12)
+    assert (f.h_acc_m, f.vel_acc_m_s, f.hdop) == (0.9, 0.3, 1.2)
+    flags = mavlink.GPS_INPUT_IGNORE_FLAG_VEL_VERT | mavlink.GPS_INPUT_IGNORE_FLAG_HDOP
+    gi = mavlink.MAVLink_gps_input_message(7_000, 0, flags, 0, 0, 3, 10_000_000, 20_000_000, 31.5, 0.8, 1.1,
+                                           1.5, -2.0, 0.4, 0.35, 2.5, 4.0, 12, 0)
+    f = mc.GNSS_DECODERS["GPS_INPUT"](wire(gi))
+    assert f.v_ned_m_s[0:2].tolist() == [1.5, -2.0] and math.isnan(f.v_ned_m_s[2])
+    assert (f.t_validity_us, f.alt_m, f.h_acc_m, f.v_acc_m) == (7_000, 31.5, 2.5, 4.0)
+    assert f.vel_acc_m_s == pytest.approx(0.35, rel=1e-7)  # float32 on the wire
+    assert math.isnan(f.hdop)
+    none = mc.decode_gps_input(wire(mavlink.MAVLink_gps_input_message(
+        7_000, 0, 8 | 16 | 32, 0, 0, 3, 10_000_000, 20_000_000, 31.5, 0.8, 1.1, 0, 0, 0, 0, 2.5, 4.0, 12, 0)))
+    assert none.v_ned_m_s is None and math.isnan(none.vel_acc_m_s)
+    hil = mavlink.MAVLink_hil_gps_message(9_000, 3, 10_000_000, 20_000_000, 31_500, 95, 65535, 250, 150, -200,
+                                          30, 30_000, 10, 0, 0)
+    f = mc.GNSS_DECODERS["HIL_GPS"](wire(hil))
+    assert f.v_ned_m_s.tolist() == [1.5, -2.0, 0.3] and f.hdop == 0.95 and f.alt_m == 31.5
+    with pytest.raises(mc.CodecError, match="out_of_range"):
+        mc.decode_gnss(wire(mavlink.MAVLink_gps_raw_int_message(1, 3, 1, 1, 0, 65535, 65535, 60_000, 0, 9)))
 
 
 def test_truth_round_trip_through_geodetic() -> None:

@@ -9,7 +9,9 @@ as ``*_other_source`` and not fed twice):
   (measured on ArduCopter SITL: ``zacc = -1001`` at rest; ``time_usec`` boot µs); on PX4
   RAW_IMU is raw sensor counts, so a PX4 companion must use HIGHRES_IMU (PX4 streams it).
 - Attitude: ATTITUDE_QUATERNION (``q1`` = w, body FRD -> NED) > ATTITUDE (Euler ZYX).
-- GNSS: GPS_RAW_INT (receiver 1) or GPS2_RAW (receiver 2), chosen by ``gnss_instance``.
+- GNSS: GPS_RAW_INT (receiver 1) or GPS2_RAW (receiver 2), chosen by ``gnss_instance``, with the
+  receiver's horizontal velocity (``vel``/``cog``, ``vel_acc``); or a fix another component hands
+  the autopilot on the same link, GPS_INPUT or HIL_GPS (``gnss_message``), with its NED velocity.
 
 GNSS time: ArduPilot stamps GPS_RAW_INT ``time_usec`` with the boot time at which its GPS driver
 took the fix in (``last_fix_time_ms`` x 1000): an ARRIVAL time, not the receiver's validity
@@ -50,6 +52,13 @@ _DECODERS = {
 class TranslateConfig:
     gnss_instance: int = 1  # 1: GPS_RAW_INT, 2: GPS2_RAW
     gnss_delay_us: int | None = None  # receiver delay (validity = stamp - this); None: the autopilot's
+    # the GNSS message read instead of the instance's (GPS_INPUT, HIL_GPS: fixes handed to the
+    # autopilot by another component, seen on the link); None: the instance's
+    gnss_message: str | None = None
+
+    @property
+    def gnss_type(self) -> str:
+        return self.gnss_message or GNSS_TYPES[self.gnss_instance]
 
 
 def boot_stamp_us(msg: Any) -> int | None:
@@ -79,6 +88,9 @@ class Translator:
     def __post_init__(self) -> None:
         if self.config.gnss_instance not in GNSS_TYPES:
             raise ValueError(f"gnss_instance must be 1 or 2, got {self.config.gnss_instance}")
+        if self.config.gnss_message not in (None, *mc.GNSS_DECODERS):
+            raise ValueError(f"gnss_message must be one of {', '.join(mc.GNSS_DECODERS)}, "
+                             f"got {self.config.gnss_message}")
         if self.config.gnss_delay_us is not None:
             self.set_gnss_delay(self.config.gnss_delay_us, "option")
 
@@ -119,7 +131,7 @@ class Translator:
     def sample(self, msg: Any) -> ImuSample | AttitudeSample | GnssFix | None:
         """The estimator sample in ``msg`` (None for other messages or a counted rejection)."""
         kind = msg.get_type()
-        if kind == GNSS_TYPES[self.config.gnss_instance]:
+        if kind == self.config.gnss_type:
             return self._gnss(msg)
         if kind in IMU_RANK:
             rank = IMU_RANK[kind]
@@ -161,7 +173,7 @@ class Translator:
                 return None
             stamp_us -= self.unix_minus_boot_us
         try:
-            fix = mc.decode_gnss(msg)
+            fix = mc.GNSS_DECODERS[msg.get_type()](msg)
         except mc.CodecError as exc:
             self.counters[f"rejected_gnss_{exc.reason}"] += 1
             return None

@@ -75,7 +75,9 @@ class NavEstimate:
     gnss_glitch: bool = False  # the last fix failed the gate (rejected, or fused relative to a GNSS offset)
     pos_valid: bool = True  # False when no fix was fused for longer than the validity time-out
     gnss_rejected_innovation: int = 0  # fixes rejected by the innovation gate so far
-    gnss_resets: int = 0  # resets of position and GNSS bias to the GNSS after a sustained rejection
+    gnss_resets: int = 0  # resets to the GNSS (position, velocity, IMU error states) after the filter lost it
+    vel_test_ratio: float = float("nan")  # horizontal GNSS-velocity NIS / gate² of the last fix (NaN = none)
+    imu_gnss_disagreement: bool = False  # the IMU-propagated motion persistently disagrees with GNSS
 
 
 @dataclass(frozen=True, slots=True)

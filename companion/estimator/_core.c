@@ -296,6 +296,12 @@ static void pht_of(const double *P, double *PHt, double *hph) {
         for (int j = 0; j < 3; j++) hph[i * 3 + j] = PHt[i * 3 + j] + PHt[(6 + i) * 3 + j];
 }
 
+/* out = (A + A^T) / 2, exactly symmetric */
+static void symmetrise(const double *A, double *out) {
+    for (int i = 0; i < NS; i++)
+        for (int j = 0; j < NS; j++) out[i * NS + j] = (A[i * NS + j] + A[j * NS + i]) * 0.5;
+}
+
 /* model.update_fast: x+, P+ (symmetrised), NIS for z = p + b + nu, nu ~ N(0, diag r). */
 static double update_c(const double *x, const double *P, const double *y, const double *r, double *xo, double *Po) {
     double PHt[NS * 3], hph[9], Si[9];
@@ -317,8 +323,7 @@ static double update_c(const double *x, const double *P, const double *y, const 
             A[i * NS + j] = P[i * NS + j] - (K[3 * i] * PHt[3 * j] + K[3 * i + 1] * PHt[3 * j + 1]
                                              + K[3 * i + 2] * PHt[3 * j + 2]);
     /* K S K^T is symmetric but its rounding is not: symmetrise (model.update_fast) */
-    for (int i = 0; i < NS; i++)
-        for (int j = 0; j < NS; j++) Po[i * NS + j] = (A[i * NS + j] + A[j * NS + i]) * 0.5;
+    symmetrise(A, Po);
     return y[0] * g0 + y[1] * g1 + y[2] * g2;
 }
 
@@ -410,15 +415,73 @@ static PyTypeObject PropagatorType = {
     .tp_methods = prop_methods,
 };
 
+/* the arguments (x, P, a 3-vector, R) of the measurement functions below; -1 on error */
+static int read_measurement(PyObject *const *args, Py_ssize_t nargs, const char *usage, const char *what,
+                            double *x, double *P, double *v, double *r) {
+    if (nargs != 4) { PyErr_SetString(PyExc_TypeError, usage); return -1; }
+    if (read_doubles(args[0], x, NS, "state") < 0 || read_cov(args[1], P) < 0
+        || read_doubles(args[2], v, 3, what) < 0 || read_doubles(args[3], r, 3, "R") < 0)
+        return -1;
+    return 0;
+}
+
 /* update(x, P, y, r) -> (x+, P+, NIS) */
 static PyObject *py_update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "update(x, P, y, r)"); return NULL; }
     double x[NS], P[NN], y[3], r[3], xo[NS], Po[NN];
-    if (read_doubles(args[0], x, NS, "state") < 0 || read_cov(args[1], P) < 0
-        || read_doubles(args[2], y, 3, "innovation") < 0 || read_doubles(args[3], r, 3, "R") < 0)
-        return NULL;
+    if (read_measurement(args, nargs, "update(x, P, y, r)", "innovation", x, P, y, r) < 0) return NULL;
     double nis = update_c(x, P, y, r, xo, Po);
     return Py_BuildValue("(NNd)", tuple_of(xo, NS), new_cov(Po), nis);
+}
+
+/* The receiver's velocity: z_v = v + nu, nu ~ N(0, diag r); a component whose z_v or r is not finite
+ * (or r <= 0) is not reported. */
+static int vel_component(const double *zv, const double *r, int i) {
+    return isfinite(zv[i]) && isfinite(r[i]) && r[i] > 0.0;
+}
+
+/* (horizontal NIS, vertical NIS) of z_v against the prior (x, P): y = z_v - v, S = P_vv + diag r; the
+ * horizontal NIS over the north-east block (2 dof; 1 dof when one of them is missing, 0 when both). */
+static void vel_nis_c(const double *x, const double *P, const double *zv, const double *r, double *nis) {
+    int n = vel_component(zv, r, 0), e = vel_component(zv, r, 1), d = vel_component(zv, r, 2);
+    double yn = n ? zv[0] - x[3] : 0.0, ye = e ? zv[1] - x[4] : 0.0;
+    double snn = P[3 * NS + 3] + (n ? r[0] : 0.0), see = P[4 * NS + 4] + (e ? r[1] : 0.0), sne = P[3 * NS + 4];
+    if (n && e)
+        nis[0] = (see * yn * yn - 2.0 * sne * yn * ye + snn * ye * ye) / (snn * see - sne * sne);
+    else
+        nis[0] = n ? yn * yn / snn : (e ? ye * ye / see : 0.0);
+    nis[1] = 0.0;
+    if (d) {
+        double yd = zv[2] - x[5];
+        nis[1] = yd * yd / (P[5 * NS + 5] + r[2]);
+    }
+}
+
+/* vel_nis(x, P, z_v, r) -> (horizontal NIS, vertical NIS) */
+static PyObject *py_vel_nis(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    double x[NS], P[NN], zv[3], r[3], nis[2];
+    if (read_measurement(args, nargs, "vel_nis(x, P, z_v, r)", "velocity", x, P, zv, r) < 0) return NULL;
+    vel_nis_c(x, P, zv, r, nis);
+    return Py_BuildValue("(dd)", nis[0], nis[1]);
+}
+
+/* update_vel(x, P, z_v, r) -> (x+, P+): the reported components fused one at a time (for a diagonal R
+ * equal to the joint update), each with the innovation of the state updated so far; P+ symmetrised. */
+static PyObject *py_update_vel(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    double x[NS], P[NN], zv[3], r[3], col[NS], A[NN];
+    if (read_measurement(args, nargs, "update_vel(x, P, z_v, r)", "velocity", x, P, zv, r) < 0) return NULL;
+    for (int c = 0; c < 3; c++) {
+        if (!vel_component(zv, r, c)) continue;
+        int j = 3 + c;
+        double s = P[j * NS + j] + r[c], y = zv[c] - x[j];
+        for (int i = 0; i < NS; i++) col[i] = P[i * NS + j];
+        for (int i = 0; i < NS; i++) {
+            double k = col[i] / s;
+            x[i] += k * y;
+            for (int m = 0; m < NS; m++) P[i * NS + m] -= k * col[m];
+        }
+    }
+    symmetrise(P, A);
+    return Py_BuildValue("(NN)", tuple_of(x, NS), new_cov(A));
 }
 
 /* inv3(s) -> row-major inverse (9-tuple) of a symmetric 3x3 (nested sequences, upper triangle read) */
@@ -835,6 +898,10 @@ static PyMethodDef module_methods[] = {
     {"rotation_blocks", (PyCFunction)(void (*)(void))py_rotation_blocks, METH_FASTCALL,
      "rotation_blocks(a, b) -> (-A, -B) row-major"},
     {"update", (PyCFunction)(void (*)(void))py_update, METH_FASTCALL, "update(x, P, y, r) -> (x+, P+, NIS)"},
+    {"vel_nis", (PyCFunction)(void (*)(void))py_vel_nis, METH_FASTCALL,
+     "vel_nis(x, P, z_v, r) -> (horizontal NIS, vertical NIS) of a velocity measurement"},
+    {"update_vel", (PyCFunction)(void (*)(void))py_update_vel, METH_FASTCALL,
+     "update_vel(x, P, z_v, r) -> (x+, P+): the reported velocity components fused"},
     {"inv3", (PyCFunction)py_inv3, METH_O, "inverse of a symmetric 3x3, row-major"},
     {"rotation_q", (PyCFunction)py_rotation_q, METH_O, "R_ned_frd of a quaternion, or None"},
     {NULL, NULL, 0, NULL},

@@ -134,6 +134,65 @@ class EstimatorConfig:
     # receiver-reported accuracy): bounds what adaptive and vbakf learn (10× the nominal std).
     r_learned_max_factor: float = 100.0
 
+    # --- receivers (docs/estimator.md, "Receiver accuracy"). A fix without h_acc/v_acc but with HDOP
+    # has the accuracy HDOP × gnss_uere_m (horizontal; 1.5× that vertical); the user equivalent range
+    # error of a single-frequency receiver is 1-5 m (1σ), 3 m is the middle.
+    gnss_uere_m: float = 3.0
+    # A fix with neither gets a learned R: the robust spread of the receiver's innovations (a
+    # log-domain running centre of |innovation|, each fix moving it by at most a factor e^(T/τ),
+    # time constant gnss_scale_tau_s, minus the prediction's share H P Hᵀ), floored at the
+    # configured sigma_gnss_*. It starts at sigma_gnss_unreported_m, the GNSS noise EKF2
+    # (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE) assume by default. The same spread floors the
+    # GATE's R for every receiver (reported accuracy or not): a receiver whose accuracy is missing or
+    # optimistic cannot make the gate reject most of its fixes, only those beyond gnss_gate_sigma ×
+    # its own spread.
+    sigma_gnss_unreported_m: float = 0.5
+    gnss_scale_tau_s: float = 2.0
+
+    # --- the receiver's velocity (Doppler), fused beside its position (docs/estimator.md)
+    # 1σ noise of a velocity component where the receiver reports no speed accuracy, and the floor
+    # under a reported one (m/s): EKF2_GPS_V_NOISE and ArduPilot's EK3_VELNE_M_NSE (0.3), and
+    # EK3_VELD_M_NSE for the vertical (0.5).
+    sigma_gnss_velocity_m_s: float = 0.3
+    sigma_gnss_velocity_vertical_m_s: float = 0.5
+    # Velocity innovation gate (standard deviations; horizontal NIS, 2 dof, and vertical, 1 dof):
+    # EKF2_GPS_V_GATE 5, EK3_VEL_I_GATE 500 %.
+    gnss_vel_gate_sigma: float = 5.0
+
+    # --- resets that recover (EKF2's resetVelocityToGnss/resetHorizontalPositionToGnss, EKF3's
+    # ResetPosition + ResetVelocity): a reset puts position on the fix, velocity on the receiver's
+    # velocity where it gives one, and re-opens the IMU error states to their priors. Where the
+    # receiver gives no velocity, the dead-reckoned velocity is kept with this std (m/s) at least:
+    # after a reset the velocity is what failed, and the following fixes must be able to correct it
+    # (5 m/s: EKF2's variance for a velocity reset without a velocity source, 25 m²/s²).
+    gnss_reset_sigma_vel_m_s: float = 5.0
+
+    # --- fly-away guard: the vehicle's envelope. An estimate faster than these speeds, or whose mean
+    # acceleration over envelope_acc_window_s (its velocity minus the velocity smoothed over that
+    # window, divided by it; the updates' corrections included) is larger, is not a quadrotor's: it
+    # is flagged invalid (NavEstimate.pos_valid False) and the next fix failing the gate resets it.
+    # 30 m/s (108 km/h) horizontal and 15 m/s vertical are above what multirotors of this class fly
+    # (ArduCopter's and PX4's default speed limits are 5-12 m/s); 20 m/s² ≈ 2 g is a 60° tilt held
+    # at full thrust. 1 s: longer than the corrections' chatter at 5-20 Hz, shorter than a fly-away.
+    envelope_speed_max_m_s: float = 30.0
+    envelope_speed_vertical_max_m_s: float = 15.0
+    envelope_acc_max_m_s2: float = 20.0
+    envelope_acc_window_s: float = 1.0
+
+    # --- IMU / GNSS disagreement (a wrong attitude input): an exponentially weighted mean of the
+    # horizontal velocity innovations' NIS per degree of freedom, time constant
+    # imu_gnss_disagree_tau_s, each NIS clipped at gate² per dof (position fixes alone cannot tell
+    # a wrong attitude from a GNSS bias: without a receiver velocity nothing is flagged).
+    # Above imu_gnss_disagree_on the IMU-propagated motion persistently disagrees
+    # with GNSS: counted (imu_gnss_disagreements), flagged (NavEstimate.imu_gnss_disagreement), and
+    # the IMU's white-acceleration density is multiplied by imu_gnss_disagree_acc_factor until the
+    # mean falls below imu_gnss_disagree_off, so the filter follows GNSS instead of dead-reckoning
+    # on the attitude it was given. A consistent filter's mean is 1 (std ≈ 0.3 over ~10 fixes).
+    imu_gnss_disagree_tau_s: float = 2.0
+    imu_gnss_disagree_on: float = 6.0
+    imu_gnss_disagree_off: float = 2.0
+    imu_gnss_disagree_acc_factor: float = 10.0
+
     # --- baselines
     beta_fixed: float = 1.0  # naive and adaptive: belief held fixed (full trust; Q_b at its floor)
     adaptive_window_fixes: int = 20  # Mohamed & Schwarz innovation window N (1 s at 20 Hz)
@@ -150,7 +209,12 @@ class EstimatorConfig:
             "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor", "gnss_gate_sigma", "gnss_gate_r_floor_m",
             "gnss_reset_timeout_s", "gnss_offset_open_s", "gnss_offset_max_s", "pos_valid_timeout_s",
             "gnss_frozen_s",
-            "gnss_frozen_speed_m_s",
+            "gnss_frozen_speed_m_s", "sigma_gnss_velocity_m_s", "sigma_gnss_velocity_vertical_m_s",
+            "gnss_vel_gate_sigma", "gnss_reset_sigma_vel_m_s", "envelope_speed_max_m_s",
+            "envelope_speed_vertical_max_m_s", "envelope_acc_max_m_s2", "envelope_acc_window_s",
+            "imu_gnss_disagree_tau_s",
+            "imu_gnss_disagree_on", "imu_gnss_disagree_off", "imu_gnss_disagree_acc_factor", "gnss_uere_m",
+            "sigma_gnss_unreported_m", "gnss_scale_tau_s",
         )
         for name in positive:
             value = getattr(self, name)
@@ -158,6 +222,8 @@ class EstimatorConfig:
                 raise ValueError(f"{name}: must be a finite number > 0, got {value!r}")
         if not self.theta_min < self.theta0 < self.theta_max:
             raise ValueError("theta_min, theta0, theta_max: need theta_min < theta0 < theta_max")
+        if self.imu_gnss_disagree_off >= self.imu_gnss_disagree_on:
+            raise ValueError("imu_gnss_disagree_off, imu_gnss_disagree_on: need off < on")
         if self.history_s < 1.5:
             raise ValueError(f"history_s: must be >= 1.5 s, got {self.history_s}")
         k_max = self.r_learned_max_factor

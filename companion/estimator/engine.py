@@ -59,7 +59,7 @@ class Fusion(NamedTuple):
     beta: float  # method.beta(state): the belief in force after this entry
     sigma_bias_m: float  # σ_b(β) of eq. 13 for that belief
     # innovation gate (a deterministic function of the time-ordered fixes: re-fused identically)
-    r_nominal_m2: Vec3  # this fix's nominal R (variances, m²): config or receiver-reported
+    r_nominal_m2: Vec3  # this fix's nominal R as given (variances, m²; config, reported, or LEARN)
     t_fused_us: int  # validity time of the last fix fused (or reset to) up to this entry
     test_ratio: float  # horizontal NIS / gate² of this fix (NaN for the first)
     glitch: bool  # this fix failed the gate (rejected, or fused only relative to an open GNSS offset)
@@ -70,6 +70,29 @@ class Fusion(NamedTuple):
     offset: Vec3 | None = None
     t_offset_us: int = 0
     n_offsets: int = 0
+    # the receiver's velocity (NED, m/s; NaN = a component not reported; None: none) and its R
+    # (variances, (m/s)²), its horizontal NIS / gate² (NaN: none), velocities tested and rejected
+    # by their gate up to this entry
+    zv_ned_m_s: Vec3 | None = None
+    rv_m2: Vec3 = (math.nan, math.nan, math.nan)
+    vel_ratio: float = math.nan
+    n_vel_tested: int = 0
+    n_vel_rejected: int = 0
+    # IMU / GNSS disagreement: the mean NIS per dof (config imu_gnss_disagree_*), whether it is
+    # flagged (the prediction from this entry then uses the inflated IMU noise), onsets so far
+    disagree_level: float = 0.0
+    disagree: bool = False
+    n_disagree: int = 0
+    # the receiver's innovation spread: log-domain running centres of |horizontal innovation| and
+    # |vertical innovation| (m; config gnss_scale_tau_s), which floor the gate's R and give the R of
+    # fixes without a reported accuracy
+    scale_h_m: float = 0.0
+    scale_v_m: float = 0.0
+    # fly-away guard: the velocity smoothed over the acceleration window (NED, m/s), this entry's
+    # estimate left the vehicle's envelope; entries that did so far
+    v_smooth: Vec3 = (0.0, 0.0, 0.0)
+    invalid: bool = False
+    n_invalid: int = 0
 
 
 class Snapshot(NamedTuple):
@@ -85,6 +108,8 @@ class Snapshot(NamedTuple):
     pos_valid: bool
     n_rejected: int
     n_resets: int
+    vel_ratio: float = math.nan  # horizontal velocity NIS / gate² of the last fix (NaN: none)
+    disagree: bool = False  # the IMU-propagated motion persistently disagrees with GNSS
 
     @property
     def var(self) -> tuple[float, ...]:
@@ -112,13 +137,14 @@ class FusionEngine:
             "gnss_fused", "gnss_refused", "gnss_out_of_order", "gnss_rejected_before_imu",
             "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
             "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets", "gnss_offsets",
+            "gnss_vel_fused", "gnss_vel_rejected_innovation", "imu_gnss_disagreements", "envelope_violations",
         ):
             self._counts.setdefault(name, 0)
         self.imu = ImuHistory(cfg.imu_hold_max_s)
         self.imu.trim_len = _TRIM_EVERY
         self.fusions: list[Fusion] = []
         self._fusion_t: list[int] = []
-        self._pending: list[tuple[int, Vec3, Vec3]] = []  # (t, z, R_nom) waiting for the IMU, by time
+        self._pending: list[_Fix] = []  # fixes waiting for the IMU, by time
         self._tested = 0  # fixes that reached the innovation test (fused = this − rejected)
         self._history_us = int(round(cfg.history_s * 1e6))
         self._future_us = int(round(cfg.future_tolerance_s * 1e6))
@@ -127,7 +153,21 @@ class FusionEngine:
         self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
         self._q_ned = cfg.sigma_acc_ned_rw_m_s2_sqrt_s**2
         self._prop = model.BlockPropagator(self._q_acc, self._q_rw, self._q_ned)
+        # while the IMU disagrees with GNSS: the white-acceleration density inflated
+        self._prop_disagree = model.BlockPropagator(self._q_acc * cfg.imu_gnss_disagree_acc_factor**2,
+                                                    self._q_rw, self._q_ned)
         self._gate2 = cfg.gnss_gate_sigma**2
+        self._vel_gate2 = cfg.gnss_vel_gate_sigma**2
+        self._scale_tau_s = cfg.gnss_scale_tau_s
+        self._reset_var = (cfg.sigma_bias0_m**2, cfg.gnss_reset_sigma_vel_m_s**2,
+                           (cfg.sigma_acc_bias0_m_s2**2, cfg.sigma_acc_ned0_m_s2**2))
+        self._v_max2 = cfg.envelope_speed_max_m_s**2
+        self._vd_max = cfg.envelope_speed_vertical_max_m_s
+        self._acc_window_s = cfg.envelope_acc_window_s
+        self._dv_max2 = (cfg.envelope_acc_max_m_s2 * cfg.envelope_acc_window_s) ** 2
+        self._dis_tau_s = cfg.imu_gnss_disagree_tau_s
+        self._dis_on, self._dis_off = cfg.imu_gnss_disagree_on, cfg.imu_gnss_disagree_off
+        self._dis_clip = self._gate2  # one NIS per dof counts at most gate² (a single outlier)
         self._gate_r_min = cfg.gnss_gate_r_floor_m**2
         self._r_max = cfg.r_learned_max_factor
         self._reset_us = int(round(cfg.gnss_reset_timeout_s * 1e6))
@@ -190,11 +230,15 @@ class FusionEngine:
         self._imu_pushed()
 
     # ---------------------------------------------------------------- GNSS
-    def push_fix(self, t_us: int, z_ned_m: Any, r_nominal_m2: Vec3 | None = None) -> None:
+    def push_fix(self, t_us: int, z_ned_m: Any, r_nominal_m2: Vec3 | None = None,
+                 v_ned_m_s: Any = None, rv_m2: Vec3 | None = None) -> None:
         """A GNSS position (NED, m; 3 numbers) valid at ``t_us``; fused now, later, or rejected.
 
         ``r_nominal_m2``: this fix's nominal R (NED variances, m²), e.g. from the receiver's
-        reported accuracy; None = the config's ``r_nominal_m2``."""
+        reported accuracy; None = the config's ``r_nominal_m2``. ``v_ned_m_s``: the receiver's
+        velocity valid at the same time (NED, m/s; a component it does not report NaN; None: no
+        velocity) with its variances ``rv_m2`` ((m/s)²; None: the config's
+        ``sigma_gnss_velocity*``): fused beside the position, with its own gate."""
         c = self._counts
         if type(z_ned_m) is not tuple:  # the navigator's are tuples of floats already
             z_ned_m = tuple(z_ned_m.tolist() if isinstance(z_ned_m, np.ndarray) else map(float, z_ned_m))
@@ -203,7 +247,8 @@ class FusionEngine:
             c["gnss_rejected_nonfinite"] += 1
             return
         r = self._r_nominal if r_nominal_m2 is None else r_nominal_m2
-        if not (finite3(*r) and min(r) > 0.0):
+        if not (len(r) == 3 and all(v > 0.0 for v in r) and r[0] == r[1]  # NaN > 0 is False; inf: learned
+                and (r[0] == math.inf or math.isfinite(r[0])) and (r[2] == math.inf or math.isfinite(r[2]))):
             c["gnss_rejected_nonfinite"] += 1
             return
         imu = self.imu
@@ -222,10 +267,29 @@ class FusionEngine:
         if self._is_duplicate(t_us):
             c["gnss_rejected_duplicate"] += 1
             return
+        zv = None if v_ned_m_s is None else self._velocity(v_ned_m_s, rv_m2)
+        fix = _Fix(t_us, z, r, zv[0] if zv else None, zv[1] if zv else _NAN3)
         if t_us > now:
-            bisect.insort(self._pending, (t_us, z, r), key=lambda item: item[0])
+            bisect.insort(self._pending, fix, key=lambda item: item[0])
             return
-        self._insert(t_us, z, r)
+        self._insert(fix)
+
+    def _velocity(self, v: Any, rv: Vec3 | None) -> tuple[Vec3, Vec3] | None:
+        """(velocity, its variances) with the components not reported (not finite, or their
+        variance not finite and > 0) as NaN; None when none is reported."""
+        if rv is None:
+            cfg = self.cfg
+            h, d = cfg.sigma_gnss_velocity_m_s**2, cfg.sigma_gnss_velocity_vertical_m_s**2
+            rv = (h, h, d)
+        vals = tuple(float(a) for a in (v.tolist() if isinstance(v, np.ndarray) else v))
+        if len(vals) != 3:
+            return None
+        ok = [math.isfinite(a) and math.isfinite(b) and b > 0.0 for a, b in zip(vals, rv, strict=True)]
+        if not any(ok):
+            return None
+        nan = math.nan
+        return ((vals[0] if ok[0] else nan, vals[1] if ok[1] else nan, vals[2] if ok[2] else nan),
+                (rv[0] if ok[0] else nan, rv[1] if ok[1] else nan, rv[2] if ok[2] else nan))
 
     def _is_duplicate(self, t_us: int) -> bool:
         i = bisect.bisect_left(self._fusion_t, t_us)
@@ -236,12 +300,12 @@ class FusionEngine:
     def _flush_pending(self) -> None:
         now = self.imu.last_t_us
         while self._pending and self._pending[0][0] <= now:
-            t_us, z, r = self._pending.pop(0)
-            self._insert(t_us, z, r)
+            self._insert(self._pending.pop(0))
 
-    def _insert(self, t_us: int, z: Vec3, r: Vec3) -> None:
+    def _insert(self, fix: _Fix) -> None:
+        t_us = fix.t_us
         if not self.fusions:
-            self._initialise(t_us, z, r)
+            self._initialise(fix)
             return
         i = bisect.bisect_right(self._fusion_t, t_us)
         if i == 0:
@@ -252,11 +316,11 @@ class FusionEngine:
             self._counts["gnss_out_of_order"] += 1
             del self.fusions[i:]
             del self._fusion_t[i:]
-        self._fuse(t_us, z, r)
+        self._fuse(fix)
         self._tested += 1
         for f in later:
             assert f.z_ned_m is not None  # anchors only ever sit at index 0
-            self._fuse(f.t_us, f.z_ned_m, f.r_nominal_m2)
+            self._fuse(_Fix(f.t_us, f.z_ned_m, f.r_nominal_m2, f.zv_ned_m_s, f.rv_m2))
             self._counts["gnss_refused"] += 1
         self._count()
 
@@ -267,37 +331,45 @@ class FusionEngine:
         c["gnss_resets"] = last.n_resets
         c["gnss_offsets"] = last.n_offsets
         c["gnss_fused"] = self._tested - last.n_rejected
+        c["gnss_vel_fused"] = last.n_vel_tested - last.n_vel_rejected
+        c["gnss_vel_rejected_innovation"] = last.n_vel_rejected
+        c["imu_gnss_disagreements"] = last.n_disagree
+        c["envelope_violations"] = last.n_invalid
 
-    def _initialise(self, t_us: int, z: Vec3, r: Vec3) -> None:
+    def _initialise(self, fix: _Fix) -> None:
+        t_us, z, zv = fix.t_us, fix.z, fix.zv
+        s0 = self.cfg.sigma_gnss_unreported_m**2
+        r: Vec3 = (s0 if fix.r[0] == math.inf else fix.r[0], s0 if fix.r[1] == math.inf else fix.r[1],
+                   s0 if fix.r[2] == math.inf else fix.r[2])
         x = (*z, *(0.0,) * (model.N_STATE - 3))
-        state = self.method.initial_state()
         P = model.initial_cov(self.cfg, r)
-        self._append(t_us, z, x, P, state, float("nan"), self.imu.integrals(t_us),
-                     r, t_us, float("nan"), False, 0, 0)
+        if zv is not None:  # the receiver's velocity where it gives one
+            x, P = model.reset_to_fix(x, P, z, r, self.cfg.sigma_bias0_m**2, zv, fix.rv)
+        state = self.method.initial_state()
+        self.fusions.append(Fusion(t_us, z, x, P, state, math.nan, self.imu.integrals(t_us),
+                                   self.method.beta(state), self.cfg.sigma_bias_m(self.method.beta(state)),
+                                   fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, zv, fix.rv,
+                                   scale_h_m=_SCALE_H * math.sqrt(r[0]), scale_v_m=_SCALE_V * math.sqrt(r[2]),
+                                   v_smooth=(x[3], x[4], x[5])))
+        self._fusion_t.append(t_us)
         self._tested += 1
         self._count()
 
-    def _append(self, t_us: int, z: Vec3 | None, x: model.State, P: model.Cov, state: Any, nis: float,
-                ints: Integrals, r: Vec3, t_fused_us: int, ratio: float, glitch: bool, n_rejected: int,
-                n_resets: int, offset: Vec3 | None = None, t_offset_us: int = 0, n_offsets: int = 0) -> None:
-        beta = self.method.beta(state)
-        self.fusions.append(Fusion(t_us, z, x, P, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
-                                   r, t_fused_us, ratio, glitch, n_rejected, n_resets, offset, t_offset_us,
-                                   n_offsets))
-        self._fusion_t.append(t_us)
-
-    def _fuse(self, t_us: int, z: Vec3, r_nom: Vec3) -> None:
-        """Predict the last entry to ``t_us``, test ``z`` there and fuse it (Algorithm 1, lines
-        7-17) if it passes the innovation gate. A fix failing the gate
+    def _fuse(self, fix: _Fix) -> None:
+        """Predict the last entry to the fix's time, test it there and fuse it (Algorithm 1, lines
+        7-17). Position and velocity are tested against the prior, each with its own gate; the
+        velocity is fused whenever it passes its gate. A position failing the gate
 
         * while an offset hypothesis is open and ``z`` − offset passes: fused as ``z`` − offset
           (the step's fixes still observe velocity);
-        * while no fix passed for ``gnss_reset_timeout_s``, or the offset has been open for
-          ``gnss_offset_max_s``: resets position and bias to it;
+        * while no fix passed for ``gnss_reset_timeout_s``, when the offset has been open for
+          ``gnss_offset_max_s``, or when the estimate left the vehicle's envelope (fly-away guard):
+          resets position, velocity and the IMU error states to the GNSS (``model.reset_to_fix``);
         * right after a fused fix (within ``gnss_offset_open_s``): a step, opens the offset
           hypothesis (offset = its innovation; the fix itself is not fused);
         * otherwise: rejected.
         A fix that passes the gate without the offset closes it (the fixes stepped back)."""
+        t_us, z, r_given, zv, rv = fix
         prev = self.fusions[-1]
         T = (t_us - prev.t_us) * 1e-6
         alpha = math.exp(-T / self._tau_s)
@@ -305,44 +377,102 @@ class FusionEngine:
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
         ints = self.imu.integrals(t_us)
+        prop = self._prop_disagree if prev.disagree else self._prop
         # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
-        x_prior, P_prior, hph, pht_p = self._prop.predict_from(prev.x, prev.P, prev.ints, ints, T, alpha, q_b)
+        x_prior, P_prior, hph, pht_p = prop.predict_from(prev.x, prev.P, prev.ints, ints, T, alpha, q_b)
         y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
         s0 = (hph[0][0] - q_b, hph[1][1] - q_b, hph[2][2] - q_b)
+        # the receiver's own spread (innovations minus the prediction's share): the gate's floor, and
+        # the R of a fix without a reported accuracy
+        sh, sv = prev.scale_h_m / _SCALE_H, prev.scale_v_m / _SCALE_V
+        spread_h, spread_v = sh * sh - 0.5 * (hph[0][0] + hph[1][1]), sv * sv - hph[2][2]
+        r_nom = r_given
+        if r_given[0] == math.inf or r_given[2] == math.inf:  # not reported: learned
+            h = r_given[0] if r_given[0] != math.inf else (spread_h if spread_h > self._r_nominal[0] else
+                                                          self._r_nominal[0])
+            v = r_given[2] if r_given[2] != math.inf else (spread_v if spread_v > self._r_nominal[2] else
+                                                          self._r_nominal[2])
+            r_nom = (h, h, v)
+        floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
+        floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
         terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p)
         R = self._r_of(prev.state, terms, r_nom)
-        ratio, passes = self._gate(y, hph, R)
+        ratio, passes = self._gate(y, hph, R, floor_h, floor_v)
         n_rej, n_res, n_off = prev.n_rejected, prev.n_resets, prev.n_offsets
+        n_vt, n_vr = prev.n_vel_tested, prev.n_vel_rejected
+        vel_ratio, vel_ok, nis_v = math.nan, False, math.nan
+        if zv is not None:
+            nis_vh, nis_vd = _core.vel_nis(x_prior, P_prior, zv, rv)
+            vel_ratio = nis_vh / self._vel_gate2
+            vel_ok = nis_vh <= self._vel_gate2 and nis_vd <= self._vel_gate2
+            n_h = (zv[0] == zv[0]) + (zv[1] == zv[1])  # horizontal components reported (NaN != NaN)
+            nis_v = nis_vh / n_h if n_h else math.nan
+            n_vt += 1
+            n_vr += not vel_ok
+        off, t_off, t_fused = prev.offset, prev.t_offset_us, prev.t_fused_us
+        expired = off is not None and t_us - t_off >= self._offset_max_us
+        glitch, rejected, fused_pos, reset = True, False, True, False
+        y_fused, R_fused, terms_fused = y, R, terms
         if passes:  # closes an open offset: the fixes stepped back
-            x_post, P_post, nis = _update(x_prior, P_prior, y, R)
-            self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms), nis, ints,
-                         r_nom, t_us, ratio, False, n_rej, n_res, None, 0, n_off)
-            return
-        off = prev.offset
-        expired = off is not None and t_us - prev.t_offset_us >= self._offset_max_us
-        if off is not None and not expired:
-            y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
-            terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
-            R_off = self._r_of(prev.state, terms_off, r_nom)
-            if self._gate(y_off, hph, R_off)[1]:
-                x_post, P_post, nis = _update(x_prior, P_prior, y_off, R_off)
-                self._append(t_us, z, x_post, P_post, self.method.update(prev.state, terms_off), nis, ints,
-                             r_nom, t_us, ratio, True, n_rej, n_res, off, prev.t_offset_us, n_off)
-                return
-        since_fused = t_us - prev.t_fused_us
-        if since_fused >= self._reset_us or expired:
-            x_reset, P_reset = model.reset_to_fix(x_prior, P_prior, z, r_nom, self.cfg.sigma_bias0_m**2)
-            self._append(t_us, z, x_reset, P_reset, prev.state, _nis(y, hph, R), ints,
-                         r_nom, t_us, ratio, False, n_rej, n_res + 1, None, 0, n_off)
-            return
-        # rejected: the entry carries the prior; only a belief learns from the fix
-        state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
-        if since_fused <= self._offset_open_us:  # a step in a consistent stream: (re)open the offset
-            off, t_off, n_off = y, t_us, n_off + 1
+            off, t_off, glitch = None, 0, False
         else:
-            t_off = prev.t_offset_us
-        self._append(t_us, z, x_prior, P_prior, state, _nis(y, hph, R), ints,
-                     r_nom, prev.t_fused_us, ratio, True, n_rej + 1, n_res, off, t_off, n_off)
+            fused_pos = False
+            if off is not None and not expired:
+                y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
+                terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
+                R_off = self._r_of(prev.state, terms_off, r_nom)
+                if self._gate(y_off, hph, R_off, floor_h, floor_v)[1]:
+                    fused_pos, y_fused, R_fused, terms_fused = True, y_off, R_off, terms_off
+        if fused_pos:
+            x_post, P_post, nis = _update(x_prior, P_prior, y_fused, R_fused)
+            state = self.method.update(prev.state, terms_fused)
+            t_fused = t_us
+        elif t_us - t_fused >= self._reset_us or expired or prev.invalid:
+            x_post, P_post = model.reset_to_fix(x_prior, P_prior, z, r_nom, self._reset_var[0], zv, rv,
+                                                self._reset_var[1], self._reset_var[2])
+            state, nis, t_fused, glitch, reset = prev.state, _nis(y, hph, R), t_us, False, True
+            off, t_off, n_res, vel_ok = None, 0, n_res + 1, False
+        else:  # rejected: the entry carries the prior; only a belief learns from the fix
+            rejected = True
+            x_post, P_post, nis = x_prior, P_prior, _nis(y, hph, R)
+            state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
+            if t_us - t_fused <= self._offset_open_us:  # a step in a consistent stream: (re)open the offset
+                off, t_off, n_off = y, t_us, n_off + 1
+        if vel_ok:
+            x_post, P_post = _core.update_vel(x_post, P_post, zv, rv)
+        # the spread follows the innovation the decision was made on (an offset's relative one)
+        yd = y_fused if fused_pos else y
+        scale_h, scale_v = prev.scale_h_m, prev.scale_v_m
+        if T > 0.0:
+            k = T / self._scale_tau_s if self._scale_tau_s > T else 1.0
+            scale_h *= math.exp(k * _clip1(math.log(math.hypot(yd[0], yd[1]) / scale_h + 1e-300)))
+            scale_v *= math.exp(k * _clip1(math.log(abs(yd[2]) / scale_v + 1e-300)))
+        # IMU / GNSS disagreement, on the velocity innovations (position fixes alone cannot tell a
+        # wrong attitude from a GNSS bias)
+        level = prev.disagree_level
+        e = nis_v
+        if e == e:
+            w = 1.0 - math.exp(-T / self._dis_tau_s) if T > 0.0 else 0.0
+            level += w * ((e if e < self._dis_clip else self._dis_clip) - level)
+        disagree = level > self._dis_on or (prev.disagree and level > self._dis_off)
+        # fly-away guard: the velocity smoothed over acc_window_s (so (v − v̄)/window is the mean
+        # acceleration over about that window, the updates' corrections included)
+        v0, v1, v2 = x_post[3], x_post[4], x_post[5]
+        if reset:
+            vs = (v0, v1, v2)
+        else:
+            w = 1.0 - math.exp(-T / self._acc_window_s) if T > 0.0 else 0.0
+            ps = prev.v_smooth
+            vs = (ps[0] + w * (v0 - ps[0]), ps[1] + w * (v1 - ps[1]), ps[2] + w * (v2 - ps[2]))
+        a2 = (v0 - vs[0]) ** 2 + (v1 - vs[1]) ** 2 + (v2 - vs[2]) ** 2
+        invalid = v0 * v0 + v1 * v1 > self._v_max2 or abs(v2) > self._vd_max or a2 > self._dv_max2
+        beta = self.method.beta(state)
+        self.fusions.append(Fusion(
+            t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
+            r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, zv, rv, vel_ratio,
+            n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
+            vs, invalid, prev.n_invalid + invalid))
+        self._fusion_t.append(t_us)
 
     def _r_of(self, state: Any, terms: InnovationTerms, r_nom: Vec3) -> Vec3:
         """The method's R for this fix, bounded by ``r_learned_max_factor`` × the nominal R."""
@@ -352,13 +482,13 @@ class FusionEngine:
             R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
         return R
 
-    def _gate(self, y: Vec3, hph: _Hph, R: Vec3) -> tuple[float, bool]:
+    def _gate(self, y: Vec3, hph: _Hph, R: Vec3, g: float, gv: float) -> tuple[float, bool]:
         """(horizontal NIS / gate², passed): horizontal NIS (2 dof, the 2×2 block of S) and
-        vertical NIS (1 dof) against gate², R floored at ``gnss_gate_r_floor_m``."""
-        g = self._gate_r_min
+        vertical NIS (1 dof) against gate², R floored at ``g`` (horizontal) and ``gv`` (vertical):
+        ``gnss_gate_r_floor_m``² or the receiver's spread."""
         r0, r1, r2 = R
         s00, s01, s11 = hph[0][0] + (r0 if r0 > g else g), hph[0][1], hph[1][1] + (r1 if r1 > g else g)
-        s2 = hph[2][2] + (r2 if r2 > g else g)
+        s2 = hph[2][2] + (r2 if r2 > gv else gv)
         nis_h = (s11 * y[0] * y[0] - 2.0 * s01 * y[0] * y[1] + s00 * y[1] * y[1]) / (s00 * s11 - s01 * s01)
         ratio = nis_h / self._gate2
         return ratio, ratio <= 1.0 and y[2] * y[2] / s2 <= self._gate2
@@ -394,7 +524,8 @@ class FusionEngine:
         alpha = math.exp(-T / self._tau_s)
         sigma_b = f.sigma_bias_m
         q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
-        x, P = self._prop.predict_from(f.x, f.P, f.ints, ints, T, alpha, q_b)[0:2]
+        prop = self._prop_disagree if f.disagree else self._prop
+        x, P = prop.predict_from(f.x, f.P, f.ints, ints, T, alpha, q_b)[0:2]
         return x, P
 
     # -------------------------------------------------------------- output
@@ -409,10 +540,13 @@ class FusionEngine:
         T = (now - last.t_us) * 1e-6
         alpha = math.exp(-T / self._tau_s)
         sigma_b = last.sigma_bias_m
-        x, out = self._prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
-                                        (1.0 - alpha * alpha) * sigma_b * sigma_b)
-        snap = Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch,
-                        now - last.t_fused_us <= self._valid_us, last.n_rejected, last.n_resets)
+        prop = self._prop_disagree if last.disagree else self._prop
+        x, out = prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
+                                  (1.0 - alpha * alpha) * sigma_b * sigma_b)
+        valid = (now - last.t_fused_us <= self._valid_us and not last.invalid
+                 and x[3] * x[3] + x[4] * x[4] <= self._v_max2 and abs(x[5]) <= self._vd_max)
+        snap = Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
+                        last.n_rejected, last.n_resets, last.vel_ratio, last.disagree)
         self._cache = (last, now, snap)
         return snap
 
@@ -424,6 +558,27 @@ class FusionEngine:
 
 
 _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
+_NAN3: Vec3 = (math.nan, math.nan, math.nan)
+# ``push_fix``'s R of a fix whose receiver reports no accuracy: learned (Fusion.scale_*_m); also per
+# component (an infinite horizontal or vertical variance: that one learned)
+LEARN: Vec3 = (math.inf, math.inf, math.inf)
+# the running centre of |innovation| (clipped log-domain mean) over σ of a zero-mean Gaussian
+# innovation: 2 dof (horizontal) and 1 dof (vertical); tests/test_estimator_gate.py checks both
+_SCALE_H, _SCALE_V = 1.1014, 0.6245
+
+
+def _clip1(v: float) -> float:
+    return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
+
+
+class _Fix(NamedTuple):
+    """A fix as the engine fuses it (also what waits for the IMU and what a re-fusion replays)."""
+
+    t_us: int  # validity time
+    z: Vec3  # position (NED, m)
+    r: Vec3  # its nominal R (variances, m²)
+    zv: Vec3 | None  # the receiver's velocity (NED, m/s; NaN = not reported; None: none)
+    rv: Vec3  # its variances ((m/s)²)
 _update = _core.update  # (x⁻, P⁻, y, R) -> (x⁺, P⁺, NIS): model.update_fast
 
 

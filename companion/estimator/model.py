@@ -214,22 +214,34 @@ def update_fast(x: State, P: np.ndarray, y: tuple[float, float, float],
 
 
 def reset_to_fix(x: State, P: np.ndarray, z: tuple[float, float, float], r_m2: tuple[float, float, float],
-                 bias_var_m2: float) -> tuple[State, np.ndarray]:
-    """Position and GNSS bias reset to the fix ``z`` (glitch recovery); velocity and the IMU
-    error states kept.
+                 bias_var_m2: float, v_ned_m_s: tuple[float, float, float] | None = None,
+                 rv_m2: tuple[float, float, float] = (math.nan,) * 3, vel_var_min_m2_s2: float = 0.0,
+                 imu_var_m2_s4: tuple[float, float] = (0.0, 0.0)) -> tuple[State, np.ndarray]:
+    """Reset to the fix ``z`` after the filter lost it (glitch recovery, the fly-away guard), as
+    EKF2 and EKF3 reset position and velocity together.
 
-    The GNSS bias restarts at 0 with variance ``bias_var_m2``; since z = p + b + ν, the position
-    is z with variance R + var(b) and covariance −var(b) with the bias (H P Hᵀ = R: the reset
-    trusts the fix exactly as much as its R says). Velocity and the IMU error states keep their
-    (grown) joint covariance and lose their correlation with the reset states.
-    """
+    * position = z, GNSS bias 0 with variance ``bias_var_m2``: since z = p + b + ν, the position has
+      variance R + var(b) and covariance −var(b) with the bias (H P Hᵀ = R: the reset trusts the fix
+      exactly as much as its R says);
+    * velocity = the receiver's ``v_ned_m_s`` with its variance ``rv_m2`` for each component it
+      reports (finite); a component it does not report keeps the estimate, its variance at least
+      ``vel_var_min_m2_s2``;
+    * the IMU error states keep their means, their variances at least their priors
+      ``imu_var_m2_s4`` = (accelerometer bias, NED acceleration error): a reset says the model failed,
+      so what was learned through it is re-opened.
+
+    The reset states lose every correlation (with each other and the rest)."""
     out = np.zeros((N_STATE, N_STATE))
-    out[np.ix_(_KEPT, _KEPT)] = P[np.ix_(_KEPT, _KEPT)]
+    v = list(x[3:6])
+    diag = P.diagonal()
     for i in range(3):
         out[i, i] = r_m2[i] + bias_var_m2
         out[i, 6 + i] = out[6 + i, i] = -bias_var_m2
         out[6 + i, 6 + i] = bias_var_m2
-    return (z[0], z[1], z[2], x[3], x[4], x[5], 0.0, 0.0, 0.0, *x[9:]), out
-
-
-_KEPT = np.r_[3:6, 9:N_STATE]  # what a reset keeps: velocity and the IMU error states
+        given = v_ned_m_s is not None and math.isfinite(v_ned_m_s[i]) and rv_m2[i] > 0.0
+        if given:
+            v[i] = float(v_ned_m_s[i])  # type: ignore[index]
+        out[3 + i, 3 + i] = rv_m2[i] if given else max(float(diag[3 + i]), vel_var_min_m2_s2)
+        out[9 + i, 9 + i] = max(float(diag[9 + i]), imu_var_m2_s4[0])
+        out[12 + i, 12 + i] = max(float(diag[12 + i]), imu_var_m2_s4[1])
+    return (z[0], z[1], z[2], v[0], v[1], v[2], 0.0, 0.0, 0.0, *x[9:]), out

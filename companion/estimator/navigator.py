@@ -162,8 +162,10 @@ class Navigator:
                 return
             self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
             self._to_ned = NedConverter(self.frame)
+        v = fix.v_ned_m_s
         self.engine.push_fix(fix.t_validity_us, self._to_ned(fix.lat_deg, fix.lon_deg, fix.alt_m),  # type: ignore[misc]
-                             self.fix_r_nominal_m2(fix.h_acc_m, fix.v_acc_m))
+                             self.fix_r_nominal_m2(fix.h_acc_m, fix.v_acc_m, fix.hdop),
+                             v, None if v is None else self.fix_r_velocity_m2(fix.vel_acc_m_s))
 
     def _frozen(self, fix: GnssFix) -> bool:
         """True when this fix repeats the position first received more than ``gnss_frozen_s``
@@ -186,27 +188,44 @@ class Navigator:
         x = fusions[-1].x
         return math.hypot(x[3], x[4]) > self.cfg.gnss_frozen_speed_m_s
 
-    def fix_r_nominal_m2(self, h_acc_m: float, v_acc_m: float) -> tuple[float, float, float]:
-        """A fix's nominal R (NED variances, m²): the receiver-reported 1σ accuracy where known,
-        floored at the configured nominal std (as PX4 EKF2: max(hacc, EKF2_GPS_P_NOISE)); the
-        configured std where unknown (NaN, 0 or negative)."""
+    def fix_r_nominal_m2(self, h_acc_m: float, v_acc_m: float,
+                         hdop: float = math.nan) -> tuple[float, float, float]:
+        """A fix's nominal R (NED variances, m²): the receiver-reported 1σ accuracy where known (finite,
+        > 0), floored at the configured nominal std (as PX4 EKF2: max(hacc, EKF2_GPS_P_NOISE)); where
+        not, HDOP × ``gnss_uere_m`` (vertical 1.5× that) when the receiver reports HDOP; else
+        infinite: the engine learns it from the receiver's innovations (``engine.LEARN``)."""
         c = self.cfg
-        h = h_acc_m if h_acc_m > c.sigma_gnss_horizontal_m else c.sigma_gnss_horizontal_m  # NaN > x is False
-        v = v_acc_m if v_acc_m > c.sigma_gnss_vertical_m else c.sigma_gnss_vertical_m
-        if not (math.isfinite(h) and math.isfinite(v)):  # +inf reported: unusable accuracy
-            h = h if math.isfinite(h) else c.sigma_gnss_horizontal_m
-            v = v if math.isfinite(v) else c.sigma_gnss_vertical_m
+        if not (math.isfinite(h_acc_m) and h_acc_m > 0.0) and math.isfinite(hdop) and hdop > 0.0:
+            h_acc_m = hdop * c.gnss_uere_m
+            if not (math.isfinite(v_acc_m) and v_acc_m > 0.0):
+                v_acc_m = 1.5 * h_acc_m
+        inf = math.inf
+        h = max(h_acc_m, c.sigma_gnss_horizontal_m) if math.isfinite(h_acc_m) and h_acc_m > 0.0 else inf
+        v = max(v_acc_m, c.sigma_gnss_vertical_m) if math.isfinite(v_acc_m) and v_acc_m > 0.0 else inf
         return h * h, h * h, v * v
 
+    def fix_r_velocity_m2(self, vel_acc_m_s: float) -> tuple[float, float, float]:
+        """The R of a fix's velocity (NED variances, (m/s)²): the receiver's 1σ speed accuracy where
+        known, floored at the configured std of each component (EKF2: max(sacc, EKF2_GPS_V_NOISE));
+        the configured std where unknown (NaN, 0, negative or infinite)."""
+        c = self.cfg
+        h, d = c.sigma_gnss_velocity_m_s, c.sigma_gnss_velocity_vertical_m_s
+        if math.isfinite(vel_acc_m_s):
+            h, d = max(h, vel_acc_m_s), max(d, vel_acc_m_s)
+        return h * h, h * h, d * d
+
     def push_fix_ned(self, t_validity_us: int, p_ned_m: np.ndarray, h_acc_m: float = math.nan,
-                     v_acc_m: float = math.nan) -> None:
-        """A fix already converted to this navigator's frame (e.g. vectorised by a log reader).
+                     v_acc_m: float = math.nan, v_ned_m_s: Any = None, vel_acc_m_s: float = math.nan) -> None:
+        """A fix already converted to this navigator's frame (e.g. vectorised by a log reader),
+        with the receiver's velocity ``v_ned_m_s`` (NED, m/s; NaN components not reported; None:
+        none) and its speed accuracy.
 
         Gated like ``push`` after the geodesy (the caller checked ``fix_type``); needs ``frame``.
         """
         if self.frame is None:
             raise ValueError("push_fix_ned needs a navigator with a frame (home)")
-        self.engine.push_fix(t_validity_us, p_ned_m, self.fix_r_nominal_m2(h_acc_m, v_acc_m))
+        self.engine.push_fix(t_validity_us, p_ned_m, self.fix_r_nominal_m2(h_acc_m, v_acc_m), v_ned_m_s,
+                             None if v_ned_m_s is None else self.fix_r_velocity_m2(vel_acc_m_s))
 
     # ------------------------------------------------------------- output
     def estimate(self) -> NavEstimate | None:
@@ -218,7 +237,8 @@ class Navigator:
             return self._last[1]
         a = snap.out  # one array for the state and the variances, handed out as views (one allocation)
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method,
-                          snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets)
+                          snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
+                          snap.vel_ratio, snap.disagree)
         self._last = (snap, est)
         return est
 

@@ -14,7 +14,11 @@ Units and conventions on the wire:
   go backwards: a fix with less latency can overtake an older one (the simulated latency varies
   by up to 1.2 s); receivers order by it, not by arrival. lat/lon degE7, alt mm; ``eph`` = HDOP
   x 100 (65535 unknown -> NaN); ``h_acc``/``v_acc`` mm (0 = not sent -> NaN);
-  ``satellites_visible`` passed through (255 = unknown, as MAVLink says).
+  ``satellites_visible`` passed through (255 = unknown, as MAVLink says); ``vel`` (cm/s) and
+  ``cog`` (cdeg) = the horizontal velocity (65535 unknown -> none; the vertical is not carried:
+  NaN), ``vel_acc`` mm/s its accuracy. GPS2_RAW the same; GPS_INPUT and HIL_GPS (decode only)
+  carry a full NED velocity (GPS_INPUT m/s, each part unless ``ignore_flags`` says unset; HIL_GPS
+  cm/s).
 - SIM_STATE: no time field (the caller supplies the matching IMU time); position as
   ``lat_int``/``lon_int`` degE7 (float ``lat``/``lon`` too, in degrees) and ``alt`` m, converted
   with a :class:`LocalNedFrame`. It carries p, v, q only: bias, latency and clearance of a
@@ -321,31 +325,120 @@ def _mm(value_m: float) -> int:
     return 0 if not math.isfinite(value_m) else max(1, min(2**32 - 1, round(value_m * 1000.0)))
 
 
+def _speed_course(v_ned_m_s: np.ndarray | None) -> tuple[int, int]:
+    """GPS_RAW_INT ``vel`` (ground speed, cm/s) and ``cog`` (course over ground, cdeg 0..35999) of a
+    NED velocity; unknown (UINT16_MAX) without a horizontal velocity. A speed too slow to give a
+    course (< 0.5 cm/s) is sent as 0 with course 0."""
+    if v_ned_m_s is None or not (math.isfinite(v_ned_m_s[0]) and math.isfinite(v_ned_m_s[1])):
+        return UINT16_UNKNOWN, UINT16_UNKNOWN
+    speed_cm_s = round(math.hypot(v_ned_m_s[0], v_ned_m_s[1]) * 100.0)
+    if speed_cm_s == 0:
+        return 0, 0
+    course_cdeg = round(math.degrees(math.atan2(v_ned_m_s[1], v_ned_m_s[0])) * 100.0) % 36000
+    return min(UINT16_UNKNOWN - 1, speed_cm_s), course_cdeg
+
+
 def encode_gnss(f: GnssFix) -> mavlink.MAVLink_gps_raw_int_message:
+    """GPS_RAW_INT of ``f``: its horizontal velocity as ``vel``/``cog`` (the vertical has no field),
+    its speed accuracy as ``vel_acc``."""
     eph = UINT16_UNKNOWN
     if math.isfinite(f.hdop):
         eph = max(0, min(UINT16_UNKNOWN - 1, round(f.hdop * 100)))
+    vel, cog = _speed_course(f.v_ned_m_s)
     return mavlink.MAVLink_gps_raw_int_message(
         f.t_validity_us, f.fix_type, round(f.lat_deg * DEG_E7), round(f.lon_deg * DEG_E7),
-        round(f.alt_m * 1000.0), eph, UINT16_UNKNOWN, UINT16_UNKNOWN, UINT16_UNKNOWN,
-        f.satellites_visible, 0, _mm(f.h_acc_m), _mm(f.v_acc_m), 0, 0, 0,
+        round(f.alt_m * 1000.0), eph, UINT16_UNKNOWN, vel, cog,
+        f.satellites_visible, 0, _mm(f.h_acc_m), _mm(f.v_acc_m), _mm(f.vel_acc_m_s), 0, 0,
     )
 
 
+def _ground_velocity(name: str, vel_cm_s: int, cog_cdeg: int) -> np.ndarray | None:
+    """NED velocity (vertical NaN: not reported) from ground speed and course; None when either is
+    unknown (UINT16_MAX), except a speed of 0 (no course needed)."""
+    if vel_cm_s == UINT16_UNKNOWN or (cog_cdeg == UINT16_UNKNOWN and vel_cm_s != 0):
+        return None
+    if cog_cdeg != UINT16_UNKNOWN and not 0 <= cog_cdeg <= 36000:
+        raise CodecError("out_of_range", f"{name} cog {cog_cdeg}")
+    speed, course = vel_cm_s / 100.0, math.radians((cog_cdeg if cog_cdeg != UINT16_UNKNOWN else 0) / 100.0)
+    if speed > LIMITS.max_speed_m_s:
+        raise CodecError("out_of_range", f"{name} vel {speed:.0f} m/s")
+    return np.array([speed * math.cos(course), speed * math.sin(course), math.nan])
+
+
+def _accuracy_m(value_mm: int) -> float:
+    """A packed accuracy (mm or mm/s; 0 = not sent) in m or m/s, NaN when not sent."""
+    return value_mm / 1000.0 if value_mm else math.nan
+
+
 def decode_gnss(m: Any) -> GnssFix:
+    """GPS_RAW_INT or GPS2_RAW (the same fields): ground speed and course as the horizontal
+    velocity (no vertical: NaN), ``vel_acc`` as its accuracy."""
+    name = m.get_type()
     lat_deg, lon_deg = m.lat / DEG_E7, m.lon / DEG_E7
-    _lat_lon("GPS_RAW_INT", lat_deg, lon_deg)
+    _lat_lon(name, lat_deg, lon_deg)
     return GnssFix(
-        t_validity_us=_stamp_us("GPS_RAW_INT", m.time_usec),
+        t_validity_us=_stamp_us(name, m.time_usec),
         lat_deg=lat_deg,
         lon_deg=lon_deg,
         alt_m=m.alt / 1000.0,
         fix_type=int(m.fix_type),
         satellites_visible=int(m.satellites_visible),
-        h_acc_m=m.h_acc / 1000.0 if m.h_acc else math.nan,
-        v_acc_m=m.v_acc / 1000.0 if m.v_acc else math.nan,
+        h_acc_m=_accuracy_m(m.h_acc),
+        v_acc_m=_accuracy_m(m.v_acc),
         hdop=m.eph / 100.0 if m.eph != UINT16_UNKNOWN else math.nan,
+        v_ned_m_s=_ground_velocity(name, int(m.vel), int(m.cog)),
+        vel_acc_m_s=_accuracy_m(getattr(m, "vel_acc", 0)),
     )
+
+
+def decode_gps_input(m: Any) -> GnssFix:
+    """GPS_INPUT (a fix handed to an autopilot): ``vn``/``ve``/``vd`` (m/s) and the accuracies (m,
+    m/s) unless its ``ignore_flags`` say they are not set; ``alt`` m MSL; ``time_usec`` as sent."""
+    ign = int(m.ignore_flags)
+    lat_deg, lon_deg = m.lat / DEG_E7, m.lon / DEG_E7
+    _lat_lon("GPS_INPUT", lat_deg, lon_deg)
+    _finite("GPS_INPUT", m.alt)
+    nan = math.nan
+    v = [nan, nan, nan]
+    if not ign & mavlink.GPS_INPUT_IGNORE_FLAG_VEL_HORIZ:
+        v[0:2] = _bounded("GPS_INPUT velocity", LIMITS.max_speed_m_s, m.vn, m.ve, 0.0)[0:2].tolist()
+    if not ign & mavlink.GPS_INPUT_IGNORE_FLAG_VEL_VERT:
+        v[2] = float(_bounded("GPS_INPUT velocity", LIMITS.max_speed_m_s, 0.0, 0.0, m.vd)[2])
+
+    def given(flag: int, value: float) -> float:
+        return float(value) if not ign & flag and math.isfinite(value) and value > 0 else nan
+
+    return GnssFix(
+        t_validity_us=_stamp_us("GPS_INPUT", m.time_usec),
+        lat_deg=lat_deg, lon_deg=lon_deg, alt_m=float(m.alt),
+        fix_type=int(m.fix_type), satellites_visible=int(m.satellites_visible),
+        h_acc_m=given(mavlink.GPS_INPUT_IGNORE_FLAG_HORIZONTAL_ACCURACY, m.horiz_accuracy),
+        v_acc_m=given(mavlink.GPS_INPUT_IGNORE_FLAG_VERTICAL_ACCURACY, m.vert_accuracy),
+        hdop=given(mavlink.GPS_INPUT_IGNORE_FLAG_HDOP, m.hdop),
+        v_ned_m_s=None if all(math.isnan(c) for c in v) else np.array(v),
+        vel_acc_m_s=given(mavlink.GPS_INPUT_IGNORE_FLAG_SPEED_ACCURACY, m.speed_accuracy),
+    )
+
+
+def decode_hil_gps(m: Any) -> GnssFix:
+    """HIL_GPS (a simulator's fix): ``vn``/``ve``/``vd`` cm/s as the NED velocity, ``eph`` = HDOP x 100."""
+    lat_deg, lon_deg = m.lat / DEG_E7, m.lon / DEG_E7
+    _lat_lon("HIL_GPS", lat_deg, lon_deg)
+    return GnssFix(
+        t_validity_us=_stamp_us("HIL_GPS", m.time_usec),
+        lat_deg=lat_deg, lon_deg=lon_deg, alt_m=m.alt / 1000.0,
+        fix_type=int(m.fix_type), satellites_visible=int(m.satellites_visible),
+        hdop=m.eph / 100.0 if m.eph != UINT16_UNKNOWN else math.nan,
+        v_ned_m_s=_bounded("HIL_GPS velocity", LIMITS.max_speed_m_s, m.vn / 100.0, m.ve / 100.0,
+                           m.vd / 100.0),
+    )
+
+
+# GNSS fixes by message name (the autopilot adapter picks its source among them).
+GNSS_DECODERS: dict[str, Callable[[Any], GnssFix]] = {
+    "GPS_RAW_INT": decode_gnss, "GPS2_RAW": decode_gnss, "GPS_INPUT": decode_gps_input,
+    "HIL_GPS": decode_hil_gps,
+}
 
 
 # Estimator inputs by message name; decode_sample dispatches on these.
