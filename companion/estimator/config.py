@@ -138,14 +138,17 @@ class EstimatorConfig:
     # has the accuracy HDOP × gnss_uere_m (horizontal; 1.5× that vertical); the user equivalent range
     # error of a single-frequency receiver is 1-5 m (1σ), 3 m is the middle.
     gnss_uere_m: float = 3.0
-    # A fix with neither gets a learned R: the robust spread of the receiver's innovations (a
-    # log-domain running centre of |innovation|, each fix moving it by at most a factor e^(T/τ),
-    # time constant gnss_scale_tau_s, minus the prediction's share H P Hᵀ), floored at the
+    # A fix with neither gets a learned R: the receiver's own noise, from its fixes and the IMU alone
+    # (never from the filter's state, so a wrong model cannot inflate it into a fly-away): the change
+    # between consecutive blocks of the velocity two fixes imply once the IMU's displacement is
+    # removed, normalised to one fix's noise, through a log-domain running centre of its magnitude
+    # (each fix moves it by at most a factor e^(T/τ), time constant gnss_scale_tau_s), floored at the
     # configured sigma_gnss_*. It starts at sigma_gnss_unreported_m, the GNSS noise EKF2
-    # (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE) assume by default. The same spread floors the
-    # GATE's R for every receiver (reported accuracy or not): a receiver whose accuracy is missing or
-    # optimistic cannot make the gate reject most of its fixes, only those beyond gnss_gate_sigma ×
-    # its own spread.
+    # (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE) assume by default. The gate's R is floored for
+    # every receiver (reported accuracy or not) at the robust spread of its innovations (the same
+    # running centre of |innovation| minus the prediction's share H P Hᵀ): a receiver whose accuracy
+    # is missing or optimistic cannot make the gate reject most of its fixes, only those beyond
+    # gnss_gate_sigma × its own spread.
     sigma_gnss_unreported_m: float = 0.5
     gnss_scale_tau_s: float = 2.0
 

@@ -84,10 +84,19 @@ class Fusion(NamedTuple):
     disagree: bool = False
     n_disagree: int = 0
     # the receiver's innovation spread: log-domain running centres of |horizontal innovation| and
-    # |vertical innovation| (m; config gnss_scale_tau_s), which floor the gate's R and give the R of
-    # fixes without a reported accuracy
+    # |vertical innovation| (m; config gnss_scale_tau_s), which floor the gate's R
     scale_h_m: float = 0.0
     scale_v_m: float = 0.0
+    # the receiver's own noise, independent of the filter's state (so a wrong model cannot feed it):
+    # u = (z − z_prev − D_imu) / T, the velocity at the previous fix the two fixes imply once the
+    # IMU's displacement over the block is removed (None: no previous fix), dv_imu the IMU's velocity
+    # change over the block, T_s its length, and the running centres of the normalised change of u
+    # (m) that give the R of fixes without a reported accuracy
+    u_ned_m_s: Vec3 | None = None
+    dv_imu_m_s: Vec3 = (0.0, 0.0, 0.0)
+    block_s: float = 0.0
+    noise_h_m: float = 0.0
+    noise_v_m: float = 0.0
     # fly-away guard: the velocity smoothed over the acceleration window (NED, m/s), this entry's
     # estimate left the vehicle's envelope; entries that did so far
     v_smooth: Vec3 = (0.0, 0.0, 0.0)
@@ -163,6 +172,7 @@ class FusionEngine:
                            (cfg.sigma_acc_bias0_m_s2**2, cfg.sigma_acc_ned0_m_s2**2))
         self._v_max2 = cfg.envelope_speed_max_m_s**2
         self._vd_max = cfg.envelope_speed_vertical_max_m_s
+        self._a_max = cfg.envelope_acc_max_m_s2
         self._acc_window_s = cfg.envelope_acc_window_s
         self._dv_max2 = (cfg.envelope_acc_max_m_s2 * cfg.envelope_acc_window_s) ** 2
         self._dis_tau_s = cfg.imu_gnss_disagree_tau_s
@@ -350,6 +360,7 @@ class FusionEngine:
                                    self.method.beta(state), self.cfg.sigma_bias_m(self.method.beta(state)),
                                    fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, zv, fix.rv,
                                    scale_h_m=_SCALE_H * math.sqrt(r[0]), scale_v_m=_SCALE_V * math.sqrt(r[2]),
+                                   noise_h_m=_SCALE_H * math.sqrt(r[0]), noise_v_m=_SCALE_V * math.sqrt(r[2]),
                                    v_smooth=(x[3], x[4], x[5])))
         self._fusion_t.append(t_us)
         self._tested += 1
@@ -377,36 +388,20 @@ class FusionEngine:
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
         ints = self.imu.integrals(t_us)
-        prop = self._prop_disagree if prev.disagree else self._prop
-        # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
-        x_prior, P_prior, hph, pht_p = prop.predict_from(prev.x, prev.P, prev.ints, ints, T, alpha, q_b)
-        y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
-        s0 = (hph[0][0] - q_b, hph[1][1] - q_b, hph[2][2] - q_b)
-        # the receiver's own spread (innovations minus the prediction's share): the gate's floor, and
-        # the R of a fix without a reported accuracy
-        sh, sv = prev.scale_h_m / _SCALE_H, prev.scale_v_m / _SCALE_V
-        spread_h, spread_v = sh * sh - 0.5 * (hph[0][0] + hph[1][1]), sv * sv - hph[2][2]
-        r_nom = r_given
-        if r_given[0] == math.inf or r_given[2] == math.inf:  # not reported: learned
-            h = r_given[0] if r_given[0] != math.inf else (spread_h if spread_h > self._r_nominal[0] else
-                                                          self._r_nominal[0])
-            v = r_given[2] if r_given[2] != math.inf else (spread_v if spread_v > self._r_nominal[2] else
-                                                          self._r_nominal[2])
-            r_nom = (h, h, v)
-        floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
-        floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
-        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p)
-        R = self._r_of(prev.state, terms, r_nom)
-        ratio, passes = self._gate(y, hph, R, floor_h, floor_v)
+        t = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, prev.disagree)
+        switched = False
+        if (zv is not None and not t.vel_ok and not prev.disagree
+                and self._gnss_consistent(prev, z, zv, rv, t.r_nom, T)):
+            # the IMU-propagated motion disagrees with a self-consistent GNSS: would the fix pass if
+            # the IMU were distrusted (its white-acceleration density inflated)?
+            t_dis = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, True)
+            if t_dis.vel_ok:
+                t, switched = t_dis, True
+        x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v, vel_ok, \
+            vel_ratio = t
         n_rej, n_res, n_off = prev.n_rejected, prev.n_resets, prev.n_offsets
         n_vt, n_vr = prev.n_vel_tested, prev.n_vel_rejected
-        vel_ratio, vel_ok, nis_v = math.nan, False, math.nan
         if zv is not None:
-            nis_vh, nis_vd = _core.vel_nis(x_prior, P_prior, zv, rv)
-            vel_ratio = nis_vh / self._vel_gate2
-            vel_ok = nis_vh <= self._vel_gate2 and nis_vd <= self._vel_gate2
-            n_h = (zv[0] == zv[0]) + (zv[1] == zv[1])  # horizontal components reported (NaN != NaN)
-            nis_v = nis_vh / n_h if n_h else math.nan
             n_vt += 1
             n_vr += not vel_ok
         off, t_off, t_fused = prev.offset, prev.t_offset_us, prev.t_fused_us
@@ -419,7 +414,7 @@ class FusionEngine:
             fused_pos = False
             if off is not None and not expired:
                 y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
-                terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
+                terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, terms.pht_p)
                 R_off = self._r_of(prev.state, terms_off, r_nom)
                 if self._gate(y_off, hph, R_off, floor_h, floor_v)[1]:
                     fused_pos, y_fused, R_fused, terms_fused = True, y_off, R_off, terms_off
@@ -443,10 +438,30 @@ class FusionEngine:
         # the spread follows the innovation the decision was made on (an offset's relative one)
         yd = y_fused if fused_pos else y
         scale_h, scale_v = prev.scale_h_m, prev.scale_v_m
+        noise_h, noise_v = prev.noise_h_m, prev.noise_v_m
+        u: Vec3 | None = None
+        dv_imu: Vec3 = (0.0, 0.0, 0.0)
         if T > 0.0:
             k = T / self._scale_tau_s if self._scale_tau_s > T else 1.0
             scale_h *= math.exp(k * _clip1(math.log(math.hypot(yd[0], yd[1]) / scale_h + 1e-300)))
             scale_v *= math.exp(k * _clip1(math.log(abs(yd[2]) / scale_v + 1e-300)))
+            # the receiver's noise: the change of u between blocks, less the IMU's velocity change
+            # over the previous block, is white GNSS noise (variance σ² c) whatever the state
+            a, tb = prev.ints, ints[0]
+            dv_imu = (ints[1] - a[1], ints[2] - a[2], ints[3] - a[3])
+            pz = prev.z_ned_m
+            if pz is not None:
+                u = ((z[0] - pz[0] - (tb * dv_imu[0] - (ints[4] - a[4]))) / T,
+                     (z[1] - pz[1] - (tb * dv_imu[1] - (ints[5] - a[5]))) / T,
+                     (z[2] - pz[2] - (tb * dv_imu[2] - (ints[6] - a[6]))) / T)
+                pu, tp = prev.u_ned_m_s, prev.block_s
+                if pu is not None and tp > 0.0:
+                    pd = prev.dv_imu_m_s
+                    c = 1.0 / math.sqrt(1.0 / (T * T) + (1.0 / T + 1.0 / tp) ** 2 + 1.0 / (tp * tp))
+                    e0, e1, e2 = ((u[0] - pu[0] - pd[0]) * c, (u[1] - pu[1] - pd[1]) * c,
+                                  (u[2] - pu[2] - pd[2]) * c)
+                    noise_h *= math.exp(k * _clip1(math.log(math.hypot(e0, e1) / noise_h + 1e-300)))
+                    noise_v *= math.exp(k * _clip1(math.log(abs(e2) / noise_v + 1e-300)))
         # IMU / GNSS disagreement, on the velocity innovations (position fixes alone cannot tell a
         # wrong attitude from a GNSS bias)
         level = prev.disagree_level
@@ -454,7 +469,9 @@ class FusionEngine:
         if e == e:
             w = 1.0 - math.exp(-T / self._dis_tau_s) if T > 0.0 else 0.0
             level += w * ((e if e < self._dis_clip else self._dis_clip) - level)
-        disagree = level > self._dis_on or (prev.disagree and level > self._dis_off)
+        if switched:
+            level = level if level > self._dis_on else self._dis_on
+        disagree = switched or level > self._dis_on or (prev.disagree and level > self._dis_off)
         # fly-away guard: the velocity smoothed over acc_window_s (so (v − v̄)/window is the mean
         # acceleration over about that window, the updates' corrections included)
         v0, v1, v2 = x_post[3], x_post[4], x_post[5]
@@ -471,8 +488,60 @@ class FusionEngine:
             t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
             r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
-            vs, invalid, prev.n_invalid + invalid))
+            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid))
         self._fusion_t.append(t_us)
+
+    def _test(self, prev: Fusion, fix: _Fix, ints: Integrals, T: float, alpha: float, q_bias_unit: float,
+              q_b: float, distrust_imu: bool) -> _Test:
+        """The prior at the fix (``prev`` predicted with the nominal or, ``distrust_imu``, the inflated
+        IMU noise) and the fix tested against it: position (its R, learned where not reported, and
+        the gate's floors) and velocity."""
+        z, r_given, zv, rv = fix.z, fix.r, fix.zv, fix.rv
+        prop = self._prop_disagree if distrust_imu else self._prop
+        # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
+        x_prior, P_prior, hph, pht_p = prop.predict_from(prev.x, prev.P, prev.ints, ints, T, alpha, q_b)
+        y = (z[0] - x_prior[0] - x_prior[6], z[1] - x_prior[1] - x_prior[7], z[2] - x_prior[2] - x_prior[8])
+        s0 = (hph[0][0] - q_b, hph[1][1] - q_b, hph[2][2] - q_b)
+        # the receiver's own spread (innovations minus the prediction's share): the gate's floor, and
+        # the R of a fix without a reported accuracy
+        sh, sv = prev.scale_h_m / _SCALE_H, prev.scale_v_m / _SCALE_V
+        spread_h, spread_v = sh * sh - 0.5 * (hph[0][0] + hph[1][1]), sv * sv - hph[2][2]
+        r_nom = r_given
+        if r_given[0] == math.inf or r_given[2] == math.inf:  # not reported: the receiver's own noise
+            nh, nv = prev.noise_h_m / _SCALE_H, prev.noise_v_m / _SCALE_V
+            nh, nv = nh * nh, nv * nv
+            r0, r2 = self._r_nominal[0], self._r_nominal[2]
+            h = r_given[0] if r_given[0] != math.inf else (nh if nh > r0 else r0)
+            v = r_given[2] if r_given[2] != math.inf else (nv if nv > r2 else r2)
+            r_nom = (h, h, v)
+        floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
+        floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
+        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p)
+        R = self._r_of(prev.state, terms, r_nom)
+        ratio, passes = self._gate(y, hph, R, floor_h, floor_v)
+        nis_v, vel_ok, vel_ratio = math.nan, False, math.nan
+        if zv is not None:
+            nis_vh, nis_vd = _core.vel_nis(x_prior, P_prior, zv, rv)
+            vel_ratio = nis_vh / self._vel_gate2
+            vel_ok = nis_vh <= self._vel_gate2 and nis_vd <= self._vel_gate2
+            n_h = (zv[0] == zv[0]) + (zv[1] == zv[1])  # horizontal components reported (NaN != NaN)
+            nis_v = nis_vh / n_h if n_h else math.nan
+        return _Test(x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v,
+                     vel_ok, vel_ratio)
+
+    def _gnss_consistent(self, prev: Fusion, z: Vec3, zv: Vec3, rv: Vec3, r_nom: Vec3, T: float) -> bool:
+        """The receiver agrees with itself since the previous fix: its horizontal position change over
+        T equals the mean of its two velocities within 5σ (both positions' R, both velocities' R and
+        an acceleration changing by up to the envelope's over T)."""
+        pz, pv = prev.z_ned_m, prev.zv_ned_m_s
+        if pz is None or pv is None or T <= 0.0:
+            return False
+        for i in (0, 1):
+            d = (z[i] - pz[i]) / T - 0.5 * (zv[i] + pv[i])
+            var = 2.0 * r_nom[i] / (T * T) + 0.25 * (rv[i] + prev.rv_m2[i]) + (0.25 * self._a_max * T) ** 2
+            if not d * d <= 25.0 * var:  # NaN (a component not reported) is not consistent
+                return False
+        return True
 
     def _r_of(self, state: Any, terms: InnovationTerms, r_nom: Vec3) -> Vec3:
         """The method's R for this fix, bounded by ``r_learned_max_factor`` × the nominal R."""
@@ -569,6 +638,26 @@ _SCALE_H, _SCALE_V = 1.1014, 0.6245
 
 def _clip1(v: float) -> float:
     return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
+
+
+class _Test(NamedTuple):
+    """A fix tested against a prior (``FusionEngine._test``)."""
+
+    x: model.State  # the prior at the fix
+    P: model.Cov
+    hph: _Hph
+    y: Vec3  # position innovation
+    s0: Vec3
+    terms: InnovationTerms
+    R: Vec3  # the method's R for it
+    ratio: float  # horizontal NIS / gate²
+    passes: bool
+    r_nom: Vec3  # its nominal R (reported or learned)
+    floor_h: float  # the gate's R floors
+    floor_v: float
+    nis_v: float  # horizontal velocity NIS per dof (NaN: no velocity)
+    vel_ok: bool  # the velocity passed its gate
+    vel_ratio: float  # horizontal velocity NIS / gate²
 
 
 class _Fix(NamedTuple):
