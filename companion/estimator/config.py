@@ -113,12 +113,19 @@ class EstimatorConfig:
     # stream was consistent a moment ago: no dead-reckoning drift can explain a 5-sigma jump) is a
     # step of the receiver's output: its innovation becomes an offset subtracted from the following
     # fixes, which are fused (they still observe velocity) until a fix passes the gate without it
-    # (the step ended) or the offset has been open gnss_offset_max_s: then one reset accepts the
-    # GNSS. 1 s spans 5 fixes at 5 Hz; 60 s is the longest glitch of issue #11's tests. A GNSS
-    # that returns after an outage longer than 1 s opens no offset: its fixes pass the gate grown
-    # by dead reckoning, or reset after gnss_reset_timeout_s.
+    # (the step ended). Once the step has lasted gnss_offset_max_s it is the GNSS's new track: the
+    # position moves by the offset (velocity and IMU errors, aided throughout, are kept) and the fixes
+    # are fused as they come, counted as a reset. 5 s: EKF2 resets into a persistent GNSS
+    # disagreement after 5 s (EKF2_NOAID_TOUT), EKF3 after 7 s; held longer, a fading NLOS reflection
+    # traps the filter on a track no fix supports (docs/results/ablation: the 60 s of the second wave
+    # cost more than they saved). Within gnss_offset_return_s of that, a fix back on the track kept
+    # before the step (it passes the gate relative to minus the accepted offset) is the step's end:
+    # the position moves back at once (counted as gnss_offset_returns). 1 s spans 5 fixes at 5 Hz.
+    # A GNSS that returns after an outage longer than 1 s opens no offset: its fixes pass the gate
+    # grown by dead reckoning, or reset after gnss_reset_timeout_s.
     gnss_offset_open_s: float = 1.0
-    gnss_offset_max_s: float = 60.0
+    gnss_offset_max_s: float = 5.0
+    gnss_offset_return_s: float = 60.0
     # The position is flagged invalid (NavEstimate.pos_valid False) when no fix was fused for
     # longer than this (time of the estimate − validity of the last fused fix). EKF2_NOAID_TOUT.
     pos_valid_timeout_s: float = 5.0
@@ -210,7 +217,8 @@ class EstimatorConfig:
             "sigma_gnss_horizontal_m", "sigma_gnss_vertical_m", "sigma_velocity0_m_s",
             "sigma_bias0_m", "imu_hold_max_s", "theta_max", "eta", "lambda_reg", "student_dof",
             "chi2_095", "h_fast0", "h_slow0", "adaptive_r_floor", "gnss_gate_sigma", "gnss_gate_r_floor_m",
-            "gnss_reset_timeout_s", "gnss_offset_open_s", "gnss_offset_max_s", "pos_valid_timeout_s",
+            "gnss_reset_timeout_s", "gnss_offset_open_s", "gnss_offset_max_s", "gnss_offset_return_s",
+            "pos_valid_timeout_s",
             "gnss_frozen_s",
             "gnss_frozen_speed_m_s", "sigma_gnss_velocity_m_s", "sigma_gnss_velocity_vertical_m_s",
             "gnss_vel_gate_sigma", "gnss_reset_sigma_vel_m_s", "envelope_speed_max_m_s",

@@ -70,6 +70,11 @@ class Fusion(NamedTuple):
     offset: Vec3 | None = None
     t_offset_us: int = 0
     n_offsets: int = 0
+    # the last step accepted (the offset that became the GNSS's track, moving the position) and
+    # when, for gnss_offset_return_s (None: none); steps back onto the earlier track so far
+    accepted: Vec3 | None = None
+    t_accepted_us: int = 0
+    n_returns: int = 0
     # the receiver's velocity (NED, m/s; NaN = a component not reported; None: none) and its R
     # (variances, (m/s)²), its horizontal NIS / gate² (NaN: none), velocities tested and rejected
     # by their gate up to this entry
@@ -147,6 +152,7 @@ class FusionEngine:
             "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
             "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets", "gnss_offsets",
             "gnss_vel_fused", "gnss_vel_rejected_innovation", "imu_gnss_disagreements", "envelope_violations",
+            "gnss_offset_returns",
         ):
             self._counts.setdefault(name, 0)
         self.imu = ImuHistory(cfg.imu_hold_max_s)
@@ -183,6 +189,7 @@ class FusionEngine:
         self._reset_us = int(round(cfg.gnss_reset_timeout_s * 1e6))
         self._offset_open_us = int(round(cfg.gnss_offset_open_s * 1e6))
         self._offset_max_us = int(round(cfg.gnss_offset_max_s * 1e6))
+        self._return_us = int(round(cfg.gnss_offset_return_s * 1e6))
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
         self._cache: tuple[Fusion, int, Snapshot] | None = None
@@ -340,6 +347,7 @@ class FusionEngine:
         c["gnss_rejected_innovation"] = last.n_rejected
         c["gnss_resets"] = last.n_resets
         c["gnss_offsets"] = last.n_offsets
+        c["gnss_offset_returns"] = last.n_returns
         c["gnss_fused"] = self._tested - last.n_rejected
         c["gnss_vel_fused"] = last.n_vel_tested - last.n_vel_rejected
         c["gnss_vel_rejected_innovation"] = last.n_vel_rejected
@@ -358,7 +366,7 @@ class FusionEngine:
         state = self.method.initial_state()
         self.fusions.append(Fusion(t_us, z, x, P, state, math.nan, self.imu.integrals(t_us),
                                    self.method.beta(state), self.cfg.sigma_bias_m(self.method.beta(state)),
-                                   fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, zv, fix.rv,
+                                   fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, None, 0, 0, zv, fix.rv,
                                    scale_h_m=_SCALE_H * math.sqrt(r[0]), scale_v_m=_SCALE_V * math.sqrt(r[2]),
                                    noise_h_m=_SCALE_H * math.sqrt(r[0]), noise_v_m=_SCALE_V * math.sqrt(r[2]),
                                    v_smooth=(x[3], x[4], x[5])))
@@ -405,28 +413,47 @@ class FusionEngine:
             n_vt += 1
             n_vr += not vel_ok
         off, t_off, t_fused = prev.offset, prev.t_offset_us, prev.t_fused_us
-        expired = off is not None and t_us - t_off >= self._offset_max_us
-        glitch, rejected, fused_pos, reset = True, False, True, False
+        acc, t_acc, n_ret = prev.accepted, prev.t_accepted_us, prev.n_returns
+        glitch, rejected, fused_pos, reset, held = True, False, True, False, False
+        shift: Vec3 | None = None  # moves the position after the update: an offset accepted, or a return
         y_fused, R_fused, terms_fused = y, R, terms
         if passes:  # closes an open offset: the fixes stepped back
             off, t_off, glitch = None, 0, False
         else:
             fused_pos = False
-            if off is not None and not expired:
-                y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
-                terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, terms.pht_p)
-                R_off = self._r_of(prev.state, terms_off, r_nom)
-                if self._gate(y_off, hph, R_off, floor_h, floor_v)[1]:
-                    fused_pos, y_fused, R_fused, terms_fused = True, y_off, R_off, terms_off
+            if off is not None:  # the step still holds (the fix passes relative to the offset)?
+                rel = self._relative(prev.state, y, off, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
+                                     floor_v)
+                if rel is not None and t_us - t_off >= self._offset_max_us:
+                    # it lasted: the GNSS's new track (EKF2/EKF3 reset into it): the position moves onto
+                    # this fix, which is fused with that zero innovation
+                    fused_pos, shift, y_fused = True, y, (0.0, 0.0, 0.0)
+                    R_fused, terms_fused = rel[1], rel[2]
+                    acc, t_acc, n_res, glitch, off, t_off = y, t_us, n_res + 1, False, None, 0
+                elif rel is not None and vel_ok:  # held on the receiver's velocity: dead reckoning
+                    held, t_fused = True, t_us  # (fusing z − offset would drag the estimate with a fade)
+                elif rel is not None:  # held, the fixes relative to it observing velocity (without a
+                    fused_pos, (y_fused, R_fused, terms_fused) = True, rel  # receiver velocity, a fade drags)
+            if not fused_pos and not held and acc is not None and t_us - t_acc <= self._return_us:
+                back = (-acc[0], -acc[1], -acc[2])  # the fix is back on the track kept before the step?
+                rel = self._relative(prev.state, y, back, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
+                                     floor_v)
+                if rel is not None:
+                    fused_pos, (y_fused, R_fused, terms_fused) = True, rel
+                    shift, acc, t_acc, n_ret, glitch, off, t_off = back, None, 0, n_ret + 1, False, None, 0
         if fused_pos:
             x_post, P_post, nis = _update(x_prior, P_prior, y_fused, R_fused)
             state = self.method.update(prev.state, terms_fused)
             t_fused = t_us
-        elif t_us - t_fused >= self._reset_us or expired or prev.invalid:
+            if shift is not None:
+                x_post = (x_post[0] + shift[0], x_post[1] + shift[1], x_post[2] + shift[2], *x_post[3:])
+        elif held:
+            x_post, P_post, nis, state = x_prior, P_prior, _nis(y, hph, R), prev.state
+        elif t_us - t_fused >= self._reset_us or prev.invalid:
             x_post, P_post = model.reset_to_fix(x_prior, P_prior, z, r_nom, self._reset_var[0], zv, rv,
                                                 self._reset_var[1], self._reset_var[2])
             state, nis, t_fused, glitch, reset = prev.state, _nis(y, hph, R), t_us, False, True
-            off, t_off, n_res, vel_ok = None, 0, n_res + 1, False
+            off, t_off, n_res, vel_ok, acc, t_acc = None, 0, n_res + 1, False, None, 0
         else:  # rejected: the entry carries the prior; only a belief learns from the fix
             rejected = True
             x_post, P_post, nis = x_prior, P_prior, _nis(y, hph, R)
@@ -486,7 +513,8 @@ class FusionEngine:
         beta = self.method.beta(state)
         self.fusions.append(Fusion(
             t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
-            r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, zv, rv, vel_ratio,
+            r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, acc, t_acc, n_ret,
+            zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
             u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid))
         self._fusion_t.append(t_us)
@@ -542,6 +570,17 @@ class FusionEngine:
             if not d * d <= 25.0 * var:  # NaN (a component not reported) is not consistent
                 return False
         return True
+
+    def _relative(self, state: Any, y: Vec3, off: Vec3, s0: Vec3, q_bias_unit: float, r_nom: Vec3, pht_p: Vec3,
+                  hph: _Hph, floor_h: float, floor_v: float) -> tuple[Vec3, Vec3, InnovationTerms] | None:
+        """(innovation, R, terms) of the fix relative to the offset ``off`` (y − off) if that passes
+        the gate, else None."""
+        y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
+        terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
+        R_off = self._r_of(state, terms_off, r_nom)
+        if self._gate(y_off, hph, R_off, floor_h, floor_v)[1]:
+            return y_off, R_off, terms_off
+        return None
 
     def _r_of(self, state: Any, terms: InnovationTerms, r_nom: Vec3) -> Vec3:
         """The method's R for this fix, bounded by ``r_learned_max_factor`` × the nominal R."""
