@@ -186,6 +186,17 @@ class GnssConfig:
     satellites_open: int = 16  # (ours) satellites_visible in open sky
     satellites_canyon: int = 7  # (ours) satellites_visible in a canyon
     report_accuracy: bool = True  # (ours) h_acc/v_acc carry the white-noise std (not the bias)
+    # --- the receiver's Doppler velocity (off in the paper's scenario: its receiver gives positions).
+    # A reflection corrupts the carrier's Doppler far less than the code's range: its error is the
+    # rate of change of the extra path, a fraction of the receiver's own speed (zero at rest), not a
+    # metre-size offset. Per axis: white noise sqrt(σ_v² + (w κ |v|)²) with the proximity weight w,
+    # σ_v = sigma_velocity_m_s (u-blox M8/M9 speed accuracy in open sky) and κ =
+    # velocity_reflection_factor (ours: a canyon's reflections shift the Doppler velocity by ~10 % of
+    # the speed). The reported speed accuracy is that std (with report_accuracy). Drawn from its own
+    # stream, so the positions are those of the receiver without velocity.
+    velocity: bool = False
+    sigma_velocity_m_s: float = 0.05
+    velocity_reflection_factor: float = 0.1
     # --- effects the estimator does not model (simvehicle.nlos; all off = the paper's GNSS)
     # A fixed constellation; a satellite whose line of sight a building blocks is tracked by its
     # reflection (NLOS, a pseudorange delay drawn when it goes behind the building, so the fix
@@ -214,7 +225,7 @@ class GnssConfig:
             raise ValueError(f"elevation_min_deg: must be in [0, 80), got {self.elevation_min_deg!r}")
         if not 0.0 <= self.nlos_reflect_prob <= 1.0:
             raise ValueError(f"nlos_reflect_prob: must be in [0, 1], got {self.nlos_reflect_prob!r}")
-        _non_negative(self, "nlos_delay_mean_m")
+        _non_negative(self, "nlos_delay_mean_m", "sigma_velocity_m_s", "velocity_reflection_factor")
         if self.heavy_tail_dof != 0.0 and not self.heavy_tail_dof > 2.0:
             raise ValueError(f"heavy_tail_dof: must be 0 (Gaussian) or > 2 (finite variance), "
                              f"got {self.heavy_tail_dof!r}")

@@ -42,6 +42,8 @@ class NedFix:
     p_ned_m: np.ndarray  # true position + bias + white noise
     sigma_noise_m: float  # white-noise std in force
     satellites: int
+    v_ned_m_s: np.ndarray | None = None  # the receiver's Doppler velocity (None: the receiver gives none)
+    sigma_velocity_m_s: float = float("nan")  # its noise std per axis in force
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,8 +108,11 @@ class GnssModel:
     """Bias and latency processes plus the delivery queue (seeded, deterministic)."""
 
     def __init__(self, cfg: GnssConfig, period_s: float, frame: LocalNedFrame, rng: np.random.Generator,
-                 clearance0_m: float, unmodelled: UnmodelledGnss | None = None) -> None:
+                 clearance0_m: float, unmodelled: UnmodelledGnss | None = None,
+                 velocity_rng: np.random.Generator | None = None) -> None:
         self.cfg = cfg
+        # the Doppler velocity's own stream (cfg.velocity), so the positions do not depend on it
+        self._velocity_normals = NormalBlocks(velocity_rng or np.random.default_rng(0)) if cfg.velocity else None
         self.unmodelled = unmodelled  # effects beyond eq. 22-27 (simvehicle.nlos), own generator
         self.period_s = period_s
         self.to_geodetic = NedToGeodetic(frame)
@@ -132,8 +137,10 @@ class GnssModel:
         self.latency_s = min(self.cfg.latency_cap_s, max(0.0, lat))
         return c
 
-    def sample(self, t_validity_us: int, p_ned_m: np.ndarray, clearance_m: float) -> NedFix:
-        """Make the fix valid at ``t_validity_us`` for true position ``p_ned_m`` and queue it."""
+    def sample(self, t_validity_us: int, p_ned_m: np.ndarray, clearance_m: float,
+               v_ned_m_s: np.ndarray | None = None) -> NedFix:
+        """Make the fix valid at ``t_validity_us`` for true position ``p_ned_m`` (and velocity
+        ``v_ned_m_s``, for a receiver with ``cfg.velocity``) and queue it."""
         c = self.step(clearance_m)
         s = c.sigma_noise_m
         m0, m1, m2 = self._normals.take(3).tolist()
@@ -147,20 +154,39 @@ class GnssModel:
             o0, o1, o2 = u.offset_ned_m.tolist()
             z_ned_m = np.array([p0 + b0 + o0 + k * m0, p1 + b1 + o1 + k * m1, p2 + b2 + o2 + k * m2])
             fix = NedFix(int(t_validity_us), z_ned_m, s * u.sigma_scale, u.satellites)
+        if self._velocity_normals is not None and v_ned_m_s is not None:
+            fix = self._with_velocity(fix, v_ned_m_s, c.weight)
         release_us = fix.t_validity_us + math.ceil(self.latency_s * 1e6 - 1e-6)
         heapq.heappush(self._queue, (release_us, self.sent, fix))
         self.sent += 1
         return fix
+
+    def _with_velocity(self, fix: NedFix, v_ned_m_s: np.ndarray, weight: float) -> NedFix:
+        """The fix with the receiver's Doppler velocity: white noise of std sqrt(σ_v² + (w κ |v|)²)
+        per axis (GnssConfig: a reflection's error is a fraction of the speed)."""
+        cfg = self.cfg
+        assert self._velocity_normals is not None
+        v0, v1, v2 = (float(x) for x in v_ned_m_s)
+        k = weight * cfg.velocity_reflection_factor * math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        s = math.sqrt(cfg.sigma_velocity_m_s**2 + k * k)
+        n0, n1, n2 = self._velocity_normals.take(3).tolist()
+        return NedFix(fix.t_validity_us, fix.p_ned_m, fix.sigma_noise_m, fix.satellites,
+                      np.array([v0 + s * n0, v1 + s * n1, v2 + s * n2]), s)
 
     def reported_accuracy_m(self, fix: NedFix) -> float:
         """The 1σ accuracy the receiver reports for ``fix`` (h_acc = v_acc): the white-noise std in
         force, NaN when the mission's GNSS reports none."""
         return fix.sigma_noise_m if self.cfg.report_accuracy else float("nan")
 
+    def reported_velocity_accuracy_m_s(self, fix: NedFix) -> float:
+        """The 1σ speed accuracy the receiver reports for ``fix`` (NaN without report_accuracy)."""
+        return fix.sigma_velocity_m_s if self.cfg.report_accuracy else float("nan")
+
     def to_fix(self, fix: NedFix) -> GnssFix:
         """The wire form of a fix: geodetic position (``frame``), fix type and accuracies."""
         lat, lon, alt = self.to_geodetic(fix.p_ned_m)
         acc = self.reported_accuracy_m(fix)
+        vel_acc = self.reported_velocity_accuracy_m_s(fix)
         return GnssFix(
             t_validity_us=fix.t_validity_us,
             lat_deg=lat,
@@ -170,6 +196,8 @@ class GnssModel:
             satellites_visible=fix.satellites,
             h_acc_m=acc,
             v_acc_m=acc,
+            v_ned_m_s=fix.v_ned_m_s,
+            vel_acc_m_s=vel_acc,
         )
 
     def release(self, t_us: int) -> list[NedFix]:

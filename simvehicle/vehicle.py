@@ -102,7 +102,7 @@ class SimVehicle:
         n0, e0 = (float(c) for c in profiles[profile_index].start_ne_m)
         self.start_ned_m = np.array([n0, e0, -float(mission.altitude_m)])
         # children 0 and 1 are the paper's streams (spawning more leaves them as they were)
-        imu_seq, gnss_seq, ahrs_seq, nlos_seq = np.random.SeedSequence(seed).spawn(4)
+        imu_seq, gnss_seq, ahrs_seq, nlos_seq, velocity_seq = np.random.SeedSequence(seed).spawn(5)
         self.body = RigidBody(cfg.vehicle, self.start_ned_m)
         self.autopilot = Autopilot(cfg.autopilot, cfg.vehicle, self.start_ned_m)
         self.imu = Imu(cfg.imu, np.random.default_rng(imu_seq), cfg.vehicle.physics_rate_hz)
@@ -116,7 +116,8 @@ class SimVehicle:
             heights = np.array([b.height_m for b in mission.world.config.buildings], dtype=float)
             nlos_rng = np.random.default_rng(nlos_seq)
             unmodelled = UnmodelledGnss(cfg.gnss, mission.world.rects_m, heights, nlos_rng)
-        self.gnss = GnssModel(cfg.gnss, period_s, mission.frame, gnss_rng, self._clearance_m, unmodelled)
+        self.gnss = GnssModel(cfg.gnss, period_s, mission.frame, gnss_rng, self._clearance_m, unmodelled,
+                              np.random.default_rng(velocity_seq))
         self.t_us = 0
         self._dt_us = cfg.vehicle.physics_dt_us
         self._dt_s = self._dt_us * 1e-6
@@ -168,7 +169,7 @@ class SimVehicle:
         # one GNSS fix per period, valid at its end; truth carries the bias of the latest valid fix
         before = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
         self._clearance_m = self._clearance(p[-1])
-        gnss.sample(t, p[-1], self._clearance_m)
+        gnss.sample(t, p[-1], self._clearance_m, v[-1])
         for fix in gnss.release(t):
             fixes.append(fix)
             arrivals.append(t)

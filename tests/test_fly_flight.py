@@ -94,7 +94,8 @@ def test_routes_are_planned_once_per_mission_object_and_profile():
 
 def test_fixes_carry_the_accuracy_the_receiver_reports(monkeypatch):
     """fly hands each fix to the filter with the h_acc/v_acc the simulated receiver puts on the wire
-    (its white-noise std in force; NaN when the mission's GNSS reports none), as SITL does."""
+    (its white-noise std in force; NaN when the mission's GNSS reports none), as SITL does; a receiver
+    with a Doppler velocity (gnss.velocity) hands it over with its speed accuracy."""
     from companion.estimator import Navigator
     from gcs_tools.evaluate.tuning import with_overrides
     from simvehicle.gnss import GnssModel
@@ -107,16 +108,21 @@ def test_fixes_carry_the_accuracy_the_receiver_reports(monkeypatch):
         made[fix.t_validity_us] = fix.sigma_noise_m
         return fix
 
-    def spy_push(self, t_validity_us, p_ned_m, h_acc_m=np.nan, v_acc_m=np.nan):
-        pushed.append((t_validity_us, h_acc_m, v_acc_m))
-        return push(self, t_validity_us, p_ned_m, h_acc_m, v_acc_m)
+    def spy_push(self, t_validity_us, p_ned_m, h_acc_m=np.nan, v_acc_m=np.nan, v_ned_m_s=None,
+                 vel_acc_m_s=np.nan):
+        pushed.append((t_validity_us, h_acc_m, v_acc_m, v_ned_m_s, vel_acc_m_s))
+        return push(self, t_validity_us, p_ned_m, h_acc_m, v_acc_m, v_ned_m_s, vel_acc_m_s)
 
     monkeypatch.setattr(GnssModel, "sample", spy_sample)
     monkeypatch.setattr(Navigator, "push_fix_ned", spy_push)
     noisy = with_overrides(TEST_CITY, [("gnss.sigma_noise_m", 0.25)])  # not the filter's configured 0.08
     fly(noisy, 0, "second-order", 4, max_duration_s=3.0)
-    assert len(pushed) > 40 and all(h == v == made[t] >= 0.25 for t, h, v in pushed)
+    assert len(pushed) > 40 and all(h == v == made[t] >= 0.25 and vel is None for t, h, v, vel, _ in pushed)
     pushed.clear()
     silent = with_overrides(TEST_CITY, [("gnss.report_accuracy", False)])
     fly(silent, 0, "second-order", 4, max_duration_s=3.0)
-    assert pushed and all(np.isnan(h) and np.isnan(v) for _, h, v in pushed)
+    assert pushed and all(np.isnan(h) and np.isnan(v) for _, h, v, _, _ in pushed)
+    pushed.clear()
+    doppler = with_overrides(TEST_CITY, [("gnss.velocity", True)])
+    fly(doppler, 0, "second-order", 4, max_duration_s=3.0)
+    assert pushed and all(vel is not None and np.isfinite(vel).all() and sv >= 0.05 for *_, vel, sv in pushed)

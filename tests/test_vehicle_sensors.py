@@ -155,3 +155,30 @@ def test_normal_blocks_serve_the_generators_own_stream():
     blocks, direct = NormalBlocks(np.random.default_rng(9), block_size=50), np.random.default_rng(9)
     for n in (3, 4, 60, 7, 0, 45, 120, 1):  # across block edges and larger than a block
         np.testing.assert_array_equal(blocks.take(n), direct.standard_normal(n))
+
+
+@pytest.mark.parametrize(("clearance_m", "speed_m_s"), [(40.0, 0.0), (40.0, 8.0), (2.0, 0.0), (2.0, 8.0)])
+def test_doppler_velocity_error_is_white_and_grows_with_speed_only_in_a_canyon(clearance_m, speed_m_s):
+    """The receiver's velocity (gnss.velocity): per-axis std sqrt(σ_v² + (w κ |v|)²) (w the proximity
+    weight), zero mean, uncorrelated fix to fix, reported as the speed accuracy; its draws do not
+    change the positions."""
+    cfg = GnssConfig(velocity=True)
+    v = np.array([speed_m_s * 0.6, speed_m_s * 0.8, 0.0])
+    model = GnssModel(cfg, PERIOD_S, FRAME, np.random.default_rng(3), clearance_m,
+                      velocity_rng=np.random.default_rng(4))
+    plain = GnssModel(GnssConfig(), PERIOD_S, FRAME, np.random.default_rng(3), clearance_m)
+    n = 6_000
+    err = np.empty((n, 3))
+    for k in range(n):
+        fix = model.sample(k * 50_000, np.zeros(3), clearance_m, v)
+        assert np.array_equal(fix.p_ned_m, plain.sample(k * 50_000, np.zeros(3), clearance_m).p_ned_m)
+        err[k] = fix.v_ned_m_s - v
+    w = conditions(cfg, clearance_m).weight
+    expected = math.hypot(cfg.sigma_velocity_m_s, w * cfg.velocity_reflection_factor * speed_m_s)
+    assert fix.sigma_velocity_m_s == pytest.approx(expected, rel=1e-12)
+    assert model.to_fix(fix).vel_acc_m_s == fix.sigma_velocity_m_s
+    np.testing.assert_allclose(err.std(axis=0), expected, rtol=0.05)  # 6k samples: std known to 0.9 %
+    np.testing.assert_allclose(err.mean(axis=0), 0.0, atol=5 * expected / math.sqrt(n))
+    assert abs(np.corrcoef(err[1:, 0], err[:-1, 0])[0, 1]) < 0.06  # 5 standard errors
+    assert GnssModel(GnssConfig(), PERIOD_S, FRAME, np.random.default_rng(3), 2.0).sample(
+        0, np.zeros(3), 2.0, v).v_ned_m_s is None  # the paper's receiver: positions only

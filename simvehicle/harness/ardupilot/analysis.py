@@ -2,7 +2,8 @@
 
 Pure code, no I/O. The companion's inputs are exactly what ArduPilot streamed (HIGHRES_IMU with
 the latest ATTITUDE_QUATERNION, in ArduPilot's boot time) and exactly the fixes ArduPilot was
-sent (fused at their validity time, pushed at their release time), so each method is what a
+sent (fused at their validity time, pushed at their release time, with the accuracies and the
+Doppler velocity GPS_INPUT gave EKF3), so each method is what a
 companion reading this autopilot would have estimated in open loop, and all methods and EKF3
 are compared on identical GNSS. Errors are taken at the truth samples (SIM_STATE) of the route
 phase; EKF3's GLOBAL_POSITION_INT is interpolated linearly to those times.
@@ -49,7 +50,9 @@ def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: Estim
     for i, t in enumerate(imu_t):  # as the session pushes them: the IMU sample, then the fixes released
         nav.push_imu_batch(np.array([t]), rec.imu_acc_frd_m_s2[i][None, :], rec.imu_q_ned_frd[i][None, :])
         while k < len(sent) and sent[k].arrival_us <= t:
-            nav.push_fix_ned(sent[k].fix.t_validity_us, sent[k].p_ned_m)
+            sf = sent[k]  # with the accuracies and the Doppler velocity EKF3 is sent (GPS_INPUT)
+            nav.push_fix_ned(sf.fix.t_validity_us, sf.p_ned_m, sf.fix.h_acc_m, sf.fix.v_acc_m, sf.v_ned_m_s,
+                             sf.speed_accuracy_m_s)
             k += 1
         while j < n and times_us[j] < t:
             j += 1  # an evaluation time without its IMU sample (dropped): skipped, stays NaN

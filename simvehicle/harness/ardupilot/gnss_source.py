@@ -44,6 +44,7 @@ class SentFix:
     fix: GnssFix  # t_validity_us, geodetic position, accuracies
     p_ned_m: np.ndarray
     v_ned_m_s: np.ndarray | None = None  # Doppler velocity (truth + noise), None: position only
+    speed_accuracy_m_s: float = float("nan")  # the velocity's 1σ as GPS_INPUT reports it (NaN: none)
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +96,9 @@ class UrbanGnssSource:
         """Fixes whose latency has elapsed by ``t_us`` (release order); remembered in ``sent``."""
         out = []
         for nf in self.model.release(t_us):
-            sf = SentFix(t_us, self.model.to_fix(nf), nf.p_ned_m, self._velocity.pop(nf.t_validity_us, None))
+            v = self._velocity.pop(nf.t_validity_us, None)
+            acc = float("nan") if v is None else float(self.velocity_sigma_m_s or 0.0)
+            sf = SentFix(t_us, self.model.to_fix(nf), nf.p_ned_m, v, acc)
             self.sent.append(sf)
             out.append(sf)
         return out
