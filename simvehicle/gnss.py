@@ -112,7 +112,8 @@ class GnssModel:
                  velocity_rng: np.random.Generator | None = None) -> None:
         self.cfg = cfg
         # the Doppler velocity's own stream (cfg.velocity), so the positions do not depend on it
-        self._velocity_normals = NormalBlocks(velocity_rng or np.random.default_rng(0)) if cfg.velocity else None
+        self._velocity_normals = (NormalBlocks(velocity_rng or np.random.default_rng(0)) if cfg.velocity
+                                  else None)
         self.unmodelled = unmodelled  # effects beyond eq. 22-27 (simvehicle.nlos), own generator
         self.period_s = period_s
         self.to_geodetic = NedToGeodetic(frame)

@@ -121,16 +121,20 @@ def multipath_stream(rng: np.random.Generator, cfg: EstimatorConfig, segments: l
     return Stream(t_us, a_meas, x, idx, z, std[idx])
 
 
-def drive(stream: Stream, engine: Any, arrival_us: np.ndarray) -> Any:
+def drive(stream: Stream, engine: Any, arrival_us: np.ndarray, velocity: np.ndarray | None = None,
+          r_m2: Any = None) -> Any:
     """Push the IMU in time order into a ``FusionEngine`` and each fix once the IMU clock reaches
-    its arrival time (``arrival_us[i]`` for fix i; equal to ``stream.fix_t_us`` = in order)."""
+    its arrival time (``arrival_us[i]`` for fix i; equal to ``stream.fix_t_us`` = in order), with
+    the receiver's velocity ``velocity[i]`` ((k, 3), NaN = not reported; None: none) and the R
+    ``r_m2`` (None: the config's; ``engine.LEARN``: learned)."""
     order = np.argsort(arrival_us, kind="stable")
     j = 0
     for k, t in enumerate(stream.t_us.tolist()):
         engine.push_acc(t, *stream.a_ned_m_s2[k].tolist())
         while j < len(order) and arrival_us[order[j]] <= t:
             i = order[j]
-            engine.push_fix(int(stream.fix_t_us[i]), stream.z_ned_m[i])
+            v = None if velocity is None else tuple(velocity[i].tolist())
+            engine.push_fix(int(stream.fix_t_us[i]), stream.z_ned_m[i], r_m2, v)
             j += 1
     return engine
 

@@ -160,15 +160,12 @@ def _fix(t_us, p_ned_m, h_acc_m=math.nan, v_acc_m=math.nan):
     return GnssFix(t_us, lat, lon, alt, 3, 12, h_acc_m, v_acc_m)
 
 
-def test_receiver_accuracy_sets_r_floored_at_the_config_else_hdop_else_learned():
+def test_receiver_accuracy_sets_r_floored_at_the_config_else_learned():
     nav = Navigator(CFG, "naive", HOME)
     assert nav.fix_r_nominal_m2(1.5, 3.0) == (2.25, 2.25, 9.0)
-    inf = math.inf
+    inf = math.inf  # not reported: the engine learns it (per component)
     assert nav.fix_r_nominal_m2(0.01, math.nan) == (CFG.sigma_gnss_horizontal_m**2,) * 2 + (inf,)
     assert nav.fix_r_nominal_m2(inf, -1.0) == (inf, inf, inf) == engine.LEARN
-    h = 1.2 * CFG.gnss_uere_m  # HDOP 1.2, no accuracy: HDOP × UERE, vertical 1.5× that
-    assert nav.fix_r_nominal_m2(math.nan, math.nan, 1.2) == pytest.approx((h * h, h * h, 2.25 * h * h))
-    assert nav.fix_r_nominal_m2(0.5, math.nan, 1.2) == (0.25, 0.25, inf)  # the reported one wins
     nav.push(AttitudeSample(0, np.array([1.0, 0.0, 0.0, 0.0])))
     nav.push(ImuSample(0, np.array([0.0, 0.0, -CFG.gravity_m_s2]), np.zeros(3)))
     nav.push(_fix(0, (0.0, 0.0, 0.0), 2.0, 4.0))

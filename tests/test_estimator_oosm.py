@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from companion.estimator import METHODS
+from companion.estimator import engine as engine_module
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, drive, multipath_stream
@@ -72,40 +73,63 @@ def test_history_stays_bounded_through_a_gnss_outage(stream):
 
 @pytest.fixture(scope="module")
 def glitch_stream():
-    """Clean GNSS with a 1 s 8 m step (an offset, no reset) and a 9 s 20 m step (with offsets limited
-    to 4 s: an offset, a reset into the step, an offset at its end, a reset out of it)."""
-    s = multipath_stream(np.random.default_rng(3), CFG, [(24.0, 0.0)])
+    """Clean GNSS with the receiver's velocity (truth + 0.1 m/s noise, no vertical) and every path of
+    the gate: a 1 s 8 m step (held on the velocity), a 9 s 20 m step (held 5 s, accepted, then its end
+    a return), a velocity glitch (rejected by its gate), a 6 s outage ending 30 m away (rejected, then
+    a reset) and a 20 m/s² error of the IMU's north acceleration for 1.5 s (the velocity fails against a
+    self-consistent GNSS: the IMU-distrust hypothesis, the disagreement flagged)."""
+    s = multipath_stream(np.random.default_rng(3), CFG, [(40.0, 0.0)])
     t = s.fix_t_us * 1e-6
     z = s.z_ned_m.copy()
     z[(t >= 4.0) & (t < 5.0), 0] += 8.0
     z[(t >= 8.0) & (t < 17.0), 1] -= 20.0
-    return s.__class__(s.t_us, s.a_ned_m_s2, s.x_true, s.fix_index, z, s.bias_std_m)
+    z[t >= 26.0, 0] += 30.0
+    keep = ~((t >= 20.0) & (t < 26.0))
+    v = s.x_true[s.fix_index, 3:6] + np.random.default_rng(4).normal(0.0, 0.1, (len(t), 3))
+    v[:, 2] = np.nan  # GPS_RAW_INT has no vertical
+    v[np.argmin(abs(t - 18.5)), 0] += 5.0
+    a = s.a_ned_m_s2.copy()
+    ti = s.t_us * 1e-6
+    a[(ti >= 30.0) & (ti < 31.5), 0] += 20.0
+    out = s.__class__(s.t_us, a, s.x_true, s.fix_index[keep], z[keep], s.bias_std_m[keep])
+    return out, v[keep]
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_gate_and_reset_are_exact_under_out_of_order_fusion(glitch_stream, method):
-    """Rejections, offsets and resets are a function of the time-ordered fixes: random delays (up
-    to 1.2 s) give the same decisions, counters and estimate as in-order processing."""
-    s = glitch_stream
-    cfg = EstimatorConfig(gnss_offset_max_s=4.0)
+@pytest.mark.parametrize("learned", [False, True])
+def test_gate_and_reset_are_exact_under_out_of_order_fusion(glitch_stream, method, learned):
+    """Every decision (position and velocity gates, offsets held, accepted and returned, resets, the
+    IMU/GNSS disagreement, the envelope, the learned R) is a function of the time-ordered fixes:
+    random delays (up to 1.2 s) give the same decisions, counters and estimate as in-order
+    processing, with the receiver's velocity and with the R of a receiver that reports none."""
+    s, v = glitch_stream
+    r = engine_module.LEARN if learned else None
     rng = np.random.default_rng(5)
     delay_us = rng.uniform(0.0, 1.2e6, size=len(s.fix_t_us)).astype(np.int64)
     delay_us[0] = 0
-    late = _run(s, method, np.minimum(s.fix_t_us + delay_us, s.t_us[-1]), cfg)
-    ref = _run(s, method, s.fix_t_us.copy(), cfg)
+    arrival_us = np.minimum(s.fix_t_us + delay_us, s.t_us[-1])
+    late = drive(s, FusionEngine(CFG, method, context=OPEN_SKY), arrival_us, v, r)
+    ref = drive(s, FusionEngine(CFG, method, context=OPEN_SKY), s.fix_t_us.copy(), v, r)
     assert late.counts["gnss_out_of_order"] > 50
-    for name in ("gnss_rejected_innovation", "gnss_resets", "gnss_offsets", "gnss_fused"):
+    names = ("gnss_rejected_innovation", "gnss_resets", "gnss_offsets", "gnss_offset_returns", "gnss_fused",
+             "gnss_vel_fused", "gnss_vel_rejected_innovation", "imu_gnss_disagreements",
+             "envelope_violations")
+    for name in names:
         assert late.counts[name] == ref.counts[name], name
-    assert ref.counts["gnss_resets"] == 2 and ref.counts["gnss_offsets"] == 3
+    c = ref.counts
+    assert c["gnss_offsets"] >= 2 and c["gnss_offset_returns"] == 1 and c["gnss_resets"] >= 2
+    assert c["gnss_vel_rejected_innovation"] >= 1 and c["imu_gnss_disagreements"] >= 1
     a, b = late.snapshot(), ref.snapshot()
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(a.var, b.var, rtol=0, atol=1e-9)
     np.testing.assert_allclose(np.array(late.covariance_now()), np.array(ref.covariance_now()),
                                rtol=0, atol=1e-9)
-    assert abs(a.beta - b.beta) < 1e-9 and a.pos_valid and not a.glitch
+    assert abs(a.beta - b.beta) < 1e-9 and a.pos_valid == b.pos_valid
     for f, g in zip(late.fusions[1:], ref.fusions[-len(late.fusions) + 1:], strict=True):
-        assert (f.t_us, f.glitch, f.n_rejected, f.n_resets, f.t_fused_us, f.n_offsets, f.t_offset_us) == (
-            g.t_us, g.glitch, g.n_rejected, g.n_resets, g.t_fused_us, g.n_offsets, g.t_offset_us)
-        assert (f.offset is None) == (g.offset is None)
-        if f.offset is not None:
-            np.testing.assert_allclose(f.offset, g.offset, rtol=0, atol=1e-9)
+        assert (f.t_us, f.glitch, f.n_rejected, f.n_resets, f.t_fused_us, f.n_offsets, f.t_offset_us,
+                f.n_returns, f.disagree, f.invalid, f.n_vel_rejected) == (
+            g.t_us, g.glitch, g.n_rejected, g.n_resets, g.t_fused_us, g.n_offsets, g.t_offset_us,
+            g.n_returns, g.disagree, g.invalid, g.n_vel_rejected)
+        assert (f.offset is None) == (g.offset is None) and (f.accepted is None) == (g.accepted is None)
+        np.testing.assert_allclose((f.scale_h_m, f.noise_h_m, f.disagree_level),
+                                   (g.scale_h_m, g.noise_h_m, g.disagree_level), rtol=0, atol=1e-9)

@@ -140,22 +140,24 @@ class EstimatorConfig:
     # Largest R any method may use, as a multiple of the fix's nominal variance (R_nom, or the
     # receiver-reported accuracy): bounds what adaptive and vbakf learn (10× the nominal std).
     r_learned_max_factor: float = 100.0
+    # The same bound for a fix whose receiver states neither its accuracy nor a velocity (its R is then
+    # its own learned noise): innovations beyond that noise may be the IMU's fault (a wrong attitude
+    # input), and an R learned from them makes the filter trust the wrong IMU more (measured on
+    # quad106 with a 180° heading fault: adaptive and vbakf 24 m from the GNSS track at 100×, the
+    # gate-off filter 9 m). 4 (2× the noise's std).
+    r_learned_max_factor_unreported: float = 4.0
 
-    # --- receivers (docs/estimator.md, "Receiver accuracy"). A fix without h_acc/v_acc but with HDOP
-    # has the accuracy HDOP × gnss_uere_m (horizontal; 1.5× that vertical); the user equivalent range
-    # error of a single-frequency receiver is 1-5 m (1σ), 3 m is the middle.
-    gnss_uere_m: float = 3.0
-    # A fix with neither gets a learned R: the receiver's own noise, from its fixes and the IMU alone
-    # (never from the filter's state, so a wrong model cannot inflate it into a fly-away): the change
-    # between consecutive blocks of the velocity two fixes imply once the IMU's displacement is
-    # removed, normalised to one fix's noise, through a log-domain running centre of its magnitude
-    # (each fix moves it by at most a factor e^(T/τ), time constant gnss_scale_tau_s), floored at the
-    # configured sigma_gnss_*. It starts at sigma_gnss_unreported_m, the GNSS noise EKF2
-    # (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE) assume by default. The gate's R is floored for
-    # every receiver (reported accuracy or not) at the robust spread of its innovations (the same
-    # running centre of |innovation| minus the prediction's share H P Hᵀ): a receiver whose accuracy
-    # is missing or optimistic cannot make the gate reject most of its fixes, only those beyond
-    # gnss_gate_sigma × its own spread.
+    # --- receivers (docs/estimator.md, "Receiver accuracy"). A fix without h_acc/v_acc gets a learned
+    # R: the receiver's own noise, from its fixes and the IMU alone (never from the filter's state, so
+    # a wrong model cannot inflate it into a fly-away): the change between consecutive blocks of the
+    # velocity two fixes imply once the IMU's displacement is removed, normalised to one fix's noise,
+    # through a log-domain running centre of its magnitude (each fix moves it by at most a factor
+    # e^(T/τ), time constant gnss_scale_tau_s), floored at the configured sigma_gnss_*. It starts at
+    # sigma_gnss_unreported_m, the GNSS noise EKF2 (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE)
+    # assume by default. The gate's R is floored for every receiver (reported accuracy or not) at the
+    # robust spread of its innovations (the same running centre of |innovation| minus the
+    # prediction's share H P Hᵀ): a receiver whose accuracy is missing or optimistic cannot make the
+    # gate reject most of its fixes, only those beyond gnss_gate_sigma × its own spread.
     sigma_gnss_unreported_m: float = 0.5
     gnss_scale_tau_s: float = 2.0
 
@@ -224,7 +226,7 @@ class EstimatorConfig:
             "gnss_vel_gate_sigma", "gnss_reset_sigma_vel_m_s", "envelope_speed_max_m_s",
             "envelope_speed_vertical_max_m_s", "envelope_acc_max_m_s2", "envelope_acc_window_s",
             "imu_gnss_disagree_tau_s",
-            "imu_gnss_disagree_on", "imu_gnss_disagree_off", "imu_gnss_disagree_acc_factor", "gnss_uere_m",
+            "imu_gnss_disagree_on", "imu_gnss_disagree_off", "imu_gnss_disagree_acc_factor",
             "sigma_gnss_unreported_m", "gnss_scale_tau_s",
         )
         for name in positive:
@@ -237,9 +239,10 @@ class EstimatorConfig:
             raise ValueError("imu_gnss_disagree_off, imu_gnss_disagree_on: need off < on")
         if self.history_s < 1.5:
             raise ValueError(f"history_s: must be >= 1.5 s, got {self.history_s}")
-        k_max = self.r_learned_max_factor
+        k_max = min(self.r_learned_max_factor, self.r_learned_max_factor_unreported)
         if not (math.isfinite(k_max) and k_max >= self.r_inflation_max):
-            raise ValueError("r_learned_max_factor: must be finite and >= r_inflation_max")
+            raise ValueError("r_learned_max_factor, r_learned_max_factor_unreported: must be finite and "
+                             ">= r_inflation_max")
         if self.r_inflation_max < 1.0:
             raise ValueError(f"r_inflation_max: must be >= 1, got {self.r_inflation_max}")
         if not 0.0 < self.alpha_fast < self.alpha_slow < 1.0:

@@ -186,6 +186,7 @@ class FusionEngine:
         self._dis_clip = self._gate2  # one NIS per dof counts at most gate² (a single outlier)
         self._gate_r_min = cfg.gnss_gate_r_floor_m**2
         self._r_max = cfg.r_learned_max_factor
+        self._r_max_blind = min(cfg.r_learned_max_factor, cfg.r_learned_max_factor_unreported)
         self._reset_us = int(round(cfg.gnss_reset_timeout_s * 1e6))
         self._offset_open_us = int(round(cfg.gnss_offset_open_s * 1e6))
         self._offset_max_us = int(round(cfg.gnss_offset_max_s * 1e6))
@@ -406,7 +407,7 @@ class FusionEngine:
             if t_dis.vel_ok:
                 t, switched = t_dis, True
         x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v, vel_ok, \
-            vel_ratio = t
+            vel_ratio, k_max = t
         n_rej, n_res, n_off = prev.n_rejected, prev.n_resets, prev.n_offsets
         n_vt, n_vr = prev.n_vel_tested, prev.n_vel_rejected
         if zv is not None:
@@ -423,7 +424,7 @@ class FusionEngine:
             fused_pos = False
             if off is not None:  # the step still holds (the fix passes relative to the offset)?
                 rel = self._relative(prev.state, y, off, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
-                                     floor_v)
+                                     floor_v, k_max)
                 if rel is not None and t_us - t_off >= self._offset_max_us:
                     # it lasted: the GNSS's new track (EKF2/EKF3 reset into it): the position moves onto
                     # this fix, which is fused with that zero innovation
@@ -437,7 +438,7 @@ class FusionEngine:
             if not fused_pos and not held and acc is not None and t_us - t_acc <= self._return_us:
                 back = (-acc[0], -acc[1], -acc[2])  # the fix is back on the track kept before the step?
                 rel = self._relative(prev.state, y, back, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
-                                     floor_v)
+                                     floor_v, k_max)
                 if rel is not None:
                     fused_pos, (y_fused, R_fused, terms_fused) = True, rel
                     shift, acc, t_acc, n_ret, glitch, off, t_off = back, None, 0, n_ret + 1, False, None, 0
@@ -545,7 +546,10 @@ class FusionEngine:
         floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
         floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
         terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p)
-        R = self._r_of(prev.state, terms, r_nom)
+        # a receiver stating neither its accuracy nor a velocity: innovations beyond its own noise may be
+        # the IMU's fault (a wrong attitude), so an R-learner may not learn much more than that noise
+        k_max = self._r_max_blind if (r_given[0] == math.inf and zv is None) else self._r_max
+        R = self._r_of(prev.state, terms, r_nom, k_max)
         ratio, passes = self._gate(y, hph, R, floor_h, floor_v)
         nis_v, vel_ok, vel_ratio = math.nan, False, math.nan
         if zv is not None:
@@ -555,7 +559,7 @@ class FusionEngine:
             n_h = (zv[0] == zv[0]) + (zv[1] == zv[1])  # horizontal components reported (NaN != NaN)
             nis_v = nis_vh / n_h if n_h else math.nan
         return _Test(x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v,
-                     vel_ok, vel_ratio)
+                     vel_ok, vel_ratio, k_max)
 
     def _gnss_consistent(self, prev: Fusion, z: Vec3, zv: Vec3, rv: Vec3, r_nom: Vec3, T: float) -> bool:
         """The receiver agrees with itself since the previous fix: its horizontal position change over
@@ -571,21 +575,21 @@ class FusionEngine:
                 return False
         return True
 
-    def _relative(self, state: Any, y: Vec3, off: Vec3, s0: Vec3, q_bias_unit: float, r_nom: Vec3, pht_p: Vec3,
-                  hph: _Hph, floor_h: float, floor_v: float) -> tuple[Vec3, Vec3, InnovationTerms] | None:
+    def _relative(self, state: Any, y: Vec3, off: Vec3, s0: Vec3, q_bias_unit: float, r_nom: Vec3,
+                  pht_p: Vec3, hph: _Hph, floor_h: float, floor_v: float, k_max: float
+                  ) -> tuple[Vec3, Vec3, InnovationTerms] | None:
         """(innovation, R, terms) of the fix relative to the offset ``off`` (y − off) if that passes
         the gate, else None."""
         y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
         terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
-        R_off = self._r_of(state, terms_off, r_nom)
+        R_off = self._r_of(state, terms_off, r_nom, k_max)
         if self._gate(y_off, hph, R_off, floor_h, floor_v)[1]:
             return y_off, R_off, terms_off
         return None
 
-    def _r_of(self, state: Any, terms: InnovationTerms, r_nom: Vec3) -> Vec3:
-        """The method's R for this fix, bounded by ``r_learned_max_factor`` × the nominal R."""
+    def _r_of(self, state: Any, terms: InnovationTerms, r_nom: Vec3, k: float) -> Vec3:
+        """The method's R for this fix, bounded by ``k`` × the nominal R."""
         R = self.method.measurement_cov(state, terms)
-        k = self._r_max
         if R[0] > k * r_nom[0] or R[1] > k * r_nom[1] or R[2] > k * r_nom[2]:
             R = (min(R[0], k * r_nom[0]), min(R[1], k * r_nom[1]), min(R[2], k * r_nom[2]))
         return R
@@ -697,6 +701,7 @@ class _Test(NamedTuple):
     nis_v: float  # horizontal velocity NIS per dof (NaN: no velocity)
     vel_ok: bool  # the velocity passed its gate
     vel_ratio: float  # horizontal velocity NIS / gate²
+    k_max: float  # the bound on the method's R, × r_nom
 
 
 class _Fix(NamedTuple):

@@ -164,7 +164,7 @@ class Navigator:
             self._to_ned = NedConverter(self.frame)
         v = fix.v_ned_m_s
         self.engine.push_fix(fix.t_validity_us, self._to_ned(fix.lat_deg, fix.lon_deg, fix.alt_m),  # type: ignore[misc]
-                             self.fix_r_nominal_m2(fix.h_acc_m, fix.v_acc_m, fix.hdop),
+                             self.fix_r_nominal_m2(fix.h_acc_m, fix.v_acc_m),
                              v, None if v is None else self.fix_r_velocity_m2(fix.vel_acc_m_s))
 
     def _frozen(self, fix: GnssFix) -> bool:
@@ -188,17 +188,13 @@ class Navigator:
         x = fusions[-1].x
         return math.hypot(x[3], x[4]) > self.cfg.gnss_frozen_speed_m_s
 
-    def fix_r_nominal_m2(self, h_acc_m: float, v_acc_m: float,
-                         hdop: float = math.nan) -> tuple[float, float, float]:
+    def fix_r_nominal_m2(self, h_acc_m: float, v_acc_m: float) -> tuple[float, float, float]:
         """A fix's nominal R (NED variances, m²): the receiver-reported 1σ accuracy where known (finite,
         > 0), floored at the configured nominal std (as PX4 EKF2: max(hacc, EKF2_GPS_P_NOISE)); where
-        not, HDOP × ``gnss_uere_m`` (vertical 1.5× that) when the receiver reports HDOP; else
-        infinite: the engine learns it from the receiver's innovations (``engine.LEARN``)."""
+        not, infinite: the engine learns it from the receiver's own fixes (``engine.LEARN``). HDOP is
+        not used: HDOP × a UERE measured both too pessimistic for a good receiver (3.6 m for quad106's
+        decimetre fixes) and too optimistic for an urban one (docs/estimator.md)."""
         c = self.cfg
-        if not (math.isfinite(h_acc_m) and h_acc_m > 0.0) and math.isfinite(hdop) and hdop > 0.0:
-            h_acc_m = hdop * c.gnss_uere_m
-            if not (math.isfinite(v_acc_m) and v_acc_m > 0.0):
-                v_acc_m = 1.5 * h_acc_m
         inf = math.inf
         h = max(h_acc_m, c.sigma_gnss_horizontal_m) if math.isfinite(h_acc_m) and h_acc_m > 0.0 else inf
         v = max(v_acc_m, c.sigma_gnss_vertical_m) if math.isfinite(v_acc_m) and v_acc_m > 0.0 else inf

@@ -74,8 +74,8 @@ SCENARIO_SECTIONS: dict[str, dict[str, dict[str, Any]]] = {
     "paper": {"estimator": PAPER_IMU_PRIOR},
     "realistic": {"imu": ICM_42688_P, "ahrs": {"enabled": True}, "gnss": RECEIVER_VELOCITY,
                   "estimator": MEMS_IMU_PRIOR},
-    "mismatch": {"imu": ICM_42688_P, "ahrs": {"enabled": True}, "gnss": {**UNMODELLED_GNSS, **RECEIVER_VELOCITY},
-                 "estimator": MEMS_IMU_PRIOR},
+    "mismatch": {"imu": ICM_42688_P, "ahrs": {"enabled": True},
+                 "gnss": {**UNMODELLED_GNSS, **RECEIVER_VELOCITY}, "estimator": MEMS_IMU_PRIOR},
 }
 SCENARIOS: tuple[str, ...] = tuple(SCENARIO_SECTIONS)  # the names (``paper`` is the default)
 

@@ -22,6 +22,7 @@ TARGETS = {
     "ardupilot": "gcs_tools.bench.ardupilot",
     "gnss": "gcs_tools.bench.gnss",
     "cli": "gcs_tools.bench.cli_start",
+    "robustness": "gcs_tools.bench.robustness",
 }
 
 
