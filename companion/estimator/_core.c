@@ -484,6 +484,59 @@ static PyObject *py_update_vel(PyObject *self, PyObject *const *args, Py_ssize_t
     return Py_BuildValue("(NN)", tuple_of(x, NS), new_cov(A));
 }
 
+/* engine._centre_step: the factor a log-domain running centre moves by for a sample ratio x its value */
+static double centre_step(double ratio, double k, double ek) {
+    if (ratio >= M_E) return ek;
+    if (ratio <= 1.0 / M_E) return 1.0 / ek;
+    return pow(ratio, k);
+}
+
+/* receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek) -> (scales', u, dv): the engine's
+ * running centres of the receiver (engine.Fusion.scale_*_m, noise_*_m) after a fix at the time of the
+ * integrals b, the previous fix pz (None: none) at those of a. scales = (scale_h, scale_v, noise_h,
+ * noise_v); yd the innovation decided on; u = (z - pz - D_imu) / T (None without pz), dv the IMU's
+ * velocity change over the block; pu, pd, tp the previous entry's u (None: none), dv and block length.
+ * The formulas of FusionEngine._fuse (docs there). */
+static PyObject *py_receiver_spread(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 12) {
+        PyErr_SetString(PyExc_TypeError, "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek)");
+        return NULL;
+    }
+    double a[NINT], b[NINT], z[3], pz[3], pu[3], pd[3], yd[3], sc[4];
+    int have_pz = args[3] != Py_None, have_pu = args[4] != Py_None;
+    if (read_doubles(args[0], a, NINT, "integrals") < 0 || read_doubles(args[1], b, NINT, "integrals") < 0
+        || read_doubles(args[2], z, 3, "fix") < 0 || (have_pz && read_doubles(args[3], pz, 3, "fix") < 0)
+        || (have_pu && read_doubles(args[4], pu, 3, "u") < 0) || read_doubles(args[5], pd, 3, "dv") < 0
+        || read_doubles(args[8], yd, 3, "innovation") < 0 || read_doubles(args[9], sc, 4, "scales") < 0)
+        return NULL;
+    double tp = PyFloat_AsDouble(args[6]), T = PyFloat_AsDouble(args[7]), k = PyFloat_AsDouble(args[10]),
+           ek = PyFloat_AsDouble(args[11]);
+    if (PyErr_Occurred()) return NULL;
+    double dv[3] = {0.0, 0.0, 0.0}, u[3];
+    int have_u = 0;
+    if (T > 0.0) {
+        sc[0] *= centre_step(hypot(yd[0], yd[1]) / sc[0], k, ek);
+        sc[1] *= centre_step(fabs(yd[2]) / sc[1], k, ek);
+        double tb = b[0];
+        for (int i = 0; i < 3; i++) dv[i] = b[1 + i] - a[1 + i];
+        if (have_pz) {
+            for (int i = 0; i < 3; i++) u[i] = (z[i] - pz[i] - (tb * dv[i] - (b[4 + i] - a[4 + i]))) / T;
+            have_u = 1;
+            if (have_pu && tp > 0.0) {
+                double c = 1.0 / sqrt(1.0 / (T * T) + (1.0 / T + 1.0 / tp) * (1.0 / T + 1.0 / tp) + 1.0 / (tp * tp));
+                double e0 = (u[0] - pu[0] - pd[0]) * c, e1 = (u[1] - pu[1] - pd[1]) * c,
+                       e2 = (u[2] - pu[2] - pd[2]) * c;
+                sc[2] *= centre_step(hypot(e0, e1) / sc[2], k, ek);
+                sc[3] *= centre_step(fabs(e2) / sc[3], k, ek);
+            }
+        }
+    }
+    PyObject *uo = have_u ? tuple_of(u, 3) : Py_NewRef(Py_None);
+    PyObject *dvo = tuple_of(dv, 3);
+    if (!uo || !dvo) { Py_XDECREF(uo); Py_XDECREF(dvo); return NULL; }
+    return Py_BuildValue("(ddddNN)", sc[0], sc[1], sc[2], sc[3], uo, dvo);
+}
+
 /* inv3(s) -> row-major inverse (9-tuple) of a symmetric 3x3 (nested sequences, upper triangle read) */
 static PyObject *py_inv3(PyObject *self, PyObject *s) {
     double m[9];
@@ -898,6 +951,8 @@ static PyMethodDef module_methods[] = {
     {"rotation_blocks", (PyCFunction)(void (*)(void))py_rotation_blocks, METH_FASTCALL,
      "rotation_blocks(a, b) -> (-A, -B) row-major"},
     {"update", (PyCFunction)(void (*)(void))py_update, METH_FASTCALL, "update(x, P, y, r) -> (x+, P+, NIS)"},
+    {"receiver_spread", (PyCFunction)(void (*)(void))py_receiver_spread, METH_FASTCALL,
+     "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek) -> (4 centres, u, dv)"},
     {"vel_nis", (PyCFunction)(void (*)(void))py_vel_nis, METH_FASTCALL,
      "vel_nis(x, P, z_v, r) -> (horizontal NIS, vertical NIS) of a velocity measurement"},
     {"update_vel", (PyCFunction)(void (*)(void))py_update_vel, METH_FASTCALL,

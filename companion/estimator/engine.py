@@ -174,6 +174,9 @@ class FusionEngine:
         self._gate2 = cfg.gnss_gate_sigma**2
         self._vel_gate2 = cfg.gnss_vel_gate_sigma**2
         self._scale_tau_s = cfg.gnss_scale_tau_s
+        h, d = cfg.sigma_gnss_velocity_m_s**2, cfg.sigma_gnss_velocity_vertical_m_s**2
+        self._rv_default: Vec3 = (h, h, d)
+        self._decay_cache: dict[int, tuple[float, float, float, float, float]] = {}
         self._reset_var = (cfg.sigma_bias0_m**2, cfg.gnss_reset_sigma_vel_m_s**2,
                            (cfg.sigma_acc_bias0_m_s2**2, cfg.sigma_acc_ned0_m_s2**2))
         self._v_max2 = cfg.envelope_speed_max_m_s**2
@@ -265,8 +268,8 @@ class FusionEngine:
             c["gnss_rejected_nonfinite"] += 1
             return
         r = self._r_nominal if r_nominal_m2 is None else r_nominal_m2
-        if not (len(r) == 3 and all(v > 0.0 for v in r) and r[0] == r[1]  # NaN > 0 is False; inf: learned
-                and (r[0] == math.inf or math.isfinite(r[0])) and (r[2] == math.inf or math.isfinite(r[2]))):
+        # each > 0 (NaN > 0 is False); +inf: learned (north and east alike)
+        if not (len(r) == 3 and r[0] > 0.0 and r[1] > 0.0 and r[2] > 0.0 and (r[0] == _INF) == (r[1] == _INF)):
             c["gnss_rejected_nonfinite"] += 1
             return
         imu = self.imu
@@ -296,18 +299,19 @@ class FusionEngine:
         """(velocity, its variances) with the components not reported (not finite, or their
         variance not finite and > 0) as NaN; None when none is reported."""
         if rv is None:
-            cfg = self.cfg
-            h, d = cfg.sigma_gnss_velocity_m_s**2, cfg.sigma_gnss_velocity_vertical_m_s**2
-            rv = (h, h, d)
-        vals = tuple(float(a) for a in (v.tolist() if isinstance(v, np.ndarray) else v))
-        if len(vals) != 3:
+            rv = self._rv_default
+        vals = v.tolist() if isinstance(v, np.ndarray) else v
+        if len(vals) != 3 or len(rv) != 3:
             return None
-        ok = [math.isfinite(a) and math.isfinite(b) and b > 0.0 for a, b in zip(vals, rv, strict=True)]
-        if not any(ok):
+        nan, isfinite = math.nan, math.isfinite
+        v0, v1, v2 = float(vals[0]), float(vals[1]), float(vals[2])
+        ok0 = isfinite(v0) and rv[0] > 0.0 and rv[0] < _INF  # NaN comparisons are False
+        ok1 = isfinite(v1) and rv[1] > 0.0 and rv[1] < _INF
+        ok2 = isfinite(v2) and rv[2] > 0.0 and rv[2] < _INF
+        if not (ok0 or ok1 or ok2):
             return None
-        nan = math.nan
-        return ((vals[0] if ok[0] else nan, vals[1] if ok[1] else nan, vals[2] if ok[2] else nan),
-                (rv[0] if ok[0] else nan, rv[1] if ok[1] else nan, rv[2] if ok[2] else nan))
+        return ((v0 if ok0 else nan, v1 if ok1 else nan, v2 if ok2 else nan),
+                (rv[0] if ok0 else nan, rv[1] if ok1 else nan, rv[2] if ok2 else nan))
 
     def _is_duplicate(self, t_us: int) -> bool:
         i = bisect.bisect_left(self._fusion_t, t_us)
@@ -392,19 +396,19 @@ class FusionEngine:
         t_us, z, r_given, zv, rv = fix
         prev = self.fusions[-1]
         T = (t_us - prev.t_us) * 1e-6
-        alpha = math.exp(-T / self._tau_s)
+        alpha, w_dis, w_acc, k, ek = self._decays(t_us - prev.t_us)
         sigma_b = prev.sigma_bias_m
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
         ints = self.imu.integrals(t_us)
         t = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, prev.disagree)
         switched = False
-        if (zv is not None and not t.vel_ok and not prev.disagree
-                and self._gnss_consistent(prev, z, zv, rv, t.r_nom, T)):
+        if (zv is not None and not t[_VEL_OK] and not prev.disagree
+                and self._gnss_consistent(prev, z, zv, rv, t[_R_NOM], T)):
             # the IMU-propagated motion disagrees with a self-consistent GNSS: would the fix pass if
             # the IMU were distrusted (its white-acceleration density inflated)?
             t_dis = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, True)
-            if t_dis.vel_ok:
+            if t_dis[_VEL_OK]:
                 t, switched = t_dis, True
         x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v, vel_ok, \
             vel_ratio, k_max = t
@@ -463,40 +467,19 @@ class FusionEngine:
                 off, t_off, n_off = y, t_us, n_off + 1
         if vel_ok:
             x_post, P_post = _core.update_vel(x_post, P_post, zv, rv)
-        # the spread follows the innovation the decision was made on (an offset's relative one)
-        yd = y_fused if fused_pos else y
-        scale_h, scale_v = prev.scale_h_m, prev.scale_v_m
-        noise_h, noise_v = prev.noise_h_m, prev.noise_v_m
-        u: Vec3 | None = None
-        dv_imu: Vec3 = (0.0, 0.0, 0.0)
-        if T > 0.0:
-            k = T / self._scale_tau_s if self._scale_tau_s > T else 1.0
-            scale_h *= math.exp(k * _clip1(math.log(math.hypot(yd[0], yd[1]) / scale_h + 1e-300)))
-            scale_v *= math.exp(k * _clip1(math.log(abs(yd[2]) / scale_v + 1e-300)))
-            # the receiver's noise: the change of u between blocks, less the IMU's velocity change
-            # over the previous block, is white GNSS noise (variance σ² c) whatever the state
-            a, tb = prev.ints, ints[0]
-            dv_imu = (ints[1] - a[1], ints[2] - a[2], ints[3] - a[3])
-            pz = prev.z_ned_m
-            if pz is not None:
-                u = ((z[0] - pz[0] - (tb * dv_imu[0] - (ints[4] - a[4]))) / T,
-                     (z[1] - pz[1] - (tb * dv_imu[1] - (ints[5] - a[5]))) / T,
-                     (z[2] - pz[2] - (tb * dv_imu[2] - (ints[6] - a[6]))) / T)
-                pu, tp = prev.u_ned_m_s, prev.block_s
-                if pu is not None and tp > 0.0:
-                    pd = prev.dv_imu_m_s
-                    c = 1.0 / math.sqrt(1.0 / (T * T) + (1.0 / T + 1.0 / tp) ** 2 + 1.0 / (tp * tp))
-                    e0, e1, e2 = ((u[0] - pu[0] - pd[0]) * c, (u[1] - pu[1] - pd[1]) * c,
-                                  (u[2] - pu[2] - pd[2]) * c)
-                    noise_h *= math.exp(k * _clip1(math.log(math.hypot(e0, e1) / noise_h + 1e-300)))
-                    noise_v *= math.exp(k * _clip1(math.log(abs(e2) / noise_v + 1e-300)))
+        yd = y_fused if fused_pos else y  # the innovation the decision was made on (an offset's relative one)
+        # the receiver's running centres (C core, the formulas below): its innovations' spread, and its
+        # own noise: the change of u = (z − z_prev − D_imu) / T between blocks, less the IMU's velocity
+        # change over the previous block, is white GNSS noise (variance σ² c) whatever the state
+        scale_h, scale_v, noise_h, noise_v, u, dv_imu = _core.receiver_spread(
+            prev.ints, ints, z, prev.z_ned_m, prev.u_ned_m_s, prev.dv_imu_m_s, prev.block_s, T, yd,
+            (prev.scale_h_m, prev.scale_v_m, prev.noise_h_m, prev.noise_v_m), k, ek)
         # IMU / GNSS disagreement, on the velocity innovations (position fixes alone cannot tell a
         # wrong attitude from a GNSS bias)
         level = prev.disagree_level
         e = nis_v
         if e == e:
-            w = 1.0 - math.exp(-T / self._dis_tau_s) if T > 0.0 else 0.0
-            level += w * ((e if e < self._dis_clip else self._dis_clip) - level)
+            level += w_dis * ((e if e < self._dis_clip else self._dis_clip) - level)
         if switched:
             level = level if level > self._dis_on else self._dis_on
         disagree = switched or level > self._dis_on or (prev.disagree and level > self._dis_off)
@@ -506,9 +489,8 @@ class FusionEngine:
         if reset:
             vs = (v0, v1, v2)
         else:
-            w = 1.0 - math.exp(-T / self._acc_window_s) if T > 0.0 else 0.0
             ps = prev.v_smooth
-            vs = (ps[0] + w * (v0 - ps[0]), ps[1] + w * (v1 - ps[1]), ps[2] + w * (v2 - ps[2]))
+            vs = (ps[0] + w_acc * (v0 - ps[0]), ps[1] + w_acc * (v1 - ps[1]), ps[2] + w_acc * (v2 - ps[2]))
         a2 = (v0 - vs[0]) ** 2 + (v1 - vs[1]) ** 2 + (v2 - vs[2]) ** 2
         invalid = v0 * v0 + v1 * v1 > self._v_max2 or abs(v2) > self._vd_max or a2 > self._dv_max2
         beta = self.method.beta(state)
@@ -520,11 +502,26 @@ class FusionEngine:
             u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid))
         self._fusion_t.append(t_us)
 
+    def _decays(self, dt_us: int) -> tuple[float, float, float, float, float]:
+        """(α(T) of the GNSS bias, the disagreement mean's and the smoothed velocity's weights
+        1 − e^(−T/τ), the running centres' rate k = min(1, T/τ) and e^k) for T = ``dt_us``; cached by
+        interval (fixes come at a few fixed rates)."""
+        d = self._decay_cache.get(dt_us)
+        if d is None:
+            T = dt_us * 1e-6
+            k = min(1.0, T / self._scale_tau_s)
+            d = (math.exp(-T / self._tau_s), 1.0 - math.exp(-T / self._dis_tau_s),
+                 1.0 - math.exp(-T / self._acc_window_s), k, math.exp(k))
+            if len(self._decay_cache) > 256:
+                self._decay_cache.clear()
+            self._decay_cache[dt_us] = d
+        return d
+
     def _test(self, prev: Fusion, fix: _Fix, ints: Integrals, T: float, alpha: float, q_bias_unit: float,
               q_b: float, distrust_imu: bool) -> _Test:
         """The prior at the fix (``prev`` predicted with the nominal or, ``distrust_imu``, the inflated
         IMU noise) and the fix tested against it: position (its R, learned where not reported, and
-        the gate's floors) and velocity."""
+        the gate's floors) and velocity, as a plain tuple (``_Test``'s fields, in that order)."""
         z, r_given, zv, rv = fix.z, fix.r, fix.zv, fix.rv
         prop = self._prop_disagree if distrust_imu else self._prop
         # H P⁻ Hᵀ (3×3): the body-frame bias correlates axes
@@ -558,8 +555,8 @@ class FusionEngine:
             vel_ok = nis_vh <= self._vel_gate2 and nis_vd <= self._vel_gate2
             n_h = (zv[0] == zv[0]) + (zv[1] == zv[1])  # horizontal components reported (NaN != NaN)
             nis_v = nis_vh / n_h if n_h else math.nan
-        return _Test(x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v,
-                     vel_ok, vel_ratio, k_max)
+        return (x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v,
+                vel_ok, vel_ratio, k_max)
 
     def _gnss_consistent(self, prev: Fusion, z: Vec3, zv: Vec3, rv: Vec3, r_nom: Vec3, T: float) -> bool:
         """The receiver agrees with itself since the previous fix: its horizontal position change over
@@ -671,6 +668,7 @@ class FusionEngine:
 
 _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
 _NAN3: Vec3 = (math.nan, math.nan, math.nan)
+_INF = math.inf
 # ``push_fix``'s R of a fix whose receiver reports no accuracy: learned (Fusion.scale_*_m); also per
 # component (an infinite horizontal or vertical variance: that one learned)
 LEARN: Vec3 = (math.inf, math.inf, math.inf)
@@ -679,29 +677,16 @@ LEARN: Vec3 = (math.inf, math.inf, math.inf)
 _SCALE_H, _SCALE_V = 1.1014, 0.6245
 
 
-def _clip1(v: float) -> float:
-    return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
 
 
-class _Test(NamedTuple):
-    """A fix tested against a prior (``FusionEngine._test``)."""
-
-    x: model.State  # the prior at the fix
-    P: model.Cov
-    hph: _Hph
-    y: Vec3  # position innovation
-    s0: Vec3
-    terms: InnovationTerms
-    R: Vec3  # the method's R for it
-    ratio: float  # horizontal NIS / gate²
-    passes: bool
-    r_nom: Vec3  # its nominal R (reported or learned)
-    floor_h: float  # the gate's R floors
-    floor_v: float
-    nis_v: float  # horizontal velocity NIS per dof (NaN: no velocity)
-    vel_ok: bool  # the velocity passed its gate
-    vel_ratio: float  # horizontal velocity NIS / gate²
-    k_max: float  # the bound on the method's R, × r_nom
+# What ``FusionEngine._test`` returns, in this order (a plain tuple: it is built at every fix): the prior
+# at the fix (x, P), H P Hᵀ, the position innovation y, s0, its InnovationTerms, the method's R, the
+# horizontal NIS / gate², passed, the nominal R (reported or learned), the gate's R floors (horizontal,
+# vertical), the horizontal velocity NIS per dof (NaN: no velocity), the velocity passed its gate, its
+# horizontal NIS / gate², the bound on the method's R (× the nominal)
+_Test = tuple[model.State, model.Cov, "_Hph", Vec3, Vec3, InnovationTerms, Vec3, float, bool, Vec3, float, float,
+              float, bool, float, float]
+_R_NOM, _VEL_OK = 9, 13
 
 
 class _Fix(NamedTuple):

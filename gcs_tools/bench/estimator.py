@@ -13,6 +13,8 @@ the estimator is timed. Figures:
 * ``oosm_cost_ratio``: median cost of fusing a fix 1.2 s late ÷ an on-time fix (constant
   latency, so every fix is fused after the latest one: no re-fusion); the random-latency
   stream's mean cost per fix (re-fusions after out-of-order arrivals included) is reported too;
+* ``*_with_velocity``: the streaming factor and the fix costs with the receiver's velocity on
+  every fix (fused beside the position with its own gate);
 * ``replay_realtime_factor`` and its break-down: ``gcs_tools.bench.replay`` on quad106;
 * ``memory_rss_mb_by_sim_min``: resident memory of this process while one Navigator flies a
   one-hour stream (built beforehand, so growth between the marks is the estimator's own), and
@@ -57,8 +59,11 @@ def latency_s(rng: np.random.Generator, n: int, period_s: float) -> np.ndarray:
     return out
 
 
-def flight(duration_s: float, latency: float | None, seed: int = SEED) -> list[Sample]:
-    """Wire samples in arrival order; ``latency`` None: the correlated process, else constant (s)."""
+def flight(duration_s: float, latency: float | None, seed: int = SEED,
+           velocity: bool = False) -> list[Sample]:
+    """Wire samples in arrival order; ``latency`` None: the correlated process, else constant (s);
+    ``velocity``: each fix carries the receiver's velocity (truth + 0.05 m/s noise, no vertical, as
+    GPS_RAW_INT gives it)."""
     rng = np.random.default_rng(seed)
     n = int(duration_s * 1e6 / IMU_PERIOD_US)
     t_us = np.arange(n, dtype=np.int64) * IMU_PERIOD_US
@@ -82,7 +87,8 @@ def flight(duration_s: float, latency: float | None, seed: int = SEED) -> list[S
     for j, k in enumerate(idx.tolist()):
         arrival = int(t_us[k]) + int(math.ceil(lat[j] * 1e6 / IMU_PERIOD_US)) * IMU_PERIOD_US
         la, lo, al = HOME.to_geodetic(z[j])
-        events.append((arrival, 2, GnssFix(int(t_us[k]), la, lo, al, 3, 12)))
+        vel = np.array([*(v[k, 0:2] + 0.05 * rng.standard_normal(2)), np.nan]) if velocity else None
+        events.append((arrival, 2, GnssFix(int(t_us[k]), la, lo, al, 3, 12, v_ned_m_s=vel)))
     events.sort(key=lambda e: (e[0], e[1]))
     return [e[2] for e in events]
 
@@ -212,6 +218,10 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     on_time = fix_costs_us(flight(duration_s / 2, 0.0))
     late = fix_costs_us(flight(duration_s / 2, 1.2))
     random_latency = fix_costs_us(stream)
+    with_velocity = flight(duration_s, None, velocity=True)
+    cpu_velocity = streaming_wall_s(with_velocity)[1]
+    on_time_v = fix_costs_us(flight(duration_s / 2, 0.0, velocity=True))
+    late_v = fix_costs_us(flight(duration_s / 2, 1.2, velocity=True))
     counts = nav_s.counters()
     out: dict[str, Any] = {
         "method": METHOD,
@@ -228,6 +238,10 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "us_per_fix_late_1p2s_median": float(np.median(late)),
         "oosm_cost_ratio": float(np.median(late) / np.median(on_time)),
         "us_per_fix_random_latency_mean": float(np.mean(random_latency)),
+        # the same with the receiver's velocity on every fix (fused beside the position)
+        "realtime_factor_cpu_with_velocity": duration_s / cpu_velocity,
+        "us_per_fix_on_time_median_with_velocity": float(np.median(on_time_v)),
+        "oosm_cost_ratio_with_velocity": float(np.median(late_v) / np.median(on_time_v)),
         "gnss_fused": counts["gnss_fused"],
         "gnss_out_of_order": counts["gnss_out_of_order"],
         "gnss_refused": counts["gnss_refused"],
