@@ -269,7 +269,8 @@ class FusionEngine:
             return
         r = self._r_nominal if r_nominal_m2 is None else r_nominal_m2
         # each > 0 (NaN > 0 is False); +inf: learned (north and east alike)
-        if not (len(r) == 3 and r[0] > 0.0 and r[1] > 0.0 and r[2] > 0.0 and (r[0] == _INF) == (r[1] == _INF)):
+        if not (len(r) == 3 and r[0] > 0.0 and r[1] > 0.0 and r[2] > 0.0
+                and (r[0] == _INF) == (r[1] == _INF)):
             c["gnss_rejected_nonfinite"] += 1
             return
         imu = self.imu
@@ -684,8 +685,8 @@ _SCALE_H, _SCALE_V = 1.1014, 0.6245
 # horizontal NIS / gate², passed, the nominal R (reported or learned), the gate's R floors (horizontal,
 # vertical), the horizontal velocity NIS per dof (NaN: no velocity), the velocity passed its gate, its
 # horizontal NIS / gate², the bound on the method's R (× the nominal)
-_Test = tuple[model.State, model.Cov, "_Hph", Vec3, Vec3, InnovationTerms, Vec3, float, bool, Vec3, float, float,
-              float, bool, float, float]
+_Test = tuple[model.State, model.Cov, "_Hph", Vec3, Vec3, InnovationTerms, Vec3, float, bool, Vec3, float,
+              float, float, bool, float, float]
 _R_NOM, _VEL_OK = 9, 13
 
 
