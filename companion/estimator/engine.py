@@ -405,7 +405,7 @@ class FusionEngine:
         t = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, prev.disagree)
         switched = False
         if (zv is not None and not t[_VEL_OK] and not prev.disagree
-                and self._gnss_consistent(prev, z, zv, rv, t[_R_NOM], T)):
+                and self._gnss_consistent(prev, z, zv, rv, t[_R_NOM], T)):  # type: ignore[arg-type]
             # the IMU-propagated motion disagrees with a self-consistent GNSS: would the fix pass if
             # the IMU were distrusted (its white-acceleration density inflated)?
             t_dis = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, True)
