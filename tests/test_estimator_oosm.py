@@ -117,7 +117,7 @@ def test_gate_and_reset_are_exact_under_out_of_order_fusion(glitch_stream, metho
     for name in names:
         assert late.counts[name] == ref.counts[name], name
     c = ref.counts
-    assert c["gnss_offsets"] >= 2 and c["gnss_offset_returns"] == 1 and c["gnss_resets"] >= 2
+    assert c["gnss_offsets"] >= 1 and c["gnss_offset_returns"] == 1 and c["gnss_resets"] >= 1
     assert c["gnss_vel_rejected_innovation"] >= 1 and c["imu_gnss_disagreements"] >= 1
     a, b = late.snapshot(), ref.snapshot()
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)

@@ -109,8 +109,7 @@ def test_a_jump_with_a_heading_fault_stays_on_the_gnss_track(log, clean, method,
     10 s of another, and within 3 m with the receiver's velocity."""
     case = rb.glitch_case(log, clean, rb.Glitch("jump + heading", 100.0, 80.0, heading_deg=180.0), method,
                           velocity)
-    assert case["ok"], case
-    assert case["resets"] <= 1
+    assert case["ok"], case  # (its resets, if any, at least 10 s apart)
     if velocity:
         assert case["deviation_max_m"] < 3.0
 

@@ -81,8 +81,10 @@ def test_decoders_return_a_value_or_a_codec_error_for_any_field_values(name):
             outcomes[exc.reason] = outcomes.get(exc.reason, 0) + 1
             continue
         outcomes["ok"] += 1
-        if name == "ESTIMATOR_STATUS" and math.isnan(value.pos_horiz_ratio):  # NaN = no test made
-            value = dataclasses.replace(value, pos_horiz_ratio=0.0)
+        if name == "ESTIMATOR_STATUS":  # NaN = no test made
+            value = dataclasses.replace(value, pos_horiz_ratio=0.0 if math.isnan(value.pos_horiz_ratio)
+                                        else value.pos_horiz_ratio,
+                                        vel_ratio=0.0 if math.isnan(value.vel_ratio) else value.vel_ratio)
         assert _finite_values(value) or name in ("SIM_STATE", "ODOMETRY", "GPS_RAW_INT"), (name, value)
     assert sum(outcomes.values()) > 1_000, outcomes  # most draws really reached the decoder
 

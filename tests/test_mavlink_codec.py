@@ -157,6 +157,11 @@ def test_estimator_status_and_belief_values() -> None:
     raw = wire(mc.encode_estimator_status(e))
     assert all(math.isnan(getattr(raw, f)) for f in
                ("vel_ratio", "pos_vert_ratio", "mag_ratio", "hagl_ratio", "tas_ratio"))  # never tested
+    # the receiver's velocity tested, the IMU disagreeing with it: its ratio and ACCEL_ERROR
+    bad_imu = _estimate(0.5, 3.0, pos_horiz_test_ratio=0.5, vel_test_ratio=1.7, imu_gnss_disagreement=True)
+    st_imu = mc.decode_estimator_status(wire(mc.encode_estimator_status(bad_imu)))
+    assert st_imu.vel_ratio == pytest.approx(1.7) and math.isnan(st.vel_ratio)
+    assert st_imu.flags == mc.ESTIMATOR_HEALTHY_FLAGS | mc.mavlink.ESTIMATOR_ACCEL_ERROR
     failed = wire(mc.encode_estimator_status(_estimate(0.5, 3.0, pos_horiz_test_ratio=2.6, gnss_glitch=True)))
     assert failed.pos_horiz_ratio == pytest.approx(2.6)  # the rejected fix's ratio, not the last fused NIS
     assert failed.flags == mc.ESTIMATOR_HEALTHY_FLAGS | mc.mavlink.ESTIMATOR_GPS_GLITCH

@@ -491,15 +491,16 @@ static double centre_step(double ratio, double k, double ek) {
     return pow(ratio, k);
 }
 
-/* receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek) -> (scales', u, dv): the engine's
+/* receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek, kn, ekn) -> (scales', u, dv): the engine's
  * running centres of the receiver (engine.Fusion.scale_*_m, noise_*_m) after a fix at the time of the
  * integrals b, the previous fix pz (None: none) at those of a. scales = (scale_h, scale_v, noise_h,
  * noise_v); yd the innovation decided on; u = (z - pz - D_imu) / T (None without pz), dv the IMU's
- * velocity change over the block; pu, pd, tp the previous entry's u (None: none), dv and block length.
+ * velocity change over the block; pu, pd, tp the previous entry's u (None: none), dv and block length;
+ * (k, e^k) the innovation spread's rate, (kn, e^kn) the noise's.
  * The formulas of FusionEngine._fuse (docs there). */
 static PyObject *py_receiver_spread(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 12) {
-        PyErr_SetString(PyExc_TypeError, "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek)");
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek, kn, ekn)");
         return NULL;
     }
     double a[NINT], b[NINT], z[3], pz[3], pu[3], pd[3], yd[3], sc[4];
@@ -510,7 +511,7 @@ static PyObject *py_receiver_spread(PyObject *self, PyObject *const *args, Py_ss
         || read_doubles(args[8], yd, 3, "innovation") < 0 || read_doubles(args[9], sc, 4, "scales") < 0)
         return NULL;
     double tp = PyFloat_AsDouble(args[6]), T = PyFloat_AsDouble(args[7]), k = PyFloat_AsDouble(args[10]),
-           ek = PyFloat_AsDouble(args[11]);
+           ek = PyFloat_AsDouble(args[11]), kn = PyFloat_AsDouble(args[12]), ekn = PyFloat_AsDouble(args[13]);
     if (PyErr_Occurred()) return NULL;
     double dv[3] = {0.0, 0.0, 0.0}, u[3];
     int have_u = 0;
@@ -526,8 +527,8 @@ static PyObject *py_receiver_spread(PyObject *self, PyObject *const *args, Py_ss
                 double c = 1.0 / sqrt(1.0 / (T * T) + (1.0 / T + 1.0 / tp) * (1.0 / T + 1.0 / tp) + 1.0 / (tp * tp));
                 double e0 = (u[0] - pu[0] - pd[0]) * c, e1 = (u[1] - pu[1] - pd[1]) * c,
                        e2 = (u[2] - pu[2] - pd[2]) * c;
-                sc[2] *= centre_step(hypot(e0, e1) / sc[2], k, ek);
-                sc[3] *= centre_step(fabs(e2) / sc[3], k, ek);
+                sc[2] *= centre_step(hypot(e0, e1) / sc[2], kn, ekn);
+                sc[3] *= centre_step(fabs(e2) / sc[3], kn, ekn);
             }
         }
     }
@@ -952,7 +953,7 @@ static PyMethodDef module_methods[] = {
      "rotation_blocks(a, b) -> (-A, -B) row-major"},
     {"update", (PyCFunction)(void (*)(void))py_update, METH_FASTCALL, "update(x, P, y, r) -> (x+, P+, NIS)"},
     {"receiver_spread", (PyCFunction)(void (*)(void))py_receiver_spread, METH_FASTCALL,
-     "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek) -> (4 centres, u, dv)"},
+     "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek, kn, ekn) -> (4 centres, u, dv)"},
     {"vel_nis", (PyCFunction)(void (*)(void))py_vel_nis, METH_FASTCALL,
      "vel_nis(x, P, z_v, r) -> (horizontal NIS, vertical NIS) of a velocity measurement"},
     {"update_vel", (PyCFunction)(void (*)(void))py_update_vel, METH_FASTCALL,

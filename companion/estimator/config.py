@@ -152,14 +152,18 @@ class EstimatorConfig:
     # a wrong model cannot inflate it into a fly-away): the change between consecutive blocks of the
     # velocity two fixes imply once the IMU's displacement is removed, normalised to one fix's noise,
     # through a log-domain running centre of its magnitude (each fix moves it by at most a factor
-    # e^(T/τ), time constant gnss_scale_tau_s), floored at the configured sigma_gnss_*. It starts at
+    # e^(T/τ), time constant gnss_noise_tau_s), floored at the configured sigma_gnss_*. It starts at
     # sigma_gnss_unreported_m, the GNSS noise EKF2 (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE)
-    # assume by default. The gate's R is floored for every receiver (reported accuracy or not) at the
-    # robust spread of its innovations (the same running centre of |innovation| minus the
-    # prediction's share H P Hᵀ): a receiver whose accuracy is missing or optimistic cannot make the
-    # gate reject most of its fixes, only those beyond gnss_gate_sigma × its own spread.
+    # assume by default. The gate's R is floored for every receiver (reported accuracy or not) at
+    # the robust spread of its innovations (the same running centre of |innovation|, time constant
+    # gnss_scale_tau_s, minus the prediction's share H P Hᵀ; relative to a step held): a receiver
+    # whose accuracy is missing or optimistic cannot make the gate reject most of its fixes, only
+    # those beyond gnss_gate_sigma × its own spread.
     sigma_gnss_unreported_m: float = 0.5
     gnss_scale_tau_s: float = 2.0
+    # The learned noise's time constant (s): a receiver's noise level changes slowly, and a running
+    # centre over ~50 fixes at 5 Hz is known to ~15 % (2 s would leave it ±30 %).
+    gnss_noise_tau_s: float = 10.0
 
     # --- the receiver's velocity (Doppler), fused beside its position (docs/estimator.md)
     # 1σ noise of a velocity component where the receiver reports no speed accuracy, and the floor
@@ -227,7 +231,7 @@ class EstimatorConfig:
             "envelope_speed_vertical_max_m_s", "envelope_acc_max_m_s2", "envelope_acc_window_s",
             "imu_gnss_disagree_tau_s",
             "imu_gnss_disagree_on", "imu_gnss_disagree_off", "imu_gnss_disagree_acc_factor",
-            "sigma_gnss_unreported_m", "gnss_scale_tau_s",
+            "sigma_gnss_unreported_m", "gnss_scale_tau_s", "gnss_noise_tau_s",
         )
         for name in positive:
             value = getattr(self, name)

@@ -176,7 +176,8 @@ class FusionEngine:
         self._scale_tau_s = cfg.gnss_scale_tau_s
         h, d = cfg.sigma_gnss_velocity_m_s**2, cfg.sigma_gnss_velocity_vertical_m_s**2
         self._rv_default: Vec3 = (h, h, d)
-        self._decay_cache: dict[int, tuple[float, float, float, float, float]] = {}
+        self._noise_tau_s = cfg.gnss_noise_tau_s
+        self._decay_cache: dict[int, tuple[float, float, float, float, float, float, float]] = {}
         self._reset_var = (cfg.sigma_bias0_m**2, cfg.gnss_reset_sigma_vel_m_s**2,
                            (cfg.sigma_acc_bias0_m_s2**2, cfg.sigma_acc_ned0_m_s2**2))
         self._v_max2 = cfg.envelope_speed_max_m_s**2
@@ -397,17 +398,18 @@ class FusionEngine:
         t_us, z, r_given, zv, rv = fix
         prev = self.fusions[-1]
         T = (t_us - prev.t_us) * 1e-6
-        alpha, w_dis, w_acc, k, ek = self._decays(t_us - prev.t_us)
+        alpha, w_dis, w_acc, k, ek, kn, ekn = self._decays(t_us - prev.t_us)
         sigma_b = prev.sigma_bias_m
         q_bias_unit = 1.0 - alpha * alpha
         q_b = q_bias_unit * sigma_b * sigma_b
         ints = self.imu.integrals(t_us)
         t = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, prev.disagree)
         switched = False
-        if (zv is not None and not t[_VEL_OK] and not prev.disagree
+        if (zv is not None and not t[_VEL_OK] and not prev.disagree and prev.vel_ratio > 1.0
                 and self._gnss_consistent(prev, z, zv, rv, t[_R_NOM], T)):  # type: ignore[arg-type]
-            # the IMU-propagated motion disagrees with a self-consistent GNSS: would the fix pass if
-            # the IMU were distrusted (its white-acceleration density inflated)?
+            # the IMU-propagated motion persistently (this fix and the last) disagrees with a
+            # self-consistent GNSS: would the fix pass if the IMU were distrusted (its
+            # white-acceleration density inflated)?
             t_dis = self._test(prev, fix, ints, T, alpha, q_bias_unit, q_b, True)
             if t_dis[_VEL_OK]:
                 t, switched = t_dis, True
@@ -456,7 +458,10 @@ class FusionEngine:
         elif held:
             x_post, P_post, nis, state = x_prior, P_prior, _nis(y, hph, R), prev.state
         elif t_us - t_fused >= self._reset_us or prev.invalid:
-            x_post, P_post = model.reset_to_fix(x_prior, P_prior, z, r_nom, self._reset_var[0], zv, rv,
+            x_reset = x_prior
+            if zv is None and self._outside_envelope(x_prior):  # a velocity no vehicle flies: zero (EKF2)
+                x_reset = (*x_prior[0:3], 0.0, 0.0, 0.0, *x_prior[6:])
+            x_post, P_post = model.reset_to_fix(x_reset, P_prior, z, r_nom, self._reset_var[0], zv, rv,
                                                 self._reset_var[1], self._reset_var[2])
             state, nis, t_fused, glitch, reset = prev.state, _nis(y, hph, R), t_us, False, True
             off, t_off, n_res, vel_ok, acc, t_acc = None, 0, n_res + 1, False, None, 0
@@ -468,13 +473,16 @@ class FusionEngine:
                 off, t_off, n_off = y, t_us, n_off + 1
         if vel_ok:
             x_post, P_post = _core.update_vel(x_post, P_post, zv, rv)
-        yd = y_fused if fused_pos else y  # the innovation the decision was made on (an offset's relative one)
+        # the innovation the decision was made on: relative to a held step (so a step held does not
+        # widen the gate until it passes), else the fix's own
+        yd = y_fused if fused_pos else (
+            (y[0] - off[0], y[1] - off[1], y[2] - off[2]) if held and off is not None else y)
         # the receiver's running centres (C core, the formulas below): its innovations' spread, and its
         # own noise: the change of u = (z − z_prev − D_imu) / T between blocks, less the IMU's velocity
         # change over the previous block, is white GNSS noise (variance σ² c) whatever the state
         scale_h, scale_v, noise_h, noise_v, u, dv_imu = _core.receiver_spread(
             prev.ints, ints, z, prev.z_ned_m, prev.u_ned_m_s, prev.dv_imu_m_s, prev.block_s, T, yd,
-            (prev.scale_h_m, prev.scale_v_m, prev.noise_h_m, prev.noise_v_m), k, ek)
+            (prev.scale_h_m, prev.scale_v_m, prev.noise_h_m, prev.noise_v_m), k, ek, kn, ekn)
         # IMU / GNSS disagreement, on the velocity innovations (position fixes alone cannot tell a
         # wrong attitude from a GNSS bias)
         level = prev.disagree_level
@@ -493,7 +501,7 @@ class FusionEngine:
             ps = prev.v_smooth
             vs = (ps[0] + w_acc * (v0 - ps[0]), ps[1] + w_acc * (v1 - ps[1]), ps[2] + w_acc * (v2 - ps[2]))
         a2 = (v0 - vs[0]) ** 2 + (v1 - vs[1]) ** 2 + (v2 - vs[2]) ** 2
-        invalid = v0 * v0 + v1 * v1 > self._v_max2 or abs(v2) > self._vd_max or a2 > self._dv_max2
+        invalid = self._outside_envelope(x_post) or a2 > self._dv_max2
         beta = self.method.beta(state)
         self.fusions.append(Fusion(
             t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
@@ -503,16 +511,20 @@ class FusionEngine:
             u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid))
         self._fusion_t.append(t_us)
 
-    def _decays(self, dt_us: int) -> tuple[float, float, float, float, float]:
+    def _outside_envelope(self, x: model.State) -> bool:
+        """The speed of ``x`` outside the vehicle's envelope (horizontal or vertical)."""
+        return x[3] * x[3] + x[4] * x[4] > self._v_max2 or abs(x[5]) > self._vd_max
+
+    def _decays(self, dt_us: int) -> tuple[float, float, float, float, float, float, float]:
         """(α(T) of the GNSS bias, the disagreement mean's and the smoothed velocity's weights
-        1 − e^(−T/τ), the running centres' rate k = min(1, T/τ) and e^k) for T = ``dt_us``; cached by
-        interval (fixes come at a few fixed rates)."""
+        1 − e^(−T/τ), the running centres' rates k = min(1, T/τ) and e^k: the innovation spread's and
+        the receiver noise's) for T = ``dt_us``; cached by interval (fixes come at a few fixed rates)."""
         d = self._decay_cache.get(dt_us)
         if d is None:
             T = dt_us * 1e-6
-            k = min(1.0, T / self._scale_tau_s)
+            k, kn = min(1.0, T / self._scale_tau_s), min(1.0, T / self._noise_tau_s)
             d = (math.exp(-T / self._tau_s), 1.0 - math.exp(-T / self._dis_tau_s),
-                 1.0 - math.exp(-T / self._acc_window_s), k, math.exp(k))
+                 1.0 - math.exp(-T / self._acc_window_s), k, math.exp(k), kn, math.exp(kn))
             if len(self._decay_cache) > 256:
                 self._decay_cache.clear()
             self._decay_cache[dt_us] = d
@@ -653,8 +665,7 @@ class FusionEngine:
         prop = self._prop_disagree if last.disagree else self._prop
         x, out = prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
                                   (1.0 - alpha * alpha) * sigma_b * sigma_b)
-        valid = (now - last.t_fused_us <= self._valid_us and not last.invalid
-                 and x[3] * x[3] + x[4] * x[4] <= self._v_max2 and abs(x[5]) <= self._vd_max)
+        valid = now - last.t_fused_us <= self._valid_us and not last.invalid and not self._outside_envelope(x)
         snap = Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
                         last.n_rejected, last.n_resets, last.vel_ratio, last.disagree)
         self._cache = (last, now, snap)

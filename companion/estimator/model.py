@@ -224,8 +224,9 @@ def reset_to_fix(x: State, P: np.ndarray, z: tuple[float, float, float], r_m2: t
       variance R + var(b) and covariance −var(b) with the bias (H P Hᵀ = R: the reset trusts the fix
       exactly as much as its R says);
     * velocity = the receiver's ``v_ned_m_s`` with its variance ``rv_m2`` for each component it
-      reports (finite); a component it does not report keeps the estimate, its variance at least
-      ``vel_var_min_m2_s2``;
+      reports (finite); a component it does not report keeps the estimate (the caller zeroes one
+      outside the vehicle's envelope, as EKF2 resets to zero without a velocity source), its
+      variance at least ``vel_var_min_m2_s2``;
     * the IMU error states keep their means, their variances at least their priors
       ``imu_var_m2_s4`` = (accelerometer bias, NED acceleration error): a reset says the model failed,
       so what was learned through it is re-opened.

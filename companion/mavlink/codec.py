@@ -34,8 +34,10 @@ Units and conventions on the wire:
 - ESTIMATOR_STATUS: ``flags`` say which outputs are valid now (velocity and position only while
   ``pos_valid``; ``GPS_GLITCH`` while GNSS is rejected by the innovation gate);
   ``pos_horiz_ratio`` = the estimator's last horizontal GNSS innovation test ratio (NIS /
-  gate²), NaN until a fix was tested; ratios of tests we never make (velocity, vertical, magnetometer,
-  height above terrain, airspeed) are NaN ("not computed"), never 0 ("perfect").
+  gate²), NaN until a fix was tested; ``vel_ratio`` the same for the receiver's velocity (NaN when
+  the last fix had none); ``ACCEL_ERROR`` while the IMU-propagated motion disagrees with the GNSS
+  velocity; ratios of tests we never make (vertical, magnetometer, height above terrain, airspeed)
+  are NaN ("not computed"), never 0 ("perfect").
 - SET_POSITION_TARGET_LOCAL_NED: LOCAL_NED, ``time_boot_ms`` (ms); velocity/acceleration marked
   ignored in ``type_mask`` decode as zero feed-forward; ignored position is an error.
 - RAW_IMU / SCALED_IMU (decode only): acceleration mg, rate mrad/s, body FRD.
@@ -155,6 +157,7 @@ class EstimatorStatus:
     pos_horiz_ratio: float  # NIS / gate (χ² threshold): > 1 means the fix failed the gate; NaN: no test
     pos_horiz_accuracy_m: float
     pos_vert_accuracy_m: float
+    vel_ratio: float = math.nan  # the same for the receiver's horizontal velocity (NaN: none tested)
 
 
 @dataclass(frozen=True, slots=True)
@@ -571,10 +574,12 @@ def decode_odometry(m: Any) -> NavEstimate:
 
 
 def estimator_flags(e: NavEstimate) -> int:
-    """ESTIMATOR_STATUS_FLAGS of ``e``: position/velocity bits while the estimate is valid,
-    GPS_GLITCH while the innovation gate rejects GNSS."""
+    """ESTIMATOR_STATUS_FLAGS of ``e``: position/velocity bits while the estimate is valid (the
+    fly-away guard clears them), GPS_GLITCH while the innovation gate rejects GNSS, ACCEL_ERROR while
+    the IMU-propagated motion disagrees with the GNSS velocity (``imu_gnss_disagreement``)."""
     flags = ESTIMATOR_HEALTHY_FLAGS if estimate_valid(e) else 0
-    return flags | (mavlink.ESTIMATOR_GPS_GLITCH if e.gnss_glitch else 0)
+    flags |= mavlink.ESTIMATOR_GPS_GLITCH if e.gnss_glitch else 0
+    return flags | (mavlink.ESTIMATOR_ACCEL_ERROR if e.imu_gnss_disagreement else 0)
 
 
 def encode_estimator_status(e: NavEstimate) -> mavlink.MAVLink_estimator_status_message:
@@ -582,21 +587,24 @@ def encode_estimator_status(e: NavEstimate) -> mavlink.MAVLink_estimator_status_
     ``pos_horiz_ratio`` = the estimator's ``pos_horiz_test_ratio`` (NaN: no fix tested yet;
     clamped to the float32 maximum). ``e`` must pass :func:`check_sendable`."""
     ratio = min(e.pos_horiz_test_ratio, FLOAT32_MAX)  # NaN stays NaN
+    vel_ratio = min(e.vel_test_ratio, FLOAT32_MAX)
     horiz = math.sqrt(float(e.cov_diag[0] + e.cov_diag[1]))
     vert = math.sqrt(float(e.cov_diag[2]))
     nan = math.nan
     return mavlink.MAVLink_estimator_status_message(
-        e.t_us, estimator_flags(e), nan, ratio, nan, nan, nan, nan, horiz, vert,
+        e.t_us, estimator_flags(e), vel_ratio, ratio, nan, nan, nan, nan, horiz, vert,
     )
 
 
 def decode_estimator_status(m: Any) -> EstimatorStatus:
     _finite("ESTIMATOR_STATUS", m.pos_horiz_accuracy, m.pos_vert_accuracy)
-    if not (math.isnan(m.pos_horiz_ratio) or 0.0 <= m.pos_horiz_ratio < math.inf):  # NaN: no test made
-        raise CodecError("out_of_range", f"ESTIMATOR_STATUS pos_horiz_ratio {m.pos_horiz_ratio}")
+    for name in ("pos_horiz_ratio", "vel_ratio"):
+        value = getattr(m, name)
+        if not (math.isnan(value) or 0.0 <= value < math.inf):  # NaN: no test made
+            raise CodecError("out_of_range", f"ESTIMATOR_STATUS {name} {value}")
     return EstimatorStatus(
         int(m.time_usec), int(m.flags), float(m.pos_horiz_ratio),
-        float(m.pos_horiz_accuracy), float(m.pos_vert_accuracy),
+        float(m.pos_horiz_accuracy), float(m.pos_vert_accuracy), float(m.vel_ratio),
     )
 
 
