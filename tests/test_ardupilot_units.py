@@ -126,6 +126,9 @@ def test_velocity_is_truth_plus_the_stated_noise_and_leaves_the_positions_alone(
     f = gps_input_fields(vel.sent[0], gps_id=1, velocity_sigma_m_s=0.1)
     assert f["gps_id"] == 1 and f["ignore_flags"] == 0 and f["speed_accuracy"] == pytest.approx(0.1)
     assert (f["vn"], f["ve"], f["vd"]) == pytest.approx(tuple(v[0]))
+    # what the companion is given in the analysis: the same velocity with the speed accuracy GPS_INPUT says
+    assert all(sf.speed_accuracy_m_s == 0.1 for sf in vel.sent)
+    assert math.isnan(plain.sent[0].speed_accuracy_m_s)
     with pytest.raises(ValueError, match="generator"):
         UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(3), d0, 0.1)
 
