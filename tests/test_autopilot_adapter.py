@@ -99,6 +99,20 @@ def test_translator_one_time_base_receiver_delay_repeats_and_unix_stamps():
     assert fix is not None and fix.t_validity_us == 31_000_000 - 100_000
 
 
+def test_translator_gnss_carries_the_receiver_velocity_and_reads_gps_input_when_told():
+    fix = Translator(TranslateConfig(gnss_delay_us=0)).sample(_gps(20_000_000))
+    assert fix is not None and fix.v_ned_m_s is not None and math.isnan(fix.v_ned_m_s[2])  # no vertical
+    gi = mavlink.MAVLink_gps_input_message(7_000_000, 0, 0, 0, 0, 3, 10_000_000, 20_000_000, 31.5, 0.8, 1.1,
+                                           1.5, -2.0, 0.4, 0.35, 2.5, 4.0, 12, 0)
+    assert Translator(TranslateConfig(gnss_delay_us=0)).sample(gi) is None  # not the configured source
+    told = Translator(TranslateConfig(gnss_delay_us=0, gnss_message="GPS_INPUT"))
+    f = told.sample(gi)
+    assert f is not None and f.t_validity_us == 7_000_000
+    np.testing.assert_allclose(f.v_ned_m_s, (1.5, -2.0, 0.4), rtol=1e-6)
+    with pytest.raises(ValueError, match="gnss_message"):
+        Translator(TranslateConfig(gnss_message="GPS_BOGUS"))
+
+
 def test_translator_units_and_source_ranking():
     tr = Translator()
     raw = mavlink.MAVLink_raw_imu_message(5_000_000, 0, 0, -1000, 10, 0, -20, 0, 0, 0)
