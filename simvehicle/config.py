@@ -186,14 +186,14 @@ class GnssConfig:
     satellites_open: int = 16  # (ours) satellites_visible in open sky
     satellites_canyon: int = 7  # (ours) satellites_visible in a canyon
     report_accuracy: bool = True  # (ours) h_acc/v_acc carry the white-noise std (not the bias)
-    # --- the receiver's Doppler velocity (off in the paper's scenario: its receiver gives positions).
-    # A reflection corrupts the carrier's Doppler far less than the code's range: its error is the
-    # rate of change of the extra path, a fraction of the receiver's own speed (zero at rest), not a
-    # metre-size offset. Per axis: white noise sqrt(σ_v² + (w κ |v|)²) with the proximity weight w,
-    # σ_v = sigma_velocity_m_s (u-blox M8/M9 speed accuracy in open sky) and κ =
-    # velocity_reflection_factor (ours: a canyon's reflections shift the Doppler velocity by ~10 % of
-    # the speed). The reported speed accuracy is that std (with report_accuracy). Drawn from its own
-    # stream, so the positions are those of the receiver without velocity.
+    # --- the receiver's Doppler velocity
+    # Off in the paper's scenario (its receiver gives positions only). A reflection corrupts the carrier's
+    # Doppler far less than the code's range: its error is the rate of change of the extra path, a fraction of
+    # the receiver's own speed (zero at rest), not a metre-size offset. Per axis: white noise sqrt(σ_v² + (w κ
+    # |v|)²) with the proximity weight w, σ_v = sigma_velocity_m_s (u-blox M8/M9 speed accuracy in open sky)
+    # and κ = velocity_reflection_factor (ours: a canyon's reflections shift the Doppler velocity by ~10 % of
+    # the speed). The reported speed accuracy is that std (with report_accuracy). Drawn from its own stream,
+    # so the positions are those of the receiver without velocity.
     velocity: bool = False
     sigma_velocity_m_s: float = 0.05
     velocity_reflection_factor: float = 0.1

@@ -111,9 +111,10 @@ class EstimatorConfig:
     gnss_reset_timeout_s: float = 5.0
     # GNSS step hypothesis: a fix failing the gate within gnss_offset_open_s of a fused fix (the
     # stream was consistent a moment ago: no dead-reckoning drift can explain a 5-sigma jump) is a
-    # step of the receiver's output: its innovation becomes an offset subtracted from the following
-    # fixes, which are fused (they still observe velocity) until a fix passes the gate without it
-    # (the step ended). Once the step has lasted gnss_offset_max_s it is the GNSS's new track: the
+    # step of the receiver's output: its innovation becomes an offset; the following fixes that pass
+    # the gate relative to it are held (dead reckoning on the receiver's velocity where it passes its
+    # gate, else fused as z − offset, which still observes velocity) until a fix passes the gate
+    # without it (the step ended). Once the step has lasted gnss_offset_max_s it is the GNSS's new track: the
     # position moves by the offset (velocity and IMU errors, aided throughout, are kept) and the fixes
     # are fused as they come, counted as a reset. 5 s: EKF2 resets into a persistent GNSS
     # disagreement after 5 s (EKF2_NOAID_TOUT), EKF3 after 7 s; held longer, a fading NLOS reflection
@@ -147,18 +148,17 @@ class EstimatorConfig:
     # gate-off filter 9 m). 4 (2× the noise's std).
     r_learned_max_factor_unreported: float = 4.0
 
-    # --- receivers (docs/estimator.md, "Receiver accuracy"). A fix without h_acc/v_acc gets a learned
-    # R: the receiver's own noise, from its fixes and the IMU alone (never from the filter's state, so
-    # a wrong model cannot inflate it into a fly-away): the change between consecutive blocks of the
-    # velocity two fixes imply once the IMU's displacement is removed, normalised to one fix's noise,
-    # through a log-domain running centre of its magnitude (each fix moves it by at most a factor
-    # e^(T/τ), time constant gnss_noise_tau_s), floored at the configured sigma_gnss_*. It starts at
-    # sigma_gnss_unreported_m, the GNSS noise EKF2 (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE)
-    # assume by default. The gate's R is floored for every receiver (reported accuracy or not) at
-    # the robust spread of its innovations (the same running centre of |innovation|, time constant
-    # gnss_scale_tau_s, minus the prediction's share H P Hᵀ; relative to a step held): a receiver
-    # whose accuracy is missing or optimistic cannot make the gate reject most of its fixes, only
-    # those beyond gnss_gate_sigma × its own spread.
+    # --- receivers (docs/estimator.md, "Receiver accuracy")
+    # A fix without h_acc/v_acc gets a learned R: the receiver's own noise, from its fixes and the IMU alone
+    # (never from the filter's state, so a wrong model cannot inflate it into a fly-away): the change between
+    # consecutive blocks of the velocity two fixes imply once the IMU's displacement is removed, normalised to
+    # one fix's noise, through a log-domain running centre of its magnitude (each fix moves it by at most a
+    # factor e^(T/τ), time constant gnss_noise_tau_s), floored at the configured sigma_gnss_*. It starts at
+    # sigma_gnss_unreported_m, the GNSS noise EKF2 (EKF2_GPS_P_NOISE) and EKF3 (EK3_POSNE_M_NSE) assume by
+    # default. The gate's R is floored for every receiver (reported accuracy or not) at the robust spread of
+    # its innovations (the same running centre of |innovation|, time constant gnss_scale_tau_s, minus the
+    # prediction's share H P Hᵀ; relative to a step held): a receiver whose accuracy is missing or optimistic
+    # cannot make the gate reject most of its fixes, only those beyond gnss_gate_sigma × its own spread.
     sigma_gnss_unreported_m: float = 0.5
     gnss_scale_tau_s: float = 2.0
     # The learned noise's time constant (s): a receiver's noise level changes slowly, and a running
@@ -175,35 +175,38 @@ class EstimatorConfig:
     # EKF2_GPS_V_GATE 5, EK3_VEL_I_GATE 500 %.
     gnss_vel_gate_sigma: float = 5.0
 
-    # --- resets that recover (EKF2's resetVelocityToGnss/resetHorizontalPositionToGnss, EKF3's
-    # ResetPosition + ResetVelocity): a reset puts position on the fix, velocity on the receiver's
-    # velocity where it gives one, and re-opens the IMU error states to their priors. Where the
-    # receiver gives no velocity, the dead-reckoned velocity is kept with this std (m/s) at least:
-    # after a reset the velocity is what failed, and the following fixes must be able to correct it
-    # (5 m/s: EKF2's variance for a velocity reset without a velocity source, 25 m²/s²).
+    # --- resets that recover
+    # As EKF2's resetVelocityToGnss/resetHorizontalPositionToGnss and EKF3's ResetPosition + ResetVelocity, a
+    # reset puts position on the fix, velocity on the receiver's velocity where it gives one, and re-opens the
+    # IMU error states to their priors. Where the receiver gives no velocity, the dead-reckoned velocity is
+    # kept with this std (m/s) at least: after a reset the velocity is what failed, and the following fixes
+    # must be able to correct it (5 m/s: EKF2's variance for a velocity reset without a velocity source, 25
+    # m²/s²).
     gnss_reset_sigma_vel_m_s: float = 5.0
 
-    # --- fly-away guard: the vehicle's envelope. An estimate faster than these speeds, or whose mean
-    # acceleration over envelope_acc_window_s (its velocity minus the velocity smoothed over that
-    # window, divided by it; the updates' corrections included) is larger, is not a quadrotor's: it
-    # is flagged invalid (NavEstimate.pos_valid False) and the next fix failing the gate resets it.
-    # 30 m/s (108 km/h) horizontal and 15 m/s vertical are above what multirotors of this class fly
-    # (ArduCopter's and PX4's default speed limits are 5-12 m/s); 20 m/s² ≈ 2 g is a 60° tilt held
-    # at full thrust. 1 s: longer than the corrections' chatter at 5-20 Hz, shorter than a fly-away.
+    # --- fly-away guard
+    # The vehicle's envelope. An estimate faster than these speeds, or whose mean acceleration over
+    # envelope_acc_window_s (its velocity minus the velocity smoothed over that window, divided by it; the
+    # updates' corrections included) is larger, is not a quadrotor's: it is flagged invalid
+    # (NavEstimate.pos_valid False) and the next fix failing the gate resets it. 30 m/s (108 km/h) horizontal
+    # and 15 m/s vertical are above what multirotors of this class fly (ArduCopter's and PX4's default speed
+    # limits are 5-12 m/s); 20 m/s² ≈ 2 g is a 60° tilt held at full thrust. 1 s: longer than the corrections'
+    # chatter at 5-20 Hz, shorter than a fly-away.
     envelope_speed_max_m_s: float = 30.0
     envelope_speed_vertical_max_m_s: float = 15.0
     envelope_acc_max_m_s2: float = 20.0
     envelope_acc_window_s: float = 1.0
 
-    # --- IMU / GNSS disagreement (a wrong attitude input): an exponentially weighted mean of the
-    # horizontal velocity innovations' NIS per degree of freedom, time constant
-    # imu_gnss_disagree_tau_s, each NIS clipped at gate² per dof (position fixes alone cannot tell
-    # a wrong attitude from a GNSS bias: without a receiver velocity nothing is flagged).
-    # Above imu_gnss_disagree_on the IMU-propagated motion persistently disagrees
-    # with GNSS: counted (imu_gnss_disagreements), flagged (NavEstimate.imu_gnss_disagreement), and
-    # the IMU's white-acceleration density is multiplied by imu_gnss_disagree_acc_factor until the
-    # mean falls below imu_gnss_disagree_off, so the filter follows GNSS instead of dead-reckoning
-    # on the attitude it was given. A consistent filter's mean is 1 (std ≈ 0.3 over ~10 fixes).
+    # --- IMU / GNSS disagreement (a wrong attitude input)
+    # An exponentially weighted mean of the horizontal velocity innovations' NIS per degree of freedom, time
+    # constant imu_gnss_disagree_tau_s, each NIS clipped at gate² per dof (position fixes alone cannot tell a
+    # wrong attitude from a GNSS bias: without a receiver velocity nothing is flagged). Above
+    # imu_gnss_disagree_on the IMU-propagated motion persistently disagrees with GNSS: counted
+    # (imu_gnss_disagreements), flagged (NavEstimate.imu_gnss_disagreement), and the IMU's white-acceleration
+    # density is multiplied by imu_gnss_disagree_acc_factor until the mean falls below imu_gnss_disagree_off,
+    # so the filter follows GNSS instead of dead-reckoning on the attitude it was given. A consistent filter's
+    # mean is 1 (std ≈ 0.3 over ~10 fixes). A velocity failing its gate on two consecutive fixes while the
+    # receiver agrees with itself, and passing with the IMU distrusted, flags it at once.
     imu_gnss_disagree_tau_s: float = 2.0
     imu_gnss_disagree_on: float = 6.0
     imu_gnss_disagree_off: float = 2.0
