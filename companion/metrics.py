@@ -10,8 +10,9 @@ reference (exact medians need the values; 0.8 MB for 18 hours of 5 Hz fixes). A 
 runs for days bounds it with ``max_errors``: once that many are kept, every other one is
 dropped and from then on only every 2nd (then 4th, ...) matched error is kept: a uniform
 decimation in time, so the statistics are those of an evenly spaced sample (``decimation``
-says the stride; ``matched`` stays exact). References waiting for estimates are bounded too
-(``max_pending``, the oldest counted as unmatched).
+says the stride; ``matched`` and, without a fitted alignment, the maxima stay exact).
+References waiting for estimates are bounded too (``max_pending``, the oldest counted as
+unmatched).
 :func:`error_statistics` reduces the error vectors to the summary block
 ``{n, alignment, offset_ned_m, mean_error_ned_m, error_horizontal_m, error_3d_m}`` (each
 ``median, p95, max, rmse, iqr, n``).
@@ -130,6 +131,7 @@ class PositionErrors:
         self.unmatched = 0
         self.matched = 0
         self.decimation = 1  # every decimation-th matched error is kept
+        self._max_sq = [0.0, 0.0]  # largest squared horizontal and 3-D error of all matched
 
     def add_estimate(self, t_us: int, p_ned_m: Any) -> None:
         if self._t and t_us < self._t[-1]:
@@ -172,9 +174,13 @@ class PositionErrors:
             q0, q1 = self._p[i - 1], self._p[i]
             q = (q0[0] + w * (q1[0] - q0[0]), q0[1] + w * (q1[1] - q0[1]), q0[2] + w * (q1[2] - q0[2]))
         self.matched += 1
+        e = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+        h_sq = e[0] * e[0] + e[1] * e[1]
+        m = self._max_sq
+        m[0], m[1] = max(m[0], h_sq), max(m[1], h_sq + e[2] * e[2])
         if (self.matched - 1) % self.decimation:
             return
-        self._err.extend((q[0] - p[0], q[1] - p[1], q[2] - p[2]))
+        self._err.extend(e)
         if self.max_errors is not None and len(self._err) >= 3 * self.max_errors:
             kept = np.frombuffer(self._err, dtype=np.float32).reshape(-1, 3)[::2]
             self._err = array("f", kept.ravel().tobytes())
@@ -192,6 +198,9 @@ class PositionErrors:
 
     def statistics(self, alignment: str = "geodetic") -> dict[str, Any]:
         out = error_statistics(self.errors_ned_m(), alignment)
+        if alignment == "geodetic" and self.decimation > 1:  # the maxima of all, not of the kept sample
+            out["error_horizontal_m"]["max"] = math.sqrt(self._max_sq[0])
+            out["error_3d_m"]["max"] = math.sqrt(self._max_sq[1])
         out["unmatched"] = self.unmatched + len(self._pending)
         out["matched"], out["decimation"] = self.matched, self.decimation
         return out

@@ -137,25 +137,27 @@ def test_translator_one_time_base_receiver_delay_repeats_and_unix_stamps():
     assert fix is not None and fix.t_validity_us == 31_000_000 - 100_000
 
 
-def test_system_time_is_range_checked_and_a_lone_new_offset_is_not_believed():
+def test_system_time_is_range_checked_and_a_lone_jump_is_not_believed():
     tr = Translator()
     unix_us = 1_700_000_000_000_000
 
-    def pair(offset_s: float, boot_s: float, arrival_s: float) -> None:
-        boot_ms = round(boot_s * 1000)
-        tr.system_time(mavlink.MAVLink_system_time_message(unix_us + round(offset_s * 1e6) + boot_ms * 1000,
-                                                           boot_ms), round(arrival_s * 1e6))
+    def pair(unix_s: float, boot_s: float, arrival_s: float) -> None:
+        msg = mavlink.MAVLink_system_time_message(unix_us + round(unix_s * 1e6), round(boot_s * 1000))
+        tr.system_time(msg, round(arrival_s * 1e6))
 
-    pair(0.0, 10.0, 0.0)
+    pair(10.0, 10.0, 0.0)
     assert tr.unix_minus_boot_us == unix_us
     tr.system_time(mavlink.MAVLink_system_time_message(2**63 - 1, 11_000), 1_000_000)  # spoofed: 2^63
-    pair(3600.0, 11.0, 1.0)  # a lone pair one hour off
+    pair(3611.0, 11.0, 1.0)  # a lone pair one hour ahead
+    pair(5.0, 11.0, 1.1)  # ... or 6 s back
     assert tr.unix_minus_boot_us == unix_us
-    assert tr.counters["rejected_system_time_range"] == 1 and tr.counters["rejected_system_time_offset"] == 1
-    pair(0.001, 12.0, 2.0)  # the genuine stream goes on (1 ms of jitter)
+    assert tr.counters["rejected_system_time_range"] == 1 and tr.counters["rejected_system_time_clock"] == 2
+    for k in range(5):  # a SITL at x5: boot time runs 5x its UNIX clock (wall): the offset drifts
+        pair(11.0 + k, 15.0 + 5 * k, 1.0 + k)
+    assert tr.unix_minus_boot_us == unix_us + 15_000_000 - 35_000_000
     for k in range(3):  # the clock really was set: three agreeing pairs over 2 s
-        pair(60.0, 13.0 + k, 3.0 + k)
-    assert tr.unix_minus_boot_us == unix_us + 60_000_000 and tr.counters["system_time_offset_changes"] == 1
+        pair(100.0 + k, 40.0 + k, 6.0 + k)
+    assert tr.unix_minus_boot_us == unix_us + 60_000_000 and tr.counters["system_time_clock_set"] == 1
 
 
 def test_translator_units_and_source_ranking():

@@ -66,7 +66,7 @@ BOOT_CLOCK = ClockWindow(max_back_us=1_000_000, max_forward_us=200_000, consensu
 GNSS_WINDOW = ClockWindow(max_back_us=5_000_000, max_forward_us=500_000)  # a fix's validity vs boot time
 PARAM_RETRY_S = 3.0  # the delay parameter is asked again after this without an answer ...
 PARAM_TRIES = 3  # ... this many times in all
-NOT_REJECTIONS = ("imu_other_source", "attitude_other_source", "gnss_repeated", "system_time_offset_changes")
+NOT_REJECTIONS = ("imu_other_source", "attitude_other_source", "gnss_repeated", "system_time_clock_set")
 
 
 @dataclass(frozen=True, slots=True)

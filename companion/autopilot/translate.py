@@ -24,11 +24,12 @@ and is mapped to boot time with the SYSTEM_TIME pairs' offset. A fix repeated at
 What the autopilot tells us about time and delay is checked before it is believed:
 
 - SYSTEM_TIME: a UNIX time outside 2015..2100 is refused (``rejected_system_time_range``); the
-  UNIX-minus-boot offset follows the project's clock rule
-  (:data:`SYSTEM_TIME_OFFSET_WINDOW`, :mod:`companion.domain.clock_guard`): a lone pair that
-  disagrees with the offset in force by more than 0.5 s is refused
-  (``rejected_system_time_offset``); three agreeing pairs over 1.5 s make a new offset (the
-  autopilot's clock was set).
+  UNIX time is a stamped stream like any other and follows the project's clock rule
+  (:data:`UNIX_CLOCK`, :mod:`companion.domain.clock_guard`, arrivals = our clock): a lone pair
+  far from the stream (an hour ahead, a second back) is refused (``rejected_system_time_clock``);
+  three agreeing pairs over 1.5 s make a new time base (the autopilot's clock was set). The
+  offset of the last accepted pair maps UNIX stamps (a sped-up PX4 SITL's UNIX clock runs at
+  wall speed while its boot time runs faster: the offset drifts, the stream is still smooth).
 - The receiver delay parameter: a value outside the autopilot's own range for it
   (:data:`DELAY_RANGES_MS`: ArduPilot ``GPSn_DELAY_MS`` 0..250 ms, PX4 ``EKF2_GPS_DELAY`` 0..300 ms)
   is refused (``rejected_gnss_delay_range``) and the default kept. Whether a PARAM_VALUE was
@@ -53,9 +54,11 @@ DELAY_PARAMS = {3: {1: "GPS1_DELAY_MS", 2: "GPS2_DELAY_MS"}, 12: {1: "EKF2_GPS_D
 DELAY_RANGES_MS = {3: (0.0, 250.0), 12: (0.0, 300.0)}
 UNIX_STAMP_MIN_US = 10**15  # ≈ 31.7 years: a larger stamp is UNIX time, not time since boot
 UNIX_PLAUSIBLE_US = (1_420_070_400 * 10**6, 4_102_444_800 * 10**6)  # 2015-01-01 .. 2100-01-01 (UTC)
-SYSTEM_TIME_OFFSET_WINDOW = ClockWindow(  # on the UNIX-minus-boot offset (µs), arrivals in wall µs
-    max_back_us=500_000, max_forward_us=500_000, consensus_samples=3, consensus_step_us=500_000,
-    consensus_back_us=500_000, consensus_span_us=1_500_000)
+# SYSTEM_TIME's UNIX time (1 Hz of the autopilot's clock; arrivals = our clock, µs): 1 s back,
+# 1 s ahead of an envelope growing 20x our clock; a new base needs 3 pairs over 1.5 s
+UNIX_CLOCK = ClockWindow(max_back_us=1_000_000, max_forward_us=1_000_000, consensus_samples=3,
+                         consensus_step_us=30_000_000, consensus_back_us=1_000_000, max_rate=20.0,
+                         consensus_span_us=1_500_000)
 IMU_RANK = {"HIGHRES_IMU": 0, "SCALED_IMU": 1, "RAW_IMU": 2, "SCALED_IMU2": 3}
 ATTITUDE_RANK = {"ATTITUDE_QUATERNION": 0, "ATTITUDE": 1}
 GNSS_TYPES = {1: "GPS_RAW_INT", 2: "GPS2_RAW"}
@@ -95,7 +98,7 @@ class Translator:
     _imu_rank: int = len(IMU_RANK)
     _attitude_rank: int = len(ATTITUDE_RANK)
     _last_gnss_stamp_us: int = -1
-    _offset: StreamClock = field(default_factory=lambda: StreamClock(SYSTEM_TIME_OFFSET_WINDOW))
+    _unix: StreamClock = field(default_factory=lambda: StreamClock(UNIX_CLOCK))
 
     def __post_init__(self) -> None:
         if self.config.gnss_instance not in GNSS_TYPES:
@@ -139,20 +142,19 @@ class Translator:
         if not UNIX_PLAUSIBLE_US[0] <= unix_us <= UNIX_PLAUSIBLE_US[1]:
             self.counters["rejected_system_time_range"] += 1
             return
-        offset = unix_us - int(msg.time_boot_ms) * 1000
-        verdict = self._offset.check(offset, arrival_us)
+        verdict = self._unix.check(unix_us, arrival_us)
         if verdict is Verdict.REJECT:
-            self.counters["rejected_system_time_offset"] += 1
+            self.counters["rejected_system_time_clock"] += 1
             return
         if verdict is Verdict.RESET:
-            self.counters["system_time_offset_changes"] += 1
-        self.unix_minus_boot_us = offset
+            self.counters["system_time_clock_set"] += 1
+        self.unix_minus_boot_us = unix_us - int(msg.time_boot_ms) * 1000
 
     def reset(self) -> None:
         """Forget the time-base state (after an autopilot reboot); source choices are kept."""
         self._last_gnss_stamp_us = -1
         self.unix_minus_boot_us = None
-        self._offset.reset()
+        self._unix.reset()
         self.last_attitude = self.last_imu = self.last_fix = None
 
     def sample(self, msg: Any) -> ImuSample | AttitudeSample | GnssFix | None:

@@ -11,7 +11,7 @@ Two scanners, one rule: :func:`parse_datagram` takes one datagram on its own (no
 over to the next, so one hostile datagram cannot damage the frames of another);
 :class:`StreamScanner` takes a byte stream (TCP, serial) in chunks and resynchronises on junk:
 a damaged span is skipped from the next magic byte whose frame checks, so a false magic byte
-in junk delays the genuine frames behind it (at most one frame length) but never loses them.
+in junk (announcing a long frame) neither loses nor holds back the genuine frames behind it.
 A frame whose message id the dialect lacks cannot be CRC-checked: it is skipped whole when a
 frame (or the end of the data) follows it, counted as ``unknown_msgid``.
 
@@ -152,29 +152,52 @@ def full_payload(spec: MessageSpec, body: bytes) -> bytes:
     return body[: spec.size]
 
 
+def _next_magic(data: bytes | bytearray, start: int, end: int) -> int:
+    """The first magic byte (MAVLink 2 or 1) in ``data[start:end]``, ``end`` if none."""
+    found = [i for i in (data.find(b"\xfd", start, end), data.find(b"\xfe", start, end)) if i >= 0]
+    return min(found) if found else end
+
+
 def _skip(data: bytes | bytearray, pos: int, n: int, reason: str, stream: bool,
           dialect: str) -> tuple[int, bool]:
     """Where to look for the next frame after a failure at ``pos``, and whether that skips one
-    whole frame: past a frame of an unknown message id when a good frame follows it (or, in a
-    datagram, its end), else the next magic byte. Junk's false frames mostly carry unknown ids
-    too: skipping their length on a guess could skip genuine frames, so the next frame must
-    prove the guess."""
-    if reason == "unknown_msgid":
-        signature = SIGNATURE_BYTES if data[pos] == MAGIC_V2 and data[pos + 2] & IFLAG_SIGNED else 0
-        end = pos + data[pos + 1] + 2 + signature + (HEADER_V2 if data[pos] == MAGIC_V2 else HEADER_V1)
-        if end == n and not stream:
-            return end, True
-        if end < n and not isinstance(frame_at(data, end, n, dialect=dialect), str):
-            return end, True
-    nxt = [i for i in (data.find(b"\xfd", pos + 1, n), data.find(b"\xfe", pos + 1, n)) if i >= 0]
-    return (min(nxt) if nxt else n), False
+    whole frame: past a frame of an unknown message id when no good frame starts inside it and a
+    good frame follows it (or, in a datagram, it ends the datagram); else the next magic byte.
+    Junk's false frames mostly carry unknown ids too: skipping their length on a guess could skip
+    genuine frames, so the frames around must prove the guess."""
+    resync = _next_magic(data, pos + 1, n)
+    if reason != "unknown_msgid":
+        return resync, False
+    signature = SIGNATURE_BYTES if data[pos] == MAGIC_V2 and data[pos + 2] & IFLAG_SIGNED else 0
+    end = pos + data[pos + 1] + 2 + signature + (HEADER_V2 if data[pos] == MAGIC_V2 else HEADER_V1)
+    after = "" if end == n and not stream else "cut" if end >= n else frame_at(data, end, n, dialect=dialect)
+    if isinstance(after, str) and after:
+        return resync, False
+    inside = resync
+    while inside < end:  # a genuine frame inside the span: it was junk, not a frame
+        if not isinstance(frame_at(data, inside, end, dialect=dialect), str):
+            return resync, False
+        inside = _next_magic(data, inside + 1, end)
+    return end, True
+
+
+def _next_good_frame(data: bytes | bytearray, pos: int, n: int, dialect: str) -> int:
+    """Where the first complete frame that checks starts after ``pos`` (-1: none yet)."""
+    i = _next_magic(data, pos + 1, n)
+    while i < n:
+        if not isinstance(frame_at(data, i, n, dialect=dialect), str):
+            return i
+        i = _next_magic(data, i + 1, n)
+    return -1
 
 
 def scan(data: bytes | bytearray, stream: bool = False,
          dialect: str = "common") -> tuple[list[Any], list[str], int]:
     """Link views of the good frames in ``data``, per damaged span the reason of its first failure,
     and the offset scanned up to. ``stream``: a frame cut by the end of ``data`` stops the scan
-    there (its bytes are still to come) instead of counting as damage."""
+    there (its bytes are still to come) instead of counting as damage, unless a complete good
+    frame starts inside its span: then it was a false magic byte in junk, skipped at once (the
+    genuine frames behind it are never held back by it)."""
     n = len(data)
     views: list[Any] = []
     skipped: list[str] = []
@@ -183,7 +206,11 @@ def scan(data: bytes | bytearray, stream: bool = False,
         parsed = frame_at(data, pos, n, link=True, dialect=dialect)
         if isinstance(parsed, str):
             if stream and parsed == "truncated":
-                break
+                later = _next_good_frame(data, pos, n, dialect)
+                if later < 0:
+                    break  # its bytes may still come: wait
+                lost, pos = lost or "garbage", later  # a good frame inside its span: it was junk
+                continue
             nxt, whole = _skip(data, pos, n, parsed, stream, dialect)
             if whole and not lost:  # a whole frame of a message we cannot read: its own span
                 skipped.append(parsed)

@@ -73,7 +73,7 @@ def resolve_dir(px4_dir: Path | None = None) -> Path:
     path = px4_dir or (Path(os.environ[DIR_ENV]) if os.environ.get(DIR_ENV) else DEFAULT_DIR)
     binary = path / "bin" / "px4"
     if not binary.is_file():
-        raise UserError(f"PX4 SITL not found: {binary} (set {DIR_ENV} to the directory holding bin/px4 and etc/)")
+        raise UserError(f"PX4 SITL not found: {binary} (set {DIR_ENV} to the directory of bin/px4 and etc/)")
     if not os.access(binary, os.X_OK) or not (path / "etc" / "init.d-posix" / "rcS").is_file():
         raise UserError(f"PX4 SITL directory {path} lacks an executable bin/px4 or etc/init.d-posix/rcS")
     return path
@@ -112,7 +112,8 @@ def free_instance(first: int = 0, last: int = MAX_INSTANCE + 1, skip: frozenset[
             continue
         if all(_udp_port_free(p) for p in instance_ports(instance)):
             return instance
-    raise UserError(f"no free PX4 SITL instance in -i {first}..{min(last, MAX_INSTANCE + 1) - 1} (ports in use)")
+    last = min(last, MAX_INSTANCE + 1) - 1
+    raise UserError(f"no free PX4 SITL instance in -i {first}..{last} (ports in use)")
 
 
 def _param_lines(params: Mapping[str, float], logging: bool) -> str:
