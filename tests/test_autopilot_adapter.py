@@ -132,7 +132,7 @@ def test_translator_one_time_base_receiver_delay_repeats_and_unix_stamps():
     assert tr.sample(_gps(0, fix=1)) is None and tr.counters["gnss_no_stamp"] == 1
     unix_us = 1_700_000_000_000_000
     assert tr.sample(_gps(unix_us + 30_000_000)) is None and tr.counters["gnss_no_time_base"] == 1
-    tr.system_time(mavlink.MAVLink_system_time_message(unix_us + 25_000_000, 25_000), 0)  # boot 25 s
+    tr.system_time(mavlink.MAVLink_system_time_message(unix_us + 25_000_000, 25_000))  # boot 25 s
     fix = tr.sample(_gps(unix_us + 31_000_000))
     assert fix is not None and fix.t_validity_us == 31_000_000 - 100_000
 
@@ -141,22 +141,24 @@ def test_system_time_is_range_checked_and_a_lone_jump_is_not_believed():
     tr = Translator()
     unix_us = 1_700_000_000_000_000
 
-    def pair(unix_s: float, boot_s: float, arrival_s: float) -> None:
+    def pair(unix_s: float, boot_s: float) -> None:
         msg = mavlink.MAVLink_system_time_message(unix_us + round(unix_s * 1e6), round(boot_s * 1000))
-        tr.system_time(msg, round(arrival_s * 1e6))
+        tr.system_time(msg)
 
-    pair(10.0, 10.0, 0.0)
+    pair(10.0, 10.0)
     assert tr.unix_minus_boot_us == unix_us
-    tr.system_time(mavlink.MAVLink_system_time_message(2**63 - 1, 11_000), 1_000_000)  # spoofed: 2^63
-    pair(3611.0, 11.0, 1.0)  # a lone pair one hour ahead
-    pair(5.0, 11.0, 1.1)  # ... or 6 s back
+    tr.system_time(mavlink.MAVLink_system_time_message(2**63 - 1, 11_000))  # spoofed: 2^63
+    pair(3611.0, 11.0)  # a lone pair one hour ahead
+    pair(5.0, 11.0)  # ... or 6 s back
     assert tr.unix_minus_boot_us == unix_us
     assert tr.counters["rejected_system_time_range"] == 1 and tr.counters["rejected_system_time_clock"] == 2
-    for k in range(5):  # a SITL at x5: boot time runs 5x its UNIX clock (wall): the offset drifts
-        pair(11.0 + k, 15.0 + 5 * k, 1.0 + k)
+    for k in range(5):  # a SITL at x5: its boot time runs 5x its UNIX clock (wall): the offset drifts
+        pair(11.0 + k, 15.0 + 5 * k)
     assert tr.unix_minus_boot_us == unix_us + 15_000_000 - 35_000_000
-    for k in range(3):  # the clock really was set: three agreeing pairs over 2 s
-        pair(100.0 + k, 40.0 + k, 6.0 + k)
+    pair(18.0, 36.0)  # UNIX time running faster than boot time (3 s in 1 s): not a clock
+    assert tr.counters["rejected_system_time_clock"] == 3
+    for k in range(3):  # the clock really was set: three agreeing pairs over 2 s of boot time
+        pair(100.0 + k, 40.0 + k)
     assert tr.unix_minus_boot_us == unix_us + 60_000_000 and tr.counters["system_time_clock_set"] == 1
 
 
@@ -257,6 +259,9 @@ class _FakeConn:
 
     def note_peer(self, msg, now_s) -> None:
         pass
+
+    def arrival_us(self, msg) -> None:
+        return None
 
     def set_source(self, system_id: int, component_id: int) -> None:
         self.source = (system_id, component_id)

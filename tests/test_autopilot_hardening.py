@@ -230,9 +230,14 @@ def test_tcp_stream_with_junk_delivers_every_frame_and_reconnects():
 class _Conn:
     """Stands in for MavConnection: records what the node sends."""
 
+    exact_arrivals = True  # the simulated arrival times are exact: the datagram rule applies
+
     def __init__(self) -> None:
         self.sent: list = []
         self.counters: dict = {}
+
+    def arrival_us(self, msg) -> None:
+        return None  # the node's own clock (the simulated time) is the arrival time
 
     def send(self, msg) -> bool:
         self.sent.append(msg)

@@ -25,6 +25,11 @@ What one hostile sender cannot do here (the transport is our own, not pymavlink'
 - **steal the port**: the UDP port is bound without ``SO_REUSEADDR``: a port in use is a one-line
   error, never shared.
 
+Each UDP datagram carries the kernel's receive time (``SO_TIMESTAMPNS``, on our monotonic clock:
+:meth:`MavConnection.arrival_us`): when we fall behind, the frames of the backlog still have
+their true arrival times (the clock rule's forward envelope needs them). A byte stream has no
+such times (TCP keeps only its newest segment's): ``exact_arrivals`` is False there.
+
 A TCP peer that closes (a SITL restarting) is reconnected (``disconnects``, ``reconnects``); the
 first connection is tried ``connect_retries`` times, 1 s apart, then a one-line error. Writes
 never block: a TCP or serial link that cannot take more queues at most :data:`MAX_OUT_BYTES`
@@ -65,6 +70,8 @@ MAX_OUT_BYTES = 262_144  # TCP/serial bytes queued while the peer does not read
 TCP_CONNECT_RETRIES = 3  # first connection: attempts 1 s apart
 RECONNECT_PERIOD_S = 0.5  # a lost TCP peer is tried again this often
 SO_RCVBUF_BYTES = 4 * 1024 * 1024
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux: receive times on each datagram
+_TIMESPEC = struct.Struct("qq")
 _PACK_ERRORS = (struct.error, OverflowError, ValueError, TypeError)
 _LINK_REASONS = {"unknown_msgid": "unknown_message", "bad_crc": "bad_crc"}  # the rest is garbage
 
@@ -158,6 +165,8 @@ class MavConnection:
         self._next_reconnect_s = 0.0
         self._peer_addrs: dict[tuple[str, int], float] = {}  # udpin: address -> last accepted frame (s)
         self._origin: dict[int, tuple[str, int]] = {}  # udpin: id(view) -> its address, last batch only
+        self._arrival: dict[int, int] = {}  # UDP: id(view) -> kernel receive time (monotonic µs), last batch
+        self.exact_arrivals = False  # True when every datagram carries the kernel's receive time
         self._open(connect_retries)
 
     # -- opening ------------------------------------------------------------------------------
@@ -183,6 +192,9 @@ class MavConnection:
             sock.setblocking(False)
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SO_RCVBUF_BYTES)
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+                self.exact_arrivals = True
             self._sock, self._fd = sock, sock.fileno()
 
     def _connect_tcp(self, attempts: int) -> None:
@@ -260,6 +272,7 @@ class MavConnection:
             time.sleep(max(min(timeout_s, RECONNECT_PERIOD_S), 0.0))
             return []
         self._origin.clear()
+        self._arrival.clear()
         self._flush_out()
         try:
             readable, _, _ = select.select([self._fd], [], [], max(timeout_s, 0.0))
@@ -277,21 +290,29 @@ class MavConnection:
     def _recv_datagrams(self, out: list[Any]) -> None:
         assert self._sock is not None
         udpin = self.endpoint.kind == "udpin"
+        mono_minus_real_ns = time.monotonic_ns() - time.time_ns()
         for _ in range(MAX_DATAGRAMS):
             try:
-                data, addr = self._sock.recvfrom(MAX_DATAGRAM_BYTES)
+                data, ancillary, _, addr = self._sock.recvmsg(MAX_DATAGRAM_BYTES, 64)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:  # udpout: the peer's port is closed (ICMP refused)
                 self.counters["peer_refused"] += 1
                 return
             self.counters["datagrams"] += 1
+            arrival_us = None
+            for level, kind, value in ancillary:
+                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(value) >= _TIMESPEC.size:
+                    sec, ns = _TIMESPEC.unpack(value[: _TIMESPEC.size])
+                    arrival_us = (sec * 1_000_000_000 + ns + mono_minus_real_ns) // 1000
             views, skipped = parse_datagram(data, DIALECT)
             first = len(out)
             self._take(views, skipped, out)
-            if udpin:
-                for view in out[first:]:
+            for view in out[first:]:
+                if udpin:
                     self._origin[id(view)] = addr
+                if arrival_us is not None:
+                    self._arrival[id(view)] = arrival_us
 
     def _recv_stream(self, out: list[Any]) -> None:
         for _ in range(MAX_DATAGRAMS):
@@ -345,6 +366,11 @@ class MavConnection:
             if now_s - seen > self.peers.peer_timeout_s:
                 del self._peer_addrs[addr]
                 self.counters["peers_expired"] += 1
+
+    def arrival_us(self, msg: Any) -> int | None:
+        """When ``msg`` (from the last :meth:`recv`) arrived, by the kernel (monotonic µs); None on
+        a byte stream, or when the kernel gave no time."""
+        return self._arrival.get(id(msg))
 
     @property
     def peer_addresses(self) -> list[tuple[str, int]]:

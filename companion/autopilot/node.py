@@ -16,12 +16,15 @@ set it to our frame's origin with SET_GPS_GLOBAL_ORIGIN once a second (``--home`
 frame from the start).
 
 One clock rule (:mod:`companion.domain.clock_guard`) on the autopilot's boot time: every stamped
-message of the autopilot is checked against the time base its stream has shown
-(:data:`BOOT_CLOCK`); a lone stamp far off is refused and counted (``rejected_clock_<type>``),
-never adopted; a reboot (the boot time going back) is believed only when a run of agreeing
-stamps says so for a while: then a fresh Navigator starts in the same frame and the streams are
-asked for again. GNSS validity times must lie near that base (:data:`GNSS_WINDOW`). A PARAM_VALUE
-is adopted only as the answer to our own request.
+message of the autopilot is checked against the time base its stream has shown; a lone stamp
+far off is refused and counted (``rejected_clock_<type>``), never adopted; a reboot (the boot
+time going back) is believed only when a run of agreeing stamps says so for a while: then a
+fresh Navigator starts in the same frame and the streams are asked for again. Over UDP every
+frame has the kernel's arrival time, so the forward edge follows the arrivals
+(:data:`BOOT_CLOCK_DATAGRAM`: a burst of forged stamps gains 0.2 s at most); a byte stream
+(TCP, serial) has no per-frame arrival time once we lag behind, so its forward edge is a fixed
+1 s (:data:`BOOT_CLOCK_STREAM`). GNSS validity times must lie near that base
+(:data:`GNSS_WINDOW`). A PARAM_VALUE is adopted only as the answer to our own request.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ import math
 import sys
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -56,13 +59,15 @@ from companion.wiring import navigator_for
 
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
 REASK_MIN_S = 2.0  # a reboot seen this soon after asking for the streams does not ask again
-# The autopilot's boot time, over every stamped message (arrivals = our monotonic clock): stamps
-# lag the newest by up to 0.18 s and lead by 0.02 s (measured on PX4 SITL x10); 1 s back, 0.2 s
-# ahead of an envelope growing 20x our clock (a SITL up to x20); a jump needs 5 agreeing stamps
-# over 0.25 s of arrivals (a reboot keeps streaming on its new base; a forged burst does not)
-BOOT_CLOCK = ClockWindow(max_back_us=1_000_000, max_forward_us=200_000, consensus_samples=5,
-                         consensus_step_us=1_000_000, consensus_back_us=1_000_000, max_rate=20.0,
-                         consensus_span_us=250_000)
+# The autopilot's boot time, over every stamped message (arrivals: our monotonic clock). Stamps
+# lag the newest by up to 0.18 s and lead by 0.02 s (measured on PX4 SITL x10): 1 s back; ahead,
+# over UDP 0.2 s beyond an envelope growing 20x the kernel's arrival times (a SITL up to x20),
+# over a byte stream 1 s; a jump needs 5 agreeing stamps over 0.25 s of arrivals (a reboot
+# keeps streaming on its new base; a forged burst arrives at once)
+BOOT_CLOCK_DATAGRAM = ClockWindow(max_back_us=1_000_000, max_forward_us=200_000, consensus_samples=5,
+                                  consensus_step_us=1_000_000, consensus_back_us=1_000_000, max_rate=20.0,
+                                  consensus_span_us=250_000)
+BOOT_CLOCK_STREAM = replace(BOOT_CLOCK_DATAGRAM, max_forward_us=1_000_000, max_rate=0.0)
 GNSS_WINDOW = ClockWindow(max_back_us=5_000_000, max_forward_us=500_000)  # a fix's validity vs boot time
 PARAM_RETRY_S = 3.0  # the delay parameter is asked again after this without an answer ...
 PARAM_TRIES = 3  # ... this many times in all
@@ -120,7 +125,8 @@ class AutopilotCompanion:
         self.translator = Translator(config.translate)
         self.timesync = Timesync(config.timesync)
         self.frames = FrameChooser(config.frame, config.home)
-        self.clock = StreamClock(BOOT_CLOCK)
+        self.exact_arrivals = bool(getattr(conn, "exact_arrivals", False))
+        self.clock = StreamClock(BOOT_CLOCK_DATAGRAM if self.exact_arrivals else BOOT_CLOCK_STREAM)
         self.telemetry = telemetry or TelemetryPublisher.disabled()
         self._topics = EstimatorTelemetry(self.telemetry)
         self.nav: Navigator | None = None
@@ -182,8 +188,10 @@ class AutopilotCompanion:
         kind = msg.get_type()
         self.received[kind] += 1
         stamp = boot_stamp_us(msg)
-        if stamp is not None and not self._boot_time_ok(kind, stamp, now_s):
-            return
+        if stamp is not None:
+            arrival = self.conn.arrival_us(msg) if self.exact_arrivals else None
+            if not self._boot_time_ok(kind, stamp, round(now_s * 1e6) if arrival is None else arrival, now_s):
+                return
         if kind == "TIMESYNC":
             answer = self.timesync.handle(msg, time.monotonic_ns())
             if answer is not None:
@@ -193,7 +201,7 @@ class AutopilotCompanion:
         elif kind == "PARAM_VALUE":
             self._param_value(msg)
         elif kind == "SYSTEM_TIME":
-            self.translator.system_time(msg, round(now_s * 1e6))
+            self.translator.system_time(msg)
         elif kind in ("GPS_GLOBAL_ORIGIN", "HOME_POSITION"):  # degE7, mm AMSL
             lla = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
             if self.frames.origin(kind, lla):
@@ -219,10 +227,10 @@ class AutopilotCompanion:
         self._delay_param = self.translator.delay_parameter(ap.autopilot_type)
         self._next_heartbeat_s = self._next_timesync_s = now_s
 
-    def _boot_time_ok(self, kind: str, stamp_us: int, now_s: float) -> bool:
+    def _boot_time_ok(self, kind: str, stamp_us: int, arrival_us: int, now_s: float) -> bool:
         """The one clock rule on the autopilot's boot time (see the module doc)."""
         before = self.clock.base_us
-        verdict = self.clock.check(stamp_us, round(now_s * 1e6))
+        verdict = self.clock.check(stamp_us, arrival_us)
         if verdict is Verdict.REJECT:
             self.counters[f"rejected_clock_{kind.lower()}"] += 1
             return False

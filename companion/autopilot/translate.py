@@ -25,11 +25,12 @@ What the autopilot tells us about time and delay is checked before it is believe
 
 - SYSTEM_TIME: a UNIX time outside 2015..2100 is refused (``rejected_system_time_range``); the
   UNIX time is a stamped stream like any other and follows the project's clock rule
-  (:data:`UNIX_CLOCK`, :mod:`companion.domain.clock_guard`, arrivals = our clock): a lone pair
-  far from the stream (an hour ahead, a second back) is refused (``rejected_system_time_clock``);
-  three agreeing pairs over 1.5 s make a new time base (the autopilot's clock was set). The
-  offset of the last accepted pair maps UNIX stamps (a sped-up PX4 SITL's UNIX clock runs at
-  wall speed while its boot time runs faster: the offset drifts, the stream is still smooth).
+  (:data:`UNIX_CLOCK`, :mod:`companion.domain.clock_guard`) against the pair's own boot time
+  (already checked): it may not run faster than the boot time (a sped-up PX4 SITL's UNIX clock
+  runs at wall speed, slower than its boot time; real hardware: both at 1x). A lone pair far from
+  the stream (an hour ahead, a second back) is refused (``rejected_system_time_clock``); three
+  agreeing pairs over 1.5 s of boot time make a new time base (the autopilot's clock was set).
+  The offset of the last accepted pair maps UNIX stamps.
 - The receiver delay parameter: a value outside the autopilot's own range for it
   (:data:`DELAY_RANGES_MS`: ArduPilot ``GPSn_DELAY_MS`` 0..250 ms, PX4 ``EKF2_GPS_DELAY`` 0..300 ms)
   is refused (``rejected_gnss_delay_range``) and the default kept. Whether a PARAM_VALUE was
@@ -54,10 +55,10 @@ DELAY_PARAMS = {3: {1: "GPS1_DELAY_MS", 2: "GPS2_DELAY_MS"}, 12: {1: "EKF2_GPS_D
 DELAY_RANGES_MS = {3: (0.0, 250.0), 12: (0.0, 300.0)}
 UNIX_STAMP_MIN_US = 10**15  # ≈ 31.7 years: a larger stamp is UNIX time, not time since boot
 UNIX_PLAUSIBLE_US = (1_420_070_400 * 10**6, 4_102_444_800 * 10**6)  # 2015-01-01 .. 2100-01-01 (UTC)
-# SYSTEM_TIME's UNIX time (1 Hz of the autopilot's clock; arrivals = our clock, µs): 1 s back,
-# 1 s ahead of an envelope growing 20x our clock; a new base needs 3 pairs over 1.5 s
+# SYSTEM_TIME's UNIX time against its boot time ("arrivals"): 1 s back, 1 s ahead of an envelope
+# growing as fast as the boot time (+5 %); a new base needs 3 agreeing pairs over 1.5 s of boot time
 UNIX_CLOCK = ClockWindow(max_back_us=1_000_000, max_forward_us=1_000_000, consensus_samples=3,
-                         consensus_step_us=30_000_000, consensus_back_us=1_000_000, max_rate=20.0,
+                         consensus_step_us=30_000_000, consensus_back_us=1_000_000, max_rate=1.05,
                          consensus_span_us=1_500_000)
 IMU_RANK = {"HIGHRES_IMU": 0, "SCALED_IMU": 1, "RAW_IMU": 2, "SCALED_IMU2": 3}
 ATTITUDE_RANK = {"ATTITUDE_QUATERNION": 0, "ATTITUDE": 1}
@@ -134,15 +135,15 @@ class Translator:
             self.set_gnss_delay(round(value_ms * 1000), f"autopilot parameter {name}")
         return True
 
-    def system_time(self, msg: Any, arrival_us: int) -> None:
-        """A SYSTEM_TIME pair (``arrival_us``: our wall clock when it arrived, µs)."""
+    def system_time(self, msg: Any) -> None:
+        """A SYSTEM_TIME pair (its boot time already checked by the caller's clock rule)."""
         unix_us = int(msg.time_unix_usec)
         if unix_us <= UNIX_STAMP_MIN_US:  # no UNIX time yet (ArduPilot before its GPS has time)
             return
         if not UNIX_PLAUSIBLE_US[0] <= unix_us <= UNIX_PLAUSIBLE_US[1]:
             self.counters["rejected_system_time_range"] += 1
             return
-        verdict = self._unix.check(unix_us, arrival_us)
+        verdict = self._unix.check(unix_us, int(msg.time_boot_ms) * 1000)
         if verdict is Verdict.REJECT:
             self.counters["rejected_system_time_clock"] += 1
             return
