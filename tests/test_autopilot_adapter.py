@@ -96,6 +96,24 @@ def test_discovery_needs_component_1_a_vehicle_type_and_consistent_heartbeats():
     assert d.last_heartbeat_s == 0.4 and d.counters["inconsistent_heartbeat"] == 2 and len(d.alarms) == 1
 
 
+def test_a_streaming_autopilot_is_chosen_at_once_unless_another_is_close():
+    imu = mavlink.MAVLink_highres_imu_message(1_000_000, 0, 0, -9.8, *[0] * 10, 0b111111, 0)
+
+    def elect(rival_frames: int) -> float | None:
+        d = Discovery()
+        for k in range(rival_frames):
+            d.accept(_from(_hb() if k < 2 else imu, 42, 1), 0.001 * k)
+        for k in range(200):  # a SITL at x10: two HEARTBEATs and its streams within 0.2 s
+            t = 0.1 + 0.001 * k
+            if d.accept(_from(_hb() if k in (0, 50) else imu, 7, 1), t):
+                return t
+        return None
+
+    assert elect(0) == pytest.approx(0.1 + 0.099)  # the 100th frame decides
+    assert elect(2) == pytest.approx(0.1 + 0.099)  # 2 forged frames: 10x beaten at once
+    assert elect(30) is None  # a rival with 30 frames: the window (1.5 s) decides
+
+
 def test_target_system_pins_the_autopilot_and_other_vehicles_are_only_counted():
     d = Discovery(DiscoveryConfig(target_system=5, election_s=0.0))
     for t in (0.0, 0.1, 0.2):

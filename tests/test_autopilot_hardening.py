@@ -293,7 +293,7 @@ def test_a_reboot_needs_a_lasting_run_of_agreeing_stamps(tmp_path):
 
 def test_the_frame_needs_agreeing_fixes_and_far_fixes_never_reach_the_filter(tmp_path):
     items = list(stream(0.0, 8.0))
-    for t_s in (1.6, 6.0):  # the first fix after discovery, and one later: 5,000 km south
+    for t_s in (1.05, 6.0):  # the first fix after discovery (t = 1 s), and one later: 5,000 km south
         k = next(i for i, (t, m) in enumerate(items) if t >= t_s and m.get_type() == "GPS_RAW_INT")
         items[k] = (items[k][0], packed(gps(round(items[k][0] * 1e6), lat=HOME[0] - 45.0)))
     node = _run(items, tmp_path)
@@ -308,7 +308,7 @@ def test_the_frame_needs_agreeing_fixes_and_far_fixes_never_reach_the_filter(tmp
 def test_a_forged_origin_far_from_the_fixes_is_not_the_frame(tmp_path):
     far = round((HOME[0] + 10) * 1e7)  # 1,100 km north
     origin = mavlink.MAVLink_gps_global_origin_message(far, round(HOME[1] * 1e7), 0, 0)
-    items = sorted([(1.5001, packed(origin)), *stream(0.0, 3.0)], key=lambda i: i[0])  # just discovered
+    items = sorted([(1.0001, packed(origin)), *stream(0.0, 3.0)], key=lambda i: i[0])  # just discovered
     node = _run(items, tmp_path)
     assert node.frames.source == "first good fix"
     assert node.frames.counters["rejected_origin_far_from_fixes"] == 1

@@ -9,7 +9,10 @@ The election: from the first candidate HEARTBEAT on, every frame of every candid
 for ``election_s`` (wall time). A candidate qualifies with ``min_heartbeats`` HEARTBEATs of one
 type and autopilot (a HEARTBEAT that changes them starts its count again). When the window is
 over and a candidate qualifies, the one whose link carries the most frames wins (a real
-autopilot streams; a forged HEARTBEAT is a frame or two). Nothing is sent before that.
+autopilot streams; a forged HEARTBEAT is a frame or two). A qualified candidate with ten times
+the frames of all the others together wins at once if it has ``decisive_frames``
+frames or ``decisive_heartbeats`` HEARTBEATs (an autopilot streaming, or a SITL at x10 sending
+HEARTBEATs ten times a wall second, is not kept waiting). Nothing is sent before that.
 
 After the election the choice is never changed. Messages of other systems (ground stations,
 other vehicles: ArduPilot routes them between its ports) or other components are not used and
@@ -69,6 +72,8 @@ class DiscoveryConfig:
     target_system: int | None = None  # --target-system: only this system id can be the autopilot
     election_s: float = 1.5  # wall time candidates are compared from the first one's HEARTBEAT
     min_heartbeats: int = 2  # consistent HEARTBEATs a candidate needs to be chosen
+    decisive_frames: int = 100  # ... with this many frames (10x the rest) it wins before the window ends,
+    decisive_heartbeats: int = 3  # ... or with this many HEARTBEATs (10x the rest's frames)
     max_candidates: int = 16  # candidates tracked while electing (more are counted, not tracked)
     heartbeat_timeout_s: float = 3.0  # wall time without the autopilot's HEARTBEAT = lost (reboot or link)
     lost_timeout_s: float = 15.0  # ... and given up for good (the run ends with an error)
@@ -149,12 +154,18 @@ class Discovery:
             self.last_heartbeat_s = now_s
         if candidate is not None:
             candidate.frames += 1
-        if math.isnan(self.election_started_s) or now_s - self.election_started_s < self.config.election_s:
+        if math.isnan(self.election_started_s):
             return
         qualified = [c for c in self._candidates.values() if c.heartbeats >= self.config.min_heartbeats]
         if not qualified:
             return
         winner = max(qualified, key=lambda c: c.frames)
+        others = sum(c.frames for c in self._candidates.values()) - winner.frames
+        c = self.config
+        decisive = winner.frames >= 10 * others and (
+            winner.frames >= c.decisive_frames or winner.heartbeats >= c.decisive_heartbeats)
+        if now_s - self.election_started_s < c.election_s and not decisive:
+            return
         self.autopilot = winner.autopilot
         for c in self._candidates.values():
             if c is not winner:
