@@ -161,10 +161,10 @@ class Discovery:
             return
         winner = max(qualified, key=lambda c: c.frames)
         others = sum(c.frames for c in self._candidates.values()) - winner.frames
-        c = self.config
+        cfg = self.config
         decisive = winner.frames >= 10 * others and (
-            winner.frames >= c.decisive_frames or winner.heartbeats >= c.decisive_heartbeats)
-        if now_s - self.election_started_s < c.election_s and not decisive:
+            winner.frames >= cfg.decisive_frames or winner.heartbeats >= cfg.decisive_heartbeats)
+        if now_s - self.election_started_s < cfg.election_s and not decisive:
             return
         self.autopilot = winner.autopilot
         for c in self._candidates.values():
