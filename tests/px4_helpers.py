@@ -1,4 +1,4 @@
-"""PX4 SITL for tests (SIH quadrotor, ``gcs_tools.px4.sitl``): the firmware from
+"""PX4 SITL for tests (SIH quadrotor, ``simvehicle.harness.px4.sitl``): the firmware from
 ``<repo>/../shared/tools/px4/`` (or $BELIEFNAV_PX4_DIR). Missing, the tests skip on a developer
 machine and FAIL in CI (environment CI=true), where the shared directory is always checked out
 beside the repo.
@@ -31,7 +31,7 @@ from typing import Any
 import pytest
 
 from companion.errors import UserError
-from gcs_tools.px4.sitl import SOCKET_PATH, Px4Config, Px4Sitl, resolve_dir
+from simvehicle.harness.px4.sitl import SOCKET_PATH, Px4Config, Px4Sitl, resolve_dir
 
 PX4_TEST_SPEED = 5.0  # PX4_SIM_SPEED_FACTOR for tests: 4.9x measured, leaves a core for the rest
 

@@ -180,7 +180,7 @@ def test_px4_that_dies_is_a_lost_autopilot_exit_1_and_one_line(px4, tmp_path):
 @pytest.fixture(scope="module")
 def arducopter(tmp_path_factory):
     require_ardupilot()
-    from gcs_tools.ardupilot.sitl import ArduPilotSitl, SitlConfig
+    from simvehicle.harness.ardupilot.sitl import ArduPilotSitl, SitlConfig
 
     with ArduPilotSitl(SitlConfig(work_dir=tmp_path_factory.mktemp("ardupilot"), speedup=10)) as sitl:
         yield sitl

@@ -1,7 +1,7 @@
 """Start PX4 SITL (the real autopilot firmware, with its built-in SIH quadrotor) as a context manager.
 
 ```python
-from gcs_tools.px4.sitl import Px4Config, Px4Sitl
+from simvehicle.harness.px4.sitl import Px4Config, Px4Sitl
 with Px4Sitl(Px4Config(work_dir=run_dir / "px4", speed_factor=5, params={"EKF2_GPS_DELAY": 110})) as px4:
     px4.url          # "udpin:127.0.0.1:<14540 + i>": where PX4's onboard link sends (a companion listens)
     px4.system_id    # i + 1
@@ -45,7 +45,7 @@ from types import TracebackType
 from companion.errors import UserError
 
 DIR_ENV = "BELIEFNAV_PX4_DIR"
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_DIR = REPO_ROOT.parent / "shared" / "tools" / "px4"
 OFFBOARD_REMOTE_BASE = 14540  # PX4 sends its onboard link here (+ instance): a companion listens
 UDP_LOCAL_BASES = (14580, 18570, 14280, 13030, 19450)  # what PX4 binds (+ instance)
@@ -117,7 +117,7 @@ def free_instance(first: int = 0, last: int = MAX_INSTANCE + 1, skip: frozenset[
 
 
 def _param_lines(params: Mapping[str, float], logging: bool) -> str:
-    lines = ["#!/bin/sh", "# written by gcs_tools.px4.sitl: sourced by PX4's rcS after the airframe"]
+    lines = ["#!/bin/sh", "# written by simvehicle.harness.px4.sitl: sourced by PX4's rcS after the airframe"]
     if not logging:
         lines.append("param set SDLOG_MODE -1")
     for name, value in params.items():
