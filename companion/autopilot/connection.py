@@ -160,6 +160,8 @@ class MavConnection:
         self._serial: Any = None
         self._fd = -1
         self._scanner = StreamScanner(DIALECT)
+        self._buffer = bytearray(max(MAX_DATAGRAM_BYTES, STREAM_CHUNK_BYTES))  # reads land here: no 64 kB
+        self._view = memoryview(self._buffer)  # allocation per datagram (it would fragment the heap)
         self._out = bytearray()
         self._lost = False
         self._next_reconnect_s = 0.0
@@ -293,7 +295,7 @@ class MavConnection:
         mono_minus_real_ns = time.monotonic_ns() - time.time_ns()
         for _ in range(MAX_DATAGRAMS):
             try:
-                data, ancillary, _, addr = self._sock.recvmsg(MAX_DATAGRAM_BYTES, 64)
+                n, ancillary, _, addr = self._sock.recvmsg_into([self._view], 64)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:  # udpout: the peer's port is closed (ICMP refused)
@@ -305,7 +307,7 @@ class MavConnection:
                 if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(value) >= _TIMESPEC.size:
                     sec, ns = _TIMESPEC.unpack(value[: _TIMESPEC.size])
                     arrival_us = (sec * 1_000_000_000 + ns + mono_minus_real_ns) // 1000
-            views, skipped = parse_datagram(data, DIALECT)
+            views, skipped = parse_datagram(bytes(self._view[:n]), DIALECT)
             first = len(out)
             self._take(views, skipped, out)
             for view in out[first:]:
@@ -317,11 +319,12 @@ class MavConnection:
     def _recv_stream(self, out: list[Any]) -> None:
         for _ in range(MAX_DATAGRAMS):
             try:
-                chunk = os.read(self._fd, STREAM_CHUNK_BYTES)
+                n = os.readv(self._fd, [self._view[:STREAM_CHUNK_BYTES]])
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:
-                chunk = b""
+                n = 0
+            chunk = bytes(self._view[:n])
             if not chunk:  # the peer closed (EOF), or the device is gone
                 if self.endpoint.kind == "tcp":
                     self._on_lost()
