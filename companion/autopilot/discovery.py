@@ -18,9 +18,10 @@ After the election the choice is never changed. Messages of other systems (groun
 other vehicles: ArduPilot routes them between its ports) or other components are not used and
 are counted (``other_system``, ``other_component``; ``before_discovery`` while electing). A
 second autopilot is an alarm, not a switch: its HEARTBEATs are counted
-(``conflicting_autopilot``) and the first one is reported (:attr:`Discovery.alarms`, once per
-system). So is a HEARTBEAT of the chosen autopilot with another type or autopilot
-(``inconsistent_heartbeat``: not used, it does not keep the autopilot alive). With
+(``conflicting_autopilot``), their system ids kept (:attr:`Discovery.conflicting_systems`, at
+most :data:`MAX_LISTED`) and the first one reported (:attr:`Discovery.alarms`, once). So is a
+HEARTBEAT of the chosen autopilot with another type or autopilot (``inconsistent_heartbeat``:
+not used, it does not keep the autopilot alive). With
 ``target_system`` other vehicles are expected (a swarm on one network): counted only.
 
 The autopilot is lost after ``heartbeat_timeout_s`` without its HEARTBEAT (a reboot, a link
@@ -37,6 +38,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 AUTOPILOT_COMPONENT = mavlink.MAV_COMP_ID_AUTOPILOT1
+MAX_LISTED = 32  # conflicting system ids listed in the summary (all are counted)
 NOT_VEHICLES = frozenset((  # HEARTBEAT types that are not a flight controller
     mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_TYPE_GIMBAL,
     mavlink.MAV_TYPE_ADSB, mavlink.MAV_TYPE_CAMERA, mavlink.MAV_TYPE_CHARGING_STATION,
@@ -100,11 +102,12 @@ class Discovery:
     config: DiscoveryConfig = field(default_factory=DiscoveryConfig)
     autopilot: Autopilot | None = None
     counters: Counter[str] = field(default_factory=Counter)
-    alarms: list[str] = field(default_factory=list)  # what a reviewer must see (each reported once)
+    alarms: list[str] = field(default_factory=list)  # what a reviewer must see (each kind reported once)
+    conflicting_systems: set[int] = field(default_factory=set)  # other autopilots heard (at most MAX_LISTED)
     last_heartbeat_s: float = math.nan  # wall clock of the autopilot's last HEARTBEAT
     election_started_s: float = math.nan
     _candidates: dict[tuple[int, int], _Candidate] = field(default_factory=dict)
-    _alarmed: set[tuple[str, int]] = field(default_factory=set)
+    _alarmed: set[str] = field(default_factory=set)
 
     def accept(self, msg: Any, now_s: float) -> bool:
         """Whether ``msg`` comes from the autopilot (electing it first, see the module doc)."""
@@ -119,7 +122,8 @@ class Discovery:
             target = self.config.target_system
             if _is_candidate(msg) and (target is None or src[0] == target):
                 self.counters["conflicting_autopilot"] += 1
-                self._alarm("conflicting", src[0], f"a second autopilot (system {src[0]}, "
+                self._conflicting(src[0])
+                self._alarm("conflicting", f"a second autopilot (system {src[0]}, "
                             f"{enum_name('MAV_AUTOPILOT', msg.autopilot)}) on the link beside system "
                             f"{ap.system_id}: not used; pin the autopilot with --target-system")
             self.counters["other_system" if src[0] != ap.system_id else "other_component"] += 1
@@ -127,7 +131,7 @@ class Discovery:
         if msg.get_type() == "HEARTBEAT":
             if (int(msg.autopilot), int(msg.type)) != (ap.autopilot_type, ap.vehicle_type):
                 self.counters["inconsistent_heartbeat"] += 1
-                self._alarm("inconsistent", ap.system_id, f"a HEARTBEAT of system {ap.system_id} says "
+                self._alarm("inconsistent", f"a HEARTBEAT of system {ap.system_id} says "
                             f"autopilot {msg.autopilot}, type {msg.type} (not {ap.autopilot_type}, "
                             f"{ap.vehicle_type}): not used")
                 return False
@@ -170,15 +174,20 @@ class Discovery:
         for c in self._candidates.values():
             if c is not winner:
                 s = c.autopilot.system_id
-                self._alarm("conflicting", s, f"{len(self._candidates)} autopilots answered discovery: "
+                self._conflicting(s)
+                self._alarm("conflicting", f"{len(self._candidates)} autopilots answered discovery: "
                             f"system {winner.autopilot.system_id} chosen ({winner.frames} frames), system "
                             f"{s} ({c.frames} frames) not used; pin the autopilot with --target-system")
         self._candidates.clear()
 
-    def _alarm(self, kind: str, system_id: int, text: str) -> None:
-        if (kind, system_id) not in self._alarmed:
-            self._alarmed.add((kind, system_id))
+    def _alarm(self, kind: str, text: str) -> None:
+        if kind not in self._alarmed:
+            self._alarmed.add(kind)
             self.alarms.append(text)
+
+    def _conflicting(self, system_id: int) -> None:
+        if len(self.conflicting_systems) < MAX_LISTED:
+            self.conflicting_systems.add(system_id)
 
     def heartbeat_lost(self, now_s: float) -> bool:
         return self.autopilot is not None and now_s - self.last_heartbeat_s > self.config.heartbeat_timeout_s

@@ -85,6 +85,7 @@ class CompanionConfig:
     component_id: int = DEFAULT_COMPONENT_ID
     discovery_timeout_s: float = 60.0  # wall seconds without an autopilot HEARTBEAT = error
     signing_key: bytes | None = None  # MAVLink 2 signing on the link (both ways)
+    boot_clock: ClockWindow | None = None  # None: BOOT_CLOCK_DATAGRAM / _STREAM by the link's kind
     heartbeat_period_s: float = 1.0  # our HEARTBEAT (wall clock)
     summary_period_s: float = 1.0  # summary.json rewritten this often (wall clock)
     series_period_us: int = 40_000  # our estimate compared at 25 Hz (boot time)
@@ -126,7 +127,8 @@ class AutopilotCompanion:
         self.timesync = Timesync(config.timesync)
         self.frames = FrameChooser(config.frame, config.home)
         self.exact_arrivals = bool(getattr(conn, "exact_arrivals", False))
-        self.clock = StreamClock(BOOT_CLOCK_DATAGRAM if self.exact_arrivals else BOOT_CLOCK_STREAM)
+        window = config.boot_clock or (BOOT_CLOCK_DATAGRAM if self.exact_arrivals else BOOT_CLOCK_STREAM)
+        self.clock = StreamClock(window)
         self.telemetry = telemetry or TelemetryPublisher.disabled()
         self._topics = EstimatorTelemetry(self.telemetry)
         self.nav: Navigator | None = None
@@ -452,6 +454,7 @@ class AutopilotCompanion:
             "master": c.master, "method": c.method, "feed": c.feed, "wall_s": wall_s,
             "cpu_s": time.process_time(),
             "autopilot": ap.as_dict() if ap is not None else None,
+            "conflicting_autopilots": sorted(self.discovery.conflicting_systems),
             "home": None if frame is None else {
                 "lat_deg": frame.home_lat_deg, "lon_deg": frame.home_lon_deg,
                 "alt_m": frame.home_alt_m, "source": self.frames.source},
