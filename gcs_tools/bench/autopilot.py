@@ -117,7 +117,8 @@ def _floods(frames: list[bytes], tmp: Path) -> dict[str, Any]:
         node.tick(time.monotonic())
         conn.recv(timeout_s=0.02)
     out["idle_cpu_fraction_after"] = (time.process_time() - c0) / (time.monotonic() - w0)
-    out["clock_rule"] = {k: v for k, v in node.counters.items() if k.startswith(("rejected_clock", "autopilot_"))}
+    out["clock_rule"] = {k: v for k, v in node.counters.items()
+                         if k.startswith(("rejected_clock", "autopilot_"))}
     out["link"] = {k: conn.counters[k] for k in ("garbage", "bad_crc", "unknown_message", "peers_refused")}
     conn.close()
     assert conn.tlog is not None
