@@ -3,16 +3,20 @@
 A *candidate* is a sender whose HEARTBEAT says it is a flight controller: component 1
 (MAV_COMP_ID_AUTOPILOT1), ``autopilot`` not MAV_AUTOPILOT_INVALID and a vehicle ``type`` (not a
 ground station, companion, gimbal, camera, ...). ``target_system`` (``--target-system``) pins
-the system id: then no other system can be a candidate at all.
+the system id: then no other system can be a candidate at all, and the pinned one is chosen as
+soon as it qualifies (nothing to elect).
 
 The election: from the first candidate HEARTBEAT on, every frame of every candidate is counted
 for ``election_s`` (wall time). A candidate qualifies with ``min_heartbeats`` HEARTBEATs of one
-type and autopilot (a HEARTBEAT that changes them starts its count again). When the window is
+type and autopilot, at least ``heartbeat_spacing_s`` apart (a HEARTBEAT that changes them starts
+its count again; a burst of them counts as one). When the window is
 over and a candidate qualifies, the one whose link carries the most frames wins (a real
 autopilot streams; a forged HEARTBEAT is a frame or two). A qualified candidate with ten times
 the frames of all the others together wins at once if it has ``decisive_frames``
-frames or ``decisive_heartbeats`` HEARTBEATs (an autopilot streaming, or a SITL at x10 sending
-HEARTBEATs ten times a wall second, is not kept waiting). Nothing is sent before that.
+frames or ``decisive_heartbeats`` HEARTBEATs, once its first HEARTBEAT is ``decisive_after_s`` old
+(an autopilot streaming, or a SITL at x10 sending HEARTBEATs ten times a wall second, is not kept
+waiting; a forged burst that arrives before the autopilot's first frame decides nothing). Nothing
+is sent before that.
 
 After the election the choice is never changed. Messages of other systems (ground stations,
 other vehicles: ArduPilot routes them between its ports) or other components are not used and
@@ -75,7 +79,9 @@ class DiscoveryConfig:
     election_s: float = 1.5  # wall time candidates are compared from the first one's HEARTBEAT
     min_heartbeats: int = 2  # consistent HEARTBEATs a candidate needs to be chosen
     decisive_frames: int = 100  # ... with this many frames (10x the rest) it wins before the window ends,
-    decisive_heartbeats: int = 3  # ... or with this many HEARTBEATs (10x the rest's frames)
+    decisive_heartbeats: int = 3  # ... or with this many HEARTBEATs (10x the rest's frames),
+    decisive_after_s: float = 0.25  # ... once its first HEARTBEAT is this old (a burst decides nothing)
+    heartbeat_spacing_s: float = 0.05  # HEARTBEATs closer than this count as one (a SITL at x20: 0.05 s)
     max_candidates: int = 16  # candidates tracked while electing (more are counted, not tracked)
     heartbeat_timeout_s: float = 3.0  # wall time without the autopilot's HEARTBEAT = lost (reboot or link)
     lost_timeout_s: float = 15.0  # ... and given up for good (the run ends with an error)
@@ -88,7 +94,9 @@ class DiscoveryConfig:
 @dataclass(slots=True)
 class _Candidate:
     autopilot: Autopilot
-    heartbeats: int = 0
+    first_heartbeat_s: float
+    heartbeats: int = 0  # consistent ones, at least heartbeat_spacing_s apart
+    last_counted_s: float = -math.inf
     frames: int = 0
 
 
@@ -148,11 +156,13 @@ class Discovery:
                 if len(self._candidates) >= self.config.max_candidates:
                     self.counters["candidates_not_tracked"] += 1
                     return
-                candidate = self._candidates[src] = _Candidate(ap)
+                candidate = self._candidates[src] = _Candidate(ap, now_s)
             if candidate.autopilot != ap:  # its type or autopilot changed: count again
                 self.counters["inconsistent_heartbeat"] += 1
-                candidate.autopilot, candidate.heartbeats = ap, 0
-            candidate.heartbeats += 1
+                candidate.autopilot, candidate.heartbeats, candidate.first_heartbeat_s = ap, 0, now_s
+            if now_s - candidate.last_counted_s >= self.config.heartbeat_spacing_s:  # a burst is one
+                candidate.heartbeats += 1
+                candidate.last_counted_s = now_s
             if math.isnan(self.election_started_s):
                 self.election_started_s = now_s
             self.last_heartbeat_s = now_s
@@ -166,10 +176,12 @@ class Discovery:
         winner = max(qualified, key=lambda c: c.frames)
         others = sum(c.frames for c in self._candidates.values()) - winner.frames
         cfg = self.config
-        decisive = winner.frames >= 10 * others and (
-            winner.frames >= cfg.decisive_frames or winner.heartbeats >= cfg.decisive_heartbeats)
-        if now_s - self.election_started_s < cfg.election_s and not decisive:
-            return
+        if cfg.target_system is None:  # pinned: no rival can exist, nothing to elect
+            settled = now_s - winner.first_heartbeat_s >= cfg.decisive_after_s
+            decisive = settled and winner.frames >= 10 * others and (
+                winner.frames >= cfg.decisive_frames or winner.heartbeats >= cfg.decisive_heartbeats)
+            if now_s - self.election_started_s < cfg.election_s and not decisive:
+                return
         self.autopilot = winner.autopilot
         for c in self._candidates.values():
             if c is not winner:
