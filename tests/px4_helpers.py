@@ -29,20 +29,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from ardupilot_helpers import require_tool
 
-from companion.errors import UserError
 from simvehicle.harness.px4.sitl import SOCKET_PATH, Px4Config, Px4Sitl, resolve_dir
 
 PX4_TEST_SPEED = 5.0  # PX4_SIM_SPEED_FACTOR for tests: 4.9x measured, leaves a core for the rest
 
 
 def require_px4() -> Path:
-    try:
-        return resolve_dir()
-    except UserError as exc:
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"PX4 SITL is required in CI: {exc}")
-        pytest.skip(str(exc))
+    return require_tool(resolve_dir, "PX4 SITL")
 
 
 def _alive(pid: int) -> bool:

@@ -43,6 +43,7 @@ from pathlib import Path
 from types import TracebackType
 
 from companion.errors import UserError
+from simvehicle.harness.firmware import log_tail, port_free, signal_group, stop_group
 
 DIR_ENV = "BELIEFNAV_PX4_DIR"
 REPO_ROOT = Path(__file__).resolve().parents[3]
@@ -84,15 +85,6 @@ def instance_ports(instance: int) -> tuple[int, ...]:
     return (OFFBOARD_REMOTE_BASE + instance, *(base + instance for base in UDP_LOCAL_BASES))
 
 
-def _udp_port_free(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind(("0.0.0.0", port))
-        except OSError:
-            return False
-    return True
-
-
 def _server_alive(instance: int) -> bool:
     """Whether a PX4 server answers on /tmp/px4-sock-<instance> (a stale file answers nobody)."""
     path = SOCKET_PATH.format(instance)
@@ -110,7 +102,7 @@ def free_instance(first: int = 0, last: int = MAX_INSTANCE + 1, skip: frozenset[
     for instance in range(first, min(last, MAX_INSTANCE + 1)):
         if instance in skip or _server_alive(instance):
             continue
-        if all(_udp_port_free(p) for p in instance_ports(instance)):
+        if all(port_free(p, socket.SOCK_DGRAM) for p in instance_ports(instance)):
             return instance
     last = min(last, MAX_INSTANCE + 1) - 1
     raise UserError(f"no free PX4 SITL instance in -i {first}..{last} (ports in use)")
@@ -252,12 +244,8 @@ class Px4Sitl:
         self.stop()
         raise UserError(f"PX4 SITL -i {self.instance}: no HEARTBEAT within {timeout_s:g} s: {self._tail()}")
 
-    def _tail(self, lines: int = 3) -> str:
-        try:
-            text = self.log_path.read_text(errors="replace").strip().splitlines()
-        except OSError:
-            return "(no output)"
-        return " | ".join(text[-lines:]) or "(no output)"
+    def _tail(self) -> str:
+        return log_tail(self.log_path)
 
     def running(self) -> bool:
         return self.process is not None and self.process.poll() is None
@@ -275,14 +263,8 @@ class Px4Sitl:
         proc, self.process = self.process, None
         if proc is None:
             return None
-        if proc.poll() is None:
-            _signal_group(proc, signal.SIGTERM)
-            try:
-                proc.wait(self.config.stop_timeout_s)
-            except subprocess.TimeoutExpired:
-                _signal_group(proc, signal.SIGKILL)
-                proc.wait()
-        _signal_group(proc, signal.SIGKILL)  # whatever its start script left running
+        stop_group(proc, self.config.stop_timeout_s)
+        signal_group(proc, signal.SIGKILL)  # whatever its start script left running
         self._remove_socket()
         return proc.returncode
 
@@ -298,7 +280,3 @@ class Px4Sitl:
                  tb: TracebackType | None) -> None:
         self.stop()
 
-
-def _signal_group(proc: subprocess.Popen[bytes], sig: signal.Signals) -> None:
-    with contextlib.suppress(ProcessLookupError, PermissionError):
-        os.killpg(proc.pid, sig)
