@@ -134,7 +134,11 @@ def test_px4_over_udp_survives_spoofing_floods_and_forged_stamps(px4, tmp_path):
     assert (ap["system_id"], ap["component_id"], ap["autopilot_type"]) == (px4.system_id, 1, 12)
     conflicting = [p for p in s["problems"] if "second autopilot (system 42" in p or "system 42 (" in p]
     assert len(conflicting) == 1, s["problems"]
-    assert s["samples"]["rejected"]["autopilot_conflicting_autopilot"] >= 3
+    rejected = s["samples"]["rejected"]
+    assert rejected["autopilot_conflicting_autopilot"] >= 3 and s["conflicting_autopilots"] == [42]
+    # system 42's HEARTBEATs are the only other system: PX4's own unknown message ids are not
+    assert rejected["autopilot_other_system"] == rejected["autopilot_conflicting_autopilot"]
+    assert s["link"]["unknown_message"] > 0
     _check_forgeries_refused(s)
     link = s["link"]
     assert link["garbage"] + link.get("bad_crc", 0) + link.get("unknown_message", 0) >= 3000 - 10
