@@ -81,22 +81,25 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run_master(args: argparse.Namespace) -> int:
-    from companion.autopilot.node import config_from_args, run
+    from companion.autopilot.service import config_from_args, run
     from companion.telemetry.pubsub import publisher_from_args
 
     telemetry = None
     try:
         config = config_from_args(args)
         telemetry = publisher_from_args(args, "companion")
-        run(config, telemetry)
+        summary = run(config, telemetry)
     except UserError as exc:
         print(f"companion estimator: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        pass
+        return 0
     finally:
         if telemetry is not None:
             telemetry.close()
+    if summary.get("failure"):
+        print(f"companion estimator: error: {summary['failure']}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -6,7 +6,13 @@ Pure numeric core shared by ``beliefnav replay`` and the live companion: no I/O.
 same local NED frame and in arrival order: each reference sample is compared with the estimate
 linearly interpolated to the reference's time, once the estimates have passed that time.
 Memory: a short window of recent estimates (``window_us``) plus three float32 per matched
-reference (exact medians need the values; 0.8 MB for 18 hours of 5 Hz fixes).
+reference (exact medians need the values; 0.8 MB for 18 hours of 5 Hz fixes). A process that
+runs for days bounds it with ``max_errors``: once that many are kept, every other one is
+dropped and from then on only every 2nd (then 4th, ...) matched error is kept: a uniform
+decimation in time, so the statistics are those of an evenly spaced sample (``decimation``
+says the stride; ``matched`` and, without a fitted alignment, the maxima stay exact).
+References waiting for estimates are bounded too (``max_pending``, the oldest counted as
+unmatched).
 :func:`error_statistics` reduces the error vectors to the summary block
 ``{n, alignment, offset_ned_m, mean_error_ned_m, error_horizontal_m, error_3d_m}`` (each
 ``median, p95, max, rmse, iqr, n``).
@@ -114,13 +120,18 @@ class PositionErrors:
     unmatched, collected errors are kept.
     """
 
-    def __init__(self, window_us: int = DEFAULT_WINDOW_US, max_gap_us: int | None = None) -> None:
+    def __init__(self, window_us: int = DEFAULT_WINDOW_US, max_gap_us: int | None = None,
+                 max_errors: int | None = None, max_pending: int = 65_536) -> None:
         self.window_us, self.max_gap_us = window_us, max_gap_us
+        self.max_errors, self.max_pending = max_errors, max_pending
         self._t: list[int] = []
         self._p: list[tuple[float, float, float]] = []
         self._pending: deque[tuple[int, tuple[float, float, float]]] = deque()
-        self._err = array("f")  # float32: 12 bytes per matched reference
+        self._err = array("f")  # float32: 12 bytes per kept error
         self.unmatched = 0
+        self.matched = 0
+        self.decimation = 1  # every decimation-th matched error is kept
+        self._max_sq = [0.0, 0.0]  # largest squared horizontal and 3-D error of all matched
 
     def add_estimate(self, t_us: int, p_ned_m: Any) -> None:
         if self._t and t_us < self._t[-1]:
@@ -142,6 +153,9 @@ class PositionErrors:
             self._pending.append((t_us, p))
             if len(self._pending) > 1 and self._pending[-2][0] > t_us:  # rare: keep it sorted
                 self._pending = deque(sorted(self._pending))
+            if len(self._pending) > self.max_pending:
+                self._pending.popleft()
+                self.unmatched += 1
 
     def _match(self, t_us: int, p: tuple[float, float, float]) -> None:
         t = self._t
@@ -159,7 +173,18 @@ class PositionErrors:
             w = (t_us - t0) / (t1 - t0)
             q0, q1 = self._p[i - 1], self._p[i]
             q = (q0[0] + w * (q1[0] - q0[0]), q0[1] + w * (q1[1] - q0[1]), q0[2] + w * (q1[2] - q0[2]))
-        self._err.extend((q[0] - p[0], q[1] - p[1], q[2] - p[2]))
+        self.matched += 1
+        e = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+        h_sq = e[0] * e[0] + e[1] * e[1]
+        m = self._max_sq
+        m[0], m[1] = max(m[0], h_sq), max(m[1], h_sq + e[2] * e[2])
+        if (self.matched - 1) % self.decimation:
+            return
+        self._err.extend(e)
+        if self.max_errors is not None and len(self._err) >= 3 * self.max_errors:
+            kept = np.frombuffer(self._err, dtype=np.float32).reshape(-1, 3)[::2]
+            self._err = array("f", kept.ravel().tobytes())
+            self.decimation *= 2
 
     def restart(self) -> None:
         self.unmatched += len(self._pending)
@@ -173,7 +198,11 @@ class PositionErrors:
 
     def statistics(self, alignment: str = "geodetic") -> dict[str, Any]:
         out = error_statistics(self.errors_ned_m(), alignment)
+        if alignment == "geodetic" and self.decimation > 1:  # the maxima of all, not of the kept sample
+            out["error_horizontal_m"]["max"] = math.sqrt(self._max_sq[0])
+            out["error_3d_m"]["max"] = math.sqrt(self._max_sq[1])
         out["unmatched"] = self.unmatched + len(self._pending)
+        out["matched"], out["decimation"] = self.matched, self.decimation
         return out
 
 

@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -21,13 +22,18 @@ M = mavutil.mavlink
 COPTER_MODE_GUIDED = 4
 
 
-def require_ardupilot() -> Path:
+def require_tool(resolve: Callable[[], Path], what: str) -> Path:
+    """``resolve()``'s path; if it raises UserError: skip on a developer machine, fail in CI."""
     try:
-        return resolve_binary()
+        return resolve()
     except UserError as exc:
         if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"ArduPilot SITL is required in CI: {exc}")
+            pytest.fail(f"{what} is required in CI: {exc}")
         pytest.skip(str(exc))
+
+
+def require_ardupilot() -> Path:
+    return require_tool(resolve_binary, "ArduPilot SITL")
 
 
 def run_companion(master: str, out: Path, *extra: str) -> subprocess.Popen[str]:

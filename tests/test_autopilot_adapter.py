@@ -11,7 +11,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.autopilot import compare, feeds
 from companion.autopilot.connection import Endpoint, parse_connection
-from companion.autopilot.discovery import Discovery
+from companion.autopilot.discovery import Discovery, DiscoveryConfig
 from companion.autopilot.streams import StreamRates, data_stream_requests, interval_requests
 from companion.autopilot.timesync import Timesync
 from companion.autopilot.translate import TranslateConfig, Translator
@@ -52,22 +52,85 @@ def _from(msg, system, component):
     return msg
 
 
-def test_discovery_takes_the_first_autopilot_and_counts_the_rest():
+QUAD = mavlink.MAV_TYPE_QUADROTOR
+
+
+def _hb(autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, vehicle=QUAD):
+    return mavlink.MAVLink_heartbeat_message(vehicle, autopilot, 0, 0, 0, 3)
+
+
+def test_discovery_elects_the_autopilot_the_link_carries_not_the_first_heartbeat():
+    """A forged HEARTBEAT first (system 42), then the real autopilot's stream: the real one wins
+    after the election window, 42 is an alarm (reported once), never used."""
     d = Discovery()
     gcs = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
-    quad = mavlink.MAV_TYPE_QUADROTOR
-    ap = mavlink.MAVLink_heartbeat_message(quad, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0, 3)
     assert not d.accept(_from(gcs, 255, 190), 0.0)  # a ground station is not an autopilot
-    assert d.accept(_from(ap, 7, 1), 0.0)
+    assert not d.accept(_from(_hb(), 42, 1), 0.0)  # the forged one comes first: nothing chosen yet
+    imu = mavlink.MAVLink_highres_imu_message(1_000_000, 0, 0, -9.8, *[0] * 10, 0b111111, 0)
+    assert not d.accept(_from(_hb(), 7, 1), 0.1)
+    for k in range(20):
+        assert not d.accept(_from(imu, 7, 1), 0.2 + k * 0.05)
+    assert not d.accept(_from(_hb(), 42, 1), 1.0)  # 42 qualifies too (2 HEARTBEATs) but carries nothing
+    assert d.accept(_from(_hb(), 7, 1), 1.6)  # the window is over: the stream's autopilot
     assert d.autopilot is not None and (d.autopilot.system_id, d.autopilot.component_id) == (7, 1)
     assert d.autopilot.as_dict()["autopilot"] == "MAV_AUTOPILOT_ARDUPILOTMEGA"
-    other = mavlink.MAVLink_heartbeat_message(quad, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
-    assert not d.accept(_from(other, 8, 1), 0.5)
-    assert not d.accept(_from(ap, 7, 154), 0.5)  # a gimbal of the same system
-    assert dict(d.counters) == {"before_discovery": 1, "other_system": 1, "other_component": 1}
-    assert not d.heartbeat_lost(2.9) and d.heartbeat_lost(3.1)
-    assert not d.boot_time(60_000_000) and not d.boot_time(59_500_000)  # jitter, not a reboot
-    assert d.boot_time(1_000_000) and d.reboots == 1
+    assert len(d.alarms) == 1 and "system 42" in d.alarms[0]
+    assert not d.accept(_from(_hb(mavlink.MAV_AUTOPILOT_PX4), 42, 1), 2.0)  # never a switch
+    assert not d.accept(_from(_hb(mavlink.MAV_AUTOPILOT_PX4), 42, 1), 3.0)
+    assert d.counters["conflicting_autopilot"] == 2 and len(d.alarms) == 1  # counted, reported once
+    assert not d.accept(_from(_hb(), 7, 154), 2.5)  # a gimbal of the same system
+    assert d.counters["other_system"] == 2 and d.counters["other_component"] == 1
+    assert not d.heartbeat_lost(4.5) and d.heartbeat_lost(4.7) and not d.given_up(16.5) and d.given_up(16.7)
+
+
+def test_discovery_needs_component_1_a_vehicle_type_and_consistent_heartbeats():
+    d = Discovery(DiscoveryConfig(election_s=0.0))
+    assert not d.accept(_from(_hb(), 3, 154), 0.0)  # not the autopilot component
+    assert not d.accept(_from(_hb(vehicle=mavlink.MAV_TYPE_ONBOARD_CONTROLLER), 3, 1), 0.1)
+    assert not d.accept(_from(_hb(), 3, 1), 0.2)  # one HEARTBEAT is not enough
+    assert not d.accept(_from(_hb(mavlink.MAV_AUTOPILOT_PX4), 3, 1), 0.3)  # changed: its count restarts
+    assert d.autopilot is None and d.counters["inconsistent_heartbeat"] == 1
+    assert d.accept(_from(_hb(mavlink.MAV_AUTOPILOT_PX4), 3, 1), 0.4)
+    assert d.autopilot is not None and d.autopilot.autopilot_type == mavlink.MAV_AUTOPILOT_PX4
+    assert not d.accept(_from(_hb(), 3, 1), 0.5)  # a HEARTBEAT of it saying ArduPilot now: not believed
+    assert d.last_heartbeat_s == 0.4 and d.counters["inconsistent_heartbeat"] == 2 and len(d.alarms) == 1
+
+
+def test_a_streaming_autopilot_is_chosen_at_once_unless_another_is_close():
+    imu = mavlink.MAVLink_highres_imu_message(1_000_000, 0, 0, -9.8, *[0] * 10, 0b111111, 0)
+
+    def elect(rival_frames: int) -> float | None:
+        d = Discovery()
+        for k in range(rival_frames):
+            d.accept(_from(_hb() if k < 2 else imu, 42, 1), 0.001 * k)
+        for k in range(300):  # a SITL at x10: HEARTBEATs every 0.1 s and its streams, 0.3 s
+            t = 0.1 + 0.001 * k
+            if d.accept(_from(_hb() if k % 100 == 0 else imu, 7, 1), t):
+                return t
+        return None
+
+    # 100 frames and 3 HEARTBEATs: decided 0.25 s after its first; 2 forged frames (a burst: one
+    # HEARTBEAT) are beaten 10x just the same
+    assert elect(0) == pytest.approx(0.35, abs=0.002) and elect(2) == pytest.approx(0.35, abs=0.002)
+    assert elect(50) is None  # a rival with 50 frames: the window (1.5 s) decides
+
+    burst = Discovery()  # a forged burst before the autopilot's first frame decides nothing
+    assert not any(burst.accept(_from(_hb(), 42, 1), 0.0) for _ in range(10))
+    assert burst.autopilot is None and burst._candidates[(42, 1)].heartbeats == 1
+
+
+def test_target_system_pins_the_autopilot_and_other_vehicles_are_only_counted():
+    d = Discovery(DiscoveryConfig(target_system=5, election_s=0.0))
+    for t in (0.0, 0.1, 0.2):
+        assert not d.accept(_from(_hb(), 4, 1), t)  # a busier vehicle: never a candidate
+    assert not d.accept(_from(_hb(), 5, 1), 0.3)
+    assert d.accept(_from(_hb(), 5, 1), 0.4) and d.autopilot is not None and d.autopilot.system_id == 5
+    pinned = Discovery(DiscoveryConfig(target_system=5))  # the default window: no wait when pinned
+    assert not pinned.accept(_from(_hb(), 5, 1), 0.0) and pinned.accept(_from(_hb(), 5, 1), 0.1)
+    assert not d.accept(_from(_hb(), 4, 1), 0.5)
+    assert d.alarms == [] and d.counters["conflicting_autopilot"] == 0  # a swarm: expected
+    with pytest.raises(ValueError):
+        DiscoveryConfig(target_system=0)
 
 
 def test_stream_requests_ask_each_message_by_interval_then_legacy_groups():
@@ -111,6 +174,31 @@ def test_translator_gnss_carries_the_receiver_velocity_and_reads_gps_input_when_
     np.testing.assert_allclose(f.v_ned_m_s, (1.5, -2.0, 0.4), rtol=1e-6)
     with pytest.raises(ValueError, match="gnss_message"):
         Translator(TranslateConfig(gnss_message="GPS_BOGUS"))
+
+
+def test_system_time_is_range_checked_and_a_lone_jump_is_not_believed():
+    tr = Translator()
+    unix_us = 1_700_000_000_000_000
+
+    def pair(unix_s: float, boot_s: float) -> None:
+        msg = mavlink.MAVLink_system_time_message(unix_us + round(unix_s * 1e6), round(boot_s * 1000))
+        tr.system_time(msg)
+
+    pair(10.0, 10.0)
+    assert tr.unix_minus_boot_us == unix_us
+    tr.system_time(mavlink.MAVLink_system_time_message(2**63 - 1, 11_000))  # spoofed: 2^63
+    pair(3611.0, 11.0)  # a lone pair one hour ahead
+    pair(5.0, 11.0)  # ... or 6 s back
+    assert tr.unix_minus_boot_us == unix_us
+    assert tr.counters["rejected_system_time_range"] == 1 and tr.counters["rejected_system_time_clock"] == 2
+    for k in range(5):  # a SITL at x5: its boot time runs 5x its UNIX clock (wall): the offset drifts
+        pair(11.0 + k, 15.0 + 5 * k)
+    assert tr.unix_minus_boot_us == unix_us + 15_000_000 - 35_000_000
+    pair(18.0, 36.0)  # UNIX time running faster than boot time (3 s in 1 s): not a clock
+    assert tr.counters["rejected_system_time_clock"] == 3
+    for k in range(3):  # the clock really was set: three agreeing pairs over 2 s of boot time
+        pair(100.0 + k, 40.0 + k)
+    assert tr.unix_minus_boot_us == unix_us + 60_000_000 and tr.counters["system_time_clock_set"] == 1
 
 
 def test_translator_units_and_source_ranking():
@@ -204,8 +292,15 @@ class _FakeConn:
         self.counters: dict = {}
         self.source = (0, 0)
 
-    def send(self, msg) -> None:
+    def send(self, msg) -> bool:
         self.sent.append(msg)
+        return True
+
+    def note_peer(self, msg, now_s) -> None:
+        pass
+
+    def arrival_us(self, msg) -> None:
+        return None
 
     def set_source(self, system_id: int, component_id: int) -> None:
         self.source = (system_id, component_id)
@@ -224,11 +319,14 @@ def test_node_streams_state_machine_fallback_and_reask(tmp_path):
     node.tick(0.0)
     assert conn.kinds() == []  # nothing before discovery
     hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
+    node.handle(_from(hb, 3, 1), -2.0)
+    assert conn.source == (0, 0)  # one HEARTBEAT: not yet
     node.handle(_from(hb, 3, 1), 0.0)
     assert conn.source == (3, 197)
     node.tick(0.0)
     first = conn.kinds()
     assert first.count("COMMAND_LONG") == 8 and "HEARTBEAT" in first and "TIMESYNC" in first
+    assert "PARAM_REQUEST_READ" in first  # EKF2_GPS_DELAY
     node.tick(2.0)
     assert "REQUEST_DATA_STREAM" not in conn.kinds()
     node.tick(3.5)  # no IMU 3 s after asking: the legacy groups too
@@ -342,10 +440,9 @@ def test_node_counts_implausible_and_broken_messages_and_never_raises(tmp_path):
 
     conn = _FakeConn()
     node = AutopilotCompanion(CompanionConfig(master="udpin::14550", out_dir=tmp_path), conn)  # type: ignore[arg-type]
-    hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
-    node.handle(_from(hb, 3, 1), 0.0)
-    node.handle(_from(mavlink.MAVLink_gps_global_origin_message(950_000_000, 0, 0, 0), 3, 1), 0.1)
-    node.handle(_from(mavlink.MAVLink_local_position_ned_message(1000, math.nan, 0, 0, 0, 0, 0), 3, 1), 0.1)
+    _discover(node, 3, mavlink.MAV_AUTOPILOT_PX4)
+    node.handle(_from(mavlink.MAVLink_gps_global_origin_message(950_000_000, 0, 0, 0), 3, 1), 2.1)
+    node.handle(_from(mavlink.MAVLink_local_position_ned_message(1000, math.nan, 0, 0, 0, 0, 0), 3, 1), 2.1)
 
     class Broken:  # a SYSTEM_TIME without its fields
         def get_type(self):
@@ -357,15 +454,23 @@ def test_node_counts_implausible_and_broken_messages_and_never_raises(tmp_path):
         def get_srcComponent(self):
             return 1
 
-    node.handle(Broken(), 0.2)
-    node.handle(Broken(), 0.3)
-    assert node.origins == {} and node.series.local_t_us == []
-    assert node.counters["rejected_gps_global_origin"] == 1
+    node.handle(Broken(), 2.2)
+    node.handle(Broken(), 2.3)
+    assert node.frames.origins == {} and node.comparison.local_references == 0
+    assert node.frames.counters["rejected_gps_global_origin"] == 1
     assert node.counters["rejected_local_position_ned"] == 1
     assert node.counters["handler_error_SYSTEM_TIME_AttributeError"] == 2 and len(node.errors) == 1
 
 
-def test_receiver_delay_read_from_the_autopilot_unless_given(tmp_path):
+def _discover(node, system_id: int, autopilot: int) -> None:
+    """Two HEARTBEATs across the election window: ``node`` has found its autopilot at t = 2 s."""
+    hb = mavlink.MAVLink_heartbeat_message(2, autopilot, 0, 0, 0, 3)
+    node.handle(_from(hb, system_id, 1), 0.0)
+    node.handle(_from(hb, system_id, 1), 2.0)
+    assert node.discovery.autopilot is not None
+
+
+def test_receiver_delay_read_from_the_autopilot_only_as_the_answer_to_our_request(tmp_path):
     from companion.autopilot.node import AutopilotCompanion, CompanionConfig
 
     def node_for(autopilot: int, delay_us: int | None = None):
@@ -373,7 +478,8 @@ def test_receiver_delay_read_from_the_autopilot_unless_given(tmp_path):
         config = CompanionConfig(master="udpin::14550", out_dir=tmp_path,
                                  translate=TranslateConfig(gnss_delay_us=delay_us))
         node = AutopilotCompanion(config, conn)  # type: ignore[arg-type]
-        node.handle(_from(mavlink.MAVLink_heartbeat_message(2, autopilot, 0, 0, 0, 3), 1, 1), 0.0)
+        _discover(node, 1, autopilot)
+        node.tick(2.0)
         asked = [m.param_id for m in conn.sent if m.get_type() == "PARAM_REQUEST_READ"]
         return node, asked
 
@@ -383,16 +489,32 @@ def test_receiver_delay_read_from_the_autopilot_unless_given(tmp_path):
     node, asked = node_for(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
     tr = node.translator
     assert asked == ["GPS1_DELAY_MS"] and tr.gnss_delay_us == 120_000  # its default until read
-    node.handle(value("GPS1_DELAY_MS", 0.0), 0.1)
-    assert tr.gnss_delay_us == 120_000 and "= 0" in tr.gnss_delay_source
-    node.handle(value("GPS1_DELAY_MS", 60.0), 0.2)
-    node.handle(value("GPS2_DELAY_MS", 300.0), 0.2)  # not the receiver we read
+    node.handle(value("GPS2_DELAY_MS", 30.0), 2.1)  # not the receiver we read
+    node.handle(value("GPS1_DELAY_MS", 60.0), 2.2)
     assert tr.gnss_delay_us == 60_000 and tr.gnss_delay_source == "autopilot parameter GPS1_DELAY_MS"
+    node.handle(value("GPS1_DELAY_MS", 200.0), 2.3)  # answered already: a later one is not ours
+    assert tr.gnss_delay_us == 60_000 and node.counters["param_value_unsolicited"] == 2
     fix = tr.sample(_gps(20_000_000))
     assert fix is not None and fix.t_validity_us == 19_940_000
 
+    node, asked = node_for(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
+    node.handle(value("GPS1_DELAY_MS", 0.0), 2.1)
+    assert node.translator.gnss_delay_us == 120_000 and "= 0" in node.translator.gnss_delay_source
+
     node, asked = node_for(mavlink.MAV_AUTOPILOT_PX4)
     assert asked == ["EKF2_GPS_DELAY"] and node.translator.gnss_delay_us == 110_000
+    node.handle(value("EKF2_GPS_DELAY", 1000.0), 2.1)  # beyond its own range (0..300 ms): not believed
+    assert node.translator.gnss_delay_us == 110_000 and "outside its range" in node.errors[0]
+    node.tick(6.0)
+    assert node.counters["param_value_unsolicited"] == 0  # and not asked again: it did answer
+
+    conn = _FakeConn()  # no answer: asked again 3 s later, 3 times in all
+    node = AutopilotCompanion(CompanionConfig(master="udpin::14550", out_dir=tmp_path), conn)  # type: ignore[arg-type]
+    _discover(node, 1, mavlink.MAV_AUTOPILOT_PX4)
+    for t in (2.0, 3.0, 5.1, 8.2, 11.3, 14.4):
+        node.tick(t)
+    assert [m.get_type() for m in conn.sent].count("PARAM_REQUEST_READ") == 3
+
     node, asked = node_for(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, delay_us=0)  # --gps-delay-ms 0
     assert asked == [] and (node.translator.gnss_delay_us, node.translator.gnss_delay_source) == (0, "option")
     node, asked = node_for(mavlink.MAV_AUTOPILOT_GENERIC)  # who knows: no delay assumed

@@ -63,7 +63,9 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
     assert err["error_horizontal_m"]["median"] < 1.0  # open sky: within 1 m of EKF3
     ts = s["timesync"]
     assert ts["requests_answered"] >= 1 and ts["responses_used"] >= 1 and ts["rtt_ms"] < 50
-    assert s["node"]["autopilot_reboots"] == 1 and s["link"]["reconnects"] == 1
+    assert s["node"]["autopilot_reboots"] == 1
+    # reconnected (once, or twice when the first connection reached the dying process)
+    assert 1 <= s["link"]["reconnects"] == s["link"]["disconnects"] <= 2
     assert s["gnss_delay"] == {"ms": 120.0, "source": "GPS1_DELAY_MS = 0: ArduPilot's driver default"}
 
     _same_units(forms)

@@ -96,7 +96,9 @@ def test_quad106_streamed_to_udpin_estimates_near_home_and_answers(tmp_path):
     used = s["samples"]["used"]
     assert used["gnss"] > 0.8 * 5 * LOG_SECONDS and used["imu"] > 0.8 * 50 * LOG_SECONDS
     rejected = s["samples"]["rejected"]
-    assert rejected.get("autopilot_other_system", 0) >= 1 and rejected.get("bad_frames", 0) >= 1
+    assert rejected.get("autopilot_other_system", 0) >= 1 and s["link"].get("garbage", 0) >= 1
+    assert rejected.get("autopilot_conflicting_autopilot") == 1  # system 9 says it is a PX4 quadrotor too
+    assert len(s["problems"]) == 1 and "a second autopilot (system 9" in s["problems"][0]
     assert s["errors"]["autopilot_estimate"] is None  # the log carries no autopilot estimate
     ours = [m for m in replies if (m.get_srcSystem(), m.get_srcComponent()) == (1, 197)]
     assert any(m.get_type() == "HEARTBEAT" and m.type == M.MAV_TYPE_ONBOARD_CONTROLLER for m in ours)

@@ -82,3 +82,60 @@ def test_bad_windows_are_refused():
         ClockWindow(max_back_us=-1, max_forward_us=0)
     with pytest.raises(ValueError):
         ClockWindow(max_back_us=0, max_forward_us=0, consensus_samples=1)
+    with pytest.raises(ValueError):
+        ClockWindow(max_back_us=0, max_forward_us=0, max_rate=float("nan"))
+
+
+# --- a stream over a real link: stamps checked against their arrival times ---------------------
+LINK = ClockWindow(max_back_us=1_000_000, max_forward_us=200_000, consensus_samples=5,
+                   consensus_step_us=1_000_000, consensus_back_us=1_000_000, max_rate=20.0,
+                   consensus_span_us=250_000)
+
+
+def test_a_forged_burst_cannot_ratchet_the_base_forward():
+    """Ten forged stamps, each 0.15 s after the last, arriving together: the stream gains at most
+    max_forward in one instant, so the genuine stamps that follow are still in the window."""
+    c = StreamClock(LINK)
+    for k in range(50):  # genuine: 50 Hz at x1
+        assert c.check(10_000_000 + k * 20_000, k * 20_000) is Verdict.ACCEPT
+    base, now = c.base_us, 49 * 20_000 + 100
+    verdicts = [c.check(base + (k + 1) * 150_000, now).value for k in range(10)]
+    assert verdicts == ["accept"] + ["reject"] * 9  # +0.15 s fits the forward window once, no more
+    assert c.base_us == base + 150_000
+    for k in range(1, 20):  # the genuine stream goes on: in window (0.15 s back at most)
+        assert c.check(base + k * 20_000, now + k * 20_000) is Verdict.ACCEPT
+    assert c.resets == 0
+
+
+def test_the_forward_edge_grows_with_the_arrivals_at_max_rate():
+    """A sped-up sender (x10) after a 0.5 s stall of ours: 5 s of its stamps arrive at once, all
+    in window; the same 5 s without the stall would not be."""
+    c = StreamClock(LINK)
+    assert c.check(1_000_000, 0) is Verdict.ACCEPT
+    assert c.check(6_000_000, 500_000) is Verdict.ACCEPT  # 5 s in 0.5 s: x10 <= x20
+    assert c.check(16_000_000, 500_100) is Verdict.REJECT  # 10 s in 0.1 ms: no
+
+
+def test_a_reset_needs_its_agreeing_run_to_last():
+    c = StreamClock(LINK)
+    for k in range(10):
+        c.check(50_000_000 + k * 20_000, k * 20_000)
+    now = 10 * 20_000
+    burst = [c.check(1_000_000 + k * 1_000, now).value for k in range(20)]  # 20 agreeing, at once
+    assert set(burst) == {"reject"} and c.resets == 0 and c.pending == 20
+    rebooted = [c.check(1_020_000 + k * 20_000, now + (k + 1) * 20_000).value for k in range(15)]
+    assert rebooted[:12] == ["reject"] * 12 and rebooted[12] == "reset"  # >= 0.25 s after the run began
+    assert c.resets == 1
+
+
+def test_a_jittery_run_agrees_within_consensus_back():
+    """Messages of one sender lag each other (a stamp 0.1 s older than the previous): a run may go
+    back by consensus_back, so a real reboot with mixed message types is still found."""
+    c = StreamClock(LINK)
+    c.check(50_000_000, 0)
+    stamps = [1_000_000, 1_100_000, 1_000_000, 1_150_000, 1_050_000, 1_200_000]
+    verdicts = [c.check(t, 300_000 + k * 60_000).value for k, t in enumerate(stamps)]
+    assert verdicts == ["reject"] * 5 + ["reset"]
+    strict = StreamClock(W)
+    strict.check(50_000_000)
+    assert [strict.check(t).value for t in stamps] == ["reject"] * 6  # in order only (the default)

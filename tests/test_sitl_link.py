@@ -95,7 +95,7 @@ def test_signed_frames_are_byte_equal_to_pymavlink_and_replays_are_refused(links
     tx = links(peer_port=rx.port, signing_key=KEY, system_id=7, component_id=197, link_id=9)
     ref = codec.new_link(7, 197)
     ref.signing.secret_key, ref.signing.sign_outgoing, ref.signing.link_id = KEY, True, 9
-    ref.signing.timestamp = tx.mav.signing.timestamp
+    ref.signing.timestamp = tx.signer.timestamp
     sent: list[bytes] = []
     tx.tee = lambda frame, outgoing: sent.append(bytes(frame))
     fix = GnssFix(1_000_000, 48.0, 11.0, 500.0, 3, 12)

@@ -1,46 +1,55 @@
-"""The companion process beside a foreign autopilot: ``python -m companion estimator --master URL``
-(= ``beliefnav companion``).
+"""The companion beside a real autopilot: ``python -m companion estimator --master URL``
+(= ``beliefnav companion``); :class:`AutopilotCompanion` is everything but the socket loop
+(:mod:`.service` runs it).
 
-Order of events: open the connection (nothing is sent before discovery); the autopilot's first
-HEARTBEAT gives its system and component; from then on we send our HEARTBEAT (1 Hz, as
-MAV_TYPE_ONBOARD_CONTROLLER with the autopilot's system id and our component id), TIMESYNC
-requests (1 Hz) and answers, and ask for the streams. The local frame is fixed at the first good
-fix: ``--home`` if given, else the autopilot's GPS_GLOBAL_ORIGIN, else its HOME_POSITION, else that
-fix; the Navigator starts there. Samples (one boot-time base, :mod:`.translate`) go to the
-Navigator in arrival order; the estimate is kept at 25 Hz for the comparison with the autopilot's
-own estimate and fed back (``--feed``) on the estimate's clock. With ``vision``/``odometry`` our
-positions are local NED about our frame's origin, which must be the autopilot's EKF origin: while
-the autopilot reports no GPS_GLOBAL_ORIGIN (no GPS of its own), we set it to our frame's origin
-with SET_GPS_GLOBAL_ORIGIN once a second (``--home`` fixes that frame from the start). A reboot of
-the autopilot (its boot time going back) starts a fresh Navigator in the same frame and asks for
-the streams again.
+Order of events: open the connection (nothing is sent before discovery); the autopilot is
+elected from the HEARTBEATs the link carries (:mod:`.discovery`); from then on we send our
+HEARTBEAT (1 Hz, as MAV_TYPE_ONBOARD_CONTROLLER with the autopilot's system id and our
+component id), TIMESYNC requests (1 Hz) and answers, ask for the streams and read the receiver
+delay parameter. The local frame is fixed once the fixes agree (:mod:`.frame`); the Navigator
+starts there. Samples (one boot-time base, :mod:`.translate`) go to the Navigator in arrival
+order; the estimate is compared online with the autopilot's own (:mod:`.compare`, 25 Hz of our
+series, bounded memory) and fed back (``--feed``) on the estimate's clock. With
+``vision``/``odometry`` our positions are local NED about our frame's origin, which must be the
+autopilot's EKF origin: while the autopilot reports no GPS_GLOBAL_ORIGIN (no GPS of its own), we
+set it to our frame's origin with SET_GPS_GLOBAL_ORIGIN once a second (``--home`` fixes that
+frame from the start).
 
-Outputs in ``--out DIR``: ``run.tlog`` (every frame both ways) and ``summary.json`` (written on
-exit, also after Ctrl-C/SIGTERM or an error).
+One clock rule (:mod:`companion.domain.clock_guard`) on the autopilot's boot time: every stamped
+message of the autopilot is checked against the time base its stream has shown; a lone stamp
+far off is refused and counted (``rejected_clock_<type>``), never adopted; a reboot (the boot
+time going back) is believed only when a run of agreeing stamps says so for a while: then a
+fresh Navigator starts in the same frame and the streams are asked for again. Over UDP every
+frame has the kernel's arrival time, so the forward edge follows the arrivals
+(:data:`BOOT_CLOCK_DATAGRAM`: a burst of forged stamps gains 0.2 s at most); a byte stream
+(TCP, serial) has no per-frame arrival time once we lag behind, so its forward edge is a fixed
+1 s (:data:`BOOT_CLOCK_STREAM`). GNSS validity times must lie near that base
+(:data:`GNSS_WINDOW`). A PARAM_VALUE is adopted only as the answer to our own request.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
 from collections import Counter
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.autopilot import compare, feeds
-from companion.autopilot.connection import MavConnection, open_connection
-from companion.autopilot.discovery import Discovery, DiscoveryConfig
+from companion.autopilot import feeds
+from companion.autopilot.compare import LiveComparison
+from companion.autopilot.connection import MavConnection, PeerPolicy
+from companion.autopilot.discovery import Discovery, DiscoveryConfig, enum_name
+from companion.autopilot.frame import FrameChooser, FrameConfig, plausible
 from companion.autopilot.options import DEFAULT_COMPONENT_ID, FEEDS
 from companion.autopilot.streams import StreamRates, data_stream_requests, interval_requests
 from companion.autopilot.timesync import Timesync, TimesyncConfig
 from companion.autopilot.translate import TranslateConfig, Translator, boot_stamp_us
-from companion.domain.geodesy import LocalNedFrame, parse_home
+from companion.domain.clock_guard import ClockWindow, StreamClock, Verdict, within
+from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
 from companion.estimator import DEFAULT_METHOD, EstimatorConfig, Navigator, check_method
@@ -49,27 +58,44 @@ from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
 from companion.wiring import navigator_for
 
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
-MIN_FIX_TYPE = 3
 REASK_MIN_S = 2.0  # a reboot seen this soon after asking for the streams does not ask again
+# The autopilot's boot time, over every stamped message (arrivals: our monotonic clock). Stamps
+# lag the newest by up to 0.18 s and lead by 0.02 s (measured on PX4 SITL x10): 1 s back; ahead,
+# over UDP 0.2 s beyond an envelope growing 20x the kernel's arrival times (a SITL up to x20),
+# over a byte stream 1 s; a jump needs 5 agreeing stamps over 0.25 s of arrivals (a reboot
+# keeps streaming on its new base; a forged burst arrives at once)
+BOOT_CLOCK_DATAGRAM = ClockWindow(max_back_us=1_000_000, max_forward_us=200_000, consensus_samples=5,
+                                  consensus_step_us=1_000_000, consensus_back_us=1_000_000, max_rate=20.0,
+                                  consensus_span_us=250_000)
+BOOT_CLOCK_STREAM = replace(BOOT_CLOCK_DATAGRAM, max_forward_us=1_000_000, max_rate=0.0)
+GNSS_WINDOW = ClockWindow(max_back_us=5_000_000, max_forward_us=500_000)  # a fix's validity vs boot time
+PARAM_RETRY_S = 3.0  # the delay parameter is asked again after this without an answer ...
+PARAM_TRIES = 3  # ... this many times in all
+NOT_REJECTIONS = ("imu_other_source", "attitude_other_source", "gnss_repeated", "system_time_clock_set")
 
 
 @dataclass(frozen=True, slots=True)
 class CompanionConfig:
     master: str  # connection string (companion.autopilot.connection)
-    out_dir: Path
+    out_dir: Any  # pathlib.Path
     method: str = DEFAULT_METHOD
     feed: str = "none"  # one of FEEDS
-    home: LocalNedFrame | None = None  # None: GPS_GLOBAL_ORIGIN, else HOME_POSITION, else first good fix
+    home: LocalNedFrame | None = None  # None: GPS_GLOBAL_ORIGIN, else HOME_POSITION, else the fixes
     duration_s: float | None = None  # wall seconds to run; None: until interrupted
     component_id: int = DEFAULT_COMPONENT_ID
     discovery_timeout_s: float = 60.0  # wall seconds without an autopilot HEARTBEAT = error
+    signing_key: bytes | None = None  # MAVLink 2 signing on the link (both ways)
+    boot_clock: ClockWindow | None = None  # None: BOOT_CLOCK_DATAGRAM / _STREAM by the link's kind
     heartbeat_period_s: float = 1.0  # our HEARTBEAT (wall clock)
-    series_period_us: int = 40_000  # our estimate kept at 25 Hz (boot time) for the comparison
+    summary_period_s: float = 1.0  # summary.json rewritten this often (wall clock)
+    series_period_us: int = 40_000  # our estimate compared at 25 Hz (boot time)
     max_gap_us: int = 200_000  # no comparison across a longer hole in our series
     rates: StreamRates = field(default_factory=StreamRates)
     translate: TranslateConfig = field(default_factory=TranslateConfig)
     feeds: feeds.FeedConfig = field(default_factory=feeds.FeedConfig)
     discovery: DiscoveryConfig = field(default_factory=DiscoveryConfig)
+    frame: FrameConfig = field(default_factory=FrameConfig)
+    peers: PeerPolicy = field(default_factory=PeerPolicy)
     timesync: TimesyncConfig = field(default_factory=TimesyncConfig)
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
 
@@ -81,27 +107,12 @@ class CompanionConfig:
             raise UserError(f"--component-id {self.component_id}: must be 1..255")
         if self.duration_s is not None and not self.duration_s > 0:
             raise UserError(f"--duration-s {self.duration_s}: must be positive")
-
-
-@dataclass(slots=True)
-class _Series:
-    """Our estimate (25 Hz) and the autopilot's, keyed by epoch-offset boot time."""
-
-    t_us: list[int] = field(default_factory=list)
-    p_ned_m: list[np.ndarray] = field(default_factory=list)
-    beta: list[float] = field(default_factory=list)
-    global_t_us: list[int] = field(default_factory=list)
-    global_lla: list[tuple[float, float, float]] = field(default_factory=list)
-    local_t_us: list[int] = field(default_factory=list)
-    local_ned_m: list[tuple[float, float, float]] = field(default_factory=list)
-
-    def trim(self) -> None:
-        """Equal lengths in each group again: SIGTERM (SystemExit) can land between two appends."""
-        groups = (("t_us", "p_ned_m", "beta"), ("global_t_us", "global_lla"), ("local_t_us", "local_ned_m"))
-        for group in groups:
-            n = min(len(getattr(self, name)) for name in group)
-            for name in group:
-                del getattr(self, name)[n:]
+        if not (math.isfinite(self.discovery_timeout_s) and self.discovery_timeout_s > 0):
+            raise UserError(f"--discovery-timeout-s {self.discovery_timeout_s}: must be a positive number")
+        lost = self.discovery.lost_timeout_s
+        if not (math.isfinite(lost) and lost > self.discovery.heartbeat_timeout_s):
+            raise UserError(f"--lost-timeout-s {lost}: must be a number above "
+                            f"{self.discovery.heartbeat_timeout_s:g} s (a HEARTBEAT gap)")
 
 
 class AutopilotCompanion:
@@ -114,19 +125,21 @@ class AutopilotCompanion:
         self.discovery = Discovery(config.discovery)
         self.translator = Translator(config.translate)
         self.timesync = Timesync(config.timesync)
+        self.frames = FrameChooser(config.frame, config.home)
+        self.exact_arrivals = bool(getattr(conn, "exact_arrivals", False))
+        window = config.boot_clock or (BOOT_CLOCK_DATAGRAM if self.exact_arrivals else BOOT_CLOCK_STREAM)
+        self.clock = StreamClock(window)
         self.telemetry = telemetry or TelemetryPublisher.disabled()
         self._topics = EstimatorTelemetry(self.telemetry)
         self.nav: Navigator | None = None
-        self.frame: LocalNedFrame | None = None
-        self.home_source = ""
-        self.origins: dict[str, tuple[float, float, float]] = {}
         self.counters: Counter[str] = Counter()
         self.received: Counter[str] = Counter()
         self.acks: Counter[str] = Counter()
         self.past_nav_counters: Counter[str] = Counter()
-        self.series = _Series()
+        self.comparison = LiveComparison(config.max_gap_us)
         self.epoch = 0
-        self.errors: list[str] = []
+        self.errors: list[str] = []  # summary.problems: what went wrong, each kind once
+        self._alarms_seen = 0
         self._next_series_us = 0
         self._next_feed_us = 0
         self._next_heartbeat_s = 0.0
@@ -137,7 +150,20 @@ class AutopilotCompanion:
         self._last_imu_s = math.nan
         self._heartbeat_was_lost = False
         self._delay_param: str | None = None
+        self._param_asked_s = math.nan
+        self._param_tries = 0
         self._next_origin_s = 0.0
+
+    @property
+    def frame(self) -> LocalNedFrame | None:
+        return self.frames.frame
+
+    def problem(self, key: str, text: str) -> None:
+        """Report ``text`` once per ``key`` (summary.problems and stderr)."""
+        if self.counters[f"problem_{key}"] == 0:
+            print(f"companion: {text}", file=sys.stderr)
+            self.errors.append(text)
+        self.counters[f"problem_{key}"] += 1
 
     # -- incoming -----------------------------------------------------------------------------
     def handle(self, msg: Any, now_s: float) -> None:
@@ -145,102 +171,129 @@ class AutopilotCompanion:
         try:
             self._handle(msg, now_s)
         except Exception as exc:  # noqa: BLE001 - a frame must never end the process
-            name = f"handler_error_{msg.get_type()}_{type(exc).__name__}"
-            if name not in self.counters:
-                print(f"companion: {msg.get_type()} raised {type(exc).__name__}: {exc}", file=sys.stderr)
-                self.errors.append(f"{msg.get_type()}: {type(exc).__name__}: {exc}")
-            self.counters[name] += 1
+            self.problem(f"handler_{msg.get_type()}_{type(exc).__name__}",
+                         f"{msg.get_type()}: {type(exc).__name__}: {exc}")
+            self.counters[f"handler_error_{msg.get_type()}_{type(exc).__name__}"] += 1
 
     def _handle(self, msg: Any, now_s: float) -> None:
-        was_known = self.discovery.autopilot is not None
-        if not self.discovery.accept(msg, now_s):
+        d = self.discovery
+        was_known = d.autopilot is not None
+        ours = d.accept(msg, now_s)
+        if not was_known and d.autopilot is not None:
+            self._discovered(now_s)
+        while self._alarms_seen < len(d.alarms):
+            self.problem(f"alarm_{self._alarms_seen}", d.alarms[self._alarms_seen])
+            self._alarms_seen += 1
+        if not ours:
             return
+        self.conn.note_peer(msg, now_s)
         kind = msg.get_type()
         self.received[kind] += 1
-        if not was_known:
-            ap = self.discovery.autopilot
-            assert ap is not None
-            self.conn.set_source(ap.system_id, self.config.component_id)
-            self._ask_streams = True
-            self._delay_param = self.translator.delay_parameter(ap.autopilot_type)
-            if self._delay_param is not None:
-                self.conn.send(mavlink.MAVLink_param_request_read_message(
-                    ap.system_id, ap.component_id, self._delay_param.encode(), -1))
-            self._next_heartbeat_s = self._next_timesync_s = now_s
         stamp = boot_stamp_us(msg)
-        if stamp is not None and self.discovery.boot_time(stamp):
-            self._rebooted(now_s)
+        if stamp is not None:
+            arrival = self.conn.arrival_us(msg) if self.exact_arrivals else None
+            if not self._boot_time_ok(kind, stamp, round(now_s * 1e6) if arrival is None else arrival, now_s):
+                return
         if kind == "TIMESYNC":
             answer = self.timesync.handle(msg, time.monotonic_ns())
             if answer is not None:
                 self.conn.send(answer)
         elif kind == "COMMAND_ACK":
-            self.acks[f"{_enum('MAV_CMD', msg.command)}:{_enum('MAV_RESULT', msg.result)}"] += 1
+            self.acks[f"{enum_name('MAV_CMD', msg.command)}:{enum_name('MAV_RESULT', msg.result)}"] += 1
         elif kind == "PARAM_VALUE":
-            ap = self.discovery.autopilot
-            if ap is not None and self._delay_param is not None and msg.param_id == self._delay_param:
-                self.translator.delay_parameter_value(ap.autopilot_type, msg.param_id, float(msg.param_value))
+            self._param_value(msg)
         elif kind == "SYSTEM_TIME":
             self.translator.system_time(msg)
-        elif kind == "GPS_GLOBAL_ORIGIN" or kind == "HOME_POSITION":  # degE7, mm AMSL
+        elif kind in ("GPS_GLOBAL_ORIGIN", "HOME_POSITION"):  # degE7, mm AMSL
             lla = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
-            if _plausible(*lla):
-                self.origins[kind] = lla
+            if self.frames.origin(kind, lla):
                 self._check_origin(kind, lla)
-            else:
-                self.counters[f"rejected_{kind.lower()}"] += 1
         elif kind == "GLOBAL_POSITION_INT":
             self._reference_global(msg)
         elif kind == "LOCAL_POSITION_NED":
             p = (float(msg.x), float(msg.y), float(msg.z))
-            if all(math.isfinite(v) for v in p):
-                self.series.local_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
-                self.series.local_ned_m.append(p)
-            else:
+            if not all(math.isfinite(v) and abs(v) <= codec.LIMITS.max_home_distance_m for v in p):
                 self.counters["rejected_local_position_ned"] += 1
+            elif self.nav is not None:
+                self.comparison.reference_local(self._key(int(msg.time_boot_ms) * 1000), p)
         else:
             sample = self.translator.sample(msg)
             if sample is not None:
                 self._push(sample, now_s)
 
+    def _discovered(self, now_s: float) -> None:
+        ap = self.discovery.autopilot
+        assert ap is not None
+        self.conn.set_source(ap.system_id, self.config.component_id)
+        self._ask_streams = True
+        self._delay_param = self.translator.delay_parameter(ap.autopilot_type)
+        self._next_heartbeat_s = self._next_timesync_s = now_s
+
+    def _boot_time_ok(self, kind: str, stamp_us: int, arrival_us: int, now_s: float) -> bool:
+        """The one clock rule on the autopilot's boot time (see the module doc)."""
+        before = self.clock.base_us
+        verdict = self.clock.check(stamp_us, arrival_us)
+        if verdict is Verdict.REJECT:
+            self.counters[f"rejected_clock_{kind.lower()}"] += 1
+            return False
+        if verdict is Verdict.RESET:
+            if before is not None and stamp_us < before:
+                self._rebooted(now_s)
+            else:
+                self.counters["autopilot_clock_jumps_forward"] += 1
+        return True
+
+    def _param_value(self, msg: Any) -> None:
+        """Only the answer to our own request is adopted: once, in range (see .translate)."""
+        ap = self.discovery.autopilot
+        name = str(msg.param_id)
+        asked = self._delay_param is not None and not math.isnan(self._param_asked_s)
+        if ap is None or not asked or name != self._delay_param:
+            self.counters["param_value_unsolicited"] += 1
+            return
+        self._param_asked_s = math.nan  # answered: a later one is unsolicited
+        value = float(msg.param_value)
+        if not self.translator.delay_parameter_value(ap.autopilot_type, name, value):
+            self.problem("gnss_delay_range", f"the autopilot's {name} = {value:g} ms is outside its range: "
+                         f"{self.translator.gnss_delay_us / 1000:g} ms kept")
+
     def _reference_global(self, msg: Any) -> None:
         if msg.lat == 0 and msg.lon == 0:  # ArduPilot before its EKF has a position
             self.counters["reference_without_position"] += 1
             return
-        if not _plausible(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3):
+        lla = (msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3)
+        if not plausible(*lla):
             self.counters["rejected_global_position_int"] += 1
             return
-        self.series.global_t_us.append(self._key(int(msg.time_boot_ms) * 1000))
-        self.series.global_lla.append((msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3))
+        if self.frame is None or self.nav is None:
+            self.counters["reference_before_estimate"] += 1
+            return
+        self.comparison.reference_global(self._key(int(msg.time_boot_ms) * 1000), self.frame.to_ned_m(*lla))
 
     def _key(self, t_us: int) -> int:
         return self.epoch * EPOCH_STRIDE_US + t_us
 
     def _push(self, sample: Any, now_s: float) -> None:
-        if self.nav is None:
-            if not (isinstance(sample, GnssFix) and sample.fix_type >= MIN_FIX_TYPE):
-                self.counters["samples_before_first_fix"] += 1
+        if isinstance(sample, GnssFix):
+            base = self.clock.base_us
+            if base is not None and not within(sample.t_validity_us, base, GNSS_WINDOW):
+                self.counters["rejected_clock_gnss"] += 1
                 return
-            self._start_navigator(sample)
-            assert self.nav is not None
+            if not self.frames.fix(sample):
+                if self.frame is None:
+                    self.counters["samples_before_first_fix"] += 1
+                return
+            if self.nav is None:
+                self._start_navigator()
+        if self.nav is None:
+            self.counters["samples_before_first_fix"] += 1
+            return
         self.nav.push(sample)
         if isinstance(sample, ImuSample):
             self._last_imu_s = now_s
             self._after_imu(sample.t_us)
 
-    def _start_navigator(self, fix: GnssFix) -> None:
-        if self.frame is None:
-            c = self.config
-            if c.home is not None:
-                self.frame, self.home_source = c.home, "option --home"
-            else:
-                for source in ("GPS_GLOBAL_ORIGIN", "HOME_POSITION"):
-                    if source in self.origins:
-                        self.frame, self.home_source = LocalNedFrame(*self.origins[source]), source
-                        break
-                else:
-                    self.frame = LocalNedFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
-                    self.home_source = "first good fix"
+    def _start_navigator(self) -> None:
         self.nav = navigator_for(None, self.config.method, config=self.config.estimator, frame=self.frame)
         self._topics = EstimatorTelemetry(self.telemetry)
 
@@ -256,10 +309,7 @@ class AutopilotCompanion:
             return
         if due_series:
             self._next_series_us = t_us + self.config.series_period_us
-            s = self.series
-            s.t_us.append(self._key(est.t_us))
-            s.p_ned_m.append(np.asarray(est.p_ned_m, dtype=float))
-            s.beta.append(float(est.beta))
+            self.comparison.estimate(self._key(est.t_us), est.p_ned_m, float(est.beta))
         if due_feed:
             # on a fixed cadence (next = previous + period), not "period after the IMU sample that
             # was due": at 50 Hz IMU that would add up to 20 ms to every period
@@ -269,6 +319,11 @@ class AutopilotCompanion:
             self._send_feed(est)
 
     def _send_feed(self, est: NavEstimate) -> None:
+        try:  # nothing absurd is sent: not finite, beyond the codec's limits (counted, not raised)
+            codec.check_sendable(est)
+        except codec.CodecError as exc:
+            self.counters[f"unsendable_{exc.reason}"] += 1
+            return
         tr, feed = self.translator, self.config.feed
         if feed == "gps-input":
             assert self.frame is not None
@@ -287,8 +342,8 @@ class AutopilotCompanion:
         else:
             msg = feeds.odometry(est, tr.last_attitude.q_ned_frd, tr.last_imu.gyro_frd_rad_s,
                                  self.config.feeds)
-        self.conn.send(msg)
-        self.counters[f"feed_{msg.get_type().lower()}_sent"] += 1
+        if self.conn.send(msg):
+            self.counters[f"feed_{msg.get_type().lower()}_sent"] += 1
 
     def _rebooted(self, now_s: float) -> None:
         self.counters["autopilot_reboots"] += 1
@@ -296,6 +351,7 @@ class AutopilotCompanion:
             self.past_nav_counters.update(self.nav.counters())
         self.nav = None
         self.epoch += 1
+        self.comparison.restart()
         self._next_series_us = self._next_feed_us = 0
         self.translator.reset()
         # asked already since it came back (its HEARTBEAT returned first)? then once is enough
@@ -318,6 +374,7 @@ class AutopilotCompanion:
         if now_s >= self._next_timesync_s:
             self._next_timesync_s = now_s + self.config.timesync.request_period_s
             self.conn.send(self.timesync.request(time.monotonic_ns()))
+        self._ask_parameter(now_s, ap.system_id, ap.component_id)
         self._set_origin(now_s, ap.system_id)
         rates = self.config.rates
         if self._ask_streams:
@@ -336,22 +393,34 @@ class AutopilotCompanion:
         elif now_s - self._asked_s > rates.silence_s and not (now_s - self._last_imu_s <= rates.silence_s):
             self._ask_streams = True  # still (or again) no IMU: ask again
 
+    def _ask_parameter(self, now_s: float, system_id: int, component_id: int) -> None:
+        """Read the receiver delay (PARAM_REQUEST_READ), again if unanswered, a few times at most."""
+        if self._delay_param is None or self._param_tries >= PARAM_TRIES:
+            return
+        answered = math.isnan(self._param_asked_s)
+        if self._param_tries and (answered or now_s - self._param_asked_s < PARAM_RETRY_S):
+            return  # answered, or still waiting
+        self._param_tries += 1
+        self._param_asked_s = now_s
+        self.conn.send(mavlink.MAVLink_param_request_read_message(
+            system_id, component_id, self._delay_param.encode(), -1))
+
     def _check_origin(self, kind: str, lla: tuple[float, float, float]) -> None:
         """Local-position feeds are about our frame's origin: say so once if the EKF's is elsewhere."""
         local = self.config.feed in ("vision", "odometry")
         if kind != "GPS_GLOBAL_ORIGIN" or not local or self.frame is None:
             return
         offset_m = float(np.linalg.norm(self.frame.to_ned_m(*lla)))
-        if offset_m > 1.0 and not self.counters["origin_mismatch"]:
-            self.errors.append(f"the autopilot's EKF origin is {offset_m:.1f} m from our frame's origin: "
-                               f"its local position is offset by that much")
+        if offset_m > 1.0:
+            self.problem("origin_mismatch", f"the autopilot's EKF origin is {offset_m:.1f} m from our "
+                         f"frame's origin: its local position is offset by that much")
         self.counters["origin_mismatch"] += offset_m > 1.0
 
     def _set_origin(self, now_s: float, target_system: int) -> None:
         """Local-position feeds: give an autopilot without an EKF origin ours (1 Hz until it reports one)."""
-        frame = self.frame or self.config.home
+        frame = self.frame
         if (self.config.feed not in ("vision", "odometry") or frame is None or now_s < self._next_origin_s
-                or "GPS_GLOBAL_ORIGIN" in self.origins):
+                or "GPS_GLOBAL_ORIGIN" in self.frames.origins):
             return
         self._next_origin_s = now_s + 1.0
         self.counters["set_gps_global_origin_sent"] += 1
@@ -367,154 +436,80 @@ class AutopilotCompanion:
         return total
 
     def summary(self, wall_s: float) -> dict[str, Any]:
-        self.series.trim()
         c = self.config
         nav = self.nav_counters()
         rejected = Counter({k: v for k, v in nav.items() if "rejected" in k and v})
-        rejected.update({k: v for k, v in self.translator.counters.items() if v})
+        rejected.update({k: v for k, v in self.translator.counters.items() if v and k not in NOT_REJECTIONS})
         rejected.update({f"autopilot_{k}": v for k, v in self.discovery.counters.items() if v})
-        rejected.update({k: v for k, v in self.counters.items()
-                         if v and k.startswith(("rejected_", "handler_error_"))})
+        rejected.update({k: v for k, v in (*self.counters.items(), *self.frames.counters.items())
+                         if v and k.startswith(("rejected_", "handler_error_", "unsendable_"))})
         if self.counters["samples_before_first_fix"]:
             rejected["before_first_fix"] = self.counters["samples_before_first_fix"]
-        if self.conn.counters["bad_frames"]:
-            rejected["bad_frames"] = self.conn.counters["bad_frames"]
+        if self.counters["param_value_unsolicited"]:
+            rejected["param_value_unsolicited"] = self.counters["param_value_unsolicited"]
         ap = self.discovery.autopilot
-        beta = np.asarray(self.series.beta, dtype=float)
-        p = np.asarray(self.series.p_ned_m, dtype=float).reshape(-1, 3)
-        horiz = np.hypot(p[:, 0], p[:, 1])
+        cmp_ = self.comparison
+        frame = self.frame
         return {
             "master": c.master, "method": c.method, "feed": c.feed, "wall_s": wall_s,
             "cpu_s": time.process_time(),
             "autopilot": ap.as_dict() if ap is not None else None,
-            "home": None if self.frame is None else {
-                "lat_deg": self.frame.home_lat_deg, "lon_deg": self.frame.home_lon_deg,
-                "alt_m": self.frame.home_alt_m, "source": self.home_source},
+            "conflicting_autopilots": sorted(self.discovery.conflicting_systems),
+            "home": None if frame is None else {
+                "lat_deg": frame.home_lat_deg, "lon_deg": frame.home_lon_deg,
+                "alt_m": frame.home_alt_m, "source": self.frames.source},
             "autopilot_origins": {k: dict(zip(("lat_deg", "lon_deg", "alt_m"), v, strict=True))
-                                  for k, v in self.origins.items()},
+                                  for k, v in self.frames.origins.items()},
             "samples": {"used": {"imu": nav["imu_used"], "attitude": nav["attitude_used"],
                                  "gnss": nav["gnss_fused"]},
                         "rejected": dict(sorted(rejected.items())),
                         "received": dict(sorted(self.received.items()))},
             "estimator_counters": dict(sorted(nav.items())),
-            "beta": compare.distribution(beta) | {
-                "min": float(beta.min()) if beta.size else None,
-                "final": float(beta[-1]) if beta.size else None},
-            "estimate": {"count": int(p.shape[0]),
-                         "max_horizontal_from_home_m": float(horiz.max()) if p.size else None,
-                         "final_p_ned_m": [float(v) for v in p[-1]] if p.size else None},
+            "beta": cmp_.beta_summary(),
+            "estimate": {"count": cmp_.count,
+                         "max_horizontal_from_home_m": None if math.isnan(cmp_.max_horizontal_m)
+                         else cmp_.max_horizontal_m,
+                         "final_p_ned_m": None if cmp_.final_p_ned_m is None else list(cmp_.final_p_ned_m)},
             "errors": {"autopilot_estimate": self.autopilot_errors()},
             "streams": {"requests": self.counters["stream_requests"],
                         "fallback_requests": self.counters["stream_fallback_requests"],
                         "acks": dict(sorted(self.acks.items()))},
             "timesync": self.timesync.as_dict(),
+            "clock": {"base_us": self.clock.base_us, "resets": self.clock.resets,
+                      "rejected": self.clock.rejected},
             "node": dict(sorted(self.counters.items())),
-            "link": dict(self.conn.counters),
+            "link": dict(sorted(self.conn.counters.items())),
             "gnss_delay": {"ms": self.translator.gnss_delay_us / 1000.0,
                            "source": self.translator.gnss_delay_source},
-            "problems": self.errors,
+            "problems": list(self.errors),
         }
 
     def autopilot_errors(self) -> dict[str, Any] | None:
         """Ours vs GLOBAL_POSITION_INT (preferred) or LOCAL_POSITION_NED, origins aligned."""
-        s = self.series
-        if self.frame is None or len(s.t_us) < 2:
-            return None
-        t = np.asarray(s.t_us, dtype=np.int64)
-        p = np.asarray(s.p_ned_m, dtype=float)
         frame = self.frame
-        home = {"lat_deg": frame.home_lat_deg, "lon_deg": frame.home_lon_deg, "alt_m": frame.home_alt_m}
-        if s.global_t_us:
-            lla = np.asarray(s.global_lla, dtype=float)
-            ref = frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
-            result = compare.compare(t, p, np.asarray(s.global_t_us, dtype=np.int64), ref,
-                                     self.config.max_gap_us)
-            alignment: dict[str, Any] = {
-                "reference": "GLOBAL_POSITION_INT", "our_home": home,
-                "method": "geodetic: the autopilot's lat/lon/alt (AMSL) converted into our local NED "
-                          "frame; nothing fitted"}
-        elif s.local_t_us:
-            local = np.asarray(s.local_ned_m, dtype=float)
-            origin = self.origins.get("GPS_GLOBAL_ORIGIN")
-            if origin is not None:
-                offset = frame.to_ned_m(*origin)
-                result = compare.compare(t, p, np.asarray(s.local_t_us, dtype=np.int64), local + offset,
-                                         self.config.max_gap_us)
-                alignment = {"reference": "LOCAL_POSITION_NED", "method": "the autopilot's EKF origin "
-                             "(GPS_GLOBAL_ORIGIN) placed in our frame", "origin_in_our_frame_ned_m":
-                             [float(v) for v in offset], "our_home": home}
-            else:
-                result = compare.compare(t, p, np.asarray(s.local_t_us, dtype=np.int64), local,
-                                         self.config.max_gap_us, fit_translation=True)
-                alignment = {"reference": "LOCAL_POSITION_NED", "method": "no origin sent: translation "
-                             "fitted (median difference removed), so only the spread is measured",
-                             "our_home": home}
-        else:
+        if frame is None:
             return None
-        alignment["time"] = "autopilot boot time (time_boot_ms); ours interpolated at its stamps"
+        origin = self.frames.origins.get("GPS_GLOBAL_ORIGIN")
+        offset = None if origin is None else frame.to_ned_m(*origin)
+        found = self.comparison.errors(offset)
+        if found is None:
+            return None
+        result, how = found
+        home = {"lat_deg": frame.home_lat_deg, "lon_deg": frame.home_lon_deg, "alt_m": frame.home_alt_m}
+        alignments: dict[str, dict[str, Any]] = {
+            "global": {"reference": "GLOBAL_POSITION_INT", "method": "geodetic: the autopilot's lat/lon/alt "
+                       "(AMSL) converted into our local NED frame; nothing fitted"},
+            "local_origin": {"reference": "LOCAL_POSITION_NED", "method": "the autopilot's EKF origin "
+                             "(GPS_GLOBAL_ORIGIN) placed in our frame",
+                             "origin_in_our_frame_ned_m": None if offset is None else offset.tolist()},
+            "local_fitted": {"reference": "LOCAL_POSITION_NED", "method": "no origin sent: translation "
+                             "fitted (median difference removed), so only the spread is measured"},
+        }
+        alignment = alignments[how] | {
+            "our_home": home, "time": "autopilot boot time (time_boot_ms); ours interpolated at its stamps"}
         return result | {"alignment": alignment}
-
-
-def _plausible(lat_deg: float, lon_deg: float, alt_m: float) -> bool:
-    """A position on (or near) the Earth: the only kind used as a frame origin or a reference."""
-    return abs(lat_deg) <= 90 and abs(lon_deg) <= 180 and -1_000 <= alt_m <= 20_000
 
 
 def _known_satellites(fix: GnssFix | None) -> int:
     """The raw fix's satellite count, -1 when unknown (no fix, or 255 = unknown in MAVLink)."""
     return fix.satellites_visible if fix is not None and fix.satellites_visible < 255 else -1
-
-
-def _enum(name: str, value: int) -> str:
-    entry = mavlink.enums.get(name, {}).get(value)
-    return entry.name if entry is not None else str(value)
-
-
-# -- process ------------------------------------------------------------------------------------
-
-
-def config_from_args(args: argparse.Namespace) -> CompanionConfig:
-    if args.out is None:
-        raise UserError("--out DIR is required with --master")
-    delay = args.gps_delay_ms
-    if delay is not None and not (math.isfinite(delay) and 0 <= delay <= 1000):
-        raise UserError(f"--gps-delay-ms {delay}: must be within 0..1000")
-    return CompanionConfig(
-        master=args.master, out_dir=args.out, method=args.method, feed=args.feed,
-        home=parse_home(args.home) if args.home else None, duration_s=args.duration_s,
-        component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
-        translate=TranslateConfig(gnss_instance=args.gnss_instance,
-                                  gnss_delay_us=None if delay is None else round(delay * 1000)))
-
-
-def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) -> dict[str, Any]:
-    """Run until ``duration_s`` (or Ctrl-C/SIGTERM); write run.tlog and summary.json; the summary."""
-    from companion.runtime import write_json
-
-    config.out_dir.mkdir(parents=True, exist_ok=True)
-    conn = open_connection(config.master, 1, config.component_id, config.out_dir / "run.tlog")
-    node = AutopilotCompanion(config, conn, telemetry)
-    start = time.monotonic()
-    try:
-        serve(node, start)
-    finally:
-        summary = node.summary(time.monotonic() - start)
-        write_json(config.out_dir / "summary.json", summary)
-        conn.close()
-        if conn.tlog is not None:
-            conn.tlog.close()
-    return summary
-
-
-def serve(node: AutopilotCompanion, start_s: float) -> None:
-    c = node.config
-    while True:
-        now = time.monotonic()
-        if c.duration_s is not None and now - start_s >= c.duration_s:
-            return
-        if node.discovery.autopilot is None and now - start_s > c.discovery_timeout_s:
-            node.errors.append("no autopilot HEARTBEAT")
-            raise UserError(f"--master {c.master}: no autopilot HEARTBEAT within {c.discovery_timeout_s:g} s")
-        node.tick(now)
-        for msg in node.conn.recv(timeout_s=0.02):
-            node.handle(msg, time.monotonic())

@@ -28,3 +28,15 @@ def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool)
                              "(default: the autopilot's GPS1_DELAY_MS / EKF2_GPS_DELAY)")
     parser.add_argument("--discovery-timeout-s", type=float, default=60.0,
                         help="give up when no autopilot HEARTBEAT arrives within this (wall s)")
+    parser.add_argument("--lost-timeout-s", type=float, default=15.0,
+                        help="the autopilot silent this long (wall s) is lost: the run ends, exit 1")
+    parser.add_argument("--target-system", type=int, default=None,
+                        help="the autopilot's MAVLink system id (default: the one the link carries; "
+                             "another autopilot is then an alarm)")
+
+
+def add_signing_argument(parser: argparse.ArgumentParser) -> None:
+    """``--signing-key-file`` (the SITL processes get it with their link options instead)."""
+    parser.add_argument("--signing-key-file", type=Path,
+                        help="MAVLink 2 signing key (64 hex characters or a passphrase, as MAVProxy's): "
+                             "sign what we send, refuse what is not signed with it")

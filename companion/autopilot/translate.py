@@ -20,8 +20,23 @@ validity time. We do the same with ``gnss_delay_us``: the option if given, else 
 setting, read as a parameter (:data:`DELAY_PARAMS`: ArduPilot ``GPS1_DELAY_MS``/``GPS2_DELAY_MS``,
 where 0 means its driver's default, :data:`ARDUPILOT_DEFAULT_GPS_DELAY_MS`; PX4 ``EKF2_GPS_DELAY``).
 A stamp above :data:`UNIX_STAMP_MIN_US` is UNIX time (MAVLink allows either)
-and is mapped to boot time with the last SYSTEM_TIME pair. A fix repeated at the same stamp
+and is mapped to boot time with the SYSTEM_TIME pairs' offset. A fix repeated at the same stamp
 (the autopilot streams GPS_RAW_INT faster than the receiver updates) is dropped and counted.
+
+What the autopilot tells us about time and delay is checked before it is believed:
+
+- SYSTEM_TIME: a UNIX time outside 2015..2100 is refused (``rejected_system_time_range``); the
+  UNIX time is a stamped stream like any other and follows the project's clock rule
+  (:data:`UNIX_CLOCK`, :mod:`companion.domain.clock_guard`) against the pair's own boot time
+  (already checked): it may not run faster than the boot time (a sped-up PX4 SITL's UNIX clock
+  runs at wall speed, slower than its boot time; real hardware: both at 1x). A lone pair far from
+  the stream (an hour ahead, a second back) is refused (``rejected_system_time_clock``); three
+  agreeing pairs over 1.5 s of boot time make a new time base (the autopilot's clock was set).
+  The offset of the last accepted pair maps UNIX stamps.
+- The receiver delay parameter: a value outside the autopilot's own range for it
+  (:data:`DELAY_RANGES_MS`: ArduPilot ``GPSn_DELAY_MS`` 0..250 ms, PX4 ``EKF2_GPS_DELAY`` 0..300 ms)
+  is refused (``rejected_gnss_delay_range``) and the default kept. Whether a PARAM_VALUE was
+  asked for at all is the node's check (an unsolicited one is never adopted).
 """
 
 from __future__ import annotations
@@ -30,6 +45,7 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from companion.domain.clock_guard import ClockWindow, StreamClock, Verdict
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.mavlink import codec as mc
 
@@ -37,7 +53,15 @@ ARDUPILOT_DEFAULT_GPS_DELAY_MS = 120.0  # AP_GPS_UBLOX::get_lag, used by EKF3 wh
 PX4_DEFAULT_GPS_DELAY_MS = 110.0  # EKF2_GPS_DELAY's default
 # autopilot type -> receiver instance -> parameter holding the receiver delay (ms)
 DELAY_PARAMS = {3: {1: "GPS1_DELAY_MS", 2: "GPS2_DELAY_MS"}, 12: {1: "EKF2_GPS_DELAY", 2: "EKF2_GPS_DELAY"}}
+# autopilot type -> the receiver delay parameter's own range (ms): ArduPilot GPS_DELAY_MS, PX4 EKF2_GPS_DELAY
+DELAY_RANGES_MS = {3: (0.0, 250.0), 12: (0.0, 300.0)}
 UNIX_STAMP_MIN_US = 10**15  # ≈ 31.7 years: a larger stamp is UNIX time, not time since boot
+UNIX_PLAUSIBLE_US = (1_420_070_400 * 10**6, 4_102_444_800 * 10**6)  # 2015-01-01 .. 2100-01-01 (UTC)
+# SYSTEM_TIME's UNIX time against its boot time ("arrivals"): 1 s back, 1 s ahead of an envelope
+# growing as fast as the boot time (+5 %); a new base needs 3 agreeing pairs over 1.5 s of boot time
+UNIX_CLOCK = ClockWindow(max_back_us=1_000_000, max_forward_us=1_000_000, consensus_samples=3,
+                         consensus_step_us=30_000_000, consensus_back_us=1_000_000, max_rate=1.05,
+                         consensus_span_us=1_500_000)
 IMU_RANK = {"HIGHRES_IMU": 0, "SCALED_IMU": 1, "RAW_IMU": 2, "SCALED_IMU2": 3}
 ATTITUDE_RANK = {"ATTITUDE_QUATERNION": 0, "ATTITUDE": 1}
 GNSS_TYPES = {1: "GPS_RAW_INT", 2: "GPS2_RAW"}
@@ -84,6 +108,7 @@ class Translator:
     _imu_rank: int = len(IMU_RANK)
     _attitude_rank: int = len(ATTITUDE_RANK)
     _last_gnss_stamp_us: int = -1
+    _unix: StreamClock = field(default_factory=lambda: StreamClock(UNIX_CLOCK))
 
     def __post_init__(self) -> None:
         if self.config.gnss_instance not in GNSS_TYPES:
@@ -108,24 +133,41 @@ class Translator:
             self.set_gnss_delay(round(PX4_DEFAULT_GPS_DELAY_MS * 1000), "PX4 default, until read")
         return DELAY_PARAMS.get(autopilot_type, {}).get(self.config.gnss_instance)
 
-    def delay_parameter_value(self, autopilot_type: int, name: str, value_ms: float) -> None:
-        """Take the autopilot's receiver-delay parameter (ArduPilot: 0 = its driver's default)."""
-        if not (0 <= value_ms <= 1000):
-            return
+    def delay_parameter_value(self, autopilot_type: int, name: str, value_ms: float) -> bool:
+        """Take the autopilot's receiver-delay parameter (ArduPilot: 0 = its driver's default);
+        False (counted, the delay in force kept) when it is outside the parameter's own range."""
+        lo, hi = DELAY_RANGES_MS.get(autopilot_type, (0.0, 1000.0))
+        if not lo <= value_ms <= hi:
+            self.counters["rejected_gnss_delay_range"] += 1
+            return False
         if autopilot_type == 3 and value_ms == 0:
             self.set_gnss_delay(round(ARDUPILOT_DEFAULT_GPS_DELAY_MS * 1000),
                                 f"{name} = 0: ArduPilot's driver default")
         else:
             self.set_gnss_delay(round(value_ms * 1000), f"autopilot parameter {name}")
+        return True
 
     def system_time(self, msg: Any) -> None:
-        if int(msg.time_unix_usec) > UNIX_STAMP_MIN_US:
-            self.unix_minus_boot_us = int(msg.time_unix_usec) - int(msg.time_boot_ms) * 1000
+        """A SYSTEM_TIME pair (its boot time already checked by the caller's clock rule)."""
+        unix_us = int(msg.time_unix_usec)
+        if unix_us <= UNIX_STAMP_MIN_US:  # no UNIX time yet (ArduPilot before its GPS has time)
+            return
+        if not UNIX_PLAUSIBLE_US[0] <= unix_us <= UNIX_PLAUSIBLE_US[1]:
+            self.counters["rejected_system_time_range"] += 1
+            return
+        verdict = self._unix.check(unix_us, int(msg.time_boot_ms) * 1000)
+        if verdict is Verdict.REJECT:
+            self.counters["rejected_system_time_clock"] += 1
+            return
+        if verdict is Verdict.RESET:
+            self.counters["system_time_clock_set"] += 1
+        self.unix_minus_boot_us = unix_us - int(msg.time_boot_ms) * 1000
 
     def reset(self) -> None:
         """Forget the time-base state (after an autopilot reboot); source choices are kept."""
         self._last_gnss_stamp_us = -1
         self.unix_minus_boot_us = None
+        self._unix.reset()
         self.last_attitude = self.last_imu = self.last_fix = None
 
     def sample(self, msg: Any) -> ImuSample | AttitudeSample | GnssFix | None:

@@ -1,18 +1,27 @@
 """Fast MAVLink frame scanning: CRC-checked frames unpacked into light tuple views.
 
-Shared by the tlog reader and the UDP links (pymavlink's byte-wise parser costs ~20 µs per
-message; this ~2 µs). A frame is checked with its message's CRC_EXTRA (x25 / MCRF4XX via
-``fastcrc``) and unpacked only when asked for, into a namedtuple with the message's field
-names and ``get_type()`` (what the decoders of :mod:`companion.mavlink.codec` read).
-Link views also carry the sender's system id and the frame's bytes (``get_srcSystem()``,
-``get_msgbuf()``). The scanner does not check signatures: a signing link checks each signed
-frame's signature itself (``companion.mavlink.udp_link.check_signature``) and signs what it packs
-with :func:`signature_block`.
+Shared by the tlog reader, the UDP links and the ``--master`` connection (pymavlink's byte-wise
+parser costs ~20 µs per message; this ~2 µs). A frame is checked with its message's CRC_EXTRA
+(x25 / MCRF4XX via ``fastcrc``) and unpacked only when asked for, into a namedtuple with the
+message's field names and ``get_type()`` (what the decoders of :mod:`companion.mavlink.codec`
+read). Link views also carry the sender's system id and the frame's bytes (``get_srcSystem()``,
+``get_srcComponent()``, ``get_msgbuf()``).
+
+Two scanners, one rule: :func:`parse_datagram` takes one datagram on its own (nothing carries
+over to the next, so one hostile datagram cannot damage the frames of another);
+:class:`StreamScanner` takes a byte stream (TCP, serial) in chunks and resynchronises on junk:
+a damaged span is skipped from the next magic byte whose frame checks, so a false magic byte
+in junk (announcing a long frame) neither loses nor holds back the genuine frames behind it.
+A frame whose message id the dialect lacks cannot be CRC-checked: it is skipped whole when a
+frame (or the end of the data) follows it, counted as ``unknown_msgid``.
+
+The dialect is the common one, or ArduPilot's (``ardupilotmega``: common plus its own
+messages), for links to a real autopilot. The scanner does not check signatures:
+:class:`companion.mavlink.signing.Signer` does, and signs what :func:`pack_frame` packs.
 """
 
 from __future__ import annotations
 
-import hashlib
 import struct
 from collections import namedtuple
 from collections.abc import Iterable
@@ -21,6 +30,7 @@ from operator import itemgetter
 from typing import Any
 
 from fastcrc.crc16 import mcrf4xx
+from pymavlink.dialects.v20 import ardupilotmega
 from pymavlink.dialects.v20 import common as mavlink
 
 MAGIC_V2 = 0xFD
@@ -70,7 +80,7 @@ def _make_spec(msgtype: type[mavlink.MAVLink_message], extra: tuple[str, ...] = 
         else:
             def view(payload: bytes, *more: Any) -> Any:  # no extras: `more` is always empty
                 return new(cls, getter(unpack(payload)))
-    else:  # arrays (slices of the unpacked tuple) and/or NUL-padded text
+    else:  # arrays (slices of the unpacked tuple) and/or NUL-padded text (as str, like pymavlink)
         keys = [s if n == 1 else slice(s, s + n) for s, n in zip(starts, spans, strict=True)]
         text_at = [i for i, text in enumerate(is_text) if text]
 
@@ -78,21 +88,24 @@ def _make_spec(msgtype: type[mavlink.MAVLink_message], extra: tuple[str, ...] = 
             t = unpack(payload)
             values = [t[k] for k in keys]
             for i in text_at:
-                values[i] = values[i].rstrip(b"\x00")
+                values[i] = values[i].split(b"\x00", 1)[0].decode("utf-8", errors="replace")
             return new(cls, (*values, *more))
 
     return MessageSpec(bytes([msgtype.crc_extra]), msgtype.unpacker.size, view)
 
 
-_SPECS: dict[tuple[int, bool], MessageSpec] = {}
+DIALECTS = {"common": mavlink.mavlink_map, "ardupilotmega": ardupilotmega.mavlink_map}
+_SPECS: dict[tuple[int, bool, str], MessageSpec] = {}
 
 
-def message_spec(msgid: int, link: bool = False) -> MessageSpec | None:
-    """The spec of ``msgid`` (None if the common dialect lacks it); ``link``: views carry the
-    sender's system id and the frame bytes."""
-    spec = _SPECS.get((msgid, link))
-    if spec is None and msgid in mavlink.mavlink_map:
-        spec = _SPECS[msgid, link] = _make_spec(mavlink.mavlink_map[msgid], LINK_EXTRA_FIELDS if link else ())
+def message_spec(msgid: int, link: bool = False, dialect: str = "common") -> MessageSpec | None:
+    """The spec of ``msgid`` (None if the dialect lacks it); ``link``: views carry the sender's
+    system id and the frame bytes."""
+    spec = _SPECS.get((msgid, link, dialect))
+    if spec is None:
+        table = DIALECTS[dialect]
+        if msgid in table:
+            spec = _SPECS[msgid, link, dialect] = _make_spec(table[msgid], LINK_EXTRA_FIELDS if link else ())
     return spec
 
 
@@ -102,7 +115,8 @@ def message_ids(types: Iterable[str]) -> frozenset[int]:
     return frozenset(ids[t] for t in types)
 
 
-def frame_at(data: bytes, m: int, n: int, link: bool = False) -> tuple[int, int, MessageSpec, bytes] | str:
+def frame_at(data: bytes | bytearray, m: int, n: int, link: bool = False,
+             dialect: str = "common") -> tuple[int, int, MessageSpec, bytes] | str:
     """The frame whose magic byte is at ``m`` in ``data[:n]``: (end, msgid, spec, payload), or the
     reason it is not one (``truncated``, ``garbage``, ``unknown_msgid``, ``bad_crc``)."""
     if m + HEADER_V1 + 2 > n:
@@ -122,13 +136,13 @@ def frame_at(data: bytes, m: int, n: int, link: bool = False) -> tuple[int, int,
     end = payload_end + 2 + sig
     if end > n:
         return "truncated"
-    spec = message_spec(msgid, link)
+    spec = message_spec(msgid, link, dialect)
     if spec is None:
         return "unknown_msgid"
     crc = mcrf4xx(spec.crc_extra, mcrf4xx(data[m + 1 : payload_end], CRC_INIT))
     if crc != data[payload_end] | data[payload_end + 1] << 8:
         return "bad_crc"
-    return end, msgid, spec, data[m + header : payload_end]
+    return end, msgid, spec, bytes(data[m + header : payload_end])
 
 
 def full_payload(spec: MessageSpec, body: bytes) -> bytes:
@@ -138,30 +152,109 @@ def full_payload(spec: MessageSpec, body: bytes) -> bytes:
     return body[: spec.size]
 
 
-def parse_datagram(data: bytes) -> tuple[list[Any], list[str]]:
-    """Link views of the good frames in ``data`` and, per damaged span, the reason of its first
-    failure (the scan resynchronises on the next magic byte whose frame checks)."""
+def _next_magic(data: bytes | bytearray, start: int, end: int) -> int:
+    """The first magic byte (MAVLink 2 or 1) in ``data[start:end]``, ``end`` if none."""
+    found = [i for i in (data.find(b"\xfd", start, end), data.find(b"\xfe", start, end)) if i >= 0]
+    return min(found) if found else end
+
+
+def _skip(data: bytes | bytearray, pos: int, n: int, reason: str, stream: bool,
+          dialect: str) -> tuple[int, bool]:
+    """Where to look for the next frame after a failure at ``pos``, and whether that skips one
+    whole frame: past a frame of an unknown message id when no good frame starts inside it and a
+    good frame follows it (or, in a datagram, it ends the datagram); else the next magic byte.
+    Junk's false frames mostly carry unknown ids too: skipping their length on a guess could skip
+    genuine frames, so the frames around must prove the guess."""
+    resync = _next_magic(data, pos + 1, n)
+    if reason != "unknown_msgid":
+        return resync, False
+    signature = SIGNATURE_BYTES if data[pos] == MAGIC_V2 and data[pos + 2] & IFLAG_SIGNED else 0
+    end = pos + data[pos + 1] + 2 + signature + (HEADER_V2 if data[pos] == MAGIC_V2 else HEADER_V1)
+    after = "" if end == n and not stream else "cut" if end >= n else frame_at(data, end, n, dialect=dialect)
+    if isinstance(after, str) and after:
+        return resync, False
+    inside = resync
+    while inside < end:  # a genuine frame inside the span: it was junk, not a frame
+        if not isinstance(frame_at(data, inside, end, dialect=dialect), str):
+            return resync, False
+        inside = _next_magic(data, inside + 1, end)
+    return end, True
+
+
+def _next_good_frame(data: bytes | bytearray, pos: int, n: int, dialect: str) -> int:
+    """Where the first complete frame that checks starts after ``pos`` (-1: none yet)."""
+    i = _next_magic(data, pos + 1, n)
+    while i < n:
+        if not isinstance(frame_at(data, i, n, dialect=dialect), str):
+            return i
+        i = _next_magic(data, i + 1, n)
+    return -1
+
+
+def scan(data: bytes | bytearray, stream: bool = False,
+         dialect: str = "common") -> tuple[list[Any], list[str], int]:
+    """Link views of the good frames in ``data``, per damaged span the reason of its first failure,
+    and the offset scanned up to. ``stream``: a frame cut by the end of ``data`` stops the scan
+    there (its bytes are still to come) instead of counting as damage, unless a complete good
+    frame starts inside its span: then it was a false magic byte in junk, skipped at once (the
+    genuine frames behind it are never held back by it)."""
     n = len(data)
     views: list[Any] = []
     skipped: list[str] = []
     pos, lost = 0, ""
     while pos < n:
-        parsed = frame_at(data, pos, n, link=True)
+        parsed = frame_at(data, pos, n, link=True, dialect=dialect)
         if isinstance(parsed, str):
-            lost = lost or parsed
-            nxt = [i for i in (data.find(b"\xfd", pos + 1), data.find(b"\xfe", pos + 1)) if i >= 0]
-            pos = min(nxt) if nxt else n
+            if stream and parsed == "truncated":
+                later = _next_good_frame(data, pos, n, dialect)
+                if later < 0:
+                    break  # its bytes may still come: wait
+                lost, pos = lost or "garbage", later  # a good frame inside its span: it was junk
+                continue
+            nxt, whole = _skip(data, pos, n, parsed, stream, dialect)
+            if whole and not lost:  # a whole frame of a message we cannot read: its own span
+                skipped.append(parsed)
+            else:
+                lost = lost or parsed
+            pos = nxt
             continue
         if lost:
             skipped.append(lost)
             lost = ""
         end, msgid, spec, body = parsed
         src = data[pos + 5] if data[pos] == MAGIC_V2 else data[pos + 3]
-        views.append(spec.view(full_payload(spec, body), src, data[pos:end]))
+        views.append(spec.view(full_payload(spec, body), src, bytes(data[pos:end])))
         pos = end
     if lost:
         skipped.append(lost)
+    return views, skipped, pos
+
+
+def parse_datagram(data: bytes, dialect: str = "common") -> tuple[list[Any], list[str]]:
+    """Link views of the good frames in one datagram and, per damaged span, the reason of its
+    first failure (the scan resynchronises on the next magic byte whose frame checks)."""
+    views, skipped, _ = scan(data, stream=False, dialect=dialect)
     return views, skipped
+
+
+class StreamScanner:
+    """Frames of a byte stream fed in chunks (TCP, serial): what :func:`scan` finds, the bytes of a
+    frame not yet complete kept for the next chunk (at most one frame: the buffer is bounded)."""
+
+    def __init__(self, dialect: str = "common") -> None:
+        self.dialect = dialect
+        self._buffer = bytearray()
+
+    def feed(self, chunk: bytes) -> tuple[list[Any], list[str]]:
+        buf = self._buffer
+        buf += chunk
+        views, skipped, pos = scan(buf, stream=True, dialect=self.dialect)
+        del buf[:pos]
+        return views, skipped
+
+    def reset(self) -> None:
+        """Forget a partial frame (the stream was reconnected)."""
+        self._buffer.clear()
 
 
 # --- packing ---------------------------------------------------------------------------------
@@ -178,7 +271,7 @@ def pack_frame(msg: mavlink.MAVLink_message, seq: int, system_id: int, component
     """The MAVLink 2 frame of a pymavlink message, byte-equal to pymavlink's ``pack`` (its
     generated code builds the payload; header, zero trimming and CRC are done here). ``signed``:
     the header's signed flag is set and the frame ends at its CRC, ready for
-    :func:`signature_block`."""
+    :meth:`companion.mavlink.signing.Signer.sign`."""
     msg._pack = _payload_only  # the instance's packer returns the payload
     try:
         payload = msg.pack(None)
@@ -190,14 +283,3 @@ def pack_frame(msg: mavlink.MAVLink_message, seq: int, system_id: int, component
                              component_id, msgid & 0xFFFF, msgid >> 16)
     crc = mcrf4xx(bytes((msg.crc_extra,)), mcrf4xx(header[1:] + body, CRC_INIT))
     return header + body + _CRC.pack(crc)
-
-
-_LINK_TIMESTAMP = struct.Struct("<BQ")
-
-
-def signature_block(frame: bytes, secret_key: bytes, link_id: int, timestamp: int) -> bytes:
-    """The 13 bytes that sign ``frame`` (packed with ``signed=True``): link id, 48-bit timestamp
-    (10 µs ticks since 2015) and the first 6 bytes of SHA-256(key + frame + link id + timestamp),
-    as pymavlink's ``sign_packet``."""
-    tail = _LINK_TIMESTAMP.pack(link_id, timestamp)[:7]
-    return tail + hashlib.sha256(secret_key + frame + tail).digest()[:6]

@@ -23,26 +23,27 @@ from __future__ import annotations
 import argparse
 import contextlib
 import errno
-import hashlib
-import os
 import select
 import socket
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.errors import UserError
-from companion.mavlink.frames import IFLAG_SIGNED, MAGIC_V2, pack_frame, parse_datagram, signature_block
+from companion.mavlink.frames import pack_frame, parse_datagram
+from companion.mavlink.signing import (  # noqa: F401 - re-exported: the SITL's users import them here
+    SIGNING_EPOCH_UNIX_S,
+    SIGNING_KEY_BYTES,
+    Signer,
+    read_signing_key,
+)
 
 MAX_DATAGRAM_BYTES = 65_535
 BATCH_DATAGRAM_BYTES = 32_768  # a batch is split into datagrams of at most this size
-SIGNING_EPOCH_UNIX_S = 1_420_070_400  # MAVLink 2 signing timestamps count 10 µs since 2015-01-01
-SIGNING_KEY_BYTES = 32
 VEHICLE_SYSTEM_ID = 1  # the vehicle and its companions share one MAVLink system id
 VEHICLE_COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1: the vehicle process
 ESTIMATOR_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
@@ -93,62 +94,6 @@ class LinkCounters:
         return asdict(self)
 
 
-def read_signing_key(path: str | os.PathLike[str]) -> bytes:
-    """A signing key file holds 64 hex characters (the raw key, for pymavlink-style clients) or a
-    passphrase: one word of printable ASCII, whose SHA-256 is the key exactly as MAVProxy's
-    ``signing key WORD`` computes it (MAVProxy keeps only the first word of a longer phrase and
-    encodes it as ASCII, so anything else could not be typed there)."""
-    try:
-        text = Path(path).read_text(encoding="utf-8").strip()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"cannot read signing key file {path}: {exc}") from None
-    if not text:
-        raise UserError(f"signing key file {path} is empty")
-    if len(text) == 2 * SIGNING_KEY_BYTES:
-        try:
-            return bytes.fromhex(text)
-        except ValueError:
-            pass
-    if not (text.isascii() and text.isprintable()) or any(c.isspace() for c in text):
-        raise UserError(f"signing key file {path}: a passphrase must be one word of printable ASCII "
-                        "(what MAVProxy's 'signing key' accepts), or give 64 hex characters")
-    return hashlib.sha256(text.encode("ascii")).digest()
-
-
-NEW_STREAM_MAX_AGE = 6_000_000  # 60 s in signing ticks (10 µs): an older new stream is a replay
-
-
-def check_signature(mav: mavlink.MAVLink, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
-    """MAVLink 2 signature check that verifies the signature BEFORE it trusts the timestamp.
-
-    pymavlink's own ``check_signature`` records a stream's timestamp before comparing the
-    signature, so one forged frame (no key needed) with a huge timestamp makes every later genuine
-    frame of that stream look replayed: the link is cut. Here a frame moves the stream's
-    timestamp only once its signature checks; replays (timestamp not newer) are still refused.
-    """
-    signing = mav.signing
-    h = hashlib.sha256()
-    h.update(signing.secret_key)
-    h.update(msgbuf[:-6])
-    if h.digest()[:6] != bytes(msgbuf[-6:]):
-        return False
-    t_low, t_high = mav.mav_sign_unpacker.unpack(msgbuf[-12:-6])
-    timestamp = t_low + (t_high << 32)
-    stream = (msgbuf[-13], src_system, src_component)
-    last = signing.stream_timestamps.get(stream)
-    if last is not None and timestamp <= last:
-        return False
-    if last is None and timestamp + NEW_STREAM_MAX_AGE < signing.timestamp:
-        return False
-    signing.stream_timestamps[stream] = timestamp
-    signing.timestamp = max(signing.timestamp, timestamp)
-    return True
-
-
-def _signing_timestamp_now() -> int:
-    return int((max(time.time(), SIGNING_EPOCH_UNIX_S) - SIGNING_EPOCH_UNIX_S) * 100_000)
-
-
 class _DatagramSink:
     """File-like target for pymavlink's packer: each ``write`` is one datagram."""
 
@@ -194,13 +139,7 @@ class UdpLink:
         )
         self._mav = mavlink.MAVLink(_DatagramSink(self), config.system_id, config.component_id)
         self._mav.robust_parsing = True
-        if config.signing_key is not None:
-            if len(config.signing_key) != SIGNING_KEY_BYTES:
-                raise UserError(f"a MAVLink 2 signing key has {SIGNING_KEY_BYTES} bytes")
-            self._mav.signing.secret_key = config.signing_key
-            self._mav.signing.sign_outgoing = True
-            self._mav.signing.link_id = config.link_id
-            self._mav.signing.timestamp = _signing_timestamp_now()
+        self.signer = None if config.signing_key is None else Signer(config.signing_key, config.link_id)
 
     # -- plumbing -------------------------------------------------------------------------
     @property
@@ -230,14 +169,11 @@ class UdpLink:
         if self.peer is None:
             return
         mav = self._mav
-        key = self.config.signing_key
-        if key is None:  # the fast packer, byte-equal to pymavlink's (signed too, below)
+        if self.signer is None:  # the fast packer, byte-equal to pymavlink's (signed too, below)
             self._send_datagram(pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent))
         else:
             frame = pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent, signed=True)
-            signing = mav.signing
-            self._send_datagram(frame + signature_block(frame, key, signing.link_id, signing.timestamp))
-            signing.timestamp += 1
+            self._send_datagram(self.signer.sign(frame))
         mav.seq = (mav.seq + 1) & 0xFF
         self.counters.messages_tx += 1
 
@@ -341,7 +277,8 @@ class UdpLink:
         """Parse one datagram with the fast scanner of :mod:`companion.mavlink.frames` (messages
         are its light views); count and drop what cannot be used (never raises). With signing,
         a frame is kept only if it is MAVLink 2, signed, and its signature checks
-        (:func:`check_signature`: unsigned, wrong key or replayed frames count as bad_signature)."""
+        (:class:`companion.mavlink.signing.Signer`: unsigned, wrong key or replayed frames count as
+        bad_signature)."""
         c = self.counters
         c.datagrams_rx += 1
         if self.config.drop_probability_rx and self._drop(self.config.drop_probability_rx):
@@ -355,15 +292,11 @@ class UdpLink:
                 c.unknown_message += 1
             else:
                 c.garbage += 1
-        if self.config.signing_key is not None:
-            mav, signed = self._mav, []
-            for v in views:
-                buf = v.get_msgbuf()
-                if buf[0] == MAGIC_V2 and buf[2] & IFLAG_SIGNED and check_signature(
-                        mav, buf, v.get_srcSystem(), buf[6]):
-                    signed.append(v)
-                else:
-                    c.bad_signature += 1
+        signer = self.signer
+        if signer is not None:
+            signed = [v for v in views
+                      if signer.check(v.get_msgbuf(), v.get_srcSystem(), v.get_srcComponent())]
+            c.bad_signature += len(views) - len(signed)
             views = signed
         return self._accept(views, addr)
 

@@ -20,6 +20,7 @@ TARGETS = {
     "autopilot": "gcs_tools.bench.autopilot",
     "replay": "gcs_tools.bench.replay",
     "ardupilot": "gcs_tools.bench.ardupilot",
+    "companion-memory": "gcs_tools.bench.companion_memory",
     "gnss": "gcs_tools.bench.gnss",
     "cli": "gcs_tools.bench.cli_start",
     "robustness": "gcs_tools.bench.robustness",

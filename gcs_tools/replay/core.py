@@ -10,11 +10,12 @@ written to ``estimates.csv`` as they come; β and NIS are summarised in fixed-si
 What is kept grows only by the error vector of each reference sample (12 bytes).
 
 Log restarts: a concatenated log (or an autopilot reboot inside one) makes the IMU time jump
-back. A jump of more than ``RESTART_JUMP_US`` confirmed by ``RESTART_CONSENSUS`` consecutive
-IMU samples on the new time base starts a new segment: a fresh navigator (same frame), the
-comparisons restarted; counters are summed over segments and ``log_restarts`` counts them. A
-lone sample far back is not a restart: it goes to the navigator, which rejects it
-(``imu_rejected_time_backwards``).
+back. The project's one clock rule decides (:mod:`companion.domain.clock_guard`,
+:data:`RESTART_WINDOW`): a jump of more than 1 s back confirmed by 5 consecutive IMU samples on
+the new time base starts a new segment: a fresh navigator (same frame), the comparisons
+restarted; counters are summed over segments and ``log_restarts`` counts them. Events are held
+while the rule decides. A lone sample far back is not a restart: it goes to the navigator,
+which rejects it (``imu_rejected_time_backwards``). A log's IMU time may jump forward freely.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from typing import IO, TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from companion.domain.clock_guard import MAX_STAMP_US, ClockWindow, StreamClock, Verdict
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
@@ -44,8 +46,10 @@ if TYPE_CHECKING:
 # Decoded samples fed to the navigator at a time: one timer pair per chunk instead of per sample
 # (the order, and so every estimate and counter, is unchanged).
 FEED_CHUNK = 512
-RESTART_JUMP_US = 1_000_000  # IMU time going back by more than this may be a log restart ...
-RESTART_CONSENSUS = 5  # ... once this many IMU samples in a row continue on the new time base
+# IMU time going back by more than 1 s may be a log restart, once 5 IMU samples in a row (each
+# at most 1 s after the previous) continue on the new time base; forward it may jump freely
+RESTART_WINDOW = ClockWindow(max_back_us=1_000_000, max_forward_us=MAX_STAMP_US, consensus_samples=5,
+                             consensus_step_us=1_000_000)
 RESTART_HOLD_MAX = 4096  # events held while deciding; past this the jump is not a restart
 # β and NIS distributions in bounded memory: quantiles exact to half a bin (β: 5e-5;
 # NIS: 0.05 % relative, log bins from 1e-6 to 1e6)
@@ -429,8 +433,8 @@ def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
             progress: Callable[[int, int], None] | None) -> int:
     """Push the reader's events through ``run``; returns the number of log restarts."""
     chunk: list[Any] = []
-    held: list[Any] = []  # events after a backward IMU jump, while deciding whether it is a restart
-    held_imu_us, held_imu_n = 0, 0
+    held: list[Any] = []  # events after a backward IMU jump, while the clock rule decides
+    clock = StreamClock(RESTART_WINDOW)
     restarts = 0
     count = 0
     stats = reader.stats
@@ -460,31 +464,20 @@ def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
             if len(chunk) >= feed_chunk:
                 run.feed(chunk)
             continue
+        verdict = clock.check(ev.t_us) if type(ev) is ImuSample else None
         if held:
             held.append(ev)
-            if type(ev) is ImuSample:
-                last = run.last_imu_us or 0
-                if ev.t_us >= last - RESTART_JUMP_US:  # back on the old time base: a lone outlier
-                    pending, held = held, []
-                    for e in pending:
-                        process(e)
-                elif held_imu_us <= ev.t_us <= held_imu_us + RESTART_JUMP_US:
-                    held_imu_us, held_imu_n = ev.t_us, held_imu_n + 1
-                    if held_imu_n >= RESTART_CONSENSUS:
-                        run.feed(chunk)
-                        run.restart()
-                        restarts += 1
-                        pending, held = held, []
-                        for e in pending:
-                            process(e)
-            if len(held) > RESTART_HOLD_MAX:
-                pending, held = held, []
+            if verdict is Verdict.RESET:
+                run.feed(chunk)
+                run.restart()
+                restarts += 1
+            if verdict is Verdict.ACCEPT or verdict is Verdict.RESET or len(held) > RESTART_HOLD_MAX:
+                pending, held = held, []  # back on the old time base (a lone outlier), or a restart
                 for e in pending:
                     process(e)
             continue
-        last_us = run.last_imu_us
-        if type(ev) is ImuSample and last_us is not None and ev.t_us < last_us - RESTART_JUMP_US:
-            held, held_imu_us, held_imu_n = [ev], ev.t_us, 1
+        if verdict is Verdict.REJECT and clock.pending:  # far back: a restart, or a lone outlier?
+            held = [ev]
             continue
         process(ev)
     for e in held:

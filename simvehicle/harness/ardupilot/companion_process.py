@@ -42,7 +42,7 @@ def companion_command(master: str, out_dir: Path, feed: str, method: str,
     if feed not in FEED_MESSAGES:
         raise UserError(f"--feed {feed}: the companion process feeds one of {', '.join(FEED_MESSAGES)}")
     return [sys.executable, "-m", "gcs_tools", "companion", "--master", master, "--out", str(out_dir),
-            "--feed", feed, "--method", method, "--gnss-instance", "2",
+            "--feed", feed, "--method", method, "--gnss-instance", "2", "--target-system", "1",
             "--home", ",".join(f"{v:.9f}" for v in home), "--no-telemetry"]
 
 

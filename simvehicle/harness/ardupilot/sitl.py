@@ -28,10 +28,7 @@ Binary: ``SitlConfig.binary``, else environment ``BELIEFNAV_ARDUPILOT_BIN``, els
 
 from __future__ import annotations
 
-import contextlib
 import os
-import signal
-import socket
 import subprocess
 import time
 from collections.abc import Mapping
@@ -40,6 +37,7 @@ from pathlib import Path
 from types import TracebackType
 
 from companion.errors import UserError
+from simvehicle.harness.firmware import log_tail, port_free, stop_group
 
 BINARY_ENV = "BELIEFNAV_ARDUPILOT_BIN"
 REPO_ROOT = Path(__file__).resolve().parents[3]
@@ -84,21 +82,10 @@ def instance_ports(instance: int) -> tuple[int, int, int]:
     return tuple(base + off for off in SERIAL_OFFSETS)  # type: ignore[return-value]
 
 
-def _tcp_port_free(port: int) -> bool:
-    # ArduPilot listens on 0.0.0.0, so probe the wildcard address (a 127.0.0.1 bind may succeed
-    # while another instance holds 0.0.0.0 with SO_REUSEADDR).
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        try:
-            s.bind(("0.0.0.0", port))
-        except OSError:
-            return False
-    return True
-
-
 def free_instance(first: int = 0, last: int = 100, skip: frozenset[int] = frozenset()) -> int:
     """The first ``-I`` in [first, last) whose three serial ports are free (a UserError if none)."""
     for instance in range(first, last):
-        if instance not in skip and all(_tcp_port_free(p) for p in instance_ports(instance)):
+        if instance not in skip and all(port_free(p) for p in instance_ports(instance)):
             return instance
     raise UserError(f"no free ArduPilot SITL instance in -I {first}..{last - 1} (TCP ports in use)")
 
@@ -214,12 +201,8 @@ class ArduPilotSitl:
         # Connecting to SERIAL0 would make this probe the firmware's client; ask the kernel instead.
         return port_listening(self.ports[0])
 
-    def _tail(self, lines: int = 3) -> str:
-        try:
-            text = self.log_path.read_text(errors="replace").strip().splitlines()
-        except OSError:
-            return "(no output)"
-        return " | ".join(text[-lines:]) or "(no output)"
+    def _tail(self) -> str:
+        return log_tail(self.log_path)
 
     def running(self) -> bool:
         return self.process is not None and self.process.poll() is None
@@ -233,16 +216,7 @@ class ArduPilotSitl:
     def stop(self) -> int | None:
         """Stop the firmware (SIGTERM to its group, SIGKILL after the time-out); its exit code."""
         proc, self.process = self.process, None
-        if proc is None:
-            return None
-        if proc.poll() is None:
-            _signal_group(proc, signal.SIGTERM)
-            try:
-                proc.wait(self.config.stop_timeout_s)
-            except subprocess.TimeoutExpired:
-                _signal_group(proc, signal.SIGKILL)
-                proc.wait()
-        return proc.returncode
+        return None if proc is None else stop_group(proc, self.config.stop_timeout_s)
 
     def __enter__(self) -> ArduPilotSitl:
         return self.start()
@@ -250,11 +224,6 @@ class ArduPilotSitl:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.stop()
-
-
-def _signal_group(proc: subprocess.Popen[bytes], sig: signal.Signals) -> None:
-    with contextlib.suppress(ProcessLookupError, PermissionError):
-        os.killpg(proc.pid, sig)
 
 
 def port_listening(port: int) -> bool:
