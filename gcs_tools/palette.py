@@ -23,6 +23,8 @@ QUANTITY: dict[str, str] = {
     "building": "#bfbfbf",  # map rectangles (fill)
     "rejected": "#d62728",  # a GNSS fix the filter rejected (its innovation gate)
     "uncertainty": "#1f77b4",  # the estimate's 95 % horizontal uncertainty ellipse (as the estimate)
+    "real_data": "#a50f15",  # a real data set beside the simulator (calibration)
+    "simulated": "#1b9e77",  # the simulator's counterpart of a real data set
 }
 
 METHOD: dict[str, str] = {

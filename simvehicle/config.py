@@ -236,6 +236,106 @@ class GnssConfig:
         return self.nlos or self.satellite_noise or self.heavy_tail_dof > 0.0
 
 
+RECEIVER_SYSTEMS = ("GPS", "GLONASS", "GALILEO", "BEIDOU")
+
+
+@dataclass(frozen=True)
+class ReceiverConfig:
+    """A raw GNSS receiver flown through the 3-D city (``simvehicle.receiver``): per-satellite line of
+    sight, diffraction and facade reflections, tracking, clock; its single-point fix replaces the
+    eq. 22-27 fixes when ``enabled``. Physics and receiver values from the literature, "(cal)" the
+    few adjusted on the tuning mission against the smartLoc Berlin drive (docs/simcal.md).
+    """
+
+    enabled: bool = False
+    systems: tuple[str, ...] = ("GPS", "GLONASS")  # of RECEIVER_SYSTEMS (smartLoc's receiver: GPS + GLONASS)
+    rate_hz: float = 5.0  # measurement epochs (u-blox M8T raw data: up to 10 Hz)
+    start_utc: str = "2024-03-20T08:00:00"  # GPS time of boot = this UTC date ...
+    start_spread_s: float = 86400.0  # ... plus a time drawn from the seed in [0, spread): each seed its sky
+    latency_s: float = 0.08  # measurement epoch -> output (u-blox NAV-PVT ~ 50-100 ms)
+    elevation_mask_deg: float = 0.0  # satellites tracked above this (the fix applies its own 5° mask)
+    # C/N0 of an unobstructed signal: zenith value less the antenna's gain roll-off (1 − sin el)² × rolloff
+    cn0_zenith_dbhz: float = 50.0  # GPS L1 C/A (Galileo, BeiDou alike); patch antenna, u-blox class receiver
+    cn0_glonass_offset_db: float = -4.0  # (cal) GLONASS G1 arrives weaker on such antennas
+    antenna_rolloff_db: float = 14.0  # gain at the horizon below the zenith's
+    cn0_noise_db: float = 1.0  # white noise of the C/N0 estimate per epoch
+    cn0_threshold_dbhz: float = 12.0  # a tracked signal is lost below this (u-blox M8 tracks to ~10 dB-Hz) ...
+    cn0_acquire_dbhz: float = 26.0  # (cal) ... and (re)acquired only above this
+    # reflections off facades (simvehicle.receiver.reflection_amplitude): Fresnel coefficients of a dielectric
+    # (or a conductor) at the incidence angle, split into the co- (RHCP) and cross-polarised (LHCP) parts the
+    # antenna receives, the LHCP part rejected by the antenna's cross-polar discrimination (XPD, ∝ sin el),
+    # less an absorption/roughness loss; per facade, drawn once per flight: conductor or dielectric, loss
+    facade_permittivity: float = 5.0  # relative permittivity of a dielectric facade (concrete ~5, glass ~6)
+    metal_facade_fraction: float = 0.5  # (cal) facades reflecting as conductors (metallised glass, cladding)
+    facade_absorption_db: float = 2.0  # roughness/absorption loss of a facade, mean ...
+    facade_absorption_sd_db: float = 1.0  # ... and spread between facades
+    antenna_xpd_db: float = 10.0  # (cal) the antenna's LHCP rejection at the zenith (patch antennas 10-20 dB)
+    diffraction: bool = True  # roof-edge (knife-edge) diffraction of blocked and grazing signals
+    # a blocked satellite without a mapped reflection: tracked, with this probability per blocked episode,
+    # through reflectors the map lacks (detail, other buildings, vehicles): an extra path drawn once per
+    # episode (exponential) and a loss
+    unmapped_prob: float = 0.8  # (cal)
+    unmapped_delay_mean_m: float = 50.0  # (cal)
+    unmapped_loss_db: float = 6.0  # besides the antenna's XPD (a reflection, of whatever kind)
+    # code tracking: early-minus-late DLL (Betz and Kolodziej 2009 noise; triangle correlation multipath)
+    correlator_spacing_chips: float = 0.2
+    dll_bandwidth_hz: float = 0.5  # carrier-aided (u-blox class)
+    integration_s: float = 0.02
+    doppler_sigma_m_s: float = 0.05  # pseudorange-rate noise at 45 dB-Hz, ∝ 10^((45 − C/N0)/20)
+    # errors every receiver shares: broadcast orbit/clock (SISRE), the ionosphere Klobuchar leaves
+    sisre_m: float = 0.6  # GPS, Galileo, BeiDou (per satellite and flight)
+    sisre_glonass_m: float = 1.5
+    iono_error_fraction: float = 0.3  # true delay = Klobuchar × (1 + f · N(0, 1)), per satellite and flight
+    glonass_ifb_sd_m: float = 1.0  # GLONASS inter-frequency bias per channel
+    # receiver clock (TCXO): initial drift, Allan-variance coefficients; the offset kept within ±0.5 ms by
+    # 1 ms resets (u-blox's unsteered clock)
+    clock_drift0_s_s: float = 1e-7
+    clock_h0: float = 2e-19
+    clock_h_2: float = 2e-20
+    # the receiver's own fix (companion.gnss.solve_position)
+    weighting: str = "cn0-elevation"
+    raim: bool = False
+
+    def validate(self) -> None:
+        _positive(self, "rate_hz", "cn0_zenith_dbhz", "correlator_spacing_chips", "dll_bandwidth_hz",
+                  "integration_s", "unmapped_delay_mean_m")
+        _non_negative(self, "start_spread_s", "latency_s", "antenna_rolloff_db", "cn0_noise_db",
+                      "facade_absorption_db", "facade_absorption_sd_db", "antenna_xpd_db", "unmapped_loss_db",
+                      "doppler_sigma_m_s", "sisre_m", "sisre_glonass_m", "iono_error_fraction",
+                      "glonass_ifb_sd_m", "clock_drift0_s_s", "clock_h0", "clock_h_2")
+        bad = [s for s in self.systems if s not in RECEIVER_SYSTEMS]
+        if bad or not self.systems:
+            raise ValueError(f"systems: each one of {', '.join(RECEIVER_SYSTEMS)}, got {list(self.systems)}")
+        for name in ("unmapped_prob", "metal_facade_fraction"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name}: must be in [0, 1], got {getattr(self, name)!r}")
+        if not self.facade_permittivity > 1.0:
+            raise ValueError(f"facade_permittivity: must be > 1, got {self.facade_permittivity!r}")
+        if not 0.0 < self.correlator_spacing_chips <= 1.0:
+            raise ValueError(f"correlator_spacing_chips: must be in (0, 1], got {self.correlator_spacing_chips!r}")
+        if not 0.0 <= self.elevation_mask_deg < 90.0:
+            raise ValueError(f"elevation_mask_deg: must be in [0, 90), got {self.elevation_mask_deg!r}")
+        from companion.gnss.spp import SppConfig  # the solver's own check of the weighting
+
+        SppConfig(weighting=self.weighting)
+        parse_utc(self.start_utc)
+
+
+def parse_utc(text: str) -> tuple[int, int, int, int, int, float]:
+    """``YYYY-MM-DDTHH:MM:SS`` -> calendar fields (a ValueError naming the format otherwise)."""
+    try:
+        date, _, clock = text.partition("T")
+        y, mo, d = (int(v) for v in date.split("-"))
+        hh, mi, ss = clock.split(":")
+        fields = (y, mo, d, int(hh), int(mi), float(ss))
+    except ValueError:
+        raise ValueError(f"start_utc {text!r}: expected YYYY-MM-DDTHH:MM:SS") from None
+    if not (1980 <= y <= 2200 and 1 <= mo <= 12 and 1 <= d <= 31 and 0 <= fields[3] < 24
+            and 0 <= fields[4] < 60 and 0 <= fields[5] < 60):
+        raise ValueError(f"start_utc {text!r}: out of range")
+    return fields
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """Everything the simulated vehicle needs, one section per part."""
@@ -245,12 +345,13 @@ class SimConfig:
     imu: ImuConfig = field(default_factory=ImuConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     ahrs: AhrsConfig = field(default_factory=AhrsConfig)
+    receiver: ReceiverConfig = field(default_factory=ReceiverConfig)
 
 
-SECTIONS = ("vehicle", "autopilot", "imu", "gnss", "ahrs")
+SECTIONS = ("vehicle", "autopilot", "imu", "gnss", "ahrs", "receiver")
 _SECTION_TYPES: dict[str, type] = {
     "vehicle": VehicleConfig, "autopilot": AutopilotConfig, "imu": ImuConfig, "gnss": GnssConfig,
-    "ahrs": AhrsConfig,
+    "ahrs": AhrsConfig, "receiver": ReceiverConfig,
 }
 
 

@@ -183,6 +183,11 @@ class GnssModel:
         """The 1σ speed accuracy the receiver reports for ``fix`` (NaN without report_accuracy)."""
         return fix.sigma_velocity_m_s if self.cfg.report_accuracy else float("nan")
 
+    def reported_accuracies_m(self, fix: NedFix) -> tuple[float, float]:
+        """(horizontal per axis, vertical) 1σ: both ``reported_accuracy_m``."""
+        acc = self.reported_accuracy_m(fix)
+        return acc, acc
+
     def to_fix(self, fix: NedFix) -> GnssFix:
         """The wire form of a fix: geodetic position (``frame``), fix type and accuracies."""
         lat, lon, alt = self.to_geodetic(fix.p_ned_m)

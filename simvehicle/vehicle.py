@@ -24,6 +24,8 @@ from simvehicle.dynamics import RigidBody
 from simvehicle.gnss import GnssModel, NedFix
 from simvehicle.imu import Imu, specific_force_frd
 from simvehicle.nlos import UnmodelledGnss
+from simvehicle.rawgnss import RawGnssModel
+from simvehicle.receiver import RawObservation
 
 # columns of the per-period block: specific force (0-2), then the RigidBody state (3-15)
 _BLOCK_COLUMNS = 16
@@ -52,6 +54,8 @@ class StepOutput:
     collided: bool  # within radius_m of a building, or at/below the ground, at the end of the period
     to_fix: Callable[[NedFix], GnssFix]  # the wire form of a released fix (geodetic)
     q_sent_ned_frd: np.ndarray | None = None  # (n, 4) the onboard AHRS estimate; None = the truth is sent
+    # the raw receiver's epochs released this period (``receiver.enabled``; each with its arrival tick)
+    gnss_raw: tuple[RawObservation, ...] = ()
 
     @property
     def q_att_ned_frd(self) -> np.ndarray:
@@ -102,7 +106,8 @@ class SimVehicle:
         n0, e0 = (float(c) for c in profiles[profile_index].start_ne_m)
         self.start_ned_m = np.array([n0, e0, -float(mission.altitude_m)])
         # children 0 and 1 are the paper's streams (spawning more leaves them as they were)
-        imu_seq, gnss_seq, ahrs_seq, nlos_seq, velocity_seq = np.random.SeedSequence(seed).spawn(5)
+        # child 4 is the eq. 22-27 receiver velocity's, 5 the raw receiver's
+        imu_seq, gnss_seq, ahrs_seq, nlos_seq, velocity_seq, raw_seq = np.random.SeedSequence(seed).spawn(6)
         self.body = RigidBody(cfg.vehicle, self.start_ned_m)
         self.autopilot = Autopilot(cfg.autopilot, cfg.vehicle, self.start_ned_m)
         self.imu = Imu(cfg.imu, np.random.default_rng(imu_seq), cfg.vehicle.physics_rate_hz)
@@ -116,8 +121,15 @@ class SimVehicle:
             heights = np.array([b.height_m for b in mission.world.config.buildings], dtype=float)
             nlos_rng = np.random.default_rng(nlos_seq)
             unmodelled = UnmodelledGnss(cfg.gnss, mission.world.rects_m, heights, nlos_rng)
-        self.gnss = GnssModel(cfg.gnss, period_s, mission.frame, gnss_rng, self._clearance_m, unmodelled,
-                              np.random.default_rng(velocity_seq))
+        self.gnss: GnssModel | RawGnssModel
+        if cfg.receiver.enabled:
+            heights = np.array([b.height_m for b in mission.world.config.buildings], dtype=float)
+            self.gnss = RawGnssModel(cfg.receiver, mission.world.rects_m, heights, mission.frame,
+                                     np.random.default_rng(raw_seq), round(period_s * 1e6))
+        else:
+            self.gnss = GnssModel(cfg.gnss, period_s, mission.frame, gnss_rng, self._clearance_m, unmodelled,
+                                  np.random.default_rng(velocity_seq))
+        self._raw = self.gnss if isinstance(self.gnss, RawGnssModel) else None
         self.t_us = 0
         self._dt_us = cfg.vehicle.physics_dt_us
         self._dt_s = self._dt_us * 1e-6
@@ -175,7 +187,8 @@ class SimVehicle:
             arrivals.append(t)
         after = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
         collided = self._clearance_m < veh.radius_m or p[-1, 2] >= 0.0
+        raw = () if self._raw is None else tuple(self._raw.drain_raw())
         return StepOutput(
             t, range(t0 + dt_us, t + 1, dt_us), acc, gyro, q, p, v, (before, after),
-            fixes, arrivals, bool(collided), gnss.to_fix, q_sent,
+            fixes, arrivals, bool(collided), gnss.to_fix, q_sent, raw,
         )

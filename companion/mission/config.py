@@ -161,7 +161,7 @@ class Profile:
 
 # Sections kept as raw mappings for their owners to validate (``Mission.section(name)``).
 OVERRIDE_SECTIONS: tuple[str, ...] = (
-    "vehicle", "autopilot", "imu", "gnss", "estimator", "ahrs", "belief_plugins",
+    "vehicle", "autopilot", "imu", "gnss", "estimator", "ahrs", "belief_plugins", "receiver",
 )
 
 

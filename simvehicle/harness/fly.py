@@ -84,7 +84,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     goal = Goal(route.waypoints_ned_m[-1], cfg.goal_radius_m, cfg.goal_speed_m_s,
                 arrive_after_s=route.t_start_s + route.duration_s)
     push, push_fix_ned = nav.push, nav.push_fix_ned
-    accuracy_m = sim.gnss.reported_accuracy_m  # what GnssModel.to_fix puts on the wire
+    accuracies_m = sim.gnss.reported_accuracies_m  # what the model's to_fix puts on the wire
     vel_accuracy = sim.gnss.reported_velocity_accuracy_m_s
     rows = array("d")  # recording.ROW_FLOATS floats per control step: ~180 B, not two domain objects (~2 kB)
     fix_rows = array("d")  # FIX_FIELDS floats per fix received
@@ -100,10 +100,10 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
             push(imu)
             while k < len(fixes) and fixes[k][0] <= imu.t_us:
                 fix = fixes[k][1]
-                acc = accuracy_m(fix)  # in the mission frame: no geodesy
-                push_fix_ned(fix.t_validity_us, fix.p_ned_m, acc, acc, fix.v_ned_m_s, vel_accuracy(fix))
+                h_acc, v_acc = accuracies_m(fix)  # in the mission frame: no geodesy
+                push_fix_ned(fix.t_validity_us, fix.p_ned_m, h_acc, v_acc, fix.v_ned_m_s, vel_accuracy(fix))
                 n_rejected = engine.counts["gnss_rejected_innovation"]
-                fix_rows.extend((fixes[k][0], fix.t_validity_us, *fix.p_ned_m, acc,
+                fix_rows.extend((fixes[k][0], fix.t_validity_us, *fix.p_ned_m, h_acc,
                                  n_rejected - rejected_before))
                 rejected_before = n_rejected
                 k += 1
