@@ -17,7 +17,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", type=int, default=0, help="mission profile index")
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw of the vehicle")
     p.add_argument("--scenario", default=None,
-                   help="sensor scenario: paper, realistic, mismatch (default: the mission's)")
+                   help="sensor scenario: paper, realistic, mismatch, canyon (default: the mission's)")
     p.add_argument("--estimator-port", type=int, required=True, help="UDP port the estimator talks to")
     p.add_argument("--bridge-port", type=int, required=True, help="UDP port the planner bridge talks to")
     p.add_argument("--ground-port", type=int, required=True, help="UDP port for a ground station")
@@ -28,6 +28,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--goal-speed-m-s", type=float, default=0.5, help="arrival: and this slow")
     p.add_argument("--arrive-after-s", type=float, default=0.0, help="arrival: not before this time")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock (default: lockstep)")
+    p.add_argument("--ubx-port", type=int, default=0,
+                   help="raw receiver (scenario canyon): UBX TCP port on 127.0.0.1 (default 0: a free one, "
+                        "named in <out>/receiver.json)")
     p.add_argument("--estimator-param", action="append", default=[], metavar="NAME=VALUE",
                    help="a companion estimator parameter shown on the ground link (EST_*; repeatable)")
     add_ground_arguments(p)
@@ -82,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
             estimator_port=args.estimator_port, bridge_port=args.bridge_port, ground_port=args.ground_port,
             out_dir=args.out, max_duration_s=args.max_duration_s, realtime=args.realtime,
             ground_out=ground_out_targets(args), estimator_params=estimator_params(args.estimator_param),
+            ubx_port=args.ubx_port,
         )
         node = VehicleNode(sim, mission, recorder, config, fields, rng, publisher_from_args(args, "vehicle"))
         result = node.fly()

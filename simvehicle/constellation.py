@@ -247,10 +247,10 @@ def constellation(t_from_gps_s: float, t_to_gps_s: float,
     return tuple(kep), tuple(glo)
 
 
-# Broadcast ionosphere parameters (a mid-latitude daytime set, LNAV-quantised)
+# Broadcast ionosphere parameters (a mid-latitude daytime set) in their LNAV units, so exact
 KLOBUCHAR = (
-    np.array([1.1176e-08, 7.4506e-09, -5.9605e-08, -5.9605e-08]),
-    np.array([9.0112e04, 4.9152e04, -1.3107e05, -3.2768e05]),
+    np.array([12 * 2.0**-30, 1 * 2.0**-27, -1 * 2.0**-24, -1 * 2.0**-24]),
+    np.array([44 * 2.0**11, 3 * 2.0**14, -2 * 2.0**16, -5 * 2.0**16]),
 )
 
 

@@ -60,7 +60,9 @@ from simvehicle import SimVehicle
 from simvehicle import ground_telemetry as gt
 from simvehicle.barrier import StepBarrier
 from simvehicle.groundlink import GroundConfig, ground_link_for, vehicle_status
+from simvehicle.rawgnss import RawGnssModel
 from simvehicle.recording import FlightRecorder
+from simvehicle.ubx_server import ReceiverStream
 
 AUTOPILOT_COMPONENT_ID = 1
 COMPANIONS = ("estimator", "bridge")
@@ -88,6 +90,7 @@ class VehicleNodeConfig:
     stats_period_s: float = 1.0  # wall time between vehicle.json updates (a kill -9 loses <= this)
     # the companion estimator's parameters shown on the ground link (``simvehicle.params``: EST_* names)
     estimator_params: tuple[tuple[str, float], ...] = ()
+    ubx_port: int = 0  # the raw receiver's UBX TCP port (0: a free one; receiver.json names it)
 
 
 @dataclass(slots=True)
@@ -146,6 +149,9 @@ class VehicleNode:
         self._status_sent: tuple[str, bool] | None = None
         self._next_status_us = 0
         self.gnss_sent = 0
+        # the raw receiver (scenario canyon): UBX on TCP, receiver.ubx, receiver.json
+        self.receiver = (ReceiverStream(sim.gnss, config.ubx_port, config.out_dir)
+                         if isinstance(sim.gnss, RawGnssModel) else None)
         self.collisions = 0  # control periods that end in contact (counted on entry)
 
     def _publish_status(self, status: Any) -> None:
@@ -246,6 +252,7 @@ class VehicleNode:
     def _send_step(self, out: Any, pace: Callable[[int], None] | None) -> None:
         frame = self.mission.frame
         fixes = list(zip(out.gnss_arrival_us, out.gnss, strict=True))
+        raws = list(out.gnss_raw)
         for imu, att, truth in zip(out.imu, out.attitude, out.truth, strict=True):
             if pace is not None:
                 pace(imu.t_us)
@@ -263,6 +270,14 @@ class VehicleNode:
                 self.ground.send_gnss(fix, imu.t_us)
                 self._topics.publish("gnss", GnssReport(imu.t_us, fix))
                 self.gnss_sent += 1
+            if raws and raws[0].arrival_us <= imu.t_us and self.receiver is not None:
+                due = [raws.pop(0)]
+                while raws and raws[0].arrival_us <= imu.t_us:
+                    due.append(raws.pop(0))
+                if self.ground.gps_disabled:  # an outage for the raw stream too
+                    self._count("ubx_withheld")
+                else:
+                    self.receiver.send(due)
         if out.t_us % self.config.clock_period_us == 0:
             clock = codec.encode_system_time(self._stamp_us(), out.t_us)
             self._send(clock, ground=True)
@@ -366,6 +381,8 @@ class VehicleNode:
             "ground_requests": {**self.ground.counters, **self.ground.params.counters},
             "node": dict(self.counters),
             "gnss_sent": self.gnss_sent,
+            **({"ubx": dict(self.receiver.server.counters, url=self.receiver.server.url)}
+               if self.receiver is not None else {}),
             "collisions": self.collisions,
             "telemetry": self.telemetry.counters(),
             "lockstep": dict(self.barrier.counters),
@@ -375,6 +392,8 @@ class VehicleNode:
     def close(self) -> None:
         """Flush what was recorded (also on SIGTERM): tlog, time series, statistics."""
         self.tlog.close()
+        if self.receiver is not None:
+            self.receiver.close()
         self.recorder.save(self.config.out_dir / "vehicle_series.npz")
         for link in self.links.values():
             link.close()

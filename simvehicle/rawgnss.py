@@ -85,6 +85,7 @@ class RawGnssModel:
         self._queue: list[tuple[int, int, RawObservation, RawFix | None]] = []
         self._released: list[RawObservation] = []
         self._prev_ecef: np.ndarray | None = None
+        self._resets = 0
         self.bias_ned_m = np.zeros(3)
         self.latency_s = cfg.latency_s
         self.sent = 0  # fixes made
@@ -124,7 +125,8 @@ class RawGnssModel:
         report = ep.replace(sat_pos_ecef_m=np.full((ep.n, 3), np.nan), sat_vel_ecef_m_s=np.full((ep.n, 3), np.nan),
                             sat_clock_s=nan, sat_clock_drift_s_s=nan)
         raw = RawObservation(int(t_us), -1, report, truth, t_gps, rx.clock_bias_s, rx.clock_drift_s_s,
-                             sol if sol.ok else None, rx.lock_ms.copy())
+                             sol if sol.ok else None, rx.lock_ms.copy(), rx.clock_resets > self._resets)
+        self._resets = rx.clock_resets
         fix = None
         if sol.ok:
             self._prev_ecef = sol.p_ecef_m

@@ -150,6 +150,7 @@ class RawObservation:
     clock_drift_s_s: float
     solution: SppSolution | None = None  # the receiver's own single-point solution (None: no fix)
     lock_ms: np.ndarray | None = None  # (n,) time since each signal was acquired (RXM-RAWX locktime)
+    clock_reset: bool = False  # the receiver clock was reset by 1 ms since the previous epoch
 
 
 class Receiver:

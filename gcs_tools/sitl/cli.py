@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     choices.add_method_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
     parser.add_argument("--scenario", default=None,
-                        help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
+                        help="sensor scenario: paper, realistic, mismatch, canyon (default: the mission file's)")
     parser.add_argument("--out", type=Path, default=Path("runs/sitl"),
                         help="output directory (default runs/sitl)")
     parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
@@ -44,6 +44,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-signing", action="store_true",
                         help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
+    parser.add_argument("--ubx-port", type=int, default=None,
+                        help="scenario canyon: the raw receiver's UBX TCP port on 127.0.0.1 (default: a free one, "
+                             "named in OUT/receiver.json)")
     from simvehicle.groundlink import add_ground_arguments
 
     add_ground_arguments(parser)
@@ -113,7 +116,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         "realtime": args.realtime, "signing_key_file": args.signing_key_file, "signing": not args.no_signing,
         "ports": _ports(args.ports), "wall_timeout_s": args.wall_timeout_s,
         "drop_probability": args.drop_probability, "telemetry_args": tuple(telemetry.forward_arguments(args)),
-        "ground_args": tuple(ground_out_arguments(args)),
+        "ground_args": tuple(ground_out_arguments(args)), "ubx_port": args.ubx_port,
     }
     _, max_duration_s = flight_plan(SitlOptions(args.mission, args.profile, args.method, args.seed, args.out,
                                                 args.max_duration_s))

@@ -54,6 +54,7 @@ class SitlOptions:
     scenario: str | None = None  # the vehicle's sensor scenario (None: the mission file's)
     ground_args: tuple[str, ...] = ()  # vehicle's --ground-out / --no-ground-out flags (default: 14550)
     fly: FlyConfig = field(default_factory=FlyConfig)  # start delay, arrival test, time limit: as ``fly``
+    ubx_port: int | None = None  # the raw receiver's UBX TCP port (scenario canyon; None: a free one)
 
 
 @dataclass(slots=True)
@@ -153,6 +154,8 @@ def child_specs(opts: SitlOptions, ports: tuple[int, int, int]) -> list[ChildSpe
         vehicle.append("--realtime")
     if opts.scenario is not None:
         vehicle += ["--scenario", opts.scenario]
+    if opts.ubx_port is not None:
+        vehicle += ["--ubx-port", str(opts.ubx_port)]
     estimator = [
         "companion", "estimator", "--vehicle-port", str(ports[0]), "--mission", opts.mission,
         "--method", opts.method, "--stats", str(out / "estimator.json"), "--step-markers", *common,
@@ -187,7 +190,7 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
     check_ports_free(ports)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
     for stale in ("vehicle.json", "estimator.json", "bridge.json", "vehicle_series.npz", "vehicle_series.f64",
-                  "run.tlog"):
+                  "run.tlog", "receiver.json", "receiver.ubx"):
         (opts.out_dir / stale).unlink(missing_ok=True)
     prepare_signing(opts)
     supervisor = Supervisor(opts.out_dir / "logs")

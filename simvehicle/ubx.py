@@ -1,0 +1,290 @@
+"""The simulated receiver's output as u-blox UBX frames (pure: bytes out, no I/O).
+
+Per measurement epoch, in a u-blox receiver's order: ``NAV-SAT`` (elevation, azimuth, C/N0, use
+flags and residuals of every tracked satellite), ``RXM-RAWX`` (pseudorange, Doppler, C/N0, lock
+time, the pseudorange σ as ``prStd``), ``NAV-PVT`` (the single-point fix) and, whenever a GPS
+satellite has been tracked through a whole 6 s subframe, ``RXM-SFRBX`` with that LNAV subframe
+(subframes 1-3: the ephemeris, 4: page 18, the Klobuchar parameters; built from the broadcast
+ephemerides the simulator flies, quantised to their LNAV resolution, so a decoder recovers them
+exactly). Messages are packed by ``pyubx2``; ``companion.gnss.ubx.UbxDecoder`` turns them back into
+the same ``GnssEpoch`` (a round trip exact to the UBX resolution: Doppler as float32 Hz).
+
+Conventions (u-blox M8 interface description): ``rcvTow``/``week`` the receiver's clock reading
+(GPS time + clock offset); ``recStat.clkReset`` after a 1 ms clock reset; GLONASS ``freqId`` =
+channel + 7; ``locktime`` in ms (saturating at 64.5 s); ``doMes`` = −(pseudorange rate) / λ.
+``NAV-PVT``: ``iTOW`` the solution's GPS time in ms, the date/time in UTC, ``height`` =
+``hMSL`` (no geoid model: ellipsoidal heights throughout), ``hAcc`` the fix's 1σ per horizontal axis
+(``GnssFix.h_acc_m``), ``vAcc`` its vertical 1σ, the Doppler velocity and its ``sAcc``.
+``RXM-SFRBX`` GPS words: the 24 data bits as the satellite sent them (the receiver has resolved
+their polarity) in bits 29..6, the six IS-GPS-200 parity bits in 5..0, the previous word's D29/D30
+in bits 31..30. Not emitted: Galileo/BeiDou/GLONASS navigation messages, GPS subframe 5 and the
+other subframe 4 pages (page 18 goes out in every subframe 4 slot, not once in 12.5 minutes).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pyubx2 import GET, UBXMessage
+
+from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ
+from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris
+from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.spp import SppSolution
+from companion.gnss.systems import System
+from companion.gnss.timescale import gps_minus_utc_s, gps_to_unix_s, week_tow
+from simvehicle.receiver import RawObservation, prstd_index
+
+LNAV_PREAMBLE = 0x8B
+SUBFRAME_S = 6.0
+SC = math.pi
+# IS-GPS-200 Table 20-XIV: the data bits (1-based) each parity bit D25..D30 sums, and which of the
+# previous word's D29*/D30* starts it
+PARITY_BITS: tuple[tuple[int, tuple[int, ...]], ...] = (
+    (29, (1, 2, 3, 5, 6, 10, 11, 12, 13, 14, 17, 18, 20, 23)),
+    (30, (2, 3, 4, 6, 7, 11, 12, 13, 14, 15, 18, 19, 21, 24)),
+    (29, (1, 3, 4, 5, 7, 8, 12, 13, 14, 15, 16, 19, 20, 22)),
+    (30, (2, 4, 5, 6, 8, 9, 13, 14, 15, 16, 17, 20, 21, 23)),
+    (30, (1, 3, 5, 6, 7, 9, 10, 14, 15, 16, 17, 18, 21, 22, 24)),
+    (29, (3, 5, 6, 8, 9, 10, 11, 13, 15, 19, 22, 23, 24)),
+)
+_MASKS = tuple((prev, sum(1 << (24 - i) for i in bits)) for prev, bits in PARITY_BITS)
+
+
+def lnav_parity(data24: int, d29_prev: int, d30_prev: int) -> int:
+    """The six parity bits D25..D30 of a word's 24 source data bits (IS-GPS-200 20.3.5.2)."""
+    out = 0
+    for prev, mask in _MASKS:
+        v = (d29_prev if prev == 29 else d30_prev) ^ (bin(data24 & mask).count("1") & 1)
+        out = (out << 1) | v
+    return out
+
+
+class _Bits:
+    """240 data bits of a subframe, written by (position, width, value)."""
+
+    def __init__(self) -> None:
+        self.v = 0
+
+    def put(self, pos: int, n: int, value: int) -> None:
+        value &= (1 << n) - 1
+        self.v |= value << (240 - pos - n)
+
+    def scaled(self, pos: int, n: int, x: float, lsb: float) -> None:
+        q = round(x / lsb)
+        if not -(1 << n) < q < (1 << n):
+            raise ValueError(f"LNAV field at bit {pos}: {x} does not fit {n} bits of {lsb}")
+        self.put(pos, n, q)
+
+    def words(self) -> list[int]:
+        """Ten u-blox SFRBX words with parity; words 2 and 10 end in D29 = D30 = 0 (their last two
+        data bits chosen for it, IS-GPS-200's "t" bits)."""
+        data = [(self.v >> (240 - 24 * (i + 1))) & 0xFFFFFF for i in range(10)]
+        out, d29, d30 = [], 0, 0
+        for i, d in enumerate(data):
+            if i in (1, 9):
+                for t in range(4):
+                    cand = (d & ~0x3) | t
+                    if lnav_parity(cand, d29, d30) & 0x3 == 0:
+                        d = cand
+                        break
+            par = lnav_parity(d, d29, d30)
+            out.append((d29 << 31) | (d30 << 30) | (d << 6) | par)
+            d29, d30 = (par >> 1) & 1, par & 1
+        return out
+
+
+def _header(b: _Bits, tow_next_s: float, subframe: int) -> None:
+    b.put(0, 8, LNAV_PREAMBLE)
+    b.put(24, 17, int(round(tow_next_s / SUBFRAME_S)) % 100800)
+    b.put(43, 3, subframe)
+
+
+def lnav_subframe(eph: KeplerEphemeris, subframe: int, tow_next_s: float, week: int,
+                  klobuchar: tuple[np.ndarray, np.ndarray] | None = None) -> list[int] | None:
+    """One LNAV subframe (1, 2, 3, or 4 page 18 when ``klobuchar`` is given) of ``eph`` as ten
+    SFRBX words; ``tow_next_s`` the GPS second of week the next subframe starts at (HOW), ``week``
+    the GPS week (sent modulo 1024). None for other subframes."""
+    b = _Bits()
+    _header(b, tow_next_s, subframe)
+    if subframe == 1:
+        b.put(48, 10, week % 1024)
+        b.put(64, 6, eph.health)
+        b.put(70, 2, (eph.iode >> 8) & 0x3)
+        b.scaled(160, 8, eph.tgd_s, 2.0**-31)
+        b.put(168, 8, eph.iode & 0xFF)
+        b.put(176, 16, int(round((eph.toc_gps_s % 604800.0) / 16.0)))
+        b.scaled(192, 8, eph.af2_s_s2, 2.0**-55)
+        b.scaled(200, 16, eph.af1_s_s, 2.0**-43)
+        b.scaled(216, 22, eph.af0_s, 2.0**-31)
+    elif subframe == 2:
+        b.put(48, 8, eph.iode & 0xFF)
+        b.scaled(56, 16, eph.crs_m, 2.0**-5)
+        b.scaled(72, 16, eph.delta_n_rad_s, 2.0**-43 * SC)
+        b.scaled(88, 32, eph.m0_rad, 2.0**-31 * SC)
+        b.scaled(120, 16, eph.cuc_rad, 2.0**-29)
+        b.scaled(136, 32, eph.e, 2.0**-33)
+        b.scaled(168, 16, eph.cus_rad, 2.0**-29)
+        b.scaled(184, 32, eph.sqrt_a_m05, 2.0**-19)
+        b.put(216, 16, int(round(eph.toe_sow_s / 16.0)))
+    elif subframe == 3:
+        b.scaled(48, 16, eph.cic_rad, 2.0**-29)
+        b.scaled(64, 32, eph.omega0_rad, 2.0**-31 * SC)
+        b.scaled(96, 16, eph.cis_rad, 2.0**-29)
+        b.scaled(112, 32, eph.i0_rad, 2.0**-31 * SC)
+        b.scaled(144, 16, eph.crc_m, 2.0**-5)
+        b.scaled(160, 32, eph.omega_rad, 2.0**-31 * SC)
+        b.scaled(192, 24, eph.omega_dot_rad_s, 2.0**-43 * SC)
+        b.put(216, 8, eph.iode & 0xFF)
+        b.scaled(224, 14, eph.idot_rad_s, 2.0**-43 * SC)
+    elif subframe == 4 and klobuchar is not None:
+        alpha, beta = klobuchar
+        b.put(48, 2, 1)
+        b.put(50, 6, 56)  # page 18: ionosphere and UTC
+        for k, (lsb_a, lsb_b) in enumerate(((2.0**-30, 2.0**11), (2.0**-27, 2.0**14),
+                                             (2.0**-24, 2.0**16), (2.0**-24, 2.0**16))):
+            b.scaled(56 + 8 * k, 8, float(alpha[k]), lsb_a)
+            b.scaled(88 + 8 * k, 8, float(beta[k]), lsb_b)
+    else:
+        return None
+    return b.words()
+
+
+def _wavelength_m(system: np.ndarray, channel: np.ndarray) -> np.ndarray:
+    f = np.select([system == System.GLONASS, system == System.BEIDOU],
+                  [FREQ_G1_HZ + channel * DFREQ_G1_HZ, np.full(len(system), FREQ_B1I_HZ)], FREQ_L1_HZ)
+    return C_M_S / f
+
+
+SIGNAL_ID = {int(System.GPS): 0, int(System.GALILEO): 0, int(System.BEIDOU): 0, int(System.GLONASS): 0,
+             int(System.QZSS): 0}
+
+
+def rawx(epoch: GnssEpoch, channel: np.ndarray, lock_ms: np.ndarray | None, clock_reset: bool = False) -> bytes:
+    """RXM-RAWX of an epoch (``channel``: GLONASS frequency channel per row, 0 for the others)."""
+    week, tow = week_tow(epoch.t_gps_s)
+    lam = _wavelength_m(epoch.system, channel)
+    do_hz = -epoch.pseudorange_rate_m_s / lam
+    sigma = np.sqrt(np.where(np.isfinite(epoch.pseudorange_var_m2), epoch.pseudorange_var_m2, 1e4))
+    prstd = prstd_index(sigma)
+    lock = np.zeros(epoch.n) if lock_ms is None else np.asarray(lock_ms)
+    kw: dict[str, Any] = {"rcvTow": tow, "week": week, "leapS": int(round(gps_minus_utc_s(epoch.t_gps_s))),
+                          "numMeas": epoch.n, "leapSec": 1, "clkReset": int(clock_reset)}
+    for i in range(epoch.n):
+        s = f"_{i + 1:02d}"
+        kw.update({
+            "prMes" + s: float(epoch.pseudorange_m[i]), "cpMes" + s: 0.0,
+            "doMes" + s: float(do_hz[i]) if math.isfinite(do_hz[i]) else 0.0,
+            "gnssId" + s: int(epoch.system[i]), "svId" + s: int(epoch.prn[i]),
+            "sigId" + s: SIGNAL_ID.get(int(epoch.system[i]), 0),
+            "freqId" + s: int(channel[i]) + 7 if epoch.system[i] == System.GLONASS else 0,
+            "locktime" + s: int(min(max(lock[i], 0.0), 64500.0)),
+            "cno" + s: int(np.clip(np.rint(epoch.cn0_dbhz[i]), 0, 255)) if math.isfinite(epoch.cn0_dbhz[i]) else 0,
+            "prStd" + s: int(prstd[i]), "cpStd" + s: 15, "doStd" + s: 8, "prValid" + s: 1,
+        })
+    return UBXMessage("RXM", "RXM-RAWX", GET, **kw).serialize()
+
+
+def navsat(epoch: GnssEpoch, itow_ms: int, solution: SppSolution | None) -> bytes:
+    """NAV-SAT: every row's elevation, azimuth, C/N0; used and residual from the solution."""
+    kw: dict[str, Any] = {"iTOW": itow_ms, "version": 1, "numSvs": epoch.n}
+    for i in range(epoch.n):
+        s = f"_{i + 1:02d}"
+        used = bool(solution is not None and solution.used[i])
+        res = float(solution.residuals_m[i]) if solution is not None and math.isfinite(solution.residuals_m[i]) else 0.0
+        kw.update({
+            "gnssId" + s: int(epoch.system[i]), "svId" + s: int(epoch.prn[i]),
+            "cno" + s: int(np.clip(np.rint(np.nan_to_num(epoch.cn0_dbhz[i])), 0, 255)),
+            "elev" + s: int(np.clip(np.rint(np.nan_to_num(epoch.elevation_deg[i], nan=-91)), -91, 90)),
+            "azim" + s: int(np.rint(np.nan_to_num(epoch.azimuth_deg[i])) % 360),
+            "prRes" + s: float(np.clip(res, -3276.0, 3276.0)), "qualityInd" + s: 7 if used else 4,
+            "svUsed" + s: int(used), "ephAvail" + s: 1, "orbitSource" + s: 1,
+        })
+    return UBXMessage("NAV", "NAV-SAT", GET, **kw).serialize()
+
+
+def navpvt(solution: SppSolution, lat_deg: float, lon_deg: float, height_m: float, v_ned_m_s: np.ndarray | None,
+           h_acc_m: float, v_acc_m: float, t_gps_s: float) -> bytes:
+    """NAV-PVT of a fix valid at GPS time ``t_gps_s`` (iTOW in ms; the date and time in UTC)."""
+    week, tow = week_tow(t_gps_s)
+    itow = int(round(tow * 1000.0)) % 604_800_000
+    unix = gps_to_unix_s(t_gps_s)
+    whole = math.floor(unix)
+    tm = time.gmtime(whole)
+    v = np.full(3, np.nan) if v_ned_m_s is None else np.asarray(v_ned_m_s, dtype=float)
+    has_v = bool(np.isfinite(v).all())
+    vn, ve, vd = (v if has_v else np.zeros(3)).tolist()
+    speed = math.hypot(vn, ve)
+    mm = lambda x: int(round(x * 1000.0)) if math.isfinite(x) else 0  # noqa: E731
+    return UBXMessage(
+        "NAV", "NAV-PVT", GET, iTOW=itow, year=tm.tm_year, month=tm.tm_mon, day=tm.tm_mday, hour=tm.tm_hour,
+        min=tm.tm_min, second=tm.tm_sec, validDate=1, validTime=1, fullyResolved=1, tAcc=50,
+        nano=int(round((unix - whole) * 1e9)), fixType=3, gnssFixOk=1, numSV=solution.n_used,
+        lon=lon_deg, lat=lat_deg, height=mm(height_m), hMSL=mm(height_m), hAcc=mm(h_acc_m), vAcc=mm(v_acc_m),
+        velN=mm(vn), velE=mm(ve), velD=mm(vd), gSpeed=mm(speed),
+        headMot=math.degrees(math.atan2(ve, vn)) % 360.0 if speed > 0.1 else 0.0,
+        sAcc=mm(solution.vel_acc_m_s) if has_v else 0, headAcc=180.0,
+        pDOP=min(float(solution.dops.pdop), 655.0) if math.isfinite(solution.dops.pdop) else 99.99,
+    ).serialize()
+
+
+def sfrbx(system: int, prn: int, words: list[int]) -> bytes:
+    kw: dict[str, Any] = {"gnssId": system, "svId": prn, "numWords": len(words), "version": 2}
+    kw.update({f"dwrd_{i + 1:02d}": int(w) for i, w in enumerate(words)})
+    return UBXMessage("RXM", "RXM-SFRBX", GET, **kw).serialize()
+
+
+@dataclass
+class UbxEncoder:
+    """Frames of the receiver's epochs, in order (the GPS subframes each satellite completed)."""
+
+    store: EphemerisStore
+    frames: int = 0
+    _last_t_gps_s: float | None = None
+
+    def epoch_frames(self, raw: RawObservation) -> list[bytes]:
+        """NAV-SAT, RXM-RAWX, NAV-PVT (when the epoch was solved) and the GPS subframes completed
+        since the previous epoch."""
+        ep = raw.epoch
+        channel = np.where(ep.system == System.GLONASS, self.store.glonass_channel(ep.prn), 0)
+        sol = raw.solution
+        itow = int(round(week_tow(raw.t_gps_s)[1] * 1000.0)) % 604_800_000
+        out = [navsat(ep, itow, sol), rawx(ep, channel, raw.lock_ms, raw.clock_reset)]
+        if sol is not None:
+            lat, lon, h = (float(x) for x in ecef_to_geodetic(sol.p_ecef_m))
+            v = sol.v_ecef_m_s
+            v_ned = ecef_to_ned_matrix(lat, lon) @ v if np.isfinite(v).all() else None
+            out.append(navpvt(sol, math.degrees(lat), math.degrees(lon), h, v_ned, sol.h_acc_m, sol.v_acc_m,
+                              raw.t_gps_s))
+        out += self._subframes(raw)
+        self._last_t_gps_s = raw.t_gps_s
+        self.frames += len(out)
+        return out
+
+    def _subframes(self, raw: RawObservation) -> list[bytes]:
+        t0, t1 = self._last_t_gps_s, raw.t_gps_s
+        if t0 is None:
+            return []
+        edge = math.floor(t1 / SUBFRAME_S) * SUBFRAME_S  # the latest subframe boundary
+        if edge <= t0:
+            return []
+        week, tow_next = week_tow(edge)
+        subframe = int(round(tow_next / SUBFRAME_S) - 1) % 5 + 1  # the one that just ended
+        ep = raw.epoch
+        lock = raw.lock_ms if raw.lock_ms is not None else np.zeros(ep.n)
+        gps = (ep.system == System.GPS) & (lock >= (t1 - edge + SUBFRAME_S) * 1000.0)
+        out: list[bytes] = []
+        if not gps.any():
+            return out
+        rows = self.store.select(ep.system[gps], ep.prn[gps], np.full(int(gps.sum()), edge - SUBFRAME_S))
+        for prn, row in zip(ep.prn[gps].tolist(), rows.tolist(), strict=True):
+            if 0 <= row < self.store.n_kepler:
+                words = lnav_subframe(self.store.kepler[row], subframe, tow_next, week, self.store.klobuchar)
+                if words is not None:
+                    out.append(sfrbx(int(System.GPS), prn, words))
+        return out
