@@ -61,7 +61,7 @@ T_LIGHT0_S = 0.075  # satellite states evaluated this long before reception, the
 LIGHT_TIME_ITERATIONS = 2  # from the previous epoch's light time (3 from the first guess: < 1 µm)
 MS_RESET_S = 1e-3
 CN0_REF_DBHZ = 45.0
-CONDUCTOR_PERMITTIVITY = 1e8  # a conductor's Fresnel coefficients (r_s = −1, r_p = 1) as a dielectric limit
+CONDUCTOR_PERMITTIVITY = 1e12  # a conductor's Fresnel coefficients (r_s = −1, r_p = 1) as a dielectric limit
 SKY_REFRESH_S = 2.0  # the broadcast orbits are evaluated this often, Taylor-moved in between
 
 
@@ -207,7 +207,7 @@ class Receiver:
         self._t_us: int | None = None
         self._sky_cache: tuple[float, SatStates, np.ndarray] | None = None
         self._tau = np.full(n, T_LIGHT0_S)
-        self._atm_cache: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._atm_cache: tuple[float, np.ndarray, np.ndarray, float] | None = None
         self.lock_ms = np.zeros(0)  # per row of the last epoch: time since lock (RXM-RAWX locktime)
 
     # -- clock -------------------------------------------------------------------------------------
@@ -250,16 +250,16 @@ class Receiver:
 
     def _atmosphere(self, t_gps_s: float, u_ned: np.ndarray, el: np.ndarray, h_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Klobuchar (L1) and Saastamoinen delays per satellite (all rows), recomputed every
-        ``SKY_REFRESH_S`` (they change by millimetres in that time)."""
+        ``SKY_REFRESH_S`` or 0.5 m of height (they change by millimetres in that)."""
         c = self._atm_cache
-        if c is None or abs(t_gps_s - c[0]) > SKY_REFRESH_S / 2:
+        if c is None or abs(t_gps_s - c[0]) > SKY_REFRESH_S / 2 or abs(h_m - c[3]) > 0.5:
             up = el > 0
             az = np.arctan2(u_ned[:, 1], u_ned[:, 0]) % (2.0 * np.pi)
             e = np.maximum(el, 1e-3)
             klob = (klobuchar_m(*self.store.klobuchar, self.lat_rad, self.lon_rad, az, e, week_tow(t_gps_s)[1])
                     if self.store.klobuchar is not None else np.zeros(len(el)))
             tropo = saastamoinen_m(self.lat_rad, self.home_alt_m + h_m, e)
-            self._atm_cache = c = (t_gps_s, np.where(up, klob, 0.0), np.where(up, tropo, 0.0))
+            self._atm_cache = c = (t_gps_s, np.where(up, klob, 0.0), np.where(up, tropo, 0.0), h_m)
         return c[1], c[2]
 
     # -- one epoch ---------------------------------------------------------------------------------
@@ -364,7 +364,8 @@ class Receiver:
         track = (a1 > 0) & (cn0 >= np.where(was, cfg.cn0_threshold_dbhz, cfg.cn0_acquire_dbhz))
         a_inph = alpha * np.cos(phase)
         env = e1 + chip * dll_multipath_chips(np.clip(a_inph, -0.99, 0.99), delta_chips, cfg.correlator_spacing_chips)
-        sig = dll_sigma_m(cn0, chip, cfg)
+        cn0_seen = np.maximum(cn0, 0.0)  # (−inf where nothing arrives: those rows are not reported)
+        sig = dll_sigma_m(cn0_seen, chip, cfg)
         n_code = sig * noise[1, idx]
         # shared errors: atmosphere, orbits/clocks, inter-frequency biases
         az = np.arctan2(u_ned[idx, 1], u_ned[idx, 0]) % (2.0 * np.pi)
@@ -392,7 +393,7 @@ class Receiver:
         s_r = s_rot[idx]
         rot_rate = OMEGA_E_RAD_S * tau_dot * (uu[:, 0] * s_r[:, 1] - uu[:, 1] * s_r[:, 0])
         rate = (sat_rate * (1.0 - tau_dot) + rot_rate - rx_rate + C_M_S * (self.clock_drift_s_s - st.clock_drift_s_s[idx])
-                + cfg.doppler_sigma_m_s * 10.0 ** ((CN0_REF_DBHZ - cn0) / 20.0) * noise[2, idx])
+                + cfg.doppler_sigma_m_s * 10.0 ** ((CN0_REF_DBHZ - cn0_seen) / 20.0) * noise[2, idx])
         # lock times
         tracked_all = np.zeros(n_all, dtype=bool)
         tracked_all[idx[track]] = True

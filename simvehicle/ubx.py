@@ -6,8 +6,9 @@ time, the pseudorange σ as ``prStd``), ``NAV-PVT`` (the single-point fix) and, 
 satellite has been tracked through a whole 6 s subframe, ``RXM-SFRBX`` with that LNAV subframe
 (subframes 1-3: the ephemeris, 4: page 18, the Klobuchar parameters; built from the broadcast
 ephemerides the simulator flies, quantised to their LNAV resolution, so a decoder recovers them
-exactly). Messages are packed by ``pyubx2``; ``companion.gnss.ubx.UbxDecoder`` turns them back into
-the same ``GnssEpoch`` (a round trip exact to the UBX resolution: Doppler as float32 Hz).
+exactly). Packed here with ``struct`` (byte-equal to ``pyubx2``'s, tested; 20 times faster);
+``pyubx2`` parses them and ``companion.gnss.ubx.UbxDecoder`` turns them back into the same
+``GnssEpoch`` (a round trip exact to the UBX resolution: Doppler as float32 Hz).
 
 Conventions (u-blox M8 interface description): ``rcvTow``/``week`` the receiver's clock reading
 (GPS time + clock offset); ``recStat.clkReset`` after a 1 ms clock reset; GLONASS ``freqId`` =
@@ -24,12 +25,11 @@ other subframe 4 pages (page 18 goes out in every subframe 4 slot, not once in 1
 from __future__ import annotations
 
 import math
+import struct
 import time
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
-from pyubx2 import GET, UBXMessage
 
 from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ
 from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris
@@ -161,8 +161,28 @@ def _wavelength_m(system: np.ndarray, channel: np.ndarray) -> np.ndarray:
     return C_M_S / f
 
 
-SIGNAL_ID = {int(System.GPS): 0, int(System.GALILEO): 0, int(System.BEIDOU): 0, int(System.GLONASS): 0,
-             int(System.QZSS): 0}
+def frame(msg_class: int, msg_id: int, payload: bytes) -> bytes:
+    """A UBX frame: sync chars, class, id, little-endian length, payload, 8-bit Fletcher checksum."""
+    body = struct.pack("<BBH", msg_class, msg_id, len(payload)) + payload
+    a = b = 0
+    for byte in body:
+        a = (a + byte) & 0xFF
+        b = (b + a) & 0xFF
+    return b"\xb5\x62" + body + bytes((a, b))
+
+
+RXM, NAV = 0x02, 0x01
+RAWX, SFRBX, PVT, SAT = 0x15, 0x13, 0x07, 0x35
+_RAWX_HEAD = struct.Struct("<dHbBB3x")
+_RAWX_MEAS = struct.Struct("<ddfBBBBHBBBBBx")
+_SAT_HEAD = struct.Struct("<IBB2x")
+_SAT_SV = struct.Struct("<BBBbhhI")
+_PVT = struct.Struct("<IHBBBBBBIiBBBBiiiiIIiiiiiIIHH4xihH")
+
+
+def _i(x: float, scale: float = 1.0) -> int:
+    """A scaled field as an integer (pyubx2's rounding), 0 for a value not known."""
+    return int(round(x / scale)) if math.isfinite(x) else 0
 
 
 def rawx(epoch: GnssEpoch, channel: np.ndarray, lock_ms: np.ndarray | None, clock_reset: bool = False) -> bytes:
@@ -171,48 +191,38 @@ def rawx(epoch: GnssEpoch, channel: np.ndarray, lock_ms: np.ndarray | None, cloc
     lam = _wavelength_m(epoch.system, channel)
     do_hz = -epoch.pseudorange_rate_m_s / lam
     sigma = np.sqrt(np.where(np.isfinite(epoch.pseudorange_var_m2), epoch.pseudorange_var_m2, 1e4))
-    prstd = prstd_index(sigma)
-    lock = np.zeros(epoch.n) if lock_ms is None else np.asarray(lock_ms)
-    kw: dict[str, Any] = {"rcvTow": tow, "week": week, "leapS": int(round(gps_minus_utc_s(epoch.t_gps_s))),
-                          "numMeas": epoch.n, "leapSec": 1, "clkReset": int(clock_reset)}
-    for i in range(epoch.n):
-        s = f"_{i + 1:02d}"
-        kw.update({
-            "prMes" + s: float(epoch.pseudorange_m[i]), "cpMes" + s: 0.0,
-            "doMes" + s: float(do_hz[i]) if math.isfinite(do_hz[i]) else 0.0,
-            "gnssId" + s: int(epoch.system[i]), "svId" + s: int(epoch.prn[i]),
-            "sigId" + s: SIGNAL_ID.get(int(epoch.system[i]), 0),
-            "freqId" + s: int(channel[i]) + 7 if epoch.system[i] == System.GLONASS else 0,
-            "locktime" + s: int(min(max(lock[i], 0.0), 64500.0)),
-            "cno" + s: int(np.clip(np.rint(epoch.cn0_dbhz[i]), 0, 255)) if math.isfinite(epoch.cn0_dbhz[i]) else 0,
-            "prStd" + s: int(prstd[i]), "cpStd" + s: 15, "doStd" + s: 8, "prValid" + s: 1,
-        })
-    return UBXMessage("RXM", "RXM-RAWX", GET, **kw).serialize()
+    prstd = prstd_index(sigma).tolist()
+    lock = (np.zeros(epoch.n) if lock_ms is None else np.clip(np.asarray(lock_ms), 0.0, 64500.0)).tolist()
+    cn0 = np.clip(np.rint(np.nan_to_num(epoch.cn0_dbhz)), 0, 255).astype(int).tolist()
+    rec_stat = 1 | (2 if clock_reset else 0)  # leapSec known, clkReset
+    out = [_RAWX_HEAD.pack(tow, week, int(round(gps_minus_utc_s(epoch.t_gps_s))), epoch.n, rec_stat)]
+    for i, (s, prn) in enumerate(zip(epoch.system.tolist(), epoch.prn.tolist(), strict=True)):
+        d = float(do_hz[i])
+        out.append(_RAWX_MEAS.pack(
+            float(epoch.pseudorange_m[i]), 0.0, d if math.isfinite(d) else 0.0, s, prn, 0,
+            int(channel[i]) + 7 if s == System.GLONASS else 0, int(lock[i]), cn0[i], prstd[i], 15, 8, 1))
+    return frame(RXM, RAWX, b"".join(out))
 
 
 def navsat(epoch: GnssEpoch, itow_ms: int, solution: SppSolution | None) -> bytes:
     """NAV-SAT: every row's elevation, azimuth, C/N0; used and residual from the solution."""
-    kw: dict[str, Any] = {"iTOW": itow_ms, "version": 1, "numSvs": epoch.n}
+    out = [_SAT_HEAD.pack(itow_ms, 1, epoch.n)]
     for i in range(epoch.n):
-        s = f"_{i + 1:02d}"
         used = bool(solution is not None and solution.used[i])
-        res = float(solution.residuals_m[i]) if solution is not None and math.isfinite(solution.residuals_m[i]) else 0.0
-        kw.update({
-            "gnssId" + s: int(epoch.system[i]), "svId" + s: int(epoch.prn[i]),
-            "cno" + s: int(np.clip(np.rint(np.nan_to_num(epoch.cn0_dbhz[i])), 0, 255)),
-            "elev" + s: int(np.clip(np.rint(np.nan_to_num(epoch.elevation_deg[i], nan=-91)), -91, 90)),
-            "azim" + s: int(np.rint(np.nan_to_num(epoch.azimuth_deg[i])) % 360),
-            "prRes" + s: float(np.clip(res, -3276.0, 3276.0)), "qualityInd" + s: 7 if used else 4,
-            "svUsed" + s: int(used), "ephAvail" + s: 1, "orbitSource" + s: 1,
-        })
-    return UBXMessage("NAV", "NAV-SAT", GET, **kw).serialize()
+        res = float(solution.residuals_m[i]) if solution is not None else math.nan
+        flags = (7 if used else 4) | (int(used) << 3) | (1 << 8) | (1 << 11)  # quality, used, orbit: eph, ephAvail
+        out.append(_SAT_SV.pack(
+            int(epoch.system[i]), int(epoch.prn[i]), int(np.clip(np.rint(np.nan_to_num(epoch.cn0_dbhz[i])), 0, 255)),
+            int(np.clip(np.rint(np.nan_to_num(epoch.elevation_deg[i], nan=-91.0)), -91, 90)),
+            int(np.rint(np.nan_to_num(epoch.azimuth_deg[i]))) % 360, _i(float(np.clip(res, -3276.0, 3276.0)), 0.1),
+            flags))
+    return frame(NAV, SAT, b"".join(out))
 
 
 def navpvt(solution: SppSolution, lat_deg: float, lon_deg: float, height_m: float, v_ned_m_s: np.ndarray | None,
            h_acc_m: float, v_acc_m: float, t_gps_s: float) -> bytes:
     """NAV-PVT of a fix valid at GPS time ``t_gps_s`` (iTOW in ms; the date and time in UTC)."""
-    week, tow = week_tow(t_gps_s)
-    itow = int(round(tow * 1000.0)) % 604_800_000
+    _, tow = week_tow(t_gps_s)
     unix = gps_to_unix_s(t_gps_s)
     whole = math.floor(unix)
     tm = time.gmtime(whole)
@@ -220,23 +230,21 @@ def navpvt(solution: SppSolution, lat_deg: float, lon_deg: float, height_m: floa
     has_v = bool(np.isfinite(v).all())
     vn, ve, vd = (v if has_v else np.zeros(3)).tolist()
     speed = math.hypot(vn, ve)
-    mm = lambda x: int(round(x * 1000.0)) if math.isfinite(x) else 0  # noqa: E731
-    return UBXMessage(
-        "NAV", "NAV-PVT", GET, iTOW=itow, year=tm.tm_year, month=tm.tm_mon, day=tm.tm_mday, hour=tm.tm_hour,
-        min=tm.tm_min, second=tm.tm_sec, validDate=1, validTime=1, fullyResolved=1, tAcc=50,
-        nano=int(round((unix - whole) * 1e9)), fixType=3, gnssFixOk=1, numSV=solution.n_used,
-        lon=lon_deg, lat=lat_deg, height=mm(height_m), hMSL=mm(height_m), hAcc=mm(h_acc_m), vAcc=mm(v_acc_m),
-        velN=mm(vn), velE=mm(ve), velD=mm(vd), gSpeed=mm(speed),
-        headMot=math.degrees(math.atan2(ve, vn)) % 360.0 if speed > 0.1 else 0.0,
-        sAcc=mm(solution.vel_acc_m_s) if has_v else 0, headAcc=180.0,
-        pDOP=min(float(solution.dops.pdop), 655.0) if math.isfinite(solution.dops.pdop) else 99.99,
-    ).serialize()
+    head = math.degrees(math.atan2(ve, vn)) % 360.0 if speed > 0.1 else 0.0
+    pdop = float(solution.dops.pdop)
+    payload = _PVT.pack(
+        int(round(tow * 1000.0)) % 604_800_000, tm.tm_year, tm.tm_mon, tm.tm_mday, tm.tm_hour, tm.tm_min,
+        tm.tm_sec, 0b111, 50, int(round((unix - whole) * 1e9)), 3, 1, 0, solution.n_used,
+        _i(lon_deg, 1e-7), _i(lat_deg, 1e-7), _i(height_m, 1e-3), _i(height_m, 1e-3), _i(h_acc_m, 1e-3),
+        _i(v_acc_m, 1e-3), _i(vn, 1e-3), _i(ve, 1e-3), _i(vd, 1e-3), _i(speed, 1e-3), _i(head, 1e-5),
+        _i(solution.vel_acc_m_s, 1e-3) if has_v else 0, _i(180.0, 1e-5),
+        _i(min(pdop, 655.0), 0.01) if math.isfinite(pdop) else 9999, 0, 0, 0, 0)
+    return frame(NAV, PVT, payload)
 
 
 def sfrbx(system: int, prn: int, words: list[int]) -> bytes:
-    kw: dict[str, Any] = {"gnssId": system, "svId": prn, "numWords": len(words), "version": 2}
-    kw.update({f"dwrd_{i + 1:02d}": int(w) for i, w in enumerate(words)})
-    return UBXMessage("RXM", "RXM-SFRBX", GET, **kw).serialize()
+    """RXM-SFRBX (version 2) of one navigation message subframe."""
+    return frame(RXM, SFRBX, struct.pack(f"<BBBBBBBx{len(words)}I", system, prn, 0, 0, len(words), 0, 2, *words))
 
 
 @dataclass

@@ -24,6 +24,7 @@ TARGETS = {
     "gnss": "gcs_tools.bench.gnss",
     "cli": "gcs_tools.bench.cli_start",
     "robustness": "gcs_tools.bench.robustness",
+    "receiver": "gcs_tools.bench.receiver",
 }
 
 
