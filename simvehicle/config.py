@@ -274,8 +274,8 @@ class ReceiverConfig:
     # a blocked satellite without a mapped reflection: tracked, with this probability per blocked episode,
     # through reflectors the map lacks (detail, other buildings, vehicles): an extra path drawn once per
     # episode (exponential) and a loss
-    unmapped_prob: float = 0.8  # (cal)
-    unmapped_delay_mean_m: float = 50.0  # (cal)
+    unmapped_prob: float = 0.9  # (cal)
+    unmapped_delay_mean_m: float = 40.0  # (cal)
     unmapped_loss_db: float = 6.0  # besides the antenna's XPD (a reflection, of whatever kind)
     # code tracking: early-minus-late DLL (Betz and Kolodziej 2009 noise; triangle correlation multipath)
     correlator_spacing_chips: float = 0.2

@@ -259,6 +259,23 @@ TOLERANCES: tuple[Tolerance, ...] = (
     _res("GPS", "50-90deg", -5.0, 5.0),
     _res("GLO", "15-30deg", 10.0, 75.0),
 )
+# smartLoc Berlin Potsdamer Platz as ``statistics`` gives it (``beliefnav gnss spp``'s default weighting):
+# the tolerances' reference when the data set is not at hand (tests check it against the data)
+SMARTLOC_REFERENCE: dict[str, Any] = {
+    "horizontal_median_m": 15.692, "horizontal_p95_m": 44.597, "percent_above_5m": 93.878,
+    "step_median_m": 5.103, "correlation_short_s": 3.2, "correlation_long_s": 31.4, "correlation_down_s": 5.2,
+    "accuracy_ratio_horizontal": 1.605, "accuracy_ratio_vertical": 2.841, "vertical_median_m": 31.56,
+    "satellites_per_epoch": 14.605,
+    "cn0_by_elevation": {
+        "GPS": {"0-15deg": {"median": 28.0, "n": 899}, "15-30deg": {"median": 38.0, "n": 3793},
+                "30-50deg": {"median": 40.0, "n": 4769}, "50-90deg": {"median": 50.0, "n": 1732}},
+        "GLO": {"15-30deg": {"median": 33.0, "n": 4776}, "30-50deg": {"median": 38.0, "n": 1325},
+                "50-90deg": {"median": 43.0, "n": 2744}}},
+    "residuals_at_truth": {
+        "GPS": {"0-15deg": {"median": 16.57}, "15-30deg": {"median": 12.86}, "30-50deg": {"median": 8.03},
+                "50-90deg": {"median": -2.16}},
+        "GLO": {"15-30deg": {"median": 37.15}, "30-50deg": {"median": 4.13}, "50-90deg": {"median": -0.56}}},
+}
 REPORTED_ONLY: tuple[tuple[str, str, str], ...] = (
     ("correlation time, longer horizontal axis", "correlation_long_s", "s"),
     ("vertical |error|, median", "vertical_median_m", "m"),

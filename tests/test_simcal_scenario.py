@@ -1,0 +1,58 @@
+"""The canyon scenario against the smartLoc Berlin drive (docs/simcal.md): the calibration holds on its
+tuning flights (no data needed: the reference statistics are the tool's table), the reference table is
+the data set's (skips without the data, fails when CI=true), and the scenario table knows canyon."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import pytest
+
+from companion.mission import SCENARIOS, load_mission
+from gcs_tools.evaluate import simcal
+from simvehicle.config import sim_config_for
+
+SMARTLOC = Path(__file__).resolve().parents[1] / "../shared/data/urban/smartloc/Berlin_Potsdamer_Platz_Input.txt"
+
+
+def test_canyon_is_a_scenario_with_the_raw_receiver():
+    assert "canyon" in SCENARIOS
+    cfg = sim_config_for(load_mission("default", "canyon"))
+    assert cfg.receiver.enabled and cfg.ahrs.enabled and cfg.imu.acc_noise_density_m_s2_rt_hz > 0
+    for other in ("paper", "realistic", "mismatch"):
+        assert not sim_config_for(load_mission("default", other)).receiver.enabled
+
+
+@pytest.fixture(scope="module")
+def tuning_flights():
+    """The calibration's tuning flights, one seed (deterministic): default-tuning's four profiles."""
+    return simcal.statistics(simcal.simulate("default-tuning", "canyon", (0, 1, 2, 3), (1000,)))
+
+
+def test_calibrated_receiver_stays_within_every_tolerance_on_its_tuning_flights(tuning_flights):
+    rows = simcal.compare(simcal.SMARTLOC_REFERENCE, tuning_flights)
+    failed = [(r["statistic"], round(r["simulated"], 2), (round(r["lo"], 2), round(r["hi"], 2)))
+              for r in rows if not r["pass"]]
+    assert not failed
+    assert tuning_flights["epochs"] > 2000 and tuning_flights["fixes"] > 0.95 * tuning_flights["epochs"]
+
+
+def test_smartloc_reference_table_is_the_data_sets():
+    if not SMARTLOC.exists():
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"smartLoc data missing at {SMARTLOC}")
+        pytest.skip("smartLoc data set not beside the repository (../shared/data/urban/smartloc)")
+    real = simcal.statistics([simcal.real_series(SMARTLOC.resolve())])
+    ref = simcal.SMARTLOC_REFERENCE
+    for key, value in ref.items():
+        if isinstance(value, dict):
+            for system, bins in value.items():
+                for band, v in bins.items():
+                    assert real[key][system][band]["median"] == pytest.approx(v["median"], abs=0.01)
+        else:
+            assert real[key] == pytest.approx(value, abs=1e-3 * max(1.0, abs(value)))
+    # and every tolerance holds the reference itself (a table that cannot contain its centre is wrong)
+    assert all(r["pass"] for r in simcal.compare(ref, real))
+    assert math.isfinite(real["accuracy_ratio_vertical"])
