@@ -94,18 +94,20 @@ class City:
         self.height_m = np.asarray(heights_m, dtype=float)
         self.facades = Facades.of(r, self.height_m)
         self._index = np.arange(len(r))
+        self._lo_n, self._lo_e = r[None, :, 0], r[None, :, 1]
+        self._hi_n, self._hi_e = r[None, :, 2], r[None, :, 3]
 
     def _entry(self, origin_ne: np.ndarray, dir_ne: np.ndarray, run_max_m: np.ndarray | None,
                skip: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal run (K, B) where each ray enters each box (0 from inside), and whether it does
         (before ``run_max_m``, not building ``skip``): the slab test."""
         d = np.where(np.abs(dir_ne) < 1e-12, 1e-12, dir_ne)  # parallel to a slab: a huge finite run
-        inv = (1.0 / d)[:, None, :]
-        o = origin_ne[:, None, :]
-        t1 = (self.lo[None] - o) * inv
-        t2 = (self.hi[None] - o) * inv
-        t_near = np.minimum(t1, t2).max(axis=2)
-        t_far = np.maximum(t1, t2).min(axis=2)
+        inv_n, inv_e = (1.0 / d[:, 0])[:, None], (1.0 / d[:, 1])[:, None]
+        o_n, o_e = origin_ne[:, 0:1], origin_ne[:, 1:2]
+        n0, n1 = (self._lo_n - o_n) * inv_n, (self._hi_n - o_n) * inv_n  # (K, B) per slab, no axis-2 reductions
+        e0, e1 = (self._lo_e - o_e) * inv_e, (self._hi_e - o_e) * inv_e
+        t_near = np.maximum(np.minimum(n0, n1), np.minimum(e0, e1))
+        t_far = np.minimum(np.maximum(n0, n1), np.maximum(e0, e1))
         t_in = np.maximum(t_near, 0.0)
         hit = t_far >= t_in
         if run_max_m is not None:
@@ -113,14 +115,6 @@ class City:
         if skip is not None:
             hit &= self._index[None] != skip[:, None]
         return t_in, hit
-
-    def blocked(self, origin_ne: np.ndarray, h_m: np.ndarray, dir_ne: np.ndarray, tan_el: np.ndarray,
-                run_max_m: np.ndarray | None = None, skip: np.ndarray | None = None) -> np.ndarray:
-        """(K,) True where a roof is above the ray (see :meth:`trace`; no diffraction)."""
-        if not len(self.height_m):
-            return np.zeros(len(origin_ne), bool)
-        t_in, hit = self._entry(origin_ne, dir_ne, run_max_m, skip)
-        return (hit & (self.height_m[None] > h_m[:, None] + t_in * tan_el[:, None])).any(axis=1)
 
     def trace(self, origin_ne: np.ndarray, h_m: np.ndarray, dir_ne: np.ndarray, tan_el: np.ndarray,
               wavelength_m: float) -> RayTrace:
@@ -132,60 +126,76 @@ class City:
             inf = np.full(k, -np.inf)
             return RayTrace(np.zeros(k, bool), inf, np.full(k, np.nan), inf)
         t_in, hit = self._entry(origin_ne, dir_ne, None, None)
-        over = self.height_m[None] - (h_m[:, None] + t_in * tan_el[:, None])  # roof above the ray (K, B)
+        return self._edges(t_in, hit, h_m, tan_el, wavelength_m)
+
+    def _edges(self, t_in: np.ndarray, hit: np.ndarray, h_m: np.ndarray | float, tan_el: np.ndarray,
+               wavelength_m: float) -> RayTrace:
+        over = self.height_m[None] - (np.reshape(h_m, (-1, 1)) + t_in * tan_el[:, None])  # roof above the ray
         cos_el = (1.0 / np.sqrt(1.0 + tan_el * tan_el))[:, None]
         dist = np.maximum(t_in / cos_el, 0.1)
         # the edge's distance from the ray, perpendicular to it: the vertical offset × cos(el)
         nu = np.where(hit, over * cos_el * np.sqrt(2.0 / wavelength_m / dist), -np.inf)
         j = np.argmax(nu, axis=1)
-        rows = np.arange(k)
+        rows = np.arange(len(t_in))
         nu_j = nu[rows, j]
         return RayTrace(nu_j > 0.0, nu_j, dist[rows, j], over[rows, j])
 
-    def reflections(self, p_ne: np.ndarray, h_m: float, dir_ne: np.ndarray,
-                    tan_el: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Every valid specular reflection of satellites (S,) (horizontal unit directions ``dir_ne``
-        (S, 2), slopes ``tan_el``) into the receiver at ``p_ne`` (2,), height ``h_m``:
-        ``(satellite (R,), facade (R,), extra path m (R,), cos of the incidence angle u·n (R,))``."""
+    def paths(self, p_ne: np.ndarray, h_m: float, dir_ne: np.ndarray, tan_el: np.ndarray,
+              wavelength_m: float) -> tuple[RayTrace, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """The direct paths of satellites (S,) (horizontal unit directions ``dir_ne`` (S, 2), slopes
+        ``tan_el``) to the receiver at ``p_ne`` (2,), height ``h_m`` (:meth:`trace`), and every valid
+        specular facade reflection ``(satellite (R,), facade (R,), extra path m (R,), cos of the
+        incidence angle u·n (R,))``; all rays in one slab test."""
         f = self.facades
         p = np.asarray(p_ne, dtype=float)
+        n_s = len(dir_ne)
+        empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros(0))
+        if not len(self.height_m):
+            return self.trace(np.broadcast_to(p, (n_s, 2)), np.full(n_s, h_m), dir_ne, tan_el, wavelength_m), empty
         dist = f.sign * (p[f.axis] - f.coord)  # receiver in front of the plane (W,)
         u_axis = dir_ne[:, f.axis] * f.sign[None]  # (S, W): > 0 the satellite is in front
-        cand = (dist[None] > 0.0) & (u_axis > 1e-9)
-        s_idx, w_idx = np.nonzero(cand)
-        if not len(s_idx):
-            return s_idx, w_idx, np.zeros(0), np.zeros(0)
-        ua = u_axis[s_idx, w_idx]
-        run = dist[w_idx] / ua  # horizontal run to the plane along the mirrored direction
+        s_idx, w_idx = np.nonzero((dist[None] > 0.0) & (u_axis > 1e-9))
+        run = dist[w_idx] / u_axis[s_idx, w_idx]  # horizontal run to the plane along the mirrored direction
         other = 1 - f.axis[w_idx]
-        d_other = dir_ne[s_idx, other]
-        q_other = p[other] + d_other * run
+        q_other = p[other] + dir_ne[s_idx, other] * run
         tan = tan_el[s_idx]
         q_h = h_m + run * tan
         on = (q_other >= f.lo[w_idx]) & (q_other <= f.hi[w_idx]) & (q_h <= f.height_m[w_idx])
         s_idx, w_idx, run, q_other, q_h, tan = s_idx[on], w_idx[on], run[on], q_other[on], q_h[on], tan[on]
-        if not len(s_idx):
-            return s_idx, w_idx, np.zeros(0), np.zeros(0)
+        k = len(s_idx)
+        rows = np.arange(k)
         axis = f.axis[w_idx]
         d_in = dir_ne[s_idx].copy()  # the arriving direction, mirrored (toward the facade)
-        d_in[np.arange(len(s_idx)), axis] *= -1.0
+        d_in[rows, axis] *= -1.0
+        q = np.empty((k, 2))
+        q[rows, axis] = f.coord[w_idx] + f.sign[w_idx] * NUDGE_M
+        q[rows, 1 - axis] = q_other
         b = f.building[w_idx]
-        leg1 = self.blocked(np.broadcast_to(p, (len(s_idx), 2)), np.full(len(s_idx), h_m), d_in, tan,
-                            run_max_m=run, skip=b)
-        q = np.empty((len(s_idx), 2))
-        q[np.arange(len(s_idx)), axis] = f.coord[w_idx] + f.sign[w_idx] * NUDGE_M
-        q[np.arange(len(s_idx)), 1 - axis] = q_other
-        leg2 = self.blocked(q, q_h, dir_ne[s_idx], tan, skip=b)
-        ok = ~leg1 & ~leg2
+        # one slab test: the direct rays, receiver -> facade legs (up to the facade), facade -> satellite legs
+        origins = np.concatenate((np.broadcast_to(p, (n_s + k, 2)), q))
+        dirs = np.concatenate((dir_ne, d_in, dir_ne[s_idx]))
+        tans = np.concatenate((tan_el, tan, tan))
+        h0 = np.concatenate((np.full(n_s + k, h_m), q_h))
+        run_max = np.concatenate((np.full(n_s, np.inf), run, np.full(k, np.inf)))
+        skip = np.concatenate((np.full(n_s, -1), b, b))
+        t_in, hit = self._entry(origins, dirs, run_max, skip)
+        direct = self._edges(t_in[:n_s], hit[:n_s], h_m, tan_el, wavelength_m)
+        legs = (hit[n_s:] & (self.height_m[None] > h0[n_s:, None] + t_in[n_s:] * tans[n_s:, None])).any(axis=1)
+        ok = ~legs[:k] & ~legs[k:]
         cos_el = 1.0 / np.sqrt(1.0 + tan[ok] ** 2)
         u_n = dir_ne[s_idx[ok], axis[ok]] * f.sign[w_idx[ok]] * cos_el
-        return s_idx[ok], w_idx[ok], 2.0 * dist[w_idx[ok]] * u_n, u_n
+        return direct, (s_idx[ok], w_idx[ok], 2.0 * dist[w_idx[ok]] * u_n, u_n)
+
+    def reflections(self, p_ne: np.ndarray, h_m: float, dir_ne: np.ndarray,
+                    tan_el: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The reflections of :meth:`paths` alone."""
+        return self.paths(p_ne, h_m, dir_ne, tan_el, 0.19)[1]
 
 
 def diffraction_extra_m(edge_distance_m: np.ndarray, edge_over_m: np.ndarray, sin_el: np.ndarray) -> np.ndarray:
     """Extra length (m) of the path bent over an edge ``Δh`` above the straight ray at slant
     distance ``d`` (toward a satellite at infinity, elevation ``el``): with the edge at
     ``d u + Δh z``, ``|d u + Δh z| − u·(d u + Δh z)`` (≈ Δh² cos² el / 2d); 0 when the ray clears it."""
-    d = np.nan_to_num(edge_distance_m, nan=1.0)
-    over = np.maximum(np.nan_to_num(edge_over_m, neginf=0.0), 0.0)
+    d = np.where(np.isfinite(edge_distance_m), edge_distance_m, 1.0)
+    over = np.where(edge_over_m > 0.0, edge_over_m, 0.0)
     return np.sqrt(d * d + 2.0 * d * over * sin_el + over * over) - d - over * sin_el

@@ -9,14 +9,14 @@ unchanged; in addition each epoch's raw observations come out through :meth:`dra
 One epoch per ``1 / rate_hz`` at the control-period ends that are multiples of it, measured at the
 TRUE position and velocity (:class:`simvehicle.receiver.Receiver`); the receiver solves it at once
 (``companion.gnss.solve_position``: the broadcast satellite states at transmission, Klobuchar,
-Saastamoinen, the configured weighting, from its previous solution) and releases the raw epoch and
+Saastamoinen, the configured weighting, from its previous solution moved on by its velocity) and releases the raw epoch and
 its fix together ``latency_s`` later (an epoch without a solution releases no fix). The fix is
 valid at the measurement's true time; ``bias_ned_m`` (the truth's ``gnss_bias_ned_m``) is the
 latest fix's error.
 
 The sky: GPS time of boot ``t0`` = ``start_utc`` + a whole number of seconds drawn from the seed in
 ``[0, start_spread_s)``; the broadcast ephemerides (``store``, :mod:`simvehicle.constellation`)
-cover boot − 1 h … boot + 4 h and are extended when a flight lasts longer.
+cover boot − 15 min … boot + 1 h and are extended (by another hour) when a flight lasts longer.
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ from simvehicle.constellation import SYSTEM_NAMES, ephemeris_store
 from simvehicle.gnss import FIX_TYPE_3D, NedFix, NedToGeodetic
 from simvehicle.receiver import RawObservation, Receiver
 
-SPAN_BEFORE_S = 3600.0
-SPAN_AFTER_S = 4 * 3600.0
+SPAN_BEFORE_S = 900.0
+SPAN_AFTER_S = 3600.0
 _NAN3 = np.full(3, np.nan)
 
 
@@ -84,7 +84,7 @@ class RawGnssModel:
         self._latency_us = math.ceil(cfg.latency_s * 1e6 - 1e-6)
         self._queue: list[tuple[int, int, RawObservation, RawFix | None]] = []
         self._released: list[RawObservation] = []
-        self._prev_ecef: np.ndarray | None = None
+        self._prev: tuple[int, np.ndarray, np.ndarray] | None = None  # the last solution: time, position, velocity
         self._resets = 0
         self.bias_ned_m = np.zeros(3)
         self.latency_s = cfg.latency_s
@@ -119,7 +119,7 @@ class RawGnssModel:
         corrected = ep.replace(pseudorange_m=ep.pseudorange_m + C_M_S * ep.sat_clock_s - truth.model_atmosphere_m,
                                pseudorange_rate_m_s=ep.pseudorange_rate_m_s + C_M_S * ep.sat_clock_drift_s_s,
                                corrected=True)
-        sol = solve_position(corrected, self.spp, p0_ecef_m=self._prev_ecef)
+        sol = solve_position(corrected, self.spp, p0_ecef_m=self._guess_ecef(t_us))
         self.epochs += 1
         nan = np.full(ep.n, np.nan)
         report = ep.replace(sat_pos_ecef_m=np.full((ep.n, 3), np.nan), sat_vel_ecef_m_s=np.full((ep.n, 3), np.nan),
@@ -129,7 +129,7 @@ class RawGnssModel:
         self._resets = rx.clock_resets
         fix = None
         if sol.ok:
-            self._prev_ecef = sol.p_ecef_m
+            self._prev = (int(t_us), sol.p_ecef_m, sol.v_ecef_m_s)
             fix = self._fix(int(t_us), sol)
             self.bias_ned_m = fix.p_ned_m - np.asarray(p_ned_m, dtype=float)
             self.sent += 1
@@ -137,6 +137,13 @@ class RawGnssModel:
             self.unsolved += 1
         heapq.heappush(self._queue, (int(t_us) + self._latency_us, self.epochs, raw, fix))
         return fix
+
+    def _guess_ecef(self, t_us: int) -> np.ndarray | None:
+        """Where the receiver starts its iterations: its last solution moved on by its Doppler velocity."""
+        if self._prev is None:
+            return None
+        t0, p, v = self._prev
+        return p + v * (t_us - t0) * 1e-6 if np.isfinite(v).all() else p
 
     def to_ned_m(self, p_ecef_m: np.ndarray) -> np.ndarray:
         """An ECEF position in the mission's NED frame (the same map as ``LocalNedFrame``)."""

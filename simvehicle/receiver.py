@@ -58,9 +58,10 @@ from simvehicle.constellation import SYSTEM_NAMES
 
 CHIP_RATE_HZ = {System.GPS: 1.023e6, System.GALILEO: 1.023e6, System.BEIDOU: 2.046e6, System.GLONASS: 0.511e6}
 T_LIGHT0_S = 0.075  # satellite states evaluated this long before reception, then moved along their velocity
-LIGHT_TIME_ITERATIONS = 2  # from the previous epoch's light time (3 from the first guess: < 1 µm)
+LIGHT_TIME_ITERATIONS = 3  # passes of the light-time equation from the 75 ms guess (< 1 µm)
 MS_RESET_S = 1e-3
 CN0_REF_DBHZ = 45.0
+WAVELENGTH_L1_M = C_M_S / FREQ_L1_HZ  # the diffraction's wavelength (G1 and B1I differ by < 3 %)
 CONDUCTOR_PERMITTIVITY = 1e12  # a conductor's Fresnel coefficients (r_s = −1, r_p = 1) as a dielectric limit
 SKY_REFRESH_S = 2.0  # the broadcast orbits are evaluated this often, Taylor-moved in between
 
@@ -211,23 +212,25 @@ class Receiver:
         self.lock_ms = np.zeros(0)  # per row of the last epoch: time since lock (RXM-RAWX locktime)
 
     # -- clock -------------------------------------------------------------------------------------
-    def _advance_clock(self, t_us: int) -> None:
+    def _advance_clock(self, t_us: int, n0: float, n1: float) -> bool:
+        """Move the clock to ``t_us`` with the standard normals ``n0``, ``n1``; True when the
+        previous epoch was the last one (its light times are a good start)."""
         if self._t_us is None:
             self._t_us = t_us
-            return
+            return False
         dt = (t_us - self._t_us) * 1e-6
         self._t_us = t_us
         if dt <= 0:
-            return
+            return dt == 0
         cfg = self.cfg
         q_b = cfg.clock_h0 / 2.0 * dt
         q_d = 2.0 * math.pi**2 * cfg.clock_h_2 * dt
-        n0, n1 = self._noise.standard_normal(2)
         self.clock_bias_s += self.clock_drift_s_s * dt + math.sqrt(q_b) * n0
         self.clock_drift_s_s += math.sqrt(q_d) * n1
         if abs(self.clock_bias_s) > 0.5 * MS_RESET_S:
             self.clock_bias_s -= math.copysign(MS_RESET_S, self.clock_bias_s)
             self.clock_resets += 1
+        return dt <= 1.0
 
     def _sky(self, t_gps_s: float) -> SatStates:
         """Satellite states at ``t_gps_s``: the store evaluated at most every ``SKY_REFRESH_S`` and
@@ -250,9 +253,9 @@ class Receiver:
 
     def _atmosphere(self, t_gps_s: float, u_ned: np.ndarray, el: np.ndarray, h_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Klobuchar (L1) and Saastamoinen delays per satellite (all rows), recomputed every
-        ``SKY_REFRESH_S`` or 0.5 m of height (they change by millimetres in that)."""
+        ``SKY_REFRESH_S`` or 5 m of height (they change by millimetres in that)."""
         c = self._atm_cache
-        if c is None or abs(t_gps_s - c[0]) > SKY_REFRESH_S / 2 or abs(h_m - c[3]) > 0.5:
+        if c is None or abs(t_gps_s - c[0]) > SKY_REFRESH_S / 2 or abs(h_m - c[3]) > 5.0:
             up = el > 0
             az = np.arctan2(u_ned[:, 1], u_ned[:, 0]) % (2.0 * np.pi)
             e = np.maximum(el, 1e-3)
@@ -268,16 +271,17 @@ class Receiver:
         ``v_ned_m_s`` (mission frame): the receiver's report WITH the broadcast satellite states at
         transmission (what the receiver's own solution uses), and the truth per row."""
         cfg = self.cfg
-        self._advance_clock(t_us)
-        t = self.t0_gps_s + t_us * 1e-6
         n_all = len(self.system)
-        noise = self._noise.standard_normal((4, n_all))  # fixed count per epoch (common random numbers)
+        draws = self._noise.standard_normal(3 * n_all + 2)  # a fixed count per epoch (common random numbers)
+        noise = draws[2:].reshape(3, n_all)
+        recent = self._advance_clock(t_us, float(draws[0]), float(draws[1]))
+        t = self.t0_gps_s + t_us * 1e-6
         r_ned_ecef = self.ecef_to_ned.T
         rx = self.home_ecef_m + r_ned_ecef @ p_ned_m
         v_rx = r_ned_ecef @ v_ned_m_s
         st = self._sky(t - T_LIGHT0_S)
-        tau = self._tau  # the previous epoch's light times: one refinement leaves < 1 µm
-        for _ in range(LIGHT_TIME_ITERATIONS):
+        tau = self._tau  # from the previous epoch's light times (≤ 160 m of range ago): one pass leaves < 3 mm
+        for _ in range(1 if recent else LIGHT_TIME_ITERATIONS):
             s = st.pos_ecef_m + st.vel_ecef_m_s * (T_LIGHT0_S - tau)[:, None]
             ang = OMEGA_E_RAD_S * tau
             c, sn = np.cos(ang), np.sin(ang)
@@ -301,8 +305,7 @@ class Receiver:
         lam = self.wavelength_m[idx]
         m = len(idx)
         # direct path: clear, or diffracted over the dominant roof edge
-        ray = self.city.trace(np.broadcast_to(p_ne, (m, 2)), np.full(m, h), dir_ne, tan_el, float(np.mean(lam))
-                              if m else 0.19)
+        ray, (s_i, w_i, extra, cos_inc) = self.city.paths(p_ne, h, dir_ne, tan_el, WAVELENGTH_L1_M)
         blocked = ray.blocked
         if cfg.diffraction:
             amp_d = 10.0 ** (-knife_edge_loss_db(ray.nu) / 20.0)
@@ -314,7 +317,6 @@ class Receiver:
         amp_r = np.zeros(m)
         extra_r = np.zeros(m)
         dir_r = dir_ne.copy()
-        s_i, w_i, extra, cos_inc = self.city.reflections(p_ne, h, dir_ne, tan_el)
         if len(s_i):
             amp = self.facade_absorption[w_i] * reflection_amplitude(
                 cos_inc, sin_el[s_i], self.facade_permittivity[w_i], cfg.antenna_xpd_db)
@@ -355,14 +357,16 @@ class Receiver:
         chip = self.chip_m[idx]
         delta_chips = delta_m / chip
         corr = np.maximum(1.0 - np.abs(delta_chips), 0.0)
-        comb = np.abs(1.0 + alpha * corr * np.exp(1j * phase))
+        cos_ph = np.cos(phase)
+        ac = alpha * corr
+        comb2 = 1.0 + 2.0 * ac * cos_ph + ac * ac  # |1 + α R(δ) e^{iθ}|²
         with np.errstate(divide="ignore"):
-            cn0 = (unobstructed_cn0_dbhz(el_v, self.system[idx], cfg) + 20.0 * np.log10(a1)
-                   + 20.0 * np.log10(np.maximum(comb, 1e-6)) + cfg.cn0_noise_db * noise[0, idx])
+            cn0 = (unobstructed_cn0_dbhz(el_v, self.system[idx], cfg) + 10.0 * np.log10(a1 * a1 * np.maximum(comb2, 1e-12))
+                   + cfg.cn0_noise_db * noise[0, idx])
         # tracking with hysteresis: a signal is acquired at cn0_acquire_dbhz, then kept down to the threshold
         was = self._lock_start_us[idx] >= 0
         track = (a1 > 0) & (cn0 >= np.where(was, cfg.cn0_threshold_dbhz, cfg.cn0_acquire_dbhz))
-        a_inph = alpha * np.cos(phase)
+        a_inph = alpha * cos_ph
         env = e1 + chip * dll_multipath_chips(np.clip(a_inph, -0.99, 0.99), delta_chips, cfg.correlator_spacing_chips)
         cn0_seen = np.maximum(cn0, 0.0)  # (−inf where nothing arrives: those rows are not reported)
         sig = dll_sigma_m(cn0_seen, chip, cfg)
