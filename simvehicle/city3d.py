@@ -97,14 +97,18 @@ class City:
         self._lo_n, self._lo_e = r[None, :, 0], r[None, :, 1]
         self._hi_n, self._hi_e = r[None, :, 2], r[None, :, 3]
 
-    def _entry(self, origin_ne: np.ndarray, dir_ne: np.ndarray, run_max_m: np.ndarray | None,
-               skip: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def _entry(
+        self, origin_ne: np.ndarray, dir_ne: np.ndarray, run_max_m: np.ndarray | None, skip: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal run (K, B) where each ray enters each box (0 from inside), and whether it does
         (before ``run_max_m``, not building ``skip``): the slab test."""
         d = np.where(np.abs(dir_ne) < 1e-12, 1e-12, dir_ne)  # parallel to a slab: a huge finite run
         inv_n, inv_e = (1.0 / d[:, 0])[:, None], (1.0 / d[:, 1])[:, None]
         o_n, o_e = origin_ne[:, 0:1], origin_ne[:, 1:2]
-        n0, n1 = (self._lo_n - o_n) * inv_n, (self._hi_n - o_n) * inv_n  # (K, B) per slab, no axis-2 reductions
+        n0, n1 = (
+            (self._lo_n - o_n) * inv_n,
+            (self._hi_n - o_n) * inv_n,
+        )  # (K, B) per slab, no axis-2 reductions
         e0, e1 = (self._lo_e - o_e) * inv_e, (self._hi_e - o_e) * inv_e
         t_near = np.maximum(np.minimum(n0, n1), np.minimum(e0, e1))
         t_far = np.minimum(np.maximum(n0, n1), np.maximum(e0, e1))
@@ -116,8 +120,14 @@ class City:
             hit &= self._index[None] != skip[:, None]
         return t_in, hit
 
-    def trace(self, origin_ne: np.ndarray, h_m: np.ndarray, dir_ne: np.ndarray, tan_el: np.ndarray,
-              wavelength_m: float) -> RayTrace:
+    def trace(
+        self,
+        origin_ne: np.ndarray,
+        h_m: np.ndarray,
+        dir_ne: np.ndarray,
+        tan_el: np.ndarray,
+        wavelength_m: float,
+    ) -> RayTrace:
         """Rays from ``origin_ne`` (K, 2) at height ``h_m`` (K,) along the horizontal unit
         directions ``dir_ne`` (K, 2), rising ``tan_el`` (K,) per metre: blocked, and the dominant
         roof edge for diffraction."""
@@ -128,8 +138,14 @@ class City:
         t_in, hit = self._entry(origin_ne, dir_ne, None, None)
         return self._edges(t_in, hit, h_m, tan_el, wavelength_m)
 
-    def _edges(self, t_in: np.ndarray, hit: np.ndarray, h_m: np.ndarray | float, tan_el: np.ndarray,
-               wavelength_m: float) -> RayTrace:
+    def _edges(
+        self,
+        t_in: np.ndarray,
+        hit: np.ndarray,
+        h_m: np.ndarray | float,
+        tan_el: np.ndarray,
+        wavelength_m: float,
+    ) -> RayTrace:
         over = self.height_m[None] - (np.reshape(h_m, (-1, 1)) + t_in * tan_el[:, None])  # roof above the ray
         cos_el = (1.0 / np.sqrt(1.0 + tan_el * tan_el))[:, None]
         dist = np.maximum(t_in / cos_el, 0.1)
@@ -140,8 +156,9 @@ class City:
         nu_j = nu[rows, j]
         return RayTrace(nu_j > 0.0, nu_j, dist[rows, j], over[rows, j])
 
-    def paths(self, p_ne: np.ndarray, h_m: float, dir_ne: np.ndarray, tan_el: np.ndarray,
-              wavelength_m: float) -> tuple[RayTrace, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    def paths(
+        self, p_ne: np.ndarray, h_m: float, dir_ne: np.ndarray, tan_el: np.ndarray, wavelength_m: float
+    ) -> tuple[RayTrace, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
         """The direct paths of satellites (S,) (horizontal unit directions ``dir_ne`` (S, 2), slopes
         ``tan_el``) to the receiver at ``p_ne`` (2,), height ``h_m`` (:meth:`trace`), and every valid
         specular facade reflection ``(satellite (R,), facade (R,), extra path m (R,), cos of the
@@ -151,7 +168,9 @@ class City:
         n_s = len(dir_ne)
         empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros(0))
         if not len(self.height_m):
-            return self.trace(np.broadcast_to(p, (n_s, 2)), np.full(n_s, h_m), dir_ne, tan_el, wavelength_m), empty
+            return self.trace(
+                np.broadcast_to(p, (n_s, 2)), np.full(n_s, h_m), dir_ne, tan_el, wavelength_m
+            ), empty
         dist = f.sign * (p[f.axis] - f.coord)  # receiver in front of the plane (W,)
         u_axis = dir_ne[:, f.axis] * f.sign[None]  # (S, W): > 0 the satellite is in front
         s_idx, w_idx = np.nonzero((dist[None] > 0.0) & (u_axis > 1e-9))
@@ -180,19 +199,24 @@ class City:
         skip = np.concatenate((np.full(n_s, -1), b, b))
         t_in, hit = self._entry(origins, dirs, run_max, skip)
         direct = self._edges(t_in[:n_s], hit[:n_s], h_m, tan_el, wavelength_m)
-        legs = (hit[n_s:] & (self.height_m[None] > h0[n_s:, None] + t_in[n_s:] * tans[n_s:, None])).any(axis=1)
+        legs = (hit[n_s:] & (self.height_m[None] > h0[n_s:, None] + t_in[n_s:] * tans[n_s:, None])).any(
+            axis=1
+        )
         ok = ~legs[:k] & ~legs[k:]
         cos_el = 1.0 / np.sqrt(1.0 + tan[ok] ** 2)
         u_n = dir_ne[s_idx[ok], axis[ok]] * f.sign[w_idx[ok]] * cos_el
         return direct, (s_idx[ok], w_idx[ok], 2.0 * dist[w_idx[ok]] * u_n, u_n)
 
-    def reflections(self, p_ne: np.ndarray, h_m: float, dir_ne: np.ndarray,
-                    tan_el: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def reflections(
+        self, p_ne: np.ndarray, h_m: float, dir_ne: np.ndarray, tan_el: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The reflections of :meth:`paths` alone."""
         return self.paths(p_ne, h_m, dir_ne, tan_el, 0.19)[1]
 
 
-def diffraction_extra_m(edge_distance_m: np.ndarray, edge_over_m: np.ndarray, sin_el: np.ndarray) -> np.ndarray:
+def diffraction_extra_m(
+    edge_distance_m: np.ndarray, edge_over_m: np.ndarray, sin_el: np.ndarray
+) -> np.ndarray:
     """Extra length (m) of the path bent over an edge ``Δh`` above the straight ray at slant
     distance ``d`` (toward a satellite at infinity, elevation ``el``): with the edge at
     ``d u + Δh z``, ``|d u + Δh z| − u·(d u + Δh z)`` (≈ Δh² cos² el / 2d); 0 when the ray clears it."""

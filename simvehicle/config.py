@@ -259,7 +259,7 @@ class ReceiverConfig:
     cn0_glonass_offset_db: float = -4.0  # (cal) GLONASS G1 arrives weaker on such antennas
     antenna_rolloff_db: float = 14.0  # gain at the horizon below the zenith's
     cn0_noise_db: float = 1.0  # white noise of the C/N0 estimate per epoch
-    cn0_threshold_dbhz: float = 12.0  # a tracked signal is lost below this (u-blox M8 tracks to ~10 dB-Hz) ...
+    cn0_threshold_dbhz: float = 12.0  # a tracked signal is lost below this (u-blox M8: ~10 dB-Hz) ...
     cn0_acquire_dbhz: float = 26.0  # (cal) ... and (re)acquired only above this
     # reflections off facades (simvehicle.receiver.reflection_amplitude): Fresnel coefficients of a dielectric
     # (or a conductor) at the incidence angle, split into the co- (RHCP) and cross-polarised (LHCP) parts the
@@ -312,7 +312,8 @@ class ReceiverConfig:
         if not self.facade_permittivity > 1.0:
             raise ValueError(f"facade_permittivity: must be > 1, got {self.facade_permittivity!r}")
         if not 0.0 < self.correlator_spacing_chips <= 1.0:
-            raise ValueError(f"correlator_spacing_chips: must be in (0, 1], got {self.correlator_spacing_chips!r}")
+            raise ValueError(f"correlator_spacing_chips: must be in (0, 1], "
+                             f"got {self.correlator_spacing_chips!r}")
         if not 0.0 <= self.elevation_mask_deg < 90.0:
             raise ValueError(f"elevation_mask_deg: must be in [0, 90), got {self.elevation_mask_deg!r}")
         from companion.gnss.spp import SppConfig  # the solver's own check of the weighting

@@ -60,13 +60,17 @@ GPS_NODE_RATE_RAD_S = math.radians(-4.4874e-7)
 GLONASS_CHANNELS = (1, -4, 5, 6, 1, -4, 5, 6, -2, -7, 0, -1, -2, -7, 0, -1, 4, -3, 3, 2, 4, -3, 3, 2)
 BEIDOU_MEO_PRNS = (*range(19, 31), *range(32, 38), *range(41, 47))
 
-SYSTEM_NAMES: dict[str, System] = {"GPS": System.GPS, "GLONASS": System.GLONASS, "GALILEO": System.GALILEO,
-                                   "BEIDOU": System.BEIDOU}
+SYSTEM_NAMES: dict[str, System] = {
+    "GPS": System.GPS,
+    "GLONASS": System.GLONASS,
+    "GALILEO": System.GALILEO,
+    "BEIDOU": System.BEIDOU,
+}
 
 
 def _frac(i: int, salt: int) -> float:
     """A fixed number in [0, 1) per (satellite, purpose): the 'ours' values, without a generator."""
-    return ((i * 0.6180339887498949 + salt * 0.4142135623730951) % 1.0)
+    return (i * 0.6180339887498949 + salt * 0.4142135623730951) % 1.0
 
 
 def _q(x: float, lsb: float) -> float:
@@ -85,7 +89,16 @@ def _clock(salt: int, t_gps_s: float) -> tuple[float, float, float]:
     w = 2 * math.pi / CLOCK_PERIOD_S
     ph = w * t_gps_s + 2 * math.pi * _frac(salt, 4)
     a = CLOCK_WANDER_S
-    return 4e-4 * (_frac(salt, 3) - 0.5) + a * math.sin(ph), a * w * math.cos(ph), -0.5 * a * w * w * math.sin(ph)
+    return (
+        4e-4 * (_frac(salt, 3) - 0.5) + a * math.sin(ph),
+        a * w * math.cos(ph),
+        -0.5 * a * w * w * math.sin(ph),
+    )
+
+
+def _vec3(v: np.ndarray, lsb: float) -> tuple[float, float, float]:
+    """A broadcast vector field: three components at ``lsb`` resolution."""
+    return _q(float(v[0]), lsb), _q(float(v[1]), lsb), _q(float(v[2]), lsb)
 
 
 def _wrap_pi(x: float) -> float:
@@ -96,8 +109,16 @@ class _Walker:
     """One satellite's nominal circular orbit: node longitude in the Earth-fixed frame and argument of
     latitude, both linear in time (secular node regression; mean motion from the repeat condition)."""
 
-    def __init__(self, inc_rad: float, node_rate_rad_s: float, revs: int, sidereal_days: int,
-                 lam0_rad: float, u0_rad: float, t0_gps_s: float) -> None:
+    def __init__(
+        self,
+        inc_rad: float,
+        node_rate_rad_s: float,
+        revs: int,
+        sidereal_days: int,
+        lam0_rad: float,
+        u0_rad: float,
+        t0_gps_s: float,
+    ) -> None:
         self.inc = inc_rad
         self.node_rate = node_rate_rad_s
         self.n = revs * (SIDEREAL_RATE_RAD_S - node_rate_rad_s) / sidereal_days
@@ -113,15 +134,32 @@ class _Walker:
         return (mu / self.n**2) ** (1.0 / 3.0)
 
 
-def _walker_set(n_planes: int, per_plane: int, phasing_deg: float, inc_deg: float, revs: int, days: int,
-                mu: float, node0_deg: float, t0: float) -> list[_Walker]:
+def _walker_set(
+    n_planes: int,
+    per_plane: int,
+    phasing_deg: float,
+    inc_deg: float,
+    revs: int,
+    days: int,
+    mu: float,
+    node0_deg: float,
+    t0: float,
+) -> list[_Walker]:
     j2_rate = _j2_node_rate(math.radians(inc_deg), revs * SIDEREAL_RATE_RAD_S / days, mu)
     out = []
     for p in range(n_planes):
         for s in range(per_plane):
-            out.append(_Walker(math.radians(inc_deg), j2_rate, revs, days,
-                               math.radians(node0_deg + p * 360.0 / n_planes),
-                               math.radians(s * 360.0 / per_plane + p * phasing_deg), t0))
+            out.append(
+                _Walker(
+                    math.radians(inc_deg),
+                    j2_rate,
+                    revs,
+                    days,
+                    math.radians(node0_deg + p * 360.0 / n_planes),
+                    math.radians(s * 360.0 / per_plane + p * phasing_deg),
+                    t0,
+                )
+            )
     return out
 
 
@@ -133,8 +171,11 @@ def _j2_node_rate(inc_rad: float, n_rad_s: float, mu: float) -> float:
 def _gps_orbits() -> list[_Walker]:
     t0 = gps_from_calendar(*GPS_EPOCH_UTC, "UTC")
     gha = math.radians(GPS_EPOCH_GHA_DEG)
-    return [_Walker(math.radians(55.0), GPS_NODE_RATE_RAD_S, 2, 1, math.radians(raan) - gha, math.radians(u), t0)
-            for raan, slots in GPS_SLOTS for u in slots]
+    return [
+        _Walker(math.radians(55.0), GPS_NODE_RATE_RAD_S, 2, 1, math.radians(raan) - gha, math.radians(u), t0)
+        for raan, slots in GPS_SLOTS
+        for u in slots
+    ]
 
 
 def _kepler_params(system: System) -> tuple[float, float, float]:
@@ -161,12 +202,12 @@ def _kepler_ephemeris(system: System, prn: int, orbit: _Walker, toe: float, inde
     omega0 = _q(_wrap_pi(orbit.lam(toe) + we * sow), 2.0**-31 * SC)
     omega_dot = _q(orbit.node_rate, 2.0**-43 * SC)
     af0, af1, af2 = _clock(salt, toe)
+    no_harmonics = (0.0,) * 7  # idot, cuc, cus, crc, crs, cic, cis: a nominal orbit has none
     return KeplerEphemeris(
-        system=int(system), prn=prn, toe_gps_s=toe, toc_gps_s=toe, toe_sow_s=sow, sqrt_a_m05=sqrt_a, e=e,
-        i0_rad=_q(orbit.inc, 2.0**-31 * SC), omega0_rad=omega0, omega_rad=omega, m0_rad=m0, delta_n_rad_s=delta_n,
-        omega_dot_rad_s=omega_dot, idot_rad_s=0.0, cuc_rad=0.0, cus_rad=0.0, crc_m=0.0, crs_m=0.0, cic_rad=0.0,
-        cis_rad=0.0, af0_s=_q(af0, 2.0**-31), af1_s_s=_q(af1, 2.0**-43), af2_s_s2=_q(af2, 2.0**-55), tgd_s=_q(-1e-8 * _frac(salt, 5), 2.0**-31),
-        iode=index % 256)
+        int(system), prn, toe, toe, sow, sqrt_a, e, _q(orbit.inc, 2.0**-31 * SC), omega0, omega, m0, delta_n,
+        omega_dot, *no_harmonics, _q(af0, 2.0**-31), _q(af1, 2.0**-43), _q(af2, 2.0**-55),
+        _q(-1e-8 * _frac(salt, 5), 2.0**-31), index % 256,
+    )
 
 
 def _kepler_sets(system: System, t_from: float, t_to: float) -> list[KeplerEphemeris]:
@@ -181,8 +222,11 @@ def _kepler_sets(system: System, t_from: float, t_to: float) -> list[KeplerEphem
         prns = list(BEIDOU_MEO_PRNS)
     first = math.floor(t_from / KEPLER_INTERVAL_S)
     last = math.ceil(t_to / KEPLER_INTERVAL_S)
-    return [_kepler_ephemeris(system, prn, orb, j * KEPLER_INTERVAL_S, j)
-            for j in range(first, last + 1) for prn, orb in zip(prns, orbits, strict=True)]
+    return [
+        _kepler_ephemeris(system, prn, orb, j * KEPLER_INTERVAL_S, j)
+        for j in range(first, last + 1)
+        for prn, orb in zip(prns, orbits, strict=True)
+    ]
 
 
 def _glonass_sets(t_from: float, t_to: float) -> list[GlonassEphemeris]:
@@ -201,17 +245,27 @@ def _glonass_sets(t_from: float, t_to: float) -> list[GlonassEphemeris]:
     states = []
     for o in orbits:
         lam, u, a = o.lam(t), o.u(t), o.a_m(mu)
-        cl, sl, cu, su, ci, si = (math.cos(lam), math.sin(lam), math.cos(u), math.sin(u),
-                                  math.cos(o.inc), math.sin(o.inc))
+        cl, sl, cu, su, ci, si = (
+            math.cos(lam),
+            math.sin(lam),
+            math.cos(u),
+            math.sin(u),
+            math.cos(o.inc),
+            math.sin(o.inc),
+        )
         r = a * np.array([cl * cu - sl * su * ci, sl * cu + cl * su * ci, su * si])
         v_in = a * o.n * np.array([-cl * su - sl * cu * ci, -sl * su + cl * cu * ci, cu * si])
         v = v_in - np.cross([0.0, 0.0, k.OMEGA_E_GLO_RAD_S], r)  # inertial-like -> Earth-fixed velocity
         states.append(np.r_[r, v])
     s = np.array(states)
     n = len(orbits)
-    acc = np.array([[1e-6 * (_frac(i, 6) - 0.5), 1e-6 * (_frac(i, 7) - 0.5), 1e-6 * (_frac(i, 8) - 0.5)]
-                    for i in range(n)])
-    acc = np.vectorize(lambda x: _q(x, 2.0**-30 * 1e3))(acc)
+    acc = np.array(
+        [
+            [1e-6 * (_frac(i, 6) - 0.5), 1e-6 * (_frac(i, 7) - 0.5), 1e-6 * (_frac(i, 8) - 0.5)]
+            for i in range(n)
+        ]
+    )
+    acc = np.rint(acc / (2.0**-30 * 1e3)) * (2.0**-30 * 1e3)  # the broadcast resolution
     steps = round(GLONASS_INTERVAL_S / GLONASS_STEP_S)
     h = np.full(n, GLONASS_STEP_S)
     out = []
@@ -222,18 +276,25 @@ def _glonass_sets(t_from: float, t_to: float) -> list[GlonassEphemeris]:
         for i in range(n):
             slot = i + 1
             offset, rate, _ = _clock(1000 + slot, tb)
-            out.append(GlonassEphemeris(
-                prn=slot, channel=GLONASS_CHANNELS[i], toe_gps_s=tb,
-                pos_ecef_m=tuple(_q(float(x), 2.0**-11 * 1e3) for x in s[i, :3]),
-                vel_ecef_m_s=tuple(_q(float(x), 2.0**-20 * 1e3) for x in s[i, 3:]),
-                acc_ecef_m_s2=tuple(float(x) for x in acc[i]),
-                clock_bias_s=_q(offset, 2.0**-30), gamma_n=_q(rate, 2.0**-40)))
+            out.append(
+                GlonassEphemeris(
+                    prn=slot,
+                    channel=GLONASS_CHANNELS[i],
+                    toe_gps_s=tb,
+                    pos_ecef_m=_vec3(s[i, :3], 2.0**-11 * 1e3),
+                    vel_ecef_m_s=_vec3(s[i, 3:], 2.0**-20 * 1e3),
+                    acc_ecef_m_s2=_vec3(acc[i], 2.0**-30 * 1e3),
+                    clock_bias_s=_q(offset, 2.0**-30),
+                    gamma_n=_q(rate, 2.0**-40),
+                )
+            )
     return out
 
 
 @lru_cache(maxsize=8)
-def constellation(t_from_gps_s: float, t_to_gps_s: float,
-                  systems: tuple[System, ...]) -> tuple[tuple[KeplerEphemeris, ...], tuple[GlonassEphemeris, ...]]:
+def constellation(
+    t_from_gps_s: float, t_to_gps_s: float, systems: tuple[System, ...]
+) -> tuple[tuple[KeplerEphemeris, ...], tuple[GlonassEphemeris, ...]]:
     """Broadcast ephemerides of ``systems`` covering [t_from, t_to] (GPS time)."""
     kep: list[KeplerEphemeris] = []
     glo: list[GlonassEphemeris] = []

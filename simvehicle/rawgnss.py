@@ -9,10 +9,10 @@ unchanged; in addition each epoch's raw observations come out through :meth:`dra
 One epoch per ``1 / rate_hz`` at the control-period ends that are multiples of it, measured at the
 TRUE position and velocity (:class:`simvehicle.receiver.Receiver`); the receiver solves it at once
 (``companion.gnss.solve_position``: the broadcast satellite states at transmission, Klobuchar,
-Saastamoinen, the configured weighting, from its previous solution moved on by its velocity) and releases the raw epoch and
-its fix together ``latency_s`` later (an epoch without a solution releases no fix). The fix is
-valid at the measurement's true time; ``bias_ned_m`` (the truth's ``gnss_bias_ned_m``) is the
-latest fix's error.
+Saastamoinen, the configured weighting, from its previous solution moved on by its velocity) and
+releases the raw epoch and its fix together ``latency_s`` later (an epoch without a solution
+releases no fix). The fix is valid at the measurement's true time; ``bias_ned_m`` (the truth's
+``gnss_bias_ned_m``) is the latest fix's error.
 
 The sky: GPS time of boot ``t0`` = ``start_utc`` + a whole number of seconds drawn from the seed in
 ``[0, start_spread_s)``; the broadcast ephemerides (``store``, :mod:`simvehicle.constellation`)
@@ -63,13 +63,22 @@ def boot_gps_time_s(cfg: ReceiverConfig, rng: np.random.Generator) -> float:
 class RawGnssModel:
     """Receiver epochs and fixes, queued and released after the receiver's latency (seeded)."""
 
-    def __init__(self, cfg: ReceiverConfig, rects_m: np.ndarray, heights_m: np.ndarray, frame: LocalNedFrame,
-                 rng: np.random.Generator, control_period_us: int) -> None:
+    def __init__(
+        self,
+        cfg: ReceiverConfig,
+        rects_m: np.ndarray,
+        heights_m: np.ndarray,
+        frame: LocalNedFrame,
+        rng: np.random.Generator,
+        control_period_us: int,
+    ) -> None:
         self.cfg = cfg
         self.period_us = round(1e6 / cfg.rate_hz)
         if self.period_us % control_period_us:
-            raise ValueError(f"receiver rate_hz {cfg.rate_hz}: its period must be a multiple of the control "
-                             f"period ({control_period_us} µs)")
+            raise ValueError(
+                f"receiver rate_hz {cfg.rate_hz}: its period must be a multiple of the control "
+                f"period ({control_period_us} µs)"
+            )
         self.frame = frame
         self.to_geodetic = NedToGeodetic(frame)
         self.systems = tuple(SYSTEM_NAMES[s] for s in cfg.systems)
@@ -84,7 +93,9 @@ class RawGnssModel:
         self._latency_us = math.ceil(cfg.latency_s * 1e6 - 1e-6)
         self._queue: list[tuple[int, int, RawObservation, RawFix | None]] = []
         self._released: list[RawObservation] = []
-        self._prev: tuple[int, np.ndarray, np.ndarray] | None = None  # the last solution: time, position, velocity
+        self._prev: tuple[int, np.ndarray, np.ndarray] | None = (
+            None  # the last solution: time, position, velocity
+        )
         self._resets = 0
         self.bias_ned_m = np.zeros(3)
         self.latency_s = cfg.latency_s
@@ -102,8 +113,9 @@ class RawGnssModel:
         self.store = ephemeris_store(t_gps_s - SPAN_BEFORE_S, self._covered_to_s, self.systems)
         self.receiver.store = self.store
 
-    def sample(self, t_us: int, p_ned_m: np.ndarray, clearance_m: float,
-               v_ned_m_s: np.ndarray | None = None) -> RawFix | None:
+    def sample(
+        self, t_us: int, p_ned_m: np.ndarray, clearance_m: float, v_ned_m_s: np.ndarray | None = None
+    ) -> RawFix | None:
         """At an epoch time, measure, solve and queue (epoch and fix); otherwise nothing."""
         if t_us % self.period_us:
             return None
@@ -116,16 +128,32 @@ class RawGnssModel:
         # the receiver removes the satellite clocks and the broadcast atmosphere (Klobuchar, Saastamoinen:
         # evaluated here at the true antenna, which its own estimate differs from by micro-radians of
         # elevation) and solves the corrected pseudoranges
-        corrected = ep.replace(pseudorange_m=ep.pseudorange_m + C_M_S * ep.sat_clock_s - truth.model_atmosphere_m,
-                               pseudorange_rate_m_s=ep.pseudorange_rate_m_s + C_M_S * ep.sat_clock_drift_s_s,
-                               corrected=True)
+        corrected = ep.replace(
+            pseudorange_m=ep.pseudorange_m + C_M_S * ep.sat_clock_s - truth.model_atmosphere_m,
+            pseudorange_rate_m_s=ep.pseudorange_rate_m_s + C_M_S * ep.sat_clock_drift_s_s,
+            corrected=True,
+        )
         sol = solve_position(corrected, self.spp, p0_ecef_m=self._guess_ecef(t_us))
         self.epochs += 1
         nan = np.full(ep.n, np.nan)
-        report = ep.replace(sat_pos_ecef_m=np.full((ep.n, 3), np.nan), sat_vel_ecef_m_s=np.full((ep.n, 3), np.nan),
-                            sat_clock_s=nan, sat_clock_drift_s_s=nan)
-        raw = RawObservation(int(t_us), -1, report, truth, t_gps, rx.clock_bias_s, rx.clock_drift_s_s,
-                             sol if sol.ok else None, rx.lock_ms.copy(), rx.clock_resets > self._resets)
+        report = ep.replace(
+            sat_pos_ecef_m=np.full((ep.n, 3), np.nan),
+            sat_vel_ecef_m_s=np.full((ep.n, 3), np.nan),
+            sat_clock_s=nan,
+            sat_clock_drift_s_s=nan,
+        )
+        raw = RawObservation(
+            int(t_us),
+            -1,
+            report,
+            truth,
+            t_gps,
+            rx.clock_bias_s,
+            rx.clock_drift_s_s,
+            sol if sol.ok else None,
+            rx.lock_ms.copy(),
+            rx.clock_resets > self._resets,
+        )
         self._resets = rx.clock_resets
         fix = None
         if sol.ok:
@@ -153,7 +181,9 @@ class RawGnssModel:
         p_ned = self.to_ned_m(sol.p_ecef_m)
         v = sol.v_ecef_m_s
         v_ned = self._to_ned @ v if np.isfinite(v).all() else None
-        return RawFix(t_us, p_ned, sol.h_acc_m, sol.n_used, sol.v_acc_m, sol.dops.hdop, v_ned, sol.vel_acc_m_s)
+        return RawFix(
+            t_us, p_ned, sol.h_acc_m, sol.n_used, sol.v_acc_m, sol.dops.hdop, v_ned, sol.vel_acc_m_s
+        )
 
     def release(self, t_us: int) -> list[RawFix]:
         """Fixes due by ``t_us`` (their raw epochs go to :meth:`drain_raw`, stamped with ``t_us``)."""
@@ -192,10 +222,8 @@ class RawGnssModel:
         lat, lon, alt = self.to_geodetic(fix.p_ned_m)
         raw = fix if isinstance(fix, RawFix) else None
         v = None if raw is None or raw.doppler_v_ned_m_s is None else raw.doppler_v_ned_m_s
+        v_acc, hdop = (raw.v_acc_m, raw.hdop) if raw else (math.nan, math.nan)
         return GnssFix(
-            t_validity_us=fix.t_validity_us, lat_deg=lat, lon_deg=lon, alt_m=alt, fix_type=FIX_TYPE_3D,
-            satellites_visible=fix.satellites, h_acc_m=fix.sigma_noise_m,
-            v_acc_m=raw.v_acc_m if raw else math.nan, hdop=raw.hdop if raw else math.nan,
-            v_ned_m_s=None if v is None else tuple(float(x) for x in v),
+            fix.t_validity_us, lat, lon, alt, FIX_TYPE_3D, fix.satellites, fix.sigma_noise_m, v_acc, hdop, v,
             vel_acc_m_s=raw.doppler_vel_acc_m_s if raw else math.nan,
         )

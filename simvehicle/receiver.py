@@ -45,7 +45,15 @@ import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
-from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ, MU_GPS_M3_S2, OMEGA_E_RAD_S
+from companion.gnss.constants import (
+    C_M_S,
+    DFREQ_G1_HZ,
+    FREQ_B1I_HZ,
+    FREQ_G1_HZ,
+    FREQ_L1_HZ,
+    MU_GPS_M3_S2,
+    OMEGA_E_RAD_S,
+)
 from companion.gnss.ephemeris import EphemerisStore, SatStates
 from companion.gnss.geometry import ecef_to_ned_matrix, geodetic_to_ecef
 from companion.gnss.observations import GnssEpoch, make_epoch
@@ -81,8 +89,11 @@ def dll_multipath_chips(a: np.ndarray, delta_chips: np.ndarray, spacing_chips: f
     out = np.where(
         x <= d * (1.0 + a) / 2.0,
         a * x / (1.0 + a),
-        np.where(x <= 1.0 - d * (1.0 - a) / 2.0, a * d / 2.0,
-                 np.where(x < 1.0 + d / 2.0, a * (1.0 + d / 2.0 - x) / (2.0 - a), 0.0)),
+        np.where(
+            x <= 1.0 - d * (1.0 - a) / 2.0,
+            a * d / 2.0,
+            np.where(x < 1.0 + d / 2.0, a * (1.0 + d / 2.0 - x) / (2.0 - a), 0.0),
+        ),
     )
     return np.sign(delta_chips) * out
 
@@ -92,17 +103,22 @@ def dll_sigma_m(cn0_dbhz: np.ndarray, chip_m: np.ndarray, cfg: ReceiverConfig) -
     ``chip · sqrt(B d / (2 C/N0) · (1 + 2 / (T C/N0 (2 − d))))``."""
     c = 10.0 ** (np.asarray(cn0_dbhz) / 10.0)
     d = cfg.correlator_spacing_chips
-    return chip_m * np.sqrt(cfg.dll_bandwidth_hz * d / (2.0 * c) * (1.0 + 2.0 / (cfg.integration_s * c * (2.0 - d))))
+    return chip_m * np.sqrt(
+        cfg.dll_bandwidth_hz * d / (2.0 * c) * (1.0 + 2.0 / (cfg.integration_s * c * (2.0 - d)))
+    )
 
 
 def unobstructed_cn0_dbhz(el_rad: np.ndarray, system: np.ndarray, cfg: ReceiverConfig) -> np.ndarray:
     """C/N0 of a clear line of sight: zenith value, less the antenna roll-off (1 − sin el)²."""
-    base = np.where(system == System.GLONASS, cfg.cn0_zenith_dbhz + cfg.cn0_glonass_offset_db, cfg.cn0_zenith_dbhz)
+    base = np.where(
+        system == System.GLONASS, cfg.cn0_zenith_dbhz + cfg.cn0_glonass_offset_db, cfg.cn0_zenith_dbhz
+    )
     return base - cfg.antenna_rolloff_db * (1.0 - np.sin(np.maximum(el_rad, 0.0))) ** 2
 
 
-def reflection_amplitude(cos_inc: np.ndarray, sin_el: np.ndarray, permittivity: np.ndarray,
-                         xpd_zenith_db: float) -> np.ndarray:
+def reflection_amplitude(
+    cos_inc: np.ndarray, sin_el: np.ndarray, permittivity: np.ndarray, xpd_zenith_db: float
+) -> np.ndarray:
     """Amplitude the antenna receives of a reflected RHCP signal, relative to the direct one at the
     same elevation: Fresnel coefficients of a smooth dielectric of relative permittivity ``ε`` at
     incidence ``θ`` (``cos θ = |u·n|``), ``r_s = (cos θ − √(ε − sin²θ)) / (cos θ + √(ε − sin²θ))``,
@@ -157,22 +173,34 @@ class RawObservation:
 class Receiver:
     """The receiver's state (clock, tracking, episodes) and its per-epoch observation model."""
 
-    def __init__(self, cfg: ReceiverConfig, city: City, frame: LocalNedFrame, store: EphemerisStore,
-                 t0_gps_s: float, rng: np.random.Generator) -> None:
+    def __init__(
+        self,
+        cfg: ReceiverConfig,
+        city: City,
+        frame: LocalNedFrame,
+        store: EphemerisStore,
+        t0_gps_s: float,
+        rng: np.random.Generator,
+    ) -> None:
         self.cfg = cfg
         self.city = city
         self.store = store
         self.t0_gps_s = t0_gps_s
         systems = tuple(SYSTEM_NAMES[s] for s in cfg.systems)
-        keys = sorted({(int(e.system), int(e.prn)) for e in store.kepler if System(e.system) in systems}
-                      | {(int(System.GLONASS), int(g.prn)) for g in store.glonass if System.GLONASS in systems})
+        keys = sorted(
+            {(int(e.system), int(e.prn)) for e in store.kepler if System(e.system) in systems}
+            | {(int(System.GLONASS), int(g.prn)) for g in store.glonass if System.GLONASS in systems}
+        )
         self.system = np.array([s for s, _ in keys], dtype=np.int8)
         self.prn = np.array([p for _, p in keys], dtype=np.int16)
         n = len(keys)
         channel = np.where(self.system == System.GLONASS, store.glonass_channel(self.prn), 0)
         self.channel = channel
-        freq = np.select([self.system == System.GLONASS, self.system == System.BEIDOU],
-                         [FREQ_G1_HZ + channel * DFREQ_G1_HZ, np.full(n, FREQ_B1I_HZ)], FREQ_L1_HZ)
+        freq = np.select(
+            [self.system == System.GLONASS, self.system == System.BEIDOU],
+            [FREQ_G1_HZ + channel * DFREQ_G1_HZ, np.full(n, FREQ_B1I_HZ)],
+            FREQ_L1_HZ,
+        )
         self.wavelength_m = C_M_S / freq
         self.chip_m = C_M_S / np.array([CHIP_RATE_HZ[System(int(s))] for s in self.system])
         self.iono_scale = iono_frequency_scale(self.system, channel)
@@ -184,10 +212,13 @@ class Receiver:
         # per-flight draws: facade losses, common errors, clock (shared stream), then one stream per satellite
         g = rng
         w = len(city.facades)
-        self.facade_permittivity = np.where(g.uniform(size=w) < cfg.metal_facade_fraction, CONDUCTOR_PERMITTIVITY,
-                                            cfg.facade_permittivity)
-        self.facade_absorption = 10.0 ** (-np.maximum(
-            cfg.facade_absorption_db + cfg.facade_absorption_sd_db * g.standard_normal(w), 0.0) / 20.0)
+        self.facade_permittivity = np.where(
+            g.uniform(size=w) < cfg.metal_facade_fraction, CONDUCTOR_PERMITTIVITY, cfg.facade_permittivity
+        )
+        self.facade_absorption = 10.0 ** (
+            -np.maximum(cfg.facade_absorption_db + cfg.facade_absorption_sd_db * g.standard_normal(w), 0.0)
+            / 20.0
+        )
         sisre = np.where(self.system == System.GLONASS, cfg.sisre_glonass_m, cfg.sisre_m)
         self.sisre_m = sisre * g.standard_normal(n)
         self.iono_factor = 1.0 + cfg.iono_error_fraction * g.standard_normal(n)
@@ -248,10 +279,17 @@ class Receiver:
         dt = t_gps_s - t_ref
         if dt == 0.0:
             return st
-        return SatStates(st.pos_ecef_m + st.vel_ecef_m_s * dt + 0.5 * acc * dt * dt, st.vel_ecef_m_s + acc * dt,
-                         st.clock_s + st.clock_drift_s_s * dt, st.clock_drift_s_s, st.valid)
+        return SatStates(
+            st.pos_ecef_m + st.vel_ecef_m_s * dt + 0.5 * acc * dt * dt,
+            st.vel_ecef_m_s + acc * dt,
+            st.clock_s + st.clock_drift_s_s * dt,
+            st.clock_drift_s_s,
+            st.valid,
+        )
 
-    def _atmosphere(self, t_gps_s: float, u_ned: np.ndarray, el: np.ndarray, h_m: float) -> tuple[np.ndarray, np.ndarray]:
+    def _atmosphere(
+        self, t_gps_s: float, u_ned: np.ndarray, el: np.ndarray, h_m: float
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Klobuchar (L1) and Saastamoinen delays per satellite (all rows), recomputed every
         ``SKY_REFRESH_S`` or 5 m of height (they change by millimetres in that)."""
         c = self._atm_cache
@@ -259,8 +297,11 @@ class Receiver:
             up = el > 0
             az = np.arctan2(u_ned[:, 1], u_ned[:, 0]) % (2.0 * np.pi)
             e = np.maximum(el, 1e-3)
-            klob = (klobuchar_m(*self.store.klobuchar, self.lat_rad, self.lon_rad, az, e, week_tow(t_gps_s)[1])
-                    if self.store.klobuchar is not None else np.zeros(len(el)))
+            klob = (
+                klobuchar_m(*self.store.klobuchar, self.lat_rad, self.lon_rad, az, e, week_tow(t_gps_s)[1])
+                if self.store.klobuchar is not None
+                else np.zeros(len(el))
+            )
             tropo = saastamoinen_m(self.lat_rad, self.home_alt_m + h_m, e)
             self._atm_cache = c = (t_gps_s, np.where(up, klob, 0.0), np.where(up, tropo, 0.0), h_m)
         return c[1], c[2]
@@ -280,7 +321,9 @@ class Receiver:
         rx = self.home_ecef_m + r_ned_ecef @ p_ned_m
         v_rx = r_ned_ecef @ v_ned_m_s
         st = self._sky(t - T_LIGHT0_S)
-        tau = self._tau  # from the previous epoch's light times (≤ 160 m of range ago): one pass leaves < 3 mm
+        tau = (
+            self._tau
+        )  # from the previous epoch's light times (≤ 160 m of range ago): one pass leaves < 3 mm
         for _ in range(1 if recent else LIGHT_TIME_ITERATIONS):
             s = st.pos_ecef_m + st.vel_ecef_m_s * (T_LIGHT0_S - tau)[:, None]
             ang = OMEGA_E_RAD_S * tau
@@ -309,7 +352,9 @@ class Receiver:
         blocked = ray.blocked
         if cfg.diffraction:
             amp_d = 10.0 ** (-knife_edge_loss_db(ray.nu) / 20.0)
-            extra_d = np.where(blocked, diffraction_extra_m(ray.edge_distance_m, ray.edge_over_m, sin_el), 0.0)
+            extra_d = np.where(
+                blocked, diffraction_extra_m(ray.edge_distance_m, ray.edge_over_m, sin_el), 0.0
+            )
         else:
             amp_d = np.where(blocked, 0.0, 1.0)
             extra_d = np.zeros(m)
@@ -319,7 +364,8 @@ class Receiver:
         dir_r = dir_ne.copy()
         if len(s_i):
             amp = self.facade_absorption[w_i] * reflection_amplitude(
-                cos_inc, sin_el[s_i], self.facade_permittivity[w_i], cfg.antenna_xpd_db)
+                cos_inc, sin_el[s_i], self.facade_permittivity[w_i], cfg.antenna_xpd_db
+            )
             order = np.lexsort((extra, -amp, s_i))
             first = np.r_[True, s_i[order][1:] != s_i[order][:-1]]
             best = order[first]
@@ -353,7 +399,11 @@ class Receiver:
         alpha = np.where(a1 > 0, a2 / np.where(a1 > 0, a1, 1.0), 0.0)
         delta_m = e2 - e1
         phase = 2.0 * np.pi * delta_m / lam + np.where((k1 == 0) != (k2 == 0), np.pi, 0.0)
-        phase = phase + np.where(k2 == 2, self._unmapped_phase[idx], 0.0) - np.where(k1 == 2, self._unmapped_phase[idx], 0.0)
+        phase = (
+            phase
+            + np.where(k2 == 2, self._unmapped_phase[idx], 0.0)
+            - np.where(k1 == 2, self._unmapped_phase[idx], 0.0)
+        )
         chip = self.chip_m[idx]
         delta_chips = delta_m / chip
         corr = np.maximum(1.0 - np.abs(delta_chips), 0.0)
@@ -361,13 +411,18 @@ class Receiver:
         ac = alpha * corr
         comb2 = 1.0 + 2.0 * ac * cos_ph + ac * ac  # |1 + α R(δ) e^{iθ}|²
         with np.errstate(divide="ignore"):
-            cn0 = (unobstructed_cn0_dbhz(el_v, self.system[idx], cfg) + 10.0 * np.log10(a1 * a1 * np.maximum(comb2, 1e-12))
-                   + cfg.cn0_noise_db * noise[0, idx])
+            cn0 = (
+                unobstructed_cn0_dbhz(el_v, self.system[idx], cfg)
+                + 10.0 * np.log10(a1 * a1 * np.maximum(comb2, 1e-12))
+                + cfg.cn0_noise_db * noise[0, idx]
+            )
         # tracking with hysteresis: a signal is acquired at cn0_acquire_dbhz, then kept down to the threshold
         was = self._lock_start_us[idx] >= 0
         track = (a1 > 0) & (cn0 >= np.where(was, cfg.cn0_threshold_dbhz, cfg.cn0_acquire_dbhz))
         a_inph = alpha * cos_ph
-        env = e1 + chip * dll_multipath_chips(np.clip(a_inph, -0.99, 0.99), delta_chips, cfg.correlator_spacing_chips)
+        env = e1 + chip * dll_multipath_chips(
+            np.clip(a_inph, -0.99, 0.99), delta_chips, cfg.correlator_spacing_chips
+        )
         cn0_seen = np.maximum(cn0, 0.0)  # (−inf where nothing arrives: those rows are not reported)
         sig = dll_sigma_m(cn0_seen, chip, cfg)
         n_code = sig * noise[1, idx]
@@ -376,12 +431,24 @@ class Receiver:
         klob_all, tropo_all = self._atmosphere(t, u_ned, el, h)
         klob, tropo = klob_all[idx], tropo_all[idx]
         iono = klob * self.iono_scale[idx] * self.iono_factor[idx]
-        common = self.sisre_m[idx] + (self.iono_factor[idx] - 1.0) * klob * self.iono_scale[idx] + self.ifb_m[idx]
+        common = (
+            self.sisre_m[idx] + (self.iono_factor[idx] - 1.0) * klob * self.iono_scale[idx] + self.ifb_m[idx]
+        )
         isb = self.isb_all_m[idx]
         clk_sv = st.clock_s[idx] + st.clock_drift_s_s[idx] * (T_LIGHT0_S - tau[idx])
         b_m = C_M_S * self.clock_bias_s
-        pr = (rho[idx] + b_m + isb - C_M_S * clk_sv + iono + tropo + self.sisre_m[idx] + self.ifb_m[idx]
-              + env + n_code)
+        pr = (
+            rho[idx]
+            + b_m
+            + isb
+            - C_M_S * clk_sv
+            + iono
+            + tropo
+            + self.sisre_m[idx]
+            + self.ifb_m[idx]
+            + env
+            + n_code
+        )
         # pseudorange rate: the tracked path's range rate (a reflection arrives from the mirrored direction)
         vs = st.vel_ecef_m_s[idx]
         ang = OMEGA_E_RAD_S * tau[idx]
@@ -396,29 +463,46 @@ class Receiver:
         tau_dot = geo_rate / C_M_S
         s_r = s_rot[idx]
         rot_rate = OMEGA_E_RAD_S * tau_dot * (uu[:, 0] * s_r[:, 1] - uu[:, 1] * s_r[:, 0])
-        rate = (sat_rate * (1.0 - tau_dot) + rot_rate - rx_rate + C_M_S * (self.clock_drift_s_s - st.clock_drift_s_s[idx])
-                + cfg.doppler_sigma_m_s * 10.0 ** ((CN0_REF_DBHZ - cn0_seen) / 20.0) * noise[2, idx])
+        rate = (
+            sat_rate * (1.0 - tau_dot)
+            + rot_rate
+            - rx_rate
+            + C_M_S * (self.clock_drift_s_s - st.clock_drift_s_s[idx])
+            + cfg.doppler_sigma_m_s * 10.0 ** ((CN0_REF_DBHZ - cn0_seen) / 20.0) * noise[2, idx]
+        )
         # lock times
         tracked_all = np.zeros(n_all, dtype=bool)
         tracked_all[idx[track]] = True
-        self._lock_start_us = np.where(tracked_all, np.where(self._lock_start_us < 0, t_us, self._lock_start_us), -1)
+        self._lock_start_us = np.where(
+            tracked_all, np.where(self._lock_start_us < 0, t_us, self._lock_start_us), -1
+        )
         keep = track
         rows_all = idx[keep]
         self.lock_ms = (t_us - self._lock_start_us[rows_all]) / 1e3
         sat_pos = s[idx][keep]  # at transmission, in the transmission-time frame
         ep = make_epoch(
-            t + self.clock_bias_s, self.system[rows_all], self.prn[rows_all], pr[keep],
+            t + self.clock_bias_s,
+            self.system[rows_all],
+            self.prn[rows_all],
+            pr[keep],
             pseudorange_var_m2=(0.01 * 2.0 ** prstd_index(sig[keep])) ** 2,
             pseudorange_rate_m_s=rate[keep],
             cn0_dbhz=np.clip(np.rint(cn0[keep]), 0, 255),
             elevation_deg=np.rint(np.degrees(el_v[keep])),
             azimuth_deg=np.rint(np.degrees(az[keep])) % 360,
-            sat_pos_ecef_m=sat_pos, sat_vel_ecef_m_s=vs[keep], sat_clock_s=clk_sv[keep],
+            sat_pos_ecef_m=sat_pos,
+            sat_vel_ecef_m_s=vs[keep],
+            sat_clock_s=clk_sv[keep],
             sat_clock_drift_s_s=st.clock_drift_s_s[idx][keep],
         )
         truth = SatTruth(
-            los=~blocked[keep], nlos=(k1 != 0)[keep], env_error_m=env[keep], noise_m=n_code[keep],
-            common_error_m=common[keep], range_m=rho[idx][keep], extra_path_m=e1[keep],
+            los=~blocked[keep],
+            nlos=(k1 != 0)[keep],
+            env_error_m=env[keep],
+            noise_m=n_code[keep],
+            common_error_m=common[keep],
+            range_m=rho[idx][keep],
+            extra_path_m=e1[keep],
             model_atmosphere_m=(klob * self.iono_scale[idx] + tropo)[keep],
         )
         return ep, truth

@@ -105,8 +105,13 @@ def _header(b: _Bits, tow_next_s: float, subframe: int) -> None:
     b.put(43, 3, subframe)
 
 
-def lnav_subframe(eph: KeplerEphemeris, subframe: int, tow_next_s: float, week: int,
-                  klobuchar: tuple[np.ndarray, np.ndarray] | None = None) -> list[int] | None:
+def lnav_subframe(
+    eph: KeplerEphemeris,
+    subframe: int,
+    tow_next_s: float,
+    week: int,
+    klobuchar: tuple[np.ndarray, np.ndarray] | None = None,
+) -> list[int] | None:
     """One LNAV subframe (1, 2, 3, or 4 page 18 when ``klobuchar`` is given) of ``eph`` as ten
     SFRBX words; ``tow_next_s`` the GPS second of week the next subframe starts at (HOW), ``week``
     the GPS week (sent modulo 1024). None for other subframes."""
@@ -146,8 +151,9 @@ def lnav_subframe(eph: KeplerEphemeris, subframe: int, tow_next_s: float, week: 
         alpha, beta = klobuchar
         b.put(48, 2, 1)
         b.put(50, 6, 56)  # page 18: ionosphere and UTC
-        for k, (lsb_a, lsb_b) in enumerate(((2.0**-30, 2.0**11), (2.0**-27, 2.0**14),
-                                             (2.0**-24, 2.0**16), (2.0**-24, 2.0**16))):
+        for k, (lsb_a, lsb_b) in enumerate(
+            ((2.0**-30, 2.0**11), (2.0**-27, 2.0**14), (2.0**-24, 2.0**16), (2.0**-24, 2.0**16))
+        ):
             b.scaled(56 + 8 * k, 8, float(alpha[k]), lsb_a)
             b.scaled(88 + 8 * k, 8, float(beta[k]), lsb_b)
     else:
@@ -156,8 +162,11 @@ def lnav_subframe(eph: KeplerEphemeris, subframe: int, tow_next_s: float, week: 
 
 
 def _wavelength_m(system: np.ndarray, channel: np.ndarray) -> np.ndarray:
-    f = np.select([system == System.GLONASS, system == System.BEIDOU],
-                  [FREQ_G1_HZ + channel * DFREQ_G1_HZ, np.full(len(system), FREQ_B1I_HZ)], FREQ_L1_HZ)
+    f = np.select(
+        [system == System.GLONASS, system == System.BEIDOU],
+        [FREQ_G1_HZ + channel * DFREQ_G1_HZ, np.full(len(system), FREQ_B1I_HZ)],
+        FREQ_L1_HZ,
+    )
     return C_M_S / f
 
 
@@ -185,7 +194,9 @@ def _i(x: float, scale: float = 1.0) -> int:
     return int(round(x / scale)) if math.isfinite(x) else 0
 
 
-def rawx(epoch: GnssEpoch, channel: np.ndarray, lock_ms: np.ndarray | None, clock_reset: bool = False) -> bytes:
+def rawx(
+    epoch: GnssEpoch, channel: np.ndarray, lock_ms: np.ndarray | None, clock_reset: bool = False
+) -> bytes:
     """RXM-RAWX of an epoch (``channel``: GLONASS frequency channel per row, 0 for the others)."""
     week, tow = week_tow(epoch.t_gps_s)
     lam = _wavelength_m(epoch.system, channel)
@@ -198,9 +209,23 @@ def rawx(epoch: GnssEpoch, channel: np.ndarray, lock_ms: np.ndarray | None, cloc
     out = [_RAWX_HEAD.pack(tow, week, int(round(gps_minus_utc_s(epoch.t_gps_s))), epoch.n, rec_stat)]
     for i, (s, prn) in enumerate(zip(epoch.system.tolist(), epoch.prn.tolist(), strict=True)):
         d = float(do_hz[i])
-        out.append(_RAWX_MEAS.pack(
-            float(epoch.pseudorange_m[i]), 0.0, d if math.isfinite(d) else 0.0, s, prn, 0,
-            int(channel[i]) + 7 if s == System.GLONASS else 0, int(lock[i]), cn0[i], prstd[i], 15, 8, 1))
+        out.append(
+            _RAWX_MEAS.pack(
+                float(epoch.pseudorange_m[i]),
+                0.0,
+                d if math.isfinite(d) else 0.0,
+                s,
+                prn,
+                0,
+                int(channel[i]) + 7 if s == System.GLONASS else 0,
+                int(lock[i]),
+                cn0[i],
+                prstd[i],
+                15,
+                8,
+                1,
+            )
+        )
     return frame(RXM, RAWX, b"".join(out))
 
 
@@ -210,17 +235,33 @@ def navsat(epoch: GnssEpoch, itow_ms: int, solution: SppSolution | None) -> byte
     for i in range(epoch.n):
         used = bool(solution is not None and solution.used[i])
         res = float(solution.residuals_m[i]) if solution is not None else math.nan
-        flags = (7 if used else 4) | (int(used) << 3) | (1 << 8) | (1 << 11)  # quality, used, orbit: eph, ephAvail
-        out.append(_SAT_SV.pack(
-            int(epoch.system[i]), int(epoch.prn[i]), int(np.clip(np.rint(np.nan_to_num(epoch.cn0_dbhz[i])), 0, 255)),
-            int(np.clip(np.rint(np.nan_to_num(epoch.elevation_deg[i], nan=-91.0)), -91, 90)),
-            int(np.rint(np.nan_to_num(epoch.azimuth_deg[i]))) % 360, _i(float(np.clip(res, -3276.0, 3276.0)), 0.1),
-            flags))
+        flags = (
+            (7 if used else 4) | (int(used) << 3) | (1 << 8) | (1 << 11)
+        )  # quality, used, orbit: eph, ephAvail
+        out.append(
+            _SAT_SV.pack(
+                int(epoch.system[i]),
+                int(epoch.prn[i]),
+                int(np.clip(np.rint(np.nan_to_num(epoch.cn0_dbhz[i])), 0, 255)),
+                int(np.clip(np.rint(np.nan_to_num(epoch.elevation_deg[i], nan=-91.0)), -91, 90)),
+                int(np.rint(np.nan_to_num(epoch.azimuth_deg[i]))) % 360,
+                _i(float(np.clip(res, -3276.0, 3276.0)), 0.1),
+                flags,
+            )
+        )
     return frame(NAV, SAT, b"".join(out))
 
 
-def navpvt(solution: SppSolution, lat_deg: float, lon_deg: float, height_m: float, v_ned_m_s: np.ndarray | None,
-           h_acc_m: float, v_acc_m: float, t_gps_s: float) -> bytes:
+def navpvt(
+    solution: SppSolution,
+    lat_deg: float,
+    lon_deg: float,
+    height_m: float,
+    v_ned_m_s: np.ndarray | None,
+    h_acc_m: float,
+    v_acc_m: float,
+    t_gps_s: float,
+) -> bytes:
     """NAV-PVT of a fix valid at GPS time ``t_gps_s`` (iTOW in ms; the date and time in UTC)."""
     _, tow = week_tow(t_gps_s)
     unix = gps_to_unix_s(t_gps_s)
@@ -233,18 +274,47 @@ def navpvt(solution: SppSolution, lat_deg: float, lon_deg: float, height_m: floa
     head = math.degrees(math.atan2(ve, vn)) % 360.0 if speed > 0.1 else 0.0
     pdop = float(solution.dops.pdop)
     payload = _PVT.pack(
-        int(round(tow * 1000.0)) % 604_800_000, tm.tm_year, tm.tm_mon, tm.tm_mday, tm.tm_hour, tm.tm_min,
-        tm.tm_sec, 0b111, 50, int(round((unix - whole) * 1e9)), 3, 1, 0, solution.n_used,
-        _i(lon_deg, 1e-7), _i(lat_deg, 1e-7), _i(height_m, 1e-3), _i(height_m, 1e-3), _i(h_acc_m, 1e-3),
-        _i(v_acc_m, 1e-3), _i(vn, 1e-3), _i(ve, 1e-3), _i(vd, 1e-3), _i(speed, 1e-3), _i(head, 1e-5),
-        _i(solution.vel_acc_m_s, 1e-3) if has_v else 0, _i(180.0, 1e-5),
-        _i(min(pdop, 655.0), 0.01) if math.isfinite(pdop) else 9999, 0, 0, 0, 0)
+        int(round(tow * 1000.0)) % 604_800_000,
+        tm.tm_year,
+        tm.tm_mon,
+        tm.tm_mday,
+        tm.tm_hour,
+        tm.tm_min,
+        tm.tm_sec,
+        0b111,
+        50,
+        int(round((unix - whole) * 1e9)),
+        3,
+        1,
+        0,
+        solution.n_used,
+        _i(lon_deg, 1e-7),
+        _i(lat_deg, 1e-7),
+        _i(height_m, 1e-3),
+        _i(height_m, 1e-3),
+        _i(h_acc_m, 1e-3),
+        _i(v_acc_m, 1e-3),
+        _i(vn, 1e-3),
+        _i(ve, 1e-3),
+        _i(vd, 1e-3),
+        _i(speed, 1e-3),
+        _i(head, 1e-5),
+        _i(solution.vel_acc_m_s, 1e-3) if has_v else 0,
+        _i(180.0, 1e-5),
+        _i(min(pdop, 655.0), 0.01) if math.isfinite(pdop) else 9999,
+        0,
+        0,
+        0,
+        0,
+    )
     return frame(NAV, PVT, payload)
 
 
 def sfrbx(system: int, prn: int, words: list[int]) -> bytes:
     """RXM-SFRBX (version 2) of one navigation message subframe."""
-    return frame(RXM, SFRBX, struct.pack(f"<BBBBBBBx{len(words)}I", system, prn, 0, 0, len(words), 0, 2, *words))
+    return frame(
+        RXM, SFRBX, struct.pack(f"<BBBBBBBx{len(words)}I", system, prn, 0, 0, len(words), 0, 2, *words)
+    )
 
 
 @dataclass
@@ -267,8 +337,11 @@ class UbxEncoder:
             lat, lon, h = (float(x) for x in ecef_to_geodetic(sol.p_ecef_m))
             v = sol.v_ecef_m_s
             v_ned = ecef_to_ned_matrix(lat, lon) @ v if np.isfinite(v).all() else None
-            out.append(navpvt(sol, math.degrees(lat), math.degrees(lon), h, v_ned, sol.h_acc_m, sol.v_acc_m,
-                              raw.t_gps_s))
+            out.append(
+                navpvt(
+                    sol, math.degrees(lat), math.degrees(lon), h, v_ned, sol.h_acc_m, sol.v_acc_m, raw.t_gps_s
+                )
+            )
         out += self._subframes(raw)
         self._last_t_gps_s = raw.t_gps_s
         self.frames += len(out)

@@ -13,7 +13,7 @@ import errno
 import socket
 from dataclasses import asdict
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -42,8 +42,13 @@ class UbxServer:
         self.port = int(self._sock.getsockname()[1])
         self._clients: list[tuple[socket.socket, bytearray]] = []
         self._log: BinaryIO | None = open(log_path, "wb") if log_path is not None else None  # noqa: SIM115
-        self.counters: dict[str, int] = {"frames": 0, "bytes": 0, "clients": 0, "dropped_slow": 0,
-                                         "dropped_closed": 0}
+        self.counters: dict[str, int] = {
+            "frames": 0,
+            "bytes": 0,
+            "clients": 0,
+            "dropped_slow": 0,
+            "dropped_closed": 0,
+        }
 
     @property
     def url(self) -> str:
@@ -88,7 +93,9 @@ class UbxServer:
                 pass
             except OSError as exc:
                 conn.close()
-                self.counters["dropped_closed" if exc.errno in (errno.EPIPE, errno.ECONNRESET) else "dropped_slow"] += 1
+                self.counters[
+                    "dropped_closed" if exc.errno in (errno.EPIPE, errno.ECONNRESET) else "dropped_slow"
+                ] += 1
                 continue
             if len(pending) > MAX_BACKLOG_BYTES:
                 conn.close()
@@ -123,17 +130,25 @@ class ReceiverStream:
 
     def _write_info(self) -> None:
         store = self.gnss.store
-        write_json(self.out_dir / "receiver.json", {
-            "ubx": self.server.url,
-            "log": "receiver.ubx",
-            "t0_gps_s": self.gnss.t0_gps_s,
-            "boot_time": "GPS time = t0_gps_s + boot time (s); RXM-RAWX rcvTow adds the receiver clock offset",
-            "systems": list(self.gnss.cfg.systems),
-            "rate_hz": self.gnss.cfg.rate_hz,
-            "ephemerides": {"kepler": [asdict(e) for e in store.kepler], "glonass": [asdict(g) for g in store.glonass],
-                            "klobuchar": None if store.klobuchar is None else [list(map(float, v)) for v in
-                                                                               store.klobuchar]},
-        })
+        write_json(
+            self.out_dir / "receiver.json",
+            {
+                "ubx": self.server.url,
+                "log": "receiver.ubx",
+                "t0_gps_s": self.gnss.t0_gps_s,
+                "boot_time": "GPS time = t0_gps_s + boot time (s); RXM-RAWX rcvTow adds the receiver "
+                "clock offset",
+                "systems": list(self.gnss.cfg.systems),
+                "rate_hz": self.gnss.cfg.rate_hz,
+                "ephemerides": {
+                    "kepler": [asdict(e) for e in store.kepler],
+                    "glonass": [asdict(g) for g in store.glonass],
+                    "klobuchar": None
+                    if store.klobuchar is None
+                    else [list(map(float, v)) for v in store.klobuchar],
+                },
+            },
+        )
 
     def send(self, raws: list[RawObservation]) -> None:
         if self.gnss.store is not self.encoder.store:
@@ -145,11 +160,16 @@ class ReceiverStream:
         self.server.close()
 
 
-def store_from_info(info: dict) -> EphemerisStore:
+def store_from_info(info: dict[str, Any]) -> EphemerisStore:
     """The ``EphemerisStore`` of a ``receiver.json``'s ``ephemerides`` (its consumer's side)."""
     eph = info["ephemerides"]
     klob = eph.get("klobuchar")
-    return EphemerisStore([KeplerEphemeris(**e) for e in eph["kepler"]],
-                          [GlonassEphemeris(**{k: tuple(v) if isinstance(v, list) else v for k, v in g.items()})
-                           for g in eph["glonass"]],
-                          None if klob is None else (np.array(klob[0]), np.array(klob[1])))
+    glonass = []
+    for g in eph["glonass"]:
+        fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in g.items()}
+        glonass.append(GlonassEphemeris(**fields))
+    return EphemerisStore(
+        [KeplerEphemeris(**e) for e in eph["kepler"]],
+        glonass,
+        None if klob is None else (np.array(klob[0]), np.array(klob[1])),
+    )

@@ -40,7 +40,11 @@ def test_image_method_extra_path_matches_the_mirrored_receiver():
     away, R' the receiver mirrored in the facade's plane; the specular point's height is checked."""
     city = City(np.array([[-100.0, 20.0, 100.0, 40.0]]), np.array([80.0]))
     p, h = np.array([0.0, 0.0]), 10.0
-    for el, az in ((30.0, 250.0), (15.0, 290.0), (60.0, 265.0)):  # satellites in the west: the facade faces them
+    for el, az in (
+        (30.0, 250.0),
+        (15.0, 290.0),
+        (60.0, 265.0),
+    ):  # satellites in the west: the facade faces them
         u = _unit(el, az)
         d = u[:2] / np.linalg.norm(u[:2])
         s, w, extra, cos_inc = city.reflections(p, h, d[None], np.array([math.tan(math.radians(el))]))
@@ -85,8 +89,9 @@ def test_line_of_sight_at_the_roof_edge_and_knife_edge_loss():
     el = math.radians(35.0)
     u, z = np.array([math.cos(el), math.sin(el)]), np.array([0.0, 1.0])
     e = 40.0 * u + 3.0 * z
-    assert diffraction_extra_m(np.array([40.0]), np.array([3.0]), np.array([math.sin(el)]))[0] == pytest.approx(
-        np.linalg.norm(e) - u @ e, rel=1e-12)
+    assert diffraction_extra_m(np.array([40.0]), np.array([3.0]), np.array([math.sin(el)]))[
+        0
+    ] == pytest.approx(np.linalg.norm(e) - u @ e, rel=1e-12)
 
 
 def _discriminator_zero(a: float, delta: float, d: float) -> float:
@@ -109,17 +114,23 @@ def _discriminator_zero(a: float, delta: float, d: float) -> float:
 def test_dll_multipath_closed_form_is_the_discriminator_zero(a, delta):
     d = 0.2
     assert dll_multipath_chips(np.array([a]), np.array([delta]), d)[0] == pytest.approx(
-        _discriminator_zero(a, delta, d), abs=1e-9)
+        _discriminator_zero(a, delta, d), abs=1e-9
+    )
 
 
 def test_dll_noise_and_unobstructed_cn0():
     cfg = ReceiverConfig(dll_bandwidth_hz=0.5, correlator_spacing_chips=0.2, integration_s=0.02)
-    c = 10 ** 4.5
+    c = 10**4.5
     expect = 293.0522 * math.sqrt(0.5 * 0.2 / (2 * c) * (1 + 2 / (0.02 * c * 1.8)))
     assert dll_sigma_m(np.array([45.0]), np.array([293.0522]), cfg)[0] == pytest.approx(expect, rel=1e-6)
     cn0 = unobstructed_cn0_dbhz(np.radians([90.0, 30.0, 0.0]), np.array([0, 0, 6]), cfg)
-    assert cn0.tolist() == pytest.approx([cfg.cn0_zenith_dbhz, cfg.cn0_zenith_dbhz - cfg.antenna_rolloff_db / 4,
-                                          cfg.cn0_zenith_dbhz + cfg.cn0_glonass_offset_db - cfg.antenna_rolloff_db])
+    assert cn0.tolist() == pytest.approx(
+        [
+            cfg.cn0_zenith_dbhz,
+            cfg.cn0_zenith_dbhz - cfg.antenna_rolloff_db / 4,
+            cfg.cn0_zenith_dbhz + cfg.cn0_glonass_offset_db - cfg.antenna_rolloff_db,
+        ]
+    )
 
 
 def test_reflection_amplitude_fresnel_limits():
@@ -129,11 +140,14 @@ def test_reflection_amplitude_fresnel_limits():
     amp = reflection_amplitude(np.array([1.0]), np.array([0.5]), np.array([eps]), 10.0)[0]
     assert amp == pytest.approx(r0 * 10 ** (-10.0 * 0.5 / 20), rel=1e-9)
     # grazing: the handedness is kept (amplitude → 1)
-    assert reflection_amplitude(np.array([1e-6]), np.array([0.5]), np.array([eps]), 10.0)[0] == pytest.approx(1.0, abs=1e-3)
+    assert reflection_amplitude(np.array([1e-6]), np.array([0.5]), np.array([eps]), 10.0)[0] == pytest.approx(
+        1.0, abs=1e-3
+    )
     # a conductor turns all of it at every angle
     for c in (1.0, 0.5, 0.1):
-        assert reflection_amplitude(np.array([c]), np.array([0.3]), np.array([CONDUCTOR_PERMITTIVITY]), 12.0)[0] == pytest.approx(
-            10 ** (-12.0 * 0.3 / 20), rel=1e-3)
+        assert reflection_amplitude(np.array([c]), np.array([0.3]), np.array([CONDUCTOR_PERMITTIVITY]), 12.0)[
+            0
+        ] == pytest.approx(10 ** (-12.0 * 0.3 / 20), rel=1e-3)
 
 
 def test_nominal_gps_ground_track_repeats_every_sidereal_day_and_glonass_orbit():
@@ -162,11 +176,13 @@ def test_nominal_gps_ground_track_repeats_every_sidereal_day_and_glonass_orbit()
 
 
 def _open_sky_receiver(**over):
-    cfg = ReceiverConfig(enabled=True, start_spread_s=0.0, cn0_noise_db=0.0, doppler_sigma_m_s=0.0,
-                         sisre_m=0.0, sisre_glonass_m=0.0, iono_error_fraction=0.0, glonass_ifb_sd_m=0.0,
-                         clock_h0=0.0, clock_h_2=0.0, **over)
+    quiet = ("start_spread_s", "cn0_noise_db", "doppler_sigma_m_s", "sisre_m", "sisre_glonass_m",
+             "iono_error_fraction", "glonass_ifb_sd_m", "clock_h0", "clock_h_2")
+    cfg = ReceiverConfig(enabled=True, **{**dict.fromkeys(quiet, 0.0), **over})
     store = ephemeris_store(T0 - 3600, T0 + 3600, SYSTEMS)
-    return Receiver(cfg, City(np.zeros((0, 4)), np.zeros(0)), FRAME, store, T0, np.random.default_rng(3)), store
+    return Receiver(
+        cfg, City(np.zeros((0, 4)), np.zeros(0)), FRAME, store, T0, np.random.default_rng(3)
+    ), store
 
 
 def test_open_sky_epoch_solves_to_the_true_position_and_velocity():
@@ -188,7 +204,9 @@ def test_open_sky_epoch_solves_to_the_true_position_and_velocity():
     home = geodetic_to_ecef(lat, lon, FRAME.home_alt_m)
     r = ecef_to_ned_matrix(lat, lon)
     assert np.linalg.norm(r @ (sol.p_ecef_m - home) - p) < 0.01
-    assert np.linalg.norm(r @ sol.v_ecef_m_s - v) < 0.02  # the solver's first-order Earth rotation: ~5 mm/s a satellite
+    assert (
+        np.linalg.norm(r @ sol.v_ecef_m_s - v) < 0.02
+    )  # the solver's first-order Earth rotation: ~5 mm/s a satellite
     gps = sol.clock_systems.index(System.GPS)
     assert sol.clock_bias_m[gps] == pytest.approx(C_M_S * rx.clock_bias_s, abs=0.01)
     assert sol.clock_drift_m_s == pytest.approx(C_M_S * rx.clock_drift_s_s, abs=0.01)
@@ -200,7 +218,9 @@ def test_blocked_satellite_tracked_by_its_reflection_carries_the_extra_path():
     image method's extra path and nothing else (noise-free, no second path)."""
     rx, _ = _open_sky_receiver(unmapped_prob=0.0, diffraction=False)
     # east: 40 m high (blocks what its roof hides from the antenna); west: a tall facade that reflects them
-    rx.city = City(np.array([[-500.0, 15.0, 500.0, 60.0], [-500.0, -60.0, 500.0, -15.0]]), np.array([40.0, 300.0]))
+    rx.city = City(
+        np.array([[-500.0, 15.0, 500.0, 60.0], [-500.0, -60.0, 500.0, -15.0]]), np.array([40.0, 300.0])
+    )
     rx.facade_permittivity = np.full(8, CONDUCTOR_PERMITTIVITY)
     rx.facade_absorption = np.ones(8)
     rx.observe(0, np.zeros(3), np.zeros(3))

@@ -14,7 +14,9 @@ from companion.mission import SCENARIOS, load_mission
 from gcs_tools.evaluate import simcal
 from simvehicle.config import sim_config_for
 
-SMARTLOC = Path(__file__).resolve().parents[1] / "../shared/data/urban/smartloc/Berlin_Potsdamer_Platz_Input.txt"
+SMARTLOC = (
+    Path(__file__).resolve().parents[1] / "../shared/data/urban/smartloc/Berlin_Potsdamer_Platz_Input.txt"
+)
 
 
 def test_canyon_is_a_scenario_with_the_raw_receiver():
@@ -33,8 +35,11 @@ def tuning_flights():
 
 def test_calibrated_receiver_stays_within_every_tolerance_on_its_tuning_flights(tuning_flights):
     rows = simcal.compare(simcal.SMARTLOC_REFERENCE, tuning_flights)
-    failed = [(r["statistic"], round(r["simulated"], 2), (round(r["lo"], 2), round(r["hi"], 2)))
-              for r in rows if not r["pass"]]
+    failed = [
+        (r["statistic"], round(r["simulated"], 2), (round(r["lo"], 2), round(r["hi"], 2)))
+        for r in rows
+        if not r["pass"]
+    ]
     assert not failed
     assert tuning_flights["epochs"] > 2000 and tuning_flights["fixes"] > 0.95 * tuning_flights["epochs"]
 

@@ -47,9 +47,30 @@ def test_sitl_canyon_streams_ubx_matching_its_gps_raw_int(tmp_path):
     got: dict = {}
     reader = threading.Thread(target=_read_stream, args=(out / "receiver.json", got, 40.0), daemon=True)
     reader.start()
-    done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", "test",
-                           "--scenario", "canyon", "--profile", "0", "--max-duration-s", "8", "--no-telemetry",
-                           "--no-ground-out", "--out", str(out)], capture_output=True, text=True, timeout=80)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gcs_tools",
+            "sitl",
+            "--no-progress",
+            "--mission",
+            "test",
+            "--scenario",
+            "canyon",
+            "--profile",
+            "0",
+            "--max-duration-s",
+            "8",
+            "--no-telemetry",
+            "--no-ground-out",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=80,
+    )
     reader.join(timeout=10)
     assert not children_of(out)
     assert "data" in got, done.stderr

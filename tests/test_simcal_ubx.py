@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from gnss_helpers_lnav import SUBFRAMES_PRN21
 from pyubx2 import GET, UBXMessage, UBXReader
 
 from companion.errors import UserError
@@ -20,7 +21,6 @@ from companion.gnss.systems import System
 from companion.gnss.timescale import gps_minus_utc_s, week_tow
 from companion.gnss.ubx import ReceiverPvt, UbxDecoder
 from companion.mission import load_mission
-from gnss_helpers_lnav import SUBFRAMES_PRN21
 from simvehicle import SimVehicle
 from simvehicle.receiver import prstd_index
 from simvehicle.ubx import UbxEncoder, lnav_parity, lnav_subframe, navpvt, navsat, rawx, sfrbx
@@ -43,18 +43,36 @@ def flight():
 
 def _pyubx2_rawx(ep: GnssEpoch, channel, lock, reset) -> bytes:
     week, tow = week_tow(ep.t_gps_s)
-    kw = {"rcvTow": tow, "week": week, "leapS": round(gps_minus_utc_s(ep.t_gps_s)), "numMeas": ep.n, "leapSec": 1,
-          "clkReset": int(reset)}
-    lam = np.where(ep.system == System.GLONASS, 299792458.0 / (1602e6 + channel * 0.5625e6), 299792458.0 / 1575.42e6)
+    kw = {
+        "rcvTow": tow,
+        "week": week,
+        "leapS": round(gps_minus_utc_s(ep.t_gps_s)),
+        "numMeas": ep.n,
+        "leapSec": 1,
+        "clkReset": int(reset),
+    }
+    lam = np.where(
+        ep.system == System.GLONASS, 299792458.0 / (1602e6 + channel * 0.5625e6), 299792458.0 / 1575.42e6
+    )
     for i in range(ep.n):
         s = f"_{i + 1:02d}"
-        kw.update({f"prMes{s}": float(ep.pseudorange_m[i]), f"cpMes{s}": 0.0,
-                   f"doMes{s}": float(-ep.pseudorange_rate_m_s[i] / lam[i]), f"gnssId{s}": int(ep.system[i]),
-                   f"svId{s}": int(ep.prn[i]), f"sigId{s}": 0,
-                   f"freqId{s}": int(channel[i]) + 7 if ep.system[i] == System.GLONASS else 0,
-                   f"locktime{s}": int(min(lock[i], 64500)), f"cno{s}": int(ep.cn0_dbhz[i]),
-                   f"prStd{s}": int(prstd_index(np.sqrt(ep.pseudorange_var_m2[i:i + 1]))[0]), f"cpStd{s}": 15,
-                   f"doStd{s}": 8, f"prValid{s}": 1})
+        kw.update(
+            {
+                f"prMes{s}": float(ep.pseudorange_m[i]),
+                f"cpMes{s}": 0.0,
+                f"doMes{s}": float(-ep.pseudorange_rate_m_s[i] / lam[i]),
+                f"gnssId{s}": int(ep.system[i]),
+                f"svId{s}": int(ep.prn[i]),
+                f"sigId{s}": 0,
+                f"freqId{s}": int(channel[i]) + 7 if ep.system[i] == System.GLONASS else 0,
+                f"locktime{s}": int(min(lock[i], 64500)),
+                f"cno{s}": int(ep.cn0_dbhz[i]),
+                f"prStd{s}": int(prstd_index(np.sqrt(ep.pseudorange_var_m2[i : i + 1]))[0]),
+                f"cpStd{s}": 15,
+                f"doStd{s}": 8,
+                f"prValid{s}": 1,
+            }
+        )
     return UBXMessage("RXM", "RXM-RAWX", GET, **kw).serialize()
 
 
@@ -70,22 +88,51 @@ def test_frames_are_byte_equal_to_pyubx2(flight):
     for i in range(ep.n):
         s = f"_{i + 1:02d}"
         used = bool(sol.used[i])
-        kw.update({f"gnssId{s}": int(ep.system[i]), f"svId{s}": int(ep.prn[i]), f"cno{s}": int(ep.cn0_dbhz[i]),
-                   f"elev{s}": int(ep.elevation_deg[i]), f"azim{s}": int(ep.azimuth_deg[i]),
-                   f"prRes{s}": float(sol.residuals_m[i]), f"qualityInd{s}": 7 if used else 4,
-                   f"svUsed{s}": int(used), f"orbitSource{s}": 1, f"ephAvail{s}": 1})
+        kw.update(
+            {
+                f"gnssId{s}": int(ep.system[i]),
+                f"svId{s}": int(ep.prn[i]),
+                f"cno{s}": int(ep.cn0_dbhz[i]),
+                f"elev{s}": int(ep.elevation_deg[i]),
+                f"azim{s}": int(ep.azimuth_deg[i]),
+                f"prRes{s}": float(sol.residuals_m[i]),
+                f"qualityInd{s}": 7 if used else 4,
+                f"svUsed{s}": int(used),
+                f"orbitSource{s}": 1,
+                f"ephAvail{s}": 1,
+            }
+        )
     assert navsat(ep, 123456, sol) == UBXMessage("NAV", "NAV-SAT", GET, **kw).serialize()
     v = np.array([1.234, -0.5, 0.25])
     t = raw.t_gps_s
     got = navpvt(sol, 52.1234567, 13.7654321, 123.456, v, 7.5, 12.25, t)
     msg = UBXReader.parse(got)
     assert (msg.lat, msg.lon, msg.height, msg.hAcc, msg.vAcc, msg.velN, msg.velE, msg.velD) == (
-        52.1234567, 13.7654321, 123456, 7500, 12250, 1234, -500, 250)
+        52.1234567,
+        13.7654321,
+        123456,
+        7500,
+        12250,
+        1234,
+        -500,
+        250,
+    )
     assert msg.numSV == sol.n_used and msg.fixType == 3 and msg.gnssFixOk == 1 and msg.validDate == 1
     assert msg.iTOW == round(week_tow(t)[1] * 1000) and msg.pDOP == pytest.approx(sol.dops.pdop, abs=0.005)
     words = list(range(1, 11))
-    assert sfrbx(0, 7, words) == UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=0, svId=7, numWords=10, version=2,
-                                            **{f"dwrd_{i + 1:02d}": w for i, w in enumerate(words)}).serialize()
+    assert (
+        sfrbx(0, 7, words)
+        == UBXMessage(
+            "RXM",
+            "RXM-SFRBX",
+            GET,
+            gnssId=0,
+            svId=7,
+            numWords=10,
+            version=2,
+            **{f"dwrd_{i + 1:02d}": w for i, w in enumerate(words)},
+        ).serialize()
+    )
 
 
 def test_lnav_parity_of_a_real_satellite_and_the_ephemeris_round_trip(flight):
@@ -102,7 +149,9 @@ def test_lnav_parity_of_a_real_satellite_and_the_ephemeris_round_trip(flight):
     got = None
     for k in (1, 2, 3):
         words = lnav_subframe(eph, k, tow + 6.0 * k, week)
-        assert words is not None and all(w & 0x3 == 0 for w in (words[1] & 0x3F, words[9] & 0x3F))  # D29 = D30 = 0
+        assert words is not None and all(
+            w & 0x3 == 0 for w in (words[1] & 0x3F, words[9] & 0x3F)
+        )  # D29 = D30 = 0
         got = dec.add(eph.prn, words, eph.toe_gps_s + 60.0) or got
     assert got == eph
     dec.add(eph.prn, lnav_subframe(eph, 4, tow + 24.0, week, store.klobuchar), eph.toe_gps_s)

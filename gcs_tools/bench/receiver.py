@@ -27,6 +27,7 @@ from companion.mission import load_mission
 from simvehicle import SimVehicle
 from simvehicle.harness.backend import FlightRequest, backend
 from simvehicle.rawgnss import RawGnssModel
+from simvehicle.receiver import RawObservation
 from simvehicle.ubx import UbxEncoder
 
 MISSION, PROFILE, METHOD, SEED = "default", 0, "second-order", 0
@@ -62,12 +63,14 @@ def per_epoch_ms(repeats: int = 5, n: int = 100) -> dict[str, float]:
         prev = None
         c0 = time.process_time()
         for ep, tr in epochs:
-            cor = ep.replace(pseudorange_m=ep.pseudorange_m + C_M_S * ep.sat_clock_s - tr.model_atmosphere_m,
-                             corrected=True)
+            cor = ep.replace(
+                pseudorange_m=ep.pseudorange_m + C_M_S * ep.sat_clock_s - tr.model_atmosphere_m,
+                corrected=True,
+            )
             prev = solve_position(cor, gnss.spp, p0_ecef_m=prev).p_ecef_m
         best["solve"] = min(best["solve"], (time.process_time() - c0) / n * 1e3)
     enc = UbxEncoder(gnss.store)
-    raws = []
+    raws: list[RawObservation] = []
     while len(raws) < 50:
         raws += list(sim.advance(None, None).gnss_raw)
     c0 = time.process_time()

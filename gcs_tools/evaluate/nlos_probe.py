@@ -64,6 +64,7 @@ def probe(profiles: Sequence[int], seeds: Sequence[int],
           mission: str = tuning.TUNING_MISSION) -> list[dict[str, Any]]:
     """Fly each (profile, seed) and return its ``nlos_stats`` (with ``profile`` and ``seed``)."""
     from simvehicle import SimVehicle
+    from simvehicle.gnss import GnssModel
     from simvehicle.harness.fly import fly
 
     m = campaign.mission(mission, (("estimator.beta_fixed", 0.5),), "mismatch")
@@ -71,7 +72,8 @@ def probe(profiles: Sequence[int], seeds: Sequence[int],
     for p in profiles:
         for s in seeds:
             series = fly(m, p, "fixed-beta", s).series
-            twin = SimVehicle(m, p, s).gnss.unmodelled
+            gnss = SimVehicle(m, p, s).gnss
+            twin = gnss.unmodelled if isinstance(gnss, GnssModel) else None
             if twin is None:
                 raise UserError(f"mission {mission!r}: the mismatch scenario has no unmodelled GNSS")
             offsets = np.array([twin.step(x).offset_ned_m for x in series["p_true_ned_m"]])

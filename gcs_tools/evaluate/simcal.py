@@ -27,7 +27,7 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -85,8 +85,15 @@ def real_series(smartloc_input: Path, truth: Path | None = None) -> Series:
     truth_ecef = inp.truth.at(series.t_s)
     origin = truth_ecef[np.isfinite(truth_ecef).all(axis=1)][0]
     err = baseline.ned_errors(series.p_ecef_m, truth_ecef, origin)
-    return Series("smartLoc Berlin Potsdamer Platz", series.t_s - series.t_s[0], err, series.h_acc_m,
-                  series.v_acc_m, list(inp.epochs), truth_ecef)
+    return Series(
+        "smartLoc Berlin Potsdamer Platz",
+        series.t_s - series.t_s[0],
+        err,
+        series.h_acc_m,
+        series.v_acc_m,
+        list(inp.epochs),
+        truth_ecef,
+    )
 
 
 # --- the simulated receiver --------------------------------------------------------------------------
@@ -102,8 +109,10 @@ def receiver_flight(mission: Mission, profile: int, seed: int, max_duration_s: f
     sim = SimVehicle(mission, profile, seed)
     gnss = sim.gnss
     if not isinstance(gnss, RawGnssModel):
-        raise UserError(f"mission {mission.name!r} (scenario {mission.scenario!r}) has no raw receiver: "
-                        f"use the {SCENARIO!r} scenario or 'receiver: {{enabled: true}}'")
+        raise UserError(
+            f"mission {mission.name!r} (scenario {mission.scenario!r}) has no raw receiver: "
+            f"use the {SCENARIO!r} scenario or 'receiver: {{enabled: true}}'"
+        )
     end_us = round((route.t_start_s + route.duration_s) * 1e6)
     if max_duration_s is not None:
         end_us = min(end_us, round(max_duration_s * 1e6))
@@ -119,7 +128,9 @@ def receiver_flight(mission: Mission, profile: int, seed: int, max_duration_s: f
         out = sim.advance(est, route.setpoint(sim.t_us))
         truth_at[out.t_us] = out.p_ned_m[-1].copy()
         tr = out.final_truth
-        est = NavEstimate(out.t_us, tr.p_ned_m, tr.v_ned_m_s, tr.gnss_bias_ned_m, zero9, 1.0, math.nan, "truth")
+        est = NavEstimate(
+            out.t_us, tr.p_ned_m, tr.v_ned_m_s, tr.gnss_bias_ned_m, zero9, 1.0, math.nan, "truth"
+        )
         for raw in out.gnss_raw:
             p_true = truth_at.pop(raw.t_us)
             sol = raw.solution
@@ -128,16 +139,23 @@ def receiver_flight(mission: Mission, profile: int, seed: int, max_duration_s: f
             solved, dropped = attach_broadcast(raw.epoch, gnss.store)
             if dropped:
                 raise RuntimeError("a simulated observation without an ephemeris")
-            solved = solved.replace(pseudorange_m=solved.pseudorange_m + C_M_S * solved.sat_clock_s
-                                    - raw.truth.model_atmosphere_m, corrected=True)
+            solved = solved.replace(
+                pseudorange_m=solved.pseudorange_m
+                + C_M_S * solved.sat_clock_s
+                - raw.truth.model_atmosphere_m,
+                corrected=True,
+            )
             rows.append((raw.t_us * 1e-6, err, h_acc, v_acc, solved, home + to_ecef @ p_true))
         truth_at = {t: p for t, p in truth_at.items() if t >= out.t_us - 1_000_000}
         if out.t_us >= end_us:
             break
     return Series(
         f"{mission.name} profile {profile} seed {seed}",
-        np.array([r[0] for r in rows]), np.array([r[1] for r in rows]).reshape(-1, 3),
-        np.array([r[2] for r in rows]), np.array([r[3] for r in rows]), [r[4] for r in rows],
+        np.array([r[0] for r in rows]),
+        np.array([r[1] for r in rows]).reshape(-1, 3),
+        np.array([r[2] for r in rows]),
+        np.array([r[3] for r in rows]),
+        [r[4] for r in rows],
         np.array([r[5] for r in rows]).reshape(-1, 3),
     )
 
@@ -157,8 +175,12 @@ def cn0_by_elevation(epochs: Sequence[GnssEpoch]) -> dict[str, dict[str, dict[st
         for lo, hi in zip(CN0_BINS_DEG[:-1], CN0_BINS_DEG[1:], strict=True):
             m = (sy == s) & (el >= lo) & (el < hi) & np.isfinite(cn)
             q = np.percentile(cn[m], [25, 50, 75]) if m.any() else [math.nan] * 3
-            out[name][f"{lo:g}-{min(hi, 90):g}deg"] = {"median": float(q[1]), "q25": float(q[0]),
-                                                        "q75": float(q[2]), "n": int(m.sum())}
+            out[name][f"{lo:g}-{min(hi, 90):g}deg"] = {
+                "median": float(q[1]),
+                "q25": float(q[0]),
+                "q75": float(q[2]),
+                "n": int(m.sum()),
+            }
     return out
 
 
@@ -168,7 +190,7 @@ def statistics(runs: Sequence[Series]) -> dict[str, Any]:
     h = np.concatenate([r.horizontal_m for r in runs])
     steps = np.concatenate([r.steps_m for r in runs])
     per_run = [baseline.error_statistics(r.t_s, r.err_ned_m, r.h_acc_m, r.v_acc_m) for r in runs]
-    corr = [run["correlation_time_s"] for run in per_run]  # type: ignore[index]
+    corr = [cast(dict[str, float], run["correlation_time_s"]) for run in per_run]
     short = [min(c["north"], c["east"]) for c in corr]
     long_ = [max(c["north"], c["east"]) for c in corr]
     down = [c["down"] for c in corr]
@@ -190,17 +212,26 @@ def statistics(runs: Sequence[Series]) -> dict[str, Any]:
         "correlation_short_s": float(np.nanmedian(short)) if runs else math.nan,
         "correlation_long_s": float(np.nanmedian(long_)) if runs else math.nan,
         "correlation_down_s": float(np.nanmedian(down)) if runs else math.nan,
-        "accuracy_ratio_horizontal": (math.sqrt(float(np.mean(hor**2) / np.mean(2.0 * ha[ok] ** 2)))
-                                      if ok.any() else math.nan),
-        "accuracy_ratio_vertical": (math.sqrt(float(np.mean(err[ok, 2] ** 2) / np.mean(va[ok] ** 2)))
-                                    if ok.any() else math.nan),
-        "vertical_median_m": float(np.median(np.abs(err[np.isfinite(err).all(axis=1), 2]))) if len(h) else math.nan,
+        "accuracy_ratio_horizontal": (
+            math.sqrt(float(np.mean(hor**2) / np.mean(2.0 * ha[ok] ** 2))) if ok.any() else math.nan
+        ),
+        "accuracy_ratio_vertical": (
+            math.sqrt(float(np.mean(err[ok, 2] ** 2) / np.mean(va[ok] ** 2))) if ok.any() else math.nan
+        ),
+        "vertical_median_m": float(np.median(np.abs(err[np.isfinite(err).all(axis=1), 2])))
+        if len(h)
+        else math.nan,
         "satellites_per_epoch": float(np.mean([e.n for e in epochs])) if epochs else math.nan,
         "cn0_by_elevation": cn0_by_elevation(epochs),
         "residuals_at_truth": baseline.residuals_at_truth(epochs, truth, SppConfig()) if epochs else {},
-        "per_run": [{"name": r.name, "horizontal_median_m": float(np.median(r.horizontal_m))
-                     if len(r.horizontal_m) else math.nan, "correlation_time_s": c}
-                    for r, c in zip(runs, corr, strict=True)],
+        "per_run": [
+            {
+                "name": r.name,
+                "horizontal_median_m": float(np.median(r.horizontal_m)) if len(r.horizontal_m) else math.nan,
+                "correlation_time_s": c,
+            }
+            for r, c in zip(runs, corr, strict=True)
+        ],
     }
 
 
@@ -233,24 +264,44 @@ class Tolerance:
 
 
 def _cn0(system: str, band: str) -> Tolerance:
-    return Tolerance(f"C/N0 median, {system} {band.replace('deg', '°')}",
-                     lambda s: _bin(s, "cn0_by_elevation", system, band), "abs", 5.0, unit="dB-Hz")
+    return Tolerance(
+        f"C/N0 median, {system} {band.replace('deg', '°')}",
+        lambda s: _bin(s, "cn0_by_elevation", system, band),
+        "abs",
+        5.0,
+        unit="dB-Hz",
+    )
 
 
 def _res(system: str, band: str, lo: float, hi: float) -> Tolerance:
-    return Tolerance(f"residual at truth, median, {system} {band.replace('deg', '°')}",
-                     lambda s: _bin(s, "residuals_at_truth", system, band), "range", lo=lo, hi=hi, unit="m")
+    return Tolerance(
+        f"residual at truth, median, {system} {band.replace('deg', '°')}",
+        lambda s: _bin(s, "residuals_at_truth", system, band),
+        "range",
+        lo=lo,
+        hi=hi,
+        unit="m",
+    )
 
 
 TOLERANCES: tuple[Tolerance, ...] = (
     Tolerance("horizontal error, median", lambda s: s["horizontal_median_m"], "ratio", 1.5, unit="m"),
     Tolerance("horizontal error, p95", lambda s: s["horizontal_p95_m"], "ratio", 1.5, unit="m"),
-    Tolerance("epochs with horizontal error > 5 m", lambda s: s["percent_above_5m"], "min", lo=80.0, unit="%"),
+    Tolerance(
+        "epochs with horizontal error > 5 m", lambda s: s["percent_above_5m"], "min", lo=80.0, unit="%"
+    ),
     Tolerance("epoch-to-epoch step, median", lambda s: s["step_median_m"], "ratio", 2.0, unit="m"),
-    Tolerance("correlation time, shorter horizontal axis", lambda s: s["correlation_short_s"], "ratio", 2.5,
-              unit="s"),
+    Tolerance(
+        "correlation time, shorter horizontal axis",
+        lambda s: s["correlation_short_s"],
+        "ratio",
+        2.5,
+        unit="s",
+    ),
     Tolerance("correlation time, down", lambda s: s["correlation_down_s"], "ratio", 2.5, unit="s"),
-    Tolerance("actual / reported accuracy, horizontal", lambda s: s["accuracy_ratio_horizontal"], "ratio", 1.6),
+    Tolerance(
+        "actual / reported accuracy, horizontal", lambda s: s["accuracy_ratio_horizontal"], "ratio", 1.6
+    ),
     Tolerance("actual / reported accuracy, vertical", lambda s: s["accuracy_ratio_vertical"], "ratio", 1.6),
     *(_cn0("GPS", b) for b in ("0-15deg", "15-30deg", "30-50deg", "50-90deg")),
     *(_cn0("GLO", b) for b in ("15-30deg", "30-50deg", "50-90deg")),
@@ -262,19 +313,39 @@ TOLERANCES: tuple[Tolerance, ...] = (
 # smartLoc Berlin Potsdamer Platz as ``statistics`` gives it (``beliefnav gnss spp``'s default weighting):
 # the tolerances' reference when the data set is not at hand (tests check it against the data)
 SMARTLOC_REFERENCE: dict[str, Any] = {
-    "horizontal_median_m": 15.692, "horizontal_p95_m": 44.597, "percent_above_5m": 93.878,
-    "step_median_m": 5.103, "correlation_short_s": 3.2, "correlation_long_s": 31.4, "correlation_down_s": 5.2,
-    "accuracy_ratio_horizontal": 1.605, "accuracy_ratio_vertical": 2.841, "vertical_median_m": 31.56,
+    "horizontal_median_m": 15.692,
+    "horizontal_p95_m": 44.597,
+    "percent_above_5m": 93.878,
+    "step_median_m": 5.103,
+    "correlation_short_s": 3.2,
+    "correlation_long_s": 31.4,
+    "correlation_down_s": 5.2,
+    "accuracy_ratio_horizontal": 1.605,
+    "accuracy_ratio_vertical": 2.841,
+    "vertical_median_m": 31.56,
     "satellites_per_epoch": 14.605,
     "cn0_by_elevation": {
-        "GPS": {"0-15deg": {"median": 28.0, "n": 899}, "15-30deg": {"median": 38.0, "n": 3793},
-                "30-50deg": {"median": 40.0, "n": 4769}, "50-90deg": {"median": 50.0, "n": 1732}},
-        "GLO": {"15-30deg": {"median": 33.0, "n": 4776}, "30-50deg": {"median": 38.0, "n": 1325},
-                "50-90deg": {"median": 43.0, "n": 2744}}},
+        "GPS": {
+            "0-15deg": {"median": 28.0, "n": 899},
+            "15-30deg": {"median": 38.0, "n": 3793},
+            "30-50deg": {"median": 40.0, "n": 4769},
+            "50-90deg": {"median": 50.0, "n": 1732},
+        },
+        "GLO": {
+            "15-30deg": {"median": 33.0, "n": 4776},
+            "30-50deg": {"median": 38.0, "n": 1325},
+            "50-90deg": {"median": 43.0, "n": 2744},
+        },
+    },
     "residuals_at_truth": {
-        "GPS": {"0-15deg": {"median": 16.57}, "15-30deg": {"median": 12.86}, "30-50deg": {"median": 8.03},
-                "50-90deg": {"median": -2.16}},
-        "GLO": {"15-30deg": {"median": 37.15}, "30-50deg": {"median": 4.13}, "50-90deg": {"median": -0.56}}},
+        "GPS": {
+            "0-15deg": {"median": 16.57},
+            "15-30deg": {"median": 12.86},
+            "30-50deg": {"median": 8.03},
+            "50-90deg": {"median": -2.16},
+        },
+        "GLO": {"15-30deg": {"median": 37.15}, "30-50deg": {"median": 4.13}, "50-90deg": {"median": -0.56}},
+    },
 }
 REPORTED_ONLY: tuple[tuple[str, str, str], ...] = (
     ("correlation time, longer horizontal axis", "correlation_long_s", "s"),
@@ -289,8 +360,17 @@ def compare(real: dict[str, Any], sim: dict[str, Any]) -> list[dict[str, Any]]:
     for t in TOLERANCES:
         r, s = t.value(real), t.value(sim)
         lo, hi = t.bounds(r)
-        rows.append({"statistic": t.name, "unit": t.unit, "real": r, "simulated": s, "lo": lo, "hi": hi,
-                     "pass": bool(math.isfinite(s) and lo <= s <= hi)})
+        rows.append(
+            {
+                "statistic": t.name,
+                "unit": t.unit,
+                "real": r,
+                "simulated": s,
+                "lo": lo,
+                "hi": hi,
+                "pass": bool(math.isfinite(s) and lo <= s <= hi),
+            }
+        )
     return rows
 
 
@@ -301,8 +381,9 @@ def _fmt(v: float) -> str:
     return f"{v:.1f}" if abs(v) < 1000 else f"{v:.0f}"
 
 
-def report_markdown(rows: list[dict[str, Any]], real: dict[str, Any], sim: dict[str, Any],
-                    info: dict[str, Any]) -> str:
+def report_markdown(
+    rows: list[dict[str, Any]], real: dict[str, Any], sim: dict[str, Any], info: dict[str, Any]
+) -> str:
     lines = [
         "# Simulated receiver vs smartLoc Berlin Potsdamer Platz",
         "",
@@ -315,8 +396,10 @@ def report_markdown(rows: list[dict[str, Any]], real: dict[str, Any], sim: dict[
     for r in rows:
         hi = "∞" if not math.isfinite(r["hi"]) else _fmt(r["hi"])
         unit = f" {r['unit']}" if r["unit"] else ""
-        lines.append(f"| {r['statistic']} | {_fmt(r['real'])}{unit} | {_fmt(r['simulated'])}{unit} | "
-                     f"{_fmt(r['lo'])}–{hi} | {'pass' if r['pass'] else '**FAIL**'} |")
+        lines.append(
+            f"| {r['statistic']} | {_fmt(r['real'])}{unit} | {_fmt(r['simulated'])}{unit} | "
+            f"{_fmt(r['lo'])}–{hi} | {'pass' if r['pass'] else '**FAIL**'} |"
+        )
     for name, key, unit in REPORTED_ONLY:
         u = f" {unit}" if unit else ""
         lines.append(f"| {name} | {_fmt(real[key])}{u} | {_fmt(sim[key])}{u} | reported only | |")
@@ -325,8 +408,9 @@ def report_markdown(rows: list[dict[str, Any]], real: dict[str, Any], sim: dict[
     return "\n".join(lines)
 
 
-def figure(path: Path, real: list[Series], sim: list[Series], real_stats: dict[str, Any],
-           sim_stats: dict[str, Any]) -> None:
+def figure(
+    path: Path, real: list[Series], sim: list[Series], real_stats: dict[str, Any], sim_stats: dict[str, Any]
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -357,13 +441,17 @@ def figure(path: Path, real: list[Series], sim: list[Series], real_stats: dict[s
     ax = axes[0, 2]
     for label, runs in groups.items():
         for axis, ls in ((0, "-"), (1, "--"), (2, ":")):
-            curves = [_acf(r.t_s, r.err_ned_m[:, axis]) for r in runs]
-            curves = [c for c in curves if c is not None]
+            curves = [c for r in runs if (c := _acf(r.t_s, r.err_ned_m[:, axis])) is not None]
             if curves:
                 n = min(len(c) for c in curves)
                 acf = np.mean([c[:n] for c in curves], axis=0)
-                ax.plot(np.arange(n) * baseline.ACF_GRID_S, acf, color=colours[label], ls=ls,
-                        label=f"{label} {'NED'[axis]}")
+                ax.plot(
+                    np.arange(n) * baseline.ACF_GRID_S,
+                    acf,
+                    color=colours[label],
+                    ls=ls,
+                    label=f"{label} {'NED'[axis]}",
+                )
     ax.axhline(math.exp(-1.0), color="0.5", lw=0.8)
     ax.set_xlim(0, 60)
     ax.set_xlabel("lag [s]")
@@ -376,7 +464,9 @@ def figure(path: Path, real: list[Series], sim: list[Series], real_stats: dict[s
             el = np.concatenate([e.elevation_deg[e.system == sys_] for e in eps])
             cn = np.concatenate([e.cn0_dbhz[e.system == sys_] for e in eps])
             centres, med = _binned_median(el, cn, 5.0)
-            ax.plot(centres, med, color=colours[label], ls=ls, marker=".", label=f"{label} {SHORT_NAME[sys_]}")
+            ax.plot(
+                centres, med, color=colours[label], ls=ls, marker=".", label=f"{label} {SHORT_NAME[sys_]}"
+            )
     ax.set_xlabel("elevation [°]")
     ax.set_ylabel("C/N0 median [dB-Hz]")
     ax.set_title("C/N0 by elevation (GPS solid, GLONASS dashed)")
@@ -386,9 +476,18 @@ def figure(path: Path, real: list[Series], sim: list[Series], real_stats: dict[s
     x = np.arange(len(bands))
     for k, (label, stats) in enumerate((("smartLoc (real)", real_stats), ("simulated", sim_stats))):
         for j, sys_name in enumerate(("GPS", "GLO")):
-            vals = [stats["residuals_at_truth"].get(sys_name, {}).get(b, {}).get("median", math.nan) for b in bands]
-            ax.bar(x + (2 * k + j - 1.5) * 0.2, vals, 0.2, color=colours[label], alpha=1.0 if j == 0 else 0.5,
-                   label=f"{label} {sys_name}")
+            vals = [
+                stats["residuals_at_truth"].get(sys_name, {}).get(b, {}).get("median", math.nan)
+                for b in bands
+            ]
+            ax.bar(
+                x + (2 * k + j - 1.5) * 0.2,
+                vals,
+                0.2,
+                color=colours[label],
+                alpha=1.0 if j == 0 else 0.5,
+                label=f"{label} {sys_name}",
+            )
     ax.set_xticks(x, [b.replace("deg", "°") for b in bands])
     ax.axhline(0.0, color="0.3", lw=0.8)
     ax.set_ylabel("median residual at the true position [m]")
@@ -444,8 +543,13 @@ def _int_list(text: str, what: str) -> list[int]:
     return out
 
 
-def simulate(mission: str, scenario: str, profiles: Sequence[int], seeds: Sequence[int],
-             max_duration_s: float | None = None) -> list[Series]:
+def simulate(
+    mission: str,
+    scenario: str,
+    profiles: Sequence[int],
+    seeds: Sequence[int],
+    max_duration_s: float | None = None,
+) -> list[Series]:
     m = load_mission(mission, scenario)
     for p in profiles:
         if not 0 <= p < len(m.profiles):
@@ -453,18 +557,36 @@ def simulate(mission: str, scenario: str, profiles: Sequence[int], seeds: Sequen
     return [receiver_flight(m, p, s, max_duration_s) for p in profiles for s in seeds]
 
 
-def run(smartloc: Path, out: Path, mission: str = "default", scenario: str = SCENARIO,
-        profiles: Sequence[int] = (3, 4), seeds: Sequence[int] = (0, 1, 2), truth: Path | None = None,
-        max_duration_s: float | None = None) -> dict[str, Any]:
+def run(
+    smartloc: Path,
+    out: Path,
+    mission: str = "default",
+    scenario: str = SCENARIO,
+    profiles: Sequence[int] = (3, 4),
+    seeds: Sequence[int] = (0, 1, 2),
+    truth: Path | None = None,
+    max_duration_s: float | None = None,
+) -> dict[str, Any]:
     real = [real_series(smartloc, truth)]
     sim = simulate(mission, scenario, profiles, seeds, max_duration_s)
     real_stats, sim_stats = statistics(real), statistics(sim)
     rows = compare(real_stats, sim_stats)
-    info = {"mission": mission, "scenario": scenario, "profiles": list(profiles), "seeds": list(seeds),
-            "smartloc": smartloc.name}
+    info = {
+        "mission": mission,
+        "scenario": scenario,
+        "profiles": list(profiles),
+        "seeds": list(seeds),
+        "smartloc": smartloc.name,
+    }
     out.mkdir(parents=True, exist_ok=True)
-    result = {"info": info, "comparison": rows, "real": real_stats, "simulated": sim_stats,
-              "passed": sum(r["pass"] for r in rows), "total": len(rows)}
+    result = {
+        "info": info,
+        "comparison": rows,
+        "real": real_stats,
+        "simulated": sim_stats,
+        "passed": sum(r["pass"] for r in rows),
+        "total": len(rows),
+    }
     (out / "results.json").write_text(json.dumps(plain_json(result, nan_to_none=True), indent=2) + "\n")
     (out / "report.md").write_text(report_markdown(rows, real_stats, sim_stats, info))
     figure(out / FIGURE, real, sim, real_stats, sim_stats)
@@ -472,8 +594,12 @@ def run(smartloc: Path, out: Path, mission: str = "default", scenario: str = SCE
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.simcal", description=__doc__.splitlines()[0])
-    p.add_argument("--smartloc", type=Path, required=True, help="smartLoc *_Input.txt (its *_GT.txt beside it)")
+    p = argparse.ArgumentParser(
+        prog="python -m gcs_tools.evaluate.simcal", description=__doc__.splitlines()[0]
+    )
+    p.add_argument(
+        "--smartloc", type=Path, required=True, help="smartLoc *_Input.txt (its *_GT.txt beside it)"
+    )
     p.add_argument("--truth", type=Path, default=None, help="smartLoc *_GT.txt, when not beside the input")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--mission", default="default", help="mission flown by the simulated receiver")
@@ -483,8 +609,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-duration-s", type=float, default=None, help="cut each flight at this time")
     args = p.parse_args(argv)
     try:
-        res = run(args.smartloc, args.out, args.mission, args.scenario, _int_list(args.profiles, "--profiles"),
-                  _int_list(args.seeds, "--seeds"), args.truth, args.max_duration_s)
+        res = run(
+            args.smartloc,
+            args.out,
+            args.mission,
+            args.scenario,
+            _int_list(args.profiles, "--profiles"),
+            _int_list(args.seeds, "--seeds"),
+            args.truth,
+            args.max_duration_s,
+        )
     except UserError as exc:
         print(f"beliefnav: error: {exc}", file=sys.stderr)
         return 2

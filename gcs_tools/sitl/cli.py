@@ -33,7 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     choices.add_method_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
     parser.add_argument("--scenario", default=None,
-                        help="sensor scenario: paper, realistic, mismatch, canyon (default: the mission file's)")
+                        help="sensor scenario: paper, realistic, mismatch, canyon "
+                             "(default: the mission file's)")
     parser.add_argument("--out", type=Path, default=Path("runs/sitl"),
                         help="output directory (default runs/sitl)")
     parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
@@ -45,8 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
     parser.add_argument("--ubx-port", type=int, default=None,
-                        help="scenario canyon: the raw receiver's UBX TCP port on 127.0.0.1 (default: a free one, "
-                             "named in OUT/receiver.json)")
+                        help="scenario canyon: the raw receiver's UBX TCP port on 127.0.0.1 "
+                             "(default: a free one, named in OUT/receiver.json)")
     from simvehicle.groundlink import add_ground_arguments
 
     add_ground_arguments(parser)
