@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.errors import ConfigError
 from companion.domain.samples import GnssFix
 from companion.gnss.constants import C_M_S
 from companion.gnss.geometry import ecef_to_ned_matrix, geodetic_to_ecef
@@ -75,7 +76,7 @@ class RawGnssModel:
         self.cfg = cfg
         self.period_us = round(1e6 / cfg.rate_hz)
         if self.period_us % control_period_us:
-            raise ValueError(
+            raise ConfigError(
                 f"receiver rate_hz {cfg.rate_hz}: its period must be a multiple of the control "
                 f"period ({control_period_us} µs)"
             )

@@ -61,3 +61,25 @@ def test_smartloc_reference_table_is_the_data_sets():
     # and every tolerance holds the reference itself (a table that cannot contain its centre is wrong)
     assert all(r["pass"] for r in simcal.compare(ref, real))
     assert math.isfinite(real["accuracy_ratio_vertical"])
+
+
+@pytest.mark.parametrize(("receiver", "message"), [
+    ({"systems": ["GPS", "NAVIC"]}, "systems"),
+    ({"start_utc": "2024-13-01T00:00:00"}, "start_utc"),
+    ({"unmapped_prob": 1.5}, "unmapped_prob"),
+    ({"rate_hz": 3.0}, "rate_hz"),  # not a whole number of 50 ms control periods
+])
+def test_a_broken_receiver_section_is_one_line(receiver, message):
+    from companion.errors import ConfigError
+    from companion.mission import build_mission
+    from simvehicle import SimVehicle
+
+    data = {"name": "broken", "home": {"lat_deg": 52.52, "lon_deg": 13.405, "alt_m": 35.0},
+            "world": {"bounds": {"north_min_m": 0, "east_min_m": 0, "north_max_m": 50, "east_max_m": 50},
+                      "buildings": [{"north_min_m": 20, "east_min_m": 20, "north_max_m": 30,
+                                     "east_max_m": 30}]},
+            "profiles": [{"start_ne_m": [5, 5], "goal_ne_m": [45, 45]}], "scenario": "canyon",
+            "receiver": receiver}
+    with pytest.raises(ConfigError, match=message) as info:
+        SimVehicle(build_mission(data, "broken.yaml"), 0, 0)
+    assert "\n" not in str(info.value)

@@ -494,12 +494,13 @@ def figure(
     ax.set_title("pseudorange residuals by elevation (GPS solid, GLONASS pale)")
     ax.legend(fontsize=7)
     ax = axes[1, 2]
+    bins = np.arange(0.5, 31.5)
     for label, runs in groups.items():
-        for r in runs[:3]:
-            ax.plot(r.t_s, np.hypot(r.err_ned_m[:, 0], r.err_ned_m[:, 1]), color=colours[label], lw=0.7)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("horizontal error [m]")
-    ax.set_title("horizontal error over time (real; first simulated runs)")
+        n = [e.n for r in runs for e in r.epochs]
+        ax.hist(n, bins=bins, density=True, histtype="step", color=colours[label], label=label)
+    ax.set_xlabel("satellites tracked per epoch")
+    ax.set_ylabel("share of epochs")
+    ax.set_title("satellites per epoch")
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
