@@ -28,8 +28,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
-from companion.errors import ConfigError
 from companion.domain.samples import GnssFix
+from companion.errors import ConfigError
 from companion.gnss.constants import C_M_S
 from companion.gnss.geometry import ecef_to_ned_matrix, geodetic_to_ecef
 from companion.gnss.spp import SppConfig, SppSolution, solve_position

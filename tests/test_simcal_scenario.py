@@ -29,8 +29,10 @@ def test_canyon_is_a_scenario_with_the_raw_receiver():
 
 @pytest.fixture(scope="module")
 def tuning_flights():
-    """The calibration's tuning flights, one seed (deterministic): default-tuning's four profiles."""
-    return simcal.statistics(simcal.simulate("default-tuning", "canyon", (0, 1, 2, 3), (1000,)))
+    """The calibration's tuning flights, its first two seeds (deterministic): default-tuning's four
+    profiles, 8 flights. (One flight's statistics wander far from the pool's: per-flight medians
+    range 5-30 m with the seed's sky; docs/simcal.md.)"""
+    return simcal.statistics(simcal.simulate("default-tuning", "canyon", (0, 1, 2, 3), (1000, 1001)))
 
 
 def test_calibrated_receiver_stays_within_every_tolerance_on_its_tuning_flights(tuning_flights):
@@ -41,7 +43,7 @@ def test_calibrated_receiver_stays_within_every_tolerance_on_its_tuning_flights(
         if not r["pass"]
     ]
     assert not failed
-    assert tuning_flights["epochs"] > 2000 and tuning_flights["fixes"] > 0.95 * tuning_flights["epochs"]
+    assert tuning_flights["epochs"] > 4000 and tuning_flights["fixes"] > 0.95 * tuning_flights["epochs"]
 
 
 def test_smartloc_reference_table_is_the_data_sets():

@@ -496,8 +496,8 @@ def figure(
     ax = axes[1, 2]
     bins = np.arange(0.5, 31.5)
     for label, runs in groups.items():
-        n = [e.n for r in runs for e in r.epochs]
-        ax.hist(n, bins=bins, density=True, histtype="step", color=colours[label], label=label)
+        per_epoch = [e.n for r in runs for e in r.epochs]
+        ax.hist(per_epoch, bins=bins, density=True, histtype="step", color=colours[label], label=label)
     ax.set_xlabel("satellites tracked per epoch")
     ax.set_ylabel("share of epochs")
     ax.set_title("satellites per epoch")
