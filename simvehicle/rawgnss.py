@@ -51,8 +51,9 @@ class RawFix(NedFix):
 
     v_acc_m: float = math.nan
     hdop: float = math.nan
-    doppler_v_ned_m_s: np.ndarray | None = None  # the Doppler velocity of the solution
-    doppler_vel_acc_m_s: float = math.nan
+    # the solution's Doppler velocity and its 1σ per axis (the names a receiver velocity has on NedFix)
+    v_ned_m_s: np.ndarray | None = None
+    sigma_velocity_m_s: float = math.nan
 
 
 def boot_gps_time_s(cfg: ReceiverConfig, rng: np.random.Generator) -> float:
@@ -218,13 +219,17 @@ class RawGnssModel:
         """(horizontal per axis, vertical) 1σ the receiver reports."""
         return fix.sigma_noise_m, fix.v_acc_m if isinstance(fix, RawFix) else fix.sigma_noise_m
 
+    def reported_velocity_accuracy_m_s(self, fix: NedFix) -> float:
+        """The fix's reported 1σ speed accuracy per axis (NaN without a Doppler velocity)."""
+        return fix.sigma_velocity_m_s if isinstance(fix, RawFix) else math.nan
+
     def to_fix(self, fix: NedFix) -> GnssFix:
         """The wire form: geodetic position, accuracies, HDOP and the Doppler velocity."""
         lat, lon, alt = self.to_geodetic(fix.p_ned_m)
         raw = fix if isinstance(fix, RawFix) else None
-        v = None if raw is None or raw.doppler_v_ned_m_s is None else raw.doppler_v_ned_m_s
+        v = None if raw is None else raw.v_ned_m_s
         v_acc, hdop = (raw.v_acc_m, raw.hdop) if raw else (math.nan, math.nan)
         return GnssFix(
             fix.t_validity_us, lat, lon, alt, FIX_TYPE_3D, fix.satellites, fix.sigma_noise_m, v_acc, hdop, v,
-            vel_acc_m_s=raw.doppler_vel_acc_m_s if raw else math.nan,
+            vel_acc_m_s=raw.sigma_velocity_m_s if raw else math.nan,
         )
