@@ -241,3 +241,24 @@ def test_clock_reset_by_one_millisecond():
     rx.clock_bias_s, rx.clock_drift_s_s = 0.4999e-3, 1e-6
     rx.observe(200_000, np.zeros(3), np.zeros(3))
     assert rx.clock_resets == 1 and rx.clock_bias_s == pytest.approx(0.4999e-3 + 0.2e-6 - 1e-3, abs=1e-12)
+
+
+def test_same_seed_same_epochs_and_another_seed_another_sky():
+    from companion.mission import load_mission
+    from simvehicle import SimVehicle
+
+    def epochs(seed):
+        sim = SimVehicle(load_mission("test", "canyon"), 0, seed)
+        out = []
+        while sim.t_us < 3e6:
+            out += sim.advance(None, None).gnss_raw
+        return sim, out
+
+    (a_sim, a), (_, b), (c_sim, c) = epochs(4), epochs(4), epochs(5)
+    assert len(a) == len(b) >= 13
+    for x, y in zip(a, b, strict=True):
+        assert x.epoch.t_gps_s == y.epoch.t_gps_s and x.arrival_us == y.arrival_us
+        for name in ("system", "prn", "pseudorange_m", "pseudorange_rate_m_s", "cn0_dbhz"):
+            np.testing.assert_array_equal(getattr(x.epoch, name), getattr(y.epoch, name))
+    assert a_sim.gnss.t0_gps_s != c_sim.gnss.t0_gps_s  # each seed its time of day, so its sky
+    assert a[0].arrival_us - a[0].t_us == 80_000 and a[0].t_us % 200_000 == 0
