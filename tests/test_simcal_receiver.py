@@ -255,6 +255,7 @@ def test_same_seed_same_epochs_and_another_seed_another_sky():
         return sim, out
 
     (a_sim, a), (_, b), (c_sim, c) = epochs(4), epochs(4), epochs(5)
+    assert not np.array_equal(a[0].epoch.pseudorange_m[:3], c[0].epoch.pseudorange_m[:3])
     assert len(a) == len(b) >= 13
     for x, y in zip(a, b, strict=True):
         assert x.epoch.t_gps_s == y.epoch.t_gps_s and x.arrival_us == y.arrival_us
