@@ -47,13 +47,11 @@ _NAN3 = np.full(3, np.nan)
 
 @dataclass(frozen=True, slots=True)
 class RawFix(NedFix):
-    """A single-point fix (``sigma_noise_m`` = its reported horizontal 1σ per axis)."""
+    """A single-point fix: ``sigma_noise_m`` its reported horizontal 1σ per axis, ``v_ned_m_s`` /
+    ``sigma_velocity_m_s`` the solution's Doppler velocity and its 1σ per axis."""
 
     v_acc_m: float = math.nan
     hdop: float = math.nan
-    # the solution's Doppler velocity and its 1σ per axis (the names a receiver velocity has on NedFix)
-    v_ned_m_s: np.ndarray | None = None
-    sigma_velocity_m_s: float = math.nan
 
 
 def boot_gps_time_s(cfg: ReceiverConfig, rng: np.random.Generator) -> float:
@@ -183,9 +181,8 @@ class RawGnssModel:
         p_ned = self.to_ned_m(sol.p_ecef_m)
         v = sol.v_ecef_m_s
         v_ned = self._to_ned @ v if np.isfinite(v).all() else None
-        return RawFix(
-            t_us, p_ned, sol.h_acc_m, sol.n_used, sol.v_acc_m, sol.dops.hdop, v_ned, sol.vel_acc_m_s
-        )
+        return RawFix(t_us, p_ned, sol.h_acc_m, sol.n_used, v_ned_m_s=v_ned,
+                      sigma_velocity_m_s=sol.vel_acc_m_s, v_acc_m=sol.v_acc_m, hdop=sol.dops.hdop)
 
     def release(self, t_us: int) -> list[RawFix]:
         """Fixes due by ``t_us`` (their raw epochs go to :meth:`drain_raw`, stamped with ``t_us``)."""
