@@ -1,0 +1,75 @@
+"""The paper's belief, one per satellite: β_s = σ(θ_s) sets that satellite's pseudorange variance
+
+    R_s(β_s) = R_nom,s · k^(1 − β_s)          (k = ``r_inflation_max``: R_nom at full trust, k R_nom at none)
+
+monotone decreasing in β_s and bounded. θ_s learns from the satellite's consistency: its pre-fit
+innovation y_s against its predicted variance S_s(β) = s0_s + R_s(β) (s0 = (H P⁻ Hᵀ)_ss), under a
+Student-t negative log-likelihood (1 degree of freedom, ν = ``student_dof``)
+
+    ℓ_s(β) = ½ log S_s + (ν + 1)/2 · log(1 + y_s² / (ν S_s))  +  κ/2 (θ_s − θ_prior,s)²
+
+whose data term is minimal at S_s = y_s² (consistency: it has an interior optimum, which the loss as
+printed in the paper has not), plus a prior pulling θ_s towards what C/N0 and elevation (and a map's
+line of sight) expect. With ∂S/∂β = −ln k · R_s(β):
+
+    ∂ℓ/∂S = ½/S − ½ (ν + 1) y² / (S (ν S + y²)),    ∇θ ℓ = ∂ℓ/∂S · ∂S/∂β · β(1 − β) + κ (θ − θ_prior)
+
+and the update is the paper's dual-timescale damped Newton step (eq. 18-21) per satellite:
+
+    H_f ← α_f H_f + g²,  H_s ← α_s H_s + g²,  H = ω H_f + (1 − ω) H_s,  θ ← θ − η g / (H + λ)
+
+A reflected satellite's innovation is larger than S says: ∂ℓ/∂S < 0 there, so θ falls (R grows
+until S ≈ y²); a clean one's is smaller: θ rises to the cap. Vectorised over satellites.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from companion.tight.config import TightConfig
+
+
+def sigmoid(theta: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-theta))
+
+
+def r_of_beta(beta: np.ndarray, r_nominal: np.ndarray, cfg: TightConfig) -> np.ndarray:
+    """R_s(β) = R_nom · k^(1 − β)."""
+    return r_nominal * cfg.r_inflation_max ** (1.0 - beta)
+
+
+def loss_grad_theta(theta: np.ndarray, y: np.ndarray, s0: np.ndarray, r_nominal: np.ndarray,
+                    theta_prior: np.ndarray, cfg: TightConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(ℓ_s(θ_s), ∂ℓ_s/∂θ_s) per satellite (see the module doc)."""
+    beta = sigmoid(theta)
+    r = r_of_beta(beta, r_nominal, cfg)
+    S = s0 + r
+    nu = cfg.student_dof
+    y2 = y * y
+    loss = 0.5 * np.log(S) + 0.5 * (nu + 1.0) * np.log1p(y2 / (nu * S))
+    loss = loss + 0.5 * cfg.prior_weight * (theta - theta_prior) ** 2
+    dl_ds = 0.5 / S - 0.5 * (nu + 1.0) * y2 / (S * (nu * S + y2))
+    ds_dbeta = -np.log(cfg.r_inflation_max) * r
+    g = dl_ds * ds_dbeta * beta * (1.0 - beta) + cfg.prior_weight * (theta - theta_prior)
+    return loss, g
+
+
+def second_order_step(theta: np.ndarray, h_fast: np.ndarray, h_slow: np.ndarray, g: np.ndarray,
+                      cfg: TightConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(θ, H_fast, H_slow) after the damped Newton step along g (eq. 18-21), per satellite."""
+    h_fast = cfg.alpha_fast * h_fast + g * g
+    h_slow = cfg.alpha_slow * h_slow + g * g
+    h = cfg.omega_fast * h_fast + (1.0 - cfg.omega_fast) * h_slow
+    return theta - cfg.eta * g / (h + cfg.lambda_reg), h_fast, h_slow
+
+
+def theta_prior(cn0_dbhz: np.ndarray, elevation_deg: np.ndarray, cfg: TightConfig,
+                map_blocked: np.ndarray | None = None) -> np.ndarray:
+    """Prior logit from C/N0 and elevation (a missing C/N0 counts as the midpoint), plus
+    ``prior_map_nlos`` where a map says the line of sight is blocked."""
+    cn0 = np.where(np.isfinite(cn0_dbhz), cn0_dbhz, cfg.prior_cn0_mid_dbhz)
+    th = cfg.prior_cn0_per_db * (cn0 - cfg.prior_cn0_mid_dbhz) + cfg.prior_el_per_deg * (
+        elevation_deg - cfg.prior_el_mid_deg)
+    if map_blocked is not None:
+        th = th + np.where(map_blocked, cfg.prior_map_nlos, 0.0)
+    return np.clip(th, cfg.theta_min, cfg.theta_max)

@@ -1,0 +1,126 @@
+"""Parameters of the tightly coupled filter: one frozen dataclass, every field with its unit.
+
+Two motion models share every other parameter (``motion``):
+
+* ``"imu"``: an IMU (specific force + the autopilot's attitude) drives position and velocity, with
+  the loose filter's accelerometer bias (body axes) and NED acceleration error states; the white
+  acceleration density is the IMU's input error (the loose filter's value);
+* ``"constant-velocity"``: no inertial data (smartLoc, a receiver alone): a white-acceleration
+  model whose density is the vehicle's own manoeuvring (a car in town: ~1 m/s² over a few seconds
+  horizontally, almost none vertically); the IMU error states stay at zero.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+MOTIONS = ("imu", "constant-velocity")
+
+
+@dataclass(frozen=True)
+class TightConfig:
+    motion: Literal["imu", "constant-velocity"] = "imu"
+    # --- process model
+    # White acceleration density (m/s² per √Hz: Q_vv = σ² T). "imu": the loose filter's 0.3 (attitude
+    # error × g and vibration). "constant-velocity": the vehicle's manoeuvres (see
+    # ``for_ground_vehicle``).
+    sigma_acc_m_s2: float = 0.3
+    sigma_acc_vertical_m_s2: float = 0.3
+    sigma_acc_bias0_m_s2: float = 0.2  # body accelerometer bias prior (EKF2-like), "imu" only
+    sigma_acc_bias_rw_m_s2_sqrt_s: float = 3e-3
+    sigma_acc_ned0_m_s2: float = 0.2  # NED acceleration error (attitude error × g) prior, "imu" only
+    sigma_acc_ned_rw_m_s2_sqrt_s: float = 0.01
+    # Receiver clock: a common phase random walk (white frequency noise, m²/s) shared by every
+    # system's clock, each system's offset a slow random walk of its own (inter-system bias, m²/s),
+    # and a common drift random walk (m²/s³). A TCXO: h0 ≈ 2e-19 s → c² h0 / 2 ≈ 0.01 m²/s; drift
+    # noise c² 2π² h₋₂ ≈ 0.04 m²/s³; we keep an order of magnitude more for thermal steps.
+    q_clock_m2_s: float = 0.1
+    q_isb_m2_s: float = 1e-3
+    q_drift_m2_s3: float = 0.5
+    sigma_clock0_m: float = 100.0  # a system's clock when first seen: from its own residuals ± this
+    sigma_drift0_m_s: float = 100.0  # drift at start (a receiver's clock can drift 300 m/s = 1 ppm)
+    sigma_velocity0_m_s: float = 5.0  # velocity at start (from the Doppler solution when there is one)
+    # --- measurements
+    # A-priori σ model of a pseudorange (the single-point solution's: ``companion.gnss.spp``):
+    # "cn0-elevation" σ² = a² + b² 10^((45 − C/N0)/10) / sin² el, GLONASS × 1.5; "uniform"; "given".
+    sigma_uniform_m: float = 5.0
+    sigma_floor_m: float = 0.5
+    sigma_zenith_m: float = 3.0
+    cn0_ref_dbhz: float = 45.0
+    glonass_sigma_factor: float = 1.5
+    # σ of a line-of-sight pseudorange at cn0_ref (grows as 1/√(C/N0)): the belief rows' nominal R
+    sigma_los_cn0_m: float = 3.0
+    sigma_range_rate_m_s: float = 0.5  # Doppler σ of an ideal observation (same shape as the pseudorange σ)
+    elevation_mask_deg: float = 5.0
+    # Innovation gate (standard deviations) per satellite: 5 is EKF2/EKF3's GNSS gate.
+    gate_sigma: float = 5.0
+    # No satellite passed for this long: re-start from a single-point solution (EKF2_NOAID_TOUT).
+    reset_timeout_s: float = 5.0
+    # A system whose satellites all disagree with its predicted clock by more than this (m) has
+    # stepped (a receiver clock jump of milliseconds): its clock is re-initialised, not the position.
+    clock_jump_m: float = 1000.0
+    # --- odometry (ground vehicles): forward speed as a measurement of |v_horizontal|
+    sigma_speed_m_s: float = 0.1
+    speed_sigma_fraction: float = 0.02  # + this × speed (wheel radius, slip)
+    # --- per-satellite belief (the paper's second-order rule, per satellite; belief.py)
+    r_inflation_max: float = 100.0  # R_s(β) = R_nom,s · this^(1 − β): ≤ 10× the σ at no trust
+    theta_min: float = -4.0
+    theta_max: float = 4.0
+    eta: float = 0.5  # damped Newton learning rate (per epoch of one satellite)
+    lambda_reg: float = 0.1
+    alpha_fast: float = 0.5
+    alpha_slow: float = 0.95
+    omega_fast: float = 0.7
+    student_dof: float = 4.0  # ν of the per-satellite Student-t consistency loss (1 dof)
+    # Prior on θ from C/N0 and elevation (and the map): ℓ += κ/2 (θ − θ_prior)², with
+    # θ_prior = prior_cn0_per_db (C/N0 − prior_cn0_mid) + prior_el_per_deg (el − prior_el_mid): a
+    # strong, high signal is expected in line of sight, a weak low one is not (NLOS loses dB).
+    prior_weight: float = 0.05
+    prior_cn0_per_db: float = 0.15
+    prior_cn0_mid_dbhz: float = 35.0
+    prior_el_per_deg: float = 0.05
+    prior_el_mid_deg: float = 25.0
+    prior_map_nlos: float = -3.0  # θ_prior added where the map says the line of sight is blocked
+    # --- Student-t row: iteratively reweighted update
+    student_iterations: int = 3
+    # --- FDE row: χ² test of the epoch's normalised innovations, worst excluded while it fails
+    fde_p_false_alarm: float = 1e-3
+    fde_max_exclusions: int = 4
+    # --- out-of-sequence
+    history_s: float = 2.0  # epochs this late are still fused exactly
+    future_tolerance_s: float = 0.05
+    imu_hold_max_s: float = 0.1
+    gravity_m_s2: float = 9.80665
+
+    def validate(self) -> None:
+        if self.motion not in MOTIONS:
+            raise ValueError(f"motion {self.motion!r}: choose from {', '.join(MOTIONS)}")
+        for name in ("sigma_acc_m_s2", "sigma_acc_vertical_m_s2", "q_clock_m2_s", "q_drift_m2_s3",
+                     "sigma_clock0_m", "sigma_drift0_m_s", "sigma_velocity0_m_s", "sigma_uniform_m",
+                     "sigma_floor_m", "sigma_range_rate_m_s", "gate_sigma", "reset_timeout_s",
+                     "clock_jump_m", "sigma_speed_m_s", "eta", "lambda_reg", "student_dof", "history_s",
+                     "imu_hold_max_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+        if not self.r_inflation_max >= 1.0:
+            raise ValueError("r_inflation_max: must be >= 1")
+        if not self.theta_min < 0.0 < self.theta_max:
+            raise ValueError("theta_min < 0 < theta_max needed")
+        if not 0.0 < self.alpha_fast < self.alpha_slow < 1.0:
+            raise ValueError("alpha_fast, alpha_slow: need 0 < alpha_fast < alpha_slow < 1")
+        if self.student_iterations < 1 or self.fde_max_exclusions < 0:
+            raise ValueError("student_iterations >= 1, fde_max_exclusions >= 0 needed")
+
+    @classmethod
+    def for_ground_vehicle(cls, **over: object) -> TightConfig:
+        """GNSS alone on a car (smartLoc): constant velocity with 1 m/s²/√Hz horizontally (a car
+        changes speed by ~2 m/s in 2 s in town) and 0.1 vertically (roads are smooth)."""
+        base: dict[str, object] = dict(motion="constant-velocity", sigma_acc_m_s2=1.0,
+                                       sigma_acc_vertical_m_s2=0.1, sigma_acc_bias0_m_s2=0.0,
+                                       sigma_acc_bias_rw_m_s2_sqrt_s=0.0, sigma_acc_ned0_m_s2=0.0,
+                                       sigma_acc_ned_rw_m_s2_sqrt_s=0.0)
+        base.update(over)
+        return cls(**base)  # type: ignore[arg-type]

@@ -1,0 +1,478 @@
+"""The tightly coupled filter: pseudoranges, Doppler and odometry speed into one state, out-of-sequence
+exact, on the loose filter's IMU history (``companion.estimator.history.ImuHistory``: held NED
+accelerations with prefix integrals, so any interval's mean and transition are one closed-form step).
+
+Like the loose engine (``companion.estimator.engine``) the filter is a time-ordered list of entries,
+each the posterior at one measurement's time with everything needed to re-fuse the later ones: a
+late epoch rolls back to the entry before it, is fused, and the later measurements are re-fused
+from their stored data — the same result as in order (tested to 1e-9). Measurements valid after the
+newest IMU sample wait for it.
+
+An epoch (``SatEpoch``: prepared once by ``prepare_epoch``, state-independent) is fused as
+
+1. predict the last entry to the epoch's time;
+2. a system seen for the first time gets a clock from its satellites' median residual (σ
+   ``sigma_clock0_m``); a system whose median residual exceeds ``clock_jump_m`` had a clock jump:
+   its clock is re-initialised (counted), not the position;
+3. the weighting (``weighting.py``, by name) decides each satellite's variance and whether it is
+   used (innovation gate, FDE, Student-t, per-satellite belief);
+4. one batch Kalman update with the used pseudoranges and their range rates (Doppler, with the
+   same per-satellite inflation).
+
+No satellite passing for ``reset_timeout_s`` re-starts position and clocks from a single-point
+solution of the epoch (counted ``resets``); velocity and the IMU error states are kept.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import replace
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from companion.estimator.history import ImuHistory, Integrals, mean_between
+from companion.estimator.model import IDENTITY9, Rot9
+from companion.gnss.constants import C_M_S
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.spp import SppConfig, SppSolution, sigma_model_m, solve_position
+from companion.gnss.systems import System
+from companion.tight import model, weighting
+from companion.tight.belief import theta_prior
+from companion.tight.config import TightConfig
+from companion.tight.model import I_CLK, I_DRIFT, N_CLK, N_STATE, Frame
+
+_TRIM_EVERY = 256
+_IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
+# initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
+SPP_INIT = SppConfig(raim=True)
+# a reset also widens the position: the canyon's single-point solution is often tens of metres off
+SIGMA_SPP_EXTRA_M = 10.0
+
+
+class SatEpoch(NamedTuple):
+    """One receiver epoch prepared for the filter (every array (m,) or (m, 3), mask applied)."""
+
+    epoch: GnssEpoch  # as received (single-point solution at start and reset)
+    key: np.ndarray  # system × 1000 + PRN
+    slot: np.ndarray  # clock slot (model.CLOCK_SLOTS)
+    z_m: np.ndarray  # pseudorange free of satellite clock and atmosphere (m)
+    r_model_m2: np.ndarray  # σ² of the C/N0 + elevation model
+    r_uniform_m2: np.ndarray  # sigma_uniform_m²
+    r_los_m2: np.ndarray  # σ² of a line-of-sight signal: C/N0 only (the belief inflates the rest)
+    theta_prior: np.ndarray  # prior belief logit (C/N0, elevation, map)
+    elevation_deg: np.ndarray
+    sat_pos_ecef_m: np.ndarray
+    sat_vel_ecef_m_s: np.ndarray
+    z_rate_m_s: np.ndarray  # pseudorange rate free of the satellite clock drift (NaN: none)
+    r_rate_m2_s2: np.ndarray
+
+
+class Speed(NamedTuple):
+    speed_m_s: float
+    r_m2_s2: float
+
+
+class EpochInfo(NamedTuple):
+    """What one entry's fusion did (for outputs and diagnostics)."""
+
+    n_sats: int = 0
+    n_used: int = 0
+    nis: float = math.nan  # of the used pseudoranges (and range rates)
+    beta_mean: float = math.nan  # mean belief of the epoch's satellites
+    key: np.ndarray | None = None  # per satellite: keys, beliefs, pre-fit innovations, used
+    beta: np.ndarray | None = None
+    y_m: np.ndarray | None = None
+    used: np.ndarray | None = None
+
+
+class Entry(NamedTuple):
+    t_us: int
+    meas: SatEpoch | Speed | None  # None: an anchor (start, re-based base)
+    x: np.ndarray  # posterior (never written again)
+    P: np.ndarray
+    ints: Integrals
+    live: tuple[bool, ...]  # clock slots initialised
+    state: Any  # the weighting's state after this entry (immutable)
+    t_good_us: int  # last time a satellite passed
+    info: EpochInfo
+    totals: tuple[int, int, int, int, int]  # cumulative: sats used, sats rejected, resets, clock resets, epochs
+
+
+def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
+                  blocked: np.ndarray | None = None) -> SatEpoch | None:
+    """The state-independent part of an epoch, at the frame's origin (elevation, atmosphere, σ model,
+    prior). Observations without a finite pseudorange or satellite position, or below the elevation
+    mask, are dropped. ``blocked``: (n,) the map's line-of-sight verdict per observation (or None)."""
+    from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
+    from companion.gnss.geometry import azimuth_elevation_rad
+    from companion.gnss.timescale import week_tow
+
+    ok = np.isfinite(epoch.pseudorange_m) & np.isfinite(epoch.sat_pos_ecef_m).all(axis=1)
+    if not epoch.corrected:
+        ok &= np.isfinite(epoch.sat_clock_s)
+    d = epoch.sat_pos_ecef_m - frame.r0_ecef_m
+    los = d / np.linalg.norm(np.where(np.isfinite(d), d, 1.0), axis=1)[:, None]
+    az, el = azimuth_elevation_rad(np.where(np.isfinite(los), los, 0.0), frame.lat_rad, frame.lon_rad)
+    ok &= el >= math.radians(cfg.elevation_mask_deg)
+    if ok.sum() == 0:
+        return None
+    ep = epoch.select(ok)
+    el, az = el[ok], az[ok]
+    z = ep.pseudorange_m.copy()
+    rate = ep.pseudorange_rate_m_s.copy()
+    if not ep.corrected:
+        z = z + C_M_S * ep.sat_clock_s - saastamoinen_m(frame.lat_rad, frame.h_m, el)
+        if klobuchar is not None:
+            z = z - klobuchar_m(klobuchar[0], klobuchar[1], frame.lat_rad, frame.lon_rad, az, el,
+                                week_tow(ep.t_gps_s)[1]) * iono_frequency_scale(ep.system)
+        rate = rate + C_M_S * np.nan_to_num(ep.sat_clock_drift_s_s)
+    spp_cfg = SppConfig(weighting="cn0-elevation", sigma_floor_m=cfg.sigma_floor_m,
+                        sigma_zenith_m=cfg.sigma_zenith_m, cn0_ref_dbhz=cfg.cn0_ref_dbhz,
+                        glonass_sigma_factor=cfg.glonass_sigma_factor)
+    sigma = sigma_model_m(ep, el, spp_cfg)
+    sigma_los = sigma_model_m(ep, el, replace(spp_cfg, weighting="cn0", sigma_cn0_m=cfg.sigma_los_cn0_m))
+    ideal = math.hypot(cfg.sigma_floor_m, cfg.sigma_zenith_m)
+    r_rate = (sigma * cfg.sigma_range_rate_m_s / ideal) ** 2
+    vel_ok = np.isfinite(rate) & np.isfinite(ep.sat_vel_ecef_m_s).all(axis=1)
+    el_deg = np.degrees(el)
+    m = ep.n
+    return SatEpoch(ep, ep.system.astype(int) * 1000 + ep.prn.astype(int), model.SLOT_OF[ep.system.astype(int)],
+                    z, sigma**2, np.full(m, cfg.sigma_uniform_m**2), sigma_los**2,
+                    theta_prior(ep.cn0_dbhz, el_deg, cfg, None if blocked is None else blocked[ok]),
+                    el_deg, ep.sat_pos_ecef_m, np.where(vel_ok[:, None], ep.sat_vel_ecef_m_s, np.nan),
+                    np.where(vel_ok, rate, np.nan), r_rate)
+
+
+class TightEngine:
+    """The filter on NED accelerations (with attitudes) and prepared epochs, in arrival order."""
+
+    def __init__(self, cfg: TightConfig, method: str = weighting.DEFAULT_WEIGHTING,
+                 counts: dict[str, int] | None = None, frame: Frame | None = None,
+                 klobuchar: Any = None) -> None:
+        cfg.validate()
+        self.cfg = cfg
+        self.method = method
+        self.weighting = weighting.make(method, cfg)
+        self.frame = frame
+        self.klobuchar = klobuchar
+        self.imu = ImuHistory(cfg.imu_hold_max_s)
+        self.imu.trim_len = _TRIM_EVERY
+        self.entries: list[Entry] = []
+        self._t: list[int] = []
+        self._pending: list[tuple[int, SatEpoch | Speed]] = []
+        self._history_us = int(round(cfg.history_s * 1e6))
+        self._future_us = int(round(cfg.future_tolerance_s * 1e6))
+        self._reset_us = int(round(cfg.reset_timeout_s * 1e6))
+        c = cfg
+        self._q = (c.sigma_acc_m_s2**2, c.sigma_acc_vertical_m_s2**2, c.sigma_acc_bias_rw_m_s2_sqrt_s**2,
+                   c.sigma_acc_ned_rw_m_s2_sqrt_s**2, c.q_clock_m2_s, c.q_isb_m2_s, c.q_drift_m2_s3)
+        self._counts = counts if counts is not None else {}
+        for k in ("gnss_epochs", "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_before_imu",
+                  "gnss_rejected_no_solution", "gnss_rejected_duplicate", "gnss_out_of_order", "gnss_refused",
+                  "speed_fused"):
+            self._counts.setdefault(k, 0)
+        self._cache: tuple[Any, int, Any] | None = None
+
+    # ------------------------------------------------------------------ IMU
+    @property
+    def counts(self) -> dict[str, int]:
+        c = self._counts
+        for k, v in zip(_IMU_COUNTS, self.imu.counts, strict=True):
+            c[k] = v
+        if self.entries:
+            used, rejected, resets, clock_resets, _ = self.entries[-1].totals
+            c.update(sat_used=used, sat_rejected=rejected, gnss_resets=resets, clock_resets=clock_resets)
+        return c
+
+    def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
+        """One NED acceleration (gravity-compensated) with its attitude (``FusionEngine.push_acc``)."""
+        if self.imu.push(t_us, ax, ay, az, rot) or self._pending:
+            self._imu_pushed()
+
+    def push_frd(self, t_us: int, f_frd_m_s2: Any, rot: Rot9) -> None:
+        if self.imu.push_frd(t_us, f_frd_m_s2, rot, self.cfg.gravity_m_s2) or self._pending:
+            self._imu_pushed()
+
+    def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
+        """Many clean, increasing, gap-free samples at once (as ``ImuHistory.append_batch``)."""
+        self.imu.append_batch(np.asarray(t_us, np.int64), np.asarray(a_ned, float),
+                              None if rot is None else np.asarray(rot, float))
+        self._imu_pushed()
+
+    def _imu_pushed(self) -> None:
+        if self._pending and self._pending[0][0] <= self.imu.last_t_us:
+            now = self.imu.last_t_us
+            while self._pending and self._pending[0][0] <= now:
+                self._insert(*self._pending.pop(0))
+        if len(self.imu) > self.imu.trim_len:
+            self._trim()
+            self.imu.trim_len = len(self.imu) + _TRIM_EVERY
+
+    # ------------------------------------------------------------ measurements
+    def push_epoch(self, t_us: int, epoch: SatEpoch) -> None:
+        """A prepared epoch valid at ``t_us`` (boot time); fused now, later, or rejected (counted)."""
+        self._counts["gnss_epochs"] += 1
+        self._push(t_us, epoch)
+
+    def push_speed(self, t_us: int, speed_m_s: float) -> None:
+        """A ground vehicle's forward speed (odometry) as a measurement of |v_NE|."""
+        if not (math.isfinite(speed_m_s) and speed_m_s >= 0.0):
+            self._counts["speed_rejected_nonfinite"] = self._counts.get("speed_rejected_nonfinite", 0) + 1
+            return
+        sd = self.cfg.sigma_speed_m_s + self.cfg.speed_sigma_fraction * speed_m_s
+        self._push(t_us, Speed(speed_m_s, sd * sd))
+
+    def _push(self, t_us: int, meas: SatEpoch | Speed) -> None:
+        c = self._counts
+        imu = self.imu
+        if not len(imu):
+            c["gnss_rejected_before_imu"] += 1
+            return
+        now = imu.last_t_us
+        if t_us > now + self._future_us:
+            c["gnss_rejected_future"] += 1
+            return
+        if t_us < now - self._history_us or t_us < imu.first_t_us or (self._t and t_us < self._t[0]):
+            c["gnss_rejected_too_old"] += 1
+            return
+        if self._is_duplicate(t_us, meas):
+            c["gnss_rejected_duplicate"] += 1
+            return
+        if t_us > now:
+            bisect.insort(self._pending, (t_us, meas), key=lambda item: item[0])
+            return
+        self._insert(t_us, meas)
+
+    def _is_duplicate(self, t_us: int, meas: SatEpoch | Speed) -> bool:
+        kind = type(meas)
+        lo, hi = bisect.bisect_left(self._t, t_us), bisect.bisect_right(self._t, t_us)
+        return any(type(self.entries[i].meas) is kind for i in range(lo, hi)) or any(
+            t == t_us and type(m) is kind for t, m in self._pending)
+
+    def ensure_frame(self, epoch: GnssEpoch) -> bool:
+        """Set the local frame at this epoch's single-point solution if there is none yet."""
+        if self.frame is None:
+            sol = solve_position(epoch, SPP_INIT, klobuchar=self.klobuchar)
+            if not sol.ok:
+                return False
+            self.frame = Frame.at_ecef(sol.p_ecef_m)
+        return True
+
+    def _insert(self, t_us: int, meas: SatEpoch | Speed) -> None:
+        if not self.entries:
+            if isinstance(meas, SatEpoch):
+                self._initialise(t_us, meas)
+            return
+        i = bisect.bisect_right(self._t, t_us)
+        if i == 0:
+            self._counts["gnss_rejected_too_old"] += 1
+            return
+        later = self.entries[i:]
+        if later:
+            self._counts["gnss_out_of_order"] += 1
+            del self.entries[i:]
+            del self._t[i:]
+        self._fuse(t_us, meas)
+        for e in later:
+            assert e.meas is not None
+            self._fuse(e.t_us, e.meas)
+            self._counts["gnss_refused"] += 1
+
+    def _append(self, e: Entry) -> None:
+        self.entries.append(e)
+        self._t.append(e.t_us)
+
+    # --------------------------------------------------------------- start / reset
+    def _spp(self, meas: SatEpoch) -> SppSolution | None:
+        sol = solve_position(meas.epoch, SPP_INIT, klobuchar=self.klobuchar)
+        return sol if sol.ok else None
+
+    def _initialise(self, t_us: int, meas: SatEpoch) -> None:
+        sol = self._spp(meas)
+        if sol is None:
+            self._counts["gnss_rejected_no_solution"] += 1
+            return
+        if self.frame is None:
+            self.frame = Frame.at_ecef(sol.p_ecef_m)
+        c = self.cfg
+        x = np.zeros(N_STATE)
+        P = np.zeros((N_STATE, N_STATE))
+        P[3:6, 3:6] = np.eye(3) * c.sigma_velocity0_m_s**2
+        P[6:9, 6:9] = np.eye(3) * c.sigma_acc_bias0_m_s2**2
+        P[9:12, 9:12] = np.eye(3) * c.sigma_acc_ned0_m_s2**2
+        P[I_DRIFT, I_DRIFT] = c.sigma_drift0_m_s**2
+        if np.isfinite(sol.v_ecef_m_s).all():
+            x[3:6] = self.frame.c_ecef_ned.T @ sol.v_ecef_m_s
+            x[I_DRIFT] = sol.clock_drift_m_s
+        x, P, live = self._from_solution(x, P, sol, (False,) * N_CLK)
+        self._append(Entry(t_us, None, x, P, self.imu.integrals(t_us), live, self.weighting.initial_state(),
+                           t_us, EpochInfo(), (0, 0, 0, 0, 1)))
+
+    def _from_solution(self, x: np.ndarray, P: np.ndarray, sol: SppSolution, live: tuple[bool, ...]
+                       ) -> tuple[np.ndarray, np.ndarray, tuple[bool, ...]]:
+        """Position and clocks set to a single-point solution (their covariance reset), the rest kept."""
+        assert self.frame is not None
+        C = self.frame.c_ecef_ned
+        x = x.copy()
+        x[0:3] = self.frame.ned(sol.p_ecef_m)
+        reset = np.r_[0:3, I_CLK:I_DRIFT]
+        P = P.copy()
+        P[reset, :] = 0.0
+        P[:, reset] = 0.0
+        P[0:3, 0:3] = C.T @ sol.cov_ecef_m2 @ C + np.eye(3) * SIGMA_SPP_EXTRA_M**2
+        live_l = [False] * N_CLK
+        for s, b in zip(sol.clock_systems, sol.clock_bias_m, strict=True):
+            j = int(model.SLOT_OF[int(s)])
+            x[I_CLK + j] = b
+            live_l[j] = True
+        for j in np.flatnonzero(live_l):
+            P[I_CLK + j, I_CLK + j] = self.cfg.sigma_clock0_m**2
+        x[I_CLK:I_DRIFT] = np.where(live_l, x[I_CLK:I_DRIFT], 0.0)
+        return x, P, tuple(live_l)
+
+    # ---------------------------------------------------------------------- fusion
+    def _predict(self, e: Entry, t_us: int, ints: Integrals) -> tuple[np.ndarray, np.ndarray]:
+        T = (t_us - e.t_us) * 1e-6
+        x15 = (*e.x[0:6], 0.0, 0.0, 0.0, *e.x[6:12])
+        m15, nA, nB = mean_between(x15, e.ints, ints, 1.0)
+        x = e.x.copy()
+        x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
+        x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * np.asarray(e.live, dtype=float)
+        if T <= 0.0:
+            return x, e.P.copy()
+        F = model.transition(T, nA, nB)
+        live = np.asarray(e.live, bool)
+        F[I_CLK:I_DRIFT, I_DRIFT] *= live
+        Q = model.process_noise(T, nA, live, *self._q)
+        return x, F @ e.P @ F.T + Q
+
+    def _fuse(self, t_us: int, meas: SatEpoch | Speed) -> None:
+        prev = self.entries[-1]
+        ints = self.imu.integrals(t_us)
+        x, P = self._predict(prev, t_us, ints)
+        if isinstance(meas, Speed):
+            self._fuse_speed(prev, t_us, meas, x, P, ints)
+        else:
+            self._fuse_epoch(prev, t_us, meas, x, P, ints)
+
+    def _fuse_speed(self, prev: Entry, t_us: int, m: Speed, x: np.ndarray, P: np.ndarray, ints: Integrals) -> None:
+        s, h = model.speed(x)
+        y = m.speed_m_s - s
+        ph = P @ h
+        S = float(h @ ph) + m.r_m2_s2
+        if s > 0.5 and y * y <= self.cfg.gate_sigma**2 * S:  # below 0.5 m/s the direction is unknown
+            k = ph / S
+            x = x + k * y
+            P = P - np.outer(k, ph)
+            P = 0.5 * (P + P.T)
+            self._counts["speed_fused"] += 1
+        self._append(Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
+                           prev.totals))
+
+    def _fuse_epoch(self, prev: Entry, t_us: int, m: SatEpoch, x: np.ndarray, P: np.ndarray,
+                    ints: Integrals) -> None:
+        assert self.frame is not None
+        c = self.cfg
+        used_tot, rej_tot, resets, clock_resets, epochs = prev.totals
+        pred, H, _ = model.pseudorange(x, self.frame, m.sat_pos_ecef_m, m.slot)
+        y = m.z_m - pred
+        live = list(prev.live)
+        for j in np.unique(m.slot).tolist():
+            sel = m.slot == j
+            med = float(np.median(y[sel]))
+            if not live[j] or abs(med) > c.clock_jump_m:
+                clock_resets += int(live[j])
+                x[I_CLK + j] += med
+                P[I_CLK + j, :] = 0.0
+                P[:, I_CLK + j] = 0.0
+                P[I_CLK + j, I_CLK + j] = c.sigma_clock0_m**2
+                y[sel] -= med
+                live[j] = True
+        HP = H @ P
+        S0 = HP @ H.T
+        r_nom = {"uniform": m.r_uniform_m2, "model": m.r_model_m2, "los": m.r_los_m2}[self.weighting.nominal]
+        terms = weighting.SatTerms(m.key, y, np.diag(S0).copy(), r_nom, m.theta_prior)
+
+        def solve(r: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            u = np.flatnonzero(used)
+            S = S0[np.ix_(u, u)] + np.diag(r[u])
+            dx = HP[u].T @ np.linalg.solve(S, y[u])
+            return y - H @ dx, S
+
+        r, used, state = self.weighting.weigh(prev.state, terms, solve)
+        u = np.flatnonzero(used)
+        # range rates of the used satellites, inflated like their pseudoranges, gated on their own
+        rate_ok = used & np.isfinite(m.z_rate_m_s)
+        nis = math.nan
+        if len(u):
+            Hs, ys, rs = [H[u]], [y[u]], [r[u]]
+            if rate_ok.any():
+                k = np.flatnonzero(rate_ok)
+                pr, Hr = model.range_rate(x, self.frame, m.sat_pos_ecef_m[k], m.sat_vel_ecef_m_s[k])
+                yr = m.z_rate_m_s[k] - pr
+                rr = m.r_rate_m2_s2[k] * (r[k] / r_nom[k])
+                s0r = np.einsum("ij,jk,ik->i", Hr, P, Hr)
+                g = yr * yr <= c.gate_sigma**2 * (s0r + rr)
+                Hs.append(Hr[g])
+                ys.append(yr[g])
+                rs.append(rr[g])
+            Hu, yu, ru = np.vstack(Hs), np.concatenate(ys), np.concatenate(rs)
+            PHt = P @ Hu.T
+            S = Hu @ PHt + np.diag(ru)
+            W = np.linalg.solve(S, np.column_stack((yu, PHt.T)))
+            x = x + PHt @ W[:, 0]
+            P = P - PHt @ W[:, 1:]
+            P = 0.5 * (P + P.T)
+            nis = float(yu @ W[:, 0])
+        t_good = t_us if len(u) else prev.t_good_us
+        if not len(u) and t_us - prev.t_good_us >= self._reset_us:
+            sol = self._spp(m)
+            if sol is not None:
+                x, P, live_t = self._from_solution(x, P, sol, tuple(live))
+                live = list(live_t)
+                resets += 1
+                t_good = t_us
+        beta = self.weighting.beta(state, m.key)
+        info = EpochInfo(m.epoch.n, len(u), nis, float(np.mean(beta)) if len(beta) else math.nan,
+                         m.key, beta, y, used)
+        self._append(Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
+                           (used_tot + len(u), rej_tot + len(y) - len(u), resets, clock_resets, epochs + 1)))
+
+    # --------------------------------------------------------------------- history
+    def _trim(self) -> None:
+        horizon = self.imu.last_t_us - self._history_us
+        if not self.entries:
+            self.imu.trim_before(horizon)
+            return
+        j = bisect.bisect_right(self._t, horizon) - 1
+        if j < 0:
+            return
+        if j > 0:
+            del self.entries[:j]
+            del self._t[:j]
+        base = self.entries[0]
+        if base.t_us < horizon:
+            ints = self.imu.integrals(horizon)
+            x, P = self._predict(base, horizon, ints)
+            self.entries[0] = base._replace(t_us=horizon, meas=None, x=x, P=P, ints=ints)
+            self._t[0] = horizon
+        self.imu.trim_before(self._t[0])
+
+    # ---------------------------------------------------------------------- output
+    def state_now(self) -> tuple[int, np.ndarray, np.ndarray, Entry] | None:
+        """(t_us, x, P, the last entry) at the newest IMU time; None before the first epoch."""
+        if not self.entries:
+            return None
+        last = self.entries[-1]
+        now = self.imu.last_t_us
+        if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
+            return self._cache[2]  # type: ignore[no-any-return]
+        x, P = self._predict(last, now, self.imu.last_integrals())
+        out = (now, x, P, last)
+        self._cache = (last, now, out)
+        return out
+
+    def clock_bias_m(self, x: np.ndarray, system: System) -> float:
+        return float(x[I_CLK + int(model.SLOT_OF[int(system)])])

@@ -1,0 +1,178 @@
+"""State, process and measurement models of the tightly coupled filter (pure numpy).
+
+State (``N_STATE`` = 19)::
+
+    x = [p (NED, m), v (NED, m/s), a (body accelerometer bias, m/s²), d (NED acceleration error,
+         m/s²), c_s (receiver clock × c per system slot, m; ``CLOCK_SLOTS``), ḋ (common drift, m/s)]
+
+``p, v, a, d`` move exactly as the loose filter's (``companion.estimator.model``: the IMU history's
+prefix integrals give the block's mean and transition for any attitude history); every system's
+clock moves with the common drift, ``c_s ← c_s + T ḋ``. A system's slot is live once one of its
+satellites was seen (before that its value and variance are 0 and it gets no process noise).
+
+Measurements, per satellite ``i`` with position ``r_i`` (ECEF at transmission) and velocity ``u_i``,
+the receiver at ``r = r₀ + C p`` (``C`` = R_ecef_ned at home, ``r₀`` home's ECEF), ``v_e = C v``:
+
+    pseudorange      ρ_i = |r_i − r| + ω_e (x_i y − y_i x) / c + c_s(i)
+    range rate       ρ̇_i = g_i (1 − l_i·u_i / c) + ω_e (u_iy x + y_i v_x − u_ix y − x_i v_y) / c + ḋ,
+                     g_i = l_i · (u_i − v_e),  l_i = (r_i − r) / |r_i − r|
+
+(the Sagnac term and its rate, the light-time rate of ``companion.gnss.spp``). Their Jacobians are
+exact (tested against finite differences).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from companion.estimator import model as loose_model
+from companion.gnss.constants import C_M_S, OMEGA_E_RAD_S
+from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, geodetic_to_ecef
+from companion.gnss.systems import System
+
+CLOCK_SLOTS: tuple[System, ...] = tuple(System)
+SLOT_OF = np.full(max(int(s) for s in System) + 1, -1, dtype=int)
+for _i, _s in enumerate(CLOCK_SLOTS):
+    SLOT_OF[int(_s)] = _i
+N_NAV = 12
+I_P, I_V, I_A, I_D = 0, 3, 6, 9
+I_CLK = N_NAV
+N_CLK = len(CLOCK_SLOTS)
+I_DRIFT = I_CLK + N_CLK
+N_STATE = I_DRIFT + 1
+NAV_OF_LOOSE = np.r_[0:6, 9:15]  # the loose 15-state's p, v, a, d (its GNSS bias b dropped)
+_W = OMEGA_E_RAD_S / C_M_S
+
+
+class Frame(NamedTuple):
+    """The local NED frame's anchor in ECEF."""
+
+    r0_ecef_m: np.ndarray  # (3,)
+    c_ecef_ned: np.ndarray  # (3, 3): d_ecef = C d_ned
+    lat_rad: float
+    lon_rad: float
+    h_m: float
+
+    @classmethod
+    def at_ecef(cls, r0_ecef_m: np.ndarray) -> Frame:
+        lat, lon, h = (float(v) for v in ecef_to_geodetic(np.asarray(r0_ecef_m, float)))
+        return cls.at_geodetic(lat, lon, h)
+
+    @classmethod
+    def at_geodetic(cls, lat_rad: float, lon_rad: float, h_m: float) -> Frame:
+        r0 = geodetic_to_ecef(lat_rad, lon_rad, h_m)
+        return cls(np.asarray(r0, float), ecef_to_ned_matrix(lat_rad, lon_rad).T, lat_rad, lon_rad, h_m)
+
+    def ecef(self, p_ned_m: np.ndarray) -> np.ndarray:
+        return self.r0_ecef_m + self.c_ecef_ned @ p_ned_m
+
+    def ned(self, r_ecef_m: np.ndarray) -> np.ndarray:
+        return self.c_ecef_ned.T @ (np.asarray(r_ecef_m, float) - self.r0_ecef_m)
+
+
+def pseudorange(x: np.ndarray, frame: Frame, sat_pos_ecef_m: np.ndarray, slot: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(predicted pseudoranges (m,), H (m, N_STATE), unit line of sight receiver→satellite (m, 3))."""
+    r = frame.ecef(x[I_P:I_P + 3])
+    d = sat_pos_ecef_m - r
+    rng = np.sqrt(np.einsum("ij,ij->i", d, d))
+    los = d / rng[:, None]
+    sag = _W * (sat_pos_ecef_m[:, 0] * r[1] - sat_pos_ecef_m[:, 1] * r[0])
+    pred = rng + sag + x[I_CLK + slot]
+    m = len(slot)
+    H = np.zeros((m, N_STATE))
+    dr = -los
+    dr[:, 0] -= _W * sat_pos_ecef_m[:, 1]
+    dr[:, 1] += _W * sat_pos_ecef_m[:, 0]
+    H[:, I_P:I_P + 3] = dr @ frame.c_ecef_ned
+    H[np.arange(m), I_CLK + slot] = 1.0
+    return pred, H, los
+
+
+def range_rate(x: np.ndarray, frame: Frame, sat_pos_ecef_m: np.ndarray, sat_vel_ecef_m_s: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(predicted pseudorange rates (m,), H (m, N_STATE)); see the module doc."""
+    C = frame.c_ecef_ned
+    r = frame.ecef(x[I_P:I_P + 3])
+    ve = C @ x[I_V:I_V + 3]
+    rs, us = sat_pos_ecef_m, sat_vel_ecef_m_s
+    d = rs - r
+    rng = np.sqrt(np.einsum("ij,ij->i", d, d))
+    los = d / rng[:, None]
+    dv = us - ve
+    g = np.einsum("ij,ij->i", los, dv)
+    s = np.einsum("ij,ij->i", los, us)
+    f = 1.0 - s / C_M_S
+    sag = _W * (us[:, 1] * r[0] + rs[:, 1] * ve[0] - us[:, 0] * r[1] - rs[:, 0] * ve[1])
+    pred = g * f + sag + x[I_DRIFT]
+    # ∂l/∂r = −(I − l lᵀ)/ρ:  ∂(l·w)/∂r = −(w − (l·w) l)/ρ
+    dg_dr = -(dv - g[:, None] * los) / rng[:, None]
+    ds_dr = -(us - s[:, None] * los) / rng[:, None]
+    dm_dr = dg_dr * f[:, None] - (g / C_M_S)[:, None] * ds_dr
+    dm_dr[:, 0] += _W * us[:, 1]
+    dm_dr[:, 1] -= _W * us[:, 0]
+    dm_dv = -los * f[:, None]
+    dm_dv[:, 0] += _W * rs[:, 1]
+    dm_dv[:, 1] -= _W * rs[:, 0]
+    H = np.zeros((len(rs), N_STATE))
+    H[:, I_P:I_P + 3] = dm_dr @ C
+    H[:, I_V:I_V + 3] = dm_dv @ C
+    H[:, I_DRIFT] = 1.0
+    return pred, H
+
+
+def speed(x: np.ndarray) -> tuple[float, np.ndarray]:
+    """(horizontal speed |v_NE| (m/s), its H row (N_STATE,))."""
+    vn, ve = float(x[I_V]), float(x[I_V + 1])
+    s = float(np.hypot(vn, ve))
+    h = np.zeros(N_STATE)
+    if s > 1e-6:
+        h[I_V], h[I_V + 1] = vn / s, ve / s
+    return s, h
+
+
+def elevation_rad(los_ecef: np.ndarray, frame: Frame) -> np.ndarray:
+    """Elevation of receiver→satellite unit vectors at home (a few km away the difference is < 0.1°)."""
+    down = los_ecef @ frame.c_ecef_ned[:, 2]
+    return np.arcsin(np.clip(-down, -1.0, 1.0))
+
+
+# --------------------------------------------------------------------------- propagation
+def transition(T_s: float, nA: np.ndarray, nB: np.ndarray) -> np.ndarray:
+    """F over a block from the IMU history's (−A, −B) (row-major 9 each; ``history.rotation_blocks``):
+    the loose filter's transition on (p, v, a, d), clocks moved by the common drift."""
+    A = -np.asarray(nA, float).reshape(3, 3)
+    B = -np.asarray(nB, float).reshape(3, 3)
+    F = np.eye(N_STATE)
+    F[:N_NAV, :N_NAV] = loose_model.transition_block(T_s, A, B, 1.0)[np.ix_(NAV_OF_LOOSE, NAV_OF_LOOSE)]
+    F[I_CLK:I_DRIFT, I_DRIFT] = T_s
+    return F
+
+
+def process_noise(T_s: float, nA: np.ndarray, live: np.ndarray, q_acc_ne: float, q_acc_d: float,
+                  q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float) -> np.ndarray:
+    """Q over a block: the loose filter's (white acceleration, separate vertical density; body and
+    NED bias random walks) on (p, v, a, d); common clock phase, per-system offset and drift random
+    walks on the live clock slots (``live``, bool (N_CLK,))."""
+    Q15 = np.zeros((15, 15))
+    R_mean = -np.asarray(nA, float).reshape(3, 3) / T_s if T_s > 0 else np.eye(3)
+    loose_model.add_process_noise(Q15, T_s, R_mean, q_acc_ne, 0.0, q_rw, q_ned)
+    if q_acc_d != q_acc_ne:  # the vertical white-acceleration density of a ground vehicle
+        T2 = T_s * T_s
+        dq = q_acc_d - q_acc_ne
+        Q15[2, 2] += dq * T2 * T_s / 3.0
+        Q15[2, 5] += dq * T2 / 2.0
+        Q15[5, 2] += dq * T2 / 2.0
+        Q15[5, 5] += dq * T_s
+    Q = np.zeros((N_STATE, N_STATE))
+    Q[:N_NAV, :N_NAV] = Q15[np.ix_(NAV_OF_LOOSE, NAV_OF_LOOSE)]
+    idx = I_CLK + np.flatnonzero(live)
+    T2, T3 = T_s * T_s, T_s * T_s * T_s
+    Q[np.ix_(idx, idx)] += q_clock * T_s + q_drift * T3 / 3.0
+    Q[idx, idx] += q_isb * T_s
+    Q[idx, I_DRIFT] += q_drift * T2 / 2.0
+    Q[I_DRIFT, idx] += q_drift * T2 / 2.0
+    Q[I_DRIFT, I_DRIFT] += q_drift * T_s
+    return Q

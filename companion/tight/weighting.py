@@ -1,0 +1,205 @@
+"""How each satellite is weighted in a tightly coupled update: the rows to beat and the per-satellite
+belief, selectable by name (``WEIGHTINGS``).
+
+A weighting sees one epoch's ``SatTerms`` (per satellite: the pre-fit innovation, the β-independent
+part of its innovation variance, the nominal variance, the prior logit) and a ``solve(r, used)``
+callback (the filter's update with those variances and satellites; it returns the post-fit
+residuals and the innovation covariance), and returns the variances to fuse with, the satellites to
+use and its new state. States are immutable (the out-of-sequence history keeps them).
+
+* ``naive``: one σ for every satellite (``sigma_uniform_m``): fixed weights;
+* ``cn0-elevation``: the single-point solution's σ model (C/N0 and elevation) — every row below
+  starts from it;
+* ``fde``: that, with the χ² test of the epoch's normalised innovations; while it fails, the
+  satellite with the largest normalised innovation is excluded (RAIM/FDE in the filter);
+* ``student-t``: a heavy-tailed (Student-t, ν = ``student_dof``) update by iteratively reweighted
+  least squares: each satellite's variance is divided by its weight (ν + 1)/(ν + e²/R) from its
+  post-fit residual e;
+* ``first-order`` / ``second-order``: the per-satellite belief (``belief.py``), R_s(β_s) = R_nom,s ·
+  k^(1 − β_s), β_s learned from each satellite's consistency with the paper's first-order or
+  second-order (damped Newton, dual-timescale) rule.
+
+Every row tests each satellite against the innovation gate (``gate_sigma``) with its variance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+from scipy.stats import chi2 as _chi2
+
+from companion.errors import not_one_of
+from companion.tight import belief
+from companion.tight.config import TightConfig
+
+
+class SatTerms(NamedTuple):
+    """One epoch's pseudorange terms, per satellite (arrays (m,))."""
+
+    key: np.ndarray  # int: system × 1000 + PRN
+    y: np.ndarray  # pre-fit innovation z − h(x⁻) (m)
+    s0: np.ndarray  # (H P⁻ Hᵀ)_ii (m²)
+    r_nominal: np.ndarray  # a-priori variance from the σ model (m²)
+    theta_prior: np.ndarray  # prior belief logit from C/N0, elevation (and the map)
+
+
+Solve = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (r, used) -> (post-fit e, S)
+
+
+class Weighting(Protocol):
+    # the nominal variance: "uniform" (sigma_uniform_m²), "model" (C/N0 + elevation), "los" (a
+    # line-of-sight signal's: C/N0 only; the belief and its prior carry the rest)
+    nominal: str
+
+    def initial_state(self) -> Any: ...
+
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+        """(variances to fuse with (m,), satellites to use (bool (m,)), new state)."""
+        ...
+
+    def beta(self, state: Any, key: np.ndarray) -> np.ndarray:
+        """Belief per satellite in [0, 1] (1 for the rows without one)."""
+        ...
+
+
+REGISTRY: dict[str, Callable[[TightConfig], Weighting]] = {}
+
+
+def register(name: str) -> Callable[[Any], Any]:
+    def deco(cls: Any) -> Any:
+        REGISTRY[name] = cls
+        return cls
+
+    return deco
+
+
+def make(name: str, cfg: TightConfig) -> Weighting:
+    if name not in REGISTRY:
+        raise not_one_of("--method (tight coupling)", name, tuple(REGISTRY))
+    return REGISTRY[name](cfg)
+
+
+def gate(t: SatTerms, r: np.ndarray, cfg: TightConfig) -> np.ndarray:
+    """Satellites whose pre-fit innovation is within ``gate_sigma`` of √(s0 + r)."""
+    return t.y * t.y <= cfg.gate_sigma**2 * (t.s0 + r)
+
+
+@register("naive")
+class Fixed:
+    """Fixed weights: σ = ``sigma_uniform_m`` for every satellite."""
+
+    nominal = "uniform"
+
+    def __init__(self, cfg: TightConfig) -> None:
+        self.cfg = cfg
+
+    def initial_state(self) -> None:
+        return None
+
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+        return t.r_nominal, gate(t, t.r_nominal, self.cfg), state
+
+    def beta(self, state: Any, key: np.ndarray) -> np.ndarray:
+        return np.ones(len(key))
+
+
+@register("cn0-elevation")
+class SigmaModel(Fixed):
+    """The C/N0 + elevation σ model (``companion.gnss.spp.sigma_model_m``'s ``cn0-elevation``)."""
+
+    nominal = "model"
+
+
+@register("fde")
+class Fde(SigmaModel):
+    """χ² test of the normalised innovations yᵀ S⁻¹ y; the worst satellite out while it fails."""
+
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+        c = self.cfg
+        used = gate(t, t.r_nominal, c)
+        for _ in range(c.fde_max_exclusions):
+            idx = np.flatnonzero(used)
+            if len(idx) < 5:
+                break
+            _, S_used = solve(t.r_nominal, used)  # the filter's S (not diagonal: the common position)
+            w = np.linalg.solve(S_used, t.y[idx])
+            stat = float(t.y[idx] @ w)
+            if stat <= _chi2.ppf(1.0 - c.fde_p_false_alarm, len(idx)):
+                break
+            norm = np.abs(w) / np.sqrt(np.diag(np.linalg.inv(S_used)))  # standardised innovations
+            used = used.copy()
+            used[idx[int(np.argmax(norm))]] = False
+        return t.r_nominal, used, state
+
+
+@register("student-t")
+class StudentT(SigmaModel):
+    """Iteratively reweighted update with Student-t weights (ν + 1) / (ν + e² / R_nom)."""
+
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+        c = self.cfg
+        nu = c.student_dof
+        used = gate(t, t.r_nominal, c)
+        r = t.r_nominal
+        for _ in range(c.student_iterations):
+            e, _ = solve(r, used)
+            w = (nu + 1.0) / (nu + e * e / t.r_nominal)
+            r = t.r_nominal / np.minimum(w, 1.0 + 1.0 / nu)
+        return r, used, state
+
+
+BeliefMap = dict[int, tuple[float, float, float]]  # key -> (θ, H_fast, H_slow), never mutated
+
+
+@register("second-order")
+class SatelliteBelief(SigmaModel):
+    """A belief per satellite, learned by the paper's second-order rule (``belief.py``)."""
+
+    nominal = "los"
+    first_order = False
+
+    def initial_state(self) -> BeliefMap:  # type: ignore[override]
+        return {}
+
+    def _gather(self, state: BeliefMap, t: SatTerms) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n = len(t.key)
+        theta, hf, hs = np.empty(n), np.ones(n), np.ones(n)
+        for i, k in enumerate(t.key.tolist()):
+            s = state.get(k)
+            if s is None:
+                theta[i] = min(max(t.theta_prior[i], self.cfg.theta_min), self.cfg.theta_max)
+            else:
+                theta[i], hf[i], hs[i] = s
+        return theta, hf, hs
+
+    def weigh(self, state: BeliefMap, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+        c = self.cfg
+        theta, hf, hs = self._gather(state, t)
+        _, g = belief.loss_grad_theta(theta, t.y, t.s0, t.r_nominal, t.theta_prior, c)
+        if self.first_order:
+            theta = theta - c.eta * g
+        else:
+            theta, hf, hs = belief.second_order_step(theta, hf, hs, g, c)
+        theta = np.clip(theta, c.theta_min, c.theta_max)
+        new = dict(state)
+        for k, th, f, s in zip(t.key.tolist(), theta.tolist(), hf.tolist(), hs.tolist(), strict=True):
+            new[k] = (th, f, s)
+        r = belief.r_of_beta(belief.sigmoid(theta), t.r_nominal, c)
+        return r, gate(t, r, c), new
+
+    def beta(self, state: BeliefMap, key: np.ndarray) -> np.ndarray:  # type: ignore[override]
+        th = np.array([state.get(k, (np.nan,))[0] for k in key.tolist()], dtype=float)
+        return belief.sigmoid(th)
+
+
+@register("first-order")
+class SatelliteBeliefFirstOrder(SatelliteBelief):
+    """The same belief with the plain gradient step θ ← θ − η ∇θ ℓ."""
+
+    first_order = True
+
+
+WEIGHTINGS: tuple[str, ...] = tuple(REGISTRY)
+DEFAULT_WEIGHTING = "second-order"
