@@ -64,20 +64,31 @@ class TightConfig:
     # --- odometry (ground vehicles): forward speed as a measurement of |v_horizontal|
     sigma_speed_m_s: float = 0.1
     speed_sigma_fraction: float = 0.02  # + this × speed (wheel radius, slip)
+    # heading from the odometry's yaw rate: the offset ψ₀ starts from the filter's velocity direction
+    # once the speed is known to odometry_heading_start_m_s, with σ odometry_heading0_rad, and walks
+    # with the yaw-rate bias (a car's gyro: ~0.1°/s, 0.017 rad in 10 s)
+    odometry_heading_start_s: float = 5.0
+    odometry_heading0_rad: float = 0.3
+    sigma_yaw_rate_bias_rad_s: float = 5e-3
+    sigma_lateral_m_s: float = 0.2  # side slip and the heading's own noise, across the track
     # --- per-satellite belief (the paper's second-order rule, per satellite; belief.py)
     r_inflation_max: float = 100.0  # R_s(β) = R_nom,s · this^(1 − β): ≤ 10× the σ at no trust
     theta_min: float = -4.0
     theta_max: float = 4.0
-    eta: float = 0.5  # damped Newton learning rate (per epoch of one satellite)
+    # damped Newton learning rate per epoch of one satellite: a reflection starts abruptly, so the belief
+    # must cross its range within ~1 s (5 epochs); 0.25 and 0.5 followed NLOS onsets too slowly
+    eta: float = 1.0
     lambda_reg: float = 0.1
     alpha_fast: float = 0.5
     alpha_slow: float = 0.95
     omega_fast: float = 0.7
-    student_dof: float = 4.0  # ν of the per-satellite Student-t consistency loss (1 dof)
+    # ν of the Student-t (1 dof) in the belief's loss and the student-t row: NLOS errors are a heavy
+    # mixture (tens of metres on a third of the satellites in a deep canyon), so a heavy tail, ν = 2
+    student_dof: float = 2.0
     # Prior on θ from C/N0 and elevation (and the map): ℓ += κ/2 (θ − θ_prior)², with
     # θ_prior = prior_cn0_per_db (C/N0 − prior_cn0_mid) + prior_el_per_deg (el − prior_el_mid): a
     # strong, high signal is expected in line of sight, a weak low one is not (NLOS loses dB).
-    prior_weight: float = 0.05
+    prior_weight: float = 0.1
     prior_cn0_per_db: float = 0.15
     prior_cn0_mid_dbhz: float = 35.0
     prior_el_per_deg: float = 0.05

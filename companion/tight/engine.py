@@ -41,7 +41,7 @@ from companion.gnss.systems import System
 from companion.tight import model, weighting
 from companion.tight.belief import theta_prior
 from companion.tight.config import TightConfig
-from companion.tight.model import I_CLK, I_DRIFT, N_CLK, N_STATE, Frame
+from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, N_CLK, N_STATE, Frame
 
 _TRIM_EVERY = 256
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
@@ -70,8 +70,11 @@ class SatEpoch(NamedTuple):
 
 
 class Speed(NamedTuple):
+    """Odometry: forward speed, its variance and (NaN: none) the integral of the yaw rate since start."""
+
     speed_m_s: float
     r_m2_s2: float
+    yaw_integral_rad: float = math.nan
 
 
 class EpochInfo(NamedTuple):
@@ -167,7 +170,8 @@ class TightEngine:
         self._reset_us = int(round(cfg.reset_timeout_s * 1e6))
         c = cfg
         self._q = (c.sigma_acc_m_s2**2, c.sigma_acc_vertical_m_s2**2, c.sigma_acc_bias_rw_m_s2_sqrt_s**2,
-                   c.sigma_acc_ned_rw_m_s2_sqrt_s**2, c.q_clock_m2_s, c.q_isb_m2_s, c.q_drift_m2_s3)
+                   c.sigma_acc_ned_rw_m_s2_sqrt_s**2, c.q_clock_m2_s, c.q_isb_m2_s, c.q_drift_m2_s3,
+                   c.sigma_yaw_rate_bias_rad_s**2)
         self._counts = counts if counts is not None else {}
         for k in ("gnss_epochs", "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_before_imu",
                   "gnss_rejected_no_solution", "gnss_rejected_duplicate", "gnss_out_of_order", "gnss_refused",
@@ -216,13 +220,14 @@ class TightEngine:
         self._counts["gnss_epochs"] += 1
         self._push(t_us, epoch)
 
-    def push_speed(self, t_us: int, speed_m_s: float) -> None:
-        """A ground vehicle's forward speed (odometry) as a measurement of |v_NE|."""
+    def push_speed(self, t_us: int, speed_m_s: float, yaw_integral_rad: float = math.nan) -> None:
+        """A ground vehicle's forward speed (odometry) as a measurement of |v_NE|; with the integral of
+        its yaw rate (rad since any fixed start), of its horizontal velocity (heading ψ₀ + integral)."""
         if not (math.isfinite(speed_m_s) and speed_m_s >= 0.0):
             self._counts["speed_rejected_nonfinite"] = self._counts.get("speed_rejected_nonfinite", 0) + 1
             return
         sd = self.cfg.sigma_speed_m_s + self.cfg.speed_sigma_fraction * speed_m_s
-        self._push(t_us, Speed(speed_m_s, sd * sd))
+        self._push(t_us, Speed(speed_m_s, sd * sd, yaw_integral_rad))
 
     def _push(self, t_us: int, meas: SatEpoch | Speed) -> None:
         c = self._counts
@@ -346,6 +351,8 @@ class TightEngine:
         live = np.asarray(e.live, bool)
         F[I_CLK:I_DRIFT, I_DRIFT] *= live
         Q = model.process_noise(T, nA, live, *self._q)
+        if e.P[I_HEADING, I_HEADING] == 0.0:
+            Q[I_HEADING, I_HEADING] = 0.0
         return x, F @ e.P @ F.T + Q
 
     def _fuse(self, t_us: int, meas: SatEpoch | Speed) -> None:
@@ -358,14 +365,35 @@ class TightEngine:
             self._fuse_epoch(prev, t_us, meas, x, P, ints)
 
     def _fuse_speed(self, prev: Entry, t_us: int, m: Speed, x: np.ndarray, P: np.ndarray, ints: Integrals) -> None:
-        s, h = model.speed(x)
-        y = m.speed_m_s - s
-        ph = P @ h
-        S = float(h @ ph) + m.r_m2_s2
-        if s > 0.5 and y * y <= self.cfg.gate_sigma**2 * S:  # below 0.5 m/s the direction is unknown
-            k = ph / S
-            x = x + k * y
-            P = P - np.outer(k, ph)
+        c = self.cfg
+        heading_live = P[I_HEADING, I_HEADING] > 0.0
+        start = self.entries[0].t_us if self.entries else t_us
+        if (not heading_live and math.isfinite(m.yaw_integral_rad) and m.speed_m_s > 2.0
+                and t_us - start >= c.odometry_heading_start_s * 1e6):
+            # heading offset from the filter's velocity direction (the car moves along its heading)
+            x[I_HEADING] = math.atan2(x[4], x[3]) - m.yaw_integral_rad
+            P[I_HEADING, :] = 0.0
+            P[:, I_HEADING] = 0.0
+            P[I_HEADING, I_HEADING] = c.odometry_heading0_rad**2
+            heading_live = True
+        if heading_live and math.isfinite(m.yaw_integral_rad):
+            y, H = model.odometry_velocity(x, m.speed_m_s, m.yaw_integral_rad)
+            psi = float(x[I_HEADING]) + m.yaw_integral_rad
+            u = np.array([[math.cos(psi), math.sin(psi)], [-math.sin(psi), math.cos(psi)]])  # along, across
+            R = u.T @ np.diag([m.r_m2_s2, c.sigma_lateral_m_s**2]) @ u
+        else:
+            s, h = model.speed(x)
+            if s <= 0.5:  # below 0.5 m/s the direction is unknown
+                self._append(Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
+                                   prev.totals))
+                return
+            y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])
+        PHt = P @ H.T
+        S = H @ PHt + R
+        w = np.linalg.solve(S, y)
+        if float(y @ w) <= c.gate_sigma**2 * len(y):
+            x = x + PHt @ w
+            P = P - PHt @ np.linalg.solve(S, PHt.T)
             P = 0.5 * (P + P.T)
             self._counts["speed_fused"] += 1
         self._append(Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,

@@ -3,7 +3,8 @@
 State (``N_STATE`` = 19)::
 
     x = [p (NED, m), v (NED, m/s), a (body accelerometer bias, m/s²), d (NED acceleration error,
-         m/s²), c_s (receiver clock × c per system slot, m; ``CLOCK_SLOTS``), ḋ (common drift, m/s)]
+         m/s²), c_s (receiver clock × c per system slot, m; ``CLOCK_SLOTS``), ḋ (common drift, m/s),
+         ψ₀ (odometry heading offset, rad)]
 
 ``p, v, a, d`` move exactly as the loose filter's (``companion.estimator.model``: the IMU history's
 prefix integrals give the block's mean and transition for any attitude history); every system's
@@ -41,7 +42,8 @@ I_P, I_V, I_A, I_D = 0, 3, 6, 9
 I_CLK = N_NAV
 N_CLK = len(CLOCK_SLOTS)
 I_DRIFT = I_CLK + N_CLK
-N_STATE = I_DRIFT + 1
+I_HEADING = I_DRIFT + 1  # heading offset ψ₀ of a ground vehicle's odometry (rad): heading = ψ₀ + ∫ yaw rate
+N_STATE = I_HEADING + 1
 NAV_OF_LOOSE = np.r_[0:6, 9:15]  # the loose 15-state's p, v, a, d (its GNSS bias b dropped)
 _W = OMEGA_E_RAD_S / C_M_S
 
@@ -133,6 +135,20 @@ def speed(x: np.ndarray) -> tuple[float, np.ndarray]:
     return s, h
 
 
+def odometry_velocity(x: np.ndarray, speed_m_s: float, yaw_integral_rad: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """A ground vehicle's odometry as a horizontal velocity: (v_NE − s [cos ψ, sin ψ], H (2, N_STATE))
+    with ψ = ψ₀ + ∫ yaw rate (the vehicle moves along its heading: no side slip)."""
+    psi = float(x[I_HEADING]) + yaw_integral_rad
+    c, s = np.cos(psi), np.sin(psi)
+    y = -np.array([x[I_V] - speed_m_s * c, x[I_V + 1] - speed_m_s * s])
+    H = np.zeros((2, N_STATE))
+    H[0, I_V] = H[1, I_V + 1] = 1.0
+    H[0, I_HEADING] = speed_m_s * s
+    H[1, I_HEADING] = -speed_m_s * c
+    return y, H
+
+
 def elevation_rad(los_ecef: np.ndarray, frame: Frame) -> np.ndarray:
     """Elevation of receiver→satellite unit vectors at home (a few km away the difference is < 0.1°)."""
     down = los_ecef @ frame.c_ecef_ned[:, 2]
@@ -152,7 +168,8 @@ def transition(T_s: float, nA: np.ndarray, nB: np.ndarray) -> np.ndarray:
 
 
 def process_noise(T_s: float, nA: np.ndarray, live: np.ndarray, q_acc_ne: float, q_acc_d: float,
-                  q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float) -> np.ndarray:
+                  q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float,
+                  q_heading: float = 0.0) -> np.ndarray:
     """Q over a block: the loose filter's (white acceleration, separate vertical density; body and
     NED bias random walks) on (p, v, a, d); common clock phase, per-system offset and drift random
     walks on the live clock slots (``live``, bool (N_CLK,))."""
@@ -175,4 +192,5 @@ def process_noise(T_s: float, nA: np.ndarray, live: np.ndarray, q_acc_ne: float,
     Q[idx, I_DRIFT] += q_drift * T2 / 2.0
     Q[I_DRIFT, idx] += q_drift * T2 / 2.0
     Q[I_DRIFT, I_DRIFT] += q_drift * T_s
+    Q[I_HEADING, I_HEADING] = q_heading * T_s
     return Q
