@@ -46,12 +46,15 @@ def rinex_for_quad106(tmp_path_factory):
     ]
     epochs, truth = [], []
     last_s = -1
-    for t_us, lat, lon, alt in fixes:
+    ecef = [geodetic_to_ecef(math.radians(lat), math.radians(lon), alt) for _, lat, lon, alt in fixes]
+    for i, (t_us, *_) in enumerate(fixes):
         if t_us // 1_000_000 == last_s:
             continue
         last_s = t_us // 1_000_000
-        p = geodetic_to_ecef(math.radians(lat), math.radians(lon), alt)
-        epochs.append(observe(st, tmap.gps_s(t_us), p, atmosphere=False)[0])
+        p = ecef[i]
+        j0, j1 = max(i - 1, 0), min(i + 1, len(fixes) - 1)  # the receiver's velocity (its Doppler)
+        v = (ecef[j1] - ecef[j0]) / max((fixes[j1][0] - fixes[j0][0]) * 1e-6, 1e-3)
+        epochs.append(observe(st, tmap.gps_s(t_us), p, v_rx_ecef=v, atmosphere=False)[0])
         truth.append((t_us, p))
     kep, glo = constellation(t_mid)
     write_nav(out / "q.nav", kep, glo)
@@ -80,7 +83,7 @@ def test_rinex_fixes_land_on_the_log_fixes(rinex_for_quad106):
 
 
 def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path):
-    obs, nav, _ = rinex_for_quad106
+    obs, nav, truth = rinex_for_quad106
     out = tmp_path / "rep"
     cmd = [
         sys.executable,
@@ -113,7 +116,23 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
         text=True,
         timeout=60,
     )
-    assert tight.returncode == 2 and "not available yet" in tight.stderr and tight.stderr.count("\n") == 1
+    assert tight.returncode == 0, tight.stderr
+    t = json.loads((tmp_path / "t" / "summary.json").read_text())
+    nav_t = t["navigator"]
+    assert t["raw_gnss"]["coupling"] == "tight" and nav_t["gnss_fused"] >= len(truth) - 2
+    assert nav_t["gnss_resets"] == 0 and nav_t["sat_used"] > 6 * len(truth)
+    # the same pseudoranges (and models) as the loose run's single-point fixes: the tight estimate lands
+    # where the loose one does (both in the frame of the first single-point solution)
+    assert t["home"] == s["home"]
+    est = np.genfromtxt(tmp_path / "t" / "estimates.csv", delimiter=",", names=True)
+    ref = np.genfromtxt(out / "estimates.csv", delimiter=",", names=True)
+    ref = ref[ref["t_s"] > ref["t_s"][0] + 10.0]
+    err = np.hypot(np.interp(ref["t_s"], est["t_s"], est["p_n_m"]) - ref["p_n_m"],
+                   np.interp(ref["t_s"], est["t_s"], est["p_e_m"]) - ref["p_e_m"])
+    assert np.median(err) < 1.0, np.median(err)
+    badm = subprocess.run(cmd[:9] + ["--coupling", "tight", "--method", "adaptive", "--out", str(tmp_path / "b")],
+                          capture_output=True, text=True, timeout=60)
+    assert badm.returncode == 2 and "second-order" in badm.stderr and badm.stderr.count("\n") == 1
     nonav = subprocess.run(
         cmd[:7] + ["--out", str(tmp_path / "n")], capture_output=True, text=True, timeout=60
     )

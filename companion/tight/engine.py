@@ -178,6 +178,7 @@ class TightEngine:
                   "speed_fused"):
             self._counts.setdefault(k, 0)
         self._cache: tuple[Any, int, Any] | None = None
+        self._n_fused = 0  # epochs with at least one satellite used (in order of arrival)
 
     # ------------------------------------------------------------------ IMU
     @property
@@ -187,7 +188,8 @@ class TightEngine:
             c[k] = v
         if self.entries:
             used, rejected, resets, clock_resets, _ = self.entries[-1].totals
-            c.update(sat_used=used, sat_rejected=rejected, gnss_resets=resets, clock_resets=clock_resets)
+            c.update(sat_used=used, sat_rejected=rejected, gnss_resets=resets, clock_resets=clock_resets,
+                     gnss_fused=self._n_fused)
         return c
 
     def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
@@ -455,6 +457,7 @@ class TightEngine:
             P = 0.5 * (P + P.T)
             nis = float(yu @ W[:, 0])
         t_good = t_us if len(u) else prev.t_good_us
+        self._n_fused += bool(len(u))
         if not len(u) and t_us - prev.t_good_us >= self._reset_us:
             sol = self._spp(m)
             if sol is not None:

@@ -75,10 +75,15 @@ def register(name: str) -> Callable[[Any], Any]:
     return deco
 
 
-def make(name: str, cfg: TightConfig) -> Weighting:
+def check_weighting(name: str, what: str = "--method (tight coupling)") -> str:
+    """``name`` if it is a tight-coupling row, else a one-line ``ConfigError`` naming them."""
     if name not in REGISTRY:
-        raise not_one_of("--method (tight coupling)", name, tuple(REGISTRY))
-    return REGISTRY[name](cfg)
+        raise not_one_of(what, name, tuple(REGISTRY))
+    return name
+
+
+def make(name: str, cfg: TightConfig) -> Weighting:
+    return REGISTRY[check_weighting(name)](cfg)
 
 
 def gate(t: SatTerms, r: np.ndarray, cfg: TightConfig) -> np.ndarray:

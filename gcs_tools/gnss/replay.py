@@ -34,10 +34,6 @@ GRAVITY_M_S2 = 9.80665
 
 
 def check_coupling(coupling: str) -> None:
-    if coupling == "tight":
-        raise UserError(
-            "--coupling tight: the tightly coupled estimator is not available yet; use --coupling loose"
-        )
     if coupling not in COUPLINGS:
         raise UserError(f"--coupling {coupling!r}: choose from {', '.join(COUPLINGS)}")
 

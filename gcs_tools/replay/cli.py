@@ -54,8 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--truth", type=Path, default=None,
                    help="smartLoc truth file (default: beside --smartloc)")
     g.add_argument("--coupling", default="loose",
-                   help="loose: SPP fixes into the estimator (default); tight: pseudoranges into the "
-                        "estimator (not available yet)")
+                   help="loose: SPP fixes into the estimator (default); tight: pseudoranges (and Doppler) "
+                        "into the tightly coupled estimator, --method one of its rows (docs/tight.md)")
+    g.add_argument("--no-odometry", action="store_true",
+                   help="--smartloc --coupling tight: leave the car's wheel speed and yaw rate out")
     telemetry.add_arguments(parser, publisher=True)
     parser.set_defaults(vehicle_id="replay")
 
@@ -127,8 +129,13 @@ def gnss_options(args: argparse.Namespace) -> GnssErrorOptions | None:
 def run(args: argparse.Namespace) -> int:
     from gcs_tools.outdir import check_out_dir
 
-    choices.method(args.method)
-    gnss_reader, gnss_note = _raw_gnss(args)
+    if args.coupling == "tight":
+        from companion.tight import check_weighting
+
+        check_weighting(args.method)
+    else:
+        choices.method(args.method)
+    gnss_reader, gnss_note, navigator = _raw_gnss(args)
     if args.smartloc is not None:
         args.file = args.smartloc
     elif args.file is None:
@@ -155,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = core.replay(args.file, args.method, home=home, mission=mission, rate_hz=args.rate_hz,
                              progress=progress, on_imu=_on_imu(pub, args.speed), out_dir=args.out,
-                             gps_delay_ms=args.gps_delay_ms, reader=gnss_reader, gnss=gnss)
+                             gps_delay_ms=args.gps_delay_ms, reader=gnss_reader, gnss=gnss,
+                             navigator=navigator)
     finally:
         if bar is not None:
             bar.close()
@@ -175,16 +183,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None]:
-    """The reader for --rinex-obs / --smartloc (None: the log's own), and a summary note."""
+def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None, Any]:
+    """The reader for --rinex-obs / --smartloc (None: the log's own), a summary note and the navigator
+    factory (None: the loose Navigator)."""
     if args.rinex_obs is None and args.smartloc is None:
         if args.rinex_nav or args.coupling != "loose" or args.truth is not None:
             raise UserError("--rinex-nav, --coupling and --truth go with --rinex-obs or --smartloc")
-        return None, None
+        return None, None, None
     from companion.gnss.spp import SppConfig
     from gcs_tools.gnss import replay as gnss_replay
 
     gnss_replay.check_coupling(args.coupling)
+    if args.coupling == "tight":
+        return _raw_gnss_tight(args)
     config = SppConfig()
     if args.smartloc is not None:
         if args.file is not None or args.rinex_obs is not None:
@@ -193,7 +204,7 @@ def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None]:
             raise UserError(f"{args.smartloc}: no such file")
         src = gnss_replay.smartloc_source(args.smartloc, args.truth, config)
         return src, {"smartloc": str(args.smartloc), "coupling": args.coupling, "fixes": len(src.fixes),
-                     "imu": "none: zero acceleration, level attitude (a GNSS-only constant-velocity filter)"}
+                     "imu": "none: zero acceleration, level attitude (a GNSS-only constant-velocity filter)"}, None
     if args.file is None or not args.file.is_file():
         raise UserError(f"--rinex-obs needs the flight log to replay ({args.file}: no such file)")
     if not args.rinex_nav:
@@ -201,7 +212,33 @@ def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None]:
     reader, note = gnss_replay.rinex_log_reader(args.file, args.rinex_obs, args.rinex_nav, config,
                                                 args.gps_delay_ms)
     note["coupling"] = args.coupling
-    return reader, note
+    return reader, note, None
+
+
+def _raw_gnss_tight(args: argparse.Namespace) -> tuple[Any, dict[str, Any], Any]:
+    """--coupling tight: raw epochs (and smartLoc's odometry) into the tightly coupled navigator."""
+    from companion.tight import TightConfig
+    from gcs_tools.gnss import tight_replay
+
+    if args.smartloc is not None:
+        if args.file is not None or args.rinex_obs is not None:
+            raise UserError("--smartloc replays the smartLoc drive alone: no log file, no --rinex-obs")
+        if not args.smartloc.is_file():
+            raise UserError(f"{args.smartloc}: no such file")
+        src = tight_replay.smartloc_raw_source(args.smartloc, args.truth, not args.no_odometry)
+        note = {"smartloc": str(args.smartloc), "coupling": "tight", "epochs": len(src.epochs),
+                "odometry": not args.no_odometry,
+                "motion": "constant velocity (no IMU)" + (" with wheel speed and yaw rate" if not args.no_odometry
+                                                          else "")}
+        return src, note, tight_replay.tight_factory(TightConfig.for_ground_vehicle())
+    if args.file is None or not args.file.is_file():
+        raise UserError(f"--rinex-obs needs the flight log to replay ({args.file}: no such file)")
+    if not args.rinex_nav:
+        raise UserError("--rinex-obs needs --rinex-nav (broadcast ephemerides)")
+    reader, store, note = tight_replay.rinex_raw_log_reader(args.file, args.rinex_obs, args.rinex_nav,
+                                                             args.gps_delay_ms)
+    note["coupling"] = "tight"
+    return reader, note, tight_replay.tight_factory(TightConfig(), store)
 
 
 def counts_text(counts: dict[str, Any], none: str = "none") -> str:

@@ -1,0 +1,150 @@
+"""``TightNavigator``: the tightly coupled filter on a stream of wire samples (no I/O).
+
+Takes what ``companion.estimator.Navigator`` takes for the IMU (``AttitudeSample``, ``ImuSample``)
+and, instead of position fixes, raw receiver epochs (``RawGnss``) and a ground vehicle's odometry
+(``Odometry``); gives the same ``NavEstimate`` (``b_ned_m`` is zero: there is no fix-level bias, the
+per-satellite beliefs replace it; ``beta`` is the mean belief of the last epoch's satellites).
+
+Epochs without satellite states (a receiver's RXM-RAWX) are completed from the broadcast
+ephemerides given at construction, through ``SatelliteCache`` (evaluated once a second).
+``line_of_sight`` (optional, a map): ``(p_ned_m, azimuth_rad, elevation_rad) -> blocked (bool (n,))``
+lowers the prior belief of the satellites a map says are hidden.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, cast
+
+import numpy as np
+
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+from companion.errors import ConfigError
+from companion.estimator._core import rotation_q
+from companion.gnss.ephemeris import EphemerisStore, attach_broadcast
+from companion.tight import engine as tight_engine
+from companion.tight.config import TightConfig
+from companion.tight.model import Frame
+from companion.tight.samples import Odometry, RawGnss
+from companion.tight.satcache import SatelliteCache
+from companion.tight.weighting import DEFAULT_WEIGHTING
+
+LineOfSight = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+class TightNavigator:
+    """Tightly coupled GNSS/IMU (or GNSS/odometry) navigation on samples pushed in arrival order."""
+
+    def __init__(self, cfg: TightConfig | None = None, method: str = DEFAULT_WEIGHTING,
+                 frame: LocalNedFrame | None = None, ephemerides: EphemerisStore | None = None,
+                 line_of_sight: LineOfSight | None = None, sat_cache_period_s: float = 1.0) -> None:
+        self.cfg = cfg if cfg is not None else TightConfig()
+        try:
+            self.cfg.validate()
+        except ValueError as exc:
+            raise ConfigError(f"tight estimator: {exc}") from None
+        self.method = method
+        self._counts: dict[str, int] = {"attitude_used": 0, "attitude_rejected_nonfinite": 0,
+                                        "imu_rejected_no_attitude": 0, "gnss_fix_ignored": 0,
+                                        "gnss_rejected_no_ephemeris": 0, "gnss_rejected_empty": 0,
+                                        "odometry_rejected": 0}
+        f = None if frame is None else Frame.at_geodetic(math.radians(frame.home_lat_deg),
+                                                         math.radians(frame.home_lon_deg), frame.home_alt_m)
+        klob = None if ephemerides is None else ephemerides.klobuchar
+        self.engine = tight_engine.TightEngine(self.cfg, method, self._counts, f, klob)
+        self._sats = None if ephemerides is None else SatelliteCache(ephemerides, sat_cache_period_s)
+        self._los = line_of_sight
+        self._rot: Any = None
+        self._odo: tuple[int, float, float] | None = None  # (t_us, yaw rate, its integral)
+        self._last: tuple[Any, NavEstimate] | None = None
+
+    def push(self, sample: Any) -> None:
+        """Consume one sample (arrival order). Never raises on bad data: it is counted."""
+        kind = type(sample)
+        if kind is ImuSample:
+            if self._rot is None:
+                self._counts["imu_rejected_no_attitude"] += 1
+                return
+            self.engine.push_frd(sample.t_us, sample.acc_frd_m_s2, self._rot)
+        elif kind is AttitudeSample:
+            r = rotation_q(sample.q_ned_frd)
+            if r is None:
+                self._counts["attitude_rejected_nonfinite"] += 1
+                return
+            self._rot = r
+            self._counts["attitude_used"] += 1
+        elif kind is RawGnss:
+            self._push_raw(sample)
+        elif kind is Odometry:
+            self._push_odometry(sample)
+        elif kind is GnssFix:
+            self._counts["gnss_fix_ignored"] += 1
+        else:
+            raise TypeError(f"TightNavigator.push: not a sample: {kind.__name__}")
+
+    def _push_raw(self, raw: RawGnss) -> None:
+        epoch = raw.epoch
+        if epoch.n and not np.isfinite(epoch.sat_pos_ecef_m).any():
+            if self._sats is None or epoch.time_base != "gps":
+                self._counts["gnss_rejected_no_ephemeris"] += 1
+                return
+            epoch, _ = attach_broadcast(epoch, cast(EphemerisStore, self._sats))
+        eng = self.engine
+        if epoch.n == 0:
+            self._counts["gnss_rejected_empty"] += 1
+            return
+        if not len(eng.imu):
+            self._counts["gnss_rejected_before_imu"] += 1
+            return
+        if not eng.ensure_frame(epoch):
+            self._counts["gnss_rejected_no_solution"] += 1
+            return
+        assert eng.frame is not None
+        blocked = None
+        if self._los is not None and eng.entries:
+            from companion.gnss.geometry import azimuth_elevation_rad
+
+            now = eng.state_now()
+            assert now is not None
+            d = epoch.sat_pos_ecef_m - eng.frame.ecef(now[1][0:3])
+            az, el = azimuth_elevation_rad(d / np.linalg.norm(d, axis=1)[:, None], eng.frame.lat_rad,
+                                           eng.frame.lon_rad)
+            blocked = np.asarray(self._los(now[1][0:3], az, el), dtype=bool)
+        m = tight_engine.prepare_epoch(epoch, eng.frame, self.cfg, eng.klobuchar, blocked)
+        if m is None:
+            self._counts["gnss_rejected_empty"] += 1
+            return
+        eng.push_epoch(raw.t_us, m)
+
+    def _push_odometry(self, o: Odometry) -> None:
+        if not (math.isfinite(o.speed_m_s) and math.isfinite(o.yaw_rate_rad_s)) or (
+                self._odo is not None and o.t_us <= self._odo[0]):
+            self._counts["odometry_rejected"] += 1
+            return
+        integral = 0.0
+        if self._odo is not None:  # trapezoid
+            t0, w0, i0 = self._odo
+            integral = i0 + 0.5 * (w0 + o.yaw_rate_rad_s) * (o.t_us - t0) * 1e-6
+        self._odo = (o.t_us, o.yaw_rate_rad_s, integral)
+        self.engine.push_speed(o.t_us, o.speed_m_s, integral)
+
+    def estimate(self) -> NavEstimate | None:
+        """The estimate at the newest IMU time; None before the first epoch."""
+        now = self.engine.state_now()
+        if now is None:
+            return None
+        if self._last is not None and self._last[0] is now:
+            return self._last[1]
+        t_us, x, P, last = now
+        cov = np.concatenate((np.diag(P)[0:6], np.zeros(3)))
+        info = last.info
+        est = NavEstimate(t_us, x[0:3].copy(), x[3:6].copy(), np.zeros(3), cov, info.beta_mean, info.nis,
+                          self.method, pos_valid=t_us - last.t_good_us <= self.cfg.reset_timeout_s * 1e6,
+                          gnss_resets=last.totals[2])
+        self._last = (now, est)
+        return est
+
+    def counters(self) -> dict[str, int]:
+        return dict(self.engine.counts)

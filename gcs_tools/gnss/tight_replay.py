@@ -1,0 +1,183 @@
+"""Raw GNSS into ``beliefnav replay --coupling tight``: readers that yield raw epochs (``RawGnss``)
+instead of fixes, and the tightly coupled navigator factory.
+
+* ``SmartLocRawSource``: the smartLoc drive as raw epochs (pre-corrected pseudoranges with satellite
+  positions) and its wheel odometry (speed, yaw rate; the data set's yaw rate is counter-clockwise,
+  so its negative is the NED heading rate), a level attitude and a zero-acceleration input at 50 Hz
+  (no inertial data: the filter runs its constant-velocity model), the truth as reference;
+* ``LogWithRawGnss``: a flight log whose fixes are dropped (counted) and whose IMU samples carry the
+  RINEX epochs, inserted at their receiver times mapped to boot time (``BootTimeMap``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
+from companion.errors import UserError
+from companion.gnss.geometry import ecef_to_geodetic
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.spp import SppConfig, solve_position
+from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, check_weighting
+from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, SMARTLOC_T0_US
+from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Reference, ReferenceInfo
+
+
+def anchor_of(epochs: Sequence[GnssEpoch], klobuchar: Any = None) -> LocalNedFrame:
+    """The local frame at the first epoch with a single-point solution."""
+    for ep in epochs:
+        sol = solve_position(ep, SppConfig(), klobuchar=klobuchar)
+        if sol.ok:
+            lat, lon, h = (float(v) for v in ecef_to_geodetic(sol.p_ecef_m))
+            return LocalNedFrame(float(np.degrees(lat)), float(np.degrees(lon)), h)
+    raise UserError("no epoch has a single-point solution: no frame to start from")
+
+
+@dataclass
+class SmartLocRawSource:
+    """smartLoc as raw epochs + odometry (see the module doc)."""
+
+    epochs: list[GnssEpoch]
+    odometry: np.ndarray  # (m, 3): t_s, speed m/s, yaw rate rad/s (counter-clockwise)
+    truth_t_s: np.ndarray
+    truth_ecef_m: np.ndarray
+    use_odometry: bool = True
+    format: str = "smartloc"
+    anchor: LocalNedFrame = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.t0_s = float(self.epochs[0].t_gps_s)
+        self.stats = ReaderStats()
+        self.sources: dict[str, str | None] = {
+            "imu": "none (zero acceleration, level: the constant-velocity model)",
+            "attitude": "none (level)",
+            "gnss": "smartLoc pseudoranges (raw epochs)",
+            "odometry": "smartLoc odom3 (speed, yaw rate)" if self.use_odometry else None,
+        }
+        self.references = {TRUTH: ReferenceInfo("smartLoc point3", "geodetic",
+                                                "estimated position vs the smartLoc truth (ECEF -> geodetic)")}
+        self.anchor = anchor_of(self.epochs)
+
+    def boot_us(self, t_s: float) -> int:
+        return int(round((t_s - self.t0_s) * 1e6)) + SMARTLOC_T0_US
+
+    def first_fix(self) -> GnssFix | None:
+        return None
+
+    def describe_empty(self) -> str:
+        return "no epoch in the smartLoc input"
+
+    def __iter__(self) -> Iterator[Event]:
+        lat, lon, h = ecef_to_geodetic(self.truth_ecef_m)
+        t_ref = [self.boot_us(float(t)) for t in self.truth_t_s]
+        t_ep = [self.boot_us(e.t_gps_s) for e in self.epochs]
+        odo = self.odometry if self.use_odometry else np.zeros((0, 3))
+        t_odo = [self.boot_us(float(t)) for t in odo[:, 0]]
+        t_end = max(t_ep[-1], t_ref[-1]) + 1_000_000
+        step = int(1e6 / SMARTLOC_IMU_HZ)
+        q, acc, gyro = np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.0, 0.0, -GRAVITY_M_S2]), np.zeros(3)
+        ri = ei = oi = 0
+        for t in range(0, t_end, step):
+            while ri < len(t_ref) and t_ref[ri] <= t:
+                yield Reference(TRUTH, t_ref[ri], float(np.degrees(lat[ri])), float(np.degrees(lon[ri])),
+                                float(h[ri]), "smartLoc point3")
+                ri += 1
+            self.stats.decoded["imu"] += 1
+            self.stats.records += 1
+            yield AttitudeSample(t, q)
+            yield ImuSample(t, acc, gyro)
+            while oi < len(t_odo) and t_odo[oi] <= t:
+                self.stats.decoded["odometry"] += 1
+                yield Odometry(t_odo[oi], float(odo[oi, 1]), -float(odo[oi, 2]))
+                oi += 1
+            while ei < len(t_ep) and t_ep[ei] <= t:
+                self.stats.decoded["gnss"] += 1
+                yield RawGnss(t_ep[ei], self.epochs[ei])
+                ei += 1
+
+
+def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry: bool = True
+                        ) -> SmartLocRawSource:
+    from gcs_tools.gnss import smartloc
+
+    data = smartloc.read_input(input_path)
+    truth_path = truth_path or smartloc.default_truth_path(input_path)
+    if truth_path is None:
+        raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
+    truth = smartloc.read_truth(truth_path)
+    return SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry)
+
+
+class LogWithRawGnss:
+    """A log reader whose fixes are replaced by raw epochs (stamped on boot time)."""
+
+    def __init__(self, inner: LogReader, raws: Sequence[RawGnss], anchor: LocalNedFrame, source: str) -> None:
+        self.inner = inner
+        self.raws = sorted(raws, key=lambda r: r.t_us)
+        self.format = inner.format
+        self.stats: ReaderStats = inner.stats
+        self.sources = dict(inner.sources)
+        self.sources["gnss"] = source
+        self.anchor = anchor
+        self._source = source
+
+    @property
+    def references(self) -> dict[str, ReferenceInfo]:
+        return self.inner.references
+
+    def first_fix(self) -> GnssFix | None:
+        return None
+
+    def describe_empty(self) -> str:
+        return f"no epoch from {self._source}"
+
+    def __iter__(self) -> Iterator[Event]:
+        raws, i, n = self.raws, 0, len(self.raws)
+        for ev in self.inner:
+            if type(ev) is GnssFix:
+                self.stats.rejected["log_fix_replaced"] += 1
+                continue
+            if isinstance(ev, ImuSample):
+                while i < n and raws[i].t_us <= ev.t_us:
+                    self.stats.decoded["gnss_external"] += 1
+                    yield raws[i]
+                    i += 1
+            yield ev
+        self.stats.rejected["external_epoch_after_log"] += n - i
+
+
+def rinex_raw_log_reader(log_path: Path, obs: Path, navs: Sequence[Path], gps_delay_ms: float | None = None
+                         ) -> tuple[LogWithRawGnss, Any, dict[str, object]]:
+    """(the log's reader with RINEX epochs in place of its fixes, the ephemeris store, a summary note)."""
+    from gcs_tools.gnss.sources import rinex_input
+    from gcs_tools.gnss.timebase import log_time_map
+    from gcs_tools.replay.logs import open_log
+
+    data = rinex_input(obs, navs)
+    time_map = log_time_map(log_path)
+    raws = [RawGnss(time_map.boot_us(e.t_gps_s), e) for e in data.epochs]
+    if not raws:
+        raise UserError(f"{obs}: no observation epoch")
+    store = data.store  # the epochs already carry their satellite states (rinex_input)
+    anchor = anchor_of(data.epochs[:50], data.klobuchar)
+    reader = LogWithRawGnss(open_log(log_path, gps_delay_ms), raws, anchor, f"RINEX {obs.name} (raw epochs)")
+    note: dict[str, object] = {"rinex_obs": str(obs), "rinex_nav": [str(p) for p in navs],
+                               "epochs": len(raws), "rejected": dict(data.rejected),
+                               "time_join": {"pairs_used": time_map.pairs_used,
+                                             "residual_rms_us": time_map.residual_rms_us}}
+    return reader, store, note
+
+
+def tight_factory(config: TightConfig, ephemerides: Any = None) -> Any:
+    """``replay(navigator=…)``: a TightNavigator per segment, in the replay's frame."""
+
+    def make(method: str, frame: LocalNedFrame) -> TightNavigator:
+        return TightNavigator(config, check_weighting(method), frame, ephemerides)
+
+    return make
