@@ -54,6 +54,14 @@ class SatelliteCache:
         system = np.asarray(system, dtype=np.int64)
         prn = np.asarray(prn, dtype=np.int64)
         t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
+        finite = np.isfinite(t)
+        if not finite.all():  # no time (no pseudorange): no state
+            out = self.states(system[finite], prn[finite], t[finite])
+            n = len(t)
+            pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+            clk, drift = np.full(n, np.nan), np.full(n, np.nan)
+            pos[finite], vel[finite], clk[finite], drift[finite] = out[0], out[1], out[2], out[3]
+            return SatStates(pos, vel, clk, drift, finite & np.isin(np.arange(n), np.flatnonzero(finite)[out.valid]))
         k = np.round(t / self.period_s).astype(np.int64)
         keys = (system * 1000 + prn).tolist()
         anchors = self._anchors

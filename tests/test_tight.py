@@ -1,0 +1,271 @@
+"""The tightly coupled filter: Jacobians against finite differences, the per-satellite belief (gradient,
+R(β) monotone and bounded, direction), out-of-sequence epochs == in order to 1e-9, NEES/NIS in χ²
+bounds on its own model, the satellite-state cache's error, the navigator on raw epochs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
+from companion.errors import ConfigError
+from companion.gnss import make_epoch
+from companion.gnss.systems import System
+from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, belief, model
+from companion.tight.engine import TightEngine, prepare_epoch
+from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, N_STATE, Frame
+from companion.tight.satcache import SatelliteCache
+from tests.gnss_helpers import RX_ECEF, T0, observe, store
+
+FRAME = Frame.at_ecef(RX_ECEF)
+STORE = store()
+
+
+def _sats(t: float = T0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(system, prn, position, velocity) of the synthetic satellites above 10° at RX_ECEF."""
+    kep, glo = STORE.kepler, STORE.glonass
+    sysv = np.array([e.system for e in kep] + [int(System.GLONASS)] * len(glo))
+    prn = np.array([e.prn for e in kep] + [g.prn for g in glo])
+    s = STORE.states(sysv, prn, np.full(len(sysv), t))
+    d = s.pos_ecef_m - RX_ECEF
+    el = model.elevation_rad(d / np.linalg.norm(d, axis=1)[:, None], FRAME)
+    vis = s.valid & (el > math.radians(10))
+    return sysv[vis], prn[vis], s.pos_ecef_m[vis], s.vel_ecef_m_s[vis]
+
+
+def _state(rng: np.random.Generator) -> np.ndarray:
+    x = np.zeros(N_STATE)
+    x[0:3] = rng.normal(0, 50, 3)
+    x[3:6] = rng.normal(0, 10, 3)
+    x[I_CLK:I_DRIFT] = rng.normal(0, 1e4, I_DRIFT - I_CLK)
+    x[I_DRIFT] = rng.normal(0, 50)
+    x[I_HEADING] = rng.uniform(-3, 3)
+    return x
+
+
+def _numeric_jacobian(f, x: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    cols = []
+    for i in range(len(x)):
+        e = np.zeros(len(x))
+        e[i] = steps[i]
+        cols.append((f(x + e) - f(x - e)) / (2 * steps[i]))
+    return np.column_stack(cols)
+
+
+def test_measurement_jacobians_match_finite_differences():
+    rng = np.random.default_rng(1)
+    sysv, _, pos, vel = _sats()
+    slot = model.SLOT_OF[sysv]
+    steps = np.full(N_STATE, 1e-3)
+    steps[0:3] = 1.0  # metres: the range is smooth over 20,000 km
+    steps[I_CLK:I_HEADING] = 1.0  # linear: a step above the range's rounding
+    for _ in range(3):
+        x = _state(rng)
+        _, H, _ = model.pseudorange(x, FRAME, pos, slot)
+        num = _numeric_jacobian(lambda z: model.pseudorange(z, FRAME, pos, slot)[0], x, steps)
+        np.testing.assert_allclose(H, num, atol=1e-7)
+        _, Hr = model.range_rate(x, FRAME, pos, vel)
+        num = _numeric_jacobian(lambda z: model.range_rate(z, FRAME, pos, vel)[0], x, steps)
+        np.testing.assert_allclose(Hr, num, atol=1e-9)
+        assert np.abs(Hr[:, 0:3]).max() > 1e-5  # the position terms are there and right
+        _, Ho = model.odometry_velocity(x, 7.0, 0.3)
+        num = _numeric_jacobian(lambda z: -model.odometry_velocity(z, 7.0, 0.3)[0], x, np.full(N_STATE, 1e-6))
+        np.testing.assert_allclose(Ho, num, atol=1e-7)
+        _, hs = model.speed(x)
+        num = _numeric_jacobian(lambda z: np.array([model.speed(z)[0]]), x, np.full(N_STATE, 1e-6))
+        np.testing.assert_allclose(hs[None, :], num, atol=1e-7)
+
+
+def test_range_rate_model_matches_the_generators_doppler():
+    """The synthetic receiver's Doppler (central differences of exact light-time ranges) against the
+    model at the true state: within the first-order Earth-rotation error (docs/gnss.md: ~5 mm/s)."""
+    v = np.array([3.0, -2.0, 1.0])
+    ep, _ = observe(STORE, T0, RX_ECEF, v_rx_ecef=v, atmosphere=False)
+    from companion.gnss import attach_broadcast
+
+    ep, _ = attach_broadcast(ep, STORE)
+    x = np.zeros(N_STATE)
+    x[3:6] = FRAME.c_ecef_ned.T @ v
+    from companion.gnss.constants import C_M_S
+
+    pred, _ = model.range_rate(x, FRAME, ep.sat_pos_ecef_m, ep.sat_vel_ecef_m_s)
+    got = ep.pseudorange_rate_m_s + C_M_S * ep.sat_clock_drift_s_s
+    assert np.abs(got - pred).max() < 0.02
+
+
+def test_belief_gradient_monotone_bounded_r():
+    cfg = TightConfig()
+    rng = np.random.default_rng(2)
+    n = 200
+    theta = rng.uniform(cfg.theta_min, cfg.theta_max, n)
+    y = rng.normal(0, 30, n)
+    s0 = rng.uniform(1, 50, n)
+    r_nom = rng.uniform(1, 100, n)
+    prior = rng.uniform(-2, 2, n)
+    _, g = belief.loss_grad_theta(theta, y, s0, r_nom, prior, cfg)
+    h = 1e-6
+    num = (belief.loss_grad_theta(theta + h, y, s0, r_nom, prior, cfg)[0]
+           - belief.loss_grad_theta(theta - h, y, s0, r_nom, prior, cfg)[0]) / (2 * h)
+    np.testing.assert_allclose(g, num, rtol=1e-5, atol=1e-8)
+    beta = np.linspace(0, 1, 101)
+    r = belief.r_of_beta(beta, 4.0, cfg)
+    assert np.all(np.diff(r) < 0) and r[-1] == pytest.approx(4.0) and r[0] == pytest.approx(4.0 * cfg.r_inflation_max)
+    # the data term's minimum is at consistency: S = y² (here s0 + R(β*) = y²)
+    cfg0 = TightConfig(prior_weight=0.0)
+    th = np.linspace(-6, 6, 20001)
+    loss, _ = belief.loss_grad_theta(th, np.full_like(th, 20.0), np.full_like(th, 4.0), np.full_like(th, 9.0),
+                                     np.zeros_like(th), cfg0)
+    b = belief.sigmoid(th[np.argmin(loss)])
+    assert 4.0 + belief.r_of_beta(b, 9.0, cfg0) == pytest.approx(400.0, rel=1e-2)
+
+
+def _synthetic_epochs(rng: np.random.Generator, cfg: TightConfig, n: int, dt_s: float = 0.2,
+                      bias: dict[int, tuple[float, int]] | None = None):
+    """Corrected pseudoranges (σ_uniform noise) of a receiver moving by the filter's own process model
+    (white acceleration, clock random walks), and its true states."""
+    sysv, prn, pos, _ = _sats()
+    slot = model.SLOT_OF[sysv]
+    x = np.zeros(N_STATE)
+    x[3:6] = (5.0, -3.0, 0.0)
+    x[I_CLK + model.SLOT_OF[sysv]] = 1000.0
+    x[I_DRIFT] = -50.0
+    live = np.zeros(model.N_CLK, bool)
+    live[np.unique(slot)] = True
+    F = model.transition(dt_s, -dt_s * np.eye(3).ravel(), -0.5 * dt_s * dt_s * np.eye(3).ravel())
+    F[I_CLK:I_DRIFT, I_DRIFT] *= live
+    Q = model.process_noise(dt_s, -dt_s * np.eye(3).ravel(), live, cfg.sigma_acc_m_s2**2,
+                            cfg.sigma_acc_vertical_m_s2**2, 0.0, 0.0, cfg.q_clock_m2_s, cfg.q_isb_m2_s,
+                            cfg.q_drift_m2_s3)
+    Q[I_HEADING, I_HEADING] = 0.0
+    Lq = np.linalg.cholesky(Q + 1e-15 * np.eye(N_STATE))
+    epochs, truth = [], []
+    sig = cfg.sigma_uniform_m
+    for k in range(n):
+        if k:
+            x = F @ x + Lq @ rng.standard_normal(N_STATE)
+        pred, _, _ = model.pseudorange(x, FRAME, pos, slot)
+        z = pred + rng.normal(0, sig, len(pred))
+        for i, (b, k0) in (bias or {}).items():  # satellite i reflected (+b m) from epoch k0 on
+            if k >= k0:
+                z[i] += b
+        ep = make_epoch(T0 + k * dt_s, sysv, prn, z, sat_pos_ecef_m=pos, cn0_dbhz=np.full(len(z), 45.0),
+                        corrected=True)
+        epochs.append(prepare_epoch(ep, FRAME, cfg))
+        truth.append(x.copy())
+    return epochs, truth
+
+
+def test_out_of_sequence_epochs_equal_in_order():
+    cfg = TightConfig.for_ground_vehicle()
+    rng = np.random.default_rng(3)
+    epochs, _ = _synthetic_epochs(rng, cfg, 40, bias={0: (30.0, 10)})
+    t_us = [1_000_000 + 200_000 * k for k in range(len(epochs))]
+    for method in ("second-order", "student-t", "fde"):
+        a = _feed(cfg, method, epochs, t_us, list(range(len(epochs))))
+        order = list(range(len(epochs)))
+        for k in range(2, len(order) - 3, 5):  # several epochs arrive after later ones (up to 0.8 s late)
+            order[k], order[k + 3] = order[k + 3], order[k]
+        b = _feed(cfg, method, epochs, t_us, order)
+        assert b.counts["gnss_out_of_order"] > 0 and b.counts["gnss_refused"] > 0
+        assert len(a.entries) == len(b.entries)
+        for ea, eb in zip(a.entries, b.entries, strict=True):
+            assert ea.t_us == eb.t_us
+            np.testing.assert_allclose(eb.x, ea.x, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(eb.P, ea.P, rtol=0, atol=1e-9)
+        assert a.counts["sat_used"] == b.counts["sat_used"]
+
+
+def _feed(cfg: TightConfig, method: str, epochs, t_us, order) -> TightEngine:
+    """IMU (zero acceleration, 50 Hz) to the end first in chunks; epochs pushed in ``order``, each as
+    soon as the IMU passed its validity (a late one after later ones)."""
+    eng = TightEngine(cfg, method, frame=FRAME)
+    eng.push_acc(0, 0.0, 0.0, 0.0)
+    pushed = 0
+    for i in order:
+        target = max(t_us[j] for j in order[: order.index(i) + 1])
+        while pushed < target:
+            pushed += 20_000
+            eng.push_acc(pushed, 0.0, 0.0, 0.0)
+        eng.push_epoch(t_us[i], epochs[i])
+    return eng
+
+
+def test_nees_and_nis_within_chi2_bounds_on_the_filters_own_model():
+    cfg = TightConfig.for_ground_vehicle(sigma_clock0_m=1e3)
+    rng = np.random.default_rng(7)
+    runs, n = 40, 60
+    nees, nis, m_tot = [], [], 0
+    for _ in range(runs):
+        epochs, truth = _synthetic_epochs(rng, cfg, n)
+        t_us = [1_000_000 + 200_000 * k for k in range(n)]
+        eng = _feed(cfg, "naive", epochs, t_us, list(range(n)))
+        e = eng.entries[-1]
+        d = (e.x - truth[-1])[0:6]
+        nees.append(float(d @ np.linalg.solve(e.P[0:6, 0:6], d)))
+        for ent in eng.entries[20:]:
+            if ent.info.n_used:
+                nis.append(ent.info.nis)
+                m_tot += ent.info.n_used
+    lo, hi = chi2.ppf([0.005, 0.995], 6 * runs) / runs
+    assert lo < np.mean(nees) < hi, np.mean(nees)
+    lo, hi = chi2.ppf([0.005, 0.995], m_tot) / m_tot
+    assert lo < np.sum(nis) / m_tot < hi, np.sum(nis) / m_tot
+
+
+def test_belief_falls_for_a_reflected_satellite_and_rises_for_clean_ones():
+    cfg = TightConfig.for_ground_vehicle()
+    rng = np.random.default_rng(5)
+    low = int(np.argmin(_synthetic_epochs(rng, cfg, 1)[0][0].elevation_deg))  # NLOS: a low satellite
+    epochs, truth = _synthetic_epochs(rng, cfg, 100, bias={low: (40.0, 50)})  # reflected after 10 s
+    t_us = [1_000_000 + 200_000 * k for k in range(100)]
+    eng = _feed(cfg, "second-order", epochs, t_us, list(range(100)))
+    info = eng.entries[-1].info
+    beta = dict(zip(info.key.tolist(), info.beta.tolist(), strict=True))
+    bad = int(epochs[0].key[low])
+    clean = [b for k, b in beta.items() if k != bad]
+    assert beta[bad] < 0.35 and min(clean) > beta[bad] + 0.3 and np.median(clean) > 0.9
+    # and the position is not dragged by the reflection
+    err = np.linalg.norm(eng.entries[-1].x[0:2] - truth[-1][0:2])
+    assert err < 3.0
+
+
+def test_satellite_cache_error_is_below_a_millimetre():
+    cache = SatelliteCache(STORE, period_s=1.0)
+    sysv, prn, _, _ = _sats()
+    rng = np.random.default_rng(6)
+    worst_p, worst_c = 0.0, 0.0
+    for t in T0 + rng.uniform(0, 30, 20):
+        a, b = cache.states(sysv, prn, np.full(len(sysv), t)), STORE.states(sysv, prn, np.full(len(sysv), t))
+        worst_p = max(worst_p, float(np.abs(a.pos_ecef_m - b.pos_ecef_m).max()))
+        worst_c = max(worst_c, float(np.abs(a.clock_s - b.clock_s).max()) * 3e8)
+    assert worst_p < 1e-3 and worst_c < 1e-3, (worst_p, worst_c)
+
+
+def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
+    nav = TightNavigator(TightConfig(), "second-order", ephemerides=STORE)
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    f = np.array([0.0, 0.0, -9.80665])
+    n_ep = 0
+    for k in range(0, 200):  # 4 s at 50 Hz, an epoch per 0.2 s (raw pseudoranges: clocks, atmosphere)
+        t_us = 1_000_000 + 20_000 * k
+        nav.push(AttitudeSample(t_us, q))
+        nav.push(ImuSample(t_us, f, np.zeros(3)))
+        if k % 10 == 0:
+            ep, _ = observe(STORE, T0 + k * 0.02, RX_ECEF)
+            nav.push(RawGnss(t_us, ep))
+            n_ep += 1
+    nav.push(RawGnss(5_000_000, make_epoch(T0 + 4.0, [0], [1], [math.nan])))  # nothing usable
+    nav.push(GnssFix(5_000_000, 52.5, 13.4, 60.0, 3, 10, 1.0, 1.0, 1.0))
+    nav.push(Odometry(5_000_000, math.nan, 0.0))
+    c = nav.counters()
+    assert c["gnss_fused"] == n_ep - 1 and c["gnss_rejected_empty"] == 1 and c["gnss_fix_ignored"] == 1
+    assert c["odometry_rejected"] == 1
+    est = nav.estimate()
+    assert est is not None and est.pos_valid
+    p = nav.engine.frame.ecef(np.asarray(est.p_ned_m))
+    assert np.linalg.norm(p - RX_ECEF) < 2.0
+    with pytest.raises(ConfigError, match="second-order"):
+        TightNavigator(TightConfig(), "adaptive")
