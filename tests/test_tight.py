@@ -79,6 +79,25 @@ def test_measurement_jacobians_match_finite_differences():
         np.testing.assert_allclose(hs[None, :], num, atol=1e-7)
 
 
+def test_prediction_is_the_loose_filters_on_p_v_a_d():
+    """The tight transition and process noise equal the loose filter's (its GNSS bias dropped)."""
+    from companion.estimator import model as loose
+
+    rng = np.random.default_rng(8)
+    T = 0.2
+    A = T * np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    B = 0.5 * T * A
+    live = np.array([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])
+    F = model.transition(T, -A.ravel(), -B.ravel(), live)
+    nav = model.NAV_OF_LOOSE
+    np.testing.assert_allclose(F[:12, :12], loose.transition_block(T, A, B, 1.0)[np.ix_(nav, nav)], atol=1e-15)
+    Q = model.process_noise(T, -A.ravel(), live, 0.09, 0.09, 9e-6, 1e-4, 0.1, 1e-3, 0.5)
+    Q15 = np.zeros((15, 15))
+    loose.add_process_noise(Q15, T, A / T, 0.09, 0.0, 9e-6, 1e-4)
+    np.testing.assert_allclose(Q[:12, :12], Q15[np.ix_(nav, nav)], atol=1e-15)
+    assert np.all(np.linalg.eigvalsh(Q) > -1e-15) and Q[I_CLK + 1, I_CLK + 1] == 0.0
+
+
 def test_range_rate_model_matches_the_generators_doppler():
     """The synthetic receiver's Doppler (central differences of exact light-time ranges) against the
     model at the true state: within the first-order Earth-rotation error (docs/gnss.md: ~5 mm/s)."""
@@ -132,10 +151,9 @@ def _synthetic_epochs(rng: np.random.Generator, cfg: TightConfig, n: int, dt_s: 
     x[3:6] = (5.0, -3.0, 0.0)
     x[I_CLK + model.SLOT_OF[sysv]] = 1000.0
     x[I_DRIFT] = -50.0
-    live = np.zeros(model.N_CLK, bool)
-    live[np.unique(slot)] = True
-    F = model.transition(dt_s, -dt_s * np.eye(3).ravel(), -0.5 * dt_s * dt_s * np.eye(3).ravel())
-    F[I_CLK:I_DRIFT, I_DRIFT] *= live
+    live = np.zeros(model.N_CLK)
+    live[np.unique(slot)] = 1.0
+    F = model.transition(dt_s, -dt_s * np.eye(3).ravel(), -0.5 * dt_s * dt_s * np.eye(3).ravel(), live)
     Q = model.process_noise(dt_s, -dt_s * np.eye(3).ravel(), live, cfg.sigma_acc_m_s2**2,
                             cfg.sigma_acc_vertical_m_s2**2, 0.0, 0.0, cfg.q_clock_m2_s, cfg.q_isb_m2_s,
                             cfg.q_drift_m2_s3)
@@ -265,6 +283,10 @@ def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
     assert c["odometry_rejected"] == 1
     est = nav.estimate()
     assert est is not None and est.pos_valid
+    t_now, x_now, P_now, _ = nav.engine.state_now()  # the C output path == the full prediction
+    assert t_now == est.t_us
+    np.testing.assert_allclose(np.r_[est.p_ned_m, est.v_ned_m_s], x_now[0:6], atol=1e-9)
+    np.testing.assert_allclose(est.cov_diag[0:6], np.diag(P_now)[0:6], rtol=1e-9)
     p = nav.engine.frame.ecef(np.asarray(est.p_ned_m))
     assert np.linalg.norm(p - RX_ECEF) < 2.0
     with pytest.raises(ConfigError, match="second-order"):

@@ -12,8 +12,8 @@ An epoch (``SatEpoch``: prepared once by ``prepare_epoch``, state-independent) i
 
 1. predict the last entry to the epoch's time;
 2. a system seen for the first time gets a clock from its satellites' median residual (σ
-   ``sigma_clock0_m``); a system whose median residual exceeds ``clock_jump_m`` had a clock jump:
-   its clock is re-initialised (counted), not the position;
+   ``sigma_clock0_m``); a system whose satellites all disagree with its predicted clock by more
+   than ``clock_jump_m`` had a clock jump: its clock is re-initialised (counted), not the position;
 3. the weighting (``weighting.py``, by name) decides each satellite's variance and whether it is
    used (innovation gate, FDE, Student-t, per-satellite belief);
 4. one batch Kalman update with the used pseudoranges and their range rates (Doppler, with the
@@ -33,6 +33,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from companion.estimator.history import ImuHistory, Integrals, mean_between
+from companion.estimator.model import BlockPropagator
 from companion.estimator.model import IDENTITY9, Rot9
 from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
@@ -178,6 +179,8 @@ class TightEngine:
                   "speed_fused"):
             self._counts.setdefault(k, 0)
         self._cache: tuple[Any, int, Any] | None = None
+        self._nav15: tuple[Entry, tuple[float, ...], np.ndarray] | None = None
+        self._prop = BlockPropagator(self._q[0], self._q[2], self._q[3])
         self._n_fused = 0  # epochs with at least one satellite used (in order of arrival)
 
     # ------------------------------------------------------------------ IMU
@@ -341,17 +344,17 @@ class TightEngine:
 
     # ---------------------------------------------------------------------- fusion
     def _predict(self, e: Entry, t_us: int, ints: Integrals) -> tuple[np.ndarray, np.ndarray]:
+        """Entry ``e`` predicted to ``t_us``: (x, P)."""
         T = (t_us - e.t_us) * 1e-6
         x15 = (*e.x[0:6], 0.0, 0.0, 0.0, *e.x[6:12])
         m15, nA, nB = mean_between(x15, e.ints, ints, 1.0)
         x = e.x.copy()
         x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
-        x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * np.asarray(e.live, dtype=float)
+        live = np.asarray(e.live, dtype=float)
+        x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * live
         if T <= 0.0:
             return x, e.P.copy()
-        F = model.transition(T, nA, nB)
-        live = np.asarray(e.live, bool)
-        F[I_CLK:I_DRIFT, I_DRIFT] *= live
+        F = model.transition(T, nA, nB, live)
         Q = model.process_noise(T, nA, live, *self._q)
         if e.P[I_HEADING, I_HEADING] == 0.0:
             Q[I_HEADING, I_HEADING] = 0.0
@@ -409,17 +412,18 @@ class TightEngine:
         pred, H, _ = model.pseudorange(x, self.frame, m.sat_pos_ecef_m, m.slot)
         y = m.z_m - pred
         live = list(prev.live)
-        for j in np.unique(m.slot).tolist():
+        for j in set(m.slot.tolist()):
             sel = m.slot == j
+            if live[j] and np.abs(y[sel]).min() <= c.clock_jump_m:
+                continue  # the usual case: a known clock, no jump
             med = float(np.median(y[sel]))
-            if not live[j] or abs(med) > c.clock_jump_m:
-                clock_resets += int(live[j])
-                x[I_CLK + j] += med
-                P[I_CLK + j, :] = 0.0
-                P[:, I_CLK + j] = 0.0
-                P[I_CLK + j, I_CLK + j] = c.sigma_clock0_m**2
-                y[sel] -= med
-                live[j] = True
+            clock_resets += int(live[j])
+            x[I_CLK + j] += med
+            P[I_CLK + j, :] = 0.0
+            P[:, I_CLK + j] = 0.0
+            P[I_CLK + j, I_CLK + j] = c.sigma_clock0_m**2
+            y[sel] -= med
+            live[j] = True
         HP = H @ P
         S0 = HP @ H.T
         r_nom = {"uniform": m.r_uniform_m2, "model": m.r_model_m2, "los": m.r_los_m2}[self.weighting.nominal]
@@ -498,12 +502,34 @@ class TightEngine:
             return None
         last = self.entries[-1]
         now = self.imu.last_t_us
+        x, P = self._predict(last, now, self.imu.last_integrals())
+        return now, x, P, last
+
+    def output_now(self) -> tuple[int, np.ndarray, Entry] | None:
+        """(t_us, [p, v, their 6 variances] (12,), the last entry) at the newest IMU time, by the loose
+        filter's C output path (``BlockPropagator.output_from``: the mean from the IMU history's
+        newest integrals and the variances of p and v, which depend on (p, v, a, d) alone), the
+        vertical white-acceleration density added where it differs; cached."""
+        if not self.entries:
+            return None
+        last = self.entries[-1]
+        now = self.imu.last_t_us
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]  # type: ignore[no-any-return]
-        x, P = self._predict(last, now, self.imu.last_integrals())
-        out = (now, x, P, last)
-        self._cache = (last, now, out)
-        return out
+        if self._nav15 is None or self._nav15[0] is not last:
+            P15 = np.zeros((15, 15))
+            P15[np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)] = last.P[:12, :12]
+            self._nav15 = (last, (*last.x[0:6], 0.0, 0.0, 0.0, *last.x[6:12]), P15)
+        T = (now - last.t_us) * 1e-6
+        _, out = self._prop.output_from(self._nav15[1], self._nav15[2], last.ints, self.imu, T, 1.0, 0.0)
+        res = np.concatenate((out[0:6], out[9:15]))
+        dq = self._q[1] - self._q[0]
+        if dq:
+            res[8] += dq * T * T * T / 3.0
+            res[11] += dq * T
+        snap = (now, res, last)
+        self._cache = (last, now, snap)
+        return snap
 
     def clock_bias_m(self, x: np.ndarray, system: System) -> float:
         return float(x[I_CLK + int(model.SLOT_OF[int(system)])])

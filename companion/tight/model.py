@@ -24,11 +24,10 @@ exact (tested against finite differences).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.estimator import model as loose_model
 from companion.gnss.constants import C_M_S, OMEGA_E_RAD_S
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, geodetic_to_ecef
 from companion.gnss.systems import System
@@ -156,41 +155,60 @@ def elevation_rad(los_ecef: np.ndarray, frame: Frame) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- propagation
-def transition(T_s: float, nA: np.ndarray, nB: np.ndarray) -> np.ndarray:
+def transition(T_s: float, nA: Any, nB: Any, live: np.ndarray) -> np.ndarray:
     """F over a block from the IMU history's (−A, −B) (row-major 9 each; ``history.rotation_blocks``):
-    the loose filter's transition on (p, v, a, d), clocks moved by the common drift."""
-    A = -np.asarray(nA, float).reshape(3, 3)
-    B = -np.asarray(nB, float).reshape(3, 3)
-    F = np.eye(N_STATE)
-    F[:N_NAV, :N_NAV] = loose_model.transition_block(T_s, A, B, 1.0)[np.ix_(NAV_OF_LOOSE, NAV_OF_LOOSE)]
-    F[I_CLK:I_DRIFT, I_DRIFT] = T_s
+    the loose filter's transition (``companion.estimator.model.transition_block``, its GNSS bias
+    dropped) on (p, v, a, d); the live clocks moved by the common drift."""
+    F = _EYE.copy()
+    F.flat[_F_T] = T_s
+    h = -0.5 * T_s * T_s
+    F.flat[_F_D] = (h, h, h, -T_s, -T_s, -T_s)
+    F[0:3, I_A:I_A + 3] = np.reshape(nB, (3, 3))
+    F[3:6, I_A:I_A + 3] = np.reshape(nA, (3, 3))
+    F[I_CLK:I_DRIFT, I_DRIFT] = T_s * live
     return F
 
 
-def process_noise(T_s: float, nA: np.ndarray, live: np.ndarray, q_acc_ne: float, q_acc_d: float,
+def process_noise(T_s: float, nA: Any, live: np.ndarray, q_acc_ne: float, q_acc_d: float,
                   q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float,
                   q_heading: float = 0.0) -> np.ndarray:
-    """Q over a block: the loose filter's (white acceleration, separate vertical density; body and
-    NED bias random walks) on (p, v, a, d); common clock phase, per-system offset and drift random
-    walks on the live clock slots (``live``, bool (N_CLK,))."""
-    Q15 = np.zeros((15, 15))
-    R_mean = -np.asarray(nA, float).reshape(3, 3) / T_s if T_s > 0 else np.eye(3)
-    loose_model.add_process_noise(Q15, T_s, R_mean, q_acc_ne, 0.0, q_rw, q_ned)
-    if q_acc_d != q_acc_ne:  # the vertical white-acceleration density of a ground vehicle
-        T2 = T_s * T_s
-        dq = q_acc_d - q_acc_ne
-        Q15[2, 2] += dq * T2 * T_s / 3.0
-        Q15[2, 5] += dq * T2 / 2.0
-        Q15[5, 2] += dq * T2 / 2.0
-        Q15[5, 5] += dq * T_s
+    """Q over a block: the loose filter's (``companion.estimator.model.add_process_noise``: white
+    acceleration, here with its own vertical density; body and NED bias random walks, the body one
+    through the block's mean rotation) on (p, v, a, d); common clock phase, per-system offset and
+    drift random walks on the live clock slots (``live``, float 0/1 (N_CLK,)); the heading offset's."""
+    T, T2 = T_s, T_s * T_s
+    T3, T4, T5 = T2 * T, T2 * T2, T2 * T2 * T
+    w, e = q_rw, q_ned
+    pp_ne, pp_d = q_acc_ne * T3 / 3.0, q_acc_d * T3 / 3.0
+    pv_ne, pv_d = q_acc_ne * T2 / 2.0, q_acc_d * T2 / 2.0
+    vv_ne, vv_d = q_acc_ne * T, q_acc_d * T
+    pp, pv, vv = (w + e) * T5 / 20.0, (w + e) * T4 / 8.0, (w + e) * T3 / 3.0
+    pd, vd = -e * T3 / 6.0, -e * T2 / 2.0
     Q = np.zeros((N_STATE, N_STATE))
-    Q[:N_NAV, :N_NAV] = Q15[np.ix_(NAV_OF_LOOSE, NAV_OF_LOOSE)]
-    idx = I_CLK + np.flatnonzero(live)
-    T2, T3 = T_s * T_s, T_s * T_s * T_s
-    Q[np.ix_(idx, idx)] += q_clock * T_s + q_drift * T3 / 3.0
-    Q[idx, idx] += q_isb * T_s
-    Q[idx, I_DRIFT] += q_drift * T2 / 2.0
-    Q[I_DRIFT, idx] += q_drift * T2 / 2.0
-    Q[I_DRIFT, I_DRIFT] += q_drift * T_s
-    Q[I_HEADING, I_HEADING] = q_heading * T_s
+    Q.flat[_Q_NAV] = (pp_ne + pp, pp_ne + pp, pp_d + pp, pv_ne + pv, pv_ne + pv, pv_d + pv,
+                      pv_ne + pv, pv_ne + pv, pv_d + pv, vv_ne + vv, vv_ne + vv, vv_d + vv,
+                      w * T, w * T, w * T, e * T, e * T, e * T, pd, pd, pd, pd, pd, pd, vd, vd, vd, vd, vd, vd)
+    if w > 0.0:
+        R_mean = -np.reshape(nA, (3, 3)) / T_s if T_s > 0 else np.eye(3)
+        pa, va = (-w * T3 / 6.0) * R_mean, (-w * T2 / 2.0) * R_mean
+        Q[0:3, I_A:I_A + 3] = pa
+        Q[I_A:I_A + 3, 0:3] = pa.T
+        Q[3:6, I_A:I_A + 3] = va
+        Q[I_A:I_A + 3, 3:6] = va.T
+    c = q_clock * T + q_drift * T3 / 3.0
+    Q[I_CLK:I_DRIFT, I_CLK:I_DRIFT] = np.outer(live, live) * c + np.diag(live * (q_isb * T))
+    Q[I_CLK:I_DRIFT, I_DRIFT] = Q[I_DRIFT, I_CLK:I_DRIFT] = live * (q_drift * T2 / 2.0)
+    Q[I_DRIFT, I_DRIFT] = q_drift * T
+    Q[I_HEADING, I_HEADING] = q_heading * T
     return Q
+
+
+def _diag(r0: int, c0: int) -> list[int]:
+    return [(r0 + i) * N_STATE + c0 + i for i in range(3)]
+
+
+_EYE = np.eye(N_STATE)
+_F_T = _diag(I_P, I_V)
+_F_D = _diag(I_P, I_D) + _diag(I_V, I_D)
+_Q_NAV = np.array([*_diag(0, 0), *_diag(0, 3), *_diag(3, 0), *_diag(3, 3), *_diag(I_A, I_A), *_diag(I_D, I_D),
+                   *_diag(0, I_D), *_diag(I_D, 0), *_diag(3, I_D), *_diag(I_D, 3)])

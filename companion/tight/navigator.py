@@ -106,9 +106,9 @@ class TightNavigator:
         if self._los is not None and eng.entries:
             from companion.gnss.geometry import azimuth_elevation_rad
 
-            now = eng.state_now()
+            now = eng.output_now()
             assert now is not None
-            d = epoch.sat_pos_ecef_m - eng.frame.ecef(now[1][0:3])
+            d = epoch.sat_pos_ecef_m - eng.frame.ecef(now[1][0:3])  # the position at the newest IMU time
             az, el = azimuth_elevation_rad(d / np.linalg.norm(d, axis=1)[:, None], eng.frame.lat_rad,
                                            eng.frame.lon_rad)
             blocked = np.asarray(self._los(now[1][0:3], az, el), dtype=bool)
@@ -132,13 +132,14 @@ class TightNavigator:
 
     def estimate(self) -> NavEstimate | None:
         """The estimate at the newest IMU time; None before the first epoch."""
-        now = self.engine.state_now()
+        now = self.engine.output_now()
         if now is None:
             return None
         if self._last is not None and self._last[0] is now:
             return self._last[1]
-        t_us, x, P, last = now
-        cov = np.concatenate((np.diag(P)[0:6], np.zeros(3)))
+        t_us, out, last = now
+        x = out[0:6]
+        cov = np.concatenate((out[6:12], np.zeros(3)))
         info = last.info
         est = NavEstimate(t_us, x[0:3].copy(), x[3:6].copy(), np.zeros(3), cov, info.beta_mean, info.nis,
                           self.method, pos_valid=t_us - last.t_good_us <= self.cfg.reset_timeout_s * 1e6,

@@ -46,47 +46,45 @@ class SatelliteCache:
         self.store = store
         self.period_s = float(period_s)
         self.keep_anchors = keep_anchors
-        # (key, anchor index) -> (pos, vel, acc, clock, drift, valid)
-        self._anchors: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray, float, float, bool]] = {}
+        # anchor index -> (sorted keys (m,), table (m, 12): pos, vel, acc, clock, drift, valid)
+        self._anchors: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.evaluations = 0  # satellite states computed by the store (for the benchmark)
+
+    def _table(self, k: int, system: np.ndarray, prn: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        have = self._anchors.get(k)
+        missing = ~np.isin(keys, have[0]) if have is not None else np.ones(len(keys), bool)
+        if missing.any():
+            ukeys, first = np.unique(keys[missing], return_index=True)
+            sysm, prnm = system[missing][first], prn[missing][first]
+            s = self.store.states(sysm, prnm, np.full(len(ukeys), k * self.period_s))
+            self.evaluations += len(ukeys)
+            rows = np.column_stack((s.pos_ecef_m, s.vel_ecef_m_s, ecef_acceleration(s.pos_ecef_m, s.vel_ecef_m_s),
+                                    s.clock_s, s.clock_drift_s_s, s.valid.astype(float)))
+            if have is not None:
+                ukeys, rows = np.concatenate((have[0], ukeys)), np.vstack((have[1], rows))
+                order = np.argsort(ukeys)
+                ukeys, rows = ukeys[order], rows[order]
+            have = self._anchors[k] = (ukeys, rows)
+            for old in [a for a in self._anchors if a < k - self.keep_anchors]:
+                del self._anchors[old]
+        return have  # type: ignore[return-value]
 
     def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
         system = np.asarray(system, dtype=np.int64)
         prn = np.asarray(prn, dtype=np.int64)
         t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
-        finite = np.isfinite(t)
-        if not finite.all():  # no time (no pseudorange): no state
-            out = self.states(system[finite], prn[finite], t[finite])
-            n = len(t)
-            pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
-            clk, drift = np.full(n, np.nan), np.full(n, np.nan)
-            pos[finite], vel[finite], clk[finite], drift[finite] = out[0], out[1], out[2], out[3]
-            return SatStates(pos, vel, clk, drift, finite & np.isin(np.arange(n), np.flatnonzero(finite)[out.valid]))
-        k = np.round(t / self.period_s).astype(np.int64)
-        keys = (system * 1000 + prn).tolist()
-        anchors = self._anchors
-        missing = [i for i, (key, a) in enumerate(zip(keys, k.tolist(), strict=True)) if (key, a) not in anchors]
-        if missing:
-            mi = np.array(missing)
-            ta = k[mi] * self.period_s
-            s = self.store.states(system[mi], prn[mi], ta)
-            self.evaluations += len(mi)
-            acc = ecef_acceleration(s.pos_ecef_m, s.vel_ecef_m_s)
-            for j, i in enumerate(missing):
-                anchors[(keys[i], int(k[i]))] = (s.pos_ecef_m[j], s.vel_ecef_m_s[j], acc[j], float(s.clock_s[j]),
-                                                 float(s.clock_drift_s_s[j]), bool(s.valid[j]))
-            newest = int(k.max())
-            if len(anchors) > 64 * self.keep_anchors:
-                for old in [a for a in anchors if a[1] < newest - self.keep_anchors]:
-                    del anchors[old]
-        rows = [anchors[(key, a)] for key, a in zip(keys, k.tolist(), strict=True)]
-        pos0 = np.array([r[0] for r in rows]).reshape(-1, 3)
-        vel0 = np.array([r[1] for r in rows]).reshape(-1, 3)
-        acc0 = np.array([r[2] for r in rows]).reshape(-1, 3)
-        clk0 = np.array([r[3] for r in rows])
-        drift = np.array([r[4] for r in rows])
-        valid = np.array([r[5] for r in rows], dtype=bool)
-        dt = (t - k * self.period_s)[:, None]
-        pos = pos0 + vel0 * dt + 0.5 * acc0 * dt * dt
-        vel = vel0 + acc0 * dt
-        return SatStates(pos, vel, clk0 + drift * dt[:, 0], drift, valid)
+        n = len(t)
+        out = np.full((n, 12), np.nan)
+        finite = np.isfinite(t)  # no time (no pseudorange): no state
+        k = np.zeros(n, dtype=np.int64)
+        k[finite] = np.round(t[finite] / self.period_s).astype(np.int64)
+        keys = system * 1000 + prn
+        for a in np.unique(k[finite]).tolist():
+            sel = finite & (k == a)
+            tk, rows = self._table(a, system[sel], prn[sel], keys[sel])
+            out[sel] = rows[np.searchsorted(tk, keys[sel])]
+        dt = np.where(finite, t - k * self.period_s, 0.0)[:, None]
+        pos = out[:, 0:3] + out[:, 3:6] * dt + 0.5 * out[:, 6:9] * dt * dt
+        vel = out[:, 3:6] + out[:, 6:9] * dt
+        valid = finite & (out[:, 11] == 1.0)
+        return SatStates(pos, vel, out[:, 9] + out[:, 10] * dt[:, 0], out[:, 10], valid)

@@ -25,6 +25,7 @@ TARGETS = {
     "cli": "gcs_tools.bench.cli_start",
     "robustness": "gcs_tools.bench.robustness",
     "receiver": "gcs_tools.bench.receiver",
+    "tight": "gcs_tools.bench.tight",
 }
 
 

@@ -1,0 +1,94 @@
+"""``beliefnav bench tight``: the tightly coupled navigator's cost per sample, as a receiver feeds it.
+
+A stream of ``DURATION_S`` (``--quick``: 10 s) on the synthetic constellation: IMU + attitude at
+200 Hz and raw epochs of 20 satellites at 5 Hz (pseudoranges, Doppler, C/N0; no satellite states:
+the navigator computes them from the broadcast ephemerides through its once-a-second cache), every
+sample pushed through ``TightNavigator.push`` in arrival order and ``estimate()`` at 50 Hz. The
+epochs are generated before the clock starts. Reported: real time / CPU time (the target is
+≥ 500×), µs per IMU sample and per epoch (median over epochs, the IMU excluded), the same epoch
+with satellite states evaluated in full each time, and the cache's largest position/clock error
+against the full evaluation over the stream's epochs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from companion.domain.samples import AttitudeSample, ImuSample
+from companion.gnss import attach_broadcast
+from companion.gnss.constants import C_M_S
+from companion.tight import RawGnss, TightConfig, TightNavigator
+from companion.tight.satcache import SatelliteCache
+from gcs_tools.gnss.synthetic import RX_ECEF, T0, observe, store
+
+DURATION_S = 60.0
+IMU_HZ, GNSS_HZ, OUT_HZ = 200, 5, 50
+N_SATS = 20
+
+
+def _epochs(st: object, n: int) -> list:
+    out = []
+    for k in range(n):
+        ep, _ = observe(st, T0 + 100.0 + k / GNSS_HZ, RX_ECEF, mask_deg=-90.0)
+        out.append(ep.select(np.argsort(-ep.cn0_dbhz)[:N_SATS]))
+    return out
+
+
+def measure(args: argparse.Namespace) -> dict[str, object]:
+    duration = 10.0 if getattr(args, "quick", False) else DURATION_S
+    st = store()
+    n_ep = int(duration * GNSS_HZ)
+    epochs = _epochs(st, n_ep)
+    cfg = TightConfig(elevation_mask_deg=-90.0)  # all 20 fused (a few are low: the cost is the same)
+    nav = TightNavigator(cfg, "second-order", ephemerides=st)
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    f = np.array([0.0, 0.0, -9.80665])
+    gyro = np.zeros(3)
+    n_imu = int(duration * IMU_HZ)
+    per_epoch: list[float] = []
+    c0, w0 = time.process_time(), time.perf_counter()
+    for i in range(n_imu):
+        t_us = 1_000_000 + i * (1_000_000 // IMU_HZ)
+        nav.push(AttitudeSample(t_us, q))
+        nav.push(ImuSample(t_us, f, gyro))
+        if i % (IMU_HZ // GNSS_HZ) == 0 and i // (IMU_HZ // GNSS_HZ) < n_ep:
+            e0 = time.perf_counter()
+            nav.push(RawGnss(t_us, epochs[i // (IMU_HZ // GNSS_HZ)]))
+            per_epoch.append((time.perf_counter() - e0) * 1e6)
+        if i % (IMU_HZ // OUT_HZ) == 0:
+            nav.estimate()
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    counts = nav.counters()
+    # the same epochs with satellite states evaluated in full, and the cache's error
+    full_us = []
+    cache = SatelliteCache(st, 1.0)
+    worst_pos, worst_clk = 0.0, 0.0
+    for ep in epochs:
+        t0 = time.perf_counter()
+        a, _ = attach_broadcast(ep, st)
+        full_us.append((time.perf_counter() - t0) * 1e6)
+        b, _ = attach_broadcast(ep, cache)  # type: ignore[arg-type]
+        worst_pos = max(worst_pos, float(np.abs(a.sat_pos_ecef_m - b.sat_pos_ecef_m).max()))
+        worst_clk = max(worst_clk, float(np.abs(a.sat_clock_s - b.sat_clock_s).max()) * C_M_S)
+    cached_us = []
+    cache = SatelliteCache(st, 1.0)
+    for ep in epochs:
+        t0 = time.perf_counter()
+        attach_broadcast(ep, cache)  # type: ignore[arg-type]
+        cached_us.append((time.perf_counter() - t0) * 1e6)
+    return {
+        "duration_s": duration, "imu_hz": IMU_HZ, "gnss_hz": GNSS_HZ, "satellites": N_SATS,
+        "satellites_used_per_epoch": counts["sat_used"] / max(counts["gnss_fused"], 1),
+        "realtime_factor_cpu": duration / cpu, "realtime_factor": duration / wall,
+        "us_per_epoch_median": float(np.median(per_epoch)),
+        "us_per_epoch_p95": float(np.percentile(per_epoch, 95)),
+        "us_per_imu_sample": (wall - sum(per_epoch) * 1e-6) / n_imu * 1e6,
+        "satellite_states_full_us": float(np.median(full_us)),
+        "satellite_states_cached_us": float(np.median(cached_us)),
+        "satellite_cache_max_position_error_m": worst_pos,
+        "satellite_cache_max_clock_error_m": worst_clk,
+        "epochs_fused": counts["gnss_fused"], "gnss_resets": counts["gnss_resets"],
+    }
