@@ -130,8 +130,8 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
     err = np.hypot(np.interp(ref["t_s"], est["t_s"], est["p_n_m"]) - ref["p_n_m"],
                    np.interp(ref["t_s"], est["t_s"], est["p_e_m"]) - ref["p_e_m"])
     assert np.median(err) < 1.0, np.median(err)
-    badm = subprocess.run(cmd[:9] + ["--coupling", "tight", "--method", "adaptive", "--out", str(tmp_path / "b")],
-                          capture_output=True, text=True, timeout=60)
+    bad_method = ["--coupling", "tight", "--method", "adaptive", "--out", str(tmp_path / "b")]
+    badm = subprocess.run(cmd[:9] + bad_method, capture_output=True, text=True, timeout=60)
     assert badm.returncode == 2 and "second-order" in badm.stderr and badm.stderr.count("\n") == 1
     nonav = subprocess.run(
         cmd[:7] + ["--out", str(tmp_path / "n")], capture_output=True, text=True, timeout=60

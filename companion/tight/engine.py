@@ -33,8 +33,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from companion.estimator.history import ImuHistory, Integrals, mean_between
-from companion.estimator.model import BlockPropagator
-from companion.estimator.model import IDENTITY9, Rot9
+from companion.estimator.model import IDENTITY9, BlockPropagator, Rot9
 from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, sigma_model_m, solve_position
@@ -101,7 +100,8 @@ class Entry(NamedTuple):
     state: Any  # the weighting's state after this entry (immutable)
     t_good_us: int  # last time a satellite passed
     info: EpochInfo
-    totals: tuple[int, int, int, int, int]  # cumulative: sats used, sats rejected, resets, clock resets, epochs
+    # cumulative: satellites used, satellites rejected, resets, clock resets, epochs
+    totals: tuple[int, int, int, int, int]
 
 
 def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
@@ -142,7 +142,8 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
     vel_ok = np.isfinite(rate) & np.isfinite(ep.sat_vel_ecef_m_s).all(axis=1)
     el_deg = np.degrees(el)
     m = ep.n
-    return SatEpoch(ep, ep.system.astype(int) * 1000 + ep.prn.astype(int), model.SLOT_OF[ep.system.astype(int)],
+    sysi = ep.system.astype(int)
+    return SatEpoch(ep, sysi * 1000 + ep.prn.astype(int), model.SLOT_OF[sysi],
                     z, sigma**2, np.full(m, cfg.sigma_uniform_m**2), sigma_los**2,
                     theta_prior(ep.cn0_dbhz, el_deg, cfg, None if blocked is None else blocked[ok]),
                     el_deg, ep.sat_pos_ecef_m, np.where(vel_ok[:, None], ep.sat_vel_ecef_m_s, np.nan),
@@ -337,7 +338,7 @@ class TightEngine:
             j = int(model.SLOT_OF[int(s)])
             x[I_CLK + j] = b
             live_l[j] = True
-        for j in np.flatnonzero(live_l):
+        for j in np.flatnonzero(live_l).tolist():
             P[I_CLK + j, I_CLK + j] = self.cfg.sigma_clock0_m**2
         x[I_CLK:I_DRIFT] = np.where(live_l, x[I_CLK:I_DRIFT], 0.0)
         return x, P, tuple(live_l)
@@ -369,7 +370,8 @@ class TightEngine:
         else:
             self._fuse_epoch(prev, t_us, meas, x, P, ints)
 
-    def _fuse_speed(self, prev: Entry, t_us: int, m: Speed, x: np.ndarray, P: np.ndarray, ints: Integrals) -> None:
+    def _fuse_speed(self, prev: Entry, t_us: int, m: Speed, x: np.ndarray, P: np.ndarray,
+                    ints: Integrals) -> None:
         c = self.cfg
         heading_live = P[I_HEADING, I_HEADING] > 0.0
         start = self.entries[0].t_us if self.entries else t_us
@@ -515,7 +517,7 @@ class TightEngine:
         last = self.entries[-1]
         now = self.imu.last_t_us
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
-            return self._cache[2]  # type: ignore[no-any-return]
+            return self._cache[2]
         if self._nav15 is None or self._nav15[0] is not last:
             P15 = np.zeros((15, 15))
             P15[np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)] = last.P[:12, :12]

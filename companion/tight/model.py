@@ -187,7 +187,8 @@ def process_noise(T_s: float, nA: Any, live: np.ndarray, q_acc_ne: float, q_acc_
     Q = np.zeros((N_STATE, N_STATE))
     Q.flat[_Q_NAV] = (pp_ne + pp, pp_ne + pp, pp_d + pp, pv_ne + pv, pv_ne + pv, pv_d + pv,
                       pv_ne + pv, pv_ne + pv, pv_d + pv, vv_ne + vv, vv_ne + vv, vv_d + vv,
-                      w * T, w * T, w * T, e * T, e * T, e * T, pd, pd, pd, pd, pd, pd, vd, vd, vd, vd, vd, vd)
+                      w * T, w * T, w * T, e * T, e * T, e * T, pd, pd, pd, pd, pd, pd,
+                      vd, vd, vd, vd, vd, vd)
     if w > 0.0:
         R_mean = -np.reshape(nA, (3, 3)) / T_s if T_s > 0 else np.eye(3)
         pa, va = (-w * T3 / 6.0) * R_mean, (-w * T2 / 2.0) * R_mean

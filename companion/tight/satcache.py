@@ -50,7 +50,8 @@ class SatelliteCache:
         self._anchors: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.evaluations = 0  # satellite states computed by the store (for the benchmark)
 
-    def _table(self, k: int, system: np.ndarray, prn: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _table(self, k: int, system: np.ndarray, prn: np.ndarray, keys: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
         have = self._anchors.get(k)
         missing = ~np.isin(keys, have[0]) if have is not None else np.ones(len(keys), bool)
         if missing.any():
@@ -58,7 +59,8 @@ class SatelliteCache:
             sysm, prnm = system[missing][first], prn[missing][first]
             s = self.store.states(sysm, prnm, np.full(len(ukeys), k * self.period_s))
             self.evaluations += len(ukeys)
-            rows = np.column_stack((s.pos_ecef_m, s.vel_ecef_m_s, ecef_acceleration(s.pos_ecef_m, s.vel_ecef_m_s),
+            acc = ecef_acceleration(s.pos_ecef_m, s.vel_ecef_m_s)
+            rows = np.column_stack((s.pos_ecef_m, s.vel_ecef_m_s, acc,
                                     s.clock_s, s.clock_drift_s_s, s.valid.astype(float)))
             if have is not None:
                 ukeys, rows = np.concatenate((have[0], ukeys)), np.vstack((have[1], rows))

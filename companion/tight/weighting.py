@@ -194,7 +194,7 @@ class SatelliteBelief(SigmaModel):
         r = belief.r_of_beta(belief.sigmoid(theta), t.r_nominal, c)
         return r, gate(t, r, c), new
 
-    def beta(self, state: BeliefMap, key: np.ndarray) -> np.ndarray:  # type: ignore[override]
+    def beta(self, state: BeliefMap, key: np.ndarray) -> np.ndarray:
         th = np.array([state.get(k, (np.nan,))[0] for k in key.tolist()], dtype=float)
         return belief.sigmoid(th)
 

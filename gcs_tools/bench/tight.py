@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from companion.domain.samples import AttitudeSample, ImuSample
-from companion.gnss import attach_broadcast
+from companion.gnss import EphemerisStore, GnssEpoch, attach_broadcast
 from companion.gnss.constants import C_M_S
 from companion.tight import RawGnss, TightConfig, TightNavigator
 from companion.tight.satcache import SatelliteCache
@@ -29,7 +29,7 @@ IMU_HZ, GNSS_HZ, OUT_HZ = 200, 5, 50
 N_SATS = 20
 
 
-def _epochs(st: object, n: int) -> list:
+def _epochs(st: EphemerisStore, n: int) -> list[GnssEpoch]:
     out = []
     for k in range(n):
         ep, _ = observe(st, T0 + 100.0 + k / GNSS_HZ, RX_ECEF, mask_deg=-90.0)

@@ -176,7 +176,8 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
     goals = {name: {"median_ratio_to_spp": s["median_m"] / spp["median_m"],
                     "p95_ratio_to_spp": s["p95_m"] / spp["p95_m"]} for name, s in stats.items()}
     return {
-        "data": {"input": str(input_path), "epochs": int(keep.sum()), "duration_s": float(t_ep[-1] - t_ep[0])},
+        "data": {"input": str(input_path), "epochs": int(keep.sum()),
+                 "duration_s": float(t_ep[-1] - t_ep[0])},
         "method": {"score": "horizontal distance to truth at every epoch time",
                    "bootstrap": f"moving blocks of {block} epochs ({block_s:g} s), {n_resamples} resamples, "
                                 f"seed {seed}, the same blocks for every row (paired)"},
@@ -218,7 +219,8 @@ def belief_vs_residual(epochs: Sequence[Any], truth: Any, log: Sequence[tuple[in
         m = (res >= lo) & (res < hi)
         if m.any():
             out.append({"residual_from_m": lo, "residual_to_m": hi, "n": int(m.sum()),
-                        "beta_median": float(np.median(beta[m])), "beta_p25": float(np.percentile(beta[m], 25)),
+                        "beta_median": float(np.median(beta[m])),
+                        "beta_p25": float(np.percentile(beta[m], 25)),
                         "beta_p75": float(np.percentile(beta[m], 75))})
     return out
 
@@ -228,7 +230,8 @@ def markdown(r: dict[str, Any]) -> str:
         return f"[{v[0]:.1f}, {v[1]:.1f}]"
 
     lines = [f"smartLoc {Path(r['data']['input']).name}: {r['data']['epochs']} epochs, "
-             f"{r['data']['duration_s']:.0f} s; {r['method']['score']}; intervals: {r['method']['bootstrap']}.",
+             f"{r['data']['duration_s']:.0f} s; {r['method']['score']}; "
+             f"intervals: {r['method']['bootstrap']}.",
              "", "| row | median (m) | 95 % CI | p95 (m) | 95 % CI | max (m) | median / SPP | p95 / SPP |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, s in r["rows"].items():
@@ -236,19 +239,24 @@ def markdown(r: dict[str, Any]) -> str:
         lines.append(f"| {name} | {s['median_m']:.1f} | {ci(s['median_ci_m'])} | {s['p95_m']:.1f} | "
                      f"{ci(s['p95_ci_m'])} | {s['max_m']:.1f} | {g['median_ratio_to_spp']:.2f} | "
                      f"{g['p95_ratio_to_spp']:.2f} |")
-    lines += ["", "| paired difference | median (m) | 95 % CI | p95 (m) | 95 % CI |", "| --- | --- | --- | --- | --- |"]
+    lines += ["", "| paired difference | median (m) | 95 % CI | p95 (m) | 95 % CI |",
+              "| --- | --- | --- | --- | --- |"]
     for c in r["paired"]:
-        lines.append(f"| {c['row']} − {c['reference']} | {c['median_diff_m']:+.1f} | {ci(c['median_diff_ci_m'])} | "
+        lines.append(f"| {c['row']} − {c['reference']} | {c['median_diff_m']:+.1f} | "
+                     f"{ci(c['median_diff_ci_m'])} | "
                      f"{c['p95_diff_m']:+.1f} | {ci(c['p95_diff_ci_m'])} |")
-    lines += ["", "| residual at the true position (m) | observations | β median | β p25-p75 |", "| --- | --- | --- | --- |"]
+    lines += ["", "| residual at the true position (m) | observations | β median | β p25-p75 |",
+              "| --- | --- | --- | --- |"]
     for b in r["belief_vs_residual"]:
-        lines.append(f"| {b['residual_from_m']:g} to {b['residual_to_m']:g} | {b['n']} | {b['beta_median']:.2f} | "
+        lines.append(f"| {b['residual_from_m']:g} to {b['residual_to_m']:g} | {b['n']} | "
+                     f"{b['beta_median']:.2f} | "
                      f"{b['beta_p25']:.2f}-{b['beta_p75']:.2f} |")
     return "\n".join(lines) + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.tight", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.tight",
+                                description=(__doc__ or "").splitlines()[0])
     p.add_argument("--smartloc", type=Path, required=True, metavar="INPUT", help="smartLoc *_Input.txt")
     p.add_argument("--truth", type=Path, default=None, help="smartLoc *_GT.txt (default: beside INPUT)")
     p.add_argument("--out", type=Path, default=Path("runs/tight-smartloc"))

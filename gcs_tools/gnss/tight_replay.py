@@ -28,6 +28,8 @@ from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, chec
 from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, SMARTLOC_T0_US
 from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Reference, ReferenceInfo
 
+RawEvent = Event | RawGnss | Odometry  # what these readers yield
+
 
 def anchor_of(epochs: Sequence[GnssEpoch], klobuchar: Any = None) -> LocalNedFrame:
     """The local frame at the first epoch with a single-point solution."""
@@ -60,8 +62,8 @@ class SmartLocRawSource:
             "gnss": "smartLoc pseudoranges (raw epochs)",
             "odometry": "smartLoc odom3 (speed, yaw rate)" if self.use_odometry else None,
         }
-        self.references = {TRUTH: ReferenceInfo("smartLoc point3", "geodetic",
-                                                "estimated position vs the smartLoc truth (ECEF -> geodetic)")}
+        note = "estimated position vs the smartLoc truth (ECEF -> geodetic)"
+        self.references = {TRUTH: ReferenceInfo("smartLoc point3", "geodetic", note)}
         self.anchor = anchor_of(self.epochs)
 
     def boot_us(self, t_s: float) -> int:
@@ -73,7 +75,7 @@ class SmartLocRawSource:
     def describe_empty(self) -> str:
         return "no epoch in the smartLoc input"
 
-    def __iter__(self) -> Iterator[Event]:
+    def __iter__(self) -> Iterator[RawEvent]:
         lat, lon, h = ecef_to_geodetic(self.truth_ecef_m)
         t_ref = [self.boot_us(float(t)) for t in self.truth_t_s]
         t_ep = [self.boot_us(e.t_gps_s) for e in self.epochs]
@@ -137,7 +139,7 @@ class LogWithRawGnss:
     def describe_empty(self) -> str:
         return f"no epoch from {self._source}"
 
-    def __iter__(self) -> Iterator[Event]:
+    def __iter__(self) -> Iterator[RawEvent]:
         raws, i, n = self.raws, 0, len(self.raws)
         for ev in self.inner:
             if type(ev) is GnssFix:

@@ -203,8 +203,9 @@ def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None, Any
         if not args.smartloc.is_file():
             raise UserError(f"{args.smartloc}: no such file")
         src = gnss_replay.smartloc_source(args.smartloc, args.truth, config)
-        return src, {"smartloc": str(args.smartloc), "coupling": args.coupling, "fixes": len(src.fixes),
-                     "imu": "none: zero acceleration, level attitude (a GNSS-only constant-velocity filter)"}, None
+        note = {"smartloc": str(args.smartloc), "coupling": args.coupling, "fixes": len(src.fixes),
+                "imu": "none: zero acceleration, level attitude (a GNSS-only constant-velocity filter)"}
+        return src, note, None
     if args.file is None or not args.file.is_file():
         raise UserError(f"--rinex-obs needs the flight log to replay ({args.file}: no such file)")
     if not args.rinex_nav:
@@ -228,8 +229,8 @@ def _raw_gnss_tight(args: argparse.Namespace) -> tuple[Any, dict[str, Any], Any]
         src = tight_replay.smartloc_raw_source(args.smartloc, args.truth, not args.no_odometry)
         note = {"smartloc": str(args.smartloc), "coupling": "tight", "epochs": len(src.epochs),
                 "odometry": not args.no_odometry,
-                "motion": "constant velocity (no IMU)" + (" with wheel speed and yaw rate" if not args.no_odometry
-                                                          else "")}
+                "motion": "constant velocity (no IMU)"
+                + ("" if args.no_odometry else " with wheel speed and yaw rate")}
         return src, note, tight_replay.tight_factory(TightConfig.for_ground_vehicle())
     if args.file is None or not args.file.is_file():
         raise UserError(f"--rinex-obs needs the flight log to replay ({args.file}: no such file)")
