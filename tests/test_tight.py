@@ -79,6 +79,25 @@ def test_measurement_jacobians_match_finite_differences():
         np.testing.assert_allclose(hs[None, :], num, atol=1e-7)
 
 
+def test_prepared_sigma_models_are_the_single_point_solutions():
+    from companion.gnss.spp import SppConfig, sigma_model_m
+
+    cfg = TightConfig()
+    ep, _ = observe(STORE, T0, RX_ECEF)
+    from companion.gnss import attach_broadcast
+
+    ep, _ = attach_broadcast(ep, STORE)
+    rng = np.random.default_rng(10)
+    ep = ep.replace(cn0_dbhz=rng.uniform(20, 50, ep.n))
+    m = prepare_epoch(ep, FRAME, cfg)
+    assert m is not None and m.epoch.n == ep.n
+    el = np.radians(m.elevation_deg)
+    base = SppConfig(weighting="cn0-elevation")
+    np.testing.assert_allclose(m.r_model_m2, sigma_model_m(ep, el, base) ** 2, rtol=1e-9)
+    los = SppConfig(weighting="cn0", sigma_cn0_m=cfg.sigma_los_cn0_m)
+    np.testing.assert_allclose(m.r_los_m2, sigma_model_m(ep, el, los) ** 2, rtol=1e-9)
+
+
 def test_prediction_is_the_loose_filters_on_p_v_a_d():
     """The tight transition and process noise equal the loose filter's (its GNSS bias dropped)."""
     from companion.estimator import model as loose

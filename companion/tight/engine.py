@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -36,7 +35,7 @@ from companion.estimator.history import ImuHistory, Integrals, mean_between
 from companion.estimator.model import IDENTITY9, BlockPropagator, Rot9
 from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
-from companion.gnss.spp import SppConfig, SppSolution, sigma_model_m, solve_position
+from companion.gnss.spp import SppConfig, SppSolution, solve_position
 from companion.gnss.systems import System
 from companion.tight import model, weighting
 from companion.tight.belief import theta_prior
@@ -67,6 +66,7 @@ class SatEpoch(NamedTuple):
     sat_vel_ecef_m_s: np.ndarray
     z_rate_m_s: np.ndarray  # pseudorange rate free of the satellite clock drift (NaN: none)
     r_rate_m2_s2: np.ndarray
+    systems: tuple[tuple[int, np.ndarray], ...]  # (clock slot, its satellites (bool (m,))) per system
 
 
 class Speed(NamedTuple):
@@ -108,46 +108,55 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
                   blocked: np.ndarray | None = None) -> SatEpoch | None:
     """The state-independent part of an epoch, at the frame's origin (elevation, atmosphere, σ model,
     prior). Observations without a finite pseudorange or satellite position, or below the elevation
-    mask, are dropped. ``blocked``: (n,) the map's line-of-sight verdict per observation (or None)."""
-    from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
-    from companion.gnss.geometry import azimuth_elevation_rad
-    from companion.gnss.timescale import week_tow
+    mask, are dropped. ``blocked``: (n,) the map's line-of-sight verdict per observation (or None).
 
-    ok = np.isfinite(epoch.pseudorange_m) & np.isfinite(epoch.sat_pos_ecef_m).all(axis=1)
+    σ models (``companion.gnss.spp.sigma_model_m``'s, written out for speed and tested equal):
+    "cn0-elevation" σ² = a² + b² w / sin² el and the line-of-sight σ² = a² + c² w, with
+    w = 10^((C/N0_ref − C/N0)/10), sin el floored at 0.05, GLONASS σ × ``glonass_sigma_factor``."""
+    d = epoch.sat_pos_ecef_m - frame.r0_ecef_m
+    rng = np.sqrt(np.einsum("ij,ij->i", d, d))
+    sin_el = -(d @ frame.c_ecef_ned[:, 2]) / rng
+    ok = np.isfinite(epoch.pseudorange_m) & np.isfinite(sin_el) & (sin_el >= math.sin(math.radians(
+        cfg.elevation_mask_deg)))
     if not epoch.corrected:
         ok &= np.isfinite(epoch.sat_clock_s)
-    d = epoch.sat_pos_ecef_m - frame.r0_ecef_m
-    los = d / np.linalg.norm(np.where(np.isfinite(d), d, 1.0), axis=1)[:, None]
-    az, el = azimuth_elevation_rad(np.where(np.isfinite(los), los, 0.0), frame.lat_rad, frame.lon_rad)
-    ok &= el >= math.radians(cfg.elevation_mask_deg)
-    if ok.sum() == 0:
+    if not ok.any():
         return None
-    ep = epoch.select(ok)
-    el, az = el[ok], az[ok]
-    z = ep.pseudorange_m.copy()
-    rate = ep.pseudorange_rate_m_s.copy()
+    ep = epoch
+    if not ok.all():
+        ep, d, rng, sin_el = epoch.select(ok), d[ok], rng[ok], sin_el[ok]
+        blocked = None if blocked is None else blocked[ok]
+    el = np.arcsin(np.clip(sin_el, -1.0, 1.0))
+    z = ep.pseudorange_m
+    rate = ep.pseudorange_rate_m_s
     if not ep.corrected:
+        from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
+        from companion.gnss.timescale import week_tow
+
         z = z + C_M_S * ep.sat_clock_s - saastamoinen_m(frame.lat_rad, frame.h_m, el)
         if klobuchar is not None:
+            ne = d @ frame.c_ecef_ned[:, 0:2]
+            az = np.arctan2(ne[:, 1], ne[:, 0]) % (2 * np.pi)
             z = z - klobuchar_m(klobuchar[0], klobuchar[1], frame.lat_rad, frame.lon_rad, az, el,
                                 week_tow(ep.t_gps_s)[1]) * iono_frequency_scale(ep.system)
         rate = rate + C_M_S * np.nan_to_num(ep.sat_clock_drift_s_s)
-    spp_cfg = SppConfig(weighting="cn0-elevation", sigma_floor_m=cfg.sigma_floor_m,
-                        sigma_zenith_m=cfg.sigma_zenith_m, cn0_ref_dbhz=cfg.cn0_ref_dbhz,
-                        glonass_sigma_factor=cfg.glonass_sigma_factor)
-    sigma = sigma_model_m(ep, el, spp_cfg)
-    sigma_los = sigma_model_m(ep, el, replace(spp_cfg, weighting="cn0", sigma_cn0_m=cfg.sigma_los_cn0_m))
-    ideal = math.hypot(cfg.sigma_floor_m, cfg.sigma_zenith_m)
-    r_rate = (sigma * cfg.sigma_range_rate_m_s / ideal) ** 2
+    cn0 = ep.cn0_dbhz
+    weak = 10.0 ** ((cfg.cn0_ref_dbhz - np.where(np.isfinite(cn0), cn0, cfg.cn0_ref_dbhz)) / 10.0)
+    glo = np.where(ep.system == System.GLONASS, cfg.glonass_sigma_factor**2, 1.0)
+    a2 = cfg.sigma_floor_m**2
+    r_model = (a2 + cfg.sigma_zenith_m**2 * weak / np.maximum(sin_el, 0.05) ** 2) * glo
+    r_los = (a2 + cfg.sigma_los_cn0_m**2 * weak) * glo
+    r_rate = r_model * (cfg.sigma_range_rate_m_s**2 / (a2 + cfg.sigma_zenith_m**2))
     vel_ok = np.isfinite(rate) & np.isfinite(ep.sat_vel_ecef_m_s).all(axis=1)
     el_deg = np.degrees(el)
-    m = ep.n
     sysi = ep.system.astype(int)
-    return SatEpoch(ep, sysi * 1000 + ep.prn.astype(int), model.SLOT_OF[sysi],
-                    z, sigma**2, np.full(m, cfg.sigma_uniform_m**2), sigma_los**2,
-                    theta_prior(ep.cn0_dbhz, el_deg, cfg, None if blocked is None else blocked[ok]),
-                    el_deg, ep.sat_pos_ecef_m, np.where(vel_ok[:, None], ep.sat_vel_ecef_m_s, np.nan),
-                    np.where(vel_ok, rate, np.nan), r_rate)
+    slots = model.SLOT_OF[sysi]
+    return SatEpoch(ep, sysi * 1000 + ep.prn.astype(int), slots,
+                    z, r_model, np.full(ep.n, cfg.sigma_uniform_m**2), r_los,
+                    theta_prior(cn0, el_deg, cfg, blocked), el_deg, ep.sat_pos_ecef_m,
+                    ep.sat_vel_ecef_m_s if vel_ok.all() else np.where(vel_ok[:, None], ep.sat_vel_ecef_m_s, np.nan),
+                    rate if vel_ok.all() else np.where(vel_ok, rate, np.nan), r_rate,
+                    tuple((j, slots == j) for j in sorted(set(slots.tolist()))))
 
 
 class TightEngine:
@@ -414,9 +423,9 @@ class TightEngine:
         pred, H, _ = model.pseudorange(x, self.frame, m.sat_pos_ecef_m, m.slot)
         y = m.z_m - pred
         live = list(prev.live)
-        for j in set(m.slot.tolist()):
-            sel = m.slot == j
-            if live[j] and np.abs(y[sel]).min() <= c.clock_jump_m:
+        abs_y = np.abs(y)
+        for j, sel in m.systems:
+            if live[j] and abs_y[sel].min() <= c.clock_jump_m:
                 continue  # the usual case: a known clock, no jump
             med = float(np.median(y[sel]))
             clock_resets += int(live[j])
@@ -427,39 +436,35 @@ class TightEngine:
             y[sel] -= med
             live[j] = True
         HP = H @ P
-        S0 = HP @ H.T
         r_nom = {"uniform": m.r_uniform_m2, "model": m.r_model_m2, "los": m.r_los_m2}[self.weighting.nominal]
-        terms = weighting.SatTerms(m.key, y, np.diag(S0).copy(), r_nom, m.theta_prior)
+        terms = weighting.SatTerms(m.key, y, np.einsum("ij,ij->i", HP, H), r_nom, m.theta_prior)
 
         def solve(r: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             u = np.flatnonzero(used)
-            S = S0[np.ix_(u, u)] + np.diag(r[u])
+            S = HP[u] @ H[u].T + np.diag(r[u])
             dx = HP[u].T @ np.linalg.solve(S, y[u])
             return y - H @ dx, S
 
-        r, used, state = self.weighting.weigh(prev.state, terms, solve)
+        r, used, state, beta = self.weighting.weigh(prev.state, terms, solve)
         u = np.flatnonzero(used)
         # range rates of the used satellites, inflated like their pseudoranges, gated on their own
         rate_ok = used & np.isfinite(m.z_rate_m_s)
         nis = math.nan
         if len(u):
-            Hs, ys, rs = [H[u]], [y[u]], [r[u]]
+            Hu, HPu, yu, ru = H[u], HP[u], y[u], r[u]
             if rate_ok.any():
                 k = np.flatnonzero(rate_ok)
                 pr, Hr = model.range_rate(x, self.frame, m.sat_pos_ecef_m[k], m.sat_vel_ecef_m_s[k])
                 yr = m.z_rate_m_s[k] - pr
                 rr = m.r_rate_m2_s2[k] * (r[k] / r_nom[k])
-                s0r = np.einsum("ij,jk,ik->i", Hr, P, Hr)
-                g = yr * yr <= c.gate_sigma**2 * (s0r + rr)
-                Hs.append(Hr[g])
-                ys.append(yr[g])
-                rs.append(rr[g])
-            Hu, yu, ru = np.vstack(Hs), np.concatenate(ys), np.concatenate(rs)
-            PHt = P @ Hu.T
-            S = Hu @ PHt + np.diag(ru)
-            W = np.linalg.solve(S, np.column_stack((yu, PHt.T)))
-            x = x + PHt @ W[:, 0]
-            P = P - PHt @ W[:, 1:]
+                HPr = Hr @ P
+                g = yr * yr <= c.gate_sigma**2 * (np.einsum("ij,ij->i", HPr, Hr) + rr)
+                Hu, HPu = np.vstack((Hu, Hr[g])), np.vstack((HPu, HPr[g]))
+                yu, ru = np.concatenate((yu, yr[g])), np.concatenate((ru, rr[g]))
+            S = HPu @ Hu.T + np.diag(ru)
+            W = np.linalg.solve(S, np.column_stack((yu, HPu)))
+            x = x + W[:, 0] @ HPu
+            P = P - HPu.T @ W[:, 1:]
             P = 0.5 * (P + P.T)
             nis = float(yu @ W[:, 0])
         t_good = t_us if len(u) else prev.t_good_us
@@ -471,7 +476,6 @@ class TightEngine:
                 live = list(live_t)
                 resets += 1
                 t_good = t_us
-        beta = self.weighting.beta(state, m.key)
         info = EpochInfo(m.epoch.n, len(u), nis, float(np.mean(beta)) if len(beta) else math.nan,
                          m.key, beta, y, used)
         self._append(Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,

@@ -23,7 +23,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
-from companion.gnss.ephemeris import EphemerisStore, attach_broadcast
+from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
 from companion.tight.config import TightConfig
 from companion.tight.model import Frame
@@ -90,7 +90,11 @@ class TightNavigator:
             if self._sats is None or epoch.time_base != "gps":
                 self._counts["gnss_rejected_no_ephemeris"] += 1
                 return
-            epoch, _ = attach_broadcast(epoch, cast(EphemerisStore, self._sats))
+            st, _ = transmission_states(cast(EphemerisStore, self._sats), epoch)
+            epoch = epoch.replace(sat_pos_ecef_m=st.pos_ecef_m, sat_vel_ecef_m_s=st.vel_ecef_m_s,
+                                  sat_clock_s=st.clock_s, sat_clock_drift_s_s=st.clock_drift_s_s)
+            if not st.valid.all():  # no ephemeris for some: as attach_broadcast, without them
+                epoch = epoch.select(st.valid)
         eng = self.engine
         if epoch.n == 0:
             self._counts["gnss_rejected_empty"] += 1

@@ -46,45 +46,56 @@ class SatelliteCache:
         self.store = store
         self.period_s = float(period_s)
         self.keep_anchors = keep_anchors
-        # anchor index -> (sorted keys (m,), table (m, 12): pos, vel, acc, clock, drift, valid)
-        self._anchors: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        # anchor index -> (row of each satellite key, table (m, 12): pos, vel, acc, clock, drift, valid)
+        self._anchors: dict[int, tuple[dict[int, int], np.ndarray]] = {}
         self.evaluations = 0  # satellite states computed by the store (for the benchmark)
 
-    def _table(self, k: int, system: np.ndarray, prn: np.ndarray, keys: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def _table(self, k: int, keys: list[int], system: np.ndarray, prn: np.ndarray
+               ) -> tuple[dict[int, int], np.ndarray]:
+        """The anchor ``k``'s (row of each key, table (m, 12): pos, vel, acc, clock, drift, valid),
+        evaluating the satellites it does not hold yet."""
         have = self._anchors.get(k)
-        missing = ~np.isin(keys, have[0]) if have is not None else np.ones(len(keys), bool)
-        if missing.any():
-            ukeys, first = np.unique(keys[missing], return_index=True)
-            sysm, prnm = system[missing][first], prn[missing][first]
-            s = self.store.states(sysm, prnm, np.full(len(ukeys), k * self.period_s))
-            self.evaluations += len(ukeys)
+        index, table = have if have is not None else ({}, np.zeros((0, 12)))
+        missing = [i for i, key in enumerate(keys) if key not in index]
+        if missing:
+            new: dict[int, int] = {}
+            for i in missing:
+                new.setdefault(keys[i], i)
+            rows_i = np.array(list(new.values()))
+            s = self.store.states(system[rows_i], prn[rows_i], np.full(len(rows_i), k * self.period_s))
+            self.evaluations += len(rows_i)
             acc = ecef_acceleration(s.pos_ecef_m, s.vel_ecef_m_s)
-            rows = np.column_stack((s.pos_ecef_m, s.vel_ecef_m_s, acc,
-                                    s.clock_s, s.clock_drift_s_s, s.valid.astype(float)))
-            if have is not None:
-                ukeys, rows = np.concatenate((have[0], ukeys)), np.vstack((have[1], rows))
-                order = np.argsort(ukeys)
-                ukeys, rows = ukeys[order], rows[order]
-            have = self._anchors[k] = (ukeys, rows)
+            rows = np.column_stack((s.pos_ecef_m, s.vel_ecef_m_s, acc, s.clock_s, s.clock_drift_s_s,
+                                    s.valid.astype(float)))
+            index = dict(index)
+            for j, key in enumerate(new):
+                index[key] = len(table) + j
+            table = np.vstack((table, rows))
+            self._anchors[k] = (index, table)
             for old in [a for a in self._anchors if a < k - self.keep_anchors]:
                 del self._anchors[old]
-        return have  # type: ignore[return-value]
+        return index, table
 
     def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
         system = np.asarray(system, dtype=np.int64)
         prn = np.asarray(prn, dtype=np.int64)
         t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
         n = len(t)
-        out = np.full((n, 12), np.nan)
         finite = np.isfinite(t)  # no time (no pseudorange): no state
         k = np.zeros(n, dtype=np.int64)
         k[finite] = np.round(t[finite] / self.period_s).astype(np.int64)
-        keys = system * 1000 + prn
-        for a in np.unique(k[finite]).tolist():
-            sel = finite & (k == a)
-            tk, rows = self._table(a, system[sel], prn[sel], keys[sel])
-            out[sel] = rows[np.searchsorted(tk, keys[sel])]
+        keys = (system * 1000 + prn).tolist()
+        anchors = set(k[finite].tolist())
+        if len(anchors) == 1 and finite.all():  # the usual case: one anchor for the whole epoch
+            index, table = self._table(anchors.pop(), keys, system, prn)
+            out = table[[index[key] for key in keys]]
+        else:
+            out = np.full((n, 12), np.nan)
+            for a in anchors:
+                sel = np.flatnonzero(finite & (k == a))
+                sel_keys = [keys[i] for i in sel.tolist()]
+                index, table = self._table(a, sel_keys, system[sel], prn[sel])
+                out[sel] = table[[index[key] for key in sel_keys]]
         dt = np.where(finite, t - k * self.period_s, 0.0)[:, None]
         pos = out[:, 0:3] + out[:, 3:6] * dt + 0.5 * out[:, 6:9] * dt * dt
         vel = out[:, 3:6] + out[:, 6:9] * dt

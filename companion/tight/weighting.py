@@ -45,6 +45,13 @@ class SatTerms(NamedTuple):
     theta_prior: np.ndarray  # prior belief logit from C/N0, elevation (and the map)
 
 
+class Weighed(NamedTuple):
+    r: np.ndarray  # variances to fuse with (m,)
+    used: np.ndarray  # bool (m,)
+    state: Any  # the new state
+    beta: np.ndarray  # belief per satellite in [0, 1] (1 for the rows without one)
+
+
 Solve = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (r, used) -> (post-fit e, S)
 
 
@@ -55,12 +62,8 @@ class Weighting(Protocol):
 
     def initial_state(self) -> Any: ...
 
-    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
-        """(variances to fuse with (m,), satellites to use (bool (m,)), new state)."""
-        ...
-
-    def beta(self, state: Any, key: np.ndarray) -> np.ndarray:
-        """Belief per satellite in [0, 1] (1 for the rows without one)."""
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> Weighed:
+        """The variances to fuse with, the satellites to use, the new state and the beliefs."""
         ...
 
 
@@ -103,11 +106,8 @@ class Fixed:
     def initial_state(self) -> None:
         return None
 
-    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
-        return t.r_nominal, gate(t, t.r_nominal, self.cfg), state
-
-    def beta(self, state: Any, key: np.ndarray) -> np.ndarray:
-        return np.ones(len(key))
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> Weighed:
+        return Weighed(t.r_nominal, gate(t, t.r_nominal, self.cfg), state, np.ones(len(t.y)))
 
 
 @register("cn0-elevation")
@@ -121,7 +121,7 @@ class SigmaModel(Fixed):
 class Fde(SigmaModel):
     """χ² test of the normalised innovations yᵀ S⁻¹ y; the worst satellite out while it fails."""
 
-    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> Weighed:
         c = self.cfg
         used = gate(t, t.r_nominal, c)
         for _ in range(c.fde_max_exclusions):
@@ -136,14 +136,14 @@ class Fde(SigmaModel):
             norm = np.abs(w) / np.sqrt(np.diag(np.linalg.inv(S_used)))  # standardised innovations
             used = used.copy()
             used[idx[int(np.argmax(norm))]] = False
-        return t.r_nominal, used, state
+        return Weighed(t.r_nominal, used, state, np.ones(len(t.y)))
 
 
 @register("student-t")
 class StudentT(SigmaModel):
     """Iteratively reweighted update with Student-t weights (ν + 1) / (ν + e² / R_nom)."""
 
-    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+    def weigh(self, state: Any, t: SatTerms, solve: Solve) -> Weighed:
         c = self.cfg
         nu = c.student_dof
         used = gate(t, t.r_nominal, c)
@@ -152,7 +152,7 @@ class StudentT(SigmaModel):
             e, _ = solve(r, used)
             w = (nu + 1.0) / (nu + e * e / t.r_nominal)
             r = t.r_nominal / np.minimum(w, 1.0 + 1.0 / nu)
-        return r, used, state
+        return Weighed(r, used, state, np.ones(len(t.y)))
 
 
 BeliefMap = dict[int, tuple[float, float, float]]  # key -> (θ, H_fast, H_slow), never mutated
@@ -179,7 +179,7 @@ class SatelliteBelief(SigmaModel):
                 theta[i], hf[i], hs[i] = s
         return theta, hf, hs
 
-    def weigh(self, state: BeliefMap, t: SatTerms, solve: Solve) -> tuple[np.ndarray, np.ndarray, Any]:
+    def weigh(self, state: BeliefMap, t: SatTerms, solve: Solve) -> Weighed:
         c = self.cfg
         theta, hf, hs = self._gather(state, t)
         _, g = belief.loss_grad_theta(theta, t.y, t.s0, t.r_nominal, t.theta_prior, c)
@@ -191,12 +191,9 @@ class SatelliteBelief(SigmaModel):
         new = dict(state)
         for k, th, f, s in zip(t.key.tolist(), theta.tolist(), hf.tolist(), hs.tolist(), strict=True):
             new[k] = (th, f, s)
-        r = belief.r_of_beta(belief.sigmoid(theta), t.r_nominal, c)
-        return r, gate(t, r, c), new
-
-    def beta(self, state: BeliefMap, key: np.ndarray) -> np.ndarray:
-        th = np.array([state.get(k, (np.nan,))[0] for k in key.tolist()], dtype=float)
-        return belief.sigmoid(th)
+        beta = belief.sigmoid(theta)
+        r = belief.r_of_beta(beta, t.r_nominal, c)
+        return Weighed(r, gate(t, r, c), new, beta)
 
 
 @register("first-order")
