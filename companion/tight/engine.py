@@ -147,15 +147,17 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
     r_model = (a2 + cfg.sigma_zenith_m**2 * weak / np.maximum(sin_el, 0.05) ** 2) * glo
     r_los = (a2 + cfg.sigma_los_cn0_m**2 * weak) * glo
     r_rate = r_model * (cfg.sigma_range_rate_m_s**2 / (a2 + cfg.sigma_zenith_m**2))
-    vel_ok = np.isfinite(rate) & np.isfinite(ep.sat_vel_ecef_m_s).all(axis=1)
+    vel = ep.sat_vel_ecef_m_s
+    vel_ok = np.isfinite(rate) & np.isfinite(vel).all(axis=1)
+    if not vel_ok.all():
+        vel, rate = np.where(vel_ok[:, None], vel, np.nan), np.where(vel_ok, rate, np.nan)
     el_deg = np.degrees(el)
     sysi = ep.system.astype(int)
     slots = model.SLOT_OF[sysi]
     return SatEpoch(ep, sysi * 1000 + ep.prn.astype(int), slots,
                     z, r_model, np.full(ep.n, cfg.sigma_uniform_m**2), r_los,
                     theta_prior(cn0, el_deg, cfg, blocked), el_deg, ep.sat_pos_ecef_m,
-                    ep.sat_vel_ecef_m_s if vel_ok.all() else np.where(vel_ok[:, None], ep.sat_vel_ecef_m_s, np.nan),
-                    rate if vel_ok.all() else np.where(vel_ok, rate, np.nan), r_rate,
+                    vel, rate, r_rate,
                     tuple((j, slots == j) for j in sorted(set(slots.tolist()))))
 
 
