@@ -324,3 +324,37 @@ def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
     assert np.linalg.norm(p - RX_ECEF) < 2.0
     with pytest.raises(ConfigError, match="second-order"):
         TightNavigator(TightConfig(), "adaptive")
+
+
+def test_block_bootstrap_indices_are_contiguous_blocks():
+    from gcs_tools.evaluate.tight import block_indices
+
+    idx = block_indices(1000, 100, np.random.default_rng(0), 50)
+    assert idx.shape == (50, 1000) and idx.min() >= 0 and idx.max() < 1000
+    d = np.diff(idx[:, :100], axis=1)
+    assert np.all(d == 1)  # the first block is 100 consecutive epochs
+
+
+def test_smartloc_tight_rows_on_the_real_drive():
+    """The smartLoc Berlin drive (real receiver, deep canyon): the per-satellite belief with the car's
+    odometry against the single-point solution, fixed weights and C/N0 weighting (the goal: median
+    ≤ 0.7×, p95 ≤ 0.5× the single-point solution's), and its β against the residuals at the truth."""
+    import os
+    from pathlib import Path
+
+    from gcs_tools.evaluate.tight import run
+
+    shared = Path(__file__).resolve().parents[1].parent / "shared"
+    inp = shared / "data" / "urban" / "smartloc" / "Berlin_Potsdamer_Platz_Input.txt"
+    if not inp.is_file():
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"the smartLoc data set is required in CI: {inp} is missing")
+        pytest.skip(f"smartLoc data set not found at {inp} (shared directory beside the repository)")
+    r = run(inp, None, n_resamples=200, rows=("naive", "second-order"))
+    rows, goals = r["rows"], r["goals"]["tight-second-order"]
+    assert goals["median_ratio_to_spp"] <= 0.7 and goals["p95_ratio_to_spp"] <= 0.5, goals
+    assert rows["tight-second-order"]["max_m"] < 40.0  # never diverging
+    vs_naive = next(c for c in r["paired"] if c["reference"] == "tight-naive")
+    assert vs_naive["median_diff_ci_m"][1] < 0 and vs_naive["p95_diff_ci_m"][1] < 0
+    beta = {(b["residual_from_m"], b["residual_to_m"]): b["beta_median"] for b in r["belief_vs_residual"]}
+    assert beta[(-5.0, 5.0)] > 0.9 and beta[(40.0, math.inf)] < 0.6

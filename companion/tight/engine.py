@@ -33,6 +33,7 @@ import numpy as np
 
 from companion.estimator.history import ImuHistory, Integrals, mean_between
 from companion.estimator.model import IDENTITY9, BlockPropagator, Rot9
+from companion.gnss.atmosphere import iono_frequency_scale
 from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, solve_position
@@ -46,6 +47,8 @@ _TRIM_EVERY = 256
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
 SPP_INIT = SppConfig(raim=True)
+# L1 ionospheric delay → each system's signal (GLONASS at its centre frequency), per clock slot
+_IONO_SCALE = iono_frequency_scale(np.array([int(s) for s in model.CLOCK_SLOTS]))
 # a reset also widens the position: the canyon's single-point solution is often tens of metres off
 SIGMA_SPP_EXTRA_M = 10.0
 
@@ -130,7 +133,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
     z = ep.pseudorange_m
     rate = ep.pseudorange_rate_m_s
     if not ep.corrected:
-        from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
+        from companion.gnss.atmosphere import klobuchar_m, saastamoinen_m
         from companion.gnss.timescale import week_tow
 
         z = z + C_M_S * ep.sat_clock_s - saastamoinen_m(frame.lat_rad, frame.h_m, el)
@@ -138,8 +141,9 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
             ne = d @ frame.c_ecef_ned[:, 0:2]
             az = np.arctan2(ne[:, 1], ne[:, 0]) % (2 * np.pi)
             z = z - klobuchar_m(klobuchar[0], klobuchar[1], frame.lat_rad, frame.lon_rad, az, el,
-                                week_tow(ep.t_gps_s)[1]) * iono_frequency_scale(ep.system)
-        rate = rate + C_M_S * np.nan_to_num(ep.sat_clock_drift_s_s)
+                                week_tow(ep.t_gps_s)[1]) * _IONO_SCALE[model.SLOT_OF[ep.system]]
+        drift = ep.sat_clock_drift_s_s
+        rate = rate + C_M_S * np.where(np.isfinite(drift), drift, 0.0)
     cn0 = ep.cn0_dbhz
     weak = 10.0 ** ((cfg.cn0_ref_dbhz - np.where(np.isfinite(cn0), cn0, cfg.cn0_ref_dbhz)) / 10.0)
     glo = np.where(ep.system == System.GLONASS, cfg.glonass_sigma_factor**2, 1.0)
@@ -478,7 +482,7 @@ class TightEngine:
                 live = list(live_t)
                 resets += 1
                 t_good = t_us
-        info = EpochInfo(m.epoch.n, len(u), nis, float(np.mean(beta)) if len(beta) else math.nan,
+        info = EpochInfo(m.epoch.n, len(u), nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
                          m.key, beta, y, used)
         self._append(Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
                            (used_tot + len(u), rej_tot + len(y) - len(u), resets, clock_resets, epochs + 1)))

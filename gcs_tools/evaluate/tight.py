@@ -45,6 +45,8 @@ NO_ODOMETRY_ROWS = ("cn0-elevation", "student-t", "second-order")
 REFERENCES = ("spp", "loose", "tight-naive", "tight-cn0-elevation", "tight-fde", "tight-student-t")
 BELIEF_ROW = "tight-second-order"
 RESIDUAL_BINS_M = (-math.inf, -10.0, -5.0, 5.0, 10.0, 20.0, 40.0, math.inf)
+# --sensitivity: the belief row with each of these TightConfig fields halved and doubled
+SENSITIVITY = ("eta", "student_dof", "prior_weight", "sigma_los_cn0_m", "r_inflation_max", "sigma_acc_m_s2")
 
 
 def block_indices(n: int, block: int, rng: np.random.Generator, n_resamples: int) -> np.ndarray:
@@ -106,7 +108,7 @@ class _EpochLog:
 
 def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float = 20.0,
         n_resamples: int = 2000, rows: Sequence[str] = TIGHT_ROWS,
-        progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+        progress: Callable[[str], None] | None = None, sensitivity: bool = False) -> dict[str, Any]:
     from gcs_tools.gnss import smartloc
     from gcs_tools.gnss import tight_replay as tr
     from gcs_tools.gnss.baseline import solve_series
@@ -161,6 +163,19 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
             cfg = TightConfig.for_ground_vehicle()
             hook = belief_log if name == BELIEF_ROW else None
             replay_row(name, reader, lambda m, f, cfg=cfg: TightNavigator(cfg, m, f), w, hook)
+    sens: dict[str, dict[str, float]] = {}
+    if sensitivity:
+        base = TightConfig.for_ground_vehicle()
+        for field in SENSITIVITY:
+            for factor in (0.5, 2.0):
+                name = f"{field} x{factor:g}"
+                cfg = TightConfig.for_ground_vehicle(**{field: getattr(base, field) * factor})
+                reader = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m)
+                replay_row(name, reader, lambda m, f, cfg=cfg: TightNavigator(cfg, m, f), "second-order")
+                e = errors.pop(name)[ok]
+                e = e[np.isfinite(e)]
+                sens[name] = {"median_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95)),
+                              "max_m": float(e.max())}
     keep = ok & np.all([np.isfinite(e) for e in errors.values()], axis=0)
     errors = {k: v[keep] for k, v in errors.items()}
     rng = np.random.default_rng(seed)
@@ -171,7 +186,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
     if "tight-second-order-no-odometry" in errors:
         comparisons += [paired(errors, "tight-second-order-no-odometry", ref, idx)
                         for ref in ("spp", "loose", "tight-cn0-elevation-no-odometry",
-                                    "tight-student-t-no-odometry")]
+                                    "tight-student-t-no-odometry") if ref in errors]
     spp = stats["spp"]
     goals = {name: {"median_ratio_to_spp": s["median_m"] / spp["median_m"],
                     "p95_ratio_to_spp": s["p95_m"] / spp["p95_m"]} for name, s in stats.items()}
@@ -183,6 +198,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
                                 f"seed {seed}, the same blocks for every row (paired)"},
         "rows": stats, "paired": comparisons, "goals": goals, "realtime_factor": timing,
         "belief_vs_residual": belief_vs_residual(data.epochs, truth, belief_log.rows, src),
+        "sensitivity": sens,
     }
 
 
@@ -251,6 +267,11 @@ def markdown(r: dict[str, Any]) -> str:
         lines.append(f"| {b['residual_from_m']:g} to {b['residual_to_m']:g} | {b['n']} | "
                      f"{b['beta_median']:.2f} | "
                      f"{b['beta_p25']:.2f}-{b['beta_p75']:.2f} |")
+    if r.get("sensitivity"):
+        lines += ["", "| tight-second-order with | median (m) | p95 (m) | max (m) |",
+                  "| --- | --- | --- | --- |"]
+        for name, s in r["sensitivity"].items():
+            lines.append(f"| {name} | {s['median_m']:.1f} | {s['p95_m']:.1f} | {s['max_m']:.1f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -263,6 +284,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--block-s", type=float, default=20.0)
     p.add_argument("--resamples", type=int, default=2000)
+    p.add_argument("--sensitivity", action="store_true",
+                   help="also the belief row with each main parameter halved and doubled")
     args = p.parse_args(argv)
     try:
         if not args.smartloc.is_file():
@@ -270,7 +293,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not (args.block_s > 0 and args.resamples >= 100):
             raise UserError("--block-s must be > 0 and --resamples >= 100")
         r = run(args.smartloc, args.truth, args.seed, args.block_s, args.resamples,
-                progress=lambda m: print(f"  {m}", flush=True))
+                progress=lambda m: print(f"  {m}", flush=True), sensitivity=args.sensitivity)
     except UserError as exc:
         print(f"beliefnav: error: {exc}")
         return 2
