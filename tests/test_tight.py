@@ -358,3 +358,31 @@ def test_smartloc_tight_rows_on_the_real_drive():
     assert vs_naive["median_diff_ci_m"][1] < 0 and vs_naive["p95_diff_ci_m"][1] < 0
     beta = {(b["residual_from_m"], b["residual_to_m"]): b["beta_median"] for b in r["belief_vs_residual"]}
     assert beta[(-5.0, 5.0)] > 0.9 and beta[(40.0, math.inf)] < 0.6
+
+
+def test_atmosphere_once_a_second_is_within_centimetres():
+    from companion.gnss import transmission_states
+    from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
+    from companion.gnss.timescale import week_tow
+    from companion.tight.satcache import AtmosphereCache
+
+    cache = SatelliteCache(STORE, 5.0)
+    atmo = AtmosphereCache(cache, FRAME.lat_rad, FRAME.lon_rad, FRAME.h_m, FRAME.r0_ecef_m, FRAME.c_ecef_ned,
+                           STORE.klobuchar)
+    worst_low, worst_high = 0.0, 0.0
+    for t in T0 + np.arange(0.0, 6.0, 0.2):
+        ep, _ = observe(STORE, t, RX_ECEF, mask_deg=5.0)
+        st, t_tx = transmission_states(STORE, ep)
+        got = atmo.delays_m(ep.system, ep.prn, t_tx)
+        d = st.pos_ecef_m - RX_ECEF
+        ned = d @ FRAME.c_ecef_ned / np.linalg.norm(d, axis=1)[:, None]
+        el = np.arcsin(-ned[:, 2])
+        az = np.arctan2(ned[:, 1], ned[:, 0]) % (2 * np.pi)
+        want = saastamoinen_m(FRAME.lat_rad, FRAME.h_m, el) + klobuchar_m(
+            *STORE.klobuchar, FRAME.lat_rad, FRAME.lon_rad, az, el, week_tow(ep.t_gps_s)[1]
+        ) * iono_frequency_scale(ep.system)
+        err = np.abs(got - want)
+        high = el > math.radians(15)
+        worst_high = max(worst_high, float(err[high].max()))
+        worst_low = max(worst_low, float(err.max()))
+    assert worst_high < 0.005 and worst_low < 0.03, (worst_high, worst_low)

@@ -108,10 +108,13 @@ class Entry(NamedTuple):
 
 
 def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
-                  blocked: np.ndarray | None = None) -> SatEpoch | None:
+                  blocked: np.ndarray | None = None, atmosphere_m: np.ndarray | None = None
+                  ) -> SatEpoch | None:
     """The state-independent part of an epoch, at the frame's origin (elevation, atmosphere, σ model,
     prior). Observations without a finite pseudorange or satellite position, or below the elevation
-    mask, are dropped. ``blocked``: (n,) the map's line-of-sight verdict per observation (or None).
+    mask, are dropped. ``blocked``: (n,) the map's line-of-sight verdict per observation (or None);
+    ``atmosphere_m``: (n,) the raw pseudoranges' atmospheric delays when already known
+    (``satcache.AtmosphereCache``), else computed here.
 
     σ models (``companion.gnss.spp.sigma_model_m``'s, written out for speed and tested equal):
     "cn0-elevation" σ² = a² + b² w / sin² el and the line-of-sight σ² = a² + c² w, with
@@ -129,10 +132,13 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
     if not ok.all():
         ep, d, rng, sin_el = epoch.select(ok), d[ok], rng[ok], sin_el[ok]
         blocked = None if blocked is None else blocked[ok]
+        atmosphere_m = None if atmosphere_m is None else atmosphere_m[ok]
     el = np.arcsin(np.clip(sin_el, -1.0, 1.0))
     z = ep.pseudorange_m
     rate = ep.pseudorange_rate_m_s
-    if not ep.corrected:
+    if not ep.corrected and atmosphere_m is not None:
+        z = z + C_M_S * ep.sat_clock_s - atmosphere_m
+    elif not ep.corrected:
         from companion.gnss.atmosphere import klobuchar_m, saastamoinen_m
         from companion.gnss.timescale import week_tow
 
@@ -142,6 +148,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
             az = np.arctan2(ne[:, 1], ne[:, 0]) % (2 * np.pi)
             z = z - klobuchar_m(klobuchar[0], klobuchar[1], frame.lat_rad, frame.lon_rad, az, el,
                                 week_tow(ep.t_gps_s)[1]) * _IONO_SCALE[model.SLOT_OF[ep.system]]
+    if not ep.corrected:
         drift = ep.sat_clock_drift_s_s
         rate = rate + C_M_S * np.where(np.isfinite(drift), drift, 0.0)
     cn0 = ep.cn0_dbhz
@@ -518,7 +525,8 @@ class TightEngine:
         return now, x, P, last
 
     def output_now(self) -> tuple[int, np.ndarray, Entry] | None:
-        """(t_us, [p, v, their 6 variances] (12,), the last entry) at the newest IMU time, by the loose
+        """(t_us, [p, v, 0 (3), the variances of p, v, 0 (3)] (18,), the last entry) at the newest IMU
+        time, by the loose
         filter's C output path (``BlockPropagator.output_from``: the mean from the IMU history's
         newest integrals and the variances of p and v, which depend on (p, v, a, d) alone), the
         vertical white-acceleration density added where it differs; cached."""
@@ -534,12 +542,13 @@ class TightEngine:
             self._nav15 = (last, (*last.x[0:6], 0.0, 0.0, 0.0, *last.x[6:12]), P15)
         T = (now - last.t_us) * 1e-6
         _, out = self._prop.output_from(self._nav15[1], self._nav15[2], last.ints, self.imu, T, 1.0, 0.0)
-        res = np.concatenate((out[0:6], out[9:15]))
+        # out: p, v, b (9) then their variances (9); the b slots are zero here (no fix-level bias)
+        out[6:9] = 0.0
         dq = self._q[1] - self._q[0]
         if dq:
-            res[8] += dq * T * T * T / 3.0
-            res[11] += dq * T
-        snap = (now, res, last)
+            out[11] += dq * T * T * T / 3.0
+            out[14] += dq * T
+        snap = (now, out, last)
         self._cache = (last, now, snap)
         return snap
 

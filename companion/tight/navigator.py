@@ -29,7 +29,7 @@ from companion.tight import engine as tight_engine
 from companion.tight.config import TightConfig
 from companion.tight.model import Frame
 from companion.tight.samples import Odometry, RawGnss
-from companion.tight.satcache import SatelliteCache
+from companion.tight.satcache import AtmosphereCache, SatelliteCache
 from companion.tight.weighting import DEFAULT_WEIGHTING
 
 LineOfSight = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
@@ -56,10 +56,12 @@ class TightNavigator:
         klob = None if ephemerides is None else ephemerides.klobuchar
         self.engine = tight_engine.TightEngine(self.cfg, method, self._counts, f, klob)
         self._sats = None if ephemerides is None else SatelliteCache(ephemerides, sat_cache_period_s)
+        self._atmo: AtmosphereCache | None = None
         self._los = line_of_sight
         self._rot: Any = None
         self._odo: tuple[int, float, float] | None = None  # (t_us, yaw rate, its integral)
         self._last: tuple[Any, NavEstimate] | None = None
+        self._valid_us = self.cfg.reset_timeout_s * 1e6
 
     def push(self, sample: Any) -> None:
         """Consume one sample (arrival order). Never raises on bad data: it is counted."""
@@ -87,15 +89,18 @@ class TightNavigator:
 
     def _push_raw(self, raw: RawGnss) -> None:
         epoch = raw.epoch
+        atmosphere = None
         if epoch.n and not np.isfinite(epoch.sat_pos_ecef_m).any():
             if self._sats is None or epoch.time_base != "gps":
                 self._counts["gnss_rejected_no_ephemeris"] += 1
                 return
-            st, _ = transmission_states(cast(EphemerisStore, self._sats), epoch)
+            st, t_tx = transmission_states(cast(EphemerisStore, self._sats), epoch)
             epoch = epoch.replace(sat_pos_ecef_m=st.pos_ecef_m, sat_vel_ecef_m_s=st.vel_ecef_m_s,
                                   sat_clock_s=st.clock_s, sat_clock_drift_s_s=st.clock_drift_s_s)
             if not st.valid.all():  # no ephemeris for some: as attach_broadcast, without them
-                epoch = epoch.select(st.valid)
+                epoch, t_tx = epoch.select(st.valid), t_tx[st.valid]
+            if self.engine.frame is not None:
+                atmosphere = self._atmosphere().delays_m(epoch.system, epoch.prn, t_tx)
         eng = self.engine
         if epoch.n == 0:
             self._counts["gnss_rejected_empty"] += 1
@@ -117,11 +122,20 @@ class TightNavigator:
             az, el = azimuth_elevation_rad(d / np.linalg.norm(d, axis=1)[:, None], eng.frame.lat_rad,
                                            eng.frame.lon_rad)
             blocked = np.asarray(self._los(now[1][0:3], az, el), dtype=bool)
-        m = tight_engine.prepare_epoch(epoch, eng.frame, self.cfg, eng.klobuchar, blocked)
+        m = tight_engine.prepare_epoch(epoch, eng.frame, self.cfg, eng.klobuchar, blocked, atmosphere)
         if m is None:
             self._counts["gnss_rejected_empty"] += 1
             return
         eng.push_epoch(raw.t_us, m)
+
+    def _atmosphere(self) -> AtmosphereCache:
+        """The atmosphere's delays at home, once per satellite and satellite-cache anchor."""
+        f = self.engine.frame
+        assert f is not None and self._sats is not None
+        if self._atmo is None:
+            self._atmo = AtmosphereCache(self._sats, f.lat_rad, f.lon_rad, f.h_m, f.r0_ecef_m, f.c_ecef_ned,
+                                         self.engine.klobuchar)
+        return self._atmo
 
     def _push_odometry(self, o: Odometry) -> None:
         if not (math.isfinite(o.speed_m_s) and math.isfinite(o.yaw_rate_rad_s)) or (
@@ -142,12 +156,10 @@ class TightNavigator:
             return None
         if self._last is not None and self._last[0] is now:
             return self._last[1]
-        t_us, out, last = now
-        x = out[0:6]
-        cov = np.concatenate((out[6:12], np.zeros(3)))
+        t_us, out, last = now  # one array, handed out as views (as the loose navigator does)
         info = last.info
-        est = NavEstimate(t_us, x[0:3].copy(), x[3:6].copy(), np.zeros(3), cov, info.beta_mean, info.nis,
-                          self.method, pos_valid=t_us - last.t_good_us <= self.cfg.reset_timeout_s * 1e6,
+        est = NavEstimate(t_us, out[0:3], out[3:6], out[6:9], out[9:18], info.beta_mean, info.nis,
+                          self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
                           gnss_resets=last.totals[2])
         self._last = (now, est)
         return est

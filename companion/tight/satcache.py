@@ -101,3 +101,52 @@ class SatelliteCache:
         vel = out[:, 3:6] + out[:, 6:9] * dt
         valid = finite & (out[:, 11] == 1.0)
         return SatStates(pos, vel, out[:, 9] + out[:, 10] * dt[:, 0], out[:, 10], valid)
+
+
+class AtmosphereCache:
+    """Tropospheric (Saastamoinen) and ionospheric (Klobuchar, per signal) delays at a fixed site,
+    once per satellite and ``period_s`` (at whole multiples of it, from the satellite's position
+    then): the value is a function of the time alone (out-of-sequence fusion stays exact). Half a
+    second moves a satellite's elevation by ≤ 0.004°: ≤ 3 cm of tropospheric delay at 5° elevation,
+    < 5 mm above 15° (tested)."""
+
+    def __init__(self, sats: Any, lat_rad: float, lon_rad: float, h_m: float, r0_ecef_m: np.ndarray,
+                 c_ecef_ned: np.ndarray, klobuchar: Any = None, period_s: float = 1.0) -> None:
+        self.sats, self.klobuchar, self.period_s = sats, klobuchar, period_s
+        self.site = (lat_rad, lon_rad, h_m)
+        self.r0, self.c = np.asarray(r0_ecef_m, float), np.asarray(c_ecef_ned, float)
+        self._memo: dict[tuple[int, int], float] = {}
+
+    def delays_m(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> np.ndarray:
+        """The delay (m) of each observation's signal (L1 scaled to its frequency)."""
+        from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
+        from companion.gnss.timescale import week_tow
+
+        keys = (np.asarray(system, np.int64) * 1000 + np.asarray(prn, np.int64)).tolist()
+        k = np.round(np.where(np.isfinite(t_gps_s), t_gps_s, 0.0) / self.period_s).astype(np.int64).tolist()
+        memo = self._memo
+        missing = [i for i, (key, a) in enumerate(zip(keys, k, strict=True)) if (key, a) not in memo]
+        if missing:
+            mi = np.array(missing)
+            ta = np.array([k[i] for i in missing]) * self.period_s
+            pos = self.sats.states(np.asarray(system)[mi], np.asarray(prn)[mi], ta).pos_ecef_m
+            d = pos - self.r0
+            ned = d @ self.c / np.linalg.norm(d, axis=1)[:, None]
+            el = np.arcsin(np.clip(-ned[:, 2], -1.0, 1.0))
+            lat, lon, h = self.site
+            delay = saastamoinen_m(lat, h, el)
+            if self.klobuchar is not None:
+                az = np.arctan2(ned[:, 1], ned[:, 0]) % (2 * np.pi)
+                iono = np.empty(len(mi))
+                for t in set(ta.tolist()):  # usually one anchor time per call
+                    j = ta == t
+                    iono[j] = klobuchar_m(self.klobuchar[0], self.klobuchar[1], lat, lon, az[j], el[j],
+                                          week_tow(t)[1])
+                delay = delay + iono * iono_frequency_scale(np.asarray(system)[mi])
+            for i, v in zip(missing, np.where(np.isfinite(delay), delay, 0.0).tolist(), strict=True):
+                memo[(keys[i], k[i])] = v
+            newest = max(k)
+            if len(memo) > 4096:
+                for old in [key for key in memo if key[1] < newest - 8]:
+                    del memo[old]
+        return np.array([memo[(key, a)] for key, a in zip(keys, k, strict=True)])
