@@ -149,6 +149,7 @@ def test_belief_gradient_monotone_bounded_r():
     num = (belief.loss_grad_theta(theta + h, y, s0, r_nom, prior, cfg)[0]
            - belief.loss_grad_theta(theta - h, y, s0, r_nom, prior, cfg)[0]) / (2 * h)
     np.testing.assert_allclose(g, num, rtol=1e-5, atol=1e-8)
+    np.testing.assert_allclose(belief.grad_theta(theta, y, s0, r_nom, prior, cfg), g, rtol=1e-12, atol=1e-15)
     beta = np.linspace(0, 1, 101)
     r = belief.r_of_beta(beta, 4.0, cfg)
     assert np.all(np.diff(r) < 0) and r[-1] == pytest.approx(4.0)

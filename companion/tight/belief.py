@@ -24,6 +24,8 @@ until S ≈ y²); a clean one's is smaller: θ rises to the cap. Vectorised over
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from companion.tight.config import TightConfig
@@ -52,6 +54,19 @@ def loss_grad_theta(theta: np.ndarray, y: np.ndarray, s0: np.ndarray, r_nominal:
     ds_dbeta = -np.log(cfg.r_inflation_max) * r
     g = dl_ds * ds_dbeta * beta * (1.0 - beta) + cfg.prior_weight * (theta - theta_prior)
     return loss, g
+
+
+def grad_theta(theta: np.ndarray, y: np.ndarray, s0: np.ndarray, r_nominal: np.ndarray,
+               theta_prior: np.ndarray, cfg: TightConfig) -> np.ndarray:
+    """∂ℓ_s/∂θ_s alone (``loss_grad_theta``'s second value, without the loss: the filter's path)."""
+    beta = 1.0 / (1.0 + np.exp(-theta))
+    r = r_nominal * cfg.r_inflation_max ** (1.0 - beta)
+    S = s0 + r
+    y2 = y * y
+    nu = cfg.student_dof
+    dl_ds = 0.5 / S - 0.5 * (nu + 1.0) * y2 / (S * (nu * S + y2))
+    return dl_ds * (-math.log(cfg.r_inflation_max)) * r * beta * (1.0 - beta) + cfg.prior_weight * (
+        theta - theta_prior)
 
 
 def second_order_step(theta: np.ndarray, h_fast: np.ndarray, h_slow: np.ndarray, g: np.ndarray,

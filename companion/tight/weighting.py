@@ -169,28 +169,24 @@ class SatelliteBelief(SigmaModel):
         return {}
 
     def _gather(self, state: BeliefMap, t: SatTerms) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        n = len(t.key)
-        theta, hf, hs = np.empty(n), np.ones(n), np.ones(n)
-        for i, k in enumerate(t.key.tolist()):
-            s = state.get(k)
-            if s is None:
-                theta[i] = min(max(t.theta_prior[i], self.cfg.theta_min), self.cfg.theta_max)
-            else:
-                theta[i], hf[i], hs[i] = s
-        return theta, hf, hs
+        """(θ, H_fast, H_slow) per satellite: its own, or a new satellite's (its prior, 1, 1)."""
+        lo, hi = self.cfg.theta_min, self.cfg.theta_max
+        a = np.array([state.get(k) or (min(max(p, lo), hi), 1.0, 1.0)
+                      for k, p in zip(t.key.tolist(), t.theta_prior.tolist(), strict=True)]).reshape(-1, 3)
+        return a[:, 0], a[:, 1], a[:, 2]
 
     def weigh(self, state: BeliefMap, t: SatTerms, solve: Solve) -> Weighed:
         c = self.cfg
         theta, hf, hs = self._gather(state, t)
-        _, g = belief.loss_grad_theta(theta, t.y, t.s0, t.r_nominal, t.theta_prior, c)
+        g = belief.grad_theta(theta, t.y, t.s0, t.r_nominal, t.theta_prior, c)
         if self.first_order:
             theta = theta - c.eta * g
         else:
             theta, hf, hs = belief.second_order_step(theta, hf, hs, g, c)
         theta = np.clip(theta, c.theta_min, c.theta_max)
         new = dict(state)
-        for k, th, f, s in zip(t.key.tolist(), theta.tolist(), hf.tolist(), hs.tolist(), strict=True):
-            new[k] = (th, f, s)
+        rows = zip(theta.tolist(), hf.tolist(), hs.tolist(), strict=True)
+        new.update(zip(t.key.tolist(), rows, strict=True))
         beta = belief.sigmoid(theta)
         r = belief.r_of_beta(beta, t.r_nominal, c)
         return Weighed(r, gate(t, r, c), new, beta)
