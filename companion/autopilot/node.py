@@ -53,8 +53,12 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
 from companion.estimator import DEFAULT_METHOD, EstimatorConfig, Navigator, check_method
+from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.timescale import gps_to_unix_s
 from companion.mavlink import codec
 from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
+from companion.tight import RawGnss, TightConfig, TightNavigator, check_weighting
 from companion.wiring import navigator_for
 
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
@@ -98,9 +102,16 @@ class CompanionConfig:
     peers: PeerPolicy = field(default_factory=PeerPolicy)
     timesync: TimesyncConfig = field(default_factory=TimesyncConfig)
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    # "tight": the receiver's raw epochs (``ubx``: serial:DEV:BAUD or tcp:HOST:PORT, u-blox UBX) into the
+    # tightly coupled filter (companion.tight) instead of the autopilot's fixes; ``method`` names its row
+    coupling: str = "loose"
+    ubx: str | None = None
+    tight: TightConfig = field(default_factory=TightConfig)
 
     def __post_init__(self) -> None:
-        check_method(self.method)
+        if self.coupling not in ("loose", "tight"):
+            raise UserError(f"--coupling {self.coupling!r}: choose from loose, tight")
+        (check_weighting if self.coupling == "tight" else check_method)(self.method)
         if self.feed not in FEEDS:
             raise UserError(f"--feed {self.feed!r}: choose from {', '.join(FEEDS)}")
         if not 1 <= self.component_id <= 255:
@@ -131,7 +142,9 @@ class AutopilotCompanion:
         self.clock = StreamClock(window)
         self.telemetry = telemetry or TelemetryPublisher.disabled()
         self._topics = EstimatorTelemetry(self.telemetry)
-        self.nav: Navigator | None = None
+        self.nav: Navigator | TightNavigator | None = None
+        self._ephemerides: dict[tuple[int, int], KeplerEphemeris] = {}  # (PRN, IODE) -> from the receiver
+        self._klobuchar: Any = None
         self.counters: Counter[str] = Counter()
         self.received: Counter[str] = Counter()
         self.acks: Counter[str] = Counter()
@@ -294,8 +307,56 @@ class AutopilotCompanion:
             self._after_imu(sample.t_us)
 
     def _start_navigator(self) -> None:
-        self.nav = navigator_for(None, self.config.method, config=self.config.estimator, frame=self.frame)
+        if self.config.coupling == "tight":
+            self.nav = TightNavigator(self.config.tight, self.config.method, self.frame, self._store())
+        else:
+            self.nav = navigator_for(None, self.config.method, config=self.config.estimator, frame=self.frame)
         self._topics = EstimatorTelemetry(self.telemetry)
+
+    # -- the receiver's raw GNSS (--coupling tight) --------------------------------------------
+    def _store(self) -> EphemerisStore | None:
+        if not self._ephemerides:
+            return None
+        return EphemerisStore(list(self._ephemerides.values()), [], self._klobuchar)
+
+    def raw_items(self, items: list[Any]) -> None:
+        """The receiver's decoded items (``RawReceiver.drain()``), in arrival order: ephemerides go to
+        the filter, each raw epoch is put on the autopilot's boot clock (its SYSTEM_TIME: the
+        epoch's GPS time as Unix time minus the autopilot's Unix − boot offset) and fused. Counted,
+        never raised."""
+        for item in items:
+            try:
+                self._raw_item(item)
+            except Exception as exc:  # noqa: BLE001 - the receiver's data must never end the process
+                self.counters[f"raw_error_{type(exc).__name__}"] += 1
+
+    def _raw_item(self, item: Any) -> None:
+        if isinstance(item, KeplerEphemeris):
+            self._ephemerides[(item.prn, item.iode)] = item
+            self.counters["raw_ephemerides"] += 1
+            if isinstance(self.nav, TightNavigator):
+                store = self._store()
+                assert store is not None
+                self.nav.update_ephemerides(store)
+        elif isinstance(item, GnssEpoch):
+            offset_us = self.translator.unix_minus_boot_us
+            if offset_us is None:
+                self.counters["raw_before_system_time"] += 1
+            elif not isinstance(self.nav, TightNavigator):
+                self.counters["raw_before_first_fix"] += 1
+            else:
+                t_us = round(gps_to_unix_s(item.t_gps_s) * 1e6) - offset_us
+                base = self.clock.base_us  # the one clock rule, as for the autopilot's fixes
+                if base is not None and not within(t_us, base, GNSS_WINDOW):
+                    self.counters["rejected_clock_raw"] += 1
+                    return
+                self.nav.push(RawGnss(t_us, item))
+                self.counters["raw_epochs"] += 1
+        else:
+            self.counters["raw_receiver_fixes"] += 1
+
+    def set_klobuchar(self, klobuchar: Any) -> None:
+        self._klobuchar = klobuchar
 
     def _after_imu(self, t_us: int) -> None:
         assert self.nav is not None
@@ -451,7 +512,7 @@ class AutopilotCompanion:
         cmp_ = self.comparison
         frame = self.frame
         return {
-            "master": c.master, "method": c.method, "feed": c.feed, "wall_s": wall_s,
+            "master": c.master, "method": c.method, "feed": c.feed, "coupling": c.coupling, "wall_s": wall_s,
             "cpu_s": time.process_time(),
             "autopilot": ap.as_dict() if ap is not None else None,
             "conflicting_autopilots": sorted(self.discovery.conflicting_systems),

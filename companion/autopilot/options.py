@@ -26,6 +26,12 @@ def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool)
     parser.add_argument("--gps-delay-ms", type=float, default=None,
                         help="receiver delay: fix validity = the autopilot's stamp minus this "
                              "(default: the autopilot's GPS1_DELAY_MS / EKF2_GPS_DELAY)")
+    parser.add_argument("--coupling", default="loose", choices=("loose", "tight"),
+                        help="loose: the autopilot's GNSS fixes into the estimator (default); tight: the "
+                             "receiver's raw epochs (--ubx) into the tightly coupled filter (docs/tight.md)")
+    parser.add_argument("--ubx", default=None, metavar="URL",
+                        help="--coupling tight: the u-blox receiver (RXM-RAWX, RXM-SFRBX): "
+                             "serial:DEVICE:BAUD or tcp:HOST:PORT")
     parser.add_argument("--discovery-timeout-s", type=float, default=60.0,
                         help="give up when no autopilot HEARTBEAT arrives within this (wall s)")
     parser.add_argument("--lost-timeout-s", type=float, default=15.0,

@@ -27,6 +27,7 @@ from companion.autopilot.translate import TranslateConfig
 from companion.domain.geodesy import parse_home
 from companion.errors import UserError
 from companion.mavlink.signing import read_signing_key
+from companion.receiver.raw_receiver import RawReceiver
 from companion.telemetry.pubsub import TelemetryPublisher
 
 UNSIGNED_WARNING = ("WARNING: MAVLink signing is OFF on {link}, which is not loopback: anyone who can "
@@ -44,8 +45,14 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     if target is not None and not 1 <= target <= 255:
         raise UserError(f"--target-system {target}: must be 1..255")
     key_file = getattr(args, "signing_key_file", None)
+    coupling, ubx = getattr(args, "coupling", "loose"), getattr(args, "ubx", None)
+    if coupling == "tight" and ubx is None:
+        raise UserError("--coupling tight needs the receiver: --ubx serial:DEVICE:BAUD or tcp:HOST:PORT")
+    if coupling != "tight" and ubx is not None:
+        raise UserError("--ubx goes with --coupling tight (the loose filter takes the autopilot's fixes)")
     return CompanionConfig(
         master=args.master, out_dir=Path(args.out), method=args.method, feed=args.feed,
+        coupling=coupling, ubx=ubx,
         home=parse_home(args.home) if args.home else None, duration_s=args.duration_s,
         component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
         signing_key=read_signing_key(key_file) if key_file else None,
@@ -87,6 +94,7 @@ def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) ->
     security = security_note(config)
     if security["warning"]:
         print(f"beliefnav: {security['warning']}", file=sys.stderr)
+    receiver = RawReceiver(config.ubx) if config.coupling == "tight" and config.ubx else None
     conn = open_connection(config.master, 1, config.component_id, config.out_dir / "run.tlog",
                            signing_key=config.signing_key, peers=config.peers)
     node = AutopilotCompanion(config, conn, telemetry)
@@ -94,22 +102,27 @@ def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) ->
     failure: str | None = None
 
     def summary() -> dict[str, Any]:
-        return node.summary(time.monotonic() - start) | {"security": security, "failure": failure}
+        extra = {} if receiver is None else {"receiver": {"url": config.ubx, **receiver.counters()}}
+        return node.summary(time.monotonic() - start) | {"security": security, "failure": failure} | extra
 
     try:
-        failure = serve(node, start, lambda: write_json(config.out_dir / "summary.json", summary()))
+        failure = serve(node, start, lambda: write_json(config.out_dir / "summary.json", summary()), receiver)
     finally:
         result = summary()
         write_json(config.out_dir / "summary.json", result)
+        if receiver is not None:
+            receiver.close()
         conn.close()
         if conn.tlog is not None:
             conn.tlog.close()
     return result
 
 
-def serve(node: AutopilotCompanion, start_s: float, checkpoint: Any = None) -> str | None:
+def serve(node: AutopilotCompanion, start_s: float, checkpoint: Any = None,
+          receiver: RawReceiver | None = None) -> str | None:
     """The loop; returns why the run failed (the autopilot lost) or None. ``checkpoint()`` is called
-    every ``summary_period_s`` (it rewrites summary.json)."""
+    every ``summary_period_s`` (it rewrites summary.json). ``receiver`` (``--coupling tight``): its
+    decoded items are handed to the node between MAVLink messages."""
     c = node.config
     next_checkpoint = start_s + c.summary_period_s
     while True:
@@ -134,6 +147,9 @@ def serve(node: AutopilotCompanion, start_s: float, checkpoint: Any = None) -> s
         node.tick(now)
         for msg in node.conn.recv(timeout_s=0.02):
             node.handle(msg, time.monotonic())
+        if receiver is not None:
+            node.set_klobuchar(receiver.decoder.klobuchar)
+            node.raw_items(receiver.drain())
         if checkpoint is not None and now >= next_checkpoint:
             next_checkpoint = now + c.summary_period_s
             checkpoint()

@@ -2,7 +2,7 @@
 
 Pure: :class:`UbxDecoder` takes parsed messages (anything with pyubx2's ``identity`` and field
 attributes) in arrival order; opening a file, serial port or TCP stream is the caller's
-(``gcs_tools.gnss.ubx_source``).
+(``companion.receiver.ubx_stream``).
 
 * ``RXM-RAWX`` -> :class:`GnssEpoch` at ``week · 604800 + rcvTow`` (receiver time, GPS scale): one
   signal per system (GPS/QZSS L1 C/A, Galileo E1, BeiDou B1I, GLONASS L1OF), pseudoranges with

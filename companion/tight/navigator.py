@@ -57,6 +57,7 @@ class TightNavigator:
         self.engine = tight_engine.TightEngine(self.cfg, method, self._counts, f, klob)
         self._sats = None if ephemerides is None else SatelliteCache(ephemerides, sat_cache_period_s)
         self._atmo: AtmosphereCache | None = None
+        self._sat_period_s = sat_cache_period_s
         self._los = line_of_sight
         self._rot: Any = None
         self._odo: tuple[int, float, float] | None = None  # (t_us, yaw rate, its integral)
@@ -127,6 +128,12 @@ class TightNavigator:
             self._counts["gnss_rejected_empty"] += 1
             return
         eng.push_epoch(raw.t_us, m)
+
+    def update_ephemerides(self, store: EphemerisStore) -> None:
+        """Broadcast ephemerides for the epochs from now on (a receiver decodes them as it runs)."""
+        self._sats = SatelliteCache(store, self._sats.period_s if self._sats else self._sat_period_s)
+        self._atmo = None
+        self.engine.klobuchar = store.klobuchar if store.klobuchar is not None else self.engine.klobuchar
 
     def _atmosphere(self) -> AtmosphereCache:
         """The atmosphere's delays at home, once per satellite and satellite-cache anchor."""

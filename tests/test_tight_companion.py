@@ -1,0 +1,116 @@
+"""The companion on a u-blox receiver it owns (``--coupling tight --ubx URL``): the UBX stream read on a
+thread from a real TCP socket, and the node putting the receiver's raw epochs on the autopilot's boot
+clock, into the tightly coupled filter, and out as GPS_INPUT with its own accuracy."""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from collections import Counter
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.autopilot.node import AutopilotCompanion, CompanionConfig, config_from_args
+from companion.errors import UserError
+from companion.gnss.geometry import ecef_to_geodetic, geodetic_to_ecef
+from companion.gnss.timescale import gps_to_unix_s
+from companion.receiver.raw_receiver import RawReceiver
+from tests.gnss_helpers import RX_ECEF, T0, observe, store
+from tests.test_autopilot_adapter import _FakeConn, _from
+from tests.test_gnss_readers import _ubx_frames
+
+
+def test_raw_receiver_reads_ubx_from_tcp_on_a_thread():
+    payload = _ubx_frames()
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    port = srv.getsockname()[1]
+
+    def serve() -> None:
+        conn, _ = srv.accept()
+        for i in range(0, len(payload), 61):
+            conn.sendall(payload[i:i + 61])
+            time.sleep(0.001)
+        conn.close()
+
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    rx = RawReceiver(f"tcp:127.0.0.1:{port}")
+    items: list = []
+    deadline = time.monotonic() + 10.0
+    try:
+        while time.monotonic() < deadline and not rx.counters().get("stream_ended"):
+            items += rx.drain()
+            time.sleep(0.01)
+        items += rx.drain()
+    finally:
+        rx.close()
+        srv.close()
+        th.join(timeout=5.0)
+    assert [type(i).__name__ for i in items] == ["GnssEpoch", "KeplerEphemeris", "ReceiverPvt", "GnssEpoch"]
+    c = rx.counters()
+    assert c["items"] == 4 and c["stream_ended"] == 1
+
+
+def test_bad_receiver_options_are_one_line_errors(tmp_path):
+    import argparse
+
+    from companion.autopilot.options import add_master_arguments
+
+    p = argparse.ArgumentParser()
+    add_master_arguments(p, master_required=True)
+    p.add_argument("--method", default="second-order")
+    base = ["--master", "udpin::14550", "--out", str(tmp_path)]
+    with pytest.raises(UserError, match="--ubx"):
+        config_from_args(p.parse_args(base + ["--coupling", "tight"]))
+    with pytest.raises(UserError, match="--coupling tight"):
+        config_from_args(p.parse_args(base + ["--ubx", "tcp:127.0.0.1:1"]))
+    with pytest.raises(UserError, match="second-order"):
+        config_from_args(p.parse_args(base + ["--coupling", "tight", "--ubx", "tcp:h:1", "--method", "vbakf"]))
+    with pytest.raises(UserError, match="cannot connect"):
+        RawReceiver("tcp:127.0.0.1:1")
+
+
+def test_node_fuses_the_receivers_raw_epochs_and_feeds_gps_input(tmp_path):
+    st = store()
+    conn = _FakeConn()
+    conn.counters = Counter()
+    config = CompanionConfig(master="udpin::14550", out_dir=tmp_path, coupling="tight", ubx="tcp:unused:1",
+                             feed="gps-input")
+    node = AutopilotCompanion(config, conn)  # type: ignore[arg-type]
+    hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3)
+    node.handle(_from(hb, 3, 1), 0.0)
+    node.raw_items([observe(st, T0, RX_ECEF)[0]])  # before the autopilot's clock: counted
+    boot0_us = 1_000_000  # the autopilot's boot time at GPS time T0
+    node.handle(_from(mavlink.MAVLink_system_time_message(round(gps_to_unix_s(T0) * 1e6), boot0_us // 1000), 3, 1),
+                0.0)
+    lat, lon, h = (float(v) for v in ecef_to_geodetic(RX_ECEF))
+    fix = mavlink.MAVLink_gps_raw_int_message(boot0_us, 3, round(math.degrees(lat) * 1e7),
+                                              round(math.degrees(lon) * 1e7), round(h * 1e3), 100, 100, 0, 0, 12)
+    node.raw_items(list(st.kepler))  # the receiver's decoded ephemerides
+    for k in range(300):  # 6 s at 50 Hz; an epoch every 0.2 s
+        t_us = boot0_us + 20_000 * k
+        att = mavlink.MAVLink_attitude_quaternion_message(t_us // 1000, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        imu = mavlink.MAVLink_highres_imu_message(t_us, 0, 0, -9.80665, *[0] * 10, 0b111111, 0)
+        node.handle(_from(att, 3, 1), k * 0.02)
+        if k == 0:
+            node.handle(_from(fix, 3, 1), 0.0)  # the frame (as in loose coupling)
+        node.handle(_from(imu, 3, 1), k * 0.02)
+        if k % 10 == 0:
+            node.raw_items([observe(st, T0 + k * 0.02, RX_ECEF)[0]])
+    assert node.counters["raw_before_system_time"] == 1 and node.counters["raw_epochs"] == 30
+    nav = node.nav_counters()
+    assert nav["gnss_fused"] >= 28 and nav["gnss_resets"] == 0 and nav["gnss_fix_ignored"] >= 1
+    feeds = [m for m in conn.sent if m.get_type() == "GPS_INPUT"]
+    assert len(feeds) > 40
+    last = feeds[-1]
+    p = geodetic_to_ecef(math.radians(last.lat / 1e7), math.radians(last.lon / 1e7), last.alt)
+    assert np.linalg.norm(p[:2] - RX_ECEF[:2]) < 3.0  # horizontal ECEF components near the truth
+    assert 0.0 < last.horiz_accuracy < 5.0 and last.fix_type == 3
+    s = node.summary(1.0)
+    assert s["coupling"] == "tight" and s["samples"]["used"]["gnss"] >= 28
