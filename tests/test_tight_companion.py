@@ -71,7 +71,8 @@ def test_bad_receiver_options_are_one_line_errors(tmp_path):
     with pytest.raises(UserError, match="--coupling tight"):
         config_from_args(p.parse_args(base + ["--ubx", "tcp:127.0.0.1:1"]))
     with pytest.raises(UserError, match="second-order"):
-        config_from_args(p.parse_args(base + ["--coupling", "tight", "--ubx", "tcp:h:1", "--method", "vbakf"]))
+        tight = ["--coupling", "tight", "--ubx", "tcp:h:1", "--method", "vbakf"]
+        config_from_args(p.parse_args(base + tight))
     with pytest.raises(UserError, match="cannot connect"):
         RawReceiver("tcp:127.0.0.1:1")
 
@@ -87,11 +88,11 @@ def test_node_fuses_the_receivers_raw_epochs_and_feeds_gps_input(tmp_path):
     node.handle(_from(hb, 3, 1), 0.0)
     node.raw_items([observe(st, T0, RX_ECEF)[0]])  # before the autopilot's clock: counted
     boot0_us = 1_000_000  # the autopilot's boot time at GPS time T0
-    node.handle(_from(mavlink.MAVLink_system_time_message(round(gps_to_unix_s(T0) * 1e6), boot0_us // 1000), 3, 1),
-                0.0)
+    sys_time = mavlink.MAVLink_system_time_message(round(gps_to_unix_s(T0) * 1e6), boot0_us // 1000)
+    node.handle(_from(sys_time, 3, 1), 0.0)
     lat, lon, h = (float(v) for v in ecef_to_geodetic(RX_ECEF))
-    fix = mavlink.MAVLink_gps_raw_int_message(boot0_us, 3, round(math.degrees(lat) * 1e7),
-                                              round(math.degrees(lon) * 1e7), round(h * 1e3), 100, 100, 0, 0, 12)
+    lat_e7, lon_e7 = round(math.degrees(lat) * 1e7), round(math.degrees(lon) * 1e7)
+    fix = mavlink.MAVLink_gps_raw_int_message(boot0_us, 3, lat_e7, lon_e7, round(h * 1e3), 100, 100, 0, 0, 12)
     node.raw_items(list(st.kepler))  # the receiver's decoded ephemerides
     for k in range(300):  # 6 s at 50 Hz; an epoch every 0.2 s
         t_us = boot0_us + 20_000 * k
