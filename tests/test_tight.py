@@ -351,7 +351,7 @@ def test_smartloc_tight_rows_on_the_real_drive():
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail(f"the smartLoc data set is required in CI: {inp} is missing")
         pytest.skip(f"smartLoc data set not found at {inp} (shared directory beside the repository)")
-    r = run(inp, None, n_resamples=200, rows=("naive", "second-order"))
+    r = run(inp, None, n_resamples=200, rows=("naive", "second-order"), loose=False, no_odometry=False)
     rows, goals = r["rows"], r["goals"]["tight-second-order"]
     assert goals["median_ratio_to_spp"] <= 0.7 and goals["p95_ratio_to_spp"] <= 0.5, goals
     assert rows["tight-second-order"]["max_m"] < 40.0  # never diverging

@@ -108,7 +108,8 @@ class _EpochLog:
 
 def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float = 20.0,
         n_resamples: int = 2000, rows: Sequence[str] = TIGHT_ROWS,
-        progress: Callable[[str], None] | None = None, sensitivity: bool = False) -> dict[str, Any]:
+        progress: Callable[[str], None] | None = None, sensitivity: bool = False,
+        loose: bool = True, no_odometry: bool = True) -> dict[str, Any]:
     from gcs_tools.gnss import smartloc
     from gcs_tools.gnss import tight_replay as tr
     from gcs_tools.gnss.baseline import solve_series
@@ -152,9 +153,10 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
         errors[name] = _horizontal(est, truth_ned)
         timing[name] = float(res.summary["realtime_factor"])
 
-    replay_row("loose", smartloc_source(input_path, truth_path, SppConfig()), None, "second-order")
+    if loose:
+        replay_row("loose", smartloc_source(input_path, truth_path, SppConfig()), None, "second-order")
     belief_log = _EpochLog()
-    for odometry in (True, False):
+    for odometry in (True, False) if no_odometry else (True,):
         for w in rows:
             if not odometry and w not in NO_ODOMETRY_ROWS:
                 continue
