@@ -43,6 +43,7 @@ def _state(rng: np.random.Generator) -> np.ndarray:
     x[I_CLK:I_DRIFT] = rng.normal(0, 1e4, I_DRIFT - I_CLK)
     x[I_DRIFT] = rng.normal(0, 50)
     x[I_HEADING] = rng.uniform(-3, 3)
+    x[-1] = rng.normal(0, 0.01)  # the yaw-rate bias
     return x
 
 
@@ -179,7 +180,7 @@ def _synthetic_epochs(rng: np.random.Generator, cfg: TightConfig, n: int, dt_s: 
     Q = model.process_noise(dt_s, -dt_s * np.eye(3).ravel(), live, cfg.sigma_acc_m_s2**2,
                             cfg.sigma_acc_vertical_m_s2**2, 0.0, 0.0, cfg.q_clock_m2_s, cfg.q_isb_m2_s,
                             cfg.q_drift_m2_s3)
-    Q[I_HEADING, I_HEADING] = 0.0
+    Q[I_HEADING:, I_HEADING:] = 0.0
     Lq = np.linalg.cholesky(Q + 1e-15 * np.eye(N_STATE))
     epochs, truth = [], []
     sig = cfg.sigma_uniform_m

@@ -65,11 +65,15 @@ class TightConfig:
     sigma_speed_m_s: float = 0.1
     speed_sigma_fraction: float = 0.02  # + this × speed (wheel radius, slip)
     # heading from the odometry's yaw rate: the offset ψ₀ starts from the filter's velocity direction
-    # once the speed is known to odometry_heading_start_m_s, with σ odometry_heading0_rad, and walks
-    # with the yaw-rate bias (a car's gyro: ~0.1°/s, 0.017 rad in 10 s)
+    # after odometry_heading_start_s, with σ odometry_heading0_rad; it walks with the yaw rate's white
+    # noise (rad/√s) and integrates minus the yaw rate's bias b_ω, a state: a car's yaw-rate sensor is
+    # zeroed by the vehicle at standstill, leaving ≲ 0.1°/s (σ 0.002 rad/s at start; smartLoc Berlin's
+    # drifts 0.06°/s), drifting slowly with temperature (1e-4 rad/s/√s)
     odometry_heading_start_s: float = 5.0
     odometry_heading0_rad: float = 0.3
-    sigma_yaw_rate_bias_rad_s: float = 5e-3
+    sigma_heading_rw_rad_sqrt_s: float = 5e-3
+    sigma_yaw_rate_bias0_rad_s: float = 0.002
+    sigma_yaw_rate_bias_rw_rad_s_sqrt_s: float = 1e-4
     sigma_lateral_m_s: float = 0.2  # side slip and the heading's own noise, across the track
     # --- per-satellite belief (the paper's second-order rule, per satellite; belief.py)
     r_inflation_max: float = 100.0  # R_s(β) = R_nom,s · this^(1 − β): ≤ 10× the σ at no trust

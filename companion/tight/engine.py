@@ -41,7 +41,7 @@ from companion.gnss.systems import System
 from companion.tight import model, weighting
 from companion.tight.belief import theta_prior
 from companion.tight.config import TightConfig
-from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, N_CLK, N_STATE, Frame
+from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
 
 _TRIM_EVERY = 256
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
@@ -195,7 +195,7 @@ class TightEngine:
         c = cfg
         self._q = (c.sigma_acc_m_s2**2, c.sigma_acc_vertical_m_s2**2, c.sigma_acc_bias_rw_m_s2_sqrt_s**2,
                    c.sigma_acc_ned_rw_m_s2_sqrt_s**2, c.q_clock_m2_s, c.q_isb_m2_s, c.q_drift_m2_s3,
-                   c.sigma_yaw_rate_bias_rad_s**2)
+                   c.sigma_heading_rw_rad_sqrt_s**2, c.sigma_yaw_rate_bias_rw_rad_s_sqrt_s**2)
         self._counts = counts if counts is not None else {}
         for k in ("gnss_epochs", "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_before_imu",
                   "gnss_rejected_no_solution", "gnss_rejected_duplicate", "gnss_out_of_order", "gnss_refused",
@@ -379,8 +379,8 @@ class TightEngine:
             return x, e.P.copy()
         F = model.transition(T, nA, nB, live)
         Q = model.process_noise(T, nA, live, *self._q)
-        if e.P[I_HEADING, I_HEADING] == 0.0:
-            Q[I_HEADING, I_HEADING] = 0.0
+        if e.P[I_HEADING, I_HEADING] == 0.0:  # no odometry heading yet: its states stay at rest
+            Q[I_HEADING:, I_HEADING:] = 0.0
         return x, F @ e.P @ F.T + Q
 
     def _fuse(self, t_us: int, meas: SatEpoch | Speed) -> None:
@@ -401,9 +401,11 @@ class TightEngine:
                 and t_us - start >= c.odometry_heading_start_s * 1e6):
             # heading offset from the filter's velocity direction (the car moves along its heading)
             x[I_HEADING] = math.atan2(x[4], x[3]) - m.yaw_integral_rad
-            P[I_HEADING, :] = 0.0
-            P[:, I_HEADING] = 0.0
+            x[I_YAW_BIAS] = 0.0
+            P[I_HEADING:, :] = 0.0
+            P[:, I_HEADING:] = 0.0
             P[I_HEADING, I_HEADING] = c.odometry_heading0_rad**2
+            P[I_YAW_BIAS, I_YAW_BIAS] = c.sigma_yaw_rate_bias0_rad_s**2
             heading_live = True
         if heading_live and math.isfinite(m.yaw_integral_rad):
             y, H = model.odometry_velocity(x, m.speed_m_s, m.yaw_integral_rad)

@@ -4,7 +4,7 @@ State (``N_STATE`` = 19)::
 
     x = [p (NED, m), v (NED, m/s), a (body accelerometer bias, m/s²), d (NED acceleration error,
          m/s²), c_s (receiver clock × c per system slot, m; ``CLOCK_SLOTS``), ḋ (common drift, m/s),
-         ψ₀ (odometry heading offset, rad)]
+         ψ₀ (odometry heading offset, rad), b_ω (odometry yaw-rate bias, rad/s)]
 
 ``p, v, a, d`` move exactly as the loose filter's (``companion.estimator.model``: the IMU history's
 prefix integrals give the block's mean and transition for any attitude history); every system's
@@ -42,7 +42,8 @@ I_CLK = N_NAV
 N_CLK = len(CLOCK_SLOTS)
 I_DRIFT = I_CLK + N_CLK
 I_HEADING = I_DRIFT + 1  # heading offset ψ₀ of a ground vehicle's odometry (rad): heading = ψ₀ + ∫ yaw rate
-N_STATE = I_HEADING + 1
+I_YAW_BIAS = I_HEADING + 1  # the odometry yaw rate's bias b_ω (rad/s): ψ̇₀ = −b_ω
+N_STATE = I_YAW_BIAS + 1
 NAV_OF_LOOSE = np.r_[0:6, 9:15]  # the loose 15-state's p, v, a, d (its GNSS bias b dropped)
 _W = OMEGA_E_RAD_S / C_M_S
 
@@ -166,16 +167,18 @@ def transition(T_s: float, nA: Any, nB: Any, live: np.ndarray) -> np.ndarray:
     F[0:3, I_A:I_A + 3] = np.reshape(nB, (3, 3))
     F[3:6, I_A:I_A + 3] = np.reshape(nA, (3, 3))
     F[I_CLK:I_DRIFT, I_DRIFT] = T_s * live
+    F[I_HEADING, I_YAW_BIAS] = -T_s  # the heading offset integrates minus the yaw rate's bias
     return F
 
 
 def process_noise(T_s: float, nA: Any, live: np.ndarray, q_acc_ne: float, q_acc_d: float,
                   q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float,
-                  q_heading: float = 0.0) -> np.ndarray:
+                  q_heading: float = 0.0, q_yaw_bias: float = 0.0) -> np.ndarray:
     """Q over a block: the loose filter's (``companion.estimator.model.add_process_noise``: white
     acceleration, here with its own vertical density; body and NED bias random walks, the body one
     through the block's mean rotation) on (p, v, a, d); common clock phase, per-system offset and
-    drift random walks on the live clock slots (``live``, float 0/1 (N_CLK,)); the heading offset's."""
+    drift random walks on the live clock slots (``live``, float 0/1 (N_CLK,)); the heading offset's
+    (the yaw rate's white noise) and the yaw-rate bias random walk integrated into it."""
     T, T2 = T_s, T_s * T_s
     T3, T4, T5 = T2 * T, T2 * T2, T2 * T2 * T
     w, e = q_rw, q_ned
@@ -200,7 +203,9 @@ def process_noise(T_s: float, nA: Any, live: np.ndarray, q_acc_ne: float, q_acc_
     Q[I_CLK:I_DRIFT, I_CLK:I_DRIFT] = np.outer(live, live) * c + np.diag(live * (q_isb * T))
     Q[I_CLK:I_DRIFT, I_DRIFT] = Q[I_DRIFT, I_CLK:I_DRIFT] = live * (q_drift * T2 / 2.0)
     Q[I_DRIFT, I_DRIFT] = q_drift * T
-    Q[I_HEADING, I_HEADING] = q_heading * T
+    Q[I_HEADING, I_HEADING] = q_heading * T + q_yaw_bias * T3 / 3.0
+    Q[I_HEADING, I_YAW_BIAS] = Q[I_YAW_BIAS, I_HEADING] = -q_yaw_bias * T2 / 2.0
+    Q[I_YAW_BIAS, I_YAW_BIAS] = q_yaw_bias * T
     return Q
 
 

@@ -45,7 +45,8 @@ NO_ODOMETRY_ROWS = ("cn0-elevation", "student-t", "second-order")
 REFERENCES = ("spp", "loose", "tight-naive", "tight-cn0-elevation", "tight-fde", "tight-student-t")
 BELIEF_ROW = "tight-second-order"
 RESIDUAL_BINS_M = (-math.inf, -10.0, -5.0, 5.0, 10.0, 20.0, 40.0, math.inf)
-# --sensitivity: the belief row with each of these TightConfig fields halved and doubled
+# --sensitivity: the belief row with each of these TightConfig fields halved and doubled, and with the
+# odometry perturbed
 SENSITIVITY = ("eta", "student_dof", "prior_weight", "sigma_los_cn0_m", "r_inflation_max", "sigma_acc_m_s2")
 
 
@@ -56,6 +57,11 @@ def block_indices(n: int, block: int, rng: np.random.Generator, n_resamples: int
     starts = rng.integers(0, n - block + 1, size=(n_resamples, k))
     idx = (starts[:, :, None] + np.arange(block)[None, None, :]).reshape(n_resamples, -1)
     return idx[:, :n]
+
+
+def _summary(e: np.ndarray) -> dict[str, float]:
+    e = e[np.isfinite(e)]
+    return {"median_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95)), "max_m": float(e.max())}
 
 
 def _interval(v: np.ndarray) -> list[float]:
@@ -174,10 +180,16 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
                 cfg = TightConfig.for_ground_vehicle(**{field: getattr(base, field) * factor})
                 reader = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m)
                 replay_row(name, reader, lambda m, f, cfg=cfg: TightNavigator(cfg, m, f), "second-order")
-                e = errors.pop(name)[ok]
-                e = e[np.isfinite(e)]
-                sens[name] = {"median_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95)),
-                              "max_m": float(e.max())}
+                sens[name] = _summary(errors.pop(name)[ok])
+        # the odometry of another car: a yaw-rate bias the vehicle did not zero, a wheel-radius error
+        for name, scale, bias_deg_s in (("odometry yaw rate +0.2 deg/s", 1.0, 0.2),
+                                        ("odometry yaw rate +0.5 deg/s", 1.0, 0.5),
+                                        ("odometry speed x1.03", 1.03, 0.0)):
+            odo = data.odometry * [1.0, scale, 1.0] + [0.0, 0.0, math.radians(bias_deg_s)]
+            reader = tr.SmartLocRawSource(data.epochs, odo, truth.t_s, truth.p_ecef_m)
+            cfg = TightConfig.for_ground_vehicle()
+            replay_row(name, reader, lambda m, f, cfg=cfg: TightNavigator(cfg, m, f), "second-order")
+            sens[name] = _summary(errors.pop(name)[ok])
     keep = ok & np.all([np.isfinite(e) for e in errors.values()], axis=0)
     errors = {k: v[keep] for k, v in errors.items()}
     rng = np.random.default_rng(seed)
@@ -287,7 +299,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--block-s", type=float, default=20.0)
     p.add_argument("--resamples", type=int, default=2000)
     p.add_argument("--sensitivity", action="store_true",
-                   help="also the belief row with each main parameter halved and doubled")
+                   help="also the belief row with each main parameter halved and doubled, and with "
+                        "a biased odometry")
     args = p.parse_args(argv)
     try:
         if not args.smartloc.is_file():
