@@ -1,6 +1,6 @@
 """State, process and measurement models of the tightly coupled filter (pure numpy).
 
-State (``N_STATE`` = 19)::
+State (``N_STATE`` = 21)::
 
     x = [p (NED, m), v (NED, m/s), a (body accelerometer bias, m/s²), d (NED acceleration error,
          m/s²), c_s (receiver clock × c per system slot, m; ``CLOCK_SLOTS``), ḋ (common drift, m/s),
