@@ -388,3 +388,45 @@ def test_atmosphere_once_a_second_is_within_centimetres():
         worst_high = max(worst_high, float(err[high].max()))
         worst_low = max(worst_low, float(err.max()))
     assert worst_high < 0.005 and worst_low < 0.03, (worst_high, worst_low)
+
+
+def test_odometry_heading_starts_once_moving_and_follows_a_turn():
+    """A car at rest for 8 s, then 8 m/s north-east, turning 90° right at 3°/s from 20 s: GNSS (5 m
+    noise) + wheel speed and yaw rate with a 0.05°/s bias. The heading offset starts only once the
+    car moves, and the track stays within metres."""
+    cfg = TightConfig.for_ground_vehicle()
+    rng = np.random.default_rng(11)
+    sysv, prn, pos, _ = _sats()
+    slot = model.SLOT_OF[sysv]
+    eng = TightEngine(cfg, "cn0-elevation", frame=FRAME)
+    dt, p, psi = 0.02, np.zeros(3), math.radians(45.0)
+    clock = 1000.0
+    eng.push_acc(0, 0.0, 0.0, 0.0)
+    yaw_int, errs = 0.0, []
+    for k in range(1, 2000):  # 40 s at 50 Hz
+        t = k * dt
+        rate = math.radians(3.0) if 20.0 <= t < 50.0 and psi < math.radians(135.0) else 0.0
+        speed = 0.0 if t < 8.0 else 8.0
+        psi += rate * dt
+        p = p + speed * dt * np.array([math.cos(psi), math.sin(psi), 0.0])
+        t_us = 1_000_000 + int(round(t * 1e6))
+        eng.push_acc(t_us, 0.0, 0.0, 0.0)
+        yaw_int += (rate + math.radians(0.05)) * dt
+        if k % 10 == 0:
+            x = np.zeros(N_STATE)
+            x[0:3] = p
+            x[I_CLK + slot] = clock
+            pred, _, _ = model.pseudorange(x, FRAME, pos, slot)
+            ep = make_epoch(T0 + t, sysv, prn, pred + rng.normal(0, cfg.sigma_uniform_m, len(pred)),
+                            sat_pos_ecef_m=pos, cn0_dbhz=np.full(len(pred), 45.0), corrected=True)
+            eng.push_epoch(t_us, prepare_epoch(ep, FRAME, cfg))
+            eng.push_speed(t_us, speed, yaw_int)
+            e = eng.entries[-1]
+            if t < 8.0:
+                assert e.P[I_HEADING, I_HEADING] == 0.0  # no heading while at rest
+            if t > 12.0:
+                errs.append(float(np.hypot(*(e.x[0:2] - p[0:2]))))
+    x = eng.entries[-1].x
+    heading = math.atan2(x[4], x[3])
+    assert abs((heading - psi + math.pi) % (2 * math.pi) - math.pi) < 0.1
+    assert np.median(errs) < 2.5 and max(errs) < 8.0, (np.median(errs), max(errs))

@@ -65,7 +65,8 @@ class TightConfig:
     sigma_speed_m_s: float = 0.1
     speed_sigma_fraction: float = 0.02  # + this × speed (wheel radius, slip)
     # heading from the odometry's yaw rate: the offset ψ₀ starts from the filter's velocity direction
-    # after odometry_heading_start_s, with σ odometry_heading0_rad; it walks with the yaw rate's white
+    # after odometry_heading_start_s, once the filter moves at the odometry's speed (to 30 %) with a
+    # velocity σ below 30 % of it, with σ odometry_heading0_rad (or more); it walks with the yaw rate's white
     # noise (rad/√s) and integrates minus the yaw rate's bias b_ω, a state: a car's yaw-rate sensor is
     # zeroed by the vehicle at standstill, leaving ≲ 0.1°/s (σ 0.002 rad/s at start; smartLoc Berlin's
     # drifts 0.06°/s), drifting slowly with temperature (1e-4 rad/s/√s)

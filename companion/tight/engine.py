@@ -397,14 +397,18 @@ class TightEngine:
         c = self.cfg
         heading_live = P[I_HEADING, I_HEADING] > 0.0
         start = self.entries[0].t_us if self.entries else t_us
+        speed = math.hypot(x[3], x[4])
+        sigma_v = math.sqrt(max(P[3, 3] + P[4, 4], 0.0))
         if (not heading_live and math.isfinite(m.yaw_integral_rad) and m.speed_m_s > 2.0
-                and t_us - start >= c.odometry_heading_start_s * 1e6):
-            # heading offset from the filter's velocity direction (the car moves along its heading)
+                and t_us - start >= c.odometry_heading_start_s * 1e6
+                and speed > 0.7 * m.speed_m_s and sigma_v < 0.3 * speed):
+            # heading offset from the filter's velocity direction (the car moves along its heading),
+            # once that direction is known: the filter moves at the odometry's speed, to 30 %
             x[I_HEADING] = math.atan2(x[4], x[3]) - m.yaw_integral_rad
             x[I_YAW_BIAS] = 0.0
             P[I_HEADING:, :] = 0.0
             P[:, I_HEADING:] = 0.0
-            P[I_HEADING, I_HEADING] = c.odometry_heading0_rad**2
+            P[I_HEADING, I_HEADING] = max(c.odometry_heading0_rad, sigma_v / speed) ** 2
             P[I_YAW_BIAS, I_YAW_BIAS] = c.sigma_yaw_rate_bias0_rad_s**2
             heading_live = True
         if heading_live and math.isfinite(m.yaw_integral_rad):
