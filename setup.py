@@ -1,4 +1,5 @@
-"""Build of the estimator's C core (companion/estimator/_core.c); everything else is in pyproject.toml.
+"""Build of the estimators' C cores (companion/estimator/_core.c, companion/tight/_tight.c); everything else
+is in pyproject.toml.
 
 It uses numpy's C API (numpy is a build requirement). -ffp-contract=off: no fused multiply-add,
 so the core computes the same bits as the float expressions it replaced (docs/estimator.md, Speed)."""
@@ -13,6 +14,12 @@ setup(
             ["companion/estimator/_core.c"],
             include_dirs=[numpy.get_include()],
             extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
-        )
+        ),
+        Extension(  # the tightly coupled filter's hot path (companion/tight/_tight.c)
+            "companion.tight._tight",
+            ["companion/tight/_tight.c"],
+            include_dirs=[numpy.get_include()],
+            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
+        ),
     ]
 )

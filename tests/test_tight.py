@@ -362,7 +362,7 @@ def test_smartloc_tight_rows_on_the_real_drive():
     assert beta[(-5.0, 5.0)] > 0.9 and beta[(40.0, math.inf)] < 0.6
 
 
-def test_atmosphere_once_a_second_is_within_centimetres():
+def test_atmosphere_every_5_s_is_within_centimetres():
     from companion.gnss import transmission_states
     from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
     from companion.gnss.timescale import week_tow
@@ -372,7 +372,7 @@ def test_atmosphere_once_a_second_is_within_centimetres():
     atmo = AtmosphereCache(cache, FRAME.lat_rad, FRAME.lon_rad, FRAME.h_m, FRAME.r0_ecef_m, FRAME.c_ecef_ned,
                            STORE.klobuchar)
     worst_low, worst_high = 0.0, 0.0
-    for t in T0 + np.arange(0.0, 6.0, 0.2):
+    for t in T0 + np.arange(0.0, 10.0, 0.2):
         ep, _ = observe(STORE, t, RX_ECEF, mask_deg=5.0)
         st, t_tx = transmission_states(STORE, ep)
         got = atmo.delays_m(ep.system, ep.prn, t_tx)
@@ -387,7 +387,7 @@ def test_atmosphere_once_a_second_is_within_centimetres():
         high = el > math.radians(15)
         worst_high = max(worst_high, float(err[high].max()))
         worst_low = max(worst_low, float(err.max()))
-    assert worst_high < 0.005 and worst_low < 0.03, (worst_high, worst_low)
+    assert worst_high < 0.01 and worst_low < 0.05, (worst_high, worst_low)
 
 
 def test_odometry_heading_starts_once_moving_and_follows_a_turn():
@@ -430,3 +430,54 @@ def test_odometry_heading_starts_once_moving_and_follows_a_turn():
     heading = math.atan2(x[4], x[3])
     assert abs((heading - psi + math.pi) % (2 * math.pi) - math.pi) < 0.1
     assert np.median(errs) < 2.5 and max(errs) < 8.0, (np.median(errs), max(errs))
+
+
+def test_c_core_equals_the_numpy_forms():
+    """``_tight.c`` (the filter's hot path) against model.py's numpy forms: F P Fᵀ + Q, the
+    pseudorange innovations with H, H P and (H P Hᵀ)_ii, and the stacked update with range rates."""
+    from companion.tight import _tight
+
+    rng = np.random.default_rng(12)
+    A = rng.normal(size=(N_STATE, N_STATE))
+    P = A @ A.T + np.eye(N_STATE)
+    T = 0.2
+    nA = -(T * np.linalg.qr(rng.normal(size=(3, 3)))[0])
+    nB = 0.5 * T * nA
+    live = np.array([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])
+    q = (0.09, 0.01, 9e-6, 1e-4, 0.1, 1e-3, 0.5, 2.5e-5, 1e-8)
+    F = model.transition(T, nA.ravel(), nB.ravel(), live)
+    want = F @ P @ F.T + model.process_noise(T, nA.ravel(), live, *q)
+    got = _tight.predict_cov(P, T, nA.ravel(), nB.ravel(), live, *q, True)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    sysv, _, pos, vel = _sats()
+    slot = model.SLOT_OF[sysv]
+    x = _state(rng)
+    z = model.pseudorange(x, FRAME, pos, slot)[0] + rng.normal(0, 5, len(slot))
+    y, H, HP, s0, mins = _tight.innovations(x, P, FRAME.r0_ecef_m, FRAME.c_ecef_ned, pos, slot.astype(float), z)
+    for j in range(model.N_CLK):
+        sel = slot == j
+        assert mins[j] == (np.abs(y[sel]).min() if sel.any() else np.inf)
+    pred, H_ref, _ = model.pseudorange(x, FRAME, pos, slot)
+    np.testing.assert_allclose(y, z - pred, atol=1e-6)
+    np.testing.assert_allclose(H, H_ref, atol=1e-12)
+    np.testing.assert_allclose(HP, H_ref @ P, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(s0, np.einsum("ij,ij->i", H_ref @ P, H_ref), rtol=1e-12)
+    used = rng.uniform(size=len(y)) > 0.2
+    r = rng.uniform(4, 100, len(y))
+    z_rate = model.range_rate(x, FRAME, pos, vel)[0] + rng.normal(0, 0.3, len(y))
+    z_rate[::4] = np.nan  # some without Doppler
+    r_rate = rng.uniform(0.05, 1.0, len(y))
+    x_c, P_c, nis_c, n_rate = _tight.update(x, P, H, HP, y, r, used.astype(float), FRAME.r0_ecef_m,
+                                            FRAME.c_ecef_ned, pos, vel, z_rate, r_rate, 25.0)
+    u = np.flatnonzero(used)
+    k = np.flatnonzero(used & np.isfinite(z_rate))
+    pr, Hr = model.range_rate(x, FRAME, pos[k], vel[k])
+    yr = z_rate[k] - pr
+    g = yr**2 <= 25.0 * (np.einsum("ij,jk,ik->i", Hr, P, Hr) + r_rate[k])
+    Hs = np.vstack((H_ref[u], Hr[g]))
+    ys = np.concatenate((y[u], yr[g]))
+    S = Hs @ P @ Hs.T + np.diag(np.concatenate((r[u], r_rate[k][g])))
+    K = P @ Hs.T @ np.linalg.inv(S)
+    np.testing.assert_allclose(x_c, x + K @ ys, rtol=1e-9, atol=1e-7)
+    np.testing.assert_allclose(P_c, P - K @ Hs @ P, rtol=1e-9, atol=1e-9)
+    assert n_rate == int(g.sum()) > 0 and nis_c == pytest.approx(float(ys @ np.linalg.solve(S, ys)), rel=1e-9)

@@ -38,7 +38,7 @@ from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, solve_position
 from companion.gnss.systems import System
-from companion.tight import model, weighting
+from companion.tight import _tight, model, weighting
 from companion.tight.belief import theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
@@ -59,6 +59,7 @@ class SatEpoch(NamedTuple):
     epoch: GnssEpoch  # as received (single-point solution at start and reset)
     key: np.ndarray  # system × 1000 + PRN
     slot: np.ndarray  # clock slot (model.CLOCK_SLOTS)
+    slot_f: np.ndarray  # the same as float64 (the C core's)
     z_m: np.ndarray  # pseudorange free of satellite clock and atmosphere (m)
     r_model_m2: np.ndarray  # σ² of the C/N0 + elevation model
     r_uniform_m2: np.ndarray  # sigma_uniform_m²
@@ -165,7 +166,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
     el_deg = np.degrees(el)
     sysi = ep.system.astype(int)
     slots = model.SLOT_OF[sysi]
-    return SatEpoch(ep, sysi * 1000 + ep.prn.astype(int), slots,
+    return SatEpoch(ep, sysi * 1000 + ep.prn.astype(int), slots, slots.astype(float),
                     z, r_model, np.full(ep.n, cfg.sigma_uniform_m**2), r_los,
                     theta_prior(cn0, el_deg, cfg, blocked), el_deg, ep.sat_pos_ecef_m,
                     vel, rate, r_rate,
@@ -204,6 +205,9 @@ class TightEngine:
         self._cache: tuple[Any, int, Any] | None = None
         self._nav15: tuple[Entry, tuple[float, ...], np.ndarray] | None = None
         self._prop = BlockPropagator(self._q[0], self._q[2], self._q[3])
+        self._g = cfg.gravity_m_s2
+        nominal_fields = {"uniform": "r_uniform_m2", "model": "r_model_m2", "los": "r_los_m2"}
+        self._r_field = nominal_fields[self.weighting.nominal]
         self._n_fused = 0  # epochs with at least one satellite used (in order of arrival)
 
     # ------------------------------------------------------------------ IMU
@@ -224,7 +228,7 @@ class TightEngine:
             self._imu_pushed()
 
     def push_frd(self, t_us: int, f_frd_m_s2: Any, rot: Rot9) -> None:
-        if self.imu.push_frd(t_us, f_frd_m_s2, rot, self.cfg.gravity_m_s2) or self._pending:
+        if self.imu.push_frd(t_us, f_frd_m_s2, rot, self._g) or self._pending:
             self._imu_pushed()
 
     def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
@@ -280,6 +284,8 @@ class TightEngine:
 
     def _is_duplicate(self, t_us: int, meas: SatEpoch | Speed) -> bool:
         kind = type(meas)
+        if (not self._t or t_us > self._t[-1]) and not self._pending:  # the usual case: a new time
+            return False
         lo, hi = bisect.bisect_left(self._t, t_us), bisect.bisect_right(self._t, t_us)
         return any(type(self.entries[i].meas) is kind for i in range(lo, hi)) or any(
             t == t_us and type(m) is kind for t, m in self._pending)
@@ -377,11 +383,9 @@ class TightEngine:
         x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * live
         if T <= 0.0:
             return x, e.P.copy()
-        F = model.transition(T, nA, nB, live)
-        Q = model.process_noise(T, nA, live, *self._q)
-        if e.P[I_HEADING, I_HEADING] == 0.0:  # no odometry heading yet: its states stay at rest
-            Q[I_HEADING:, I_HEADING:] = 0.0
-        return x, F @ e.P @ F.T + Q
+        # F P Fᵀ + Q (model.transition, model.process_noise) in C; no odometry heading yet: its
+        # states stay at rest
+        return x, _tight.predict_cov(e.P, T, nA, nB, live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0))
 
     def _fuse(self, t_us: int, meas: SatEpoch | Speed) -> None:
         prev = self.entries[-1]
@@ -439,12 +443,14 @@ class TightEngine:
         assert self.frame is not None
         c = self.cfg
         used_tot, rej_tot, resets, clock_resets, epochs = prev.totals
-        pred, H, _ = model.pseudorange(x, self.frame, m.sat_pos_ecef_m, m.slot)
-        y = m.z_m - pred
+        frame = self.frame
+        # y = z − h(x⁻), H, H P⁻ and (H P⁻ Hᵀ)_ii: model.pseudorange in C
+        r0, C = frame.r0_ecef_m, frame.c_ecef_ned
+        y, H, HP, s0, min_abs_y = _tight.innovations(x, P, r0, C, m.sat_pos_ecef_m, m.slot_f, m.z_m)
         live = list(prev.live)
-        abs_y = np.abs(y)
+        restarted = False
         for j, sel in m.systems:
-            if live[j] and abs_y[sel].min() <= c.clock_jump_m:
+            if live[j] and min_abs_y[j] <= c.clock_jump_m:
                 continue  # the usual case: a known clock, no jump
             med = float(np.median(y[sel]))
             clock_resets += int(live[j])
@@ -452,11 +458,11 @@ class TightEngine:
             P[I_CLK + j, :] = 0.0
             P[:, I_CLK + j] = 0.0
             P[I_CLK + j, I_CLK + j] = c.sigma_clock0_m**2
-            y[sel] -= med
-            live[j] = True
-        HP = H @ P
-        r_nom = {"uniform": m.r_uniform_m2, "model": m.r_model_m2, "los": m.r_los_m2}[self.weighting.nominal]
-        terms = weighting.SatTerms(m.key, y, np.einsum("ij,ij->i", HP, H), r_nom, m.theta_prior)
+            live[j] = restarted = True
+        if restarted:
+            y, H, HP, s0, _ = _tight.innovations(x, P, r0, C, m.sat_pos_ecef_m, m.slot_f, m.z_m)
+        r_nom = getattr(m, self._r_field)
+        terms = weighting.SatTerms(m.key, y, s0, r_nom, m.theta_prior)
 
         def solve(r: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             u = np.flatnonzero(used)
@@ -465,40 +471,27 @@ class TightEngine:
             return y - H @ dx, S
 
         r, used, state, beta = self.weighting.weigh(prev.state, terms, solve)
-        u = np.flatnonzero(used)
-        # range rates of the used satellites, inflated like their pseudoranges, gated on their own
-        rate_ok = used & np.isfinite(m.z_rate_m_s)
+        n_used = int(used.sum())
         nis = math.nan
-        if len(u):
-            Hu, HPu, yu, ru = H[u], HP[u], y[u], r[u]
-            if rate_ok.any():
-                k = np.flatnonzero(rate_ok)
-                pr, Hr = model.range_rate(x, self.frame, m.sat_pos_ecef_m[k], m.sat_vel_ecef_m_s[k])
-                yr = m.z_rate_m_s[k] - pr
-                rr = m.r_rate_m2_s2[k] * (r[k] / r_nom[k])
-                HPr = Hr @ P
-                g = yr * yr <= c.gate_sigma**2 * (np.einsum("ij,ij->i", HPr, Hr) + rr)
-                Hu, HPu = np.vstack((Hu, Hr[g])), np.vstack((HPu, HPr[g]))
-                yu, ru = np.concatenate((yu, yr[g])), np.concatenate((ru, rr[g]))
-            S = HPu @ Hu.T + np.diag(ru)
-            W = np.linalg.solve(S, np.column_stack((yu, HPu)))
-            x = x + W[:, 0] @ HPu
-            P = P - HPu.T @ W[:, 1:]
-            P = 0.5 * (P + P.T)
-            nis = float(yu @ W[:, 0])
-        t_good = t_us if len(u) else prev.t_good_us
-        self._n_fused += bool(len(u))
-        if not len(u) and t_us - prev.t_good_us >= self._reset_us:
+        if n_used:
+            # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
+            # their own) in one update, in C (model.range_rate; the numpy form in the tests)
+            x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used.astype(float), r0, C, m.sat_pos_ecef_m,
+                                         m.sat_vel_ecef_m_s, m.z_rate_m_s, m.r_rate_m2_s2 * (r / r_nom),
+                                         c.gate_sigma**2)
+        t_good = t_us if n_used else prev.t_good_us
+        self._n_fused += bool(n_used)
+        if not n_used and t_us - prev.t_good_us >= self._reset_us:
             sol = self._spp(m)
             if sol is not None:
                 x, P, live_t = self._from_solution(x, P, sol, tuple(live))
                 live = list(live_t)
                 resets += 1
                 t_good = t_us
-        info = EpochInfo(m.epoch.n, len(u), nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
+        info = EpochInfo(m.epoch.n, n_used, nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
                          m.key, beta, y, used)
         self._append(Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
-                           (used_tot + len(u), rej_tot + len(y) - len(u), resets, clock_resets, epochs + 1)))
+                           (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1)))
 
     # --------------------------------------------------------------------- history
     def _trim(self) -> None:
@@ -548,8 +541,8 @@ class TightEngine:
             self._nav15 = (last, (*last.x[0:6], 0.0, 0.0, 0.0, *last.x[6:12]), P15)
         T = (now - last.t_us) * 1e-6
         _, out = self._prop.output_from(self._nav15[1], self._nav15[2], last.ints, self.imu, T, 1.0, 0.0)
-        # out: p, v, b (9) then their variances (9); the b slots are zero here (no fix-level bias)
-        out[6:9] = 0.0
+        # out: p, v, b (9) then their variances (9); b and its variances are zero here (its mean and
+        # variance enter as 0, with no process noise: no fix-level bias in this filter)
         dq = self._q[1] - self._q[0]
         if dq:
             out[11] += dq * T * T * T / 3.0

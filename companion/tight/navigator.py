@@ -55,6 +55,7 @@ class TightNavigator:
                                                          math.radians(frame.home_lon_deg), frame.home_alt_m)
         klob = None if ephemerides is None else ephemerides.klobuchar
         self.engine = tight_engine.TightEngine(self.cfg, method, self._counts, f, klob)
+        self._push_frd = self.engine.push_frd
         self._sats = None if ephemerides is None else SatelliteCache(ephemerides, sat_cache_period_s)
         self._atmo: AtmosphereCache | None = None
         self._sat_period_s = sat_cache_period_s
@@ -71,7 +72,7 @@ class TightNavigator:
             if self._rot is None:
                 self._counts["imu_rejected_no_attitude"] += 1
                 return
-            self.engine.push_frd(sample.t_us, sample.acc_frd_m_s2, self._rot)
+            self._push_frd(sample.t_us, sample.acc_frd_m_s2, self._rot)
         elif kind is AttitudeSample:
             r = rotation_q(sample.q_ned_frd)
             if r is None:
@@ -136,7 +137,7 @@ class TightNavigator:
         self.engine.klobuchar = store.klobuchar if store.klobuchar is not None else self.engine.klobuchar
 
     def _atmosphere(self) -> AtmosphereCache:
-        """The atmosphere's delays at home, once per satellite and satellite-cache anchor."""
+        """The atmosphere's delays at home, once per satellite and 5 s (``AtmosphereCache``)."""
         f = self.engine.frame
         assert f is not None and self._sats is not None
         if self._atmo is None:

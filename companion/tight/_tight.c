@@ -1,0 +1,375 @@
+/* The tightly coupled filter's numeric hot path in C: the block covariance prediction, the
+ * pseudorange innovations with their Jacobian, and the stacked Kalman update with the range
+ * rates (model.py's formulas; equal to the numpy forms to rounding, tested in tests/test_tight.py).
+ *
+ * State layout (model.py): p 0-2, v 3-5, a 6-8, d 9-11, clocks 12-17, drift 18, heading offset 19,
+ * yaw-rate bias 20. Arrays are float64, C order. Compiled with -ffp-contract=off (no fused
+ * multiply-add), as the estimator's core.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+#define NPY_NO_DEPRECATED_API NPY_1_22_API_VERSION
+#include <numpy/arrayobject.h>
+
+#define N 21
+#define NC 6
+#define I_CLK 12
+#define I_DRIFT 18
+#define I_HEAD 19
+#define I_YAWB 20
+#define MAXM 160 /* measurement rows in one update (pseudoranges + range rates) */
+
+static const double C_M_S = 299792458.0;
+static const double W_C = 7.2921151467e-5 / 299792458.0; /* ω_e / c */
+
+static PyArrayObject *in_array(PyObject *obj, int nd) {
+    PyArrayObject *a = (PyArrayObject *)PyArray_FROMANY(obj, NPY_DOUBLE, nd, nd, NPY_ARRAY_IN_ARRAY);
+    return a;
+}
+
+static PyObject *new_array(int nd, npy_intp d0, npy_intp d1, const double *src) {
+    npy_intp dims[2] = {d0, d1};
+    PyObject *out = PyArray_SimpleNew(nd, dims, NPY_DOUBLE);
+    if (out && src) memcpy(PyArray_DATA((PyArrayObject *)out), src, sizeof(double) * (size_t)(d0 * (nd == 2 ? d1 : 1)));
+    return out;
+}
+
+/* ---------------------------------------------------------------- prediction */
+/* predict_cov(P, T, nA, nB, live, q_acc_ne, q_acc_d, q_rw, q_ned, q_clock, q_isb, q_drift, q_heading,
+ *             q_yaw_bias, heading_live) -> F P F^T + Q  (model.transition, model.process_noise) */
+static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
+    PyObject *oP, *onA, *onB, *olive;
+    double T, qne, qd, w, e, qc, qi, qdr, qh, qb;
+    int hlive;
+    if (!PyArg_ParseTuple(args, "OdOOOdddddddddp", &oP, &T, &onA, &onB, &olive, &qne, &qd, &w, &e, &qc, &qi,
+                          &qdr, &qh, &qb, &hlive))
+        return NULL;
+    PyArrayObject *aP = in_array(oP, 2), *anA = in_array(onA, 1), *anB = in_array(onB, 1), *alive = in_array(olive, 1);
+    if (!aP || !anA || !anB || !alive) goto fail;
+    if (PyArray_DIM(aP, 0) != N || PyArray_DIM(aP, 1) != N || PyArray_DIM(anA, 0) != 9 || PyArray_DIM(anB, 0) != 9
+        || PyArray_DIM(alive, 0) != NC) {
+        PyErr_SetString(PyExc_ValueError, "predict_cov: shapes");
+        goto fail;
+    }
+    const double *P = PyArray_DATA(aP), *nA = PyArray_DATA(anA), *nB = PyArray_DATA(anB), *live = PyArray_DATA(alive);
+    double F[N * N], FP[N * N], out[N * N];
+    memset(F, 0, sizeof F);
+    for (int i = 0; i < N; i++) F[i * N + i] = 1.0;
+    double h = -0.5 * T * T;
+    for (int i = 0; i < 3; i++) {
+        F[i * N + 3 + i] = T;
+        F[i * N + 9 + i] = h;
+        F[(3 + i) * N + 9 + i] = -T;
+        for (int j = 0; j < 3; j++) {
+            F[i * N + 6 + j] = nB[i * 3 + j];
+            F[(3 + i) * N + 6 + j] = nA[i * 3 + j];
+        }
+    }
+    for (int j = 0; j < NC; j++) F[(I_CLK + j) * N + I_DRIFT] = T * live[j];
+    F[I_HEAD * N + I_YAWB] = -T;
+    /* F P: row i of F has few non-zero entries, but N is small: dense with a zero skip */
+    for (int i = 0; i < N; i++)
+        for (int k = 0; k < N; k++) {
+            double s = 0.0;
+            for (int j = 0; j < N; j++) {
+                double f = F[i * N + j];
+                if (f != 0.0) s += f * P[j * N + k];
+            }
+            FP[i * N + k] = s;
+        }
+    for (int i = 0; i < N; i++)
+        for (int k = 0; k < N; k++) {
+            double s = 0.0;
+            for (int j = 0; j < N; j++) {
+                double f = F[k * N + j];
+                if (f != 0.0) s += FP[i * N + j] * f;
+            }
+            out[i * N + k] = s;
+        }
+    /* Q (model.process_noise) */
+    double T2 = T * T, T3 = T2 * T, T4 = T2 * T2, T5 = T4 * T;
+    double pp = (w + e) * T5 / 20.0, pv = (w + e) * T4 / 8.0, vv = (w + e) * T3 / 3.0;
+    double pd = -e * T3 / 6.0, vd = -e * T2 / 2.0;
+    for (int i = 0; i < 3; i++) {
+        double q = i == 2 ? qd : qne;
+        out[i * N + i] += q * T3 / 3.0 + pp;
+        out[i * N + 3 + i] += q * T2 / 2.0 + pv;
+        out[(3 + i) * N + i] += q * T2 / 2.0 + pv;
+        out[(3 + i) * N + 3 + i] += q * T + vv;
+        out[(6 + i) * N + 6 + i] += w * T;
+        out[(9 + i) * N + 9 + i] += e * T;
+        out[i * N + 9 + i] += pd;
+        out[(9 + i) * N + i] += pd;
+        out[(3 + i) * N + 9 + i] += vd;
+        out[(9 + i) * N + 3 + i] += vd;
+    }
+    if (w > 0.0) {
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++) {
+                double Rm = T > 0.0 ? -nA[i * 3 + j] / T : (i == j ? 1.0 : 0.0);
+                double pa = (-w * T3 / 6.0) * Rm, va = (-w * T2 / 2.0) * Rm;
+                out[i * N + 6 + j] += pa;
+                out[(6 + j) * N + i] += pa;
+                out[(3 + i) * N + 6 + j] += va;
+                out[(6 + j) * N + 3 + i] += va;
+            }
+    }
+    double c = qc * T + qdr * T3 / 3.0;
+    for (int i = 0; i < NC; i++) {
+        for (int j = 0; j < NC; j++) out[(I_CLK + i) * N + I_CLK + j] += live[i] * live[j] * c;
+        out[(I_CLK + i) * N + I_CLK + i] += live[i] * (qi * T);
+        out[(I_CLK + i) * N + I_DRIFT] += live[i] * (qdr * T2 / 2.0);
+        out[I_DRIFT * N + I_CLK + i] += live[i] * (qdr * T2 / 2.0);
+    }
+    out[I_DRIFT * N + I_DRIFT] += qdr * T;
+    if (hlive) {
+        out[I_HEAD * N + I_HEAD] += qh * T + qb * T3 / 3.0;
+        out[I_HEAD * N + I_YAWB] += -qb * T2 / 2.0;
+        out[I_YAWB * N + I_HEAD] += -qb * T2 / 2.0;
+        out[I_YAWB * N + I_YAWB] += qb * T;
+    }
+    Py_DECREF(aP); Py_DECREF(anA); Py_DECREF(anB); Py_DECREF(alive);
+    return new_array(2, N, N, out);
+fail:
+    Py_XDECREF(aP); Py_XDECREF(anA); Py_XDECREF(anB); Py_XDECREF(alive);
+    return NULL;
+}
+
+/* ---------------------------------------------------------------- measurements */
+/* the receiver position r = r0 + C p (ECEF) and velocity C v */
+static void receiver(const double *x, const double *r0, const double *C, double *r, double *ve) {
+    for (int i = 0; i < 3; i++) {
+        r[i] = r0[i] + C[i * 3] * x[0] + C[i * 3 + 1] * x[1] + C[i * 3 + 2] * x[2];
+        ve[i] = C[i * 3] * x[3] + C[i * 3 + 1] * x[4] + C[i * 3 + 2] * x[5];
+    }
+}
+
+/* innovations(x, P, r0, C, sat_pos (m, 3), slot (m) float, z (m)) -> (y (m), H (m, N), HP (m, N), s0 (m),
+ * min |y| per clock slot (NC, inf where none)): model.pseudorange and the β-independent innovation
+ * variances (H P H^T)_ii */
+static PyObject *py_innovations(PyObject *self, PyObject *args) {
+    PyObject *ox, *oP, *or0, *oC, *os, *osl, *oz;
+    if (!PyArg_ParseTuple(args, "OOOOOOO", &ox, &oP, &or0, &oC, &os, &osl, &oz)) return NULL;
+    PyArrayObject *ax = in_array(ox, 1), *aP = in_array(oP, 2), *ar0 = in_array(or0, 1), *aC = in_array(oC, 2),
+                  *as = in_array(os, 2), *asl = in_array(osl, 1), *az = in_array(oz, 1);
+    PyObject *oy = NULL, *oH = NULL, *oHP = NULL, *os0 = NULL, *omin = NULL;
+    if (!ax || !aP || !ar0 || !aC || !as || !asl || !az) goto fail;
+    npy_intp m = PyArray_DIM(as, 0);
+    if (PyArray_DIM(ax, 0) != N || PyArray_DIM(aP, 0) != N || PyArray_DIM(as, 1) != 3 || PyArray_DIM(asl, 0) != m
+        || PyArray_DIM(az, 0) != m) {
+        PyErr_SetString(PyExc_ValueError, "innovations: shapes");
+        goto fail;
+    }
+    const double *x = PyArray_DATA(ax), *P = PyArray_DATA(aP), *r0 = PyArray_DATA(ar0), *C = PyArray_DATA(aC),
+                 *S = PyArray_DATA(as), *sl = PyArray_DATA(asl), *z = PyArray_DATA(az);
+    oy = new_array(1, m, 0, NULL); oH = new_array(2, m, N, NULL); oHP = new_array(2, m, N, NULL);
+    os0 = new_array(1, m, 0, NULL);
+    omin = new_array(1, NC, 0, NULL);
+    if (!oy || !oH || !oHP || !os0 || !omin) goto fail;
+    double *mins = PyArray_DATA((PyArrayObject *)omin);
+    for (int j = 0; j < NC; j++) mins[j] = INFINITY;
+    double *y = PyArray_DATA((PyArrayObject *)oy), *H = PyArray_DATA((PyArrayObject *)oH),
+           *HP = PyArray_DATA((PyArrayObject *)oHP), *s0 = PyArray_DATA((PyArrayObject *)os0);
+    double r[3], ve[3];
+    receiver(x, r0, C, r, ve);
+    memset(H, 0, sizeof(double) * (size_t)(m * N));
+    for (npy_intp i = 0; i < m; i++) {
+        const double *s = S + 3 * i;
+        double d0 = s[0] - r[0], d1 = s[1] - r[1], d2 = s[2] - r[2];
+        double rng = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        int j = (int)sl[i];
+        double pred = rng + W_C * (s[0] * r[1] - s[1] * r[0]) + x[I_CLK + j];
+        y[i] = z[i] - pred;
+        if (j >= 0 && j < NC && fabs(y[i]) < mins[j]) mins[j] = fabs(y[i]);
+        double dr0 = -d0 / rng - W_C * s[1], dr1 = -d1 / rng + W_C * s[0], dr2 = -d2 / rng;
+        double *h = H + i * N;
+        for (int k = 0; k < 3; k++) h[k] = dr0 * C[k] + dr1 * C[3 + k] + dr2 * C[6 + k];
+        h[I_CLK + j] = 1.0;
+        double *hp = HP + i * N, q = 0.0;
+        for (int k = 0; k < N; k++) {
+            double v = h[0] * P[k] + h[1] * P[N + k] + h[2] * P[2 * N + k] + P[(I_CLK + j) * N + k];
+            hp[k] = v;
+        }
+        q = hp[0] * h[0] + hp[1] * h[1] + hp[2] * h[2] + hp[I_CLK + j];
+        s0[i] = q;
+    }
+    Py_DECREF(ax); Py_DECREF(aP); Py_DECREF(ar0); Py_DECREF(aC); Py_DECREF(as); Py_DECREF(asl); Py_DECREF(az);
+    return Py_BuildValue("(NNNNN)", oy, oH, oHP, os0, omin);
+fail:
+    Py_XDECREF(ax); Py_XDECREF(aP); Py_XDECREF(ar0); Py_XDECREF(aC); Py_XDECREF(as); Py_XDECREF(asl);
+    Py_XDECREF(az); Py_XDECREF(oy); Py_XDECREF(oH); Py_XDECREF(oHP); Py_XDECREF(os0); Py_XDECREF(omin);
+    return NULL;
+}
+
+/* model.range_rate for one satellite: prediction and H row */
+static double range_rate_row(const double *x, const double *r0, const double *C, const double *rs,
+                             const double *us, double *h) {
+    double r[3], ve[3];
+    receiver(x, r0, C, r, ve);
+    double d[3] = {rs[0] - r[0], rs[1] - r[1], rs[2] - r[2]};
+    double rng = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    double l[3] = {d[0] / rng, d[1] / rng, d[2] / rng};
+    double dv[3] = {us[0] - ve[0], us[1] - ve[1], us[2] - ve[2]};
+    double g = l[0] * dv[0] + l[1] * dv[1] + l[2] * dv[2];
+    double sv = l[0] * us[0] + l[1] * us[1] + l[2] * us[2];
+    double f = 1.0 - sv / C_M_S;
+    double sag = W_C * (us[1] * r[0] + rs[1] * ve[0] - us[0] * r[1] - rs[0] * ve[1]);
+    double dm_dr[3], dm_dv[3];
+    for (int k = 0; k < 3; k++) {
+        double dg = -(dv[k] - g * l[k]) / rng, ds = -(us[k] - sv * l[k]) / rng;
+        dm_dr[k] = dg * f - (g / C_M_S) * ds;
+        dm_dv[k] = -l[k] * f;
+    }
+    dm_dr[0] += W_C * us[1];
+    dm_dr[1] -= W_C * us[0];
+    dm_dv[0] += W_C * rs[1];
+    dm_dv[1] -= W_C * rs[0];
+    memset(h, 0, sizeof(double) * N);
+    for (int k = 0; k < 3; k++) {
+        h[k] = dm_dr[0] * C[k] + dm_dr[1] * C[3 + k] + dm_dr[2] * C[6 + k];
+        h[3 + k] = dm_dv[0] * C[k] + dm_dv[1] * C[3 + k] + dm_dv[2] * C[6 + k];
+    }
+    h[I_DRIFT] = 1.0;
+    return g * f + sag + x[I_DRIFT];
+}
+
+/* update(x, P, H (m, N), HP (m, N), y (m), r (m), used (m) float 0/1, r0, C, sat_pos, sat_vel, z_rate (m, NaN: none),
+ *        r_rate (m), gate2) -> (x+, P+, NIS, range rates used): the used pseudoranges and, for each used
+ * satellite with a range rate that passes its own gate (y² ≤ gate2 (s0 + r)), that range rate, in one
+ * Kalman update (Cholesky of S) */
+static PyObject *py_update(PyObject *self, PyObject *args) {
+    PyObject *ox, *oP, *oH, *oHP, *oy, *or, *ou, *or0, *oC, *os, *ov, *ozr, *orr;
+    double gate2;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOd", &ox, &oP, &oH, &oHP, &oy, &or, &ou, &or0, &oC, &os, &ov, &ozr,
+                          &orr, &gate2))
+        return NULL;
+    PyObject *objs[13] = {ox, oP, oH, oHP, oy, or, ou, or0, oC, os, ov, ozr, orr};
+    int nds[13] = {1, 2, 2, 2, 1, 1, 1, 1, 2, 2, 2, 1, 1};
+    PyArrayObject *a[13] = {0};
+    double *Hs = NULL, *HPs = NULL, *W = NULL, *Sm = NULL;
+    PyObject *result = NULL;
+    for (int i = 0; i < 13; i++) {
+        a[i] = in_array(objs[i], nds[i]);
+        if (!a[i]) goto done;
+    }
+    npy_intp m = PyArray_DIM(a[4], 0);
+    const double *x = PyArray_DATA(a[0]), *P = PyArray_DATA(a[1]), *H = PyArray_DATA(a[2]), *HP = PyArray_DATA(a[3]),
+                 *y = PyArray_DATA(a[4]), *r = PyArray_DATA(a[5]), *used = PyArray_DATA(a[6]),
+                 *r0 = PyArray_DATA(a[7]), *C = PyArray_DATA(a[8]), *sp = PyArray_DATA(a[9]),
+                 *sv = PyArray_DATA(a[10]), *zr = PyArray_DATA(a[11]), *rr = PyArray_DATA(a[12]);
+    Hs = malloc(sizeof(double) * MAXM * N);
+    HPs = malloc(sizeof(double) * MAXM * N);
+    double ys[MAXM], rs[MAXM];
+    int k = 0, n_rate = 0;
+    for (npy_intp i = 0; i < m && k < MAXM; i++) {
+        if (used[i] == 0.0) continue;
+        memcpy(Hs + k * N, H + i * N, sizeof(double) * N);
+        memcpy(HPs + k * N, HP + i * N, sizeof(double) * N);
+        ys[k] = y[i];
+        rs[k] = r[i];
+        k++;
+    }
+    for (npy_intp i = 0; i < m && k < MAXM; i++) {
+        if (used[i] == 0.0 || !isfinite(zr[i]) || !isfinite(sv[3 * i])) continue;
+        double *h = Hs + k * N, *hp = HPs + k * N;
+        double pred = range_rate_row(x, r0, C, sp + 3 * i, sv + 3 * i, h);
+        double yr = zr[i] - pred, s0 = 0.0;
+        for (int c = 0; c < N; c++) {
+            double v = 0.0;
+            for (int j = 0; j < N; j++) v += h[j] * P[j * N + c];
+            hp[c] = v;
+        }
+        for (int c = 0; c < N; c++) s0 += hp[c] * h[c];
+        if (yr * yr <= gate2 * (s0 + rr[i])) {
+            ys[k] = yr;
+            rs[k] = rr[i];
+            k++;
+            n_rate++;
+        }
+    }
+    double xo[N], Po[N * N], nis = NAN;
+    memcpy(xo, x, sizeof xo);
+    memcpy(Po, P, sizeof Po);
+    if (k > 0) {
+        Sm = malloc(sizeof(double) * k * k);
+        W = malloc(sizeof(double) * k * (N + 1));
+        for (int i = 0; i < k; i++)
+            for (int j = 0; j <= i; j++) {
+                double s = 0.0;
+                for (int c = 0; c < N; c++) s += HPs[i * N + c] * Hs[j * N + c];
+                Sm[i * k + j] = Sm[j * k + i] = s + (i == j ? rs[i] : 0.0);
+            }
+        /* Cholesky S = L L^T (lower, in place) */
+        for (int j = 0; j < k; j++) {
+            double s = Sm[j * k + j];
+            for (int c = 0; c < j; c++) s -= Sm[j * k + c] * Sm[j * k + c];
+            if (!(s > 0.0)) {
+                PyErr_SetString(PyExc_ArithmeticError, "update: innovation covariance not positive definite");
+                goto done;
+            }
+            double d = sqrt(s);
+            Sm[j * k + j] = d;
+            for (int i = j + 1; i < k; i++) {
+                double t = Sm[i * k + j];
+                for (int c = 0; c < j; c++) t -= Sm[i * k + c] * Sm[j * k + c];
+                Sm[i * k + j] = t / d;
+            }
+        }
+        /* V = L^-1 [y, HP] (k x (N+1)), forward substitution: then K y = HP^T S^-1 y = V_HP^T V_y and
+         * K H P = V_HP^T V_HP (symmetric), NIS = |V_y|^2 */
+        for (int i = 0; i < k; i++) {
+            W[i * (N + 1)] = ys[i];
+            memcpy(W + i * (N + 1) + 1, HPs + i * N, sizeof(double) * N);
+        }
+        for (int i = 0; i < k; i++) {
+            double *wi = W + i * (N + 1);
+            for (int j = 0; j < i; j++) {
+                double l = Sm[i * k + j];
+                const double *wj = W + j * (N + 1);
+                for (int c = 0; c <= N; c++) wi[c] -= l * wj[c];
+            }
+            double d = Sm[i * k + i];
+            for (int c = 0; c <= N; c++) wi[c] /= d;
+        }
+        nis = 0.0;
+        for (int i = 0; i < k; i++) nis += W[i * (N + 1)] * W[i * (N + 1)];
+        for (int c = 0; c < N; c++) {
+            double s = 0.0;
+            for (int i = 0; i < k; i++) s += W[i * (N + 1) + 1 + c] * W[i * (N + 1)];
+            xo[c] += s;
+        }
+        for (int r1 = 0; r1 < N; r1++)
+            for (int c = r1; c < N; c++) {
+                double s = 0.0;
+                for (int i = 0; i < k; i++) s += W[i * (N + 1) + 1 + r1] * W[i * (N + 1) + 1 + c];
+                Po[r1 * N + c] -= s;
+                if (c != r1) Po[c * N + r1] -= s;
+            }
+        for (int r1 = 0; r1 < N; r1++) /* P was symmetric: keep it exactly so */
+            for (int c = r1 + 1; c < N; c++) {
+                double s = 0.5 * (Po[r1 * N + c] + Po[c * N + r1]);
+                Po[r1 * N + c] = Po[c * N + r1] = s;
+            }
+    }
+    result = Py_BuildValue("(NNdi)", new_array(1, N, 0, xo), new_array(2, N, N, Po), nis, n_rate);
+done:
+    for (int i = 0; i < 13; i++) Py_XDECREF(a[i]);
+    free(Hs); free(HPs); free(W); free(Sm);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"predict_cov", py_predict_cov, METH_VARARGS, "F P F^T + Q over a block (model.transition, model.process_noise)"},
+    {"innovations", py_innovations, METH_VARARGS, "pseudorange innovations, H, H P, (H P H^T)_ii"},
+    {"update", py_update, METH_VARARGS, "the stacked Kalman update with the range rates"},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_tight", "the tight filter's C hot path", -1, methods};
+
+PyMODINIT_FUNC PyInit__tight(void) {
+    import_array();
+    return PyModule_Create(&module);
+}

@@ -1,0 +1,16 @@
+"""Types of the tight filter's C core (``_tight.c``); the formulas are model.py's."""
+
+from typing import Any
+
+import numpy as np
+
+def predict_cov(P: np.ndarray, T_s: float, nA: Any, nB: Any, live: np.ndarray, q_acc_ne: float,
+                q_acc_d: float, q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float,
+                q_heading: float, q_yaw_bias: float, heading_live: bool) -> np.ndarray: ...
+def innovations(x: np.ndarray, P: np.ndarray, r0_ecef_m: np.ndarray, c_ecef_ned: np.ndarray,
+                sat_pos_ecef_m: np.ndarray, slot: np.ndarray, z_m: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+def update(x: np.ndarray, P: np.ndarray, H: np.ndarray, HP: np.ndarray, y: np.ndarray, r: np.ndarray,
+           used: np.ndarray, r0_ecef_m: np.ndarray, c_ecef_ned: np.ndarray, sat_pos_ecef_m: np.ndarray,
+           sat_vel_ecef_m_s: np.ndarray, z_rate_m_s: np.ndarray, r_rate_m2_s2: np.ndarray, gate2: float
+           ) -> tuple[np.ndarray, np.ndarray, float, int]: ...
