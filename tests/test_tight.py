@@ -453,7 +453,8 @@ def test_c_core_equals_the_numpy_forms():
     slot = model.SLOT_OF[sysv]
     x = _state(rng)
     z = model.pseudorange(x, FRAME, pos, slot)[0] + rng.normal(0, 5, len(slot))
-    y, H, HP, s0, mins = _tight.innovations(x, P, FRAME.r0_ecef_m, FRAME.c_ecef_ned, pos, slot.astype(float), z)
+    r0, C = FRAME.r0_ecef_m, FRAME.c_ecef_ned
+    y, H, HP, s0, mins = _tight.innovations(x, P, r0, C, pos, slot.astype(float), z)
     for j in range(model.N_CLK):
         sel = slot == j
         assert mins[j] == (np.abs(y[sel]).min() if sel.any() else np.inf)
