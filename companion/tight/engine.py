@@ -70,7 +70,7 @@ class SatEpoch(NamedTuple):
     sat_vel_ecef_m_s: np.ndarray
     z_rate_m_s: np.ndarray  # pseudorange rate free of the satellite clock drift (NaN: none)
     r_rate_m2_s2: np.ndarray
-    systems: tuple[tuple[int, np.ndarray], ...]  # (clock slot, its satellites (bool (m,))) per system
+    systems: tuple[int, ...]  # the clock slots of the epoch's systems
 
 
 class Speed(NamedTuple):
@@ -170,7 +170,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
                     z, r_model, np.full(ep.n, cfg.sigma_uniform_m**2), r_los,
                     theta_prior(cn0, el_deg, cfg, blocked), el_deg, ep.sat_pos_ecef_m,
                     vel, rate, r_rate,
-                    tuple((j, slots == j) for j in sorted(set(slots.tolist()))))
+                    tuple(sorted(set(slots.tolist()))))
 
 
 class TightEngine:
@@ -449,10 +449,10 @@ class TightEngine:
         y, H, HP, s0, min_abs_y = _tight.innovations(x, P, r0, C, m.sat_pos_ecef_m, m.slot_f, m.z_m)
         live = list(prev.live)
         restarted = False
-        for j, sel in m.systems:
+        for j in m.systems:
             if live[j] and min_abs_y[j] <= c.clock_jump_m:
                 continue  # the usual case: a known clock, no jump
-            med = float(np.median(y[sel]))
+            med = float(np.median(y[m.slot == j]))
             clock_resets += int(live[j])
             x[I_CLK + j] += med
             P[I_CLK + j, :] = 0.0
