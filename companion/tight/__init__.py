@@ -8,8 +8,9 @@ history, no I/O.
 
 Modules: ``config`` (parameters), ``model`` (state, process, measurement models and Jacobians),
 ``belief`` (the per-satellite loss, gradient and second-order step), ``weighting`` (the rows by
-name), ``engine`` (the filter, out-of-sequence exact), ``satcache`` (satellite states once a second),
-``samples`` (RawGnss, Odometry), ``navigator`` (front end).
+name), ``engine`` (the filter, out-of-sequence exact), ``satcache`` (satellite states and
+atmospheric delays every 5 s), ``_tight`` (C, ``_tight.c``, built by ``make venv``: the epoch's
+numeric hot path), ``samples`` (RawGnss, Odometry), ``navigator`` (front end).
 """
 
 from companion.tight.config import TightConfig
