@@ -46,8 +46,9 @@ def run(args: argparse.Namespace) -> int:
     exit_on_sigterm()  # SIGTERM ends the run like Ctrl-C: summary.json is still written
     config = config_from_args(args)
     if sections:
-        estimator = companion_config.estimator_config(sections, args.config)
-        config = dataclasses.replace(config, estimator=estimator)
+        config = dataclasses.replace(config,
+                                     estimator=companion_config.estimator_config(sections, args.config),
+                                     tight=companion_config.tight_config(sections, args.config))
     print(f"companion: waiting for a HEARTBEAT on {args.master} (up to {args.discovery_timeout_s:g} s)",
           flush=True)
     publisher = telemetry.publisher_from_args(args, "companion")

@@ -3,7 +3,8 @@
 A key is an option's long name without the dashes (``master``, ``feed``, ``gps-delay-ms``,
 ``vehicle-id``, ``no-telemetry``: ``beliefnav companion --help`` lists them), its value what the
 option takes (a number, a string, ``true`` for a flag). An ``estimator:`` section sets fields of the
-estimator's parameters (``EstimatorConfig``, docs/parameters.md) for a real vehicle's sensors. An
+estimator's parameters (``EstimatorConfig``, docs/parameters.md) for a real vehicle's sensors, a
+``tight:`` section those of the tightly coupled filter (``TightConfig``, ``--coupling tight``). An
 option given on the command line wins over the file; the file over the defaults. Every mistake is
 one line naming the file and the key (an unknown key names the nearest one).
 
@@ -21,7 +22,7 @@ from typing import Any
 
 from companion.errors import ConfigError
 
-SECTIONS = ("estimator",)  # the file's sections besides the options
+SECTIONS = ("estimator", "tight")  # the file's sections besides the options
 NOT_IN_FILE = frozenset({"help", "config"})
 
 
@@ -141,3 +142,11 @@ def estimator_config(sections: dict[str, Any], where: Path | None) -> Any:
     from companion.mission.schema import build
 
     return build(EstimatorConfig, sections.get("estimator", {}), f"{where}: estimator")
+
+
+def tight_config(sections: dict[str, Any], where: Path | None) -> Any:
+    """The ``tight:`` section (``--coupling tight``) as a ``TightConfig`` (its defaults where silent)."""
+    from companion.mission.schema import build
+    from companion.tight import TightConfig
+
+    return build(TightConfig, sections.get("tight", {}), f"{where}: tight")

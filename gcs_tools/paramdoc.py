@@ -122,6 +122,7 @@ def render() -> str:
     from companion.estimator.config import EstimatorConfig
     from companion.estimator.plugin_config import PluginConfig
     from companion.mission.config import FlightConfig, PlannerConfig
+    from companion.tight import TightConfig
     from simvehicle.config import _SECTION_TYPES
 
     parts = [
@@ -147,6 +148,13 @@ def render() -> str:
         "`estimator:` section override them for the simulation ([estimator.md](estimator.md)).",
         "",
         *dataclass_table(EstimatorConfig),
+        "",
+        "## `tight:` — the tightly coupled filter (the companion's `--config` with `--coupling tight`)",
+        "",
+        "Defaults for an IMU-driven vehicle; `TightConfig.for_ground_vehicle()` (the smartLoc replay)",
+        "changes the motion model ([tight.md](tight.md)).",
+        "",
+        *dataclass_table(TightConfig),
         "",
         "## `belief_plugins:` — the ablation methods' own parameters",
         "",

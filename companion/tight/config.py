@@ -21,7 +21,7 @@ MOTIONS = ("imu", "constant-velocity")
 
 @dataclass(frozen=True)
 class TightConfig:
-    motion: Literal["imu", "constant-velocity"] = "imu"
+    motion: Literal["imu", "constant-velocity"] = "imu"  # what drives the prediction (module doc)
     # --- process model
     # White acceleration density (m/s² per √Hz: Q_vv = σ² T). "imu": the loose filter's 0.3 (attitude
     # error × g and vibration). "constant-velocity": the vehicle's manoeuvres (see
@@ -62,7 +62,7 @@ class TightConfig:
     # stepped (a receiver clock jump of milliseconds): its clock is re-initialised, not the position.
     clock_jump_m: float = 1000.0
     # --- odometry (ground vehicles): forward speed as a measurement of |v_horizontal|
-    sigma_speed_m_s: float = 0.1
+    sigma_speed_m_s: float = 0.1  # wheel speed σ along the track (plus speed_sigma_fraction × speed)
     speed_sigma_fraction: float = 0.02  # + this × speed (wheel radius, slip)
     # heading from the odometry's yaw rate: the offset ψ₀ starts from the filter's velocity direction
     # after odometry_heading_start_s, once the filter moves at the odometry's speed (to 30 %) with a
@@ -100,9 +100,9 @@ class TightConfig:
     prior_el_mid_deg: float = 25.0
     prior_map_nlos: float = -3.0  # θ_prior added where the map says the line of sight is blocked
     # --- Student-t row: iteratively reweighted update
-    student_iterations: int = 3
+    student_iterations: int = 3  # reweighted updates per epoch
     # --- FDE row: χ² test of the epoch's normalised innovations, worst excluded while it fails
-    fde_p_false_alarm: float = 1e-3
+    fde_p_false_alarm: float = 1e-3  # the χ² test's false-alarm probability (RAIM/FDE's)
     fde_max_exclusions: int = 4
     # --- out-of-sequence
     history_s: float = 2.0  # epochs this late are still fused exactly
