@@ -432,6 +432,30 @@ def test_odometry_heading_starts_once_moving_and_follows_a_turn():
     assert np.median(errs) < 2.5 and max(errs) < 8.0, (np.median(errs), max(errs))
 
 
+def test_c_belief_step_equals_the_numpy_forms():
+    from companion.tight import _tight, weighting
+
+    cfg = TightConfig()
+    rng = np.random.default_rng(13)
+    n = 50
+    theta, hf, hs = rng.uniform(-4, 4, n), rng.uniform(0.1, 3, n), rng.uniform(0.1, 3, n)
+    y, s0 = rng.normal(0, 30, n), rng.uniform(1, 50, n)
+    r_nom, prior = rng.uniform(1, 100, n), rng.uniform(-2, 2, n)
+    for first in (False, True):
+        got = _tight.belief_step(theta, hf, hs, y, s0, r_nom, prior, cfg.eta, cfg.lambda_reg, cfg.alpha_fast,
+                                 cfg.alpha_slow, cfg.omega_fast, cfg.student_dof, cfg.r_inflation_max,
+                                 cfg.prior_weight, cfg.theta_min, cfg.theta_max, cfg.gate_sigma**2, first)
+        g = belief.grad_theta(theta, y, s0, r_nom, prior, cfg)
+        th, f, s = (theta - cfg.eta * g, hf, hs) if first else belief.second_order_step(theta, hf, hs, g, cfg)
+        th = np.clip(th, cfg.theta_min, cfg.theta_max)
+        b = belief.sigmoid(th)
+        r = belief.r_of_beta(b, r_nom, cfg)
+        used = weighting.gate(weighting.SatTerms(np.zeros(n), y, s0, r_nom, prior), r, cfg)
+        for a, w in zip(got, (th, f, s, b, r), strict=False):
+            np.testing.assert_allclose(a, w, rtol=1e-12, atol=1e-14)
+        assert np.array_equal(got[5] > 0, used)
+
+
 def test_c_core_equals_the_numpy_forms():
     """``_tight.c`` (the filter's hot path) against model.py's numpy forms: F P Fᵀ + Q, the
     pseudorange innovations with H, H P and (H P Hᵀ)_ii, and the stacked update with range rates."""

@@ -360,7 +360,72 @@ done:
     return result;
 }
 
+/* belief_step(theta, h_fast, h_slow, y, s0, r_nominal, theta_prior, eta, lambda_reg, alpha_fast, alpha_slow,
+ *             omega_fast, nu, k, kappa, theta_min, theta_max, gate2, first_order)
+ * -> (theta, h_fast, h_slow, beta, r, used): belief.grad_theta, the second-order (or first-order) step,
+ * the clamp, β = σ(θ), R(β) = R_nom k^(1-β) and the innovation gate y² <= gate2 (s0 + R), per satellite */
+static PyObject *py_belief_step(PyObject *self, PyObject *args) {
+    PyObject *o[7];
+    double eta, lam, af, as_, wf, nu, kk, kappa, tmin, tmax, gate2;
+    int first;
+    if (!PyArg_ParseTuple(args, "OOOOOOOdddddddddddp", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &eta, &lam,
+                          &af, &as_, &wf, &nu, &kk, &kappa, &tmin, &tmax, &gate2, &first))
+        return NULL;
+    PyArrayObject *a[7] = {0};
+    PyObject *out[6] = {0};
+    for (int i = 0; i < 7; i++) {
+        a[i] = in_array(o[i], 1);
+        if (!a[i]) goto fail;
+    }
+    npy_intp m = PyArray_DIM(a[0], 0);
+    for (int i = 1; i < 7; i++)
+        if (PyArray_DIM(a[i], 0) != m) {
+            PyErr_SetString(PyExc_ValueError, "belief_step: shapes");
+            goto fail;
+        }
+    for (int i = 0; i < 6; i++) {
+        out[i] = new_array(1, m, 0, NULL);
+        if (!out[i]) goto fail;
+    }
+    const double *th0 = PyArray_DATA(a[0]), *hf0 = PyArray_DATA(a[1]), *hs0 = PyArray_DATA(a[2]),
+                 *y = PyArray_DATA(a[3]), *s0 = PyArray_DATA(a[4]), *rn = PyArray_DATA(a[5]),
+                 *pr = PyArray_DATA(a[6]);
+    double *th = PyArray_DATA((PyArrayObject *)out[0]), *hf = PyArray_DATA((PyArrayObject *)out[1]),
+           *hs = PyArray_DATA((PyArrayObject *)out[2]), *be = PyArray_DATA((PyArrayObject *)out[3]),
+           *r = PyArray_DATA((PyArrayObject *)out[4]), *used = PyArray_DATA((PyArrayObject *)out[5]);
+    double lnk = log(kk);
+    for (npy_intp i = 0; i < m; i++) {
+        double t = th0[i];
+        double b = 1.0 / (1.0 + exp(-t));
+        double rr = rn[i] * pow(kk, 1.0 - b);
+        double S = s0[i] + rr, y2 = y[i] * y[i];
+        double dl = 0.5 / S - 0.5 * (nu + 1.0) * y2 / (S * (nu * S + y2));
+        double g = dl * (-lnk) * rr * b * (1.0 - b) + kappa * (t - pr[i]);
+        double f = hf0[i], sl = hs0[i];
+        if (first) {
+            t = t - eta * g;
+        } else {
+            f = af * f + g * g;
+            sl = as_ * sl + g * g;
+            double h = wf * f + (1.0 - wf) * sl;
+            t = t - eta * g / (h + lam);
+        }
+        t = t < tmin ? tmin : (t > tmax ? tmax : t);
+        b = 1.0 / (1.0 + exp(-t));
+        rr = rn[i] * pow(kk, 1.0 - b);
+        th[i] = t; hf[i] = f; hs[i] = sl; be[i] = b; r[i] = rr;
+        used[i] = y2 <= gate2 * (s0[i] + rr) ? 1.0 : 0.0;
+    }
+    for (int i = 0; i < 7; i++) Py_DECREF(a[i]);
+    return Py_BuildValue("(NNNNNN)", out[0], out[1], out[2], out[3], out[4], out[5]);
+fail:
+    for (int i = 0; i < 7; i++) Py_XDECREF(a[i]);
+    for (int i = 0; i < 6; i++) Py_XDECREF(out[i]);
+    return NULL;
+}
+
 static PyMethodDef methods[] = {
+    {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},
     {"predict_cov", py_predict_cov, METH_VARARGS, "F P F^T + Q over a block (model.transition, model.process_noise)"},
     {"innovations", py_innovations, METH_VARARGS, "pseudorange innovations, H, H P, (H P H^T)_ii"},
     {"update", py_update, METH_VARARGS, "the stacked Kalman update with the range rates"},

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.stats import chi2 as _chi2
 
 from companion.errors import not_one_of
-from companion.tight import belief
+from companion.tight import _tight
 from companion.tight.config import TightConfig
 
 
@@ -178,18 +178,16 @@ class SatelliteBelief(SigmaModel):
     def weigh(self, state: BeliefMap, t: SatTerms, solve: Solve) -> Weighed:
         c = self.cfg
         theta, hf, hs = self._gather(state, t)
-        g = belief.grad_theta(theta, t.y, t.s0, t.r_nominal, t.theta_prior, c)
-        if self.first_order:
-            theta = theta - c.eta * g
-        else:
-            theta, hf, hs = belief.second_order_step(theta, hf, hs, g, c)
-        theta = np.clip(theta, c.theta_min, c.theta_max)
+        # belief.grad_theta, the (second- or first-order) step, the clamp, R(β) and the gate, in C
+        # (``_tight.belief_step``; equal to belief.py's numpy forms, tested)
+        theta, hf, hs, beta, r, used = _tight.belief_step(
+            theta, hf, hs, t.y, t.s0, t.r_nominal, t.theta_prior, c.eta, c.lambda_reg, c.alpha_fast,
+            c.alpha_slow, c.omega_fast, c.student_dof, c.r_inflation_max, c.prior_weight, c.theta_min,
+            c.theta_max, c.gate_sigma**2, self.first_order)
         new = dict(state)
         rows = zip(theta.tolist(), hf.tolist(), hs.tolist(), strict=True)
         new.update(zip(t.key.tolist(), rows, strict=True))
-        beta = belief.sigmoid(theta)
-        r = belief.r_of_beta(beta, t.r_nominal, c)
-        return Weighed(r, gate(t, r, c), new, beta)
+        return Weighed(r, used > 0.0, new, beta)
 
 
 @register("first-order")
