@@ -19,7 +19,9 @@ and the update is the paper's dual-timescale damped Newton step (eq. 18-21) per 
     H_f ← α_f H_f + g²,  H_s ← α_s H_s + g²,  H = ω H_f + (1 − ω) H_s,  θ ← θ − η g / (H + λ)
 
 A reflected satellite's innovation is larger than S says: ∂ℓ/∂S < 0 there, so θ falls (R grows
-until S ≈ y²); a clean one's is smaller: θ rises to the cap. Vectorised over satellites.
+until S ≈ y²); a clean one's is smaller: θ rises to the cap. Vectorised over satellites. The
+filter runs these as one C call (``_tight.belief_step``: gradient, step, clamp, R(β), gate), equal to
+the numpy forms here (tested); these stay the reference and serve the tests and the evaluation.
 """
 
 from __future__ import annotations
