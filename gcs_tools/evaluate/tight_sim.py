@@ -1,0 +1,171 @@
+"""``python -m gcs_tools.evaluate.tight_sim``: the tight-coupling rows on the calibrated simulator.
+
+Each flight (mission, profile, seed) is flown in process under the ``canyon`` sensor scenario (the
+raw GNSS receiver calibrated to smartLoc, docs/simcal.md) with the loosely coupled second-order
+filter in the loop, as ``fly`` does; the same IMU, attitude and raw receiver epochs
+(``StepOutput.gnss_raw``, satellite states from the sky's broadcast ephemerides) go, in arrival
+order, to one tightly coupled navigator per row (open loop: they estimate, the loose filter flies).
+Every control step each row's position is compared with the truth (horizontal distance):
+
+* ``spp``: the receiver's latest single-point fix as it arrived (what a consumer of the fixes has);
+* ``loose``: the filter flying the vehicle (its single-point fixes, second-order);
+* ``tight-<row>``: ``companion.tight`` with each weighting, IMU-driven (``TightConfig()``).
+
+Intervals: per-flight medians and 95th percentiles, bootstrap over flights (seeded), and paired
+differences between rows over the same flights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from companion.errors import UserError
+from companion.tight import RawGnss, TightConfig, TightNavigator
+from gcs_tools.jsonvalues import plain_json
+
+ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
+
+
+def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
+             max_duration_s: float | None = None) -> dict[str, np.ndarray]:
+    """Horizontal errors (m) per control step of each row on one flight."""
+    from companion.mission import load_mission
+    from companion.wiring import navigator_for
+    from simvehicle.harness.fly import planned_route
+    from simvehicle.rawgnss import RawGnssModel
+    from simvehicle.vehicle import SimVehicle
+
+    m = load_mission(mission, "canyon")
+    nav = navigator_for(m, "second-order")
+    route = planned_route(m, profile, 1.0)
+    sim = SimVehicle(m, profile, seed)
+    gnss = sim.gnss
+    assert isinstance(gnss, RawGnssModel)  # the canyon scenario's receiver
+    store = gnss.store
+    tight = {r: TightNavigator(TightConfig(), r, m.frame, store) for r in rows}
+    end_us = round(min(1.0 + route.duration_s * 1.5, max_duration_s or 1e9) * 1e6)
+    errors: dict[str, list[float]] = {k: [] for k in ("spp", "loose", *(f"tight-{r}" for r in rows))}
+    last_fix = None
+    est = None
+    while sim.t_us < end_us:
+        out = sim.advance(est, route.setpoint(sim.t_us))
+        if gnss.store is not store:  # the sky's ephemerides extended
+            store = gnss.store
+            for t in tight.values():
+                t.update_ephemerides(store)
+        fixes = list(zip(out.gnss_arrival_us, out.gnss_ned, strict=True))
+        raws = sorted(out.gnss_raw, key=lambda o: o.arrival_us)
+        k = j = 0
+        for att, imu in zip(out.attitude, out.imu, strict=True):
+            nav.push(att)
+            nav.push(imu)
+            for t in tight.values():
+                t.push(att)
+                t.push(imu)
+            while k < len(fixes) and fixes[k][0] <= imu.t_us:
+                f = fixes[k][1]
+                nav.push_fix_ned(f.t_validity_us, f.p_ned_m, *sim.gnss.reported_accuracies_m(f))
+                last_fix = np.asarray(f.p_ned_m, float)
+                k += 1
+            while j < len(raws) and raws[j].arrival_us <= imu.t_us:
+                for t in tight.values():
+                    t.push(RawGnss(raws[j].t_us, raws[j].epoch))
+                j += 1
+        est = nav.estimate()
+        truth = np.asarray(out.final_truth.p_ned_m, float)
+        if est is None or last_fix is None:
+            continue
+        rows_now: dict[str, Any] = {"spp": last_fix, "loose": est.p_ned_m}
+        for r, t in tight.items():
+            e = t.estimate()
+            rows_now[f"tight-{r}"] = None if e is None else e.p_ned_m
+        if any(v is None for v in rows_now.values()):
+            continue
+        for name, p in rows_now.items():
+            errors[name].append(float(np.hypot(p[0] - truth[0], p[1] - truth[1])))
+    return {k: np.asarray(v) for k, v in errors.items()}
+
+
+def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Sequence[str] = ROWS,
+        n_resamples: int = 2000, rng_seed: int = 0, max_duration_s: float | None = None) -> dict[str, Any]:
+    flights: list[dict[str, Any]] = []
+    for p in profiles:
+        for s in seeds:
+            e = fly_rows(mission, p, s, rows, max_duration_s)
+            flights.append({"profile": p, "seed": s, "steps": int(len(e["spp"])),
+                            "median_m": {k: float(np.median(v)) for k, v in e.items()},
+                            "p95_m": {k: float(np.percentile(v, 95)) for k, v in e.items()}})
+    names = list(flights[0]["median_m"])
+    rng = np.random.default_rng(rng_seed)
+    idx = rng.integers(0, len(flights), size=(n_resamples, len(flights)))
+    out_rows: dict[str, dict[str, Any]] = {}
+    paired: list[dict[str, Any]] = []
+    for stat in ("median_m", "p95_m"):
+        table = {n: np.array([f[stat][n] for f in flights]) for n in names}
+        for n, v in table.items():
+            lo, hi = np.percentile(v[idx].mean(axis=1), [2.5, 97.5])
+            out_rows.setdefault(n, {})[stat] = {"mean": float(v.mean()), "ci": [float(lo), float(hi)]}
+        for ref in names:
+            if ref == "tight-second-order" or "tight-second-order" not in table:
+                continue
+            d = table["tight-second-order"] - table[ref]
+            lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
+            paired.append({"stat": stat, "reference": ref, "mean_diff_m": float(d.mean()),
+                           "ci": [float(lo), float(hi)]})
+    return {"mission": mission, "scenario": "canyon", "profiles": list(profiles), "seeds": list(seeds),
+            "flights": flights, "rows": out_rows, "paired": paired,
+            "method": "per-flight median and p95 of the horizontal error at every control step; mean over "
+                      f"flights with a bootstrap over flights ({n_resamples} resamples, seed {rng_seed})"}
+
+
+def markdown(r: dict[str, Any]) -> str:
+    lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}: {r['method']}.", "",
+             "| row | median (m) | 95 % CI | p95 (m) | 95 % CI |", "| --- | --- | --- | --- | --- |"]
+    for n, s in r["rows"].items():
+        a, b = s["median_m"], s["p95_m"]
+        lines.append(f"| {n} | {a['mean']:.2f} | [{a['ci'][0]:.2f}, {a['ci'][1]:.2f}] | {b['mean']:.2f} | "
+                     f"[{b['ci'][0]:.2f}, {b['ci'][1]:.2f}] |")
+    lines += ["", "| tight-second-order − | statistic | mean difference (m) | 95 % CI |",
+              "| --- | --- | --- | --- |"]
+    for c in r["paired"]:
+        lines.append(f"| {c['reference']} | {c['stat'].removesuffix('_m')} | {c['mean_diff_m']:+.2f} | "
+                     f"[{c['ci'][0]:+.2f}, {c['ci'][1]:+.2f}] |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.tight_sim",
+                                description=(__doc__ or "").splitlines()[0])
+    p.add_argument("--mission", default="default")
+    p.add_argument("--profiles", default="3,4")
+    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--out", type=Path, default=Path("runs/tight-sim"))
+    p.add_argument("--max-duration-s", type=float, default=None)
+    args = p.parse_args(argv)
+    try:
+        profiles = [int(v) for v in args.profiles.split(",")]
+        seeds = [int(v) for v in args.seeds.split(",")]
+    except ValueError:
+        print("beliefnav: error: --profiles and --seeds take comma-separated integers")
+        return 2
+    try:
+        r = run(args.mission, profiles, seeds, max_duration_s=args.max_duration_s)
+    except UserError as exc:
+        print(f"beliefnav: error: {exc}")
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "results.json").write_text(json.dumps(plain_json(r, nan_to_none=True), indent=1) + "\n")
+    md = markdown(r)
+    (args.out / "results.md").write_text(md)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
