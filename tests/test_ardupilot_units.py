@@ -11,7 +11,6 @@ from companion.mavlink.codec import mavlink, new_link, pack
 from companion.mission import load_mission
 from simvehicle.config import GnssConfig
 from simvehicle.gnss import GnssModel
-from simvehicle.harness.ardupilot.analysis import autopilot_track, count_collisions, errors
 from simvehicle.harness.ardupilot.config import ArduPilotConfig, ardupilot_parameters
 from simvehicle.harness.ardupilot.driver import (
     COPTER_MODE_GUIDED,
@@ -21,9 +20,11 @@ from simvehicle.harness.ardupilot.driver import (
     DriverInputs,
     FlightDriver,
 )
-from simvehicle.harness.ardupilot.gnss_source import UrbanGnssSource, gps_input_fields
-from simvehicle.harness.ardupilot.session import Recording
+from simvehicle.harness.ardupilot.gnss_source import gps_input_fields
 from simvehicle.harness.fly import planned_route
+from simvehicle.harness.foreign.analysis import autopilot_track, count_collisions, errors
+from simvehicle.harness.foreign.gnss_source import UrbanGnssSource
+from simvehicle.harness.foreign.recording import Recording
 
 
 def _line(t_us: np.ndarray) -> np.ndarray:
@@ -210,15 +211,16 @@ def test_analysis_known_answers():
 def test_campaign_aggregate_known_answers(tmp_path):
     from dataclasses import replace
 
-    from gcs_tools.evaluate.ardupilot import ApJob, ApResult, aggregate, table_text
+    from gcs_tools.evaluate.ardupilot import CAMPAIGN as ARDUPILOT
+    from gcs_tools.evaluate.autopilot import Job, Result, aggregate, table_text
 
-    def result(seed: int, ekf: float, comp: float, error: str = "") -> ApResult:
-        job = ApJob("test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig())
+    def result(seed: int, ekf: float, comp: float, error: str = "") -> Result:
+        job = Job(ARDUPILOT, "test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig())
         errs = {} if error else {"ardupilot-ekf3": np.full(10, ekf), "second-order": np.full(10, comp)}
-        return ApResult(job, errs, np.full(10, 1.0), not error, 0, "reached_goal", 10.0, 1.0, error)
+        return Result(job, errs, np.full(10, 1.0), not error, 0, "reached_goal", 10.0, 1.0, error)
 
-    res = aggregate([result(0, 2.0, 1.0), result(1, 4.0, 1.0), result(2, 0, 0, "no SITL"),
-                     replace(result(2, 9.0, 9.0), valid=False)],
+    res = aggregate(ARDUPILOT, [result(0, 2.0, 1.0), result(1, 4.0, 1.0), result(2, 0, 0, "no SITL"),
+                                replace(result(2, 9.0, 9.0), valid=False)],
                     ("ardupilot-ekf3", "second-order"), (0, 1, 2))
     ol = res["open_loop"]
     assert ol["ardupilot-ekf3"]["median"] == pytest.approx(3.0) and ol["ardupilot-ekf3"]["n"] == 20
@@ -228,25 +230,26 @@ def test_campaign_aggregate_known_answers(tmp_path):
     assert ol["second-order"]["reduction_vs_ekf3_seeds"]["value"] == pytest.approx(1.0 / 3.0 - 1.0)
     # the late flight (commands delayed by the scheduler) is counted but not used
     assert res["flying"]["none"]["flights"] == 4 and res["flying"]["none"]["valid"] == 2
-    assert "| second-order | 1.00 |" in table_text(res)
+    assert "| second-order | 1.00 |" in table_text(ARDUPILOT, res)
     assert "ardupilot-ekf3-posonly" not in ol  # no such flights: no row
 
 
 def test_campaign_rows_of_the_position_only_and_closed_loops(tmp_path):
     """EKF3 without velocity is its own open-loop row (paired with EKF3 by seed); closed loops add
     no open-loop row but report EKF3's error (what it flew on) and what the companion sent."""
-    from gcs_tools.evaluate.ardupilot import ApJob, ApResult, aggregate, table_text
+    from gcs_tools.evaluate.ardupilot import CAMPAIGN as ARDUPILOT
+    from gcs_tools.evaluate.autopilot import Job, Result, aggregate, table_text
 
-    def result(seed: int, loop: str, errs: dict) -> ApResult:
-        job = ApJob("test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig(), loop)
+    def result(seed: int, loop: str, errs: dict) -> Result:
+        job = Job(ARDUPILOT, "test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig(), loop)
         errs = {k: np.full(10, v) for k, v in errs.items()}
-        return ApResult(job, errs, np.full(10, 2.0), True, 1, "reached_goal", 10.0, 1.0)
+        return Result(job, errs, np.full(10, 2.0), True, 1, "reached_goal", 10.0, 1.0)
 
     results = [result(s, "none", {"ardupilot-ekf3": 2.0 + s, "second-order": 1.0}) for s in (0, 1)]
     results += [result(s, "none-posonly", {"ardupilot-ekf3-posonly": 4.0 + 2 * s}) for s in (0, 1)]
     results += [result(s, "vision", {"ardupilot-ekf3": 1.5, "companion-live": 1.25}) for s in (0, 1)]
     rows = ("ardupilot-ekf3", "ardupilot-ekf3-posonly", "second-order")
-    res = aggregate(results, rows, (0, 1))
+    res = aggregate(ARDUPILOT, results, rows, (0, 1))
     ol = res["open_loop"]
     assert list(ol) == list(rows) and ol["ardupilot-ekf3"]["median"] == pytest.approx(2.5)
     assert ol["ardupilot-ekf3-posonly"]["reduction_vs_ekf3"] == pytest.approx(5.0 / 2.5 - 1.0)
@@ -256,7 +259,7 @@ def test_campaign_rows_of_the_position_only_and_closed_loops(tmp_path):
     assert v["companion_sent_error_horizontal_m"]["median"] == pytest.approx(1.25)
     assert res["flying"]["none-posonly"]["flown_estimate_error_horizontal_m"]["median"] == pytest.approx(5.0)
     assert res["flying"]["none"]["companion_sent_error_horizontal_m"]["n"] == 0
-    text = table_text(res)
+    text = table_text(ARDUPILOT, res)
     assert "ExternalNav | 2 (2) | 2 | 2 | 2.00 | 2.00 | 1.50 | 1.25 |" in text
 
 

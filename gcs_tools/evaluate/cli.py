@@ -25,13 +25,16 @@ DEFAULT_METHODS = "naive,adaptive,first-order,second-order"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot"),
-                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL, EKF3 as its own row")
+    parser.add_argument("--vehicle", default="sim", choices=("sim", "ardupilot", "px4"),
+                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL, EKF3 as its own row; "
+                             "px4: PX4 SITL (SIH quadrotor), EKF2 as its own row")
     parser.add_argument("--speedup", type=float, default=None, help="ardupilot: SITL --speedup (default 10)")
-    parser.add_argument("--feeds", default="none,none-posonly,gps-input,vision",
-                        help="ardupilot: loops flown, any of none (open loop, EKF3 with GNSS velocity), "
-                             "none-posonly (EKF3 position only), gps-input, vision (closed loop on the "
-                             "companion process); default all four")
+    parser.add_argument("--speed-factor", type=float, default=None,
+                        help="px4: PX4_SIM_SPEED_FACTOR, at most 10 (default 5)")
+    parser.add_argument("--feeds", default=None,
+                        help="ardupilot/px4: loops flown (default all): none (open loop, the EKF with GNSS "
+                             "velocity), none-posonly (the EKF on positions only), and closed loops on the "
+                             "companion process: ardupilot gps-input, vision; px4 odometry")
     parser.add_argument("--mission", default="default",
                         help="mission name (default, test, default-tuning) or YAML path")
     parser.add_argument("--profiles", default="10",
@@ -85,8 +88,10 @@ def parameters(mission: Any) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.vehicle == "ardupilot":
-        return run_ardupilot(args)
+    if args.vehicle in ("ardupilot", "px4"):
+        return run_autopilot(args)
+    if args.feeds is not None or args.speedup is not None or args.speed_factor is not None:
+        raise UserError("--feeds, --speedup and --speed-factor apply to --vehicle ardupilot or px4")
     overrides = tuple(tuning.parse_override(text) for text in args.set)
     mission = campaign.mission(args.mission, overrides, args.scenario)
     tuning.check(mission)
@@ -136,26 +141,28 @@ def run(args: argparse.Namespace) -> int:
 
 
 
-def run_ardupilot(args: argparse.Namespace) -> int:
+def run_autopilot(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
-    from gcs_tools.evaluate import ardupilot
-    from simvehicle.harness.ardupilot.config import ArduPilotConfig
+    from gcs_tools.evaluate import ardupilot, autopilot, px4
 
     if args.set or args.scheduler or args.readme or args.rows is not None \
             or args.max_duration_s is not None:
         raise UserError("--set, --scheduler, --readme, --max-duration-s and --rows apply to --vehicle sim "
                         "only")
+    speed = {"ardupilot": ("--speedup", args.speedup), "px4": ("--speed-factor", args.speed_factor)}
+    for name, (option, value) in speed.items():
+        if name != args.vehicle and value is not None:
+            raise UserError(f"{option} applies to --vehicle {name} only")
+    spec = (ardupilot if args.vehicle == "ardupilot" else px4).CAMPAIGN
+    config = spec.config(speed[args.vehicle][1])
     mission = load_mission(args.mission)
     profiles = choices.profiles(args.profiles, len(mission.profiles))
     methods = parse_methods(args.methods or DEFAULT_METHODS)
     seeds = choices.seeds(args.seeds)
-    cfg = ardupilot.with_speedup(ArduPilotConfig(), args.speedup)
-    feeds = tuple(f.strip() for f in args.feeds.split(",") if f.strip())
-    if not feeds or any(f not in ardupilot.LOOPS for f in feeds) or len(set(feeds)) != len(feeds):
-        raise UserError(f"--feeds: expected distinct values of {', '.join(ardupilot.LOOPS)}, "
-                        f"got {args.feeds!r}")
-    res = ardupilot.evaluate(args.mission, profiles, methods, seeds, args.workers, args.out, cfg, feeds)
-    print(ardupilot.table_text(res), end="")
+    feeds = autopilot.check_feeds(spec, args.feeds or ",".join(spec.loop_names))
+    res = autopilot.evaluate(spec, args.mission, profiles, methods, seeds, args.workers, args.out, config,
+                             feeds)
+    print(autopilot.table_text(spec, res), end="")
     print(f"wrote {args.out}/results.json, report.md, errors_horizontal.png and flights/ "
           f"({len(res['info']['flights'])} flights, {res['info']['wall_s']:.1f} s)", file=sys.stderr)
     return 0

@@ -21,13 +21,13 @@ if TYPE_CHECKING:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gcs_tools.sitl import ardupilot_cli
+    from gcs_tools.sitl import autopilot_cli
     from simvehicle.harness.backend import SITL_VEHICLES
 
     parser.add_argument("--vehicle", default="sim", choices=SITL_VEHICLES,
-                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL flying on our GNSS "
-                             "(simvehicle.harness.backend.BACKENDS)")
-    ardupilot_cli.add_arguments(parser)
+                        help="sim: our simulated vehicle; ardupilot: ArduCopter SITL, px4: PX4 SITL (SIH "
+                             "quadrotor), each flying on our GNSS (simvehicle.harness.backend.BACKENDS)")
+    autopilot_cli.add_arguments(parser)
     parser.add_argument("--mission", default="default", help="mission name or YAML path")
     parser.add_argument("--profile", type=int, default=0, help="mission profile index")
     choices.add_method_argument(parser)
@@ -71,10 +71,12 @@ def _ports(text: str | None) -> tuple[int, int, int] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.vehicle == "ardupilot":
-        from gcs_tools.sitl import ardupilot_cli
+    if args.vehicle in ("ardupilot", "px4"):
+        from gcs_tools.sitl import autopilot_cli
 
-        return ardupilot_cli.run(args)
+        return autopilot_cli.run(args)
+    if args.feed != "none" or args.speedup or args.speed_factor or args.ulog:
+        raise UserError("--feed, --speedup, --speed-factor and --ulog apply to --vehicle ardupilot or px4")
     from companion.mission import with_scenario
     from gcs_tools import choices
     from gcs_tools.outdir import ensure_out_dir

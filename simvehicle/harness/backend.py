@@ -5,12 +5,14 @@ takes an injected vehicle the same way).
     result = backend("inprocess").fly(FlightRequest("test", profile=0, method="second-order", seed=0))
     result = backend("sim", realtime=False).fly(FlightRequest("test", 0, out_dir=Path("runs/x")))
     result = backend("ardupilot", feed="none").fly(FlightRequest("test", 0, out_dir=Path("runs/ap")))
+    result = backend("px4", feed="odometry").fly(FlightRequest("test", 0, out_dir=Path("runs/px4")))
 
 A backend is built by name from ``BACKENDS`` with its own options (keywords of its constructor) and
 flies one ``FlightRequest`` at a time, returning a ``FlightResult``: the in-process flight's summary
 keys and 20 Hz series (docs/ARCHITECTURE.md), plus what the backend adds (``sitl``, ``ardupilot``
-sections). Writing files and figures is the caller's (``gcs_tools``). A new vehicle (PX4 SITL, ...)
-is one module with a class following ``VehicleBackend`` and one line in ``BACKENDS``; the CLI's
+sections). Writing files and figures is the caller's (``gcs_tools``). A new vehicle is one module
+with a class following ``VehicleBackend`` and one line in ``BACKENDS`` (a SITL autopilot flown on
+our GNSS subclasses ``foreign.backend.ForeignBackend``, as ArduPilot and PX4 do); the CLI's
 ``beliefnav sitl --vehicle NAME`` lists ``SITL_VEHICLES``.
 """
 
@@ -40,7 +42,7 @@ class FlightRequest:
     profile: int = 0
     method: str = DEFAULT_METHOD
     seed: int = 0
-    out_dir: Path | None = None  # required by process backends (sim, ardupilot)
+    out_dir: Path | None = None  # required by process backends (sim, ardupilot, px4)
     max_duration_s: float | None = None  # simulated time limit (None: the backend's default)
     scenario: str | None = None  # sensor scenario (None: the mission file's)
 
@@ -69,6 +71,7 @@ BACKENDS: dict[str, str] = {
     "inprocess": "simvehicle.harness.fly:InProcessBackend",  # our simulator, one process, no network
     "sim": "simvehicle.harness.sitl.backend:SitlBackend",  # our simulator as three MAVLink/UDP processes
     "ardupilot": "simvehicle.harness.ardupilot.backend:ArduPilotBackend",  # ArduCopter SITL on our GNSS
+    "px4": "simvehicle.harness.px4.backend:Px4Backend",  # PX4 SITL (SIH quadrotor) on our GNSS
 }
 SITL_VEHICLES: tuple[str, ...] = tuple(name for name in BACKENDS if name != "inprocess")  # sitl --vehicle
 

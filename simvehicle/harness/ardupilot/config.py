@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from simvehicle.harness.foreign.config import ForeignFlightConfig
+
 # ArduPilot's GPS_INPUT ignore_flags: velocity (horizontal, vertical) and speed accuracy are not sent.
 GPS_INPUT_IGNORE_VELOCITY = 8 | 16 | 32
 GPS_WEEK = 2400  # any plausible GPS week: ArduPilot uses week/ms only as a clock (jitter correction)
@@ -14,44 +16,18 @@ FEEDS = ("none", "gps-input", "vision")  # what ArduPilot flies on: EKF3 on the 
 
 
 @dataclass(frozen=True)
-class ArduPilotConfig:
-    """How ArduCopter SITL is run, fed and flown (units in the names)."""
+class ArduPilotConfig(ForeignFlightConfig):
+    """How ArduCopter SITL is run, fed and flown (units in the names; the shared fields:
+    ``ForeignFlightConfig``). ``gps_delay_ms`` is GPS1_DELAY_MS; ``gnss_rate_hz`` the GPS_INPUT rate."""
 
     speedup: float = 10.0  # SITL --speedup (measured stable at 10 on a loaded 2-core machine)
-    stream_rate_hz: float = 50.0  # HIGHRES_IMU, ATTITUDE_QUATERNION, SIM_STATE (truth) requested rate
-    estimate_rate_hz: float = 10.0  # GLOBAL_POSITION_INT, LOCAL_POSITION_NED (EKF3's estimate)
-    gnss_rate_hz: float = 10.0  # GPS_INPUT rate from our degradation model (ArduPilot takes 5-20 Hz)
-    gps_delay_ms: int = 100  # GPS1_DELAY_MS: the receiver delay EKF3 assumes (our open-sky mean latency)
-    # Doppler velocity in the raw GPS_INPUT (our model makes positions only): ArduPilot's TRUE velocity
-    # at the fix's validity time plus white noise of this std per axis, sent with the fix (same
-    # latency) and fused by EKF3 (EK3_SRC1_VELXY/VELZ 3, its defaults). False: position only.
-    gnss_velocity: bool = True
-    gnss_velocity_sigma_m_s: float = 0.1  # a u-blox M8/M9's typical 0.05-0.1 m/s speed accuracy
-    setpoint_rate_hz: float = 20.0  # SET_POSITION_TARGET_LOCAL_NED rate
-    takeoff_tolerance_m: float = 1.0  # take-off done once within this of the mission altitude
-    hover_before_route_s: float = 3.0  # settle after take-off before the route's clock starts
-    goal_radius_m: float = 2.0  # as fly: true position within this of the goal ...
-    goal_speed_m_s: float = 1.0  # ... and slower than this, after the reference arrived
-    timeout_margin_s: float = 30.0  # route phase limit: duration + max(margin, 50 % of the duration)
-    setup_timeout_s: float = 180.0  # simulated seconds allowed for boot, EKF3 GPS use, arming, take-off
-    connect_timeout_s: float = 20.0  # wall seconds to reach the SITL's TCP port and get a HEARTBEAT
-    wall_timeout_s: float = 600.0  # whole flight, wall clock
-    # A flight whose commands (GPS_INPUT, setpoints) reached ArduPilot later than this (p95, in
-    # ArduPilot time) measured the machine's scheduler, not the estimators: it is flagged invalid
-    # (SITL does not wait for us; a loaded machine needs a lower --speedup).
-    max_command_delay_ms: float = 100.0
 
     def validate(self) -> None:
-        for name in ("speedup", "stream_rate_hz", "estimate_rate_hz", "gnss_rate_hz", "setpoint_rate_hz",
-                     "goal_radius_m", "setup_timeout_s", "connect_timeout_s", "wall_timeout_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
-        if not 5.0 <= self.gnss_rate_hz <= 20.0:
-            raise ValueError(f"gnss_rate_hz: GPS_INPUT is taken at 5-20 Hz, got {self.gnss_rate_hz!r}")
+        super().validate()
+        if not self.speedup > 0:
+            raise ValueError(f"speedup: must be > 0, got {self.speedup!r}")
         if not 0 < self.gps_delay_ms <= 250:
             raise ValueError(f"gps_delay_ms: GPS1_DELAY_MS must be 1..250 ms, got {self.gps_delay_ms}")
-        if not self.gnss_velocity_sigma_m_s >= 0:
-            raise ValueError(f"gnss_velocity_sigma_m_s: must be >= 0, got {self.gnss_velocity_sigma_m_s!r}")
 
 
 def ardupilot_parameters(cfg: ArduPilotConfig, feed: str = "none") -> dict[str, float]:

@@ -49,7 +49,8 @@ DIR_ENV = "BELIEFNAV_PX4_DIR"
 REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_DIR = REPO_ROOT.parent / "shared" / "tools" / "px4"
 OFFBOARD_REMOTE_BASE = 14540  # PX4 sends its onboard link here (+ instance): a companion listens
-UDP_LOCAL_BASES = (14580, 18570, 14280, 13030, 19450)  # what PX4 binds (+ instance)
+GCS_LOCAL_BASE = 18570  # PX4's GCS link binds this (+ instance): a ground station sends to it
+UDP_LOCAL_BASES = (14580, GCS_LOCAL_BASE, 14280, 13030, 19450)  # what PX4 binds (+ instance)
 MAX_INSTANCE = 9  # above 9 the onboard link's remote port is shared (14549)
 SOCKET_PATH = "/tmp/px4-sock-{}"
 
@@ -148,6 +149,27 @@ class Px4Sitl:
     @property
     def url(self) -> str:
         return f"udpin:127.0.0.1:{self.offboard_port}"
+
+    @property
+    def gcs_url(self) -> str:
+        """PX4's GCS link (MAVLink mode Normal): send to it, it answers to the sender's address."""
+        return f"udpout:127.0.0.1:{GCS_LOCAL_BASE + self.instance}"
+
+    @property
+    def log_dir(self) -> Path:
+        """Where PX4's logger writes its ULogs (``logging``): ``rootfs/log/<date>/<time>.ulg``."""
+        return self.work_dir / "rootfs" / "log"
+
+    def ulogs(self) -> list[Path]:
+        """The ULogs written so far, oldest first."""
+        return sorted(self.log_dir.rglob("*.ulg"), key=lambda p: p.stat().st_mtime)
+
+    def listener(self, topic: str, timeout_s: float = 10.0) -> str:
+        """``px4-listener TOPIC`` on this instance: the latest uORB message as PX4 prints it."""
+        out = subprocess.run([str(self.work_dir / "bin" / "px4-listener"), "--instance", str(self.instance),
+                              topic], capture_output=True, text=True, timeout=timeout_s,
+                             cwd=self.work_dir / "rootfs", check=False)
+        return out.stdout
 
     @property
     def log_path(self) -> Path:

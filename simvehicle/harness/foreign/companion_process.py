@@ -1,18 +1,13 @@
-"""Closed loop (``--feed gps-input|vision``): the companion as the separate process a user deploys.
+"""Closed loop: the companion as the separate process a user deploys beside the autopilot.
 
-The flight tool starts ``beliefnav companion --master tcp:127.0.0.1:<SERIAL1> --feed F
---gnss-instance 2 --home <SITL home>`` beside ArduCopter SITL, on its own MAVLink connection
-(SERIAL1, TCP 5762 + 10·I). The GNSS source sends the raw degraded fixes to ArduPilot's SECOND
-receiver (GPS2_TYPE 14, gps_id 1), which EKF3 does not use; the companion reads them back as
-GPS2_RAW, with the HIGHRES_IMU and ATTITUDE_QUATERNION it asks ArduPilot for itself, and sends
-its feed: ``gps-input`` = GPS_INPUT of the cleaned fix to GPS1, ``vision`` =
-VISION_POSITION_ESTIMATE (ExternalNav; it also sets the EKF origin to ``--home``). What it sent
-is read back from its own ``run.tlog`` and scored against truth (:func:`sent_track`).
-
-GPS2_RAW's stamp: ArduPilot's MAVLink GPS driver maps each fix's ``time_week_ms`` (our validity
-time) to its clock through its transport-jitter correction (the smallest recent arrival delay),
-so the stamp is about the validity time plus the open-sky latency; the companion subtracts
-``GPS2_DELAY_MS`` (the same 100 ms as EKF3's open-loop ``GPS1_DELAY_MS``).
+The flight tool starts ``beliefnav companion --master URL --feed F --home <SITL home> [extra]``
+beside the SITL, on its own MAVLink connection: ArduCopter's SERIAL1 (``tcp:127.0.0.1:5762 +
+10·I``, raw fixes read back as GPS2_RAW: ``--gnss-instance 2 --target-system 1``) or PX4's
+onboard link (``udpin:127.0.0.1:14540 + i``, raw fixes as GPS_RAW_INT, ``--target-system i + 1``).
+It reads the autopilot's IMU, attitude and GNSS streams (it asks for them itself) and sends its
+feed: ``gps-input`` = GPS_INPUT of the cleaned fix, ``vision`` = VISION_POSITION_ESTIMATE,
+``odometry`` = ODOMETRY (external navigation; it also sets the EKF origin to ``--home``). What it
+sent is read back from its own ``run.tlog`` and scored against truth (:func:`sent_track`).
 """
 
 from __future__ import annotations
@@ -33,16 +28,16 @@ from companion.errors import UserError
 
 COMPANION_COMPONENT_ID = 197  # beliefnav companion's default (MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY)
 STOP_TIMEOUT_S = 10.0  # SIGTERM -> summary.json written; then SIGKILL
-FEED_MESSAGES = {"gps-input": "GPS_INPUT", "vision": "VISION_POSITION_ESTIMATE"}
+FEED_MESSAGES = {"gps-input": "GPS_INPUT", "vision": "VISION_POSITION_ESTIMATE", "odometry": "ODOMETRY"}
 
 
-def companion_command(master: str, out_dir: Path, feed: str, method: str,
-                      home: tuple[float, float, float]) -> list[str]:
-    """The command line a user would type (GNSS from GPS2_RAW: the receiver EKF3 does not use)."""
+def companion_command(master: str, out_dir: Path, feed: str, method: str, home: tuple[float, float, float],
+                      *extra: str) -> list[str]:
+    """The command line a user would type (``extra``: e.g. ``--gnss-instance 2``)."""
     if feed not in FEED_MESSAGES:
         raise UserError(f"--feed {feed}: the companion process feeds one of {', '.join(FEED_MESSAGES)}")
     return [sys.executable, "-m", "gcs_tools", "companion", "--master", master, "--out", str(out_dir),
-            "--feed", feed, "--method", method, "--gnss-instance", "2", "--target-system", "1",
+            "--feed", feed, "--method", method, *extra,
             "--home", ",".join(f"{v:.9f}" for v in home), "--no-telemetry"]
 
 
@@ -92,10 +87,10 @@ class CompanionProcess:
 
 def sent_track(tlog_path: Path, feed: str, companion_frame: LocalNedFrame,
                mission_frame: LocalNedFrame) -> tuple[np.ndarray, np.ndarray]:
-    """What the companion SENT ArduPilot (from its tlog): (boot µs (N,), mission NED (N, 3)), time-sorted.
+    """What the companion SENT the autopilot (its tlog): (boot µs (N,), mission NED (N, 3)), time-sorted.
 
     GPS_INPUT: geodetic (a fix_type below 3, sent while it had no valid estimate, is left out);
-    VISION_POSITION_ESTIMATE: NED about the companion's frame origin (``--home``)."""
+    VISION_POSITION_ESTIMATE and ODOMETRY: NED about the companion's frame origin (``--home``)."""
     from pymavlink import mavutil
 
     kind = FEED_MESSAGES[feed]
@@ -115,7 +110,7 @@ def sent_track(tlog_path: Path, feed: str, companion_frame: LocalNedFrame,
                 p.append(mission_frame.to_ned_m(msg.lat * 1e-7, msg.lon * 1e-7, float(msg.alt)))
             else:
                 lla = companion_frame.to_geodetic(np.array([msg.x, msg.y, msg.z], dtype=float))
-                t_us.append(int(msg.usec))
+                t_us.append(int(msg.usec if kind == "VISION_POSITION_ESTIMATE" else msg.time_usec))
                 p.append(mission_frame.to_ned_m(*lla))
     finally:
         log.close()

@@ -1,12 +1,14 @@
-"""After a flight beside ArduPilot: every companion method on the recorded samples, EKF3, truth.
+"""After a flight beside a foreign autopilot: every companion method on the recorded samples, the
+autopilot's EKF, truth.
 
-Pure code, no I/O. The companion's inputs are exactly what ArduPilot streamed (HIGHRES_IMU with
-the latest ATTITUDE_QUATERNION, in ArduPilot's boot time) and exactly the fixes ArduPilot was
-sent (fused at their validity time, pushed at their release time, with the accuracies and the
-Doppler velocity GPS_INPUT gave EKF3), so each method is what a
-companion reading this autopilot would have estimated in open loop, and all methods and EKF3
-are compared on identical GNSS. Errors are taken at the truth samples (SIM_STATE) of the route
-phase; EKF3's GLOBAL_POSITION_INT is interpolated linearly to those times.
+Pure code, no I/O. The companion's inputs are exactly what the autopilot streamed (HIGHRES_IMU
+with the latest ATTITUDE_QUATERNION, in its boot time) and exactly the fixes it was sent (fused
+at their validity time, pushed at their release time, with the accuracies and the Doppler
+velocity the autopilot's EKF is given), so each method is what a companion reading this
+autopilot would have estimated in open loop, and all methods and the autopilot's
+EKF (EKF3, EKF2) are compared on identical GNSS. Errors are taken at the truth samples
+(ArduPilot's SIM_STATE, PX4 SIH's HIL_STATE_QUATERNION) of the route phase; the EKF's
+GLOBAL_POSITION_INT is interpolated linearly to those times.
 """
 
 from __future__ import annotations
@@ -18,11 +20,10 @@ import numpy as np
 from companion.estimator import EstimatorConfig
 from companion.mission import Mission
 from companion.wiring import navigator_for
-from simvehicle.harness.ardupilot.gnss_source import SentFix
-from simvehicle.harness.ardupilot.session import Recording
+from simvehicle.harness.foreign.gnss_source import SentFix
+from simvehicle.harness.foreign.recording import Recording
 
-AUTOPILOT_ROW = "ardupilot-ekf3"
-LIVE_ROW = "companion-live"  # closed loop: what the companion process sent ArduPilot (its tlog)
+LIVE_ROW = "companion-live"  # closed loop: what the companion process sent the autopilot (its tlog)
 
 
 @dataclass(frozen=True)
@@ -30,7 +31,7 @@ class Track:
     """One estimator's output at the evaluation times (N,)."""
 
     p_ned_m: np.ndarray  # (N, 3), NaN before its first estimate
-    b_ned_m: np.ndarray  # (N, 3) estimated multipath bias (NaN for EKF3)
+    b_ned_m: np.ndarray  # (N, 3) estimated multipath bias (NaN for the autopilot's EKF)
     beta: np.ndarray
     nis: np.ndarray
     counters: dict[str, int]
@@ -50,7 +51,7 @@ def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: Estim
     for i, t in enumerate(imu_t):  # as the session pushes them: the IMU sample, then the fixes released
         nav.push_imu_batch(np.array([t]), rec.imu_acc_frd_m_s2[i][None, :], rec.imu_q_ned_frd[i][None, :])
         while k < len(sent) and sent[k].arrival_us <= t:
-            sf = sent[k]  # with the accuracies and the Doppler velocity EKF3 is sent (GPS_INPUT)
+            sf = sent[k]  # with the accuracies and the Doppler velocity the autopilot's EKF is sent
             nav.push_fix_ned(sf.fix.t_validity_us, sf.p_ned_m, sf.fix.h_acc_m, sf.fix.v_acc_m, sf.v_ned_m_s,
                              sf.speed_accuracy_m_s)
             k += 1
@@ -65,7 +66,7 @@ def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: Estim
 
 
 def autopilot_track(rec: Recording, times_us: np.ndarray) -> Track:
-    """EKF3's GLOBAL_POSITION_INT, interpolated to ``times_us`` (NaN outside its span)."""
+    """The autopilot EKF's GLOBAL_POSITION_INT, interpolated to ``times_us`` (NaN outside its span)."""
     return interpolated_track(np.asarray(rec.ekf_t_us, dtype=float), np.asarray(rec.ekf_p_ned_m), times_us)
 
 

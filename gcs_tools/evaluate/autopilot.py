@@ -1,0 +1,365 @@
+"""``beliefnav evaluate --vehicle ardupilot|px4``: a foreign autopilot's EKF beside the companion's
+methods over profiles and seeds (the vehicle's specifics: ``gcs_tools.evaluate.ardupilot``,
+``gcs_tools.evaluate.px4``).
+
+Each (profile, seed, loop) is one SITL flight (``beliefnav sitl --vehicle V``) on its own instance,
+``--workers`` at a time. Every companion method is run on that flight's recorded IMU, attitude and
+GNSS, so all rows share the same fixes. Statistics: pooled 20-50 Hz samples per row; with two or
+more seeds, the median of per-seed medians with a percentile-bootstrap 95 % CI over seeds and the
+reduction against the autopilot's EKF with its paired bootstrap CI. Errors are HORIZONTAL (the
+EKFs hold height on their own references; 3-D figures are in each flight's summary).
+
+Loops (``--feeds``), each the same profiles and seeds flown again: open loops (the autopilot flies
+on its EKF fed our raw fixes, with or without a Doppler velocity; a loop without velocity keeps
+only its EKF row, named by the loop) and closed loops (the autopilot flies on the companion
+PROCESS's feed; row ``companion-live`` = what it sent). Closed loops are compared on tracking
+error, collisions, goals reached and the estimate the autopilot flew on. Flights whose commands
+reached the autopilot late (the machine's scheduler, ``valid`` False) are listed but left out of
+the statistics.
+
+Ctrl-C: every worker stops its SITL and companion and skips its remaining flights; the run ends
+within seconds with "interrupted" (exit 130).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import numpy as np
+
+from companion.estimator.methods import DEFAULT_METHOD
+from gcs_tools.evaluate import stats
+from gcs_tools.jsonvalues import plain_json
+from simvehicle.harness.foreign.analysis import LIVE_ROW
+
+BOOTSTRAP_SEED = 20240917
+CLOSED_LOOP_METHOD = DEFAULT_METHOD
+_interrupted = False  # a worker that got Ctrl-C flies nothing more
+
+
+@dataclass(frozen=True)
+class Loop:
+    """One way of flying the campaign's profiles."""
+
+    name: str  # --feeds value
+    label: str  # what the autopilot flies on (report)
+    feed: str  # the backend's feed: "none" = open loop
+    gnss_velocity: bool = True  # the raw fixes carry a Doppler velocity (open loop)
+    ekf_row: str = ""  # the autopilot EKF's row in this loop ("" = the vehicle's autopilot_row)
+
+    @property
+    def open(self) -> bool:
+        return self.feed == "none"
+
+
+def open_loops(ekf: str, posonly_row: str) -> tuple[Loop, Loop]:
+    """The two open loops every autopilot flies: its EKF on our raw fixes with a Doppler velocity
+    (``none``), and without (``none-posonly``: only its EKF row is kept, as ``posonly_row``)."""
+    return (Loop("none", f"{ekf} on the raw fixes (+ Doppler velocity)", "none"),
+            Loop("none-posonly", f"{ekf} on the raw fixes, position only", "none", gnss_velocity=False,
+                 ekf_row=posonly_row))
+
+
+@dataclass(frozen=True)
+class VehicleCampaign:
+    """A foreign autopilot's campaign: its backend, its EKF's row and the loops it flies."""
+
+    vehicle: str  # backend name (simvehicle.harness.backend.BACKENDS)
+    title: str  # "ArduPilot", "PX4"
+    ekf: str  # "EKF3", "EKF2"
+    autopilot_row: str  # "ardupilot-ekf3"
+    loops: tuple[Loop, ...]
+    figure_title: str
+    config_class: Callable[..., Any]  # the backend's flight configuration (ArduPilotConfig, Px4FlightConfig)
+    speed_field: str  # its speed-up field (speedup, speed_factor)
+
+    def config(self, speed: float | None = None) -> Any:
+        """The flight configuration, at this speed-up (None: its default)."""
+        return self.config_class() if speed is None else self.config_class(**{self.speed_field: speed})
+
+    @property
+    def reduction_key(self) -> str:
+        return f"reduction_vs_{self.ekf.lower()}"
+
+    def loop(self, name: str) -> Loop:
+        return next(lp for lp in self.loops if lp.name == name)
+
+    @property
+    def loop_names(self) -> tuple[str, ...]:
+        return tuple(lp.name for lp in self.loops)
+
+    @property
+    def rows(self) -> tuple[str, ...]:
+        """The EKF rows, the vehicle's own first."""
+        return (self.autopilot_row, *dict.fromkeys(lp.ekf_row for lp in self.loops if lp.ekf_row))
+
+
+@dataclass(frozen=True)
+class Job:
+    campaign: VehicleCampaign
+    mission: str
+    profile: int
+    seed: int
+    methods: tuple[str, ...]
+    out_dir: Path
+    config: Any  # the backend's flight configuration (ArduPilotConfig, Px4FlightConfig)
+    loop: str = "none"  # one of campaign.loops
+
+    @property
+    def feed(self) -> str:
+        return self.campaign.loop(self.loop).feed
+
+
+@dataclass(frozen=True)
+class Result:
+    job: Job
+    errors_h_m: dict[str, np.ndarray]  # row -> horizontal error per sample (route phase)
+    track_error_m: np.ndarray
+    reached_goal: bool
+    collisions: int
+    ended_by: str
+    sim_s: float
+    wall_s: float
+    error: str = ""  # a flight that could not be flown (its rows are absent, the reason kept)
+    valid: bool = True  # False: our commands reached the autopilot late, left out of the statistics
+    command_delay_p95_ms: float = float("nan")
+
+    @property
+    def flown_on(self) -> np.ndarray:
+        """Horizontal error of the estimate the autopilot flew on (its EKF in every loop)."""
+        loop = self.job.campaign.loop(self.job.loop)
+        return self.errors_h_m.get(loop.ekf_row or self.job.campaign.autopilot_row, np.zeros(0))
+
+
+def run_job(job: Job) -> Result:
+    from companion.errors import UserError
+    from gcs_tools.fly.output import write_outputs
+    from simvehicle.harness.backend import FlightRequest, backend
+    from simvehicle.harness.foreign.scoring import HORIZONTAL_ERROR_PREFIX
+
+    if _interrupted:
+        return Result(job, {}, np.zeros(0), False, 0, "interrupted", 0.0, 0.0, "interrupted")
+    spec, loop = job.campaign, job.campaign.loop(job.loop)
+    cfg = replace(job.config, gnss_velocity=loop.gnss_velocity)
+    vehicle = backend(spec.vehicle, config=cfg, methods=job.methods, feed=loop.feed)
+    try:
+        r = vehicle.fly(FlightRequest(job.mission, job.profile, CLOSED_LOOP_METHOD, job.seed, job.out_dir))
+    except UserError as exc:
+        return Result(job, {}, np.zeros(0), False, 0, "error", 0.0, 0.0, str(exc))
+    s, series = r.summary, r.series
+    if series:
+        from companion.mission import load_mission
+
+        write_outputs(r, load_mission(job.mission).world, job.out_dir)
+    errs = {k[len(HORIZONTAL_ERROR_PREFIX):]: np.asarray(v) for k, v in series.items()
+            if k.startswith(HORIZONTAL_ERROR_PREFIX)}
+    if loop.ekf_row:  # the companion rows are those of the loop with velocity
+        errs = {loop.ekf_row: errs[spec.autopilot_row]} if spec.autopilot_row in errs else {}
+    run = s[spec.vehicle]
+    return Result(job, errs, np.asarray(series.get("track_error_m", np.zeros(0))), bool(s["reached_goal"]),
+                  int(s["collisions"]), str(run["ended_by"]), float(run["sim_s"]), float(run["wall_s"]),
+                  valid=bool(s["valid"]), command_delay_p95_ms=float(run["command_delay_ms"]["p95"]))
+
+
+def _worker_init() -> None:
+    """In each worker: the first Ctrl-C (the terminal's, or the parent's) ends the current flight
+    (its SITL and companion are stopped on the way out); later ones are ignored, so that clean-up
+    is not cut short, and every remaining flight is skipped."""
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        global _interrupted
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _interrupted = True
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, interrupt)
+
+
+def run(jobs: Sequence[Job], workers: int) -> list[Result]:
+    if workers <= 1:
+        return [run_job(j) for j in jobs]
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
+    futures: list[Any] = []
+    try:
+        futures = [pool.submit(run_job, j) for j in jobs]
+        return [f.result() for f in futures]
+    except KeyboardInterrupt:
+        for f in futures:
+            f.cancel()
+        for proc in list(getattr(pool, "_processes", {}).values()):  # SIGINT only reached us (kill -INT)
+            if proc.is_alive() and proc.pid is not None:
+                os.kill(proc.pid, signal.SIGINT)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def usable(r: Result) -> bool:
+    return not r.error and r.valid
+
+
+def pooled(results: Sequence[Result], row: str) -> np.ndarray:
+    """Every horizontal-error sample of ``row`` over the flights that were flown."""
+    parts = [r.errors_h_m[row] for r in results if usable(r) and row in r.errors_h_m]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def aggregate(spec: VehicleCampaign, results: Sequence[Result], rows: Sequence[str],
+              seeds: Sequence[int]) -> dict[str, Any]:
+    """Per row: pooled horizontal error stats, per-seed CI and the reduction against the EKF."""
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    open_names = {lp.name for lp in spec.loops if lp.open}
+    ok = [r for r in results if usable(r) and r.job.loop in open_names]  # open loop: the estimators compared
+
+    def seed_medians(row: str) -> np.ndarray:
+        out = []
+        for seed in seeds:
+            parts = [r.errors_h_m[row] for r in ok if r.job.seed == seed and row in r.errors_h_m]
+            x = np.concatenate(parts) if parts else np.zeros(0)
+            x = x[np.isfinite(x)]
+            out.append(float(np.median(x)) if x.size else float("nan"))
+        return np.array(out)
+
+    ref = spec.autopilot_row
+    ekf_seeds = seed_medians(ref)
+    ekf_pooled = stats.summarize(pooled(ok, ref))
+    key = spec.reduction_key
+    table: dict[str, Any] = {}
+    for row in rows:
+        if not any(row in r.errors_h_m for r in ok):
+            continue
+        entry: dict[str, Any] = dict(stats.summarize(pooled(ok, row)))
+        entry[key] = stats.reduction(entry["median"], ekf_pooled["median"])
+        per_flight = [float(np.nanmedian(r.errors_h_m[row])) for r in ok if row in r.errors_h_m
+                      and np.isfinite(r.errors_h_m[row]).any()]
+        entry["flight_medians"] = per_flight
+        if len(seeds) >= 2:
+            m = seed_medians(row)
+            entry["seed_median"] = float(np.nanmedian(m))
+            entry["seed_median_ci95"] = list(stats.bootstrap_ci(m, rng))
+            if row != ref:
+                v, lo, hi = stats.paired_reduction_ci(m, ekf_seeds, rng)
+                entry[f"{key}_seeds"] = {"value": v, "ci95": [lo, hi]}
+        table[row] = entry
+    flying = {}
+    for loop in spec.loops:
+        of_loop = [r for r in results if r.job.loop == loop.name]
+        if not of_loop:
+            continue
+        good = [r for r in of_loop if usable(r)]
+        track = np.concatenate([r.track_error_m for r in good] or [np.zeros(0)])
+        flown = np.concatenate([r.flown_on for r in good] or [np.zeros(0)])
+        live = np.concatenate([r.errors_h_m.get(LIVE_ROW, np.zeros(0)) for r in good] or [np.zeros(0)])
+        flying[loop.name] = {
+            "flies_on": loop.label, "flights": len(of_loop), "valid": len(good),
+            "invalid_late_commands": sum(not r.valid for r in of_loop if not r.error),
+            "errors": sum(bool(r.error) for r in of_loop),
+            "reached_goal": sum(r.reached_goal for r in good),
+            "collisions": sum(r.collisions for r in good),
+            "tracking_error_m": stats.summarize(track),
+            "flown_estimate_error_horizontal_m": stats.summarize(flown),  # the EKF's, in every loop
+            "companion_sent_error_horizontal_m": stats.summarize(live),  # closed loop: what it sent
+            "flight_tracking_medians": [float(np.median(r.track_error_m))
+                                        for r in good if r.track_error_m.size],
+        }
+    return {"open_loop": table, "flying": flying}
+
+
+def table_text(spec: VehicleCampaign, res: dict[str, Any]) -> str:
+    """The Markdown tables: open-loop rows, then how each loop flew."""
+    ekf, key = spec.ekf, spec.reduction_key
+    lines = [f"| estimator | horizontal error median [m] | p95 [m] | vs {ekf} | per-seed median [95 % CI] |",
+             "| --- | ---: | ---: | ---: | --- |"]
+    for row, e in res["open_loop"].items():
+        ci = e.get("seed_median_ci95")
+        seed = (f"{e['seed_median']:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]" if ci and np.isfinite(ci[0])
+                else "n/a (one seed)")
+        red = e.get(f"{key}_seeds")
+        vs = "—" if row == spec.autopilot_row else f"{100 * e[key]:+.0f} %"
+        if row != spec.autopilot_row and red and np.isfinite(red["ci95"][0]):
+            lo, hi = (100 * x for x in red["ci95"])
+            vs += f" (seeds {100 * red['value']:+.0f} % [{lo:+.0f}, {hi:+.0f}])"
+        lines.append(f"| {row} | {e['median']:.2f} | {e['p95']:.2f} | {vs} | {seed} |")
+    lines += ["", f"| {spec.title} flies on | flights (valid) | reached goal | collisions "
+                  f"| tracking median [m] | p95 [m] | {ekf} horizontal median [m] | companion sent [m] |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for f in res["flying"].values():
+        trk, fl, cs = (f["tracking_error_m"], f["flown_estimate_error_horizontal_m"],
+                       f["companion_sent_error_horizontal_m"])
+        sent = f"{cs['median']:.2f}" if cs["n"] else "—"
+        lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) | {f['reached_goal']} "
+                     f"| {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} | {fl['median']:.2f} "
+                     f"| {sent} |")
+    return "\n".join(lines) + "\n"
+
+
+def error_figure(spec: VehicleCampaign, results: Sequence[Result], rows: Sequence[str], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = []
+    open_names = {lp.name for lp in spec.loops if lp.open}
+    ok = [r for r in results if r.job.loop in open_names]
+    rows = [row for row in rows if any(row in r.errors_h_m for r in ok)]
+    for row in rows:
+        x = pooled(ok, row)
+        data.append(x[np.isfinite(x)])
+    fig, ax = plt.subplots(figsize=(7.0, 3.8))
+    ax.boxplot(data, whis=(5, 95), showfliers=False)
+    ax.set_xticks(range(1, len(rows) + 1), rows, rotation=20, fontsize=8)
+    ax.set_ylabel("horizontal estimation error [m]")
+    ax.set_title(spec.figure_title, fontsize=9)
+    ax.grid(alpha=0.25, axis="y")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def check_feeds(spec: VehicleCampaign, text: str) -> tuple[str, ...]:
+    """``--feeds`` as distinct loop names of ``spec`` (a one-line UserError otherwise)."""
+    from companion.errors import UserError
+
+    feeds = tuple(f.strip() for f in text.split(",") if f.strip())
+    if not feeds or any(f not in spec.loop_names for f in feeds) or len(set(feeds)) != len(feeds):
+        raise UserError(f"--feeds: expected distinct values of {', '.join(spec.loop_names)}, got {text!r}")
+    return feeds
+
+
+def evaluate(spec: VehicleCampaign, mission: str, profiles: Sequence[int], methods: Sequence[str],
+             seeds: Sequence[int], workers: int, out: Path, config: Any,
+             feeds: Sequence[str] | None = None) -> dict[str, Any]:
+    out.mkdir(parents=True, exist_ok=True)
+    flights = out / "flights"
+    loops = tuple(feeds) if feeds is not None else spec.loop_names
+    jobs = [Job(spec, mission, p, s, tuple(methods), flights / f"{loop}-profile{p:02d}-seed{s}", config, loop)
+            for s in seeds for p in profiles for loop in loops]
+    t0 = time.perf_counter()
+    results = run(jobs, workers)
+    wall_s = time.perf_counter() - t0
+    rows = (*spec.rows, *methods)
+    res = aggregate(spec, results, rows, seeds)
+    res["info"] = {
+        "vehicle": spec.vehicle, "mission": mission, "profiles": list(profiles), "seeds": list(seeds),
+        "methods": list(methods), "workers": workers, "wall_s": wall_s,
+        "config": asdict(config),
+        "gnss_velocity": f"truth + N(0, {config.gnss_velocity_sigma_m_s:g} m/s) per axis, in the loops "
+                         + ", ".join(lp.name for lp in spec.loops if lp.gnss_velocity and lp.name in loops),
+        "flights": [{"profile": r.job.profile, "seed": r.job.seed, "feed": r.job.loop, "valid": r.valid,
+                     "command_delay_p95_ms": r.command_delay_p95_ms, "ended_by": r.ended_by,
+                     "reached_goal": r.reached_goal, "collisions": r.collisions, "sim_s": r.sim_s,
+                     "wall_s": r.wall_s, "error": r.error} for r in results],
+    }
+    (out / "results.json").write_text(json.dumps(plain_json(res, nan_to_none=True), indent=2) + "\n")
+    error_figure(spec, results, rows, out / "errors_horizontal.png")
+    (out / "report.md").write_text(table_text(spec, res))
+    return res
