@@ -16,23 +16,25 @@ CFG = EstimatorConfig()
 DT_FIX_S = 0.05
 
 
-def _terms(rng: np.random.Generator, scale_m: float) -> InnovationTerms:
+def _terms(rng: np.random.Generator, scale_m: float, bias_scale: float = 1.0) -> InnovationTerms:
     return InnovationTerms(
         y=tuple(scale_m * rng.standard_normal(3)),
         s0=tuple(rng.uniform(0.002, 0.05, 3)),
         q_bias_unit=0.033,
         r_nominal=(0.0064, 0.0064, 0.01),
         pht_p=tuple(rng.uniform(0.001, 0.03, 3)),
+        bias_scale=bias_scale,
     )
 
 
 @pytest.mark.parametrize("loss", ["student-t", "gaussian"])
 @pytest.mark.parametrize("scale_m", [0.05, 0.3, 2.0])
-def test_gradient_matches_finite_differences(loss, scale_m):
+@pytest.mark.parametrize("bias_scale", [1.0, 6.7])  # a decimetre receiver; one stating 8 m
+def test_gradient_matches_finite_differences(loss, scale_m, bias_scale):
     cfg = dataclasses.replace(CFG, loss=loss)
     rng = np.random.default_rng(int(scale_m * 100))
     for beta in (0.05, 0.3, 0.6, 0.93):
-        t = _terms(rng, scale_m)
+        t = _terms(rng, scale_m, bias_scale)
         h = 1e-6
         fd = (loss_grad(beta + h, t, cfg)[0] - loss_grad(beta - h, t, cfg)[0]) / (2 * h)
         assert loss_grad(beta, t, cfg)[1] == pytest.approx(fd, rel=1e-6, abs=1e-8)

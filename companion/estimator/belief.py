@@ -48,19 +48,23 @@ class InnovationTerms(NamedTuple):
     q_bias_unit: float  # 1 − α(T)²: H Q_b Hᵀ = this · σ_b(β)² I
     r_nominal: Vec3  # nominal R (variances)
     pht_p: Vec3  # position rows of P⁻ Hᵀ: P⁻_pp + P⁻_pb (β-independent)
+    bias_scale: float = 1.0  # the receiver's scale of the bias range: σ_b(β) × this (config.bias_scale)
 
     def hph(self, sigma_bias_m: float) -> Vec3:
-        """diag(H P⁻ Hᵀ) for a bias std σ_b."""
-        q = self.q_bias_unit * sigma_bias_m * sigma_bias_m
+        """diag(H P⁻ Hᵀ) for a bias std σ_b (before the receiver's scale)."""
+        sb = sigma_bias_m * self.bias_scale
+        q = self.q_bias_unit * sb * sb
         return (self.s0[0] + q, self.s0[1] + q, self.s0[2] + q)
 
 
 def s_of_beta(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[Vec3, Vec3]:
     """(diag S(β), diag ∂S/∂β)."""
-    sb = cfg.sigma_bias_m(beta)
+    f = t.bias_scale
+    sb = cfg.sigma_bias_m(beta) * f
     r = cfg.r_factor(beta)
-    hph = t.hph(sb)
-    dq = -2.0 * t.q_bias_unit * sb * cfg.sigma_bias_max_m
+    q = t.q_bias_unit * sb * sb
+    hph = (t.s0[0] + q, t.s0[1] + q, t.s0[2] + q)
+    dq = -2.0 * t.q_bias_unit * sb * cfg.sigma_bias_max_m * f
     dr = -math.log(cfg.r_inflation_max) * r
     S = (hph[0] + r * t.r_nominal[0], hph[1] + r * t.r_nominal[1], hph[2] + r * t.r_nominal[2])
     dS = (dq + dr * t.r_nominal[0], dq + dr * t.r_nominal[1], dq + dr * t.r_nominal[2])

@@ -55,6 +55,13 @@ class EstimatorConfig:
     sigma_gnss_horizontal_m: float = 0.08  # paper: nominal GNSS noise std, north and east
     sigma_gnss_vertical_m: float = 0.08  # paper gives one value; vertical kept equal
     r_inflation_max: float = 1.5625  # R(0) / R(1) = (0.10 / 0.08)²: paper noise under multipath / nominal
+    # The bias range at the receiver's scale: σ_b(β) and the bias's prior are multiplied by
+    # max(1, this × the fix's nominal horizontal std / sigma_bias_max_m), i.e. the largest bias std is at
+    # least this many times the receiver's own 1σ (its reported accuracy, or its learned noise). The paper's
+    # 1.2 m is the bias of a 0.08 m receiver; a single-point receiver in a street stating 8 m has biases of
+    # 5-50 m, which a 1.2 m range can only take as position (docs/estimator.md, "The bias range at the
+    # receiver's scale": 1 on the real-IMU tuning flights). Receivers of 1.2 m or better: unchanged.
+    sigma_bias_max_per_gnss_std: float = 1.0
 
     # --- initial covariance (at the first good fix; position from the fix itself)
     sigma_velocity0_m_s: float = 1.0  # velocity is unknown at start-up
@@ -262,8 +269,9 @@ class EstimatorConfig:
             raise ValueError("adaptive_window_fixes: must be >= 2")
         if not (0.0 < self.vb_forgetting <= 1.0 and self.vb_iterations >= 1 and self.vb_prior_dof > 0.0):
             raise ValueError("vb_forgetting, vb_iterations, vb_prior_dof: need 0 < ρ ≤ 1, ≥ 1, > 0")
-        for name in ("future_tolerance_s", "lambda_smooth_1_m", "eta_first_order", "sigma_acc_bias0_m_s2",
-                     "sigma_acc_bias_rw_m_s2_sqrt_s", "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s"):
+        for name in ("future_tolerance_s", "lambda_smooth_1_m", "sigma_bias_max_per_gnss_std",
+                     "eta_first_order", "sigma_acc_bias0_m_s2", "sigma_acc_bias_rw_m_s2_sqrt_s",
+                     "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name}: must be a finite number >= 0")
 
@@ -276,6 +284,12 @@ class EstimatorConfig:
     def sigma_bias_m(self, beta: float) -> float:
         """σ_b(β) of eq. 13 (m)."""
         return self.sigma_bias_max_m * (1.0 - beta) + self.sigma_bias_floor_m
+
+    def bias_scale(self, r_nominal_h_m2: float) -> float:
+        """The receiver's scale of the bias range (≥ 1) for a fix of nominal horizontal R ``r_nominal_h_m2``
+        (m²): σ_b(β) and the bias's prior and reset variance are multiplied by it."""
+        k = self.sigma_bias_max_per_gnss_std * math.sqrt(r_nominal_h_m2) / self.sigma_bias_max_m
+        return k if k > 1.0 else 1.0
 
     def r_factor(self, beta: float) -> float:
         """R(β) / R_nom = r_inflation_max ** (1 − β): 1 at full trust, r_inflation_max at none."""

@@ -107,6 +107,9 @@ class Fusion(NamedTuple):
     v_smooth: Vec3 = (0.0, 0.0, 0.0)
     invalid: bool = False
     n_invalid: int = 0
+    # the receiver's scale of the bias range in force from this entry (config.bias_scale of this fix's
+    # nominal R): sigma_bias_m above includes it
+    bias_scale: float = 1.0
 
 
 class Snapshot(NamedTuple):
@@ -367,16 +370,18 @@ class FusionEngine:
         r: Vec3 = (s0 if fix.r[0] == math.inf else fix.r[0], s0 if fix.r[1] == math.inf else fix.r[1],
                    s0 if fix.r[2] == math.inf else fix.r[2])
         x = (*z, *(0.0,) * (model.N_STATE - 3))
-        P = model.initial_cov(self.cfg, r)
+        f = self.cfg.bias_scale(r[0])  # the receiver's scale of the bias range (1 for a decimetre receiver)
+        P = model.initial_cov(self.cfg, r, f)
         if zv is not None:  # the receiver's velocity where it gives one
-            x, P = model.reset_to_fix(x, P, z, r, self.cfg.sigma_bias0_m**2, zv, fix.rv)
+            x, P = model.reset_to_fix(x, P, z, r, (self.cfg.sigma_bias0_m * f) ** 2, zv, fix.rv)
         state = self.method.initial_state()
+        beta = self.method.beta(state)
         self.fusions.append(Fusion(t_us, z, x, P, state, math.nan, self.imu.integrals(t_us),
-                                   self.method.beta(state), self.cfg.sigma_bias_m(self.method.beta(state)),
+                                   beta, self.cfg.sigma_bias_m(beta) * f,
                                    fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, None, 0, 0, zv, fix.rv,
                                    scale_h_m=_SCALE_H * math.sqrt(r[0]), scale_v_m=_SCALE_V * math.sqrt(r[2]),
                                    noise_h_m=_SCALE_H * math.sqrt(r[0]), noise_v_m=_SCALE_V * math.sqrt(r[2]),
-                                   v_smooth=(x[3], x[4], x[5])))
+                                   v_smooth=(x[3], x[4], x[5]), bias_scale=f))
         self._fusion_t.append(t_us)
         self._tested += 1
         self._count()
@@ -431,7 +436,7 @@ class FusionEngine:
             fused_pos = False
             if off is not None:  # the step still holds (the fix passes relative to the offset)?
                 rel = self._relative(prev.state, y, off, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
-                                     floor_v, k_max)
+                                     floor_v, k_max, terms.bias_scale)
                 if rel is not None and t_us - t_off >= self._offset_max_us:
                     # it lasted: the GNSS's new track (EKF2/EKF3 reset into it): the position moves onto
                     # this fix, which is fused with that zero innovation
@@ -445,7 +450,7 @@ class FusionEngine:
             if not fused_pos and not held and acc is not None and t_us - t_acc <= self._return_us:
                 back = (-acc[0], -acc[1], -acc[2])  # the fix is back on the track kept before the step?
                 rel = self._relative(prev.state, y, back, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
-                                     floor_v, k_max)
+                                     floor_v, k_max, terms.bias_scale)
                 if rel is not None:
                     fused_pos, (y_fused, R_fused, terms_fused) = True, rel
                     shift, acc, t_acc, n_ret, glitch, off, t_off = back, None, 0, n_ret + 1, False, None, 0
@@ -503,12 +508,15 @@ class FusionEngine:
         a2 = (v0 - vs[0]) ** 2 + (v1 - vs[1]) ** 2 + (v2 - vs[2]) ** 2
         invalid = self._outside_envelope(x_post) or a2 > self._dv_max2
         beta = self.method.beta(state)
+        f = self.cfg.bias_scale(r_nom[0])
+        if reset and f != 1.0:  # the reset's bias prior at the receiver's scale (model.reset_to_fix's form)
+            P_post = model.scale_bias_prior(P_post, f, self._reset_var[0])
         self.fusions.append(Fusion(
-            t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta),
+            t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta) * f,
             r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, acc, t_acc, n_ret,
             zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
-            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid))
+            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f))
         self._fusion_t.append(t_us)
 
     def _outside_envelope(self, x: model.State) -> bool:
@@ -555,7 +563,7 @@ class FusionEngine:
             r_nom = (h, h, v)
         floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
         floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
-        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p)
+        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p, prev.bias_scale)
         # a receiver stating neither its accuracy nor a velocity: innovations beyond its own noise may be
         # the IMU's fault (a wrong attitude), so an R-learner may not learn much more than that noise
         k_max = self._r_max_blind if (r_given[0] == math.inf and zv is None) else self._r_max
@@ -586,12 +594,12 @@ class FusionEngine:
         return True
 
     def _relative(self, state: Any, y: Vec3, off: Vec3, s0: Vec3, q_bias_unit: float, r_nom: Vec3,
-                  pht_p: Vec3, hph: _Hph, floor_h: float, floor_v: float, k_max: float
-                  ) -> tuple[Vec3, Vec3, InnovationTerms] | None:
+                  pht_p: Vec3, hph: _Hph, floor_h: float, floor_v: float, k_max: float,
+                  bias_scale: float) -> tuple[Vec3, Vec3, InnovationTerms] | None:
         """(innovation, R, terms) of the fix relative to the offset ``off`` (y − off) if that passes
         the gate, else None."""
         y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
-        terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p)
+        terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p, bias_scale)
         R_off = self._r_of(state, terms_off, r_nom, k_max)
         if self._gate(y_off, hph, R_off, floor_h, floor_v)[1]:
             return y_off, R_off, terms_off

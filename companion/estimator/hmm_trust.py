@@ -92,7 +92,8 @@ def log_likelihoods(terms: InnovationTerms, levels: tuple[Level, ...],
     """log N(y; 0, S_j) summed over ``axes`` (NED indices), per level."""
     out = []
     for lv in levels:
-        q = terms.q_bias_unit * lv.sigma_bias_m * lv.sigma_bias_m
+        sb = lv.sigma_bias_m * terms.bias_scale
+        q = terms.q_bias_unit * sb * sb
         ll = 0.0
         for i in axes:
             s = terms.s0[i] + q + lv.r_factor * terms.r_nominal[i]

@@ -175,11 +175,13 @@ def update(
     return x_post, P_post, y, S, float(y @ S_inv @ y)
 
 
-def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = None) -> np.ndarray:
+def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = None,
+                bias_scale: float = 1.0) -> np.ndarray:
     """P₀ at the first fix: position as good as the fix (its R: ``r_m2``, default the config's
-    nominal R), velocity and biases from the config."""
+    nominal R), velocity and biases from the config (the GNSS bias's std × ``bias_scale``, the
+    receiver's scale of the bias range: ``EstimatorConfig.bias_scale``)."""
     r = np.diag(cfg.r_nominal_m2()) if r_m2 is None else np.asarray(r_m2, dtype=float)
-    v, b = np.full(3, cfg.sigma_velocity0_m_s**2), np.full(3, cfg.sigma_bias0_m**2)
+    v, b = np.full(3, cfg.sigma_velocity0_m_s**2), np.full(3, (cfg.sigma_bias0_m * bias_scale) ** 2)
     a = np.full(3, cfg.sigma_acc_bias0_m_s2**2)
     d = np.full(3, cfg.sigma_acc_ned0_m_s2**2)
     return np.diag(np.concatenate([r, v, b, a, d]))
@@ -246,3 +248,16 @@ def reset_to_fix(x: State, P: np.ndarray, z: tuple[float, float, float], r_m2: t
         out[9 + i, 9 + i] = max(float(diag[9 + i]), imu_var_m2_s4[0])
         out[12 + i, 12 + i] = max(float(diag[12 + i]), imu_var_m2_s4[1])
     return (z[0], z[1], z[2], v[0], v[1], v[2], 0.0, 0.0, 0.0, *x[9:]), out
+
+
+def scale_bias_prior(P: np.ndarray, f: float, bias_var_m2: float) -> np.ndarray:
+    """``reset_to_fix``'s covariance with the bias variance ``bias_var_m2`` raised to f² times it (a
+    new array): position variance R + f² var(b), covariance −f² var(b), bias f² var(b)."""
+    out = P.copy()
+    f2 = f * f
+    for i in range(3):
+        out[i, i] += (f2 - 1.0) * bias_var_m2
+        out[i, 6 + i] *= f2
+        out[6 + i, i] *= f2
+        out[6 + i, 6 + i] *= f2
+    return out

@@ -35,7 +35,7 @@ def window_nll(betas: np.ndarray, window: tuple[InnovationTerms, ...], cfg: Esti
     y = np.array([t.y for t in window])  # (N, 3)
     s0 = np.array([t.s0 for t in window])
     r_nom = np.array([t.r_nominal for t in window])
-    q_unit = np.array([t.q_bias_unit for t in window])  # (N,)
+    q_unit = np.array([t.q_bias_unit * t.bias_scale * t.bias_scale for t in window])  # (N,): σ_b scaled
     sb = cfg.sigma_bias_max_m * (1.0 - betas) + cfg.sigma_bias_floor_m  # (G,)
     r = cfg.r_inflation_max ** (1.0 - betas)  # (G,)
     q_b = (q_unit[None, :] * (sb * sb)[:, None])[:, :, None]  # (G, N, 1)
