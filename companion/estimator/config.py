@@ -55,13 +55,14 @@ class EstimatorConfig:
     sigma_gnss_horizontal_m: float = 0.08  # paper: nominal GNSS noise std, north and east
     sigma_gnss_vertical_m: float = 0.08  # paper gives one value; vertical kept equal
     r_inflation_max: float = 1.5625  # R(0) / R(1) = (0.10 / 0.08)²: paper noise under multipath / nominal
-    # The bias range at the receiver's scale: σ_b(β) and the bias's prior are multiplied by
-    # max(1, this × the fix's nominal horizontal std / sigma_bias_max_m), i.e. the largest bias std is at
-    # least this many times the receiver's own 1σ (its reported accuracy, or its learned noise). The paper's
-    # 1.2 m is the bias of a 0.08 m receiver; a single-point receiver in a street stating 8 m has biases of
-    # 5-50 m, which a 1.2 m range can only take as position (docs/estimator.md, "The bias range at the
-    # receiver's scale": 1 on the real-IMU tuning flights). Receivers of 1.2 m or better: unchanged.
-    sigma_bias_max_per_gnss_std: float = 1.0
+    # The bias range at the receiver's scale (0: off, the default): σ_b(β) and the bias's prior are multiplied
+    # by max(1, this × the fix's nominal horizontal std / sigma_bias_max_m), so the largest bias std is at
+    # least this many times the receiver's own 1σ (reported, or learned). The paper's 1.2 m is the bias of a
+    # 0.08 m receiver; a single-point receiver stating 8 m has biases of 5-50 m. Measured (docs/estimator.md,
+    # "The bias range at the receiver's scale"), 1 helps the belief methods on real IMU flights with a clean
+    # Doppler velocity and hurts the flying filter on the calibrated canyon receiver: off by default.
+    # Receivers of 1.2 m / this or better are unchanged either way.
+    sigma_bias_max_per_gnss_std: float = 0.0
 
     # --- initial covariance (at the first good fix; position from the fix itself)
     sigma_velocity0_m_s: float = 1.0  # velocity is unknown at start-up
