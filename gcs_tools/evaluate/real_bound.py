@@ -150,9 +150,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"real_bound: error: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps(out, indent=1))
+    for b in out:  # one JSON object per accuracy
+        print(json.dumps(b))
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())
