@@ -45,6 +45,7 @@ from companion.autopilot.connection import MavConnection, PeerPolicy
 from companion.autopilot.discovery import Discovery, DiscoveryConfig, enum_name
 from companion.autopilot.frame import FrameChooser, FrameConfig, plausible
 from companion.autopilot.options import DEFAULT_COMPONENT_ID, FEEDS
+from companion.autopilot.status import AutopilotStatus
 from companion.autopilot.streams import StreamRates, data_stream_requests, interval_requests
 from companion.autopilot.timesync import Timesync, TimesyncConfig
 from companion.autopilot.translate import TranslateConfig, Translator, boot_stamp_us
@@ -142,6 +143,7 @@ class AutopilotCompanion:
         self.clock = StreamClock(window)
         self.telemetry = telemetry or TelemetryPublisher.disabled()
         self._topics = EstimatorTelemetry(self.telemetry)
+        self.status = AutopilotStatus(self.telemetry)  # status (mode, armed) and gnss for the ground tools
         self.nav: Navigator | TightNavigator | None = None
         self._ephemerides: dict[tuple[int, int], KeplerEphemeris] = {}  # (PRN, IODE) -> from the receiver
         self._klobuchar: Any = None
@@ -207,7 +209,9 @@ class AutopilotCompanion:
             arrival = self.conn.arrival_us(msg) if self.exact_arrivals else None
             if not self._boot_time_ok(kind, stamp, round(now_s * 1e6) if arrival is None else arrival, now_s):
                 return
-        if kind == "TIMESYNC":
+        if kind == "HEARTBEAT":
+            self.status.heartbeat(msg, self.clock.base_us or 0, now_s, self.frame)
+        elif kind == "TIMESYNC":
             answer = self.timesync.handle(msg, time.monotonic_ns())
             if answer is not None:
                 self.conn.send(answer)
@@ -231,6 +235,8 @@ class AutopilotCompanion:
                 self.comparison.reference_local(self._key(int(msg.time_boot_ms) * 1000), p)
         else:
             sample = self.translator.sample(msg)
+            if kind == self.translator.config.gnss_type:
+                self.status.gnss(msg, sample, self.clock.base_us or 0, now_s)  # type: ignore[arg-type]
             if sample is not None:
                 self._push(sample, now_s)
 
@@ -490,6 +496,10 @@ class AutopilotCompanion:
             round(frame.home_alt_m * 1e3), 0))
 
     # -- results ------------------------------------------------------------------------------
+    def finish(self) -> None:
+        """A clean end: the last ``health`` says ``ended`` (nothing before the first estimate)."""
+        self._topics.finish(self.nav)
+
     def nav_counters(self) -> Counter[str]:
         total = Counter(self.past_nav_counters)
         if self.nav is not None:

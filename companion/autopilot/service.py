@@ -108,6 +108,8 @@ def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) ->
     try:
         failure = serve(node, start, lambda: write_json(config.out_dir / "summary.json", summary()), receiver)
     finally:
+        if failure is None:
+            node.finish()  # a clean end (duration, Ctrl-C, SIGTERM): the ground tools say "ended"
         result = summary()
         write_json(config.out_dir / "summary.json", result)
         if receiver is not None:

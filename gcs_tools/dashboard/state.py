@@ -139,12 +139,12 @@ class LiveState:
         elif isinstance(obj, zc.Belief):
             v.add("beta", [t_s, _num(obj.beta), _num(obj.nis)])
         elif isinstance(obj, zc.GnssReport):
-            v.add("latency", [t_s, _num(obj.latency_s)])
             fix = obj.fix
-            v.latest.update(gnss_latency_s=obj.latency_s, fix_type=fix.fix_type,
-                            satellites=fix.satellites_visible, hdop=fix.hdop, h_acc_m=fix.h_acc_m,
-                            gnss_alt_m=fix.alt_m)
-            if fix.fix_type >= 2:
+            v.latest.update(fix_type=fix.fix_type, satellites=fix.satellites_visible, hdop=fix.hdop,
+                            h_acc_m=fix.h_acc_m, gnss_alt_m=fix.alt_m)
+            if fix.fix_type >= 2:  # a position, with its latency (a no-fix report has neither)
+                v.add("latency", [t_s, _num(obj.latency_s)])
+                v.latest["gnss_latency_s"] = obj.latency_s
                 v.place(obj)
         elif isinstance(obj, zc.FlightStatus):
             v.latest.update(mode=obj.mode, armed=obj.armed)
