@@ -8,12 +8,15 @@ from __future__ import annotations
 import json
 import math
 import time
+from contextlib import ExitStack
+from pathlib import Path
 
 import numpy as np
 import pytest
 from ardupilot_helpers import GroundStation, require_ardupilot, stop, tlog_messages
 from pymavlink.dialects.v20 import common as mavlink2
-from telemetry_helpers import hub_env
+from telemetry_helpers import child, free_port, hub_env
+from test_dashboard_browser import ARGS, CHROMIUM
 
 from companion.autopilot.status import AutopilotStatus, flight_mode
 from companion.domain.geodesy import LocalNedFrame
@@ -118,8 +121,19 @@ def test_beside_arducopter_sitl_the_dashboard_state_shows_mode_armed_and_fix(tmp
     state = LiveState()
     out = tmp_path / "companion"
     cfg = TelemetryConfig.from_env(env)
-    with TelemetrySubscriber(state.ingest, cfg) as sub, \
-            ArduPilotSitl(SitlConfig(work_dir=tmp_path / "ap", speedup=10)) as sitl:
+    port = free_port()
+    with ExitStack() as stack:
+        page = None
+        if Path(CHROMIUM).exists():  # and the page itself, in headless Chromium, beside it
+            dash = stack.enter_context(child(["-m", "gcs_tools", "dashboard", "--port", str(port)], env))
+            assert dash.stdout.readline().startswith("dashboard on http://127.0.0.1:")
+            pw = stack.enter_context(pytest.importorskip("playwright.sync_api").sync_playwright())
+            browser = pw.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            stack.callback(browser.close)
+            page = browser.new_page(viewport={"width": 1300, "height": 900})
+            page.goto(f"http://127.0.0.1:{port}/")
+        sub = stack.enter_context(TelemetrySubscriber(state.ingest, cfg))
+        sitl = stack.enter_context(ArduPilotSitl(SitlConfig(work_dir=tmp_path / "ap", speedup=10)))
         proc = subprocess.Popen([sys.executable, "-m", "gcs_tools", "companion", "--master", sitl.url,
                                  "--out", str(out), "--vehicle-id", "ap1", "--duration-s", "25"],
                                 env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -155,6 +169,13 @@ def test_beside_arducopter_sitl_the_dashboard_state_shows_mode_armed_and_fix(tmp
             assert latest().get("armed") is True or ("GUIDED", True) in seen, (latest(), texts)
             gcs.conn.mav.command_long_send(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, *[0] * 5)
             assert wait(lambda s: s.get("armed") is False, 10), latest()
+            if page is not None:
+                page.wait_for_function("() => document.getElementById('f-mode').textContent === 'GUIDED'"
+                                       " && document.getElementById('f-armed').textContent === 'disarmed'"
+                                       " && window.dashboardVehicles.ap1.series.fix.length > 10",
+                                       timeout=10_000)
+                tiles = ("mode", "armed", "fix", "sats", "hdop", "alt")
+                shown = {k: page.inner_text(f"#f-{k}") for k in tiles}
         finally:
             if gcs is not None:
                 gcs.close()
@@ -190,3 +211,8 @@ def test_beside_arducopter_sitl_the_dashboard_state_shows_mode_armed_and_fix(tmp
     # at rest: the fixes on the map where the estimates are (same frame), within the SITL's noise
     assert np.linalg.norm(placed.mean(axis=0) - est.mean(axis=0)) < 2.0
     assert s["status"]["companion"] == "ended"
+    if page is not None:  # the page shows the state's values as QGroundControl would
+        assert shown["mode"] == "GUIDED" and shown["armed"] == "disarmed", shown
+        assert shown["fix"] == {3: "3D fix", 6: "RTK fixed"}[s["fix_type"]], shown
+        assert shown["sats"] == str(s["satellites"]) and shown["hdop"] == f"{s['hdop']:.1f}", shown
+        assert abs(float(shown["alt"].removesuffix(" m"))) < 2.0, shown
