@@ -29,14 +29,24 @@ def _collisions(n: int) -> str:
     return "no collision" if n == 0 else f"{n} collision{'s' if n > 1 else ''}"
 
 
-def gnss_line(g: dict[str, int]) -> str:
-    """``GNSS fixes: 2,665 sent, 2,651 fused, none rejected, 14 not yet delivered at the end``: the
-    parts add up (a fix still inside the simulated receiver latency when the flight ends is neither
-    fused nor rejected)."""
+REJECTION_WORDS = {"innovation": "by the innovation gate", "too_old": "too old", "future": "from the future",
+                   "duplicate": "repeated", "nonfinite": "not finite",
+                   "before_imu": "before the first IMU sample", "fix_type": "without a 3-D fix"}
+
+
+def gnss_line(g: dict[str, int], counters: dict[str, int] | None = None) -> str:
+    """``GNSS fixes: 2,665 sent, 2,660 fused, 1 rejected (1 too old), 4 not yet delivered at the
+    end``: the parts add up (a fix still inside the simulated receiver latency when the flight ends
+    is neither fused nor rejected); the rejections by reason from the estimator's ``counters``."""
     sent, fused, rejected = g["sent"], g["fused"], g["rejected"]
     pending = sent - fused - rejected
     text = (f"GNSS fixes: {sent:,} sent, {fused:,} fused, "
             + (f"{rejected:,} rejected" if rejected else "none rejected"))
+    reasons = {k.removeprefix("gnss_rejected_"): n for k, n in (counters or {}).items()
+               if k.startswith("gnss_rejected_") and n}
+    if rejected and sum(reasons.values()) == rejected:
+        text += " (" + ", ".join(f"{n:,} {REJECTION_WORDS.get(r, r.replace('_', ' '))}"
+                                 for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])) + ")"
     if pending > 0:
         text += f", {pending:,} not yet delivered at the end"
     return text
@@ -54,7 +64,7 @@ def flight_lines(command: str, s: dict[str, Any], out: Path, files: Sequence[str
         + (f" (ended by {sitl['ended_by']})" if sitl else ""),
         f"  estimation error median {_m(est['median'])} p95 {_m(est['p95'])}; tracking error median "
         f"{_m(trk['median'])} p95 {_m(trk['p95'])}; min clearance {_m(s['min_clearance_m'])}",
-        "  " + gnss_line(s["gnss"]) + "; " + _collisions(s["collisions"])
+        "  " + gnss_line(s["gnss"], s.get("estimator_counters")) + "; " + _collisions(s["collisions"])
         + (f"; lockstep: {lock.get('retries', 0)} waits, {lock.get('gave_up', 0)} give-ups" if lock else ""),
         f"  wrote {out}/: {', '.join(files)}",
     ]

@@ -36,3 +36,19 @@ def test_parse_errors_are_one_line_with_a_hint():
         assert done.returncode == 2 and done.stdout == ""
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and want in lines[0], done.stderr
+
+
+def test_flight_summary_gnss_line_adds_up_and_names_the_rejections():
+    from gcs_tools.summaries import gnss_line
+
+    counters = {"gnss_fused": 2660, "gnss_rejected_too_old": 1, "gnss_rejected_innovation": 0}
+    assert gnss_line({"sent": 2665, "fused": 2660, "rejected": 1}, counters) == (
+        "GNSS fixes: 2,665 sent, 2,660 fused, 1 rejected (1 too old), 4 not yet delivered at the end")
+    counters = {"gnss_rejected_innovation": 7, "gnss_rejected_future": 2}
+    assert gnss_line({"sent": 109, "fused": 100, "rejected": 9}, counters) == (
+        "GNSS fixes: 109 sent, 100 fused, 9 rejected (7 by the innovation gate, 2 from the future)")
+    # counters that do not add up to the total (another source of rejections): no reasons claimed
+    line = "GNSS fixes: 10 sent, 8 fused, 2 rejected"
+    assert gnss_line({"sent": 10, "fused": 8, "rejected": 2}, {}) == line
+    line = "GNSS fixes: 10 sent, 10 fused, none rejected"
+    assert gnss_line({"sent": 10, "fused": 10, "rejected": 0}) == line
