@@ -142,7 +142,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
         write_outputs(result, mission.world, args.out)
     else:
         (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
-    files = sorted(p.name for p in args.out.iterdir() if p.is_file() and p.suffix != ".key")
+    files = sorted(p.name + ("/" if p.is_dir() else "") for p in args.out.iterdir() if p.suffix != ".key")
     print_summary("sitl", result.summary, args.out, files, args.json)
     if result.failure:
         print(f"beliefnav: error: {result.failure}", file=sys.stderr)
