@@ -319,3 +319,34 @@ def test_replay_output_exports_estimate_belief_attitude_and_the_logs_fixes(tmp_p
         if k >= 0 and t - t_fix[k] < 0.25e9:  # the last fix (5 Hz), as the table holds it
             gap.append(np.hypot(*(_enu(p["pose"]["position"]) - fixes[k])[:2]))
     assert len(gap) > 0.9 * len(est["t_s"]) and float(np.median(gap)) < 1.0
+
+
+def test_an_autopilots_repeated_gps_raw_int_is_one_fix(tmp_path, capsys):
+    """ArduPilot streams GPS_RAW_INT faster than its receiver updates (measured beside ArduCopter
+    SITL: each 5 Hz fix four times, same ``time_usec``): each fix is exported once, at its first
+    arrival, in the log's GPS_GLOBAL_ORIGIN frame."""
+    from pymavlink.dialects.v20 import common as mav
+
+    from companion.mavlink.tlog import TlogWriter
+
+    tlog = tmp_path / "ap.tlog"
+    lat0, lon0 = -353632610, 1491652300
+    unix0_us = 1_795_000_000_000_000
+    with TlogWriter(tlog) as w:
+        w.write(unix0_us, mav.MAVLink_system_time_message(unix0_us, 0))
+        w.write(unix0_us, mav.MAVLink_gps_global_origin_message(lat0, lon0, 584_000))
+        for k in range(10):  # fixes at 5 Hz, each sent 4 times at 20 Hz
+            for r in range(4):
+                t_us = 200_000 * k + 50_000 * r
+                w.write(unix0_us + t_us, mav.MAVLink_gps_raw_int_message(
+                    200_000 * k, 3, lat0 + 10 * k, lon0, 584_000, 121, 200, 0, 0, 10))
+    out = tmp_path / "ap.mcap"
+    assert main(["export", str(tlog), "--out", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["fixes"] == report["messages"]["/gnss/fix"] == 10
+    _, msgs, _ = _read(out)
+    lats = [m["latitude"] for _, m in msgs["/gnss/fix"]]
+    assert lats == pytest.approx([(lat0 + 10 * k) * 1e-7 for k in range(10)], abs=1e-9)
+    north = [m["pose"]["position"]["y"] for _, m in msgs["/pose/gnss"]]  # ENU: y is north
+    # 1e-6 deg of latitude is 0.111 m (within 1 % of a spherical Earth's 0.1113 m)
+    assert north == pytest.approx([k * 0.1113 for k in range(10)], rel=0.01, abs=1e-6)

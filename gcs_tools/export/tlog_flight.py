@@ -59,14 +59,27 @@ def tlog_epoch(path: Path) -> float | None:
     return None
 
 
+def _repeated(m: Any, seen: set[tuple[int, int, int]]) -> bool:
+    """A GPS_RAW_INT already seen: autopilots stream it faster than their receiver updates, repeating
+    the same fix (its ``time_usec`` and position)."""
+    key = (int(m.time_usec), int(m.lat), int(m.lon))
+    if key in seen:
+        return True
+    seen.add(key)
+    return False
+
+
 def read_fixes(path: Path, epoch_unix_s: float | None) -> list[Fix]:
-    """The 3-D (or better) GPS_RAW_INT fixes of a tlog, arrival on its boot clock (tlog stamp less
-    the stamp offset) when known, else their validity time."""
+    """The 3-D (or better) GPS_RAW_INT fixes of a tlog, each once (its first arrival), arrival on its
+    boot clock (tlog stamp less the stamp offset) when known, else their validity time."""
     from companion.mavlink import codec
     from companion.mavlink.tlog import read_tlog
 
     fixes = []
+    seen: set[tuple[int, int, int]] = set()
     for stamp_us, m in read_tlog(path, ["GPS_RAW_INT"]):
+        if _repeated(m, seen):
+            continue
         try:
             fix = codec.decode_gnss(m)
         except codec.CodecError:
@@ -86,7 +99,8 @@ def from_tlog(path: Path, home: LocalNedFrame | None = None) -> Flight:
     sim_state: list[tuple[float, tuple[float, ...]]] = []  # (last IMU time [s] or NaN, lat lon alt q1..q4)
     sim_state_stamps: list[int] = []  # their tlog stamps (when no IMU came before)
     last_imu_s = float("nan")
-    gnss: list[tuple[int, Any]] = []  # (tlog stamp, GnssFix)
+    gnss: list[tuple[int, Any]] = []  # (tlog stamp, GnssFix), each fix once (its first arrival)
+    gnss_seen: set[tuple[int, int, int]] = set()
     origins: dict[str, tuple[float, float, float]] = {}
     stamp_offsets: list[float] = []  # tlog stamp - boot time [s] of SYSTEM_TIME
     other_offsets: list[float] = []  # ... of other boot-stamped messages (a fallback)
@@ -107,7 +121,7 @@ def from_tlog(path: Path, home: LocalNedFrame | None = None) -> Flight:
                     sim_state.append((last_imu_s, (lat, lon, float(m.alt),
                                                    float(m.q1), float(m.q2), float(m.q3), float(m.q4))))
                     sim_state_stamps.append(stamp_us)
-                elif kind == "GPS_RAW_INT":
+                elif kind == "GPS_RAW_INT" and not _repeated(m, gnss_seen):
                     fix = codec.decode_gnss(m)
                     if fix.fix_type >= 3:
                         gnss.append((stamp_us, fix))
