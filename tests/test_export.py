@@ -350,3 +350,39 @@ def test_an_autopilots_repeated_gps_raw_int_is_one_fix(tmp_path, capsys):
     north = [m["pose"]["position"]["y"] for _, m in msgs["/pose/gnss"]]  # ENU: y is north
     # 1e-6 deg of latitude is 0.111 m (within 1 % of a spherical Earth's 0.1113 m)
     assert north == pytest.approx([k * 0.1113 for k in range(10)], rel=0.01, abs=1e-6)
+
+
+def test_a_companion_recording_is_exported_about_its_routes_home(tmp_path, capsys):
+    """``beliefnav companion`` beside an autopilot publishes no truth and a route without waypoints
+    whose ``home_lla`` is its frame: the fixes land where the estimates are (here: on them)."""
+    from companion.domain.geodesy import LocalNedFrame
+    from companion.domain.samples import NavEstimate
+
+    home = LocalNedFrame(-35.3632610, 149.1652300, 584.0)
+    route = zc.RouteInfo(0, "", 0, np.zeros((0, 3)), 0.0, home_lla=np.array([-35.363261, 149.16523, 584.0]))
+    lines = [_line("ap1", "companion", "route", route)]
+    for k in range(21):
+        t_us = k * 100_000
+        p = np.array([3.0 + k * 0.5, -4.0, -2.0])
+        lines.append(_line("ap1", "companion", "estimate", NavEstimate(
+            t_us, p, np.zeros(3), np.zeros(3), np.full(9, 0.01), 0.9, 1.0, "second-order"),
+            1_795_000_000 * 10**9 + t_us * 1000))
+        if k % 2 == 0:
+            lat, lon, alt = home.to_geodetic(p)
+            fix = GnssFix(t_us, lat, lon, alt, 3, 10, 0.5, 0.8)
+            lines.append(_line("ap1", "companion", "gnss", zc.GnssReport(t_us, fix)))
+    rec = tmp_path / "ap.jsonl"
+    rec.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "ap.mcap"
+    assert main(["export", str(rec), "--out", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["home"]["source"] == "the route's home" and not report.get("warnings"), report
+    _, msgs, meta = _read(out)
+    est = {t: m["pose"]["position"] for t, m in msgs["/pose/estimated"]}
+    gnss = msgs["/pose/gnss"]
+    assert len(gnss) == 11
+    for t, m in gnss:  # the fix's pose is the estimate's, in the same enu frame, to a millimetre
+        e, g = est[t], m["pose"]["position"]
+        assert (g["x"], g["y"], g["z"]) == pytest.approx((e["x"], e["y"], e["z"]), abs=1e-3)
+    assert "mission" not in meta["beliefnav"]
+

@@ -411,8 +411,8 @@ def _log_samples(log: Path) -> tuple[list[Fix], np.ndarray, np.ndarray]:
 
 def from_recording(path: Path, vehicle: str | None, home: LocalNedFrame | None = None) -> Flight:
     """A ``beliefnav record`` file: the vehicle's estimates, truth, setpoints and fixes; the frame of
-    the packaged mission its route names (else the first fix's position, with a warning); the
-    wall clock from the publishers' stamps."""
+    its route's ``home_lla`` (else of the packaged mission the route names, else the first fix's
+    position, with a warning); the wall clock from the publishers' stamps."""
     from gcs_tools.recorder.recording import iter_lines, read_recording, series
 
     rec = read_recording(path)
@@ -435,16 +435,20 @@ def from_recording(path: Path, vehicle: str | None, home: LocalNedFrame | None =
     own, own_source, buildings, info = None, "", [], {"vehicle": vehicle}
     if routes:
         r = routes[-1]
-        info |= {"mission": r.mission, "profile": r.profile}
-        mission = run_mission({"mission": r.mission})
-        if mission is not None:
-            own, own_source = mission.frame, f"the mission {r.mission!r}"
+        if r.mission:  # (a companion beside an autopilot flies no mission: its route is only its home)
+            info |= {"mission": r.mission, "profile": r.profile}
+        if np.isfinite(r.home_lla).all():  # the frame the publisher's positions are about
+            own, own_source = LocalNedFrame(*(float(x) for x in r.home_lla)), "the route's home"
+        else:
+            mission = run_mission({"mission": r.mission})
+            if mission is not None:
+                own, own_source = mission.frame, f"the mission {r.mission!r}"
         buildings = [(float(b[0]), float(b[1]), float(b[2]), float(b[3]), math.nan) for b in r.buildings_ne_m]
     if own is None and fixes and home is None:
         f0 = fixes[0]
         own, own_source = LocalNedFrame(f0.lat_deg, f0.lon_deg, f0.alt_m), "the first fix"
-        warnings.append("the recording names no known mission: the local frame is about its first fix, "
-                        "so truth and estimate (about the mission's home) may be offset from the fixes")
+        warnings.append("the recording has no route with a home and names no known mission: the local frame "
+                        "is about its first fix, so truth and estimate may be offset from the fixes")
     near = (fixes[0].lat_deg, fixes[0].lon_deg, fixes[0].alt_m) if fixes else None
     frame, home_source = choose_home(home, own, own_source, near, warnings)
     truth = sorted(by.get("truth", []), key=lambda o: o.t_us)
