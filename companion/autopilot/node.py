@@ -236,7 +236,8 @@ class AutopilotCompanion:
         else:
             sample = self.translator.sample(msg)
             if kind == self.translator.config.gnss_type:
-                self.status.gnss(msg, sample, self.clock.base_us or 0, now_s)  # type: ignore[arg-type]
+                fix = sample if isinstance(sample, GnssFix) else None
+                self.status.gnss(msg, fix, self.clock.base_us or 0, now_s)
             if sample is not None:
                 self._push(sample, now_s)
 
