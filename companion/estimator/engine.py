@@ -21,12 +21,12 @@ so neither the state nor the covariance is propagated per IMU sample:
 
 Entries older than ``history_s`` are dropped; the newest of them is kept as the base (re-based
 to the horizon when it is older, so a GNSS outage does not grow the IMU history). Fixes valid
-before the base are rejected and counted.
+before the base are rejected and counted. The list, the roll-back and the trimming are
+``timeline.Timeline``'s (shared with the tight engine); this module fuses.
 """
 
 from __future__ import annotations
 
-import bisect
 import math
 from dataclasses import replace
 from typing import Any, NamedTuple
@@ -36,10 +36,9 @@ import numpy as np
 from companion.estimator import _core, methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.history import ImuHistory, Integrals, finite3
-from companion.estimator.model import IDENTITY9, Rot9
+from companion.estimator.history import Integrals, finite3
+from companion.estimator.timeline import Timeline
 
-_TRIM_EVERY = 256  # IMU samples between two trims of the histories
 # the IMU counters (``ImuHistory.counts``, counted by the core), in that order
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 
@@ -134,8 +133,9 @@ class Snapshot(NamedTuple):
         return tuple(self.out[9:18].tolist())
 
 
-class FusionEngine:
-    """Belief-adaptive EKF on NED inputs; counts every rejection in ``counts``."""
+class FusionEngine(Timeline[Fusion, "_Fix"]):
+    """Belief-adaptive EKF on NED inputs; counts every rejection in ``counts``. IMU input:
+    ``push_acc``, ``push_frd``, ``push_acc_batch`` (``Timeline``'s)."""
 
     def __init__(self, cfg: EstimatorConfig, method: str, counts: dict[str, int] | None = None,
                  context: methods.MethodContext | None = None) -> None:
@@ -143,7 +143,7 @@ class FusionEngine:
         self.method_name = method
         # the method's map and plugin parameters, and a reader of this filter's latest posterior
         self.method = methods.make(method, cfg, replace(context or methods.MethodContext(),
-                                                        posterior=lambda: self.fusions[-1].x))
+                                                        posterior=lambda: self.entries[-1].x))
         # A belief (GNSS trust) learns from a fix the gate rejects: it is evidence against trust.
         # R-learners (adaptive, vbakf) do not: they estimate the noise of the fixes fused, as the
         # autopilot EKFs keep gated fixes out of everything.
@@ -158,14 +158,9 @@ class FusionEngine:
             "gnss_offset_returns",
         ):
             self._counts.setdefault(name, 0)
-        self.imu = ImuHistory(cfg.imu_hold_max_s)
-        self.imu.trim_len = _TRIM_EVERY
-        self.fusions: list[Fusion] = []
-        self._fusion_t: list[int] = []
-        self._pending: list[_Fix] = []  # fixes waiting for the IMU, by time
+        super().__init__(cfg.imu_hold_max_s, cfg.history_s, cfg.future_tolerance_s, cfg.gravity_m_s2,
+                         self._counts)
         self._tested = 0  # fixes that reached the innovation test (fused = this − rejected)
-        self._history_us = int(round(cfg.history_s * 1e6))
-        self._future_us = int(round(cfg.future_tolerance_s * 1e6))
         self._r_nominal: Vec3 = tuple(float(v) for v in cfg.r_nominal_m2().diagonal())  # type: ignore[assignment]
         self._q_acc = cfg.sigma_acc_m_s2**2
         self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
@@ -201,58 +196,17 @@ class FusionEngine:
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
         self._cache: tuple[Fusion, int, Snapshot] | None = None
-        self._g = cfg.gravity_m_s2
+
+    @property
+    def fusions(self) -> list[Fusion]:
+        """The entries, in time order (``Timeline.entries``)."""
+        return self.entries
 
     @property
     def counts(self) -> dict[str, int]:
         """Samples used and rejected by reason (the dict given to the constructor, updated)."""
         self._counts.update(zip(_IMU_COUNTS, self.imu.counts, strict=True))
         return self._counts
-
-    # ----------------------------------------------------------------- IMU
-    def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
-        """One NED acceleration (m/s², gravity-compensated: R f̃ + g) at ``t_us``, with the
-        rotation R_ned_frd (row-major 9-tuple) it was measured with (the body-frame bias state
-        needs it; identity = the body axes are NED). Gated and counted by the core
-        (``ImuHistory.push``)."""
-        if self.imu.push(t_us, ax, ay, az, rot) or self._pending:
-            self._imu_pushed()
-
-    def push_frd(self, t_us: int, f_frd_m_s2: Any, rot: Rot9) -> None:
-        """One body specific force f̃ (FRD, m/s²; 3 numbers or an array) measured with the attitude
-        R_ned_frd: ``push_acc`` of R f̃ + [0, 0, g] (computed by the core, the navigator's path)."""
-        if self.imu.push_frd(t_us, f_frd_m_s2, rot, self._g) or self._pending:
-            self._imu_pushed()
-
-    def _imu_pushed(self) -> None:
-        """Fuse the fixes the IMU has now passed; trim when the history is due."""
-        imu = self.imu
-        if self._pending and self._pending[0][0] <= imu.last_t_us:
-            self._flush_pending()
-        if len(imu) > imu.trim_len:
-            self._trim()
-
-    def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
-        """Many NED accelerations (with their rotations, (n, 9) row-major; None = identity) at
-        once; the same result as ``push_acc`` one by one."""
-        t_us = np.asarray(t_us, dtype=np.int64)
-        a_ned = np.asarray(a_ned, dtype=float)
-        n = len(t_us)
-        if n == 0:
-            return
-        imu = self.imu
-        clean = bool(np.isfinite(a_ned).all()) and len(imu) > 0
-        if clean:
-            t_prev = np.concatenate(([imu.last_t_us], t_us[:-1]))
-            dt_s = (t_us - imu.t0_us) * 1e-6 - (t_prev - imu.t0_us) * 1e-6
-            clean = bool((t_us > t_prev).all()) and bool((dt_s <= imu.hold_max_s).all())
-        if not clean:  # anything to gate or count: take the per-sample path
-            rots = [IDENTITY9] * n if rot is None else [tuple(r) for r in np.asarray(rot, float).tolist()]
-            for t, (ax, ay, az), r in zip(t_us.tolist(), a_ned.tolist(), rots, strict=True):
-                self.push_acc(t, ax, ay, az, r)
-            return
-        imu.append_batch(t_us, a_ned, None if rot is None else np.asarray(rot, dtype=float))
-        self._imu_pushed()
 
     # ---------------------------------------------------------------- GNSS
     def push_fix(self, t_us: int, z_ned_m: Any, r_nominal_m2: Vec3 | None = None,
@@ -277,28 +231,8 @@ class FusionEngine:
                 and (r[0] == _INF) == (r[1] == _INF)):
             c["gnss_rejected_nonfinite"] += 1
             return
-        imu = self.imu
-        if not len(imu):
-            c["gnss_rejected_before_imu"] += 1
-            return
-        now = imu.last_t_us
-        if t_us > now + self._future_us:
-            c["gnss_rejected_future"] += 1
-            return
-        if t_us < now - self._history_us or t_us < imu.first_t_us or (
-            self._fusion_t and t_us < self._fusion_t[0]
-        ):
-            c["gnss_rejected_too_old"] += 1
-            return
-        if self._is_duplicate(t_us):
-            c["gnss_rejected_duplicate"] += 1
-            return
         zv = None if v_ned_m_s is None else self._velocity(v_ned_m_s, rv_m2)
-        fix = _Fix(t_us, z, r, zv[0] if zv else None, zv[1] if zv else _NAN3)
-        if t_us > now:
-            bisect.insort(self._pending, fix, key=lambda item: item[0])
-            return
-        self._insert(fix)
+        self._push(t_us, _Fix(t_us, z, r, zv[0] if zv else None, zv[1] if zv else _NAN3))
 
     def _velocity(self, v: Any, rv: Vec3 | None) -> tuple[Vec3, Vec3] | None:
         """(velocity, its variances) with the components not reported (not finite, or their
@@ -318,42 +252,16 @@ class FusionEngine:
         return ((v0 if ok0 else nan, v1 if ok1 else nan, v2 if ok2 else nan),
                 (rv[0] if ok0 else nan, rv[1] if ok1 else nan, rv[2] if ok2 else nan))
 
-    def _is_duplicate(self, t_us: int) -> bool:
-        i = bisect.bisect_left(self._fusion_t, t_us)
-        if i < len(self._fusion_t) and self._fusion_t[i] == t_us and self.fusions[i].z_ned_m is not None:
-            return True
-        return bool(self._pending) and any(item[0] == t_us for item in self._pending)
+    def _measurement(self, e: Fusion) -> _Fix | None:
+        return None if e.z_ned_m is None else _Fix(e.t_us, e.z_ned_m, e.r_nominal_m2, e.zv_ned_m_s, e.rv_m2)
 
-    def _flush_pending(self) -> None:
-        now = self.imu.last_t_us
-        while self._pending and self._pending[0][0] <= now:
-            self._insert(self._pending.pop(0))
-
-    def _insert(self, fix: _Fix) -> None:
-        t_us = fix.t_us
-        if not self.fusions:
-            self._initialise(fix)
-            return
-        i = bisect.bisect_right(self._fusion_t, t_us)
-        if i == 0:
-            self._counts["gnss_rejected_too_old"] += 1
-            return
-        later = self.fusions[i:]
-        if later:
-            self._counts["gnss_out_of_order"] += 1
-            del self.fusions[i:]
-            del self._fusion_t[i:]
-        self._fuse(fix)
+    def _inserted(self) -> None:
         self._tested += 1
-        for f in later:
-            assert f.z_ned_m is not None  # anchors only ever sit at index 0
-            self._fuse(_Fix(f.t_us, f.z_ned_m, f.r_nominal_m2, f.zv_ned_m_s, f.rv_m2))
-            self._counts["gnss_refused"] += 1
         self._count()
 
     def _count(self) -> None:
         """Gate counters from the newest entry (cumulative there, so exact after a re-fusion)."""
-        last, c = self.fusions[-1], self._counts
+        last, c = self.entries[-1], self._counts
         c["gnss_rejected_innovation"] = last.n_rejected
         c["gnss_resets"] = last.n_resets
         c["gnss_offsets"] = last.n_offsets
@@ -364,8 +272,8 @@ class FusionEngine:
         c["imu_gnss_disagreements"] = last.n_disagree
         c["envelope_violations"] = last.n_invalid
 
-    def _initialise(self, fix: _Fix) -> None:
-        t_us, z, zv = fix.t_us, fix.z, fix.zv
+    def _start(self, t_us: int, fix: _Fix) -> Fusion:
+        z, zv = fix.z, fix.zv
         s0 = self.cfg.sigma_gnss_unreported_m**2
         r: Vec3 = (s0 if fix.r[0] == math.inf else fix.r[0], s0 if fix.r[1] == math.inf else fix.r[1],
                    s0 if fix.r[2] == math.inf else fix.r[2])
@@ -376,17 +284,14 @@ class FusionEngine:
             x, P = model.reset_to_fix(x, P, z, r, (self.cfg.sigma_bias0_m * f) ** 2, zv, fix.rv)
         state = self.method.initial_state()
         beta = self.method.beta(state)
-        self.fusions.append(Fusion(t_us, z, x, P, state, math.nan, self.imu.integrals(t_us),
-                                   beta, self.cfg.sigma_bias_m(beta) * f,
-                                   fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, None, 0, 0, zv, fix.rv,
-                                   scale_h_m=_SCALE_H * math.sqrt(r[0]), scale_v_m=_SCALE_V * math.sqrt(r[2]),
-                                   noise_h_m=_SCALE_H * math.sqrt(r[0]), noise_v_m=_SCALE_V * math.sqrt(r[2]),
-                                   v_smooth=(x[3], x[4], x[5]), bias_scale=f))
-        self._fusion_t.append(t_us)
-        self._tested += 1
-        self._count()
+        return Fusion(t_us, z, x, P, state, math.nan, self.imu.integrals(t_us),
+                      beta, self.cfg.sigma_bias_m(beta) * f,
+                      fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, None, 0, 0, zv, fix.rv,
+                      scale_h_m=_SCALE_H * math.sqrt(r[0]), scale_v_m=_SCALE_V * math.sqrt(r[2]),
+                      noise_h_m=_SCALE_H * math.sqrt(r[0]), noise_v_m=_SCALE_V * math.sqrt(r[2]),
+                      v_smooth=(x[3], x[4], x[5]), bias_scale=f)
 
-    def _fuse(self, fix: _Fix) -> None:
+    def _fuse(self, prev: Fusion, t_us: int, fix: _Fix) -> Fusion:
         """Predict the last entry to the fix's time, test it there and fuse it (Algorithm 1, lines
         7-17). Position and velocity are tested against the prior, each with its own gate; the
         velocity is fused whenever it passes its gate. A position failing the gate
@@ -400,8 +305,7 @@ class FusionEngine:
           hypothesis (offset = its innovation; the fix itself is not fused);
         * otherwise: rejected.
         A fix that passes the gate without the offset closes it (the fixes stepped back)."""
-        t_us, z, r_given, zv, rv = fix
-        prev = self.fusions[-1]
+        _, z, r_given, zv, rv = fix
         T = (t_us - prev.t_us) * 1e-6
         alpha, w_dis, w_acc, k, ek, kn, ekn = self._decays(t_us - prev.t_us)
         sigma_b = prev.sigma_bias_m
@@ -511,13 +415,12 @@ class FusionEngine:
         f = self.cfg.bias_scale(r_nom[0])
         if reset and f != 1.0:  # the reset's bias prior at the receiver's scale (model.reset_to_fix's form)
             P_post = model.scale_bias_prior(P_post, f, self._reset_var[0])
-        self.fusions.append(Fusion(
+        return Fusion(
             t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta) * f,
             r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, acc, t_acc, n_ret,
             zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
-            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f))
-        self._fusion_t.append(t_us)
+            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f)
 
     def _outside_envelope(self, x: model.State) -> bool:
         """The speed of ``x`` outside the vehicle's envelope (horizontal or vertical)."""
@@ -624,29 +527,9 @@ class FusionEngine:
         return ratio, ratio <= 1.0 and y[2] * y[2] / s2 <= self._gate2
 
     # ------------------------------------------------------------- history
-    def _trim(self) -> None:
-        """Drop what no fix inside the history can need; re-base an old base to the horizon."""
-        self._trim_history()
-        self.imu.trim_len = len(self.imu) + _TRIM_EVERY
-
-    def _trim_history(self) -> None:
-        horizon = self.imu.last_t_us - self._history_us
-        if not self.fusions:
-            self.imu.trim_before(horizon)
-            return
-        j = bisect.bisect_right(self._fusion_t, horizon) - 1
-        if j < 0:
-            return
-        if j > 0:
-            del self.fusions[:j]
-            del self._fusion_t[:j]
-        base = self.fusions[0]
-        if base.t_us < horizon:
-            ints = self.imu.integrals(horizon)
-            x, P = self._predict(base, horizon, ints)
-            self.fusions[0] = base._replace(t_us=horizon, z_ned_m=None, x=x, P=P, ints=ints)
-            self._fusion_t[0] = horizon
-        self.imu.trim_before(self._fusion_t[0])
+    def _anchor(self, e: Fusion, t_us: int, ints: Integrals) -> Fusion:
+        x, P = self._predict(e, t_us, ints)
+        return e._replace(t_us=t_us, z_ned_m=None, x=x, P=P, ints=ints)
 
     def _predict(self, f: Fusion, t_us: int, ints: Integrals) -> tuple[model.State, model.Cov]:
         """Entry ``f`` predicted to ``t_us`` (whose IMU integrals are ``ints``)."""
@@ -661,9 +544,9 @@ class FusionEngine:
     # -------------------------------------------------------------- output
     def snapshot(self) -> Snapshot | None:
         """The filter at the newest IMU time, or None before the first fix."""
-        if not self.fusions:
+        if not self.entries:
             return None
-        last = self.fusions[-1]
+        last = self.entries[-1]
         now = self.imu.last_t_us
         if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
             return self._cache[2]
@@ -681,9 +564,9 @@ class FusionEngine:
 
     def covariance_now(self) -> model.Cov | None:
         """The full covariance (15×15) at the newest IMU time (None before the first fix)."""
-        if not self.fusions:
+        if not self.entries:
             return None
-        return self._predict(self.fusions[-1], self.imu.last_t_us, self.imu.last_integrals())[1]
+        return self._predict(self.entries[-1], self.imu.last_t_us, self.imu.last_integrals())[1]
 
 
 _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)

@@ -2,11 +2,11 @@
 exact, on the loose filter's IMU history (``companion.estimator.history.ImuHistory``: held NED
 accelerations with prefix integrals, so any interval's mean and transition are one closed-form step).
 
-Like the loose engine (``companion.estimator.engine``) the filter is a time-ordered list of entries,
-each the posterior at one measurement's time with everything needed to re-fuse the later ones: a
-late epoch rolls back to the entry before it, is fused, and the later measurements are re-fused
-from their stored data — the same result as in order (tested to 1e-9). Measurements valid after the
-newest IMU sample wait for it.
+Like the loose engine (``companion.estimator.engine``) the filter is a time-ordered list of entries
+(``companion.estimator.timeline.Timeline``, shared with it), each the posterior at one measurement's
+time with everything needed to re-fuse the later ones: a late epoch rolls back to the entry before
+it, is fused, and the later measurements are re-fused from their stored data — the same result as in
+order (tested to 1e-9). Measurements valid after the newest IMU sample wait for it.
 
 An epoch (``SatEpoch``: prepared once by ``prepare_epoch``, state-independent) is fused as
 
@@ -25,14 +25,14 @@ solution of the epoch (counted ``resets``); velocity and the IMU error states ar
 
 from __future__ import annotations
 
-import bisect
 import math
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.estimator.history import ImuHistory, Integrals, mean_between
-from companion.estimator.model import IDENTITY9, BlockPropagator, Rot9
+from companion.estimator.history import Integrals, mean_between
+from companion.estimator.model import BlockPropagator
+from companion.estimator.timeline import Timeline
 from companion.gnss.atmosphere import iono_frequency_scale
 from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
@@ -43,7 +43,6 @@ from companion.tight.belief import theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
 
-_TRIM_EVERY = 256
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
 SPP_INIT = SppConfig(raim=True)
@@ -173,8 +172,9 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
                     tuple(sorted(set(slots.tolist()))))
 
 
-class TightEngine:
-    """The filter on NED accelerations (with attitudes) and prepared epochs, in arrival order."""
+class TightEngine(Timeline[Entry, SatEpoch | Speed]):
+    """The filter on NED accelerations (with attitudes: ``push_acc``, ``push_frd``, ``push_acc_batch``,
+    ``Timeline``'s) and prepared epochs, in arrival order."""
 
     def __init__(self, cfg: TightConfig, method: str = weighting.DEFAULT_WEIGHTING,
                  counts: dict[str, int] | None = None, frame: Frame | None = None,
@@ -185,13 +185,6 @@ class TightEngine:
         self.weighting = weighting.make(method, cfg)
         self.frame = frame
         self.klobuchar = klobuchar
-        self.imu = ImuHistory(cfg.imu_hold_max_s)
-        self.imu.trim_len = _TRIM_EVERY
-        self.entries: list[Entry] = []
-        self._t: list[int] = []
-        self._pending: list[tuple[int, SatEpoch | Speed]] = []
-        self._history_us = int(round(cfg.history_s * 1e6))
-        self._future_us = int(round(cfg.future_tolerance_s * 1e6))
         self._reset_us = int(round(cfg.reset_timeout_s * 1e6))
         c = cfg
         self._q = (c.sigma_acc_m_s2**2, c.sigma_acc_vertical_m_s2**2, c.sigma_acc_bias_rw_m_s2_sqrt_s**2,
@@ -202,10 +195,11 @@ class TightEngine:
                   "gnss_rejected_no_solution", "gnss_rejected_duplicate", "gnss_out_of_order", "gnss_refused",
                   "speed_fused"):
             self._counts.setdefault(k, 0)
+        super().__init__(cfg.imu_hold_max_s, cfg.history_s, cfg.future_tolerance_s, cfg.gravity_m_s2,
+                         self._counts)
         self._cache: tuple[Any, int, Any] | None = None
         self._nav15: tuple[Entry, tuple[float, ...], np.ndarray] | None = None
         self._prop = BlockPropagator(self._q[0], self._q[2], self._q[3])
-        self._g = cfg.gravity_m_s2
         nominal_fields = {"uniform": "r_uniform_m2", "model": "r_model_m2", "los": "r_los_m2"}
         self._r_field = nominal_fields[self.weighting.nominal]
         self._n_fused = 0  # epochs with at least one satellite used (in order of arrival)
@@ -222,30 +216,6 @@ class TightEngine:
                      gnss_fused=self._n_fused)
         return c
 
-    def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:
-        """One NED acceleration (gravity-compensated) with its attitude (``FusionEngine.push_acc``)."""
-        if self.imu.push(t_us, ax, ay, az, rot) or self._pending:
-            self._imu_pushed()
-
-    def push_frd(self, t_us: int, f_frd_m_s2: Any, rot: Rot9) -> None:
-        if self.imu.push_frd(t_us, f_frd_m_s2, rot, self._g) or self._pending:
-            self._imu_pushed()
-
-    def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
-        """Many clean, increasing, gap-free samples at once (as ``ImuHistory.append_batch``)."""
-        self.imu.append_batch(np.asarray(t_us, np.int64), np.asarray(a_ned, float),
-                              None if rot is None else np.asarray(rot, float))
-        self._imu_pushed()
-
-    def _imu_pushed(self) -> None:
-        if self._pending and self._pending[0][0] <= self.imu.last_t_us:
-            now = self.imu.last_t_us
-            while self._pending and self._pending[0][0] <= now:
-                self._insert(*self._pending.pop(0))
-        if len(self.imu) > self.imu.trim_len:
-            self._trim()
-            self.imu.trim_len = len(self.imu) + _TRIM_EVERY
-
     # ------------------------------------------------------------ measurements
     def push_epoch(self, t_us: int, epoch: SatEpoch) -> None:
         """A prepared epoch valid at ``t_us`` (boot time); fused now, later, or rejected (counted)."""
@@ -261,35 +231,6 @@ class TightEngine:
         sd = self.cfg.sigma_speed_m_s + self.cfg.speed_sigma_fraction * speed_m_s
         self._push(t_us, Speed(speed_m_s, sd * sd, yaw_integral_rad))
 
-    def _push(self, t_us: int, meas: SatEpoch | Speed) -> None:
-        c = self._counts
-        imu = self.imu
-        if not len(imu):
-            c["gnss_rejected_before_imu"] += 1
-            return
-        now = imu.last_t_us
-        if t_us > now + self._future_us:
-            c["gnss_rejected_future"] += 1
-            return
-        if t_us < now - self._history_us or t_us < imu.first_t_us or (self._t and t_us < self._t[0]):
-            c["gnss_rejected_too_old"] += 1
-            return
-        if self._is_duplicate(t_us, meas):
-            c["gnss_rejected_duplicate"] += 1
-            return
-        if t_us > now:
-            bisect.insort(self._pending, (t_us, meas), key=lambda item: item[0])
-            return
-        self._insert(t_us, meas)
-
-    def _is_duplicate(self, t_us: int, meas: SatEpoch | Speed) -> bool:
-        kind = type(meas)
-        if (not self._t or t_us > self._t[-1]) and not self._pending:  # the usual case: a new time
-            return False
-        lo, hi = bisect.bisect_left(self._t, t_us), bisect.bisect_right(self._t, t_us)
-        return any(type(self.entries[i].meas) is kind for i in range(lo, hi)) or any(
-            t == t_us and type(m) is kind for t, m in self._pending)
-
     def ensure_frame(self, epoch: GnssEpoch) -> bool:
         """Set the local frame at this epoch's single-point solution if there is none yet."""
         if self.frame is None:
@@ -299,40 +240,22 @@ class TightEngine:
             self.frame = Frame.at_ecef(sol.p_ecef_m)
         return True
 
-    def _insert(self, t_us: int, meas: SatEpoch | Speed) -> None:
-        if not self.entries:
-            if isinstance(meas, SatEpoch):
-                self._initialise(t_us, meas)
-            return
-        i = bisect.bisect_right(self._t, t_us)
-        if i == 0:
-            self._counts["gnss_rejected_too_old"] += 1
-            return
-        later = self.entries[i:]
-        if later:
-            self._counts["gnss_out_of_order"] += 1
-            del self.entries[i:]
-            del self._t[i:]
-        self._fuse(t_us, meas)
-        for e in later:
-            assert e.meas is not None
-            self._fuse(e.t_us, e.meas)
-            self._counts["gnss_refused"] += 1
-
-    def _append(self, e: Entry) -> None:
-        self.entries.append(e)
-        self._t.append(e.t_us)
+    def _measurement(self, e: Entry) -> SatEpoch | Speed | None:
+        return e.meas
 
     # --------------------------------------------------------------- start / reset
     def _spp(self, meas: SatEpoch) -> SppSolution | None:
         sol = solve_position(meas.epoch, SPP_INIT, klobuchar=self.klobuchar)
         return sol if sol.ok else None
 
-    def _initialise(self, t_us: int, meas: SatEpoch) -> None:
+    def _start(self, t_us: int, meas: SatEpoch | Speed) -> Entry | None:
+        """The first entry, at an epoch's single-point solution (None for odometry or no solution)."""
+        if not isinstance(meas, SatEpoch):
+            return None
         sol = self._spp(meas)
         if sol is None:
             self._counts["gnss_rejected_no_solution"] += 1
-            return
+            return None
         if self.frame is None:
             self.frame = Frame.at_ecef(sol.p_ecef_m)
         c = self.cfg
@@ -346,8 +269,8 @@ class TightEngine:
             x[3:6] = self.frame.c_ecef_ned.T @ sol.v_ecef_m_s
             x[I_DRIFT] = sol.clock_drift_m_s
         x, P, live = self._from_solution(x, P, sol, (False,) * N_CLK)
-        self._append(Entry(t_us, None, x, P, self.imu.integrals(t_us), live, self.weighting.initial_state(),
-                           t_us, EpochInfo(), (0, 0, 0, 0, 1)))
+        return Entry(t_us, None, x, P, self.imu.integrals(t_us), live, self.weighting.initial_state(),
+                     t_us, EpochInfo(), (0, 0, 0, 0, 1))
 
     def _from_solution(self, x: np.ndarray, P: np.ndarray, sol: SppSolution, live: tuple[bool, ...]
                        ) -> tuple[np.ndarray, np.ndarray, tuple[bool, ...]]:
@@ -387,17 +310,15 @@ class TightEngine:
         # states stay at rest
         return x, _tight.predict_cov(e.P, T, nA, nB, live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0))
 
-    def _fuse(self, t_us: int, meas: SatEpoch | Speed) -> None:
-        prev = self.entries[-1]
+    def _fuse(self, prev: Entry, t_us: int, meas: SatEpoch | Speed) -> Entry:
         ints = self.imu.integrals(t_us)
         x, P = self._predict(prev, t_us, ints)
         if isinstance(meas, Speed):
-            self._fuse_speed(prev, t_us, meas, x, P, ints)
-        else:
-            self._fuse_epoch(prev, t_us, meas, x, P, ints)
+            return self._fuse_speed(prev, t_us, meas, x, P, ints)
+        return self._fuse_epoch(prev, t_us, meas, x, P, ints)
 
     def _fuse_speed(self, prev: Entry, t_us: int, m: Speed, x: np.ndarray, P: np.ndarray,
-                    ints: Integrals) -> None:
+                    ints: Integrals) -> Entry:
         c = self.cfg
         heading_live = P[I_HEADING, I_HEADING] > 0.0
         start = self.entries[0].t_us if self.entries else t_us
@@ -423,9 +344,8 @@ class TightEngine:
         else:
             s, h = model.speed(x)
             if s <= 0.5:  # below 0.5 m/s the direction is unknown
-                self._append(Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                                   prev.totals))
-                return
+                return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
+                             prev.totals)
             y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])
         PHt = P @ H.T
         S = H @ PHt + R
@@ -435,11 +355,11 @@ class TightEngine:
             P = P - PHt @ np.linalg.solve(S, PHt.T)
             P = 0.5 * (P + P.T)
             self._counts["speed_fused"] += 1
-        self._append(Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                           prev.totals))
+        return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
+                     prev.totals)
 
     def _fuse_epoch(self, prev: Entry, t_us: int, m: SatEpoch, x: np.ndarray, P: np.ndarray,
-                    ints: Integrals) -> None:
+                    ints: Integrals) -> Entry:
         assert self.frame is not None
         c = self.cfg
         used_tot, rej_tot, resets, clock_resets, epochs = prev.totals
@@ -490,28 +410,13 @@ class TightEngine:
                 t_good = t_us
         info = EpochInfo(m.epoch.n, n_used, nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
                          m.key, beta, y, used)
-        self._append(Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
-                           (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1)))
+        return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
+                     (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1))
 
     # --------------------------------------------------------------------- history
-    def _trim(self) -> None:
-        horizon = self.imu.last_t_us - self._history_us
-        if not self.entries:
-            self.imu.trim_before(horizon)
-            return
-        j = bisect.bisect_right(self._t, horizon) - 1
-        if j < 0:
-            return
-        if j > 0:
-            del self.entries[:j]
-            del self._t[:j]
-        base = self.entries[0]
-        if base.t_us < horizon:
-            ints = self.imu.integrals(horizon)
-            x, P = self._predict(base, horizon, ints)
-            self.entries[0] = base._replace(t_us=horizon, meas=None, x=x, P=P, ints=ints)
-            self._t[0] = horizon
-        self.imu.trim_before(self._t[0])
+    def _anchor(self, e: Entry, t_us: int, ints: Integrals) -> Entry:
+        x, P = self._predict(e, t_us, ints)
+        return e._replace(t_us=t_us, meas=None, x=x, P=P, ints=ints)
 
     # ---------------------------------------------------------------------- output
     def state_now(self) -> tuple[int, np.ndarray, np.ndarray, Entry] | None:
