@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,3 +26,10 @@ def plain_json(value: Any, *, nan_to_none: bool) -> Any:
     if nan_to_none and isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def write_results(out_dir: Path, result: Any, markdown: str) -> None:
+    """``out_dir/results.json`` (plain JSON, NaN as null) and ``out_dir/results.md`` (the directory made)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "results.json").write_text(json.dumps(plain_json(result, nan_to_none=True), indent=1) + "\n")
+    (out_dir / "results.md").write_text(markdown)

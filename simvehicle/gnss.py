@@ -21,6 +21,7 @@ from __future__ import annotations
 import heapq
 import math
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -104,6 +105,38 @@ class NedToGeodetic:
         return float(g[0]), float(g[1]), float(g[2])
 
 
+T = TypeVar("T")
+
+
+class ReleaseQueue(Generic[T]):
+    """A receiver's delivery queue: items released at their time, in order of release time (ties: in
+    order of queueing)."""
+
+    def __init__(self) -> None:
+        self._heap: list[tuple[int, int, T]] = []
+        self._n = 0  # items queued (the tie-break)
+
+    def put(self, release_us: int, item: T) -> None:
+        heapq.heappush(self._heap, (release_us, self._n, item))
+        self._n += 1
+
+    def due(self, t_us: int) -> list[T]:
+        """The items whose release time is ``t_us`` or before, taken out of the queue."""
+        out = []
+        q = self._heap
+        while q and q[0][0] <= t_us:
+            out.append(heapq.heappop(q)[2])
+        return out
+
+    @property
+    def next_release_us(self) -> int | float:
+        """Release time of the next queued item (inf when none is queued)."""
+        return self._heap[0][0] if self._heap else math.inf
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+
 class GnssModel:
     """Bias and latency processes plus the delivery queue (seeded, deterministic)."""
 
@@ -122,7 +155,7 @@ class GnssModel:
         self.bias_ned_m = c0.sigma_bias_m * self._normals.take(3)  # start in the stationary law
         self.latency_s = c0.latency_mean_s
         self._zeta = math.exp(-period_s / cfg.latency_tau_s)
-        self._queue: list[tuple[int, int, NedFix]] = []
+        self._queue: ReleaseQueue[NedFix] = ReleaseQueue()
         self.sent = 0
 
     def step(self, clearance_m: float) -> GnssConditions:
@@ -158,7 +191,7 @@ class GnssModel:
         if self._velocity_normals is not None and v_ned_m_s is not None:
             fix = self._with_velocity(fix, v_ned_m_s, c.weight)
         release_us = fix.t_validity_us + math.ceil(self.latency_s * 1e6 - 1e-6)
-        heapq.heappush(self._queue, (release_us, self.sent, fix))
+        self._queue.put(release_us, fix)
         self.sent += 1
         return fix
 
@@ -208,16 +241,12 @@ class GnssModel:
 
     def release(self, t_us: int) -> list[NedFix]:
         """Fixes whose latency has elapsed by ``t_us``, in order of release time."""
-        out = []
-        q = self._queue
-        while q and q[0][0] <= t_us:
-            out.append(heapq.heappop(q)[2])
-        return out
+        return self._queue.due(t_us)
 
     @property
     def next_release_us(self) -> int | float:
         """Release time of the next queued fix (inf when none is queued)."""
-        return self._queue[0][0] if self._queue else math.inf
+        return self._queue.next_release_us
 
     @property
     def pending(self) -> int:

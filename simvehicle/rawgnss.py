@@ -21,7 +21,6 @@ cover boot − 15 min … boot + 1 h and are extended (by another hour) when a f
 
 from __future__ import annotations
 
-import heapq
 import math
 from dataclasses import dataclass, replace
 
@@ -37,7 +36,7 @@ from companion.gnss.timescale import gps_from_calendar
 from simvehicle.city3d import City
 from simvehicle.config import ReceiverConfig, parse_utc
 from simvehicle.constellation import SYSTEM_NAMES, ephemeris_store
-from simvehicle.gnss import FIX_TYPE_3D, NedFix, NedToGeodetic
+from simvehicle.gnss import FIX_TYPE_3D, NedFix, NedToGeodetic, ReleaseQueue
 from simvehicle.receiver import RawObservation, Receiver
 
 SPAN_BEFORE_S = 900.0
@@ -91,7 +90,7 @@ class RawGnssModel:
         self._home_ecef = geodetic_to_ecef(lat, lon, frame.home_alt_m)
         self._to_ned = ecef_to_ned_matrix(lat, lon)
         self._latency_us = math.ceil(cfg.latency_s * 1e6 - 1e-6)
-        self._queue: list[tuple[int, int, RawObservation, RawFix | None]] = []
+        self._queue: ReleaseQueue[tuple[RawObservation, RawFix | None]] = ReleaseQueue()
         self._released: list[RawObservation] = []
         self._prev: tuple[int, np.ndarray, np.ndarray] | None = (
             None  # the last solution: time, position, velocity
@@ -163,7 +162,7 @@ class RawGnssModel:
             self.sent += 1
         else:
             self.unsolved += 1
-        heapq.heappush(self._queue, (int(t_us) + self._latency_us, self.epochs, raw, fix))
+        self._queue.put(int(t_us) + self._latency_us, (raw, fix))
         return fix
 
     def _guess_ecef(self, t_us: int) -> np.ndarray | None:
@@ -187,9 +186,7 @@ class RawGnssModel:
     def release(self, t_us: int) -> list[RawFix]:
         """Fixes due by ``t_us`` (their raw epochs go to :meth:`drain_raw`, stamped with ``t_us``)."""
         out: list[RawFix] = []
-        q = self._queue
-        while q and q[0][0] <= t_us:
-            _, _, raw, fix = heapq.heappop(q)
+        for raw, fix in self._queue.due(t_us):
             self._released.append(replace(raw, arrival_us=int(t_us)))
             if fix is not None:
                 out.append(fix)
@@ -202,7 +199,7 @@ class RawGnssModel:
 
     @property
     def next_release_us(self) -> int | float:
-        return self._queue[0][0] if self._queue else math.inf
+        return self._queue.next_release_us
 
     @property
     def pending(self) -> int:

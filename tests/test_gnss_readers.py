@@ -4,10 +4,8 @@ real drive when the shared data set is beside the repository)."""
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +17,7 @@ from companion.gnss import timescale as ts
 from companion.gnss.ubx import UbxDecoder
 from gcs_tools.gnss import rinex, smartloc
 from gcs_tools.gnss.sources import load_input, rinex_input
-from tests.gnss_helpers import CLOCKS_M, RX_ECEF, T0, constellation, observe, store
+from tests.gnss_helpers import CLOCKS_M, RX_ECEF, T0, constellation, observe, serve_bytes_once, store
 
 DATA = Path(__file__).parent / "data"
 OBS, NAV = DATA / "synthetic_gnss.obs", DATA / "synthetic_gnss.nav"
@@ -308,27 +306,12 @@ def test_ubx_frames_decode_to_epochs_fixes_and_ephemerides(tmp_path):
 def test_ubx_from_a_tcp_stream():
     from gcs_tools.gnss.ubx_source import open_stream, ubx_items
 
-    payload = _ubx_frames()
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(1)
-    port = srv.getsockname()[1]
-
-    def serve() -> None:
-        conn, _ = srv.accept()
-        for i in range(0, len(payload), 97):  # in odd-sized pieces
-            conn.sendall(payload[i : i + 97])
-        conn.close()
-
-    th = threading.Thread(target=serve, daemon=True)
-    th.start()
-    stream = open_stream(f"tcp:127.0.0.1:{port}")
-    try:
-        items = list(ubx_items(stream))
-    finally:
-        stream.close()
-        srv.close()
-    th.join(5)
+    with serve_bytes_once(_ubx_frames(), 97) as port:  # in odd-sized pieces
+        stream = open_stream(f"tcp:127.0.0.1:{port}")
+        try:
+            items = list(ubx_items(stream))
+        finally:
+            stream.close()
     assert [type(i).__name__ for i in items] == ["GnssEpoch", "KeplerEphemeris", "ReceiverPvt", "GnssEpoch"]
     with pytest.raises(UserError, match="cannot connect"):
         open_stream(f"tcp:127.0.0.1:{port}", timeout_s=1.0)

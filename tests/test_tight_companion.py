@@ -5,8 +5,6 @@ clock, into the tightly coupled filter, and out as GPS_INPUT with its own accura
 from __future__ import annotations
 
 import math
-import socket
-import threading
 import time
 from collections import Counter
 
@@ -20,39 +18,23 @@ from companion.errors import UserError
 from companion.gnss.geometry import ecef_to_geodetic, geodetic_to_ecef
 from companion.gnss.timescale import gps_to_unix_s
 from companion.receiver.raw_receiver import RawReceiver
-from tests.gnss_helpers import RX_ECEF, T0, observe, store
+from tests.gnss_helpers import RX_ECEF, T0, observe, serve_bytes_once, store
 from tests.test_autopilot_adapter import _FakeConn, _from
 from tests.test_gnss_readers import _ubx_frames
 
 
 def test_raw_receiver_reads_ubx_from_tcp_on_a_thread():
-    payload = _ubx_frames()
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(1)
-    port = srv.getsockname()[1]
-
-    def serve() -> None:
-        conn, _ = srv.accept()
-        for i in range(0, len(payload), 61):
-            conn.sendall(payload[i:i + 61])
-            time.sleep(0.001)
-        conn.close()
-
-    th = threading.Thread(target=serve, daemon=True)
-    th.start()
-    rx = RawReceiver(f"tcp:127.0.0.1:{port}")
     items: list = []
-    deadline = time.monotonic() + 10.0
-    try:
-        while time.monotonic() < deadline and not rx.counters().get("stream_ended"):
+    with serve_bytes_once(_ubx_frames(), 61, 0.001) as port:
+        rx = RawReceiver(f"tcp:127.0.0.1:{port}")
+        deadline = time.monotonic() + 10.0
+        try:
+            while time.monotonic() < deadline and not rx.counters().get("stream_ended"):
+                items += rx.drain()
+                time.sleep(0.01)
             items += rx.drain()
-            time.sleep(0.01)
-        items += rx.drain()
-    finally:
-        rx.close()
-        srv.close()
-        th.join(timeout=5.0)
+        finally:
+            rx.close()
     assert [type(i).__name__ for i in items] == ["GnssEpoch", "KeplerEphemeris", "ReceiverPvt", "GnssEpoch"]
     c = rx.counters()
     assert c["items"] == 4 and c["stream_ended"] == 1

@@ -422,22 +422,18 @@ def figure(
     colours = {"smartLoc (real)": palette.quantity("real_data"), "simulated": palette.quantity("simulated")}
     groups = {"smartLoc (real)": real, "simulated": sim}
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
-    ax = axes[0, 0]
-    for label, runs in groups.items():
-        h = np.sort(np.concatenate([r.horizontal_m for r in runs]))
-        ax.plot(h, np.arange(1, len(h) + 1) / len(h), color=colours[label], label=label)
-    ax.set_xscale("log")
-    ax.set_xlabel("horizontal error [m]")
-    ax.set_ylabel("CDF")
-    ax.set_title("single-point horizontal error")
-    ax.legend()
-    ax = axes[0, 1]
-    for label, runs in groups.items():
-        st = np.sort(np.concatenate([r.steps_m for r in runs]))
-        ax.plot(st, np.arange(1, len(st) + 1) / len(st), color=colours[label], label=label)
-    ax.set_xscale("log")
-    ax.set_xlabel("epoch-to-epoch horizontal step [m] (5 Hz)")
-    ax.set_title("steps")
+    for ax, name, xlabel, title in (
+        (axes[0, 0], "horizontal_m", "horizontal error [m]", "single-point horizontal error"),
+        (axes[0, 1], "steps_m", "epoch-to-epoch horizontal step [m] (5 Hz)", "steps"),
+    ):  # empirical CDFs over each group's runs
+        for label, runs in groups.items():
+            v = np.sort(np.concatenate([getattr(r, name) for r in runs]))
+            ax.plot(v, np.arange(1, len(v) + 1) / len(v), color=colours[label], label=label)
+        ax.set_xscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_title(title)
+    axes[0, 0].set_ylabel("CDF")
+    axes[0, 0].legend()
     ax = axes[0, 2]
     for label, runs in groups.items():
         for axis, ls in ((0, "-"), (1, "--"), (2, ":")):

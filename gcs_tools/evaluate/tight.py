@@ -26,9 +26,8 @@ else of all of them), so one sees β_s fall for reflected signals and stay high 
 from __future__ import annotations
 
 import argparse
-import json
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +37,7 @@ from companion.errors import UserError
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
 from companion.gnss.spp import SppConfig
 from companion.tight import TightConfig, TightNavigator
-from gcs_tools.jsonvalues import plain_json
+from gcs_tools.jsonvalues import write_results
 
 TIGHT_ROWS = ("naive", "cn0-elevation", "fde", "student-t", "first-order", "second-order")
 NO_ODOMETRY_ROWS = ("cn0-elevation", "student-t", "second-order")
@@ -255,37 +254,38 @@ def belief_vs_residual(epochs: Sequence[Any], truth: Any, log: Sequence[tuple[in
     return out
 
 
+def table_lines(head: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    """A markdown table: the header, its rule and one line per row of cells."""
+    return ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |",
+            *("| " + " | ".join(row) + " |" for row in rows)]
+
+
 def markdown(r: dict[str, Any]) -> str:
     def ci(v: list[float]) -> str:
         return f"[{v[0]:.1f}, {v[1]:.1f}]"
 
     lines = [f"smartLoc {Path(r['data']['input']).name}: {r['data']['epochs']} epochs, "
              f"{r['data']['duration_s']:.0f} s; {r['method']['score']}; "
-             f"intervals: {r['method']['bootstrap']}.",
-             "", "| row | median (m) | 95 % CI | p95 (m) | 95 % CI | max (m) | median / SPP | p95 / SPP |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
-    for name, s in r["rows"].items():
-        g = r["goals"][name]
-        lines.append(f"| {name} | {s['median_m']:.1f} | {ci(s['median_ci_m'])} | {s['p95_m']:.1f} | "
-                     f"{ci(s['p95_ci_m'])} | {s['max_m']:.1f} | {g['median_ratio_to_spp']:.2f} | "
-                     f"{g['p95_ratio_to_spp']:.2f} |")
-    lines += ["", "| paired difference | median (m) | 95 % CI | p95 (m) | 95 % CI |",
-              "| --- | --- | --- | --- | --- |"]
-    for c in r["paired"]:
-        lines.append(f"| {c['row']} − {c['reference']} | {c['median_diff_m']:+.1f} | "
-                     f"{ci(c['median_diff_ci_m'])} | "
-                     f"{c['p95_diff_m']:+.1f} | {ci(c['p95_diff_ci_m'])} |")
-    lines += ["", "| residual at the true position (m) | observations | β median | β p25-p75 |",
-              "| --- | --- | --- | --- |"]
-    for b in r["belief_vs_residual"]:
-        lines.append(f"| {b['residual_from_m']:g} to {b['residual_to_m']:g} | {b['n']} | "
-                     f"{b['beta_median']:.2f} | "
-                     f"{b['beta_p25']:.2f}-{b['beta_p75']:.2f} |")
+             f"intervals: {r['method']['bootstrap']}.", ""]
+    goals = r["goals"]
+    lines += table_lines(
+        ("row", "median (m)", "95 % CI", "p95 (m)", "95 % CI", "max (m)", "median / SPP", "p95 / SPP"),
+        ((name, f"{s['median_m']:.1f}", ci(s["median_ci_m"]), f"{s['p95_m']:.1f}", ci(s["p95_ci_m"]),
+          f"{s['max_m']:.1f}", f"{goals[name]['median_ratio_to_spp']:.2f}",
+          f"{goals[name]['p95_ratio_to_spp']:.2f}") for name, s in r["rows"].items()))
+    lines += ["", *table_lines(
+        ("paired difference", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
+        ((f"{c['row']} − {c['reference']}", f"{c['median_diff_m']:+.1f}", ci(c["median_diff_ci_m"]),
+          f"{c['p95_diff_m']:+.1f}", ci(c["p95_diff_ci_m"])) for c in r["paired"]))]
+    lines += ["", *table_lines(
+        ("residual at the true position (m)", "observations", "β median", "β p25-p75"),
+        ((f"{b['residual_from_m']:g} to {b['residual_to_m']:g}", str(b["n"]), f"{b['beta_median']:.2f}",
+          f"{b['beta_p25']:.2f}-{b['beta_p75']:.2f}") for b in r["belief_vs_residual"]))]
     if r.get("sensitivity"):
-        lines += ["", "| tight-second-order with | median (m) | p95 (m) | max (m) |",
-                  "| --- | --- | --- | --- |"]
-        for name, s in r["sensitivity"].items():
-            lines.append(f"| {name} | {s['median_m']:.1f} | {s['p95_m']:.1f} | {s['max_m']:.1f} |")
+        lines += ["", *table_lines(
+            ("tight-second-order with", "median (m)", "p95 (m)", "max (m)"),
+            ((name, f"{s['median_m']:.1f}", f"{s['p95_m']:.1f}", f"{s['max_m']:.1f}")
+             for name, s in r["sensitivity"].items()))]
     return "\n".join(lines) + "\n"
 
 
@@ -312,10 +312,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"beliefnav: error: {exc}")
         return 2
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "results.json").write_text(json.dumps(plain_json(r, nan_to_none=True), indent=1) + "\n")
     md = markdown(r)
-    (args.out / "results.md").write_text(md)
+    write_results(args.out, r, md)
     print(md)
     print(f"wrote {args.out / 'results.json'} and {args.out / 'results.md'}")
     return 0

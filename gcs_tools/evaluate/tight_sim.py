@@ -18,7 +18,6 @@ differences between rows over the same flights.
 from __future__ import annotations
 
 import argparse
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,8 @@ import numpy as np
 
 from companion.errors import UserError
 from companion.tight import RawGnss, TightConfig, TightNavigator
-from gcs_tools.jsonvalues import plain_json
+from gcs_tools.evaluate.tight import table_lines
+from gcs_tools.jsonvalues import write_results
 
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
 
@@ -125,17 +125,16 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
 
 
 def markdown(r: dict[str, Any]) -> str:
-    lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}: {r['method']}.", "",
-             "| row | median (m) | 95 % CI | p95 (m) | 95 % CI |", "| --- | --- | --- | --- | --- |"]
-    for n, s in r["rows"].items():
-        a, b = s["median_m"], s["p95_m"]
-        lines.append(f"| {n} | {a['mean']:.2f} | [{a['ci'][0]:.2f}, {a['ci'][1]:.2f}] | {b['mean']:.2f} | "
-                     f"[{b['ci'][0]:.2f}, {b['ci'][1]:.2f}] |")
-    lines += ["", "| tight-second-order − | statistic | mean difference (m) | 95 % CI |",
-              "| --- | --- | --- | --- |"]
-    for c in r["paired"]:
-        lines.append(f"| {c['reference']} | {c['stat'].removesuffix('_m')} | {c['mean_diff_m']:+.2f} | "
-                     f"[{c['ci'][0]:+.2f}, {c['ci'][1]:+.2f}] |")
+    def ci(v: list[float], sign: str = "") -> str:
+        return f"[{v[0]:{sign}.2f}, {v[1]:{sign}.2f}]"
+
+    lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}: {r['method']}.", ""]
+    lines += table_lines(("row", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
+                         ((n, f"{s['median_m']['mean']:.2f}", ci(s["median_m"]["ci"]),
+                           f"{s['p95_m']['mean']:.2f}", ci(s["p95_m"]["ci"])) for n, s in r["rows"].items()))
+    lines += ["", *table_lines(("tight-second-order −", "statistic", "mean difference (m)", "95 % CI"),
+                               ((c["reference"], c["stat"].removesuffix("_m"), f"{c['mean_diff_m']:+.2f}",
+                                 ci(c["ci"], "+")) for c in r["paired"]))]
     return "\n".join(lines) + "\n"
 
 
@@ -159,10 +158,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"beliefnav: error: {exc}")
         return 2
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "results.json").write_text(json.dumps(plain_json(r, nan_to_none=True), indent=1) + "\n")
     md = markdown(r)
-    (args.out / "results.md").write_text(md)
+    write_results(args.out, r, md)
     print(md)
     return 0
 

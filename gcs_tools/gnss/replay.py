@@ -3,16 +3,18 @@ and smartLoc as a GNSS-only replay scored against its truth.
 
 ``LogWithFixes(reader, fixes)`` wraps a log reader: the log's GnssFix events are dropped (counted
 as ``stats.rejected['log_fix_replaced']``) and the given fixes are inserted, in validity order, as
-soon as the log's IMU time reaches their validity time. ``SmartLocSource`` is a reader of its own:
+soon as the log's IMU time reaches their validity time (``LogWithGnss``, which
+``tight_replay.LogWithRawGnss`` shares). ``SmartLocSource`` is a reader of its own:
 a constant level attitude and a zero-acceleration IMU at 50 Hz (no inertial data: the filter runs
 as a constant-velocity GNSS filter), the SPP fixes, and the smartLoc truth as references.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -58,42 +60,61 @@ def fixes_on_boot_time(series: SppSeries, time_map: BootTimeMap) -> list[GnssFix
     return fixes
 
 
-class LogWithFixes:
-    """A log reader whose GNSS fixes are replaced by ``fixes`` (validity-stamped on boot time)."""
+T = TypeVar("T")
 
-    def __init__(self, inner: LogReader, fixes: Sequence[GnssFix], source: str) -> None:
+
+class LogWithGnss(Generic[T]):
+    """A log reader whose GNSS fixes are replaced by ``items`` (``what``: fixes or raw epochs, each at
+    ``t_us(item)`` on boot time): the log's fixes are dropped (``log_fix_replaced``), each item is
+    yielded before the first IMU sample at or after its time (``gnss_external``); those after the
+    log's end are counted (``external_{what}_after_log``)."""
+
+    def __init__(self, inner: LogReader, items: Sequence[T], t_us: Callable[[T], int], source: str,
+                 what: str) -> None:
         self.inner = inner
-        self.fixes = sorted(fixes, key=lambda f: f.t_validity_us)
+        self.items = sorted(items, key=t_us)
+        self._t_us = t_us
         self.format = inner.format
         self.stats: ReaderStats = inner.stats
         self.sources = dict(inner.sources)
         self.sources["gnss"] = source
         self._source = source
+        self._what = what
 
     @property
     def references(self) -> dict[str, ReferenceInfo]:
         return self.inner.references
 
     def first_fix(self) -> GnssFix | None:
-        return self.fixes[0] if self.fixes else None
+        return None
 
     def describe_empty(self) -> str:
-        return f"no fix from {self._source}"
+        return f"no {self._what} from {self._source}"
 
-    def __iter__(self) -> Iterator[Event]:
-        fixes, i, n = self.fixes, 0, len(self.fixes)
+    def __iter__(self) -> Iterator[Event | T]:
+        items, i, n, t_us = self.items, 0, len(self.items), self._t_us
         for ev in self.inner:
-            kind = type(ev)
-            if kind is GnssFix:
+            if type(ev) is GnssFix:
                 self.stats.rejected["log_fix_replaced"] += 1
                 continue
             if isinstance(ev, ImuSample):
-                while i < n and fixes[i].t_validity_us <= ev.t_us:
+                while i < n and t_us(items[i]) <= ev.t_us:
                     self.stats.decoded["gnss_external"] += 1
-                    yield fixes[i]
+                    yield items[i]
                     i += 1
             yield ev
-        self.stats.rejected["external_fix_after_log"] += n - i
+        self.stats.rejected[f"external_{self._what}_after_log"] += n - i
+
+
+class LogWithFixes(LogWithGnss[GnssFix]):
+    """A log reader whose GNSS fixes are replaced by ``fixes`` (validity-stamped on boot time)."""
+
+    def __init__(self, inner: LogReader, fixes: Sequence[GnssFix], source: str) -> None:
+        super().__init__(inner, fixes, lambda f: f.t_validity_us, source, "fix")
+        self.fixes = self.items
+
+    def first_fix(self) -> GnssFix | None:
+        return self.fixes[0] if self.fixes else None
 
 
 @dataclass

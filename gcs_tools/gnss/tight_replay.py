@@ -25,7 +25,7 @@ from companion.gnss.geometry import ecef_to_geodetic
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, solve_position
 from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, check_weighting
-from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, SMARTLOC_T0_US
+from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, SMARTLOC_T0_US, LogWithGnss
 from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Reference, ReferenceInfo
 
 RawEvent = Event | RawGnss | Odometry  # what these readers yield
@@ -116,42 +116,12 @@ def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry:
     return SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry)
 
 
-class LogWithRawGnss:
-    """A log reader whose fixes are replaced by raw epochs (stamped on boot time)."""
+class LogWithRawGnss(LogWithGnss[RawGnss]):
+    """A log reader whose fixes are replaced by raw epochs (stamped on boot time), in ``anchor``'s frame."""
 
     def __init__(self, inner: LogReader, raws: Sequence[RawGnss], anchor: LocalNedFrame, source: str) -> None:
-        self.inner = inner
-        self.raws = sorted(raws, key=lambda r: r.t_us)
-        self.format = inner.format
-        self.stats: ReaderStats = inner.stats
-        self.sources = dict(inner.sources)
-        self.sources["gnss"] = source
+        super().__init__(inner, raws, lambda r: r.t_us, source, "epoch")
         self.anchor = anchor
-        self._source = source
-
-    @property
-    def references(self) -> dict[str, ReferenceInfo]:
-        return self.inner.references
-
-    def first_fix(self) -> GnssFix | None:
-        return None
-
-    def describe_empty(self) -> str:
-        return f"no epoch from {self._source}"
-
-    def __iter__(self) -> Iterator[RawEvent]:
-        raws, i, n = self.raws, 0, len(self.raws)
-        for ev in self.inner:
-            if type(ev) is GnssFix:
-                self.stats.rejected["log_fix_replaced"] += 1
-                continue
-            if isinstance(ev, ImuSample):
-                while i < n and raws[i].t_us <= ev.t_us:
-                    self.stats.decoded["gnss_external"] += 1
-                    yield raws[i]
-                    i += 1
-            yield ev
-        self.stats.rejected["external_epoch_after_log"] += n - i
 
 
 def rinex_raw_log_reader(log_path: Path, obs: Path, navs: Sequence[Path], gps_delay_ms: float | None = None
