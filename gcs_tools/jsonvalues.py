@@ -28,8 +28,10 @@ def plain_json(value: Any, *, nan_to_none: bool) -> Any:
     return value
 
 
-def write_results(out_dir: Path, result: Any, markdown: str) -> None:
-    """``out_dir/results.json`` (plain JSON, NaN as null) and ``out_dir/results.md`` (the directory made)."""
+def write_results(out_dir: Path, result: Any, markdown: str) -> str:
+    """``out_dir/results.json`` (plain JSON, NaN as null) and ``out_dir/results.md`` (the directory made);
+    returns the markdown (to print)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "results.json").write_text(json.dumps(plain_json(result, nan_to_none=True), indent=1) + "\n")
     (out_dir / "results.md").write_text(markdown)
+    return markdown

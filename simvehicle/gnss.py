@@ -137,7 +137,23 @@ class ReleaseQueue(Generic[T]):
         return len(self._heap)
 
 
-class GnssModel:
+class QueuedDelivery(Generic[T]):
+    """What a receiver model with a delivery queue (``_queue``) shows the vehicle."""
+
+    _queue: ReleaseQueue[T]
+
+    @property
+    def next_release_us(self) -> int | float:
+        """Release time of the next queued item (inf when none is queued)."""
+        return self._queue.next_release_us
+
+    @property
+    def pending(self) -> int:
+        """Items queued and not yet released."""
+        return len(self._queue)
+
+
+class GnssModel(QueuedDelivery[NedFix]):
     """Bias and latency processes plus the delivery queue (seeded, deterministic)."""
 
     def __init__(self, cfg: GnssConfig, period_s: float, frame: LocalNedFrame, rng: np.random.Generator,
@@ -242,12 +258,3 @@ class GnssModel:
     def release(self, t_us: int) -> list[NedFix]:
         """Fixes whose latency has elapsed by ``t_us``, in order of release time."""
         return self._queue.due(t_us)
-
-    @property
-    def next_release_us(self) -> int | float:
-        """Release time of the next queued fix (inf when none is queued)."""
-        return self._queue.next_release_us
-
-    @property
-    def pending(self) -> int:
-        return len(self._queue)

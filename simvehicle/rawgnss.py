@@ -36,7 +36,7 @@ from companion.gnss.timescale import gps_from_calendar
 from simvehicle.city3d import City
 from simvehicle.config import ReceiverConfig, parse_utc
 from simvehicle.constellation import SYSTEM_NAMES, ephemeris_store
-from simvehicle.gnss import FIX_TYPE_3D, NedFix, NedToGeodetic, ReleaseQueue
+from simvehicle.gnss import FIX_TYPE_3D, NedFix, NedToGeodetic, QueuedDelivery, ReleaseQueue
 from simvehicle.receiver import RawObservation, Receiver
 
 SPAN_BEFORE_S = 900.0
@@ -59,7 +59,7 @@ def boot_gps_time_s(cfg: ReceiverConfig, rng: np.random.Generator) -> float:
     return t + (math.floor(rng.uniform(0.0, cfg.start_spread_s)) if cfg.start_spread_s > 0 else 0.0)
 
 
-class RawGnssModel:
+class RawGnssModel(QueuedDelivery[tuple[RawObservation, RawFix | None]]):
     """Receiver epochs and fixes, queued and released after the receiver's latency (seeded)."""
 
     def __init__(
@@ -196,14 +196,6 @@ class RawGnssModel:
         """The raw epochs released since the last call, in release order."""
         out, self._released = self._released, []
         return out
-
-    @property
-    def next_release_us(self) -> int | float:
-        return self._queue.next_release_us
-
-    @property
-    def pending(self) -> int:
-        return len(self._queue)
 
     def reported_accuracy_m(self, fix: NedFix) -> float:
         """The fix's reported horizontal 1σ per axis (the solution's a-posteriori covariance)."""

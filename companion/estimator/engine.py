@@ -133,7 +133,7 @@ class Snapshot(NamedTuple):
         return tuple(self.out[9:18].tolist())
 
 
-class FusionEngine(Timeline[Fusion, "_Fix"]):
+class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
     """Belief-adaptive EKF on NED inputs; counts every rejection in ``counts``. IMU input:
     ``push_acc``, ``push_frd``, ``push_acc_batch`` (``Timeline``'s)."""
 
@@ -195,7 +195,6 @@ class FusionEngine(Timeline[Fusion, "_Fix"]):
         self._return_us = int(round(cfg.gnss_offset_return_s * 1e6))
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
-        self._cache: tuple[Fusion, int, Snapshot] | None = None
 
     @property
     def fusions(self) -> list[Fusion]:
@@ -543,13 +542,10 @@ class FusionEngine(Timeline[Fusion, "_Fix"]):
 
     # -------------------------------------------------------------- output
     def snapshot(self) -> Snapshot | None:
-        """The filter at the newest IMU time, or None before the first fix."""
-        if not self.entries:
-            return None
-        last = self.entries[-1]
-        now = self.imu.last_t_us
-        if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
-            return self._cache[2]
+        """The filter at the newest IMU time, or None before the first fix (cached)."""
+        return self._output_now()
+
+    def _output(self, last: Fusion, now: int) -> Snapshot:
         T = (now - last.t_us) * 1e-6
         alpha = math.exp(-T / self._tau_s)
         sigma_b = last.sigma_bias_m
@@ -557,10 +553,8 @@ class FusionEngine(Timeline[Fusion, "_Fix"]):
         x, out = prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
                                   (1.0 - alpha * alpha) * sigma_b * sigma_b)
         valid = now - last.t_fused_us <= self._valid_us and not last.invalid and not self._outside_envelope(x)
-        snap = Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
+        return Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
                         last.n_rejected, last.n_resets, last.vel_ratio, last.disagree)
-        self._cache = (last, now, snap)
-        return snap
 
     def covariance_now(self) -> model.Cov | None:
         """The full covariance (15×15) at the newest IMU time (None before the first fix)."""

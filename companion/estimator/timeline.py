@@ -41,10 +41,12 @@ class Timed(Protocol):
 
 E = TypeVar("E", bound=Timed)  # an entry (immutable: a NamedTuple with t_us first)
 M = TypeVar("M")  # a measurement
+O = TypeVar("O")  # the output at the newest IMU time
 
 
-class Timeline(Generic[E, M]):
-    """Entries ``entries`` (in time order; their times ``_t``) and the measurements waiting for the IMU."""
+class Timeline(Generic[E, M, O]):
+    """Entries ``entries`` (in time order; their times ``_t``), the measurements waiting for the IMU, and
+    the output at the newest IMU time (cached per last entry and IMU time)."""
 
     def __init__(self, imu_hold_max_s: float, history_s: float, future_tolerance_s: float,
                  gravity_m_s2: float, counts: dict[str, int]) -> None:
@@ -57,6 +59,7 @@ class Timeline(Generic[E, M]):
         self._history_us = int(round(history_s * 1e6))
         self._future_us = int(round(future_tolerance_s * 1e6))
         self._counts = counts
+        self._cache: tuple[E, int, O] | None = None  # (last entry, IMU time, its output)
         for name in ("gnss_rejected_before_imu", "gnss_rejected_future", "gnss_rejected_too_old",
                      "gnss_rejected_duplicate", "gnss_out_of_order", "gnss_refused"):
             counts.setdefault(name, 0)
@@ -80,6 +83,24 @@ class Timeline(Generic[E, M]):
 
     def _inserted(self) -> None:
         """After a measurement was inserted (the entries changed): e.g. counters from the newest entry."""
+
+    def _output(self, last: E, now_us: int) -> O:
+        """The output at the newest IMU time ``now_us`` from the last entry."""
+        raise NotImplementedError
+
+    # --------------------------------------------------------------------- output
+    def _output_now(self) -> O | None:
+        """``_output`` at the newest IMU time (None before the first entry); computed once per last
+        entry and IMU time."""
+        if not self.entries:
+            return None
+        last, now = self.entries[-1], self.imu.last_t_us
+        c = self._cache
+        if c is not None and c[0] is last and c[1] == now:
+            return c[2]
+        out = self._output(last, now)
+        self._cache = (last, now, out)
+        return out
 
     # ------------------------------------------------------------------ IMU
     def push_acc(self, t_us: int, ax: float, ay: float, az: float, rot: Rot9 = IDENTITY9) -> None:

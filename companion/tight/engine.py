@@ -172,7 +172,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
                     tuple(sorted(set(slots.tolist()))))
 
 
-class TightEngine(Timeline[Entry, SatEpoch | Speed]):
+class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry]]):
     """The filter on NED accelerations (with attitudes: ``push_acc``, ``push_frd``, ``push_acc_batch``,
     ``Timeline``'s) and prepared epochs, in arrival order."""
 
@@ -197,7 +197,6 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed]):
             self._counts.setdefault(k, 0)
         super().__init__(cfg.imu_hold_max_s, cfg.history_s, cfg.future_tolerance_s, cfg.gravity_m_s2,
                          self._counts)
-        self._cache: tuple[Any, int, Any] | None = None
         self._nav15: tuple[Entry, tuple[float, ...], np.ndarray] | None = None
         self._prop = BlockPropagator(self._q[0], self._q[2], self._q[3])
         nominal_fields = {"uniform": "r_uniform_m2", "model": "r_model_m2", "los": "r_los_m2"}
@@ -434,12 +433,9 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed]):
         filter's C output path (``BlockPropagator.output_from``: the mean from the IMU history's
         newest integrals and the variances of p and v, which depend on (p, v, a, d) alone), the
         vertical white-acceleration density added where it differs; cached."""
-        if not self.entries:
-            return None
-        last = self.entries[-1]
-        now = self.imu.last_t_us
-        if self._cache is not None and self._cache[0] is last and self._cache[1] == now:
-            return self._cache[2]
+        return self._output_now()
+
+    def _output(self, last: Entry, now: int) -> tuple[int, np.ndarray, Entry]:
         if self._nav15 is None or self._nav15[0] is not last:
             P15 = np.zeros((15, 15))
             P15[np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)] = last.P[:12, :12]
@@ -452,9 +448,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed]):
         if dq:
             out[11] += dq * T * T * T / 3.0
             out[14] += dq * T
-        snap = (now, out, last)
-        self._cache = (last, now, snap)
-        return snap
+        return now, out, last
 
     def clock_bias_m(self, x: np.ndarray, system: System) -> float:
         return float(x[I_CLK + int(model.SLOT_OF[int(system)])])

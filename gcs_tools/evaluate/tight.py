@@ -312,9 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"beliefnav: error: {exc}")
         return 2
-    md = markdown(r)
-    write_results(args.out, r, md)
-    print(md)
+    print(write_results(args.out, r, markdown(r)))
     print(f"wrote {args.out / 'results.json'} and {args.out / 'results.md'}")
     return 0
 
