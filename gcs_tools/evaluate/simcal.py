@@ -165,23 +165,14 @@ def cn0_by_elevation(epochs: Sequence[GnssEpoch]) -> dict[str, dict[str, dict[st
     """Median (and quartiles) of C/N0 per system and elevation bin, over every observation."""
     if not epochs:
         return {}
-    sy = np.concatenate([e.system for e in epochs])
-    el = np.concatenate([e.elevation_deg for e in epochs])
-    cn = np.concatenate([e.cn0_dbhz for e in epochs])
-    out: dict[str, dict[str, dict[str, float]]] = {}
-    for s in np.unique(sy):
-        name = SHORT_NAME[System(int(s))]
-        out[name] = {}
-        for lo, hi in zip(CN0_BINS_DEG[:-1], CN0_BINS_DEG[1:], strict=True):
-            m = (sy == s) & (el >= lo) & (el < hi) & np.isfinite(cn)
-            q = np.percentile(cn[m], [25, 50, 75]) if m.any() else [math.nan] * 3
-            out[name][f"{lo:g}-{min(hi, 90):g}deg"] = {
-                "median": float(q[1]),
-                "q25": float(q[0]),
-                "q75": float(q[2]),
-                "n": int(m.sum()),
-            }
-    return out
+
+    def quartiles(v: np.ndarray) -> dict[str, float]:
+        q = np.percentile(v, [25, 50, 75]) if len(v) else [math.nan] * 3
+        return {"median": float(q[1]), "q25": float(q[0]), "q75": float(q[2]), "n": len(v)}
+
+    return baseline.by_system_and_elevation(np.concatenate([e.system for e in epochs]),
+                                            np.concatenate([e.elevation_deg for e in epochs]),
+                                            np.concatenate([e.cn0_dbhz for e in epochs]), quartiles)
 
 
 def statistics(runs: Sequence[Series]) -> dict[str, Any]:

@@ -6,7 +6,7 @@ the CSV writer is the only I/O."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -161,15 +161,26 @@ def residuals_at_truth(
         sys_all.append(e.system)
     if not res:
         return {}
-    r, el, sy = np.concatenate(res), np.concatenate(el_all), np.concatenate(sys_all)
+
+    def stat(v: np.ndarray) -> dict[str, float]:
+        q = _quantiles(v)
+        return {"median": q["median"], "p95": q["p95"], "n": q["n"]}
+
+    return by_system_and_elevation(np.concatenate(sys_all), np.concatenate(el_all), np.concatenate(res), stat)
+
+
+def by_system_and_elevation(system: np.ndarray, el_deg: np.ndarray, values: np.ndarray,
+                            stat: Callable[[np.ndarray], dict[str, float]]
+                            ) -> dict[str, dict[str, dict[str, float]]]:
+    """``stat`` of the finite ``values`` per system (``SHORT_NAME``) and ``ELEVATION_BINS_DEG`` band
+    (keys "lo-hi deg", the top band to 90)."""
     out: dict[str, dict[str, dict[str, float]]] = {}
-    for s in np.unique(sy):
+    for s in np.unique(system):
         name = SHORT_NAME[System(int(s))]
         out[name] = {}
         for lo, hi in zip(ELEVATION_BINS_DEG[:-1], ELEVATION_BINS_DEG[1:], strict=True):
-            m = (sy == s) & (el >= lo) & (el < hi) & np.isfinite(r)
-            q = _quantiles(r[m])
-            out[name][f"{lo:g}-{min(hi, 90):g}deg"] = {"median": q["median"], "p95": q["p95"], "n": q["n"]}
+            m = (system == s) & (el_deg >= lo) & (el_deg < hi) & np.isfinite(values)
+            out[name][f"{lo:g}-{min(hi, 90):g}deg"] = stat(values[m])
     return out
 
 
