@@ -18,7 +18,9 @@ odometry) says how to start, fuse and re-base:
   O(IMU samples);
 * every ``TRIM_EVERY`` IMU samples: entries older than ``history_s`` are dropped; the newest of
   them stays as the base, re-based to the horizon by ``_anchor`` when it is older (so a GNSS outage
-  does not grow the IMU history), and the IMU history is trimmed to the base.
+  does not grow the IMU history), and the IMU history is trimmed to the base;
+* ``_output_now()``: the engine's ``_output`` of the last entry at the newest IMU time, computed once
+  per (last entry, IMU time).
 """
 
 from __future__ import annotations
@@ -41,10 +43,10 @@ class Timed(Protocol):
 
 E = TypeVar("E", bound=Timed)  # an entry (immutable: a NamedTuple with t_us first)
 M = TypeVar("M")  # a measurement
-O = TypeVar("O")  # the output at the newest IMU time
+Out = TypeVar("Out")  # the output at the newest IMU time
 
 
-class Timeline(Generic[E, M, O]):
+class Timeline(Generic[E, M, Out]):
     """Entries ``entries`` (in time order; their times ``_t``), the measurements waiting for the IMU, and
     the output at the newest IMU time (cached per last entry and IMU time)."""
 
@@ -59,7 +61,7 @@ class Timeline(Generic[E, M, O]):
         self._history_us = int(round(history_s * 1e6))
         self._future_us = int(round(future_tolerance_s * 1e6))
         self._counts = counts
-        self._cache: tuple[E, int, O] | None = None  # (last entry, IMU time, its output)
+        self._cache: tuple[E, int, Out] | None = None  # (last entry, IMU time, its output)
         for name in ("gnss_rejected_before_imu", "gnss_rejected_future", "gnss_rejected_too_old",
                      "gnss_rejected_duplicate", "gnss_out_of_order", "gnss_refused"):
             counts.setdefault(name, 0)
@@ -84,12 +86,12 @@ class Timeline(Generic[E, M, O]):
     def _inserted(self) -> None:
         """After a measurement was inserted (the entries changed): e.g. counters from the newest entry."""
 
-    def _output(self, last: E, now_us: int) -> O:
+    def _output(self, last: E, now_us: int) -> Out:
         """The output at the newest IMU time ``now_us`` from the last entry."""
         raise NotImplementedError
 
     # --------------------------------------------------------------------- output
-    def _output_now(self) -> O | None:
+    def _output_now(self) -> Out | None:
         """``_output`` at the newest IMU time (None before the first entry); computed once per last
         entry and IMU time."""
         if not self.entries:
