@@ -121,11 +121,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
     from gcs_tools.gnss.replay import smartloc_source
     from gcs_tools.replay import core
 
-    data = smartloc.read_input(input_path)
-    truth_path = truth_path or smartloc.default_truth_path(input_path)
-    if truth_path is None:
-        raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
-    truth = smartloc.read_truth(truth_path)
+    data, truth = smartloc.read_drive(input_path, truth_path)
     t_ep = np.array([e.t_gps_s for e in data.epochs])
     truth_ecef = truth.at(t_ep)
     ok = np.isfinite(truth_ecef).all(axis=1)

@@ -182,11 +182,7 @@ class SmartLocSource:
 def smartloc_source(input_path: Path, truth_path: Path | None, config: SppConfig) -> SmartLocSource:
     from gcs_tools.gnss import smartloc
 
-    data = smartloc.read_input(input_path)
-    truth_path = truth_path or smartloc.default_truth_path(input_path)
-    if truth_path is None:
-        raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
-    truth = smartloc.read_truth(truth_path)
+    data, truth = smartloc.read_drive(input_path, truth_path)
     series = solve_series(data.epochs, config)
     t0 = float(series.t_s[0])
     fixes = []

@@ -168,6 +168,16 @@ def default_truth_path(input_path: Path) -> Path | None:
     return None
 
 
+def read_drive(input_path: Path, truth_path: Path | None = None) -> tuple[SmartLocInput, Truth]:
+    """A drive's input and its truth (``truth_path``, else the ``*_GT.txt`` beside the input; a
+    ``UserError`` naming ``--truth`` when there is none)."""
+    data = read_input(input_path)
+    truth_path = truth_path or default_truth_path(input_path)
+    if truth_path is None:
+        raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
+    return data, read_truth(truth_path)
+
+
 def is_smartloc(path: Path) -> bool:
     with open(path, "rb") as f:
         head = f.read(64).lstrip()

@@ -108,11 +108,7 @@ def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry:
                         ) -> SmartLocRawSource:
     from gcs_tools.gnss import smartloc
 
-    data = smartloc.read_input(input_path)
-    truth_path = truth_path or smartloc.default_truth_path(input_path)
-    if truth_path is None:
-        raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
-    truth = smartloc.read_truth(truth_path)
+    data, truth = smartloc.read_drive(input_path, truth_path)
     return SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry)
 
 
