@@ -118,6 +118,11 @@ class RawGnssModel(QueuedDelivery[tuple[RawObservation, RawFix | None]]):
         """At an epoch time, measure, solve and queue (epoch and fix); otherwise nothing."""
         if t_us % self.period_us:
             return None
+        return self.measure(t_us, p_ned_m, v_ned_m_s)
+
+    def measure(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None = None) -> RawFix | None:
+        """One epoch at ``t_us`` (whatever the grid: a harness driven by another simulator's truth
+        measures when its truth arrives), solved and queued; its fix, or None without a solution."""
         t_gps = self.t0_gps_s + t_us * 1e-6
         if t_gps > self._covered_to_s - 600.0:
             self._extend(t_gps)

@@ -30,7 +30,21 @@ class ArduPilotConfig(ForeignFlightConfig):
             raise ValueError(f"gps_delay_ms: GPS1_DELAY_MS must be 1..250 ms, got {self.gps_delay_ms}")
 
 
-def ardupilot_parameters(cfg: ArduPilotConfig, feed: str = "none") -> dict[str, float]:
+# EKF3's pre-flight GPS quality checks (EK3_GPS_CHECK bits: NSats, HDoP, speed error, position error,
+# yaw error, position drift, vertical speed, horizontal speed, vertical position error). The canyon
+# receiver's honest single-point fixes fail them where the flights start (a street between buildings:
+# vertical accuracy ~9 m > 7.5 m, speed accuracy ~1 m/s, the fix wandering 5-8 m at rest > 3 m), so EKF3
+# never uses GNSS and the vehicle cannot take off; with the raw receiver every loop flies with them off.
+CANYON_PARAMETERS = {"EK3_GPS_CHECK": 0}
+
+
+def ardupilot_parameters(cfg: ArduPilotConfig, feed: str = "none", canyon: bool = False) -> dict[str, float]:
+    """The parameters of ``feed`` (:func:`_parameters`), with ``CANYON_PARAMETERS`` on the canyon receiver."""
+    params = _parameters(cfg, feed)
+    return {**params, **CANYON_PARAMETERS} if canyon else params
+
+
+def _parameters(cfg: ArduPilotConfig, feed: str) -> dict[str, float]:
     """Parameters set at boot (a defaults file beside copter.parm, so those needing a reboot apply).
 
     Open loop (``none``): GPS1_TYPE 14 makes our raw GPS_INPUT EKF3's ONLY GNSS. With

@@ -20,7 +20,15 @@ from simvehicle.harness.ardupilot.sitl import ArduPilotSitl, SitlConfig
 from simvehicle.harness.backend import FlightResult
 from simvehicle.harness.foreign.companion_process import companion_command
 from simvehicle.harness.foreign.config import ForeignFlightOptions
-from simvehicle.harness.foreign.flight import companion_info, plan_flight, run_info, run_session
+from simvehicle.harness.foreign.flight import (
+    companion_info,
+    plan_flight,
+    receiver_info,
+    receiver_stream,
+    run_info,
+    run_session,
+    tight_arguments,
+)
 from simvehicle.harness.foreign.scoring import Vehicle, score_flight
 
 ARDUPILOT = Vehicle("ardupilot", "ardupilot-ekf3")
@@ -39,23 +47,25 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
     m = plan.mission
     driver = FlightDriver(cfg, plan.route, m.altitude_m)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
-    params = ardupilot_parameters(cfg, opts.feed)
+    params = ardupilot_parameters(cfg, opts.feed, canyon=plan.canyon is not None)
     sitl_cfg = SitlConfig(work_dir=opts.out_dir / "ardupilot", home=(*plan.home, 0.0), speedup=cfg.speedup,
                           params=params, instance_range=opts.instance_range)
     companion_dir = opts.out_dir / "companion"
-    with ArduPilotSitl(sitl_cfg) as sitl:
+    with receiver_stream(plan, opts.out_dir) as stream, ArduPilotSitl(sitl_cfg) as sitl:
         session = ArduPilotSession(sitl.ports[0], cfg, m.frame, plan.source, driver,
                                    opts.out_dir / "run.tlog", GPS2_ID if plan.closed else GPS1_ID)
 
         def companion() -> list[str]:  # SERIAL1 listens once SERIAL0 has its client
             return companion_command(sitl.wait_serial(1), companion_dir, opts.feed, opts.method, plan.home,
-                                     "--gnss-instance", "2", "--target-system", "1")
+                                     "--gnss-instance", "2", "--target-system", "1", *tight_arguments(stream))
 
         run = run_session(session, sitl.running, companion if plan.closed else None, companion_dir)
         instance = sitl.instance
     info = {"instance": instance, "speedup": cfg.speedup, "feed": opts.feed,
             **run_info(plan, cfg, session, run, params), "gps_input_sent": session.gps_sent}
     live = None
+    if plan.canyon is not None:
+        info["receiver"] = receiver_info(plan.canyon)
     if plan.closed:
         info["companion"], live = companion_info(plan, companion_dir, run, opts.feed)
     return score_flight(ARDUPILOT, opts, m, plan.route, session.rec, plan.source, driver, info,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+from companion.gnss.timescale import week_tow
 from simvehicle.harness.ardupilot.config import GPS1_ID, GPS_INPUT_IGNORE_VELOCITY, GPS_WEEK
 from simvehicle.harness.foreign.gnss_source import SentFix
 
@@ -20,8 +21,9 @@ def gps_input_fields(sf: SentFix, gps_id: int = GPS1_ID,
                      velocity_sigma_m_s: float = 0.0) -> dict[str, float | int]:
     """GPS_INPUT fields (MAVLink common) for a fix: validity time as GPS time, to receiver ``gps_id``.
 
-    Velocity (and ``speed_accuracy`` = ``velocity_sigma_m_s``) when the fix carries one; otherwise
-    flagged as ignored.
+    Velocity (and ``speed_accuracy``: the fix's own, else ``velocity_sigma_m_s``) when the fix carries
+    one; otherwise flagged as ignored. Time: the fix's GPS time (``t_gps_s``, a raw receiver's) as week
+    and time of week, else the validity time's boot ms on a fixed week.
 
     ``horiz_accuracy``/``vert_accuracy`` carry the model's reported accuracy (the white-noise std,
     not the bias: what a receiver that cannot see its multipath reports; EKF3 floors it at
@@ -30,13 +32,18 @@ def gps_input_fields(sf: SentFix, gps_id: int = GPS1_ID,
     fix, v = sf.fix, sf.v_ned_m_s
     acc = fix.h_acc_m if math.isfinite(fix.h_acc_m) else 1.0
     vacc = fix.v_acc_m if math.isfinite(fix.v_acc_m) else 1.5
-    t_ms = fix.t_validity_us // 1000
+    speed_acc = sf.speed_accuracy_m_s if math.isfinite(sf.speed_accuracy_m_s) else velocity_sigma_m_s
+    if sf.t_gps_s is None:
+        week, t_ms = GPS_WEEK, fix.t_validity_us // 1000
+    else:  # a raw receiver's fix: the GPS time of its measurement (ArduPilot sets its clock from it)
+        week, tow_s = week_tow(sf.t_gps_s)
+        t_ms = round(tow_s * 1000.0)
     return {
         "time_usec": int(fix.t_validity_us),
         "gps_id": gps_id,
         "ignore_flags": GPS_INPUT_IGNORE_VELOCITY if v is None else 0,
         "time_week_ms": int(t_ms),
-        "time_week": GPS_WEEK,
+        "time_week": int(week),
         "fix_type": int(fix.fix_type),
         "lat": round(fix.lat_deg * 1e7),
         "lon": round(fix.lon_deg * 1e7),
@@ -46,7 +53,7 @@ def gps_input_fields(sf: SentFix, gps_id: int = GPS1_ID,
         "vn": 0.0 if v is None else float(v[0]),
         "ve": 0.0 if v is None else float(v[1]),
         "vd": 0.0 if v is None else float(v[2]),
-        "speed_accuracy": 0.0 if v is None else float(velocity_sigma_m_s),
+        "speed_accuracy": 0.0 if v is None else float(speed_acc),
         "horiz_accuracy": float(acc),
         "vert_accuracy": float(vacc),
         "satellites_visible": int(fix.satellites_visible),

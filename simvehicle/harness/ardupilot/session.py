@@ -27,7 +27,7 @@ from companion.errors import UserError  # noqa: E402
 from simvehicle.harness.ardupilot.config import GPS1_ID, ArduPilotConfig  # noqa: E402
 from simvehicle.harness.ardupilot.driver import FlightDriver  # noqa: E402
 from simvehicle.harness.ardupilot.gnss_source import gps_input_fields  # noqa: E402
-from simvehicle.harness.foreign.gnss_source import SentFix, UrbanGnssSource  # noqa: E402
+from simvehicle.harness.foreign.gnss_source import GnssSource, SentFix  # noqa: E402
 from simvehicle.harness.foreign.session import ForeignSession  # noqa: E402
 
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 255, 190
@@ -38,7 +38,7 @@ class ArduPilotSession(ForeignSession):
     # the companion's feeds, stamped with its estimate's time (ArduPilot boot µs)
     feed_stamps = {"GPS_INPUT": "time_usec", "VISION_POSITION_ESTIMATE": "usec"}
 
-    def __init__(self, port: int, cfg: ArduPilotConfig, frame: LocalNedFrame, source: UrbanGnssSource,
+    def __init__(self, port: int, cfg: ArduPilotConfig, frame: LocalNedFrame, source: GnssSource,
                  driver: FlightDriver, tlog_path: Path, raw_gps_id: int = GPS1_ID) -> None:
         super().__init__(frame, source, driver, tlog_path, cfg.setup_timeout_s, cfg.wall_timeout_s)
         self.cfg = cfg

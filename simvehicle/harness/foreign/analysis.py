@@ -9,21 +9,36 @@ autopilot would have estimated in open loop, and all methods and the autopilot's
 EKF (EKF3, EKF2) are compared on identical GNSS. Errors are taken at the truth samples
 (ArduPilot's SIM_STATE, PX4 SIH's HIL_STATE_QUATERNION) of the route phase; the EKF's
 GLOBAL_POSITION_INT is interpolated linearly to those times.
+
+With the canyon receiver (scenario ``canyon``) the flight also records its raw epochs: the tightly
+coupled rows (``tight-<weighting>``, ``companion.tight``) are run on exactly those epochs (pushed
+at their release, fused at their measurement time, on the same IMU stream), and row ``spp`` is the
+receiver's own fix as it arrived (what the autopilot's EKF was sent).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import AttitudeSample, ImuSample
 from companion.estimator import EstimatorConfig
+from companion.gnss.ephemeris import EphemerisStore
 from companion.mission import Mission
+from companion.tight import RawGnss, TightConfig, TightNavigator
 from companion.wiring import navigator_for
 from simvehicle.harness.foreign.gnss_source import SentFix
 from simvehicle.harness.foreign.recording import Recording
+from simvehicle.receiver import RawObservation
 
 LIVE_ROW = "companion-live"  # closed loop: what the companion process sent the autopilot (its tlog)
+SPP_ROW = "spp"  # the canyon receiver's own single-point fixes, as they arrived (what the autopilot got)
+PushImu = Callable[[int, np.ndarray, np.ndarray], None]  # (t_us, acc_frd_m_s2, q_ned_frd)
+TIGHT_PREFIX = "tight-"  # the tightly coupled rows on the canyon receiver's raw epochs: tight-<weighting>
 
 
 @dataclass(frozen=True)
@@ -43,17 +58,47 @@ def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: Estim
     estimate right after the IMU sample (and the fixes released with it) at each time: exactly what
     the closed loop's live companion computes."""
     nav = navigator_for(mission, method, config=cfg)
+
+    def push_imu(t_us: int, acc_frd_m_s2: np.ndarray, q_ned_frd: np.ndarray) -> None:
+        nav.push_imu_batch(np.array([t_us]), acc_frd_m_s2[None, :], q_ned_frd[None, :])
+
+    def push_fix(sf: SentFix) -> None:  # with the accuracies and Doppler velocity the autopilot's EKF got
+        nav.push_fix_ned(sf.fix.t_validity_us, sf.p_ned_m, sf.fix.h_acc_m, sf.fix.v_acc_m, sf.v_ned_m_s,
+                         sf.speed_accuracy_m_s)
+
+    return _replayed(rec, [(sf.arrival_us, sf) for sf in sent], push_imu, push_fix, nav, times_us)
+
+
+def tight_track(rec: Recording, raws: list[RawObservation], weighting: str, store: EphemerisStore,
+                frame: LocalNedFrame, times_us: np.ndarray) -> Track:
+    """The tightly coupled filter (``companion.tight``, ``weighting``) over the recording: the IMU and
+    attitude the autopilot streamed, the receiver's raw epochs pushed at their release and fused at
+    their measurement time, satellite states from the sky's broadcast ephemerides (``store``)."""
+    nav = TightNavigator(TightConfig(), weighting, frame, store)
+    gyro = np.zeros(3)  # unused by the filter (attitude comes with each sample)
+
+    def push_imu(t_us: int, acc_frd_m_s2: np.ndarray, q_ned_frd: np.ndarray) -> None:
+        nav.push(AttitudeSample(t_us, q_ned_frd))
+        nav.push(ImuSample(t_us, acc_frd_m_s2, gyro))
+
+    def push_raw(raw: RawObservation) -> None:
+        nav.push(RawGnss(raw.t_us, raw.epoch))
+
+    return _replayed(rec, [(raw.arrival_us, raw) for raw in raws], push_imu, push_raw, nav, times_us)
+
+
+def _replayed(rec: Recording, arrivals: list[tuple[int, Any]], push_imu: PushImu, push: Callable[[Any], None],
+              nav: Any, times_us: np.ndarray) -> Track:
+    """As the session pushes them: each IMU sample, then the GNSS items (``(arrival µs, item)``, in
+    arrival order) released with it; ``nav``'s estimate right after the IMU sample at each time."""
     n = len(times_us)
     p, b = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
     beta, nis = np.full(n, np.nan), np.full(n, np.nan)
-    imu_t = rec.imu_t_us
     k = j = 0
-    for i, t in enumerate(imu_t):  # as the session pushes them: the IMU sample, then the fixes released
-        nav.push_imu_batch(np.array([t]), rec.imu_acc_frd_m_s2[i][None, :], rec.imu_q_ned_frd[i][None, :])
-        while k < len(sent) and sent[k].arrival_us <= t:
-            sf = sent[k]  # with the accuracies and the Doppler velocity the autopilot's EKF is sent
-            nav.push_fix_ned(sf.fix.t_validity_us, sf.p_ned_m, sf.fix.h_acc_m, sf.fix.v_acc_m, sf.v_ned_m_s,
-                             sf.speed_accuracy_m_s)
+    for i, t in enumerate(rec.imu_t_us):
+        push_imu(t, rec.imu_acc_frd_m_s2[i], rec.imu_q_ned_frd[i])
+        while k < len(arrivals) and arrivals[k][0] <= t:
+            push(arrivals[k][1])
             k += 1
         while j < n and times_us[j] < t:
             j += 1  # an evaluation time without its IMU sample (dropped): skipped, stays NaN
@@ -63,6 +108,18 @@ def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: Estim
                 p[j], b[j], beta[j], nis[j] = est.p_ned_m, est.b_ned_m, est.beta, est.nis
             j += 1
     return Track(p, b, beta, nis, nav.counters())
+
+
+def held_track(arrival_us: np.ndarray, p_ned_m: np.ndarray, times_us: np.ndarray) -> Track:
+    """The latest position that had arrived by each time (a consumer of the fixes: the receiver's own
+    single-point solution as it arrived); NaN before the first."""
+    n = len(times_us)
+    p = np.full((n, 3), np.nan)
+    idx = np.searchsorted(np.asarray(arrival_us, dtype=np.int64), times_us, side="right") - 1
+    ok = idx >= 0
+    p[ok] = np.asarray(p_ned_m, dtype=float).reshape(-1, 3)[idx[ok]]
+    nan = np.full(n, np.nan)
+    return Track(p, np.full((n, 3), np.nan), nan, nan, {})
 
 
 def autopilot_track(rec: Recording, times_us: np.ndarray) -> Track:

@@ -20,11 +20,11 @@ class ForeignBackend:
     def fly(self, request: FlightRequest) -> FlightResult:
         if request.out_dir is None:
             raise UserError(f"the {self.name} backend runs processes: it needs an output directory")
-        if request.scenario is not None or request.max_duration_s is not None:
-            raise UserError("--scenario and --max-duration-s apply to our simulated vehicle only")
+        if request.max_duration_s is not None:
+            raise UserError("--max-duration-s applies to our simulated vehicle only")
         return self.fly_options(mission=mission_name(request, self.name), profile=request.profile,
                                 method=request.method, seed=request.seed, out_dir=request.out_dir,
-                                **self.options)
+                                scenario=request.scenario, **self.options)
 
     def fly_options(self, **fields: Any) -> FlightResult:  # pragma: no cover - each vehicle's
         raise NotImplementedError

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from companion.estimator import METHODS, EstimatorConfig
+from companion.tight import WEIGHTINGS
 from simvehicle.config import _positive
 
 
@@ -54,7 +55,13 @@ class ForeignFlightOptions:
     seed: int  # our GNSS model's draws
     out_dir: Path  # run.tlog, the SITL's work directory, the companion's
     feed: str = "none"
+    # sensor scenario (None: the mission file's): paper = our eq. 22-27 fixes; canyon = the calibrated
+    # raw receiver in the 3-D city (its fixes to the autopilot, its raw epochs recorded and, in closed
+    # loop, served as UBX to the tightly coupled companion). The autopilot's own IMU flies either way.
+    scenario: str | None = None
     methods: tuple[str, ...] = METHODS  # every companion method evaluated on the same samples
+    # scenario canyon: the tightly coupled weightings run on the receiver's raw epochs (rows tight-<w>)
+    tight_methods: tuple[str, ...] = WEIGHTINGS
     # The filter's defaults are those of real sensors (the quad106 log). A mission's ``estimator:``
     # section describes OUR simulated IMU (0.006 m/s² noise, true attitude), not the autopilot's,
     # so it is not used here; nothing was tuned on SITL flights.

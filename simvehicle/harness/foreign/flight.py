@@ -9,9 +9,10 @@ feed delays, validity). ``companion_info``: the closed loop's companion process,
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,11 +27,15 @@ from companion.planning import Route
 from simvehicle.config import SimConfig, sim_config_for
 from simvehicle.gnss import NedToGeodetic
 from simvehicle.harness.fly import planned_route
+from simvehicle.harness.foreign.canyon_source import CanyonGnssSource
 from simvehicle.harness.foreign.companion_process import CompanionProcess, read_summary, sent_track
 from simvehicle.harness.foreign.config import ForeignFlightConfig, ForeignFlightOptions
 from simvehicle.harness.foreign.gnss_source import VELOCITY_SEED_STREAM, UrbanGnssSource
 from simvehicle.harness.foreign.scoring import delay_stats
 from simvehicle.harness.foreign.session import ForeignSession
+from simvehicle.ubx_server import ReceiverStream
+
+FOREIGN_SCENARIOS = ("paper", "canyon")  # the scenarios whose GNSS a foreign autopilot is flown on
 
 
 @dataclass(frozen=True)
@@ -40,8 +45,13 @@ class FlightPlan:
     sim: SimConfig
     home: tuple[float, float, float]  # the SITL's home: the profile's start on the ground (deg, deg, m)
     closed: bool  # the autopilot flies on the companion process's feed
-    velocity_sigma_m_s: float | None  # the raw fixes' Doppler velocity noise (None: no velocity)
-    source: UrbanGnssSource
+    velocity_sigma_m_s: float | None  # the raw fixes' Doppler velocity noise (None: none, or the receiver's)
+    source: UrbanGnssSource | CanyonGnssSource
+
+    @property
+    def canyon(self) -> CanyonGnssSource | None:
+        """The calibrated raw receiver (scenario ``canyon``), None for our eq. 22-27 fixes."""
+        return self.source if isinstance(self.source, CanyonGnssSource) else None
 
 
 def plan_flight(vehicle: str, opts: ForeignFlightOptions, cfg: ForeignFlightConfig,
@@ -53,7 +63,11 @@ def plan_flight(vehicle: str, opts: ForeignFlightOptions, cfg: ForeignFlightConf
     if opts.feed not in feeds:
         raise UserError(f"--feed {opts.feed}: with --vehicle {vehicle}, --feed is one of {', '.join(feeds)}")
     check_method(opts.method)
-    m = load_mission(opts.mission)
+    m = load_mission(opts.mission, opts.scenario)
+    if m.scenario not in FOREIGN_SCENARIOS:
+        names = ", ".join(FOREIGN_SCENARIOS)
+        raise UserError(f"--scenario {m.scenario}: with --vehicle {vehicle}, one of {names} "
+                        "(the autopilot's own IMU flies; only the GNSS is ours)")
     if not 0 <= opts.profile < len(m.profiles):
         raise UserError(f"--profile {opts.profile}: mission {m.name!r} has profiles 0..{len(m.profiles) - 1}")
     route = planned_route(m, opts.profile, 0.0)
@@ -61,12 +75,18 @@ def plan_flight(vehicle: str, opts: ForeignFlightOptions, cfg: ForeignFlightConf
     start_ned = np.array([*m.profiles[opts.profile].start_ne_m, 0.0])
     lat, lon, alt = NedToGeodetic(m.frame)(start_ned)
     closed = opts.feed != "none"
-    # open loop: the EKF gets the Doppler velocity (unless switched off); closed loop: the companion
-    # (which fuses no GNSS velocity) reads the raw fixes, so they carry the same velocity for the record
-    sigma = cfg.gnss_velocity_sigma_m_s if cfg.gnss_velocity or closed else None
-    source = UrbanGnssSource(sim.gnss, m.world, m.frame, cfg.gnss_rate_hz, np.random.default_rng(opts.seed),
-                             float(m.world.clearance_m(*start_ned[:2])), sigma,
-                             np.random.default_rng([opts.seed, VELOCITY_SEED_STREAM]))
+    source: UrbanGnssSource | CanyonGnssSource
+    if sim.receiver.enabled:  # the receiver's own Doppler velocity and accuracies
+        sigma = None
+        source = CanyonGnssSource(sim.receiver, m.world, m.frame, np.random.default_rng(opts.seed),
+                                  velocity=cfg.gnss_velocity or closed)
+    else:
+        # open loop: the EKF gets the Doppler velocity (unless switched off); closed loop: the companion
+        # (which fuses no GNSS velocity) reads the raw fixes, so they carry the same velocity for the record
+        sigma = cfg.gnss_velocity_sigma_m_s if cfg.gnss_velocity or closed else None
+        source = UrbanGnssSource(sim.gnss, m.world, m.frame, cfg.gnss_rate_hz,
+                                 np.random.default_rng(opts.seed), float(m.world.clearance_m(*start_ned[:2])),
+                                 sigma, np.random.default_rng([opts.seed, VELOCITY_SEED_STREAM]))
     return FlightPlan(m, route, sim, (float(lat), float(lon), float(alt)), closed, sigma, source)
 
 
@@ -76,11 +96,10 @@ def run_info(plan: FlightPlan, cfg: ForeignFlightConfig, session: ForeignSession
     rec, driver = session.rec, session.driver
     wall_s = run.wall_s
     sim_s = (rec.imu_t_us[-1] - rec.imu_t_us[0]) * 1e-6 if rec.imu_t_us else 0.0
-    sigma = plan.velocity_sigma_m_s
     delay, feed_delay = delay_stats(session.command_delay_us), delay_stats(session.feed_delay_us)
     return {
         "ended_by": run.ended_by, "parameters": parameters,
-        "gnss_velocity": None if sigma is None else f"truth + N(0, {sigma:g} m/s) per axis",
+        "gnss_velocity": gnss_velocity_text(plan),
         "phase_times_s": {k: v * 1e-6 for k, v in driver.phase_times_us.items()},
         "sim_s": sim_s, "wall_s": wall_s, "session_cpu_s": run.cpu_s,
         "sim_s_per_wall_s": sim_s / wall_s if wall_s > 0 else math.nan,
@@ -96,6 +115,22 @@ def run_info(plan: FlightPlan, cfg: ForeignFlightConfig, session: ForeignSession
     }
 
 
+def gnss_velocity_text(plan: FlightPlan) -> str | None:
+    """What the raw fixes' velocity is (None: position only)."""
+    canyon, sigma = plan.canyon, plan.velocity_sigma_m_s
+    if canyon is not None:
+        return "the receiver's Doppler solution" if canyon.velocity else None
+    return None if sigma is None else f"truth + N(0, {sigma:g} m/s) per axis"
+
+
+def receiver_info(source: CanyonGnssSource) -> dict[str, Any]:
+    """The canyon receiver's run: epochs measured and released, fixes, unsolved epochs, its sky."""
+    model = source.model
+    return {"epochs": model.epochs, "epochs_released": len(source.raw), "fixes": model.sent,
+            "unsolved": model.unsolved, "t0_gps_s": model.t0_gps_s, "rate_hz": model.cfg.rate_hz,
+            "systems": list(model.cfg.systems), "ubx": "receiver.ubx", "info": "receiver.json"}
+
+
 def companion_info(plan: FlightPlan, companion_dir: Path, run: SessionRun,
                    feed: str) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
     """The companion process's run (its summary.json) and what it sent (its tlog), mission frame."""
@@ -106,6 +141,29 @@ def companion_info(plan: FlightPlan, companion_dir: Path, run: SessionRun,
             "timesync": summary.get("timesync"), "problems": summary.get("problems")}
     live = sent_track(companion_dir / "run.tlog", feed, LocalNedFrame(*plan.home), plan.mission.frame)
     return info, live
+
+
+@contextlib.contextmanager
+def receiver_stream(plan: FlightPlan, out_dir: Path) -> Iterator[ReceiverStream | None]:
+    """The canyon receiver's UBX stream for the flight (None without one): a TCP port on 127.0.0.1
+    (the closed loop's companion reads it), ``receiver.ubx`` (every frame) and ``receiver.json`` (its
+    sky) in ``out_dir``; the source hands it each raw epoch as it is released."""
+    canyon = plan.canyon
+    if canyon is None:
+        yield None
+        return
+    stream = ReceiverStream(canyon.model, 0, out_dir)
+    canyon.raw_sink = stream.send
+    try:
+        yield stream
+    finally:
+        canyon.raw_sink = None
+        stream.close()
+
+
+def tight_arguments(stream: ReceiverStream | None) -> tuple[str, ...]:
+    """The companion's options for the receiver it owns (the tightly coupled filter on its UBX)."""
+    return () if stream is None else ("--coupling", "tight", "--ubx", stream.server.url)
 
 
 @dataclass(frozen=True)

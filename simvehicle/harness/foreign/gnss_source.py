@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -40,6 +41,7 @@ class SentFix:
     p_ned_m: np.ndarray
     v_ned_m_s: np.ndarray | None = None  # Doppler velocity (truth + noise), None: position only
     speed_accuracy_m_s: float = float("nan")  # the velocity's 1σ as the wire reports it (NaN: none)
+    t_gps_s: float | None = None  # GPS time of the measurement (a raw receiver's); None: the wire's own clock
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +51,22 @@ class TruthGnss:
     bias_ned_m: np.ndarray
     latency_s: float
     clearance_m: float
+
+
+class GnssSource(Protocol):
+    """What a session asks of its GNSS source (``UrbanGnssSource``, ``canyon_source.CanyonGnssSource``)."""
+
+    sent: list[SentFix]
+    velocity_sigma_m_s: float | None
+
+    def on_truth(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None = None) -> TruthGnss: ...
+
+    def due(self, t_us: int) -> list[SentFix]: ...
+
+
+def next_period_us(next_us: int, t_us: int, period_us: int) -> int:
+    """The next period boundary after ``t_us`` (truth arrives at a rate that need not divide ours)."""
+    return next_us + period_us * max(1, math.ceil((t_us + 1 - next_us) / period_us))
 
 
 class UrbanGnssSource:
@@ -83,8 +101,7 @@ class UrbanGnssSource:
                     raise ValueError("a velocity-measuring source needs the true velocity")
                 noise = self._velocity_rng.normal(0.0, self.velocity_sigma_m_s, 3)
                 self._velocity[t_us] = np.asarray(v_ned_m_s, dtype=float) + noise
-            # next period boundary after t_us (truth arrives at a rate that need not divide ours)
-            self._next_us += self.period_us * max(1, math.ceil((t_us + 1 - self._next_us) / self.period_us))
+            self._next_us = next_period_us(self._next_us, t_us, self.period_us)
         return TruthGnss(self.model.bias_ned_m.copy(), self.model.latency_s, d)
 
     def due(self, t_us: int) -> list[SentFix]:

@@ -22,16 +22,21 @@ from companion.planning import Route
 from simvehicle.harness.backend import FlightResult
 from simvehicle.harness.foreign.analysis import (
     LIVE_ROW,
+    SPP_ROW,
+    TIGHT_PREFIX,
     Track,
     autopilot_track,
     companion_track,
     count_collisions,
     errors,
+    held_track,
     interpolated_track,
+    tight_track,
 )
+from simvehicle.harness.foreign.canyon_source import CanyonGnssSource
 from simvehicle.harness.foreign.config import ForeignFlightOptions
 from simvehicle.harness.foreign.driver import RouteDriver
-from simvehicle.harness.foreign.gnss_source import UrbanGnssSource
+from simvehicle.harness.foreign.gnss_source import GnssSource
 from simvehicle.harness.foreign.recording import Recording
 
 HORIZONTAL_ERROR_PREFIX = "est_error_h_m:"  # series keys of every row's horizontal error (not in the CSV)
@@ -51,8 +56,20 @@ def delay_stats(delays_us: list[int]) -> dict[str, float]:
     return describe(np.asarray(delays_us, dtype=float) * 1e-3, ("median", "p95", "max", "n"))
 
 
+def raw_tracks(source: CanyonGnssSource, mission: Mission, times_us: np.ndarray, weightings: tuple[str, ...],
+               rec: Recording) -> dict[str, Track]:
+    """Row ``spp`` (the receiver's fixes as they arrived) and ``tight-<weighting>`` for each weighting."""
+    sent = source.sent
+    out = {SPP_ROW: held_track(np.array([sf.arrival_us for sf in sent], dtype=np.int64),
+                               np.array([sf.p_ned_m for sf in sent]), times_us)}
+    for w in weightings:
+        out[f"{TIGHT_PREFIX}{w}"] = tight_track(rec, source.raw, w, source.model.store, mission.frame,
+                                                times_us)
+    return out
+
+
 def score_flight(vehicle: Vehicle, opts: ForeignFlightOptions, mission: Mission, route: Route, rec: Recording,
-                 source: UrbanGnssSource, driver: RouteDriver, run_info: dict[str, Any], radius_m: float,
+                 source: GnssSource, driver: RouteDriver, run_info: dict[str, Any], radius_m: float,
                  live: tuple[np.ndarray, np.ndarray] | None = None) -> FlightResult:
     """Score every row at the route phase's truth samples. ``live`` (closed loop): what the companion
     process sent the autopilot; it becomes row ``companion-live`` and the flight's ``estimation_error_m``."""
@@ -67,6 +84,8 @@ def score_flight(vehicle: Vehicle, opts: ForeignFlightOptions, mission: Mission,
     tracks = {name: companion_track(rec, source.sent, name, opts.estimator, mission, times_us)
               for name in dict.fromkeys((opts.method, *opts.methods))}
     tracks[vehicle.autopilot_row] = autopilot_track(rec, times_us)
+    if isinstance(source, CanyonGnssSource):  # the raw epochs: the receiver's fixes and the tight rows
+        tracks.update(raw_tracks(source, mission, times_us, opts.tight_methods, rec))
     if live is not None:
         tracks[LIVE_ROW] = interpolated_track(*live, times_us)
     per_method = {}

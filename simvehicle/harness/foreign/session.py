@@ -35,7 +35,7 @@ from companion.mavlink.codec import CodecError, decode_attitude, decode_imu  # n
 from companion.mavlink.tlog import TlogWriter  # noqa: E402
 from simvehicle.harness.foreign.companion_process import COMPANION_COMPONENT_ID  # noqa: E402
 from simvehicle.harness.foreign.driver import Command, DriverInputs, RouteDriver  # noqa: E402
-from simvehicle.harness.foreign.gnss_source import SentFix, UrbanGnssSource  # noqa: E402
+from simvehicle.harness.foreign.gnss_source import GnssSource, SentFix  # noqa: E402
 from simvehicle.harness.foreign.recording import Recording  # noqa: E402
 
 SETPOINT_TYPE_MASK = MSG.POSITION_TARGET_TYPEMASK_YAW_IGNORE | MSG.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
@@ -47,7 +47,7 @@ class ForeignSession:
 
     feed_stamps: dict[str, str] = {}  # the companion's feed messages and their stamp field (boot µs)
 
-    def __init__(self, frame: LocalNedFrame, source: UrbanGnssSource, driver: RouteDriver,
+    def __init__(self, frame: LocalNedFrame, source: GnssSource, driver: RouteDriver,
                  tlog_path: Path, setup_timeout_s: float, wall_timeout_s: float) -> None:
         self.frame, self.source, self.driver = frame, source, driver
         self.setup_timeout_s, self.wall_timeout_s = setup_timeout_s, wall_timeout_s

@@ -38,7 +38,7 @@ from companion.autopilot.connection import MavConnection, parse_connection  # no
 from companion.domain.geodesy import LocalNedFrame  # noqa: E402
 from companion.errors import UserError  # noqa: E402
 from simvehicle.harness.foreign.driver import RouteDriver  # noqa: E402
-from simvehicle.harness.foreign.gnss_source import SentFix, UrbanGnssSource  # noqa: E402
+from simvehicle.harness.foreign.gnss_source import GnssSource, SentFix  # noqa: E402
 from simvehicle.harness.foreign.session import ForeignSession  # noqa: E402
 from simvehicle.harness.px4.config import Px4FlightConfig  # noqa: E402
 
@@ -91,7 +91,7 @@ class Px4Session(ForeignSession):
     feed_stamps = {"ODOMETRY": "time_usec"}  # the companion's ODOMETRY, forwarded from the onboard link
 
     def __init__(self, url: str, system_id: int, cfg: Px4FlightConfig, frame: LocalNedFrame,
-                 source: UrbanGnssSource, driver: RouteDriver, tlog_path: Path) -> None:
+                 source: GnssSource, driver: RouteDriver, tlog_path: Path) -> None:
         super().__init__(frame, source, driver, tlog_path, cfg.setup_timeout_s, cfg.wall_timeout_s)
         self.url, self.system_id, self.cfg = url, system_id, cfg
         self.origin_lla: tuple[float, float, float] | None = None  # EKF2's origin (GPS_GLOBAL_ORIGIN)
