@@ -37,12 +37,14 @@ from typing import Any
 import numpy as np
 
 from companion.estimator.methods import DEFAULT_METHOD
+from companion.tight import WEIGHTINGS
 from gcs_tools.evaluate import stats
 from gcs_tools.jsonvalues import plain_json
-from simvehicle.harness.foreign.analysis import LIVE_ROW
+from simvehicle.harness.foreign.analysis import LIVE_ROW, SPP_ROW, TIGHT_PREFIX
 
 BOOTSTRAP_SEED = 20240917
-CLOSED_LOOP_METHOD = DEFAULT_METHOD
+CLOSED_LOOP_METHOD = DEFAULT_METHOD  # the closed loop's companion (the raw receiver: the tight weighting)
+RAW_ROWS = (SPP_ROW, *(f"{TIGHT_PREFIX}{w}" for w in WEIGHTINGS))  # the canyon receiver's fixes, tight rows
 _interrupted = False  # a worker that got Ctrl-C flies nothing more
 
 
@@ -113,6 +115,7 @@ class Job:
     out_dir: Path
     config: Any  # the backend's flight configuration (ArduPilotConfig, Px4FlightConfig)
     loop: str = "none"  # one of campaign.loops
+    scenario: str | None = None  # sensor scenario (None: the mission's): paper or canyon
 
     @property
     def feed(self) -> str:
@@ -152,7 +155,8 @@ def run_job(job: Job) -> Result:
     cfg = replace(job.config, gnss_velocity=loop.gnss_velocity)
     vehicle = backend(spec.vehicle, config=cfg, methods=job.methods, feed=loop.feed)
     try:
-        r = vehicle.fly(FlightRequest(job.mission, job.profile, CLOSED_LOOP_METHOD, job.seed, job.out_dir))
+        r = vehicle.fly(FlightRequest(job.mission, job.profile, CLOSED_LOOP_METHOD, job.seed, job.out_dir,
+                                      scenario=job.scenario))
     except UserError as exc:
         return Result(job, {}, np.zeros(0), False, 0, "error", 0.0, 0.0, str(exc))
     s, series = r.summary, r.series
@@ -337,22 +341,25 @@ def check_feeds(spec: VehicleCampaign, text: str) -> tuple[str, ...]:
 
 def evaluate(spec: VehicleCampaign, mission: str, profiles: Sequence[int], methods: Sequence[str],
              seeds: Sequence[int], workers: int, out: Path, config: Any,
-             feeds: Sequence[str] | None = None) -> dict[str, Any]:
+             feeds: Sequence[str] | None = None, scenario: str | None = None) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     flights = out / "flights"
     loops = tuple(feeds) if feeds is not None else spec.loop_names
-    jobs = [Job(spec, mission, p, s, tuple(methods), flights / f"{loop}-profile{p:02d}-seed{s}", config, loop)
-            for s in seeds for p in profiles for loop in loops]
+    jobs = [Job(spec, mission, p, s, tuple(methods), flights / f"{loop}-profile{p:02d}-seed{s}", config, loop,
+                scenario) for s in seeds for p in profiles for loop in loops]
     t0 = time.perf_counter()
     results = run(jobs, workers)
     wall_s = time.perf_counter() - t0
-    rows = (*spec.rows, *methods)
+    rows = (*spec.rows, *methods, *RAW_ROWS)  # the raw receiver's rows: scenario canyon only
     res = aggregate(spec, results, rows, seeds)
     res["info"] = {
         "vehicle": spec.vehicle, "mission": mission, "profiles": list(profiles), "seeds": list(seeds),
         "methods": list(methods), "workers": workers, "wall_s": wall_s,
         "config": asdict(config),
-        "gnss_velocity": f"truth + N(0, {config.gnss_velocity_sigma_m_s:g} m/s) per axis, in the loops "
+        "scenario": scenario,
+        "gnss_velocity": ("the receiver's Doppler solution" if scenario == "canyon" else
+                          f"truth + N(0, {config.gnss_velocity_sigma_m_s:g} m/s) per axis")
+                         + ", in the loops "
                          + ", ".join(lp.name for lp in spec.loops if lp.gnss_velocity and lp.name in loops),
         "flights": [{"profile": r.job.profile, "seed": r.job.seed, "feed": r.job.loop, "valid": r.valid,
                      "command_delay_p95_ms": r.command_delay_p95_ms, "ended_by": r.ended_by,

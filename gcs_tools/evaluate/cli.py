@@ -47,7 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ablation rows: YAML 'rows: {label: {method: M, set: {SECTION.FIELD: V}}}' "
                              "(each method with its own hyper-parameters)")
     parser.add_argument("--scenario", default=None,
-                        help="sensor scenario: paper, realistic, mismatch (default: the mission file's)")
+                        help="sensor scenario: paper, realistic, mismatch, canyon (default: the mission "
+                             "file's; --vehicle ardupilot|px4: paper or canyon, the calibrated raw receiver)")
     parser.add_argument("--reference", default=None, metavar="ROW[,ROW...]",
                         help="row the paired per-flight differences are taken against "
                              "(default second-order if present, else the first row); more rows after "
@@ -144,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
 def run_autopilot(args: argparse.Namespace) -> int:
     from companion.mission import load_mission
     from gcs_tools.evaluate import ardupilot, autopilot, px4
+    from simvehicle.harness.foreign.flight import FOREIGN_SCENARIOS
 
     if args.set or args.scheduler or args.readme or args.rows is not None \
             or args.max_duration_s is not None:
@@ -155,13 +157,16 @@ def run_autopilot(args: argparse.Namespace) -> int:
             raise UserError(f"{option} applies to --vehicle {name} only")
     spec = (ardupilot if args.vehicle == "ardupilot" else px4).CAMPAIGN
     config = spec.config(speed[args.vehicle][1])
-    mission = load_mission(args.mission)
+    mission = load_mission(args.mission, args.scenario)
+    if mission.scenario not in FOREIGN_SCENARIOS:
+        raise UserError(f"--scenario {mission.scenario}: with --vehicle {args.vehicle}, one of "
+                        f"{', '.join(FOREIGN_SCENARIOS)}")
     profiles = choices.profiles(args.profiles, len(mission.profiles))
     methods = parse_methods(args.methods or DEFAULT_METHODS)
     seeds = choices.seeds(args.seeds)
     feeds = autopilot.check_feeds(spec, args.feeds or ",".join(spec.loop_names))
     res = autopilot.evaluate(spec, args.mission, profiles, methods, seeds, args.workers, args.out, config,
-                             feeds)
+                             feeds, args.scenario)
     print(autopilot.table_text(spec, res), end="")
     print(f"wrote {args.out}/results.json, report.md, errors_horizontal.png and flights/ "
           f"({len(res['info']['flights'])} flights, {res['info']['wall_s']:.1f} s)", file=sys.stderr)

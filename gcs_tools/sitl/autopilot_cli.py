@@ -24,6 +24,7 @@ VEHICLES: dict[str, tuple[str, str, str, str, str]] = {
             "hil_gps_sent"),
 }
 FEEDS = ("none", "gps-input", "vision", "odometry")
+RAW_ROWS = ("spp", "tight-second-order")  # printed with --scenario canyon (every row is in summary.json)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -93,10 +94,12 @@ def _print(s: dict, out: Path) -> None:
     print(f"sitl {vehicle} {s['method']} seed {s['seed']} (feed {s['feed']}): "
           f"{'reached goal' if s['reached_goal'] else 'did not reach the goal'} "
           f"({run['ended_by']}); {run['sim_s']:.0f} s simulated in {run['wall_s']:.1f} s wall")
-    for name, key in ((s["method"], "estimation_error_horizontal_m"),
-                      (f"{vehicle}-{ekf}", "autopilot_estimation_error_horizontal_m")):
-        e = s[key]
-        print(f"  {name:>15}: horizontal estimation error median {_m(e['median'])} p95 {_m(e['p95'])}")
+    rows = [(s["method"], s["estimation_error_horizontal_m"]),
+            (f"{vehicle}-{ekf}", s["autopilot_estimation_error_horizontal_m"])]
+    rows += [(name, s["methods"][name]["estimation_error_horizontal_m"]) for name in RAW_ROWS
+             if name in s.get("methods", {})]  # the canyon receiver: its fixes, the tight rows
+    for name, e in rows:
+        print(f"  {name:>18}: horizontal estimation error median {_m(e['median'])} p95 {_m(e['p95'])}")
     t = s["tracking_error_m"]
     print(f"  tracking error median {_m(t['median'])} p95 {_m(t['p95'])}; "
           f"collisions {s['collisions']}; min clearance {_m(s['min_clearance_m'])}")
