@@ -16,7 +16,7 @@ from companion.gnss.spp import SppConfig, solve_position
 from companion.gnss.timescale import week_tow
 from companion.mission import load_mission
 from simvehicle.config import ReceiverConfig
-from simvehicle.harness.ardupilot.config import FEEDS, GPS2_ID, ArduPilotConfig
+from simvehicle.harness.ardupilot.config import FEEDS, GPS2_ID, ArduPilotConfig, ardupilot_parameters
 from simvehicle.harness.ardupilot.flight import ArduPilotFlightOptions
 from simvehicle.harness.ardupilot.gnss_source import gps_input_fields
 from simvehicle.harness.foreign.analysis import SPP_ROW, errors, held_track
@@ -25,6 +25,8 @@ from simvehicle.harness.foreign.flight import plan_flight, tight_arguments
 from simvehicle.harness.foreign.gnss_source import UrbanGnssSource
 from simvehicle.harness.foreign.recording import Recording
 from simvehicle.harness.foreign.scoring import raw_tracks
+from simvehicle.harness.px4.config import Px4FlightConfig, px4_parameters
+from simvehicle.harness.px4.flight import Px4FlightOptions, fly_px4
 
 G_M_S2 = 9.80665
 T_OFFSET_US = 7_000  # the autopilot's truth stamps are not on the receiver's grid
@@ -150,3 +152,16 @@ def test_the_scenario_picks_the_source(tmp_path):
     with pytest.raises(UserError, match="--scenario mismatch: with --vehicle ardupilot, one of paper, can"):
         plan("mismatch")
     assert tight_arguments(None) == ()
+
+
+def test_parameters_with_the_raw_receiver_and_px4s_open_loop_only(tmp_path):
+    """EKF3's and EKF2's GNSS pre-flight checks are off with the raw receiver (and only then); PX4's
+    closed loop is refused before any process starts (its SYSTEM_TIME is the host's clock)."""
+    assert ardupilot_parameters(ArduPilotConfig(), "gps-input", canyon=True) == {
+        **ardupilot_parameters(ArduPilotConfig(), "gps-input"), "EK3_GPS_CHECK": 0}
+    assert "EK3_GPS_CHECK" not in ardupilot_parameters(ArduPilotConfig())
+    assert px4_parameters(Px4FlightConfig(), canyon=True)["EKF2_GPS_CHECK"] == 0
+    assert "EKF2_GPS_CHECK" not in px4_parameters(Px4FlightConfig())
+    with pytest.raises(UserError, match="open loop only"):
+        fly_px4(Px4FlightOptions("test", 2, "second-order", 0, tmp_path, feed="odometry", scenario="canyon"))
+    assert not (tmp_path / "px4").exists()

@@ -54,7 +54,20 @@ class Px4FlightConfig(ForeignFlightConfig):
             raise ValueError(f"gps_delay_ms: EKF2_GPS_DELAY must be 0..300 ms, got {self.gps_delay_ms}")
 
 
-def px4_parameters(cfg: Px4FlightConfig, feed: str = "none") -> dict[str, float]:
+# EKF2's GNSS quality checks (EKF2_GPS_CHECK bits: fix, satellites, PDOP, EPH, EPV, speed accuracy, drift,
+# speeds): the canyon receiver's honest fixes where the flights start (horizontal ~3.6 m, vertical ~9 m,
+# speed ~1 m/s, wandering at rest) exceed the defaults (EKF2_REQ_EPH 3 m, _EPV 5 m, _SACC 0.5 m/s), so
+# with the raw receiver EKF2 flies with them off, as ArduPilot's EKF3 (EK3_GPS_CHECK 0).
+CANYON_PARAMETERS = {"EKF2_GPS_CHECK": 0}
+
+
+def px4_parameters(cfg: Px4FlightConfig, feed: str = "none", canyon: bool = False) -> dict[str, float]:
+    """The parameters of ``feed`` (:func:`_parameters`), with ``CANYON_PARAMETERS`` on the canyon receiver."""
+    params = _parameters(cfg, feed)
+    return {**params, **CANYON_PARAMETERS} if canyon else params
+
+
+def _parameters(cfg: Px4FlightConfig, feed: str) -> dict[str, float]:
     """Parameters set at boot (``px4-rc.params``, sourced after the airframe).
 
     Always: no simulated GPS of PX4's own (``SENS_EN_GPSSIM`` 0), HIL_GPS accepted

@@ -15,10 +15,18 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from companion.errors import UserError
 from simvehicle.harness.backend import FlightResult
 from simvehicle.harness.foreign.companion_process import companion_command
 from simvehicle.harness.foreign.config import ForeignFlightOptions
-from simvehicle.harness.foreign.flight import companion_info, plan_flight, run_info, run_session
+from simvehicle.harness.foreign.flight import (
+    companion_info,
+    plan_flight,
+    receiver_info,
+    receiver_stream,
+    run_info,
+    run_session,
+)
 from simvehicle.harness.foreign.scoring import Vehicle, score_flight
 from simvehicle.harness.px4.config import FEEDS, Px4FlightConfig, px4_parameters
 from simvehicle.harness.px4.driver import OffboardDriver
@@ -42,12 +50,16 @@ def fly_px4(opts: Px4FlightOptions) -> FlightResult:
     m = plan.mission
     driver = OffboardDriver(cfg, plan.route, m.altitude_m, warmup_s=cfg.offboard_warmup_s)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
-    params = px4_parameters(cfg, opts.feed)
+    if plan.canyon is not None and plan.closed:
+        raise UserError("--scenario canyon with --vehicle px4: open loop only (--feed none); PX4's "
+                        "SYSTEM_TIME is the host's clock, not the receiver's GPS time, so a companion could "
+                        "not put the raw epochs on its boot clock")
+    params = px4_parameters(cfg, opts.feed, canyon=plan.canyon is not None)
     px4_dir = opts.out_dir / "px4"
     sitl_cfg = Px4Config(work_dir=px4_dir, px4_dir=opts.px4_dir, speed_factor=cfg.speed_factor,
                          instance_range=opts.instance_range, home=plan.home, params=params, logging=cfg.ulog)
     companion_dir = opts.out_dir / "companion"
-    with Px4Sitl(sitl_cfg) as sitl:
+    with receiver_stream(plan, opts.out_dir), Px4Sitl(sitl_cfg) as sitl:
         session = Px4Session(sitl.gcs_url, sitl.system_id, cfg, m.frame, plan.source, driver,
                              opts.out_dir / "run.tlog")
 
@@ -64,6 +76,8 @@ def fly_px4(opts: Px4FlightOptions) -> FlightResult:
             **run_info(plan, cfg, session, run, params), "hil_gps_sent": session.gps_sent,
             "local_frame": {"ekf2_origin": session.origin_lla, "ground_z_m": session.ground_z_m},
             "ulogs": ulogs}
+    if plan.canyon is not None:
+        info["receiver"] = receiver_info(plan.canyon)
     live = None
     if plan.closed:
         info["companion"], live = companion_info(plan, companion_dir, run, opts.feed)
