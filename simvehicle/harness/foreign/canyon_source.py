@@ -33,40 +33,26 @@ import numpy as np
 from companion.domain.geodesy import LocalNedFrame
 from companion.mission.world import World
 from simvehicle.config import ReceiverConfig
-from simvehicle.harness.foreign.gnss_source import SentFix, TruthGnss, next_period_us
+from simvehicle.harness.foreign.gnss_source import GnssSource, SentFix
 from simvehicle.rawgnss import RawGnssModel
 from simvehicle.receiver import RawObservation
 
 
-class CanyonGnssSource:
+class CanyonGnssSource(GnssSource):
     """The raw receiver sampled on an external truth stream; epochs and fixes released late."""
-
-    velocity_sigma_m_s: float | None = None  # each fix carries its own speed accuracy
 
     def __init__(self, cfg: ReceiverConfig, world: World, frame: LocalNedFrame, rng: np.random.Generator,
                  velocity: bool = True) -> None:
-        self.world = world
-        self.period_us = round(1e6 / cfg.rate_hz)
+        super().__init__(world, round(1e6 / cfg.rate_hz))
         heights = np.array([b.height_m for b in world.config.buildings], dtype=float)
-        self.model = RawGnssModel(cfg, world.rects_m, heights, frame, rng, self.period_us)
+        self.model: RawGnssModel = RawGnssModel(cfg, world.rects_m, heights, frame, rng, self.period_us)
         self.velocity = velocity
-        self._next_us: int | None = None
-        self.sent: list[SentFix] = []
         self.raw: list[RawObservation] = []
         self.raw_sink: Callable[[list[RawObservation]], None] | None = None
 
-    def clearance_m(self, p_ned_m: np.ndarray) -> float:
-        return float(self.world.clearance_m(float(p_ned_m[0]), float(p_ned_m[1])))
-
-    def on_truth(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None = None) -> TruthGnss:
-        """Feed one truth sample; measures an epoch when a receiver period has started."""
-        d = self.clearance_m(p_ned_m)
-        if self._next_us is None:
-            self._next_us = t_us
-        if t_us >= self._next_us:
-            self.model.measure(t_us, np.asarray(p_ned_m, dtype=float), v_ned_m_s)
-            self._next_us = next_period_us(self._next_us, t_us, self.period_us)
-        return TruthGnss(self.model.bias_ned_m.copy(), self.model.latency_s, d)
+    def _measure(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None,
+                 clearance_m: float) -> None:
+        self.model.measure(t_us, np.asarray(p_ned_m, dtype=float), v_ned_m_s)
 
     def due(self, t_us: int) -> list[SentFix]:
         """Fixes whose latency has elapsed by ``t_us`` (their raw epochs to ``raw`` and ``raw_sink``)."""

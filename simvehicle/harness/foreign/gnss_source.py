@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
@@ -28,6 +27,7 @@ from companion.domain.samples import GnssFix
 from companion.mission.world import World
 from simvehicle.config import GnssConfig
 from simvehicle.gnss import GnssModel
+from simvehicle.rawgnss import RawGnssModel
 
 VELOCITY_SEED_STREAM = 1  # velocity noise: default_rng([seed, this]); positions: default_rng(seed)
 
@@ -53,56 +53,64 @@ class TruthGnss:
     clearance_m: float
 
 
-class GnssSource(Protocol):
-    """What a session asks of its GNSS source (``UrbanGnssSource``, ``canyon_source.CanyonGnssSource``)."""
+class GnssSource:
+    """What both sources share (``UrbanGnssSource``, ``canyon_source.CanyonGnssSource``): a model
+    sampled on the first truth at or after each period boundary (truth arrives at a rate that need
+    not divide ours), and its state at every truth sample. A source adds ``_measure`` and ``due``."""
 
-    sent: list[SentFix]
-    velocity_sigma_m_s: float | None
+    model: GnssModel | RawGnssModel
+    velocity_sigma_m_s: float | None = None  # the wire's speed accuracy (None: each fix carries its own)
 
-    def on_truth(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None = None) -> TruthGnss: ...
+    def __init__(self, world: World, period_us: int) -> None:
+        self.world = world
+        self.period_us = period_us
+        self._next_us: int | None = None
+        self.sent: list[SentFix] = []
 
-    def due(self, t_us: int) -> list[SentFix]: ...
+    def clearance_m(self, p_ned_m: np.ndarray) -> float:
+        return float(self.world.clearance_m(float(p_ned_m[0]), float(p_ned_m[1])))
+
+    def on_truth(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None = None) -> TruthGnss:
+        """Feed one truth sample; measures when a period has started. Returns the model state."""
+        d = self.clearance_m(p_ned_m)
+        if self._next_us is None:
+            self._next_us = t_us
+        if t_us >= self._next_us:
+            self._measure(t_us, p_ned_m, v_ned_m_s, d)
+            self._next_us += self.period_us * max(1, math.ceil((t_us + 1 - self._next_us) / self.period_us))
+        return TruthGnss(self.model.bias_ned_m.copy(), self.model.latency_s, d)
+
+    def _measure(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None,
+                 clearance_m: float) -> None:  # pragma: no cover - each source's
+        raise NotImplementedError
+
+    def due(self, t_us: int) -> list[SentFix]:  # pragma: no cover - each source's
+        """Fixes whose latency has elapsed by ``t_us`` (release order); remembered in ``sent``."""
+        raise NotImplementedError
 
 
-def next_period_us(next_us: int, t_us: int, period_us: int) -> int:
-    """The next period boundary after ``t_us`` (truth arrives at a rate that need not divide ours)."""
-    return next_us + period_us * max(1, math.ceil((t_us + 1 - next_us) / period_us))
-
-
-class UrbanGnssSource:
+class UrbanGnssSource(GnssSource):
     """Samples our GNSS model at ``rate_hz`` on an external truth stream; releases fixes late."""
 
     def __init__(self, cfg: GnssConfig, world: World, frame: LocalNedFrame, rate_hz: float,
                  rng: np.random.Generator, clearance0_m: float, velocity_sigma_m_s: float | None = None,
                  velocity_rng: np.random.Generator | None = None) -> None:
-        self.world = world
-        self.period_us = round(1e6 / rate_hz)
-        self.model = GnssModel(cfg, 1.0 / rate_hz, frame, rng, clearance0_m)
-        self._next_us: int | None = None
-        self.sent: list[SentFix] = []
+        super().__init__(world, round(1e6 / rate_hz))
+        self.model: GnssModel = GnssModel(cfg, 1.0 / rate_hz, frame, rng, clearance0_m)
         if velocity_sigma_m_s is not None and velocity_rng is None:
             raise ValueError("a velocity needs its own seeded generator")
         self.velocity_sigma_m_s = velocity_sigma_m_s
         self._velocity_rng = velocity_rng
         self._velocity: dict[int, np.ndarray] = {}  # validity time -> measured velocity, until released
 
-    def clearance_m(self, p_ned_m: np.ndarray) -> float:
-        return float(self.world.clearance_m(float(p_ned_m[0]), float(p_ned_m[1])))
-
-    def on_truth(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None = None) -> TruthGnss:
-        """Feed one truth sample; samples a fix when a period has started. Returns the model state."""
-        d = self.clearance_m(p_ned_m)
-        if self._next_us is None:
-            self._next_us = t_us
-        if t_us >= self._next_us:
-            self.model.sample(t_us, p_ned_m, d)
-            if self.velocity_sigma_m_s is not None and self._velocity_rng is not None:
-                if v_ned_m_s is None:
-                    raise ValueError("a velocity-measuring source needs the true velocity")
-                noise = self._velocity_rng.normal(0.0, self.velocity_sigma_m_s, 3)
-                self._velocity[t_us] = np.asarray(v_ned_m_s, dtype=float) + noise
-            self._next_us = next_period_us(self._next_us, t_us, self.period_us)
-        return TruthGnss(self.model.bias_ned_m.copy(), self.model.latency_s, d)
+    def _measure(self, t_us: int, p_ned_m: np.ndarray, v_ned_m_s: np.ndarray | None,
+                 clearance_m: float) -> None:
+        self.model.sample(t_us, p_ned_m, clearance_m)
+        if self.velocity_sigma_m_s is not None and self._velocity_rng is not None:
+            if v_ned_m_s is None:
+                raise ValueError("a velocity-measuring source needs the true velocity")
+            noise = self._velocity_rng.normal(0.0, self.velocity_sigma_m_s, 3)
+            self._velocity[t_us] = np.asarray(v_ned_m_s, dtype=float) + noise
 
     def due(self, t_us: int) -> list[SentFix]:
         """Fixes whose latency has elapsed by ``t_us`` (release order); remembered in ``sent``."""

@@ -17,16 +17,9 @@ from pathlib import Path
 
 from companion.errors import UserError
 from simvehicle.harness.backend import FlightResult
+from simvehicle.harness.foreign import flight as foreign
 from simvehicle.harness.foreign.companion_process import companion_command
 from simvehicle.harness.foreign.config import ForeignFlightOptions
-from simvehicle.harness.foreign.flight import (
-    companion_info,
-    plan_flight,
-    receiver_info,
-    receiver_stream,
-    run_info,
-    run_session,
-)
 from simvehicle.harness.foreign.scoring import Vehicle, score_flight
 from simvehicle.harness.px4.config import FEEDS, Px4FlightConfig, px4_parameters
 from simvehicle.harness.px4.driver import OffboardDriver
@@ -46,7 +39,7 @@ class Px4FlightOptions(ForeignFlightOptions):
 
 def fly_px4(opts: Px4FlightOptions) -> FlightResult:
     cfg = opts.config
-    plan = plan_flight(PX4.name, opts, cfg, FEEDS)
+    plan = foreign.plan_flight(PX4.name, opts, cfg, FEEDS)
     m = plan.mission
     driver = OffboardDriver(cfg, plan.route, m.altitude_m, warmup_s=cfg.offboard_warmup_s)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
@@ -59,7 +52,7 @@ def fly_px4(opts: Px4FlightOptions) -> FlightResult:
     sitl_cfg = Px4Config(work_dir=px4_dir, px4_dir=opts.px4_dir, speed_factor=cfg.speed_factor,
                          instance_range=opts.instance_range, home=plan.home, params=params, logging=cfg.ulog)
     companion_dir = opts.out_dir / "companion"
-    with receiver_stream(plan, opts.out_dir), Px4Sitl(sitl_cfg) as sitl:
+    with foreign.receiver_stream(plan, opts.out_dir), Px4Sitl(sitl_cfg) as sitl:
         session = Px4Session(sitl.gcs_url, sitl.system_id, cfg, m.frame, plan.source, driver,
                              opts.out_dir / "run.tlog")
 
@@ -67,19 +60,19 @@ def fly_px4(opts: Px4FlightOptions) -> FlightResult:
             return companion_command(sitl.url, companion_dir, opts.feed, opts.method, plan.home,
                                      "--target-system", str(sitl.system_id))
 
-        run = run_session(session, sitl.running, companion if plan.closed else None, companion_dir)
+        run = foreign.run_session(session, sitl.running, companion if plan.closed else None, companion_dir)
         instance = sitl.instance
         sitl.stop()  # the logger closes its ULog
         ulogs = [str(p.relative_to(opts.out_dir)) for p in sitl.ulogs()]
     shutil.rmtree(px4_dir / "bin", ignore_errors=True)  # the copied firmware (4 MB), not a result
     info = {"instance": instance, "speed_factor": cfg.speed_factor, "feed": opts.feed,
-            **run_info(plan, cfg, session, run, params), "hil_gps_sent": session.gps_sent,
+            **foreign.run_info(plan, cfg, session, run, params), "hil_gps_sent": session.gps_sent,
             "local_frame": {"ekf2_origin": session.origin_lla, "ground_z_m": session.ground_z_m},
             "ulogs": ulogs}
     if plan.canyon is not None:
-        info["receiver"] = receiver_info(plan.canyon)
+        info["receiver"] = foreign.receiver_info(plan.canyon)
     live = None
     if plan.closed:
-        info["companion"], live = companion_info(plan, companion_dir, run, opts.feed)
+        info["companion"], live = foreign.companion_info(plan, companion_dir, run, opts.feed)
     return score_flight(PX4, opts, m, plan.route, session.rec, plan.source, driver, info,
                         plan.sim.vehicle.radius_m, live)
