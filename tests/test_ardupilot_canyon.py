@@ -1,0 +1,84 @@
+"""ArduCopter SITL on the calibrated canyon receiver, closed loop: the harness measures raw epochs from
+ArduPilot's truth, sends the receiver's own fixes to GPS2 and serves the epochs as UBX on TCP;
+``beliefnav companion --coupling tight --ubx tcp:…`` reads them and feeds EKF3 (GPS1 = its GPS_INPUT).
+The flight's record (receiver.ubx) holds exactly the epochs and fixes sent; EKF3 gets a position from
+the companion's fixes (the driver reaches its arming phase). Whether ArduPilot then arms is the
+measurement, not asserted: in a canyon its arming checks often refuse ("GPS glitching", "GPS positions
+differ": the raw receiver on GPS2 and the companion on GPS1 more than 50 m apart); when the route is
+flown, the open-loop rows (the receiver's fixes, the tightly coupled filter) and what the companion
+sent are scored (the scoring itself: tests/test_foreign_canyon.py)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from ardupilot_helpers import require_ardupilot, tlog_messages
+
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.timescale import week_tow
+from companion.gnss.ubx import ReceiverPvt
+from companion.receiver.ubx_stream import open_stream, ubx_items
+
+pytestmark = pytest.mark.slow
+
+# the test city's cross street, 30 m of it: a short route, so the flight is mostly its set-up (EKF3
+# waits for the companion, which waits for the receiver's first complete LNAV subframes, < 36 s)
+SHORT_MISSION = """extends: test
+profiles:
+  - {name: short-street, start_ne_m: [52, 35], goal_ne_m: [52, 65]}
+"""
+
+
+@pytest.mark.timeout(150)
+def test_closed_loop_ardupilot_flies_on_the_tight_companion_reading_the_canyon_receiver(tmp_path):
+    require_ardupilot()
+    mission = tmp_path / "short.yaml"
+    mission.write_text(SHORT_MISSION)
+    out = tmp_path / "canyon"
+    cmd = [sys.executable, "-m", "gcs_tools", "sitl", "--vehicle", "ardupilot", "--scenario", "canyon",
+           "--feed", "gps-input", "--mission", str(mission), "--profile", "0", "--seed", "0",
+           "--out", str(out), "--wall-timeout-s", "100", "--speedup", "10"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=140)
+    assert proc.returncode in (0, 1), proc.stdout + proc.stderr  # 1: flew, did not reach the goal
+    s = json.loads((out / "summary.json").read_text())
+    ap = s["ardupilot"]
+    assert ap["ended_by"] in ("reached_goal", "timeout", "setup_timeout:arm"), ap["ended_by"]
+    assert "arm" in ap["phase_times_s"]  # EKF3 had an absolute position: the companion's fixes on GPS1
+    assert ap["parameters"]["EK3_GPS_CHECK"] == 0 and ap["parameters"]["GPS2_TYPE"] == 14
+    rx = ap["receiver"]
+    assert rx["epochs"] > 4 * ap["sim_s"] and rx["unsolved"] == 0 and rx["fixes"] >= ap["gps_input_sent"]
+    # the companion owned the receiver: the UBX stream over TCP into the tightly coupled filter
+    comp = ap["companion"]
+    assert "--coupling tight --ubx tcp:127.0.0.1:" in comp["command"] and comp["problems"] == []
+    csum = json.loads((out / "companion" / "summary.json").read_text())
+    assert csum["coupling"] == "tight" and csum["receiver"]["lnav_ephemerides"] > 0
+    assert csum["node"]["raw_epochs"] > 0.5 * rx["epochs_released"]
+    assert csum["node"]["feed_gps_input_sent"] > 5 * ap["phase_times_s"]["arm"] * 0.1
+    # the record: receiver.ubx decodes to the epochs released and the fixes sent to GPS2, same GPS time
+    items = list(ubx_items(open_stream(str(out / "receiver.ubx"))))
+    epochs = [i for i in items if isinstance(i, GnssEpoch)]
+    pvts = {round(week_tow(p.t_gps_s)[1] * 1000): p for p in items if isinstance(p, ReceiverPvt)}
+    assert len(epochs) == rx["epochs_released"]
+    msgs = tlog_messages(out / "run.tlog")
+    sent = [m for m in msgs if m.get_type() == "GPS_INPUT" and m.get_srcSystem() == 255]
+    assert len(sent) == ap["gps_input_sent"] and {m.gps_id for m in sent} == {1}
+    for m in sent:
+        pvt = pvts[m.time_week_ms]  # the receiver's own solution of that epoch
+        assert abs(m.lat - round(pvt.lat_deg * 1e7)) <= 1 and abs(m.lon - round(pvt.lon_deg * 1e7)) <= 1
+    # EKF3 flew on the companion (GPS1), which sent a fix with its own accuracy
+    ours = [m for m in msgs if m.get_type() == "GPS_INPUT" and m.get_srcComponent() == 197]
+    assert {m.gps_id for m in ours} == {0} and any(m.fix_type == 3 and m.horiz_accuracy > 0 for m in ours)
+    if ap["ended_by"] == "setup_timeout:arm":  # refused by ArduPilot's GPS arming checks, as it said
+        texts = [t.split(" s ", 1)[1] for t in ap["statustext"]]
+        assert any(t.startswith(("Arm: GPS", "PreArm: GPS")) for t in texts), texts
+        return
+    # scored on the same epochs: the receiver's fixes, the tight rows, and what the companion sent
+    rows = s["methods"]
+    for name in ("spp", "tight-second-order", "tight-cn0-elevation", "companion-live", "ardupilot-ekf3"):
+        med = rows[name]["estimation_error_horizontal_m"]["median"]
+        assert np.isfinite(med) and 0.01 < med < 60.0, (name, med)
+    assert s["estimation_error_m"] == rows["companion-live"]["estimation_error_m"]
