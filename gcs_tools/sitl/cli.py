@@ -33,8 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     choices.add_method_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="seed of the vehicle's random draws")
     parser.add_argument("--scenario", default=None,
-                        help="sensor scenario: paper, realistic, mismatch, canyon "
-                             "(default: the mission file's)")
+                        help="sensor scenario: paper, realistic, mismatch, canyon (default: the mission "
+                             "file's; --vehicle ardupilot|px4: paper or canyon, the calibrated raw receiver)")
     parser.add_argument("--out", type=Path, default=Path("runs/sitl"),
                         help="output directory (default runs/sitl)")
     parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
