@@ -1,0 +1,59 @@
+"""PX4 SITL (SIH) on the calibrated canyon receiver, open loop: the same shared source as ArduPilot's
+measures raw epochs from SIH's truth and sends the receiver's own fixes as HIL_GPS; EKF2 flies on
+them; the flight's receiver.ubx holds the epochs and exactly the fixes sent; EKF2, the receiver's fixes
+and the tightly coupled rows are scored on them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from ardupilot_helpers import tlog_messages
+from px4_helpers import require_px4
+
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.ubx import ReceiverPvt
+from companion.receiver.ubx_stream import open_stream, ubx_items
+
+pytestmark = pytest.mark.slow
+
+SHORT_MISSION = """extends: test
+profiles:
+  - {name: short-street, start_ne_m: [52, 35], goal_ne_m: [52, 65]}
+"""
+
+
+@pytest.mark.timeout(120)
+def test_px4_ekf2_flies_on_the_canyon_receivers_fixes(tmp_path):
+    require_px4()
+    mission = tmp_path / "short.yaml"
+    mission.write_text(SHORT_MISSION)
+    out = tmp_path / "px4"
+    cmd = [sys.executable, "-m", "gcs_tools", "sitl", "--vehicle", "px4", "--scenario", "canyon", "--mission",
+           str(mission), "--profile", "0", "--seed", "0", "--out", str(out), "--wall-timeout-s", "80",
+           "--speed-factor", "5"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=110)
+    assert proc.returncode in (0, 1), proc.stdout + proc.stderr  # 1: flew, did not reach the goal
+    s = json.loads((out / "summary.json").read_text())
+    run = s["px4"]
+    assert run["ended_by"] in ("reached_goal", "timeout") and "route" in run["phase_times_s"]
+    assert run["parameters"]["EKF2_GPS_CHECK"] == 0
+    rx = run["receiver"]
+    assert rx["epochs"] > 4 * run["sim_s"] and rx["fixes"] >= run["hil_gps_sent"] == s["gnss"]["sent"]
+    # the record: receiver.ubx's NAV-PVT of each epoch is the HIL_GPS sent (validity = GPS time - boot)
+    items = list(ubx_items(open_stream(str(out / "receiver.ubx"))))
+    assert sum(isinstance(i, GnssEpoch) for i in items) == rx["epochs_released"]
+    pvts = {round((p.t_gps_s - rx["t0_gps_s"]) * 1e3): p for p in items if isinstance(p, ReceiverPvt)}
+    sent = [m for m in tlog_messages(out / "run.tlog") if m.get_type() == "HIL_GPS"]
+    assert len(sent) == run["hil_gps_sent"]
+    for m in sent:
+        pvt = pvts[round(m.time_usec * 1e-3)]
+        assert abs(m.lat - round(pvt.lat_deg * 1e7)) <= 1 and abs(m.lon - round(pvt.lon_deg * 1e7)) <= 1
+        assert abs(m.eph - 100 * pvt.h_acc_m) <= 1  # the receiver's own accuracy (NAV-PVT: mm, HIL_GPS: cm)
+    # scored on the same epochs: EKF2 (which flew), the receiver's fixes, the tight rows
+    for name in ("px4-ekf2", "spp", "tight-second-order", "tight-student-t", "second-order"):
+        med = s["methods"][name]["estimation_error_horizontal_m"]["median"]
+        assert np.isfinite(med) and 0.01 < med < 60.0, (name, med)
