@@ -165,3 +165,13 @@ def test_parameters_with_the_raw_receiver_and_px4s_open_loop_only(tmp_path):
     with pytest.raises(UserError, match="open loop only"):
         fly_px4(Px4FlightOptions("test", 2, "second-order", 0, tmp_path, feed="odometry", scenario="canyon"))
     assert not (tmp_path / "px4").exists()
+
+
+def test_scenario_option_errors_beside_an_autopilot_are_one_line(tmp_path, capsys):
+    from gcs_tools.cli import main
+
+    for cmd in (["sitl", "--vehicle", "ardupilot"], ["evaluate", "--vehicle", "px4"]):
+        assert main([*cmd, "--mission", "test", "--scenario", "realistic", "--out", str(tmp_path / "x")]) == 2
+        assert "--scenario realistic: with --vehicle" in capsys.readouterr().err
+    assert main(["sitl", "--vehicle", "ardupilot", "--scenario", "canyn", "--out", str(tmp_path / "y")]) == 2
+    assert "canyon" in capsys.readouterr().err  # not one of the scenarios: the nearest named
