@@ -11,38 +11,22 @@ sent are scored (the scoring itself: tests/test_foreign_canyon.py)."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 from ardupilot_helpers import require_ardupilot, tlog_messages
+from canyon_helpers import fly_canyon, ubx_record
 
-from companion.gnss.observations import GnssEpoch
 from companion.gnss.timescale import week_tow
-from companion.gnss.ubx import ReceiverPvt
-from companion.receiver.ubx_stream import open_stream, ubx_items
 
 pytestmark = pytest.mark.slow
-
-# the test city's cross street, 30 m of it: a short route, so the flight is mostly its set-up (EKF3
-# waits for the companion, which waits for the receiver's first complete LNAV subframes, < 36 s)
-SHORT_MISSION = """extends: test
-profiles:
-  - {name: short-street, start_ne_m: [52, 35], goal_ne_m: [52, 65]}
-"""
 
 
 @pytest.mark.timeout(150)
 def test_closed_loop_ardupilot_flies_on_the_tight_companion_reading_the_canyon_receiver(tmp_path):
     require_ardupilot()
-    mission = tmp_path / "short.yaml"
-    mission.write_text(SHORT_MISSION)
-    out = tmp_path / "canyon"
-    cmd = [sys.executable, "-m", "gcs_tools", "sitl", "--vehicle", "ardupilot", "--scenario", "canyon",
-           "--feed", "gps-input", "--mission", str(mission), "--profile", "0", "--seed", "0",
-           "--out", str(out), "--wall-timeout-s", "100", "--speedup", "10"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=140)
+    proc, out = fly_canyon(tmp_path, "ardupilot", 140, "--feed", "gps-input", "--wall-timeout-s", "100",
+                           "--speedup", "10")
     assert proc.returncode in (0, 1), proc.stdout + proc.stderr  # 1: flew, did not reach the goal
     s = json.loads((out / "summary.json").read_text())
     ap = s["ardupilot"]
@@ -59,10 +43,9 @@ def test_closed_loop_ardupilot_flies_on_the_tight_companion_reading_the_canyon_r
     assert csum["node"]["raw_epochs"] > 0.5 * rx["epochs_released"]
     assert csum["node"]["feed_gps_input_sent"] > 5 * ap["phase_times_s"]["arm"] * 0.1
     # the record: receiver.ubx decodes to the epochs released and the fixes sent to GPS2, same GPS time
-    items = list(ubx_items(open_stream(str(out / "receiver.ubx"))))
-    epochs = [i for i in items if isinstance(i, GnssEpoch)]
-    pvts = {round(week_tow(p.t_gps_s)[1] * 1000): p for p in items if isinstance(p, ReceiverPvt)}
-    assert len(epochs) == rx["epochs_released"]
+    n_epochs, solutions = ubx_record(out)
+    pvts = {round(week_tow(p.t_gps_s)[1] * 1000): p for p in solutions}
+    assert n_epochs == rx["epochs_released"]
     msgs = tlog_messages(out / "run.tlog")
     sent = [m for m in msgs if m.get_type() == "GPS_INPUT" and m.get_srcSystem() == 255]
     assert len(sent) == ap["gps_input_sent"] and {m.gps_id for m in sent} == {1}

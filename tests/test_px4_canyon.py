@@ -6,36 +6,20 @@ and the tightly coupled rows are scored on them."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 from ardupilot_helpers import tlog_messages
+from canyon_helpers import fly_canyon, ubx_record
 from px4_helpers import require_px4
 
-from companion.gnss.observations import GnssEpoch
-from companion.gnss.ubx import ReceiverPvt
-from companion.receiver.ubx_stream import open_stream, ubx_items
-
 pytestmark = pytest.mark.slow
-
-SHORT_MISSION = """extends: test
-profiles:
-  - {name: short-street, start_ne_m: [52, 35], goal_ne_m: [52, 65]}
-"""
 
 
 @pytest.mark.timeout(120)
 def test_px4_ekf2_flies_on_the_canyon_receivers_fixes(tmp_path):
     require_px4()
-    mission = tmp_path / "short.yaml"
-    mission.write_text(SHORT_MISSION)
-    out = tmp_path / "px4"
-    cmd = [sys.executable, "-m", "gcs_tools", "sitl", "--vehicle", "px4", "--scenario", "canyon", "--mission",
-           str(mission), "--profile", "0", "--seed", "0", "--out", str(out), "--wall-timeout-s", "80",
-           "--speed-factor", "5"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=110)
+    proc, out = fly_canyon(tmp_path, "px4", 110, "--wall-timeout-s", "80", "--speed-factor", "5")
     assert proc.returncode in (0, 1), proc.stdout + proc.stderr  # 1: flew, did not reach the goal
     s = json.loads((out / "summary.json").read_text())
     run = s["px4"]
@@ -44,9 +28,9 @@ def test_px4_ekf2_flies_on_the_canyon_receivers_fixes(tmp_path):
     rx = run["receiver"]
     assert rx["epochs"] > 4 * run["sim_s"] and rx["fixes"] >= run["hil_gps_sent"] == s["gnss"]["sent"]
     # the record: receiver.ubx's NAV-PVT of each epoch is the HIL_GPS sent (validity = GPS time - boot)
-    items = list(ubx_items(open_stream(str(out / "receiver.ubx"))))
-    assert sum(isinstance(i, GnssEpoch) for i in items) == rx["epochs_released"]
-    pvts = {round((p.t_gps_s - rx["t0_gps_s"]) * 1e3): p for p in items if isinstance(p, ReceiverPvt)}
+    n_epochs, solutions = ubx_record(out)
+    assert n_epochs == rx["epochs_released"]
+    pvts = {round((p.t_gps_s - rx["t0_gps_s"]) * 1e3): p for p in solutions}
     sent = [m for m in tlog_messages(out / "run.tlog") if m.get_type() == "HIL_GPS"]
     assert len(sent) == run["hil_gps_sent"]
     for m in sent:
