@@ -3,7 +3,7 @@
 A fixed constellation (azimuths uniform, elevations uniform between the mask and 85°) is drawn
 once per flight. At each fix, from the true position:
 
-* **line of sight** (exact, in the 2-D-plus-heights city): the horizontal ray toward a satellite
+* **line of sight** (exact, in the 2-D-plus-heights city, ``companion.mission.city3d``): the horizontal ray toward a satellite
   enters building ``k`` at distance ``t_k`` (slab test); the satellite is blocked when the roof
   is above the ray there, ``height_k > h + t_k tan(elevation)``, with ``h`` the height above home;
 * **NLOS**: a satellite that becomes blocked is, with probability ``nlos_reflect_prob``, tracked
@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.mission.city3d import City
 from simvehicle.config import GnssConfig
 
 MIN_SATELLITES = 5
@@ -62,31 +63,13 @@ class Constellation:
         ce = np.cos(self.elevation_rad)
         self.u_ned = np.column_stack([ce * np.cos(self.azimuth_rad), ce * np.sin(self.azimuth_rad),
                                       -np.sin(self.elevation_rad)])
-        self._dir = self.u_ned[:, :2] / ce[:, None]  # horizontal unit directions (S, 2)
-        self._tan_el = np.tan(self.elevation_rad)
-        self._lo = rects_m[:, 0:2]  # (B, 2) north_min, east_min
-        self._hi = rects_m[:, 2:4]
-        self._height = np.asarray(heights_m, dtype=float)
+        self.city = City(rects_m, heights_m)
 
     def blocked(self, p_ned_m: np.ndarray) -> np.ndarray:
-        """(S,) True where a building blocks the line of sight from ``p_ned_m``."""
-        if self._height.size == 0:
-            return np.zeros(len(self.azimuth_rad), dtype=bool)
-        p = np.asarray(p_ned_m[:2], dtype=float)
-        d = self._dir[:, None, :]  # (S, 1, 2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / d
-            t1 = (self._lo[None] - p) * inv
-            t2 = (self._hi[None] - p) * inv
-        t1 = np.where(np.isnan(t1), -np.inf, t1)  # ray parallel to a slab and on its edge
-        t2 = np.where(np.isnan(t2), np.inf, t2)
-        t_near = np.max(np.minimum(t1, t2), axis=2)  # (S, B)
-        t_far = np.min(np.maximum(t1, t2), axis=2)
-        hits = (t_far >= np.maximum(t_near, 0.0))
-        t_enter = np.maximum(t_near, 0.0)
-        h = -float(p_ned_m[2])
-        ray_height = h + t_enter * self._tan_el[:, None]
-        return np.any(hits & (self._height[None] > ray_height), axis=1)
+        """(S,) True where a building blocks the line of sight from ``p_ned_m``
+        (``City.line_of_sight_blocked``)."""
+        return self.city.line_of_sight_blocked(np.asarray(p_ned_m, dtype=float), self.azimuth_rad,
+                                               self.elevation_rad)[0]
 
 
 def position_error(u_ned: np.ndarray, used: np.ndarray, delay_m: np.ndarray) -> tuple[np.ndarray, float]:

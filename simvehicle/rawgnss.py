@@ -33,7 +33,7 @@ from companion.gnss.constants import C_M_S
 from companion.gnss.geometry import ecef_to_ned_matrix, geodetic_to_ecef
 from companion.gnss.spp import SppConfig, SppSolution, solve_position
 from companion.gnss.timescale import gps_from_calendar
-from simvehicle.city3d import City
+from companion.mission.city3d import City
 from simvehicle.config import ReceiverConfig, parse_utc
 from simvehicle.constellation import SYSTEM_NAMES, ephemeris_store
 from simvehicle.gnss import FIX_TYPE_3D, NedFix, NedToGeodetic, QueuedDelivery, ReleaseQueue

@@ -6,7 +6,7 @@ measurement epoch at the vehicle's TRUE position, velocity and time:
 1. **Sky**: the broadcast orbits of :mod:`simvehicle.constellation`; each signal's exact light time
    with the Earth's rotation during the flight (the satellite state at ``t − 75 ms`` moved along its
    velocity; < 0.1 mm), elevation and azimuth in the mission's NED frame.
-2. **Paths** (:mod:`simvehicle.city3d`): the direct path (clear, or bent over the dominant roof edge
+2. **Paths** (:mod:`companion.mission.city3d`): the direct path (clear, or bent over the dominant roof edge
    with knife-edge loss), the strongest specular facade reflection, and, for a blocked satellite
    without one, an unmapped reflection with probability ``unmapped_prob`` per blocked episode
    (its extra path and phase drawn once per episode from the satellite's own stream: common random
@@ -60,7 +60,7 @@ from companion.gnss.observations import GnssEpoch, make_epoch
 from companion.gnss.spp import SppSolution
 from companion.gnss.systems import System
 from companion.gnss.timescale import week_tow
-from simvehicle.city3d import City, diffraction_extra_m, knife_edge_loss_db
+from companion.mission.city3d import City, diffraction_extra_m, knife_edge_loss_db
 from simvehicle.config import ReceiverConfig
 from simvehicle.constellation import SYSTEM_NAMES
 

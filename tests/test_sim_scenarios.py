@@ -85,8 +85,8 @@ def test_line_of_sight_known_answers():
     cfg = GnssConfig(constellation_size=4)
     rects = np.array([[10.0, -5.0, 20.0, 5.0]])
     sky = Constellation(cfg, rects, np.array([30.0]), np.random.default_rng(0))
-    sky._dir = np.array([[1.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]])  # N, N, S, E
-    sky._tan_el = np.tan(np.radians([30.0, 60.0, 30.0, 30.0]))
+    sky.azimuth_rad = np.radians([0.0, 0.0, 180.0, 90.0])  # N, N, S, E
+    sky.elevation_rad = np.radians([30.0, 60.0, 30.0, 30.0])
     # north at 30°: at 10 m the ray is at 20 + 5.8 < 30 → blocked; at 60° it is at 37 m → clear
     blocked = sky.blocked(np.array([0.0, 0.0, -20.0]))
     assert blocked.tolist() == [True, False, False, False]

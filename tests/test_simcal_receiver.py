@@ -12,7 +12,7 @@ from companion.gnss.constants import C_M_S
 from companion.gnss.spp import SppConfig, solve_position
 from companion.gnss.systems import System
 from companion.gnss.timescale import gps_from_calendar
-from simvehicle.city3d import City, diffraction_extra_m, knife_edge_loss_db
+from companion.mission.city3d import City, diffraction_extra_m, knife_edge_loss_db
 from simvehicle.config import ReceiverConfig
 from simvehicle.constellation import constellation, ephemeris_store
 from simvehicle.receiver import (

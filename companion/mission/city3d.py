@@ -1,5 +1,7 @@
 """Signal paths in the 3-D city (box buildings on flat ground): line of sight, roof-edge diffraction
-and single specular reflections off facades, vectorised over rays. Pure numpy, no state.
+and single specular reflections off facades, vectorised over rays. Pure numpy, no state: the one
+implementation the simulated receiver (``simvehicle.receiver``, ``simvehicle.nlos``) and the
+companion's map prior (``companion.wiring.tight_navigator_for``) share.
 
 Geometry: buildings are the mission's rectangles ``[n_min, e_min, n_max, e_max]`` with their
 heights above the home altitude (ground = 0 m); a position is (north, east, height). A satellite is
@@ -119,6 +121,25 @@ class City:
         if skip is not None:
             hit &= self._index[None] != skip[:, None]
         return t_in, hit
+
+    def line_of_sight_blocked(
+        self, p_ned_m: np.ndarray, azimuth_rad: np.ndarray, elevation_rad: np.ndarray
+    ) -> np.ndarray:
+        """(K, n) True where a roof hides the satellite at ``azimuth_rad``, ``elevation_rad`` (n,)
+        from the position(s) ``p_ned_m`` ((3,) or (K, 3), NED: height ``−p_d``): the slab test of
+        the module doc. A ray touching a wall or a corner enters the box; a satellite at or below
+        the horizon (el ≤ 0) is blocked by any box its ray crosses."""
+        p = np.atleast_2d(np.asarray(p_ned_m, dtype=float))
+        az = np.asarray(azimuth_rad, dtype=float).ravel()
+        el = np.asarray(elevation_rad, dtype=float).ravel()
+        k, n = len(p), len(az)
+        if not len(self.height_m) or not n:
+            return np.zeros((k, n), dtype=bool)
+        dirs = np.tile(np.column_stack((np.cos(az), np.sin(az))), (k, 1))
+        origins = np.repeat(p[:, 0:2], n, axis=0)
+        t_in, hit = self._entry(origins, dirs, None, None)
+        ray_h = np.repeat(-p[:, 2], n)[:, None] + t_in * np.tile(np.tan(el), k)[:, None]
+        return (hit & (self.height_m[None] > ray_h)).any(axis=1).reshape(k, n)
 
     def trace(
         self,
