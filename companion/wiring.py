@@ -10,16 +10,26 @@ models handed in:
 * ``navigator_for(mission, method, config=, frame=)``: the navigator with both, the mission's map
   (``World.clearance_m``, which ``map-beta`` and ``map-hmm`` need) and its home as the frame.
 
+* ``mission_city(mission)``: the map's buildings as boxes (``companion.mission.city3d.City``);
+* ``tight_navigator_for(mission, method, config=, frame=, city=)``: the tightly coupled navigator with
+  the map's line of sight as the per-satellite belief's prior (``city``: another map, e.g. an
+  imperfect one; the mission's by default; None for a mission without one).
+
 Without a mission (a foreign log, an autopilot we do not plan for) there is no map: ``map-beta`` and
 ``map-hmm`` then refuse to start with a one-line ``ConfigError``.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from companion.domain.geodesy import LocalNedFrame
 from companion.estimator import DEFAULT_METHOD, EstimatorConfig, MethodContext, Navigator, check_method
 from companion.estimator.plugin_config import PluginConfig
+from companion.gnss.ephemeris import EphemerisStore
 from companion.mission import Mission, build
+from companion.mission.city3d import City
+from companion.tight import DEFAULT_WEIGHTING, TightConfig, TightNavigator, check_weighting
 
 _MISSION_HOME = LocalNedFrame(0.0, 0.0, 0.0)  # sentinel: "the mission's home" (compared by identity)
 
@@ -56,3 +66,32 @@ def navigator_for(mission: Mission | None, method: str = DEFAULT_METHOD, *,
         config = config if config is not None else mission_estimator_config(mission)
         home = mission.frame if frame is _MISSION_HOME else frame
     return Navigator(config, method=method, frame=home, context=context)
+
+
+def mission_city(mission: Mission) -> City:
+    """The mission's buildings as boxes with their heights (the 3-D city the receiver sees)."""
+    heights = [b.height_m for b in mission.world.config.buildings]
+    return City(mission.world.rects_m, np.asarray(heights, dtype=float))
+
+
+_MISSION_CITY = City(np.zeros((0, 4)), np.zeros(0))  # sentinel: "the mission's map" (compared by identity)
+
+
+def tight_navigator_for(mission: Mission | None, method: str = DEFAULT_WEIGHTING, *,
+                        config: TightConfig | None = None, frame: LocalNedFrame | None = _MISSION_HOME,
+                        ephemerides: EphemerisStore | None = None,
+                        city: City | None = _MISSION_CITY) -> TightNavigator:
+    """A ``TightNavigator`` running ``method`` (checked) with ``config`` (default ``TightConfig()``).
+
+    ``mission``: its home as the frame (unless ``frame`` is given) and its map's line of sight as the
+    belief's prior (``city``: another map instead, or None for none). ``None``: no map, ``frame`` (default
+    None = the first single-point solution)."""
+    check_weighting(method)
+    if mission is None:
+        home = None if frame is _MISSION_HOME else frame
+        los = None if city is _MISSION_CITY or city is None else city.line_of_sight_blocked
+    else:
+        home = mission.frame if frame is _MISSION_HOME else frame
+        c = mission_city(mission) if city is _MISSION_CITY else city
+        los = None if c is None else c.line_of_sight_blocked
+    return TightNavigator(config, method, home, ephemerides, line_of_sight=los)

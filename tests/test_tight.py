@@ -219,10 +219,10 @@ def test_out_of_sequence_epochs_equal_in_order():
         assert a.counts["sat_used"] == b.counts["sat_used"]
 
 
-def _feed(cfg: TightConfig, method: str, epochs, t_us, order) -> TightEngine:
+def _feed(cfg: TightConfig, method: str, epochs, t_us, order, line_of_sight=None) -> TightEngine:
     """IMU (zero acceleration, 50 Hz) to the end first in chunks; epochs pushed in ``order``, each as
-    soon as the IMU passed its validity (a late one after later ones)."""
-    eng = TightEngine(cfg, method, frame=FRAME)
+    soon as the IMU passed its validity (a late one after later ones); ``line_of_sight``: a map."""
+    eng = TightEngine(cfg, method, frame=FRAME, line_of_sight=line_of_sight)
     eng.push_acc(0, 0.0, 0.0, 0.0)
     pushed = 0
     for i in order:
@@ -515,6 +515,7 @@ def test_tight_rows_on_the_calibrated_simulator_open_loop():
     from gcs_tools.evaluate.tight_sim import fly_rows
 
     e = fly_rows("default", 3, 0, rows=("cn0-elevation", "second-order"), max_duration_s=30.0)
-    assert set(e) == {"spp", "loose", "tight-cn0-elevation", "tight-second-order"}
+    assert set(e) == {"spp", "loose", "tight-cn0-elevation", "tight-second-order", "tight-second-order-map",
+                      "tight-second-order-imperfect-map"}
     assert len(e["spp"]) > 300 and all(np.isfinite(v).all() for v in e.values())
     assert np.median(e["tight-second-order"]) < 0.7 * np.median(e["spp"])

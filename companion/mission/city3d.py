@@ -122,6 +122,14 @@ class City:
             hit &= self._index[None] != skip[:, None]
         return t_in, hit
 
+    def perturbed(self, rng: np.random.Generator, sigma_height_m: float, sigma_shift_m: float) -> City:
+        """The same city as an imperfect map would have it: each building's height off by
+        N(0, sigma_height_m²) (kept ≥ 1 m) and its footprint moved by N(0, sigma_shift_m²) per axis."""
+        n = len(self.height_m)
+        h = np.maximum(self.height_m + rng.normal(0.0, sigma_height_m, n), 1.0)
+        shift = rng.normal(0.0, sigma_shift_m, (n, 2))
+        return City(np.hstack((self.lo + shift, self.hi + shift)), h)
+
     def line_of_sight_blocked(
         self, p_ned_m: np.ndarray, azimuth_rad: np.ndarray, elevation_rad: np.ndarray
     ) -> np.ndarray:

@@ -27,6 +27,7 @@ the numpy forms here (tested); these stay the reference and serve the tests and 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -80,13 +81,34 @@ def second_order_step(theta: np.ndarray, h_fast: np.ndarray, h_slow: np.ndarray,
     return theta - cfg.eta * g / (h + cfg.lambda_reg), h_fast, h_slow
 
 
-def theta_prior(cn0_dbhz: np.ndarray, elevation_deg: np.ndarray, cfg: TightConfig,
-                map_blocked: np.ndarray | None = None) -> np.ndarray:
-    """Prior logit from C/N0 and elevation (a missing C/N0 counts as the midpoint), plus
-    ``prior_map_nlos`` where a map says the line of sight is blocked."""
+def theta_prior(cn0_dbhz: np.ndarray, elevation_deg: np.ndarray, cfg: TightConfig) -> np.ndarray:
+    """Prior logit from C/N0 and elevation (a missing C/N0 counts as the midpoint), unclamped: the
+    filter adds the map's term (``map_theta``) and clamps to [``theta_min``, ``theta_max``]."""
     cn0 = np.where(np.isfinite(cn0_dbhz), cn0_dbhz, cfg.prior_cn0_mid_dbhz)
-    th = cfg.prior_cn0_per_db * (cn0 - cfg.prior_cn0_mid_dbhz) + cfg.prior_el_per_deg * (
+    return cfg.prior_cn0_per_db * (cn0 - cfg.prior_cn0_mid_dbhz) + cfg.prior_el_per_deg * (
         elevation_deg - cfg.prior_el_mid_deg)
-    if map_blocked is not None:
-        th = th + np.where(map_blocked, cfg.prior_map_nlos, 0.0)
-    return np.clip(th, cfg.theta_min, cfg.theta_max)
+
+
+LineOfSight = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+# the unscented transform's points for a 3-D Gaussian with n + κ = 4: the mean (weight 1/4) and
+# ±2σ along each principal axis (1/8 each): the points' mean and covariance are the Gaussian's
+_SIGMA_SCALE = 2.0
+_SIGMA_WEIGHTS = np.array([0.25] + [0.125] * 6)
+
+
+def blocked_probability(line_of_sight: LineOfSight, p_ned_m: np.ndarray, P_pos_m2: np.ndarray,
+                        azimuth_rad: np.ndarray, elevation_rad: np.ndarray) -> np.ndarray:
+    """(n,) probability that a map hides each satellite from a position known as N(p, P): the map's
+    verdict at the unscented transform's seven points (mean, ±2σ along P's principal axes), weighted.
+    A precise position gives the map's verdict (0 or 1); an uncertain one near a roof edge a fraction."""
+    lam, vec = np.linalg.eigh(0.5 * (P_pos_m2 + P_pos_m2.T))
+    d = vec * (_SIGMA_SCALE * np.sqrt(np.maximum(lam, 0.0)))  # columns: 2σ along each axis
+    pts = np.asarray(p_ned_m, dtype=float)[None, :] + np.concatenate((np.zeros((1, 3)), d.T, -d.T))
+    hidden = np.asarray(line_of_sight(pts, azimuth_rad, elevation_rad), dtype=bool)
+    return _SIGMA_WEIGHTS @ hidden
+
+
+def map_theta(p_blocked: np.ndarray, cfg: TightConfig) -> np.ndarray:
+    """The map's term of the prior logit: ``prior_map_nlos`` where it hides the satellite,
+    ``prior_map_los`` where it shows it, blended by the probability ``p_blocked``."""
+    return cfg.prior_map_nlos * p_blocked + cfg.prior_map_los * (1.0 - p_blocked)

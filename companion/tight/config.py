@@ -98,7 +98,20 @@ class TightConfig:
     prior_cn0_mid_dbhz: float = 35.0
     prior_el_per_deg: float = 0.05
     prior_el_mid_deg: float = 25.0
-    prior_map_nlos: float = -3.0  # θ_prior added where the map says the line of sight is blocked
+    # A map (``TightNavigator(line_of_sight=…)``): θ_prior += prior_map_nlos where it hides the satellite from
+    # the predicted position, prior_map_los where it shows it, blended by the probability over the
+    # position's uncertainty (belief.blocked_probability)
+    prior_map_nlos: float = -3.0
+    prior_map_los: float = 0.0
+    # What the belief's consistency is measured on: "prefit" (each satellite's innovation against the
+    # prediction) or "leave-one-out" (against the prediction corrected by the epoch's other satellites,
+    # weighted by their beliefs: weighting.leave_one_out)
+    belief_innovation: Literal["prefit", "leave-one-out"] = "prefit"
+    # The belief's nominal variance R_nom: "los" (a line-of-sight signal's, C/N0 only: the belief and
+    # its prior carry the rest) or "cn0-elevation" (the single-point solution's σ model, 1/sin² el too)
+    belief_sigma_model: Literal["los", "cn0-elevation"] = "los"
+    # Student-t reweighting passes (as the student-t row's) on top of the beliefs' variances: 0 = none
+    belief_student_iterations: int = 0
     # --- Student-t row: iteratively reweighted update
     student_iterations: int = 3  # reweighted updates per epoch
     # --- FDE row: χ² test of the epoch's normalised innovations, worst excluded while it fails
@@ -127,8 +140,13 @@ class TightConfig:
             raise ValueError("theta_min < 0 < theta_max needed")
         if not 0.0 < self.alpha_fast < self.alpha_slow < 1.0:
             raise ValueError("alpha_fast, alpha_slow: need 0 < alpha_fast < alpha_slow < 1")
-        if self.student_iterations < 1 or self.fde_max_exclusions < 0:
-            raise ValueError("student_iterations >= 1, fde_max_exclusions >= 0 needed")
+        if self.belief_sigma_model not in ("los", "cn0-elevation"):
+            raise ValueError(f"belief_sigma_model {self.belief_sigma_model!r}: choose los or cn0-elevation")
+        if self.belief_innovation not in ("prefit", "leave-one-out"):
+            raise ValueError(f"belief_innovation {self.belief_innovation!r}: choose prefit or leave-one-out")
+        if self.student_iterations < 1 or self.fde_max_exclusions < 0 or self.belief_student_iterations < 0:
+            raise ValueError("student_iterations >= 1, fde_max_exclusions >= 0, "
+                             "belief_student_iterations >= 0 needed")
 
     @classmethod
     def for_ground_vehicle(cls, **over: object) -> TightConfig:

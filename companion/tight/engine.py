@@ -11,12 +11,15 @@ order (tested to 1e-9). Measurements valid after the newest IMU sample wait for 
 An epoch (``SatEpoch``: prepared once by ``prepare_epoch``, state-independent) is fused as
 
 1. predict the last entry to the epoch's time;
-2. a system seen for the first time gets a clock from its satellites' median residual (σ
+2. (the belief rows, with a map) each satellite's prior gets the map's line of sight at the predicted
+   position, over its uncertainty (``belief.blocked_probability``): a function of the predicted
+   state, so re-fusion after a late epoch stays exact;
+3. a system seen for the first time gets a clock from its satellites' median residual (σ
    ``sigma_clock0_m``); a system whose satellites all disagree with its predicted clock by more
    than ``clock_jump_m`` had a clock jump: its clock is re-initialised (counted), not the position;
-3. the weighting (``weighting.py``, by name) decides each satellite's variance and whether it is
+4. the weighting (``weighting.py``, by name) decides each satellite's variance and whether it is
    used (innovation gate, FDE, Student-t, per-satellite belief);
-4. one batch Kalman update with the used pseudoranges and their range rates (Doppler, with the
+5. one batch Kalman update with the used pseudoranges and their range rates (Doppler, with the
    same per-satellite inflation).
 
 No satellite passing for ``reset_timeout_s`` re-starts position and clocks from a single-point
@@ -39,7 +42,7 @@ from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, solve_position
 from companion.gnss.systems import System
 from companion.tight import _tight, model, weighting
-from companion.tight.belief import theta_prior
+from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
 
@@ -63,8 +66,9 @@ class SatEpoch(NamedTuple):
     r_model_m2: np.ndarray  # σ² of the C/N0 + elevation model
     r_uniform_m2: np.ndarray  # sigma_uniform_m²
     r_los_m2: np.ndarray  # σ² of a line-of-sight signal: C/N0 only (the belief inflates the rest)
-    theta_prior: np.ndarray  # prior belief logit (C/N0, elevation, map)
+    theta_prior: np.ndarray  # prior logit from C/N0 and elevation (unclamped; the map's is added at fusion)
     elevation_deg: np.ndarray
+    azimuth_rad: np.ndarray  # at the frame's origin (a few hundred metres away: < 0.01°), for the map
     sat_pos_ecef_m: np.ndarray
     sat_vel_ecef_m_s: np.ndarray
     z_rate_m_s: np.ndarray  # pseudorange rate free of the satellite clock drift (NaN: none)
@@ -108,12 +112,11 @@ class Entry(NamedTuple):
 
 
 def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
-                  blocked: np.ndarray | None = None, atmosphere_m: np.ndarray | None = None
-                  ) -> SatEpoch | None:
-    """The state-independent part of an epoch, at the frame's origin (elevation, atmosphere, σ model,
-    prior). Observations without a finite pseudorange or satellite position, or below the elevation
-    mask, are dropped. ``blocked``: (n,) the map's line-of-sight verdict per observation (or None);
-    ``atmosphere_m``: (n,) the raw pseudoranges' atmospheric delays when already known
+                  atmosphere_m: np.ndarray | None = None) -> SatEpoch | None:
+    """The state-independent part of an epoch, at the frame's origin (elevation, azimuth, atmosphere,
+    σ model, C/N0 and elevation prior). Observations without a finite pseudorange or satellite
+    position, or below the elevation mask, are dropped. ``atmosphere_m``: (n,) the raw pseudoranges'
+    atmospheric delays when already known
     (``satcache.AtmosphereCache``), else computed here.
 
     σ models (``companion.gnss.spp.sigma_model_m``'s, written out for speed and tested equal):
@@ -131,21 +134,20 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
     ep = epoch
     if not ok.all():
         ep, d, rng, sin_el = epoch.select(ok), d[ok], rng[ok], sin_el[ok]
-        blocked = None if blocked is None else blocked[ok]
         atmosphere_m = None if atmosphere_m is None else atmosphere_m[ok]
     el = np.arcsin(np.clip(sin_el, -1.0, 1.0))
     z = ep.pseudorange_m
     rate = ep.pseudorange_rate_m_s
     if not ep.corrected and atmosphere_m is not None:
         z = z + C_M_S * ep.sat_clock_s - atmosphere_m
-    elif not ep.corrected:
+    ne = d @ frame.c_ecef_ned[:, 0:2]
+    az = np.arctan2(ne[:, 1], ne[:, 0]) % (2 * np.pi)
+    if not ep.corrected and atmosphere_m is None:
         from companion.gnss.atmosphere import klobuchar_m, saastamoinen_m
         from companion.gnss.timescale import week_tow
 
         z = z + C_M_S * ep.sat_clock_s - saastamoinen_m(frame.lat_rad, frame.h_m, el)
         if klobuchar is not None:
-            ne = d @ frame.c_ecef_ned[:, 0:2]
-            az = np.arctan2(ne[:, 1], ne[:, 0]) % (2 * np.pi)
             z = z - klobuchar_m(klobuchar[0], klobuchar[1], frame.lat_rad, frame.lon_rad, az, el,
                                 week_tow(ep.t_gps_s)[1]) * _IONO_SCALE[model.SLOT_OF[ep.system]]
     if not ep.corrected:
@@ -167,7 +169,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
     slots = model.SLOT_OF[sysi]
     return SatEpoch(ep, sysi * 1000 + ep.prn.astype(int), slots, slots.astype(float),
                     z, r_model, np.full(ep.n, cfg.sigma_uniform_m**2), r_los,
-                    theta_prior(cn0, el_deg, cfg, blocked), el_deg, ep.sat_pos_ecef_m,
+                    theta_prior(cn0, el_deg, cfg), el_deg, az, ep.sat_pos_ecef_m,
                     vel, rate, r_rate,
                     tuple(sorted(set(slots.tolist()))))
 
@@ -178,8 +180,9 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
 
     def __init__(self, cfg: TightConfig, method: str = weighting.DEFAULT_WEIGHTING,
                  counts: dict[str, int] | None = None, frame: Frame | None = None,
-                 klobuchar: Any = None) -> None:
+                 klobuchar: Any = None, line_of_sight: LineOfSight | None = None) -> None:
         cfg.validate()
+        self.line_of_sight = line_of_sight  # a map: (p_ned_m (K, 3), az (n,), el (n,)) -> hidden (K, n)
         self.cfg = cfg
         self.method = method
         self.weighting = weighting.make(method, cfg)
@@ -381,7 +384,14 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         if restarted:
             y, H, HP, s0, _ = _tight.innovations(x, P, r0, C, m.sat_pos_ecef_m, m.slot_f, m.z_m)
         r_nom = getattr(m, self._r_field)
-        terms = weighting.SatTerms(m.key, y, s0, r_nom, m.theta_prior)
+        prior = m.theta_prior
+        if self.weighting.uses_prior:
+            if self.line_of_sight is not None:  # the map at the predicted position, over its uncertainty
+                p_hidden = blocked_probability(self.line_of_sight, x[0:3], P[0:3, 0:3], m.azimuth_rad,
+                                               np.radians(m.elevation_deg))
+                prior = prior + map_theta(p_hidden, c)
+            prior = np.clip(prior, c.theta_min, c.theta_max)
+        terms = weighting.SatTerms(m.key, y, s0, r_nom, prior)
 
         def solve(r: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             u = np.flatnonzero(used)

@@ -8,14 +8,14 @@ per-satellite beliefs replace it; ``beta`` is the mean belief of the last epoch'
 Epochs without satellite states (a receiver's RXM-RAWX) are completed from the broadcast
 ephemerides given at construction, through ``SatelliteCache`` (evaluated every
 ``sat_cache_period_s``, 5 s: < 0.5 mm and < 0.5 mm/s from the full evaluation, ``beliefnav bench tight``).
-``line_of_sight`` (optional, a map): ``(p_ned_m, azimuth_rad, elevation_rad) -> blocked (bool (n,))``
-lowers the prior belief of the satellites a map says are hidden.
+``line_of_sight`` (optional, a map): ``(p_ned_m (K, 3), azimuth_rad (n,), elevation_rad (n,)) -> hidden
+(bool (K, n))`` (``companion.mission.city3d.City.line_of_sight_blocked``; ``companion.wiring.
+tight_navigator_for`` passes the mission's) sets the belief rows' prior from the predicted line of sight.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
@@ -26,13 +26,12 @@ from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
+from companion.tight.belief import LineOfSight
 from companion.tight.config import TightConfig
 from companion.tight.model import Frame
 from companion.tight.samples import Odometry, RawGnss
 from companion.tight.satcache import AtmosphereCache, SatelliteCache
 from companion.tight.weighting import DEFAULT_WEIGHTING
-
-LineOfSight = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 class TightNavigator:
@@ -54,12 +53,11 @@ class TightNavigator:
         f = None if frame is None else Frame.at_geodetic(math.radians(frame.home_lat_deg),
                                                          math.radians(frame.home_lon_deg), frame.home_alt_m)
         klob = None if ephemerides is None else ephemerides.klobuchar
-        self.engine = tight_engine.TightEngine(self.cfg, method, self._counts, f, klob)
+        self.engine = tight_engine.TightEngine(self.cfg, method, self._counts, f, klob, line_of_sight)
         self._push_frd = self.engine.push_frd
         self._sats = None if ephemerides is None else SatelliteCache(ephemerides, sat_cache_period_s)
         self._atmo: AtmosphereCache | None = None
         self._sat_period_s = sat_cache_period_s
-        self._los = line_of_sight
         self._rot: Any = None
         self._odo: tuple[int, float, float] | None = None  # (t_us, yaw rate, its integral)
         self._last: tuple[Any, NavEstimate] | None = None
@@ -114,17 +112,7 @@ class TightNavigator:
             self._counts["gnss_rejected_no_solution"] += 1
             return
         assert eng.frame is not None
-        blocked = None
-        if self._los is not None and eng.entries:
-            from companion.gnss.geometry import azimuth_elevation_rad
-
-            now = eng.output_now()
-            assert now is not None
-            d = epoch.sat_pos_ecef_m - eng.frame.ecef(now[1][0:3])  # the position at the newest IMU time
-            az, el = azimuth_elevation_rad(d / np.linalg.norm(d, axis=1)[:, None], eng.frame.lat_rad,
-                                           eng.frame.lon_rad)
-            blocked = np.asarray(self._los(now[1][0:3], az, el), dtype=bool)
-        m = tight_engine.prepare_epoch(epoch, eng.frame, self.cfg, eng.klobuchar, blocked, atmosphere)
+        m = tight_engine.prepare_epoch(epoch, eng.frame, self.cfg, eng.klobuchar, atmosphere)
         if m is None:
             self._counts["gnss_rejected_empty"] += 1
             return

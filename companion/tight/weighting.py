@@ -99,6 +99,7 @@ class Fixed:
     """Fixed weights: σ = ``sigma_uniform_m`` for every satellite."""
 
     nominal = "uniform"
+    uses_prior = False  # the per-satellite prior (C/N0, elevation, map) is read
 
     def __init__(self, cfg: TightConfig) -> None:
         self.cfg = cfg
@@ -163,7 +164,13 @@ class SatelliteBelief(SigmaModel):
     """A belief per satellite, learned by the paper's second-order rule (``belief.py``)."""
 
     nominal = "los"
+    uses_prior = True
     first_order = False
+
+    def __init__(self, cfg: TightConfig) -> None:
+        super().__init__(cfg)
+        if cfg.belief_sigma_model == "cn0-elevation":  # the single-point solution's σ model as R_nom
+            self.nominal = "model"
 
     def initial_state(self) -> BeliefMap:  # type: ignore[override]
         return {}
@@ -178,16 +185,39 @@ class SatelliteBelief(SigmaModel):
     def weigh(self, state: BeliefMap, t: SatTerms, solve: Solve) -> Weighed:
         c = self.cfg
         theta, hf, hs = self._gather(state, t)
+        y, s0 = t.y, t.s0
+        if c.belief_innovation == "leave-one-out" and len(y) > 1:
+            y, s0 = leave_one_out(t, t.r_nominal * c.r_inflation_max ** (1.0 - 1.0 / (1.0 + np.exp(-theta))),
+                                  solve)
         # belief.grad_theta, the (second- or first-order) step, the clamp, R(β) and the gate, in C
         # (``_tight.belief_step``; equal to belief.py's numpy forms, tested)
         theta, hf, hs, beta, r, used = _tight.belief_step(
-            theta, hf, hs, t.y, t.s0, t.r_nominal, t.theta_prior, c.eta, c.lambda_reg, c.alpha_fast,
+            theta, hf, hs, y, s0, t.r_nominal, t.theta_prior, c.eta, c.lambda_reg, c.alpha_fast,
             c.alpha_slow, c.omega_fast, c.student_dof, c.r_inflation_max, c.prior_weight, c.theta_min,
             c.theta_max, c.gate_sigma**2, self.first_order)
+        # every row's gate: the pre-fit innovation against its variance
+        used = gate(t, r, c) if y is not t.y else used > 0.0
         new = dict(state)
         rows = zip(theta.tolist(), hf.tolist(), hs.tolist(), strict=True)
         new.update(zip(t.key.tolist(), rows, strict=True))
-        return Weighed(r, used > 0.0, new, beta)
+        r_fuse = r
+        nu = c.student_dof
+        for _ in range(c.belief_student_iterations):  # the epoch's heavy tail on top of the beliefs
+            e, _ = solve(r_fuse, used)
+            r_fuse = r / np.minimum((nu + 1.0) / (nu + e * e / r), 1.0 + 1.0 / nu)
+        return Weighed(r_fuse, used, new, beta)
+
+
+def leave_one_out(t: SatTerms, r: np.ndarray, solve: Solve) -> tuple[np.ndarray, np.ndarray]:
+    """Each satellite's innovation against the prediction corrected by every OTHER satellite of the
+    epoch (variances ``r``), and its variance without the satellite's own R: with S = H P Hᵀ + diag(r)
+    over all of them, ỹ_s = (S⁻¹ y)_s / (S⁻¹)_ss and 1/(S⁻¹)_ss = H_s P₋ₛ H_sᵀ + r_s (the Schur
+    complement), so s̃0_s = 1/(S⁻¹)_ss − r_s. A satellite that has just been reflected shows its whole
+    error (the others do not follow it), and a clean one is not blamed for the state's error."""
+    _, S = solve(r, np.ones(len(t.y), dtype=bool))
+    Si = np.linalg.inv(S)
+    d = np.diag(Si).copy()
+    return (Si @ t.y) / d, np.maximum(1.0 / d - r, 0.0)
 
 
 @register("first-order")

@@ -9,7 +9,11 @@ Every control step each row's position is compared with the truth (horizontal di
 
 * ``spp``: the receiver's latest single-point fix as it arrived (what a consumer of the fixes has);
 * ``loose``: the filter flying the vehicle (its single-point fixes, second-order);
-* ``tight-<row>``: ``companion.tight`` with each weighting, IMU-driven (``TightConfig()``).
+* ``tight-<row>``: ``companion.tight`` with each weighting, IMU-driven (``TightConfig()``), no map;
+* ``tight-second-order-map``: the belief with the mission's map as its line-of-sight prior
+  (``companion.wiring.tight_navigator_for``), and ``tight-second-order-imperfect-map`` with an
+  imperfect map: every building's height off by N(0, 2.5²) m and its footprint moved by N(0, 1.5²) m per
+  axis, drawn per flight from ``[MAP_SEED, profile, seed]`` (``City.perturbed``).
 
 Intervals: per-flight medians and 95th percentiles, bootstrap over flights (seeded), and paired
 differences between rows over the same flights.
@@ -30,13 +34,19 @@ from gcs_tools.evaluate.tight import table_lines
 from gcs_tools.jsonvalues import write_results
 
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
+MAP_ROWS = ("second-order-map", "second-order-imperfect-map")  # the belief with the map's prior
+BELIEF_ROWS = ("tight-second-order", *(f"tight-{r}" for r in MAP_ROWS))
+MAP_SEED = 7
+MAP_SIGMA_HEIGHT_M = 2.5
+MAP_SIGMA_SHIFT_M = 1.5
 
 
 def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
-             max_duration_s: float | None = None) -> dict[str, np.ndarray]:
-    """Horizontal errors (m) per control step of each row on one flight."""
+             max_duration_s: float | None = None, maps: bool = True) -> dict[str, np.ndarray]:
+    """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
+    the exact and an imperfect map)."""
     from companion.mission import load_mission
-    from companion.wiring import navigator_for
+    from companion.wiring import mission_city, navigator_for, tight_navigator_for
     from simvehicle.harness.fly import planned_route
     from simvehicle.rawgnss import RawGnssModel
     from simvehicle.vehicle import SimVehicle
@@ -49,8 +59,15 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     assert isinstance(gnss, RawGnssModel)  # the canyon scenario's receiver
     store = gnss.store
     tight = {r: TightNavigator(TightConfig(), r, m.frame, store) for r in rows}
+    if maps:
+        city = mission_city(m)
+        imperfect = city.perturbed(np.random.default_rng([MAP_SEED, profile, seed]), MAP_SIGMA_HEIGHT_M,
+                                   MAP_SIGMA_SHIFT_M)
+        for name, c in zip(MAP_ROWS, (city, imperfect), strict=True):
+            tight[name] = tight_navigator_for(m, "second-order", config=TightConfig(), ephemerides=store,
+                                              city=c)
     end_us = round(min(1.0 + route.duration_s * 1.5, max_duration_s or 1e9) * 1e6)
-    errors: dict[str, list[float]] = {k: [] for k in ("spp", "loose", *(f"tight-{r}" for r in rows))}
+    errors: dict[str, list[float]] = {k: [] for k in ("spp", "loose", *(f"tight-{r}" for r in tight))}
     last_fix = None
     est = None
     while sim.t_us < end_us:
@@ -111,13 +128,14 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
         for n, v in table.items():
             lo, hi = np.percentile(v[idx].mean(axis=1), [2.5, 97.5])
             out_rows.setdefault(n, {})[stat] = {"mean": float(v.mean()), "ci": [float(lo), float(hi)]}
-        for ref in names:
-            if ref == "tight-second-order" or "tight-second-order" not in table:
-                continue
-            d = table["tight-second-order"] - table[ref]
-            lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
-            paired.append({"stat": stat, "reference": ref, "mean_diff_m": float(d.mean()),
-                           "ci": [float(lo), float(hi)]})
+        for row in (b for b in BELIEF_ROWS if b in table):
+            for ref in names:
+                if ref in BELIEF_ROWS:
+                    continue
+                d = table[row] - table[ref]
+                lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
+                paired.append({"stat": stat, "row": row, "reference": ref, "mean_diff_m": float(d.mean()),
+                               "ci": [float(lo), float(hi)]})
     return {"mission": mission, "scenario": "canyon", "profiles": list(profiles), "seeds": list(seeds),
             "flights": flights, "rows": out_rows, "paired": paired,
             "method": "per-flight median and p95 of the horizontal error at every control step; mean over "
@@ -132,9 +150,9 @@ def markdown(r: dict[str, Any]) -> str:
     lines += table_lines(("row", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
                          ((n, f"{s['median_m']['mean']:.2f}", ci(s["median_m"]["ci"]),
                            f"{s['p95_m']['mean']:.2f}", ci(s["p95_m"]["ci"])) for n, s in r["rows"].items()))
-    lines += ["", *table_lines(("tight-second-order −", "statistic", "mean difference (m)", "95 % CI"),
-                               ((c["reference"], c["stat"].removesuffix("_m"), f"{c['mean_diff_m']:+.2f}",
-                                 ci(c["ci"], "+")) for c in r["paired"]))]
+    lines += ["", *table_lines(("row − reference", "statistic", "mean difference (m)", "95 % CI"),
+                               ((f"{c['row']} − {c['reference']}", c["stat"].removesuffix("_m"),
+                                 f"{c['mean_diff_m']:+.2f}", ci(c["ci"], "+")) for c in r["paired"]))]
     return "\n".join(lines) + "\n"
 
 
