@@ -45,14 +45,26 @@ def test_line_of_sight_behind_a_box_above_it_and_grazing_a_corner():
         np.testing.assert_array_equal(many[k], BOX.line_of_sight_blocked(pts[k], az, el)[0])
 
 
-def test_blocked_probability_follows_the_position_uncertainty():
+def test_blocked_probability_follows_the_position_uncertainty_and_the_signals():
     p = np.array([0.0, 0.0, -20.0])
     az, el = np.radians([0.0, 180.0]), np.radians([30.0, 30.0])
     sure = belief.blocked_probability(BOX.line_of_sight_blocked, p, np.eye(3) * 1e-4, az, el)
     np.testing.assert_allclose(sure, [1.0, 0.0])
-    # 5 m (1σ) along east: ±10 m east the ray toward the north misses the box (half-width 5 m) → 1 − 2/8
-    wide = belief.blocked_probability(BOX.line_of_sight_blocked, p, np.diag([1e-4, 25.0, 1e-4]), az, el)
-    np.testing.assert_allclose(wide, [0.75, 0.0])
+    # 4 m (1σ) east: the candidates 0 and ±4 m east see the box (half-width 5 m), ±8 m do not;
+    # Gaussian weights exp(−j²/2) at j = 0, ±1, ±2 σ
+    w1, w2 = math.exp(-0.5), math.exp(-2.0)
+    wide = belief.blocked_probability(BOX.line_of_sight_blocked, p, np.diag([1e-4, 16.0, 1e-4]), az, el)
+    np.testing.assert_allclose(wide, [(1 + 2 * w1) / (1 + 2 * w1 + 2 * w2), 0.0])
+    # the floor widens both axes: 8 m south the ray toward the north clears the roof (20 + 18 tan 30° > 30)
+    floor = belief.blocked_probability(BOX.line_of_sight_blocked, p, np.zeros((3, 3)), az, el,
+                                       sigma_floor_m=4.0)
+    total = 1 + 2 * w1 + 2 * w2
+    np.testing.assert_allclose(floor, [(total - w2) * (1 + 2 * w1) / total**2, 0.0])
+    # shadow matching: a strong signal from the north (p_los 0.9) favours the candidates that see it
+    p_los = np.array([0.9, 0.5])
+    sm = belief.blocked_probability(BOX.line_of_sight_blocked, p, np.diag([1e-4, 16.0, 1e-4]), az, el, p_los)
+    hid, seen = (1 + 2 * w1) * 0.1, 2 * w2 * 0.9
+    np.testing.assert_allclose(sm, [hid / (hid + seen), 0.0])
     cfg = TightConfig(prior_map_nlos=-3.0, prior_map_los=1.0)
     np.testing.assert_allclose(belief.map_theta(np.array([1.0, 0.0, 0.75]), cfg), [-3.0, 1.0, -2.0])
 

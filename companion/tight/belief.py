@@ -90,22 +90,35 @@ def theta_prior(cn0_dbhz: np.ndarray, elevation_deg: np.ndarray, cfg: TightConfi
 
 
 LineOfSight = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-# the unscented transform's points for a 3-D Gaussian with n + κ = 4: the mean (weight 1/4) and
-# ±2σ along each principal axis (1/8 each): the points' mean and covariance are the Gaussian's
-_SIGMA_SCALE = 2.0
-_SIGMA_WEIGHTS = np.array([0.25] + [0.125] * 6)
+# candidate positions: a 5 × 5 grid at −2σ … 2σ along the principal axes of the horizontal covariance,
+# Gaussian weights exp(−½ |offset/σ|²) (the height is the estimate's: a flying vehicle's is the best known)
+_GRID_SIGMA = np.array([(i, j) for i in (-2.0, -1.0, 0.0, 1.0, 2.0) for j in (-2.0, -1.0, 0.0, 1.0, 2.0)])
+_GRID_LOG_WEIGHT = -0.5 * (_GRID_SIGMA**2).sum(axis=1)
 
 
 def blocked_probability(line_of_sight: LineOfSight, p_ned_m: np.ndarray, P_pos_m2: np.ndarray,
-                        azimuth_rad: np.ndarray, elevation_rad: np.ndarray) -> np.ndarray:
-    """(n,) probability that a map hides each satellite from a position known as N(p, P): the map's
-    verdict at the unscented transform's seven points (mean, ±2σ along P's principal axes), weighted.
-    A precise position gives the map's verdict (0 or 1); an uncertain one near a roof edge a fraction."""
-    lam, vec = np.linalg.eigh(0.5 * (P_pos_m2 + P_pos_m2.T))
-    d = vec * (_SIGMA_SCALE * np.sqrt(np.maximum(lam, 0.0)))  # columns: 2σ along each axis
-    pts = np.asarray(p_ned_m, dtype=float)[None, :] + np.concatenate((np.zeros((1, 3)), d.T, -d.T))
+                        azimuth_rad: np.ndarray, elevation_rad: np.ndarray, p_los: np.ndarray | None = None,
+                        sigma_floor_m: float = 0.0) -> np.ndarray:
+    """(n,) probability that the map hides each satellite from a position known as N(p, P) (horizontal
+    P widened by ``sigma_floor_m`` per axis): the map's verdicts at candidate positions around p, weighted
+    by that Gaussian and, with ``p_los`` (n,) (each satellite's probability of a line of sight from its
+    signal alone: C/N0 and elevation), by how well each candidate's pattern of hidden and seen
+    satellites explains the signals (shadow matching: Π_s p_los,s where seen, 1 − p_los,s where hidden).
+    A precise position gives the map's verdict (0 or 1); an uncertain one a fraction, pulled toward the
+    candidate positions whose shadows the signals agree with, so a wrong estimate does not make the map
+    confirm itself."""
+    Ph = 0.5 * (P_pos_m2[0:2, 0:2] + P_pos_m2[0:2, 0:2].T) + np.eye(2) * sigma_floor_m**2
+    lam, vec = np.linalg.eigh(Ph)
+    axes = vec * np.sqrt(np.maximum(lam, 0.0))  # columns: 1σ along each principal axis
+    pts = np.repeat(np.asarray(p_ned_m, dtype=float)[None, :], len(_GRID_SIGMA), axis=0)
+    pts[:, 0:2] += _GRID_SIGMA @ axes.T
     hidden = np.asarray(line_of_sight(pts, azimuth_rad, elevation_rad), dtype=bool)
-    return _SIGMA_WEIGHTS @ hidden
+    log_w = _GRID_LOG_WEIGHT
+    if p_los is not None and len(p_los):
+        q = np.clip(p_los, 1e-3, 1.0 - 1e-3)
+        log_w = log_w + np.where(hidden, np.log1p(-q), np.log(q)).sum(axis=1)
+    w = np.exp(log_w - log_w.max())
+    return (w / w.sum()) @ hidden
 
 
 def map_theta(p_blocked: np.ndarray, cfg: TightConfig) -> np.ndarray:

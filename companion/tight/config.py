@@ -103,10 +103,15 @@ class TightConfig:
     # position's uncertainty (belief.blocked_probability)
     prior_map_nlos: float = -3.0
     prior_map_los: float = 0.0
+    # the map is read around the predicted position over its horizontal σ widened by this (m per axis: a
+    # canyon's filter is often more confident than right), candidate positions weighted by how well their
+    # shadows explain the signals' C/N0 and elevation (map_shadow_matching; belief.blocked_probability)
+    map_position_sigma_m: float = 0.0
+    map_shadow_matching: bool = False
     # What the belief's consistency is measured on: "prefit" (each satellite's innovation against the
     # prediction) or "leave-one-out" (against the prediction corrected by the epoch's other satellites,
     # weighted by their beliefs: weighting.leave_one_out)
-    belief_innovation: Literal["prefit", "leave-one-out"] = "prefit"
+    belief_innovation: Literal["prefit", "leave-one-out", "robust"] = "prefit"
     # The belief's nominal variance R_nom: "los" (a line-of-sight signal's, C/N0 only: the belief and
     # its prior carry the rest) or "cn0-elevation" (the single-point solution's σ model, 1/sin² el too)
     belief_sigma_model: Literal["los", "cn0-elevation"] = "los"
@@ -142,8 +147,9 @@ class TightConfig:
             raise ValueError("alpha_fast, alpha_slow: need 0 < alpha_fast < alpha_slow < 1")
         if self.belief_sigma_model not in ("los", "cn0-elevation"):
             raise ValueError(f"belief_sigma_model {self.belief_sigma_model!r}: choose los or cn0-elevation")
-        if self.belief_innovation not in ("prefit", "leave-one-out"):
-            raise ValueError(f"belief_innovation {self.belief_innovation!r}: choose prefit or leave-one-out")
+        if self.belief_innovation not in ("prefit", "leave-one-out", "robust"):
+            raise ValueError(f"belief_innovation {self.belief_innovation!r}: choose prefit, leave-one-out or "
+                             "robust")
         if self.student_iterations < 1 or self.fde_max_exclusions < 0 or self.belief_student_iterations < 0:
             raise ValueError("student_iterations >= 1, fde_max_exclusions >= 0, "
                              "belief_student_iterations >= 0 needed")

@@ -387,11 +387,12 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         prior = m.theta_prior
         if self.weighting.uses_prior:
             if self.line_of_sight is not None:  # the map at the predicted position, over its uncertainty
+                p_los = 1.0 / (1.0 + np.exp(-prior)) if c.map_shadow_matching else None
                 p_hidden = blocked_probability(self.line_of_sight, x[0:3], P[0:3, 0:3], m.azimuth_rad,
-                                               np.radians(m.elevation_deg))
+                                               np.radians(m.elevation_deg), p_los, c.map_position_sigma_m)
                 prior = prior + map_theta(p_hidden, c)
             prior = np.clip(prior, c.theta_min, c.theta_max)
-        terms = weighting.SatTerms(m.key, y, s0, r_nom, prior)
+        terms = weighting.SatTerms(m.key, y, s0, r_nom, prior, m.r_model_m2)
 
         def solve(r: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             u = np.flatnonzero(used)

@@ -43,6 +43,7 @@ class SatTerms(NamedTuple):
     s0: np.ndarray  # (H P⁻ Hᵀ)_ii (m²)
     r_nominal: np.ndarray  # a-priori variance from the σ model (m²)
     theta_prior: np.ndarray  # prior belief logit from C/N0, elevation (and the map)
+    r_model: np.ndarray | None = None  # the C/N0 + elevation σ model's variance (the belief's robust fix)
 
 
 class Weighed(NamedTuple):
@@ -145,15 +146,8 @@ class StudentT(SigmaModel):
     """Iteratively reweighted update with Student-t weights (ν + 1) / (ν + e² / R_nom)."""
 
     def weigh(self, state: Any, t: SatTerms, solve: Solve) -> Weighed:
-        c = self.cfg
-        nu = c.student_dof
-        used = gate(t, t.r_nominal, c)
-        r = t.r_nominal
-        for _ in range(c.student_iterations):
-            e, _ = solve(r, used)
-            w = (nu + 1.0) / (nu + e * e / t.r_nominal)
-            r = t.r_nominal / np.minimum(w, 1.0 + 1.0 / nu)
-        return Weighed(r, used, state, np.ones(len(t.y)))
+        r = student_t_variances(t, t.r_nominal, solve, self.cfg)
+        return Weighed(r, gate(t, t.r_nominal, self.cfg), state, np.ones(len(t.y)))
 
 
 BeliefMap = dict[int, tuple[float, float, float]]  # key -> (θ, H_fast, H_slow), never mutated
@@ -189,6 +183,9 @@ class SatelliteBelief(SigmaModel):
         if c.belief_innovation == "leave-one-out" and len(y) > 1:
             y, s0 = leave_one_out(t, t.r_nominal * c.r_inflation_max ** (1.0 - 1.0 / (1.0 + np.exp(-theta))),
                                   solve)
+        elif c.belief_innovation == "robust" and len(y) > 1:
+            r_model = t.r_model if t.r_model is not None else t.r_nominal
+            y, s0 = leave_one_out(t, student_t_variances(t, r_model, solve, c), solve)
         # belief.grad_theta, the (second- or first-order) step, the clamp, R(β) and the gate, in C
         # (``_tight.belief_step``; equal to belief.py's numpy forms, tested)
         theta, hf, hs, beta, r, used = _tight.belief_step(
@@ -206,6 +203,17 @@ class SatelliteBelief(SigmaModel):
             e, _ = solve(r_fuse, used)
             r_fuse = r / np.minimum((nu + 1.0) / (nu + e * e / r), 1.0 + 1.0 / nu)
         return Weighed(r_fuse, used, new, beta)
+
+
+def student_t_variances(t: SatTerms, r_nominal: np.ndarray, solve: Solve, cfg: TightConfig) -> np.ndarray:
+    """The student-t row's variances: ``student_iterations`` reweighted updates from ``r_nominal``."""
+    nu = cfg.student_dof
+    used = gate(t, r_nominal, cfg)
+    r = r_nominal
+    for _ in range(cfg.student_iterations):
+        e, _ = solve(r, used)
+        r = r_nominal / np.minimum((nu + 1.0) / (nu + e * e / r_nominal), 1.0 + 1.0 / nu)
+    return r
 
 
 def leave_one_out(t: SatTerms, r: np.ndarray, solve: Solve) -> tuple[np.ndarray, np.ndarray]:
