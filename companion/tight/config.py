@@ -100,21 +100,23 @@ class TightConfig:
     prior_el_mid_deg: float = 25.0
     # A map (``TightNavigator(line_of_sight=…)``): θ_prior += prior_map_nlos where it hides the satellite from
     # the predicted position, prior_map_los where it shows it, blended by the probability over the
-    # position's uncertainty (belief.blocked_probability)
-    prior_map_nlos: float = -3.0
-    prior_map_los: float = 0.0
+    # position's uncertainty (belief.blocked_probability). Chosen on the canyon's tuning flights: trusting
+    # the satellites the map shows helps; distrusting the hidden ones (in a canyon most of them, many
+    # with small errors) costs, even with the map at the true position
+    prior_map_nlos: float = 0.0
+    prior_map_los: float = 2.0
     # the map is read around the predicted position over its horizontal σ widened by this (m per axis: a
     # canyon's filter is often more confident than right), candidate positions weighted by how well their
     # shadows explain the signals' C/N0 and elevation (map_shadow_matching; belief.blocked_probability)
-    map_position_sigma_m: float = 0.0
-    map_shadow_matching: bool = False
+    map_position_sigma_m: float = 10.0
+    map_shadow_matching: bool = True
     # What the belief's consistency is measured on: "prefit" (each satellite's innovation against the
     # prediction) or "leave-one-out" (against the prediction corrected by the epoch's other satellites,
     # weighted by their beliefs: weighting.leave_one_out)
     belief_innovation: Literal["prefit", "leave-one-out", "robust"] = "prefit"
     # The belief's nominal variance R_nom: "los" (a line-of-sight signal's, C/N0 only: the belief and
     # its prior carry the rest) or "cn0-elevation" (the single-point solution's σ model, 1/sin² el too)
-    belief_sigma_model: Literal["los", "cn0-elevation"] = "los"
+    belief_sigma_model: Literal["los", "cn0-elevation"] = "cn0-elevation"
     # Student-t reweighting passes (as the student-t row's) on top of the beliefs' variances: 0 = none
     belief_student_iterations: int = 0
     # --- Student-t row: iteratively reweighted update
