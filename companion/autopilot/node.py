@@ -60,7 +60,7 @@ from companion.gnss.timescale import gps_to_unix_s
 from companion.mavlink import codec
 from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
 from companion.tight import RawGnss, TightConfig, TightNavigator, check_weighting
-from companion.wiring import navigator_for
+from companion.wiring import navigator_for, tight_navigator_for
 
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
 REASK_MIN_S = 2.0  # a reboot seen this soon after asking for the streams does not ask again
@@ -315,7 +315,8 @@ class AutopilotCompanion:
 
     def _start_navigator(self) -> None:
         if self.config.coupling == "tight":
-            self.nav = TightNavigator(self.config.tight, self.config.method, self.frame, self._store())
+            self.nav = tight_navigator_for(None, self.config.method, config=self.config.tight,
+                                           frame=self.frame, ephemerides=self._store())  # no mission: no map
         else:
             self.nav = navigator_for(None, self.config.method, config=self.config.estimator, frame=self.frame)
         self._topics = EstimatorTelemetry(self.telemetry)
