@@ -50,7 +50,8 @@ class TightConfig:
     sigma_zenith_m: float = 3.0
     cn0_ref_dbhz: float = 45.0
     glonass_sigma_factor: float = 1.5
-    # σ of a line-of-sight pseudorange at cn0_ref (grows as 1/√(C/N0)): the belief rows' nominal R
+    # σ of a line-of-sight pseudorange at cn0_ref (grows as 1/√(C/N0)): the belief rows' nominal R when
+    # belief_sigma_model is "los"
     sigma_los_cn0_m: float = 3.0
     sigma_range_rate_m_s: float = 0.5  # Doppler σ of an ideal observation (same shape as the pseudorange σ)
     elevation_mask_deg: float = 5.0
@@ -111,8 +112,9 @@ class TightConfig:
     map_position_sigma_m: float = 10.0
     map_shadow_matching: bool = True
     # What the belief's consistency is measured on: "prefit" (each satellite's innovation against the
-    # prediction) or "leave-one-out" (against the prediction corrected by the epoch's other satellites,
-    # weighted by their beliefs: weighting.leave_one_out)
+    # prediction), "leave-one-out" (against the prediction corrected by the epoch's other satellites,
+    # weighted by their beliefs: weighting.leave_one_out) or "robust" (the same, the others weighted as
+    # the student-t row weighs them). The two did not help on the canyon's tuning flights (docs/tight.md)
     belief_innovation: Literal["prefit", "leave-one-out", "robust"] = "prefit"
     # The belief's nominal variance R_nom: "los" (a line-of-sight signal's, C/N0 only: the belief and
     # its prior carry the rest) or "cn0-elevation" (the single-point solution's σ model, 1/sin² el too)
