@@ -3,9 +3,10 @@
 A fixed constellation (azimuths uniform, elevations uniform between the mask and 85°) is drawn
 once per flight. At each fix, from the true position:
 
-* **line of sight** (exact, in the 2-D-plus-heights city, ``companion.mission.city3d``): the horizontal ray toward a satellite
-  enters building ``k`` at distance ``t_k`` (slab test); the satellite is blocked when the roof
-  is above the ray there, ``height_k > h + t_k tan(elevation)``, with ``h`` the height above home;
+* **line of sight** (exact, in the 2-D-plus-heights city, ``companion.mission.city3d``): the
+  horizontal ray toward a satellite enters building ``k`` at distance ``t_k`` (slab test); the
+  satellite is blocked when the roof is above the ray there, ``height_k > h + t_k tan(elevation)``,
+  with ``h`` the height above home;
 * **NLOS**: a satellite that becomes blocked is, with probability ``nlos_reflect_prob``, tracked
   by a reflection whose extra path ``δ`` (exponential, mean ``nlos_delay_mean_m``) is drawn once
   for that blocked episode, so the fix STEPS when a building cuts the line of sight; otherwise

@@ -60,6 +60,7 @@ class Weighting(Protocol):
     # the nominal variance: "uniform" (sigma_uniform_m²), "model" (C/N0 + elevation), "los" (a
     # line-of-sight signal's: C/N0 only; the belief and its prior carry the rest)
     nominal: str
+    uses_prior: bool  # reads SatTerms.theta_prior (the engine adds the map's term only then)
 
     def initial_state(self) -> Any: ...
 
