@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
-from companion.tight import RawGnss, TightConfig, TightNavigator
+from companion.tight import RawGnss, TightConfig
 from gcs_tools.evaluate.tight import table_lines
 from gcs_tools.jsonvalues import write_results
 
@@ -58,7 +58,7 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     gnss = sim.gnss
     assert isinstance(gnss, RawGnssModel)  # the canyon scenario's receiver
     store = gnss.store
-    tight = {r: TightNavigator(TightConfig(), r, m.frame, store) for r in rows}
+    tight = {r: tight_navigator_for(m, r, config=TightConfig(), ephemerides=store, city=None) for r in rows}
     if maps:
         city = mission_city(m)
         imperfect = city.perturbed(np.random.default_rng([MAP_SEED, profile, seed]), MAP_SIGMA_HEIGHT_M,
