@@ -157,3 +157,23 @@ def test_the_missions_map_reaches_the_tight_navigator():
     d_h = imperfect.height_m - city.height_m
     assert np.all(d_h != 0.0) and np.all(np.abs(d_h) < 15.0)
     np.testing.assert_allclose(imperfect.hi - imperfect.lo, city.hi - city.lo)  # moved, same footprint
+
+
+def test_a_whole_epoch_off_is_blamed_on_the_state_not_on_every_satellite():
+    """Joint consistency: every pseudorange 30 m late at once (the receiver clock stepped: the prediction
+    is off, not each satellite). Judged against the epoch's median, the beliefs hold; judged one by one
+    against the prediction, every satellite loses trust."""
+    cfg = TightConfig.for_ground_vehicle()
+    assert cfg.belief_epoch_scale
+    rng = np.random.default_rng(8)
+    n_sat = len(_synthetic_epochs(rng, cfg, 1)[0][0].key)
+    epochs, _ = _synthetic_epochs(rng, cfg, 32, bias={i: (30.0, 30) for i in range(n_sat)})
+    t_us = [1_000_000 + 200_000 * k for k in range(32)]
+    drop = {}
+    for scaled in (True, False):
+        eng = _feed(TightConfig.for_ground_vehicle(belief_epoch_scale=scaled), "second-order", epochs, t_us,
+                    list(range(31)))
+        before, at = eng.entries[-2].info.beta, eng.entries[-1].info.beta  # epochs 29 and 30 (the step)
+        assert np.median(before) > 0.9
+        drop[scaled] = float(np.median(before - at))
+    assert drop[False] > 0.05 and drop[True] < 0.3 * drop[False], drop

@@ -119,6 +119,10 @@ class TightConfig:
     # The belief's nominal variance R_nom: "los" (a line-of-sight signal's, C/N0 only: the belief and
     # its prior carry the rest) or "cn0-elevation" (the single-point solution's σ model, 1/sin² el too)
     belief_sigma_model: Literal["los", "cn0-elevation"] = "cn0-elevation"
+    # Joint consistency: when the epoch's median y²/S is above χ²(1)'s median, the whole epoch disagrees with
+    # the prediction (the state is off, not every satellite): each satellite's S is scaled by that ratio in
+    # the belief's step, so a satellite is judged against the epoch, not against a pulled prediction
+    belief_epoch_scale: bool = True
     # Student-t reweighting passes (as the student-t row's) on top of the beliefs' variances: 0 = none
     belief_student_iterations: int = 0
     # --- Student-t row: iteratively reweighted update
