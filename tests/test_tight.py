@@ -443,11 +443,15 @@ def test_c_belief_step_equals_the_numpy_forms():
     theta, hf, hs = rng.uniform(-4, 4, n), rng.uniform(0.1, 3, n), rng.uniform(0.1, 3, n)
     y, s0 = rng.normal(0, 30, n), rng.uniform(1, 50, n)
     r_nom, prior = rng.uniform(1, 100, n), rng.uniform(-2, 2, n)
-    for first in (False, True):
+    scales = []
+    for first, scaled in ((False, False), (True, False), (False, True), (True, True)):
         got = _tight.belief_step(theta, hf, hs, y, s0, r_nom, prior, cfg.eta, cfg.lambda_reg, cfg.alpha_fast,
                                  cfg.alpha_slow, cfg.omega_fast, cfg.student_dof, cfg.r_inflation_max,
-                                 cfg.prior_weight, cfg.theta_min, cfg.theta_max, cfg.gate_sigma**2, first)
-        g = belief.grad_theta(theta, y, s0, r_nom, prior, cfg)
+                                 cfg.prior_weight, cfg.theta_min, cfg.theta_max, cfg.gate_sigma**2, first,
+                                 scaled)
+        sc = belief.epoch_scale(theta, y, s0, r_nom, cfg) if scaled else 1.0
+        scales.append(sc)
+        g = belief.grad_theta(theta, y, sc * s0, sc * r_nom, prior, cfg)
         th, f, s = (theta - cfg.eta * g, hf, hs) if first else belief.second_order_step(theta, hf, hs, g, cfg)
         th = np.clip(th, cfg.theta_min, cfg.theta_max)
         b = belief.sigmoid(th)
@@ -456,6 +460,7 @@ def test_c_belief_step_equals_the_numpy_forms():
         for a, w in zip(got, (th, f, s, b, r), strict=False):
             np.testing.assert_allclose(a, w, rtol=1e-12, atol=1e-14)
         assert np.array_equal(got[5] > 0, used)
+    assert scales[2] > 1.5  # the scaled branch is exercised (an even count: the median of the middle two)
 
 
 def test_c_core_equals_the_numpy_forms():

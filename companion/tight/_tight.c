@@ -361,15 +361,18 @@ done:
 }
 
 /* belief_step(theta, h_fast, h_slow, y, s0, r_nominal, theta_prior, eta, lambda_reg, alpha_fast, alpha_slow,
- *             omega_fast, nu, k, kappa, theta_min, theta_max, gate2, first_order)
+ *             omega_fast, nu, k, kappa, theta_min, theta_max, gate2, first_order, epoch_scale)
  * -> (theta, h_fast, h_slow, beta, r, used): belief.grad_theta, the second-order (or first-order) step,
- * the clamp, β = σ(θ), R(β) = R_nom k^(1-β) and the innovation gate y² <= gate2 (s0 + R), per satellite */
+ * the clamp, β = σ(θ), R(β) = R_nom k^(1-β) and the innovation gate y² <= gate2 (s0 + R), per satellite;
+ * epoch_scale: the gradient's S scaled by belief.epoch_scale (the epoch's median y²/S over χ²(1)'s, ≥ 1) */
+#define CHI2_1_MEDIAN 0.454936
+#define MAX_SORT 256
 static PyObject *py_belief_step(PyObject *self, PyObject *args) {
     PyObject *o[7];
     double eta, lam, af, as_, wf, nu, kk, kappa, tmin, tmax, gate2;
-    int first;
-    if (!PyArg_ParseTuple(args, "OOOOOOOdddddddddddp", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &eta, &lam,
-                          &af, &as_, &wf, &nu, &kk, &kappa, &tmin, &tmax, &gate2, &first))
+    int first, epoch_scale;
+    if (!PyArg_ParseTuple(args, "OOOOOOOdddddddddddpp", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &eta,
+                          &lam, &af, &as_, &wf, &nu, &kk, &kappa, &tmin, &tmax, &gate2, &first, &epoch_scale))
         return NULL;
     PyArrayObject *a[7] = {0};
     PyObject *out[6] = {0};
@@ -394,13 +397,26 @@ static PyObject *py_belief_step(PyObject *self, PyObject *args) {
            *hs = PyArray_DATA((PyArrayObject *)out[2]), *be = PyArray_DATA((PyArrayObject *)out[3]),
            *r = PyArray_DATA((PyArrayObject *)out[4]), *used = PyArray_DATA((PyArrayObject *)out[5]);
     double lnk = log(kk);
+    double scale = 1.0;
+    if (epoch_scale && m >= 4 && m <= MAX_SORT) {  /* the median of y²/(s0 + R(β)) before the step */
+        double q[MAX_SORT];
+        for (npy_intp i = 0; i < m; i++) {
+            double b = 1.0 / (1.0 + exp(-th0[i]));
+            double v = y[i] * y[i] / (s0[i] + rn[i] * pow(kk, 1.0 - b)), w;
+            npy_intp j = i;
+            for (; j > 0 && (w = q[j - 1]) > v; j--) q[j] = w;  /* insertion sort */
+            q[j] = v;
+        }
+        double med = (m % 2) ? q[m / 2] : 0.5 * (q[m / 2 - 1] + q[m / 2]);
+        scale = med / CHI2_1_MEDIAN > 1.0 ? med / CHI2_1_MEDIAN : 1.0;
+    }
     for (npy_intp i = 0; i < m; i++) {
         double t = th0[i];
         double b = 1.0 / (1.0 + exp(-t));
         double rr = rn[i] * pow(kk, 1.0 - b);
-        double S = s0[i] + rr, y2 = y[i] * y[i];
+        double S = scale * (s0[i] + rr), y2 = y[i] * y[i];
         double dl = 0.5 / S - 0.5 * (nu + 1.0) * y2 / (S * (nu * S + y2));
-        double g = dl * (-lnk) * rr * b * (1.0 - b) + kappa * (t - pr[i]);
+        double g = dl * (-lnk) * scale * rr * b * (1.0 - b) + kappa * (t - pr[i]);
         double f = hf0[i], sl = hs0[i];
         if (first) {
             t = t - eta * g;

@@ -72,6 +72,21 @@ def grad_theta(theta: np.ndarray, y: np.ndarray, s0: np.ndarray, r_nominal: np.n
         theta - theta_prior)
 
 
+CHI2_1_MEDIAN = 0.454936  # the median of χ²(1): a consistent epoch's median of y²/S
+
+
+def epoch_scale(theta: np.ndarray, y: np.ndarray, s0: np.ndarray, r_nominal: np.ndarray,
+                cfg: TightConfig) -> float:
+    """Joint consistency: the epoch's median y²/(s0 + R(β)) over χ²(1)'s median, at least 1 (1 with fewer
+    than 4 satellites). Above 1 the epoch as a whole disagrees with the prediction — the state is off, not
+    every satellite — and the belief's step judges each satellite with S scaled by it: the gradient is
+    ``grad_theta(θ, y, scale · s0, scale · R_nom, …)``; the fused R(β) and the gate are not scaled."""
+    if len(y) < 4:
+        return 1.0
+    r = r_of_beta(sigmoid(theta), r_nominal, cfg)
+    return max(1.0, float(np.median(y * y / (s0 + r))) / CHI2_1_MEDIAN)
+
+
 def second_order_step(theta: np.ndarray, h_fast: np.ndarray, h_slow: np.ndarray, g: np.ndarray,
                       cfg: TightConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(θ, H_fast, H_slow) after the damped Newton step along g (eq. 18-21), per satellite."""

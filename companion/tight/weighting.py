@@ -151,7 +151,6 @@ class StudentT(SigmaModel):
         return Weighed(r, gate(t, t.r_nominal, self.cfg), state, np.ones(len(t.y)))
 
 
-CHI2_1_MEDIAN = 0.454936  # the median of χ²(1): a consistent epoch's median of y²/S
 BeliefMap = dict[int, tuple[float, float, float]]  # key -> (θ, H_fast, H_slow), never mutated
 
 
@@ -188,20 +187,14 @@ class SatelliteBelief(SigmaModel):
         elif c.belief_innovation == "robust" and len(y) > 1:
             r_model = t.r_model if t.r_model is not None else t.r_nominal
             y, s0 = leave_one_out(t, student_t_variances(t, r_model, solve, c), solve)
-        scale = 1.0
-        if c.belief_epoch_scale and len(y) >= 4:  # the epoch's common inconsistency is the state's
-            r_prev = t.r_nominal * c.r_inflation_max ** (1.0 - 1.0 / (1.0 + np.exp(-theta)))
-            scale = max(1.0, float(np.median(y * y / (s0 + r_prev))) / CHI2_1_MEDIAN)
-        # belief.grad_theta, the (second- or first-order) step, the clamp, R(β) and the gate, in C
-        # (``_tight.belief_step``; equal to belief.py's numpy forms, tested)
+        # belief.epoch_scale (joint consistency), belief.grad_theta, the (second- or first-order) step, the
+        # clamp, R(β) and the gate, in C (``_tight.belief_step``; equal to belief.py's numpy forms, tested)
         theta, hf, hs, beta, r, used = _tight.belief_step(
-            theta, hf, hs, y, s0 * scale, t.r_nominal * scale, t.theta_prior, c.eta, c.lambda_reg,
-            c.alpha_fast, c.alpha_slow, c.omega_fast, c.student_dof, c.r_inflation_max, c.prior_weight,
-            c.theta_min, c.theta_max, c.gate_sigma**2, self.first_order)
-        if scale != 1.0:
-            r = r / scale
+            theta, hf, hs, y, s0, t.r_nominal, t.theta_prior, c.eta, c.lambda_reg, c.alpha_fast,
+            c.alpha_slow, c.omega_fast, c.student_dof, c.r_inflation_max, c.prior_weight, c.theta_min,
+            c.theta_max, c.gate_sigma**2, self.first_order, c.belief_epoch_scale)
         # every row's gate: the pre-fit innovation against its variance
-        used = gate(t, r, c) if (y is not t.y or scale != 1.0) else used > 0.0
+        used = gate(t, r, c) if y is not t.y else used > 0.0
         new = dict(state)
         rows = zip(theta.tolist(), hf.tolist(), hs.tolist(), strict=True)
         new.update(zip(t.key.tolist(), rows, strict=True))
