@@ -216,6 +216,7 @@ def test_out_of_sequence_epochs_equal_in_order():
             assert ea.t_us == eb.t_us
             np.testing.assert_allclose(eb.x, ea.x, rtol=0, atol=1e-9)
             np.testing.assert_allclose(eb.P, ea.P, rtol=0, atol=1e-9)
+            assert eb.fit.inflation() == pytest.approx(ea.fit.inflation(), rel=1e-9)
         assert a.counts["sat_used"] == b.counts["sat_used"]
 
 
@@ -322,7 +323,10 @@ def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
     t_now, x_now, P_now, _ = nav.engine.state_now()  # the C output path == the full prediction
     assert t_now == est.t_us
     np.testing.assert_allclose(np.r_[est.p_ned_m, est.v_ned_m_s], x_now[0:6], atol=1e-9)
-    np.testing.assert_allclose(est.cov_diag[0:6], np.diag(P_now)[0:6], rtol=1e-9)
+    # the position variances reported: P's times the filter's measured consistency (≥ 1)
+    k = nav.accuracy_inflation()
+    assert k == nav.engine.entries[-1].fit.inflation() >= 1.0
+    np.testing.assert_allclose(est.cov_diag[0:6], np.diag(P_now)[0:6] * np.r_[k, k, k, 1, 1, 1], rtol=1e-9)
     p = nav.engine.frame.ecef(np.asarray(est.p_ned_m))
     assert np.linalg.norm(p - RX_ECEF) < 2.0
     with pytest.raises(ConfigError, match="second-order"):

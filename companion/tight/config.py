@@ -130,6 +130,12 @@ class TightConfig:
     # --- FDE row: χ² test of the epoch's normalised innovations, worst excluded while it fails
     fde_p_false_alarm: float = 1e-3  # the χ² test's false-alarm probability (RAIM/FDE's)
     fde_max_exclusions: int = 4
+    # --- reported accuracy (NavEstimate.cov_diag, GPS_INPUT's horiz/vert_accuracy, the feeds' covariances):
+    # the position covariance × max(1, NIS per degree of freedom of the used pseudoranges over the last
+    # accuracy_window_s, exponentially weighted), the variance-of-unit-weight test a receiver applies to
+    # its reported accuracy: where the measurement model is wrong (reflections the belief did not
+    # catch) P alone is over-confident. 0: report P as it is.
+    accuracy_window_s: float = 10.0
     # --- out-of-sequence
     history_s: float = 2.0  # epochs this late are still fused exactly
     future_tolerance_s: float = 0.05
@@ -147,6 +153,9 @@ class TightConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+        if not (math.isfinite(self.accuracy_window_s) and self.accuracy_window_s >= 0.0):
+            raise ValueError(f"accuracy_window_s: must be a finite number >= 0, "
+                             f"got {self.accuracy_window_s!r}")
         if not self.r_inflation_max >= 1.0:
             raise ValueError("r_inflation_max: must be >= 1")
         if not self.theta_min < 0.0 < self.theta_max:

@@ -46,6 +46,7 @@ from companion.tight.belief import LineOfSight, blocked_probability, map_theta, 
 from companion.tight.config import TightConfig
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
 
+FIT_W2_MIN = 1e-3  # a satellite's weight in Fit below this (gone for a few windows): forgotten
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
 SPP_INIT = SppConfig(raim=True)
@@ -97,6 +98,40 @@ class EpochInfo(NamedTuple):
     used: np.ndarray | None = None
 
 
+class Fit(NamedTuple):
+    """The used pseudoranges' consistency over the last ``accuracy_window_s`` (the reported accuracy's
+    inflation, ``inflation``): per satellite (``key``, sorted) the exponentially weighted sum of its
+    normalised pre-fit innovations ν = y / √(H P⁻ Hᵀ + r) and of the squared weights, as of ``t_us``."""
+
+    key: np.ndarray = np.zeros(0, dtype=np.int64)
+    nu_sum: np.ndarray = np.zeros(0)
+    w2_sum: np.ndarray = np.zeros(0)
+    t_us: int = 0
+
+    def add(self, t_us: int, key: np.ndarray, nu: np.ndarray, window_s: float) -> Fit:
+        """This epoch's used satellites added, the older sums decayed by exp(−Δt / window_s)."""
+        a = math.exp(-(t_us - self.t_us) * 1e-6 / window_s) if window_s > 0.0 and len(self.key) else 0.0
+        keys = np.union1d(self.key, key)
+        nu_sum, w2_sum = np.zeros(len(keys)), np.zeros(len(keys))
+        old = np.searchsorted(keys, self.key)
+        nu_sum[old], w2_sum[old] = a * self.nu_sum, a * a * self.w2_sum
+        new = np.searchsorted(keys, key)
+        np.add.at(nu_sum, new, nu)
+        np.add.at(w2_sum, new, 1.0)
+        keep = w2_sum > FIT_W2_MIN
+        return Fit(keys[keep], nu_sum[keep], w2_sum[keep], t_us)
+
+    def inflation(self) -> float:
+        """max(1, Σ_s (Σ_t w_t ν_st)² / Σ_s Σ_t w_t²): the windowed NIS per degree of freedom of each
+        satellite's weighted mean innovation. A consistent filter's innovations are white with unit
+        variance: 1 on average. Errors larger than r raise it by their variance ratio, errors correlated
+        in time (a reflection lasting seconds, which the filter fused as independent epochs) by the
+        variance ratio of their window average to white noise's (up to (1 + a)/(1 − a),
+        a = e^(−Δt/window))."""
+        den = float(self.w2_sum.sum())
+        return max(1.0, float(self.nu_sum @ self.nu_sum) / den) if den > 0.0 else 1.0
+
+
 class Entry(NamedTuple):
     t_us: int
     meas: SatEpoch | Speed | None  # None: an anchor (start, re-based base)
@@ -109,6 +144,7 @@ class Entry(NamedTuple):
     info: EpochInfo
     # cumulative: satellites used, satellites rejected, resets, clock resets, epochs
     totals: tuple[int, int, int, int, int]
+    fit: Fit  # the used pseudoranges' consistency so far (the reported accuracy's inflation)
 
 
 def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
@@ -272,7 +308,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             x[I_DRIFT] = sol.clock_drift_m_s
         x, P, live = self._from_solution(x, P, sol, (False,) * N_CLK)
         return Entry(t_us, None, x, P, self.imu.integrals(t_us), live, self.weighting.initial_state(),
-                     t_us, EpochInfo(), (0, 0, 0, 0, 1))
+                     t_us, EpochInfo(), (0, 0, 0, 0, 1), Fit())
 
     def _from_solution(self, x: np.ndarray, P: np.ndarray, sol: SppSolution, live: tuple[bool, ...]
                        ) -> tuple[np.ndarray, np.ndarray, tuple[bool, ...]]:
@@ -347,7 +383,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             s, h = model.speed(x)
             if s <= 0.5:  # below 0.5 m/s the direction is unknown
                 return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                             prev.totals)
+                             prev.totals, prev.fit)
             y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])
         PHt = P @ H.T
         S = H @ PHt + R
@@ -358,7 +394,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             P = 0.5 * (P + P.T)
             self._counts["speed_fused"] += 1
         return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                     prev.totals)
+                     prev.totals, prev.fit)
 
     def _fuse_epoch(self, prev: Entry, t_us: int, m: SatEpoch, x: np.ndarray, P: np.ndarray,
                     ints: Integrals) -> Entry:
@@ -403,7 +439,10 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         r, used, state, beta = self.weighting.weigh(prev.state, terms, solve)
         n_used = int(used.sum())
         nis = math.nan
+        fit = prev.fit
         if n_used:
+            u = np.flatnonzero(used)
+            fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
             # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
             # their own) in one update, in C (model.range_rate; the numpy form in the tests)
             x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used.astype(float), r0, C, m.sat_pos_ecef_m,
@@ -421,7 +460,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         info = EpochInfo(m.epoch.n, n_used, nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
                          m.key, beta, y, used)
         return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
-                     (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1))
+                     (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit)
 
     # --------------------------------------------------------------------- history
     def _anchor(self, e: Entry, t_us: int, ints: Integrals) -> Entry:

@@ -154,11 +154,23 @@ class TightNavigator:
             return self._last[1]
         t_us, out, last = now  # one array, handed out as views (as the loose navigator does)
         info = last.info
-        est = NavEstimate(t_us, out[0:3], out[3:6], out[6:9], out[9:18], info.beta_mean, info.nis,
+        cov = out[9:18]
+        k = self.accuracy_inflation()
+        if k > 1.0:
+            cov = cov.copy()
+            cov[0:3] *= k
+        est = NavEstimate(t_us, out[0:3], out[3:6], out[6:9], cov, info.beta_mean, info.nis,
                           self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
                           gnss_resets=last.totals[2])
         self._last = (now, est)
         return est
+
+    def accuracy_inflation(self) -> float:
+        """The factor (≥ 1) on the position variances the estimates report: the used pseudoranges'
+        NIS per degree of freedom over the last ``accuracy_window_s`` (1 when that is 0)."""
+        if not self.engine.entries or self.cfg.accuracy_window_s <= 0.0:
+            return 1.0
+        return self.engine.entries[-1].fit.inflation()
 
     def counters(self) -> dict[str, int]:
         return dict(self.engine.counts)

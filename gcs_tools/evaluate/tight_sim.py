@@ -17,6 +17,12 @@ Every control step each row's position is compared with the truth (horizontal di
 
 Intervals: per-flight medians and 95th percentiles, bootstrap over flights (seeded), and paired
 differences between rows over the same flights.
+
+Reported accuracy (``coverage``, per tight row): the fraction of steps whose horizontal error lies
+inside the reported 1-σ and 2-σ ellipses (NEES_h = e_N²/σ_N² + e_E²/σ_E² ≤ 1 and ≤ 4; a consistent
+2-D Gaussian: 39.3 % and 86.5 %), for the covariance reported (``NavEstimate.cov_diag``, the filter's
+P inflated by its measured consistency) and for P alone, with the medians of the error and of the
+reported ``horiz_accuracy`` = sqrt(σ_N² + σ_E²).
 """
 
 from __future__ import annotations
@@ -42,9 +48,11 @@ MAP_SIGMA_SHIFT_M = 1.5
 
 
 def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
-             max_duration_s: float | None = None, maps: bool = True) -> dict[str, np.ndarray]:
+             max_duration_s: float | None = None, maps: bool = True,
+             accuracy: dict[str, list[tuple[float, float, float]]] | None = None) -> dict[str, np.ndarray]:
     """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
-    the exact and an imperfect map)."""
+    the exact and an imperfect map); ``accuracy`` (if given) collects per tight row and step (NEES_h
+    reported, NEES_h of P alone, reported horiz_accuracy)."""
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
     from simvehicle.harness.fly import planned_route
@@ -99,22 +107,34 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
         if est is None or last_fix is None:
             continue
         rows_now: dict[str, Any] = {"spp": last_fix, "loose": est.p_ned_m}
-        for r, t in tight.items():
-            e = t.estimate()
+        ests = {r: t.estimate() for r, t in tight.items()}
+        for r, e in ests.items():
             rows_now[f"tight-{r}"] = None if e is None else e.p_ned_m
         if any(v is None for v in rows_now.values()):
             continue
         for name, p in rows_now.items():
             errors[name].append(float(np.hypot(p[0] - truth[0], p[1] - truth[1])))
+        if accuracy is not None:
+            for r, e in ests.items():
+                assert e is not None
+                d2 = (np.asarray(e.p_ned_m[0:2]) - truth[0:2]) ** 2
+                nees = float(np.sum(d2 / np.asarray(e.cov_diag[0:2])))
+                h_acc = float(np.sqrt(e.cov_diag[0] + e.cov_diag[1]))
+                k_r = tight[r].accuracy_inflation()
+                accuracy.setdefault(f"tight-{r}", []).append((nees, nees * k_r, h_acc))
     return {k: np.asarray(v) for k, v in errors.items()}
 
 
 def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Sequence[str] = ROWS,
         n_resamples: int = 2000, rng_seed: int = 0, max_duration_s: float | None = None) -> dict[str, Any]:
     flights: list[dict[str, Any]] = []
+    acc: dict[str, list[tuple[float, float, float]]] = {}
+    err: dict[str, list[np.ndarray]] = {}
     for p in profiles:
         for s in seeds:
-            e = fly_rows(mission, p, s, rows, max_duration_s)
+            e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc)
+            for k, v in e.items():
+                err.setdefault(k, []).append(v)
             flights.append({"profile": p, "seed": s, "steps": int(len(e["spp"])),
                             "median_m": {k: float(np.median(v)) for k, v in e.items()},
                             "p95_m": {k: float(np.percentile(v, 95)) for k, v in e.items()}})
@@ -138,8 +158,18 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
                                "ci": [float(lo), float(hi)]})
     return {"mission": mission, "scenario": "canyon", "profiles": list(profiles), "seeds": list(seeds),
             "flights": flights, "rows": out_rows, "paired": paired,
+            "coverage": {k: coverage(np.asarray(v), np.concatenate(err[k])) for k, v in acc.items()},
             "method": "per-flight median and p95 of the horizontal error at every control step; mean over "
                       f"flights with a bootstrap over flights ({n_resamples} resamples, seed {rng_seed})"}
+
+
+def coverage(acc: np.ndarray, errors_m: np.ndarray) -> dict[str, float]:
+    """Pooled over steps: fractions inside the 1-σ / 2-σ ellipses (reported and P alone), medians."""
+    return {"reported_1sigma": float(np.mean(acc[:, 0] <= 1.0)),
+            "reported_2sigma": float(np.mean(acc[:, 0] <= 4.0)),
+            "p_1sigma": float(np.mean(acc[:, 1] <= 1.0)), "p_2sigma": float(np.mean(acc[:, 1] <= 4.0)),
+            "median_error_m": float(np.median(errors_m)),
+            "median_horiz_accuracy_m": float(np.median(acc[:, 2]))}
 
 
 def markdown(r: dict[str, Any]) -> str:
@@ -153,6 +183,13 @@ def markdown(r: dict[str, Any]) -> str:
     lines += ["", *table_lines(("row − reference", "statistic", "mean difference (m)", "95 % CI"),
                                ((f"{c['row']} − {c['reference']}", c["stat"].removesuffix("_m"),
                                  f"{c['mean_diff_m']:+.2f}", ci(c["ci"], "+")) for c in r["paired"]))]
+    lines += ["", "Reported accuracy, pooled over steps (a consistent 2-D Gaussian: 39.3 % inside 1 σ, "
+              "86.5 % inside 2 σ):", "",
+              *table_lines(("row", "inside 1 σ", "inside 2 σ", "P alone: 1 σ", "2 σ", "median error (m)",
+                            "median horiz_accuracy (m)"),
+                           ((n, f"{c['reported_1sigma']:.1%}", f"{c['reported_2sigma']:.1%}",
+                             f"{c['p_1sigma']:.1%}", f"{c['p_2sigma']:.1%}", f"{c['median_error_m']:.2f}",
+                             f"{c['median_horiz_accuracy_m']:.2f}") for n, c in r["coverage"].items()))]
     return "\n".join(lines) + "\n"
 
 
@@ -164,6 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--out", type=Path, default=Path("runs/tight-sim"))
     p.add_argument("--max-duration-s", type=float, default=None)
+    p.add_argument("--rows", default=",".join(ROWS), help="tight weightings, comma-separated")
     args = p.parse_args(argv)
     try:
         profiles = [int(v) for v in args.profiles.split(",")]
@@ -172,7 +210,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("beliefnav: error: --profiles and --seeds take comma-separated integers")
         return 2
     try:
-        r = run(args.mission, profiles, seeds, max_duration_s=args.max_duration_s)
+        rows = [v for v in args.rows.split(",") if v]
+        bad = sorted(set(rows) - set(ROWS))
+        if bad or not rows:
+            raise UserError(f"--rows: choose from {', '.join(ROWS)}")
+        r = run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s)
     except UserError as exc:
         print(f"beliefnav: error: {exc}")
         return 2
