@@ -135,7 +135,7 @@ class TightConfig:
     # accuracy_window_s, exponentially weighted), the variance-of-unit-weight test a receiver applies to
     # its reported accuracy: where the measurement model is wrong (reflections the belief did not
     # catch) P alone is over-confident. 0: report P as it is.
-    accuracy_window_s: float = 10.0
+    accuracy_window_s: float = 20.0
     # --- out-of-sequence
     history_s: float = 2.0  # epochs this late are still fused exactly
     future_tolerance_s: float = 0.05
