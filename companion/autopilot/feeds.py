@@ -5,7 +5,9 @@
   the cleaned fix is ``p̂`` in geodetic coordinates, with ``horiz_accuracy = sqrt(P_nn + P_ee)``,
   ``vert_accuracy = sqrt(P_dd)`` and ``speed_accuracy`` from the velocity block. β enters through
   the covariance: a low trust inflates R(β) and the bias process noise, so P grows while the
-  fixes are doubted. While the estimate is not valid (``pos_valid`` False) fix_type is 0.
+  fixes are doubted. The tight filter's position variances arrive already inflated by its measured
+  consistency (``TightNavigator.accuracy_inflation``). While the estimate is not valid (``pos_valid``
+  False) fix_type is 0.
   ArduPilot: ``GPS1_TYPE`` = 14 (MAVLink), in force after a reboot.
 - ``vision``: VISION_POSITION_ESTIMATE, NED position about our home and Euler attitude.
   ArduPilot: ``VISO_TYPE`` = 1, ``EK3_SRC1_POSXY`` = 6, ``EK3_SRC1_VELXY`` = 0,
