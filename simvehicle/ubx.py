@@ -32,8 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ
-from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris
+from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEphemeris
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix
+from companion.gnss.glonav import hamming, moscow_day_start_gps_s, words_from_string
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppSolution
 from companion.gnss.systems import System
@@ -310,11 +311,48 @@ def navpvt(
     return frame(NAV, PVT, payload)
 
 
-def sfrbx(system: int, prn: int, words: list[int]) -> bytes:
-    """RXM-SFRBX (version 2) of one navigation message subframe."""
+def sfrbx(system: int, prn: int, words: list[int], freq_id: int = 0) -> bytes:
+    """RXM-SFRBX (version 2) of one navigation message subframe (GLONASS: ``freq_id`` = channel + 7)."""
     return frame(
-        RXM, SFRBX, struct.pack(f"<BBBBBBBx{len(words)}I", system, prn, 0, 0, len(words), 0, 2, *words)
+        RXM, SFRBX, struct.pack(f"<BBBBBBBx{len(words)}I", system, prn, 0, freq_id, len(words), 0, 2, *words)
     )
+
+
+GLONASS_STRING_S = 2.0
+GLONASS_FRAME_S = 30.0
+
+
+def _put_sm(value: float, lsb: float, hi: int, n: int) -> int:
+    """A sign-magnitude field (GLONASS ICD) at string bit ``hi`` (bit k−1 = string bit k)."""
+    q = int(round(value / lsb))
+    if abs(q) >= 1 << (n - 1):
+        raise ValueError(f"GLONASS field {value!r} out of range ({n} bits of {lsb!r})")
+    return ((1 << (n - 1) if q < 0 else 0) | abs(q)) << (hi - n)
+
+
+def glonass_string(eph: GlonassEphemeris, m: int, t_frame_gps_s: float, t_gps_s: float) -> int:
+    """GLONASS string ``m`` (1-4) of the frame starting at ``t_frame_gps_s`` (ICD 5.1 4.4, the layout
+    ``companion.gnss.glonav`` decodes), Hamming code included."""
+    axis = m - 1
+    s = m << 80
+    if m <= 3:
+        km = 1e3
+        s |= _put_sm(eph.vel_ecef_m_s[axis] / km, 2.0**-20, 64, 24) | _put_sm(eph.acc_ecef_m_s2[axis] / km,
+                                                                             2.0**-30, 40, 5)
+        s |= _put_sm(eph.pos_ecef_m[axis] / km, 2.0**-11, 35, 27)
+    day0 = moscow_day_start_gps_s(t_gps_s)
+    if m == 1:
+        tk = int(round(t_frame_gps_s - moscow_day_start_gps_s(t_frame_gps_s)))
+        s |= ((tk // 3600) << 7 | (tk % 3600) // 60 << 1 | (tk % 60) // 30) << 64
+    elif m == 2:
+        tb = int(round((eph.toe_gps_s - moscow_day_start_gps_s(eph.toe_gps_s)) / 900.0))
+        s |= (4 if eph.health else 0) << 77 | tb << 69
+    elif m == 3:
+        s |= _put_sm(eph.gamma_n, 2.0**-40, 79, 11)
+    else:
+        n_t = int(round((day0 - moscow_day_start_gps_s(0.0)) / 86400.0)) % 1461 + 1  # not decoded
+        s |= _put_sm(-eph.clock_bias_s, 2.0**-30, 80, 22) | n_t << 15 | eph.prn << 10 | 1 << 8
+    return hamming(s)
 
 
 @dataclass
@@ -348,6 +386,45 @@ class UbxEncoder:
         return out
 
     def _subframes(self, raw: RawObservation) -> list[bytes]:
+        return self._gps_subframes(raw) + self._glonass_strings(raw)
+
+    def _glonass_strings(self, raw: RawObservation) -> list[bytes]:
+        """Strings 1-4 (the ephemeris) of each GLONASS satellite tracked through the string that
+        just ended (a string every 2 s, 15 to a 30 s frame)."""
+        t0, t1 = self._last_t_gps_s, raw.t_gps_s
+        if t0 is None or not self.store.glonass:
+            return []
+        edge = math.floor(t1 / GLONASS_STRING_S) * GLONASS_STRING_S
+        if edge <= t0:
+            return []
+        start = edge - GLONASS_STRING_S
+        day0 = moscow_day_start_gps_s(start)
+        t_frame = day0 + math.floor((start - day0) / GLONASS_FRAME_S) * GLONASS_FRAME_S
+        m = int(round((start - t_frame) / GLONASS_STRING_S)) + 1
+        ep = raw.epoch
+        lock = raw.lock_ms if raw.lock_ms is not None else np.zeros(ep.n)
+        glo = (ep.system == System.GLONASS) & (lock >= (t1 - start) * 1000.0)
+        if m > 4 or not glo.any():
+            return []
+        out = []
+        frame_no = int(round((t_frame - day0) / GLONASS_FRAME_S))
+        for prn in ep.prn[glo].tolist():
+            eph = self._glonass_ephemeris(int(prn), t_frame)
+            if eph is not None:
+                string = glonass_string(eph, m, t_frame, start)
+                words = words_from_string(string, frame_no // 5, frame_no % 5 + 1)
+                out.append(sfrbx(int(System.GLONASS), int(prn), words, eph.channel + 7))
+        return out
+
+    def _glonass_ephemeris(self, slot: int, t_gps_s: float) -> GlonassEphemeris | None:
+        """The set a satellite broadcasts at ``t_gps_s``: its t_b nearest."""
+        best = None
+        for e in self.store.glonass:
+            if e.prn == slot and (best is None or abs(e.toe_gps_s - t_gps_s) < abs(best.toe_gps_s - t_gps_s)):
+                best = e
+        return best
+
+    def _gps_subframes(self, raw: RawObservation) -> list[bytes]:
         t0, t1 = self._last_t_gps_s, raw.t_gps_s
         if t0 is None:
             return []

@@ -14,7 +14,7 @@ from gnss_helpers_lnav import SUBFRAMES_PRN21
 from pyubx2 import GET, UBXMessage, UBXReader
 
 from companion.errors import UserError
-from companion.gnss.ephemeris import KeplerEphemeris
+from companion.gnss.ephemeris import GlonassEphemeris, KeplerEphemeris
 from companion.gnss.lnav import LnavDecoder
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.systems import System
@@ -163,7 +163,7 @@ def test_round_trip_through_pyubx2_and_the_project_decoder(flight):
     sim, raws, frames = flight
     data = b"".join(f for fs in frames for f in fs)
     dec = UbxDecoder()
-    epochs, pvts, ephs = [], [], []
+    epochs, pvts, ephs, glo = [], [], [], []
     for _, msg in UBXReader(io.BytesIO(data), protfilter=2):
         item = dec.feed(msg)
         if isinstance(item, GnssEpoch):
@@ -172,6 +172,8 @@ def test_round_trip_through_pyubx2_and_the_project_decoder(flight):
             pvts.append(item)
         elif isinstance(item, KeplerEphemeris):
             ephs.append(item)
+        elif isinstance(item, GlonassEphemeris):
+            glo.append(item)
     assert len(epochs) == len(raws) > 100 and len(pvts) == sum(r.solution is not None for r in raws)
     for raw, ep in zip(raws, epochs, strict=True):
         a = raw.epoch
@@ -196,6 +198,43 @@ def test_round_trip_through_pyubx2_and_the_project_decoder(flight):
     # the GPS satellites tracked through whole subframes: their broadcast ephemerides, exactly
     assert ephs and all(e in sim.gnss.store.kepler for e in ephs)
     assert dec.counters["lnav_klobuchar"] > 0
+    # and the GLONASS satellites tracked through strings 1-4 (8 s of each 30 s frame): theirs, exactly
+    tracked = {int(p) for r in raws for s_, p in zip(r.epoch.system, r.epoch.prn, strict=True)
+               if s_ == System.GLONASS}
+    assert len({g.prn for g in glo}) >= len(tracked) // 2 > 0
+    assert all(g in sim.gnss.store.glonass for g in glo) and dec.counters["glonass_bad_hamming"] == 0
+
+
+def test_glonass_strings_round_trip_to_the_same_satellite_position(flight):
+    """Each simulated GLONASS ephemeris through strings 1-4 (ICD layout, Hamming code) and back:
+    the same fields, the same satellite 15 min after t_b (to 1 cm); a flipped bit is refused."""
+    from companion.gnss.ephemeris import EphemerisStore
+    from companion.gnss.glonav import GlonassDecoder, hamming_ok, string_from_words, words_from_string
+    from simvehicle.ubx import glonass_string
+
+    sim = flight[0]
+    store = sim.gnss.store
+    dec = GlonassDecoder()
+    out = []
+    for k, eph in enumerate(store.glonass):
+        t_frame = eph.toe_gps_s - 60.0 + 30.0 * (k % 3)
+        strings = [glonass_string(eph, m, t_frame, t_frame + 2.0 * (m - 1)) for m in (1, 2, 3, 4)]
+        assert all(hamming_ok(s_) and string_from_words(words_from_string(s_, 1, 2)) == s_ for s_ in strings)
+        got = [dec.add(eph.prn, eph.channel, words_from_string(s_, 7, k % 5 + 1), t_frame + 40.0)
+               for s_ in strings]
+        assert got[:3] == [None] * 3 and got[3] == eph
+        out.append(got[3])
+    assert len(out) == len(store.glonass) > 20
+    t = np.array([e.toe_gps_s + 900.0 for e in store.glonass])
+    prn = np.array([e.prn for e in store.glonass])
+    sysv = np.full(len(t), int(System.GLONASS))
+    a = EphemerisStore([], list(store.glonass)).states(sysv, prn, t)
+    b = EphemerisStore([], out).states(sysv, prn, t)
+    assert np.isfinite(a.pos_ecef_m).all() and np.abs(a.pos_ecef_m - b.pos_ecef_m).max() < 0.01
+    bad = words_from_string(glonass_string(store.glonass[0], 1, 0.0, 0.0) ^ (1 << 40), 0, 1)
+    assert GlonassDecoder().add(1, 0, bad, 0.0) is None
+    with pytest.raises(ValueError, match="out of range"):
+        glonass_string(dataclasses.replace(store.glonass[0], clock_bias_s=0.01), 4, 0.0, 0.0)
 
 
 def test_ubx_server_streams_to_clients_and_refuses_a_busy_port(tmp_path):

@@ -16,6 +16,7 @@ from companion.autopilot.node import AutopilotCompanion, CompanionConfig
 from companion.autopilot.service import config_from_args
 from companion.errors import UserError
 from companion.gnss.geometry import ecef_to_geodetic, geodetic_to_ecef
+from companion.gnss.systems import System
 from companion.gnss.timescale import gps_to_unix_s
 from companion.receiver.raw_receiver import RawReceiver
 from tests.gnss_helpers import RX_ECEF, T0, observe, serve_bytes_once, store
@@ -80,7 +81,7 @@ def test_node_fuses_the_receivers_raw_epochs_and_feeds_gps_input(tmp_path):
         return mavlink.MAVLink_gps_raw_int_message(t_us, 3, lat_e7, lon_e7, round(h * 1e3), 100, 100, 0, 0,
                                                    12)
 
-    node.raw_items(list(st.kepler))  # the receiver's decoded ephemerides
+    node.raw_items([*st.kepler, *st.glonass])  # the receiver's decoded ephemerides (GLONASS's too)
     for k in range(300):  # 6 s at 50 Hz; an epoch every 0.2 s
         t_us = boot0_us + 20_000 * k
         att = mavlink.MAVLink_attitude_quaternion_message(t_us // 1000, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -97,6 +98,11 @@ def test_node_fuses_the_receivers_raw_epochs_and_feeds_gps_input(tmp_path):
     nav = node.nav_counters()
     assert nav["gnss_fused"] >= c["raw_epochs"] - 2 and nav["gnss_resets"] == 0
     assert nav["gnss_fix_ignored"] >= 1
+    # every tracked satellite has its ephemeris, GLONASS's too: all are used
+    info = node.nav.engine.entries[-1].info
+    n_glonass = int(np.sum(observe(st, T0, RX_ECEF)[0].system == System.GLONASS))
+    assert n_glonass > 0 and info.n_used == info.n_sats
+    assert int(np.sum(info.key // 1000 == System.GLONASS)) == n_glonass
     feeds = [m for m in conn.sent if m.get_type() == "GPS_INPUT"]
     assert len(feeds) > 40
     last = feeds[-1]

@@ -54,7 +54,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
 from companion.estimator import DEFAULT_METHOD, EstimatorConfig, Navigator, check_method
-from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris
+from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEphemeris
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.timescale import gps_to_unix_s
 from companion.mavlink import codec
@@ -146,6 +146,7 @@ class AutopilotCompanion:
         self.status = AutopilotStatus(self.telemetry)  # status (mode, armed) and gnss for the ground tools
         self.nav: Navigator | TightNavigator | None = None
         self._ephemerides: dict[tuple[int, int], KeplerEphemeris] = {}  # (PRN, IODE) -> from the receiver
+        self._glonass: dict[tuple[int, float], GlonassEphemeris] = {}  # (slot, t_b) -> from the receiver
         self._klobuchar: Any = None
         self.counters: Counter[str] = Counter()
         self.received: Counter[str] = Counter()
@@ -323,9 +324,9 @@ class AutopilotCompanion:
 
     # -- the receiver's raw GNSS (--coupling tight) --------------------------------------------
     def _store(self) -> EphemerisStore | None:
-        if not self._ephemerides:
+        if not self._ephemerides and not self._glonass:
             return None
-        return EphemerisStore(list(self._ephemerides.values()), [], self._klobuchar)
+        return EphemerisStore(list(self._ephemerides.values()), list(self._glonass.values()), self._klobuchar)
 
     def raw_items(self, items: list[Any]) -> None:
         """The receiver's decoded items (``RawReceiver.drain()``), in arrival order: ephemerides go to
@@ -339,8 +340,11 @@ class AutopilotCompanion:
                 self.counters[f"raw_error_{type(exc).__name__}"] += 1
 
     def _raw_item(self, item: Any) -> None:
-        if isinstance(item, KeplerEphemeris):
-            self._ephemerides[(item.prn, item.iode)] = item
+        if isinstance(item, KeplerEphemeris | GlonassEphemeris):
+            if isinstance(item, KeplerEphemeris):
+                self._ephemerides[(item.prn, item.iode)] = item
+            else:
+                self._glonass[(item.prn, item.toe_gps_s)] = item
             self.counters["raw_ephemerides"] += 1
             if isinstance(self.nav, TightNavigator):
                 store = self._store()

@@ -9,7 +9,8 @@ attributes) in arrival order; opening a file, serial port or TCP stream is the c
   ``prValid``, variance ``(0.01 · 2^prStd)²`` m², pseudorange rate ``−λ · doMes`` (GLONASS λ from
   ``freqId − 7``), C/N0; elevation/azimuth from the latest ``NAV-SAT``.
 * ``RXM-SFRBX`` GPS L1 C/A -> :class:`KeplerEphemeris` and Klobuchar (:mod:`companion.gnss.lnav`);
-  Galileo/BeiDou/GLONASS frames are counted (``sfrbx_not_decoded_<system>``), not decoded.
+  GLONASS L1OF strings 1-4 -> :class:`GlonassEphemeris` (:mod:`companion.gnss.glonav`, the channel
+  from ``freqId``); Galileo/BeiDou frames are counted (``sfrbx_not_decoded_<system>``), not decoded.
 * ``NAV-PVT`` -> :class:`ReceiverPvt` (the receiver's own solution with its accuracies).
 """
 
@@ -23,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ
-from companion.gnss.ephemeris import KeplerEphemeris
+from companion.gnss.ephemeris import GlonassEphemeris, KeplerEphemeris
+from companion.gnss.glonav import GlonassDecoder
 from companion.gnss.lnav import LnavDecoder
 from companion.gnss.observations import GnssEpoch, make_epoch
 from companion.gnss.systems import SHORT_NAME, System
@@ -53,13 +55,14 @@ class ReceiverPvt:
     t_utc_gps_s: float = math.nan  # the UTC date/time fields as GPS time when valid
 
 
-UbxItem = GnssEpoch | ReceiverPvt | KeplerEphemeris
+UbxItem = GnssEpoch | ReceiverPvt | KeplerEphemeris | GlonassEphemeris
 
 
 @dataclass
 class UbxDecoder:
     counters: Counter[str] = field(default_factory=Counter)
     lnav: LnavDecoder = field(default_factory=LnavDecoder)
+    glonav: GlonassDecoder = field(default_factory=GlonassDecoder)
     week: int | None = None  # from the last RAWX
     t_gps_s: float | None = None  # the last RAWX's receiver time (resolves LNAV's 10-bit week)
     _sat: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)  # el, az (deg)
@@ -142,8 +145,10 @@ class UbxDecoder:
             azimuth_deg=az,
         )
 
-    def _sfrbx(self, m: Any) -> KeplerEphemeris | None:
+    def _sfrbx(self, m: Any) -> KeplerEphemeris | GlonassEphemeris | None:
         gnss = int(m.gnssId)
+        if gnss == System.GLONASS:
+            return self._glonass(m)
         if gnss != System.GPS:
             name = SHORT_NAME.get(System(gnss), str(gnss)) if gnss in KNOWN_SYSTEMS else str(gnss)
             self.counters[f"sfrbx_not_decoded_{name}"] += 1
@@ -155,6 +160,16 @@ class UbxDecoder:
             return None
         eph = self.lnav.add(int(m.svId), words, t_ref)
         for k, v in self.lnav.counters.items():
+            self.counters[k] = v
+        return eph
+
+    def _glonass(self, m: Any) -> GlonassEphemeris | None:
+        if self.t_gps_s is None:
+            self.counters["sfrbx_before_week"] += 1  # t_b is a time of day: the day comes from RAWX
+            return None
+        words = [int(getattr(m, f"dwrd_{i:02d}")) for i in range(1, int(m.numWords) + 1)]
+        eph = self.glonav.add(int(m.svId), int(m.freqId) - 7, words, self.t_gps_s)
+        for k, v in self.glonav.counters.items():
             self.counters[k] = v
         return eph
 

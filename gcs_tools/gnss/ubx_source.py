@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import UserError
-from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris, attach_broadcast
+from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEphemeris, attach_broadcast
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.ubx import ReceiverPvt, UbxDecoder
 from companion.receiver.ubx_stream import open_stream, ubx_items
@@ -20,12 +20,13 @@ __all__ = ["open_stream", "read_ubx_file", "ubx_items"]
 
 def read_ubx_file(path: Path) -> Any:
     """A UBX log as a ``GnssInput``: RAWX epochs with satellite states from the SFRBX ephemerides
-    decoded in the same log (GPS only: other systems' observations are counted as no_ephemeris)."""
+    decoded in the same log (GPS and GLONASS: other systems' observations are counted as no_ephemeris)."""
     from gcs_tools.gnss.sources import GnssInput
 
     dec = UbxDecoder()
     epochs: list[GnssEpoch] = []
     ephs: list[KeplerEphemeris] = []
+    glo: list[GlonassEphemeris] = []
     pvts: list[ReceiverPvt] = []
     with open_stream(str(path)) as f:
         for item in ubx_items(f, dec):
@@ -33,13 +34,15 @@ def read_ubx_file(path: Path) -> Any:
                 epochs.append(item)
             elif isinstance(item, KeplerEphemeris):
                 ephs.append(item)
+            elif isinstance(item, GlonassEphemeris):
+                glo.append(item)
             else:
                 pvts.append(item)
     if not epochs:
         raise UserError(f"{path}: no RXM-RAWX epochs (counters: {dict(dec.counters) or 'none'})")
-    if not ephs:
-        raise UserError(f"{path}: no GPS ephemeris (RXM-SFRBX subframes 1-3) to place the satellites")
-    store = EphemerisStore(ephs, [], dec.klobuchar)
+    if not ephs and not glo:
+        raise UserError(f"{path}: no GPS or GLONASS ephemeris (RXM-SFRBX) to place the satellites")
+    store = EphemerisStore(ephs, glo, dec.klobuchar)
     rejected: Counter[str] = Counter(dec.counters)
     out = []
     for e in epochs:
