@@ -40,6 +40,7 @@ def test_closed_loop_ardupilot_flies_on_the_tight_companion_reading_the_canyon_r
     assert "--coupling tight --ubx tcp:127.0.0.1:" in comp["command"] and comp["problems"] == []
     csum = json.loads((out / "companion" / "summary.json").read_text())
     assert csum["coupling"] == "tight" and csum["receiver"]["lnav_ephemerides"] > 0
+    assert csum["receiver"].get("glonass_ephemerides", 0) > 0  # GLONASS's too (strings 1-4)
     assert csum["node"]["raw_epochs"] > 0.5 * rx["epochs_released"]
     assert csum["node"]["feed_gps_input_sent"] > 5 * ap["phase_times_s"]["arm"] * 0.1
     # the record: receiver.ubx decodes to the epochs released and the fixes sent to GPS2, same GPS time
