@@ -33,6 +33,11 @@ def test_fit_known_answers():
         200_000, np.array([1, 2]), np.array([0.5, 0.5]), 0.0).inflation() == 1.0
     assert Fit().add(0, np.array([1, 2]), np.array([3.0, 1.0]), 0.0).inflation() == pytest.approx(5.0)
     assert Fit().inflation() == 1.0
+    # the same satellites in another order (the general path) == in the stored order (the fast path)
+    key, nu = np.array([3, 5, 8]), np.array([0.3, -1.0, 2.0])
+    a = Fit().add(0, key, nu, window_s).add(200_000, key, 2 * nu, window_s)
+    b = Fit().add(0, key, nu, window_s).add(200_000, key[::-1], 2 * nu[::-1], window_s)
+    assert a.inflation() == pytest.approx(b.inflation(), rel=1e-12) and list(b.key) == [3, 5, 8]
 
 
 def _run(bias_m: float | None, runs: int = 12, n: int = 100) -> dict[str, np.ndarray]:

@@ -111,6 +111,8 @@ class Fit(NamedTuple):
     def add(self, t_us: int, key: np.ndarray, nu: np.ndarray, window_s: float) -> Fit:
         """This epoch's used satellites added, the older sums decayed by exp(−Δt / window_s)."""
         a = math.exp(-(t_us - self.t_us) * 1e-6 / window_s) if window_s > 0.0 and len(self.key) else 0.0
+        if len(key) == len(self.key) and np.array_equal(key, self.key):  # the usual: the same satellites
+            return Fit(self.key, a * self.nu_sum + nu, (a * a) * self.w2_sum + 1.0, t_us)
         keys = np.union1d(self.key, key)
         nu_sum, w2_sum = np.zeros(len(keys)), np.zeros(len(keys))
         old = np.searchsorted(keys, self.key)
