@@ -109,6 +109,11 @@ def test_windowed_likelihood_is_minimal_at_the_consistent_trust():
     no_smooth = dataclasses.replace(cfg, lambda_smooth_1_m=0.0)
     direct = sum(loss_grad(0.7, t, no_smooth)[0] for t in window)
     assert window_nll(np.array([0.7]), tuple(window), cfg)[0] == pytest.approx(direct, rel=1e-12)
+    # with the bias-level term too (a receiver scale and a bias estimate per fix)
+    level = dataclasses.replace(no_smooth, lambda_bias_level=2.0)
+    window = [t._replace(bias_scale=1.5, bias_m2=(0.1 * k, 0.2, 0.3)) for k, t in enumerate(window)]
+    direct = sum(loss_grad(0.7, t, level)[0] for t in window)
+    assert window_nll(np.array([0.7]), tuple(window), level)[0] == pytest.approx(direct, rel=1e-12)
 
 
 def test_windowed_ml_lowers_trust_under_multipath(stream):

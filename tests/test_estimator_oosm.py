@@ -1,5 +1,7 @@
 """Out-of-sequence fusion (Algorithm 1) equals in-order processing; old fixes are rejected."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -22,13 +24,19 @@ def stream():
     return multipath_stream(np.random.default_rng(7), CFG, [(8.0, 0.0), (8.0, 1.2), (8.0, 0.0)])
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_random_delays_and_order_equal_in_order(stream, method):
+# every method at the defaults, and the rules whose loss has the bias-level term with it on
+LEVEL = dataclasses.replace(CFG, lambda_bias_level=1.0)
+CASES = [(m, CFG) for m in METHODS] + [(m, LEVEL) for m in ("first-order", "second-order", "windowed-ml")]
+
+
+@pytest.mark.parametrize(("method", "cfg"), CASES,
+                         ids=[m + ("+bias-level" if c is LEVEL else "") for m, c in CASES])
+def test_random_delays_and_order_equal_in_order(stream, method, cfg):
     rng = np.random.default_rng(11)
     delay_us = rng.uniform(0.0, 1.2e6, size=len(stream.fix_t_us)).astype(np.int64)
     delay_us[0] = 0  # the first fix starts the filter
-    late = _run(stream, method, np.minimum(stream.fix_t_us + delay_us, stream.t_us[-1]))
-    ref = _run(stream, method, stream.fix_t_us.copy())
+    late = _run(stream, method, np.minimum(stream.fix_t_us + delay_us, stream.t_us[-1]), cfg)
+    ref = _run(stream, method, stream.fix_t_us.copy(), cfg)
     c = late.counts
     assert c["gnss_out_of_order"] > 50 and c["gnss_refused"] > c["gnss_out_of_order"]
     assert c["gnss_rejected_too_old"] == 0 and ref.counts["gnss_out_of_order"] == 0

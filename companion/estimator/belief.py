@@ -49,6 +49,8 @@ class InnovationTerms(NamedTuple):
     r_nominal: Vec3  # nominal R (variances)
     pht_p: Vec3  # position rows of P⁻ Hᵀ: P⁻_pp + P⁻_pb (β-independent)
     bias_scale: float = 1.0  # the receiver's scale of the bias range: σ_b(β) × this (config.bias_scale)
+    # second moment of the GNSS-bias estimate at the fix, b̂⁻² + P⁻_bb per axis (m²): the bias-level term
+    bias_m2: Vec3 = (0.0, 0.0, 0.0)
 
     def hph(self, sigma_bias_m: float) -> Vec3:
         """diag(H P⁻ Hᵀ) for a bias std σ_b (before the receiver's scale)."""
@@ -94,8 +96,27 @@ def _terms(beta: float, t: InnovationTerms, cfg: EstimatorConfig
     return logdet, d_logdet, nis, d_nis, smooth, d_smooth
 
 
+def bias_level(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[float, float]:
+    """(ℓ_b(β), ∂ℓ_b/∂β): the bias-level term, λ_b Σ_axes [log σ + m_i / (2σ²)] with σ = σ_b(β) × the
+    receiver's scale and m_i = b̂⁻² + P⁻_bb the second moment of the bias estimate. It is the negative
+    log-likelihood of the bias the filter holds under the stationary range β allows (minimal at
+    σ² = mean m: the expectation-maximisation update of a prior variance). A one-step innovation
+    shows the bias's change over one fix interval, not its level; this term shows the level. Where
+    the bias is unobservable (no receiver velocity) its estimate stays near 0 with P⁻_bb near σ²:
+    the term then pushes nowhere. 0 when ``lambda_bias_level`` is 0."""
+    w = cfg.lambda_bias_level
+    if w == 0.0:
+        return 0.0, 0.0
+    f = t.bias_scale
+    sigma = cfg.sigma_bias_m(beta) * f
+    m = t.bias_m2[0] + t.bias_m2[1] + t.bias_m2[2]
+    inv2 = 1.0 / (sigma * sigma)
+    return (w * (3.0 * math.log(sigma) + 0.5 * m * inv2),
+            w * (3.0 - m * inv2) / sigma * (-cfg.sigma_bias_max_m * f))
+
+
 def loss_grad(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[float, float, float]:
-    """(ℓ(β), ∂ℓ/∂β, NIS) for the consistency loss selected by ``cfg.loss``."""
+    """(ℓ(β), ∂ℓ/∂β, NIS) for the consistency loss selected by ``cfg.loss``, plus the bias-level term."""
     logdet, d_logdet, nis, d_nis, smooth, d_smooth = _terms(beta, t, cfg)
     if cfg.loss == "gaussian":
         fit, d_fit = 0.5 * nis, 0.5 * d_nis
@@ -103,7 +124,8 @@ def loss_grad(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[fl
         nu, m = cfg.student_dof, 3.0
         fit = 0.5 * (nu + m) * math.log1p(nis / nu)
         d_fit = 0.5 * (nu + m) * d_nis / (nu + nis)
-    return 0.5 * logdet + fit + smooth, 0.5 * d_logdet + d_fit + d_smooth, nis
+    level, d_level = bias_level(beta, t, cfg)
+    return 0.5 * logdet + fit + smooth + level, 0.5 * d_logdet + d_fit + d_smooth + d_level, nis
 
 
 def paper_loss_grad(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[float, float, float]:

@@ -98,6 +98,11 @@ class EstimatorConfig:
     loss: Literal["student-t", "gaussian"] = "student-t"  # innovation NLL form (companion.estimator.belief)
     student_dof: float = 7.815  # ν of the Student-t loss = χ²₀.₉₅(3 dof), the paper's threshold
     lambda_smooth_1_m: float = 0.1  # weight λ of the smoothness term ‖Δp‖ (1/m)
+    # (ours) weight λ_b of the bias-level term (belief.bias_level; dimensionless): the likelihood of the
+    # filter's GNSS-bias estimate under the range σ_b(β) allows. 0 = the paper's loss. With a receiver
+    # velocity the bias is observable and a one-step innovation shows only its change, not its level
+    # (docs/results/ablation/findings.md); the ablation's rows choose it on the tuning set.
+    lambda_bias_level: float = 0.0
     chi2_095: float = 7.815  # paper-literal loss: χ²₀.₉₅ for 3 dof
 
     # --- innovation gate, glitch recovery, validity (what PX4 EKF2 / ArduPilot EKF3 do; docs/estimator.md)
@@ -270,7 +275,8 @@ class EstimatorConfig:
             raise ValueError("adaptive_window_fixes: must be >= 2")
         if not (0.0 < self.vb_forgetting <= 1.0 and self.vb_iterations >= 1 and self.vb_prior_dof > 0.0):
             raise ValueError("vb_forgetting, vb_iterations, vb_prior_dof: need 0 < ρ ≤ 1, ≥ 1, > 0")
-        for name in ("future_tolerance_s", "lambda_smooth_1_m", "sigma_bias_max_per_gnss_std",
+        for name in ("future_tolerance_s", "lambda_smooth_1_m", "lambda_bias_level",
+                     "sigma_bias_max_per_gnss_std",
                      "eta_first_order", "sigma_acc_bias0_m_s2", "sigma_acc_bias_rw_m_s2_sqrt_s",
                      "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):

@@ -338,8 +338,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         else:
             fused_pos = False
             if off is not None:  # the step still holds (the fix passes relative to the offset)?
-                rel = self._relative(prev.state, y, off, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
-                                     floor_v, k_max, terms.bias_scale)
+                rel = self._relative(prev.state, terms, off, hph, floor_h, floor_v, k_max)
                 if rel is not None and t_us - t_off >= self._offset_max_us:
                     # it lasted: the GNSS's new track (EKF2/EKF3 reset into it): the position moves onto
                     # this fix, which is fused with that zero innovation
@@ -352,8 +351,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                     fused_pos, (y_fused, R_fused, terms_fused) = True, rel  # receiver velocity, a fade drags)
             if not fused_pos and not held and acc is not None and t_us - t_acc <= self._return_us:
                 back = (-acc[0], -acc[1], -acc[2])  # the fix is back on the track kept before the step?
-                rel = self._relative(prev.state, y, back, s0, q_bias_unit, r_nom, terms.pht_p, hph, floor_h,
-                                     floor_v, k_max, terms.bias_scale)
+                rel = self._relative(prev.state, terms, back, hph, floor_h, floor_v, k_max)
                 if rel is not None:
                     fused_pos, (y_fused, R_fused, terms_fused) = True, rel
                     shift, acc, t_acc, n_ret, glitch, off, t_off = back, None, 0, n_ret + 1, False, None, 0
@@ -465,7 +463,9 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             r_nom = (h, h, v)
         floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
         floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
-        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p, prev.bias_scale)
+        bias_m2 = (x_prior[6] * x_prior[6] + P_prior[6, 6], x_prior[7] * x_prior[7] + P_prior[7, 7],
+                   x_prior[8] * x_prior[8] + P_prior[8, 8])
+        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p, prev.bias_scale, bias_m2)
         # a receiver stating neither its accuracy nor a velocity: innovations beyond its own noise may be
         # the IMU's fault (a wrong attitude), so an R-learner may not learn much more than that noise
         k_max = self._r_max_blind if (r_given[0] == math.inf and zv is None) else self._r_max
@@ -495,14 +495,14 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                 return False
         return True
 
-    def _relative(self, state: Any, y: Vec3, off: Vec3, s0: Vec3, q_bias_unit: float, r_nom: Vec3,
-                  pht_p: Vec3, hph: _Hph, floor_h: float, floor_v: float, k_max: float,
-                  bias_scale: float) -> tuple[Vec3, Vec3, InnovationTerms] | None:
+    def _relative(self, state: Any, terms: InnovationTerms, off: Vec3, hph: _Hph, floor_h: float,
+                  floor_v: float, k_max: float) -> tuple[Vec3, Vec3, InnovationTerms] | None:
         """(innovation, R, terms) of the fix relative to the offset ``off`` (y − off) if that passes
         the gate, else None."""
+        y = terms.y
         y_off = (y[0] - off[0], y[1] - off[1], y[2] - off[2])
-        terms_off = InnovationTerms(y_off, s0, q_bias_unit, r_nom, pht_p, bias_scale)
-        R_off = self._r_of(state, terms_off, r_nom, k_max)
+        terms_off = terms._replace(y=y_off)
+        R_off = self._r_of(state, terms_off, terms.r_nominal, k_max)
         if self._gate(y_off, hph, R_off, floor_h, floor_v)[1]:
             return y_off, R_off, terms_off
         return None

@@ -5,9 +5,10 @@ asks, at every fix, which β would have explained the last N innovations best: w
 fix's own β-independent terms (``InnovationTerms``: S(β) = S₀ + q_b σ_b(β)² + r(β) R_nom), it
 evaluates the innovation negative log-likelihood of ``EstimatorConfig.loss`` (Gaussian or
 Student-t, ν = ``student_dof``; the consistency part of the belief loss, without the smoothness
-term) summed over the window on a grid of β, takes the minimiser β*, and moves
-β ← β + gain · (β* − β). A window is a likelihood, not a gradient: no step size to tune against
-the loss's scale, no oscillation from a curvature estimate, and it cannot run away on one outlier.
+term; with the bias-level term when ``lambda_bias_level`` > 0) summed over the window on a grid
+of β, takes the minimiser β*, and moves β ← β + gain · (β* − β). A window is a likelihood, not a
+gradient: no step size to tune against the loss's scale, no oscillation from a curvature
+estimate, and it cannot run away on one outlier.
 
 State: (β, the last N fixes' terms) — an immutable tuple, as the out-of-sequence buffer needs.
 Hyper-parameters: ``PluginConfig.window_*`` (mission section ``belief_plugins:``, in its ``MethodContext``).
@@ -47,7 +48,13 @@ def window_nll(betas: np.ndarray, window: tuple[InnovationTerms, ...], cfg: Esti
     else:
         nu = cfg.student_dof
         fit = 0.5 * (nu + 3.0) * np.log1p(nis / nu)
-    return np.asarray((0.5 * logdet + fit).sum(axis=1))
+    total = (0.5 * logdet + fit).sum(axis=1)
+    if cfg.lambda_bias_level > 0.0:  # the bias-level term (belief.bias_level), summed over the window
+        sigma = sb[:, None] * np.array([t.bias_scale for t in window])[None, :]  # (G, N)
+        m = np.array([sum(t.bias_m2) for t in window])  # (N,)
+        level = 3.0 * np.log(sigma) + 0.5 * m[None, :] / sigma**2
+        total = total + cfg.lambda_bias_level * level.sum(axis=1)
+    return np.asarray(total)
 
 
 @register("windowed-ml")

@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import time
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from companion.domain.statistics import describe
 from companion.errors import UserError
+from companion.estimator.navigator import Navigator
 from companion.mission import Mission, load_mission, with_scenario
 from companion.planning import Route, plan_route
 from companion.wiring import navigator_for
@@ -68,13 +70,18 @@ def planned_route(mission: Mission, profile_index: int, t_start_s: float) -> Rou
 
 
 def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
-        max_duration_s: float | None = None, config: FlyConfig | None = None) -> FlightResult:
-    """Fly one profile of ``mission`` with estimator ``method``; deterministic given ``seed``."""
+        max_duration_s: float | None = None, config: FlyConfig | None = None,
+        on_navigator: Callable[[Navigator], None] | None = None) -> FlightResult:
+    """Fly one profile of ``mission`` with estimator ``method``; deterministic given ``seed``.
+    ``on_navigator``: called with the flight's navigator before the first sample (a diagnostic may
+    observe its engine, e.g. ``gcs_tools.evaluate.trust_probe``)."""
     cfg = config or FlyConfig()
     m = load_mission(mission) if isinstance(mission, str) else mission
     if seed < 0:
         raise UserError(f"--seed must be >= 0, got {seed}")
     nav = navigator_for(m, method)  # checks the method first
+    if on_navigator is not None:
+        on_navigator(nav)
     route = planned_route(m, profile_index, cfg.start_delay_s)
     sim = SimVehicle(m, profile_index, seed)
     end_s = cfg.start_delay_s + route.duration_s + max(cfg.timeout_margin_s, 0.5 * route.duration_s)
