@@ -292,3 +292,23 @@ def test_effects_and_severity_bad_arguments_are_one_line_errors(tmp_path, extra,
         assert ablation.main([command, "--rows", str(rows), "--out", str(out), *extra]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1 and not out.exists()  # nothing flown or written
+
+
+def test_pair_compares_rows_of_two_campaigns_by_flight(tmp_path, capsys):
+    """``ablation pair``: rows of one campaign against a reference row of another, matched by
+    (profile, seed); a known difference comes back exactly (every pair differs by the same 0.1 m)."""
+    def write(d, rows):
+        d.mkdir()
+        per_flight = {row: {f"{p}/{s}": {"est_h_median_m": v + 0.01 * p + 0.001 * s}
+                            for p in (0, 1) for s in (0, 1, 2)} for row, v in rows.items()}
+        (d / "results.json").write_text(json.dumps({"flights": {"per_flight": per_flight}}), encoding="utf-8")
+
+    write(tmp_path / "new", {"second-order": 0.6})
+    write(tmp_path / "base", {"fixed-beta-0.5": 0.7, "naive": 0.5})
+    table = ablation.pair(tmp_path / "new", tmp_path / "base", ["fixed-beta-0.5", "naive"])
+    assert table["rows"]["second-order"]["fixed-beta-0.5"] == pytest.approx([-0.1, -0.1, -0.1])
+    assert table["rows"]["second-order"]["naive"] == pytest.approx([0.1, 0.1, 0.1])
+    assert json.loads((tmp_path / "new" / "paired.json").read_text())["rows"] == table["rows"]
+    assert "second-order: − fixed-beta-0.5 -0.100" in capsys.readouterr().out
+    assert ablation.main(["pair", str(tmp_path / "new"), str(tmp_path / "base"), "--reference", "nope"]) == 2
+    assert "ablation: error: --reference: nope not in" in capsys.readouterr().err

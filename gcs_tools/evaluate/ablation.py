@@ -17,6 +17,9 @@ Score of a point: the mean over its flights of the per-flight median horizontal 
 campaign's headline statistic). Every point is appended to ``tuning-<scenario>.jsonl``; the rows
 go to ``rows-<scenario>.yaml`` (``beliefnav evaluate --rows``).
 
+``pair`` compares the rows of one campaign with reference rows of another, paired by flight
+(``paired.json``): a campaign that re-flies only re-tuned rows against the rows that did not change.
+
 ``effects`` flies the given rows on ``mismatch`` with each unmodelled GNSS effect switched off in
 turn (``EFFECTS``): what each effect costs each row, paired by flight (``effects.json``).
 
@@ -341,6 +344,36 @@ def effects(rows: Sequence[Row], profiles: Sequence[int], seeds: Sequence[int], 
     return table
 
 
+def _per_flight(campaign_dir: Path) -> dict[str, dict[tuple[int, int], dict[str, float]]]:
+    """row → (profile, seed) → that flight's statistics, from a campaign's results.json."""
+    path = campaign_dir / "results.json"
+    if not path.exists():
+        raise UserError(f"{path}: no campaign results there")
+    per_flight = json.loads(path.read_text(encoding="utf-8"))["flights"]["per_flight"]
+    return {row: {(int(k.split("/")[0]), int(k.split("/")[1])): v for k, v in table.items()}
+            for row, table in per_flight.items()}
+
+
+def pair(new: Path, base: Path, references: Sequence[str]) -> dict[str, Any]:
+    """Every row of campaign ``new`` against each ``references`` row of campaign ``base``, paired by
+    (profile, seed): mean(row − reference) of the per-flight score with its 95 % stratified bootstrap
+    interval (``table_gap``). Valid when the two campaigns fly bit-identical flights for rows whose
+    settings did not change (same code, common random numbers): re-flying only the re-tuned rows
+    then compares them with the rest. Written to ``new/paired.json``."""
+    a, b = _per_flight(new), _per_flight(base)
+    missing = sorted(set(references) - set(b))
+    if missing:
+        raise UserError(f"--reference: {', '.join(missing)} not in {base} (rows: {', '.join(b)})")
+    rng = np.random.default_rng(flights.BOOTSTRAP_SEED)
+    table = {"score": SCORE, "new": str(new), "base": str(base),
+             "rows": {row: {ref: list(table_gap(a[row], b[ref], rng)) for ref in references} for row in a}}
+    (new / "paired.json").write_text(json.dumps(table, indent=2) + "\n", encoding="utf-8")
+    for row, gaps in table["rows"].items():
+        cells = (f"− {ref} {d:+.3f} [{lo:+.3f}, {hi:+.3f}]" for ref, (d, lo, hi) in gaps.items())
+        print(f"{row}: " + ", ".join(cells))
+    return table
+
+
 def figure(table: dict[str, Any], path: Path) -> None:
     import matplotlib
 
@@ -513,12 +546,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     h.add_argument("--profiles", default=None, help=f"profiles of {tuning.TUNING_MISSION} (default: all)")
     h.add_argument("--workers", type=int, default=2)
     h.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
+    q = sub.add_parser("pair", help="rows of a campaign against rows of another, paired by flight")
+    q.add_argument("new", type=Path, help="campaign directory whose rows are compared (e.g. re-tuned rows)")
+    q.add_argument("base", type=Path, help="campaign directory holding the reference rows")
+    q.add_argument("--reference", required=True, metavar="ROW[,ROW...]")
     r = sub.add_parser("report", help="write OUT/report.md from the steps' outputs")
     r.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     args = p.parse_args(argv)
     try:
         if args.command == "report":
             report(args.out)
+        elif args.command == "pair":
+            pair(args.new, args.base, [v for v in args.reference.split(",") if v])
         elif args.command == "shared":
             key, _, raw = args.vary.partition("=")
             values = [tuning.parse_override(f"{key}={v}")[1] for v in raw.split(",") if v]
