@@ -1,7 +1,7 @@
 """What an innovation-driven trust rule sees, with and without the receiver's Doppler velocity.
 
     python -m gcs_tools.evaluate.trust_probe --rows docs/results/ablation/rows-mismatch.yaml \\
-        --row second-order --profiles 0-3 --seeds 1000
+        --row second-order --profiles 0-2 --seeds 1000 [--set estimator.lambda_bias_level=0]
 
 Each (profile, seed) of the tuning mission is flown on ``mismatch`` with the row's settings twice:
 with the receiver's velocity fused and without it (``gnss.velocity`` false; the positions are the
@@ -127,6 +127,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--profiles", default=None,
                     help="a count N (0..N-1) or e.g. 0-3, 0,2 (default: every profile of --mission)")
     ap.add_argument("--seeds", default="1000")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                    help="on top of the row's settings (e.g. estimator.lambda_bias_level=0); repeatable")
     args = ap.parse_args(argv)
     try:
         rows = {r.label: r for r in rows_mod.load_rows(Path(args.rows))}
@@ -134,7 +136,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise UserError(f"--row {args.row!r}: not in {args.rows} (rows: {', '.join(rows)})")
         available = len(campaign.mission(args.mission).profiles)
         profiles = choices.profiles(args.profiles or str(available), available)
-        out = probe(rows[args.row], profiles, choices.seeds(args.seeds), args.mission)
+        row = rows[args.row]
+        extra = tuple(tuning.parse_override(v) for v in args.set)
+        row = rows_mod.Row(row.label, row.method, row.overrides + extra)
+        out = probe(row, profiles, choices.seeds(args.seeds), args.mission)
     except UserError as exc:
         print(f"trust_probe: error: {exc}", file=sys.stderr)
         return 2
