@@ -310,5 +310,8 @@ def test_pair_compares_rows_of_two_campaigns_by_flight(tmp_path, capsys):
     assert table["rows"]["second-order"]["naive"] == pytest.approx([0.1, 0.1, 0.1])
     assert json.loads((tmp_path / "new" / "paired.json").read_text())["rows"] == table["rows"]
     assert "second-order: − fixed-beta-0.5 -0.100" in capsys.readouterr().out
+    # the report's table of it (every interval excludes 0 here: starred)
+    lines = ablation._paired_section(tmp_path / "new")
+    assert "| `second-order` | -0.100 [-0.100, -0.100] * | +0.100 [+0.100, +0.100] * |" in lines
     assert ablation.main(["pair", str(tmp_path / "new"), str(tmp_path / "base"), "--reference", "nope"]) == 2
     assert "ablation: error: --reference: nope not in" in capsys.readouterr().err

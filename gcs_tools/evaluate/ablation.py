@@ -98,8 +98,10 @@ EFFECTS: tuple[tuple[str, str, tuple[tuple[str, Any], ...]], ...] = (
     ("fixed geometry", "the white noise does not grow with the satellites lost",
      (("gnss.satellite_noise", False),)),
 )
-# campaign directories the report picks up: the two scenarios, and mismatch with the step offset limited
-CAMPAIGNS = ("realistic", "mismatch", "mismatch-offset-limited")
+# campaign directories the report picks up: the two scenarios, mismatch with the step offset limited, and
+# mismatch with the receiver's velocity (every row at its earlier settings; the rows re-tuned for it)
+CAMPAIGNS = ("realistic", "mismatch", "mismatch-offset-limited", "mismatch-velocity",
+             "mismatch-velocity-retuned")
 
 
 def severity_overrides(s: float) -> tuple[tuple[str, Any], ...]:
@@ -365,10 +367,10 @@ def pair(new: Path, base: Path, references: Sequence[str]) -> dict[str, Any]:
     if missing:
         raise UserError(f"--reference: {', '.join(missing)} not in {base} (rows: {', '.join(b)})")
     rng = np.random.default_rng(flights.BOOTSTRAP_SEED)
-    table = {"score": SCORE, "new": str(new), "base": str(base),
-             "rows": {row: {ref: list(table_gap(a[row], b[ref], rng)) for ref in references} for row in a}}
+    rows = {row: {ref: list(table_gap(a[row], b[ref], rng)) for ref in references} for row in a}
+    table = {"score": SCORE, "new": str(new), "base": str(base), "rows": rows}
     (new / "paired.json").write_text(json.dumps(table, indent=2) + "\n", encoding="utf-8")
-    for row, gaps in table["rows"].items():
+    for row, gaps in rows.items():
         cells = (f"− {ref} {d:+.3f} [{lo:+.3f}, {hi:+.3f}]" for ref, (d, lo, hi) in gaps.items())
         print(f"{row}: " + ", ".join(cells))
     return table
@@ -427,6 +429,7 @@ def report(out: Path) -> str:
                   + _every_row(c.get("overrides")) + ".", "",
                   flights.markdown(res["flights"]),
                   *_more_tables(res["flights"]),
+                  *_paired_section(out / campaign_dir),
                   "Rows (hyper-parameters chosen on the tuning set, "
                   f"[rows-{scenario}.yaml](rows-{scenario}.yaml), sweep records "
                   f"[tuning-{scenario}.jsonl](tuning-{scenario}.jsonl)):", ""]
@@ -486,6 +489,23 @@ def _effects_section(eff: dict[str, Any]) -> list[str]:
             gap = f" ({d:+.3f} [{lo:+.3f}, {hi:+.3f}])" if e["overrides"] else ""
             cells.append(f"{v['mean_m']:.3f}{gap}")
         lines.append(f"| {name}: {e['what']} | " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
+def _paired_section(campaign_dir: Path) -> list[str]:
+    """The ``pair`` table of a campaign (``paired.json``, if any): its rows against another campaign's."""
+    path = campaign_dir / "paired.json"
+    if not path.exists():
+        return []
+    t = json.loads(path.read_text(encoding="utf-8"))
+    refs = list(next(iter(t["rows"].values())))
+    lines = [f"Paired against rows of `{Path(t['base']).name}` (row − reference, mean per-flight median "
+             "horizontal error [m], 95 % interval; `ablation pair`):", "",
+             "| row | " + " | ".join(f"− `{r}`" for r in refs) + " |", "|---|" + "---|" * len(refs)]
+    for row, gaps in t["rows"].items():
+        lines.append(f"| `{row}` | " + " | ".join(
+            f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]{' *' if lo > 0 or hi < 0 else ''}"
+            for d, lo, hi in (gaps[r] for r in refs)) + " |")
     return lines + [""]
 
 
