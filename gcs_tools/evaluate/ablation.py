@@ -499,8 +499,8 @@ def _paired_section(campaign_dir: Path) -> list[str]:
         return []
     t = json.loads(path.read_text(encoding="utf-8"))
     refs = list(next(iter(t["rows"].values())))
-    lines = [f"Paired against rows of `{Path(t['base']).name}` (row − reference, mean per-flight median "
-             "horizontal error [m], 95 % interval; `ablation pair`):", "",
+    lines = [f"Paired against rows of `{Path(t['base']).name}`, at the settings that campaign flew (row − "
+             "reference, mean per-flight median horizontal error [m], 95 % interval; `ablation pair`):", "",
              "| row | " + " | ".join(f"− `{r}`" for r in refs) + " |", "|---|" + "---|" * len(refs)]
     for row, gaps in t["rows"].items():
         lines.append(f"| `{row}` | " + " | ".join(
