@@ -53,12 +53,13 @@ SIGMA_ACC = "estimator.sigma_acc_m_s2"
 SIGMA_ACC_VALUES = (0.1, 0.2, 0.4)
 GATE_OFF = ("estimator.gnss_gate_sigma", 1.0e3)  # a 1000σ gate: no fix is ever rejected
 _HMM = "belief_plugins.hmm_"
-BIAS_LEVEL, BIAS_LEVELS = "estimator.lambda_bias_level", (0.0, 1.0, 3.0)  # the belief loss's bias-level term
+BIAS_LEVEL, BIAS_LEVELS = "estimator.lambda_bias_level", (0.0, 1.0, 3.0, 10.0)  # the loss's bias-level term
 # Each method's own hyper-parameters: (row label, method, axes), where axes is either
-# {override key: values} (their cartesian product) or an explicit tuple of points. 2-8 points each.
+# {override key: values} (their cartesian product) or an explicit tuple of points. 2-9 points each.
 SWEEPS: tuple[tuple[str, str, Any], ...] = (
     ("naive", "naive", {"estimator.beta_fixed": (0.5, 1.0)}),
-    ("fixed-beta-best", "fixed-beta", {"estimator.beta_fixed": (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.9)}),
+    ("fixed-beta-best", "fixed-beta",
+     {"estimator.beta_fixed": (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.9)}),
     ("map-beta", "map-beta", {"belief_plugins.map_beta_open": (0.9, 1.0),
                               "belief_plugins.map_beta_canyon": (0.2, 0.35, 0.5)}),
     # the trust rules: the step size and the weight of the bias-level term (0: the paper's loss; with a
@@ -71,7 +72,7 @@ SWEEPS: tuple[tuple[str, str, Any], ...] = (
     ("adaptive", "adaptive", {"estimator.beta_fixed": (0.5, 1.0),
                               "estimator.adaptive_window_fixes": (20, 60)}),
     ("vbakf", "vbakf", {"estimator.beta_fixed": (0.5, 1.0), "estimator.vb_forgetting": (0.95, 0.98)}),
-    ("windowed-ml", "windowed-ml", {"belief_plugins.window_fixes": (20, 60), BIAS_LEVEL: (0.0, 1.0)}),
+    ("windowed-ml", "windowed-ml", {"belief_plugins.window_fixes": (20, 60), BIAS_LEVEL: BIAS_LEVELS}),
     # hmm-trust: the (clean, degraded) trust pair, the outlier level's R factor and the dwell time
     ("hmm-trust", "hmm-trust", tuple(
         ((_HMM + "beta_clean", c), (_HMM + "beta_degraded", d), (_HMM + "outlier_r_factor", o),
