@@ -198,6 +198,7 @@ def test_campaign_rows_of_px4_loops(tmp_path):
      "--feeds: expected distinct values of none, none-posonly, odometry"),
     (["evaluate", "--vehicle", "px4", "--speedup", "3"], "--speedup applies to --vehicle ardupilot only"),
     (["evaluate", "--feeds", "none"], "apply to --vehicle ardupilot or px4"),
+    (["evaluate", "--resume"], "apply to --vehicle ardupilot or px4"),
 ])
 def test_px4_option_errors_are_one_line(tmp_path: Path, capsys, argv, message):
     from gcs_tools.cli import main

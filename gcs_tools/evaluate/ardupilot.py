@@ -33,6 +33,6 @@ LOOPS = CAMPAIGN.loop_names
 
 def evaluate(mission: str, profiles: Sequence[int], methods: Sequence[str], seeds: Sequence[int],
              workers: int, out: Path, config: ArduPilotConfig | None = None,
-             feeds: Sequence[str] = LOOPS) -> dict[str, Any]:
+             feeds: Sequence[str] = LOOPS, resume: bool = False) -> dict[str, Any]:
     return evaluate_campaign(CAMPAIGN, mission, profiles, methods, seeds, workers, out,
-                             config or ArduPilotConfig(), feeds)
+                             config or ArduPilotConfig(), feeds, resume)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import time
 from collections.abc import Callable, Sequence
@@ -45,6 +46,7 @@ from simvehicle.harness.foreign.analysis import LIVE_ROW, SPP_ROW, TIGHT_PREFIX
 BOOTSTRAP_SEED = 20240917
 CLOSED_LOOP_METHOD = DEFAULT_METHOD  # the closed loop's companion (the raw receiver: the tight weighting)
 RAW_ROWS = (SPP_ROW, *(f"{TIGHT_PREFIX}{w}" for w in WEIGHTINGS))  # the canyon receiver's fixes, tight rows
+SERIES_FILE = "errors_horizontal.csv"  # per flight: what its Result needs, at full precision (--resume)
 _interrupted = False  # a worker that got Ctrl-C flies nothing more
 
 
@@ -83,6 +85,9 @@ class VehicleCampaign:
     figure_title: str
     config_class: Callable[..., Any]  # the backend's flight configuration (ArduPilotConfig, Px4FlightConfig)
     speed_field: str  # its speed-up field (speedup, speed_factor)
+    # --resume of a flight recorded without the series file: its recording scored again (a
+    # FlightResult), or None (flown again)
+    rescore: Callable[[Job], Any] | None = None
 
     def config(self, speed: float | None = None) -> Any:
         """The flight configuration, at this speed-up (None: its default)."""
@@ -135,6 +140,7 @@ class Result:
     error: str = ""  # a flight that could not be flown (its rows are absent, the reason kept)
     valid: bool = True  # False: our commands reached the autopilot late, left out of the statistics
     command_delay_p95_ms: float = float("nan")
+    read_back: bool = False  # --resume: read from its directory, not flown in this run
 
     @property
     def flown_on(self) -> np.ndarray:
@@ -143,14 +149,20 @@ class Result:
         return self.errors_h_m.get(loop.ekf_row or self.job.campaign.autopilot_row, np.zeros(0))
 
 
-def run_job(job: Job) -> Result:
+def run_job(job: Job, resume: bool = False) -> Result:
+    """Fly one job (``resume``: read its flight back if its directory holds a complete one; an
+    incomplete directory is cleared and flown again)."""
     from companion.errors import UserError
-    from gcs_tools.fly.output import write_outputs
+    from gcs_tools.fly.output import strict_json, write_outputs
     from simvehicle.harness.backend import FlightRequest, backend
-    from simvehicle.harness.foreign.scoring import HORIZONTAL_ERROR_PREFIX
 
     if _interrupted:
         return Result(job, {}, np.zeros(0), False, 0, "interrupted", 0.0, 0.0, "interrupted")
+    if resume:
+        done = read_back(job)
+        if done is not None:
+            return done
+        shutil.rmtree(job.out_dir, ignore_errors=True)
     spec, loop = job.campaign, job.campaign.loop(job.loop)
     cfg = replace(job.config, gnss_velocity=loop.gnss_velocity)
     vehicle = backend(spec.vehicle, config=cfg, methods=job.methods, feed=loop.feed)
@@ -159,19 +171,96 @@ def run_job(job: Job) -> Result:
                                       scenario=job.scenario))
     except UserError as exc:
         return Result(job, {}, np.zeros(0), False, 0, "error", 0.0, 0.0, str(exc))
-    s, series = r.summary, r.series
-    if series:
+    job.out_dir.mkdir(parents=True, exist_ok=True)
+    if r.series:
         from companion.mission import load_mission
 
         write_outputs(r, load_mission(job.mission).world, job.out_dir)
+    else:  # no route phase (e.g. a set-up time-out): the summary says how it ended
+        (job.out_dir / "summary.json").write_text(json.dumps(strict_json(r.summary), indent=2) + "\n")
+    write_series(job.out_dir / SERIES_FILE, r.series)  # last: its presence marks a complete flight
+    return flight_result(job, r.summary, r.series)
+
+
+def flight_result(job: Job, summary: dict[str, Any], series: dict[str, Any]) -> Result:
+    """The campaign's view of one flight: its summary (as flown, or read back from summary.json)
+    and its series (every row's horizontal error and the tracking error)."""
+    from simvehicle.harness.foreign.scoring import HORIZONTAL_ERROR_PREFIX
+
+    spec, loop = job.campaign, job.campaign.loop(job.loop)
     errs = {k[len(HORIZONTAL_ERROR_PREFIX):]: np.asarray(v) for k, v in series.items()
             if k.startswith(HORIZONTAL_ERROR_PREFIX)}
     if loop.ekf_row:  # the companion rows are those of the loop with velocity
         errs = {loop.ekf_row: errs[spec.autopilot_row]} if spec.autopilot_row in errs else {}
-    run = s[spec.vehicle]
-    return Result(job, errs, np.asarray(series.get("track_error_m", np.zeros(0))), bool(s["reached_goal"]),
-                  int(s["collisions"]), str(run["ended_by"]), float(run["sim_s"]), float(run["wall_s"]),
-                  valid=bool(s["valid"]), command_delay_p95_ms=float(run["command_delay_ms"]["p95"]))
+    run = summary[spec.vehicle]
+    p95 = run["command_delay_ms"]["p95"]
+    return Result(job, errs, np.asarray(series.get("track_error_m", np.zeros(0))),
+                  bool(summary["reached_goal"]), int(summary["collisions"]), str(run["ended_by"]),
+                  float(run["sim_s"]), float(run["wall_s"]), valid=bool(summary["valid"]),
+                  command_delay_p95_ms=float("nan") if p95 is None else float(p95))
+
+
+def write_series(path: Path, series: dict[str, Any]) -> None:
+    """The series a Result needs (``track_error_m`` and every ``est_error_h_m:ROW``) as CSV at full
+    precision (``%.17g``: read back bit for bit), written to a temporary file and renamed."""
+    from simvehicle.harness.foreign.scoring import HORIZONTAL_ERROR_PREFIX
+
+    keys = ["track_error_m", *(k for k in series if k.startswith(HORIZONTAL_ERROR_PREFIX))]
+    n = len(series.get("track_error_m", ()))
+    data = np.column_stack([np.asarray(series[k], dtype=float).reshape(n) for k in keys]) if n else \
+        np.zeros((0, len(keys)))
+    tmp = path.with_name(path.name + ".part")
+    np.savetxt(tmp, data, delimiter=",", header=",".join(keys), comments="", fmt="%.17g")
+    os.replace(tmp, path)
+
+
+def read_series(path: Path) -> dict[str, np.ndarray]:
+    """``write_series``'s file back (OSError/ValueError if it is missing or damaged)."""
+    lines = path.read_text().splitlines()
+    if not lines or lines[0].split(",")[0] != "track_error_m":
+        raise ValueError(f"{path}: not a series file")
+    keys = lines[0].split(",")
+    data = np.loadtxt(lines[1:], delimiter=",", ndmin=2) if len(lines) > 1 else np.zeros((0, len(keys)))
+    if data.shape[1] != len(keys):
+        raise ValueError(f"{path}: {data.shape[1]} columns for {len(keys)} names")
+    return {k: data[:, i].copy() for i, k in enumerate(keys)}
+
+
+def read_back(job: Job) -> Result | None:
+    """The job's flight from its directory, if complete: ``summary.json`` and the series file (or,
+    for a flight recorded before campaigns kept that file, its recording scored again by the
+    vehicle's ``rescore`` when that reproduces the summary's per-row statistics exactly). None:
+    incomplete, to be flown again. A directory flown for another flight is a UserError."""
+    from companion.errors import UserError
+
+    d, spec = job.out_dir, job.campaign
+    try:
+        summary = json.loads((d / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+    want = {"mission": job.mission, "profile": job.profile, "seed": job.seed, "feed": job.feed}
+    got = {k: summary.get(k) for k in want}
+    if got != want or not set(job.methods) <= set(summary.get("methods", {})):
+        rows = sorted(summary.get("methods", {}))
+        raise UserError(f"--resume: {d} holds another flight ({got}, rows {rows}); resume with the options "
+                        "it was flown with, or use another --out")
+    try:
+        series = read_series(d / SERIES_FILE)
+    except (OSError, ValueError):
+        rescored = spec.rescore(job) if spec.rescore is not None and (d / "run.tlog").is_file() else None
+        if rescored is None or not same_scores(summary, rescored.summary):
+            return None
+        series = rescored.series
+        write_series(d / SERIES_FILE, series)
+    return replace(flight_result(job, summary, series), read_back=True)
+
+
+def same_scores(recorded: dict[str, Any], rescored: dict[str, Any]) -> bool:
+    """Two summaries of a flight agree on every row's statistics, collisions, goal and tracking (as
+    stored: strict JSON numbers)."""
+    keys = ("methods", "collisions", "reached_goal", "tracking_error_m")
+    return all(plain_json(recorded.get(k), nan_to_none=True) == plain_json(rescored.get(k), nan_to_none=True)
+               for k in keys)
 
 
 def _worker_init() -> None:
@@ -187,13 +276,13 @@ def _worker_init() -> None:
     signal.signal(signal.SIGINT, interrupt)
 
 
-def run(jobs: Sequence[Job], workers: int) -> list[Result]:
+def run(jobs: Sequence[Job], workers: int, resume: bool = False) -> list[Result]:
     if workers <= 1:
-        return [run_job(j) for j in jobs]
+        return [run_job(j, resume) for j in jobs]
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
     futures: list[Any] = []
     try:
-        futures = [pool.submit(run_job, j) for j in jobs]
+        futures = [pool.submit(run_job, j, resume) for j in jobs]
         return [f.result() for f in futures]
     except KeyboardInterrupt:
         for f in futures:
@@ -341,20 +430,24 @@ def check_feeds(spec: VehicleCampaign, text: str) -> tuple[str, ...]:
 
 def evaluate(spec: VehicleCampaign, mission: str, profiles: Sequence[int], methods: Sequence[str],
              seeds: Sequence[int], workers: int, out: Path, config: Any,
-             feeds: Sequence[str] | None = None, scenario: str | None = None) -> dict[str, Any]:
+             feeds: Sequence[str] | None = None, scenario: str | None = None,
+             resume: bool = False) -> dict[str, Any]:
+    """Fly every (seed, profile, loop) into ``out/flights`` and write ``results.json``, ``report.md``
+    and the figure. ``resume``: flights already complete there are read back, not flown."""
     out.mkdir(parents=True, exist_ok=True)
     flights = out / "flights"
     loops = tuple(feeds) if feeds is not None else spec.loop_names
     jobs = [Job(spec, mission, p, s, tuple(methods), flights / f"{loop}-profile{p:02d}-seed{s}", config, loop,
                 scenario) for s in seeds for p in profiles for loop in loops]
     t0 = time.perf_counter()
-    results = run(jobs, workers)
+    results = run(jobs, workers, resume)
     wall_s = time.perf_counter() - t0
     rows = (*spec.rows, *methods, *RAW_ROWS)  # the raw receiver's rows: scenario canyon only
     res = aggregate(spec, results, rows, seeds)
     res["info"] = {
         "vehicle": spec.vehicle, "mission": mission, "profiles": list(profiles), "seeds": list(seeds),
-        "methods": list(methods), "workers": workers, "wall_s": wall_s,
+        "methods": list(methods), "workers": workers,
+        "wall_s": wall_s, "read_back": sum(r.read_back for r in results),  # this run's, and how many read
         "config": asdict(config),
         "scenario": scenario,
         "gnss_velocity": ("the receiver's Doppler solution" if scenario == "canyon" else
@@ -364,7 +457,7 @@ def evaluate(spec: VehicleCampaign, mission: str, profiles: Sequence[int], metho
         "flights": [{"profile": r.job.profile, "seed": r.job.seed, "feed": r.job.loop, "valid": r.valid,
                      "command_delay_p95_ms": r.command_delay_p95_ms, "ended_by": r.ended_by,
                      "reached_goal": r.reached_goal, "collisions": r.collisions, "sim_s": r.sim_s,
-                     "wall_s": r.wall_s, "error": r.error} for r in results],
+                     "wall_s": r.wall_s, "error": r.error, "read_back": r.read_back} for r in results],
     }
     (out / "results.json").write_text(json.dumps(plain_json(res, nan_to_none=True), indent=2) + "\n")
     error_figure(spec, results, rows, out / "errors_horizontal.png")

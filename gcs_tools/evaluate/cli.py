@@ -35,6 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ardupilot/px4: loops flown (default all): none (open loop, the EKF with GNSS "
                              "velocity), none-posonly (the EKF on positions only), and closed loops on the "
                              "companion process: ardupilot gps-input, vision; px4 odometry")
+    parser.add_argument("--resume", action="store_true",
+                        help="ardupilot/px4: continue a campaign in --out (e.g. after Ctrl-C) with the "
+                             "options it was started with: a flight whose directory holds a complete result "
+                             "is read back, not flown; incomplete ones are cleared and flown again")
     parser.add_argument("--mission", default="default",
                         help="mission name (default, test, default-tuning) or YAML path")
     parser.add_argument("--profiles", default="10",
@@ -91,8 +95,8 @@ def parameters(mission: Any) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     if args.vehicle in ("ardupilot", "px4"):
         return run_autopilot(args)
-    if args.feeds is not None or args.speedup is not None or args.speed_factor is not None:
-        raise UserError("--feeds, --speedup and --speed-factor apply to --vehicle ardupilot or px4")
+    if args.feeds is not None or args.speedup is not None or args.speed_factor is not None or args.resume:
+        raise UserError("--feeds, --speedup, --speed-factor and --resume apply to --vehicle ardupilot or px4")
     overrides = tuple(tuning.parse_override(text) for text in args.set)
     mission = campaign.mission(args.mission, overrides, args.scenario)
     tuning.check(mission)
@@ -166,8 +170,9 @@ def run_autopilot(args: argparse.Namespace) -> int:
     seeds = choices.seeds(args.seeds)
     feeds = autopilot.check_feeds(spec, args.feeds or ",".join(spec.loop_names))
     res = autopilot.evaluate(spec, args.mission, profiles, methods, seeds, args.workers, args.out, config,
-                             feeds, args.scenario)
+                             feeds, args.scenario, args.resume)
     print(autopilot.table_text(spec, res), end="")
     print(f"wrote {args.out}/results.json, report.md, errors_horizontal.png and flights/ "
-          f"({len(res['info']['flights'])} flights, {res['info']['wall_s']:.1f} s)", file=sys.stderr)
+          f"({len(res['info']['flights'])} flights, {res['info']['read_back']} read back, "
+          f"{res['info']['wall_s']:.1f} s)", file=sys.stderr)
     return 0
