@@ -149,30 +149,39 @@ def test_resume_refuses_a_directory_of_another_flight(tmp_path, fake_backend):
         read_back(replace(jobs[0], methods=(*METHODS, "adaptive")))  # a row it was not scored with
 
 
-def test_a_flight_without_its_series_is_rescored_only_when_that_reproduces_it(tmp_path, fake_backend):
-    jobs, flown = fake_backend
+RESCORED: list[Path] = []  # the flights fake_rescore was asked for
+DRIFT = {"m": 0.0}  # what it changes in a row's recorded median (0: it reproduces the flight)
+
+
+def fake_rescore(out_dir: Path, mission: str, methods: tuple[str, ...], config: Any) -> FlightResult:
+    """A vehicle's rescorer (``VehicleCampaign.rescorer``): the fake flight's series again, with
+    the summary as recorded (or with one median moved by ``DRIFT``, as a changed estimator would)."""
+    RESCORED.append(out_dir)
+    summary = json.loads((out_dir / "summary.json").read_text())
+    summary["methods"]["naive"]["estimation_error_horizontal_m"]["median"] += DRIFT["m"]
+    job = Job(CAMPAIGN, mission, int(summary["profile"]), int(summary["seed"]), methods, out_dir, config)
+    r = fake_flight(job)
+    return FlightResult(summary, r.series, r.route)
+
+
+def test_a_flight_without_its_series_is_rescored_only_when_that_reproduces_it(tmp_path, fake_backend,
+                                                                               monkeypatch):
+    jobs, _ = fake_backend
     plain = campaign_jobs(tmp_path)[0]
     jobs.append(plain)
     flown_result = run(jobs, workers=1)[0]
     (plain.out_dir / SERIES_FILE).unlink()
+    job = replace(plain, campaign=replace(CAMPAIGN, rescorer=f"{__name__}:fake_rescore"))
+    RESCORED.clear()
+    assert read_back(job) is None and RESCORED == []  # no tlog: nothing to score again
     (plain.out_dir / "run.tlog").write_bytes(b"recorded")
-    calls: list[Job] = []
-
-    def rescore(job: Job, drift: float = 0.0) -> FlightResult:
-        calls.append(job)
-        r = fake_flight(job)
-        summary = json.loads((job.out_dir / "summary.json").read_text())
-        if drift:
-            summary["methods"]["naive"]["estimation_error_horizontal_m"]["median"] += drift
-        return FlightResult(summary, r.series, r.route)
-
-    changed = replace(plain, campaign=replace(CAMPAIGN, rescore=lambda job: rescore(job, 1e-9)))
-    assert read_back(changed) is None and calls == [changed]  # the code changed since: fly it again
+    monkeypatch.setitem(DRIFT, "m", 1e-9)
+    assert read_back(job) is None and [plain.out_dir] == RESCORED  # the code changed since: fly it again
     assert not (plain.out_dir / SERIES_FILE).exists()
-    same = replace(plain, campaign=replace(CAMPAIGN, rescore=rescore))
-    got = read_back(same)
+    monkeypatch.setitem(DRIFT, "m", 0.0)
+    got = read_back(job)
     assert got is not None and got.read_back
     assert_same(replace(got, job=plain), flown_result)
     assert (plain.out_dir / SERIES_FILE).exists()  # kept: read directly next time
-    calls.clear()
-    assert read_back(same) is not None and calls == []
+    RESCORED.clear()
+    assert read_back(job) is not None and RESCORED == []

@@ -27,7 +27,8 @@ CAMPAIGN = VehicleCampaign(
            Loop("gps-input", f"EKF3 on {CLOSED_LOOP_METHOD}'s cleaned fixes (GPS_INPUT)", "gps-input"),
            Loop("vision", f"EKF3 on {CLOSED_LOOP_METHOD}'s position as ExternalNav", "vision")),
     figure_title="ArduCopter SITL on our urban GNSS: EKF3 vs the companion (open loop; whiskers p5-p95)",
-    config_class=ArduPilotConfig, speed_field="speedup")
+    config_class=ArduPilotConfig, speed_field="speedup",
+    rescorer="simvehicle.harness.ardupilot.rescore:rescore_ardupilot")
 LOOPS = CAMPAIGN.loop_names
 
 

@@ -85,9 +85,9 @@ class VehicleCampaign:
     figure_title: str
     config_class: Callable[..., Any]  # the backend's flight configuration (ArduPilotConfig, Px4FlightConfig)
     speed_field: str  # its speed-up field (speedup, speed_factor)
-    # --resume of a flight recorded without the series file: its recording scored again (a
-    # FlightResult), or None (flown again)
-    rescore: Callable[[Job], Any] | None = None
+    # --resume of a flight recorded without the series file: "module:function" scoring its recording
+    # again, (out_dir, mission, methods, config) -> FlightResult ("": it is flown again)
+    rescorer: str = ""
 
     def config(self, speed: float | None = None) -> Any:
         """The flight configuration, at this speed-up (None: its default)."""
@@ -96,6 +96,16 @@ class VehicleCampaign:
     @property
     def reduction_key(self) -> str:
         return f"reduction_vs_{self.ekf.lower()}"
+
+    def rescore(self, job: Job) -> Any:
+        """``job``'s flight scored again from its recording by ``rescorer`` (None: no rescorer)."""
+        if not self.rescorer:
+            return None
+        import importlib
+
+        module, name = self.rescorer.split(":")
+        config = replace(job.config, gnss_velocity=self.loop(job.loop).gnss_velocity)
+        return getattr(importlib.import_module(module), name)(job.out_dir, job.mission, job.methods, config)
 
     def loop(self, name: str) -> Loop:
         return next(lp for lp in self.loops if lp.name == name)
@@ -247,7 +257,7 @@ def read_back(job: Job) -> Result | None:
     try:
         series = read_series(d / SERIES_FILE)
     except (OSError, ValueError):
-        rescored = spec.rescore(job) if spec.rescore is not None and (d / "run.tlog").is_file() else None
+        rescored = spec.rescore(job) if (d / "run.tlog").is_file() else None
         if rescored is None or not same_scores(summary, rescored.summary):
             return None
         series = rescored.series

@@ -13,20 +13,8 @@ loop, on the first free instance; statistics, report); this module names PX4's l
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Any
-
-from gcs_tools.evaluate.autopilot import CLOSED_LOOP_METHOD, Job, Loop, VehicleCampaign, open_loops
+from gcs_tools.evaluate.autopilot import CLOSED_LOOP_METHOD, Loop, VehicleCampaign, open_loops
 from simvehicle.harness.px4.config import Px4FlightConfig
-
-
-def rescore(job: Job) -> Any:
-    """A flight of ``job`` recorded without its series file, scored again from its tlogs."""
-    from simvehicle.harness.px4.rescore import rescore_px4
-
-    config = replace(job.config, gnss_velocity=job.campaign.loop(job.loop).gnss_velocity)
-    return rescore_px4(job.out_dir, job.mission, job.methods, config)
-
 
 POSONLY_ROW = "px4-ekf2-posonly"  # EKF2 without the GNSS velocity
 CAMPAIGN = VehicleCampaign(
@@ -34,4 +22,5 @@ CAMPAIGN = VehicleCampaign(
     loops=(*open_loops("EKF2", POSONLY_ROW),
            Loop("odometry", f"EKF2 on {CLOSED_LOOP_METHOD}'s ODOMETRY (external vision)", "odometry")),
     figure_title="PX4 SITL (SIH) on our urban GNSS: EKF2 vs the companion (open loop; whiskers p5-p95)",
-    config_class=Px4FlightConfig, speed_field="speed_factor", rescore=rescore)
+    config_class=Px4FlightConfig, speed_field="speed_factor",
+    rescorer="simvehicle.harness.px4.rescore:rescore_px4")
