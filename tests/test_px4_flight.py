@@ -11,8 +11,11 @@ import sys
 
 import numpy as np
 import pytest
-from ardupilot_helpers import tlog_messages
+from ardupilot_helpers import assert_rescored_from_the_tlog, tlog_messages
 from px4_helpers import require_px4
+
+from simvehicle.harness.px4.config import Px4FlightConfig
+from simvehicle.harness.px4.rescore import rescore_px4
 
 pytestmark = pytest.mark.slow
 SAME_KEYS_AS_ARDUPILOT = {"mission", "profile", "method", "seed", "vehicle", "feed", "reached_goal", "valid",
@@ -20,19 +23,6 @@ SAME_KEYS_AS_ARDUPILOT = {"mission", "profile", "method", "seed", "vehicle", "fe
                           "estimation_error_horizontal_m", "autopilot_estimation_error_m",
                           "autopilot_estimation_error_horizontal_m", "tracking_error_m", "min_clearance_m",
                           "methods", "gnss", "estimator_counters"}
-
-
-def assert_rescored_from_the_tlog(out, s: dict) -> None:
-    """The flight's session replayed from its tlog (no SITL) and scored again gives every row's
-    statistics, the collisions and the outcome exactly as flown (``evaluate --resume`` relies on it)."""
-    from gcs_tools.evaluate.autopilot import same_scores
-    from simvehicle.harness.px4.config import Px4FlightConfig
-    from simvehicle.harness.px4.rescore import rescore_px4
-
-    methods = tuple(m for m in s["methods"] if m not in ("px4-ekf2", "companion-live"))
-    again = rescore_px4(out, "test", methods, Px4FlightConfig(speed_factor=5))
-    assert same_scores(s, again.summary)
-    assert not same_scores(s, {**again.summary, "collisions": s["collisions"] + 1})
 
 
 def _sitl(out, *extra: str) -> subprocess.CompletedProcess[str]:
@@ -77,7 +67,7 @@ def test_sitl_vehicle_px4_flies_the_route_on_hil_gps_and_its_ulog_replays(tmp_pa
     for m in tlog_messages(out / "run.tlog"):  # a standard tlog, both directions
         kinds[m.get_type()] = kinds.get(m.get_type(), 0) + 1
     assert kinds["HIL_GPS"] == run["hil_gps_sent"] and kinds["SET_POSITION_TARGET_LOCAL_NED"] > 500
-    assert_rescored_from_the_tlog(out, s)
+    assert_rescored_from_the_tlog(rescore_px4, out, s, Px4FlightConfig(speed_factor=5))
 
     # PX4's own log of the flight, replayed: our estimate against EKF2's logged one and SIH's truth
     (ulog,) = run["ulogs"]
@@ -128,4 +118,4 @@ def test_closed_loop_px4_flies_on_the_companion_process_odometry(tmp_path):
     ekf = table[:, [header.index("p_autopilot_n_m"), header.index("p_autopilot_e_m")]]
     ours = table[:, [header.index("p_est_n_m"), header.index("p_est_e_m")]]
     assert np.nanmedian(np.hypot(*(ekf - ours).T)) < 3.0  # EKF2 follows the companion (blended with its IMU)
-    assert_rescored_from_the_tlog(out, s)
+    assert_rescored_from_the_tlog(rescore_px4, out, s, Px4FlightConfig(speed_factor=5))
