@@ -45,7 +45,8 @@ def fake_flight(job: Job, samples: int = 40) -> FlightResult:
             e[rng.random(samples) < 0.1] = np.nan  # an EKF with no estimate yet
             series[f"{HORIZONTAL_ERROR_PREFIX}{row}"] = e
         series["track_error_m"] = rng.exponential(2.0, samples) + 0.1
-    summary = {"mission": MISSION, "profile": job.profile, "method": "second-order", "seed": job.seed,
+    summary = {"mission": load_mission(MISSION).name, "profile": job.profile, "method": "second-order",
+               "seed": job.seed,
                "vehicle": "px4", "feed": job.feed, "reached_goal": bool(samples), "valid": job.seed != 1,
                "collisions": int(rng.integers(0, 5)),
                "methods": {row: {"estimation_error_horizontal_m": {"median": 1.0}} for row in rows},

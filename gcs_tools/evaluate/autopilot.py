@@ -23,6 +23,7 @@ within seconds with "interrupted" (exit 130).
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -248,7 +249,7 @@ def read_back(job: Job) -> Result | None:
         summary = json.loads((d / "summary.json").read_text())
     except (OSError, ValueError):
         return None
-    want = {"mission": job.mission, "profile": job.profile, "seed": job.seed, "feed": job.feed}
+    want = {"mission": mission_name(job.mission), "profile": job.profile, "seed": job.seed, "feed": job.feed}
     got = {k: summary.get(k) for k in want}
     if got != want or not set(job.methods) <= set(summary.get("methods", {})):
         rows = sorted(summary.get("methods", {}))
@@ -263,6 +264,14 @@ def read_back(job: Job) -> Result | None:
         series = rescored.series
         write_series(d / SERIES_FILE, series)
     return replace(flight_result(job, summary, series), read_back=True)
+
+
+@functools.lru_cache(maxsize=8)
+def mission_name(mission: str) -> str:
+    """The name a flight's summary records for ``--mission`` (``default`` -> ``default-city``)."""
+    from companion.mission import load_mission
+
+    return str(load_mission(mission).name)
 
 
 def same_scores(recorded: dict[str, Any], rescored: dict[str, Any]) -> bool:
