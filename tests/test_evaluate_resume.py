@@ -146,6 +146,8 @@ def test_resume_refuses_a_directory_of_another_flight(tmp_path, fake_backend):
     other = replace(jobs[0], seed=7)
     with pytest.raises(UserError, match="holds another flight"):
         read_back(other)
+    with pytest.raises(UserError, match="holds another flight"):  # checked before anything flies
+        autopilot.check_resumable([replace(jobs[0], out_dir=tmp_path / "none"), other])
     with pytest.raises(UserError, match="holds another flight"):
         read_back(replace(jobs[0], methods=(*METHODS, "adaptive")))  # a row it was not scored with
 

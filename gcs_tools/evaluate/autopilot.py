@@ -242,19 +242,12 @@ def read_back(job: Job) -> Result | None:
     for a flight recorded before campaigns kept that file, its recording scored again by the
     vehicle's ``rescore`` when that reproduces the summary's per-row statistics exactly). None:
     incomplete, to be flown again. A directory flown for another flight is a UserError."""
-    from companion.errors import UserError
-
     d, spec = job.out_dir, job.campaign
     try:
         summary = json.loads((d / "summary.json").read_text())
     except (OSError, ValueError):
         return None
-    want = {"mission": mission_name(job.mission), "profile": job.profile, "seed": job.seed, "feed": job.feed}
-    got = {k: summary.get(k) for k in want}
-    if got != want or not set(job.methods) <= set(summary.get("methods", {})):
-        rows = sorted(summary.get("methods", {}))
-        raise UserError(f"--resume: {d} holds another flight ({got}, rows {rows}); resume with the options "
-                        "it was flown with, or use another --out")
+    check_same_flight(job, summary)
     try:
         series = read_series(d / SERIES_FILE)
     except (OSError, ValueError):
@@ -264,6 +257,29 @@ def read_back(job: Job) -> Result | None:
         series = rescored.series
         write_series(d / SERIES_FILE, series)
     return replace(flight_result(job, summary, series), read_back=True)
+
+
+def check_same_flight(job: Job, summary: dict[str, Any]) -> None:
+    """A UserError if ``summary`` (of ``job``'s directory) is not of ``job``'s flight: mission,
+    profile, seed, feed, and every method of ``job`` among its rows."""
+    from companion.errors import UserError
+
+    want = {"mission": mission_name(job.mission), "profile": job.profile, "seed": job.seed, "feed": job.feed}
+    got = {k: summary.get(k) for k in want}
+    if got != want or not set(job.methods) <= set(summary.get("methods", {})):
+        rows = sorted(summary.get("methods", {}))
+        raise UserError(f"--resume: {job.out_dir} holds another flight ({got}, rows {rows}); resume with the "
+                        "options it was flown with, or use another --out")
+
+
+def check_resumable(jobs: Sequence[Job]) -> None:
+    """Before any flight: every job directory with a readable summary is of that job (UserError)."""
+    for job in jobs:
+        try:
+            summary = json.loads((job.out_dir / "summary.json").read_text())
+        except (OSError, ValueError):
+            continue
+        check_same_flight(job, summary)
 
 
 @functools.lru_cache(maxsize=8)
@@ -458,6 +474,8 @@ def evaluate(spec: VehicleCampaign, mission: str, profiles: Sequence[int], metho
     loops = tuple(feeds) if feeds is not None else spec.loop_names
     jobs = [Job(spec, mission, p, s, tuple(methods), flights / f"{loop}-profile{p:02d}-seed{s}", config, loop,
                 scenario) for s in seeds for p in profiles for loop in loops]
+    if resume:
+        check_resumable(jobs)
     t0 = time.perf_counter()
     results = run(jobs, workers, resume)
     wall_s = time.perf_counter() - t0
