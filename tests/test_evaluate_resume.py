@@ -156,7 +156,8 @@ RESCORED: list[Path] = []  # the flights fake_rescore was asked for
 DRIFT = {"m": 0.0}  # what it changes in a row's recorded median (0: it reproduces the flight)
 
 
-def fake_rescore(out_dir: Path, mission: str, methods: tuple[str, ...], config: Any) -> FlightResult:
+def fake_rescore(out_dir: Path, mission: str, methods: tuple[str, ...], config: Any,
+                 scenario: str | None) -> FlightResult:
     """A vehicle's rescorer (``VehicleCampaign.rescorer``): the fake flight's series again, with
     the summary as recorded (or with one median moved by ``DRIFT``, as a changed estimator would)."""
     RESCORED.append(out_dir)

@@ -36,4 +36,4 @@ def evaluate(mission: str, profiles: Sequence[int], methods: Sequence[str], seed
              workers: int, out: Path, config: ArduPilotConfig | None = None,
              feeds: Sequence[str] = LOOPS, resume: bool = False) -> dict[str, Any]:
     return evaluate_campaign(CAMPAIGN, mission, profiles, methods, seeds, workers, out,
-                             config or ArduPilotConfig(), feeds, resume)
+                             config or ArduPilotConfig(), feeds, resume=resume)

@@ -87,7 +87,7 @@ class VehicleCampaign:
     config_class: Callable[..., Any]  # the backend's flight configuration (ArduPilotConfig, Px4FlightConfig)
     speed_field: str  # its speed-up field (speedup, speed_factor)
     # --resume of a flight recorded without the series file: "module:function" scoring its recording
-    # again, (out_dir, mission, methods, config) -> FlightResult ("": it is flown again)
+    # again, (out_dir, mission, methods, config, scenario) -> FlightResult ("": it is flown again)
     rescorer: str = ""
 
     def config(self, speed: float | None = None) -> Any:
@@ -106,7 +106,8 @@ class VehicleCampaign:
 
         module, name = self.rescorer.split(":")
         config = replace(job.config, gnss_velocity=self.loop(job.loop).gnss_velocity)
-        return getattr(importlib.import_module(module), name)(job.out_dir, job.mission, job.methods, config)
+        return getattr(importlib.import_module(module), name)(job.out_dir, job.mission, job.methods, config,
+                                                               job.scenario)
 
     def loop(self, name: str) -> Loop:
         return next(lp for lp in self.loops if lp.name == name)

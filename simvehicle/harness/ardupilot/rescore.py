@@ -26,7 +26,8 @@ def _session(plan: FlightPlan, cfg: ArduPilotConfig,
     return session, (GCS_SYSTEM_ID, GCS_COMPONENT_ID), AUTOPILOT
 
 
-def rescore_ardupilot(out_dir: Path, mission: str, methods: tuple[str, ...],
-                      config: ArduPilotConfig) -> FlightResult:
-    """The flight in ``out_dir`` (flown with ``config`` and ``methods``) scored again."""
-    return rescore(ARDUPILOT, FEEDS, ArduPilotFlightOptions, _session, out_dir, mission, methods, config)
+def rescore_ardupilot(out_dir: Path, mission: str, methods: tuple[str, ...], config: ArduPilotConfig,
+                      scenario: str | None = None) -> FlightResult:
+    """The flight in ``out_dir`` (flown with ``config``, ``methods`` and ``scenario``) scored again."""
+    return rescore(ARDUPILOT, FEEDS, ArduPilotFlightOptions, _session, out_dir, mission, methods, config,
+                   scenario)

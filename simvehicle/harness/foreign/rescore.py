@@ -35,13 +35,13 @@ SessionFor = Callable[[FlightPlan, Any, dict[str, Any]], tuple[ForeignSession, I
 
 def rescore(vehicle: Vehicle, feeds: tuple[str, ...], options: Callable[..., ForeignFlightOptions],
             session_for: SessionFor, out_dir: Path, mission: str, methods: tuple[str, ...],
-            config: ForeignFlightConfig) -> FlightResult:
+            config: ForeignFlightConfig, scenario: str | None = None) -> FlightResult:
     """The flight in ``out_dir`` (flown with ``config`` and ``methods``) scored again."""
     try:
         recorded = json.loads((out_dir / "summary.json").read_text())
         run_info: dict[str, Any] = recorded[vehicle.name]
         opts = options(mission, int(recorded["profile"]), str(recorded["method"]), int(recorded["seed"]),
-                       out_dir, str(recorded["feed"]), methods, config=config)
+                       out_dir, feed=str(recorded["feed"]), methods=methods, config=config, scenario=scenario)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise UserError(f"{out_dir}: no readable {vehicle.name} flight summary ({exc})") from None
     plan = plan_flight(vehicle.name, opts, config, feeds)

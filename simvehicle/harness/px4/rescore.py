@@ -28,7 +28,7 @@ def _session(plan: FlightPlan, cfg: Px4FlightConfig,
     return session, (system_id, FLIGHT_TOOL_COMPONENT_ID), (system_id, PX4_COMPONENT_ID)
 
 
-def rescore_px4(out_dir: Path, mission: str, methods: tuple[str, ...],
-                config: Px4FlightConfig) -> FlightResult:
-    """The flight in ``out_dir`` (flown with ``config`` and ``methods``) scored again."""
-    return rescore(PX4, FEEDS, Px4FlightOptions, _session, out_dir, mission, methods, config)
+def rescore_px4(out_dir: Path, mission: str, methods: tuple[str, ...], config: Px4FlightConfig,
+                scenario: str | None = None) -> FlightResult:
+    """The flight in ``out_dir`` (flown with ``config``, ``methods`` and ``scenario``) scored again."""
+    return rescore(PX4, FEEDS, Px4FlightOptions, _session, out_dir, mission, methods, config, scenario)
