@@ -90,7 +90,8 @@ class GroundStation:
         self.conn.close()
 
 
-def assert_rescored_from_the_tlog(rescore: Any, out: Path, s: dict[str, Any], config: Any) -> None:
+def assert_rescored_from_the_tlog(rescore: Any, out: Path, s: dict[str, Any], mission: str,
+                                  config: Any) -> None:
     """A foreign-autopilot flight's session replayed from its tlog (no SITL) and scored again by
     ``rescore`` (``rescore_px4``, ``rescore_ardupilot``) gives every row's statistics, the collisions
     and the outcome exactly as flown (``evaluate --resume`` relies on it)."""
@@ -98,6 +99,6 @@ def assert_rescored_from_the_tlog(rescore: Any, out: Path, s: dict[str, Any], co
 
     ekf = s["vehicle"] + "-ekf"  # ardupilot-ekf3, px4-ekf2
     methods = tuple(m for m in s["methods"] if m != "companion-live" and not m.startswith(ekf))
-    again = rescore(out, s["mission"], methods, config)
+    again = rescore(out, mission, methods, config)
     assert same_scores(s, again.summary)
     assert not same_scores(s, {**again.summary, "collisions": s["collisions"] + 1})

@@ -64,7 +64,7 @@ def test_sitl_vehicle_ardupilot_flies_the_route_and_scores_ekf3_and_the_companio
         kinds[msg.get_type()] = kinds.get(msg.get_type(), 0) + 1
     assert kinds.get("GPS_INPUT") == ap["gps_input_sent"]
     assert kinds.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 500 and kinds.get("SIM_STATE", 0) > 1000
-    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, ArduPilotConfig(speedup=5))
+    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, "test", ArduPilotConfig(speedup=5))
 
 
 @pytest.mark.timeout(300)
@@ -117,7 +117,7 @@ def test_closed_loop_ardupilot_flies_on_the_companion_process(tmp_path, feed):
     ours = table[:, [header.index("p_est_n_m"), header.index("p_est_e_m")]]
     apart = np.hypot(*(ekf - ours).T)
     assert np.nanmedian(apart) < 2.0  # EKF3 follows the companion (blended with its own IMU)
-    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, ArduPilotConfig(speedup=5))
+    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, "test", ArduPilotConfig(speedup=5))
 
 
 

@@ -67,7 +67,7 @@ def test_sitl_vehicle_px4_flies_the_route_on_hil_gps_and_its_ulog_replays(tmp_pa
     for m in tlog_messages(out / "run.tlog"):  # a standard tlog, both directions
         kinds[m.get_type()] = kinds.get(m.get_type(), 0) + 1
     assert kinds["HIL_GPS"] == run["hil_gps_sent"] and kinds["SET_POSITION_TARGET_LOCAL_NED"] > 500
-    assert_rescored_from_the_tlog(rescore_px4, out, s, Px4FlightConfig(speed_factor=5))
+    assert_rescored_from_the_tlog(rescore_px4, out, s, "test", Px4FlightConfig(speed_factor=5))
 
     # PX4's own log of the flight, replayed: our estimate against EKF2's logged one and SIH's truth
     (ulog,) = run["ulogs"]
@@ -118,4 +118,4 @@ def test_closed_loop_px4_flies_on_the_companion_process_odometry(tmp_path):
     ekf = table[:, [header.index("p_autopilot_n_m"), header.index("p_autopilot_e_m")]]
     ours = table[:, [header.index("p_est_n_m"), header.index("p_est_e_m")]]
     assert np.nanmedian(np.hypot(*(ekf - ours).T)) < 3.0  # EKF2 follows the companion (blended with its IMU)
-    assert_rescored_from_the_tlog(rescore_px4, out, s, Px4FlightConfig(speed_factor=5))
+    assert_rescored_from_the_tlog(rescore_px4, out, s, "test", Px4FlightConfig(speed_factor=5))
