@@ -23,4 +23,6 @@ def test_top_shows_live_numbers():
     assert "malformed payloads: 1" in last
     for header in ("t [s]", "est. error [m]", "GNSS latency [s]", "altitude [m]", "messages [count]"):
         assert header in last  # a unit in every column header
-    assert "live" in last or "stale" in last
+    # the state column, as the dashboard's badge: the synthetic run ends with a clean-finish health, so
+    # the last frame may already say "ended" (or still "live"); never an empty column
+    assert any(state in last for state in ("live", "ended", "stale"))

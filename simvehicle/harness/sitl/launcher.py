@@ -14,9 +14,11 @@ MAVLink 2 signing is on by default: every run gets a fresh 32-byte key in ``<out
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import secrets
+import signal
 import socket
 import subprocess
 import threading
@@ -183,6 +185,21 @@ def _follow_progress(stream: Any, on_progress: Progress | None) -> None:
             on_progress(float(line.get("t_s", 0.0)), float(line.get("goal_distance_m", float("nan"))))
 
 
+def _sigint_sets(event: threading.Event) -> Callable[[], None]:
+    """While a flight runs, Ctrl-C sets ``event`` instead of raising KeyboardInterrupt wherever the
+    main thread happens to be: an exception raised between a lock's acquire and its ``try`` (as in
+    ``subprocess.Popen.poll``) leaves the lock held, and the clean-up's ``wait()`` then blocks for
+    ever. Returns the function that puts the previous handler back (a no-op off the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: event.set())
+
+    def restore() -> None:
+        with contextlib.suppress(ValueError, TypeError):
+            signal.signal(signal.SIGINT, previous)
+    return restore
+
+
 def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
     """Fly once; always stops every process and returns what they recorded."""
     ports = opts.ports or tuple(free_udp_ports(3))
@@ -198,6 +215,8 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
     detail = ""
     exit_code: int | None = None
     reader: threading.Thread | None = None
+    interrupted = threading.Event()
+    restore_sigint = _sigint_sets(interrupted)
     try:
         specs = child_specs(opts, ports)
         vehicle = supervisor.start(specs[0], stdout=subprocess.PIPE)
@@ -219,10 +238,13 @@ def launch(opts: SitlOptions, on_progress: Progress | None = None) -> SitlRun:
             if deadline is not None and time.monotonic() > deadline:
                 ended_by = "timeout"
                 break
-            time.sleep(POLL_S)
-    except KeyboardInterrupt:
+            if interrupted.wait(POLL_S):
+                ended_by = "interrupted"
+                break
+    except KeyboardInterrupt:  # a Ctrl-C before our handler was in place, or off the main thread
         ended_by = "interrupted"
     finally:
+        restore_sigint()
         codes = supervisor.stop(order=("vehicle",))
         if reader is not None:
             reader.join(timeout=1.0)
