@@ -208,20 +208,21 @@ def test_recorder_counts_deep_and_huge_payloads_and_keeps_only_their_head(tmp_pa
 
     config = TelemetryConfig.from_env(dict(os.environ))
     writer = RecordingWriter(tmp_path / "rec.jsonl")
-    done = threading.Event()
+    counted = threading.Semaphore(0)
     bad = [b"[" * 20_000 + b"]" * 20_000, b'{"t_us": "' + b"z" * 1_000_000 + b'"}']
 
     def on_malformed(key: str, payload: bytes, error: str) -> None:
         writer.write_malformed(key, payload, error, time.time_ns())
-        if writer.malformed == len(bad):
-            done.set()
+        counted.release()
 
     with TelemetrySubscriber(writer.write, config, on_malformed=on_malformed) as sub, \
             TelemetryPublisher("fuzz", "vehicle", config) as pub:
         assert pub.wait_for_subscribers("truth", 10)
         for payload in bad:
-            assert pub.put_raw("truth", payload)
-        assert done.wait(10)
+            # live telemetry is best effort (Zenoh drops a put under congestion, and a route may still
+            # be settling just after matching): what is tested is what the recorder does with a
+            # payload that arrives, so one that did not arrive in 5 s is sent again (at most 3 times)
+            assert any(pub.put_raw("truth", payload) and counted.acquire(timeout=5) for _ in range(3))
         assert sub.malformed_total == 2 and sub.received == 0
     writer.close()
     lines = [json.loads(line) for line in (tmp_path / "rec.jsonl").read_text().splitlines()]
