@@ -237,6 +237,33 @@ def test_glonass_strings_round_trip_to_the_same_satellite_position(flight):
         glonass_string(dataclasses.replace(store.glonass[0], clock_bias_s=0.01), 4, 0.0, 0.0)
 
 
+def test_glonass_decoder_takes_hostile_words_and_counts_every_one():
+    """Random words, random words made Hamming-valid, wrong lengths, extreme slots, channels and
+    times: nothing raises, each kind of refusal is counted, and anything decoded is finite."""
+    from companion.gnss.glonav import GlonassDecoder, hamming, string_from_words, words_from_string
+
+    rng = np.random.default_rng(7)
+    dec = GlonassDecoder()
+    decoded, calls = [], 0
+    for i in range(3000):
+        n = 4 if i % 10 else int(rng.integers(0, 9))
+        words = [int(w) for w in rng.integers(0, 2**32, n, dtype=np.uint64)]
+        if n == 4 and i % 2:  # a valid Hamming code over random content, strings 1-4 mostly
+            s = string_from_words(words) & ~((1 << 8) - 1) & ((1 << 85) - 1)
+            s = (s & ~(0xF << 80)) | (int(rng.integers(1, 6)) << 80)
+            s = hamming(s)
+            words = words_from_string(s, int(rng.integers(0, 2**16)), int(rng.integers(0, 2**16)))
+        t = float(rng.choice([0.0, 1.4e9, 1e12, -1e9]))
+        eph = dec.add(int(rng.integers(0, 256)), int(rng.integers(-100, 300)), words, t)
+        calls += 1
+        if eph is not None:
+            decoded.append(eph)
+    assert calls == 3000 and all(dec.counters.get(k, 0) > 0 for k in (
+        "glonass_bad_length", "glonass_bad_hamming", "glonass_other_string"))
+    assert all(np.isfinite([*e.pos_ecef_m, *e.vel_ecef_m_s, e.toe_gps_s, e.clock_bias_s]).all()
+               for e in decoded)
+
+
 def test_ubx_server_streams_to_clients_and_refuses_a_busy_port(tmp_path):
     server = UbxServer(0, tmp_path / "r.ubx")
     try:

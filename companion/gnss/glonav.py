@@ -114,6 +114,7 @@ class GlonassDecoder:
             return None
         m = field_u(s, 84, 4)
         if m not in (1, 2, 3, 4):
+            self._count("glonass_other_string")  # almanac and time strings 5-15: not needed here
             return None
         fid = int(words[3])
         if self.frame_id.get(slot) != fid:  # a new frame: the older strings are of another t_b
