@@ -1,9 +1,11 @@
 """Nominal GNSS constellations as broadcast ephemerides: the simulated receiver's sky (no data set).
 
 Every satellite flies a nominal orbit of its system's published design, written as the broadcast
-ephemerides a receiver would decode, quantised to the navigation message's resolution (GPS LNAV
-scale factors for every Keplerian system, GLONASS string scale factors), so that an ephemeris sent
-in a navigation message and decoded again is exactly the orbit the simulator flies:
+ephemerides a receiver would decode, quantised to the navigation message's resolution (the orbit at
+GPS LNAV scale factors for every Keplerian system, which Galileo I/NAV and BeiDou D1 carry exactly;
+the clock polynomial and group delay at the system's own: LNAV, I/NAV, D1 (TGD1 in 0.1 ns); GLONASS
+string scale factors), so that an ephemeris sent in a navigation message and decoded again is
+exactly the orbit the simulator flies:
 
 * **GPS**: the 24 baseline slots of the GPS SPS Performance Standard (Table 3-1: right ascension of
   the node and argument of latitude at 1 July 1993 0h UTC, Greenwich hour angle 18h 36m 14.4s),
@@ -21,8 +23,10 @@ in a navigation message and decoded again is exactly the orbit the simulator fli
 The absolute node longitudes of GLONASS, Galileo and BeiDou, every eccentricity (0.001-0.009),
 argument of perigee, clock polynomial and group delay are ours (deterministic per satellite):
 a representative sky, not a given day's. Keplerian ephemerides every 2 h (``toe`` on even
-hours), GLONASS every 30 min: the ``EphemerisStore``'s nearest-``toe`` rule then uses each within
-1 h / 15 min of its reference time.
+hours of the system's time: BeiDou's 14 s after GPS's), GLONASS every 30 min: the
+``EphemerisStore``'s nearest-``toe`` rule then uses each within 1 h / 15 min of its reference time.
+Galileo and BeiDou clocks wander by 4 ns (GPS, GLONASS: 100 ns): their messages' af2 field holds
+no more than about 1.4e-17 s/s² (D1) / 5.4e-17 s/s² (I/NAV).
 """
 
 from __future__ import annotations
@@ -35,7 +39,13 @@ import numpy as np
 from companion.gnss import constants as k
 from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEphemeris, rk4_step
 from companion.gnss.systems import System
-from companion.gnss.timescale import GLONASS_MINUS_UTC_S, gps_from_calendar, gps_minus_utc_s, gps_to_bdt_s
+from companion.gnss.timescale import (
+    GLONASS_MINUS_UTC_S,
+    GPS_MINUS_BDT_S,
+    gps_from_calendar,
+    gps_minus_utc_s,
+    gps_to_bdt_s,
+)
 
 SIDEREAL_RATE_RAD_S = k.OMEGA_E_GPS_RAD_S
 KEPLER_INTERVAL_S = 7200.0  # toe spacing of the Keplerian systems
@@ -80,15 +90,21 @@ def _q(x: float, lsb: float) -> float:
 
 CLOCK_WANDER_S = 1e-7  # amplitude of a satellite clock's daily wander around its offset
 CLOCK_PERIOD_S = 86400.0
+# per Keplerian system: (clock wander s, LSB of af0, af1, af2, TGD; iode modulus): the message's own
+CLOCK_MESSAGE: dict[System, tuple[float, float, float, float, float, int]] = {
+    System.GPS: (CLOCK_WANDER_S, 2.0**-31, 2.0**-43, 2.0**-55, 2.0**-31, 256),
+    System.GALILEO: (4e-9, 2.0**-34, 2.0**-46, 2.0**-59, 2.0**-32, 256),
+    System.BEIDOU: (4e-9, 2.0**-33, 2.0**-50, 2.0**-66, 1e-10, 32),
+}
 
 
-def _clock(salt: int, t_gps_s: float) -> tuple[float, float, float]:
+def _clock(salt: int, t_gps_s: float, wander_s: float = CLOCK_WANDER_S) -> tuple[float, float, float]:
     """A satellite clock (offset s, rate s/s, half its acceleration s/s²) at ``t_gps_s``: a fixed
     offset (±0.2 ms) plus a smooth daily wander, so that consecutive broadcast polynomials join
     (to 0.1 ns at a 2 h toe spacing) whatever the date."""
     w = 2 * math.pi / CLOCK_PERIOD_S
     ph = w * t_gps_s + 2 * math.pi * _frac(salt, 4)
-    a = CLOCK_WANDER_S
+    a = wander_s
     return (
         4e-4 * (_frac(salt, 3) - 0.5) + a * math.sin(ph),
         a * w * math.cos(ph),
@@ -188,7 +204,7 @@ def _kepler_params(system: System) -> tuple[float, float, float]:
 
 
 def _kepler_ephemeris(system: System, prn: int, orbit: _Walker, toe: float, index: int) -> KeplerEphemeris:
-    """The LNAV-quantised broadcast ephemeris of ``orbit`` at ``toe`` (GPS time, a multiple of 16 s)."""
+    """The broadcast ephemeris of ``orbit`` at ``toe`` (GPS time, on an hour of the system's own time)."""
     mu, we, bdt = _kepler_params(system)
     sow = (gps_to_bdt_s(toe) if bdt else toe) % k.SECONDS_PER_WEEK
     salt = int(system) * 100 + prn
@@ -201,12 +217,13 @@ def _kepler_ephemeris(system: System, prn: int, orbit: _Walker, toe: float, inde
     # IS-GPS-200: Ω_k = Ω0 + (Ω̇ − ω_e) t_k − ω_e t_oe; at t_k = 0 that is the node's Earth-fixed longitude
     omega0 = _q(_wrap_pi(orbit.lam(toe) + we * sow), 2.0**-31 * SC)
     omega_dot = _q(orbit.node_rate, 2.0**-43 * SC)
-    af0, af1, af2 = _clock(salt, toe)
+    wander, lsb0, lsb1, lsb2, lsb_tgd, iods = CLOCK_MESSAGE[system]
+    af0, af1, af2 = _clock(salt, toe, wander)
     no_harmonics = (0.0,) * 7  # idot, cuc, cus, crc, crs, cic, cis: a nominal orbit has none
     return KeplerEphemeris(
         int(system), prn, toe, toe, sow, sqrt_a, e, _q(orbit.inc, 2.0**-31 * SC), omega0, omega, m0, delta_n,
-        omega_dot, *no_harmonics, _q(af0, 2.0**-31), _q(af1, 2.0**-43), _q(af2, 2.0**-55),
-        _q(-1e-8 * _frac(salt, 5), 2.0**-31), index % 256,
+        omega_dot, *no_harmonics, _q(af0, lsb0), _q(af1, lsb1), _q(af2, lsb2),
+        _q(-1e-8 * _frac(salt, 5), lsb_tgd), index % iods,
     )
 
 
@@ -220,10 +237,11 @@ def _kepler_sets(system: System, t_from: float, t_to: float) -> list[KeplerEphem
     else:
         orbits = _walker_set(3, 8, 15.0, 55.0, 13, 7, k.MU_BDS_M3_S2, 70.0, t_ref)
         prns = list(BEIDOU_MEO_PRNS)
+    shift = GPS_MINUS_BDT_S if system == System.BEIDOU else 0.0  # toe on the system's own hours
     first = math.floor(t_from / KEPLER_INTERVAL_S)
     last = math.ceil(t_to / KEPLER_INTERVAL_S)
     return [
-        _kepler_ephemeris(system, prn, orb, j * KEPLER_INTERVAL_S, j)
+        _kepler_ephemeris(system, prn, orb, j * KEPLER_INTERVAL_S + shift, j)
         for j in range(first, last + 1)
         for prn, orb in zip(prns, orbits, strict=True)
     ]

@@ -18,8 +18,11 @@ channel + 7; ``locktime`` in ms (saturating at 64.5 s); ``doMes`` = −(pseudora
 (``GnssFix.h_acc_m``), ``vAcc`` its vertical 1σ, the Doppler velocity and its ``sAcc``.
 ``RXM-SFRBX`` GPS words: the 24 data bits as the satellite sent them (the receiver has resolved
 their polarity) in bits 29..6, the six IS-GPS-200 parity bits in 5..0, the previous word's D29/D30
-in bits 31..30. Not emitted: Galileo/BeiDou/GLONASS navigation messages, GPS subframe 5 and the
-other subframe 4 pages (page 18 goes out in every subframe 4 slot, not once in 12.5 minutes).
+in bits 31..30. GLONASS strings 1-4 of every 30 s frame; Galileo E1-B I/NAV page pairs every 2 s
+(``simvehicle.navmsg``: word types 2, 4 / 1, 3, 5 in the slots of the ICD's nominal subframe, word
+type 0 in the others); BeiDou D1 subframes 1-5 every 6 s of BDT (4-5 without almanac). Not emitted:
+GPS subframe 5 and the other subframe 4 pages (page 18 goes out in every subframe 4 slot, not once
+in 12.5 minutes), GLONASS strings 5-15, the BeiDou GEO satellites' D2 (the simulated sky has none).
 """
 
 from __future__ import annotations
@@ -38,7 +41,8 @@ from companion.gnss.glonav import hamming, moscow_day_start_gps_s, words_from_st
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppSolution
 from companion.gnss.systems import System
-from companion.gnss.timescale import gps_minus_utc_s, gps_to_unix_s, week_tow
+from companion.gnss.timescale import GPS_MINUS_BDT_S, gps_minus_utc_s, gps_to_bdt_s, gps_to_unix_s, week_tow
+from simvehicle.navmsg import d1_subframe, inav_sfrbx_words, inav_word
 from simvehicle.receiver import RawObservation, prstd_index
 
 LNAV_PREAMBLE = 0x8B
@@ -320,6 +324,11 @@ def sfrbx(system: int, prn: int, words: list[int], freq_id: int = 0) -> bytes:
 
 GLONASS_STRING_S = 2.0
 GLONASS_FRAME_S = 30.0
+INAV_PAGE_S = 2.0
+INAV_SUBFRAME_S = 30.0
+# E1-B nominal subframe (Galileo OS SIS ICD Table 42): page slot -> the ephemeris word types sent
+INAV_SUBFRAME_WORDS = {0: 2, 1: 4, 10: 1, 11: 3, 12: 5}
+D1_SUBFRAME_S = 6.0
 
 
 def _put_sm(value: float, lsb: float, hi: int, n: int) -> int:
@@ -386,7 +395,46 @@ class UbxEncoder:
         return out
 
     def _subframes(self, raw: RawObservation) -> list[bytes]:
-        return self._gps_subframes(raw) + self._glonass_strings(raw)
+        return self._gps_subframes(raw) + self._glonass_strings(raw) + self._galileo_pages(raw) + (
+            self._beidou_subframes(raw))
+
+    def _completed(self, raw: RawObservation, system: System, period_s: float,
+                   offset_s: float = 0.0) -> tuple[float, list[tuple[int, int]]]:
+        """The start of the ``period_s`` message slot (boundaries at ``offset_s`` + k·period) that
+        ended since the previous epoch, with (prn, store row) of each ``system`` satellite tracked
+        through all of it; (nan, []) when none ended."""
+        t0, t1 = self._last_t_gps_s, raw.t_gps_s
+        if t0 is None:
+            return math.nan, []
+        edge = math.floor((t1 - offset_s) / period_s) * period_s + offset_s
+        if edge <= t0:
+            return math.nan, []
+        start = edge - period_s
+        ep = raw.epoch
+        lock = raw.lock_ms if raw.lock_ms is not None else np.zeros(ep.n)
+        sel = (ep.system == system) & (lock >= (t1 - start) * 1000.0)
+        rows = self.store.select(ep.system[sel], ep.prn[sel], np.full(int(sel.sum()), start))
+        return start, [(p, r) for p, r in zip(ep.prn[sel].tolist(), rows.tolist(), strict=True)
+                       if 0 <= r < self.store.n_kepler]
+
+    def _galileo_pages(self, raw: RawObservation) -> list[bytes]:
+        """The I/NAV page pair (2 s) each tracked Galileo satellite just completed."""
+        start, sats = self._completed(raw, System.GALILEO, INAV_PAGE_S)
+        if not sats:
+            return []
+        wtype = INAV_SUBFRAME_WORDS.get(int(round(start % INAV_SUBFRAME_S / INAV_PAGE_S)), 0)
+        return [sfrbx(int(System.GALILEO), prn,
+                      inav_sfrbx_words(inav_word(self.store.kepler[row], wtype, start))) for prn, row in sats]
+
+    def _beidou_subframes(self, raw: RawObservation) -> list[bytes]:
+        """The D1 subframe (6 s of BDT) each tracked BeiDou satellite just completed."""
+        start, sats = self._completed(raw, System.BEIDOU, D1_SUBFRAME_S, GPS_MINUS_BDT_S)
+        if not sats:
+            return []
+        t_bdt = gps_to_bdt_s(start)
+        subframe = int(round(t_bdt / D1_SUBFRAME_S)) % 5 + 1
+        return [sfrbx(int(System.BEIDOU), prn, d1_subframe(self.store.kepler[row], subframe, t_bdt))
+                for prn, row in sats]
 
     def _glonass_strings(self, raw: RawObservation) -> list[bytes]:
         """Strings 1-4 (the ephemeris) of each GLONASS satellite tracked through the string that
@@ -425,24 +473,14 @@ class UbxEncoder:
         return best
 
     def _gps_subframes(self, raw: RawObservation) -> list[bytes]:
-        t0, t1 = self._last_t_gps_s, raw.t_gps_s
-        if t0 is None:
+        start, sats = self._completed(raw, System.GPS, SUBFRAME_S)
+        if not sats:
             return []
-        edge = math.floor(t1 / SUBFRAME_S) * SUBFRAME_S  # the latest subframe boundary
-        if edge <= t0:
-            return []
-        week, tow_next = week_tow(edge)
+        week, tow_next = week_tow(start + SUBFRAME_S)
         subframe = int(round(tow_next / SUBFRAME_S) - 1) % 5 + 1  # the one that just ended
-        ep = raw.epoch
-        lock = raw.lock_ms if raw.lock_ms is not None else np.zeros(ep.n)
-        gps = (ep.system == System.GPS) & (lock >= (t1 - edge + SUBFRAME_S) * 1000.0)
         out: list[bytes] = []
-        if not gps.any():
-            return out
-        rows = self.store.select(ep.system[gps], ep.prn[gps], np.full(int(gps.sum()), edge - SUBFRAME_S))
-        for prn, row in zip(ep.prn[gps].tolist(), rows.tolist(), strict=True):
-            if 0 <= row < self.store.n_kepler:
-                words = lnav_subframe(self.store.kepler[row], subframe, tow_next, week, self.store.klobuchar)
-                if words is not None:
-                    out.append(sfrbx(int(System.GPS), prn, words))
+        for prn, row in sats:
+            words = lnav_subframe(self.store.kepler[row], subframe, tow_next, week, self.store.klobuchar)
+            if words is not None:
+                out.append(sfrbx(int(System.GPS), prn, words))
         return out

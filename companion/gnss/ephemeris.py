@@ -18,6 +18,7 @@ them once per epoch, or once a second and move them with their velocity in betwe
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 from typing import NamedTuple
 
@@ -74,6 +75,7 @@ class KeplerEphemeris:
     tgd_s: float = 0.0  # group delay of the observed signal (GPS TGD, GAL BGD E1/E5b, BDS TGD1)
     iode: int = 0
     health: int = 0  # 0 = healthy
+    accuracy_m: float = math.inf  # broadcast 1σ range accuracy (Galileo SISA, BeiDou URA); inf: not given
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,7 +135,7 @@ def _kepler_tables(ephs: list[KeplerEphemeris]) -> dict[str, np.ndarray]:
         node0=t["omega0_rad"] - we * t["toe_sow_s"],
         node_rate=np.where(geo, t["omega_dot_rad_s"], t["omega_dot_rad_s"] - we),
     )
-    names = [n for n in t if n not in ("system", "prn", "iode", "health")]
+    names = [n for n in t if n not in ("system", "prn", "iode", "health", "accuracy_m")]
     t["_matrix"] = np.vstack([t[n] for n in names])
     t["_names"] = names  # type: ignore[assignment]
     return t

@@ -10,7 +10,11 @@ attributes) in arrival order; opening a file, serial port or TCP stream is the c
   ``freqId − 7``), C/N0; elevation/azimuth from the latest ``NAV-SAT``.
 * ``RXM-SFRBX`` GPS L1 C/A -> :class:`KeplerEphemeris` and Klobuchar (:mod:`companion.gnss.lnav`);
   GLONASS L1OF strings 1-4 -> :class:`GlonassEphemeris` (:mod:`companion.gnss.glonav`, the channel
-  from ``freqId``); Galileo/BeiDou frames are counted (``sfrbx_not_decoded_<system>``), not decoded.
+  from ``freqId``); Galileo I/NAV page pairs (word types 1-5) -> :class:`KeplerEphemeris`
+  (:mod:`companion.gnss.inav`, CRC-24Q checked); BeiDou D1 subframes 1-3 -> :class:`KeplerEphemeris`
+  (:mod:`companion.gnss.bdsnav`, BCH parity checked; the GEO satellites' D2 counted,
+  ``beidou_d2_not_decoded``); other systems (SBAS, QZSS) counted as ``sfrbx_not_decoded_<system>``.
+  Every refusal has a named counter (``<system>_bad_crc``, ``beidou_bad_parity``, ...).
 * ``NAV-PVT`` -> :class:`ReceiverPvt` (the receiver's own solution with its accuracies).
 """
 
@@ -25,7 +29,9 @@ import numpy as np
 
 from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ
 from companion.gnss.ephemeris import GlonassEphemeris, KeplerEphemeris
+from companion.gnss.bdsnav import BeidouDecoder
 from companion.gnss.glonav import GlonassDecoder
+from companion.gnss.inav import GalileoDecoder
 from companion.gnss.lnav import LnavDecoder
 from companion.gnss.observations import GnssEpoch, make_epoch
 from companion.gnss.systems import SHORT_NAME, System
@@ -63,6 +69,8 @@ class UbxDecoder:
     counters: Counter[str] = field(default_factory=Counter)
     lnav: LnavDecoder = field(default_factory=LnavDecoder)
     glonav: GlonassDecoder = field(default_factory=GlonassDecoder)
+    inav: GalileoDecoder = field(default_factory=GalileoDecoder)
+    bdsnav: BeidouDecoder = field(default_factory=BeidouDecoder)
     week: int | None = None  # from the last RAWX
     t_gps_s: float | None = None  # the last RAWX's receiver time (resolves LNAV's 10-bit week)
     _sat: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)  # el, az (deg)
@@ -149,6 +157,8 @@ class UbxDecoder:
         gnss = int(m.gnssId)
         if gnss == System.GLONASS:
             return self._glonass(m)
+        if gnss in (System.GALILEO, System.BEIDOU):
+            return self._galileo_beidou(m, System(gnss))
         if gnss != System.GPS:
             name = SHORT_NAME.get(System(gnss), str(gnss)) if gnss in KNOWN_SYSTEMS else str(gnss)
             self.counters[f"sfrbx_not_decoded_{name}"] += 1
@@ -160,6 +170,22 @@ class UbxDecoder:
             return None
         eph = self.lnav.add(int(m.svId), words, t_ref)
         for k, v in self.lnav.counters.items():
+            self.counters[k] = v
+        return eph
+
+    def _galileo_beidou(self, m: Any, system: System) -> KeplerEphemeris | None:
+        words = [int(getattr(m, f"dwrd_{i:02d}")) for i in range(1, int(m.numWords) + 1)]
+        eph: KeplerEphemeris | None
+        if system == System.BEIDOU:
+            eph = self.bdsnav.add(int(m.svId), words)
+            counters = self.bdsnav.counters
+        else:
+            if self.t_gps_s is None:
+                self.counters["sfrbx_before_week"] += 1  # toe is a second of week: the week from RAWX
+                return None
+            eph = self.inav.add(int(m.svId), words, self.t_gps_s)
+            counters = self.inav.counters
+        for k, v in counters.items():
             self.counters[k] = v
         return eph
 
