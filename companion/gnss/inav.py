@@ -107,7 +107,7 @@ def word_from_parts(even: int, odd: int) -> int:
 @dataclass
 class GalileoDecoder:
     """Collects I/NAV words per satellite; ``add`` returns an ephemeris once word types 1-4 of one
-    IODnav and a word type 5 are in (then starts again)."""
+    IODnav and a word type 5 are in (then starts again: each set with the word 5 received with it)."""
 
     words: dict[int, dict[int, int]] = field(default_factory=dict)
     counters: dict[str, int] = field(default_factory=dict)
@@ -147,8 +147,7 @@ class GalileoDecoder:
         if not all(k in got for k in range(1, 6)):
             return None
         eph = decode_ephemeris(svid, [got[k] for k in range(1, 6)], t_ref_gps_s)
-        for k in range(1, 5):
-            del got[k]
+        got.clear()  # the next set waits for its own word 5 (health and group delay as sent with it)
         self._count("galileo_ephemerides" if eph is not None else "galileo_svid_mismatch")
         return eph
 
