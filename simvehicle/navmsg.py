@@ -13,6 +13,7 @@ resolution (``simvehicle.constellation`` quantises to it), a value out of a fiel
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 from companion.gnss import bdsnav, inav
 from companion.gnss.ephemeris import KeplerEphemeris
@@ -23,7 +24,7 @@ WEEK_S = 604800.0
 GST_WEEK_OFFSET = 1024  # GST week 0 = GPS week 1024
 
 
-def _fields(eph: KeplerEphemeris, names: dict[str, object]) -> dict[str, float]:
+def _fields(eph: KeplerEphemeris, names: Iterable[str]) -> dict[str, float]:
     return {n: float(getattr(eph, n)) for n in names if hasattr(eph, n)}
 
 

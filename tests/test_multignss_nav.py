@@ -129,7 +129,8 @@ def _random_ephemeris(rng: np.random.Generator, system: System, prn: int) -> Kep
         acc = inav.sisa_m(int(rng.integers(0, 126)))
     else:
         toe = bdt_to_gps_s((week - 1356) * 604800.0 + toe_sow)
-        tgd, iode, health = int(rng.integers(-512, 512)) * 1e-10, int(rng.integers(0, 32)), int(rng.integers(0, 2))
+        tgd, iode = int(rng.integers(-512, 512)) * 1e-10, int(rng.integers(0, 32))
+        health = int(rng.integers(0, 2))
         acc = bdsnav.ura_m(int(rng.integers(0, 16)))
     return KeplerEphemeris(system=int(system), prn=prn, toe_gps_s=toe, toc_gps_s=toe, toe_sow_s=toe_sow,
                            tgd_s=tgd, iode=iode, health=health, accuracy_m=acc, **v)
@@ -159,7 +160,8 @@ def test_every_field_round_trips_at_its_icd_resolution():
     gal, bds = GalileoDecoder(), BeidouDecoder()
     pairs = []
     for i in range(60):
-        for system, rt, dec in ((System.GALILEO, _gal_round_trip, gal), (System.BEIDOU, _bds_round_trip, bds)):
+        for system, rt, dec in ((System.GALILEO, _gal_round_trip, gal),
+                                (System.BEIDOU, _bds_round_trip, bds)):
             prn = int(rng.integers(6, 37))
             eph = _random_ephemeris(rng, system, prn)
             t = eph.toe_gps_s + float(rng.uniform(-7000.0, 7000.0))
@@ -171,7 +173,8 @@ def test_every_field_round_trips_at_its_icd_resolution():
         got = rt(eph, eph.toe_gps_s + 600.0, dec)
         assert got == eph
         pairs.append((eph, got))
-    assert len(pairs) == len(kep) >= 2 * 2 * 24 and gal.counters["galileo_ephemerides"] == bds.counters["beidou_ephemerides"]
+    assert len(pairs) == len(kep) >= 2 * 2 * 24
+    assert gal.counters["galileo_ephemerides"] == bds.counters["beidou_ephemerides"]
     a, b = (EphemerisStore([p[j] for p in pairs]) for j in (0, 1))
     sysv = np.array([p[0].system for p in pairs])
     prn = np.array([p[0].prn for p in pairs])
@@ -259,7 +262,8 @@ def multi_flight(tmp_path_factory):
 
     mission = load_mission("default", "canyon")
     cfg = sim_config_for(mission)
-    cfg = dataclasses.replace(cfg, receiver=dataclasses.replace(cfg.receiver, systems=("GPS", "GALILEO", "BEIDOU")))
+    receiver = dataclasses.replace(cfg.receiver, systems=("GPS", "GALILEO", "BEIDOU"))
+    cfg = dataclasses.replace(cfg, receiver=receiver)
     sim = SimVehicle(mission, 4, 0, cfg)
     enc = UbxEncoder(sim.gnss.store)
     raws, frames, ticks = [], [], []
@@ -298,12 +302,11 @@ def test_a_gps_galileo_beidou_ubx_log_is_solved_with_its_galileo_and_beidou_sate
     assert all(e in sim.gnss.store.kepler for e in ephs)  # exactly the simulator's broadcast sets
     for system in (System.GALILEO, System.BEIDOU):
         assert len({e.prn for e in ephs if e.system == system}) >= 4
-    used = {s_: np.array([int(((ep.system == s_) & sol.used).sum()) for ep, sol in zip(data.epochs, series.solutions,
-                                                                                         strict=True)])
+    pairs = list(zip(data.epochs, series.solutions, strict=True))
+    used = {s_: np.array([int(((ep.system == s_) & sol.used).sum()) for ep, sol in pairs])
             for s_ in (System.GPS, System.GALILEO, System.BEIDOU)}
     assert np.median(used[System.GALILEO]) >= 3 and np.median(used[System.BEIDOU]) >= 3
-    err = np.array([np.linalg.norm(sol.p_ecef_m - truth[ep.t_gps_s]) for ep, sol in zip(data.epochs, series.solutions,
-                                                                                          strict=True)])
+    err = np.array([np.linalg.norm(sol.p_ecef_m - truth[ep.t_gps_s]) for ep, sol in pairs])
     # the receiver's own fixes (the same solver, every ephemeris it flies) set the expectation
     own = np.array([np.linalg.norm(r.solution.p_ecef_m - truth[r.epoch.t_gps_s]) for r in raws
                     if r.solution is not None])

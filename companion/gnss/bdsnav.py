@@ -26,6 +26,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from companion.gnss.ephemeris import KeplerEphemeris
 from companion.gnss.navbits import SC, BitReader, Field, from_words, get_all, split
 from companion.gnss.navbits import field as f
@@ -132,7 +134,7 @@ class BeidouDecoder:
         if r.u(0, 11) != PREAMBLE:
             self._count("beidou_bad_preamble")
             return None
-        if bool(is_beidou_geo(prn)):
+        if bool(is_beidou_geo(np.array([prn]))[0]):
             self._count("beidou_d2_not_decoded")  # GEO: the D2 message (subframe 1 in ten pages)
             return None
         sid = r.raw(FRAID)

@@ -47,7 +47,8 @@ EPHEMERIS_WORDS: dict[int, dict[str, Field]] = {
     3: {"omega_dot_rad_s": f(16, 24, 2.0**-43 * SC, True), "delta_n_rad_s": f(40, 16, 2.0**-43 * SC, True),
         "cuc_rad": f(56, 16, 2.0**-29, True), "cus_rad": f(72, 16, 2.0**-29, True),
         "crc_m": f(88, 16, 2.0**-5, True), "crs_m": f(104, 16, 2.0**-5, True)},
-    4: {"cic_rad": f(22, 16, 2.0**-29, True), "cis_rad": f(38, 16, 2.0**-29, True), "toc_sow_s": f(54, 14, 60.0),
+    4: {"cic_rad": f(22, 16, 2.0**-29, True), "cis_rad": f(38, 16, 2.0**-29, True),
+        "toc_sow_s": f(54, 14, 60.0),
         "af0_s": f(68, 31, 2.0**-34, True), "af1_s_s": f(99, 21, 2.0**-46, True),
         "af2_s_s2": f(120, 6, 2.0**-59, True)},
 }

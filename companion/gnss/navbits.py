@@ -61,7 +61,8 @@ class BitWriter:
         self.v, self.n = 0, n_bits
 
     def put(self, pos: int, n: int, value: int) -> None:
-        self.v = (self.v & ~(((1 << n) - 1) << (self.n - pos - n))) | ((value & ((1 << n) - 1)) << (self.n - pos - n))
+        shift, mask = self.n - pos - n, (1 << n) - 1
+        self.v = (self.v & ~(mask << shift)) | ((value & mask) << shift)
 
     def set_raw(self, f: Field, q: int) -> None:
         w = f.width

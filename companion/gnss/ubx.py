@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from companion.gnss.bdsnav import BeidouDecoder
 from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ
 from companion.gnss.ephemeris import GlonassEphemeris, KeplerEphemeris
-from companion.gnss.bdsnav import BeidouDecoder
 from companion.gnss.glonav import GlonassDecoder
 from companion.gnss.inav import GalileoDecoder
 from companion.gnss.lnav import LnavDecoder
