@@ -20,7 +20,8 @@ __all__ = ["open_stream", "read_ubx_file", "ubx_items"]
 
 def read_ubx_file(path: Path) -> Any:
     """A UBX log as a ``GnssInput``: RAWX epochs with satellite states from the SFRBX ephemerides
-    decoded in the same log (GPS and GLONASS: other systems' observations are counted as no_ephemeris)."""
+    decoded in the same log (GPS, GLONASS, Galileo, BeiDou MEO/IGSO: observations of satellites
+    without one, e.g. the BeiDou GEOs, are counted as no_ephemeris)."""
     from gcs_tools.gnss.sources import GnssInput
 
     dec = UbxDecoder()
@@ -41,7 +42,7 @@ def read_ubx_file(path: Path) -> Any:
     if not epochs:
         raise UserError(f"{path}: no RXM-RAWX epochs (counters: {dict(dec.counters) or 'none'})")
     if not ephs and not glo:
-        raise UserError(f"{path}: no GPS or GLONASS ephemeris (RXM-SFRBX) to place the satellites")
+        raise UserError(f"{path}: no ephemeris (RXM-SFRBX: GPS, GLONASS, Galileo, BeiDou) to place satellites")
     store = EphemerisStore(ephs, glo, dec.klobuchar)
     rejected: Counter[str] = Counter(dec.counters)
     out = []
