@@ -42,7 +42,7 @@ def read_ubx_file(path: Path) -> Any:
     if not epochs:
         raise UserError(f"{path}: no RXM-RAWX epochs (counters: {dict(dec.counters) or 'none'})")
     if not ephs and not glo:
-        raise UserError(f"{path}: no ephemeris (RXM-SFRBX: GPS, GLONASS, Galileo, BeiDou) to place satellites")
+        raise UserError(f"{path}: no ephemeris (RXM-SFRBX of GPS, GLONASS, Galileo, BeiDou) in the log")
     store = EphemerisStore(ephs, glo, dec.klobuchar)
     rejected: Counter[str] = Counter(dec.counters)
     out = []
