@@ -7,7 +7,8 @@ resolution (``simvehicle.constellation`` quantises to it), a value out of a fiel
   TOW), split into the even (112 bits) and odd (16 bits) page parts with the CRC-24Q of the pair: eight
   SFRBX words. Not sent: the ionosphere (ai0-2 zero), almanacs, GST-UTC, SAR, OSNMA (zero bits).
 * BeiDou D1: subframes 1-5 (4-5 carry only their header: no almanac) with every BCH(15,11) parity
-  bit: ten SFRBX words of 30 bits. Not sent: the Klobuchar set (zero), TGD2 (zero).
+  bit: ten SFRBX words of 30 bits. Not sent: the Klobuchar set (zero), TGD2 (zero). D2 (GEO):
+  subframe 1's ten pages (``d2_pages``; the simulated sky has no GEO satellite, the tests use it).
 """
 
 from __future__ import annotations
@@ -98,3 +99,31 @@ def d1_subframe(eph: KeplerEphemeris, subframe: int, t_bdt_s: float) -> list[int
         set_all(w, bdsnav.ORBIT_3, _fields(eph, bdsnav.ORBIT_3))
         w.set_raw(bdsnav.TOE_LSB, toe_sow & 0x7FFF)
     return [bdsnav.with_parity(k, x) for k, x in enumerate(to_words(w.v, 10, 30))]
+
+
+def d2_pages(eph: KeplerEphemeris, t_bdt_s: float) -> list[list[int]]:
+    """The ten pages of D2 subframe 1 (a GEO satellite's ephemeris; page 2, the ionosphere grid, left
+    empty) of a cycle starting at BDT ``t_bdt_s``, 3 s apart: ten lists of ten 30-bit words."""
+    whole = BitWriter(bdsnav.SUBFRAME_BITS * bdsnav.D2_PAGES)
+    set_all(whole, bdsnav.D2_FIELDS, _fields(eph, bdsnav.D2_FIELDS))
+    whole.set(bdsnav.D2_TOE, eph.toe_sow_s)
+    whole.set_raw(bdsnav.D2_AODE, eph.iode)
+    week = int(math.floor(t_bdt_s / WEEK_S))
+    out = []
+    for page in range(1, bdsnav.D2_PAGES + 1):
+        shift = bdsnav.SUBFRAME_BITS * (bdsnav.D2_PAGES - page)
+        w = BitWriter(bdsnav.SUBFRAME_BITS)
+        w.v = (whole.v >> shift) & ((1 << bdsnav.SUBFRAME_BITS) - 1)
+        w.put(0, 11, bdsnav.PREAMBLE)
+        w.set_raw(bdsnav.FRAID, 1)
+        w.set_raw(bdsnav.SOW, int(round(t_bdt_s + 3.0 * (page - 1) - week * WEEK_S)) % int(WEEK_S))
+        w.set_raw(bdsnav.PNUM, page)
+        if page == 1:
+            w.set_raw(bdsnav.D2_SATH1, eph.health & 1)
+            w.set_raw(bdsnav.D2_AODC, eph.iode)
+            w.set_raw(bdsnav.D2_URAI, bdsnav.ura_index(eph.accuracy_m))
+            w.set_raw(bdsnav.D2_WN, week % 8192)
+            w.set(bdsnav.D2_TOC, gps_to_bdt_s(eph.toc_gps_s) % WEEK_S)
+            w.set(bdsnav.D2_TGD1, eph.tgd_s)
+        out.append([bdsnav.with_parity(k, x) for k, x in enumerate(to_words(w.v, 10, 30))])
+    return out

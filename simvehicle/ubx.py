@@ -22,7 +22,7 @@ in bits 31..30. GLONASS strings 1-4 of every 30 s frame; Galileo E1-B I/NAV page
 (``simvehicle.navmsg``: word types 2, 4 / 1, 3, 5 in the slots of the ICD's nominal subframe, word
 type 0 in the others); BeiDou D1 subframes 1-5 every 6 s of BDT (4-5 without almanac). Not emitted:
 GPS subframe 5 and the other subframe 4 pages (page 18 goes out in every subframe 4 slot, not once
-in 12.5 minutes), GLONASS strings 5-15, the BeiDou GEO satellites' D2 (the simulated sky has none).
+in 12.5 minutes), GLONASS strings 5-15, BeiDou D2 (the simulated sky has no GEO satellite).
 """
 
 from __future__ import annotations

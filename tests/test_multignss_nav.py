@@ -15,10 +15,11 @@ from companion.gnss.bdsnav import BeidouDecoder
 from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris
 from companion.gnss.geometry import geodetic_to_ecef
 from companion.gnss.inav import GalileoDecoder
+from companion.gnss.navbits import from_words
 from companion.gnss.systems import System
 from companion.gnss.timescale import bdt_to_gps_s, gps_to_bdt_s
 from simvehicle.constellation import constellation
-from simvehicle.navmsg import d1_subframe, inav_sfrbx_words, inav_word
+from simvehicle.navmsg import d1_subframe, d2_pages, inav_sfrbx_words, inav_word
 
 # Real broadcast data, for a cross-check against decoders written by others:
 # Galileo E01, GST week 1014, I/NAV word types 1-5 (128-bit words) as GNSSTk's test data holds them
@@ -59,6 +60,30 @@ BDS_C10_SWIFT = {
     "sqrt_a_m05": 6.49363065910e03, "omega0_rad": 1.69518318499, "omega_dot_rad_s": -2.13366030409e-09,
     "omega_rad": -2.75182959435, "i0_rad": 9.20638105072e-01, "idot_rad_s": -9.93255658799e-10,
     "af0_s": -1.81104638614e-04, "af1_s_s": -2.85078627371e-11, "af2_s_s2": 0.0, "tgd_s": 5.6e-09,
+}
+
+# BeiDou C01 (GEO), BDT week 810: D2 subframe 1 pages 1-10 (GNSSTk's D2NavTestDataDef.hpp), with the
+# values GNSSTk's PNBBDSD2NavDataFactory decodes from them
+BDS_C01_D2_PAGES = (
+ (0x38901541,0x18004027,0x00654A7C,0x2303C840,0x39B015EA,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x180C8114,0x304FB0CA,0x1CDC2F71,0x380755B6,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x1818C079,0x00000000,0x000DC13C,0x3C88153A,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x18250AEB,0x0E4C00E9,0x01F8D7D5,0x373C55E4,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x18317E86,0x31E9F0F9,0x047BD7C7,0x3C015552,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x183D90BD,0x35CA72D3,0x2EB5040A,0x3FFE55F9,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x1849CEA7,0x3002B543,0x14600143,0x304F55C6,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x185621FD,0x301EAF12,0x3C0CB863,0x002515CC,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x18626153,0x005173D2,0x0146E114,0x238B552F,0x1555554B,0x1555554B,0x1555554B,0x1555554B,0x1555554B),
+ (0x38901541,0x186E8E6B,0x08A8AA59,0x2AAAAAB4,0x2AAAAAB4,0x2AAAAAB4,0x2AAAAAB4,0x2AAAAAB4,0x2AAAAAB4,0x2AAAAAB4),
+)
+BDS_C01_GNSSTK = {
+    "cus_rad": -7.9278834164142608643e-06, "cuc_rad": -1.6712117940187454224e-05, "crc_m": 2.45484375e02,
+    "crs_m": -5.05640625e02, "cic_rad": -2.10944563e-07, "cis_rad": 8.05594027e-08,
+    "m0_rad": -1.916523214107468176, "delta_n_rad_s": -6.54670127e-10, "e": 6.1676383484154939651e-04,
+    "sqrt_a_m05": math.sqrt(4.2164428143935076892e07), "omega0_rad": -3.1259749468667630268,
+    "i0_rad": 8.6141192515002310004e-02, "omega_rad": 1.3510960489050376498,
+    "omega_dot_rad_s": 1.69721355e-09, "idot_rad_s": 3.95730769e-10, "af0_s": -2.7373037301003932953e-04,
+    "af1_s_s": 3.71924713e-11, "af2_s_s2": 0.0,
 }
 
 
@@ -105,10 +130,31 @@ def test_real_beidou_subframes_pass_bch_and_decode_to_swift_navigations_values()
         assert d1_subframe(eph, k + 1, t_bdt + 6.0 * k) == list(BDS_C10_SUBFRAMES[k])
 
 
+def test_real_beidou_geo_pages_decode_to_the_values_gnsstk_publishes():
+    """The D2 message of a GEO satellite: subframe 1's pages 1, 3-10 (page 2 is the ionosphere grid)."""
+    dec = BeidouDecoder()
+    got = [dec.add(1, page) for page in BDS_C01_D2_PAGES]
+    assert got[:9] == [None] * 9 and dec.counters == {"beidou_d2_other": 1, "beidou_ephemerides": 1}
+    eph = got[9]
+    for name, value in BDS_C01_GNSSTK.items():
+        assert getattr(eph, name) == pytest.approx(value, rel=1e-8, abs=1e-21), name
+    assert eph.toe_gps_s == bdt_to_gps_s(810 * 604800.0 + 345600.0) and eph.toe_sow_s == 345600.0
+    # written back: words 1-4 of pages 3-9, parity included, bit for bit
+    mine = d2_pages(eph, 810 * 604800.0 + 345600.0)
+    assert BeidouDecoder().add(1, mine[0]) is None
+    for p in range(2, 9):
+        bits = from_words(mine[p], 30) ^ from_words(BDS_C01_D2_PAGES[p], 30)
+        assert bits >> 180 == 0, p + 1  # words 1-4 equal (word 5 ends in reserved bits, then parity)
+    # the same pages on a MEO/IGSO PRN are not D1 subframes 1-3
+    assert [BeidouDecoder().add(30, page) for page in BDS_C01_D2_PAGES] == [None] * 10
+
+
 def _random_ephemeris(rng: np.random.Generator, system: System, prn: int) -> KeplerEphemeris:
     """An ephemeris with every field a random value on its message's grid and within its range."""
     if system == System.GALILEO:
         tables = [inav.EPHEMERIS_WORDS[k] for k in (1, 2, 3, 4)]
+    elif prn <= 5:  # a BeiDou GEO: D2
+        tables = [bdsnav.D2_FIELDS]
     else:
         tables = [bdsnav.CLOCK, bdsnav.ORBIT_2, bdsnav.ORBIT_3]
     v: dict[str, float] = {}
@@ -146,6 +192,10 @@ def _gal_round_trip(eph: KeplerEphemeris, t_gps_s: float, dec: GalileoDecoder) -
 def _bds_round_trip(eph: KeplerEphemeris, t_gps_s: float, dec: BeidouDecoder) -> KeplerEphemeris | None:
     t_bdt = math.floor(gps_to_bdt_s(t_gps_s) / 30.0) * 30.0  # a frame start
     out = None
+    if eph.prn <= 5:
+        for page in d2_pages(eph, t_bdt):
+            out = dec.add(eph.prn, page) or out
+        return out
     for k in (1, 2, 3, 4, 5):
         out = dec.add(eph.prn, d1_subframe(eph, k, t_bdt + 6.0 * (k - 1))) or out
     return out
@@ -162,7 +212,7 @@ def test_every_field_round_trips_at_its_icd_resolution():
     for i in range(60):
         for system, rt, dec in ((System.GALILEO, _gal_round_trip, gal),
                                 (System.BEIDOU, _bds_round_trip, bds)):
-            prn = int(rng.integers(6, 37))
+            prn = int(rng.integers(1, 37))
             eph = _random_ephemeris(rng, system, prn)
             t = eph.toe_gps_s + float(rng.uniform(-7000.0, 7000.0))
             got = rt(eph, t, dec)
@@ -244,7 +294,7 @@ def test_hostile_words_are_counted_never_raised_and_anything_decoded_is_finite()
     for key in ("galileo_bad_length", "galileo_bad_crc", "galileo_alert_page", "galileo_other_word",
                 "galileo_bad_even_odd"):
         assert gal.counters.get(key, 0) > 0, key
-    for key in ("beidou_bad_length", "beidou_bad_parity", "beidou_other_subframe", "beidou_d2_not_decoded",
+    for key in ("beidou_bad_length", "beidou_bad_parity", "beidou_other_subframe", "beidou_d2_other",
                 "beidou_inconsistent"):
         assert bds.counters.get(key, 0) > 0, key
     fields = [f.name for f in dataclasses.fields(KeplerEphemeris) if f.name != "accuracy_m"]

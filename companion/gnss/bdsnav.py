@@ -1,4 +1,5 @@
-"""BeiDou D1 navigation message (B1I, MEO/IGSO satellites) -> broadcast ephemeris (BeiDou ICD B1I 3.0, 5.2).
+"""BeiDou D1 (B1I, MEO/IGSO) and D2 (GEO) navigation messages -> broadcast ephemeris (BeiDou ICD B1I 3.0,
+5.2 and 5.3).
 
 Input: a u-blox RXM-SFRBX of BeiDou B1I: a subframe's ten 30-bit words in bits 29..0 of each word
 (u-blox integration manuals, "BeiDou": the words in the order received, the top two bits padding),
@@ -16,8 +17,13 @@ subframe, parity bits included, as RTKLIB's): toe/toc 2³ s (BDT), a0 2⁻³³ s
 TGD1 0.1 ns (the B1I group delay, ``tgd_s``), √A 2⁻¹⁹, e 2⁻³³, M0/Ω0/i0/ω 2⁻³¹ semicircles, Δn/Ω̇/IDOT
 2⁻⁴³ semicircles/s, Cuc/Cus/Cic/Cis 2⁻³¹ rad, Crc/Crs 2⁻⁶ m; SatH1 the health (0 good), AODE the issue
 of data (``iode``), URAI -> ``accuracy_m`` (the GPS URA table, inf for 15). Times: BDT week (13 bits)
-and seconds, BDT = GPS − 14 s. Not decoded: subframes 4-5 (almanac), the BeiDou Klobuchar set, and
-the D2 message of the GEO satellites (C01-C05, C59-C63: counted as ``beidou_d2_not_decoded``).
+and seconds, BDT = GPS − 14 s.
+
+The GEO satellites (C01-C05, C59-C63) send D2 instead: subframe 1's pages 1, 3-10 (one page every 3 s,
+a 30 s cycle; page 2 is the ionosphere grid) carry the same fields at the same scale factors, several
+split across pages (``D2_FIELDS``: the pages concatenated); SOW 3 s per page apart and toc = toe are
+their consistency test. Not decoded: D1 subframes 4-5 and D2 subframes 2-5 (almanac, integrity,
+time offsets; counted ``beidou_other_subframe`` / ``beidou_d2_other``), the BeiDou Klobuchar set, TGD2.
 """
 
 from __future__ import annotations
@@ -77,6 +83,45 @@ ORBIT_3: dict[str, Field] = {
 }
 
 
+# D2 (GEO): subframe 1's ten pages (3 s apart) concatenated, page p at bits 300·(p − 1) onwards; the
+# fields as RTKLIB's ``decode_bds_d2`` reads them (ICD 5.3.3), several split across pages
+D2_PAGES = 10
+
+
+def _d2(page: int, bit: int, n: int) -> tuple[int, int]:
+    return SUBFRAME_BITS * (page - 1) + bit, n
+
+
+PNUM = f(42, 4)
+D2_SATH1, D2_AODC, D2_URAI, D2_WN = f(46, 1), f(47, 5), f(60, 4), f(64, 13)
+D2_TOC = split((77, 5), (90, 12), lsb=8.0)
+D2_TGD1 = f(102, 10, 1e-10, True)
+D2_AODE = split(_d2(4, 91, 5))
+D2_TOE = split(_d2(7, 80, 2), _d2(7, 90, 15), lsb=8.0)
+D2_FIELDS: dict[str, Field] = {
+    "af0_s": split(_d2(3, 100, 12), _d2(3, 120, 12), lsb=2.0**-33, signed=True),
+    "af1_s_s": split(_d2(3, 132, 4), _d2(4, 46, 6), _d2(4, 60, 12), lsb=2.0**-50, signed=True),
+    "af2_s_s2": split(_d2(4, 72, 10), _d2(4, 90, 1), lsb=2.0**-66, signed=True),
+    "delta_n_rad_s": split(_d2(4, 96, 16), lsb=2.0**-43 * SC, signed=True),
+    "cuc_rad": split(_d2(4, 120, 14), _d2(5, 46, 4), lsb=2.0**-31, signed=True),
+    "m0_rad": split(_d2(5, 50, 2), _d2(5, 60, 22), _d2(5, 90, 8), lsb=2.0**-31 * SC, signed=True),
+    "cus_rad": split(_d2(5, 98, 14), _d2(5, 120, 4), lsb=2.0**-31, signed=True),
+    "e": split(_d2(5, 124, 10), _d2(6, 46, 6), _d2(6, 60, 16), lsb=2.0**-33),
+    "sqrt_a_m05": split(_d2(6, 76, 6), _d2(6, 90, 22), _d2(6, 120, 4), lsb=2.0**-19),
+    "cic_rad": split(_d2(6, 124, 10), _d2(7, 46, 6), _d2(7, 60, 2), lsb=2.0**-31, signed=True),
+    "cis_rad": split(_d2(7, 62, 18), lsb=2.0**-31, signed=True),
+    "i0_rad": split(_d2(7, 105, 7), _d2(7, 120, 14), _d2(8, 46, 6), _d2(8, 60, 5), lsb=2.0**-31 * SC,
+                    signed=True),
+    "crc_m": split(_d2(8, 65, 17), _d2(8, 90, 1), lsb=2.0**-6, signed=True),
+    "crs_m": split(_d2(8, 91, 18), lsb=2.0**-6, signed=True),
+    "omega_dot_rad_s": split(_d2(8, 109, 3), _d2(8, 120, 16), _d2(9, 46, 5), lsb=2.0**-43 * SC, signed=True),
+    "omega0_rad": split(_d2(9, 51, 1), _d2(9, 60, 22), _d2(9, 90, 9), lsb=2.0**-31 * SC, signed=True),
+    "omega_rad": split(_d2(9, 99, 13), _d2(9, 120, 14), _d2(10, 46, 5), lsb=2.0**-31 * SC, signed=True),
+    "idot_rad_s": split(_d2(10, 51, 1), _d2(10, 60, 13), lsb=2.0**-43 * SC, signed=True),
+}
+D2_EPHEMERIS_PAGES = (1, 3, 4, 5, 6, 7, 8, 9, 10)  # page 2: the ionosphere grid
+
+
 def ura_m(index: int) -> float:
     return URA_M[index] if 0 <= index < len(URA_M) else math.inf
 
@@ -112,10 +157,11 @@ def with_parity(k: int, word: int) -> int:
 
 @dataclass
 class BeidouDecoder:
-    """Collects D1 subframes 1-3 per satellite; ``add`` returns an ephemeris once three of one frame
-    agree."""
+    """Collects D1 subframes 1-3 (MEO/IGSO) or D2 subframe 1 pages 1, 3-10 (GEO) per satellite;
+    ``add`` returns an ephemeris once those of one frame (D2: one 30 s page cycle) agree."""
 
     frames: dict[int, dict[int, int]] = field(default_factory=dict)
+    d2_pages: dict[int, dict[int, int]] = field(default_factory=dict)
     counters: dict[str, int] = field(default_factory=dict)
 
     def _count(self, name: str) -> None:
@@ -134,10 +180,9 @@ class BeidouDecoder:
         if r.u(0, 11) != PREAMBLE:
             self._count("beidou_bad_preamble")
             return None
-        if bool(is_beidou_geo(np.array([prn]))[0]):
-            self._count("beidou_d2_not_decoded")  # GEO: the D2 message (subframe 1 in ten pages)
-            return None
         sid = r.raw(FRAID)
+        if bool(is_beidou_geo(np.array([prn]))[0]):
+            return self._d2_page(prn, sid, r)
         if sid not in (1, 2, 3):
             self._count("beidou_other_subframe")  # 4-5: almanac, time offsets; 0, 6, 7: not defined
             return None
@@ -155,6 +200,54 @@ class BeidouDecoder:
         return eph
 
 
+    def _d2_page(self, prn: int, sid: int, r: BitReader) -> KeplerEphemeris | None:
+        """A GEO satellite's D2 subframe: pages 1, 3-10 of subframe 1 make an ephemeris."""
+        page = r.raw(PNUM)
+        if sid != 1 or page not in D2_EPHEMERIS_PAGES:
+            self._count("beidou_d2_other")  # subframes 2-5 (integrity, almanac) and page 2 (ionosphere)
+            return None
+        got = self.d2_pages.setdefault(prn, {})
+        got[page] = r.v
+        if len(got) < len(D2_EPHEMERIS_PAGES):
+            return None
+        eph = decode_d2_ephemeris(prn, [got[p] for p in D2_EPHEMERIS_PAGES])
+        if eph is None:
+            self._count("beidou_inconsistent")
+            del got[min(got, key=lambda k: BitReader(got[k], SUBFRAME_BITS).raw(SOW))]
+            return None
+        self.d2_pages[prn] = {}
+        self._count("beidou_ephemerides")
+        return eph
+
+
+def _ephemeris(prn: int, week: int, sow1: int, toe_sow: float, clock_orbit: dict[str, float], tgd_s: float,
+               iode: int, health: int, urai: int) -> KeplerEphemeris:
+    """The ephemeris from the decoded values (BDT week and SOW of the first subframe/page)."""
+    toe_bdt = week * WEEK_S + toe_sow
+    toe_bdt += WEEK_S * round((week * WEEK_S + sow1 - toe_bdt) / WEEK_S)  # toe in the next/previous week
+    toe = bdt_to_gps_s(toe_bdt)
+    return KeplerEphemeris(
+        system=int(System.BEIDOU), prn=int(prn), toe_gps_s=toe, toc_gps_s=toe, toe_sow_s=toe_sow,
+        tgd_s=tgd_s, iode=iode, health=health, accuracy_m=ura_m(urai), **clock_orbit)
+
+
+def decode_d2_ephemeris(prn: int, pages: Sequence[int]) -> KeplerEphemeris | None:
+    """D2 subframe 1 pages 1, 3-10 (300-bit integers) -> ephemeris; None unless they are one
+    cycle's (SOW 3 s per page apart) and toc = toe."""
+    r = [BitReader(x, SUBFRAME_BITS) for x in pages]
+    sow1 = r[0].raw(SOW)
+    if any(rp.raw(SOW) != sow1 + 3 * (p - 1) for rp, p in zip(r, D2_EPHEMERIS_PAGES, strict=True)):
+        return None
+    whole = {1: pages[0], 2: 0} | dict(zip(D2_EPHEMERIS_PAGES[1:], pages[1:], strict=True))
+    cat = BitReader(from_words([whole[p] for p in range(1, D2_PAGES + 1)], SUBFRAME_BITS),
+                    SUBFRAME_BITS * D2_PAGES)
+    toe_sow = cat.get(D2_TOE)
+    if r[0].get(D2_TOC) != toe_sow:
+        return None
+    return _ephemeris(prn, r[0].raw(D2_WN), sow1, toe_sow, get_all(cat, D2_FIELDS), r[0].get(D2_TGD1),
+                      cat.raw(D2_AODE), r[0].raw(D2_SATH1), r[0].raw(D2_URAI))
+
+
 def decode_ephemeris(prn: int, sf1: int, sf2: int, sf3: int) -> KeplerEphemeris | None:
     """Subframes 1-3 (300-bit integers) -> ephemeris; None unless they are one frame's (SOW 6 s
     apart) and toc = toe."""
@@ -165,11 +258,5 @@ def decode_ephemeris(prn: int, sf1: int, sf2: int, sf3: int) -> KeplerEphemeris 
     toe_sow = float(((b.raw(TOE_MSB) << 15) | c.raw(TOE_LSB)) * 8)
     if a.get(TOC) != toe_sow:
         return None
-    week = a.raw(WN)
-    toe_bdt = week * WEEK_S + toe_sow
-    toe_bdt += WEEK_S * round((week * WEEK_S + sow1 - toe_bdt) / WEEK_S)  # toe in the next/previous week
     v = get_all(a, CLOCK) | get_all(b, ORBIT_2) | get_all(c, ORBIT_3)
-    toe = bdt_to_gps_s(toe_bdt)
-    return KeplerEphemeris(
-        system=int(System.BEIDOU), prn=int(prn), toe_gps_s=toe, toc_gps_s=toe, toe_sow_s=toe_sow,
-        tgd_s=a.get(TGD1), iode=a.raw(AODE), health=a.raw(SATH1), accuracy_m=ura_m(a.raw(URAI)), **v)
+    return _ephemeris(prn, a.raw(WN), sow1, toe_sow, v, a.get(TGD1), a.raw(AODE), a.raw(SATH1), a.raw(URAI))

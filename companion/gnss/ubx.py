@@ -12,8 +12,8 @@ attributes) in arrival order; opening a file, serial port or TCP stream is the c
   GLONASS L1OF strings 1-4 -> :class:`GlonassEphemeris` (:mod:`companion.gnss.glonav`, the channel
   from ``freqId``); Galileo I/NAV page pairs (word types 1-5) -> :class:`KeplerEphemeris`
   (:mod:`companion.gnss.inav`, CRC-24Q checked); BeiDou D1 subframes 1-3 -> :class:`KeplerEphemeris`
-  (:mod:`companion.gnss.bdsnav`, BCH parity checked; the GEO satellites' D2 counted,
-  ``beidou_d2_not_decoded``); other systems (SBAS, QZSS) counted as ``sfrbx_not_decoded_<system>``.
+  (:mod:`companion.gnss.bdsnav`, BCH parity checked; the GEO satellites' D2 subframe 1 pages
+  alike); other systems (SBAS, QZSS) counted as ``sfrbx_not_decoded_<system>``.
   Every refusal has a named counter (``<system>_bad_crc``, ``beidou_bad_parity``, ...).
 * ``NAV-PVT`` -> :class:`ReceiverPvt` (the receiver's own solution with its accuracies).
 """

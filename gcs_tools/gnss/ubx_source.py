@@ -20,8 +20,8 @@ __all__ = ["open_stream", "read_ubx_file", "ubx_items"]
 
 def read_ubx_file(path: Path) -> Any:
     """A UBX log as a ``GnssInput``: RAWX epochs with satellite states from the SFRBX ephemerides
-    decoded in the same log (GPS, GLONASS, Galileo, BeiDou MEO/IGSO: observations of satellites
-    without one, e.g. the BeiDou GEOs, are counted as no_ephemeris)."""
+    decoded in the same log (GPS, GLONASS, Galileo, BeiDou: observations of satellites without one
+    are counted as no_ephemeris)."""
     from gcs_tools.gnss.sources import GnssInput
 
     dec = UbxDecoder()
