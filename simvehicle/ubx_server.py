@@ -10,6 +10,7 @@ also goes to a log file (``receiver.ubx``), which ``beliefnav gnss spp`` reads.
 from __future__ import annotations
 
 import errno
+import math
 import socket
 from dataclasses import asdict
 from pathlib import Path
@@ -141,7 +142,7 @@ class ReceiverStream:
                 "systems": list(self.gnss.cfg.systems),
                 "rate_hz": self.gnss.cfg.rate_hz,
                 "ephemerides": {
-                    "kepler": [asdict(e) for e in store.kepler],
+                    "kepler": [_kepler_json(e) for e in store.kepler],
                     "glonass": [asdict(g) for g in store.glonass],
                     "klobuchar": None
                     if store.klobuchar is None
@@ -160,6 +161,13 @@ class ReceiverStream:
         self.server.close()
 
 
+def _kepler_json(e: KeplerEphemeris) -> dict[str, Any]:
+    """A Keplerian ephemeris as strict JSON (an accuracy not given, inf, as null)."""
+    d = asdict(e)
+    d["accuracy_m"] = d["accuracy_m"] if math.isfinite(d["accuracy_m"]) else None
+    return d
+
+
 def store_from_info(info: dict[str, Any]) -> EphemerisStore:
     """The ``EphemerisStore`` of a ``receiver.json``'s ``ephemerides`` (its consumer's side)."""
     eph = info["ephemerides"]
@@ -169,7 +177,8 @@ def store_from_info(info: dict[str, Any]) -> EphemerisStore:
         fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in g.items()}
         glonass.append(GlonassEphemeris(**fields))
     return EphemerisStore(
-        [KeplerEphemeris(**e) for e in eph["kepler"]],
+        [KeplerEphemeris(**{**e, "accuracy_m": math.inf if e.get("accuracy_m") is None else e["accuracy_m"]})
+         for e in eph["kepler"]],
         glonass,
         None if klob is None else (np.array(klob[0]), np.array(klob[1])),
     )

@@ -361,3 +361,17 @@ def test_a_gps_galileo_beidou_ubx_log_is_solved_with_its_galileo_and_beidou_sate
     own = np.array([np.linalg.norm(r.solution.p_ecef_m - truth[r.epoch.t_gps_s]) for r in raws
                     if r.solution is not None])
     assert np.median(err) < min(np.median(own) + 0.5, 5.0)
+
+
+def test_receiver_json_carries_the_accuracy_as_strict_json():
+    """``receiver.json`` (the simulated receiver's sky for its consumers) stays strict JSON: an accuracy
+    not given (inf) is written as null and read back as inf; a given one as itself."""
+    import json
+
+    from simvehicle.ubx_server import _kepler_json, store_from_info
+
+    kep, _ = constellation(1.4e9, 1.4e9 + 3600.0, (System.GALILEO,))
+    ephs = [kep[0], dataclasses.replace(kep[1], accuracy_m=inav.sisa_m(107))]
+    text = json.dumps({"ephemerides": {"kepler": [_kepler_json(e) for e in ephs], "glonass": []}},
+                      allow_nan=False)
+    assert store_from_info(json.loads(text)).kepler == ephs
