@@ -315,10 +315,12 @@ def navpvt(
     return frame(NAV, PVT, payload)
 
 
-def sfrbx(system: int, prn: int, words: list[int], freq_id: int = 0) -> bytes:
-    """RXM-SFRBX (version 2) of one navigation message subframe (GLONASS: ``freq_id`` = channel + 7)."""
+def sfrbx(system: int, prn: int, words: list[int], freq_id: int = 0, sig_id: int = 0) -> bytes:
+    """RXM-SFRBX (version 2) of one navigation message subframe (GLONASS: ``freq_id`` = channel + 7;
+    ``sig_id`` the u-blox signal id: Galileo E1-B 1, the others' L1 signals 0)."""
     return frame(
-        RXM, SFRBX, struct.pack(f"<BBBBBBBx{len(words)}I", system, prn, 0, freq_id, len(words), 0, 2, *words)
+        RXM, SFRBX,
+        struct.pack(f"<BBBBBBBx{len(words)}I", system, prn, sig_id, freq_id, len(words), 0, 2, *words),
     )
 
 
@@ -329,6 +331,7 @@ INAV_SUBFRAME_S = 30.0
 # E1-B nominal subframe (Galileo OS SIS ICD Table 42): page slot -> the ephemeris word types sent
 INAV_SUBFRAME_WORDS = {0: 2, 1: 4, 10: 1, 11: 3, 12: 5}
 D1_SUBFRAME_S = 6.0
+GALILEO_E1B_SIG_ID = 1  # u-blox signal identifiers: Galileo E1 C 0, E1 B 1
 
 
 def _put_sm(value: float, lsb: float, hi: int, n: int) -> int:
@@ -424,7 +427,8 @@ class UbxEncoder:
             return []
         wtype = INAV_SUBFRAME_WORDS.get(int(round(start % INAV_SUBFRAME_S / INAV_PAGE_S)), 0)
         return [sfrbx(int(System.GALILEO), prn,
-                      inav_sfrbx_words(inav_word(self.store.kepler[row], wtype, start))) for prn, row in sats]
+                      inav_sfrbx_words(inav_word(self.store.kepler[row], wtype, start)), sig_id=GALILEO_E1B_SIG_ID)
+                for prn, row in sats]
 
     def _beidou_subframes(self, raw: RawObservation) -> list[bytes]:
         """The D1 subframe (6 s of BDT) each tracked BeiDou satellite just completed."""
