@@ -426,9 +426,9 @@ class UbxEncoder:
         if not sats:
             return []
         wtype = INAV_SUBFRAME_WORDS.get(int(round(start % INAV_SUBFRAME_S / INAV_PAGE_S)), 0)
-        return [sfrbx(int(System.GALILEO), prn,
-                      inav_sfrbx_words(inav_word(self.store.kepler[row], wtype, start)), sig_id=GALILEO_E1B_SIG_ID)
-                for prn, row in sats]
+        words = [inav_sfrbx_words(inav_word(self.store.kepler[row], wtype, start)) for _, row in sats]
+        return [sfrbx(int(System.GALILEO), prn, w, sig_id=GALILEO_E1B_SIG_ID)
+                for (prn, _), w in zip(sats, words, strict=True)]
 
     def _beidou_subframes(self, raw: RawObservation) -> list[bytes]:
         """The D1 subframe (6 s of BDT) each tracked BeiDou satellite just completed."""
