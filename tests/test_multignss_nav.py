@@ -267,6 +267,11 @@ def test_every_single_bit_flip_is_caught_and_counted():
             assert dec_b.add(21, w) is None
             n += 1
     assert dec_b.counters == {"beidou_bad_parity": n} and n == 285
+    for bit in range(19, 30):  # word 1's first 11 bits (the preamble) sit outside the code words
+        w = list(sf)
+        w[0] ^= 1 << bit
+        assert dec_b.add(21, w) is None
+    assert dec_b.counters["beidou_bad_preamble"] == 11
 
 
 def test_hostile_words_are_counted_never_raised_and_anything_decoded_is_finite():
