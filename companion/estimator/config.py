@@ -177,6 +177,16 @@ class EstimatorConfig:
     # The learned noise's time constant (s): a receiver's noise level changes slowly, and a running
     # centre over ~50 fixes at 5 Hz is known to ~15 % (2 s would leave it ±30 %).
     gnss_noise_tau_s: float = 10.0
+    # (ours) The std (m) of a Gauss-Markov multipath bias (correlation time bias_tau_s) assumed in the fixes of a
+    # receiver that reports no accuracy (0: off, the default, bit-identical). The learned noise above is what is
+    # white from one fix to the next, and a correlated bias changes between fixes too: a 1.2 m bias of 3 s
+    # correlation adds 0.26 m at 5 Hz to a 0.1 m white noise (model.bias_share_of_noise_m2). With this > 0 that
+    # share is removed (in variance, before the floor), so the learned R is the white part a reported accuracy
+    # states and the bias is left to the bias state, as the innovation-matching estimate R = C_y − H P Hᵀ leaves
+    # the modelled process noise out. 1.2 = sigma_bias_max_m, the filter's own multipath model. Measured on
+    # real IMU flights (docs/estimator.md, "The noise of a receiver that states none"): it helps the belief
+    # methods a little and makes naive, which has no bias to put that share in, worse: off by default.
+    sigma_gnss_unreported_bias_m: float = 0.0
 
     # --- the receiver's velocity (Doppler), fused beside its position (docs/estimator.md)
     # 1σ noise of a velocity component where the receiver reports no speed accuracy, and the floor
@@ -276,7 +286,7 @@ class EstimatorConfig:
         if not (0.0 < self.vb_forgetting <= 1.0 and self.vb_iterations >= 1 and self.vb_prior_dof > 0.0):
             raise ValueError("vb_forgetting, vb_iterations, vb_prior_dof: need 0 < ρ ≤ 1, ≥ 1, > 0")
         for name in ("future_tolerance_s", "lambda_smooth_1_m", "lambda_bias_level",
-                     "sigma_bias_max_per_gnss_std",
+                     "sigma_bias_max_per_gnss_std", "sigma_gnss_unreported_bias_m",
                      "eta_first_order", "sigma_acc_bias0_m_s2", "sigma_acc_bias_rw_m_s2_sqrt_s",
                      "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):

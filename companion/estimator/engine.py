@@ -175,6 +175,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         h, d = cfg.sigma_gnss_velocity_m_s**2, cfg.sigma_gnss_velocity_vertical_m_s**2
         self._rv_default: Vec3 = (h, h, d)
         self._noise_tau_s = cfg.gnss_noise_tau_s
+        self._noise_bias_m = cfg.sigma_gnss_unreported_bias_m
         self._decay_cache: dict[int, tuple[float, float, float, float, float, float, float]] = {}
         self._reset_var = (cfg.sigma_bias0_m**2, cfg.gnss_reset_sigma_vel_m_s**2,
                            (cfg.sigma_acc_bias0_m_s2**2, cfg.sigma_acc_ned0_m_s2**2))
@@ -455,12 +456,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         spread_h, spread_v = sh * sh - 0.5 * (hph[0][0] + hph[1][1]), sv * sv - hph[2][2]
         r_nom = r_given
         if r_given[0] == math.inf or r_given[2] == math.inf:  # not reported: the receiver's own noise
-            nh, nv = prev.noise_h_m / _SCALE_H, prev.noise_v_m / _SCALE_V
-            nh, nv = nh * nh, nv * nv
-            r0, r2 = self._r_nominal[0], self._r_nominal[2]
-            h = r_given[0] if r_given[0] != math.inf else (nh if nh > r0 else r0)
-            v = r_given[2] if r_given[2] != math.inf else (nv if nv > r2 else r2)
-            r_nom = (h, h, v)
+            h, v = self.learned_r_m2(prev)
+            r_nom = (r_given[0] if r_given[0] != math.inf else h,) * 2 + (r_given[2] if r_given[2] != math.inf else v,)
         floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
         floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
         bias_m2 = (x_prior[6] * x_prior[6] + P_prior[6, 6], x_prior[7] * x_prior[7] + P_prior[7, 7],
@@ -480,6 +477,19 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             nis_v = nis_vh / n_h if n_h else math.nan
         return (x_prior, P_prior, hph, y, s0, terms, R, ratio, passes, r_nom, floor_h, floor_v, nis_v,
                 vel_ok, vel_ratio, k_max)
+
+    def learned_r_m2(self, entry: Fusion) -> tuple[float, float]:
+        """(horizontal, vertical) R (m², per axis) of a fix without a reported accuracy fused after ``entry``:
+        the receiver's learned noise, less the share a Gauss-Markov bias of ``sigma_gnss_unreported_bias_m``
+        adds to it (``model.bias_share_of_noise_m2`` over ``entry``'s block; 0: none), floored at the
+        configured ``sigma_gnss_*``."""
+        nh, nv = entry.noise_h_m / _SCALE_H, entry.noise_v_m / _SCALE_V
+        nh, nv = nh * nh, nv * nv
+        if self._noise_bias_m > 0.0 and entry.block_s > 0.0:
+            share = model.bias_share_of_noise_m2(self._noise_bias_m, entry.block_s, self._tau_s)
+            nh, nv = nh - share, nv - share
+        r0, r2 = self._r_nominal[0], self._r_nominal[2]
+        return (nh if nh > r0 else r0), (nv if nv > r2 else r2)
 
     def _gnss_consistent(self, prev: Fusion, z: Vec3, zv: Vec3, rv: Vec3, r_nom: Vec3, T: float) -> bool:
         """The receiver agrees with itself since the previous fix: its horizontal position change over

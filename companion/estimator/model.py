@@ -78,6 +78,16 @@ def bias_decay(T_s: float, cfg: EstimatorConfig) -> float:
     return math.exp(-T_s / cfg.bias_tau_s)
 
 
+def bias_share_of_noise_m2(sigma_bias_m: float, T_s: float, tau_s: float) -> float:
+    """The variance a Gauss-Markov bias of std ``sigma_bias_m`` and correlation time ``tau_s`` adds to the
+    receiver-noise statistic (the second difference of fixes ``T_s`` apart, normalised to one fix's white
+    noise: ``(z₂ − 2 z₁ + z₀) / √6``): ``σ² (1 − α)(3 − α) / 3`` with ``α = e^(−T/τ)``, exact at a regular
+    fix rate (the statistic of ``FusionEngine``; tests/test_estimator_flyaway.py checks it on a simulated
+    bias)."""
+    a = math.exp(-T_s / tau_s)
+    return sigma_bias_m * sigma_bias_m * (1.0 - a) * (3.0 - a) / 3.0
+
+
 def rot_matrix(r9: Rot9 | np.ndarray) -> np.ndarray:
     return np.asarray(r9, dtype=float).reshape(3, 3)
 

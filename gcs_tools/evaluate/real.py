@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
+from companion.estimator.config import EstimatorConfig
 from gcs_tools.choices import seeds as parse_seeds
 from gcs_tools.evaluate import stats
 
@@ -60,6 +61,7 @@ class Job:
     rate_hz: float
     latency_ms: float | None
     methods: tuple[str, ...]
+    estimator: tuple[tuple[str, Any], ...] = ()  # EstimatorConfig fields replaced (--set estimator.FIELD=VALUE)
 
 
 def needs_map(method: str) -> bool:
@@ -85,12 +87,13 @@ def run_job(job: Job) -> list[dict[str, Any]]:
 
     opts = GnssErrorOptions(job.errors, rate_hz=job.rate_hz, accuracy=job.accuracy, latency_ms=job.latency_ms,
                             seed=job.seed)
+    config = estimator_config(job.estimator)
     base = {"flight": Path(job.flight).name, "errors": errors_label(job.errors), "accuracy": job.accuracy,
             "seed": job.seed}
     out: list[dict[str, Any]] = []
     raw: dict[str, Any] | None = None
     for method in job.methods:
-        s = core.replay(Path(job.flight), method, gnss=opts, rate_hz=10.0).summary
+        s = core.replay(Path(job.flight), method, gnss=opts, rate_hz=10.0, config=config).summary
         h = s["errors"]["truth"]["error_horizontal_m"]
         nav = s["navigator"]
         out.append({**base, "row": method, **{k: round(h[k], 4) for k in STATS},
@@ -104,6 +107,31 @@ def run_job(job: Job) -> list[dict[str, Any]]:
         h = raw[key]["error_horizontal_m"]
         out.append({**base, "row": row, **{k: round(h[k], 4) for k in STATS}})
     return out
+
+
+def estimator_config(fields: Sequence[tuple[str, Any]]) -> EstimatorConfig | None:
+    """The ``EstimatorConfig`` defaults with ``fields`` replaced (None when there are none: the defaults);
+    a bad field or value is a UserError."""
+    if not fields:
+        return None
+    from companion.mission.schema import build
+
+    return build(EstimatorConfig, dict(fields), "--set estimator")
+
+
+def parse_sets(texts: Sequence[str]) -> tuple[tuple[str, Any], ...]:
+    """``--set estimator.FIELD=VALUE`` options as (field, value) pairs, checked."""
+    from gcs_tools.evaluate.tuning import parse_override
+
+    out = []
+    for text in texts:
+        key, value = parse_override(text)
+        section, _, name = key.partition(".")
+        if section != "estimator":
+            raise UserError(f"--set {text!r}: only estimator.FIELD applies to replays of real flights")
+        out.append((name, value))
+    estimator_config(out)
+    return tuple(out)
 
 
 def _runs(runs: list[dict[str, Any]], row: str) -> dict[tuple[str, int], dict[str, Any]]:
@@ -248,9 +276,10 @@ def flight_dirs(corpus: Path | None, spec: str) -> tuple[str, list[Path]]:
 
 def run(flights: Sequence[Path], errors: Sequence[str], accuracies: Sequence[str], methods: Sequence[str],
         seeds: Sequence[int], rate_hz: float = 5.0, latency_ms: float | None = None, workers: int = 1,
-        split: str = "as listed") -> dict[str, Any]:
-    """The campaign's results (``conditions``: one table per errors × accuracy, and every run)."""
-    jobs = [Job(str(f), e, a, s, rate_hz, latency_ms, tuple(methods))
+        split: str = "as listed", estimator: tuple[tuple[str, Any], ...] = ()) -> dict[str, Any]:
+    """The campaign's results (``conditions``: one table per errors × accuracy, and every run);
+    ``estimator``: EstimatorConfig fields replaced for every method."""
+    jobs = [Job(str(f), e, a, s, rate_hz, latency_ms, tuple(methods), estimator)
             for e in errors for a in accuracies for f in flights for s in seeds]
     t0 = time.perf_counter()
     if workers > 1:
@@ -272,6 +301,7 @@ def run(flights: Sequence[Path], errors: Sequence[str], accuracies: Sequence[str
                      "errors": [errors_label(e) for e in errors],
                      "accuracy": list(accuracies), "methods": list(methods), "seeds": list(seeds),
                      "rate_hz": rate_hz, "latency_ms": latency_ms, "runs": len(jobs) * len(methods),
+                     "estimator": dict(estimator),
                      "wall_s": time.perf_counter() - t0,
                      "bootstrap": {"seed": BOOTSTRAP_SEED, "resamples": 2000, "strata": "flight"}},
         "conditions": conditions,
@@ -300,6 +330,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--latency-ms", type=float, default=None,
                    help="fixed latency (default: the model's process)")
     p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--set", action="append", default=[], metavar="estimator.FIELD=VALUE",
+                   help="replace an EstimatorConfig field for every method (repeatable; default: the defaults)")
     p.add_argument("--out", type=Path, default=Path("runs/real"))
     args = p.parse_args(argv)
     try:
@@ -310,6 +342,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if needs_map(m):
                 raise UserError(f"--methods {m}: needs a mission's map, and a real flight has none")
         split, flights = flight_dirs(args.corpus, args.flights)
+        estimator = parse_sets(args.set)
         errors = [e.strip() for e in args.errors.split(",") if e.strip()]
         accuracies = [a.strip() for a in args.accuracy.split(",") if a.strip()]
         for e in errors:
@@ -320,7 +353,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if "naive" not in methods:
             methods.insert(0, "naive")  # the reference of "vs naive"
         result = run(flights, errors, accuracies, methods, parse_seeds(args.seeds), args.rate_hz,
-                     args.latency_ms, max(1, args.workers), split)
+                     args.latency_ms, max(1, args.workers), split, estimator)
         out = ensure_out_dir(args.out)
     except UserError as exc:
         print(f"real: error: {exc}", file=sys.stderr)
