@@ -104,21 +104,26 @@ def glitch_stream():
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("learned", [False, True])
+@pytest.mark.parametrize("learned", [False, True, "minus-bias"])
 def test_gate_and_reset_are_exact_under_out_of_order_fusion(glitch_stream, method, learned):
     """Every decision (position and velocity gates, offsets held, accepted and returned, resets, the
     IMU/GNSS disagreement, the envelope, the learned R) is a function of the time-ordered fixes:
     random delays (up to 1.2 s) give the same decisions, counters and estimate as in-order
-    processing, with the receiver's velocity and with the R of a receiver that reports none."""
+    processing, with the receiver's velocity and with the R of a receiver that reports none (also
+    less a bias's share: sigma_gnss_unreported_bias_m)."""
     s, v = glitch_stream
     r = engine_module.LEARN if learned else None
+    cfg = dataclasses.replace(CFG, sigma_gnss_unreported_bias_m=1.2) if learned == "minus-bias" else CFG
     rng = np.random.default_rng(5)
     delay_us = rng.uniform(0.0, 1.2e6, size=len(s.fix_t_us)).astype(np.int64)
     delay_us[0] = 0
     arrival_us = np.minimum(s.fix_t_us + delay_us, s.t_us[-1])
-    late = drive(s, FusionEngine(CFG, method, context=OPEN_SKY), arrival_us, v, r)
-    ref = drive(s, FusionEngine(CFG, method, context=OPEN_SKY), s.fix_t_us.copy(), v, r)
+    late = drive(s, FusionEngine(cfg, method, context=OPEN_SKY), arrival_us, v, r)
+    ref = drive(s, FusionEngine(cfg, method, context=OPEN_SKY), s.fix_t_us.copy(), v, r)
     assert late.counts["gnss_out_of_order"] > 50
+    if learned == "minus-bias":  # the share removed somewhere (the learned noise above the floor)
+        plain = FusionEngine(CFG, method, context=OPEN_SKY)
+        assert any(ref.learned_r_m2(f)[0] < plain.learned_r_m2(f)[0] for f in ref.fusions)
     names = ("gnss_rejected_innovation", "gnss_resets", "gnss_offsets", "gnss_offset_returns", "gnss_fused",
              "gnss_vel_fused", "gnss_vel_rejected_innovation", "imu_gnss_disagreements",
              "envelope_violations")

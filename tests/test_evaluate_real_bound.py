@@ -48,6 +48,18 @@ def test_white_noise_averages_down_and_an_outlier_is_gated():
     assert med[0] > med[1]  # without a gate the 300 m fix drags the mean for the rest of the window
 
 
+def test_a_huber_update_bounds_an_outlier_pull_and_is_the_kalman_update_inside_its_threshold():
+    rng = np.random.default_rng(1)
+    err = rng.normal(0.0, 5.0, (400, 2))
+    r = np.full((3, 400), 25.0)
+    args = (np.full(3, 0.01), np.full(3, 10.0), np.zeros(3))
+    clean = rb.filter_medians(err, r, *args, np.array([0.0, 1e9, 1.5]))
+    assert clean[1] == clean[0] and clean[2] == pytest.approx(clean[0], rel=0.1)  # off / never / rarely active
+    err[200] = (300.0, 0.0)
+    plain, never, huber = rb.filter_medians(err, r, *args, np.array([0.0, 1e9, 1.5]))
+    assert never == plain and huber < 0.8 * plain  # the 300 m fix pulls by ~1.5σ / k, not 300 m / k
+
+
 def test_windows_are_the_campaign_fixes_and_the_best_filter_beats_raw(corpus):
     root, series = corpus
     wins = rb.windows(root, "a", str(series), [0, 1])
@@ -68,6 +80,7 @@ def test_windows_are_the_campaign_fixes_and_the_best_filter_beats_raw(corpus):
         med = np.mean([  # the reported best is the best of the grid, re-computed alone
             rb.filter_medians(e, _white(cfg[key], h, accuracy)[None], *one)[0] for e, h in wins])
         assert med == pytest.approx(b["best_filter_median_m"], rel=1e-12)
+        assert b["best_huber_filter"]["huber_c"] in rb.HUBER_C and b["best_huber_filter_median_m"] < b["raw_median_m"]
 
 
 def _white(w: float, h_acc: np.ndarray, accuracy: str) -> np.ndarray:
