@@ -85,7 +85,7 @@ def test_cli_writes_json_and_report_and_refuses_bad_arguments(flights: list[Path
                        (["--flights", str(a), "--seeds", "x"], "--seeds"),
                        (["--flights", str(a), "--methods", "map-beta"], "needs a mission's map"),
                        (["--flights", str(a), "--set", "gnss.rate_hz=1"], "only estimator.FIELD"),
-                       (["--flights", str(a), "--set", "estimator.sigma_gnss_unreported_bias_m=-1"], "must be"),
+                       (["--flights", str(a), "--set", "estimator.sigma_bias_max_m=-1"], "must be"),
                        (["--flights", str(a), "--set", "estimator.no_such_field=1"], "unknown key")):
         assert real.main([*bad, "--out", str(tmp_path / "bad")]) == 2
         err = capsys.readouterr().err.strip()
@@ -101,6 +101,7 @@ def test_an_estimator_override_changes_only_what_it_is_about(flights: list[Path]
     for fields in ((), (("sigma_gnss_unreported_bias_m", 1.2),)):
         res = real.run(*args, estimator=fields)
         assert res["campaign"]["estimator"] == dict(fields)
+        assert ("`sigma_gnss_unreported_bias_m` = 1.2" in real.markdown(res)) == bool(fields)
         runs[fields] = {(r["accuracy"], r["row"]): r["median"] for r in res["runs"]}
     default, changed = runs.values()
     assert all(changed[k] == default[k] for k in default if k[0] == "reported")

@@ -54,10 +54,19 @@ def test_a_huber_update_bounds_an_outlier_pull_and_is_the_kalman_update_inside_i
     r = np.full((3, 400), 25.0)
     args = (np.full(3, 0.01), np.full(3, 10.0), np.zeros(3))
     clean = rb.filter_medians(err, r, *args, np.array([0.0, 1e9, 1.5]))
-    assert clean[1] == clean[0] and clean[2] == pytest.approx(clean[0], rel=0.1)  # off / never / rarely active
+    # off / never active / rarely active
+    assert clean[1] == clean[0] and clean[2] == pytest.approx(clean[0], rel=0.1)
     err[200] = (300.0, 0.0)
     plain, never, huber = rb.filter_medians(err, r, *args, np.array([0.0, 1e9, 1.5]))
     assert never == plain and huber < 0.8 * plain  # the 300 m fix pulls by ~1.5σ / k, not 300 m / k
+
+
+def test_the_step_variance_is_the_largest_recent_jump_of_the_errors():
+    err = np.zeros((7, 2))
+    err[3:] = (6.0, 8.0)  # one 10 m jump at fix 3: 10²/2 = 50 m² per axis at fixes 3, 4, 5
+    np.testing.assert_array_equal(rb.step_var_m2(err), [0.0, 0.0, 0.0, 50.0, 50.0, 50.0, 0.0])
+    assert all("step_c" in c for c in rb.grid("none", "step")) and len(rb.grid("none", "step")) == 1600
+    assert not any("step_c" in c or "huber_c" in c for c in rb.grid("none"))
 
 
 def test_windows_are_the_campaign_fixes_and_the_best_filter_beats_raw(corpus):
@@ -80,7 +89,9 @@ def test_windows_are_the_campaign_fixes_and_the_best_filter_beats_raw(corpus):
         med = np.mean([  # the reported best is the best of the grid, re-computed alone
             rb.filter_medians(e, _white(cfg[key], h, accuracy)[None], *one)[0] for e, h in wins])
         assert med == pytest.approx(b["best_filter_median_m"], rel=1e-12)
-        assert b["best_huber_filter"]["huber_c"] in rb.HUBER_C and b["best_huber_filter_median_m"] < b["raw_median_m"]
+        assert b["best_huber_filter"]["huber_c"] in rb.HUBER_C
+        assert b["best_step_filter"]["step_c"] in rb.STEP_C
+        assert max(b["best_huber_filter_median_m"], b["best_step_filter_median_m"]) < b["raw_median_m"]
 
 
 def _white(w: float, h_acc: np.ndarray, accuracy: str) -> np.ndarray:

@@ -177,15 +177,16 @@ class EstimatorConfig:
     # The learned noise's time constant (s): a receiver's noise level changes slowly, and a running
     # centre over ~50 fixes at 5 Hz is known to ~15 % (2 s would leave it ±30 %).
     gnss_noise_tau_s: float = 10.0
-    # (ours) The std (m) of a Gauss-Markov multipath bias (correlation time bias_tau_s) assumed in the fixes of a
-    # receiver that reports no accuracy (0: off, the default, bit-identical). The learned noise above is what is
-    # white from one fix to the next, and a correlated bias changes between fixes too: a 1.2 m bias of 3 s
-    # correlation adds 0.26 m at 5 Hz to a 0.1 m white noise (model.bias_share_of_noise_m2). With this > 0 that
-    # share is removed (in variance, before the floor), so the learned R is the white part a reported accuracy
-    # states and the bias is left to the bias state, as the innovation-matching estimate R = C_y − H P Hᵀ leaves
-    # the modelled process noise out. 1.2 = sigma_bias_max_m, the filter's own multipath model. Measured on
-    # real IMU flights (docs/estimator.md, "The noise of a receiver that states none"): it helps the belief
-    # methods a little and makes naive, which has no bias to put that share in, worse: off by default.
+    # (ours) The std (m) of a Gauss-Markov multipath bias (correlation time bias_tau_s) assumed in the fixes
+    # of a receiver that reports no accuracy (0: off, the default, bit-identical). The learned noise above is
+    # what is white from one fix to the next, and a correlated bias changes between fixes too: a 1.2 m bias of
+    # 3 s correlation adds 0.26 m at 5 Hz to a 0.1 m white noise (model.bias_share_of_noise_m2). With this > 0
+    # that share is removed (in variance, before the floor), so the learned R is the white part a reported
+    # accuracy states and the bias is left to the bias state, as the innovation-matching estimate
+    # R = C_y − H P Hᵀ leaves the modelled process noise out. 1.2 = sigma_bias_max_m, the filter's own
+    # multipath model. Measured on real IMU flights (docs/estimator.md, "The noise of a receiver that states
+    # none"): it helps the belief methods a little and makes naive, which has no bias to put that share in,
+    # worse; on quad106 it lowers second-order's open-sky belief: off by default.
     sigma_gnss_unreported_bias_m: float = 0.0
 
     # --- the receiver's velocity (Doppler), fused beside its position (docs/estimator.md)

@@ -457,7 +457,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         r_nom = r_given
         if r_given[0] == math.inf or r_given[2] == math.inf:  # not reported: the receiver's own noise
             h, v = self.learned_r_m2(prev)
-            r_nom = (r_given[0] if r_given[0] != math.inf else h,) * 2 + (r_given[2] if r_given[2] != math.inf else v,)
+            h = r_given[0] if r_given[0] != math.inf else h
+            r_nom = (h, h, r_given[2] if r_given[2] != math.inf else v)
         floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
         floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
         bias_m2 = (x_prior[6] * x_prior[6] + P_prior[6, 6], x_prior[7] * x_prior[7] + P_prior[7, 7],

@@ -61,7 +61,7 @@ class Job:
     rate_hz: float
     latency_ms: float | None
     methods: tuple[str, ...]
-    estimator: tuple[tuple[str, Any], ...] = ()  # EstimatorConfig fields replaced (--set estimator.FIELD=VALUE)
+    estimator: tuple[tuple[str, Any], ...] = ()  # EstimatorConfig fields replaced (--set estimator.F=V)
 
 
 def needs_map(method: str) -> bool:
@@ -217,6 +217,9 @@ def markdown(result: dict[str, Any]) -> str:
         f"Seeds {info['seeds']}, fixes at {info['rate_hz']:g} Hz, latency: "
         f"{'the model process' if info['latency_ms'] is None else str(info['latency_ms']) + ' ms'}; "
         f"{info['runs']} replays in {info['wall_s']:.0f} s.",
+        *([f"Estimator fields replaced for every method: "
+           f"{', '.join(f'`{k}` = {v}' for k, v in info['estimator'].items())}."]
+          if info.get("estimator") else []),
         "", "Horizontal error against the RTK truth [m]: mean over runs (flight × seed) of each run's "
         "statistic, 95 % bootstrap interval (seeds resampled within flights). `− raw` = paired "
         "difference of run medians against the raw fixes at arrival; `vs naive` = ratio of the mean "
@@ -331,7 +334,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="fixed latency (default: the model's process)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--set", action="append", default=[], metavar="estimator.FIELD=VALUE",
-                   help="replace an EstimatorConfig field for every method (repeatable; default: the defaults)")
+                   help="replace an EstimatorConfig field for every method (repeatable)")
     p.add_argument("--out", type=Path, default=Path("runs/real"))
     args = p.parse_args(argv)
     try:

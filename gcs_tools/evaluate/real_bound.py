@@ -20,7 +20,11 @@ that estimate, whatever the IMU. This module takes the campaign's exact windows 
   chosen on the very windows it is scored on (so optimistic for that class);
 * ``best_huber_filter``: the same filters without a gate, their update robust instead (Huber: a fix whose
   normalised innovation ``m = √(NIS/2)`` exceeds ``huber_c`` is fused with its R × (m / ``huber_c``), so
-  its pull is bounded, not cut), the best of its grid in hindsight as well.
+  its pull is bounded, not cut), the best of its grid in hindsight as well;
+* ``best_step_filter``: the gated filters with each fix's white variance raised by ``step_c`` × the
+  largest squared step (per axis) of the errors over its last three fixes, ``(e_k − e_(k−1))²/2``: what
+  a receiver velocity tells of a fix, its jump against the motion (with a perfect velocity the jump of
+  the fix IS the jump of its error), used as an accuracy the receiver does not report.
 
 A filter with a perfect velocity and its parameters tuned on the windows it is scored on does at
 least as well as the same filter with a real velocity tuned elsewhere: when even ``best_filter``
@@ -49,6 +53,8 @@ SIGMA_B_M = (1.0, 3.0, 6.0, 10.0, 20.0)
 TAU_S = (2.0, 5.0, 10.0, 30.0, 100.0)
 GATE_SIGMA = (0.0, 2.0, 3.0, 4.0)
 HUBER_C = (0.5, 1.0, 1.5, 2.0)  # Huber's threshold on the normalised innovation (1.345: 95 % efficiency)
+STEP_C = (0.25, 0.5, 1.0, 2.0)  # the white variance added per squared step of the errors
+KINDS = ("gate", "huber", "step")
 PRIOR_M2 = 1e6  # the constant's prior variance (unknown)
 
 
@@ -109,19 +115,33 @@ def filter_medians(err: np.ndarray, r_m2: np.ndarray, sigma_b_m: np.ndarray, tau
     return np.median(np.hypot(est[:, 0], est[:, 1]), axis=0)
 
 
-def grid(accuracy: str, huber: bool = False) -> list[dict[str, float]]:
-    """The gated filters' grid, or (``huber``) the Huber filters' (no gate)."""
+def grid(accuracy: str, kind: str = "gate") -> list[dict[str, float]]:
+    """The grid of the gated filters (``gate``), of the Huber filters (``huber``: no gate) or of the
+    gated filters with the step term (``step``)."""
     white = [("sigma_w_m", w) for w in SIGMA_W_M] if accuracy == "none" else [("c_hacc", c) for c in C_HACC]
-    last = [("huber_c", c) for c in HUBER_C] if huber else [("gate_sigma", g) for g in GATE_SIGMA]
-    return [{white_key: w, "sigma_b_m": b, "tau_s": t, key: g}
-            for (white_key, w), b, t, (key, g) in itertools.product(white, SIGMA_B_M, TAU_S, last)]
+    extra = [("huber_c", c) for c in HUBER_C] if kind == "huber" else \
+        [("step_c", c) for c in STEP_C] if kind == "step" else [("step_c", 0.0)]
+    last = [("gate_sigma", 0.0)] if kind == "huber" else [("gate_sigma", g) for g in GATE_SIGMA]
+    out = []
+    for (white_key, w), b, t, (ek, ev), (lk, lv) in itertools.product(white, SIGMA_B_M, TAU_S, extra, last):
+        cfg = {white_key: w, "sigma_b_m": b, "tau_s": t, ek: ev, lk: lv}
+        out.append({k: v for k, v in cfg.items() if not (k == "step_c" and kind == "gate")})
+    return out
 
 
-def _best(wins: list[tuple[np.ndarray, np.ndarray]], accuracy: str, huber: bool) -> tuple[float, dict[str, float]]:
-    """(mean per-window median, parameters) of the best filter of ``grid(accuracy, huber)``."""
-    cfgs = grid(accuracy, huber)
+def step_var_m2(err: np.ndarray) -> np.ndarray:
+    """(n,) the largest of ``|e_j − e_(j−1)|² / 2`` over fixes j = k−2..k (0 before the first step)."""
+    d = np.zeros(len(err))
+    d[1:] = ((err[1:] - err[:-1]) ** 2).sum(axis=1) / 2.0
+    return np.maximum.reduce([d, np.r_[0.0, d[:-1]], np.r_[0.0, 0.0, d[:-2]]])
+
+
+def _best(wins: list[tuple[np.ndarray, np.ndarray]], accuracy: str, kind: str
+          ) -> tuple[float, dict[str, float]]:
+    """(mean per-window median, parameters) of the best filter of ``grid(accuracy, kind)``."""
+    cfgs = grid(accuracy, kind)
     arr = {k: np.array([c.get(k, 0.0) for c in cfgs]) for k in ("sigma_w_m", "c_hacc", "sigma_b_m", "tau_s",
-                                                                 "gate_sigma", "huber_c")}
+                                                                 "gate_sigma", "huber_c", "step_c")}
     medians = np.zeros(len(cfgs))
     for err, h_acc in wins:
         if accuracy == "none":
@@ -130,25 +150,26 @@ def _best(wins: list[tuple[np.ndarray, np.ndarray]], accuracy: str, huber: bool)
             if not np.isfinite(h_acc).all():
                 raise UserError("--accuracy reported: the error series has fixes without h_acc_m")
             r = (arr["c_hacc"][:, None] * h_acc[None, :]) ** 2
+        r = r + arr["step_c"][:, None] * step_var_m2(err)[None, :]
         medians += filter_medians(err, r, arr["sigma_b_m"], arr["tau_s"], arr["gate_sigma"],
-                                  arr["huber_c"] if huber else None)
+                                  arr["huber_c"] if kind == "huber" else None)
     medians /= len(wins)
     best = int(np.argmin(medians))
     return float(medians[best]), cfgs[best]
 
 
 def bound(wins: list[tuple[np.ndarray, np.ndarray]], accuracy: str) -> dict[str, Any]:
-    """``raw``, ``window_median``, the ``best_filter`` of ``grid(accuracy)`` and the
-    ``best_huber_filter`` of ``grid(accuracy, huber=True)`` (the module doc)."""
-    best, cfg = _best(wins, accuracy, False)
-    best_h, cfg_h = _best(wins, accuracy, True)
-    return {
+    """``raw``, ``window_median`` and the best filter of each kind of ``grid`` (``best_filter``: the
+    gated ones; ``best_huber_filter``, ``best_step_filter``; the module doc)."""
+    out: dict[str, Any] = {
         "accuracy": accuracy, "windows": len(wins), "filters": len(grid(accuracy)),
         "raw_median_m": float(np.mean([np.median(np.hypot(e[:, 0], e[:, 1])) for e, _ in wins])),
         "window_median_m": float(np.mean([np.hypot(*np.median(e, axis=0)) for e, _ in wins])),
-        "best_filter_median_m": best, "best_filter": cfg,
-        "best_huber_filter_median_m": best_h, "best_huber_filter": cfg_h,
     }
+    for kind in KINDS:
+        name = "best_filter" if kind == "gate" else f"best_{kind}_filter"
+        out[f"{name}_median_m"], out[name] = _best(wins, accuracy, kind)
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
