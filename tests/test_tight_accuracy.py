@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from companion.estimator.consistency import Fit
 from companion.tight import TightConfig
-from companion.tight.engine import Fit, TightEngine
+from companion.tight.engine import TightEngine
 from tests.test_tight import FRAME, _synthetic_epochs
 
 

@@ -23,6 +23,7 @@ from typing import Literal
 import numpy as np
 
 from companion.domain.physics import STANDARD_GRAVITY_M_S2
+from companion.estimator.consistency import check_accuracy_window
 
 
 @dataclass(frozen=True)
@@ -221,6 +222,15 @@ class EstimatorConfig:
     envelope_acc_max_m_s2: float = 20.0
     envelope_acc_window_s: float = 1.0
 
+    # --- reported accuracy (NavEstimate.cov_diag: GPS_INPUT's horiz/vert_accuracy, the ODOMETRY and
+    # VISION covariances): the position variances × max(1, NIS per degree of freedom of the fused fixes'
+    # N, E, D innovations over the last accuracy_window_s, exponentially weighted;
+    # companion.estimator.consistency, the tight filter's rule), the variance-of-unit-weight test a
+    # receiver applies to its reported accuracy: fix errors correlated over seconds (reflections), which
+    # the filter fuses as independent, leave P over-confident. A report only: the estimate is unchanged.
+    # 20 s: the tight filter's, several of the urban fix errors' 1-10 s correlation times. 0: P as it is.
+    accuracy_window_s: float = 20.0
+
     # --- IMU / GNSS disagreement (a wrong attitude input)
     # An exponentially weighted mean of the horizontal velocity innovations' NIS per degree of freedom, time
     # constant imu_gnss_disagree_tau_s, each NIS clipped at gate² per dof (position fixes alone cannot tell a
@@ -268,6 +278,7 @@ class EstimatorConfig:
             raise ValueError("theta_min, theta0, theta_max: need theta_min < theta0 < theta_max")
         if self.imu_gnss_disagree_off >= self.imu_gnss_disagree_on:
             raise ValueError("imu_gnss_disagree_off, imu_gnss_disagree_on: need off < on")
+        check_accuracy_window(self.accuracy_window_s)
         if self.history_s < 1.5:
             raise ValueError(f"history_s: must be >= 1.5 s, got {self.history_s}")
         k_max = min(self.r_learned_max_factor, self.r_learned_max_factor_unreported)

@@ -36,6 +36,7 @@ import numpy as np
 from companion.estimator import _core, methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
+from companion.estimator.consistency import Fit
 from companion.estimator.history import Integrals, finite3
 from companion.estimator.timeline import Timeline
 
@@ -109,6 +110,9 @@ class Fusion(NamedTuple):
     # the receiver's scale of the bias range in force from this entry (config.bias_scale of this fix's
     # nominal R): sigma_bias_m above includes it
     bias_scale: float = 1.0
+    # the fused fixes' consistency so far (N, E, D innovations over their S; the reported accuracy's
+    # inflation, ``consistency``)
+    fit: Fit = Fit()
 
 
 class Snapshot(NamedTuple):
@@ -196,6 +200,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         self._return_us = int(round(cfg.gnss_offset_return_s * 1e6))
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
+        self._window_s = cfg.accuracy_window_s
 
     @property
     def fusions(self) -> list[Fusion]:
@@ -356,8 +361,12 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                 if rel is not None:
                     fused_pos, (y_fused, R_fused, terms_fused) = True, rel
                     shift, acc, t_acc, n_ret, glitch, off, t_off = back, None, 0, n_ret + 1, False, None, 0
+        fit = prev.fit
         if fused_pos:
             x_post, P_post, nis = _update(x_prior, P_prior, y_fused, R_fused)
+            if self._window_s > 0.0:  # each axis' innovation over the S it was fused with
+                nu = np.array(y_fused) / np.sqrt(np.array((hph[0][0], hph[1][1], hph[2][2])) + R_fused)
+                fit = fit.add(t_us, _AXES, nu, self._window_s)
             state = self.method.update(prev.state, terms_fused)
             t_fused = t_us
             if shift is not None:
@@ -418,7 +427,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, acc, t_acc, n_ret,
             zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
-            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f)
+            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f, fit)
 
     def _outside_envelope(self, x: model.State) -> bool:
         """The speed of ``x`` outside the vehicle's envelope (horizontal or vertical)."""
@@ -577,6 +586,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
 _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
 _NAN3: Vec3 = (math.nan, math.nan, math.nan)
 _INF = math.inf
+_AXES = np.arange(3)  # the Fit channels of a fix: N, E, D
 # ``push_fix``'s R of a fix whose receiver reports no accuracy: learned (Fusion.scale_*_m); also per
 # component (an infinite horizontal or vertical variance: that one learned)
 LEARN: Vec3 = (math.inf, math.inf, math.inf)

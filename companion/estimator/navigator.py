@@ -25,6 +25,7 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEsti
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
+from companion.estimator.consistency import accuracy_inflation, reported_variances
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
@@ -232,11 +233,19 @@ class Navigator:
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
         a = snap.out  # one array for the state and the variances, handed out as views (one allocation)
-        est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], a[9:18], snap.beta, snap.nis, self.method,
+        var = reported_variances(a[9:18], self.accuracy_inflation())  # P's positions × k
+        est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
                           snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
                           snap.vel_ratio, snap.disagree)
         self._last = (snap, est)
         return est
+
+    def accuracy_inflation(self) -> float:
+        """The factor (≥ 1) on the position variances the estimates report: the fused fixes' NIS per
+        degree of freedom over the last ``accuracy_window_s`` (1 when that is 0, or before a fix;
+        ``companion.estimator.consistency``, the tight filter's rule)."""
+        entries = self.engine.entries
+        return accuracy_inflation(entries[-1].fit if entries else None, self.cfg.accuracy_window_s)
 
     def counters(self) -> dict[str, int]:
         """Samples used and rejected by reason (stable names)."""

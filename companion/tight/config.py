@@ -16,6 +16,8 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from companion.estimator.consistency import check_accuracy_window
+
 MOTIONS = ("imu", "constant-velocity")
 
 
@@ -153,9 +155,7 @@ class TightConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
-        if not (math.isfinite(self.accuracy_window_s) and self.accuracy_window_s >= 0.0):
-            raise ValueError(f"accuracy_window_s: must be a finite number >= 0, "
-                             f"got {self.accuracy_window_s!r}")
+        check_accuracy_window(self.accuracy_window_s)
         if not self.r_inflation_max >= 1.0:
             raise ValueError("r_inflation_max: must be >= 1")
         if not self.theta_min < 0.0 < self.theta_max:

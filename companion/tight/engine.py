@@ -33,6 +33,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from companion.estimator.consistency import Fit
 from companion.estimator.history import Integrals, mean_between
 from companion.estimator.model import BlockPropagator
 from companion.estimator.timeline import Timeline
@@ -46,7 +47,6 @@ from companion.tight.belief import LineOfSight, blocked_probability, map_theta, 
 from companion.tight.config import TightConfig
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
 
-FIT_W2_MIN = 1e-3  # a satellite's weight in Fit below this (gone for a few windows): forgotten
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
 SPP_INIT = SppConfig(raim=True)
@@ -96,42 +96,6 @@ class EpochInfo(NamedTuple):
     beta: np.ndarray | None = None
     y_m: np.ndarray | None = None
     used: np.ndarray | None = None
-
-
-class Fit(NamedTuple):
-    """The used pseudoranges' consistency over the last ``accuracy_window_s`` (the reported accuracy's
-    inflation, ``inflation``): per satellite (``key``, sorted) the exponentially weighted sum of its
-    normalised pre-fit innovations ν = y / √(H P⁻ Hᵀ + r) and of the squared weights, as of ``t_us``."""
-
-    key: np.ndarray = np.zeros(0, dtype=np.int64)
-    nu_sum: np.ndarray = np.zeros(0)
-    w2_sum: np.ndarray = np.zeros(0)
-    t_us: int = 0
-
-    def add(self, t_us: int, key: np.ndarray, nu: np.ndarray, window_s: float) -> Fit:
-        """This epoch's used satellites added, the older sums decayed by exp(−Δt / window_s)."""
-        a = math.exp(-(t_us - self.t_us) * 1e-6 / window_s) if window_s > 0.0 and len(self.key) else 0.0
-        if len(key) == len(self.key) and np.array_equal(key, self.key):  # the usual: the same satellites
-            return Fit(self.key, a * self.nu_sum + nu, (a * a) * self.w2_sum + 1.0, t_us)
-        keys = np.union1d(self.key, key)
-        nu_sum, w2_sum = np.zeros(len(keys)), np.zeros(len(keys))
-        old = np.searchsorted(keys, self.key)
-        nu_sum[old], w2_sum[old] = a * self.nu_sum, a * a * self.w2_sum
-        new = np.searchsorted(keys, key)
-        np.add.at(nu_sum, new, nu)
-        np.add.at(w2_sum, new, 1.0)
-        keep = w2_sum > FIT_W2_MIN
-        return Fit(keys[keep], nu_sum[keep], w2_sum[keep], t_us)
-
-    def inflation(self) -> float:
-        """max(1, Σ_s (Σ_t w_t ν_st)² / Σ_s Σ_t w_t²): the windowed NIS per degree of freedom of each
-        satellite's weighted mean innovation. A consistent filter's innovations are white with unit
-        variance: 1 on average. Errors larger than r raise it by their variance ratio, errors correlated
-        in time (a reflection lasting seconds, which the filter fused as independent epochs) by the
-        variance ratio of their window average to white noise's (up to (1 + a)/(1 − a),
-        a = e^(−Δt/window))."""
-        den = float(self.w2_sum.sum())
-        return max(1.0, float(self.nu_sum @ self.nu_sum) / den) if den > 0.0 else 1.0
 
 
 class Entry(NamedTuple):

@@ -24,6 +24,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
+from companion.estimator.consistency import accuracy_inflation, reported_variances
 from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
 from companion.tight.belief import LineOfSight
@@ -154,11 +155,7 @@ class TightNavigator:
             return self._last[1]
         t_us, out, last = now  # one array, handed out as views (as the loose navigator does)
         info = last.info
-        cov = out[9:18]
-        k = self.accuracy_inflation()
-        if k > 1.0:
-            cov = cov.copy()
-            cov[0:3] *= k
+        cov = reported_variances(out[9:18], self.accuracy_inflation())  # P's positions × k
         est = NavEstimate(t_us, out[0:3], out[3:6], out[6:9], cov, info.beta_mean, info.nis,
                           self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
                           gnss_resets=last.totals[2])
@@ -168,9 +165,8 @@ class TightNavigator:
     def accuracy_inflation(self) -> float:
         """The factor (≥ 1) on the position variances the estimates report: the used pseudoranges'
         NIS per degree of freedom over the last ``accuracy_window_s`` (1 when that is 0)."""
-        if not self.engine.entries or self.cfg.accuracy_window_s <= 0.0:
-            return 1.0
-        return self.engine.entries[-1].fit.inflation()
+        entries = self.engine.entries
+        return accuracy_inflation(entries[-1].fit if entries else None, self.cfg.accuracy_window_s)
 
     def counters(self) -> dict[str, int]:
         return dict(self.engine.counts)

@@ -21,8 +21,9 @@ import numpy as np
 from companion.domain.samples import AttitudeSample, ImuSample
 from companion.gnss import EphemerisStore, GnssEpoch, attach_broadcast
 from companion.gnss.constants import C_M_S
-from companion.tight import RawGnss, TightConfig, TightNavigator
+from companion.tight import RawGnss, TightConfig
 from companion.tight.satcache import SatelliteCache
+from companion.wiring import tight_navigator_for
 from gcs_tools.gnss.synthetic import RX_ECEF, T0, observe, store
 
 DURATION_S = 60.0
@@ -44,7 +45,7 @@ def measure(args: argparse.Namespace) -> dict[str, object]:
     n_ep = int(duration * GNSS_HZ)
     epochs = _epochs(st, n_ep)
     cfg = TightConfig(elevation_mask_deg=-90.0)  # all 20 fused (a few are low: the cost is the same)
-    nav = TightNavigator(cfg, "second-order", ephemerides=st)
+    nav = tight_navigator_for(None, "second-order", config=cfg, ephemerides=st)  # no map
     q = np.array([1.0, 0.0, 0.0, 0.0])
     f = np.array([0.0, 0.0, -9.80665])
     gyro = np.zeros(3)

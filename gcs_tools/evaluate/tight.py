@@ -36,7 +36,7 @@ import numpy as np
 from companion.errors import UserError
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
 from companion.gnss.spp import SppConfig
-from companion.tight import TightConfig, TightNavigator
+from companion.tight import TightConfig
 from gcs_tools.jsonvalues import write_results
 
 TIGHT_ROWS = ("naive", "cn0-elevation", "fde", "student-t", "first-order", "second-order")
@@ -165,7 +165,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
             reader = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, odometry)
             cfg = TightConfig.for_ground_vehicle()
             hook = belief_log if name == BELIEF_ROW else None
-            replay_row(name, reader, lambda m, f, cfg=cfg: TightNavigator(cfg, m, f), w, hook)
+            replay_row(name, reader, tr.tight_factory(cfg), w, hook)
     sens: dict[str, dict[str, float]] = {}
     if sensitivity:
         base = TightConfig.for_ground_vehicle()
@@ -174,7 +174,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
                 name = f"{field} x{factor:g}"
                 cfg = TightConfig.for_ground_vehicle(**{field: getattr(base, field) * factor})
                 reader = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m)
-                replay_row(name, reader, lambda m, f, cfg=cfg: TightNavigator(cfg, m, f), "second-order")
+                replay_row(name, reader, tr.tight_factory(cfg), "second-order")
                 sens[name] = _summary(errors.pop(name)[ok])
         # the odometry of another car: a yaw-rate bias the vehicle did not zero, a wheel-radius error
         for name, scale, bias_deg_s in (("odometry yaw rate +0.2 deg/s", 1.0, 0.2),
@@ -183,7 +183,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
             odo = data.odometry * [1.0, scale, 1.0] + [0.0, 0.0, math.radians(bias_deg_s)]
             reader = tr.SmartLocRawSource(data.epochs, odo, truth.t_s, truth.p_ecef_m)
             cfg = TightConfig.for_ground_vehicle()
-            replay_row(name, reader, lambda m, f, cfg=cfg: TightNavigator(cfg, m, f), "second-order")
+            replay_row(name, reader, tr.tight_factory(cfg), "second-order")
             sens[name] = _summary(errors.pop(name)[ok])
     keep = ok & np.all([np.isfinite(e) for e in errors.values()], axis=0)
     errors = {k: v[keep] for k, v in errors.items()}

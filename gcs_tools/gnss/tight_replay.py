@@ -24,7 +24,8 @@ from companion.errors import UserError
 from companion.gnss.geometry import ecef_to_geodetic
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, solve_position
-from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, check_weighting
+from companion.mission import Mission
+from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator
 from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, SMARTLOC_T0_US, LogWithGnss
 from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Reference, ReferenceInfo
 
@@ -142,10 +143,13 @@ def rinex_raw_log_reader(log_path: Path, obs: Path, navs: Sequence[Path], gps_de
     return reader, store, note
 
 
-def tight_factory(config: TightConfig, ephemerides: Any = None) -> Any:
-    """``replay(navigator=…)``: a TightNavigator per segment, in the replay's frame."""
+def tight_factory(config: TightConfig, ephemerides: Any = None, mission: Mission | None = None) -> Any:
+    """``replay(navigator=…)``: a TightNavigator per segment, in the replay's frame, assembled by
+    ``companion.wiring.tight_navigator_for``: with ``mission`` (the log was flown in it) its map's line of
+    sight is the per-satellite belief's prior; None: no map."""
+    from companion.wiring import tight_navigator_for
 
     def make(method: str, frame: LocalNedFrame) -> TightNavigator:
-        return TightNavigator(config, check_weighting(method), frame, ephemerides)
+        return tight_navigator_for(mission, method, config=config, frame=frame, ephemerides=ephemerides)
 
     return make

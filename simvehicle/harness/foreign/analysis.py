@@ -12,8 +12,9 @@ GLOBAL_POSITION_INT is interpolated linearly to those times.
 
 With the canyon receiver (scenario ``canyon``) the flight also records its raw epochs: the tightly
 coupled rows (``tight-<weighting>``, ``companion.tight``) are run on exactly those epochs (pushed
-at their release, fused at their measurement time, on the same IMU stream), and row ``spp`` is the
-receiver's own fix as it arrived (what the autopilot's EKF was sent).
+at their release, fused at their measurement time, on the same IMU stream) with the flown mission's
+map as the per-satellite belief's line-of-sight prior (the city the receiver flew in), and row ``spp``
+is the receiver's own fix as it arrived (what the autopilot's EKF was sent).
 """
 
 from __future__ import annotations
@@ -24,13 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, ImuSample
 from companion.estimator import EstimatorConfig
 from companion.gnss.ephemeris import EphemerisStore
 from companion.mission import Mission
-from companion.tight import RawGnss, TightConfig, TightNavigator
-from companion.wiring import navigator_for
+from companion.tight import RawGnss, TightConfig
+from companion.wiring import mission_city, navigator_for, tight_navigator_for
 from simvehicle.harness.foreign.gnss_source import SentFix
 from simvehicle.harness.foreign.recording import Recording
 from simvehicle.receiver import RawObservation
@@ -70,11 +70,14 @@ def companion_track(rec: Recording, sent: list[SentFix], method: str, cfg: Estim
 
 
 def tight_track(rec: Recording, raws: list[RawObservation], weighting: str, store: EphemerisStore,
-                frame: LocalNedFrame, times_us: np.ndarray) -> Track:
-    """The tightly coupled filter (``companion.tight``, ``weighting``) over the recording: the IMU and
-    attitude the autopilot streamed, the receiver's raw epochs pushed at their release and fused at
-    their measurement time, satellite states from the sky's broadcast ephemerides (``store``)."""
-    nav = TightNavigator(TightConfig(), weighting, frame, store)
+                mission: Mission, times_us: np.ndarray, map_prior: bool = True) -> Track:
+    """The tightly coupled filter (``companion.tight``, ``weighting``, ``TightConfig()``) over the
+    recording: the IMU and attitude the autopilot streamed, the receiver's raw epochs pushed at their
+    release and fused at their measurement time, satellite states from the sky's broadcast ephemerides
+    (``store``), in the mission's frame with its map's line of sight as the belief's prior (the flight
+    was flown in that city; ``map_prior=False``: no map)."""
+    nav = tight_navigator_for(mission, weighting, config=TightConfig(), ephemerides=store,
+                              city=mission_city(mission) if map_prior else None)
     gyro = np.zeros(3)  # unused by the filter (attitude comes with each sample)
 
     def push_imu(t_us: int, acc_frd_m_s2: np.ndarray, q_ned_frd: np.ndarray) -> None:

@@ -63,8 +63,7 @@ def raw_tracks(source: CanyonGnssSource, mission: Mission, times_us: np.ndarray,
     out = {SPP_ROW: held_track(np.array([sf.arrival_us for sf in sent], dtype=np.int64),
                                np.array([sf.p_ned_m for sf in sent]), times_us)}
     for w in weightings:
-        out[f"{TIGHT_PREFIX}{w}"] = tight_track(rec, source.raw, w, source.model.store, mission.frame,
-                                                times_us)
+        out[f"{TIGHT_PREFIX}{w}"] = tight_track(rec, source.raw, w, source.model.store, mission, times_us)
     return out
 
 
