@@ -12,7 +12,10 @@ dropped and from then on only every 2nd (then 4th, ...) matched error is kept: a
 decimation in time, so the statistics are those of an evenly spaced sample (``decimation``
 says the stride; ``matched`` and, without a fitted alignment, the maxima stay exact).
 References waiting for estimates are bounded too (``max_pending``, the oldest counted as
-unmatched).
+unmatched). With ``coverage=True`` and the estimate's reported horizontal variances
+(``add_estimate(..., var_ne_m2)``) it also counts how often the horizontal error lies inside the
+reported 1-σ and 2-σ ellipses (NEES_h = e_N²/σ_N² + e_E²/σ_E² ≤ 1 and ≤ 4, the variances interpolated
+like the position; a consistent 2-D Gaussian: 39.3 % and 86.5 %): ``statistics()["coverage_horizontal"]``.
 :func:`error_statistics` reduces the error vectors to the summary block
 ``{n, alignment, offset_ned_m, mean_error_ned_m, error_horizontal_m, error_3d_m}`` (each
 ``median, p95, max, rmse, iqr, n``).
@@ -121,11 +124,13 @@ class PositionErrors:
     """
 
     def __init__(self, window_us: int = DEFAULT_WINDOW_US, max_gap_us: int | None = None,
-                 max_errors: int | None = None, max_pending: int = 65_536) -> None:
+                 max_errors: int | None = None, max_pending: int = 65_536, coverage: bool = False) -> None:
         self.window_us, self.max_gap_us = window_us, max_gap_us
         self.max_errors, self.max_pending = max_errors, max_pending
         self._t: list[int] = []
         self._p: list[tuple[float, float, float]] = []
+        self._v: list[tuple[float, float]] | None = [] if coverage else None  # reported σ_N², σ_E²
+        self._within = [0, 0, 0]  # matched with finite variances, inside 1 σ, inside 2 σ
         self._pending: deque[tuple[int, tuple[float, float, float]]] = deque()
         self._err = array("f")  # float32: 12 bytes per kept error
         self.unmatched = 0
@@ -133,17 +138,24 @@ class PositionErrors:
         self.decimation = 1  # every decimation-th matched error is kept
         self._max_sq = [0.0, 0.0]  # largest squared horizontal and 3-D error of all matched
 
-    def add_estimate(self, t_us: int, p_ned_m: Any) -> None:
+    def add_estimate(self, t_us: int, p_ned_m: Any, var_ne_m2: Any = None) -> None:
+        """An estimate (time order) with its reported north and east variances (m²; used with
+        ``coverage``, NaN when not given)."""
         if self._t and t_us < self._t[-1]:
             raise ValueError("estimates must come in time order (restart() for a new time base)")
         self._t.append(t_us)
         self._p.append((float(p_ned_m[0]), float(p_ned_m[1]), float(p_ned_m[2])))
+        if self._v is not None:
+            self._v.append((math.nan, math.nan) if var_ne_m2 is None
+                           else (float(var_ne_m2[0]), float(var_ne_m2[1])))
         while self._pending and self._pending[0][0] <= t_us:
             t, p = self._pending.popleft()
             self._match(t, p)
         if len(self._t) > 4096 and self._t[len(self._t) // 2] < t_us - self.window_us:
             half = len(self._t) // 2
             del self._t[:half], self._p[:half]
+            if self._v is not None:
+                del self._v[:half]
 
     def add_reference(self, t_us: int, p_ned_m: Any) -> None:
         p = (float(p_ned_m[0]), float(p_ned_m[1]), float(p_ned_m[2]))
@@ -163,6 +175,7 @@ class PositionErrors:
         if i == len(t) or (i == 0 and t[0] != t_us) or t_us < t[-1] - self.window_us:
             self.unmatched += 1
             return
+        w = 0.0
         if t[i] == t_us:
             q = self._p[i]
         else:
@@ -175,6 +188,16 @@ class PositionErrors:
             q = (q0[0] + w * (q1[0] - q0[0]), q0[1] + w * (q1[1] - q0[1]), q0[2] + w * (q1[2] - q0[2]))
         self.matched += 1
         e = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+        if self._v is not None:
+            v1 = self._v[i]
+            v0 = self._v[i - 1] if w else v1
+            vn, ve = v0[0] + w * (v1[0] - v0[0]), v0[1] + w * (v1[1] - v0[1])
+            if vn > 0.0 and ve > 0.0 and math.isfinite(vn) and math.isfinite(ve):
+                nees = e[0] * e[0] / vn + e[1] * e[1] / ve
+                c = self._within
+                c[0] += 1
+                c[1] += nees <= 1.0
+                c[2] += nees <= 4.0
         h_sq = e[0] * e[0] + e[1] * e[1]
         m = self._max_sq
         m[0], m[1] = max(m[0], h_sq), max(m[1], h_sq + e[2] * e[2])
@@ -191,6 +214,8 @@ class PositionErrors:
         self._pending.clear()
         self._t.clear()
         self._p.clear()
+        if self._v is not None:
+            self._v.clear()
 
     def errors_ned_m(self) -> np.ndarray:
         """(n, 3) estimate − reference at the matched reference times."""
@@ -203,6 +228,10 @@ class PositionErrors:
             out["error_3d_m"]["max"] = math.sqrt(self._max_sq[1])
         out["unmatched"] = self.unmatched + len(self._pending)
         out["matched"], out["decimation"] = self.matched, self.decimation
+        if self._v is not None:
+            n, in1, in2 = self._within
+            out["coverage_horizontal"] = {"n": n, "within_1_sigma": in1 / n if n else math.nan,
+                                          "within_2_sigma": in2 / n if n else math.nan}
         return out
 
 

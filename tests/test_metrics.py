@@ -134,3 +134,26 @@ def test_batch_form_and_median_offset() -> None:
         if np.isfinite(r).all():
             online.add_reference(int(x), r)
     assert online.statistics("median_offset")["error_horizontal_m"] == med["error_horizontal_m"]
+
+
+def test_coverage_of_the_reported_accuracy_known_answers():
+    """Errors of known size against reported variances (σ_N² = 1, σ_E² = 4 m², interpolated between
+    estimates like the position): NEES_h = e_N² + e_E²/4 counted inside 1 and 2 σ; no coverage block
+    without ``coverage``, none counted where the variances are not finite."""
+    m = PositionErrors(coverage=True)
+    plain = PositionErrors()
+    for t in range(0, 11):  # estimates at 0..10 s at the origin; the variances grow 1 → 3 (N), 4 → 12 (E)
+        f = 1.0 + 2.0 * t / 10.0
+        m.add_estimate(t * 1_000_000, (0.0, 0.0, 0.0), (f, 4.0 * f))
+        plain.add_estimate(t * 1_000_000, (0.0, 0.0, 0.0), (f, 4.0 * f))
+    # NEES at t = 0 s: 0.9² = 0.81 (in 1 σ); t = 1 s (σ² 1.2, 4.8): 3² / 4.8 = 1.875 (in 2 σ);
+    # t = 2.5 s (σ² 1.5, 6): 3² / 6 = 1.5 (in 2 σ); t = 5 s (σ² 2, 8): 3² / 2 = 4.5 (outside)
+    for t_s, e in ((0.0, (0.9, 0.0)), (1.0, (0.0, 3.0)), (2.5, (0.0, 3.0)), (5.0, (3.0, 0.0))):
+        m.add_reference(int(t_s * 1e6), (-e[0], -e[1], 0.0))
+    cov = m.statistics()["coverage_horizontal"]
+    assert cov["n"] == 4 and cov["within_1_sigma"] == 0.25 and cov["within_2_sigma"] == 0.75
+    assert "coverage_horizontal" not in plain.statistics()
+    m2 = PositionErrors(coverage=True)
+    m2.add_estimate(0, (0.0, 0.0, 0.0))  # no variances given: matched, not counted
+    m2.add_reference(0, (1.0, 0.0, 0.0))
+    assert m2.statistics()["coverage_horizontal"]["n"] == 0 and m2.matched == 1

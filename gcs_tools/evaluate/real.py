@@ -46,6 +46,8 @@ TUNING_FLIGHTS = ("path_1", "path_2", "path_3")
 REPORTING_FLIGHTS = ("path_5", "path_6", "path_7", "path_8", "path_10")
 RAW = ("raw fixes (at arrival)", "raw fixes (at validity)")
 STATS = ("median", "p95", "max")
+# the fraction of truth samples inside the reported 1-σ / 2-σ horizontal ellipse (2-D Gaussian: 39 / 86 %)
+COVERAGE = ("within_1_sigma", "within_2_sigma")
 BOOTSTRAP_SEED = 20261126
 GOAL_BELOW_NAIVE = -0.20  # the goal: the best method's median at least 20 % below naive
 
@@ -95,8 +97,10 @@ def run_job(job: Job) -> list[dict[str, Any]]:
     for method in job.methods:
         s = core.replay(Path(job.flight), method, gnss=opts, rate_hz=10.0, config=config).summary
         h = s["errors"]["truth"]["error_horizontal_m"]
+        cov = s["errors"]["truth"]["coverage_horizontal"]  # the reported accuracy's, at the truth samples
         nav = s["navigator"]
         out.append({**base, "row": method, **{k: round(h[k], 4) for k in STATS},
+                    **{k: round(cov[k], 4) for k in COVERAGE},
                     "gnss_fused": nav.get("gnss_fused", 0),
                     "gnss_rejected_innovation": nav.get("gnss_rejected_innovation", 0),
                     "gnss_resets": nav.get("gnss_resets", 0), "wall_s": round(s["wall_s"], 4),
@@ -168,6 +172,8 @@ def summarise(runs: list[dict[str, Any]], rows: Sequence[str]) -> dict[str, Any]
             v = np.array([mine[k][st] for k in keys], dtype=float)
             mean, lo, hi = stats.mean_ci(v, strata, rng)
             e[st] = {"mean": mean, "ci95": [lo, hi]}
+        if keys and COVERAGE[0] in mine[keys[0]]:  # a filter row: its reported accuracy's coverage
+            e["coverage"] = {c: float(np.mean([mine[k][c] for k in keys])) for c in COVERAGE}
         e["per_flight_median"] = {f: float(np.mean([mine[k]["median"] for k in keys if k[0] == f]))
                                   for f in sorted(set(strata.tolist()))}
         pairs = [k for k in keys if k in raw_a]
@@ -223,19 +229,23 @@ def markdown(result: dict[str, Any]) -> str:
         "", "Horizontal error against the RTK truth [m]: mean over runs (flight × seed) of each run's "
         "statistic, 95 % bootstrap interval (seeds resampled within flights). `− raw` = paired "
         "difference of run medians against the raw fixes at arrival; `vs naive` = ratio of the mean "
-        "run medians − 1 (paired interval).", ""]
+        "run medians − 1 (paired interval); `within 1 σ / 2 σ` = mean over runs of the fraction of truth "
+        "samples inside the reported horizontal 1-σ / 2-σ ellipse (a consistent 2-D Gaussian: 39 % / 86 %).",
+        ""]
     for cond in result["conditions"]:
         t, g = cond["table"], cond["goals"]
         lines += [f"## errors: {cond['errors']}, accuracy: {cond['accuracy']}", "",
-                  "| row | median | p95 | max | − raw (arrival), median | vs naive |",
-                  "|---|---|---|---|---|---|"]
+                  "| row | median | p95 | max | − raw (arrival), median | vs naive | within 1 σ / 2 σ |",
+                  "|---|---|---|---|---|---|---|"]
         for row, e in t.items():
             diff = e["minus_raw_at_arrival_median"]
             vs = e["vs_naive_median"]
             cells = [f"`{row}`", _ci(e["median"]), _ci(e["p95"]), _ci(e["max"]),
                      "—" if row in RAW else _ci(diff),
                      "—" if row in (*RAW, "naive") else
-                     f"{vs['value']:+.0%} [{vs['ci95'][0]:+.0%}, {vs['ci95'][1]:+.0%}]"]
+                     f"{vs['value']:+.0%} [{vs['ci95'][0]:+.0%}, {vs['ci95'][1]:+.0%}]",
+                     "—" if "coverage" not in e else
+                     f"{e['coverage'][COVERAGE[0]]:.0%} / {e['coverage'][COVERAGE[1]]:.0%}"]
             lines.append("| " + " | ".join(cells) + " |")
         over = g["methods_with_p95_or_max_above_raw_at_arrival"]
         over_text = ", ".join(f"`{m}` ({'/'.join(w)})" for m, w in over.items()) or "none"

@@ -143,6 +143,60 @@ def rinex_raw_log_reader(log_path: Path, obs: Path, navs: Sequence[Path], gps_de
     return reader, store, note
 
 
+def ubx_raw_log_reader(log_path: Path, ubx_path: Path, gps_delay_ms: float | None = None
+                       ) -> tuple[LogWithRawGnss, Any, dict[str, object]]:
+    """(the log's reader with a UBX log's RXM-RAWX epochs in place of its fixes, the ephemeris store, a
+    summary note).
+
+    Our simulator's receiver (a ``receiver.json`` beside the UBX log: a ``beliefnav sitl --scenario
+    canyon`` run or a canyon flight beside an autopilot): its GPS time of boot joins the two clocks and
+    its broadcast ephemerides (every system it tracks) place the satellites, as in the flight. Any other
+    receiver: the log's SYSTEM_TIME / GPS time (``log_time_map``) and the ephemerides the UBX log
+    carries (RXM-SFRBX: GPS and GLONASS)."""
+    import json
+
+    from companion.gnss.ephemeris import attach_broadcast
+    from companion.gnss.timescale import BootTimeMap
+    from gcs_tools.gnss.timebase import log_time_map
+    from gcs_tools.gnss.ubx_source import open_stream, read_ubx_file, ubx_items
+    from gcs_tools.replay.logs import open_log
+
+    if not ubx_path.is_file():
+        raise UserError(f"--ubx {ubx_path}: no such file")
+    info_path = ubx_path.with_name("receiver.json")
+    note: dict[str, object] = {"ubx": str(ubx_path)}
+    if info_path.is_file():
+        from simvehicle.ubx_server import store_from_info
+
+        try:
+            info = json.loads(info_path.read_text(encoding="utf-8"))
+            t0_gps_s = float(info["t0_gps_s"])
+            store = store_from_info(info)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise UserError(f"{info_path}: not a simulated receiver's description ({exc})") from None
+        with open_stream(str(ubx_path)) as f:
+            epochs = [e for e in ubx_items(f) if isinstance(e, GnssEpoch)]
+        if not epochs:
+            raise UserError(f"{ubx_path}: no RXM-RAWX epochs")
+        time_map = BootTimeMap.from_gps_pairs(np.array([t0_gps_s]), np.array([0.0]))
+        note["time_join"] = {"from": f"{info_path.name} t0_gps_s (GPS time = t0_gps_s + boot time)",
+                             "t0_gps_s": t0_gps_s}
+        placed = [attach_broadcast(e, store)[0] for e in epochs[:50]]
+        anchor = anchor_of([e for e in placed if e.n], store.klobuchar)
+    else:
+        data = read_ubx_file(ubx_path)
+        epochs, store = data.epochs, data.store
+        time_map = log_time_map(log_path)
+        note["time_join"] = {"pairs_used": time_map.pairs_used, "residual_rms_us": time_map.residual_rms_us}
+        note["rejected"] = dict(data.rejected)
+        anchor = anchor_of(epochs[:50], data.klobuchar)
+    raws = [RawGnss(time_map.boot_us(e.t_gps_s), e) for e in epochs]
+    note["epochs"] = len(raws)
+    reader = LogWithRawGnss(open_log(log_path, gps_delay_ms), raws, anchor,
+                            f"UBX {ubx_path.name} (raw epochs)")
+    return reader, store, note
+
+
 def tight_factory(config: TightConfig, ephemerides: Any = None, mission: Mission | None = None) -> Any:
     """``replay(navigator=…)``: a TightNavigator per segment, in the replay's frame, assembled by
     ``companion.wiring.tight_navigator_for``: with ``mission`` (the log was flown in it) its map's line of

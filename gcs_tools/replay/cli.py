@@ -10,6 +10,7 @@ from typing import Any
 
 from companion.domain.geodesy import parse_home
 from companion.errors import UserError
+from companion.mission import Mission
 from companion.telemetry import pubsub as telemetry
 from gcs_tools import choices
 from gcs_tools.replay import core
@@ -49,6 +50,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "boot time through the log's SYSTEM_TIME / GPS time)")
     g.add_argument("--rinex-nav", type=Path, action="append", default=[],
                    help="RINEX 3 navigation file(s) for --rinex-obs (repeatable)")
+    g.add_argument("--ubx", type=Path, default=None, metavar="FILE",
+                   help="--coupling tight: a u-blox UBX log (RXM-RAWX, RXM-SFRBX) whose raw epochs replace "
+                        "the log's fixes, e.g. a canyon run's receiver.ubx (receiver.json beside it joins "
+                        "the clocks and gives the ephemerides); with --mission, the mission's map is the "
+                        "belief's line-of-sight prior (docs/replay.md)")
     g.add_argument("--smartloc", type=Path, default=None, metavar="INPUT",
                    help="GNSS-only replay of a smartLoc *_Input.txt (no IMU), scored against its _GT.txt")
     g.add_argument("--truth", type=Path, default=None,
@@ -135,7 +141,8 @@ def run(args: argparse.Namespace) -> int:
         check_weighting(args.method)
     else:
         choices.method(args.method)
-    gnss_reader, gnss_note, navigator = _raw_gnss(args)
+    mission = choices.mission(args.mission) if args.mission is not None else None
+    gnss_reader, gnss_note, navigator = _raw_gnss(args, mission)
     if args.smartloc is not None:
         args.file = args.smartloc
     elif args.file is None:
@@ -147,9 +154,7 @@ def run(args: argparse.Namespace) -> int:
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
     home = parse_home(args.home) if args.home else None
-    mission = None
-    if args.mission is not None:
-        mission = choices.mission(args.mission)
+    if mission is not None:
         home = home or mission.frame
     bar = None
     if not args.no_progress and sys.stderr.isatty():
@@ -183,19 +188,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None, Any]:
-    """The reader for --rinex-obs / --smartloc (None: the log's own), a summary note and the navigator
-    factory (None: the loose Navigator)."""
-    if args.rinex_obs is None and args.smartloc is None:
+def _raw_gnss(args: argparse.Namespace, mission: Mission | None = None
+              ) -> tuple[Any, dict[str, Any] | None, Any]:
+    """The reader for --rinex-obs / --ubx / --smartloc (None: the log's own), a summary note and the
+    navigator factory (None: the loose Navigator)."""
+    if args.rinex_obs is None and args.smartloc is None and args.ubx is None:
         if args.rinex_nav or args.coupling != "loose" or args.truth is not None:
-            raise UserError("--rinex-nav, --coupling and --truth go with --rinex-obs or --smartloc")
+            raise UserError("--rinex-nav, --coupling and --truth go with --rinex-obs, --ubx or --smartloc")
         return None, None, None
+    if args.ubx is not None and args.coupling != "tight":
+        raise UserError("--ubx goes with --coupling tight (loose coupling replays the log's own fixes: "
+                        "those of the receiver)")
     from companion.gnss.spp import SppConfig
     from gcs_tools.gnss import replay as gnss_replay
 
     gnss_replay.check_coupling(args.coupling)
     if args.coupling == "tight":
-        return _raw_gnss_tight(args)
+        return _raw_gnss_tight(args, mission)
     config = SppConfig()
     if args.smartloc is not None:
         if args.file is not None or args.rinex_obs is not None:
@@ -216,14 +225,18 @@ def _raw_gnss(args: argparse.Namespace) -> tuple[Any, dict[str, Any] | None, Any
     return reader, note, None
 
 
-def _raw_gnss_tight(args: argparse.Namespace) -> tuple[Any, dict[str, Any], Any]:
-    """--coupling tight: raw epochs (and smartLoc's odometry) into the tightly coupled navigator."""
+def _raw_gnss_tight(args: argparse.Namespace, mission: Mission | None) -> tuple[Any, dict[str, Any], Any]:
+    """--coupling tight: raw epochs (and smartLoc's odometry) into the tightly coupled navigator,
+    assembled by ``companion.wiring.tight_navigator_for``: with ``mission`` (the log was flown in it) its
+    map is the per-satellite belief's line-of-sight prior, else none (the summary says which)."""
     from companion.tight import TightConfig
     from gcs_tools.gnss import tight_replay
 
     if args.smartloc is not None:
-        if args.file is not None or args.rinex_obs is not None:
-            raise UserError("--smartloc replays the smartLoc drive alone: no log file, no --rinex-obs")
+        if args.file is not None or args.rinex_obs is not None or args.ubx is not None:
+            raise UserError("--smartloc replays the smartLoc drive alone: no log file, --rinex-obs or --ubx")
+        if mission is not None:
+            raise UserError("--mission: the smartLoc drive was not flown in a mission (no map of Berlin)")
         if not args.smartloc.is_file():
             raise UserError(f"{args.smartloc}: no such file")
         src = tight_replay.smartloc_raw_source(args.smartloc, args.truth, not args.no_odometry)
@@ -231,15 +244,24 @@ def _raw_gnss_tight(args: argparse.Namespace) -> tuple[Any, dict[str, Any], Any]
                 "odometry": not args.no_odometry,
                 "motion": "constant velocity (no IMU)"
                 + ("" if args.no_odometry else " with wheel speed and yaw rate")}
+        note["map"] = None
         return src, note, tight_replay.tight_factory(TightConfig.for_ground_vehicle())
+    option = "--ubx" if args.ubx is not None else "--rinex-obs"
     if args.file is None or not args.file.is_file():
-        raise UserError(f"--rinex-obs needs the flight log to replay ({args.file}: no such file)")
-    if not args.rinex_nav:
-        raise UserError("--rinex-obs needs --rinex-nav (broadcast ephemerides)")
-    reader, store, note = tight_replay.rinex_raw_log_reader(args.file, args.rinex_obs, args.rinex_nav,
-                                                             args.gps_delay_ms)
+        raise UserError(f"{option} needs the flight log to replay ({args.file}: no such file)")
+    if args.ubx is not None:
+        if args.rinex_obs is not None or args.rinex_nav:
+            raise UserError("--ubx or --rinex-obs/--rinex-nav: one raw GNSS source")
+        reader, store, note = tight_replay.ubx_raw_log_reader(args.file, args.ubx, args.gps_delay_ms)
+    else:
+        if not args.rinex_nav:
+            raise UserError("--rinex-obs needs --rinex-nav (broadcast ephemerides)")
+        reader, store, note = tight_replay.rinex_raw_log_reader(args.file, args.rinex_obs, args.rinex_nav,
+                                                                 args.gps_delay_ms)
     note["coupling"] = "tight"
-    return reader, note, tight_replay.tight_factory(TightConfig(), store)
+    note["map"] = (f"mission {mission.name}: its buildings' line of sight as the belief's prior"
+                   if mission is not None else None)
+    return reader, note, tight_replay.tight_factory(TightConfig(), store, mission)
 
 
 def counts_text(counts: dict[str, Any], none: str = "none") -> str:

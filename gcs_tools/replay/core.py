@@ -164,10 +164,10 @@ class _Comparisons:
         self.local: dict[tuple[str, str], PositionErrors] = {}
         self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
 
-    def estimate(self, t_us: int, p_ned_m: Any) -> None:
+    def estimate(self, t_us: int, p_ned_m: Any, var_ned_m2: Any) -> None:
         self.gnss.add_estimate(t_us, p_ned_m)
         for m in (*self.geodetic.values(), *self.local.values()):
-            m.add_estimate(t_us, p_ned_m)
+            m.add_estimate(t_us, p_ned_m, var_ned_m2)
 
     def fix(self, fix: GnssFix) -> None:
         if fix.fix_type >= MIN_FIX_TYPE_3D:
@@ -175,15 +175,16 @@ class _Comparisons:
 
     def reference(self, ref: Reference | LocalReference) -> None:
         key = (ref.kind, ref.source)
+        truth = ref.kind == TRUTH  # the reported accuracy's coverage: against the truth only
         if type(ref) is Reference:
             m = self.geodetic.get(key)
             if m is None:
-                m = self.geodetic[key] = PositionErrors(max_gap_us=self.max_gap_us)
+                m = self.geodetic[key] = PositionErrors(max_gap_us=self.max_gap_us, coverage=truth)
             self._geodetic(m, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
         else:
             m = self.local.get(key)
             if m is None:
-                m = self.local[key] = PositionErrors(max_gap_us=self.max_gap_us)
+                m = self.local[key] = PositionErrors(max_gap_us=self.max_gap_us, coverage=truth)
             m.add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
 
     def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
@@ -268,8 +269,8 @@ class _Run:
         rows = _rows(estimates, self.segment)
         self.sink.write(t_us, rows)
         comparisons = self.comparisons
-        for e in estimates:
-            comparisons.estimate(e.t_us, e.p_ned_m)
+        for e in estimates:  # the reported accuracy too: its coverage of the truth
+            comparisons.estimate(e.t_us, e.p_ned_m, e.cov_diag)
         self.beta.add(rows[:, 9])
         self.nis.add(rows[:, 10])
         self.rows += len(estimates)
