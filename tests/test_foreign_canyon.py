@@ -19,7 +19,7 @@ from simvehicle.config import ReceiverConfig
 from simvehicle.harness.ardupilot.config import FEEDS, GPS2_ID, ArduPilotConfig, ardupilot_parameters
 from simvehicle.harness.ardupilot.flight import ArduPilotFlightOptions
 from simvehicle.harness.ardupilot.gnss_source import gps_input_fields
-from simvehicle.harness.foreign.analysis import SPP_ROW, errors, held_track
+from simvehicle.harness.foreign.analysis import SPP_ROW, errors, held_track, tight_track
 from simvehicle.harness.foreign.canyon_source import CanyonGnssSource
 from simvehicle.harness.foreign.flight import plan_flight, tight_arguments
 from simvehicle.harness.foreign.gnss_source import UrbanGnssSource
@@ -138,6 +138,13 @@ def test_tight_rows_are_scored_on_the_recorded_epochs(flown):
     np.testing.assert_array_equal(held.p_ned_m[0], sf.p_ned_m)
     np.testing.assert_array_equal(held.p_ned_m[1], flown.sent[29].p_ned_m)
     assert tracks["tight-second-order"].counters["gnss_rejected_no_ephemeris"] == 0
+    # the rows run in the flown mission's city: its map is the belief's line-of-sight prior (the
+    # belief row moves without it), a prior the weightings without a belief do not read
+    store = flown.model.store
+    for w in ("cn0-elevation", "second-order"):
+        nomap = tight_track(rec, flown.raw, w, store, m, times, map_prior=False).p_ned_m
+        same = np.array_equal(nomap, tracks[f"tight-{w}"].p_ned_m)
+        assert same == (w == "cn0-elevation"), w
 
 
 def test_the_scenario_picks_the_source(tmp_path):

@@ -137,3 +137,51 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
         cmd[:7] + ["--out", str(tmp_path / "n")], capture_output=True, text=True, timeout=60
     )
     assert nonav.returncode == 2 and "--rinex-nav" in nonav.stderr
+
+
+def test_raw_gnss_option_errors_are_one_line(tmp_path, capsys):
+    """--ubx is raw GNSS for the tight filter; the smartLoc drive has no mission (no map of Berlin)."""
+    from gcs_tools.cli import main
+
+    cases = (
+        (["replay", str(QUAD106), "--ubx", str(tmp_path / "r.ubx")], "--ubx goes with --coupling tight"),
+        (["replay", str(QUAD106), "--ubx", str(tmp_path / "r.ubx"), "--coupling", "tight"], "no such file"),
+        (["replay", "--smartloc", str(tmp_path / "in.txt"), "--coupling", "tight", "--mission", "test"],
+         "no map of Berlin"),
+    )
+    for args, message in cases:
+        assert main([*args, "--out", str(tmp_path / "o"), "--no-telemetry"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+
+
+SMARTLOC = (Path(__file__).resolve().parents[1] / "../shared/data/urban/smartloc"
+            / "Berlin_Potsdamer_Platz_Input.txt")
+
+
+def test_smartloc_stamps_on_boot_time_one_rule_for_both_readers():
+    """smartLoc stamps are a millisecond grid written with sub-µs float error: rounded to the nearest µs
+    they land on it (truncation put 281.99899983 s 1 µs early); the loose and the tight readers give the
+    truth (and the epochs) the same boot times."""
+    import os
+
+    from gcs_tools.gnss import smartloc
+    from gcs_tools.gnss.replay import SMARTLOC_T0_US, SmartLocSource, smartloc_boot_us
+    from gcs_tools.gnss.tight_replay import SmartLocRawSource
+    from gcs_tools.replay.events import Reference
+
+    assert smartloc_boot_us(281.99899983, 0.0) == 281_999_000 + SMARTLOC_T0_US
+    assert smartloc_boot_us(0.29999995231628, 0.0) == 300_000 + SMARTLOC_T0_US
+    np.testing.assert_array_equal(smartloc_boot_us(np.array([10.0000004, 10.2999996]), 10.0),
+                                  [SMARTLOC_T0_US, SMARTLOC_T0_US + 300_000])
+    if not SMARTLOC.is_file():
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"{SMARTLOC}: the smartLoc data set is missing in CI")
+        pytest.skip("smartLoc data set not beside the repository (../shared/data/urban/smartloc)")
+    data, truth = smartloc.read_drive(SMARTLOC, None)
+    raw = SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m)
+    loose = SmartLocSource([], truth.t_s, truth.p_ecef_m, raw.t0_s)
+    t_raw = [e.t_us for e in raw if type(e) is Reference]
+    t_loose = [e.t_us for e in loose if type(e) is Reference]
+    assert t_raw == t_loose and len(t_raw) == len(truth.t_s)
+    assert all((t - SMARTLOC_T0_US) % 1000 == 0 for t in t_raw)  # each on its millisecond

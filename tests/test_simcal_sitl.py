@@ -102,3 +102,33 @@ def test_sitl_canyon_streams_ubx_matching_its_gps_raw_int(tmp_path):
         assert abs(p.lat_deg - m.lat / 1e7) < 2e-7 and abs(p.lon_deg - m.lon / 1e7) < 2e-7
         assert abs(p.height_ellipsoid_m - m.alt / 1e3) < 0.01 and p.num_sv == m.satellites_visible
     assert matched >= len(raw_int) - 1  # (the last fix may be cut by the time limit)
+    _replay_tight(out, raw_int)
+
+
+def _replay_tight(out: Path, raw_int: dict) -> None:
+    """``beliefnav replay run.tlog --ubx receiver.ubx --coupling tight``: the raw epochs join the log's boot
+    time through receiver.json (each within the receiver's clock offset, < 1 ms, of the fix the vehicle
+    sent from it); no map without a mission, the mission's map (and home) with ``--mission``."""
+    import numpy as np
+
+    from gcs_tools.cli import main
+    from gcs_tools.gnss.tight_replay import ubx_raw_log_reader
+
+    reader, _, note = ubx_raw_log_reader(out / "run.tlog", out / "receiver.ubx")
+    t_raw = np.array([r.t_us for r in reader.items])
+    assert note["epochs"] == len(t_raw) >= 30
+    for t_us in raw_int:
+        assert np.min(np.abs(t_raw - t_us)) < 1_000
+    base = ["replay", str(out / "run.tlog"), "--ubx", str(out / "receiver.ubx"), "--coupling", "tight",
+            "--no-progress", "--no-telemetry"]
+    summaries = []
+    for extra, name in (([], "nomap"), (["--mission", "test"], "map")):
+        assert main([*base, *extra, "--out", str(out / name)]) == 0
+        summaries.append(json.loads((out / name / "summary.json").read_text()))
+    nomap, withmap = summaries
+    assert nomap["raw_gnss"]["map"] is None and withmap["raw_gnss"]["map"].startswith("mission test")
+    for s in summaries:
+        nav, truth = s["navigator"], s["errors"]["truth"]
+        assert nav["gnss_fused"] >= len(t_raw) - 3 and nav["gnss_rejected_no_ephemeris"] == 0
+        assert truth["error_horizontal_m"]["median"] < 30.0 and truth["coverage_horizontal"]["n"] > 100
+    assert main([*base, "--out", str(out / "bad"), "--rinex-nav", "x.nav"]) == 2  # one raw source

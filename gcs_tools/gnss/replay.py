@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -32,6 +32,16 @@ from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Refere
 COUPLINGS = ("loose", "tight")
 SMARTLOC_IMU_HZ = 50.0
 SMARTLOC_T0_US = 1_000_000  # boot time of the drive's first epoch (IMU starts at 0)
+
+
+def smartloc_boot_us(t_s: Any, t0_s: float) -> Any:
+    """smartLoc seconds (epochs, odometry, truth) on the replay's boot time: ``SMARTLOC_T0_US`` at the
+    drive's first epoch ``t0_s``, rounded to the nearest µs (an int for a float, int64 for an array).
+    The data set's stamps are a millisecond grid written as decimal seconds with up to 0.17 µs of
+    floating-point error either way (e.g. 281.99899983 for 281.999): rounding lands every stamp on its
+    millisecond, truncation put 62 % of the Berlin drive's 1 µs early. The one rule of both readers."""
+    us = np.rint((np.asarray(t_s, dtype=float) - t0_s) * 1e6).astype(np.int64) + SMARTLOC_T0_US
+    return int(us) if us.ndim == 0 else us
 GRAVITY_M_S2 = 9.80665
 
 
@@ -149,7 +159,7 @@ class SmartLocSource:
 
     def __iter__(self) -> Iterator[Event]:
         lat, lon, h = ecef_to_geodetic(self.truth_ecef_m)
-        t_ref_us = ((self.truth_t_s - self.t0_s) * 1e6 + SMARTLOC_T0_US).astype(np.int64)
+        t_ref_us = smartloc_boot_us(self.truth_t_s, self.t0_s)
         ends = [f.t_validity_us for f in self.fixes[-1:]] + [int(t_ref_us[-1])]
         t_end = max(ends) + 1_000_000
         step = int(1e6 / SMARTLOC_IMU_HZ)
@@ -187,7 +197,7 @@ def smartloc_source(input_path: Path, truth_path: Path | None, config: SppConfig
     t0 = float(series.t_s[0])
     fixes = []
     for t, s in zip(series.t_s, series.solutions, strict=True):
-        f = to_fix(s, int(round((t - t0) * 1e6)) + SMARTLOC_T0_US)
+        f = to_fix(s, smartloc_boot_us(t, t0))
         if f is not None:
             fixes.append(f)
     return SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0)

@@ -26,7 +26,7 @@ from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, solve_position
 from companion.mission import Mission
 from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator
-from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, SMARTLOC_T0_US, LogWithGnss
+from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, LogWithGnss, smartloc_boot_us
 from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Reference, ReferenceInfo
 
 RawEvent = Event | RawGnss | Odometry  # what these readers yield
@@ -68,7 +68,7 @@ class SmartLocRawSource:
         self.anchor = anchor_of(self.epochs)
 
     def boot_us(self, t_s: float) -> int:
-        return int(round((t_s - self.t0_s) * 1e6)) + SMARTLOC_T0_US
+        return int(smartloc_boot_us(t_s, self.t0_s))
 
     def first_fix(self) -> GnssFix | None:
         return None
