@@ -35,8 +35,13 @@ class Fit(NamedTuple):
         """This measurement's channels added, the older sums decayed by exp(−Δt / window_s)."""
         a = math.exp(-(t_us - self.t_us) * 1e-6 / window_s) if window_s > 0.0 and len(self.key) else 0.0
         if key is self.key or (len(key) == len(self.key) and np.array_equal(key, self.key)):  # the usual
-            return Fit(self.key, a * self.nu_sum + nu, (a * a) * self.w2_sum + 1.0, t_us)
+            nu_sum, w2_sum = a * self.nu_sum, (a * a) * self.w2_sum  # new arrays, then in place
+            nu_sum += nu
+            w2_sum += 1.0
+            return Fit(self.key, nu_sum, w2_sum, t_us)
         keys = np.union1d(self.key, key)
+        if len(keys) == len(key) and np.array_equal(keys, key):
+            keys = key  # the caller's own (sorted) keys: the next add with them takes the path above at once
         nu_sum, w2_sum = np.zeros(len(keys)), np.zeros(len(keys))
         old = np.searchsorted(keys, self.key)
         nu_sum[old], w2_sum[old] = a * self.nu_sum, a * a * self.w2_sum
@@ -44,6 +49,8 @@ class Fit(NamedTuple):
         np.add.at(nu_sum, new, nu)
         np.add.at(w2_sum, new, 1.0)
         keep = w2_sum > FIT_W2_MIN
+        if keep.all():
+            return Fit(keys, nu_sum, w2_sum, t_us)
         return Fit(keys[keep], nu_sum[keep], w2_sum[keep], t_us)
 
     def inflation(self) -> float:
@@ -63,13 +70,17 @@ def accuracy_inflation(fit: Fit | None, window_s: float) -> float:
     return 1.0 if fit is None or window_s <= 0.0 else fit.inflation()
 
 
+def variance_scale(k: float) -> np.ndarray | None:
+    """The factors (9,) on the variances (p, v, b) a filter reports: ``k`` on the position's, 1 on the
+    rest; None when k is 1 (report them as they are)."""
+    return np.array((k, k, k, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)) if k > 1.0 else None
+
+
 def reported_variances(cov_diag: np.ndarray, k: float) -> np.ndarray:
     """The variances (9,: p, v, b) a filter reports: its position variances × ``k`` (velocity and the
     rest as they are); ``cov_diag`` itself (no copy) when k is 1."""
-    if k > 1.0:
-        cov_diag = cov_diag.copy()
-        cov_diag[0:3] *= k
-    return cov_diag
+    scale = variance_scale(k)
+    return cov_diag if scale is None else cov_diag * scale
 
 
 def check_accuracy_window(window_s: float) -> None:

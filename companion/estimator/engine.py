@@ -365,7 +365,9 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         if fused_pos:
             x_post, P_post, nis = _update(x_prior, P_prior, y_fused, R_fused)
             if self._window_s > 0.0:  # each axis' innovation over the S it was fused with
-                nu = np.array(y_fused) / np.sqrt(np.array((hph[0][0], hph[1][1], hph[2][2])) + R_fused)
+                nu = np.array((y_fused[0] / math.sqrt(hph[0][0] + R_fused[0]),
+                               y_fused[1] / math.sqrt(hph[1][1] + R_fused[1]),
+                               y_fused[2] / math.sqrt(hph[2][2] + R_fused[2])))
                 fit = fit.add(t_us, _AXES, nu, self._window_s)
             state = self.method.update(prev.state, terms_fused)
             t_fused = t_us

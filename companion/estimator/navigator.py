@@ -25,7 +25,7 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEsti
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import accuracy_inflation, reported_variances
+from companion.estimator.consistency import accuracy_inflation, variance_scale
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
@@ -99,6 +99,8 @@ class Navigator:
         self._rot: Rot | None = None  # the latest attitude as R_ned_frd (row-major)
         self._push_frd = self.engine.push_frd
         self._last: tuple[Any, NavEstimate] | None = None
+        # (the entry it is of, the factor, consistency.variance_scale of it)
+        self._inflation: tuple[Any, float, np.ndarray | None] = (None, 1.0, None)
         self._g = self.cfg.gravity_m_s2
 
     # -------------------------------------------------------------- input
@@ -233,7 +235,9 @@ class Navigator:
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
         a = snap.out  # one array for the state and the variances, handed out as views (one allocation)
-        var = reported_variances(a[9:18], self.accuracy_inflation())  # P's positions × k
+        self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per entry)
+        scale = self._inflation[2]
+        var = a[9:18] if scale is None else a[9:18] * scale
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
                           snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
                           snap.vel_ratio, snap.disagree)
@@ -245,7 +249,11 @@ class Navigator:
         degree of freedom over the last ``accuracy_window_s`` (1 when that is 0, or before a fix;
         ``companion.estimator.consistency``, the tight filter's rule)."""
         entries = self.engine.entries
-        return accuracy_inflation(entries[-1].fit if entries else None, self.cfg.accuracy_window_s)
+        last = entries[-1] if entries else None
+        if self._inflation[0] is not last:  # a function of the last entry alone: computed once per entry
+            k = accuracy_inflation(None if last is None else last.fit, self.cfg.accuracy_window_s)
+            self._inflation = (last, k, variance_scale(k))
+        return self._inflation[1]
 
     def counters(self) -> dict[str, int]:
         """Samples used and rejected by reason (stable names)."""
