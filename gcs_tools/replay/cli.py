@@ -181,6 +181,8 @@ def run(args: argparse.Namespace) -> int:
         print((args.out / "summary.json").read_text(encoding="utf-8"), end="")
         return 0
     print(report(result.summary, args.file.name))
+    if gnss_note and "map" in gnss_note:  # the tight filter's map prior, stated either way
+        print(f"  map: {gnss_note['map'] or 'none (no --mission: no line-of-sight prior)'}")
     print(f"  wrote {args.out / 'estimates.csv'} and {args.out / 'summary.json'}")
     if pub is not None:
         c = pub.counters()
