@@ -222,8 +222,8 @@ class EstimatorConfig:
     envelope_acc_max_m_s2: float = 20.0
     envelope_acc_window_s: float = 1.0
 
-    # --- reported accuracy (NavEstimate.cov_diag: GPS_INPUT's horiz/vert_accuracy, the ODOMETRY and
-    # VISION covariances): the position variances × max(1, NIS per degree of freedom of the fused fixes'
+    # --- reported accuracy (NavEstimate.cov_diag: GPS_INPUT's accuracies, the feeds' covariances):
+    # the position variances × max(1, NIS per degree of freedom of the fused fixes'
     # N, E, D innovations over the last accuracy_window_s, exponentially weighted;
     # companion.estimator.consistency, the tight filter's rule), the variance-of-unit-weight test a
     # receiver applies to its reported accuracy: fix errors correlated over seconds (reflections), which
