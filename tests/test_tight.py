@@ -452,10 +452,11 @@ def test_c_belief_step_equals_the_numpy_forms():
         got = _tight.belief_step(theta, hf, hs, y, s0, r_nom, prior, cfg.eta, cfg.lambda_reg, cfg.alpha_fast,
                                  cfg.alpha_slow, cfg.omega_fast, cfg.student_dof, cfg.r_inflation_max,
                                  cfg.prior_weight, cfg.theta_min, cfg.theta_max, cfg.gate_sigma**2, first,
-                                 scaled)
-        sc = belief.epoch_scale(theta, y, s0, r_nom, cfg) if scaled else 1.0
+                                 scaled, cfg.belief_early_factor)
+        ye = belief.consistency_innovation(y, cfg)  # early innovations scaled (the gate sees y)
+        sc = belief.epoch_scale(theta, ye, s0, r_nom, cfg) if scaled else 1.0
         scales.append(sc)
-        g = belief.grad_theta(theta, y, sc * s0, sc * r_nom, prior, cfg)
+        g = belief.grad_theta(theta, ye, sc * s0, sc * r_nom, prior, cfg)
         th, f, s = (theta - cfg.eta * g, hf, hs) if first else belief.second_order_step(theta, hf, hs, g, cfg)
         th = np.clip(th, cfg.theta_min, cfg.theta_max)
         b = belief.sigmoid(th)
@@ -465,6 +466,28 @@ def test_c_belief_step_equals_the_numpy_forms():
             np.testing.assert_allclose(a, w, rtol=1e-12, atol=1e-14)
         assert np.array_equal(got[5] > 0, used)
     assert scales[2] > 1.5  # the scaled branch is exercised (an even count: the median of the middle two)
+    assert 0.0 < cfg.belief_early_factor < 1.0 and (y < 0).sum() > 10  # the asymmetry is exercised
+
+
+def test_belief_early_innovations_count_less():
+    """A satellite late by 30 m loses more trust than one early by 30 m (NLOS only delays); with
+    ``belief_early_factor`` = 1 they lose the same."""
+    from companion.tight import _tight
+
+    for early, sym in ((0.5, False), (1.0, True)):
+        cfg = TightConfig(belief_early_factor=early)
+        y = np.array([30.0, -30.0, 0.5, -0.5])
+        th, hf, hs = np.full(4, 2.0), np.ones(4), np.ones(4)
+        for _ in range(10):  # ten epochs of the same innovations
+            th, hf, hs = _tight.belief_step(th, hf, hs, y, np.ones(4), np.full(4, 9.0), np.full(4, 2.0), cfg.eta,
+                                            cfg.lambda_reg, cfg.alpha_fast, cfg.alpha_slow, cfg.omega_fast,
+                                            cfg.student_dof, cfg.r_inflation_max, cfg.prior_weight, cfg.theta_min,
+                                            cfg.theta_max, cfg.gate_sigma**2, False, False,
+                                            cfg.belief_early_factor)[0:3]
+        assert th[0] < 0.0 and th[1] < 0.0 and th[2] > 2.0 and th[3] > 2.0
+        assert (th[0] == pytest.approx(th[1], abs=1e-12)) if sym else th[0] < th[1] - 0.5, th
+    with pytest.raises(ValueError, match="belief_early_factor"):
+        TightConfig(belief_early_factor=1.5).validate()
 
 
 def test_c_core_equals_the_numpy_forms():

@@ -361,18 +361,21 @@ done:
 }
 
 /* belief_step(theta, h_fast, h_slow, y, s0, r_nominal, theta_prior, eta, lambda_reg, alpha_fast, alpha_slow,
- *             omega_fast, nu, k, kappa, theta_min, theta_max, gate2, first_order, epoch_scale)
+ *             omega_fast, nu, k, kappa, theta_min, theta_max, gate2, first_order, epoch_scale, early)
  * -> (theta, h_fast, h_slow, beta, r, used): belief.grad_theta, the second-order (or first-order) step,
  * the clamp, β = σ(θ), R(β) = R_nom k^(1-β) and the innovation gate y² <= gate2 (s0 + R), per satellite;
- * epoch_scale: the gradient's S scaled by belief.epoch_scale (the epoch's median y²/S over χ²(1)'s, ≥ 1) */
+ * epoch_scale: the gradient's S scaled by belief.epoch_scale (the epoch's median y²/S over χ²(1)'s, ≥ 1);
+ * early: the consistency (median and gradient) sees an early innovation (y < 0) times this
+ * (belief.consistency_innovation); the gate sees y as it is */
 #define CHI2_1_MEDIAN 0.454936
 #define MAX_SORT 256
 static PyObject *py_belief_step(PyObject *self, PyObject *args) {
     PyObject *o[7];
-    double eta, lam, af, as_, wf, nu, kk, kappa, tmin, tmax, gate2;
+    double eta, lam, af, as_, wf, nu, kk, kappa, tmin, tmax, gate2, early;
     int first, epoch_scale;
-    if (!PyArg_ParseTuple(args, "OOOOOOOdddddddddddpp", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &eta,
-                          &lam, &af, &as_, &wf, &nu, &kk, &kappa, &tmin, &tmax, &gate2, &first, &epoch_scale))
+    if (!PyArg_ParseTuple(args, "OOOOOOOdddddddddddppd", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &eta,
+                          &lam, &af, &as_, &wf, &nu, &kk, &kappa, &tmin, &tmax, &gate2, &first, &epoch_scale,
+                          &early))
         return NULL;
     PyArrayObject *a[7] = {0};
     PyObject *out[6] = {0};
@@ -402,7 +405,8 @@ static PyObject *py_belief_step(PyObject *self, PyObject *args) {
         double q[MAX_SORT];
         for (npy_intp i = 0; i < m; i++) {
             double b = 1.0 / (1.0 + exp(-th0[i]));
-            double v = y[i] * y[i] / (s0[i] + rn[i] * pow(kk, 1.0 - b)), w;
+            double ye = y[i] < 0.0 ? early * y[i] : y[i];
+            double v = ye * ye / (s0[i] + rn[i] * pow(kk, 1.0 - b)), w;
             npy_intp j = i;
             for (; j > 0 && (w = q[j - 1]) > v; j--) q[j] = w;  /* insertion sort */
             q[j] = v;
@@ -414,7 +418,8 @@ static PyObject *py_belief_step(PyObject *self, PyObject *args) {
         double t = th0[i];
         double b = 1.0 / (1.0 + exp(-t));
         double rr = rn[i] * pow(kk, 1.0 - b);
-        double S = scale * (s0[i] + rr), y2 = y[i] * y[i];
+        double ye = y[i] < 0.0 ? early * y[i] : y[i];
+        double S = scale * (s0[i] + rr), y2 = ye * ye;
         double dl = 0.5 / S - 0.5 * (nu + 1.0) * y2 / (S * (nu * S + y2));
         double g = dl * (-lnk) * scale * rr * b * (1.0 - b) + kappa * (t - pr[i]);
         double f = hf0[i], sl = hs0[i];
@@ -430,7 +435,7 @@ static PyObject *py_belief_step(PyObject *self, PyObject *args) {
         b = 1.0 / (1.0 + exp(-t));
         rr = rn[i] * pow(kk, 1.0 - b);
         th[i] = t; hf[i] = f; hs[i] = sl; be[i] = b; r[i] = rr;
-        used[i] = y2 <= gate2 * (s0[i] + rr) ? 1.0 : 0.0;
+        used[i] = y[i] * y[i] <= gate2 * (s0[i] + rr) ? 1.0 : 0.0;
     }
     for (int i = 0; i < 7; i++) Py_DECREF(a[i]);
     return Py_BuildValue("(NNNNNN)", out[0], out[1], out[2], out[3], out[4], out[5]);

@@ -17,5 +17,5 @@ def update(x: np.ndarray, P: np.ndarray, H: np.ndarray, HP: np.ndarray, y: np.nd
 def belief_step(theta: np.ndarray, h_fast: np.ndarray, h_slow: np.ndarray, y: np.ndarray, s0: np.ndarray,
                 r_nominal: np.ndarray, theta_prior: np.ndarray, eta: float, lambda_reg: float,
                 alpha_fast: float, alpha_slow: float, omega_fast: float, nu: float, k: float, kappa: float,
-                theta_min: float, theta_max: float, gate2: float, first_order: bool, epoch_scale: bool
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+                theta_min: float, theta_max: float, gate2: float, first_order: bool, epoch_scale: bool,
+                early: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...

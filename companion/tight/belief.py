@@ -19,7 +19,12 @@ and the update is the paper's dual-timescale damped Newton step (eq. 18-21) per 
     H_f ← α_f H_f + g²,  H_s ← α_s H_s + g²,  H = ω H_f + (1 − ω) H_s,  θ ← θ − η g / (H + λ)
 
 A reflected satellite's innovation is larger than S says: ∂ℓ/∂S < 0 there, so θ falls (R grows
-until S ≈ y²); a clean one's is smaller: θ rises to the cap. Vectorised over satellites. The
+until S ≈ y²); a clean one's is smaller: θ rises to the cap.
+
+NLOS only delays a signal, and the common part of the reflections' delays goes into the receiver clock,
+so the clean satellites look early: the consistency sees ỹ = y where y ≥ 0 and ``belief_early_factor`` · y
+where y < 0 (``consistency_innovation``) in place of y, in the step and in the joint consistency's median;
+the gate sees y. Vectorised over satellites. The
 filter runs these as one C call (``_tight.belief_step``: gradient, step, clamp, R(β), gate), equal to
 the numpy forms here (tested); these stay the reference and serve the tests and the evaluation.
 """
@@ -70,6 +75,12 @@ def grad_theta(theta: np.ndarray, y: np.ndarray, s0: np.ndarray, r_nominal: np.n
     dl_ds = 0.5 / S - 0.5 * (nu + 1.0) * y2 / (S * (nu * S + y2))
     return dl_ds * (-math.log(cfg.r_inflation_max)) * r * beta * (1.0 - beta) + cfg.prior_weight * (
         theta - theta_prior)
+
+
+def consistency_innovation(y: np.ndarray, cfg: TightConfig) -> np.ndarray:
+    """ỹ: an early innovation (y < 0: the signal arrived before the prediction, which a reflection cannot
+    do) times ``belief_early_factor``, a late one as it is: what the belief's consistency is judged on."""
+    return np.where(y < 0.0, cfg.belief_early_factor * y, y)
 
 
 CHI2_1_MEDIAN = 0.454936  # the median of χ²(1): a consistent epoch's median of y²/S
