@@ -479,11 +479,11 @@ def test_belief_early_innovations_count_less():
         y = np.array([30.0, -30.0, 0.5, -0.5])
         th, hf, hs = np.full(4, 2.0), np.ones(4), np.ones(4)
         for _ in range(10):  # ten epochs of the same innovations
-            th, hf, hs = _tight.belief_step(th, hf, hs, y, np.ones(4), np.full(4, 9.0), np.full(4, 2.0), cfg.eta,
-                                            cfg.lambda_reg, cfg.alpha_fast, cfg.alpha_slow, cfg.omega_fast,
-                                            cfg.student_dof, cfg.r_inflation_max, cfg.prior_weight, cfg.theta_min,
-                                            cfg.theta_max, cfg.gate_sigma**2, False, False,
-                                            cfg.belief_early_factor)[0:3]
+            th, hf, hs = _tight.belief_step(
+                th, hf, hs, y, np.ones(4), np.full(4, 9.0), np.full(4, 2.0), cfg.eta, cfg.lambda_reg,
+                cfg.alpha_fast, cfg.alpha_slow, cfg.omega_fast, cfg.student_dof, cfg.r_inflation_max,
+                cfg.prior_weight, cfg.theta_min, cfg.theta_max, cfg.gate_sigma**2, False, False,
+                cfg.belief_early_factor)[0:3]
         assert th[0] < 0.0 and th[1] < 0.0 and th[2] > 2.0 and th[3] > 2.0
         assert (th[0] == pytest.approx(th[1], abs=1e-12)) if sym else th[0] < th[1] - 0.5, th
     with pytest.raises(ValueError, match="belief_early_factor"):

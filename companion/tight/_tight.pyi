@@ -18,4 +18,5 @@ def belief_step(theta: np.ndarray, h_fast: np.ndarray, h_slow: np.ndarray, y: np
                 r_nominal: np.ndarray, theta_prior: np.ndarray, eta: float, lambda_reg: float,
                 alpha_fast: float, alpha_slow: float, omega_fast: float, nu: float, k: float, kappa: float,
                 theta_min: float, theta_max: float, gate2: float, first_order: bool, epoch_scale: bool,
-                early: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+                early: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...

@@ -188,7 +188,8 @@ class SatelliteBelief(SigmaModel):
             r_model = t.r_model if t.r_model is not None else t.r_nominal
             y, s0 = leave_one_out(t, student_t_variances(t, r_model, solve, c), solve)
         # belief.consistency_innovation (early innovations scaled), belief.epoch_scale (joint consistency),
-        # belief.grad_theta, the (second- or first-order) step, the clamp, R(β) and the gate, in C (``_tight.belief_step``; equal to belief.py's numpy forms, tested)
+        # belief.grad_theta, the (second- or first-order) step, the clamp, R(β) and the gate, in C
+        # (``_tight.belief_step``; equal to belief.py's numpy forms, tested)
         theta, hf, hs, beta, r, used = _tight.belief_step(
             theta, hf, hs, y, s0, t.r_nominal, t.theta_prior, c.eta, c.lambda_reg, c.alpha_fast,
             c.alpha_slow, c.omega_fast, c.student_dof, c.r_inflation_max, c.prior_weight, c.theta_min,

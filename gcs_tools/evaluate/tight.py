@@ -29,7 +29,7 @@ import argparse
 import math
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -212,11 +212,27 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
     }
 
 
-def belief_vs_residual(epochs: Sequence[Any], truth: Any, log: Sequence[tuple[int, Any]], src: Any
-                       ) -> list[dict[str, Any]]:
-    """Median β of the observations in each bin of their residual at the true position."""
+class Observations(NamedTuple):
+    """Per observation of the logged epochs (arrays (n,)): boot time, satellite key, its residual at the
+    true position (m), the belief's β and pre-fit innovation y (m), whether it was used, C/N0, elevation."""
+
+    t_us: np.ndarray
+    key: np.ndarray
+    residual_m: np.ndarray
+    beta: np.ndarray
+    y_m: np.ndarray
+    used: np.ndarray
+    cn0_dbhz: np.ndarray
+    elevation_deg: np.ndarray
+
+
+def observations_at_truth(epochs: Sequence[Any], truth: Any, log: Sequence[tuple[int, Any]], src: Any
+                          ) -> Observations:
+    """Each logged observation's residual at the true position: pseudorange − Sagnac range, minus the
+    per-system receiver clock taken as the median residual of that system's satellites above 40° (else
+    of all of them); with what the filter's epoch (``log``: (t_us, EpochInfo)) said of it."""
     by_t = {src.boot_us(e.t_gps_s): e for e in epochs}
-    res_all, beta_all = [], []
+    rows: list[tuple[float, ...]] = []
     for t_us, info in log:
         e = by_t.get(t_us)
         if e is None:
@@ -235,11 +251,21 @@ def belief_vs_residual(epochs: Sequence[Any], truth: Any, log: Sequence[tuple[in
             r[m] = d[m] - np.median(d[hi] if hi.sum() else d[m])
         key = e.system.astype(int) * 1000 + e.prn.astype(int)
         pos = {k: i for i, k in enumerate(key.tolist())}
-        for k, b in zip(info.key.tolist(), info.beta.tolist(), strict=True):
+        for k, b, y, u in zip(info.key.tolist(), info.beta.tolist(), info.y_m.tolist(), info.used.tolist(),
+                              strict=True):
             if k in pos:
-                res_all.append(r[pos[k]])
-                beta_all.append(b)
-    res, beta = np.array(res_all), np.array(beta_all)
+                i = pos[k]
+                rows.append((t_us, k, r[i], b, y, float(u), e.cn0_dbhz[i], el[i]))
+    a = np.array(rows, dtype=float).reshape(-1, 8)
+    return Observations(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64), a[:, 2], a[:, 3], a[:, 4],
+                        a[:, 5] > 0.5, a[:, 6], a[:, 7])
+
+
+def belief_vs_residual(epochs: Sequence[Any], truth: Any, log: Sequence[tuple[int, Any]], src: Any
+                       ) -> list[dict[str, Any]]:
+    """Median β of the observations in each bin of their residual at the true position."""
+    obs = observations_at_truth(epochs, truth, log, src)
+    res, beta = obs.residual_m, obs.beta
     out = []
     for lo, hi in zip(RESIDUAL_BINS_M[:-1], RESIDUAL_BINS_M[1:], strict=True):
         m = (res >= lo) & (res < hi)

@@ -28,7 +28,7 @@ reported ``horiz_accuracy`` = sqrt(σ_N² + σ_E²).
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -49,10 +49,13 @@ MAP_SIGMA_SHIFT_M = 1.5
 
 def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              max_duration_s: float | None = None, maps: bool = True,
-             accuracy: dict[str, list[tuple[float, float, float]]] | None = None) -> dict[str, np.ndarray]:
+             accuracy: dict[str, list[tuple[float, float, float]]] | None = None,
+             on_raw: Callable[[str, Any, Any], None] | None = None) -> dict[str, np.ndarray]:
     """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
     the exact and an imperfect map); ``accuracy`` (if given) collects per tight row and step (NEES_h
-    reported, NEES_h of P alone, reported horiz_accuracy)."""
+    reported, NEES_h of P alone, reported horiz_accuracy); ``on_raw(row, raw, navigator)`` (if given) is
+    called after each row's navigator was given a raw epoch (``simvehicle.receiver.RawObservation``,
+    with the simulator's truth per satellite)."""
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
     from simvehicle.harness.fly import planned_route
@@ -99,8 +102,10 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
                 last_fix = np.asarray(f.p_ned_m, float)
                 k += 1
             while j < len(raws) and raws[j].arrival_us <= imu.t_us:
-                for t in tight.values():
+                for name, t in tight.items():
                     t.push(RawGnss(raws[j].t_us, raws[j].epoch))
+                    if on_raw is not None:
+                        on_raw(name, raws[j], t)
                 j += 1
         est = nav.estimate()
         truth = np.asarray(out.final_truth.p_ned_m, float)
