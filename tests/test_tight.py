@@ -490,6 +490,29 @@ def test_belief_early_innovations_count_less():
         TightConfig(belief_early_factor=1.5).validate()
 
 
+def test_belief_nominal_variance_is_the_sigma_model_scaled():
+    """The belief's R at trust β is (belief_sigma_scale × the σ model's σ)² · k^(1 − β); the rows without a
+    belief keep the σ model as it is."""
+    from companion.tight import weighting
+
+    rng = np.random.default_rng(5)
+    n = 8
+    t = weighting.SatTerms(np.arange(n), rng.normal(0, 3, n), np.full(n, 4.0), rng.uniform(4, 400, n),
+                           np.full(n, 1.0))
+
+    def solve(r, used):
+        return np.zeros(n), np.eye(int(used.sum()))
+
+    for scale in (0.5, 1.0):
+        cfg = TightConfig(belief_sigma_scale=scale)
+        w = weighting.make("second-order", cfg).weigh({}, t, solve)
+        r_model = scale**2 * t.r_nominal
+        np.testing.assert_allclose(w.r, r_model * cfg.r_inflation_max ** (1.0 - w.beta), rtol=1e-12)
+        assert np.array_equal(weighting.make("cn0-elevation", cfg).weigh(None, t, solve).r, t.r_nominal)
+    with pytest.raises(ValueError, match="belief_sigma_scale"):
+        TightConfig(belief_sigma_scale=0.0).validate()
+
+
 def test_c_core_equals_the_numpy_forms():
     """``_tight.c`` (the filter's hot path) against model.py's numpy forms: F P Fᵀ + Q, the
     pseudorange innovations with H, H P and (H P Hᵀ)_ii, and the stacked update with range rates."""

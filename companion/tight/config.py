@@ -121,6 +121,12 @@ class TightConfig:
     # The belief's nominal variance R_nom: "los" (a line-of-sight signal's, C/N0 only: the belief and
     # its prior carry the rest) or "cn0-elevation" (the single-point solution's σ model, 1/sin² el too)
     belief_sigma_model: Literal["los", "cn0-elevation"] = "cn0-elevation"
+    # R_nom = (this × that σ model's σ)²: the variance at full trust is a line-of-sight signal's, below the
+    # single-point solution's σ model, which carries the average reflection's share at low C/N0 and
+    # elevation (a reflected satellite looked consistent against it and kept its weight: docs/tight.md).
+    # 0.5 (1.5 m at zenith and 45 dB-Hz) chosen on the canyon's tuning flights (1: 12.4 / 44.3 m, 0.7: 11.0 /
+    # 36.2, 0.5: 10.0 / 30.3, 0.35: 9.0 / 26.9, 0.25: 9.2 / 24.3); smartLoc does not confirm below 0.5
+    belief_sigma_scale: float = 0.5
     # Joint consistency: when the epoch's median y²/S is above χ²(1)'s median, the whole epoch disagrees with
     # the prediction (the state is off, not every satellite): each satellite's S is scaled by that ratio in
     # the belief's step, so a satellite is judged against the epoch, not against a pulled prediction
@@ -168,6 +174,9 @@ class TightConfig:
             raise ValueError("theta_min < 0 < theta_max needed")
         if not 0.0 < self.alpha_fast < self.alpha_slow < 1.0:
             raise ValueError("alpha_fast, alpha_slow: need 0 < alpha_fast < alpha_slow < 1")
+        if not (math.isfinite(self.belief_sigma_scale) and self.belief_sigma_scale > 0.0):
+            raise ValueError(f"belief_sigma_scale: must be a finite number > 0, "
+                             f"got {self.belief_sigma_scale!r}")
         if not (math.isfinite(self.belief_early_factor) and 0.0 <= self.belief_early_factor <= 1.0):
             raise ValueError(f"belief_early_factor: must be in [0, 1], got {self.belief_early_factor!r}")
         if self.belief_sigma_model not in ("los", "cn0-elevation"):

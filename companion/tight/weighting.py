@@ -166,6 +166,7 @@ class SatelliteBelief(SigmaModel):
         super().__init__(cfg)
         if cfg.belief_sigma_model == "cn0-elevation":  # the single-point solution's σ model as R_nom
             self.nominal = "model"
+        self.r_scale = cfg.belief_sigma_scale**2  # R_nom: a line-of-sight signal's, below the σ model
 
     def initial_state(self) -> BeliefMap:  # type: ignore[override]
         return {}
@@ -179,6 +180,8 @@ class SatelliteBelief(SigmaModel):
 
     def weigh(self, state: BeliefMap, t: SatTerms, solve: Solve) -> Weighed:
         c = self.cfg
+        if self.r_scale != 1.0:  # R_nom below the σ model (the range rates' variances follow R / the model's)
+            t = t._replace(r_nominal=t.r_nominal * self.r_scale)
         theta, hf, hs = self._gather(state, t)
         y, s0 = t.y, t.s0
         if c.belief_innovation == "leave-one-out" and len(y) > 1:

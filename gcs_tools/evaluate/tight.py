@@ -47,7 +47,7 @@ RESIDUAL_BINS_M = (-math.inf, -10.0, -5.0, 5.0, 10.0, 20.0, 40.0, math.inf)
 # --sensitivity: the belief row with each of these TightConfig fields halved and doubled, and with the
 # odometry perturbed
 SENSITIVITY = ("eta", "student_dof", "prior_weight", "sigma_zenith_m", "r_inflation_max", "sigma_acc_m_s2",
-               "belief_early_factor")
+               "belief_early_factor", "belief_sigma_scale")
 
 
 def block_indices(n: int, block: int, rng: np.random.Generator, n_resamples: int) -> np.ndarray:
