@@ -32,7 +32,7 @@ def test_probe_stats_on_series_with_known_answers():
     err_a = rng.normal(0, 1, n)
     s = probe_stats(np.r_[t, t], np.r_[np.zeros(n, int), np.ones(n, int)], np.r_[err_a, err_b],
                     np.r_[np.full(n, 0.95), beta_b], np.r_[err_a, err_b],
-                    np.r_[np.full(n, 45.0), np.where(nlos, 30.0, 45.0)], np.full(2 * n, 30.0), 100.0,
+                    np.r_[np.full(n, 45.0), np.where(nlos, 30.0, 45.0)], np.full(2 * n, 30.0), 100.0, 0.25,
                     np.r_[np.zeros(n, bool), nlos], np.ones(2 * n, bool))
     d = s["detection_auc"]["NLOS"]
     assert d["-C/N0"] == 1.0 and d["-elevation"] == 0.5 and d["|y|"] == 1.0
@@ -46,7 +46,7 @@ def test_probe_stats_on_series_with_known_answers():
     assert math.isnan(s["epoch_median_error_m"])  # epochs of fewer than 5 satellites are not counted
     top = s["by_error"][-1]
     assert top["from_m"] == 40.0 and top["beta_median"] < 0.6
-    assert top["inflation_median"] == pytest.approx(100.0 ** 0.5)
+    assert top["r_over_model_median"] == pytest.approx(0.25 * 100.0 ** 0.5)
 
 
 def test_canyon_probe_reads_the_simulators_truth():

@@ -135,7 +135,8 @@ class TightConfig:
     # reflections' delays goes into the receiver clock, which makes the clean satellites look early. The
     # belief's consistency (its step and the joint consistency's median; not the gate, not the fused R)
     # sees an early innovation (y < 0) times this: 1 = symmetric. 0.5 chosen on the canyon's tuning flights
-    # (1: 13.9 / 48.0 m, 0.71: 13.1 / 45.7, 0.5: 12.4 / 44.3, 0: 12.5 / 45.8; docs/tight.md)
+    # (R_nom the full σ model then; 1: 13.9 / 48.0 m, 0.71: 13.1 / 45.7, 0.5: 12.4 / 44.3, 0: 12.5 / 45.8;
+    # docs/tight.md)
     belief_early_factor: float = 0.5
     # Student-t reweighting passes (as the student-t row's) on top of the beliefs' variances: 0 = none
     belief_student_iterations: int = 0

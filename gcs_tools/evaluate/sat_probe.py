@@ -16,7 +16,8 @@ Reported (``probe_stats``):
 * how well each score tells a bad observation (NLOS; |error| above 10 m) from a good one, as the area
   under the ROC curve (0.5: chance, 1: perfect): 1 − β, −C/N0, −elevation, |y|; and the FDE row's
   exclusion as a detector (its true and false positive rates);
-* per error bin: β and the variance inflation R/R_nom = k^(1 − β) the belief applies;
+* per error bin: β and the variance the belief fuses with over the σ model's (the single-point solution's
+  C/N0 + elevation variance, which the baseline rows fuse with): ``belief_sigma_scale``² · k^(1 − β);
 * how the errors persist: each satellite's error autocorrelation time (first lag below 1/e), the NLOS
   episodes' durations (canyon), and how fast β reacts to an NLOS onset (the first epoch at which β is
   0.1 below its value before the onset);
@@ -59,10 +60,11 @@ def auc(bad: np.ndarray, score: np.ndarray) -> float:
 
 
 def probe_stats(t_us: np.ndarray, key: np.ndarray, error_m: np.ndarray, beta: np.ndarray, y_m: np.ndarray,
-                cn0_dbhz: np.ndarray, elevation_deg: np.ndarray, k_inflation: float,
+                cn0_dbhz: np.ndarray, elevation_deg: np.ndarray, k_inflation: float, r_scale: float = 1.0,
                 nlos: np.ndarray | None = None, fde_used: np.ndarray | None = None) -> dict[str, Any]:
     """The statistics of the module doc from per-observation arrays ((n,) each; ``error_m`` the truth:
-    the simulator's range error from the city, or the residual at the true position)."""
+    the simulator's range error from the city, or the residual at the true position); the belief's R is
+    ``r_scale`` · ``k_inflation``^(1 − β) times the σ model's variance."""
     labels = {f"|error| > {BAD_M:g} m": np.abs(error_m) > BAD_M}
     if nlos is not None:
         labels = {"NLOS": nlos, **labels}
@@ -80,7 +82,7 @@ def probe_stats(t_us: np.ndarray, key: np.ndarray, error_m: np.ndarray, beta: np
         if m.any():
             bins.append({"from_m": lo, "to_m": hi, "n": int(m.sum()),
                          "beta_median": float(np.median(beta[m])),
-                         "inflation_median": float(np.median(k_inflation ** (1.0 - beta[m]))),
+                         "r_over_model_median": float(np.median(r_scale * k_inflation ** (1.0 - beta[m]))),
                          "abs_y_median_m": float(np.median(np.abs(y_m[m])))})
     corr, episodes, lags = [], [], []
     for k in np.unique(key):
@@ -162,8 +164,9 @@ def canyon(mission: str, profiles: Sequence[int], seeds: Sequence[int], max_dura
     # a satellite of another flight is another series: the flight goes into the key
     key = a[:, 0].astype(np.int64) * 1_000_000 + a[:, 2].astype(np.int64)
     t_us = a[:, 0].astype(np.int64) * 10**13 + a[:, 1].astype(np.int64)
-    stats = probe_stats(t_us, key, a[:, 8], a[:, 3], a[:, 4], a[:, 6], a[:, 7], TightConfig().r_inflation_max,
-                        a[:, 9] > 0.5, used_fde)
+    cfg = TightConfig()
+    stats = probe_stats(t_us, key, a[:, 8], a[:, 3], a[:, 4], a[:, 6], a[:, 7], cfg.r_inflation_max,
+                        cfg.belief_sigma_scale**2, a[:, 9] > 0.5, used_fde)
     return {"mission": mission, "profiles": list(profiles), "seeds": list(seeds), **stats}
 
 
@@ -191,7 +194,7 @@ def smartloc(input_path: Path) -> dict[str, Any]:
     used = np.array([fde_used.get(p, True) for p in pairs], dtype=bool)
     return {"input": input_path.name, **probe_stats(
         o.t_us[keep], o.key[keep], o.residual_m[keep], o.beta[keep], o.y_m[keep], o.cn0_dbhz[keep],
-        o.elevation_deg[keep], cfg.r_inflation_max, None, used[keep])}
+        o.elevation_deg[keep], cfg.r_inflation_max, cfg.belief_sigma_scale**2, None, used[keep])}
 
 
 def markdown(r: dict[str, Any]) -> str:
@@ -213,8 +216,8 @@ def markdown(r: dict[str, Any]) -> str:
         lines += table_lines(("bad observation", *cols),
                              ((lab, *(f"{d[c]:.3f}" for c in cols)) for lab, d in s["detection_auc"].items()))
         by_error = ((f"{b['from_m']:g} to {b['to_m']:g}", str(b["n"]), f"{b['beta_median']:.2f}",
-                     f"{b['inflation_median']:.2f}", f"{b['abs_y_median_m']:.1f}") for b in s["by_error"])
-        head = ("error (m)", "n", "β median", "R/R_nom median", "|y| median (m)")
+                     f"{b['r_over_model_median']:.2f}", f"{b['abs_y_median_m']:.1f}") for b in s["by_error"])
+        head = ("error (m)", "n", "β median", "R / σ model's median", "|y| median (m)")
         lines += ["", *table_lines(head, by_error), ""]
     return "\n".join(lines)
 
