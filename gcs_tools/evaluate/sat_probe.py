@@ -172,7 +172,7 @@ def canyon(mission: str, profiles: Sequence[int], seeds: Sequence[int], max_dura
 
 def smartloc(input_path: Path) -> dict[str, Any]:
     """``probe_stats`` of smartLoc's observations (the belief row with odometry; FDE's exclusions)."""
-    from companion.tight import TightConfig, TightNavigator
+    from companion.tight import TightConfig
     from gcs_tools.evaluate.tight import _EpochLog, observations_at_truth
     from gcs_tools.gnss import smartloc as sl
     from gcs_tools.gnss import tight_replay as tr
@@ -185,7 +185,7 @@ def smartloc(input_path: Path) -> dict[str, Any]:
         src: Any = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m)  # a LogReader
         log = _EpochLog()
         core.replay(input_path, row, home=src.anchor, reader=src, on_imu=log, rate_hz=20.0,
-                    navigator=lambda m, f: TightNavigator(cfg, m, f))
+                    navigator=tr.tight_factory(cfg))
         obs[row] = observations_at_truth(data.epochs, truth, log.rows, src)
     o, f = obs["second-order"], obs["fde"]
     fde_used = dict(zip(zip(f.t_us.tolist(), f.key.tolist(), strict=True), f.used.tolist(), strict=True))
