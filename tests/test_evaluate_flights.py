@@ -140,6 +140,8 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     abl = tmp_path / "abl"
     (abl / "realistic").mkdir(parents=True)
     (abl / "realistic" / "results.json").write_text((out / "results.json").read_text())
+    (abl / "realistic-velocity").mkdir()  # a campaign directory of its own, after the scenario's
+    (abl / "realistic-velocity" / "results.json").write_text((out / "results.json").read_text())
     level = {"second-order": {"ratio": 1.0, "lo": 0.8, "hi": 1.1}, "fixed-beta-best": {"mean_m": 1.5}}
     level1 = {**level, "second-order": {"ratio": 0.9, "lo": 0.7, "hi": 1.0}}
     sev = {"base": "fixed-beta-best", "score": "est_h_median_m", "profiles": [0], "seeds": [0],
@@ -149,6 +151,7 @@ def test_evaluate_cli_with_scenario_and_rows(tmp_path, capsys):
     ablation.figure(sev, abl / "severity" / "fig_where_adaptation_pays.png")
     text = ablation.report(abl)
     assert "## `realistic`" in text and "`map-beta` = `map-beta`: defaults" in text
+    assert text.index("## `realistic`") < text.index("## `realistic-velocity`") < text.index("## Where")
     assert "Paired against `map-beta` (`map-beta` − row" in text and "| `fixed-beta-0.5` | 2 |" in text
     assert "| 1.0 | 0.900 [0.700, 1.000] | 1.500 |" in text
     assert (abl / "severity" / "fig_where_adaptation_pays.png").stat().st_size > 1000
