@@ -41,11 +41,16 @@ browser:
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; }
 
-# Two workers (pytest-xdist); the tests that start a real autopilot run one after another on one of
-# them (tests/conftest.py). TEST_WORKERS=0 runs everything in one process.
+# The suite in two parts: everything but the real-autopilot tests on two workers (pytest-xdist), then
+# the tests beside a real ArduPilot or PX4 SITL alone, one after another (tests/conftest.py marks them):
+# their flights run at 5x real time and must keep their margins. Both parts always run; either failing
+# fails the target. TEST_WORKERS=0 runs the first part in one process.
 TEST_WORKERS ?= 2
 test: $(STAMP) browser
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
+	@status=0; \
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist load -m "not autopilot" || status=$$?; \
+	$(BIN)/python -m pytest -q -m autopilot || status=$$?; \
+	exit $$status
 
 bench: $(STAMP)
 	$(BIN)/beliefnav bench all --json

@@ -5,9 +5,9 @@
   gets its own (a worker inherits the controller's environment), unless the developer set
   ``BELIEFNAV_ZENOH_HUB`` themselves.
 * Tests that start a real autopilot (ArduPilot or PX4 SITL: their modules use the helpers named in
-  ``_AUTOPILOT_HELPERS``) form one xdist group, so that ``-n 2 --dist loadgroup`` runs them one
-  after another on one worker: two lockstep autopilots on two cores beside the rest of the suite
-  would make their real-time margins the test instead of the code."""
+  ``_AUTOPILOT_HELPERS``) are marked ``autopilot``. ``make test`` runs the others on two workers, then
+  these alone and one after another: a lockstep autopilot at 5x beside other CPU-heavy tests would
+  make its real-time margins the test instead of the code."""
 
 import os
 import socket
@@ -31,8 +31,9 @@ def pytest_configure(config: pytest.Config) -> None:
         os.environ[_HUB_OWNER] = "1"
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         module = getattr(item, "module", None)
         if module is not None and any(hasattr(module, name) for name in _AUTOPILOT_HELPERS):
-            item.add_marker(pytest.mark.xdist_group("autopilot"))
+            item.add_marker(pytest.mark.autopilot)
