@@ -99,7 +99,7 @@ class Navigator:
         self._rot: Rot | None = None  # the latest attitude as R_ned_frd (row-major)
         self._push_frd = self.engine.push_frd
         self._last: tuple[Any, NavEstimate] | None = None
-        # (the entry it is of, the factor, consistency.variance_scale of it)
+        # (the Fit it is of, the factor, consistency.variance_scale of it)
         self._inflation: tuple[Any, float, np.ndarray | None] = (None, 1.0, None)
         self._g = self.cfg.gravity_m_s2
 
@@ -249,10 +249,10 @@ class Navigator:
         degree of freedom over the last ``accuracy_window_s`` (1 when that is 0, or before a fix;
         ``companion.estimator.consistency``, the tight filter's rule)."""
         entries = self.engine.entries
-        last = entries[-1] if entries else None
-        if self._inflation[0] is not last:  # a function of the last entry alone: computed once per entry
-            k = accuracy_inflation(None if last is None else last.fit, self.cfg.accuracy_window_s)
-            self._inflation = (last, k, variance_scale(k))
+        fit = entries[-1].fit if entries else None
+        if self._inflation[0] is not fit:  # a function of the last fix's Fit alone (the entries between
+            k = accuracy_inflation(fit, self.cfg.accuracy_window_s)  # fixes share it): once per fix
+            self._inflation = (fit, k, variance_scale(k))
         return self._inflation[1]
 
     def counters(self) -> dict[str, int]:
