@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from simvehicle.harness.ardupilot.driver import (
     FlightDriver,
 )
 from simvehicle.harness.ardupilot.gnss_source import gps_input_fields
+from simvehicle.harness.ardupilot.session import ArduPilotSession
 from simvehicle.harness.fly import planned_route
 from simvehicle.harness.foreign.analysis import autopilot_track, count_collisions, errors
 from simvehicle.harness.foreign.gnss_source import UrbanGnssSource
@@ -180,6 +182,44 @@ def test_driver_guided_arm_takeoff_then_the_route_in_the_autopilots_frame():
     assert drv.phase == "route"  # at the goal before the reference arrived: not done
     now.t_us = drv.route_t0_us + round(route.duration_s * 1e6) + 1
     assert drv.step(now) == [] and drv.outcome == "reached_goal"
+
+
+def test_session_places_ekf3s_local_frame_by_its_origin_and_its_ground_height(tmp_path):
+    """The flight whose tracking error was 189 m (canyon, profile 4, seed 0): EKF3's origin was set
+    from a fix 21.4 m too high, its barometric altitude on the ground said 428.12 m (home 408 m), and
+    the route's setpoints, placed by the origin's altitude, were 1.3 m BELOW the ground: the vehicle
+    descended into it. Vertically the local frame is now placed by EKF3's height on the ground before
+    arming (the mission's ground), so a setpoint at the mission altitude is that far above it in
+    EKF3's local z; horizontally by the origin, as before."""
+    m = load_mission("test")
+    route = planned_route(m, 2, 0.0)
+    drv = FlightDriver(ArduPilotConfig(), route, m.altitude_m)
+    source = UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(0), 20.0)
+    s = ArduPilotSession(1, ArduPilotConfig(), m.frame, source, drv, tmp_path / "x.tlog")
+    home_alt = float(m.frame.to_geodetic(np.zeros(3))[2])
+    lat, lon, alt = m.frame.to_geodetic(np.array([10.0, -4.0, -21.4]))  # the origin's fix: 21.4 m high
+
+    def gpi(alt_m: float, relative_alt_m: float, t_ms: int, position: bool = True) -> types.SimpleNamespace:
+        return types.SimpleNamespace(lat=round(lat * 1e7) if position else 0, lon=round(lon * 1e7) if position else 0,
+                                     alt=round(alt_m * 1e3), relative_alt=round(relative_alt_m * 1e3),
+                                     time_boot_ms=t_ms)
+
+    s._handle_vehicle("GLOBAL_POSITION_INT", gpi(0.0, 0.0, 500, position=False))  # no position yet
+    s._handle_vehicle("GPS_GLOBAL_ORIGIN", types.SimpleNamespace(latitude=round(lat * 1e7), longitude=round(lon * 1e7),
+                                                                 altitude=round(alt * 1e3)))
+    assert s.ground_alt_m is None and s.now.origin_ned_m is None  # no ground height yet: nothing placed
+    s._handle_vehicle("GLOBAL_POSITION_INT", gpi(home_alt + 20.12, 0.0, 1000))  # on the ground, disarmed
+    ground_z_local = alt - (home_alt + 20.12)  # EKF3's local z on the ground: 1.28 m below its origin
+    np.testing.assert_allclose(s.now.origin_ned_m, [10.0, -4.0, -ground_z_local], atol=0.02)
+    s._handle_vehicle("HEARTBEAT", types.SimpleNamespace(custom_mode=COPTER_MODE_GUIDED, base_mode=128 | 1))
+    s._handle_vehicle("GLOBAL_POSITION_INT", gpi(home_alt + 40.1, 20.0, 2000))  # armed, at 20 m
+    assert s.ground_alt_m == pytest.approx(home_alt + 20.12)  # armed: the ground is no longer taken
+    # a setpoint at the mission altitude over the origin: EKF3's local z of 20 m above the ground
+    drv.route_t0_us = 0
+    (c,) = drv.setpoint(DriverInputs(t_us=3_000_000, origin_ned_m=s.now.origin_ned_m),
+                        np.array([10.0, -4.0, -m.altitude_m]))
+    np.testing.assert_allclose(c.args[1:4], [0.0, 0.0, ground_z_local - m.altitude_m], atol=0.02)
+    s.close()
 
 
 def test_driver_back_to_arming_when_disarmed_and_timeout():

@@ -7,6 +7,14 @@ open loop (EKF3 flies on them), GPS2 in closed loop (read by the companion proce
 own connection and feeds ArduPilot itself). Each SIM_STATE (truth, no time field) is stamped with
 the HIGHRES_IMU sent in the same scheduler tick (requested at the same rate, it immediately precedes it). What
 arrives is recorded for the analysis (``Recording``).
+
+The setpoints are in EKF3's local frame, placed in the mission frame by ``origin_ned_m``: horizontally
+EKF3's origin (GPS_GLOBAL_ORIGIN), vertically EKF3's height on the ground before arming, which is the
+mission's ground. EKF3's height is the barometer's (``EK3_SRC1_POSZ`` 1); the origin's ALTITUDE is
+the GNSS altitude of the fix that set it, which in a canyon is tens of metres off (21 m measured:
+the vehicle, told the origin's altitude was the ground, flew its route into the ground). Its
+global altitude (GLOBAL_POSITION_INT ``alt``, the autopilot row) keeps that error; heights above
+the take-off point do not, and they are what the setpoints use, as for PX4.
 """
 
 from __future__ import annotations
@@ -45,6 +53,8 @@ class ArduPilotSession(ForeignSession):
         self.raw_gps_id = raw_gps_id  # the receiver our raw fixes go to (GPS2 in closed loop)
         self.port = port
         self._velocity_sigma_m_s = source.velocity_sigma_m_s or 0.0
+        self.origin_lla: tuple[float, float, float] | None = None  # EKF3's origin (GPS_GLOBAL_ORIGIN)
+        self.ground_alt_m: float | None = None  # EKF3's altitude on the ground before arming
 
     # ---------------------------------------------------------------- wiring
     def connect(self, alive: Any) -> None:
@@ -86,9 +96,12 @@ class ArduPilotSession(ForeignSession):
             self.rec.ekf_p_ned_m.append(p)
             now.ekf_ned_m = p
             now.ekf_height_m = msg.relative_alt * 1e-3
+            if not now.armed and self.driver.route_t0_us is None and (msg.lat != 0 or msg.lon != 0):
+                self.ground_alt_m = msg.alt * 1e-3  # on the ground: the take-off point in EKF3's heights
+                self._place_local_frame()
         elif kind == "GPS_GLOBAL_ORIGIN":
-            now.origin_ned_m = self.frame.to_ned_m(msg.latitude * 1e-7, msg.longitude * 1e-7,
-                                                   msg.altitude * 1e-3)
+            self.origin_lla = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+            self._place_local_frame()
         elif kind == "HEARTBEAT":
             now.mode = msg.custom_mode
             now.armed = bool(msg.base_mode & MSG.MAV_MODE_FLAG_SAFETY_ARMED)
@@ -98,6 +111,14 @@ class ArduPilotSession(ForeignSession):
             now.ekf_position_ok = bool(flags & EKF_POS_HORIZ_ABS) and not flags & EKF_CONST_POS_MODE
         elif kind == "COMMAND_ACK" and msg.command == MSG.MAV_CMD_NAV_TAKEOFF:
             now.takeoff_accepted = now.takeoff_accepted or msg.result == MSG.MAV_RESULT_ACCEPTED
+
+    def _place_local_frame(self) -> None:
+        """``origin_ned_m``: EKF3's local frame origin in the mission frame (see the module doc). EKF3's
+        local z on the ground is (origin altitude − its altitude there); the mission's ground is D = 0."""
+        if self.origin_lla is None or self.ground_alt_m is None:
+            return
+        o = self.frame.to_ned_m(*self.origin_lla)
+        self.now.origin_ned_m = np.array([o[0], o[1], self.ground_alt_m - self.origin_lla[2]])
 
     def _send_fix(self, sf: SentFix) -> None:
         assert self.conn is not None
