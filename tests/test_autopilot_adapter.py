@@ -520,3 +520,49 @@ def test_receiver_delay_read_from_the_autopilot_only_as_the_answer_to_our_reques
     assert asked == [] and (node.translator.gnss_delay_us, node.translator.gnss_delay_source) == (0, "option")
     node, asked = node_for(mavlink.MAV_AUTOPILOT_GENERIC)  # who knows: no delay assumed
     assert asked == [] and (node.translator.gnss_delay_us, node.translator.gnss_delay_source) == (0, "none")
+
+
+def test_local_feeds_are_about_the_autopilots_ekf_origin_and_read_back_so(tmp_path):
+    """ArduPilot set its EKF origin from its own first fix, 7.9 m south, 0.7 m west and 10.5 m above
+    our home (the canyon flight, profile 0): VISION_POSITION_ESTIMATE / ODOMETRY are NED in ITS local
+    frame, so our position is sent horizontally about that origin (before: about our home, and the
+    vehicle flew 7.9 m off), vertically about our home (its height is the barometer's). The flight
+    tool reads what was sent back through the same origin from the companion's tlog."""
+    from companion.autopilot.node import AutopilotCompanion, CompanionConfig
+    from companion.mavlink.tlog import TlogWriter
+    from simvehicle.harness.foreign.companion_process import COMPANION_COMPONENT_ID, sent_track
+
+    conn = _FakeConn()
+    node = AutopilotCompanion(CompanionConfig(master="udpin::14550", out_dir=tmp_path, feed="vision",
+                                              home=HOME), conn)  # type: ignore[arg-type]
+    _discover(node, 1, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
+    lat, lon, alt = HOME.to_geodetic(np.array([-7.9, -0.7, -10.5]))
+    origin = _from(mavlink.MAVLink_gps_global_origin_message(round(lat * 1e7), round(lon * 1e7),
+                                                             round(alt * 1e3), 0), 1, 1)
+    tr = node.translator
+    tr.last_attitude = AttitudeSample(12_000_000, euler_to_quaternion(0.0, 0.0, 0.3))
+    tr.last_imu = ImuSample(12_000_000, np.array([0.0, 0.0, -9.8]), np.zeros(3))
+    e = _estimate((10.0, -5.0, -20.0))
+    node._send_feed(e)  # no origin reported yet: about our home
+    node.handle(origin, 2.5)
+    assert node.counters["feed_about_autopilot_origin"] == 1
+    node._send_feed(e)
+    before, after = conn.sent[-2:]
+    assert (before.x, before.y, before.z) == (10.0, -5.0, -20.0)
+    np.testing.assert_allclose((after.x, after.y, after.z), (17.9, -4.3, -20.0), atol=0.01)
+    node.config = CompanionConfig(master="udpin::14550", out_dir=tmp_path, feed="odometry", home=HOME)
+    node._send_feed(e)
+    np.testing.assert_allclose((conn.sent[-1].x, conn.sent[-1].y, conn.sent[-1].z), (17.9, -4.3, -20.0),
+                               atol=0.01)
+
+    from companion.mavlink.codec import new_link, pack
+
+    ours, autopilot = new_link(1, COMPANION_COMPONENT_ID), new_link(1, 1)
+    path = tmp_path / "companion.tlog"  # the companion's tlog: our feed, the origin arrives, our feed
+    with TlogWriter(path) as tlog:
+        tlog.write_frame(1, pack(ours, before))
+        tlog.write_frame(2, pack(autopilot, origin))
+        tlog.write_frame(3, pack(ours, after))
+    t, p = sent_track(path, "vision", HOME, HOME)
+    assert t.tolist() == [12_000_000, 12_000_000]
+    np.testing.assert_allclose(p, [[10.0, -5.0, -20.0], [10.0, -5.0, -20.0]], atol=0.01)

@@ -9,7 +9,10 @@
   consistency (``TightNavigator.accuracy_inflation``). While the estimate is not valid (``pos_valid``
   False) fix_type is 0.
   ArduPilot: ``GPS1_TYPE`` = 14 (MAVLink), in force after a reboot.
-- ``vision``: VISION_POSITION_ESTIMATE, NED position about our home and Euler attitude.
+- ``vision``: VISION_POSITION_ESTIMATE, NED position in the autopilot's local frame and Euler attitude:
+  horizontally about its EKF origin when it reports one (GPS_GLOBAL_ORIGIN; :func:`local_origin_ned_m`),
+  vertically about our home (heights above the take-off point: the autopilot's barometer, or ours
+  where we gave it the origin).
   ArduPilot: ``VISO_TYPE`` = 1, ``EK3_SRC1_POSXY`` = 6, ``EK3_SRC1_VELXY`` = 0,
   ``EK3_SRC1_POSZ`` = 1, ``EK3_SRC1_YAW`` = 1, reboot.
 - ``odometry``: ODOMETRY with ``frame_id`` = MAV_FRAME_LOCAL_FRD (20) and ``child_frame_id`` =
@@ -95,23 +98,39 @@ def covariance21(diagonal: tuple[float, ...]) -> list[float]:
     return cov
 
 
+def local_origin_ned_m(frame: LocalNedFrame, origin_lla: tuple[float, float, float] | None) -> np.ndarray:
+    """Where the local-position feeds' origin lies in our frame: the autopilot's EKF origin
+    (GPS_GLOBAL_ORIGIN) horizontally, our home vertically; zero without an origin. MAVLink's local
+    frame is NED about the EKF origin, and an autopilot that set its origin from its own first GNSS fix
+    (ArduPilot with a receiver of its own) has it where that fix was: in a street canyon 5-20 m from
+    ours. Sending positions about OUR home would put the vehicle that far off. The origin's altitude is
+    a GNSS altitude (tens of metres off in a canyon) and the autopilots' heights are not about it
+    (ArduPilot's barometer, PX4's external-vision height about the origin we set), so heights stay ours."""
+    if origin_lla is None:
+        return np.zeros(3)
+    o = frame.to_ned_m(*origin_lla)
+    return np.array([o[0], o[1], 0.0])
+
+
 def _pose_covariance(var: np.ndarray, config: FeedConfig) -> list[float]:
     """Position variances from the filter; attitude (the autopilot's own, passed through) stated."""
     att = config.attitude_sigma_rad ** 2
     return covariance21((var[0], var[1], var[2], att, att, att))
 
 
-def vision_position(e: NavEstimate, q_ned_frd: np.ndarray,
-                    config: FeedConfig) -> mavlink.MAVLink_vision_position_estimate_message:
+def vision_position(e: NavEstimate, q_ned_frd: np.ndarray, config: FeedConfig,
+                    origin_ned_m: np.ndarray | None = None) -> mavlink.MAVLink_vision_position_estimate_message:
+    """``origin_ned_m``: the local frame's origin in ours (:func:`local_origin_ned_m`; None: our home)."""
     roll, pitch, yaw = quaternion_to_euler(np.asarray(q_ned_frd, dtype=float))
-    p = e.p_ned_m
+    p = np.asarray(e.p_ned_m, dtype=float) - (0.0 if origin_ned_m is None else origin_ned_m)
     return mavlink.MAVLink_vision_position_estimate_message(
         usec=int(e.t_us), x=float(p[0]), y=float(p[1]), z=float(p[2]), roll=roll, pitch=pitch, yaw=yaw,
         covariance=_pose_covariance(np.asarray(e.cov_diag), config), reset_counter=0)
 
 
-def odometry(e: NavEstimate, q_ned_frd: np.ndarray, gyro_frd_rad_s: np.ndarray,
-             config: FeedConfig) -> mavlink.MAVLink_odometry_message:
+def odometry(e: NavEstimate, q_ned_frd: np.ndarray, gyro_frd_rad_s: np.ndarray, config: FeedConfig,
+             origin_ned_m: np.ndarray | None = None) -> mavlink.MAVLink_odometry_message:
+    """``origin_ned_m`` as in :func:`vision_position`."""
     q = np.asarray(q_ned_frd, dtype=float)
     r_ned_frd = np.array(rotation_ned_frd(float(q[0]), float(q[1]), float(q[2]), float(q[3]), math.sqrt))
     r_ned_frd = r_ned_frd.reshape(3, 3)
@@ -119,7 +138,7 @@ def odometry(e: NavEstimate, q_ned_frd: np.ndarray, gyro_frd_rad_s: np.ndarray,
     var = np.asarray(e.cov_diag, dtype=float)
     rate = config.rate_sigma_rad_s ** 2
     vel_cov = covariance21((var[3], var[4], var[5], rate, rate, rate))
-    p = e.p_ned_m
+    p = np.asarray(e.p_ned_m, dtype=float) - (0.0 if origin_ned_m is None else origin_ned_m)
     return mavlink.MAVLink_odometry_message(
         time_usec=int(e.t_us), frame_id=mavlink.MAV_FRAME_LOCAL_FRD,
         child_frame_id=mavlink.MAV_FRAME_BODY_FRD,

@@ -410,11 +410,14 @@ class AutopilotCompanion:
                                        unix_s=None if offset_us is None else (est.t_us + offset_us) * 1e-6)
         elif tr.last_attitude is None or tr.last_imu is None:
             return
-        elif feed == "vision":
-            msg = feeds.vision_position(est, tr.last_attitude.q_ned_frd, self.config.feeds)
         else:
-            msg = feeds.odometry(est, tr.last_attitude.q_ned_frd, tr.last_imu.gyro_frd_rad_s,
-                                 self.config.feeds)
+            assert self.frame is not None
+            origin = feeds.local_origin_ned_m(self.frame, self.frames.origins.get("GPS_GLOBAL_ORIGIN"))
+            if feed == "vision":
+                msg = feeds.vision_position(est, tr.last_attitude.q_ned_frd, self.config.feeds, origin)
+            else:
+                msg = feeds.odometry(est, tr.last_attitude.q_ned_frd, tr.last_imu.gyro_frd_rad_s,
+                                     self.config.feeds, origin)
         if self.conn.send(msg):
             self.counters[f"feed_{msg.get_type().lower()}_sent"] += 1
 
@@ -479,15 +482,13 @@ class AutopilotCompanion:
             system_id, component_id, self._delay_param.encode(), -1))
 
     def _check_origin(self, kind: str, lla: tuple[float, float, float]) -> None:
-        """Local-position feeds are about our frame's origin: say so once if the EKF's is elsewhere."""
+        """Local-position feeds are sent about the EKF's origin (``feeds.local_origin_ned_m``): counted
+        while it is more than 1 m from ours horizontally (an origin from the autopilot's own first fix)."""
         local = self.config.feed in ("vision", "odometry")
         if kind != "GPS_GLOBAL_ORIGIN" or not local or self.frame is None:
             return
-        offset_m = float(np.linalg.norm(self.frame.to_ned_m(*lla)))
-        if offset_m > 1.0:
-            self.problem("origin_mismatch", f"the autopilot's EKF origin is {offset_m:.1f} m from our "
-                         f"frame's origin: its local position is offset by that much")
-        self.counters["origin_mismatch"] += offset_m > 1.0
+        offset_m = float(np.linalg.norm(feeds.local_origin_ned_m(self.frame, lla)))
+        self.counters["feed_about_autopilot_origin"] += offset_m > 1.0
 
     def _set_origin(self, now_s: float, target_system: int) -> None:
         """Local-position feeds: give an autopilot without an EKF origin ours (1 Hz until it reports one)."""

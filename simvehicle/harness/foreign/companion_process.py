@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from companion.autopilot.feeds import local_origin_ned_m
+from companion.autopilot.frame import plausible
 from companion.domain.geodesy import LocalNedFrame
 from companion.errors import UserError
 
@@ -90,7 +92,9 @@ def sent_track(tlog_path: Path, feed: str, companion_frame: LocalNedFrame,
     """What the companion SENT the autopilot (its tlog): (boot µs (N,), mission NED (N, 3)), time-sorted.
 
     GPS_INPUT: geodetic (a fix_type below 3, sent while it had no valid estimate, is left out);
-    VISION_POSITION_ESTIMATE and ODOMETRY: NED about the companion's frame origin (``--home``)."""
+    VISION_POSITION_ESTIMATE and ODOMETRY: NED in the autopilot's local frame, about the origin the
+    companion had then (``companion.autopilot.feeds.local_origin_ned_m`` of the last plausible
+    GPS_GLOBAL_ORIGIN in its tlog before the message, in the companion's frame, ``--home``)."""
     from pymavlink import mavutil
 
     kind = FEED_MESSAGES[feed]
@@ -99,8 +103,14 @@ def sent_track(tlog_path: Path, feed: str, companion_frame: LocalNedFrame,
     if not tlog_path.is_file():
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
     log = mavutil.mavlink_connection(str(tlog_path), dialect="ardupilotmega")
+    origin = np.zeros(3)
     try:
-        while (msg := log.recv_match(type=kind)) is not None:
+        while (msg := log.recv_match(type=[kind, "GPS_GLOBAL_ORIGIN"])) is not None:
+            if msg.get_type() == "GPS_GLOBAL_ORIGIN":
+                lla = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+                if plausible(*lla):
+                    origin = local_origin_ned_m(companion_frame, lla)
+                continue
             if msg.get_srcComponent() != COMPANION_COMPONENT_ID:
                 continue
             if kind == "GPS_INPUT":
@@ -109,7 +119,7 @@ def sent_track(tlog_path: Path, feed: str, companion_frame: LocalNedFrame,
                 t_us.append(int(msg.time_usec))
                 p.append(mission_frame.to_ned_m(msg.lat * 1e-7, msg.lon * 1e-7, float(msg.alt)))
             else:
-                lla = companion_frame.to_geodetic(np.array([msg.x, msg.y, msg.z], dtype=float))
+                lla = companion_frame.to_geodetic(np.array([msg.x, msg.y, msg.z], dtype=float) + origin)
                 t_us.append(int(msg.usec if kind == "VISION_POSITION_ESTIMATE" else msg.time_usec))
                 p.append(mission_frame.to_ned_m(*lla))
     finally:
