@@ -15,6 +15,9 @@ models handed in:
   the map's line of sight as the per-satellite belief's prior (``city``: another map, e.g. an
   imperfect one; the mission's by default; None for a mission without one).
 
+A ``frame`` other than the mission's (e.g. the companion's ``--home`` beside an autopilot) gets the
+map moved into it (``City.shifted``, a translated clearance): positions are the navigator's.
+
 Without a mission (a foreign log, an autopilot we do not plan for) there is no map: ``map-beta`` and
 ``map-hmm`` then refuse to start with a one-line ``ConfigError``.
 """
@@ -25,6 +28,7 @@ import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.estimator import DEFAULT_METHOD, EstimatorConfig, MethodContext, Navigator, check_method
+from companion.estimator.methods import Clearance
 from companion.estimator.plugin_config import PluginConfig
 from companion.gnss.ephemeris import EphemerisStore
 from companion.mission import Mission, build
@@ -62,10 +66,28 @@ def navigator_for(mission: Mission | None, method: str = DEFAULT_METHOD, *,
         context = MethodContext()
         home = None if frame is _MISSION_HOME else frame
     else:
-        context = MethodContext(plugin=mission_plugin_config(mission), clearance_m=mission.world.clearance_m)
-        config = config if config is not None else mission_estimator_config(mission)
         home = mission.frame if frame is _MISSION_HOME else frame
+        context = MethodContext(plugin=mission_plugin_config(mission), clearance_m=_clearance(mission, home))
+        config = config if config is not None else mission_estimator_config(mission)
     return Navigator(config, method=method, frame=home, context=context)
+
+
+def _origin_in_mission(mission: Mission, frame: LocalNedFrame | None) -> np.ndarray | None:
+    """Where ``frame``'s origin lies in the mission's frame (NED); None for the mission's own frame (or
+    None: home at the first fix, where the map is taken as the mission's)."""
+    if frame is None or frame is mission.frame:
+        return None
+    o = mission.frame.to_ned_m(frame.home_lat_deg, frame.home_lon_deg, frame.home_alt_m)
+    return None if not np.any(o) else o
+
+
+def _clearance(mission: Mission, frame: LocalNedFrame | None) -> Clearance:
+    """The mission's clearance map for positions in ``frame``."""
+    o = _origin_in_mission(mission, frame)
+    if o is None:
+        return mission.world.clearance_m
+    world, dn, de = mission.world, float(o[0]), float(o[1])
+    return lambda north_m, east_m: world.clearance_m(np.add(north_m, dn), np.add(east_m, de))
 
 
 def mission_city(mission: Mission) -> City:
@@ -93,5 +115,7 @@ def tight_navigator_for(mission: Mission | None, method: str = DEFAULT_WEIGHTING
     else:
         home = mission.frame if frame is _MISSION_HOME else frame
         c = mission_city(mission) if city is _MISSION_CITY else city
+        o = _origin_in_mission(mission, home)
+        c = c if c is None or o is None else c.shifted(o)
         los = None if c is None else c.line_of_sight_blocked
     return TightNavigator(config, method, home, ephemerides, line_of_sight=los)

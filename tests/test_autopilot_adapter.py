@@ -566,3 +566,40 @@ def test_local_feeds_are_about_the_autopilots_ekf_origin_and_read_back_so(tmp_pa
     t, p = sent_track(path, "vision", HOME, HOME)
     assert t.tolist() == [12_000_000, 12_000_000]
     np.testing.assert_allclose(p, [[10.0, -5.0, -20.0], [10.0, -5.0, -20.0]], atol=0.01)
+
+
+def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys):
+    """``--mission NAME``: the tight filter's line-of-sight prior and the map methods get the mission's
+    buildings (moved into our frame: ``--home`` when given, else the mission's home); without it there
+    is no map; an unknown mission is a one-line error."""
+    import argparse
+
+    from companion.autopilot.node import AutopilotCompanion
+    from companion.autopilot.options import add_master_arguments
+    from companion.autopilot.service import config_from_args
+    from companion.mission import load_mission
+
+    parser = argparse.ArgumentParser()
+    add_master_arguments(parser, master_required=True)
+    parser.add_argument("--method", default="second-order")
+    base = ["--master", "udpin::14550", "--out", str(tmp_path), "--coupling", "tight", "--ubx", "tcp:127.0.0.1:1"]
+    m = load_mission("test")
+    start = m.frame.to_geodetic(np.array([47.0, 5.0, 0.0]))  # a profile's start, as the flight tool's --home
+    for extra, home, mapped in (([], None, False), (["--mission", "test"], m.frame, True),
+                                (["--mission", "test", "--home", ",".join(map(str, start))], None, True)):
+        config = config_from_args(parser.parse_args(base + extra))
+        assert (config.mission is not None) == mapped
+        if home is not None:
+            assert config.home == home
+        node = AutopilotCompanion(config, _FakeConn())  # type: ignore[arg-type]
+        if node.frame is None:
+            continue  # no --home, no mission: the frame comes from the autopilot
+        node._start_navigator()
+        assert (node.nav.engine.line_of_sight is not None) == mapped
+    loose = config_from_args(parser.parse_args(["--master", "udpin::14550", "--out", str(tmp_path),
+                                                "--mission", "test", "--method", "map-beta"]))
+    node = AutopilotCompanion(loose, _FakeConn())  # type: ignore[arg-type]
+    node._start_navigator()  # map-beta without a map refuses to start
+    assert node.nav.method == "map-beta"
+    with pytest.raises(UserError, match="nowhere.yaml"):
+        config_from_args(parser.parse_args(base + ["--mission", str(tmp_path / "nowhere.yaml")]))

@@ -159,6 +159,34 @@ def test_the_missions_map_reaches_the_tight_navigator():
     np.testing.assert_allclose(imperfect.hi - imperfect.lo, city.hi - city.lo)  # moved, same footprint
 
 
+def test_a_frame_other_than_the_missions_gets_the_map_moved_into_it():
+    """The companion beside an autopilot runs in its --home frame (the SITL's home: a profile's start),
+    not the mission's: the same places must see the same buildings. The line of sight at a point of
+    that frame equals the mission map's at the same point in the mission frame, exactly (a
+    translation); the loose map methods' clearance alike; the mission's own frame is not moved."""
+    from companion.domain.geodesy import LocalNedFrame
+    from companion.wiring import navigator_for
+
+    m = load_mission("test", "canyon")
+    o = np.array([47.0, 5.0, -1.5])  # that frame's origin in the mission's (1.5 m above its ground)
+    frame = LocalNedFrame(*m.frame.to_geodetic(o))
+    np.testing.assert_allclose(m.frame.to_ned_m(frame.home_lat_deg, frame.home_lon_deg, frame.home_alt_m), o,
+                               atol=1e-6)
+    theirs, ours = tight_navigator_for(m, "second-order").engine, tight_navigator_for(m, "second-order",
+                                                                                      frame=frame).engine
+    assert theirs.line_of_sight is not None and ours.line_of_sight is not None
+    rng = np.random.default_rng(3)
+    p_ours = np.column_stack((rng.uniform(-60, 60, 200), rng.uniform(-60, 60, 200), rng.uniform(-25, -1, 200)))
+    az, el = rng.uniform(0, 2 * np.pi, 12), np.radians(rng.uniform(5, 85, 12))
+    hidden = ours.line_of_sight(p_ours, az, el)
+    assert hidden.any() and not hidden.all()
+    np.testing.assert_array_equal(hidden, theirs.line_of_sight(p_ours + o, az, el))
+    moved = navigator_for(m, "map-beta", frame=frame).engine.method._clearance
+    for n, e, _ in p_ours[:20]:
+        assert moved(n, e) == pytest.approx(m.world.clearance_m(n + o[0], e + o[1]), abs=1e-9)
+    assert navigator_for(m, "map-beta").engine.method._clearance == m.world.clearance_m
+
+
 def test_a_whole_epoch_off_is_blamed_on_the_state_not_on_every_satellite():
     """Joint consistency: every pseudorange 30 m late at once (the receiver clock stepped: the prediction
     is off, not each satellite). Judged against the epoch's median, the beliefs hold; judged one by one

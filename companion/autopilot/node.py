@@ -58,6 +58,7 @@ from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEph
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.timescale import gps_to_unix_s
 from companion.mavlink import codec
+from companion.mission import Mission
 from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
 from companion.tight import RawGnss, TightConfig, TightNavigator, check_weighting
 from companion.wiring import navigator_for, tight_navigator_for
@@ -108,6 +109,9 @@ class CompanionConfig:
     coupling: str = "loose"
     ubx: str | None = None
     tight: TightConfig = field(default_factory=TightConfig)
+    # the mission flown (``--mission``): its buildings are the navigator's map (the tight filter's
+    # line-of-sight prior, the map methods), moved into our frame; None: no map
+    mission: Mission | None = None
 
     def __post_init__(self) -> None:
         if self.coupling not in ("loose", "tight"):
@@ -315,11 +319,12 @@ class AutopilotCompanion:
             self._after_imu(sample.t_us)
 
     def _start_navigator(self) -> None:
+        mission = self.config.mission  # its map, in our frame; our own filter settings (the autopilot's sensors)
         if self.config.coupling == "tight":
-            self.nav = tight_navigator_for(None, self.config.method, config=self.config.tight,
-                                           frame=self.frame, ephemerides=self._store())  # no mission: no map
+            self.nav = tight_navigator_for(mission, self.config.method, config=self.config.tight,
+                                           frame=self.frame, ephemerides=self._store())
         else:
-            self.nav = navigator_for(None, self.config.method, config=self.config.estimator, frame=self.frame)
+            self.nav = navigator_for(mission, self.config.method, config=self.config.estimator, frame=self.frame)
         self._topics = EstimatorTelemetry(self.telemetry)
 
     # -- the receiver's raw GNSS (--coupling tight) --------------------------------------------
@@ -530,6 +535,7 @@ class AutopilotCompanion:
         frame = self.frame
         return {
             "master": c.master, "method": c.method, "feed": c.feed, "coupling": c.coupling, "wall_s": wall_s,
+            "mission": None if c.mission is None else c.mission.name,
             "cpu_s": time.process_time(),
             "autopilot": ap.as_dict() if ap is not None else None,
             "conflicting_autopilots": sorted(self.discovery.conflicting_systems),

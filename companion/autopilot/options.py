@@ -17,7 +17,11 @@ def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool)
                              "serial:DEVICE:BAUD")
     parser.add_argument("--out", type=Path, help="output directory (run.tlog, summary.json)")
     parser.add_argument("--feed", default="none", choices=FEEDS, help="what to send the autopilot")
-    parser.add_argument("--home", help="local frame origin LAT,LON,ALT (default: the autopilot's origin)")
+    parser.add_argument("--home", help="local frame origin LAT,LON,ALT (default: the mission's home with "
+                                       "--mission, else the autopilot's origin)")
+    parser.add_argument("--mission", default=None, metavar="MISSION",
+                        help="the mission flown (a packaged name or a mission YAML file): its buildings are "
+                             "the map of the tight filter's line-of-sight prior and of the map methods")
     parser.add_argument("--duration-s", type=float, help="stop after this many wall seconds")
     parser.add_argument("--component-id", type=int, default=DEFAULT_COMPONENT_ID,
                         help="our MAVLink component id")

@@ -27,6 +27,7 @@ from companion.autopilot.translate import TranslateConfig
 from companion.domain.geodesy import parse_home
 from companion.errors import UserError
 from companion.mavlink.signing import read_signing_key
+from companion.mission import load_mission
 from companion.receiver.raw_receiver import RawReceiver
 from companion.telemetry.pubsub import TelemetryPublisher
 
@@ -50,10 +51,12 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         raise UserError("--coupling tight needs the receiver: --ubx serial:DEVICE:BAUD or tcp:HOST:PORT")
     if coupling != "tight" and ubx is not None:
         raise UserError("--ubx goes with --coupling tight (the loose filter takes the autopilot's fixes)")
+    mission = load_mission(args.mission) if getattr(args, "mission", None) else None
+    home = parse_home(args.home) if args.home else None if mission is None else mission.frame
     return CompanionConfig(
         master=args.master, out_dir=Path(args.out), method=args.method, feed=args.feed,
-        coupling=coupling, ubx=ubx,
-        home=parse_home(args.home) if args.home else None, duration_s=args.duration_s,
+        coupling=coupling, ubx=ubx, mission=mission,
+        home=home, duration_s=args.duration_s,
         component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
         signing_key=read_signing_key(key_file) if key_file else None,
         discovery=DiscoveryConfig(target_system=target, lost_timeout_s=args.lost_timeout_s),

@@ -130,6 +130,15 @@ class City:
         shift = rng.normal(0.0, sigma_shift_m, (n, 2))
         return City(np.hstack((self.lo + shift, self.hi + shift)), h)
 
+    def shifted(self, origin_ned_m: np.ndarray) -> City:
+        """The same city in a frame whose origin lies at ``origin_ned_m`` (NED) in this one: footprints
+        moved by its north and east, heights above its level (a translation: two local frames a few
+        hundred metres apart are also turned by their distance over the Earth's radius, 5e-5 rad per
+        300 m, i.e. centimetres over such a map)."""
+        o = np.asarray(origin_ned_m, dtype=float)
+        ne = np.array([o[0], o[1]])
+        return City(np.hstack((self.lo - ne, self.hi - ne)), self.height_m + o[2])
+
     def line_of_sight_blocked(
         self, p_ned_m: np.ndarray, azimuth_rad: np.ndarray, elevation_rad: np.ndarray
     ) -> np.ndarray:

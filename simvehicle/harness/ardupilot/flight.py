@@ -57,7 +57,8 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
 
         def companion() -> list[str]:  # SERIAL1 listens once SERIAL0 has its client
             return companion_command(sitl.wait_serial(1), companion_dir, opts.feed, opts.method, plan.home,
-                                     "--gnss-instance", "2", "--target-system", "1", *tight_arguments(stream))
+                                     "--gnss-instance", "2", "--target-system", "1", *tight_arguments(stream),
+                                     mission=opts.mission)
 
         run = run_session(session, sitl.running, companion if plan.closed else None, companion_dir)
         instance = sitl.instance

@@ -1,6 +1,6 @@
 """Closed loop: the companion as the separate process a user deploys beside the autopilot.
 
-The flight tool starts ``beliefnav companion --master URL --feed F --home <SITL home> [extra]``
+The flight tool starts ``beliefnav companion --master URL --feed F --mission M --home <SITL home> [extra]``
 beside the SITL, on its own MAVLink connection: ArduCopter's SERIAL1 (``tcp:127.0.0.1:5762 +
 10·I``, raw fixes read back as GPS2_RAW: ``--gnss-instance 2 --target-system 1``) or PX4's
 onboard link (``udpin:127.0.0.1:14540 + i``, raw fixes as GPS_RAW_INT, ``--target-system i + 1``).
@@ -34,12 +34,13 @@ FEED_MESSAGES = {"gps-input": "GPS_INPUT", "vision": "VISION_POSITION_ESTIMATE",
 
 
 def companion_command(master: str, out_dir: Path, feed: str, method: str, home: tuple[float, float, float],
-                      *extra: str) -> list[str]:
-    """The command line a user would type (``extra``: e.g. ``--gnss-instance 2``)."""
+                      *extra: str, mission: str | None = None) -> list[str]:
+    """The command line a user would type (``extra``: e.g. ``--gnss-instance 2``; ``mission``: the
+    mission flown, whose buildings are the companion's map)."""
     if feed not in FEED_MESSAGES:
         raise UserError(f"--feed {feed}: the companion process feeds one of {', '.join(FEED_MESSAGES)}")
     return [sys.executable, "-m", "gcs_tools", "companion", "--master", master, "--out", str(out_dir),
-            "--feed", feed, "--method", method, *extra,
+            "--feed", feed, "--method", method, *extra, *(("--mission", mission) if mission else ()),
             "--home", ",".join(f"{v:.9f}" for v in home), "--no-telemetry"]
 
 

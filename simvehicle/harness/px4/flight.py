@@ -58,7 +58,7 @@ def fly_px4(opts: Px4FlightOptions) -> FlightResult:
 
         def companion() -> list[str]:  # PX4's onboard link, as a user starts it beside PX4
             return companion_command(sitl.url, companion_dir, opts.feed, opts.method, plan.home,
-                                     "--target-system", str(sitl.system_id))
+                                     "--target-system", str(sitl.system_id), mission=opts.mission)
 
         run = foreign.run_session(session, sitl.running, companion if plan.closed else None, companion_dir)
         instance = sitl.instance
