@@ -10,6 +10,7 @@ models handed in:
 * ``navigator_for(mission, method, config=, frame=)``: the navigator with both, the mission's map
   (``World.clearance_m``, which ``map-beta`` and ``map-hmm`` need) and its home as the frame.
 
+* ``mission_clearance(mission, frame)``: the map's clearance (distance to the nearest building) in ``frame``;
 * ``mission_city(mission)``: the map's buildings as boxes (``companion.mission.city3d.City``);
 * ``tight_navigator_for(mission, method, config=, frame=, city=)``: the tightly coupled navigator with
   the map's line of sight as the per-satellite belief's prior (``city``: another map, e.g. an
@@ -67,7 +68,7 @@ def navigator_for(mission: Mission | None, method: str = DEFAULT_METHOD, *,
         home = None if frame is _MISSION_HOME else frame
     else:
         home = mission.frame if frame is _MISSION_HOME else frame
-        context = MethodContext(plugin=mission_plugin_config(mission), clearance_m=_clearance(mission, home))
+        context = MethodContext(plugin=mission_plugin_config(mission), clearance_m=mission_clearance(mission, home))
         config = config if config is not None else mission_estimator_config(mission)
     return Navigator(config, method=method, frame=home, context=context)
 
@@ -81,8 +82,8 @@ def _origin_in_mission(mission: Mission, frame: LocalNedFrame | None) -> np.ndar
     return None if not np.any(o) else o
 
 
-def _clearance(mission: Mission, frame: LocalNedFrame | None) -> Clearance:
-    """The mission's clearance map for positions in ``frame``."""
+def mission_clearance(mission: Mission, frame: LocalNedFrame | None) -> Clearance:
+    """The mission's clearance map (``World.clearance_m``, vectorised) for positions in ``frame``."""
     o = _origin_in_mission(mission, frame)
     if o is None:
         return mission.world.clearance_m

@@ -570,8 +570,9 @@ def test_local_feeds_are_about_the_autopilots_ekf_origin_and_read_back_so(tmp_pa
 
 def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys):
     """``--mission NAME``: the tight filter's line-of-sight prior and the map methods get the mission's
-    buildings (moved into our frame: ``--home`` when given, else the mission's home); without it there
-    is no map; an unknown mission is a one-line error."""
+    buildings (moved into our frame: ``--home`` when given, else the mission's home), and the fed
+    position is kept out of them (``--no-free-space``: not); without it there is no map; an unknown
+    mission is a one-line error."""
     import argparse
 
     from companion.autopilot.node import AutopilotCompanion
@@ -601,5 +602,15 @@ def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys
     node = AutopilotCompanion(loose, _FakeConn())  # type: ignore[arg-type]
     node._start_navigator()  # map-beta without a map refuses to start
     assert node.nav.method == "map-beta"
+    r = m.world.rects_m[0]  # an estimate in the middle of a building, σ 10 m: fed outside it
+    inside = _estimate(((r[0] + r[2]) / 2, (r[1] + r[3]) / 2, -20.0), var=(100.0, 100.0, 4.0, *[0.1] * 6))
+    fed = node._in_free_space(inside)
+    assert m.world.clearance_m(*fed.p_ned_m[:2]) > 0.0 and fed.p_ned_m[2] == -20.0
+    assert fed.cov_diag[2] == 4.0 and node.counters["free_space_constrained"] == 1
+    off = config_from_args(parser.parse_args(["--master", "udpin::14550", "--out", str(tmp_path), "--mission",
+                                              "test", "--no-free-space"]))
+    node = AutopilotCompanion(off, _FakeConn())  # type: ignore[arg-type]
+    node._start_navigator()
+    assert node._in_free_space(inside) is inside
     with pytest.raises(UserError, match="nowhere.yaml"):
         config_from_args(parser.parse_args(base + ["--mission", str(tmp_path / "nowhere.yaml")]))

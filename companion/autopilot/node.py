@@ -54,6 +54,8 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
 from companion.estimator import DEFAULT_METHOD, EstimatorConfig, Navigator, check_method
+from companion.estimator.freespace import FreeSpaceConfig, constrain
+from companion.estimator.methods import Clearance
 from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEphemeris
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.timescale import gps_to_unix_s
@@ -61,7 +63,7 @@ from companion.mavlink import codec
 from companion.mission import Mission
 from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
 from companion.tight import RawGnss, TightConfig, TightNavigator, check_weighting
-from companion.wiring import navigator_for, tight_navigator_for
+from companion.wiring import mission_clearance, navigator_for, tight_navigator_for
 
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
 REASK_MIN_S = 2.0  # a reboot seen this soon after asking for the streams does not ask again
@@ -112,6 +114,9 @@ class CompanionConfig:
     # the mission flown (``--mission``): its buildings are the navigator's map (the tight filter's
     # line-of-sight prior, the map methods), moved into our frame; None: no map
     mission: Mission | None = None
+    # with a mission: the fed position constrained to the map's free space (``companion.estimator.
+    # freespace``: the estimate truncated to outside the buildings); None: off (``--no-free-space``)
+    free_space: FreeSpaceConfig | None = field(default_factory=FreeSpaceConfig)
 
     def __post_init__(self) -> None:
         if self.coupling not in ("loose", "tight"):
@@ -149,6 +154,7 @@ class AutopilotCompanion:
         self._topics = EstimatorTelemetry(self.telemetry)
         self.status = AutopilotStatus(self.telemetry)  # status (mode, armed) and gnss for the ground tools
         self.nav: Navigator | TightNavigator | None = None
+        self._free_space: Clearance | None = None  # the map's clearance in our frame (--mission)
         self._ephemerides: dict[tuple[int, int], KeplerEphemeris] = {}  # (PRN, IODE) -> from the receiver
         self._glonass: dict[tuple[int, float], GlonassEphemeris] = {}  # (slot, t_b) -> from the receiver
         self._klobuchar: Any = None
@@ -320,6 +326,8 @@ class AutopilotCompanion:
 
     def _start_navigator(self) -> None:
         mission = self.config.mission  # its map, in our frame; our own filter settings (the autopilot's sensors)
+        if mission is not None and self.config.free_space is not None:
+            self._free_space = mission_clearance(mission, self.frame)
         if self.config.coupling == "tight":
             self.nav = tight_navigator_for(mission, self.config.method, config=self.config.tight,
                                            frame=self.frame, ephemerides=self._store())
@@ -402,6 +410,7 @@ class AutopilotCompanion:
         except codec.CodecError as exc:
             self.counters[f"unsendable_{exc.reason}"] += 1
             return
+        est = self._in_free_space(est)
         tr, feed = self.translator, self.config.feed
         if feed == "gps-input":
             assert self.frame is not None
@@ -425,6 +434,21 @@ class AutopilotCompanion:
                                      self.config.feeds, origin)
         if self.conn.send(msg):
             self.counters[f"feed_{msg.get_type().lower()}_sent"] += 1
+
+    def _in_free_space(self, est: NavEstimate) -> NavEstimate:
+        """The fed estimate constrained to the map's free space (unchanged without a map or away from
+        buildings); counted when moved."""
+        if self._free_space is None or self.config.free_space is None:
+            return est
+        c = constrain(np.asarray(est.p_ned_m)[:2], np.asarray(est.cov_diag)[:2], self._free_space,
+                      self.config.free_space)
+        if c is None:
+            return est
+        self.counters["free_space_constrained"] += 1
+        p = np.array([c.p_ne_m[0], c.p_ne_m[1], est.p_ned_m[2]])
+        cov = np.array(est.cov_diag, dtype=float)
+        cov[:2] = c.var_ne_m2
+        return replace(est, p_ned_m=p, cov_diag=cov)
 
     def _rebooted(self, now_s: float) -> None:
         self.counters["autopilot_reboots"] += 1

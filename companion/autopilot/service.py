@@ -26,6 +26,7 @@ from companion.autopilot.node import AutopilotCompanion, CompanionConfig
 from companion.autopilot.translate import TranslateConfig
 from companion.domain.geodesy import parse_home
 from companion.errors import UserError
+from companion.estimator.freespace import FreeSpaceConfig
 from companion.mavlink.signing import read_signing_key
 from companion.mission import load_mission
 from companion.receiver.raw_receiver import RawReceiver
@@ -56,6 +57,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     return CompanionConfig(
         master=args.master, out_dir=Path(args.out), method=args.method, feed=args.feed,
         coupling=coupling, ubx=ubx, mission=mission,
+        free_space=None if getattr(args, "no_free_space", False) else FreeSpaceConfig(),
         home=home, duration_s=args.duration_s,
         component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
         signing_key=read_signing_key(key_file) if key_file else None,
