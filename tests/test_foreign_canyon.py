@@ -167,6 +167,10 @@ def test_parameters_with_the_raw_receiver_and_px4s_open_loop_only(tmp_path):
     assert ardupilot_parameters(ArduPilotConfig(), "gps-input", canyon=True) == {
         **ardupilot_parameters(ArduPilotConfig(), "gps-input"), "EK3_GPS_CHECK": 0}
     assert "EK3_GPS_CHECK" not in ardupilot_parameters(ArduPilotConfig())
+    # the closed loops' second receiver declares the canyon receiver's latency (the companion's clock lag)
+    for feed in ("gps-input", "vision"):
+        assert ardupilot_parameters(ArduPilotConfig(), feed, True, receiver_latency_ms=80)["GPS2_DELAY_MS"] == 80
+    assert ardupilot_parameters(ArduPilotConfig(), "none", True, receiver_latency_ms=80)["GPS1_DELAY_MS"] == 100
     assert px4_parameters(Px4FlightConfig(), canyon=True)["EKF2_GPS_CHECK"] == 0
     assert "EKF2_GPS_CHECK" not in px4_parameters(Px4FlightConfig())
     with pytest.raises(UserError, match="open loop only"):

@@ -65,6 +65,7 @@ from companion.telemetry.pubsub import EstimatorTelemetry, TelemetryPublisher
 from companion.tight import RawGnss, TightConfig, TightNavigator, check_weighting
 from companion.wiring import mission_clearance, navigator_for, tight_navigator_for
 
+ARDUPILOT = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
 EPOCH_STRIDE_US = 10**13  # series time key = epoch (reboots) * this + boot µs: monotonic across reboots
 REASK_MIN_S = 2.0  # a reboot seen this soon after asking for the streams does not ask again
 # The autopilot's boot time, over every stamped message (arrivals: our monotonic clock). Stamps
@@ -117,6 +118,9 @@ class CompanionConfig:
     # with a mission: the fed position constrained to the map's free space (``companion.estimator.
     # freespace``: the estimate truncated to outside the buildings); None: off (``--no-free-space``)
     free_space: FreeSpaceConfig | None = field(default_factory=FreeSpaceConfig)
+    # --coupling tight: the autopilot's SYSTEM_TIME lags GPS time by this (µs); None: the receiver delay
+    # in force (``AutopilotCompanion.clock_lag_us``)
+    clock_lag_us: int | None = None
 
     def __post_init__(self) -> None:
         if self.coupling not in ("loose", "tight"):
@@ -370,7 +374,7 @@ class AutopilotCompanion:
             elif not isinstance(self.nav, TightNavigator):
                 self.counters["raw_before_first_fix"] += 1
             else:
-                t_us = round(gps_to_unix_s(item.t_gps_s) * 1e6) - offset_us
+                t_us = round(gps_to_unix_s(item.t_gps_s) * 1e6) - offset_us - self.clock_lag_us
                 base = self.clock.base_us  # the one clock rule, as for the autopilot's fixes
                 if base is not None and not within(t_us, base, GNSS_WINDOW):
                     self.counters["rejected_clock_raw"] += 1
@@ -379,6 +383,20 @@ class AutopilotCompanion:
                 self.counters["raw_epochs"] += 1
         else:
             self.counters["raw_receiver_fixes"] += 1
+
+    @property
+    def clock_lag_us(self) -> int:
+        """How far the autopilot's SYSTEM_TIME lags GPS time: ``clock_lag_us`` if given, else the receiver
+        delay in force beside ArduPilot (its GPSn_DELAY_MS, or ``--gps-delay-ms``), else 0. ArduPilot sets its clock
+        from a fix's GPS time when the fix ARRIVES (and keeps it), so its clock lags by that receiver's
+        latency, which is what GPSn_DELAY_MS declares (measured beside ArduPilot SITL on the canyon
+        receiver, 80 ms latency: 84.0-84.5 ms, constant; the first fix reached it 93 ms after its
+        measurement)."""
+        lag = self.config.clock_lag_us
+        if lag is not None:
+            return lag
+        ap = self.discovery.autopilot  # PX4's SYSTEM_TIME is its host's clock, not a fix's
+        return self.translator.gnss_delay_us if ap is not None and ap.autopilot_type == ARDUPILOT else 0
 
     def set_klobuchar(self, klobuchar: Any) -> None:
         self._klobuchar = klobuchar
@@ -584,7 +602,8 @@ class AutopilotCompanion:
                         "acks": dict(sorted(self.acks.items()))},
             "timesync": self.timesync.as_dict(),
             "clock": {"base_us": self.clock.base_us, "resets": self.clock.resets,
-                      "rejected": self.clock.rejected},
+                      "rejected": self.clock.rejected, "system_time_lag_ms": self.clock_lag_us / 1000.0,
+                      "system_time_lag_source": "receiver delay" if c.clock_lag_us is None else "option"},
             "node": dict(sorted(self.counters.items())),
             "link": dict(sorted(self.conn.counters.items())),
             "gnss_delay": {"ms": self.translator.gnss_delay_us / 1000.0,

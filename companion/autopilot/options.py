@@ -40,6 +40,10 @@ def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool)
     parser.add_argument("--ubx", default=None, metavar="URL",
                         help="--coupling tight: the u-blox receiver (RXM-RAWX, RXM-SFRBX): "
                              "serial:DEVICE:BAUD or tcp:HOST:PORT")
+    parser.add_argument("--clock-lag-ms", type=float, default=None,
+                        help="--coupling tight: how far the autopilot's clock (SYSTEM_TIME) lags GPS time; "
+                             "ArduPilot sets it from a fix at the fix's arrival, so by that receiver's "
+                             "latency (default: the receiver delay, --gps-delay-ms or the autopilot's)")
     parser.add_argument("--discovery-timeout-s", type=float, default=60.0,
                         help="give up when no autopilot HEARTBEAT arrives within this (wall s)")
     parser.add_argument("--lost-timeout-s", type=float, default=15.0,

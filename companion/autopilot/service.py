@@ -43,6 +43,9 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     delay = args.gps_delay_ms
     if delay is not None and not (math.isfinite(delay) and 0 <= delay <= 1000):
         raise UserError(f"--gps-delay-ms {delay}: must be within 0..1000")
+    lag = getattr(args, "clock_lag_ms", None)
+    if lag is not None and not (math.isfinite(lag) and 0 <= lag <= 1000):
+        raise UserError(f"--clock-lag-ms {lag}: must be within 0..1000")
     target = args.target_system
     if target is not None and not 1 <= target <= 255:
         raise UserError(f"--target-system {target}: must be 1..255")
@@ -58,6 +61,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         master=args.master, out_dir=Path(args.out), method=args.method, feed=args.feed,
         coupling=coupling, ubx=ubx, mission=mission,
         free_space=None if getattr(args, "no_free_space", False) else FreeSpaceConfig(),
+        clock_lag_us=None if lag is None else round(lag * 1000),
         home=home, duration_s=args.duration_s,
         component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
         signing_key=read_signing_key(key_file) if key_file else None,

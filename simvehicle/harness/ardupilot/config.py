@@ -38,9 +38,15 @@ class ArduPilotConfig(ForeignFlightConfig):
 CANYON_PARAMETERS = {"EK3_GPS_CHECK": 0}
 
 
-def ardupilot_parameters(cfg: ArduPilotConfig, feed: str = "none", canyon: bool = False) -> dict[str, float]:
-    """The parameters of ``feed`` (:func:`_parameters`), with ``CANYON_PARAMETERS`` on the canyon receiver."""
+def ardupilot_parameters(cfg: ArduPilotConfig, feed: str = "none", canyon: bool = False,
+                         receiver_latency_ms: int | None = None) -> dict[str, float]:
+    """The parameters of ``feed`` (:func:`_parameters`), with ``CANYON_PARAMETERS`` on the canyon receiver.
+    ``receiver_latency_ms`` (the canyon receiver's): the closed loops' second receiver (the raw fixes the
+    companion reads, which also set ArduPilot's clock) declares it as GPS2_DELAY_MS, as a user sets
+    GPSn_DELAY_MS to a receiver's latency; the companion takes its clock lag from it."""
     params = _parameters(cfg, feed)
+    if receiver_latency_ms is not None and "GPS2_DELAY_MS" in params:
+        params["GPS2_DELAY_MS"] = receiver_latency_ms
     return {**params, **CANYON_PARAMETERS} if canyon else params
 
 

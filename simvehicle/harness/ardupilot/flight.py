@@ -47,7 +47,10 @@ def fly_ardupilot(opts: ArduPilotFlightOptions) -> FlightResult:
     m = plan.mission
     driver = FlightDriver(cfg, plan.route, m.altitude_m)
     opts.out_dir.mkdir(parents=True, exist_ok=True)
-    params = ardupilot_parameters(cfg, opts.feed, canyon=plan.canyon is not None)
+    canyon = plan.canyon
+    params = ardupilot_parameters(cfg, opts.feed, canyon=canyon is not None,
+                                  receiver_latency_ms=None if canyon is None else
+                                  round(canyon.model.cfg.latency_s * 1000))
     sitl_cfg = SitlConfig(work_dir=opts.out_dir / "ardupilot", home=(*plan.home, 0.0), speedup=cfg.speedup,
                           params=params, instance_range=opts.instance_range)
     companion_dir = opts.out_dir / "companion"
