@@ -68,7 +68,8 @@ def navigator_for(mission: Mission | None, method: str = DEFAULT_METHOD, *,
         home = None if frame is _MISSION_HOME else frame
     else:
         home = mission.frame if frame is _MISSION_HOME else frame
-        context = MethodContext(plugin=mission_plugin_config(mission), clearance_m=mission_clearance(mission, home))
+        context = MethodContext(plugin=mission_plugin_config(mission),
+                                clearance_m=mission_clearance(mission, home))
         config = config if config is not None else mission_estimator_config(mission)
     return Navigator(config, method=method, frame=home, context=context)
 

@@ -200,12 +200,14 @@ def test_session_places_ekf3s_local_frame_by_its_origin_and_its_ground_height(tm
     lat, lon, alt = m.frame.to_geodetic(np.array([10.0, -4.0, -21.4]))  # the origin's fix: 21.4 m high
 
     def gpi(alt_m: float, relative_alt_m: float, t_ms: int, position: bool = True) -> types.SimpleNamespace:
-        return types.SimpleNamespace(lat=round(lat * 1e7) if position else 0, lon=round(lon * 1e7) if position else 0,
+        return types.SimpleNamespace(lat=round(lat * 1e7) if position else 0,
+                                     lon=round(lon * 1e7) if position else 0,
                                      alt=round(alt_m * 1e3), relative_alt=round(relative_alt_m * 1e3),
                                      time_boot_ms=t_ms)
 
     s._handle_vehicle("GLOBAL_POSITION_INT", gpi(0.0, 0.0, 500, position=False))  # no position yet
-    s._handle_vehicle("GPS_GLOBAL_ORIGIN", types.SimpleNamespace(latitude=round(lat * 1e7), longitude=round(lon * 1e7),
+    s._handle_vehicle("GPS_GLOBAL_ORIGIN", types.SimpleNamespace(latitude=round(lat * 1e7),
+                                                                 longitude=round(lon * 1e7),
                                                                  altitude=round(alt * 1e3)))
     assert s.ground_alt_m is None and s.now.origin_ned_m is None  # no ground height yet: nothing placed
     s._handle_vehicle("GLOBAL_POSITION_INT", gpi(home_alt + 20.12, 0.0, 1000))  # on the ground, disarmed

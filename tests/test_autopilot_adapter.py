@@ -583,7 +583,8 @@ def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys
     parser = argparse.ArgumentParser()
     add_master_arguments(parser, master_required=True)
     parser.add_argument("--method", default="second-order")
-    base = ["--master", "udpin::14550", "--out", str(tmp_path), "--coupling", "tight", "--ubx", "tcp:127.0.0.1:1"]
+    base = ["--master", "udpin::14550", "--out", str(tmp_path), "--coupling", "tight",
+            "--ubx", "tcp:127.0.0.1:1"]
     m = load_mission("test")
     start = m.frame.to_geodetic(np.array([47.0, 5.0, 0.0]))  # a profile's start, as the flight tool's --home
     for extra, home, mapped in (([], None, False), (["--mission", "test"], m.frame, True),

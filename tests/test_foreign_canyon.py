@@ -169,8 +169,10 @@ def test_parameters_with_the_raw_receiver_and_px4s_open_loop_only(tmp_path):
     assert "EK3_GPS_CHECK" not in ardupilot_parameters(ArduPilotConfig())
     # the closed loops' second receiver declares the canyon receiver's latency (the companion's clock lag)
     for feed in ("gps-input", "vision"):
-        assert ardupilot_parameters(ArduPilotConfig(), feed, True, receiver_latency_ms=80)["GPS2_DELAY_MS"] == 80
-    assert ardupilot_parameters(ArduPilotConfig(), "none", True, receiver_latency_ms=80)["GPS1_DELAY_MS"] == 100
+        params = ardupilot_parameters(ArduPilotConfig(), feed, True, receiver_latency_ms=80)
+        assert params["GPS2_DELAY_MS"] == 80
+    open_loop = ardupilot_parameters(ArduPilotConfig(), "none", True, receiver_latency_ms=80)
+    assert open_loop["GPS1_DELAY_MS"] == 100 and "GPS2_DELAY_MS" not in open_loop
     assert px4_parameters(Px4FlightConfig(), canyon=True)["EKF2_GPS_CHECK"] == 0
     assert "EKF2_GPS_CHECK" not in px4_parameters(Px4FlightConfig())
     with pytest.raises(UserError, match="open loop only"):

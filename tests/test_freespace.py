@@ -19,12 +19,14 @@ STREET = World(WorldConfig(Bounds(-400, -400, 400, 400), (Building(-300, -300, 3
 
 
 def test_open_space_and_far_buildings_leave_the_estimate_alone():
-    assert constrain(np.array([0.0, 8.0]), np.array([1.0, 1.0]), STREET.clearance_m) is None  # 8 m clear, σ 1 m
+    # 8 m clear, σ 1 m
+    assert constrain(np.array([0.0, 8.0]), np.array([1.0, 1.0]), STREET.clearance_m) is None
     open_sky = World(WorldConfig(Bounds(0, 0, 10, 10), ()))
     assert constrain(np.array([5.0, 5.0]), np.array([400.0, 400.0]), open_sky.clearance_m) is None
 
 
-@pytest.mark.parametrize(("east_m", "sigma_m"), [(24.0, 10.0), (8.0, 10.0), (-3.0, 4.0), (14.0, 2.0), (30.0, 20.0)])
+@pytest.mark.parametrize(("east_m", "sigma_m"),
+                         [(24.0, 10.0), (8.0, 10.0), (-3.0, 4.0), (14.0, 2.0), (30.0, 20.0)])
 def test_the_truncated_gaussian_mean_and_variance_across_the_street(east_m, sigma_m):
     """Across the street the answer is the normal truncated to [0, 16] m: mean μ + σ (φ(α) − φ(β)) /
     (Φ(β) − Φ(α)) (scipy's truncnorm), along it unchanged; on the 33-point grid (spacing 0.22 σ: the
@@ -35,7 +37,8 @@ def test_the_truncated_gaussian_mean_and_variance_across_the_street(east_m, sigm
     mean, var = truncnorm.stats(a, b, loc=east_m, scale=sigma_m, moments="mv")
     assert c.p_ne_m[1] == pytest.approx(float(mean), abs=0.05 * sigma_m)
     assert math.sqrt(c.var_ne_m2[1]) == pytest.approx(math.sqrt(float(var)), abs=0.05 * sigma_m)
-    assert c.p_ne_m[0] == pytest.approx(5.0, abs=1e-9) and c.var_ne_m2[0] == pytest.approx(sigma_m**2, rel=0.05)
+    assert c.p_ne_m[0] == pytest.approx(5.0, abs=1e-9)
+    assert c.var_ne_m2[0] == pytest.approx(sigma_m**2, rel=0.05)
     assert 0.0 < c.p_ne_m[1] < 16.0 and c.moved_m == pytest.approx(abs(c.p_ne_m[1] - east_m))
     # a fix 24 m east (8 m inside the building), σ 10 m: not on the wall, inside the street
     if east_m == 24.0:

@@ -117,8 +117,8 @@ def test_node_fuses_the_receivers_raw_epochs_and_feeds_gps_input(tmp_path):
     (mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, None, 80_000),  # its receiver delay (GPS2_DELAY_MS = 80 ms)
     (mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 84_000, 84_000),  # --clock-lag-ms 84
     (mavlink.MAV_AUTOPILOT_PX4, None, 0)])  # PX4's SYSTEM_TIME is its host's clock
-def test_raw_epochs_are_put_on_boot_time_before_the_autopilots_lagging_clock(tmp_path, autopilot, lag_option_us,
-                                                                             lag_us):
+def test_raw_epochs_are_put_on_boot_time_before_the_autopilots_lagging_clock(
+        tmp_path, autopilot, lag_option_us, lag_us):
     """ArduPilot sets its clock from a fix's GPS time when the fix arrives: its SYSTEM_TIME lags GPS time
     by that receiver's latency (84 ms beside the 80 ms canyon receiver). An epoch measured at GPS time
     T is at boot time (T as Unix time) − (SYSTEM_TIME's Unix − boot) − that lag."""
@@ -128,15 +128,16 @@ def test_raw_epochs_are_put_on_boot_time_before_the_autopilots_lagging_clock(tmp
 
     lat, lon, h = (float(v) for v in ecef_to_geodetic(RX_ECEF))
     config = CompanionConfig(master="udpin::14550", out_dir=tmp_path, coupling="tight", ubx="tcp:unused:1",
-                             home=LocalNedFrame(math.degrees(lat), math.degrees(lon), h), clock_lag_us=lag_option_us,
+                             home=LocalNedFrame(math.degrees(lat), math.degrees(lon), h),
+                             clock_lag_us=lag_option_us,
                              translate=TranslateConfig(gnss_delay_us=80_000))
     node = AutopilotCompanion(config, _FakeConn())  # type: ignore[arg-type]
     hb = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, autopilot, 0, 0, 0, 3)
     node.handle(_from(hb, 3, 1), -2.0)
     node.handle(_from(hb, 3, 1), 0.0)
     boot0_us = 1_000_000  # the autopilot's boot time at ITS Unix time gps_to_unix(T0)
-    node.handle(_from(mavlink.MAVLink_system_time_message(round(gps_to_unix_s(T0) * 1e6), boot0_us // 1000), 3, 1),
-                0.0)
+    sys_time = mavlink.MAVLink_system_time_message(round(gps_to_unix_s(T0) * 1e6), boot0_us // 1000)
+    node.handle(_from(sys_time, 3, 1), 0.0)
     node._start_navigator()
     pushed: list[int] = []
     node.nav.push = lambda sample: pushed.append(sample.t_us) if isinstance(sample, RawGnss) else None  # type: ignore[union-attr]

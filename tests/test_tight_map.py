@@ -176,7 +176,8 @@ def test_a_frame_other_than_the_missions_gets_the_map_moved_into_it():
                                                                                       frame=frame).engine
     assert theirs.line_of_sight is not None and ours.line_of_sight is not None
     rng = np.random.default_rng(3)
-    p_ours = np.column_stack((rng.uniform(-60, 60, 200), rng.uniform(-60, 60, 200), rng.uniform(-25, -1, 200)))
+    p_ours = np.column_stack((rng.uniform(-60, 60, 200), rng.uniform(-60, 60, 200),
+                              rng.uniform(-25, -1, 200)))
     az, el = rng.uniform(0, 2 * np.pi, 12), np.radians(rng.uniform(5, 85, 12))
     hidden = ours.line_of_sight(p_ours, az, el)
     assert hidden.any() and not hidden.all()

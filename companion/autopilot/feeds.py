@@ -118,8 +118,9 @@ def _pose_covariance(var: np.ndarray, config: FeedConfig) -> list[float]:
     return covariance21((var[0], var[1], var[2], att, att, att))
 
 
-def vision_position(e: NavEstimate, q_ned_frd: np.ndarray, config: FeedConfig,
-                    origin_ned_m: np.ndarray | None = None) -> mavlink.MAVLink_vision_position_estimate_message:
+def vision_position(
+        e: NavEstimate, q_ned_frd: np.ndarray, config: FeedConfig,
+        origin_ned_m: np.ndarray | None = None) -> mavlink.MAVLink_vision_position_estimate_message:
     """``origin_ned_m``: the local frame's origin in ours (:func:`local_origin_ned_m`; None: our home)."""
     roll, pitch, yaw = quaternion_to_euler(np.asarray(q_ned_frd, dtype=float))
     p = np.asarray(e.p_ned_m, dtype=float) - (0.0 if origin_ned_m is None else origin_ned_m)

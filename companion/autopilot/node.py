@@ -329,14 +329,16 @@ class AutopilotCompanion:
             self._after_imu(sample.t_us)
 
     def _start_navigator(self) -> None:
-        mission = self.config.mission  # its map, in our frame; our own filter settings (the autopilot's sensors)
+        # the mission's map, in our frame; our own filter settings (the autopilot's sensors)
+        mission = self.config.mission
         if mission is not None and self.config.free_space is not None:
             self._free_space = mission_clearance(mission, self.frame)
         if self.config.coupling == "tight":
             self.nav = tight_navigator_for(mission, self.config.method, config=self.config.tight,
                                            frame=self.frame, ephemerides=self._store())
         else:
-            self.nav = navigator_for(mission, self.config.method, config=self.config.estimator, frame=self.frame)
+            self.nav = navigator_for(mission, self.config.method, config=self.config.estimator,
+                                     frame=self.frame)
         self._topics = EstimatorTelemetry(self.telemetry)
 
     # -- the receiver's raw GNSS (--coupling tight) --------------------------------------------
@@ -387,7 +389,8 @@ class AutopilotCompanion:
     @property
     def clock_lag_us(self) -> int:
         """How far the autopilot's SYSTEM_TIME lags GPS time: ``clock_lag_us`` if given, else the receiver
-        delay in force beside ArduPilot (its GPSn_DELAY_MS, or ``--gps-delay-ms``), else 0. ArduPilot sets its clock
+        delay in force beside ArduPilot (its GPSn_DELAY_MS, or ``--gps-delay-ms``), else 0. ArduPilot sets its
+        clock
         from a fix's GPS time when the fix ARRIVES (and keeps it), so its clock lags by that receiver's
         latency, which is what GPSn_DELAY_MS declares (measured beside ArduPilot SITL on the canyon
         receiver, 80 ms latency: 84.0-84.5 ms, constant; the first fix reached it 93 ms after its

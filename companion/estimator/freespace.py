@@ -5,8 +5,8 @@ reported accuracy, e.g. the tight filter's consistency-inflated P). The map says
 outside every building (clearance > ``min_clearance_m``). The constrained estimate is the mean and the
 variances of that Gaussian truncated to free space: the Bayesian posterior with the map as a prior that is
 uniform outside the buildings and zero inside (a truncated-Gaussian constraint, as constrained Kalman
-filters apply to state bounds). It is evaluated on a ``grid_points`` × ``grid_points`` grid (33², 2-5 ms with the 25 buildings of the default city) over ±``span_sigma``
-σ per axis.
+filters apply to state bounds). It is evaluated on a ``grid_points`` × ``grid_points`` grid over
+±``span_sigma`` σ per axis (33², 2-5 ms with the 25 buildings of the default city).
 
 Why the mean and not a projection onto the nearest wall: in a 12-20 m street with 8-30 m GNSS errors a
 fix is often inside a building; the projection puts the estimate on the wall, and a vehicle steered to
@@ -83,8 +83,8 @@ def constrain(p_ne_m: np.ndarray, var_ne_m2: np.ndarray, clearance: Clearance,
     w = np.where(free, np.exp(log_w * scale * scale), 0.0)
     total = w.sum()
     if not total > 0.0:  # free points only in the Gaussian's far tail (underflow): the nearest free one
-        k = np.argmax(np.where(free, log_w, -np.inf))
-        p = np.array([n.ravel()[k], e.ravel()[k]])
+        j = int(np.argmax(np.where(free, log_w, -np.inf)))
+        p = np.array([n.ravel()[j], e.ravel()[j]])
         return Constrained(p, (s / cfg.grid_points) ** 2, float(np.hypot(*(p - mu))), 0.0)
     w /= total
     p = _mean(w, n, e)
