@@ -26,7 +26,8 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--vehicle-port", type=int, required=name == "bridge",
                        help="our simulated vehicle's UDP port for us")
         p.add_argument("--bind-port", type=int, default=0, help="our UDP port (0: any free one)")
-        p.add_argument("--mission", default="default", help="mission name or YAML path")
+        p.add_argument("--mission", default=None,
+                       help="mission name or YAML path (default: default; with --master: none, no map)")
         p.add_argument("--stats", type=Path, help="write link/node counters here (JSON) on exit")
         add_link_arguments(p)
         telemetry.add_arguments(p, publisher=True)
@@ -35,7 +36,7 @@ def _parser() -> argparse.ArgumentParser:
                            help=f"estimator method (default {DEFAULT_METHOD})")
             p.add_argument("--step-markers", action="store_true",
                            help="TIMESYNC requests are our simulated vehicle's step markers (beliefnav sitl)")
-            add_master_arguments(p, master_required=False)
+            add_master_arguments(p, master_required=False, mission=False)  # --mission is above
         else:
             p.add_argument("--profile", type=int, default=0, help="mission profile index")
             p.add_argument("--start-delay-s", type=float, default=0.0, help="hover before the route (s)")
@@ -108,7 +109,7 @@ def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNod
     from companion.mission import load_mission
     from companion.telemetry.pubsub import publisher_from_args
 
-    mission = load_mission(args.mission)
+    mission = load_mission(args.mission or "default")
     fields, rng = link_settings(args)
     if args.process == "estimator":
         from companion.mavlink.udp_link import ESTIMATOR_COMPONENT_ID

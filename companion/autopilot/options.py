@@ -10,8 +10,10 @@ DEFAULT_COMPONENT_ID = 197  # MAV_COMP_ID_VISUAL_INERTIAL_ODOMETRY
 FEEDS = ("none", "vision", "odometry", "gps-input")
 
 
-def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool) -> None:
-    """The options of the foreign-autopilot mode (``--master`` and what goes with it)."""
+def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool,
+                         mission: bool = True) -> None:
+    """The options of the foreign-autopilot mode (``--master`` and what goes with it); ``mission``: with
+    ``--mission`` (False where the parser has its own)."""
     parser.add_argument("--master", required=master_required,
                         help="autopilot connection: tcp:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT, "
                              "serial:DEVICE:BAUD")
@@ -19,10 +21,11 @@ def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool)
     parser.add_argument("--feed", default="none", choices=FEEDS, help="what to send the autopilot")
     parser.add_argument("--home", help="local frame origin LAT,LON,ALT (default: the mission's home with "
                                        "--mission, else the autopilot's origin)")
-    parser.add_argument("--mission", default=None, metavar="MISSION",
-                        help="the mission flown (a packaged name or a mission YAML file): its buildings are "
-                             "the map of the tight filter's line-of-sight prior and of the map methods, "
-                             "and the fed position is kept out of them (docs/autopilot.md)")
+    if mission:
+        parser.add_argument("--mission", default=None, metavar="MISSION",
+                            help="the mission flown (a packaged name or a mission YAML file): its buildings "
+                                 "are the map of the tight filter's line-of-sight prior and of the map "
+                                 "methods, and the fed position is kept out of them (docs/autopilot.md)")
     parser.add_argument("--no-free-space", action="store_true",
                         help="with --mission: feed the estimate as it is, not constrained to outside the "
                              "buildings")
