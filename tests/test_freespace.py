@@ -18,9 +18,24 @@ STREET = World(WorldConfig(Bounds(-400, -400, 400, 400), (Building(-300, -300, 3
                                                            Building(-300, 16.0, 300, 300)), resolution_m=4.0))
 
 
+def test_only_an_estimate_inside_a_building_is_moved_by_default():
+    """Default ``when="inside"``: an estimate in the street stays where it is, however wide its σ; one
+    inside a building gets the truncated mean (the same as ``when="near"`` gives it)."""
+    in_street, inside = np.array([5.0, 3.0]), np.array([5.0, 20.0])
+    var = np.array([100.0, 100.0])
+    assert constrain(in_street, var, STREET.clearance_m) is None
+    assert constrain(in_street, var, STREET.clearance_m, FreeSpaceConfig(when="near")) is not None
+    c, c_near = (constrain(inside, var, STREET.clearance_m, cfg) for cfg in (FreeSpaceConfig(),
+                                                                             FreeSpaceConfig(when="near")))
+    assert c is not None and c_near is not None and np.array_equal(c.p_ne_m, c_near.p_ne_m)
+    nearest = constrain(inside, var, STREET.clearance_m, FreeSpaceConfig(nearest=True))
+    assert nearest is not None and 15.0 < nearest.p_ne_m[1] < 16.0  # the nearest free grid point
+
+
 def test_open_space_and_far_buildings_leave_the_estimate_alone():
     # 8 m clear, σ 1 m
-    assert constrain(np.array([0.0, 8.0]), np.array([1.0, 1.0]), STREET.clearance_m) is None
+    assert constrain(np.array([0.0, 8.0]), np.array([1.0, 1.0]), STREET.clearance_m,
+                     FreeSpaceConfig(when="near")) is None
     open_sky = World(WorldConfig(Bounds(0, 0, 10, 10), ()))
     assert constrain(np.array([5.0, 5.0]), np.array([400.0, 400.0]), open_sky.clearance_m) is None
 
@@ -31,7 +46,8 @@ def test_the_truncated_gaussian_mean_and_variance_across_the_street(east_m, sigm
     """Across the street the answer is the normal truncated to [0, 16] m: mean μ + σ (φ(α) − φ(β)) /
     (Φ(β) − Φ(α)) (scipy's truncnorm), along it unchanged; on the 33-point grid (spacing 0.22 σ: the
     street's edges are resolved to that) within 5 % of σ (measured: 3.4 % at worst)."""
-    c = constrain(np.array([5.0, east_m]), np.array([sigma_m**2, sigma_m**2]), STREET.clearance_m)
+    near = FreeSpaceConfig(when="near")  # the truncation wherever a building is within the grid
+    c = constrain(np.array([5.0, east_m]), np.array([sigma_m**2, sigma_m**2]), STREET.clearance_m, near)
     assert c is not None
     a, b = (0.0 - east_m) / sigma_m, (16.0 - east_m) / sigma_m
     mean, var = truncnorm.stats(a, b, loc=east_m, scale=sigma_m, moments="mv")
@@ -52,3 +68,5 @@ def test_deep_inside_a_block_with_a_small_sigma_the_free_space_is_found_again():
                      FreeSpaceConfig(max_sigma_m=10.0)) is None  # 50 m to free space, σ up to 8 m: unchanged
     with pytest.raises(ValueError):
         FreeSpaceConfig(grid_points=2)
+    with pytest.raises(ValueError):
+        FreeSpaceConfig(when="always")

@@ -41,10 +41,14 @@ class FreeSpaceConfig:
     grid_points: int = 33  # per axis: spacing 0.22 σ (the mean within ~0.05 σ of the exact truncation)
     sigma_floor_m: float = 0.5  # σ below this is taken as this (a grid needs an extent)
     max_sigma_m: float = 100.0  # no free space within this: unchanged
+    # "inside": only an estimate inside a building is moved; "near": any with a building within the grid
+    when: str = "inside"
+    nearest: bool = False  # an estimate inside a building goes to the nearest free grid point instead
 
     def __post_init__(self) -> None:
         if not (self.span_sigma > 0 and self.grid_points >= 3 and self.sigma_floor_m > 0
-                and self.max_sigma_m >= self.sigma_floor_m and self.min_clearance_m >= 0):
+                and self.max_sigma_m >= self.sigma_floor_m and self.min_clearance_m >= 0
+                and self.when in ("inside", "near")):
             raise ValueError(f"FreeSpaceConfig: invalid {self}")
 
 
@@ -64,6 +68,8 @@ def constrain(p_ne_m: np.ndarray, var_ne_m2: np.ndarray, clearance: Clearance,
               cfg: FreeSpaceConfig = FreeSpaceConfig()) -> Constrained | None:
     """The estimate truncated to free space; None when unchanged (all free, or no free space found)."""
     mu = np.asarray(p_ne_m, dtype=float)[:2]
+    if cfg.when == "inside" and float(np.asarray(clearance(mu[0], mu[1]))) > cfg.min_clearance_m:
+        return None
     sigma = np.maximum(np.sqrt(np.maximum(np.asarray(var_ne_m2, dtype=float)[:2], 0.0)), cfg.sigma_floor_m)
     u = np.linspace(-cfg.span_sigma, cfg.span_sigma, cfg.grid_points)
     log_w = -0.5 * (u[:, None] ** 2 + u[None, :] ** 2)  # the Gaussian on the standardised grid
@@ -82,7 +88,7 @@ def constrain(p_ne_m: np.ndarray, var_ne_m2: np.ndarray, clearance: Clearance,
     # the Gaussian's own weights (not widened: a wider grid only looks further for free space)
     w = np.where(free, np.exp(log_w * scale * scale), 0.0)
     total = w.sum()
-    if not total > 0.0:  # free points only in the Gaussian's far tail (underflow): the nearest free one
+    if cfg.nearest or not total > 0.0:  # free points only in the Gaussian's far tail (underflow): the nearest free one
         j = int(np.argmax(np.where(free, log_w, -np.inf)))
         p = np.array([n.ravel()[j], e.ravel()[j]])
         return Constrained(p, (s / cfg.grid_points) ** 2, float(np.hypot(*(p - mu))), 0.0)

@@ -13,7 +13,10 @@ Every control step each row's position is compared with the truth (horizontal di
 * ``tight-second-order-map``: the belief with the mission's map as its line-of-sight prior
   (``companion.wiring.tight_navigator_for``), and ``tight-second-order-imperfect-map`` with an
   imperfect map: every building's height off by N(0, 2.5²) m and its footprint moved by N(0, 1.5²) m per
-  axis, drawn per flight from ``[MAP_SEED, profile, seed]`` (``City.perturbed``).
+  axis, drawn per flight from ``[MAP_SEED, profile, seed]`` (``City.perturbed``);
+* ``tight-second-order-map-free``: that belief's estimate constrained to the map's free space as the
+  companion feeds it with ``--mission`` (``companion.estimator.freespace``: its reported Gaussian
+  truncated to outside the buildings).
 
 Intervals: per-flight medians and 95th percentiles, bootstrap over flights (seeded), and paired
 differences between rows over the same flights.
@@ -41,6 +44,7 @@ from gcs_tools.jsonvalues import write_results
 
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
 MAP_ROWS = ("second-order-map", "second-order-imperfect-map")  # the belief with the map's prior
+FREE_ROW = "tight-second-order-map-free"  # the map belief's estimate kept out of the buildings (as fed)
 BELIEF_ROWS = ("tight-second-order", *(f"tight-{r}" for r in MAP_ROWS))
 MAP_SEED = 7
 MAP_SIGMA_HEIGHT_M = 2.5
@@ -56,6 +60,7 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     reported, NEES_h of P alone, reported horiz_accuracy); ``on_raw(row, raw, navigator)`` (if given) is
     called after each row's navigator was given a raw epoch (``simvehicle.receiver.RawObservation``,
     with the simulator's truth per satellite)."""
+    from companion.estimator.freespace import constrain
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
     from simvehicle.harness.fly import planned_route
@@ -78,7 +83,8 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
             tight[name] = tight_navigator_for(m, "second-order", config=TightConfig(), ephemerides=store,
                                               city=c)
     end_us = round(min(1.0 + route.duration_s * 1.5, max_duration_s or 1e9) * 1e6)
-    errors: dict[str, list[float]] = {k: [] for k in ("spp", "loose", *(f"tight-{r}" for r in tight))}
+    errors: dict[str, list[float]] = {k: [] for k in ("spp", "loose", *(f"tight-{r}" for r in tight),
+                                                      *((FREE_ROW,) if maps else ()))}
     last_fix = None
     est = None
     while sim.t_us < end_us:
@@ -115,6 +121,11 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
         ests = {r: t.estimate() for r, t in tight.items()}
         for r, e in ests.items():
             rows_now[f"tight-{r}"] = None if e is None else e.p_ned_m
+        if maps:
+            e = ests[MAP_ROWS[0]]
+            c = None if e is None else constrain(np.asarray(e.p_ned_m)[:2], np.asarray(e.cov_diag)[:2],
+                                                 m.world.clearance_m)
+            rows_now[FREE_ROW] = None if e is None else e.p_ned_m if c is None else c.p_ne_m
         if any(v is None for v in rows_now.values()):
             continue
         for name, p in rows_now.items():
@@ -155,12 +166,18 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
             out_rows.setdefault(n, {})[stat] = {"mean": float(v.mean()), "ci": [float(lo), float(hi)]}
         for row in (b for b in BELIEF_ROWS if b in table):
             for ref in names:
-                if ref in BELIEF_ROWS:
+                if ref in BELIEF_ROWS or ref == FREE_ROW:
                     continue
                 d = table[row] - table[ref]
                 lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
                 paired.append({"stat": stat, "row": row, "reference": ref, "mean_diff_m": float(d.mean()),
                                "ci": [float(lo), float(hi)]})
+        map_row = f"tight-{MAP_ROWS[0]}"
+        if FREE_ROW in table:  # what the free-space constraint adds to the map belief it constrains
+            d = table[FREE_ROW] - table[map_row]
+            lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
+            paired.append({"stat": stat, "row": FREE_ROW, "reference": map_row, "mean_diff_m": float(d.mean()),
+                           "ci": [float(lo), float(hi)]})
     return {"mission": mission, "scenario": "canyon", "profiles": list(profiles), "seeds": list(seeds),
             "flights": flights, "rows": out_rows, "paired": paired,
             "coverage": {k: coverage(np.asarray(v), np.concatenate(err[k])) for k, v in acc.items()},
