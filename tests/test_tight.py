@@ -572,7 +572,11 @@ def test_tight_rows_on_the_calibrated_simulator_open_loop():
     from gcs_tools.evaluate.tight_sim import fly_rows
 
     e = fly_rows("default", 3, 0, rows=("cn0-elevation", "second-order"), max_duration_s=30.0)
+    outside = " (truth outside buildings)"
     assert set(e) == {"spp", "loose", "tight-cn0-elevation", "tight-second-order", "tight-second-order-map",
-                      "tight-second-order-imperfect-map"}
+                      "tight-second-order-imperfect-map", "tight-second-order-map-free",
+                      "tight-second-order-map" + outside, "tight-second-order-map-free" + outside}
     assert len(e["spp"]) > 300 and all(np.isfinite(v).all() for v in e.values())
+    # the free-space row differs from the map row it constrains only where that one was inside a building
+    assert len(e["tight-second-order-map" + outside]) == len(e["tight-second-order-map-free" + outside])
     assert np.median(e["tight-second-order"]) < 0.7 * np.median(e["spp"])

@@ -88,7 +88,7 @@ def constrain(p_ne_m: np.ndarray, var_ne_m2: np.ndarray, clearance: Clearance,
     # the Gaussian's own weights (not widened: a wider grid only looks further for free space)
     w = np.where(free, np.exp(log_w * scale * scale), 0.0)
     total = w.sum()
-    if cfg.nearest or not total > 0.0:  # free points only in the Gaussian's far tail (underflow): the nearest free one
+    if cfg.nearest or not total > 0.0:  # asked for, or free points only in the far tail: the nearest free one
         j = int(np.argmax(np.where(free, log_w, -np.inf)))
         p = np.array([n.ravel()[j], e.ravel()[j]])
         return Constrained(p, (s / cfg.grid_points) ** 2, float(np.hypot(*(p - mu))), 0.0)
