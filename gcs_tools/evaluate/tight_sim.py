@@ -128,9 +128,9 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
             rows_now[f"tight-{r}"] = None if e is None else e.p_ned_m
         if maps:
             e = ests[MAP_ROWS[0]]
-            c = None if e is None else constrain(np.asarray(e.p_ned_m)[:2], np.asarray(e.cov_diag)[:2],
-                                                 m.world.clearance_m)
-            rows_now[FREE_ROW] = None if e is None else e.p_ned_m if c is None else c.p_ne_m
+            kept = None if e is None else constrain(np.asarray(e.p_ned_m)[:2], np.asarray(e.cov_diag)[:2],
+                                                    m.world.clearance_m)
+            rows_now[FREE_ROW] = None if e is None else e.p_ned_m if kept is None else kept.p_ne_m
         if any(v is None for v in rows_now.values()):
             continue
         for name, p in rows_now.items():
