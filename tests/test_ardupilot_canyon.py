@@ -40,6 +40,10 @@ def test_closed_loop_ardupilot_flies_on_the_tight_companion_reading_the_canyon_r
     assert "--coupling tight --ubx tcp:127.0.0.1:" in comp["command"] and comp["problems"] == []
     csum = json.loads((out / "companion" / "summary.json").read_text())
     assert csum["coupling"] == "tight" and csum["receiver"]["lnav_ephemerides"] > 0
+    # the mission's map (--mission), and the raw epochs put before ArduPilot's clock by the receiver's
+    # latency, which the second receiver declares (GPS2_DELAY_MS)
+    assert csum["mission"] == "test-city" and "--mission" in comp["command"]
+    assert ap["parameters"]["GPS2_DELAY_MS"] == 80 and csum["clock"]["system_time_lag_ms"] == 80.0
     assert csum["receiver"].get("glonass_ephemerides", 0) > 0  # GLONASS's too (strings 1-4)
     assert csum["node"]["raw_epochs"] > 0.5 * rx["epochs_released"]
     assert csum["node"]["feed_gps_input_sent"] > 5 * ap["phase_times_s"]["arm"] * 0.1
@@ -66,3 +70,8 @@ def test_closed_loop_ardupilot_flies_on_the_tight_companion_reading_the_canyon_r
         med = rows[name]["estimation_error_horizontal_m"]["median"]
         assert np.isfinite(med) and 0.01 < med < 60.0, (name, med)
     assert s["estimation_error_m"] == rows["companion-live"]["estimation_error_m"]
+    # the route at the mission's altitude above the ground, whatever EKF3's origin altitude (its first
+    # fix's): the local frame is placed by EKF3's barometric height on the ground
+    assert ap["phase_times_s"]["route"] > 0
+    h = -np.array([float(r.split(",")[3]) for r in (out / "timeseries.csv").read_text().splitlines()[1:]])
+    assert np.median(h) > 10.0, np.median(h)
