@@ -570,9 +570,9 @@ def test_local_feeds_are_about_the_autopilots_ekf_origin_and_read_back_so(tmp_pa
 
 def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys):
     """``--mission NAME``: the tight filter's line-of-sight prior and the map methods get the mission's
-    buildings (moved into our frame: ``--home`` when given, else the mission's home), and the fed
-    position is kept out of them (``--no-free-space``: not); without it there is no map; an unknown
-    mission is a one-line error."""
+    buildings (moved into our frame: ``--home`` when given, else the mission's home), and with
+    ``--free-space`` an estimate inside a building is fed outside it; without a mission there is no
+    map; an unknown mission is a one-line error."""
     import argparse
 
     from companion.autopilot.node import AutopilotCompanion
@@ -599,7 +599,7 @@ def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys
         node._start_navigator()
         assert (node.nav.engine.line_of_sight is not None) == mapped
     loose = config_from_args(parser.parse_args(["--master", "udpin::14550", "--out", str(tmp_path),
-                                                "--mission", "test", "--method", "map-beta"]))
+                                                "--mission", "test", "--method", "map-beta", "--free-space"]))
     node = AutopilotCompanion(loose, _FakeConn())  # type: ignore[arg-type]
     node._start_navigator()  # map-beta without a map refuses to start
     assert node.nav.method == "map-beta"
@@ -609,7 +609,7 @@ def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys
     assert m.world.clearance_m(*fed.p_ned_m[:2]) > 0.0 and fed.p_ned_m[2] == -20.0
     assert fed.cov_diag[2] == 4.0 and node.counters["free_space_constrained"] == 1
     off = config_from_args(parser.parse_args(["--master", "udpin::14550", "--out", str(tmp_path), "--mission",
-                                              "test", "--no-free-space"]))
+                                              "test"]))  # without --free-space
     node = AutopilotCompanion(off, _FakeConn())  # type: ignore[arg-type]
     node._start_navigator()
     assert node._in_free_space(inside) is inside

@@ -115,9 +115,9 @@ class CompanionConfig:
     # the mission flown (``--mission``): its buildings are the navigator's map (the tight filter's
     # line-of-sight prior, the map methods), moved into our frame; None: no map
     mission: Mission | None = None
-    # with a mission: the fed position constrained to the map's free space (``companion.estimator.
-    # freespace``: the estimate truncated to outside the buildings); None: off (``--no-free-space``)
-    free_space: FreeSpaceConfig | None = field(default_factory=FreeSpaceConfig)
+    # with a mission: an estimate inside a building fed at its mean outside them (``companion.estimator.
+    # freespace``, ``--free-space``); None: off (the default)
+    free_space: FreeSpaceConfig | None = None
     # --coupling tight: the autopilot's SYSTEM_TIME lags GPS time by this (µs); None: the receiver delay
     # in force (``AutopilotCompanion.clock_lag_us``)
     clock_lag_us: int | None = None

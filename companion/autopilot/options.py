@@ -25,10 +25,10 @@ def add_master_arguments(parser: argparse.ArgumentParser, master_required: bool,
         parser.add_argument("--mission", default=None, metavar="MISSION",
                             help="the mission flown (a packaged name or a mission YAML file): its buildings "
                                  "are the map of the tight filter's line-of-sight prior and of the map "
-                                 "methods, and the fed position is kept out of them (docs/autopilot.md)")
-    parser.add_argument("--no-free-space", action="store_true",
-                        help="with --mission: feed the estimate as it is, not constrained to outside the "
-                             "buildings")
+                                 "methods (docs/autopilot.md)")
+    parser.add_argument("--free-space", action="store_true",
+                        help="with --mission: an estimate inside a building is fed at its mean outside them "
+                             "(docs/autopilot.md; off by default: no gain measured in closed loop)")
     parser.add_argument("--duration-s", type=float, help="stop after this many wall seconds")
     parser.add_argument("--component-id", type=int, default=DEFAULT_COMPONENT_ID,
                         help="our MAVLink component id")

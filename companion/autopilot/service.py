@@ -60,7 +60,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     return CompanionConfig(
         master=args.master, out_dir=Path(args.out), method=args.method, feed=args.feed,
         coupling=coupling, ubx=ubx, mission=mission,
-        free_space=None if getattr(args, "no_free_space", False) else FreeSpaceConfig(),
+        free_space=FreeSpaceConfig() if getattr(args, "free_space", False) else None,
         clock_lag_us=None if lag is None else round(lag * 1000),
         home=home, duration_s=args.duration_s,
         component_id=args.component_id, discovery_timeout_s=args.discovery_timeout_s,
