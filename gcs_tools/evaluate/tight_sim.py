@@ -17,9 +17,10 @@ Every control step each row's position is compared with the truth (horizontal di
 * ``tight-second-order-map-free``: that belief's estimate constrained to the map's free space as the
   companion feeds it with ``--mission --free-space`` (``companion.estimator.freespace``: an estimate
   inside a building moved to its reported Gaussian's mean outside them). This simulator's vehicle,
-  flown on the loose filter's 15-20 m errors, passes through buildings (a third of the steps on profiles 3-4), where the
-  premise "a position inside a building is impossible" does not hold; so both rows are also scored on
-  the steps whose truth is outside every building (``... (truth outside buildings)``).
+  flown on the loose filter's 15-20 m errors, passes through buildings (a third of the steps on
+  profiles 3-4), where the premise "a position inside a building is impossible" does not hold; so both
+  rows are also scored on the steps whose truth is outside every building (``... (truth outside
+  buildings)``).
 
 Intervals: per-flight medians and 95th percentiles, bootstrap over flights (seeded), and paired
 differences between rows over the same flights.
