@@ -201,6 +201,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         self._valid_us = int(round(cfg.pos_valid_timeout_s * 1e6))
         self._tau_s = cfg.bias_tau_s
         self._window_s = cfg.accuracy_window_s
+        self._bias_level = cfg.lambda_bias_level > 0.0  # the belief's bias-level term reads bias_m2
 
     @property
     def fusions(self) -> list[Fusion]:
@@ -473,7 +474,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         floor_h = spread_h if spread_h > self._gate_r_min else self._gate_r_min
         floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
         bias_m2 = (x_prior[6] * x_prior[6] + P_prior[6, 6], x_prior[7] * x_prior[7] + P_prior[7, 7],
-                   x_prior[8] * x_prior[8] + P_prior[8, 8])
+                   x_prior[8] * x_prior[8] + P_prior[8, 8]) if self._bias_level else _ZERO3  # read only by it
         terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p, prev.bias_scale, bias_m2)
         # a receiver stating neither its accuracy nor a velocity: innovations beyond its own noise may be
         # the IMU's fault (a wrong attitude), so an R-learner may not learn much more than that noise
@@ -587,6 +588,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
 
 _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
 _NAN3: Vec3 = (math.nan, math.nan, math.nan)
+_ZERO3: Vec3 = (0.0, 0.0, 0.0)
 _INF = math.inf
 _AXES = np.arange(3)  # the Fit channels of a fix: N, E, D
 # ``push_fix``'s R of a fix whose receiver reports no accuracy: learned (Fusion.scale_*_m); also per

@@ -235,7 +235,7 @@ class Navigator:
         if self._last is not None and self._last[0] is snap:
             return self._last[1]
         a = snap.out  # one array for the state and the variances, handed out as views (one allocation)
-        self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per entry)
+        self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per fix)
         scale = self._inflation[2]
         var = a[9:18] if scale is None else a[9:18] * scale
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
