@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from companion.errors import UserError
 
 
 def plain_json(value: Any, *, nan_to_none: bool) -> Any:
@@ -35,3 +38,15 @@ def write_results(out_dir: Path, result: Any, markdown: str) -> str:
     (out_dir / "results.json").write_text(json.dumps(plain_json(result, nan_to_none=True), indent=1) + "\n")
     (out_dir / "results.md").write_text(markdown)
     return markdown
+
+
+def write_results_or_error(out_dir: Path, compute: Callable[[], Any], markdown: Callable[[Any], str]) -> int:
+    """An evaluation command's ending: ``compute()``'s result written (``write_results``) and its markdown
+    printed, 0; a ``UserError`` it raised printed as one line ``beliefnav: error: …``, 2."""
+    try:
+        result = compute()
+    except UserError as exc:
+        print(f"beliefnav: error: {exc}")
+        return 2
+    print(write_results(out_dir, result, markdown(result)))
+    return 0

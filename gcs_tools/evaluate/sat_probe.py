@@ -38,10 +38,11 @@ import numpy as np
 from scipy.stats import rankdata
 
 from companion.errors import UserError
+from gcs_tools import choices
 from gcs_tools.evaluate import tuning
 from gcs_tools.evaluate.nlos_probe import _correlation_time
 from gcs_tools.evaluate.tight import table_lines
-from gcs_tools.jsonvalues import write_results
+from gcs_tools.jsonvalues import write_results_or_error
 
 ERROR_BINS_M = (-math.inf, -5.0, 5.0, 10.0, 20.0, 40.0, math.inf)
 BAD_M = 10.0  # "a bad observation": |error| above this
@@ -231,12 +232,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--smartloc", type=Path, default=None, metavar="INPUT", help="smartLoc *_Input.txt")
     p.add_argument("--out", type=Path, default=Path("runs/sat-probe"))
     args = p.parse_args(argv)
-    try:
-        try:
-            profiles = [int(v) for v in args.profiles.split(",") if v]
-            seeds = [int(v) for v in args.seeds.split(",") if v]
-        except ValueError:
-            raise UserError("--profiles and --seeds take comma-separated integers") from None
+
+    def compute() -> dict[str, Any]:
+        profiles = choices.seeds(args.profiles, "--profiles") if args.profiles else ()
+        seeds = choices.seeds(args.seeds) if args.seeds else ()
         if args.smartloc is not None and not args.smartloc.is_file():
             raise UserError(f"{args.smartloc}: no such file")
         r: dict[str, Any] = {}
@@ -244,12 +243,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             r["canyon"] = canyon(args.mission, profiles, seeds)
         if args.smartloc is not None:
             r["smartloc"] = smartloc(args.smartloc)
-    except UserError as exc:
-        print(f"beliefnav: error: {exc}")
-        return 2
-    print(write_results(args.out, r, markdown(r)))
-    return 0
+        return r
 
+    return write_results_or_error(args.out, compute, markdown)
 
 if __name__ == "__main__":
     raise SystemExit(main())

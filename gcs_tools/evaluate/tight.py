@@ -37,7 +37,7 @@ from companion.errors import UserError
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
 from companion.gnss.spp import SppConfig
 from companion.tight import TightConfig
-from gcs_tools.jsonvalues import write_results
+from gcs_tools.jsonvalues import write_results_or_error
 
 TIGHT_ROWS = ("naive", "cn0-elevation", "fde", "student-t", "first-order", "second-order")
 NO_ODOMETRY_ROWS = ("cn0-elevation", "student-t", "second-order")
@@ -325,20 +325,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="also the belief row with each main parameter halved and doubled, and with "
                         "a biased odometry")
     args = p.parse_args(argv)
-    try:
+
+    def compute() -> dict[str, Any]:
         if not args.smartloc.is_file():
             raise UserError(f"{args.smartloc}: no such file")
         if not (args.block_s > 0 and args.resamples >= 100):
             raise UserError("--block-s must be > 0 and --resamples >= 100")
-        r = run(args.smartloc, args.truth, args.seed, args.block_s, args.resamples,
-                progress=lambda m: print(f"  {m}", flush=True), sensitivity=args.sensitivity)
-    except UserError as exc:
-        print(f"beliefnav: error: {exc}")
-        return 2
-    print(write_results(args.out, r, markdown(r)))
-    print(f"wrote {args.out / 'results.json'} and {args.out / 'results.md'}")
-    return 0
+        return run(args.smartloc, args.truth, args.seed, args.block_s, args.resamples,
+                   progress=lambda m: print(f"  {m}", flush=True), sensitivity=args.sensitivity)
 
+    code = write_results_or_error(args.out, compute, markdown)
+    if code == 0:
+        print(f"wrote {args.out / 'results.json'} and {args.out / 'results.md'}")
+    return code
 
 if __name__ == "__main__":
     raise SystemExit(main())

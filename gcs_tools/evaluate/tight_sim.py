@@ -43,8 +43,9 @@ import numpy as np
 
 from companion.errors import UserError
 from companion.tight import RawGnss, TightConfig
+from gcs_tools import choices
 from gcs_tools.evaluate.tight import table_lines
-from gcs_tools.jsonvalues import write_results
+from gcs_tools.jsonvalues import write_results_or_error
 
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
 MAP_ROWS = ("second-order-map", "second-order-imperfect-map")  # the belief with the map's prior
@@ -236,24 +237,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--max-duration-s", type=float, default=None)
     p.add_argument("--rows", default=",".join(ROWS), help="tight weightings, comma-separated")
     args = p.parse_args(argv)
-    try:
-        profiles = [int(v) for v in args.profiles.split(",")]
-        seeds = [int(v) for v in args.seeds.split(",")]
-    except ValueError:
-        print("beliefnav: error: --profiles and --seeds take comma-separated integers")
-        return 2
-    try:
+
+    def compute() -> dict[str, Any]:
+        profiles, seeds = choices.seeds(args.profiles, "--profiles"), choices.seeds(args.seeds)
         rows = [v for v in args.rows.split(",") if v]
         bad = sorted(set(rows) - set(ROWS))
         if bad or not rows:
             raise UserError(f"--rows: choose from {', '.join(ROWS)}")
-        r = run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s)
-    except UserError as exc:
-        print(f"beliefnav: error: {exc}")
-        return 2
-    print(write_results(args.out, r, markdown(r)))
-    return 0
+        return run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s)
 
+    return write_results_or_error(args.out, compute, markdown)
 
 if __name__ == "__main__":
     raise SystemExit(main())
