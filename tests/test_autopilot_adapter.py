@@ -615,3 +615,8 @@ def test_companion_mission_gives_the_navigator_the_missions_map(tmp_path, capsys
     assert node._in_free_space(inside) is inside
     with pytest.raises(UserError, match="nowhere.yaml"):
         config_from_args(parser.parse_args(base + ["--mission", str(tmp_path / "nowhere.yaml")]))
+    with pytest.raises(UserError, match="--free-space needs --mission"):  # not silently ignored
+        config_from_args(parser.parse_args(base + ["--free-space"]))
+    for lag in ("nan", "-1", "1001", "inf"):
+        with pytest.raises(UserError, match="--clock-lag-ms"):
+            config_from_args(parser.parse_args(base + ["--clock-lag-ms", lag]))

@@ -56,6 +56,8 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     if coupling != "tight" and ubx is not None:
         raise UserError("--ubx goes with --coupling tight (the loose filter takes the autopilot's fixes)")
     mission = load_mission(args.mission) if getattr(args, "mission", None) else None
+    if getattr(args, "free_space", False) and mission is None:
+        raise UserError("--free-space needs --mission (the buildings an estimate may not be inside)")
     home = parse_home(args.home) if args.home else None if mission is None else mission.frame
     return CompanionConfig(
         master=args.master, out_dir=Path(args.out), method=args.method, feed=args.feed,
