@@ -200,6 +200,39 @@ def test_tune_only_retunes_some_rows_pairs_the_points_and_inherits(tmp_path, mon
         assert lo_gap[0] >= 0.0
 
 
+@pytest.mark.parametrize(("gain_m", "kept"), [(0.02, True), (0.3, False)])
+def test_retune_keeps_a_row_unless_another_point_beats_it_significantly(tmp_path, monkeypatch, gain_m, kept):
+    """``tune --only second-order``: η 0.15 has the lower mean. With a gain of 0.02 m against
+    flight-to-flight scatter of ±0.2 m (paired interval including zero) the row keeps η 0.5; with
+    0.3 m (interval excluding zero) it moves."""
+    shared = (("estimator.sigma_acc_m_s2", 0.4),)
+    incumbent = shared + (("estimator.eta", 0.5), ("estimator.lambda_bias_level", 0.0))
+    ablation.write_rows(tmp_path / "rows-mismatch.yaml",
+                        [Row("fixed-beta-0.5", "fixed-beta", shared + (("estimator.beta_fixed", 0.5),)),
+                         Row("second-order", "second-order", incumbent)], "mismatch", [0], [1000])
+
+    def fake_fly(rows, scenario, profiles, seeds, workers, *a, **k):
+        out = []
+        for row in rows:
+            o = dict(row.overrides)
+            base = 1.0 + 0.1 * o["estimator.lambda_bias_level"]
+            for p in profiles:
+                for s in seeds:  # η 0.15's gain scatters by ±0.2 m from flight to flight
+                    wobble = 0.2 * np.sin(3.0 * p + 5.0 * s) if o["estimator.eta"] == 0.15 else 0.0
+                    gain = gain_m if o["estimator.eta"] == 0.15 else 0.0
+                    out.append(_result(p, s, row.label, row.method, base - gain + wobble))
+        return out
+
+    monkeypatch.setattr(ablation, "_fly", fake_fly)
+    rows = {r.label: r for r in ablation.tune("mismatch", [1000, 1001], [0, 1, 2, 3], 1, tmp_path,
+                                              ["second-order"])}
+    records = [json.loads(line) for line in (tmp_path / "tuning-mismatch.jsonl").read_text().splitlines()]
+    means = {r["overrides"]["estimator.eta"]: r["score_est_h_median_m"] for r in records
+             if r["overrides"]["estimator.lambda_bias_level"] == 0.0}
+    assert means[0.15] < means[0.5]  # the lowest mean is η 0.15 either way
+    assert dict(rows["second-order"].overrides)["estimator.eta"] == (0.5 if kept else 0.15)
+
+
 def test_shared_setting_is_chosen_alike_for_every_row(tmp_path, monkeypatch, capsys):
     """``ablation shared``: each value flies every row on the same flights; the lowest mean of the
     rows' scores wins and every value is recorded."""

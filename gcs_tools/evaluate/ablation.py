@@ -11,7 +11,8 @@
    mean of their two scores is kept for every row;
 2. then each method's OWN hyper-parameters are swept on their grid (``SWEEPS``) with that value;
    the best point of each becomes its row. ``fixed-beta-0.5`` stays at 0.5 (the issue's row);
-   ``fixed-beta-best`` is the best β of the sweep.
+   ``fixed-beta-best`` is the best β of the sweep. A re-tune (``--only``) keeps a row's point
+   unless another point beats it with a paired interval excluding zero.
 
 Score of a point: the mean over its flights of the per-flight median horizontal error (the
 campaign's headline statistic). Every point is appended to ``tuning-<scenario>.jsonl``; the rows
@@ -162,12 +163,26 @@ def table_gap(a: dict[tuple[int, int], dict[str, float]], b: dict[tuple[int, int
     return float(d.mean()), float(lo), float(hi)
 
 
+def choose(results: Sequence[campaign.JobResult], candidates: Sequence[Row], scores: dict[str, float],
+           incumbent: Row | None, rng: np.random.Generator) -> Row:
+    """The candidate with the lowest mean score, except that an incumbent (the row's point before a
+    re-tune) is kept unless that candidate beats it with a paired 95 % interval excluding zero: a
+    few tuning flights per point cannot tell small gaps apart, and a re-tune should not move a row
+    on noise."""
+    win = min(candidates, key=lambda c: scores[c.label])
+    if incumbent is None or win is incumbent:
+        return win
+    _, lo, _ = paired_gap(results, incumbent.label, win.label, rng)
+    return win if lo > 0.0 else incumbent
+
+
 def tune(scenario: str, seeds: Sequence[int], profiles: Sequence[int], workers: int, out: Path,
          only: Sequence[str] = ()) -> list[Row]:
     """Tune every row (or re-tune the rows ``only`` names, keeping the others and the shared IMU
     noise density from ``rows-<scenario>.yaml``). Every point of a sweep flies the same flights
     (profiles × seeds; common random numbers), so the point with the lowest mean is the lowest
-    paired mean; each record also carries its paired gap to the winner with a 95 % interval."""
+    paired mean; each record also carries its paired gap to the winner with a 95 % interval. A
+    re-tuned row keeps its point unless another beats it significantly (``choose``)."""
     out.mkdir(parents=True, exist_ok=True)
     log = out / f"tuning-{scenario}.jsonl"
     rows_path = out / f"rows-{scenario}.yaml"
@@ -226,7 +241,9 @@ def tune(scenario: str, seeds: Sequence[int], profiles: Sequence[int], workers: 
         res = _fly(candidates, scenario, profiles, seeds, workers)
         wall = (time.perf_counter() - t0) / len(candidates)
         scores = {c.label: _score(res, c.label) for c in candidates}
-        win = min(candidates, key=lambda c: scores[c.label])
+        incumbent = next((c for c in candidates if label in chosen
+                          and dict(c.overrides) == dict(chosen[label].overrides)), None)
+        win = choose(res, candidates, scores, incumbent, rng)
         for c in candidates:
             record("own", Row(label, method, c.overrides), scores[c.label], len(res) // len(candidates), wall,
                    paired_gap(res, c.label, win.label, rng))
