@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-from companion.gnss import bdsnav, inav
+from companion.gnss import bdsnav, inav, lnav
 from companion.gnss.ephemeris import KeplerEphemeris
 from companion.gnss.navbits import BitWriter, set_all, to_words
 from companion.gnss.timescale import gps_to_bdt_s
@@ -86,7 +86,7 @@ def d1_subframe(eph: KeplerEphemeris, subframe: int, t_bdt_s: float) -> list[int
         bdt_toc = gps_to_bdt_s(eph.toc_gps_s)
         w.set_raw(bdsnav.SATH1, eph.health & 1)
         w.set_raw(bdsnav.AODC, eph.iode)
-        w.set_raw(bdsnav.URAI, bdsnav.ura_index(eph.accuracy_m))
+        w.set_raw(bdsnav.URAI, lnav.ura_index(eph.accuracy_m))
         w.set_raw(bdsnav.WN, week % 8192)
         w.set(bdsnav.TOC, bdt_toc % WEEK_S)
         w.set(bdsnav.TGD1, eph.tgd_s)
@@ -121,7 +121,7 @@ def d2_pages(eph: KeplerEphemeris, t_bdt_s: float) -> list[list[int]]:
         if page == 1:
             w.set_raw(bdsnav.D2_SATH1, eph.health & 1)
             w.set_raw(bdsnav.D2_AODC, eph.iode)
-            w.set_raw(bdsnav.D2_URAI, bdsnav.ura_index(eph.accuracy_m))
+            w.set_raw(bdsnav.D2_URAI, lnav.ura_index(eph.accuracy_m))
             w.set_raw(bdsnav.D2_WN, week % 8192)
             w.set(bdsnav.D2_TOC, gps_to_bdt_s(eph.toc_gps_s) % WEEK_S)
             w.set(bdsnav.D2_TGD1, eph.tgd_s)

@@ -38,6 +38,7 @@ from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ
 from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEphemeris
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix
 from companion.gnss.glonav import hamming, moscow_day_start_gps_s, words_from_string
+from companion.gnss.lnav import ura_index
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppSolution
 from companion.gnss.systems import System
@@ -124,6 +125,7 @@ def lnav_subframe(
     _header(b, tow_next_s, subframe)
     if subframe == 1:
         b.put(48, 10, week % 1024)
+        b.put(60, 4, ura_index(eph.accuracy_m))
         b.put(64, 6, eph.health)
         b.put(70, 2, (eph.iode >> 8) & 0x3)
         b.scaled(160, 8, eph.tgd_s, 2.0**-31)

@@ -218,6 +218,7 @@ def test_lnav_subframes_known_answer():
     assert len(ephs) == 1
     e = ephs[0]
     assert (e.prn, e.iode, e.health) == (21, 78, 0)
+    assert e.accuracy_m == 2.4  # URA index 0 (between the week, 14 = 2062 mod 1024, and the health)
     assert ts.week_tow(e.toe_gps_s) == (2062, 597600.0) and e.toe_gps_s == e.toc_gps_s
     assert e.sqrt_a_m05 == pytest.approx(math.sqrt(26560606.593836), abs=1e-6)
     for value, expected in (

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.gnss import bdsnav, inav
+from companion.gnss import bdsnav, inav, lnav
 from companion.gnss.bdsnav import BeidouDecoder
 from companion.gnss.ephemeris import EphemerisStore, KeplerEphemeris
 from companion.gnss.geometry import geodetic_to_ecef
@@ -177,7 +177,7 @@ def _random_ephemeris(rng: np.random.Generator, system: System, prn: int) -> Kep
         toe = bdt_to_gps_s((week - 1356) * 604800.0 + toe_sow)
         tgd, iode = int(rng.integers(-512, 512)) * 1e-10, int(rng.integers(0, 32))
         health = int(rng.integers(0, 2))
-        acc = bdsnav.ura_m(int(rng.integers(0, 16)))
+        acc = lnav.ura_m(int(rng.integers(0, 16)))
     return KeplerEphemeris(system=int(system), prn=prn, toe_gps_s=toe, toc_gps_s=toe, toe_sow_s=toe_sow,
                            tgd_s=tgd, iode=iode, health=health, accuracy_m=acc, **v)
 

@@ -16,8 +16,8 @@ one :class:`KeplerEphemeris`. Fields and scale factors (ICD 5.2.4; bit positions
 subframe, parity bits included, as RTKLIB's): toe/toc 2³ s (BDT), a0 2⁻³³ s, a1 2⁻⁵⁰ s/s, a2 2⁻⁶⁶ s/s²,
 TGD1 0.1 ns (the B1I group delay, ``tgd_s``), √A 2⁻¹⁹, e 2⁻³³, M0/Ω0/i0/ω 2⁻³¹ semicircles, Δn/Ω̇/IDOT
 2⁻⁴³ semicircles/s, Cuc/Cus/Cic/Cis 2⁻³¹ rad, Crc/Crs 2⁻⁶ m; SatH1 the health (0 good), AODE the issue
-of data (``iode``), URAI -> ``accuracy_m`` (the GPS URA table, inf for 15). Times: BDT week (13 bits)
-and seconds, BDT = GPS − 14 s.
+of data (``iode``), URAI -> ``accuracy_m`` (the GPS URA table, ``lnav.ura_m``: inf for 15). Times: BDT
+week (13 bits) and seconds, BDT = GPS − 14 s.
 
 The GEO satellites (C01-C05, C59-C63) send D2 instead: subframe 1's pages 1, 3-10 (one page every 3 s,
 a 30 s cycle; page 2 is the ionosphere grid) carry the same fields at the same scale factors, several
@@ -28,13 +28,13 @@ time offsets; counted ``beidou_other_subframe`` / ``beidou_d2_other``), the BeiD
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from companion.gnss.ephemeris import KeplerEphemeris
+from companion.gnss.lnav import ura_m
 from companion.gnss.navbits import SC, BitReader, Field, from_words, get_all, split
 from companion.gnss.navbits import field as f
 from companion.gnss.systems import System, is_beidou_geo
@@ -44,8 +44,6 @@ SUBFRAME_BITS = 300
 PREAMBLE = 0b11100010010
 WEEK_S = 604800.0
 BCH_POLY = 0b10011  # x⁴ + x + 1
-# URA index -> metres (ICD B1I 5.2.4.3, the GPS table)
-URA_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0)
 
 FRAID = f(15, 3)
 SOW = split((18, 8), (30, 12))
@@ -120,15 +118,6 @@ D2_FIELDS: dict[str, Field] = {
     "idot_rad_s": split(_d2(10, 51, 1), _d2(10, 60, 13), lsb=2.0**-43 * SC, signed=True),
 }
 D2_EPHEMERIS_PAGES = (1, 3, 4, 5, 6, 7, 8, 9, 10)  # page 2: the ionosphere grid
-
-
-def ura_m(index: int) -> float:
-    return URA_M[index] if 0 <= index < len(URA_M) else math.inf
-
-
-def ura_index(accuracy_m: float) -> int:
-    """The smallest URA index whose value covers ``accuracy_m`` (15 when none does)."""
-    return next((i for i, u in enumerate(URA_M) if u >= accuracy_m), len(URA_M))
 
 
 def bch_parity(info11: int) -> int:

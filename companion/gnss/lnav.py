@@ -3,7 +3,9 @@
 Input: a subframe's ten 30-bit words as the u-blox RXM-SFRBX ``dwrd`` values (word in bits 29..0,
 parity already resolved by the receiver), so each word's 24 data bits are ``dwrd >> 6``.
 Subframes 1-3 with a matching issue of data give one :class:`KeplerEphemeris`; subframe 4 page 18
-(SV id 56) gives the Klobuchar α/β. Not decoded: almanacs, UTC parameters, CNAV, and the Galileo,
+(SV id 56) gives the Klobuchar α/β. The URA index (subframe 1, 4 bits) -> ``accuracy_m``, the upper
+bound of its interval (IS-GPS-200 20.3.3.3.1.3, as RTKLIB's table; inf for index 15, "no accuracy
+prediction available": use at own risk). Not decoded: almanacs, UTC parameters, CNAV, and the Galileo,
 BeiDou and GLONASS navigation messages (their SFRBX frames are counted, not used).
 """
 
@@ -21,6 +23,18 @@ from companion.gnss.timescale import resolve_week
 
 PREAMBLE = 0x8B
 SC2RAD = math.pi  # semicircles -> rad
+# URA index -> metres: the upper bound of each index's interval (IS-GPS-200 20.3.3.3.1.3; BeiDou's
+# ICD B1I 5.2.4.3 uses the same table); index 15 (and anything above the table) -> inf
+URA_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0)
+
+
+def ura_m(index: int) -> float:
+    return URA_M[index] if 0 <= index < len(URA_M) else math.inf
+
+
+def ura_index(accuracy_m: float) -> int:
+    """The smallest URA index whose value covers ``accuracy_m`` (15 when none does, or NaN)."""
+    return next((i for i, u in enumerate(URA_M) if u >= accuracy_m), len(URA_M))
 
 
 def _bits(words: Sequence[int]) -> int:
@@ -108,6 +122,7 @@ def decode_ephemeris(
     """Subframes 1, 2, 3 -> ephemeris; None when their issues of data differ (a cut-over)."""
     a, b, c = _Reader(sf1), _Reader(sf2), _Reader(sf3)
     week10 = a.u(48, 10)
+    ura = a.u(60, 4)
     health = a.u(64, 6)
     iodc = (a.u(70, 2) << 8) | a.u(168, 8)
     tgd = a.s(160, 8) * 2.0**-31
@@ -145,4 +160,5 @@ def decode_ephemeris(
         system=int(System.GPS), prn=int(prn), toe_gps_s=toe, toc_gps_s=toc, toe_sow_s=toe_sow,
         sqrt_a_m05=sqrt_a, e=e, i0_rad=i0, omega0_rad=omega0, omega_rad=omega, m0_rad=m0, delta_n_rad_s=deln,
         omega_dot_rad_s=omega_dot, idot_rad_s=idot, cuc_rad=cuc, cus_rad=cus, crc_m=crc, crs_m=crs,
-        cic_rad=cic, cis_rad=cis, af0_s=af0, af1_s_s=af1, af2_s_s2=af2, tgd_s=tgd, iode=iode2, health=health)
+        cic_rad=cic, cis_rad=cis, af0_s=af0, af1_s_s=af1, af2_s_s2=af2, tgd_s=tgd, iode=iode2, health=health,
+        accuracy_m=ura_m(ura))

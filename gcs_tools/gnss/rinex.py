@@ -9,6 +9,21 @@ by the leap seconds when the file is already in GPS time (a known pitfall of som
 Navigation -> :class:`KeplerEphemeris` (GPS, QZSS, Galileo I/NAV, BeiDou D1/D2) and
 :class:`GlonassEphemeris`, plus the GPS Klobuchar parameters (``IONOSPHERIC CORR`` GPSA/GPSB).
 Group delay for the single-frequency signal: GPS/QZSS TGD, Galileo BGD E5b/E1, BeiDou TGD1.
+Broadcast accuracy -> ``accuracy_m`` exactly as the UBX decoders give it from the same broadcast:
+the metres RINEX writes (GPS/QZSS/BeiDou "SV accuracy", Galileo SISA) go back to the broadcast index
+(``lnav.ura_index`` / ``inav.sisa_index``) and out through its table (``lnav.ura_m`` / ``inav.sisa_m``),
+so a writer's nominal value (2.0 m for URA index 0) and the table's upper bound (2.4 m) both read as
+2.4 m; URA index 15 (above 6144 m), a Galileo SISA below zero (−1: "NAPA", no accuracy prediction
+available) or above the table, and a blank field read as inf ("not given", as the UBX decoders give
+index 15 and NAPA).
+
+Galileo records (``data sources``, RINEX 3.05 table A8): bit 0 I/NAV E1-B, bit 1 F/NAV E5a-I, bit 2
+I/NAV E5b-I; bit 8 the clock (af0-af2, toc, SISA) is the E5a,E1 pair's, bit 9 the E5b,E1 pair's.
+The pseudoranges read here are E1, so only I/NAV records with the E5b,E1 clock (bit 9, or neither
+clock bit as I/NAV carries no other pair) are kept, with BGD E5b/E1; F/NAV records and any record
+with the E5a,E1 clock are counted (``galileo_fnav_skipped``), not mixed in: the two clocks of one
+issue of data differ by the difference of the two group delays (nanoseconds: metres of range).
+A record with both clock bits, or no source bit, is counted (``galileo_bad_data_source``).
 
 Rejections are counted (``RinexObs.rejected`` / ``RinexNav.rejected``, by reason); a file that is
 not RINEX 3, or holds no usable record, is a one-line ``UserError``. A truncated last record is
@@ -28,6 +43,8 @@ import numpy as np
 from companion.errors import UserError
 from companion.gnss.constants import C_M_S, DFREQ_G1_HZ, FREQ_B1I_HZ, FREQ_G1_HZ, FREQ_L1_HZ
 from companion.gnss.ephemeris import GlonassEphemeris, KeplerEphemeris
+from companion.gnss.inav import sisa_index, sisa_m
+from companion.gnss.lnav import ura_index, ura_m
 from companion.gnss.observations import GnssEpoch, make_epoch
 from companion.gnss.systems import FROM_RINEX_LETTER, RINEX_LETTER, System
 from companion.gnss.timescale import (
@@ -362,9 +379,9 @@ def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
     tgd = v[25]
     health = int(v[24])
     if system == System.GALILEO:
-        sources = int(v[20])
-        if not sources & 0b101:  # not I/NAV (E1-B or E5b-I): F/NAV's clock is for E5a
-            out.rejected["galileo_fnav_skipped"] += 1
+        why = galileo_skip_reason(int(v[20]))
+        if why:
+            out.rejected[why] += 1
             return
         tgd = v[26]  # BGD E5b/E1
     out.kepler.append(
@@ -395,8 +412,33 @@ def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
             tgd_s=tgd,
             iode=int(v[3]),
             health=health,
+            accuracy_m=broadcast_accuracy_m(system, v[23]) if block[6][4:23].strip() else math.inf,
         )
     )
+
+
+GAL_INAV_E1B, GAL_FNAV_E5A, GAL_INAV_E5B = 1 << 0, 1 << 1, 1 << 2
+GAL_CLOCK_E5A_E1, GAL_CLOCK_E5B_E1 = 1 << 8, 1 << 9
+
+
+def galileo_skip_reason(sources: int) -> str:
+    """Why a Galileo record with this ``data sources`` value is not used for E1 ('' if it is)."""
+    e5a_clock, e5b_clock = sources & GAL_CLOCK_E5A_E1, sources & GAL_CLOCK_E5B_E1
+    inav = sources & (GAL_INAV_E1B | GAL_INAV_E5B)
+    if sources < 0 or (e5a_clock and e5b_clock) or not (inav or sources & GAL_FNAV_E5A):
+        return "galileo_bad_data_source"
+    if e5a_clock or not inav:  # F/NAV, or a clock for the E5a,E1 pair
+        return "galileo_fnav_skipped"
+    return ""
+
+
+def broadcast_accuracy_m(system: System, value_m: float) -> float:
+    """A navigation record's accuracy field (metres) -> ``accuracy_m`` as the broadcast index gives it."""
+    if not value_m >= 0.0:  # Galileo's −1 (NAPA); never a URA
+        return math.inf
+    if system == System.GALILEO:
+        return sisa_m(sisa_index(value_m))
+    return ura_m(ura_index(value_m))
 
 
 # --- writer (tests and tools: synthetic scenarios) ---------------------------------------------
@@ -419,6 +461,13 @@ def _calendar(t_gps_s: float, scale: str) -> tuple[int, int, int, int, int, floa
     whole = math.floor(t)
     d = dt.datetime(1980, 1, 6) + dt.timedelta(seconds=whole)
     return d.year, d.month, d.day, d.hour, d.minute, d.second + (t - whole)
+
+
+def _accuracy_field(system: System, accuracy_m: float) -> float:
+    """``accuracy_m`` as a navigation record writes it: inf -> Galileo NAPA (−1), URA index 15 (8192 m)."""
+    if math.isfinite(accuracy_m):
+        return accuracy_m
+    return -1.0 if system == System.GALILEO else 8192.0
 
 
 def write_nav(
@@ -454,7 +503,7 @@ def write_nav(
             [e.i0_rad, e.crc_m, e.omega_rad, e.omega_dot_rad_s],
             [e.idot_rad_s, sources, week, 0.0],
             [
-                2.0,
+                _accuracy_field(s, e.accuracy_m),
                 e.health,
                 e.tgd_s if s != System.GALILEO else 0.0,
                 e.tgd_s if s == System.GALILEO else e.iode,
