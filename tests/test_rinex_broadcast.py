@@ -267,3 +267,31 @@ def test_simulated_sky_through_ubx_and_rinex_every_accuracy_index(tmp_path):
     assert any(math.isinf(e.accuracy_m) for e in ubx if e.system == System.GALILEO)
     assert any(math.isinf(e.accuracy_m) for e in ubx if e.system == System.GPS)
     _assert_same_states(ubx, _via_rinex(tmp_path, ubx))
+
+
+def test_simulated_glonass_through_ubx_and_rinex(tmp_path):
+    """GLONASS (no broadcast accuracy is carried, see docs/gnss.md): strings 1-4 decoded by the UBX
+    path, then through a RINEX file, give the same channel, health, position and clock."""
+    from companion.gnss.glonav import GlonassDecoder, words_from_string
+    from simvehicle.ubx import glonass_string
+
+    _, glo = constellation(1.4e9, 1.4e9 + 3600.0, (System.GLONASS,))
+    dec, ubx = GlonassDecoder(), []
+    for eph in glo:
+        t_frame = eph.toe_gps_s - 60.0
+        strings = [glonass_string(eph, m, t_frame, t_frame + 2.0 * m) for m in (1, 2, 3, 4)]
+        got = [dec.add(eph.prn, eph.channel, words_from_string(s, 7, 1), t_frame + 40.0) for s in strings]
+        assert got[3] is not None
+        ubx.append(got[3])
+    p = tmp_path / "glo.nav"
+    rinex.write_nav(p, [], ubx)
+    nav = rinex.read_nav(p)
+    assert not nav.rejected and len(nav.glonass) == len(ubx) > 20
+    assert [(e.prn, e.channel, e.health, e.toe_gps_s) for e in nav.glonass] == [
+        (e.prn, e.channel, e.health, e.toe_gps_s) for e in ubx]
+    t = np.array([e.toe_gps_s + 600.0 for e in ubx])
+    prn = np.array([e.prn for e in ubx])
+    sysv = np.full(len(t), int(System.GLONASS))
+    a, b = (EphemerisStore([], list(x)).states(sysv, prn, t) for x in (ubx, nav.glonass))
+    assert a.valid.all() and np.abs(a.pos_ecef_m - b.pos_ecef_m).max() < 1e-3
+    assert np.abs(a.clock_s - b.clock_s).max() < 1e-13
