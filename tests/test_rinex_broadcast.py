@@ -121,15 +121,20 @@ def test_real_gps_and_beidou_records_give_the_broadcast_ura(tmp_path):
 
 
 @pytest.mark.parametrize("n", range(16))
-def test_every_ura_index_reads_back_from_its_nominal_and_its_bound(n):
-    """RINEX 3.05 (GPS broadcast orbit 6): writers put 2^(1+N/2) rounded to 0.1 m for N ≤ 6 and
-    2^(N−2) above (8192 m: index 15, "no prediction"), or the interval's upper bound (RTKLIB); both
-    give ``lnav.ura_m(N)``, the UBX decoder's value, for GPS, QZSS and BeiDou alike."""
+def test_every_ura_index_reads_back_from_its_nominal_and_its_bound(tmp_path, n):
+    """RINEX 3.05 (GPS broadcast orbit 6): the nominal value is 2^(1+N/2) rounded to 0.1 m for N ≤ 6
+    and 2^(N−2) above (8192 m: index 15, "no prediction"), what the writer puts; some writers put the
+    interval's upper bound. Both give ``lnav.ura_m(N)``, the UBX decoder's value, for GPS, QZSS and
+    BeiDou alike."""
     nominal = round(2.0 ** (1.0 + n / 2.0), 1) if n <= 6 else 2.0 ** (n - 2)
     for system in (System.GPS, System.QZSS, System.BEIDOU):
         assert rinex.broadcast_accuracy_m(system, nominal) == lnav.ura_m(n)
         assert rinex.broadcast_accuracy_m(system, lnav.ura_m(n)) == lnav.ura_m(n)
-    assert math.isinf(lnav.ura_m(15))
+    (g,) = _read(tmp_path, GPS_G01).kepler
+    rinex.write_nav(tmp_path / "w.nav", [dataclasses.replace(g, accuracy_m=lnav.ura_m(n))])
+    sv_accuracy = (tmp_path / "w.nav").read_text().splitlines()[-2][4:23]
+    assert float(sv_accuracy.replace("D", "E")) == nominal
+    assert rinex.read_nav(tmp_path / "w.nav").kepler[0].accuracy_m == lnav.ura_m(n)
 
 
 def test_galileo_sisa_and_napa():

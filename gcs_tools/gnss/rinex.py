@@ -12,10 +12,10 @@ Group delay for the single-frequency signal: GPS/QZSS TGD, Galileo BGD E5b/E1, B
 Broadcast accuracy -> ``accuracy_m`` exactly as the UBX decoders give it from the same broadcast:
 the metres RINEX writes (GPS/QZSS/BeiDou "SV accuracy", Galileo SISA) go back to the broadcast index
 (``lnav.ura_index`` / ``inav.sisa_index``) and out through its table (``lnav.ura_m`` / ``inav.sisa_m``),
-so a writer's nominal value (2.0 m for URA index 0) and the table's upper bound (2.4 m) both read as
-2.4 m; URA index 15 (above 6144 m), a Galileo SISA below zero (−1: "NAPA", no accuracy prediction
-available) or above the table, and a blank field read as inf ("not given", as the UBX decoders give
-index 15 and NAPA).
+so the nominal value RINEX prescribes (2.0 m for URA index 0, as the real files and RTKLIB's writer
+put) and the interval's upper bound (2.4 m) both read as 2.4 m; URA index 15 (above 6144 m), a
+Galileo SISA below zero (−1: "NAPA", no accuracy prediction available) or above the table, and a
+blank field read as inf ("not given", as the UBX decoders give index 15 and NAPA).
 
 Galileo records (``data sources``, RINEX 3.05 table A8): bit 0 I/NAV E1-B, bit 1 F/NAV E5a-I, bit 2
 I/NAV E5b-I; bit 8 the clock (af0-af2, toc, SISA) is the E5a,E1 pair's, bit 9 the E5b,E1 pair's.
@@ -464,10 +464,12 @@ def _calendar(t_gps_s: float, scale: str) -> tuple[int, int, int, int, int, floa
 
 
 def _accuracy_field(system: System, accuracy_m: float) -> float:
-    """``accuracy_m`` as a navigation record writes it: inf -> Galileo NAPA (−1), URA index 15 (8192 m)."""
-    if math.isfinite(accuracy_m):
-        return accuracy_m
-    return -1.0 if system == System.GALILEO else 8192.0
+    """``accuracy_m`` as a navigation record writes it: Galileo SISA in metres (inf -> NAPA, −1); URA as
+    RINEX 3.05's nominal value of its index, 2^(1+N/2) to 0.1 m for N ≤ 6, else 2^(N−2) (inf: 8192 m)."""
+    if system == System.GALILEO:
+        return accuracy_m if math.isfinite(accuracy_m) else -1.0
+    n = ura_index(accuracy_m)
+    return round(2.0 ** (1.0 + n / 2.0), 1) if n <= 6 else 2.0 ** (n - 2)
 
 
 def write_nav(
