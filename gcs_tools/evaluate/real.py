@@ -41,6 +41,7 @@ from companion.errors import UserError
 from companion.estimator.config import EstimatorConfig
 from gcs_tools.choices import seeds as parse_seeds
 from gcs_tools.evaluate import stats
+from gcs_tools.gnss.transplant import PREFIX as SATS
 
 TUNING_FLIGHTS = ("path_1", "path_2", "path_3")
 REPORTING_FLIGHTS = ("path_5", "path_6", "path_7", "path_8", "path_10")
@@ -50,6 +51,9 @@ STATS = ("median", "p95", "max")
 COVERAGE = ("within_1_sigma", "within_2_sigma")
 BOOTSTRAP_SEED = 20261126
 GOAL_BELOW_NAIVE = -0.20  # the issue's goal: the best method's median at least 20 % below naive
+TIGHT_PREFIX = "tight-"
+BELIEF_ROW = "tight-second-order"  # the per-satellite belief, compared pair by pair with the other tight rows
+BELIEF_REFERENCES = ("tight-naive", "tight-cn0-elevation", "tight-fde", "tight-student-t")
 
 
 @dataclass(frozen=True)
@@ -78,12 +82,52 @@ def needs_map(method: str) -> bool:
     return False
 
 
+def is_sats(errors: str) -> bool:
+    """The ``smartloc-sats:INPUT`` errors: a smartLoc drive's satellites placed on the flight
+    (``gcs_tools.gnss.transplant``): SPP fixes for the loose rows, raw epochs for the tight rows."""
+    return errors.startswith(SATS)
+
+
 def errors_label(errors: str) -> str:
+    if is_sats(errors):
+        return f"satellites {Path(errors[len(SATS):]).name}"
     return errors if errors in ("model", "none") else f"series {Path(errors).name}"
+
+
+def tight_rows(errors: str) -> tuple[str, ...]:
+    """The tightly coupled rows a condition has (``evaluate.tight``'s weightings; none without satellites)."""
+    if not is_sats(errors):
+        return ()
+    from gcs_tools.evaluate.tight import TIGHT_ROWS
+
+    return tuple(TIGHT_PREFIX + w for w in TIGHT_ROWS)
+
+
+def _row(base: dict[str, Any], row: str, s: dict[str, Any]) -> dict[str, Any]:
+    """One run's line from a replay summary."""
+    h = s["errors"]["truth"]["error_horizontal_m"]
+    cov = s["errors"]["truth"]["coverage_horizontal"]  # the reported accuracy's, at the truth samples
+    nav = s["navigator"]
+    return {**base, "row": row, **{k: round(h[k], 4) for k in STATS},
+            **{k: round(cov[k], 4) for k in COVERAGE},
+            "gnss_fused": nav.get("gnss_fused", 0),
+            "gnss_rejected_innovation": nav.get("gnss_rejected_innovation", 0),
+            "gnss_resets": nav.get("gnss_resets", 0), "wall_s": round(s["wall_s"], 4),
+            "duration_s": round(s["duration_s"], 3)}
+
+
+def _raw_rows(base: dict[str, Any], raw: dict[str, Any]) -> list[dict[str, Any]]:
+    out = []
+    for row, key in zip(RAW, ("at_arrival", "at_validity"), strict=True):
+        h = raw[key]["error_horizontal_m"]
+        out.append({**base, "row": row, **{k: round(h[k], 4) for k in STATS}})
+    return out
 
 
 def run_job(job: Job) -> list[dict[str, Any]]:
     """Every method on the job's fixes, and the raw fixes' own errors (same for all methods)."""
+    if is_sats(job.errors):
+        return run_sats_job(job)
     from gcs_tools.replay import core
     from gcs_tools.replay.synthetic_gnss import GnssErrorOptions
 
@@ -96,21 +140,57 @@ def run_job(job: Job) -> list[dict[str, Any]]:
     raw: dict[str, Any] | None = None
     for method in job.methods:
         s = core.replay(Path(job.flight), method, gnss=opts, rate_hz=10.0, config=config).summary
-        h = s["errors"]["truth"]["error_horizontal_m"]
-        cov = s["errors"]["truth"]["coverage_horizontal"]  # the reported accuracy's, at the truth samples
-        nav = s["navigator"]
-        out.append({**base, "row": method, **{k: round(h[k], 4) for k in STATS},
-                    **{k: round(cov[k], 4) for k in COVERAGE},
-                    "gnss_fused": nav.get("gnss_fused", 0),
-                    "gnss_rejected_innovation": nav.get("gnss_rejected_innovation", 0),
-                    "gnss_resets": nav.get("gnss_resets", 0), "wall_s": round(s["wall_s"], 4),
-                    "duration_s": round(s["duration_s"], 3)})
+        out.append(_row(base, method, s))
         raw = s["errors"]["raw_fixes"]
     assert raw is not None
-    for row, key in zip(RAW, ("at_arrival", "at_validity"), strict=True):
-        h = raw[key]["error_horizontal_m"]
-        out.append({**base, "row": row, **{k: round(h[k], 4) for k in STATS}})
-    return out
+    return out + _raw_rows(base, raw)
+
+
+# the tight rows do not depend on the accuracy mode: replayed once per (flight, drive, seed, …) per process
+_TIGHT_DONE: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+
+
+def run_sats_job(job: Job) -> list[dict[str, Any]]:
+    """A smartLoc drive's satellites on the flight (``transplant.sky_on_flight``): every loose method on
+    the single-point fixes (latency, velocity and accuracy as the series condition), every tight row
+    (``TightConfig()``, no map) on the placed epochs arriving with the fixes, and the fixes' own errors."""
+    from companion.tight import RawGnss, TightConfig
+    from gcs_tools.evaluate.tight import TIGHT_ROWS
+    from gcs_tools.gnss import tight_replay as tr
+    from gcs_tools.gnss import transplant
+    from gcs_tools.replay import core
+    from gcs_tools.replay.logs import open_log
+    from gcs_tools.replay.synthetic_gnss import GnssErrorOptions, WithSyntheticGnss
+
+    flight = Path(job.flight)
+    opts = GnssErrorOptions("none", rate_hz=job.rate_hz, accuracy=job.accuracy, latency_ms=job.latency_ms,
+                            seed=job.seed)
+    sky = transplant.drive_sky(transplant.check_choice(job.errors))
+    placed = transplant.sky_on_flight(flight, sky, opts)
+    frame = placed.frame
+    config = estimator_config(job.estimator)
+    base = {"flight": flight.name, "errors": errors_label(job.errors), "accuracy": job.accuracy, "seed": job.seed}
+    out: list[dict[str, Any]] = []
+    for method in job.methods:
+        reader = WithSyntheticGnss(open_log(flight, None, frame), placed.fixes, frame, placed.raw_errors)
+        s = core.replay(flight, method, home=frame, reader=reader, rate_hz=10.0, config=config).summary
+        out.append(_row(base, method, s))
+    key = (job.flight, job.errors, job.seed, job.rate_hz, job.latency_ms)
+    if key not in _TIGHT_DONE:
+        raws = [RawGnss(int(t), e) for t, e in zip(placed.placed.t_validity_us, placed.placed.epochs,
+                                                    strict=True)]
+        arrival = dict(zip(placed.placed.t_validity_us.tolist(), placed.raw_arrival_us.tolist(), strict=True))
+        done: list[dict[str, Any]] = []
+        for w in TIGHT_ROWS:
+            reader = tr.LogWithRawGnss(open_log(flight, None, frame), raws, frame,
+                                       f"smartLoc {sky.name} placed on the flight (raw epochs)",
+                                       lambda r: arrival[r.t_us])
+            s = core.replay(flight, w, home=frame, reader=reader, rate_hz=10.0,
+                            navigator=tr.tight_factory(TightConfig())).summary
+            done.append(_row({}, TIGHT_PREFIX + w, s))
+        _TIGHT_DONE[key] = done
+    out += [{**base, **r} for r in _TIGHT_DONE[key]]
+    return out + _raw_rows(base, placed.raw_errors)
 
 
 def estimator_config(fields: Sequence[tuple[str, Any]]) -> EstimatorConfig | None:
@@ -189,6 +269,27 @@ def summarise(runs: list[dict[str, Any]], rows: Sequence[str]) -> dict[str, Any]
     return out
 
 
+def paired_medians(runs: list[dict[str, Any]], row: str, references: Sequence[str]) -> list[dict[str, Any]]:
+    """``row`` against each reference, pair by pair (flight, seed): the mean difference of the run medians
+    (m) and the ratio of their means − 1, each with its 95 % interval (seeds resampled within flights)."""
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    mine = _runs(runs, row)
+    out = []
+    for ref in references:
+        other = _runs(runs, ref)
+        pairs = [k for k in sorted(mine) if k in other]
+        a = np.array([mine[k]["median"] for k in pairs], dtype=float)
+        b = np.array([other[k]["median"] for k in pairs], dtype=float)
+        strata = np.array([k[0] for k in pairs])
+        mean, lo, hi = stats.mean_ci(a - b, strata, rng)
+        value, rlo, rhi = ratio_of_means_ci(a, b, strata, rng)
+        out.append({"row": row, "reference": ref, "pairs": len(pairs),
+                    "median_diff_m": {"mean": mean, "ci95": [lo, hi]},
+                    "median_ratio": {"value": value, "ci95": [rlo, rhi]},
+                    "excludes_zero": bool(hi < 0 or lo > 0)})
+    return out
+
+
 def goals(table: dict[str, Any], methods: Sequence[str]) -> dict[str, Any]:
     """The issue's goals on one condition: no method's p95 or max above the raw fixes'; the best
     method's median below the raw fixes' (at arrival) and at least 20 % below naive."""
@@ -264,6 +365,18 @@ def markdown(result: dict[str, Any]) -> str:
             per_flight = " | ".join(f"{e['per_flight_median'][f]:.2f}" for f in flights)
             lines.append(f"| `{row}` | {per_flight} |")
         lines.append("")
+        if cond.get("belief_paired"):
+            lines += ["The per-satellite belief against each row, pair by pair (flight × seed): the mean "
+                      "difference of the run medians [m] and the ratio of the mean run medians − 1, 95 % "
+                      "intervals (seeds resampled within flights):", "",
+                      "| row − reference | median difference [m] | ratio | interval excludes 0 |",
+                      "|---|---|---|---|"]
+            for c in cond["belief_paired"]:
+                r = c["median_ratio"]
+                lines.append(f"| `{c['row']}` − `{c['reference']}` | {_ci(c['median_diff_m'])} | "
+                             f"{r['value']:+.0%} [{r['ci95'][0]:+.0%}, {r['ci95'][1]:+.0%}] | "
+                             f"{'yes' if c['excludes_zero'] else 'no'} |")
+            lines.append("")
     return "\n".join(lines)
 
 
@@ -301,19 +414,23 @@ def run(flights: Sequence[Path], errors: Sequence[str], accuracies: Sequence[str
     else:
         results = [run_job(j) for j in jobs]
     runs = [r for rs in results for r in rs]
-    rows = [*methods, *RAW]
     conditions = []
     for e in errors:
         for a in accuracies:
             mine = [r for r in runs if r["errors"] == errors_label(e) and r["accuracy"] == a]
-            table = summarise(mine, rows)
-            conditions.append({"errors": errors_label(e), "accuracy": a, "table": table,
-                               "goals": goals(table, methods)})
+            filters = [*methods, *tight_rows(e)]
+            table = summarise(mine, [*filters, *RAW])
+            cond = {"errors": errors_label(e), "accuracy": a, "table": table, "goals": goals(table, filters)}
+            if tight_rows(e):
+                best_loose = min(methods, key=lambda m: table[m]["median"]["mean"])
+                cond["belief_paired"] = paired_medians(mine, BELIEF_ROW, [*BELIEF_REFERENCES, best_loose])
+            conditions.append(cond)
     return {
         "campaign": {"flights": [f.name for f in flights], "split": split,
                      "errors": [errors_label(e) for e in errors],
                      "accuracy": list(accuracies), "methods": list(methods), "seeds": list(seeds),
-                     "rate_hz": rate_hz, "latency_ms": latency_ms, "runs": len(jobs) * len(methods),
+                     "rate_hz": rate_hz, "latency_ms": latency_ms,
+                     "runs": sum(len(methods) + len(tight_rows(j.errors)) for j in jobs),
                      "estimator": dict(estimator),
                      "wall_s": time.perf_counter() - t0,
                      "bootstrap": {"seed": BOOTSTRAP_SEED, "resamples": 2000, "strata": "flight"}},
@@ -333,7 +450,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--flights", default="reporting",
                    help="reporting (paths 5,6,7,8,10), tuning (1,2,3), all, or flight names/paths")
     p.add_argument("--errors", default="model",
-                   help="comma-separated: model, none, or error series CSV files")
+                   help="comma-separated: model, none, error series CSV files, or "
+                        f"{SATS}INPUT (a smartLoc drive's satellites placed on each flight: SPP fixes for "
+                        "the methods, raw epochs for the tightly coupled rows)")
     p.add_argument("--accuracy", default="reported,none",
                    help=f"comma-separated of {', '.join(ACCURACY_MODES)}")
     p.add_argument("--methods", default="all",
@@ -359,8 +478,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         errors = [e.strip() for e in args.errors.split(",") if e.strip()]
         accuracies = [a.strip() for a in args.accuracy.split(",") if a.strip()]
         for e in errors:
+            if is_sats(e):
+                from gcs_tools.gnss.transplant import check_choice
+
+                check_choice(e)
             for a in accuracies:
-                GnssErrorOptions(e, rate_hz=args.rate_hz, accuracy=a, latency_ms=args.latency_ms).check()
+                GnssErrorOptions("none" if is_sats(e) else e, rate_hz=args.rate_hz, accuracy=a,
+                                 latency_ms=args.latency_ms).check()
         if not errors or not accuracies:
             raise UserError("--errors and --accuracy need at least one value each")
         if "naive" not in methods:

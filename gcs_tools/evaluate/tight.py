@@ -34,9 +34,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from companion.errors import UserError
-from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
+from companion.gnss.geometry import ecef_to_ned_matrix
 from companion.gnss.spp import SppConfig
 from companion.tight import TightConfig
+from gcs_tools.gnss.baseline import epoch_residuals_at_truth
 from gcs_tools.jsonvalues import write_results_or_error
 
 TIGHT_ROWS = ("naive", "cn0-elevation", "fde", "student-t", "first-order", "second-order")
@@ -228,9 +229,9 @@ class Observations(NamedTuple):
 
 def observations_at_truth(epochs: Sequence[Any], truth: Any, log: Sequence[tuple[int, Any]], src: Any
                           ) -> Observations:
-    """Each logged observation's residual at the true position: pseudorange − Sagnac range, minus the
-    per-system receiver clock taken as the median residual of that system's satellites above 40° (else
-    of all of them); with what the filter's epoch (``log``: (t_us, EpochInfo)) said of it."""
+    """Each logged observation's residual at the true position (``baseline.epoch_residuals_at_truth``:
+    the per-system receiver clock as the median residual of that system's satellites above 40°, else of
+    all of them); with what the filter's epoch (``log``: (t_us, EpochInfo)) said of it."""
     by_t = {src.boot_us(e.t_gps_s): e for e in epochs}
     rows: list[tuple[float, ...]] = []
     for t_us, info in log:
@@ -240,15 +241,8 @@ def observations_at_truth(epochs: Sequence[Any], truth: Any, log: Sequence[tuple
         p = truth.at(np.array([e.t_gps_s]))[0]
         if not np.isfinite(p).all():
             continue
-        rho, los = sagnac_range_m(e.sat_pos_ecef_m, p)
-        lat, lon, _ = (float(v) for v in ecef_to_geodetic(p))
-        el = np.degrees(np.arcsin(np.clip(-(los @ ecef_to_ned_matrix(lat, lon).T)[:, 2], -1.0, 1.0)))
-        d = e.pseudorange_m - rho
-        r = np.full(e.n, np.nan)
-        for s in np.unique(e.system):
-            m = e.system == s
-            hi = m & (el > 40.0)
-            r[m] = d[m] - np.median(d[hi] if hi.sum() else d[m])
+        at_truth = epoch_residuals_at_truth(e, p)
+        r, el = at_truth.residual_m, at_truth.elevation_deg
         key = e.system.astype(int) * 1000 + e.prn.astype(int)
         pos = {k: i for i, k in enumerate(key.tolist())}
         for k, b, y, u in zip(info.key.tolist(), info.beta.tolist(), info.y_m.tolist(), info.used.tolist(),

@@ -169,6 +169,37 @@ def residuals_at_truth(
     return by_system_and_elevation(np.concatenate(sys_all), np.concatenate(el_all), np.concatenate(res), stat)
 
 
+CLOCK_ELEVATION_DEG = 40.0  # the receiver clock at the truth: from the satellites above this elevation
+
+
+@dataclass(frozen=True)
+class TruthResiduals:
+    """One epoch's observations at the TRUE position (arrays (n,))."""
+
+    residual_m: np.ndarray  # pseudorange − Sagnac range − the system's clock; + = arrived late (NLOS)
+    clock_m: np.ndarray  # the receiver clock of each observation's system (m)
+    los_ecef: np.ndarray  # (n, 3) unit vectors receiver → satellite
+    elevation_deg: np.ndarray
+
+
+def epoch_residuals_at_truth(epoch: GnssEpoch, p_ecef_m: np.ndarray) -> TruthResiduals:
+    """Each observation's residual at the true position ``p_ecef_m``: pseudorange − |sat − p| (Sagnac)
+    − the receiver clock of its system, taken robustly as the MEDIAN of ``pseudorange − range`` over that
+    system's satellites above ``CLOCK_ELEVATION_DEG`` (high satellites are rarely reflected; the median
+    ignores the few that are), over all of that system's satellites when none is that high."""
+    y = epoch.pseudorange_m if epoch.corrected else epoch.pseudorange_m + C_M_S * epoch.sat_clock_s
+    rho, los = sagnac_range_m(epoch.sat_pos_ecef_m, p_ecef_m)
+    lat, lon, _ = (float(v) for v in ecef_to_geodetic(p_ecef_m))
+    el = np.degrees(np.arcsin(np.clip(-(los @ ecef_to_ned_matrix(lat, lon).T)[:, 2], -1.0, 1.0)))
+    d = y - rho
+    clock = np.full(epoch.n, np.nan)
+    for s in np.unique(epoch.system):
+        m = epoch.system == s
+        hi = m & (el > CLOCK_ELEVATION_DEG)
+        clock[m] = np.median(d[hi] if hi.sum() else d[m])
+    return TruthResiduals(d - clock, clock, los, el)
+
+
 def by_system_and_elevation(system: np.ndarray, el_deg: np.ndarray, values: np.ndarray,
                             stat: Callable[[np.ndarray], dict[str, float]]
                             ) -> dict[str, dict[str, dict[str, float]]]:

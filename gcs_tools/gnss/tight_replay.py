@@ -11,7 +11,7 @@ instead of fixes, and the tightly coupled navigator factory.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -114,10 +114,13 @@ def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry:
 
 
 class LogWithRawGnss(LogWithGnss[RawGnss]):
-    """A log reader whose fixes are replaced by raw epochs (stamped on boot time), in ``anchor``'s frame."""
+    """A log reader whose fixes are replaced by raw epochs (stamped on boot time), in ``anchor``'s frame;
+    each is pushed at its time, or at ``arrival_us(raw)`` when given (a receiver's latency: the filter
+    fuses it out of sequence)."""
 
-    def __init__(self, inner: LogReader, raws: Sequence[RawGnss], anchor: LocalNedFrame, source: str) -> None:
-        super().__init__(inner, raws, lambda r: r.t_us, source, "epoch")
+    def __init__(self, inner: LogReader, raws: Sequence[RawGnss], anchor: LocalNedFrame, source: str,
+                 arrival_us: Callable[[RawGnss], int] | None = None) -> None:
+        super().__init__(inner, raws, arrival_us or (lambda r: r.t_us), source, "epoch")
         self.anchor = anchor
 
 

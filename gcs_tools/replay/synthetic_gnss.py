@@ -250,25 +250,23 @@ def _series_errors(series: ErrorSeries, t_us: np.ndarray, start_s: float) -> tup
     return err, series.h_acc_m[nearer], series.v_acc_m[nearer], outage
 
 
-def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> SyntheticFixes:
-    """The fixes of ``opts`` along ``base`` (see the module doc)."""
+def run_model(opts: GnssErrorOptions, t_v: np.ndarray, p_base: np.ndarray, frame: LocalNedFrame,
+              period_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The urban model run along the epochs (validity times ``t_v`` µs, base positions, one epoch every
+    ``period_s``) from the seed's streams 0 and 1: (its errors (n, 3), reported accuracy (n,), satellites
+    (n,), arrival times (n,) µs from its latency process). Every error source takes its latency here."""
     from simvehicle.gnss import GnssModel
     from simvehicle.nlos import UnmodelledGnss
 
-    t_v, p_base = _epochs(base, opts.rate_hz)
-    if not len(t_v):
-        raise UserError(f"no GNSS epoch to make: the base ({base.label}) covers "
-                        f"{(base.t_us[-1] - base.t_us[0]) / 1e6:.1f} s")
     seeds = np.random.SeedSequence(opts.seed).spawn(4)
-    cfg = opts.model_config()  # its latency process serves every error source
+    cfg = opts.model_config()
     unmodelled = None
     if opts.errors == "model" and cfg.unmodelled:  # no city: no NLOS, but tails and geometry noise
         unmodelled = UnmodelledGnss(cfg, np.zeros((0, 4)), np.zeros(0), np.random.default_rng(seeds[1]))
-    model = GnssModel(cfg, 1.0 / opts.rate_hz, frame, np.random.default_rng(seeds[0]), opts.clearance_m,
-                      unmodelled)
+    model = GnssModel(cfg, period_s, frame, np.random.default_rng(seeds[0]), opts.clearance_m, unmodelled)
     n = len(t_v)
     err = np.zeros((n, 3))
-    h_acc, v_acc = np.full(n, math.nan), np.full(n, math.nan)
+    acc = np.full(n, math.nan)
     sats = np.zeros(n, dtype=int)
     t_arrival = np.zeros(n, dtype=np.int64)
     for k in range(n):  # the model's queue gives each fix its release time
@@ -277,8 +275,31 @@ def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> Syn
         model.release(int(release))
         t_arrival[k] = int(release)
         err[k] = nf.p_ned_m - p_base[k]
-        h_acc[k] = v_acc[k] = model.reported_accuracy_m(nf)
+        acc[k] = model.reported_accuracy_m(nf)
         sats[k] = nf.satellites
+    return err, acc, sats, t_arrival
+
+
+def series_start(opts: GnssErrorOptions, series_t_s: np.ndarray, span_s: float) -> float:
+    """Where a flight of ``span_s`` seconds starts reading a recorded series (times ``series_t_s``):
+    ``opts.series_start_s``, else drawn uniformly from the seed's stream 3 so that the flight fits."""
+    if opts.series_start_s is not None:
+        return opts.series_start_s
+    room = series_t_s[-1] - series_t_s[0] - span_s
+    rng = np.random.default_rng(np.random.SeedSequence(opts.seed).spawn(4)[3])
+    return float(series_t_s[0] + rng.uniform(0.0, max(room, 0.0)))
+
+
+def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> SyntheticFixes:
+    """The fixes of ``opts`` along ``base`` (see the module doc)."""
+    t_v, p_base = _epochs(base, opts.rate_hz)
+    if not len(t_v):
+        raise UserError(f"no GNSS epoch to make: the base ({base.label}) covers "
+                        f"{(base.t_us[-1] - base.t_us[0]) / 1e6:.1f} s")
+    seeds = np.random.SeedSequence(opts.seed).spawn(4)
+    n = len(t_v)
+    err, h_acc, sats, t_arrival = run_model(opts, t_v, p_base, frame, 1.0 / opts.rate_hz)
+    v_acc = h_acc.copy()
     info: dict[str, Any] = {"errors": opts.errors, "base": base.label, "rate_hz": opts.rate_hz,
                             "accuracy": opts.accuracy, "seed": opts.seed, "clearance_m": opts.clearance_m}
     keep = np.ones(n, dtype=bool)
@@ -288,10 +309,7 @@ def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> Syn
     elif opts.errors != "model":
         series = load_error_series(opts.errors)
         span_s = (t_v[-1] - t_v[0]) / 1e6
-        start = opts.series_start_s
-        if start is None:
-            room = series.t_s[-1] - series.t_s[0] - span_s
-            start = float(series.t_s[0] + np.random.default_rng(seeds[3]).uniform(0.0, max(room, 0.0)))
+        start = series_start(opts, series.t_s, span_s)
         err, h_acc, v_acc, outage = _series_errors(series, t_v, start)
         keep = ~outage
         info.update(series_start_s=start, series_period_s=series.period_s,
@@ -300,6 +318,17 @@ def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> Syn
                     series_wrapped=bool(span_s > series.t_s[-1] - series.t_s[0]))
     else:
         info["model"] = {k: v for k, v in dict(opts.model_overrides).items()}
+    return assemble(opts, base, t_v, p_base + err, err, h_acc, v_acc, sats, t_arrival, keep, info)
+
+
+def assemble(opts: GnssErrorOptions, base: Track, t_v: np.ndarray, p_fix: np.ndarray, err: np.ndarray,
+             h_acc: np.ndarray, v_acc: np.ndarray, sats: np.ndarray, t_arrival: np.ndarray, keep: np.ndarray,
+             info: dict[str, Any]) -> SyntheticFixes:
+    """The fixes at validity times ``t_v`` (positions ``p_fix`` = base + ``err``, what they report,
+    the model's arrival times) with ``opts``' fixed latency, velocity (seed's stream 2) and accuracy mode
+    applied; only the epochs ``keep`` are kept."""
+    n = len(t_v)
+    seeds = np.random.SeedSequence(opts.seed).spawn(4)
     if opts.latency_ms is not None:
         t_arrival = t_v + int(round(opts.latency_ms * 1000))
     latency_s = (t_arrival - t_v) / 1e6
@@ -319,7 +348,7 @@ def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> Syn
         h_acc, v_acc = np.full(n, math.nan), np.full(n, math.nan)
         vel_acc[:] = math.nan
     info["fixes"] = int(keep.sum())
-    return SyntheticFixes(t_v[keep], t_arrival[keep], p_base[keep] + err[keep], err[keep], h_acc[keep],
+    return SyntheticFixes(t_v[keep], t_arrival[keep], p_fix[keep], err[keep], h_acc[keep],
                           v_acc[keep], hdop[keep], None if v_ned is None else v_ned[keep], vel_acc[keep],
                           sats[keep], info)
 

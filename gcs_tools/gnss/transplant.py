@@ -1,0 +1,229 @@
+"""A recorded urban sky on another vehicle's motion: smartLoc's per-satellite errors moved onto a flight.
+
+"This real flight, through Berlin's satellites." A recorded error series (``synthetic_gnss``) gives a
+flight only the drive's *fix* errors; here the flight gets the drive's *pseudoranges*, so a tightly
+coupled filter can run on them with the flight's real IMU:
+
+1. **Residuals at the truth** (:func:`drive_sky`): for each epoch of the smartLoc drive that has a
+   single-point solution and a truth (the rows of its SPP error series, ``beliefnav gnss spp``), each
+   observation's residual at the true position, ``baseline.epoch_residuals_at_truth``: pseudorange −
+   |sat − truth| (Sagnac) − the receiver clock of its system, the clock being the median of
+   ``pseudorange − range`` over that system's satellites above 40° (all of them when none is that high);
+   with the satellite's direction, elevation, C/N0 and system.
+2. **Placement** (:func:`place`): the flight's truth (NED about its first point) is placed in the local
+   NED frame at the drive's first truth point (the satellites are 20 000 km away: a few hundred metres
+   change their directions by ~10⁻⁵ rad), and drive epoch k is aligned to flight time by the series
+   condition's rule (``synthetic_gnss``: the flight reads the drive from a seed-drawn start,
+   ``series_start``, wrapped around the drive's span when longer); its pseudoranges become
+   ``|sat − p_flight| (Sagnac) + clock + residual`` at the flight's truth at that time. The satellites'
+   positions, C/N0, elevations and variances are the drive's. So the clock cancels: a placed pseudorange
+   is the recorded one plus the change of geometric range, and the single-point solution minus the
+   flight's truth reproduces the drive's SPP minus its truth up to the change of geometry (the
+   known-answer test: below 5 cm on the drive).
+3. **What the filters get**: the loosely coupled rows the single-point solutions (``SppConfig()``, as
+   the series was made) as fixes with the series condition's latency, velocity and accuracy modes
+   (``synthetic_gnss.assemble``); the tightly coupled rows the placed epochs as raw epochs, each
+   arriving at the same time as its fix (its validity time + the same latency).
+
+smartLoc has no Doppler: the tight rows get no velocity measurement, while the loose rows get the series
+condition's velocity (truth + 0.2 m/s noise) as today.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from companion.domain.geodesy import LocalNedFrame
+from companion.errors import UserError
+from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, geodetic_to_ecef, sagnac_range_m
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.spp import SppConfig
+from gcs_tools.gnss.baseline import TruthResiduals, epoch_residuals_at_truth, ned_errors, solve_series
+
+PREFIX = "smartloc-sats:"  # the campaign's errors choice: smartloc-sats:DRIVE_Input.txt
+
+
+@dataclass(frozen=True)
+class DriveSky:
+    """The drive's epochs with a single-point solution and a truth (its SPP error series' rows)."""
+
+    t_s: np.ndarray  # (n,) series time: the epoch's time − the first kept epoch's (the series CSV's t_s)
+    epochs: tuple[GnssEpoch, ...]
+    truth_ecef_m: np.ndarray  # (n, 3)
+    at_truth: tuple[TruthResiduals, ...]
+    spp_err_ned_m: np.ndarray  # (n, 3) SPP − truth in ``origin``'s NED frame (the error series)
+    origin: LocalNedFrame  # the truth at the drive's first epoch that has one
+    name: str
+
+    @property
+    def period_s(self) -> float:
+        return float(np.median(np.diff(self.t_s)))
+
+    @property
+    def span_s(self) -> float:
+        """The series' span as the series condition wraps it (last − first + one period)."""
+        return float(self.t_s[-1] - self.t_s[0] + self.period_s)
+
+
+def check_choice(text: str) -> Path:
+    """The smartLoc input of a ``smartloc-sats:INPUT`` choice (one-line errors for a bad one)."""
+    from gcs_tools.gnss.smartloc import default_truth_path
+
+    path = Path(text[len(PREFIX):].strip())
+    if not str(path) or str(path) == ".":
+        raise UserError(f"--errors {text!r}: give the smartLoc input after '{PREFIX}' "
+                        f"(e.g. {PREFIX}Berlin_Potsdamer_Platz_Input.txt)")
+    if not path.is_file():
+        raise UserError(f"--errors {text!r}: {path}: no such file")
+    if default_truth_path(path) is None:
+        raise UserError(f"--errors {text!r}: no *_GT.txt truth beside {path.name}")
+    return path
+
+
+def drive_sky(input_path: Path, config: SppConfig | None = None) -> DriveSky:
+    """The drive of a smartLoc ``*_Input.txt`` (its ``*_GT.txt`` beside it), read and solved once per
+    process while the files are unchanged (a campaign places it on many flights)."""
+    from gcs_tools.gnss.smartloc import default_truth_path
+
+    truth_path = default_truth_path(input_path)
+    if truth_path is None:
+        raise UserError(f"{input_path}: no *_GT.txt truth beside it")
+    stamp = tuple((p.stat().st_mtime_ns, p.stat().st_size) for p in (input_path, truth_path))
+    return _drive_sky(input_path.resolve(), config or SppConfig(), stamp)
+
+
+@functools.lru_cache(maxsize=4)
+def _drive_sky(input_path: Path, config: SppConfig, stamp: object) -> DriveSky:
+    from gcs_tools.gnss import smartloc
+
+    data, truth = smartloc.read_drive(input_path)
+    series = solve_series(data.epochs, config)
+    truth_ecef = truth.at(series.t_s)
+    has_truth = np.isfinite(truth_ecef).all(axis=1)
+    if not has_truth.any():
+        raise UserError(f"{input_path}: no epoch inside its truth")
+    p0 = truth_ecef[has_truth][0]
+    lat, lon, h = (float(v) for v in ecef_to_geodetic(p0))
+    origin = LocalNedFrame(math.degrees(lat), math.degrees(lon), h)
+    err = ned_errors(series.p_ecef_m, truth_ecef, p0)
+    keep = np.flatnonzero(np.isfinite(err).all(axis=1))
+    if len(keep) < 2:
+        raise UserError(f"{input_path}: {len(keep)} epoch(s) with a single-point solution and a truth")
+    epochs = tuple(data.epochs[i] for i in keep)
+    return DriveSky(series.t_s[keep] - series.t_s[keep[0]], epochs, truth_ecef[keep],
+                    tuple(epoch_residuals_at_truth(e, p) for e, p in zip(epochs, truth_ecef[keep], strict=True)),
+                    err[keep], origin, input_path.name)
+
+
+def ned_to_ecef(frame: LocalNedFrame, p_ned_m: np.ndarray) -> np.ndarray:
+    """(n, 3) positions NED about ``frame``'s home in ECEF (the tangent frame, exact)."""
+    lat, lon = math.radians(frame.home_lat_deg), math.radians(frame.home_lon_deg)
+    p0 = geodetic_to_ecef(lat, lon, frame.home_alt_m)
+    return p0 + np.asarray(p_ned_m, dtype=float).reshape(-1, 3) @ ecef_to_ned_matrix(lat, lon)
+
+
+def place_epoch(epoch: GnssEpoch, at: TruthResiduals, p_ecef_m: np.ndarray) -> GnssEpoch:
+    """``epoch`` as received at ``p_ecef_m``: pseudorange = |sat − p| (Sagnac) + clock + residual."""
+    rho, _ = sagnac_range_m(epoch.sat_pos_ecef_m, p_ecef_m)
+    return epoch.replace(pseudorange_m=rho + at.clock_m + at.residual_m)
+
+
+def aligned_offsets_s(sky: DriveSky, start_s: float, flight_span_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets from the flight's first epoch (s), drive epoch indices) in time order: the inverse of the
+    series condition's rule, series time = t₀ + ((start − t₀ + offset) mod span); every drive epoch whose
+    offset falls in [0, ``flight_span_s``] (more than once when the flight is longer than the drive)."""
+    base = np.mod(sky.t_s - start_s, sky.span_s)
+    laps = int(math.floor(flight_span_s / sky.span_s)) + 1
+    off = np.concatenate([base + j * sky.span_s for j in range(laps)])
+    idx = np.tile(np.arange(len(sky.t_s)), laps)
+    keep = off <= flight_span_s + 1e-9
+    order = np.argsort(off[keep], kind="stable")
+    return off[keep][order], idx[keep][order]
+
+
+@dataclass(frozen=True)
+class PlacedSky:
+    """The drive's epochs placed on a flight (arrays of one length, in flight time order)."""
+
+    t_validity_us: np.ndarray  # (m,) int64 the flight's boot time
+    drive_index: np.ndarray  # (m,) the drive epoch (``DriveSky`` row)
+    epochs: tuple[GnssEpoch, ...]  # pseudoranges at the flight's truth
+    p_truth_ned_m: np.ndarray  # (m, 3) the flight's truth there (the frame's NED)
+    start_s: float  # where the flight reads the drive (series time)
+    wrapped: bool
+
+
+def place(sky: DriveSky, truth: Any, frame: LocalNedFrame, rate_hz: float, opts: Any,
+          residual_scale: float = 1.0) -> PlacedSky:
+    """The drive placed on ``truth`` (a ``synthetic_gnss.Track`` in ``frame``: the drive's ``origin``):
+    the flight's span and start are those of the series condition at ``rate_hz`` with ``opts``' seed
+    (``synthetic_gnss.series_start``); ``residual_scale`` 0 gives error-free pseudoranges (a test)."""
+    from gcs_tools.replay.synthetic_gnss import _epochs, series_start
+
+    t_grid, _ = _epochs(truth, rate_hz)
+    if not len(t_grid):
+        raise UserError(f"no GNSS epoch to make: the truth covers {(truth.t_us[-1] - truth.t_us[0]) / 1e6:.1f} s")
+    span_s = (t_grid[-1] - t_grid[0]) / 1e6
+    start = series_start(opts, sky.t_s, span_s)
+    off, idx = aligned_offsets_s(sky, start, span_s)
+    t_us = t_grid[0] + np.rint(off * 1e6).astype(np.int64)
+    p_ned, covered = truth.at(t_us)
+    t_us, idx, p_ned = t_us[covered], idx[covered], p_ned[covered]
+    p_ecef = ned_to_ecef(frame, p_ned)
+    epochs = []
+    for k, p in zip(idx.tolist(), p_ecef, strict=True):
+        at = sky.at_truth[k]
+        if residual_scale != 1.0:
+            at = dataclasses.replace(at, residual_m=at.residual_m * residual_scale)
+        epochs.append(place_epoch(sky.epochs[k], at, p))
+    return PlacedSky(t_us, idx, tuple(epochs), p_ned, start, bool(span_s > sky.t_s[-1] - sky.t_s[0]))
+
+
+@dataclass(frozen=True)
+class SkyOnFlight:
+    """What a replay of one flight under the placed sky needs."""
+
+    placed: PlacedSky
+    fixes: Any  # synthetic_gnss.SyntheticFixes: the single-point solutions (every epoch with one)
+    raw_arrival_us: np.ndarray  # (m,) when each placed epoch reaches the filter (its fix's arrival)
+    frame: LocalNedFrame
+    truth: Any  # synthetic_gnss.Track in ``frame``
+    raw_errors: dict[str, Any]  # the fixes' own errors (synthetic_gnss.raw_fix_errors)
+
+
+def sky_on_flight(flight: Path, sky: DriveSky, opts: Any) -> SkyOnFlight:
+    """The drive ``sky`` placed on an ANSFL ``flight`` (its truth read in the drive's frame) with the
+    series condition's options ``opts`` (``GnssErrorOptions``: seed, rate, accuracy, latency, velocity)."""
+    from gcs_tools.replay.logs import open_log
+    from gcs_tools.replay.synthetic_gnss import assemble, collect_tracks, raw_fix_errors, run_model, to_track
+
+    frame = sky.origin
+    tracks = collect_tracks(open_log(flight, None, frame))
+    if len(tracks.truth_t_us) < 2:
+        raise UserError(f"{flight}: no ground truth to place the satellites on")
+    truth = to_track(tracks.truth_t_us, tracks.truth_p, tracks.truth_label, tracks.truth_geodetic, frame)
+    placed = place(sky, truth, frame, opts.rate_hz, opts)
+    series = solve_series(placed.epochs, SppConfig())
+    lat, lon = math.radians(frame.home_lat_deg), math.radians(frame.home_lon_deg)
+    p0 = geodetic_to_ecef(lat, lon, frame.home_alt_m)
+    p_fix = (series.p_ecef_m - p0) @ ecef_to_ned_matrix(lat, lon).T
+    t_v = placed.t_validity_us
+    # the series condition's latency process (its bias and noise unused), one epoch per drive period
+    _, _, _, t_arrival = run_model(opts, t_v, placed.p_truth_ned_m, frame, sky.period_s)
+    info: dict[str, Any] = {"errors": f"{PREFIX}{sky.name}", "base": truth.label, "rate_hz": 1.0 / sky.period_s,
+                            "accuracy": opts.accuracy, "seed": opts.seed, "series_start_s": placed.start_s,
+                            "series_period_s": sky.period_s, "series_span_s": float(sky.t_s[-1] - sky.t_s[0]),
+                            "series_wrapped": placed.wrapped, "epochs": len(t_v),
+                            "epochs_without_solution": int((~series.ok).sum())}
+    err = p_fix - placed.p_truth_ned_m
+    fixes = assemble(opts, truth, t_v, p_fix, err, series.h_acc_m, series.v_acc_m, series.n_used, t_arrival,
+                     series.ok, info)
+    raw_arrival = t_arrival if opts.latency_ms is None else t_v + int(round(opts.latency_ms * 1000))
+    return SkyOnFlight(placed, fixes, raw_arrival, frame, truth, raw_fix_errors(fixes, truth))
