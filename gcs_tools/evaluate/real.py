@@ -169,11 +169,12 @@ def run_sats_job(job: Job) -> list[dict[str, Any]]:
     placed = transplant.sky_on_flight(flight, sky, opts)
     frame = placed.frame
     config = estimator_config(job.estimator)
-    base = {"flight": flight.name, "errors": errors_label(job.errors), "accuracy": job.accuracy, "seed": job.seed}
+    base = {"flight": flight.name, "errors": errors_label(job.errors), "accuracy": job.accuracy,
+            "seed": job.seed}
     out: list[dict[str, Any]] = []
     for method in job.methods:
-        reader = WithSyntheticGnss(open_log(flight, None, frame), placed.fixes, frame, placed.raw_errors)
-        s = core.replay(flight, method, home=frame, reader=reader, rate_hz=10.0, config=config).summary
+        fixes = WithSyntheticGnss(open_log(flight, None, frame), placed.fixes, frame, placed.raw_errors)
+        s = core.replay(flight, method, home=frame, reader=fixes, rate_hz=10.0, config=config).summary
         out.append(_row(base, method, s))
     key = (job.flight, job.errors, job.seed, job.rate_hz, job.latency_ms)
     if key not in _TIGHT_DONE:
@@ -420,7 +421,8 @@ def run(flights: Sequence[Path], errors: Sequence[str], accuracies: Sequence[str
             mine = [r for r in runs if r["errors"] == errors_label(e) and r["accuracy"] == a]
             filters = [*methods, *tight_rows(e)]
             table = summarise(mine, [*filters, *RAW])
-            cond = {"errors": errors_label(e), "accuracy": a, "table": table, "goals": goals(table, filters)}
+            cond: dict[str, Any] = {"errors": errors_label(e), "accuracy": a, "table": table,
+                                    "goals": goals(table, filters)}
             if tight_rows(e):
                 best_loose = min(methods, key=lambda m: table[m]["median"]["mean"])
                 cond["belief_paired"] = paired_medians(mine, BELIEF_ROW, [*BELIEF_REFERENCES, best_loose])

@@ -117,9 +117,9 @@ def _drive_sky(input_path: Path, config: SppConfig, stamp: object) -> DriveSky:
     if len(keep) < 2:
         raise UserError(f"{input_path}: {len(keep)} epoch(s) with a single-point solution and a truth")
     epochs = tuple(data.epochs[i] for i in keep)
-    return DriveSky(series.t_s[keep] - series.t_s[keep[0]], epochs, truth_ecef[keep],
-                    tuple(epoch_residuals_at_truth(e, p) for e, p in zip(epochs, truth_ecef[keep], strict=True)),
-                    err[keep], origin, input_path.name)
+    at_truth = tuple(epoch_residuals_at_truth(e, p) for e, p in zip(epochs, truth_ecef[keep], strict=True))
+    return DriveSky(series.t_s[keep] - series.t_s[keep[0]], epochs, truth_ecef[keep], at_truth, err[keep],
+                    origin, input_path.name)
 
 
 def ned_to_ecef(frame: LocalNedFrame, p_ned_m: np.ndarray) -> np.ndarray:
@@ -169,7 +169,8 @@ def place(sky: DriveSky, truth: Any, frame: LocalNedFrame, rate_hz: float, opts:
 
     t_grid, _ = _epochs(truth, rate_hz)
     if not len(t_grid):
-        raise UserError(f"no GNSS epoch to make: the truth covers {(truth.t_us[-1] - truth.t_us[0]) / 1e6:.1f} s")
+        raise UserError(f"no GNSS epoch to make: the truth covers "
+                        f"{(truth.t_us[-1] - truth.t_us[0]) / 1e6:.1f} s")
     span_s = (t_grid[-1] - t_grid[0]) / 1e6
     start = series_start(opts, sky.t_s, span_s)
     off, idx = aligned_offsets_s(sky, start, span_s)
@@ -217,7 +218,8 @@ def sky_on_flight(flight: Path, sky: DriveSky, opts: Any) -> SkyOnFlight:
     t_v = placed.t_validity_us
     # the series condition's latency process (its bias and noise unused), one epoch per drive period
     _, _, _, t_arrival = run_model(opts, t_v, placed.p_truth_ned_m, frame, sky.period_s)
-    info: dict[str, Any] = {"errors": f"{PREFIX}{sky.name}", "base": truth.label, "rate_hz": 1.0 / sky.period_s,
+    info: dict[str, Any] = {"errors": f"{PREFIX}{sky.name}", "base": truth.label,
+                            "rate_hz": 1.0 / sky.period_s,
                             "accuracy": opts.accuracy, "seed": opts.seed, "series_start_s": placed.start_s,
                             "series_period_s": sky.period_s, "series_span_s": float(sky.t_s[-1] - sky.t_s[0]),
                             "series_wrapped": placed.wrapped, "epochs": len(t_v),

@@ -235,11 +235,17 @@ def _epochs(base: Track, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
     return t[covered], p[covered]
 
 
+def series_times(series_t_s: np.ndarray, span_s: float, start_s: float, offset_s: np.ndarray) -> np.ndarray:
+    """The series time a flight reads ``offset_s`` after its first epoch: start + offset, wrapped around
+    the series' ``span_s`` (the alignment rule of every recorded source)."""
+    return series_t_s[0] + np.mod(start_s - series_t_s[0] + offset_s, span_s)
+
+
 def _series_errors(series: ErrorSeries, t_us: np.ndarray, start_s: float) -> tuple[np.ndarray, ...]:
     """Errors, h_acc, v_acc at the epochs (series time = start + time since the first epoch, wrapped
     around the series' span), and which epochs fall in a series gap (outage)."""
     span = series.t_s[-1] - series.t_s[0] + series.period_s
-    ts = series.t_s[0] + np.mod(start_s - series.t_s[0] + (t_us - t_us[0]) / 1e6, span)
+    ts = series_times(series.t_s, span, start_s, (t_us - t_us[0]) / 1e6)
     i = np.clip(np.searchsorted(series.t_s, ts, side="right"), 1, len(series.t_s) - 1)
     t0, t1 = series.t_s[i - 1], series.t_s[i]
     inside = (ts >= series.t_s[0]) & (ts <= series.t_s[-1])
@@ -296,7 +302,6 @@ def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> Syn
     if not len(t_v):
         raise UserError(f"no GNSS epoch to make: the base ({base.label}) covers "
                         f"{(base.t_us[-1] - base.t_us[0]) / 1e6:.1f} s")
-    seeds = np.random.SeedSequence(opts.seed).spawn(4)
     n = len(t_v)
     err, h_acc, sats, t_arrival = run_model(opts, t_v, p_base, frame, 1.0 / opts.rate_hz)
     v_acc = h_acc.copy()

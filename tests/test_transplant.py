@@ -1,0 +1,171 @@
+"""A smartLoc drive's satellites placed on another flight (``gcs_tools.gnss.transplant``) and the campaign's
+``smartloc-sats:INPUT`` condition: known answers on the first minute of the real Berlin drive placed on
+a synthetic ANSFL flight (the drive skips without the shared data, fails when CI=true)."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ansfl_helpers import write_flight
+
+from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
+from companion.gnss.observations import make_epoch
+from companion.gnss.spp import SppConfig
+from companion.gnss.systems import System
+from gcs_tools.evaluate import real
+from gcs_tools.evaluate.tight import TIGHT_ROWS
+from gcs_tools.gnss import transplant
+from gcs_tools.gnss.baseline import epoch_residuals_at_truth, solve_series
+from gcs_tools.replay.synthetic_gnss import GnssErrorOptions, series_times
+
+SMARTLOC = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "urban" / "smartloc"
+SLICE_S = 60.0  # the first minute of the drive: 300 epochs
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The drive's first minute (input and truth) in a temporary directory."""
+    src = SMARTLOC / "Berlin_Potsdamer_Platz_Input.txt"
+    if not src.is_file():
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"required in CI: the smartLoc drive beside the repository ({src})")
+        pytest.skip(f"the smartLoc drive is not beside the repository ({src})")
+    out = tmp_path_factory.mktemp("smartloc")
+    for name, limit in (("Berlin_Potsdamer_Platz_Input.txt", SLICE_S), ("Berlin_Potsdamer_Platz_GT.txt",
+                                                                          SLICE_S + 1.0)):
+        lines = (SMARTLOC / name).read_text(encoding="ascii").splitlines()
+        (out / name).write_text("\n".join(ln for ln in lines if float(ln.split()[1]) < limit) + "\n")
+    return out / "Berlin_Potsdamer_Platz_Input.txt"
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("ansfl")
+    write_flight(root / "f", seconds=20.0, offset_s=0.2, seed=3)
+    return root / "f"
+
+
+def test_residuals_at_truth_recover_the_clock_per_system_by_the_high_satellites_median() -> None:
+    """Known residuals: the median over each system's satellites above 40° is its clock, a reflected
+    high satellite (+30 m) does not move it; low ones keep their residuals."""
+    p = np.array([3785108.1, 899901.5, 5037234.5])  # Berlin
+    lat, lon, _ = (float(v) for v in ecef_to_geodetic(p))
+    el = np.radians([85, 60, 50, 45, 20, 10, 70, 55, 15])
+    az = np.radians([0, 40, 100, 200, 250, 300, 10, 150, 330])
+    ned = np.column_stack((np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)))
+    los = ned @ ecef_to_ned_matrix(lat, lon)
+    sat = p + 2.2e7 * los
+    system = np.array([System.GPS] * 6 + [System.GALILEO] * 3, dtype=np.int8)
+    clock = np.where(system == System.GPS, 1234.5, -87.25)
+    resid = np.array([0.0, 30.0, 0.0, 0.0, 45.0, -12.0, 0.0, 0.0, 80.0])
+    rho, _ = sagnac_range_m(sat, p)
+    ep = make_epoch(0.0, system, np.arange(1, 10), rho + clock + resid, sat_pos_ecef_m=sat, corrected=True)
+    at = epoch_residuals_at_truth(ep, p)
+    assert np.allclose(at.clock_m, clock, atol=1e-6) and np.allclose(at.residual_m, resid, atol=1e-6)
+    assert np.allclose(at.elevation_deg, np.degrees(el), atol=1e-6)
+
+
+def test_the_drive_epochs_align_to_flight_time_as_the_error_series_does(drive: Path) -> None:
+    """Each placed epoch's offset from the flight's first epoch maps back, through the series
+    condition's own rule (``synthetic_gnss.series_times``), onto exactly that drive epoch; every drive
+    epoch of the window is placed once, and a flight longer than the drive reads it again (wrapped)."""
+    sky = transplant.drive_sky(drive)
+    for start, span in ((12.34, 20.0), (50.0, 25.0), (3.0, 2.5 * sky.span_s)):
+        off, idx = transplant.aligned_offsets_s(sky, start, span)
+        assert np.all(np.diff(off) > 0) and off[0] >= 0 and off[-1] <= span
+        ts = series_times(sky.t_s, sky.span_s, start, off)
+        wrapped = np.mod(ts - sky.t_s[idx] + sky.span_s / 2, sky.span_s) - sky.span_s / 2
+        assert np.abs(wrapped).max() < 1e-9
+        # none skipped: the gaps between placed epochs are the drive's own (one period across the wrap)
+        assert np.diff(off).max() <= max(np.diff(sky.t_s).max(), sky.period_s) + 1e-9
+        assert off[0] <= sky.period_s * 1.5 and span - off[-1] <= np.diff(sky.t_s).max() + 1e-9
+    assert set(np.bincount(idx).tolist()) <= {2, 3}  # 2.5 spans: every drive epoch twice or three times
+
+
+def test_placed_pseudoranges_reproduce_the_drives_spp_error_series(drive: Path, flight: Path) -> None:
+    """Known answer: the single-point solution of the placed pseudoranges minus the flight's truth equals
+    the drive's SPP minus its truth (what ``beliefnav gnss spp`` writes to spp_errors.csv) within 5 cm,
+    the flight 80-200 m from where the drive was: the lines of sight turn by < 2·10⁻⁵ rad, moving a
+    solution whose error is tens of metres by millimetres (times the DOP). The clock cancels: a placed
+    pseudorange is the recorded one plus the change of range."""
+    from gcs_tools.gnss.cli import evaluate
+    from gcs_tools.gnss.sources import load_input
+
+    sky = transplant.drive_sky(drive)
+    opts = GnssErrorOptions("none", series_start_s=38.0)
+    placed = transplant.sky_on_flight(flight, sky, opts)
+    p = placed.placed
+    assert len(p.epochs) >= 85 and not p.wrapped
+    _, series, err_csv = evaluate(load_input(drive), SppConfig())
+    assert err_csv is not None
+    t_csv = series.t_s - series.t_s[np.isfinite(err_csv).all(axis=1)][0]  # the CSV's t_s
+    rows = {round(float(t), 6): e for t, e in zip(t_csv, err_csv, strict=True)}
+    want = np.array([rows[round(float(sky.t_s[k]), 6)] for k in p.drive_index])
+    got = placed.fixes.err_ned_m
+    assert len(got) == len(want)  # every placed epoch has a solution, as the drive's had
+    p_flight = transplant.ned_to_ecef(sky.origin, p.p_truth_ned_m)
+    away = np.linalg.norm(p_flight - sky.truth_ecef_m[p.drive_index], axis=1)
+    assert 120.0 < away.max() < 400.0
+    assert np.abs(got - want).max() < 0.05 and np.median(np.abs(got - want)) < 0.005, np.abs(got - want).max()
+    assert np.percentile(np.hypot(want[:, 0], want[:, 1]), 50) > 5.0  # real urban errors, not a zero test
+    k, i = 7, int(p.drive_index[7])
+    change = sagnac_range_m(sky.epochs[i].sat_pos_ecef_m, p_flight[k])[0] \
+        - sagnac_range_m(sky.epochs[i].sat_pos_ecef_m, sky.truth_ecef_m[i])[0]
+    assert np.allclose(p.epochs[k].pseudorange_m - sky.epochs[i].pseudorange_m, change, atol=1e-6)
+
+
+def test_zero_residuals_give_the_flights_truth(drive: Path, flight: Path) -> None:
+    sky = transplant.drive_sky(drive)
+    _, truth = _truth(flight, sky)
+    p = transplant.place(sky, truth, sky.origin, 5.0, GnssErrorOptions("none", seed=2), residual_scale=0.0)
+    sol = solve_series(p.epochs, SppConfig())
+    assert sol.ok.all()
+    assert np.abs(sol.p_ecef_m - transplant.ned_to_ecef(sky.origin, p.p_truth_ned_m)).max() < 1e-3
+
+
+def _truth(flight: Path, sky: transplant.DriveSky) -> tuple[object, object]:
+    from gcs_tools.replay.logs import open_log
+    from gcs_tools.replay.synthetic_gnss import collect_tracks, to_track
+
+    t = collect_tracks(open_log(flight, None, sky.origin))
+    return t, to_track(t.truth_t_us, t.truth_p, t.truth_label, t.truth_geodetic, sky.origin)
+
+
+def test_campaign_condition_loose_and_tight_rows(drive: Path, flight: Path, tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """The condition's rows: the methods on the SPP fixes, every tight row on the epochs (identical
+    with and without a reported accuracy: it changes no pseudorange), the raw fixes, and the belief's
+    paired comparisons; bad choices are one-line errors."""
+    errors = f"{transplant.PREFIX}{drive}"
+    res = real.run([flight], [errors], ["reported", "none"], ["naive"], [0, 1])
+    tight = [f"tight-{w}" for w in TIGHT_ROWS]
+    assert res["campaign"]["runs"] == 2 * 2 * (1 + len(tight))
+    by = {(r["accuracy"], r["seed"], r["row"]): r for r in res["runs"]}
+    for s in (0, 1):
+        for row in tight:
+            a, b = by[("reported", s, row)], by[("none", s, row)]
+            assert a["median"] == b["median"] and a["gnss_fused"] >= 80  # ~90 epochs in 20 s
+        assert by[("reported", s, real.RAW[0])]["median"] == by[("none", s, real.RAW[0])]["median"]
+        assert by[("reported", s, real.RAW[0])]["median"] > 3.0  # Berlin's errors, not the model's
+    for cond in res["conditions"]:
+        assert list(cond["table"]) == ["naive", *tight, *real.RAW]
+        refs = [c["reference"] for c in cond["belief_paired"]]
+        assert refs == [*real.BELIEF_REFERENCES, "naive"]
+        for c in cond["belief_paired"]:
+            mine = [by[(cond["accuracy"], s, "tight-second-order")]["median"] for s in (0, 1)]
+            other = [by[(cond["accuracy"], s, c["reference"])]["median"] for s in (0, 1)]
+            assert c["median_diff_m"]["mean"] == pytest.approx(np.mean(mine) - np.mean(other))
+    text = real.markdown(res)
+    assert f"satellites {drive.name}" in text and "`tight-second-order` − `tight-fde`" in text
+    capsys.readouterr()
+    for bad, words in (([transplant.PREFIX], "give the smartLoc input"),
+                       ([f"{transplant.PREFIX}{tmp_path / 'no.txt'}"], "no such file"),
+                       ([f"{transplant.PREFIX}{flight / 'GT.csv'}"], "no *_GT.txt truth")):
+        assert real.main(["--flights", str(flight), "--errors", *bad, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("real: error: ") and words in err and "\n" not in err, err
+    assert not math.isnan(res["conditions"][0]["goals"]["best_median_m"])
