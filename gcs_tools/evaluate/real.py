@@ -183,10 +183,10 @@ def run_sats_job(job: Job) -> list[dict[str, Any]]:
         arrival = dict(zip(placed.placed.t_validity_us.tolist(), placed.raw_arrival_us.tolist(), strict=True))
         done: list[dict[str, Any]] = []
         for w in TIGHT_ROWS:
-            reader = tr.LogWithRawGnss(open_log(flight, None, frame), raws, frame,
-                                       f"smartLoc {sky.name} placed on the flight (raw epochs)",
-                                       lambda r: arrival[r.t_us])
-            s = core.replay(flight, w, home=frame, reader=reader, rate_hz=10.0,
+            raw: Any = tr.LogWithRawGnss(open_log(flight, None, frame), raws, frame,  # a LogReader of RawGnss
+                                         f"smartLoc {sky.name} placed on the flight (raw epochs)",
+                                         lambda r: arrival[r.t_us])
+            s = core.replay(flight, w, home=frame, reader=raw, rate_hz=10.0,
                             navigator=tr.tight_factory(TightConfig())).summary
             done.append(_row({}, TIGHT_PREFIX + w, s))
         _TIGHT_DONE[key] = done
