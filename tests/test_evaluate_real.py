@@ -83,6 +83,8 @@ def test_cli_writes_json_and_report_and_refuses_bad_arguments(flights: list[Path
                        (["--flights", str(a), "--accuracy", "some"], "--gnss-accuracy 'some'"),
                        (["--flights", str(a), "--methods", "secnd-order"], "did you mean"),
                        (["--flights", str(a), "--seeds", "x"], "--seeds"),
+                       (["--flights", str(a), "--gnss-velocity", "fast"], "--gnss-velocity 'fast'"),
+                       (["--flights", str(a), "--gnss-velocity", "-1"], "--gnss-velocity -1"),
                        (["--flights", str(a), "--methods", "map-beta"], "needs a mission's map"),
                        (["--flights", str(a), "--set", "gnss.rate_hz=1"], "only estimator.FIELD"),
                        (["--flights", str(a), "--set", "estimator.sigma_bias_max_m=-1"], "must be"),

@@ -12,6 +12,13 @@ horizontal error of the estimate against the truth (median, p95, max over the tr
 samples), and the raw fixes' own error at their validity times and at their arrival (latency
 counted: what a consumer of the raw fixes has).
 
+``smartloc-sats:INPUT`` (a smartLoc ``*_Input.txt`` with its ``*_GT.txt``): the drive's satellites with
+their residuals at its truth placed on each flight (:mod:`gcs_tools.gnss.transplant`): the methods get
+the single-point fixes of those pseudoranges (latency, velocity, accuracy as with a series), and the rows
+``tight-<weighting>`` (``evaluate.tight.TIGHT_ROWS``: the tightly coupled filter, ``TightConfig()``, no
+map) the pseudoranges with the flight's IMU, arriving with the fixes; per condition ``belief_paired``
+compares ``tight-second-order`` pair by pair with the other tight rows and the best method.
+
 Pooled figures are means over runs of the per-run statistic with a 95 % percentile-bootstrap
 interval that resamples seeds within each flight (``stats.mean_ci``: the flights are a fixed
 design, the seeds the random sample); ``vs raw`` is the paired difference of per-run medians
@@ -68,6 +75,7 @@ class Job:
     latency_ms: float | None
     methods: tuple[str, ...]
     estimator: tuple[tuple[str, Any], ...] = ()  # EstimatorConfig fields replaced (--set estimator.F=V)
+    velocity_std_m_s: float | None = 0.2  # the fixes' velocity noise (None: no velocity), as GnssErrorOptions
 
 
 def needs_map(method: str) -> bool:
@@ -132,7 +140,7 @@ def run_job(job: Job) -> list[dict[str, Any]]:
     from gcs_tools.replay.synthetic_gnss import GnssErrorOptions
 
     opts = GnssErrorOptions(job.errors, rate_hz=job.rate_hz, accuracy=job.accuracy, latency_ms=job.latency_ms,
-                            seed=job.seed)
+                            seed=job.seed, velocity_std_m_s=job.velocity_std_m_s)
     config = estimator_config(job.estimator)
     base = {"flight": Path(job.flight).name, "errors": errors_label(job.errors), "accuracy": job.accuracy,
             "seed": job.seed}
@@ -164,7 +172,7 @@ def run_sats_job(job: Job) -> list[dict[str, Any]]:
 
     flight = Path(job.flight)
     opts = GnssErrorOptions("none", rate_hz=job.rate_hz, accuracy=job.accuracy, latency_ms=job.latency_ms,
-                            seed=job.seed)
+                            seed=job.seed, velocity_std_m_s=job.velocity_std_m_s)
     sky = transplant.drive_sky(transplant.check_choice(job.errors))
     placed = transplant.sky_on_flight(flight, sky, opts)
     frame = placed.frame
@@ -315,6 +323,10 @@ def _ci(e: dict[str, Any]) -> str:
     return f"{e['mean']:.2f} [{lo:.2f}, {hi:.2f}]"
 
 
+def _velocity_text(std: float | None) -> str:
+    return "no velocity" if std is None else f"a velocity: truth + {std:g} m/s noise"
+
+
 def markdown(result: dict[str, Any]) -> str:
     info = result["campaign"]
     lines = [
@@ -325,6 +337,8 @@ def markdown(result: dict[str, Any]) -> str:
         f"Seeds {info['seeds']}, fixes at {info['rate_hz']:g} Hz, latency: "
         f"{'the model process' if info['latency_ms'] is None else str(info['latency_ms']) + ' ms'}; "
         f"{info['runs']} replays in {info['wall_s']:.0f} s.",
+        *([f"The fixes carry {_velocity_text(info['velocity_std_m_s'])} (default: truth + 0.2 m/s noise)."]
+          if info.get("velocity_std_m_s", 0.2) != 0.2 else []),
         *([f"Estimator fields replaced for every method: "
            f"{', '.join(f'`{k}` = {v}' for k, v in info['estimator'].items())}."]
           if info.get("estimator") else []),
@@ -336,7 +350,14 @@ def markdown(result: dict[str, Any]) -> str:
         ""]
     for cond in result["conditions"]:
         t, g = cond["table"], cond["goals"]
-        lines += [f"## errors: {cond['errors']}, accuracy: {cond['accuracy']}", "",
+        lines += [f"## errors: {cond['errors']}, accuracy: {cond['accuracy']}", ""]
+        if "belief_paired" in cond:
+            lines += ["The drive's per-satellite errors (residuals at its truth) placed on each flight's "
+                      "truth: the methods get the single-point fixes of those pseudoranges (latency, "
+                      "velocity and accuracy as a recorded series), the `tight-*` rows the pseudoranges "
+                      "themselves (arriving with the fixes; no Doppler in the drive, so no velocity) and the "
+                      "flight's IMU.", ""]
+        lines += [
                   "| row | median | p95 | max | − raw (arrival), median | vs naive | within 1 σ / 2 σ |",
                   "|---|---|---|---|---|---|---|"]
         for row, e in t.items():
@@ -403,10 +424,12 @@ def flight_dirs(corpus: Path | None, spec: str) -> tuple[str, list[Path]]:
 
 def run(flights: Sequence[Path], errors: Sequence[str], accuracies: Sequence[str], methods: Sequence[str],
         seeds: Sequence[int], rate_hz: float = 5.0, latency_ms: float | None = None, workers: int = 1,
-        split: str = "as listed", estimator: tuple[tuple[str, Any], ...] = ()) -> dict[str, Any]:
+        split: str = "as listed", estimator: tuple[tuple[str, Any], ...] = (),
+        velocity_std_m_s: float | None = 0.2) -> dict[str, Any]:
     """The campaign's results (``conditions``: one table per errors × accuracy, and every run);
-    ``estimator``: EstimatorConfig fields replaced for every method."""
-    jobs = [Job(str(f), e, a, s, rate_hz, latency_ms, tuple(methods), estimator)
+    ``estimator``: EstimatorConfig fields replaced for every method; ``velocity_std_m_s``: the fixes'
+    velocity noise (None: the fixes carry no velocity)."""
+    jobs = [Job(str(f), e, a, s, rate_hz, latency_ms, tuple(methods), estimator, velocity_std_m_s)
             for e in errors for a in accuracies for f in flights for s in seeds]
     t0 = time.perf_counter()
     if workers > 1:
@@ -433,7 +456,7 @@ def run(flights: Sequence[Path], errors: Sequence[str], accuracies: Sequence[str
                      "accuracy": list(accuracies), "methods": list(methods), "seeds": list(seeds),
                      "rate_hz": rate_hz, "latency_ms": latency_ms,
                      "runs": sum(len(methods) + len(tight_rows(j.errors)) for j in jobs),
-                     "estimator": dict(estimator),
+                     "estimator": dict(estimator), "velocity_std_m_s": velocity_std_m_s,
                      "wall_s": time.perf_counter() - t0,
                      "bootstrap": {"seed": BOOTSTRAP_SEED, "resamples": 2000, "strata": "flight"}},
         "conditions": conditions,
@@ -445,7 +468,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from companion.estimator import METHODS
     from gcs_tools import choices
     from gcs_tools.outdir import check_out_dir, ensure_out_dir
-    from gcs_tools.replay.synthetic_gnss import ACCURACY_MODES, GnssErrorOptions
+    from gcs_tools.replay.synthetic_gnss import ACCURACY_MODES, GnssErrorOptions, velocity_option
 
     p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.real", description=__doc__.split("\n")[0])
     p.add_argument("--corpus", type=Path, default=None, help="the ANSFL directory (path_1, path_2, ...)")
@@ -464,6 +487,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--latency-ms", type=float, default=None,
                    help="fixed latency (default: the model's process)")
     p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--gnss-velocity", default="0.2", metavar="STD_M_S|none",
+                   help="the fixes' velocity: the truth's plus white noise of this std per axis (default 0.2 "
+                        "m/s), or none")
     p.add_argument("--set", action="append", default=[], metavar="estimator.FIELD=VALUE",
                    help="replace an EstimatorConfig field for every method (repeatable)")
     p.add_argument("--out", type=Path, default=Path("runs/real"))
@@ -477,6 +503,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise UserError(f"--methods {m}: needs a mission's map, and a real flight has none")
         split, flights = flight_dirs(args.corpus, args.flights)
         estimator = parse_sets(args.set)
+        velocity = velocity_option(args.gnss_velocity)
         errors = [e.strip() for e in args.errors.split(",") if e.strip()]
         accuracies = [a.strip() for a in args.accuracy.split(",") if a.strip()]
         for e in errors:
@@ -486,13 +513,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 check_choice(e)
             for a in accuracies:
                 GnssErrorOptions("none" if is_sats(e) else e, rate_hz=args.rate_hz, accuracy=a,
-                                 latency_ms=args.latency_ms).check()
+                                 latency_ms=args.latency_ms, velocity_std_m_s=velocity).check()
         if not errors or not accuracies:
             raise UserError("--errors and --accuracy need at least one value each")
         if "naive" not in methods:
             methods.insert(0, "naive")  # the reference of "vs naive"
         result = run(flights, errors, accuracies, methods, parse_seeds(args.seeds), args.rate_hz,
-                     args.latency_ms, max(1, args.workers), split, estimator)
+                     args.latency_ms, max(1, args.workers), split, estimator, velocity)
         out = ensure_out_dir(args.out)
     except UserError as exc:
         print(f"real: error: {exc}", file=sys.stderr)

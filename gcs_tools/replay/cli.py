@@ -14,7 +14,7 @@ from companion.mission import Mission
 from companion.telemetry import pubsub as telemetry
 from gcs_tools import choices
 from gcs_tools.replay import core
-from gcs_tools.replay.synthetic_gnss import ACCURACY_MODES, BASES, GnssErrorOptions
+from gcs_tools.replay.synthetic_gnss import ACCURACY_MODES, BASES, GnssErrorOptions, velocity_option
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -116,13 +116,7 @@ def gnss_options(args: argparse.Namespace) -> GnssErrorOptions | None:
         if section != "gnss":
             raise UserError(f"--gnss-set {text!r}: only gnss.FIELD (the GNSS model's fields)")
         overrides.append((name, value))
-    velocity = None
-    if args.gnss_velocity != "none":
-        try:
-            velocity = float(args.gnss_velocity)
-        except ValueError:
-            raise UserError(f"--gnss-velocity {args.gnss_velocity!r}: expected a std in m/s or 'none'"
-                            ) from None
+    velocity = velocity_option(args.gnss_velocity)
     opts = GnssErrorOptions(args.gnss_errors, rate_hz=args.gnss_rate_hz, accuracy=args.gnss_accuracy,
                             latency_ms=args.gnss_latency_ms, base=args.gnss_base,
                             clearance_m=args.gnss_clearance_m, model_overrides=tuple(overrides),

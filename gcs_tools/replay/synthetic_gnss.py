@@ -104,6 +104,17 @@ class GnssErrorOptions:
         return build(GnssConfig, dict(self.model_overrides), "--gnss-set gnss")
 
 
+def velocity_option(text: str) -> float | None:
+    """``--gnss-velocity STD_M_S|none``: the fixes' velocity noise std, or None (no velocity); range checked
+    by ``GnssErrorOptions.check``."""
+    if text == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise UserError(f"--gnss-velocity {text!r}: expected a std in m/s or 'none'") from None
+
+
 @dataclass(frozen=True)
 class ErrorSeries:
     """A recorded GNSS error series: per epoch the fix's error (fix − truth, NED) and the accuracy
