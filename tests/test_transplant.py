@@ -121,7 +121,7 @@ def test_placed_pseudoranges_reproduce_the_drives_spp_error_series(drive: Path, 
 def test_zero_residuals_give_the_flights_truth(drive: Path, flight: Path) -> None:
     sky = transplant.drive_sky(drive)
     _, truth = _truth(flight, sky)
-    p = transplant.place(sky, truth, sky.origin, 5.0, GnssErrorOptions("none", seed=2), residual_scale=0.0)
+    p = transplant.place(sky, truth, sky.origin, GnssErrorOptions("none", seed=2), residual_scale=0.0)
     sol = solve_series(p.epochs, SppConfig())
     assert sol.ok.all()
     assert np.abs(sol.p_ecef_m - transplant.ned_to_ecef(sky.origin, p.p_truth_ned_m)).max() < 1e-3

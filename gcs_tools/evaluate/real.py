@@ -184,7 +184,7 @@ def run_sats_job(job: Job) -> list[dict[str, Any]]:
         fixes = WithSyntheticGnss(open_log(flight, None, frame), placed.fixes, frame, placed.raw_errors)
         s = core.replay(flight, method, home=frame, reader=fixes, rate_hz=10.0, config=config).summary
         out.append(_row(base, method, s))
-    key = (job.flight, job.errors, job.seed, job.rate_hz, job.latency_ms)
+    key = (job.flight, job.errors, id(sky), job.seed, job.rate_hz, job.latency_ms)  # sky: per file state
     if key not in _TIGHT_DONE:
         raws = [RawGnss(int(t), e) for t, e in zip(placed.placed.t_validity_us, placed.placed.epochs,
                                                     strict=True)]

@@ -36,7 +36,7 @@ import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,6 +46,9 @@ from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, geodet
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig
 from gcs_tools.gnss.baseline import TruthResiduals, epoch_residuals_at_truth, ned_errors, solve_series
+
+if TYPE_CHECKING:
+    from gcs_tools.replay.synthetic_gnss import GnssErrorOptions, SyntheticFixes, Track
 
 PREFIX = "smartloc-sats:"  # the campaign's errors choice: smartloc-sats:DRIVE_Input.txt
 
@@ -160,14 +163,14 @@ class PlacedSky:
     wrapped: bool
 
 
-def place(sky: DriveSky, truth: Any, frame: LocalNedFrame, rate_hz: float, opts: Any,
+def place(sky: DriveSky, truth: Track, frame: LocalNedFrame, opts: GnssErrorOptions,
           residual_scale: float = 1.0) -> PlacedSky:
-    """The drive placed on ``truth`` (a ``synthetic_gnss.Track`` in ``frame``: the drive's ``origin``):
-    the flight's span and start are those of the series condition at ``rate_hz`` with ``opts``' seed
-    (``synthetic_gnss.series_start``); ``residual_scale`` 0 gives error-free pseudoranges (a test)."""
-    from gcs_tools.replay.synthetic_gnss import _epochs, series_start
+    """The drive placed on ``truth`` (in ``frame``: the drive's ``origin``): the flight's span and start
+    are the series condition's with ``opts`` (its rate's grid, ``synthetic_gnss.series_start`` from its
+    seed or its ``series_start_s``); ``residual_scale`` 0 gives error-free pseudoranges (a test)."""
+    from gcs_tools.replay.synthetic_gnss import epoch_grid, series_start
 
-    t_grid, _ = _epochs(truth, rate_hz)
+    t_grid, _ = epoch_grid(truth, opts.rate_hz)
     if not len(t_grid):
         raise UserError(f"no GNSS epoch to make: the truth covers "
                         f"{(truth.t_us[-1] - truth.t_us[0]) / 1e6:.1f} s")
@@ -192,14 +195,14 @@ class SkyOnFlight:
     """What a replay of one flight under the placed sky needs."""
 
     placed: PlacedSky
-    fixes: Any  # synthetic_gnss.SyntheticFixes: the single-point solutions (every epoch with one)
+    fixes: SyntheticFixes  # the single-point solutions (every epoch with one)
     raw_arrival_us: np.ndarray  # (m,) when each placed epoch reaches the filter (its fix's arrival)
     frame: LocalNedFrame
-    truth: Any  # synthetic_gnss.Track in ``frame``
+    truth: Track  # the flight's truth in ``frame``
     raw_errors: dict[str, Any]  # the fixes' own errors (synthetic_gnss.raw_fix_errors)
 
 
-def sky_on_flight(flight: Path, sky: DriveSky, opts: Any) -> SkyOnFlight:
+def sky_on_flight(flight: Path, sky: DriveSky, opts: GnssErrorOptions) -> SkyOnFlight:
     """The drive ``sky`` placed on an ANSFL ``flight`` (its truth read in the drive's frame) with the
     series condition's options ``opts`` (``GnssErrorOptions``: seed, rate, accuracy, latency, velocity)."""
     from gcs_tools.replay.logs import open_log
@@ -210,7 +213,7 @@ def sky_on_flight(flight: Path, sky: DriveSky, opts: Any) -> SkyOnFlight:
     if len(tracks.truth_t_us) < 2:
         raise UserError(f"{flight}: no ground truth to place the satellites on")
     truth = to_track(tracks.truth_t_us, tracks.truth_p, tracks.truth_label, tracks.truth_geodetic, frame)
-    placed = place(sky, truth, frame, opts.rate_hz, opts)
+    placed = place(sky, truth, frame, opts)
     series = solve_series(placed.epochs, SppConfig())
     lat, lon = math.radians(frame.home_lat_deg), math.radians(frame.home_lon_deg)
     p0 = geodetic_to_ecef(lat, lon, frame.home_alt_m)

@@ -237,7 +237,7 @@ class SyntheticFixes:
         return out
 
 
-def _epochs(base: Track, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+def epoch_grid(base: Track, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
     """Validity times on the rate's grid from the first base sample, and the base there."""
     step_us = 1e6 / rate_hz
     t0, t1 = int(base.t_us[0]), int(base.t_us[-1])
@@ -309,7 +309,7 @@ def series_start(opts: GnssErrorOptions, series_t_s: np.ndarray, span_s: float) 
 
 def synthesize(base: Track, opts: GnssErrorOptions, frame: LocalNedFrame) -> SyntheticFixes:
     """The fixes of ``opts`` along ``base`` (see the module doc)."""
-    t_v, p_base = _epochs(base, opts.rate_hz)
+    t_v, p_base = epoch_grid(base, opts.rate_hz)
     if not len(t_v):
         raise UserError(f"no GNSS epoch to make: the base ({base.label}) covers "
                         f"{(base.t_us[-1] - base.t_us[0]) / 1e6:.1f} s")
