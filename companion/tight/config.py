@@ -117,7 +117,22 @@ class TightConfig:
     # prediction), "leave-one-out" (against the prediction corrected by the epoch's other satellites,
     # weighted by their beliefs: weighting.leave_one_out) or "robust" (the same, the others weighted as
     # the student-t row weighs them). The two did not help on the canyon's tuning flights (docs/tight.md)
-    belief_innovation: Literal["prefit", "leave-one-out", "robust"] = "prefit"
+    # "snapshot": against the solution of the epoch's OTHER satellites, robustly re-fitted about the
+    # prediction (companion.tight.snapshot: hat-matrix leave-one-out residuals), meant to remove the
+    # prediction's error and the clock's common mode, which every satellite shares. Off: on the canyon's
+    # tuning flights it did not help (seeds 1000-1001 / 1002-1003, mean per-flight median / p95 against
+    # prefit: these defaults −0.24 / −0.20 and +0.02 / +0.75 m; position and clocks free, σ 10 m: +1.2 /
+    # +5.0 and +0.8 / +4.4 m): in a canyon where most satellites are reflected the epoch's own solution
+    # absorbs the reflections (docs/tight.md)
+    belief_innovation: Literal["prefit", "leave-one-out", "robust", "snapshot"] = "prefit"
+    # "snapshot": the prediction's position is known to this on top of P (m per axis; inf: the epoch alone);
+    # the clocks as predicted (their P) or free (re-solved from the epoch); Student-t reweighting passes of
+    # the fit (early residuals scaled by belief_early_factor in the weights: NLOS only delays); the belief's
+    # innovation ỹ = (1 − blend) y + blend ỹ_snapshot (1: the snapshot's alone)
+    belief_snapshot_sigma_m: float = 1.0
+    belief_snapshot_clocks_free: bool = False
+    belief_snapshot_iterations: int = 2
+    belief_snapshot_blend: float = 1.0
     # The belief's nominal variance R_nom: "los" (a line-of-sight signal's, C/N0 only: the belief and
     # its prior carry the rest) or "cn0-elevation" (the single-point solution's σ model, 1/sin² el too)
     belief_sigma_model: Literal["los", "cn0-elevation"] = "cn0-elevation"
@@ -182,9 +197,13 @@ class TightConfig:
             raise ValueError(f"belief_early_factor: must be in [0, 1], got {self.belief_early_factor!r}")
         if self.belief_sigma_model not in ("los", "cn0-elevation"):
             raise ValueError(f"belief_sigma_model {self.belief_sigma_model!r}: choose los or cn0-elevation")
-        if self.belief_innovation not in ("prefit", "leave-one-out", "robust"):
-            raise ValueError(f"belief_innovation {self.belief_innovation!r}: choose prefit, leave-one-out or "
-                             "robust")
+        if self.belief_innovation not in ("prefit", "leave-one-out", "robust", "snapshot"):
+            raise ValueError(f"belief_innovation {self.belief_innovation!r}: choose prefit, leave-one-out, "
+                             "robust or snapshot")
+        if not (self.belief_snapshot_sigma_m >= 0.0 and self.belief_snapshot_iterations >= 0
+                and 0.0 <= self.belief_snapshot_blend <= 1.0):
+            raise ValueError("belief_snapshot_sigma_m >= 0 (inf allowed), belief_snapshot_iterations >= 0, "
+                             "0 <= belief_snapshot_blend <= 1 needed")
         if self.student_iterations < 1 or self.fde_max_exclusions < 0 or self.belief_student_iterations < 0:
             raise ValueError("student_iterations >= 1, fde_max_exclusions >= 0, "
                              "belief_student_iterations >= 0 needed")

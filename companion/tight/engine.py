@@ -42,7 +42,7 @@ from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, solve_position
 from companion.gnss.systems import System
-from companion.tight import _tight, model, weighting
+from companion.tight import _tight, model, snapshot, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
@@ -188,6 +188,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         self.cfg = cfg
         self.method = method
         self.weighting = weighting.make(method, cfg)
+        self._snapshot = self.weighting.uses_prior and cfg.belief_innovation == "snapshot"
         self.frame = frame
         self.klobuchar = klobuchar
         self._reset_us = int(round(cfg.reset_timeout_s * 1e6))
@@ -395,6 +396,9 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                 prior = prior + map_theta(p_hidden, c)
             prior = np.clip(prior, c.theta_min, c.theta_max)
         terms = weighting.SatTerms(m.key, y, s0, r_nom, prior, m.r_model_m2)
+        if self._snapshot:  # the epoch's own solution as the belief's reference (companion.tight.snapshot)
+            cols = [0, 1, 2, *(I_CLK + j for j in m.systems)]
+            terms = terms._replace(geometry=H[:, cols], p_pos_m2=P[np.ix_(cols, cols)])
 
         def solve(r: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             u = np.flatnonzero(used)

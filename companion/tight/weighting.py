@@ -31,7 +31,7 @@ import numpy as np
 from scipy.stats import chi2 as _chi2
 
 from companion.errors import not_one_of
-from companion.tight import _tight
+from companion.tight import _tight, snapshot
 from companion.tight.config import TightConfig
 
 
@@ -44,6 +44,10 @@ class SatTerms(NamedTuple):
     r_nominal: np.ndarray  # a-priori variance from the σ model (m²)
     theta_prior: np.ndarray  # prior belief logit from C/N0, elevation (and the map)
     r_model: np.ndarray | None = None  # the C/N0 + elevation σ model's variance (the belief's robust fix)
+    # the snapshot's design G (m, 3 + clocks: snapshot.design) and the predicted position's covariance
+    # and clocks (3 + clocks, 3 + clocks), given when belief_innovation is "snapshot"
+    geometry: np.ndarray | None = None
+    p_pos_m2: np.ndarray | None = None
 
 
 class Weighed(NamedTuple):
@@ -190,6 +194,16 @@ class SatelliteBelief(SigmaModel):
         elif c.belief_innovation == "robust" and len(y) > 1:
             r_model = t.r_model if t.r_model is not None else t.r_nominal
             y, s0 = leave_one_out(t, student_t_variances(t, r_model, solve, c), solve)
+        elif c.belief_innovation == "snapshot" and t.geometry is not None and len(y) > t.geometry.shape[1]:
+            G = t.geometry
+            assert t.p_pos_m2 is not None
+            r_b = t.r_nominal * c.r_inflation_max ** (1.0 - 1.0 / (1.0 + np.exp(-theta)))
+            y_s, s0_s = snapshot.leave_one_out(
+                G, y, r_b, s0, snapshot.position_prior(t.p_pos_m2, c.belief_snapshot_sigma_m,
+                                                    c.belief_snapshot_clocks_free),
+                c.belief_snapshot_iterations, c.student_dof, c.belief_early_factor)
+            b = c.belief_snapshot_blend
+            y, s0 = (1.0 - b) * y + b * y_s, (1.0 - b) * s0 + b * s0_s
         # belief.consistency_innovation (early innovations scaled), belief.epoch_scale (joint consistency),
         # belief.grad_theta, the (second- or first-order) step, the clamp, R(β) and the gate, in C
         # (``_tight.belief_step``; equal to belief.py's numpy forms, tested)

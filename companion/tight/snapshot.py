@@ -1,0 +1,77 @@
+"""Within-epoch evidence for the per-satellite belief: each satellite against the epoch's own robust
+solution of position and clocks, leaving that satellite out.
+
+The pre-fit innovation y = z − h(x⁻) of every satellite carries the prediction's own error (position
+and clock), which all the satellites of the epoch share, and the clock of the prediction already holds
+the common part of the reflections' delays. Re-solving position (about the prediction) and each
+system's clock from this epoch's satellites removes both: a linear least-squares step from the
+prediction with design ``G`` = [H's position columns, one column per clock]
+
+    δx̂ = A⁻¹ Gᵀ W y,   A = Gᵀ W G + Λ,   W = diag(w)
+
+where Λ is a prior on the position's correction alone (the prediction's position known to
+``belief_snapshot_sigma_m``: Λ = (P_pos + σ² I)⁻¹; σ = ∞: the epoch alone) and the clocks are free. Its
+residuals e = y − G δx̂ and the leverages h_i = w_i g_i A⁻¹ g_iᵀ give, exactly, each satellite's residual
+against the solution of the OTHER satellites (the hat matrix's leave-one-out identity)
+
+    ỹ_i = e_i / (1 − h_i),   with variance  q_i / (1 − h_i)  of that solution at satellite i (q_i = g_i A⁻¹ g_iᵀ)
+
+so a reflected satellite shows its whole delay and a clean one is not blamed for the others'. The
+weights are the satellites' current beliefs' (1/R(β)), reweighted ``iterations`` times as a Student-t
+M-estimator does ((ν + 1)/(ν + ẽ²/R), ẽ the residual with an early residual scaled by
+``early_factor``: NLOS only delays, so an early satellite is not suspect, and the clocks settle on the
+earliest consistent ones). A satellite alone on its clock (h = 1) keeps its pre-fit innovation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+LEVERAGE_MAX = 0.999  # above this a satellite decides its own fit (alone on its clock): pre-fit kept
+
+
+def weighted_fit(G: np.ndarray, y: np.ndarray, w: np.ndarray, prior_info: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(residuals e, q_i = g_i A⁻¹ g_iᵀ, leverages h = w q) of the regularised weighted fit (module doc)."""
+    A = G.T @ (G * w[:, None]) + prior_info
+    Ai = np.linalg.inv(A)
+    dx = Ai @ (G.T @ (w * y))
+    q = np.einsum("ij,jk,ik->i", G, Ai, G)
+    return y - G @ dx, q, w * q
+
+
+def leave_one_out(G: np.ndarray, y: np.ndarray, r: np.ndarray, s0: np.ndarray, prior_info: np.ndarray,
+                  iterations: int = 0, nu: float = 2.0, early_factor: float = 1.0
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(ỹ, s̃0): each satellite's residual against the (robust) fit of the others, and that fit's variance
+    at the satellite (module doc). ``r`` (m,) the satellites' variances, ``s0`` their pre-fit variances
+    (kept with y where a satellite is alone on its clock)."""
+    w0 = 1.0 / r
+    w = w0
+    for _ in range(iterations):
+        e, _, _ = weighted_fit(G, y, w, prior_info)
+        e = np.where(e < 0.0, early_factor * e, e)
+        w = w0 * np.minimum((nu + 1.0) / (nu + e * e * w0), 1.0 + 1.0 / nu)
+    e, q, h = weighted_fit(G, y, w, prior_info)
+    ok = h < LEVERAGE_MAX
+    one_minus = np.where(ok, 1.0 - h, 1.0)
+    return np.where(ok, e / one_minus, y), np.where(ok, q / one_minus, s0)
+
+
+def position_prior(P_pc_m2: np.ndarray, sigma_m: float, clocks_free: bool = True) -> np.ndarray:
+    """Λ: the prior information on the correction of (position, clocks), ``P_pc_m2`` the predicted covariance
+    of those: (P_pos + σ² I)⁻¹ on the position (0 for σ = ∞) and none on the clocks (``clocks_free``), or
+    (P_pc + diag(σ² I, 0))⁻¹ (the clocks as predicted, the position's prior widened by σ)."""
+    n = P_pc_m2.shape[0]
+    if clocks_free:
+        lam = np.zeros((n, n))
+        if np.isfinite(sigma_m):
+            lam[0:3, 0:3] = np.linalg.inv(P_pc_m2[0:3, 0:3] + np.eye(3) * sigma_m**2)
+        return lam
+    if not np.isfinite(sigma_m):
+        lam = np.zeros((n, n))
+        lam[3:, 3:] = np.linalg.inv(P_pc_m2[3:, 3:])
+        return lam
+    widen = np.zeros((n, n))
+    widen[0:3, 0:3] = np.eye(3) * sigma_m**2
+    return np.linalg.inv(P_pc_m2 + widen)
