@@ -118,7 +118,7 @@ def test_out_of_sequence_epochs_with_a_map_equal_in_order():
         np.testing.assert_allclose(eb.P, ea.P, rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("innovation", ["prefit", "leave-one-out"])
+@pytest.mark.parametrize("innovation", ["prefit", "leave-one-out", "snapshot"])
 def test_one_reflected_satellite_loses_its_belief_within_a_second(innovation):
     cfg = TightConfig.for_ground_vehicle(belief_innovation=innovation)
     rng = np.random.default_rng(5)

@@ -42,7 +42,8 @@ def test_position_prior_known_answers():
     P = np.diag([4.0, 9.0, 16.0, 25.0])
     np.testing.assert_allclose(snapshot.position_prior(P, np.inf, True), 0.0)
     np.testing.assert_allclose(snapshot.position_prior(P, 0.0, True), np.diag([1 / 4, 1 / 9, 1 / 16, 0.0]))
-    np.testing.assert_allclose(snapshot.position_prior(P, 3.0, False), np.diag([1 / 13, 1 / 18, 1 / 25, 1 / 25]))
+    np.testing.assert_allclose(snapshot.position_prior(P, 3.0, False),
+                               np.diag([1 / 13, 1 / 18, 1 / 25, 1 / 25]))
     np.testing.assert_allclose(snapshot.position_prior(P, np.inf, False), np.diag([0.0, 0.0, 0.0, 1 / 25]))
 
 

@@ -42,7 +42,7 @@ from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, solve_position
 from companion.gnss.systems import System
-from companion.tight import _tight, model, snapshot, weighting
+from companion.tight import _tight, model, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame

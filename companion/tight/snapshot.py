@@ -4,17 +4,20 @@ solution of position and clocks, leaving that satellite out.
 The pre-fit innovation y = z − h(x⁻) of every satellite carries the prediction's own error (position
 and clock), which all the satellites of the epoch share, and the clock of the prediction already holds
 the common part of the reflections' delays. Re-solving position (about the prediction) and each
-system's clock from this epoch's satellites removes both: a linear least-squares step from the
-prediction with design ``G`` = [H's position columns, one column per clock]
+system's clock from this epoch's satellites is meant to remove both (on the canyon's tuning flights it
+did not help: the epoch's own solution absorbs more of the reflections than the prediction does;
+docs/tight.md): a linear least-squares step from the prediction with design ``G`` = [H's position
+columns, one column per clock]
 
     δx̂ = A⁻¹ Gᵀ W y,   A = Gᵀ W G + Λ,   W = diag(w)
 
-where Λ is a prior on the position's correction alone (the prediction's position known to
-``belief_snapshot_sigma_m``: Λ = (P_pos + σ² I)⁻¹; σ = ∞: the epoch alone) and the clocks are free. Its
-residuals e = y − G δx̂ and the leverages h_i = w_i g_i A⁻¹ g_iᵀ give, exactly, each satellite's residual
-against the solution of the OTHER satellites (the hat matrix's leave-one-out identity)
+where Λ is the prior on the correction (``position_prior``): the prediction's position known to P_pos +
+σ² per axis (``belief_snapshot_sigma_m``; σ = ∞: the epoch alone) and the clocks either free (re-solved from
+the epoch) or as predicted (their P). Its residuals e = y − G δx̂ and the leverages h_i = w_i g_i A⁻¹ g_iᵀ
+give, exactly, each satellite's residual against the solution of the OTHER satellites (the hat matrix's
+leave-one-out identity)
 
-    ỹ_i = e_i / (1 − h_i),   with variance  q_i / (1 − h_i)  of that solution at satellite i (q_i = g_i A⁻¹ g_iᵀ)
+    ỹ_i = e_i / (1 − h_i),   with variance q_i / (1 − h_i) of that solution there (q_i = g_i A⁻¹ g_iᵀ)
 
 so a reflected satellite shows its whole delay and a clean one is not blamed for the others'. The
 weights are the satellites' current beliefs' (1/R(β)), reweighted ``iterations`` times as a Student-t
