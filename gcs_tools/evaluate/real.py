@@ -184,7 +184,8 @@ def run_sats_job(job: Job) -> list[dict[str, Any]]:
         fixes = WithSyntheticGnss(open_log(flight, None, frame), placed.fixes, frame, placed.raw_errors)
         s = core.replay(flight, method, home=frame, reader=fixes, rate_hz=10.0, config=config).summary
         out.append(_row(base, method, s))
-    key = (job.flight, job.errors, id(sky), job.seed, job.rate_hz, job.latency_ms)  # sky: per file state
+    key = (job.flight, job.errors, id(sky), job.seed, job.rate_hz, job.latency_ms,  # sky: per file state
+           job.velocity_std_m_s)  # the synthetic Doppler's information
     if key not in _TIGHT_DONE:
         raws = [RawGnss(int(t), e) for t, e in zip(placed.placed.t_validity_us, placed.placed.epochs,
                                                     strict=True)]
@@ -355,8 +356,13 @@ def markdown(result: dict[str, Any]) -> str:
             lines += ["The drive's per-satellite errors (residuals at its truth) placed on each flight's "
                       "truth: the methods get the single-point fixes of those pseudoranges (latency, "
                       "velocity and accuracy as a recorded series), the `tight-*` rows the pseudoranges "
-                      "themselves (arriving with the fixes; no Doppler in the drive, so no velocity) and the "
-                      "flight's IMU.", ""]
+                      "themselves (arriving with the fixes) and the flight's IMU. "
+                      + ("The drive has no Doppler and the fixes no velocity: no row gets a velocity."
+                         if info.get("velocity_std_m_s", 0.2) is None else
+                         "The drive has no Doppler: the epochs carry SYNTHETIC pseudorange rates at the "
+                         "flight's truth velocity with the drive's clock drift and noise of the fixes' "
+                         "velocity information (their Doppler velocity's mean per-axis std = the fixes' "
+                         f"{info.get('velocity_std_m_s', 0.2):g} m/s)."), ""]
         lines += [
                   "| row | median | p95 | max | − raw (arrival), median | vs naive | within 1 σ / 2 σ |",
                   "|---|---|---|---|---|---|---|"]

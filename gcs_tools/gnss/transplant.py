@@ -25,8 +25,23 @@ coupled filter can run on them with the flight's real IMU:
    (``synthetic_gnss.assemble``); the tightly coupled rows the placed epochs as raw epochs, each
    arriving at the same time as its fix (its validity time + the same latency).
 
-smartLoc has no Doppler: the tight rows get no velocity measurement, while the loose rows get the series
-condition's velocity (truth + 0.2 m/s noise) as today.
+4. **Doppler** (:func:`range_rates_m_s`): smartLoc has none (its input rows carry no Doppler or range
+   rate), so when the loose rows get a velocity (``velocity_std_m_s``, truth + that noise per axis) the
+   placed epochs get synthetic pseudorange rates carrying the same information: the exact time derivative
+   of the placed range (|sat − p| with its Sagnac term) at the flight's truth velocity (central
+   differences of its truth, as the fixes' velocity) + the drive's receiver clock drift + white noise.
+   Satellite velocities: central differences (second order, also at the ends) of the drive's satellite
+   positions over its epochs; the drive's second differences match the ECEF orbital acceleration
+   (gravity, centrifugal, Coriolis) to 2 mm/s² (median), so these velocities are good to well below
+   1 mm/s, and the filters get the same ones. Clock drift: the least-squares slope of each system's clock
+   at the truth over ±``DRIFT_WINDOW_S`` (the Berlin receiver: −49.7 m/s, ±0.5 m/s over the drive), the
+   median over the epoch's systems. Noise: σ_i = k · 10^((45 − C/N0_i)/20), the simulated receiver's
+   shape (``simvehicle.receiver``: thermal Doppler noise ∝ 10^((45 − C/N0)/20)), k chosen per epoch so
+   that the weighted least-squares Doppler velocity (velocity and drift, those σ) has a mean per-axis
+   variance of ``velocity_std_m_s``²: the loose rows' velocity noise, so both sides get the same
+   information. Reflections' Doppler errors (a reflected signal's rate seen along its arrival
+   direction) are not synthesised: the drive does not say which facade reflected, and the loose rows'
+   velocity noise is white too. Seeded: the seed's stream 4 (``synthetic_gnss.assemble`` uses 0-3).
 """
 
 from __future__ import annotations
@@ -34,6 +49,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -42,6 +58,7 @@ import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.errors import UserError
+from companion.gnss.constants import C_M_S, OMEGA_E_RAD_S
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, geodetic_to_ecef, sagnac_range_m
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig
@@ -64,6 +81,7 @@ class DriveSky:
     spp_err_ned_m: np.ndarray  # (n, 3) SPP − truth in ``origin``'s NED frame (the error series)
     origin: LocalNedFrame  # the truth at the drive's first epoch that has one
     name: str
+    drift_m_s: np.ndarray  # (n,) the receiver clock drift (m/s; ``clock_drift_m_s``)
 
     @property
     def period_s(self) -> float:
@@ -119,10 +137,88 @@ def _drive_sky(input_path: Path, config: SppConfig, stamp: object) -> DriveSky:
     keep = np.flatnonzero(np.isfinite(err).all(axis=1))
     if len(keep) < 2:
         raise UserError(f"{input_path}: {len(keep)} epoch(s) with a single-point solution and a truth")
-    epochs = tuple(data.epochs[i] for i in keep)
+    t_s = series.t_s[keep] - series.t_s[keep[0]]
+    epochs = satellite_velocities(t_s, [data.epochs[i] for i in keep])
     at_truth = tuple(epoch_residuals_at_truth(e, p) for e, p in zip(epochs, truth_ecef[keep], strict=True))
-    return DriveSky(series.t_s[keep] - series.t_s[keep[0]], epochs, truth_ecef[keep], at_truth, err[keep],
-                    origin, input_path.name)
+    return DriveSky(t_s, epochs, truth_ecef[keep], at_truth, err[keep], origin, input_path.name,
+                    clock_drift_m_s(t_s, epochs, at_truth))
+
+
+def satellite_velocities(t_s: np.ndarray, epochs: Sequence[GnssEpoch]) -> tuple[GnssEpoch, ...]:
+    """``epochs`` with ``sat_vel_ecef_m_s``: each satellite's positions differentiated over the epochs
+    that see it (``np.gradient``, second order inside and at the ends; NaN with fewer than 3 epochs)."""
+    rows: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for k, e in enumerate(epochs):
+        for j, key in enumerate(zip(e.system.tolist(), e.prn.tolist(), strict=True)):
+            rows.setdefault(key, []).append((k, j))
+    vel = [np.full((e.n, 3), np.nan) for e in epochs]
+    for kj in rows.values():
+        if len(kj) < 3:
+            continue
+        pos = np.array([epochs[k].sat_pos_ecef_m[j] for k, j in kj])
+        v = np.gradient(pos, t_s[[k for k, _ in kj]], axis=0, edge_order=2)
+        for (k, j), vk in zip(kj, v, strict=True):
+            vel[k][j] = vk
+    return tuple(e.replace(sat_vel_ecef_m_s=v) for e, v in zip(epochs, vel, strict=True))
+
+
+DRIFT_WINDOW_S = 15.0  # the clock drift: the slope of the clock at the truth over ± this (a TCXO's drift
+# wanders by tenths of m/s over tens of seconds; a shorter window follows the clock estimate's jumps)
+
+
+def clock_drift_m_s(t_s: np.ndarray, epochs: Sequence[GnssEpoch], at_truth: Sequence[TruthResiduals],
+                    window_s: float = DRIFT_WINDOW_S) -> np.ndarray:
+    """(n,) the receiver clock drift (m/s) at each epoch: per system, the least-squares slope of its clock
+    at the truth (``TruthResiduals.clock_m``) over the epochs within ±``window_s``; the median over the
+    epoch's systems (their clocks differ by constant inter-system biases, not in drift)."""
+    systems = sorted({int(s) for e in epochs for s in e.system.tolist()})
+    slopes = np.full((len(epochs), len(systems)), np.nan)
+    for col, s in enumerate(systems):
+        k = np.array([i for i, e in enumerate(epochs) if (e.system == s).any()], dtype=int)
+        if len(k) < 2:
+            continue
+        t = t_s[k]
+        c = np.array([at_truth[i].clock_m[epochs[i].system == s][0] for i in k])
+        for i, ti in zip(k.tolist(), t.tolist(), strict=True):
+            m = np.abs(t - ti) <= window_s
+            if m.sum() >= 2:
+                tc = t[m] - t[m].mean()
+                slopes[i, col] = float(np.dot(tc, c[m] - c[m].mean()) / np.dot(tc, tc))
+    out = np.full(len(epochs), np.nan)
+    seen = np.isfinite(slopes).any(axis=1)
+    out[seen] = np.nanmedian(slopes[seen], axis=1)
+    return out
+
+
+CN0_REF_DBHZ = 45.0  # the simulated receiver's Doppler noise shape: σ ∝ 10^((45 − C/N0)/20)
+
+
+def range_rates_m_s(epoch: GnssEpoch, p_ecef_m: np.ndarray, v_ecef_m_s: np.ndarray) -> np.ndarray:
+    """(n,) the exact time derivative of ``sagnac_range_m`` (|sat − p| + ω (x_s y − y_s x) / c) for the
+    satellites moving at ``epoch.sat_vel_ecef_m_s`` and the receiver at ``v_ecef_m_s``: the range rate of
+    a placed pseudorange without clock, residual or noise."""
+    rs, us, v = epoch.sat_pos_ecef_m, epoch.sat_vel_ecef_m_s, np.asarray(v_ecef_m_s, dtype=float)
+    _, los = sagnac_range_m(rs, p_ecef_m)
+    sagnac = OMEGA_E_RAD_S / C_M_S * (us[:, 0] * p_ecef_m[1] + rs[:, 0] * v[1]
+                                      - us[:, 1] * p_ecef_m[0] - rs[:, 1] * v[0])
+    return np.einsum("ij,ij->i", los, us - v) + sagnac
+
+
+def doppler_sigma_m_s(epoch: GnssEpoch, p_ecef_m: np.ndarray, velocity_std_m_s: float) -> np.ndarray:
+    """(n,) per-satellite rate σ ∝ 10^((45 − C/N0)/20), scaled so that the weighted least-squares velocity
+    and drift from these rates has a mean per-axis velocity variance of ``velocity_std_m_s``² (NaN for a
+    satellite without velocity; all NaN when fewer than 4 have one)."""
+    ok = np.isfinite(epoch.sat_vel_ecef_m_s).all(axis=1)
+    out = np.full(epoch.n, np.nan)
+    if ok.sum() < 4:
+        return out
+    cn0 = np.where(np.isfinite(epoch.cn0_dbhz), epoch.cn0_dbhz, CN0_REF_DBHZ)
+    shape = 10.0 ** ((CN0_REF_DBHZ - cn0) / 20.0)
+    _, los = sagnac_range_m(epoch.sat_pos_ecef_m[ok], p_ecef_m)
+    h = np.column_stack((-los, np.ones(int(ok.sum()))))
+    q = np.linalg.inv(h.T @ (h / shape[ok, None] ** 2))
+    out[ok] = shape[ok] * velocity_std_m_s / math.sqrt(float(np.trace(q[:3, :3])) / 3.0)
+    return out
 
 
 def ned_to_ecef(frame: LocalNedFrame, p_ned_m: np.ndarray) -> np.ndarray:
@@ -132,10 +228,13 @@ def ned_to_ecef(frame: LocalNedFrame, p_ned_m: np.ndarray) -> np.ndarray:
     return p0 + np.asarray(p_ned_m, dtype=float).reshape(-1, 3) @ ecef_to_ned_matrix(lat, lon)
 
 
-def place_epoch(epoch: GnssEpoch, at: TruthResiduals, p_ecef_m: np.ndarray) -> GnssEpoch:
-    """``epoch`` as received at ``p_ecef_m``: pseudorange = |sat − p| (Sagnac) + clock + residual."""
+def place_epoch(epoch: GnssEpoch, at: TruthResiduals, p_ecef_m: np.ndarray,
+                rate_m_s: np.ndarray | None = None) -> GnssEpoch:
+    """``epoch`` as received at ``p_ecef_m``: pseudorange = |sat − p| (Sagnac) + clock + residual; with
+    ``rate_m_s`` its pseudorange rates (else none: NaN)."""
     rho, _ = sagnac_range_m(epoch.sat_pos_ecef_m, p_ecef_m)
-    return epoch.replace(pseudorange_m=rho + at.clock_m + at.residual_m)
+    rate = np.full(epoch.n, np.nan) if rate_m_s is None else rate_m_s
+    return epoch.replace(pseudorange_m=rho + at.clock_m + at.residual_m, pseudorange_rate_m_s=rate)
 
 
 def aligned_offsets_s(sky: DriveSky, start_s: float, flight_span_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -161,13 +260,17 @@ class PlacedSky:
     p_truth_ned_m: np.ndarray  # (m, 3) the flight's truth there (the frame's NED)
     start_s: float  # where the flight reads the drive (series time)
     wrapped: bool
+    rate_sigma_m_s: np.ndarray  # (m,) per epoch the median σ of its synthetic rates (NaN: no rates)
 
 
 def place(sky: DriveSky, truth: Track, frame: LocalNedFrame, opts: GnssErrorOptions,
           residual_scale: float = 1.0) -> PlacedSky:
     """The drive placed on ``truth`` (in ``frame``: the drive's ``origin``): the flight's span and start
     are the series condition's with ``opts`` (its rate's grid, ``synthetic_gnss.series_start`` from its
-    seed or its ``series_start_s``); ``residual_scale`` 0 gives error-free pseudoranges (a test)."""
+    seed or its ``series_start_s``); ``residual_scale`` 0 gives error-free pseudoranges (a test). With a
+    velocity (``opts.velocity_std_m_s`` not None) the epochs carry synthetic pseudorange rates at the truth's
+    velocity (``Track.velocity_at``) with the drive's clock drift and noise of the same information
+    (``doppler_sigma_m_s``; the seed's stream 4); without, none."""
     from gcs_tools.replay.synthetic_gnss import epoch_grid, series_start
 
     t_grid, _ = epoch_grid(truth, opts.rate_hz)
@@ -181,13 +284,25 @@ def place(sky: DriveSky, truth: Track, frame: LocalNedFrame, opts: GnssErrorOpti
     p_ned, covered = truth.at(t_us)
     t_us, idx, p_ned = t_us[covered], idx[covered], p_ned[covered]
     p_ecef = ned_to_ecef(frame, p_ned)
+    std = opts.velocity_std_m_s
+    lat, lon = math.radians(frame.home_lat_deg), math.radians(frame.home_lon_deg)
+    v_ecef = truth.velocity_at(t_us) @ ecef_to_ned_matrix(lat, lon)
+    rng = np.random.default_rng(np.random.SeedSequence(opts.seed).spawn(5)[4])
     epochs = []
-    for k, p in zip(idx.tolist(), p_ecef, strict=True):
+    sigma_med = np.full(len(idx), np.nan)
+    for i, (k, p) in enumerate(zip(idx.tolist(), p_ecef, strict=True)):
         at = sky.at_truth[k]
         if residual_scale != 1.0:
             at = dataclasses.replace(at, residual_m=at.residual_m * residual_scale)
-        epochs.append(place_epoch(sky.epochs[k], at, p))
-    return PlacedSky(t_us, idx, tuple(epochs), p_ned, start, bool(span_s > sky.t_s[-1] - sky.t_s[0]))
+        ep = sky.epochs[k]
+        rate = None
+        if std is not None:
+            sigma = doppler_sigma_m_s(ep, p, std)
+            rate = range_rates_m_s(ep, p, v_ecef[i]) + sky.drift_m_s[k] + sigma * rng.standard_normal(ep.n)
+            sigma_med[i] = float(np.nanmedian(sigma)) if np.isfinite(sigma).any() else math.nan
+        epochs.append(place_epoch(ep, at, p, rate))
+    return PlacedSky(t_us, idx, tuple(epochs), p_ned, start, bool(span_s > sky.t_s[-1] - sky.t_s[0]),
+                     sigma_med)
 
 
 @dataclass(frozen=True)
@@ -226,7 +341,11 @@ def sky_on_flight(flight: Path, sky: DriveSky, opts: GnssErrorOptions) -> SkyOnF
                             "accuracy": opts.accuracy, "seed": opts.seed, "series_start_s": placed.start_s,
                             "series_period_s": sky.period_s, "series_span_s": float(sky.t_s[-1] - sky.t_s[0]),
                             "series_wrapped": placed.wrapped, "epochs": len(t_v),
-                            "epochs_without_solution": int((~series.ok).sum())}
+                            "epochs_without_solution": int((~series.ok).sum()),
+                            "doppler": None if opts.velocity_std_m_s is None else {
+                                "synthetic": True, "velocity_std_m_s": opts.velocity_std_m_s,
+                                "rate_sigma_median_m_s": float(np.nanmedian(placed.rate_sigma_m_s)),
+                                "clock_drift_median_m_s": float(np.nanmedian(sky.drift_m_s))}}
     err = p_fix - placed.p_truth_ned_m
     fixes = assemble(opts, truth, t_v, p_fix, err, series.h_acc_m, series.v_acc_m, series.n_used, t_arrival,
                      series.ok, info)
