@@ -189,10 +189,9 @@ def test_synthetic_doppler_is_the_placed_ranges_rate_and_gives_the_flights_veloc
     """Known answers with zero residuals and zero noise: each rate is the finite-difference derivative of
     the placed range (|sat − p| with its Sagnac term, to 1 mm/s) + the drive's drift; the Doppler-only
     least-squares velocity and drift (the exact model's) are the flight's truth velocity and the drive's
-    drift to 1 mm/s; the project's single-point solver gets them within 3 cm/s (its range-rate model
-    differs by a few mm/s per satellite, the vertical's DOP amplifying: RTKLIB's sign of the Sagnac rate
-    and a light-time factor that the drive's satellite velocities, differentiated over reception times,
-    already carry)."""
+    drift to 1 mm/s; the project's single-point solver gets them within 1 cm/s (2.3 mm/s measured: its
+    light-time factor is counted twice here, as the drive's satellite velocities, differentiated over
+    reception times, already carry it)."""
     from companion.gnss.spp import solve_position
 
     sky = transplant.drive_sky(drive)
@@ -227,7 +226,7 @@ def test_synthetic_doppler_is_the_placed_ranges_rate_and_gives_the_flights_veloc
             worst_d = max(worst_d, abs(sol.clock_drift_m_s - sky.drift_m_s[i]))
     assert n >= 0.9 * len(p.epochs) and np.abs(v_ecef).max() > 1.0  # a moving flight
     assert worst_exact < 1e-3, worst_exact
-    assert worst_v < 0.03 and worst_d < 0.03, (worst_v, worst_d)
+    assert worst_v < 0.01 and worst_d < 0.01, (worst_v, worst_d)
     # no velocity for the fixes: no rates for the epochs
     none = transplant.place(sky, truth, sky.origin, GnssErrorOptions("none", seed=2, velocity_std_m_s=None))
     assert all(np.isnan(e.pseudorange_rate_m_s).all() for e in none.epochs)

@@ -17,7 +17,8 @@ redundancy remains, the satellite with the largest standardised residual
 ``raim_max_exclusions``).
 
 Velocity: from pseudorange rates (−λ·Doppler) with the satellite velocities, one receiver clock
-drift, the Sagnac rate term (RTKLIB ``resdop``), weighted alike.
+drift, the Sagnac rate term (the time derivative of the range's Sagnac term; RTKLIB's ``resdop``
+has the opposite sign, a known error of a few mm/s), weighted alike.
 
 Cost per epoch (``beliefnav bench gnss``, this project's 2-core machine): 0.4 ms for a smartLoc
 epoch (15 satellites, pre-corrected) to 1 ms with the atmosphere models; each RAIM exclusion adds a
@@ -430,7 +431,7 @@ def _velocity(
     r = np.zeros(len(los))
     for _ in range(3):
         sagnac = (
-            OMEGA_E_RAD_S / C_M_S * (vs[:, 1] * x[0] + rs[:, 1] * v[0] - vs[:, 0] * x[1] - rs[:, 0] * v[1])
+            OMEGA_E_RAD_S / C_M_S * (vs[:, 0] * x[1] + rs[:, 0] * v[1] - vs[:, 1] * x[0] - rs[:, 1] * v[0])
         )
         sat_los = np.einsum("ij,ij->i", vs, los)
         geo_rate = sat_los - los @ v[:3]

@@ -215,17 +215,17 @@ static double range_rate_row(const double *x, const double *r0, const double *C,
     double g = l[0] * dv[0] + l[1] * dv[1] + l[2] * dv[2];
     double sv = l[0] * us[0] + l[1] * us[1] + l[2] * us[2];
     double f = 1.0 - sv / C_M_S;
-    double sag = W_C * (us[1] * r[0] + rs[1] * ve[0] - us[0] * r[1] - rs[0] * ve[1]);
+    double sag = W_C * (us[0] * r[1] + rs[0] * ve[1] - us[1] * r[0] - rs[1] * ve[0]);
     double dm_dr[3], dm_dv[3];
     for (int k = 0; k < 3; k++) {
         double dg = -(dv[k] - g * l[k]) / rng, ds = -(us[k] - sv * l[k]) / rng;
         dm_dr[k] = dg * f - (g / C_M_S) * ds;
         dm_dv[k] = -l[k] * f;
     }
-    dm_dr[0] += W_C * us[1];
-    dm_dr[1] -= W_C * us[0];
-    dm_dv[0] += W_C * rs[1];
-    dm_dv[1] -= W_C * rs[0];
+    dm_dr[0] -= W_C * us[1];
+    dm_dr[1] += W_C * us[0];
+    dm_dv[0] -= W_C * rs[1];
+    dm_dv[1] += W_C * rs[0];
     memset(h, 0, sizeof(double) * N);
     for (int k = 0; k < 3; k++) {
         h[k] = dm_dr[0] * C[k] + dm_dr[1] * C[3 + k] + dm_dr[2] * C[6 + k];

@@ -107,17 +107,17 @@ def range_rate(x: np.ndarray, frame: Frame, sat_pos_ecef_m: np.ndarray, sat_vel_
     g = np.einsum("ij,ij->i", los, dv)
     s = np.einsum("ij,ij->i", los, us)
     f = 1.0 - s / C_M_S
-    sag = _W * (us[:, 1] * r[0] + rs[:, 1] * ve[0] - us[:, 0] * r[1] - rs[:, 0] * ve[1])
+    sag = _W * (us[:, 0] * r[1] + rs[:, 0] * ve[1] - us[:, 1] * r[0] - rs[:, 1] * ve[0])
     pred = g * f + sag + x[I_DRIFT]
     # ∂l/∂r = −(I − l lᵀ)/ρ:  ∂(l·w)/∂r = −(w − (l·w) l)/ρ
     dg_dr = -(dv - g[:, None] * los) / rng[:, None]
     ds_dr = -(us - s[:, None] * los) / rng[:, None]
     dm_dr = dg_dr * f[:, None] - (g / C_M_S)[:, None] * ds_dr
-    dm_dr[:, 0] += _W * us[:, 1]
-    dm_dr[:, 1] -= _W * us[:, 0]
+    dm_dr[:, 0] -= _W * us[:, 1]
+    dm_dr[:, 1] += _W * us[:, 0]
     dm_dv = -los * f[:, None]
-    dm_dv[:, 0] += _W * rs[:, 1]
-    dm_dv[:, 1] -= _W * rs[:, 0]
+    dm_dv[:, 0] -= _W * rs[:, 1]
+    dm_dv[:, 1] += _W * rs[:, 0]
     H = np.zeros((len(rs), N_STATE))
     H[:, I_P:I_P + 3] = dm_dr @ C
     H[:, I_V:I_V + 3] = dm_dv @ C
