@@ -27,6 +27,11 @@ hours of the system's time: BeiDou's 14 s after GPS's), GLONASS every 30 min: th
 ``EphemerisStore``'s nearest-``toe`` rule then uses each within 1 h / 15 min of its reference time.
 Galileo and BeiDou clocks wander by 4 ns (GPS, GLONASS: 100 ns): their messages' af2 field holds
 no more than about 1.4e-17 s/s² (D1) / 5.4e-17 s/s² (I/NAV).
+
+Broadcast accuracy (``BROADCAST_ACCURACY_M``), what healthy satellites of a real sky broadcast: GPS
+URA index 0 (2.4 m, the interval's upper bound; RINEX files write its nominal 2.0 m), Galileo SISA
+index 107 (3.12 m), BeiDou URAI 0 (2.4 m), as in the real broadcast records of the tests (a
+receiver's GPS file, IGS Galileo, DLR/TUM BeiDou). Nothing in the simulator's error model uses it.
 """
 
 from __future__ import annotations
@@ -38,6 +43,8 @@ import numpy as np
 
 from companion.gnss import constants as k
 from companion.gnss.ephemeris import EphemerisStore, GlonassEphemeris, KeplerEphemeris, rk4_step
+from companion.gnss.inav import sisa_m
+from companion.gnss.lnav import ura_m
 from companion.gnss.systems import System
 from companion.gnss.timescale import (
     GLONASS_MINUS_UTC_S,
@@ -96,6 +103,9 @@ CLOCK_MESSAGE: dict[System, tuple[float, float, float, float, float, int]] = {
     System.GALILEO: (4e-9, 2.0**-34, 2.0**-46, 2.0**-59, 2.0**-32, 256),
     System.BEIDOU: (4e-9, 2.0**-33, 2.0**-50, 2.0**-66, 1e-10, 32),
 }
+# per Keplerian system: the broadcast 1σ range accuracy (m) of a healthy satellite (module doc)
+BROADCAST_ACCURACY_M: dict[System, float] = {System.GPS: ura_m(0), System.GALILEO: sisa_m(107),
+                                             System.BEIDOU: ura_m(0)}
 
 
 def _clock(salt: int, t_gps_s: float, wander_s: float = CLOCK_WANDER_S) -> tuple[float, float, float]:
@@ -223,7 +233,7 @@ def _kepler_ephemeris(system: System, prn: int, orbit: _Walker, toe: float, inde
     return KeplerEphemeris(
         int(system), prn, toe, toe, sow, sqrt_a, e, _q(orbit.inc, 2.0**-31 * SC), omega0, omega, m0, delta_n,
         omega_dot, *no_harmonics, _q(af0, lsb0), _q(af1, lsb1), _q(af2, lsb2),
-        _q(-1e-8 * _frac(salt, 5), lsb_tgd), index % iods,
+        _q(-1e-8 * _frac(salt, 5), lsb_tgd), index % iods, accuracy_m=BROADCAST_ACCURACY_M[system],
     )
 
 

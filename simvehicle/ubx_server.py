@@ -162,9 +162,11 @@ class ReceiverStream:
 
 
 def _kepler_json(e: KeplerEphemeris) -> dict[str, Any]:
-    """A Keplerian ephemeris as strict JSON (an accuracy not given, inf, as null)."""
+    """A Keplerian ephemeris as strict JSON: an accuracy not given (NaN) as null, "no prediction"
+    (inf) as the string "inf"."""
     d = asdict(e)
-    d["accuracy_m"] = d["accuracy_m"] if math.isfinite(d["accuracy_m"]) else None
+    acc = d["accuracy_m"]
+    d["accuracy_m"] = None if math.isnan(acc) else "inf" if math.isinf(acc) else acc
     return d
 
 
@@ -177,7 +179,7 @@ def store_from_info(info: dict[str, Any]) -> EphemerisStore:
         fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in g.items()}
         glonass.append(GlonassEphemeris(**fields))
     return EphemerisStore(
-        [KeplerEphemeris(**{**e, "accuracy_m": math.inf if e.get("accuracy_m") is None else e["accuracy_m"]})
+        [KeplerEphemeris(**{**e, "accuracy_m": math.nan if e.get("accuracy_m") is None else float(e["accuracy_m"])})
          for e in eph["kepler"]],
         glonass,
         None if klob is None else (np.array(klob[0]), np.array(klob[1])),

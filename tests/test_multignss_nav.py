@@ -370,13 +370,19 @@ def test_a_gps_galileo_beidou_ubx_log_is_solved_with_its_galileo_and_beidou_sate
 
 def test_receiver_json_carries_the_accuracy_as_strict_json():
     """``receiver.json`` (the simulated receiver's sky for its consumers) stays strict JSON: an accuracy
-    not given (inf) is written as null and read back as inf; a given one as itself."""
+    not given (NaN) is written as null and read back as NaN, "no prediction" (inf) as "inf" and read
+    back as inf; a given one as itself."""
     import json
 
     from simvehicle.ubx_server import _kepler_json, store_from_info
 
     kep, _ = constellation(1.4e9, 1.4e9 + 3600.0, (System.GALILEO,))
-    ephs = [kep[0], dataclasses.replace(kep[1], accuracy_m=inav.sisa_m(107))]
+    ephs = [dataclasses.replace(kep[0], accuracy_m=math.nan), dataclasses.replace(kep[1], accuracy_m=math.inf),
+            kep[2]]
+    assert kep[2].accuracy_m == inav.sisa_m(107)  # the simulated sky's: SISA index 107, 3.12 m
     text = json.dumps({"ephemerides": {"kepler": [_kepler_json(e) for e in ephs], "glonass": []}},
                       allow_nan=False)
-    assert store_from_info(json.loads(text)).kepler == ephs
+    back = store_from_info(json.loads(text)).kepler
+    assert [dataclasses.replace(e, accuracy_m=0.0) for e in back] == [
+        dataclasses.replace(e, accuracy_m=0.0) for e in ephs]
+    assert math.isnan(back[0].accuracy_m) and back[1].accuracy_m == math.inf and back[2].accuracy_m == 3.12

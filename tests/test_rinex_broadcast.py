@@ -140,10 +140,27 @@ def test_every_ura_index_reads_back_from_its_nominal_and_its_bound(tmp_path, n):
 def test_galileo_sisa_and_napa():
     for index in range(126):
         assert rinex.broadcast_accuracy_m(System.GALILEO, inav.sisa_m(index)) == inav.sisa_m(index)
-    # NAPA as RINEX writes it (−1), a value above the table (spare indices): not given
+    # NAPA as RINEX writes it (−1), a value above the table (spare indices): no prediction (inf)
     for value in (-1.0, 6.5, 255.0, math.nan):
         assert math.isinf(rinex.broadcast_accuracy_m(System.GALILEO, value))
     assert math.isinf(inav.sisa_m(inav.SISA_NAPA))  # the UBX decoder's NAPA: the same inf
+
+
+@pytest.mark.parametrize("system", [System.GPS, System.GALILEO, System.BEIDOU])
+def test_accuracy_not_given_is_a_blank_field_and_no_prediction_is_not(tmp_path, system):
+    """NaN ("not given") is written as a blank field and read back as NaN; inf ("no prediction") as
+    RINEX writes it (Galileo NAPA −1, URA 15's 8192 m) and read back as inf; a given value as itself."""
+    (g,) = _read(tmp_path, GPS_G01).kepler
+    g = dataclasses.replace(g, system=int(system))
+    given = inav.sisa_m(107) if system == System.GALILEO else lnav.ura_m(0)
+    ephs = [dataclasses.replace(g, prn=p, accuracy_m=a) for p, a in ((1, math.nan), (2, math.inf), (3, given))]
+    rinex.write_nav(tmp_path / "w.nav", ephs)
+    body = (tmp_path / "w.nav").read_text().split("END OF HEADER\n")[1].splitlines()
+    fields = [line[4:23] for line in body[6::8]]  # each record: its first line, then broadcast orbits 1-7
+    assert fields[0] == " " * 19
+    assert float(fields[1].replace("D", "E")) == (-1.0 if system == System.GALILEO else 8192.0)
+    back = [e.accuracy_m for e in rinex.read_nav(tmp_path / "w.nav").kepler]
+    assert math.isnan(back[0]) and back[1] == math.inf and back[2] == given
 
 
 def test_galileo_inav_kept_fnav_counted_and_the_e1_clock_is_one(tmp_path):
@@ -218,6 +235,8 @@ def _assert_same_states(a: list[KeplerEphemeris], b: list[KeplerEphemeris], dt_s
     sysv = np.array([e.system for e in a])
     prn = np.array([e.prn for e in a])
     t = np.array([e.toe_gps_s + dt_s for e in a])
+    # the orbits and clocks compared whatever the accuracy says (a store gives no state for inf)
+    a, b = ([dataclasses.replace(e, accuracy_m=math.nan) for e in x] for x in (a, b))
     sa, sb = EphemerisStore(a).states(sysv, prn, t), EphemerisStore(b).states(sysv, prn, t)
     assert sa.valid.all() and sb.valid.all()
     assert np.abs(sa.pos_ecef_m - sb.pos_ecef_m).max() < 1e-3  # RINEX's 12 decimals: < 0.1 mm

@@ -19,6 +19,7 @@ them once per epoch, or once a second and move them with their velocity in betwe
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass, fields
 from typing import NamedTuple
 
@@ -75,7 +76,10 @@ class KeplerEphemeris:
     tgd_s: float = 0.0  # group delay of the observed signal (GPS TGD, GAL BGD E1/E5b, BDS TGD1)
     iode: int = 0
     health: int = 0  # 0 = healthy
-    accuracy_m: float = math.inf  # broadcast 1σ range accuracy (Galileo SISA, BeiDou URA); inf: not given
+    # broadcast 1σ range accuracy (GPS/BeiDou URA, Galileo SISA), metres; NaN: not given (no field, a
+    # blank RINEX field: used as any other); inf: the broadcast says "no accuracy prediction" (GPS/BeiDou
+    # URA index 15, Galileo NAPA or a spare SISA index): the satellite is not used (EphemerisStore)
+    accuracy_m: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
@@ -275,7 +279,10 @@ class EphemerisStore:
 
     Selection: per satellite, the healthy ephemeris whose ``toe`` is nearest to the query time and
     within ``MAX_AGE_S`` (RTKLIB's rule); unhealthy ones are dropped when the store is built
-    (``dropped_unhealthy``). Build once (O(m log m)); queries are vectorised (see module doc)."""
+    (``dropped_unhealthy``). A selected ephemeris whose broadcast says "no accuracy prediction"
+    (``accuracy_m`` inf) gives no state (``valid`` False, as without an ephemeris; ``no_prediction``
+    tells the two apart for counting): the satellite is not used until its next set, as receivers and
+    RTKLIB do. Build once (O(m log m)); queries are vectorised (see module doc)."""
 
     def __init__(
         self,
@@ -289,6 +296,10 @@ class EphemerisStore:
         self.dropped_unhealthy = n_in - len(self.kepler) - len(self.glonass)
         self.klobuchar = klobuchar  # (alpha (4,), beta (4,)) GPS ionosphere parameters, or None
         self._ktab = _kepler_tables(self.kepler) if self.kepler else None
+        # per global row (Kepler, then GLONASS, which broadcasts no accuracy here): no prediction
+        self._no_prediction = np.array([e.accuracy_m == math.inf for e in self.kepler]
+                                       + [False] * len(self.glonass), dtype=bool)
+        self._any_no_prediction = bool(self._no_prediction.any())
         self._glo: _GlonassGrid | None = None
         # selection intervals: one row per ephemeris, global row = Kepler rows then GLONASS rows
         sysv = [int(e.system) for e in self.kepler] + [int(System.GLONASS)] * len(self.glonass)
@@ -339,10 +350,21 @@ class EphemerisStore:
         )
         return np.where(ok, self._sel_row[np.maximum(i, 0)] if len(self._sel_row) else -1, -1)
 
-    def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
-        """Satellite states at GPS times ``t_gps_s`` (n,) (the transmission times)."""
+    def no_prediction(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> np.ndarray:
+        """(n,) bool: the ephemeris selected at ``t_gps_s`` broadcasts "no accuracy prediction"."""
         t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
         rows = self.select(system, prn, t)
+        if not self._no_prediction.any():
+            return np.zeros(len(rows), dtype=bool)
+        return (rows >= 0) & self._no_prediction[np.maximum(rows, 0)]
+
+    def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
+        """Satellite states at GPS times ``t_gps_s`` (n,) (the transmission times); rows without an
+        ephemeris, or whose ephemeris has no accuracy prediction, are NaN and not ``valid``."""
+        t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
+        rows = self.select(system, prn, t)
+        if self._any_no_prediction:
+            rows = np.where((rows >= 0) & self._no_prediction[np.maximum(rows, 0)], -1, rows)
         n = len(rows)
         pos = np.full((n, 3), np.nan)
         vel = np.full((n, 3), np.nan)
@@ -377,9 +399,13 @@ def transmission_states(store: EphemerisStore, epoch: GnssEpoch) -> tuple[SatSta
     return SatStates(pos, s.vel_ecef_m_s, clock, s.clock_drift_s_s, s.valid), t0 - dt
 
 
-def attach_broadcast(epoch: GnssEpoch, store: EphemerisStore) -> tuple[GnssEpoch, int]:
+def attach_broadcast(
+    epoch: GnssEpoch, store: EphemerisStore, rejected: Counter[str] | None = None
+) -> tuple[GnssEpoch, int]:
     """The epoch with satellite position/velocity/clock from ``store`` at transmission time;
-    observations without a usable ephemeris are removed. Returns (epoch, number removed)."""
+    observations without a usable ephemeris are removed. Returns (epoch, number removed); with
+    ``rejected`` also counts them there by reason: ``no_accuracy_prediction`` (the selected
+    ephemeris broadcasts none), ``no_ephemeris`` (none within its age, or no pseudorange)."""
     if epoch.time_base != "gps":
         raise ValueError("attach_broadcast needs an epoch in GPS time")
     st, _ = transmission_states(store, epoch)
@@ -390,4 +416,13 @@ def attach_broadcast(epoch: GnssEpoch, store: EphemerisStore) -> tuple[GnssEpoch
         sat_clock_drift_s_s=st.clock_drift_s_s,
     )
     ok = st.valid & np.isfinite(epoch.pseudorange_m)
-    return out.select(ok), int((~ok).sum())
+    n_out = int((~ok).sum())
+    if rejected is not None:
+        n_np = 0
+        if n_out:
+            t0 = epoch.t_gps_s - epoch.pseudorange_m / k.C_M_S
+            n_np = int((~ok & store.no_prediction(epoch.system, epoch.prn, t0)).sum())
+        rejected["no_ephemeris"] += n_out - n_np
+        if n_np:
+            rejected["no_accuracy_prediction"] += n_np
+    return out.select(ok), n_out

@@ -77,7 +77,10 @@ def sisa_m(index: int) -> float:
 
 
 def sisa_index(accuracy_m: float) -> int:
-    """The smallest SISA index whose value covers ``accuracy_m`` (NAPA when none does)."""
+    """The smallest SISA index whose value covers ``accuracy_m`` (NAPA when none does: inf, "no
+    prediction"). NaN ("not given") has no index: a broadcast always states one (ValueError)."""
+    if math.isnan(accuracy_m):
+        raise ValueError("accuracy not given (NaN): a broadcast SISA index states one")
     for i in range(126):
         if sisa_m(i) >= accuracy_m - 1e-9:
             return i

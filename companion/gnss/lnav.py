@@ -24,7 +24,7 @@ from companion.gnss.timescale import resolve_week
 PREAMBLE = 0x8B
 SC2RAD = math.pi  # semicircles -> rad
 # URA index -> metres: the upper bound of each index's interval (IS-GPS-200 20.3.3.3.1.3; BeiDou's
-# ICD B1I 5.2.4.3 uses the same table); index 15 (and anything above the table) -> inf
+# ICD B1I 5.2.4.3 uses the same table); index 15 ("no accuracy prediction, use at own risk") -> inf
 URA_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0)
 
 
@@ -33,7 +33,10 @@ def ura_m(index: int) -> float:
 
 
 def ura_index(accuracy_m: float) -> int:
-    """The smallest URA index whose value covers ``accuracy_m`` (15 when none does, or NaN)."""
+    """The smallest URA index whose value covers ``accuracy_m`` (15 when none does: inf, "no
+    prediction"). NaN ("not given") has no index: a broadcast always states one (ValueError)."""
+    if math.isnan(accuracy_m):
+        raise ValueError("accuracy not given (NaN): a broadcast URA index states one")
     return next((i for i, u in enumerate(URA_M) if u >= accuracy_m), len(URA_M))
 
 

@@ -25,6 +25,7 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEsti
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.consistency import accuracy_inflation, reported_variances
+from companion.gnss.constants import C_M_S
 from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
 from companion.tight.belief import LineOfSight
@@ -88,6 +89,16 @@ class TightNavigator:
         else:
             raise TypeError(f"TightNavigator.push: not a sample: {kind.__name__}")
 
+    def _count_no_prediction(self, epoch: Any, valid: np.ndarray) -> None:
+        """Count the satellites left out because their ephemeris broadcasts "no accuracy prediction"
+        (``sat_rejected_no_accuracy_prediction``, present once one is)."""
+        assert self._sats is not None
+        gone = ~valid & self._sats.store.no_prediction(epoch.system, epoch.prn,
+                                                        epoch.t_gps_s - epoch.pseudorange_m / C_M_S)
+        if gone.any():
+            key = "sat_rejected_no_accuracy_prediction"
+            self._counts[key] = self._counts.get(key, 0) + int(gone.sum())
+
     def _push_raw(self, raw: RawGnss) -> None:
         epoch = raw.epoch
         atmosphere = None
@@ -98,7 +109,8 @@ class TightNavigator:
             st, t_tx = transmission_states(cast(EphemerisStore, self._sats), epoch)
             epoch = epoch.replace(sat_pos_ecef_m=st.pos_ecef_m, sat_vel_ecef_m_s=st.vel_ecef_m_s,
                                   sat_clock_s=st.clock_s, sat_clock_drift_s_s=st.clock_drift_s_s)
-            if not st.valid.all():  # no ephemeris for some: as attach_broadcast, without them
+            if not st.valid.all():  # no (usable) ephemeris for some: as attach_broadcast, without them
+                self._count_no_prediction(epoch, st.valid)
                 epoch, t_tx = epoch.select(st.valid), t_tx[st.valid]
             if self.engine.frame is not None:
                 atmosphere = self._atmosphere().delays_m(epoch.system, epoch.prn, t_tx)

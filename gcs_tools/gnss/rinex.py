@@ -14,8 +14,9 @@ the metres RINEX writes (GPS/QZSS/BeiDou "SV accuracy", Galileo SISA) go back to
 (``lnav.ura_index`` / ``inav.sisa_index``) and out through its table (``lnav.ura_m`` / ``inav.sisa_m``),
 so the nominal value RINEX prescribes (2.0 m for URA index 0, as the real files and RTKLIB's writer
 put) and the interval's upper bound (2.4 m) both read as 2.4 m; URA index 15 (above 6144 m), a
-Galileo SISA below zero (−1: "NAPA", no accuracy prediction available) or above the table, and a
-blank field read as inf ("not given", as the UBX decoders give index 15 and NAPA).
+Galileo SISA below zero (−1: "NAPA", no accuracy prediction available) or above the table read as
+inf ("no prediction", as the UBX decoders give index 15 and NAPA); a blank field reads as NaN ("not
+given"), and the writer writes NaN as a blank field.
 
 Galileo records (``data sources``, RINEX 3.05 table A8): bit 0 I/NAV E1-B, bit 1 F/NAV E5a-I, bit 2
 I/NAV E5b-I; bit 8 the clock (af0-af2, toc, SISA) is the E5a,E1 pair's, bit 9 the E5b,E1 pair's.
@@ -412,7 +413,7 @@ def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
             tgd_s=tgd,
             iode=int(v[3]),
             health=health,
-            accuracy_m=broadcast_accuracy_m(system, v[23]) if block[6][4:23].strip() else math.inf,
+            accuracy_m=broadcast_accuracy_m(system, v[23]) if block[6][4:23].strip() else math.nan,
         )
     )
 
@@ -433,7 +434,8 @@ def galileo_skip_reason(sources: int) -> str:
 
 
 def broadcast_accuracy_m(system: System, value_m: float) -> float:
-    """A navigation record's accuracy field (metres) -> ``accuracy_m`` as the broadcast index gives it."""
+    """A navigation record's accuracy field (metres) -> ``accuracy_m`` as the broadcast index gives it
+    (inf: no prediction). A blank field is not a value: the reader makes it NaN before this."""
     if not value_m >= 0.0:  # Galileo's −1 (NAPA); never a URA
         return math.inf
     if system == System.GALILEO:
@@ -445,7 +447,9 @@ def broadcast_accuracy_m(system: System, value_m: float) -> float:
 
 
 def _d(x: float) -> str:
-    """D19.12 as RINEX writes it."""
+    """D19.12 as RINEX writes it; NaN (a value not given) as a blank field."""
+    if math.isnan(x):
+        return " " * 19
     s = f"{x:19.12E}"
     return s.replace("E", "D")
 
@@ -465,7 +469,10 @@ def _calendar(t_gps_s: float, scale: str) -> tuple[int, int, int, int, int, floa
 
 def _accuracy_field(system: System, accuracy_m: float) -> float:
     """``accuracy_m`` as a navigation record writes it: Galileo SISA in metres (inf -> NAPA, −1); URA as
-    RINEX 3.05's nominal value of its index, 2^(1+N/2) to 0.1 m for N ≤ 6, else 2^(N−2) (inf: 8192 m)."""
+    RINEX 3.05's nominal value of its index, 2^(1+N/2) to 0.1 m for N ≤ 6, else 2^(N−2) (inf: 8192 m);
+    NaN (not given) stays NaN, which ``_d`` writes as a blank field."""
+    if math.isnan(accuracy_m):
+        return accuracy_m
     if system == System.GALILEO:
         return accuracy_m if math.isfinite(accuracy_m) else -1.0
     n = ura_index(accuracy_m)

@@ -2,7 +2,9 @@
 
 ``load_input`` returns epochs ready for the solver (RINEX/UBX: satellite states attached from the
 broadcast ephemerides at transmission time; observations without an ephemeris counted in
-``rejected['no_ephemeris']``), the Klobuchar parameters, and the truth when one is given.
+``rejected['no_ephemeris']``, those whose ephemeris broadcasts "no accuracy prediction" (URA 15,
+Galileo NAPA) in ``rejected['no_accuracy_prediction']``), the Klobuchar parameters, and the truth
+when one is given.
 """
 
 from __future__ import annotations
@@ -108,8 +110,7 @@ def rinex_input(obs_path: Path, nav_paths: Sequence[Path]) -> GnssInput:
     epochs = []
     for e in obs.epochs:
         e = rinex.fix_glonass_rates(e, store.glonass_channel(e.prn))
-        e, dropped = attach_broadcast(e, store)
-        rejected["no_ephemeris"] += dropped
+        e, _ = attach_broadcast(e, store, rejected)
         if e.n:
             epochs.append(e)
     if not epochs:

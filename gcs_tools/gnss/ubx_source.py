@@ -21,7 +21,8 @@ __all__ = ["open_stream", "read_ubx_file", "ubx_items"]
 def read_ubx_file(path: Path) -> Any:
     """A UBX log as a ``GnssInput``: RAWX epochs with satellite states from the SFRBX ephemerides
     decoded in the same log (GPS, GLONASS, Galileo, BeiDou: observations of satellites without one
-    are counted as no_ephemeris)."""
+    are counted as no_ephemeris, those whose ephemeris broadcasts no accuracy prediction as
+    no_accuracy_prediction)."""
     from gcs_tools.gnss.sources import GnssInput
 
     dec = UbxDecoder()
@@ -47,8 +48,7 @@ def read_ubx_file(path: Path) -> Any:
     rejected: Counter[str] = Counter(dec.counters)
     out = []
     for e in epochs:
-        e, dropped = attach_broadcast(e, store)
-        rejected["no_ephemeris"] += dropped
+        e, _ = attach_broadcast(e, store, rejected)
         if e.n:
             out.append(e)
     if not out:
