@@ -170,6 +170,11 @@ def _kepler_json(e: KeplerEphemeris) -> dict[str, Any]:
     return d
 
 
+def _accuracy(value: float | str | None) -> float:
+    """``_kepler_json``'s accuracy back: null -> NaN (not given), "inf" -> inf, a number as itself."""
+    return math.nan if value is None else float(value)
+
+
 def store_from_info(info: dict[str, Any]) -> EphemerisStore:
     """The ``EphemerisStore`` of a ``receiver.json``'s ``ephemerides`` (its consumer's side)."""
     eph = info["ephemerides"]
@@ -179,8 +184,7 @@ def store_from_info(info: dict[str, Any]) -> EphemerisStore:
         fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in g.items()}
         glonass.append(GlonassEphemeris(**fields))
     return EphemerisStore(
-        [KeplerEphemeris(**{**e, "accuracy_m": math.nan if e.get("accuracy_m") is None else float(e["accuracy_m"])})
-         for e in eph["kepler"]],
+        [KeplerEphemeris(**{**e, "accuracy_m": _accuracy(e.get("accuracy_m"))}) for e in eph["kepler"]],
         glonass,
         None if klob is None else (np.array(klob[0]), np.array(klob[1])),
     )

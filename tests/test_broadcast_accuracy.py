@@ -76,10 +76,10 @@ def test_no_prediction_is_left_out_of_the_single_point_solution_and_counted(targ
     assert np.linalg.norm(sol.p_ecef_m - RX_ECEF) < 1.0  # still the receiver (a clean sky)
 
 
-def test_the_latest_set_decides_no_fallback_to_an_older_one():
+def test_the_selected_set_decides_no_fallback_to_another():
     """The satellite's set at T0 says NAPA, its set an hour earlier (still within its age) gave 3.12 m:
-    at T0 the satellite is not used (receivers and RTKLIB use the latest set); half an hour earlier,
-    nearer the old set, it is."""
+    at T0 (the NAPA set the nearest) the satellite is not used, not even with the older set; 40 min
+    earlier, nearer the old set, it is."""
     eph = next(e for e in KEP if (e.system, e.prn) == GAL)
     old = dataclasses.replace(eph, toe_gps_s=eph.toe_gps_s - 3600.0, toc_gps_s=eph.toc_gps_s - 3600.0,
                               toe_sow_s=eph.toe_sow_s - 3600.0, accuracy_m=sisa_m(107))
@@ -122,7 +122,8 @@ def test_no_prediction_is_left_out_of_the_tight_filter_and_counted():
     assert "sat_rejected_no_accuracy_prediction" not in given.counters()
     a, b, g = (n.estimate() for n in (napa, without, given))
     assert a is not None and b is not None and g is not None
-    np.testing.assert_allclose(np.r_[a.p_ned_m, a.v_ned_m_s], np.r_[b.p_ned_m, b.v_ned_m_s], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.r_[a.p_ned_m, a.v_ned_m_s], np.r_[b.p_ned_m, b.v_ned_m_s],
+                               rtol=0, atol=1e-9)
     assert np.abs(np.asarray(a.p_ned_m) - np.asarray(g.p_ned_m)).max() > 1e-6
 
 
@@ -132,4 +133,5 @@ def test_the_simulated_sky_broadcasts_a_healthy_accuracy():
     kep, _ = constellation(1.4e9, 1.4e9 + 7200.0, (System.GPS, System.GALILEO, System.BEIDOU))
     got = {(System(e.system), e.accuracy_m) for e in kep}
     assert got == {(System.GPS, 2.4), (System.GALILEO, 3.12), (System.BEIDOU, 2.4)}
-    assert BROADCAST_ACCURACY_M == {System.GPS: ura_m(0), System.GALILEO: sisa_m(107), System.BEIDOU: ura_m(0)}
+    expected = {System.GPS: ura_m(0), System.GALILEO: sisa_m(107), System.BEIDOU: ura_m(0)}
+    assert expected == BROADCAST_ACCURACY_M

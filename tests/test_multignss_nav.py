@@ -377,8 +377,8 @@ def test_receiver_json_carries_the_accuracy_as_strict_json():
     from simvehicle.ubx_server import _kepler_json, store_from_info
 
     kep, _ = constellation(1.4e9, 1.4e9 + 3600.0, (System.GALILEO,))
-    ephs = [dataclasses.replace(kep[0], accuracy_m=math.nan), dataclasses.replace(kep[1], accuracy_m=math.inf),
-            kep[2]]
+    ephs = [dataclasses.replace(kep[0], accuracy_m=math.nan),
+            dataclasses.replace(kep[1], accuracy_m=math.inf), kep[2]]
     assert kep[2].accuracy_m == inav.sisa_m(107)  # the simulated sky's: SISA index 107, 3.12 m
     text = json.dumps({"ephemerides": {"kepler": [_kepler_json(e) for e in ephs], "glonass": []}},
                       allow_nan=False)

@@ -153,7 +153,8 @@ def test_accuracy_not_given_is_a_blank_field_and_no_prediction_is_not(tmp_path, 
     (g,) = _read(tmp_path, GPS_G01).kepler
     g = dataclasses.replace(g, system=int(system))
     given = inav.sisa_m(107) if system == System.GALILEO else lnav.ura_m(0)
-    ephs = [dataclasses.replace(g, prn=p, accuracy_m=a) for p, a in ((1, math.nan), (2, math.inf), (3, given))]
+    ephs = [dataclasses.replace(g, prn=p, accuracy_m=a)
+            for p, a in ((1, math.nan), (2, math.inf), (3, given))]
     rinex.write_nav(tmp_path / "w.nav", ephs)
     body = (tmp_path / "w.nav").read_text().split("END OF HEADER\n")[1].splitlines()
     fields = [line[4:23] for line in body[6::8]]  # each record: its first line, then broadcast orbits 1-7

@@ -281,8 +281,8 @@ class EphemerisStore:
     within ``MAX_AGE_S`` (RTKLIB's rule); unhealthy ones are dropped when the store is built
     (``dropped_unhealthy``). A selected ephemeris whose broadcast says "no accuracy prediction"
     (``accuracy_m`` inf) gives no state (``valid`` False, as without an ephemeris; ``no_prediction``
-    tells the two apart for counting): the satellite is not used until its next set, as receivers and
-    RTKLIB do. Build once (O(m log m)); queries are vectorised (see module doc)."""
+    tells the two apart for counting): another set of the satellite is not used instead (RTKLIB too
+    selects, then excludes). Build once (O(m log m)); queries are vectorised (see module doc)."""
 
     def __init__(
         self,
