@@ -135,3 +135,14 @@ def test_the_simulated_sky_broadcasts_a_healthy_accuracy():
     assert got == {(System.GPS, 2.4), (System.GALILEO, 3.12), (System.BEIDOU, 2.4)}
     expected = {System.GPS: ura_m(0), System.GALILEO: sisa_m(107), System.BEIDOU: ura_m(0)}
     assert expected == BROADCAST_ACCURACY_M
+
+
+def test_a_broadcast_cannot_say_not_given():
+    """Every broadcast states an index: encoding NaN ("not given") is an error, inf is URA 15 / NAPA."""
+    from companion.gnss.inav import sisa_index
+    from companion.gnss.lnav import ura_index
+
+    for index in (ura_index, sisa_index):
+        with pytest.raises(ValueError, match="not given"):
+            index(math.nan)
+    assert (ura_index(math.inf), sisa_index(math.inf)) == (15, SISA_NAPA)
