@@ -162,12 +162,11 @@ def run_sats_job(job: Job) -> list[dict[str, Any]]:
     """A smartLoc drive's satellites on the flight (``transplant.sky_on_flight``): every loose method on
     the single-point fixes (latency, velocity and accuracy as the series condition), every tight row
     (``TightConfig()``, no map) on the placed epochs arriving with the fixes, and the fixes' own errors."""
-    from companion.tight import RawGnss, TightConfig
+    from companion.tight import TightConfig
     from gcs_tools.evaluate.tight import TIGHT_ROWS
     from gcs_tools.gnss import tight_replay as tr
     from gcs_tools.gnss import transplant
     from gcs_tools.replay import core
-    from gcs_tools.replay.logs import open_log
     from gcs_tools.replay.synthetic_gnss import GnssErrorOptions, WithSyntheticGnss
 
     flight = Path(job.flight)
@@ -181,20 +180,17 @@ def run_sats_job(job: Job) -> list[dict[str, Any]]:
             "seed": job.seed}
     out: list[dict[str, Any]] = []
     for method in job.methods:
-        fixes = WithSyntheticGnss(open_log(flight, None, frame), placed.fixes, frame, placed.raw_errors)
+        fixes = WithSyntheticGnss(transplant.on_drive_frame(flight, None, sky), placed.fixes, frame,
+                                  placed.raw_errors)
         s = core.replay(flight, method, home=frame, reader=fixes, rate_hz=10.0, config=config).summary
         out.append(_row(base, method, s))
     key = (job.flight, job.errors, id(sky), job.seed, job.rate_hz, job.latency_ms,  # sky: per file state
            job.velocity_std_m_s)  # the synthetic Doppler's information
     if key not in _TIGHT_DONE:
-        raws = [RawGnss(int(t), e) for t, e in zip(placed.placed.t_validity_us, placed.placed.epochs,
-                                                    strict=True)]
-        arrival = dict(zip(placed.placed.t_validity_us.tolist(), placed.raw_arrival_us.tolist(), strict=True))
         done: list[dict[str, Any]] = []
         for w in TIGHT_ROWS:
-            raw: Any = tr.LogWithRawGnss(open_log(flight, None, frame), raws, frame,  # a LogReader of RawGnss
-                                         f"smartLoc {sky.name} placed on the flight (raw epochs)",
-                                         lambda r: arrival[r.t_us])
+            raw: Any = transplant.placed_raw_reader(transplant.on_drive_frame(flight, None, sky), placed,
+                                                    sky.name)  # a LogReader of RawGnss
             s = core.replay(flight, w, home=frame, reader=raw, rate_hz=10.0,
                             navigator=tr.tight_factory(TightConfig())).summary
             done.append(_row({}, TIGHT_PREFIX + w, s))

@@ -49,7 +49,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -57,14 +57,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.samples import GnssFix
 from companion.errors import UserError
 from companion.gnss.constants import C_M_S, OMEGA_E_RAD_S
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, geodetic_to_ecef, sagnac_range_m
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig
 from gcs_tools.gnss.baseline import TruthResiduals, epoch_residuals_at_truth, ned_errors, solve_series
+from gcs_tools.replay.events import Event, LocalReference, LogReader, Reference, ReferenceInfo
 
 if TYPE_CHECKING:
+    from gcs_tools.gnss.tight_replay import LogWithRawGnss
     from gcs_tools.replay.synthetic_gnss import GnssErrorOptions, SyntheticFixes, Track
 
 PREFIX = "smartloc-sats:"  # the campaign's errors choice: smartloc-sats:DRIVE_Input.txt
@@ -93,18 +96,19 @@ class DriveSky:
         return float(self.t_s[-1] - self.t_s[0] + self.period_s)
 
 
-def check_choice(text: str) -> Path:
-    """The smartLoc input of a ``smartloc-sats:INPUT`` choice (one-line errors for a bad one)."""
+def check_choice(text: str, option: str = "--errors") -> Path:
+    """The smartLoc input of a ``smartloc-sats:INPUT`` choice given to ``option`` (one-line errors for a
+    bad one)."""
     from gcs_tools.gnss.smartloc import default_truth_path
 
     path = Path(text[len(PREFIX):].strip())
     if not str(path) or str(path) == ".":
-        raise UserError(f"--errors {text!r}: give the smartLoc input after '{PREFIX}' "
+        raise UserError(f"{option} {text!r}: give the smartLoc input after '{PREFIX}' "
                         f"(e.g. {PREFIX}Berlin_Potsdamer_Platz_Input.txt)")
     if not path.is_file():
-        raise UserError(f"--errors {text!r}: {path}: no such file")
+        raise UserError(f"{option} {text!r}: {path}: no such file")
     if default_truth_path(path) is None:
-        raise UserError(f"--errors {text!r}: no *_GT.txt truth beside {path.name}")
+        raise UserError(f"{option} {text!r}: no *_GT.txt truth beside {path.name}")
     return path
 
 
@@ -317,16 +321,18 @@ class SkyOnFlight:
     raw_errors: dict[str, Any]  # the fixes' own errors (synthetic_gnss.raw_fix_errors)
 
 
-def sky_on_flight(flight: Path, sky: DriveSky, opts: GnssErrorOptions) -> SkyOnFlight:
-    """The drive ``sky`` placed on an ANSFL ``flight`` (its truth read in the drive's frame) with the
-    series condition's options ``opts`` (``GnssErrorOptions``: seed, rate, accuracy, latency, velocity)."""
-    from gcs_tools.replay.logs import open_log
+def sky_on_flight(flight: Path, sky: DriveSky, opts: GnssErrorOptions, gps_delay_ms: float | None = None
+                  ) -> SkyOnFlight:
+    """The drive ``sky`` placed on the truth of the log ``flight`` (an ANSFL flight, or any log with a
+    truth: ``on_drive_frame``) with the series condition's options ``opts`` (``GnssErrorOptions``: seed,
+    rate, accuracy, latency, velocity)."""
     from gcs_tools.replay.synthetic_gnss import assemble, collect_tracks, raw_fix_errors, run_model, to_track
 
     frame = sky.origin
-    tracks = collect_tracks(open_log(flight, None, frame))
+    tracks = collect_tracks(on_drive_frame(flight, gps_delay_ms, sky))
     if len(tracks.truth_t_us) < 2:
-        raise UserError(f"{flight}: no ground truth to place the satellites on")
+        raise UserError(f"{flight}: no ground truth (GT.csv, SIM, SIM_STATE, *_groundtruth) to place the "
+                        "drive's satellites on")
     truth = to_track(tracks.truth_t_us, tracks.truth_p, tracks.truth_label, tracks.truth_geodetic, frame)
     placed = place(sky, truth, frame, opts)
     series = solve_series(placed.epochs, SppConfig())
@@ -351,3 +357,57 @@ def sky_on_flight(flight: Path, sky: DriveSky, opts: GnssErrorOptions) -> SkyOnF
                      series.ok, info)
     raw_arrival = t_arrival if opts.latency_ms is None else t_v + int(round(opts.latency_ms * 1000))
     return SkyOnFlight(placed, fixes, raw_arrival, frame, truth, raw_fix_errors(fixes, truth))
+
+
+def on_drive_frame(path: Path, gps_delay_ms: float | None, sky: DriveSky) -> LogReader:
+    """The log ``path`` moved to the drive: its truth and references as NED about the drive's ``origin``.
+    A log with local data only (ANSFL: an ``anchor``) is read in that frame; a log with geodetic
+    references (a SITL truth, an autopilot's estimate) is read in its own frame and moved
+    (``MovedReferences``: the flight keeps its shape, not its place). Fixes are the replay's to replace."""
+    from gcs_tools.replay.logs import open_log
+
+    reader = open_log(path, gps_delay_ms, sky.origin)
+    return reader if reader.anchor is not None else MovedReferences(reader, sky.origin)
+
+
+class MovedReferences:
+    """A log reader whose geodetic references become ``LocalReference`` NED about the first of them,
+    read as NED about ``anchor`` (the replay's home): the flight translated to another place on Earth."""
+
+    def __init__(self, inner: LogReader, anchor: LocalNedFrame) -> None:
+        self.inner, self.anchor = inner, anchor
+        self.format, self.stats, self.sources = inner.format, inner.stats, inner.sources
+
+    @property
+    def references(self) -> dict[str, ReferenceInfo]:
+        return self.inner.references
+
+    def first_fix(self) -> GnssFix | None:
+        return None
+
+    def describe_empty(self) -> str:
+        return self.inner.describe_empty()
+
+    def __iter__(self) -> Iterator[Event]:
+        own: LocalNedFrame | None = None  # the log's frame: its first geodetic reference
+        for ev in self.inner:
+            if type(ev) is Reference:
+                if own is None:
+                    own = LocalNedFrame(ev.lat_deg, ev.lon_deg, ev.alt_m)
+                n, e, d = (float(v) for v in own.to_ned_m(ev.lat_deg, ev.lon_deg, ev.alt_m))
+                yield LocalReference(ev.kind, ev.t_us, (n, e, d), ev.source)
+            else:
+                yield ev
+
+
+def placed_raw_reader(inner: LogReader, on: SkyOnFlight, name: str) -> LogWithRawGnss:
+    """``inner`` (in the drive's frame, ``on_drive_frame``) with its fixes replaced by the placed epochs
+    as raw epochs, each pushed at its fix's arrival (``SkyOnFlight.raw_arrival_us``)."""
+    from companion.tight import RawGnss
+    from gcs_tools.gnss.tight_replay import LogWithRawGnss
+
+    p = on.placed
+    raws = [RawGnss(int(t), e) for t, e in zip(p.t_validity_us, p.epochs, strict=True)]
+    arrival = dict(zip(p.t_validity_us.tolist(), on.raw_arrival_us.tolist(), strict=True))
+    return LogWithRawGnss(inner, raws, on.frame, f"smartLoc {name} placed on the flight (raw epochs)",
+                          lambda r: arrival[r.t_us])

@@ -71,10 +71,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def add_gnss_arguments(parser: argparse.ArgumentParser) -> None:
     """The options that replace the log's GNSS by synthetic fixes (docs/replay.md)."""
     g = parser.add_argument_group("synthetic GNSS (replace the log's fixes; docs/replay.md)")
-    g.add_argument("--gnss-errors", default=None, metavar="none|model|SERIES.csv",
+    g.add_argument("--gnss-errors", default=None, metavar="none|model|SERIES.csv|smartloc-sats:INPUT",
                    help="replace the log's fixes by fixes made from its truth (or --gnss-base log) plus: no "
                         "error, the project's urban GNSS model, or a recorded error series (CSV "
-                        "t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m)")
+                        "t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m); or smartloc-sats:INPUT: a smartLoc "
+                        "drive's satellites placed on the log's truth (its single-point fixes, or with "
+                        "--coupling tight its raw epochs)")
     g.add_argument("--gnss-rate-hz", type=float, default=5.0, help="fixes per second (default 5)")
     g.add_argument("--gnss-accuracy", default="reported", choices=ACCURACY_MODES,
                    help="what each fix reports: its accuracy (model or series), nothing, or only an HDOP "
@@ -116,8 +118,13 @@ def gnss_options(args: argparse.Namespace) -> GnssErrorOptions | None:
         if section != "gnss":
             raise UserError(f"--gnss-set {text!r}: only gnss.FIELD (the GNSS model's fields)")
         overrides.append((name, value))
+    errors = args.gnss_errors
+    if is_sats(errors):  # the placement takes the series condition's options (seed, latency, velocity, ...)
+        if args.gnss_base == "log":
+            raise UserError("--gnss-base log: smartloc-sats places the drive's satellites on the log's truth")
+        errors = "none"
     velocity = velocity_option(args.gnss_velocity)
-    opts = GnssErrorOptions(args.gnss_errors, rate_hz=args.gnss_rate_hz, accuracy=args.gnss_accuracy,
+    opts = GnssErrorOptions(errors, rate_hz=args.gnss_rate_hz, accuracy=args.gnss_accuracy,
                             latency_ms=args.gnss_latency_ms, base=args.gnss_base,
                             clearance_m=args.gnss_clearance_m, model_overrides=tuple(overrides),
                             velocity_std_m_s=velocity, seed=args.seed,
@@ -135,8 +142,14 @@ def run(args: argparse.Namespace) -> int:
         check_weighting(args.method)
     else:
         choices.method(args.method)
+    sats = is_sats(args.gnss_errors)
+    if args.coupling == "tight" and args.gnss_errors is not None and not sats:
+        raise UserError(f"--coupling tight --gnss-errors {args.gnss_errors}: these are fixes, and fixes carry "
+                        "no satellites for the tightly coupled filter (use --gnss-errors "
+                        "smartloc-sats:DRIVE_Input.txt, --ubx or --rinex-obs)")
     mission = choices.mission(args.mission) if args.mission is not None else None
-    gnss_reader, gnss_note, navigator = _raw_gnss(args, mission)
+    drive = _check_satellites(args, mission) if sats else None
+    gnss_reader, gnss_note, navigator = (None, None, None) if sats else _raw_gnss(args, mission)
     if args.smartloc is not None:
         args.file = args.smartloc
     elif args.file is None:
@@ -157,6 +170,11 @@ def run(args: argparse.Namespace) -> int:
         bar = tqdm(total=args.file.stat().st_size if args.file.is_file() else 0, unit="B",
                    unit_scale=True, desc=f"replay {args.method}", leave=False)
     progress = None if bar is None else (lambda pos, size: bar.update(pos - bar.n))
+    placed = None
+    if drive is not None:
+        assert gnss is not None
+        gnss_reader, gnss_note, navigator, placed = _satellites(args, drive, gnss)
+        home, gnss = placed.frame, None
     pub = telemetry.publisher_from_args(args, "companion") if args.publish else None
     try:
         result = core.replay(args.file, args.method, home=home, mission=mission, rate_hz=args.rate_hz,
@@ -170,6 +188,9 @@ def run(args: argparse.Namespace) -> int:
             pub.close()
     if gnss_note:
         result.summary["raw_gnss"] = gnss_note
+    if placed is not None:  # what --gnss-errors SERIES.csv reports, for the placed satellites' fixes
+        result.summary["synthetic_gnss"] = placed.fixes.info
+        result.summary["errors"]["raw_fixes"] = {"note": core.RAW_FIXES_NOTE, **placed.raw_errors}
     core.write_summary(result, args.out)
     if args.json:
         print((args.out / "summary.json").read_text(encoding="utf-8"), end="")
@@ -182,6 +203,52 @@ def run(args: argparse.Namespace) -> int:
         c = pub.counters()
         print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle_id}/companion/*")
     return 0
+
+
+def is_sats(errors: str | None) -> bool:
+    from gcs_tools.gnss.transplant import PREFIX
+
+    return errors is not None and errors.startswith(PREFIX)
+
+
+def _check_satellites(args: argparse.Namespace, mission: Mission | None) -> Path:
+    """``--gnss-errors smartloc-sats:INPUT``: the drive's input, the other options checked (one line)."""
+    from gcs_tools.gnss.transplant import check_choice
+
+    other = [name for name, value in (("--rinex-obs", args.rinex_obs), ("--rinex-nav", args.rinex_nav),
+                                      ("--ubx", args.ubx), ("--smartloc", args.smartloc),
+                                      ("--truth", args.truth)) if value]
+    if other:
+        raise UserError(f"--gnss-errors smartloc-sats and {other[0]}: both replace the log's GNSS; choose one")
+    if mission is not None or args.home is not None:
+        raise UserError(f"--{'mission' if mission is not None else 'home'} with --gnss-errors smartloc-sats: "
+                        "the flight is moved to the drive's first truth point (the satellites' sky), "
+                        "where no mission's map or home applies")
+    return check_choice(args.gnss_errors, "--gnss-errors")
+
+
+def _satellites(args: argparse.Namespace, drive: Path, opts: GnssErrorOptions) -> tuple[Any, dict[str, Any],
+                                                                                       Any, Any]:
+    """The drive's satellites placed on the log's truth (``gcs_tools.gnss.transplant``, as the real-flight
+    campaign's ``smartloc-sats`` condition): (reader, summary note, navigator factory, ``SkyOnFlight``).
+    Loose: the single-point fixes into the loose estimator; tight: the raw epochs into the tightly coupled
+    navigator (``TightConfig()``, no map), each arriving with its fix."""
+    from gcs_tools.gnss import transplant
+    from gcs_tools.replay.synthetic_gnss import WithSyntheticGnss
+
+    sky = transplant.drive_sky(drive)
+    placed = transplant.sky_on_flight(args.file, sky, opts, args.gps_delay_ms)
+    log = transplant.on_drive_frame(args.file, args.gps_delay_ms, sky)
+    note: dict[str, Any] = {"smartloc_sats": str(drive), "coupling": args.coupling,
+                            "epochs": len(placed.placed.epochs),
+                            "frame": "the drive's first truth point: the flight's truth moved there"}
+    if args.coupling == "loose":
+        return WithSyntheticGnss(log, placed.fixes, placed.frame, placed.raw_errors), note, None, placed
+    from companion.tight import TightConfig
+    from gcs_tools.gnss.tight_replay import tight_factory
+
+    note["map"] = None
+    return transplant.placed_raw_reader(log, placed, sky.name), note, tight_factory(TightConfig()), placed
 
 
 def _raw_gnss(args: argparse.Namespace, mission: Mission | None = None

@@ -418,7 +418,9 @@ def replay(
     if synthetic is not None:
         summary["synthetic_gnss"] = synthetic.synthetic.info
         summary["errors"]["raw_fixes"] = {"note": RAW_FIXES_NOTE, **synthetic.raw_errors}
-    log_reader = synthetic.inner if synthetic is not None else reader
+    log_reader: Any = reader  # the log's own reader, under any wrapper that replaces its GNSS
+    while hasattr(log_reader, "inner"):
+        log_reader = log_reader.inner
     clock = getattr(log_reader, "clock", None)
     if clock is not None:
         summary["clock_alignment"] = clock
