@@ -5,9 +5,11 @@ a synthetic ANSFL flight (the drive skips without the shared data, fails when CI
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -285,3 +287,104 @@ def test_satellite_velocities_and_clock_drift_known_answers() -> None:
     assert np.abs(d - drift).max() < 0.1 and np.abs(np.median(d) - drift) < 0.02
     short = transplant.satellite_velocities(t[:2], epochs[:2])  # fewer than 3 epochs: no velocity
     assert all(np.isnan(e.sat_vel_ecef_m_s).all() for e in short)
+
+
+def _replay_json(args: list[str], capsys: pytest.CaptureFixture[str]) -> dict[str, Any]:
+    from gcs_tools.cli import main
+
+    capsys.readouterr()
+    assert main(["replay", *args, "--json", "--no-progress"]) == 0, capsys.readouterr().err
+    return json.loads(capsys.readouterr().out)
+
+
+def test_replay_cli_places_the_drives_satellites_as_the_campaign_does(
+        drive: Path, flight: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``beliefnav replay FLIGHT --gnss-errors smartloc-sats:INPUT --seed 3`` is the campaign's run of that
+    flight and seed: loose, its raw fixes' errors are the placed SPP fixes' (exact) and its estimate's
+    error to the truth the campaign's second-order run's (exact); ``--coupling tight`` the campaign's
+    ``tight-second-order`` run's (exact). The campaign's summaries are taken unrounded."""
+    from gcs_tools.replay.core import json_safe
+
+    errors = f"{transplant.PREFIX}{drive}"
+    seen: dict[str, dict[str, Any]] = {}
+    row = real._row
+    monkeypatch.setattr(real, "_row", lambda base, name, s: (seen.setdefault(name, s), row(base, name, s))[1])
+    monkeypatch.setattr(real, "_TIGHT_DONE", {})
+    real.run_job(real.Job(str(flight), errors, "reported", 3, 5.0, None, ("second-order",)))
+    common = [str(flight), "--gnss-errors", errors, "--seed", "3", "--rate-hz", "10", "--method", "second-order"]
+    loose = _replay_json([*common, "--out", str(tmp_path / "loose")], capsys)
+    placed = transplant.sky_on_flight(flight, transplant.drive_sky(drive),
+                                      GnssErrorOptions("none", accuracy="reported", seed=3))
+    raw = loose["errors"]["raw_fixes"]
+    assert {k: raw[k] for k in ("at_validity", "at_arrival")} == json_safe(
+        {k: placed.raw_errors[k] for k in ("at_validity", "at_arrival")})
+    assert raw["at_arrival"]["error_horizontal_m"]["median"] > 3.0  # Berlin's errors
+    assert loose["synthetic_gnss"]["seed"] == 3 and loose["synthetic_gnss"]["errors"].startswith("smartloc-sats:")
+    want = seen["second-order"]["errors"]["truth"]["error_horizontal_m"]
+    assert loose["errors"]["truth"]["error_horizontal_m"] == json_safe(want)
+    assert loose["clock_alignment"]["offset_s"] == pytest.approx(0.2, abs=0.01)  # the ANSFL log's, kept
+    tight = _replay_json([*common, "--coupling", "tight", "--out", str(tmp_path / "tight")], capsys)
+    got = tight["errors"]["truth"]["error_horizontal_m"]["median"]
+    assert got == pytest.approx(seen["tight-second-order"]["errors"]["truth"]["error_horizontal_m"]["median"],
+                                abs=1e-9)
+    assert got != loose["errors"]["truth"]["error_horizontal_m"]["median"]  # not the loose filter
+    assert tight["raw_gnss"]["coupling"] == "tight" and tight["navigator"]["gnss_fused"] >= 80
+    other = _replay_json([*common[:4], "4", *common[5:], "--out", str(tmp_path / "seed4")], capsys)
+    assert other["synthetic_gnss"]["series_start_s"] != loose["synthetic_gnss"]["series_start_s"]
+    for kind in ("loose", "tight"):  # the replay's outputs are a replay's: the table and its export
+        assert (tmp_path / kind / "estimates.csv").is_file()
+        from gcs_tools.cli import main
+
+        assert main(["export", str(tmp_path / kind), "--format", "csv", "--out", str(tmp_path / f"{kind}.csv")]) == 0
+        assert (tmp_path / f"{kind}.csv").stat().st_size > 1000
+
+
+def test_replay_cli_satellites_on_a_log_with_geodetic_truth(drive: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A DataFlash SITL log (SIM truth, geodetic, in another city) moved to the drive: its truth keeps its
+    shape (NED about its first point = NED about the drive's origin), the placed fixes reproduce the
+    drive's SPP errors (within 5 cm), and the moved autopilot estimate (POS, cm from SIM) is compared in
+    the same frame as the truth: the estimate's distances to both agree."""
+    from companion.domain.geodesy import LocalNedFrame
+    from gcs_tools.replay.logs import open_log
+    from gcs_tools.replay.synthetic_gnss import collect_tracks, to_track
+
+    log = Path(__file__).parent / "data" / "arducopter_sitl_hover.bin"
+    sky = transplant.drive_sky(drive)
+    placed = transplant.sky_on_flight(log, sky, GnssErrorOptions("none", seed=1))
+    own = collect_tracks(open_log(log))
+    want = to_track(own.truth_t_us, own.truth_p, "", True, LocalNedFrame(*own.truth_p[0]))
+    assert np.array_equal(placed.truth.t_us, want.t_us)
+    assert np.abs(placed.truth.p_ned_m - want.p_ned_m).max() < 1e-6
+    assert placed.placed.wrapped and len(placed.fixes) == len(placed.placed.drive_index)  # 94 s on 60 s
+    assert np.abs(placed.fixes.err_ned_m - sky.spp_err_ned_m[placed.placed.drive_index]).max() < 0.05
+    s = _replay_json([str(log), "--gnss-errors", f"{transplant.PREFIX}{drive}", "--seed", "1",
+                      "--out", str(tmp_path / "o")], capsys)
+    assert s["errors"]["autopilot_estimate"]["n"] > 100 and s["errors"]["truth"]["n"] > 100
+    ap = s["errors"]["autopilot_estimate"]["error_horizontal_m"]["median"]
+    tr = s["errors"]["truth"]["error_horizontal_m"]["median"]
+    assert abs(ap - tr) < 0.5 and 1.0 < tr < 30.0, (ap, tr)
+
+
+def test_replay_cli_satellites_one_line_errors(drive: Path, flight: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    from gcs_tools.cli import main
+
+    errors = f"{transplant.PREFIX}{drive}"
+    no_truth = Path(__file__).parent / "data" / "quad106.tlog"  # a real flight: its own fixes, no truth
+    for args, words in (
+            ([str(flight), "--gnss-errors", f"{transplant.PREFIX}{tmp_path / 'no.txt'}"], "no such file"),
+            ([str(flight), "--gnss-errors", f"{transplant.PREFIX}{flight / 'GT.csv'}"], "no *_GT.txt truth"),
+            ([str(flight), "--gnss-errors", "model", "--coupling", "tight"], "fixes carry no satellites"),
+            ([str(flight), "--gnss-errors", "none", "--coupling", "tight"], "fixes carry no satellites"),
+            ([str(no_truth), "--gnss-errors", errors], "no ground truth"),
+            ([str(flight), "--gnss-errors", errors, "--gnss-base", "log"], "on the log's truth"),
+            ([str(flight), "--gnss-errors", errors, "--home", "52.5,13.4,40"], "moved to the drive"),
+            ([str(flight), "--gnss-errors", errors, "--coupling", "tight", "--method", "bogus"], "bogus"),
+            ([str(flight), "--gnss-errors", errors, "--ubx", str(drive)], "choose one")):
+        capsys.readouterr()
+        assert main(["replay", *args, "--out", str(tmp_path / "o")]) == 2, args
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("beliefnav: error: ") and words in err and "\n" not in err, err
+    assert not (tmp_path / "o").exists()

@@ -64,7 +64,7 @@ from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, geodet
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig
 from gcs_tools.gnss.baseline import TruthResiduals, epoch_residuals_at_truth, ned_errors, solve_series
-from gcs_tools.replay.events import Event, LocalReference, LogReader, Reference, ReferenceInfo
+from gcs_tools.replay.events import TRUTH, Event, LocalReference, LogReader, Reference, ReferenceInfo
 
 if TYPE_CHECKING:
     from gcs_tools.gnss.tight_replay import LogWithRawGnss
@@ -362,20 +362,27 @@ def sky_on_flight(flight: Path, sky: DriveSky, opts: GnssErrorOptions, gps_delay
 def on_drive_frame(path: Path, gps_delay_ms: float | None, sky: DriveSky) -> LogReader:
     """The log ``path`` moved to the drive: its truth and references as NED about the drive's ``origin``.
     A log with local data only (ANSFL: an ``anchor``) is read in that frame; a log with geodetic
-    references (a SITL truth, an autopilot's estimate) is read in its own frame and moved
-    (``MovedReferences``: the flight keeps its shape, not its place). Fixes are the replay's to replace."""
+    references (a SITL truth, an autopilot's estimate) is read in its own frame, the one at its first
+    truth point (found by reading up to it), and moved (``MovedReferences``: the flight keeps its shape,
+    not its place). Fixes are the replay's to replace."""
     from gcs_tools.replay.logs import open_log
 
     reader = open_log(path, gps_delay_ms, sky.origin)
-    return reader if reader.anchor is not None else MovedReferences(reader, sky.origin)
+    if reader.anchor is not None:
+        return reader
+    first = next((ev for ev in open_log(path, gps_delay_ms) if type(ev) is Reference and ev.kind == TRUTH),
+                 None)
+    own = None if first is None else LocalNedFrame(first.lat_deg, first.lon_deg, first.alt_m)
+    return MovedReferences(reader, sky.origin, own)
 
 
 class MovedReferences:
-    """A log reader whose geodetic references become ``LocalReference`` NED about the first of them,
-    read as NED about ``anchor`` (the replay's home): the flight translated to another place on Earth."""
+    """A log reader whose geodetic references become ``LocalReference`` NED about ``own`` (the log's frame;
+    None: its first reference), read as NED about ``anchor`` (the replay's home): the flight translated to
+    another place on Earth (its vertical references' offsets, e.g. a truth logged at altitude 0, kept)."""
 
-    def __init__(self, inner: LogReader, anchor: LocalNedFrame) -> None:
-        self.inner, self.anchor = inner, anchor
+    def __init__(self, inner: LogReader, anchor: LocalNedFrame, own: LocalNedFrame | None = None) -> None:
+        self.inner, self.anchor, self.own = inner, anchor, own
         self.format, self.stats, self.sources = inner.format, inner.stats, inner.sources
 
     @property
@@ -389,7 +396,7 @@ class MovedReferences:
         return self.inner.describe_empty()
 
     def __iter__(self) -> Iterator[Event]:
-        own: LocalNedFrame | None = None  # the log's frame: its first geodetic reference
+        own = self.own
         for ev in self.inner:
             if type(ev) is Reference:
                 if own is None:
