@@ -312,7 +312,8 @@ def test_replay_cli_places_the_drives_satellites_as_the_campaign_does(
     monkeypatch.setattr(real, "_row", lambda base, name, s: (seen.setdefault(name, s), row(base, name, s))[1])
     monkeypatch.setattr(real, "_TIGHT_DONE", {})
     real.run_job(real.Job(str(flight), errors, "reported", 3, 5.0, None, ("second-order",)))
-    common = [str(flight), "--gnss-errors", errors, "--seed", "3", "--rate-hz", "10", "--method", "second-order"]
+    common = [str(flight), "--gnss-errors", errors, "--seed", "3", "--rate-hz", "10",
+              "--method", "second-order"]
     loose = _replay_json([*common, "--out", str(tmp_path / "loose")], capsys)
     placed = transplant.sky_on_flight(flight, transplant.drive_sky(drive),
                                       GnssErrorOptions("none", accuracy="reported", seed=3))
@@ -320,7 +321,8 @@ def test_replay_cli_places_the_drives_satellites_as_the_campaign_does(
     assert {k: raw[k] for k in ("at_validity", "at_arrival")} == json_safe(
         {k: placed.raw_errors[k] for k in ("at_validity", "at_arrival")})
     assert raw["at_arrival"]["error_horizontal_m"]["median"] > 3.0  # Berlin's errors
-    assert loose["synthetic_gnss"]["seed"] == 3 and loose["synthetic_gnss"]["errors"].startswith("smartloc-sats:")
+    assert loose["synthetic_gnss"]["seed"] == 3
+    assert loose["synthetic_gnss"]["errors"].startswith("smartloc-sats:")
     want = seen["second-order"]["errors"]["truth"]["error_horizontal_m"]
     assert loose["errors"]["truth"]["error_horizontal_m"] == json_safe(want)
     assert loose["clock_alignment"]["offset_s"] == pytest.approx(0.2, abs=0.01)  # the ANSFL log's, kept
@@ -332,11 +334,12 @@ def test_replay_cli_places_the_drives_satellites_as_the_campaign_does(
     assert tight["raw_gnss"]["coupling"] == "tight" and tight["navigator"]["gnss_fused"] >= 80
     other = _replay_json([*common[:4], "4", *common[5:], "--out", str(tmp_path / "seed4")], capsys)
     assert other["synthetic_gnss"]["series_start_s"] != loose["synthetic_gnss"]["series_start_s"]
+    from gcs_tools.cli import main
+
     for kind in ("loose", "tight"):  # the replay's outputs are a replay's: the table and its export
         assert (tmp_path / kind / "estimates.csv").is_file()
-        from gcs_tools.cli import main
-
-        assert main(["export", str(tmp_path / kind), "--format", "csv", "--out", str(tmp_path / f"{kind}.csv")]) == 0
+        assert main(["export", str(tmp_path / kind), "--format", "csv",
+                     "--out", str(tmp_path / f"{kind}.csv")]) == 0
         assert (tmp_path / f"{kind}.csv").stat().st_size > 1000
 
 

@@ -384,10 +384,7 @@ class MovedReferences:
     def __init__(self, inner: LogReader, anchor: LocalNedFrame, own: LocalNedFrame | None = None) -> None:
         self.inner, self.anchor, self.own = inner, anchor, own
         self.format, self.stats, self.sources = inner.format, inner.stats, inner.sources
-
-    @property
-    def references(self) -> dict[str, ReferenceInfo]:
-        return self.inner.references
+        self.references: dict[str, ReferenceInfo] = inner.references
 
     def first_fix(self) -> GnssFix | None:
         return None

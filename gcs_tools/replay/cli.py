@@ -144,8 +144,8 @@ def run(args: argparse.Namespace) -> int:
         choices.method(args.method)
     sats = is_sats(args.gnss_errors)
     if args.coupling == "tight" and args.gnss_errors is not None and not sats:
-        raise UserError(f"--coupling tight --gnss-errors {args.gnss_errors}: these are fixes, and fixes carry "
-                        "no satellites for the tightly coupled filter (use --gnss-errors "
+        raise UserError(f"--coupling tight --gnss-errors {args.gnss_errors}: these are fixes, and fixes "
+                        "carry no satellites for the tightly coupled filter (use --gnss-errors "
                         "smartloc-sats:DRIVE_Input.txt, --ubx or --rinex-obs)")
     mission = choices.mission(args.mission) if args.mission is not None else None
     drive = _check_satellites(args, mission) if sats else None
@@ -219,7 +219,8 @@ def _check_satellites(args: argparse.Namespace, mission: Mission | None) -> Path
                                       ("--ubx", args.ubx), ("--smartloc", args.smartloc),
                                       ("--truth", args.truth)) if value]
     if other:
-        raise UserError(f"--gnss-errors smartloc-sats and {other[0]}: both replace the log's GNSS; choose one")
+        raise UserError(f"--gnss-errors smartloc-sats and {other[0]}: both replace the log's GNSS; "
+                        "choose one")
     if mission is not None or args.home is not None:
         raise UserError(f"--{'mission' if mission is not None else 'home'} with --gnss-errors smartloc-sats: "
                         "the flight is moved to the drive's first truth point (the satellites' sky), "
