@@ -115,9 +115,9 @@ class TightConfig:
     map_shadow_matching: bool = True
     # What the belief's consistency is measured on: "prefit" (each satellite's innovation against the
     # prediction), "leave-one-out" (against the prediction corrected by the epoch's other satellites,
-    # weighted by their beliefs: weighting.leave_one_out) or "robust" (the same, the others weighted as
-    # the student-t row weighs them). The two did not help on the canyon's tuning flights (docs/tight.md)
-    # "snapshot": against the solution of the epoch's OTHER satellites, robustly re-fitted about the
+    # weighted by their beliefs: weighting.leave_one_out), "robust" (the same, the others weighted as
+    # the student-t row weighs them; these two did not help on the canyon's tuning flights, docs/tight.md)
+    # or "snapshot": against the solution of the epoch's OTHER satellites, robustly re-fitted about the
     # prediction (companion.tight.snapshot: hat-matrix leave-one-out residuals), meant to remove the
     # prediction's error and the clock's common mode, which every satellite shares. Off: on the canyon's
     # tuning flights it did not help (seeds 1000-1001 / 1002-1003, mean per-flight median / p95 against
