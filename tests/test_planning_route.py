@@ -1,11 +1,14 @@
 """plan_route on the shipped cities: every profile plans, pruned segments stay clear, reference holds."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from companion.domain.samples import Setpoint
 from companion.mission import Bounds, Building, World, WorldConfig, load_mission
 from companion.planning import PlanningError, plan_route, prune_line_of_sight
+from companion.planning.route import clearance_speed_m_s
 
 DEFAULT = load_mission("default")
 
@@ -73,3 +76,38 @@ def test_line_of_sight_pruning_on_known_geometry():
 def test_bad_profile_index_is_one_line():
     with pytest.raises(PlanningError, match=r"default.yaml: no profile 10 \(the mission has 10\)"):
         plan_route(DEFAULT, 10)
+
+
+def test_clearance_speed_known_answers():
+    clearance_m = np.array([0.0, 3.0, 6.0, 9.0, 12.0, 30.0])
+    np.testing.assert_allclose(clearance_speed_m_s(clearance_m, 12.0, 4.0, 1.0),
+                               [1.0, 1.0, 2.0, 3.0, 4.0, 4.0])
+    np.testing.assert_array_equal(clearance_speed_m_s(clearance_m, 0.0, 4.0, 1.0), np.full(6, 4.0))
+
+
+def _planned_for(error_m):
+    planner = dataclasses.replace(DEFAULT.planner, expected_error_m=error_m)
+    return dataclasses.replace(DEFAULT, planner=planner)
+
+
+def test_expected_error_slows_the_segments_narrower_than_it(routes):
+    # profile 3: one straight east-west street 16 m wide (8 m from both walls), 280 m
+    assert len(routes[3].waypoints_ned_m) == 2
+    peak = {}
+    for error_m in (0.0, 8.0, 16.0, 32.0):
+        route = plan_route(_planned_for(error_m), 3)
+        np.testing.assert_array_equal(route.waypoints_ned_m, routes[3].waypoints_ned_m)
+        _, v, _ = route.reference(np.linspace(0.0, route.duration_s, 20001))
+        peak[error_m] = np.linalg.norm(v, axis=1).max()
+    # within the street's clearance: full speed, the same trajectory; beyond: 4 m/s x 8 / error, >= 1 m/s
+    assert peak[0.0] == pytest.approx(4.0, rel=1e-6) and peak[8.0] == peak[0.0]
+    assert peak[16.0] == pytest.approx(2.0, rel=1e-6)
+    assert peak[32.0] == pytest.approx(1.0, rel=1e-6)
+    assert plan_route(_planned_for(16.0), 3).duration_s == pytest.approx(2.0 * routes[3].duration_s)
+
+
+def test_no_expected_error_leaves_every_route_as_it_was(routes):
+    for k in (0, 1, 5):
+        route = plan_route(_planned_for(0.0), k)
+        np.testing.assert_array_equal(route.trajectory.durations_s, routes[k].trajectory.durations_s)
+        np.testing.assert_array_equal(route.waypoints_ned_m, routes[k].waypoints_ned_m)

@@ -108,12 +108,18 @@ class FlightConfig:
     altitude_m: float = 20.0  # height above home; the route flies at p_d = -altitude_m
     speed_max_m_s: float = 4.0  # peak speed of each minimum-jerk segment
     acc_max_m_s2: float = 1.5  # peak acceleration of each minimum-jerk segment
+    # the slowest a segment is flown where its clearance is below planner.expected_error_m (the peak
+    # speed falls in proportion to clearance / expected error, not below this); unused when that is 0
+    speed_min_m_s: float = 1.0
 
     def validate(self) -> None:
-        for name in ("altitude_m", "speed_max_m_s", "acc_max_m_s2"):
+        for name in ("altitude_m", "speed_max_m_s", "acc_max_m_s2", "speed_min_m_s"):
             value = getattr(self, name)
             if value <= 0:
                 raise ValueError(f"{name}: must be > 0, got {value}")
+        if self.speed_min_m_s > self.speed_max_m_s:
+            raise ValueError(f"speed_min_m_s ({self.speed_min_m_s}) must be <= "
+                             f"speed_max_m_s ({self.speed_max_m_s})")
 
 
 @dataclass(frozen=True)
@@ -131,6 +137,13 @@ class PlannerConfig:
     clearance_cost_range_m: float = 10.0  # clearance beyond which the clearance cost vanishes
     clearance_margin_m: float = 4.0  # cells with EDT clearance d_obs below this are blocked
     los_margin_m: float = 3.0  # line-of-sight pruning keeps segments at least this clear (exact)
+    # The horizontal navigation error the route is flown for (e.g. the companion's typical reported
+    # accuracy in the scenario); 0: off. When set, each pruned segment's peak speed is scaled by its
+    # exact clearance / this error (at most flight.speed_max_m_s, at least flight.speed_min_m_s). The
+    # path itself (A*, margins) is unchanged: reaching the clearance cost out to the error made routes
+    # weave into crossings (the default city's profile 3 at 16 m: three waypoints, 5.3 m from a wall,
+    # instead of its straight street's 8.0 m).
+    expected_error_m: float = 0.0
 
     def validate(self) -> None:
         if self.w_tra <= 0:
@@ -141,6 +154,8 @@ class PlannerConfig:
         for name in ("clearance_cost_range_m", "clearance_margin_m", "los_margin_m"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
+        if not self.expected_error_m >= 0.0:
+            raise ValueError(f"expected_error_m: must be >= 0, got {self.expected_error_m}")
         if self.los_margin_m > self.clearance_margin_m:
             raise ValueError(f"los_margin_m ({self.los_margin_m}) must be <= "
                              f"clearance_margin_m ({self.clearance_margin_m})")

@@ -28,8 +28,10 @@ def alpha(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return a, da, dda
 
 
-def segment_duration_s(length_m: np.ndarray, speed_max_m_s: float, acc_max_m_s2: float) -> np.ndarray:
-    """Shortest segment durations whose peak speed and acceleration stay within the limits."""
+def segment_duration_s(length_m: np.ndarray, speed_max_m_s: float | np.ndarray,
+                       acc_max_m_s2: float) -> np.ndarray:
+    """Shortest segment durations whose peak speed and acceleration stay within the limits
+    (``speed_max_m_s``: one limit, or one per segment)."""
     length_m = np.asarray(length_m, dtype=float)
     return np.maximum(PEAK_SPEED_FACTOR * length_m / speed_max_m_s,
                       np.sqrt(PEAK_ACC_FACTOR * length_m / acc_max_m_s2))
@@ -44,8 +46,9 @@ class MinJerkTrajectory:
     t_start_s: float = 0.0
 
     @classmethod
-    def through(cls, waypoints: np.ndarray, speed_max_m_s: float, acc_max_m_s2: float,
+    def through(cls, waypoints: np.ndarray, speed_max_m_s: float | np.ndarray, acc_max_m_s2: float,
                 t_start_s: float = 0.0) -> MinJerkTrajectory:
+        """Segments at their shortest durations; ``speed_max_m_s`` one peak speed, or one per segment."""
         wp = np.array(waypoints, dtype=float)
         lengths_m = np.linalg.norm(np.diff(wp, axis=0), axis=1)
         if wp.shape[0] < 2 or np.any(lengths_m <= 0):

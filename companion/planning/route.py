@@ -1,5 +1,8 @@
 """The planner bridge core: A* on the mission's grid, line-of-sight pruning, minimum-jerk timing.
 
+With the planner's ``expected_error_m`` set, each pruned segment's peak speed falls with its exact
+clearance (``clearance_speed_m_s``); the path is the same.
+
 The route is flat at ``p_d = -altitude_m`` (no take-off segment: the vehicle starts hovering
 at the start point). Waypoints are the exact start, the pruned A* cell centres, and the exact
 goal. Pure code, no I/O.
@@ -73,10 +76,26 @@ def plan_route(mission: Mission, profile_index: int, t_start_s: float = 0.0) -> 
     points_ne_m = np.vstack([start_ne_m, world.cell_centre_ne_m(path.cells[1:-1]), goal_ne_m])
     pruned_ne_m = prune_line_of_sight(points_ne_m, world, planner.los_margin_m)
     waypoints = np.column_stack([pruned_ne_m, np.full(len(pruned_ne_m), -mission.altitude_m)])
-    trajectory = MinJerkTrajectory.through(
-        waypoints, mission.flight.speed_max_m_s, mission.flight.acc_max_m_s2, t_start_s
-    )
+    flight = mission.flight
+    speed_m_s: float | np.ndarray = flight.speed_max_m_s
+    if planner.expected_error_m > 0 and len(pruned_ne_m) > 1:
+        clearance_m = np.array([float(world.segment_clearance_m(a, b))
+                                for a, b in zip(pruned_ne_m[:-1], pruned_ne_m[1:], strict=True)])
+        speed_m_s = clearance_speed_m_s(clearance_m, planner.expected_error_m, flight.speed_max_m_s,
+                                        flight.speed_min_m_s)
+    trajectory = MinJerkTrajectory.through(waypoints, speed_m_s, flight.acc_max_m_s2, t_start_s)
     return Route(profile_index, path, trajectory)
+
+
+def clearance_speed_m_s(clearance_m: np.ndarray, expected_error_m: float, speed_max_m_s: float,
+                        speed_min_m_s: float) -> np.ndarray:
+    """Peak speed of each segment from its clearance: ``speed_max · clearance / expected_error``,
+    within [``speed_min_m_s``, ``speed_max_m_s``] (full speed where the clearance exceeds the
+    expected error; an error of 0 means no limit)."""
+    clearance_m = np.asarray(clearance_m, dtype=float)
+    if expected_error_m <= 0:
+        return np.full(clearance_m.shape, float(speed_max_m_s))
+    return np.clip(speed_max_m_s * clearance_m / expected_error_m, speed_min_m_s, speed_max_m_s)
 
 
 def prune_line_of_sight(points_ne_m: np.ndarray, world: World, margin_m: float) -> np.ndarray:
