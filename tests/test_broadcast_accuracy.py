@@ -12,15 +12,14 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from companion.domain.samples import AttitudeSample, ImuSample
 from companion.gnss import SppConfig, attach_broadcast, solve_position
 from companion.gnss.ephemeris import EphemerisStore
 from companion.gnss.inav import SISA_NAPA, sisa_m
 from companion.gnss.lnav import ura_m
 from companion.gnss.systems import System
-from companion.tight import RawGnss, TightConfig, TightNavigator
+from companion.tight import TightConfig, TightNavigator
 from simvehicle.constellation import BROADCAST_ACCURACY_M, constellation
-from tests.gnss_helpers import KLOBUCHAR, RX_ECEF, T0, observe
+from tests.gnss_helpers import KLOBUCHAR, RX_ECEF, T0, hold_at_rest, observe
 from tests.gnss_helpers import constellation as synthetic_sky
 
 KEP, GLO = synthetic_sky()
@@ -94,15 +93,7 @@ def test_the_selected_set_decides_no_fallback_to_another():
 def _fly(store: EphemerisStore) -> TightNavigator:
     """The tight navigator at rest for 3 s (50 Hz IMU, raw epochs every 0.2 s)."""
     nav = TightNavigator(TightConfig(), "second-order", ephemerides=store)
-    q, f = np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.0, 0.0, -9.80665])
-    gen = _sky((0, 0), 0.0)
-    for k in range(150):
-        t_us = 1_000_000 + 20_000 * k
-        nav.push(AttitudeSample(t_us, q))
-        nav.push(ImuSample(t_us, f, np.zeros(3)))
-        if k % 10 == 0:
-            ep, _ = observe(gen, T0 + k * 0.02, RX_ECEF)
-            nav.push(RawGnss(t_us, ep))
+    hold_at_rest(nav, _sky((0, 0), 0.0), 150)
     return nav
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
+from companion.domain.samples import GnssFix
 from companion.errors import ConfigError
 from companion.gnss import make_epoch
 from companion.gnss.systems import System
@@ -18,7 +18,7 @@ from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, beli
 from companion.tight.engine import TightEngine, prepare_epoch
 from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, N_STATE, Frame
 from companion.tight.satcache import SatelliteCache
-from tests.gnss_helpers import RX_ECEF, T0, observe, store
+from tests.gnss_helpers import RX_ECEF, T0, hold_at_rest, observe, store
 
 FRAME = Frame.at_ecef(RX_ECEF)
 STORE = store()
@@ -336,17 +336,7 @@ def test_satellite_cache_error_is_below_a_millimetre():
 
 def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
     nav = TightNavigator(TightConfig(), "second-order", ephemerides=STORE)
-    q = np.array([1.0, 0.0, 0.0, 0.0])
-    f = np.array([0.0, 0.0, -9.80665])
-    n_ep = 0
-    for k in range(0, 200):  # 4 s at 50 Hz, an epoch per 0.2 s (raw pseudoranges: clocks, atmosphere)
-        t_us = 1_000_000 + 20_000 * k
-        nav.push(AttitudeSample(t_us, q))
-        nav.push(ImuSample(t_us, f, np.zeros(3)))
-        if k % 10 == 0:
-            ep, _ = observe(STORE, T0 + k * 0.02, RX_ECEF)
-            nav.push(RawGnss(t_us, ep))
-            n_ep += 1
+    n_ep = hold_at_rest(nav, STORE, 200)  # 4 s at 50 Hz, an epoch per 0.2 s (raw: clocks, atmosphere)
     nav.push(RawGnss(5_000_000, make_epoch(T0 + 4.0, [0], [1], [math.nan])))  # nothing usable
     nav.push(GnssFix(5_000_000, 52.5, 13.4, 60.0, 3, 10, 1.0, 1.0, 1.0))
     nav.push(Odometry(5_000_000, math.nan, 0.0))
