@@ -166,6 +166,12 @@ class TightConfig:
     # its reported accuracy: where the measurement model is wrong (reflections the belief did not
     # catch) P alone is over-confident. 0: report P as it is.
     accuracy_window_s: float = 20.0
+    # A common-mode floor on the reported accuracy (m, a pseudorange σ; 0 = none): the position variances
+    # reported get + accuracy_floor_m² × the used satellites' position DOPs (diag of (GᵀG)⁻¹, per N, E, D)
+    # in quadrature: errors correlated over longer than the window (and those every satellite shares)
+    # do not average out over epochs nor show in the innovations, so the error is at least that of one
+    # epoch's snapshot solution with that σ (docs/tight.md "Reported accuracy"). Opt-in.
+    accuracy_floor_m: float = 0.0
     # --- out-of-sequence
     history_s: float = 2.0  # epochs this late are still fused exactly
     future_tolerance_s: float = 0.05
@@ -184,6 +190,8 @@ class TightConfig:
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
         check_accuracy_window(self.accuracy_window_s)
+        if not (math.isfinite(self.accuracy_floor_m) and self.accuracy_floor_m >= 0.0):
+            raise ValueError(f"accuracy_floor_m: must be a finite number >= 0, got {self.accuracy_floor_m!r}")
         if not self.r_inflation_max >= 1.0:
             raise ValueError("r_inflation_max: must be >= 1")
         if not self.theta_min < 0.0 < self.theta_max:

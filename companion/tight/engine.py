@@ -45,7 +45,8 @@ from companion.gnss.systems import System
 from companion.tight import _tight, model, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
-from companion.tight.model import I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame
+from companion.tight.model import (I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame,
+                                  position_dop_ned)
 
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
@@ -96,6 +97,8 @@ class EpochInfo(NamedTuple):
     beta: np.ndarray | None = None
     y_m: np.ndarray | None = None
     used: np.ndarray | None = None
+    # the used satellites' position DOPs (N, E, D: diag of (GᵀG)⁻¹), when accuracy_floor_m > 0
+    q_pos_ned: np.ndarray | None = None
 
 
 class Entry(NamedTuple):
@@ -427,8 +430,13 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                 live = list(live_t)
                 resets += 1
                 t_good = t_us
+        q_pos = prev.info.q_pos_ned  # an epoch with none used keeps the last geometry's
+        if n_used and c.accuracy_floor_m > 0.0:
+            u = np.flatnonzero(used)
+            q_new = position_dop_ned(m.elevation_deg[u], m.azimuth_rad[u], m.slot[u])
+            q_pos = q_new if np.isfinite(q_new).all() else q_pos
         info = EpochInfo(m.epoch.n, n_used, nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
-                         m.key, beta, y, used)
+                         m.key, beta, y, used, q_pos)
         return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
                      (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit)
 

@@ -218,3 +218,20 @@ _F_T = _diag(I_P, I_V)
 _F_D = _diag(I_P, I_D) + _diag(I_V, I_D)
 _Q_NAV = np.array([*_diag(0, 0), *_diag(0, 3), *_diag(3, 0), *_diag(3, 3), *_diag(I_A, I_A), *_diag(I_D, I_D),
                    *_diag(0, I_D), *_diag(I_D, 0), *_diag(3, I_D), *_diag(I_D, 3)])
+
+
+def position_dop_ned(elevation_deg: np.ndarray, azimuth_rad: np.ndarray, slot: np.ndarray) -> np.ndarray:
+    """The position block's diagonal (3,: N, E, D; HDOP² = q_N + q_E) of (GᵀG)⁻¹ for the satellites at
+    ``elevation_deg``, ``azimuth_rad`` with one receiver clock per clock ``slot`` (G's rows: the unit
+    line of sight from the satellite to the receiver, then 1 in the satellite's clock column). NaN when
+    the geometry does not fix the position (fewer satellites than unknowns, or singular)."""
+    el = np.radians(elevation_deg)
+    slots, col = np.unique(slot, return_inverse=True)
+    G = np.zeros((len(el), 3 + len(slots)))
+    G[:, 0] = -np.cos(el) * np.cos(azimuth_rad)
+    G[:, 1] = -np.cos(el) * np.sin(azimuth_rad)
+    G[:, 2] = np.sin(el)
+    G[np.arange(len(el)), 3 + col] = 1.0
+    if len(el) < G.shape[1] or np.linalg.matrix_rank(G) < G.shape[1]:
+        return np.full(3, np.nan)
+    return np.diag(np.linalg.inv(G.T @ G))[:3].copy()

@@ -168,6 +168,10 @@ class TightNavigator:
         t_us, out, last = now  # one array, handed out as views (as the loose navigator does)
         info = last.info
         cov = reported_variances(out[9:18], self.accuracy_inflation())  # P's positions × k
+        floor = self.accuracy_floor_m2()
+        if floor is not None:  # + the common-mode floor, in quadrature
+            cov = cov.copy()
+            cov[0:3] += floor
         est = NavEstimate(t_us, out[0:3], out[3:6], out[6:9], cov, info.beta_mean, info.nis,
                           self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
                           gnss_resets=last.totals[2])
@@ -179,6 +183,15 @@ class TightNavigator:
         NIS per degree of freedom over the last ``accuracy_window_s`` (1 when that is 0)."""
         entries = self.engine.entries
         return accuracy_inflation(entries[-1].fit if entries else None, self.cfg.accuracy_window_s)
+
+    def accuracy_floor_m2(self) -> np.ndarray | None:
+        """The variances (3,: N, E, D) added to the reported position's: ``accuracy_floor_m``² × the last
+        used satellites' position DOPs; None when the floor is 0 or no geometry fixed a position yet."""
+        entries = self.engine.entries
+        q = entries[-1].info.q_pos_ned if entries and self.cfg.accuracy_floor_m > 0.0 else None
+        if q is None or not np.isfinite(q).all():
+            return None
+        return self.cfg.accuracy_floor_m**2 * q
 
     def counters(self) -> dict[str, int]:
         return dict(self.engine.counts)
