@@ -45,8 +45,16 @@ from companion.gnss.systems import System
 from companion.tight import _tight, model, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
-from companion.tight.model import (I_CLK, I_DRIFT, I_HEADING, I_YAW_BIAS, N_CLK, N_STATE, Frame,
-                                  position_dop_ned)
+from companion.tight.model import (
+    I_CLK,
+    I_DRIFT,
+    I_HEADING,
+    I_YAW_BIAS,
+    N_CLK,
+    N_STATE,
+    Frame,
+    position_dop_ned,
+)
 
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
