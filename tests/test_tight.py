@@ -235,7 +235,7 @@ def _synthetic_epochs(rng: np.random.Generator, cfg: TightConfig, n: int, dt_s: 
 
 
 def test_out_of_sequence_epochs_equal_in_order():
-    cfg = TightConfig.for_ground_vehicle()
+    cfg = TightConfig.for_ground_vehicle(accuracy_floor_m=2.5)  # its DOPs re-fused too (the estimate ignores it)
     rng = np.random.default_rng(3)
     epochs, _ = _synthetic_epochs(rng, cfg, 40, bias={0: (30.0, 10)})
     t_us = [1_000_000 + 200_000 * k for k in range(len(epochs))]
@@ -252,6 +252,11 @@ def test_out_of_sequence_epochs_equal_in_order():
             np.testing.assert_allclose(eb.x, ea.x, rtol=0, atol=1e-9)
             np.testing.assert_allclose(eb.P, ea.P, rtol=0, atol=1e-9)
             assert eb.fit.inflation() == pytest.approx(ea.fit.inflation(), rel=1e-9)
+            qa, qb = ea.info.q_pos_ned, eb.info.q_pos_ned
+            assert (qa is None) == (qb is None)
+            if qa is not None:
+                np.testing.assert_allclose(qb, qa, rtol=1e-12)
+        assert a.entries[-1].info.q_pos_ned is not None
         assert a.counts["sat_used"] == b.counts["sat_used"]
 
 
