@@ -235,7 +235,7 @@ def _synthetic_epochs(rng: np.random.Generator, cfg: TightConfig, n: int, dt_s: 
 
 
 def test_out_of_sequence_epochs_equal_in_order():
-    cfg = TightConfig.for_ground_vehicle(accuracy_floor_m=2.5)  # its DOPs re-fused too (the estimate ignores it)
+    cfg = TightConfig.for_ground_vehicle(accuracy_floor_m=2.5)  # its DOPs re-fused too
     rng = np.random.default_rng(3)
     epochs, _ = _synthetic_epochs(rng, cfg, 40, bias={0: (30.0, 10)})
     t_us = [1_000_000 + 200_000 * k for k in range(len(epochs))]
