@@ -483,7 +483,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--accuracy", default="reported,none",
                    help=f"comma-separated of {', '.join(ACCURACY_MODES)}")
     p.add_argument("--methods", default="all",
-                   help="comma-separated methods (default: all that run without a map)")
+                   help="comma-separated loosely coupled methods on the fixes (default: all that run "
+                        "without a map); with smartloc-sats errors every tight-* row runs as well (the "
+                        "belief per satellite is compared with each of them)")
     p.add_argument("--seeds", default="0-4")
     p.add_argument("--rate-hz", type=float, default=5.0)
     p.add_argument("--latency-ms", type=float, default=None,
