@@ -36,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate-hz", type=float, default=20.0,
                         help="estimate rows per second in estimates.csv (0: one per IMU sample)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-figures", action="store_true",
+                        help="no track.png and errors.png (the figures of the estimate against the log's "
+                             "references)")
     parser.add_argument("--publish", action="store_true",
                         help="publish companion/estimate, belief and health on Zenoh (see README)")
     parser.add_argument("--speed", type=float, default=0.0,
@@ -192,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
         result.summary["synthetic_gnss"] = placed.fixes.info
         result.summary["errors"]["raw_fixes"] = {"note": core.RAW_FIXES_NOTE, **placed.raw_errors}
     core.write_summary(result, args.out)
+    figures = [] if args.no_figures else _figures(result, args)
     if args.json:
         print((args.out / "summary.json").read_text(encoding="utf-8"), end="")
         return 0
@@ -199,10 +203,20 @@ def run(args: argparse.Namespace) -> int:
     if gnss_note and "map" in gnss_note:  # the tight filter's map prior, stated either way
         print(f"  map: {gnss_note['map'] or 'none (no --mission: no line-of-sight prior)'}")
     print(f"  wrote {args.out / 'estimates.csv'} and {args.out / 'summary.json'}")
+    if figures:
+        print(f"  figures: {', '.join(str(f) for f in figures)}")
     if pub is not None:
         c = pub.counters()
         print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle_id}/companion/*")
     return 0
+
+
+def _figures(result: core.ReplayResult, args: argparse.Namespace) -> list[Path]:
+    """track.png and errors.png from the estimates the replay streamed to estimates.csv."""
+    from gcs_tools.replay import figures
+
+    t_s, table = figures.read_estimates(args.out / "estimates.csv")
+    return figures.save(args.out, t_s, table, result.tracks, args.file.name, args.method, args.coupling)
 
 
 def is_sats(errors: str | None) -> bool:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Protocol
 
@@ -58,6 +58,9 @@ NIS_RANGE = (1e-6, 1e6)
 NIS_BINS = 27_640
 # a reference between two estimate rows further apart than this (an IMU dropout) is not compared
 MAX_GAP_US = 1_000_000
+# the fixes and reference positions kept for the figures: at most one per this interval per kind
+# (10 Hz: 16 bytes a point, 5.8 MB for a 10 h log)
+TRACK_PERIOD_US = 100_000
 CSV_COLUMNS = (
     "t_s", "p_n_m", "p_e_m", "p_d_m", "v_n_m_s", "v_e_m_s", "v_d_m_s", "b_n_m", "b_e_m", "b_d_m",
     "beta", "nis",
@@ -149,6 +152,22 @@ class _CsvSink:
             self._file.close()
 
 
+class _Track:
+    """A kind's positions in the local frame (t_s, n, e, d), at most one per ``TRACK_PERIOD_US``."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[float, float, float, float]] = []
+        self._next_us = -(1 << 62)
+
+    def add(self, t_us: int, p_ned_m: Any) -> None:
+        if t_us >= self._next_us or t_us < self._next_us - 2 * TRACK_PERIOD_US:  # a restart: keep going
+            self._next_us = t_us + TRACK_PERIOD_US
+            self.rows.append((t_us / 1e6, float(p_ned_m[0]), float(p_ned_m[1]), float(p_ned_m[2])))
+
+    def array(self) -> np.ndarray:
+        return np.array(self.rows, dtype=float).reshape(-1, 4)
+
+
 class _Comparisons:
     """Online error statistics against the fixes and the log's references.
 
@@ -163,6 +182,8 @@ class _Comparisons:
         self.geodetic: dict[tuple[str, str], PositionErrors] = {}
         self.local: dict[tuple[str, str], PositionErrors] = {}
         self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
+        self.tracks: dict[str, _Track] = {}  # "gnss", AUTOPILOT, TRUTH: for the figures
+        self._kinds: dict[int, str] = {id(self.gnss): "gnss"}
 
     def estimate(self, t_us: int, p_ned_m: Any, var_ned_m2: Any) -> None:
         self.gnss.add_estimate(t_us, p_ned_m)
@@ -180,12 +201,14 @@ class _Comparisons:
             m = self.geodetic.get(key)
             if m is None:
                 m = self.geodetic[key] = PositionErrors(max_gap_us=self.max_gap_us, coverage=truth)
+                self._kinds[id(m)] = ref.kind
             self._geodetic(m, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
         else:
             m = self.local.get(key)
             if m is None:
                 m = self.local[key] = PositionErrors(max_gap_us=self.max_gap_us, coverage=truth)
             m.add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
+            self._track(ref.kind).add(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
 
     def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
         self._queue.append((m, t_us, lat, lon, alt))
@@ -200,6 +223,13 @@ class _Comparisons:
         ned = self.frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
         for (m, t_us, *_), p in zip(queue, ned, strict=True):
             m.add_reference(t_us, p)
+            self._track(self._kinds[id(m)]).add(t_us, p)
+
+    def _track(self, kind: str) -> _Track:
+        track = self.tracks.get(kind)
+        if track is None:
+            track = self.tracks[kind] = _Track()
+        return track
 
     def restart(self) -> None:
         self.flush()
@@ -303,6 +333,9 @@ class ReplayResult:
     summary: dict[str, Any]
     t_us: np.ndarray  # (N,) estimate times (empty when the rows were streamed to a file)
     table: np.ndarray  # (N, len(CSV_COLUMNS) - 1): the CSV columns after t_s
+    # "gnss" (the 3-D fixes at their validity times), "autopilot_estimate", "truth" when the log has
+    # them: (K, 4) rows t_s, n, e, d [m] in the replay's frame, at most one per TRACK_PERIOD_US
+    tracks: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def replay(
@@ -429,7 +462,7 @@ def replay(
         summary["gnss_validity"] = {"gps_delay_ms": getattr(log_reader, "gps_delay_ms", None),
                                     "from": gps_delay}
     t_us, table = sink.arrays()
-    return ReplayResult(summary, t_us, table)
+    return ReplayResult(summary, t_us, table, {k: v.array() for k, v in comparisons.tracks.items()})
 
 
 def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
