@@ -14,14 +14,16 @@ import numpy as np
 
 from gcs_tools import palette
 from gcs_tools.figures import DPI, _legend, plt
+from gcs_tools.replay.core import CSV_COLUMNS, MAX_GAP_US
 from gcs_tools.replay.events import AUTOPILOT, TRUTH
 
-MAX_GAP_S = 1.0  # as core.MAX_GAP_US
+MAX_GAP_S = MAX_GAP_US / 1e6  # as the summary's comparisons
 GNSS = "gnss"
 LABELS = {TRUTH: "truth", AUTOPILOT: "the log's autopilot estimate", GNSS: "GNSS fixes"}
 
 
-def at_times(t_s: np.ndarray, x: np.ndarray, t_query_s: np.ndarray, max_gap_s: float = MAX_GAP_S) -> np.ndarray:
+def at_times(t_s: np.ndarray, x: np.ndarray, t_query_s: np.ndarray,
+             max_gap_s: float = MAX_GAP_S) -> np.ndarray:
     """``x`` (N, k) sampled at ``t_s`` (N,), linearly interpolated at ``t_query_s`` (M,) -> (M, k);
     NaN outside ``t_s``, between two samples more than ``max_gap_s`` apart, or where ``x`` is NaN."""
     t = np.asarray(t_s, dtype=float)
@@ -137,8 +139,6 @@ def save(out_dir: Path, t_s: np.ndarray, table: np.ndarray, tracks: dict[str, np
          method: str, coupling: str) -> list[Path]:
     """``track.png`` and ``errors.png`` in ``out_dir`` from the estimate rows (``t_s`` (N,), ``table``
     (N, k): ``core.CSV_COLUMNS`` after t_s) and the replay's ``tracks``; returns their paths."""
-    from gcs_tools.replay.core import CSV_COLUMNS
-
     col = {c: i - 1 for i, c in enumerate(CSV_COLUMNS)}
     table = np.asarray(table, dtype=float).reshape(len(t_s), -1)
     p_ne = table[:, [col["p_n_m"], col["p_e_m"]]]

@@ -1,0 +1,109 @@
+"""``beliefnav replay``'s figures: track.png and errors.png from real logs, --no-figures, and the pure
+plotting functions on small synthetic arrays (with and without truth, with NaNs)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from gcs_tools.cli import main
+from gcs_tools.replay import core, figures
+
+DATA = Path(__file__).parent / "data"
+QUAD106 = DATA / "quad106.tlog"  # real 668 s flight: fixes, no autopilot position, no truth
+SITL_BIN = DATA / "arducopter_sitl_hover.bin"  # SITL: fixes, the autopilot's estimate (POS), truth (SIM)
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def _assert_png(path: Path, min_px: int = 300) -> None:
+    assert path.read_bytes()[:8] == PNG_MAGIC, path
+    assert 20_000 < path.stat().st_size < 2_000_000, (path, path.stat().st_size)
+    img = imread(path)
+    assert img.shape[0] >= min_px and img.shape[1] >= min_px, img.shape
+    assert float(np.std(img[..., :3])) > 0.05  # not a blank canvas
+
+
+def test_real_tlog_writes_both_figures_and_prints_them(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "q"
+    assert main(["replay", str(QUAD106), "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    for name in ("track.png", "errors.png"):
+        _assert_png(out / name)
+        assert str(out / name) in printed
+    # the figure's estimate-to-fix distance is the summary's (same rows, same interpolation, all fixes)
+    t_s, table = figures.read_estimates(out / "estimates.csv")
+    summary = json.loads((out / "summary.json").read_text())
+    result = core.replay(QUAD106, "second-order")
+    d = figures.horizontal_distance(t_s, table[:, :2], result.tracks["gnss"])
+    gnss = summary["errors"]["gnss"]
+    assert np.isfinite(d).sum() == gnss["n"]
+    assert np.nanmedian(d) == pytest.approx(gnss["error_horizontal_m"]["median"], abs=1e-5)
+    assert np.nanmax(d) == pytest.approx(gnss["error_horizontal_m"]["max"], abs=1e-5)
+    assert set(result.tracks) == {"gnss"}  # this log has no autopilot position and no truth
+
+
+def test_log_with_truth_and_autopilot_tracks(tmp_path: Path) -> None:
+    out = tmp_path / "b"
+    assert main(["replay", str(SITL_BIN), "--out", str(out), "--no-progress"]) == 0
+    _assert_png(out / "track.png")
+    _assert_png(out / "errors.png")
+    result = core.replay(SITL_BIN, "second-order", rate_hz=0)
+    assert {"gnss", "truth", "autopilot_estimate"} <= set(result.tracks)
+    for kind, rows in result.tracks.items():
+        assert rows.shape[1] == 4 and len(rows) > 100 and np.isfinite(rows).all(), kind
+        assert np.diff(rows[:, 0]).min() >= core.TRACK_PERIOD_US / 1e6 - 1e-9, kind  # bounded: ≤ 10 Hz
+        d = figures.horizontal_distance(result.t_us / 1e6, result.table[:, :2], rows)
+        # a hover: the estimate within centimetres of every reference, in the same frame
+        assert np.nanmax(d) <= result.summary["errors"][kind]["error_horizontal_m"]["max"] + 1e-6, kind
+
+
+def test_no_figures_writes_none(tmp_path: Path) -> None:
+    out = tmp_path / "n"
+    assert main(["replay", str(SITL_BIN), "--out", str(out), "--no-progress", "--no-figures"]) == 0
+    assert (out / "estimates.csv").is_file()
+    assert not list(out.glob("*.png"))
+
+
+def test_at_times_interpolates_and_refuses_gaps() -> None:
+    t = np.array([0.0, 1.0, 2.0, 5.0, 5.5])
+    x = np.column_stack([3 * t + 1, -t])
+    got = figures.at_times(t, x, np.array([-0.1, 0.0, 0.25, 1.5, 3.0, 5.25, 6.0, np.nan]))
+    expect = np.array([[np.nan] * 2, [1, 0], [1.75, -0.25], [5.5, -1.5], [np.nan] * 2, [16.75, -5.25],
+                       [np.nan] * 2, [np.nan] * 2])
+    np.testing.assert_allclose(got, expect, atol=1e-12)  # 3.0 lies in a 3 s gap: not compared
+    x[1] = np.nan  # a NaN sample is left out: 0.5 interpolates between 0 and 2 (2 s apart: a gap)
+    assert np.isnan(figures.at_times(t, x, np.array([0.5]))).all()
+    assert figures.at_times(t, x, np.array([0.5]), max_gap_s=2.0)[0, 0] == pytest.approx(2.5)
+    assert figures.at_times(t[:1], x[:1], np.array([0.0])).shape == (1, 2)
+
+
+@pytest.mark.parametrize("with_truth", [True, False])
+def test_figure_functions_on_tiny_arrays_with_nans(tmp_path: Path, with_truth: bool) -> None:
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 4.0, 9)
+    p = np.column_stack([t, 2 * t]) + rng.normal(0, 0.1, (9, 2))
+    p[3] = np.nan
+    sigma = np.full(9, 0.5)
+    sigma[5] = np.nan
+    ref = np.column_stack([t, t, 2 * t, np.zeros(9)])
+    ref[2, 1] = np.nan
+    tracks = {"gnss": ref[::2] + [0, 0.3, -0.2, 0], "autopilot_estimate": ref}
+    if with_truth:
+        tracks["truth"] = ref
+    beta = np.linspace(0.5, 1.0, 9)
+    beta[0] = np.nan
+    figures.track_figure(tmp_path / "t.png", p, tracks, "tiny")
+    figures.errors_figure(tmp_path / "e.png", t, p, sigma, tracks, beta, "belief β", "tiny")
+    figures.errors_figure(tmp_path / "e1.png", t, p, sigma, {}, None)  # nothing to compare, no belief
+    figures.track_figure(tmp_path / "t0.png", np.zeros((0, 2)), {}, "")  # empty
+    for name in ("t.png", "e.png", "e1.png", "t0.png"):
+        assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
+    d = figures.horizontal_distance(t, p, tracks["autopilot_estimate"])
+    assert np.isnan(d[2])  # a NaN reference is not compared
+    assert np.isfinite(d[3])  # a NaN estimate row: its neighbours, 1 s apart (not a gap), are interpolated
+    assert np.nanmax(d) < 1.0
