@@ -24,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(a directory with IMU_1.csv and GT.csv, or its IMU_1.csv); not with --smartloc")
     choices.add_method_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("runs/replay"),
-                        help="output directory for estimates.csv, summary.json (default runs/replay)")
+                        help="output directory for estimates.csv, summary.json, track.png, errors.png "
+                             "(default runs/replay)")
     parser.add_argument("--json", action="store_true", help="print summary.json instead of the summary lines")
     parser.add_argument("--home", default=None, metavar="LAT,LON,ALT",
                         help="local-frame origin (degrees, degrees, metres); default: the mission's home "
