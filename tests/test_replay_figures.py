@@ -34,7 +34,7 @@ def test_real_tlog_writes_both_figures_and_prints_them(tmp_path: Path,
     printed = capsys.readouterr().out
     for name in ("track.png", "errors.png"):
         _assert_png(out / name)
-        assert str(out / name) in printed
+    assert f"wrote {out}/: estimates.csv, summary.json, track.png, errors.png" in printed
     # the figure's estimate-to-fix distance is the summary's (same rows, same interpolation, all fixes)
     t_s, table = figures.read_estimates(out / "estimates.csv")
     summary = json.loads((out / "summary.json").read_text())
@@ -62,9 +62,10 @@ def test_log_with_truth_and_autopilot_tracks(tmp_path: Path) -> None:
         assert np.nanmax(d) <= result.summary["errors"][kind]["error_horizontal_m"]["max"] + 1e-6, kind
 
 
-def test_no_figures_writes_none(tmp_path: Path) -> None:
+def test_no_figures_writes_none(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "n"
     assert main(["replay", str(SITL_BIN), "--out", str(out), "--no-progress", "--no-figures"]) == 0
+    assert f"wrote {out}/: estimates.csv, summary.json\n" in capsys.readouterr().out
     assert (out / "estimates.csv").is_file()
     assert not list(out.glob("*.png"))
 

@@ -203,9 +203,8 @@ def run(args: argparse.Namespace) -> int:
     print(report(result.summary, args.file.name))
     if gnss_note and "map" in gnss_note:  # the tight filter's map prior, stated either way
         print(f"  map: {gnss_note['map'] or 'none (no --mission: no line-of-sight prior)'}")
-    print(f"  wrote {args.out / 'estimates.csv'} and {args.out / 'summary.json'}")
-    if figures:
-        print(f"  figures: {', '.join(str(f) for f in figures)}")
+    files = ["estimates.csv", "summary.json", *(f.name for f in figures)]
+    print(f"  wrote {args.out}/: {', '.join(files)}")  # as fly and sitl
     if pub is not None:
         c = pub.counters()
         print(f"  published {c['published']} telemetry messages as beliefnav/{args.vehicle_id}/companion/*")
