@@ -55,11 +55,44 @@ def test_log_with_truth_and_autopilot_tracks(tmp_path: Path) -> None:
     result = core.replay(SITL_BIN, "second-order", rate_hz=0)
     assert {"gnss", "truth", "autopilot_estimate"} <= set(result.tracks)
     for kind, rows in result.tracks.items():
-        assert rows.shape[1] == 4 and len(rows) > 100 and np.isfinite(rows).all(), kind
+        assert rows.shape[1] == 5 and len(rows) > 100 and np.isfinite(rows).all(), kind
+        assert (rows[:, 4] == 0).all()  # one segment
         assert np.diff(rows[:, 0]).min() >= core.TRACK_PERIOD_US / 1e6 - 1e-9, kind  # bounded: ≤ 10 Hz
         d = figures.horizontal_distance(result.t_us / 1e6, result.table[:, :2], rows)
         # a hover: the estimate within centimetres of every reference, in the same frame
         assert np.nanmax(d) <= result.summary["errors"][kind]["error_horizontal_m"]["max"] + 1e-6, kind
+
+
+def test_concatenated_log_compares_each_segment_with_its_own_estimates(tmp_path: Path) -> None:
+    """Two copies of a log: two segments on the same boot times; the figure's distances, computed per
+    segment, are the summary's (which restarts its comparisons at the restart)."""
+    log = tmp_path / "twice.bin"
+    log.write_bytes(SITL_BIN.read_bytes() * 2)
+    result = core.replay(log, "second-order")
+    assert result.summary["log_restarts"] == 1
+    seg = result.table[:, core.CSV_COLUMNS.index("segment") - 1]
+    for kind in ("gnss", "truth"):
+        rows = result.tracks[kind]
+        assert set(rows[:, 4]) == {0.0, 1.0}, kind
+        d = figures.horizontal_distance(result.t_us / 1e6, result.table[:, :2], rows, seg)
+        h = result.summary["errors"][kind]["error_horizontal_m"]
+        assert np.nanmax(d) <= h["max"] + 1e-6, kind
+    d = figures.horizontal_distance(result.t_us / 1e6, result.table[:, :2], result.tracks["gnss"], seg)
+    gnss = result.summary["errors"]["gnss"]  # every fix kept: the summary's numbers exactly
+    assert np.isfinite(d).sum() == gnss["n"]
+    assert np.nanmedian(d) == pytest.approx(gnss["error_horizontal_m"]["median"], abs=1e-6)
+    figures.save(tmp_path, result.t_us / 1e6, result.table, result.tracks, log.name, "second-order", "loose")
+    _assert_png(tmp_path / "track.png")
+    _assert_png(tmp_path / "errors.png")
+    # segments on the same clock, 10 m apart: each compared with its own estimate, never the other's
+    t = np.tile(np.arange(5.0), 2)
+    seg2 = np.repeat([0.0, 1.0], 5)
+    p = np.column_stack([10 * seg2, np.zeros(10)])
+    ref = np.column_stack([t + 0.5, p, np.zeros(10), seg2])[[0, 1, 2, 3, 5, 6, 7, 8]]
+    np.testing.assert_allclose(figures.horizontal_distance(t, p, ref, seg2), 0.0, atol=1e-12)
+    assert np.nanmax(figures.horizontal_distance(t, p, ref[:, :4])) > 1.0  # what mixing them would give
+    x, y = figures.broken(np.array([0, 0, 1, 1, 1, 2]), np.arange(6.0), np.ones((6, 2)))
+    assert np.isnan(x[[2, 6]]).all() and len(x) == 8 and np.isnan(y[[2, 6]]).all() and y.shape == (8, 2)
 
 
 def test_no_figures_writes_none(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

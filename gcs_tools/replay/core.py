@@ -8,7 +8,7 @@ and the fixes themselves are compared with the estimate online (:mod:`companion.
 Streaming: the tlog and DataFlash readers read in blocks; with ``out_dir`` the estimate rows are
 written to ``estimates.csv`` as they come; β and NIS are summarised in fixed-size histograms.
 What is kept grows only by the error vector of each reference sample (12 bytes) and, for the
-figures, the fixes and references at up to 10 Hz (``TRACK_PERIOD_US``, 32 bytes a point).
+figures, the fixes and references at up to 10 Hz (``TRACK_PERIOD_US``, 40 bytes a point).
 
 Log restarts: a concatenated log (or an autopilot reboot inside one) makes the IMU time jump
 back. The project's one clock rule decides (:mod:`companion.domain.clock_guard`,
@@ -61,7 +61,7 @@ NIS_BINS = 27_640
 # a reference between two estimate rows further apart than this (an IMU dropout) is not compared
 MAX_GAP_US = 1_000_000
 # the fixes and reference positions kept for the figures: at most one per this interval per kind
-# (10 Hz, 32 bytes a point: 1.2 MB an hour per kind)
+# (10 Hz, 40 bytes a point: 1.4 MB an hour per kind)
 TRACK_PERIOD_US = 100_000
 CSV_COLUMNS = (
     "t_s", "p_n_m", "p_e_m", "p_d_m", "v_n_m_s", "v_e_m_s", "v_d_m_s", "b_n_m", "b_e_m", "b_d_m",
@@ -155,19 +155,19 @@ class _CsvSink:
 
 
 class _Track:
-    """A kind's positions in the local frame (t_s, n, e, d), at most one per ``TRACK_PERIOD_US``."""
+    """A kind's positions in the local frame (t_s, n, e, d, segment), at most one per ``TRACK_PERIOD_US``."""
 
     def __init__(self) -> None:
         self.rows = array("d")
         self._next_us = -(1 << 62)
 
-    def add(self, t_us: int, p_ned_m: Any) -> None:
+    def add(self, t_us: int, p_ned_m: Any, segment: int) -> None:
         if t_us >= self._next_us or t_us < self._next_us - 2 * TRACK_PERIOD_US:  # a restart: keep going
             self._next_us = t_us + TRACK_PERIOD_US
-            self.rows.extend((t_us / 1e6, float(p_ned_m[0]), float(p_ned_m[1]), float(p_ned_m[2])))
+            self.rows.extend((t_us / 1e6, float(p_ned_m[0]), float(p_ned_m[1]), float(p_ned_m[2]), segment))
 
     def array(self) -> np.ndarray:
-        return np.frombuffer(self.rows, dtype=float).reshape(-1, 4).copy()
+        return np.frombuffer(self.rows, dtype=float).reshape(-1, 5).copy()
 
 
 class _Comparisons:
@@ -186,6 +186,7 @@ class _Comparisons:
         self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
         self.tracks: dict[str, _Track] = {}  # "gnss", AUTOPILOT, TRUTH: for the figures
         self._kinds: dict[int, str] = {id(self.gnss): "gnss"}
+        self.segment = 0  # the log segment (restarts) the tracks' rows belong to
 
     def estimate(self, t_us: int, p_ned_m: Any, var_ned_m2: Any) -> None:
         self.gnss.add_estimate(t_us, p_ned_m)
@@ -210,7 +211,7 @@ class _Comparisons:
             if m is None:
                 m = self.local[key] = PositionErrors(max_gap_us=self.max_gap_us, coverage=truth)
             m.add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
-            self._track(ref.kind).add(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
+            self._track(ref.kind).add(ref.t_us, ref.p_ned_m, self.segment)  # type: ignore[union-attr]
 
     def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
         self._queue.append((m, t_us, lat, lon, alt))
@@ -225,7 +226,7 @@ class _Comparisons:
         ned = self.frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
         for (m, t_us, *_), p in zip(queue, ned, strict=True):
             m.add_reference(t_us, p)
-            self._track(self._kinds[id(m)]).add(t_us, p)
+            self._track(self._kinds[id(m)]).add(t_us, p, self.segment)
 
     def _track(self, kind: str) -> _Track:
         track = self.tracks.get(kind)
@@ -235,6 +236,7 @@ class _Comparisons:
 
     def restart(self) -> None:
         self.flush()
+        self.segment += 1
         for m in (self.gnss, *self.geodetic.values(), *self.local.values()):
             m.restart()
 
@@ -336,7 +338,7 @@ class ReplayResult:
     t_us: np.ndarray  # (N,) estimate times (empty when the rows were streamed to a file)
     table: np.ndarray  # (N, len(CSV_COLUMNS) - 1): the CSV columns after t_s
     # "gnss" (the 3-D fixes at their validity times), "autopilot_estimate", "truth" when the log has
-    # them: (K, 4) rows t_s, n, e, d [m] in the replay's frame, at most one per TRACK_PERIOD_US
+    # them: (K, 5) rows t_s, n, e, d [m] in the replay's frame, segment; at most one per TRACK_PERIOD_US
     tracks: dict[str, np.ndarray] = field(default_factory=dict)
 
 

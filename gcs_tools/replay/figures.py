@@ -2,8 +2,10 @@
 
 Tracks are horizontal, in the replay's local NED frame (east on x, north on y, metres). The
 estimate's error is measured at each reference time (truth, the log's own estimate, a fix) against
-the estimate interpolated there; a reference between two estimates more than ``MAX_GAP_S`` apart,
-or outside them, is not compared (NaN), as in the replay's summary (``companion.metrics``).
+the estimate of the same log segment interpolated there; a reference between two estimates more
+than ``MAX_GAP_S`` apart, or outside them, is not compared (NaN), as in the replay's summary
+(``companion.metrics``). After a log restart the segments share the time axis (each its own boot
+time): lines are broken between segments, never drawn from one to the next.
 """
 
 from __future__ import annotations
@@ -43,28 +45,55 @@ def at_times(t_s: np.ndarray, x: np.ndarray, t_query_s: np.ndarray,
     return out
 
 
-def horizontal_distance(t_s: np.ndarray, p_ne_m: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """‖p̂_NE(t) − r_NE‖ at each reference row ``ref`` (K, 4: t_s, n, e, d) -> (K,) metres."""
-    ref = np.asarray(ref, dtype=float).reshape(-1, 4)
-    p = at_times(t_s, p_ne_m, ref[:, 0])
-    return np.hypot(p[:, 0] - ref[:, 1], p[:, 1] - ref[:, 2])
+def references(rows: np.ndarray | None) -> np.ndarray:
+    """A track as (K, 5) rows t_s, n, e, d, segment (rows of 4 columns: segment 0)."""
+    r = np.asarray(np.zeros((0, 5)) if rows is None else rows, dtype=float)
+    r = r.reshape(-1, r.shape[-1] if r.ndim == 2 else 5)
+    return r if r.shape[1] == 5 else np.column_stack([r[:, :4], np.zeros(len(r))])
 
 
-def track_figure(path: Path, p_ne_m: np.ndarray, tracks: dict[str, np.ndarray], title: str = "") -> None:
-    """The estimate (N, 2: north, east) with the references in ``tracks`` (kind -> (K, 4): t_s, n, e,
-    d; kinds ``gnss`` drawn as dots, ``autopilot_estimate``, ``truth``); equal axes."""
+def horizontal_distance(t_s: np.ndarray, p_ne_m: np.ndarray, ref: np.ndarray,
+                        segment: np.ndarray | None = None) -> np.ndarray:
+    """‖p̂_NE(t) − r_NE‖ at each reference row ``ref`` (K, 4 or 5: t_s, n, e, d[, segment]) -> (K,) m,
+    the estimate (``t_s`` (N,), ``p_ne_m`` (N, 2)) taken from the reference's segment (``segment``
+    (N,); None: one segment)."""
+    ref = references(ref)
+    t = np.asarray(t_s, dtype=float)
+    p = np.asarray(p_ne_m, dtype=float).reshape(len(t), 2)
+    seg = np.zeros(len(t)) if segment is None else np.asarray(segment, dtype=float)
+    out = np.full(len(ref), np.nan)
+    for s in np.unique(ref[:, 4]):
+        rows, mine = ref[:, 4] == s, seg == s
+        q = at_times(t[mine], p[mine], ref[rows, 0])
+        out[rows] = np.hypot(q[:, 0] - ref[rows, 1], q[:, 1] - ref[rows, 2])
+    return out
+
+
+def broken(segment: np.ndarray, *columns: np.ndarray) -> list[np.ndarray]:
+    """``columns`` (N, …) with a NaN row inserted wherever ``segment`` (N,) changes: one line per segment."""
+    seg = np.asarray(segment, dtype=float)
+    at = np.flatnonzero(seg[1:] != seg[:-1]) + 1
+    return [np.insert(np.asarray(c, dtype=float), at, np.nan, axis=0) for c in columns]
+
+
+def track_figure(path: Path, p_ne_m: np.ndarray, tracks: dict[str, np.ndarray], title: str = "",
+                 segment: np.ndarray | None = None) -> None:
+    """The estimate (N, 2: north, east; ``segment`` (N,) its log segments) with the references in
+    ``tracks`` (kind -> (K, 4 or 5): t_s, n, e, d[, segment]; ``gnss`` drawn as dots,
+    ``autopilot_estimate``, ``truth``); equal axes."""
     q = palette.quantity
     fig, ax = plt.subplots(figsize=(7.0, 6.4))
-    fixes = np.asarray(tracks.get(GNSS, np.zeros((0, 4))), dtype=float).reshape(-1, 4)
+    fixes = references(tracks.get(GNSS))
     if len(fixes):
         ax.plot(fixes[:, 2], fixes[:, 1], ".", color=q("gnss"), ms=2.0, alpha=0.55, ls="none", zorder=2,
                 label=f"GNSS fixes ({len(fixes):,})")
     for kind, colour, lw in ((TRUTH, q("true"), 1.6), (AUTOPILOT, q("autopilot"), 1.1)):
-        ref = tracks.get(kind)
-        if ref is not None and len(ref):
-            ref = np.asarray(ref, dtype=float).reshape(-1, 4)
-            ax.plot(ref[:, 2], ref[:, 1], color=colour, lw=lw, zorder=3, label=LABELS[kind])
+        ref = references(tracks.get(kind))
+        if len(ref):
+            n, e = broken(ref[:, 4], ref[:, 1], ref[:, 2])
+            ax.plot(e, n, color=colour, lw=lw, zorder=3, label=LABELS[kind])
     p = np.asarray(p_ne_m, dtype=float).reshape(-1, 2)
+    (p,) = broken(np.zeros(len(p)) if segment is None else segment, p)
     ax.plot(p[:, 1], p[:, 0], color=q("estimated"), lw=1.1, zorder=4, label="estimate")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("east [m]")
@@ -79,43 +108,42 @@ def track_figure(path: Path, p_ne_m: np.ndarray, tracks: dict[str, np.ndarray], 
 
 def errors_figure(path: Path, t_s: np.ndarray, p_ne_m: np.ndarray, sigma_h_m: np.ndarray,
                   tracks: dict[str, np.ndarray], belief: np.ndarray | None = None,
-                  belief_label: str = "belief β", title: str = "") -> None:
+                  belief_label: str = "belief β", title: str = "", segment: np.ndarray | None = None) -> None:
     """Top: with a truth, the estimate's horizontal error and its reported 1σ horizontal accuracy
     ``sigma_h_m`` (N,) as a band, and the raw fixes' error; without, the estimate's horizontal
-    distance to the log's autopilot estimate and to the fixes. Bottom (when ``belief`` (N,) has a
-    finite value): the belief over time."""
+    distance to the log's autopilot estimate and to the fixes, beside the same band. Bottom (when
+    ``belief`` (N,) has a finite value): the belief over time. ``segment`` (N,): the estimates' log
+    segments (None: one)."""
     q = palette.quantity
     t = np.asarray(t_s, dtype=float)
+    seg = np.zeros(len(t)) if segment is None else np.asarray(segment, dtype=float)
     p = np.asarray(p_ne_m, dtype=float).reshape(-1, 2)
     b = None if belief is None else np.asarray(belief, dtype=float)
     two = b is not None and bool(np.isfinite(b).any())
     fig, axes = plt.subplots(2 if two else 1, 1, figsize=(8.0, 6.4 if two else 4.2), sharex=True,
                              squeeze=False, height_ratios=(1.6, 1) if two else None)
     ax = axes[0, 0]
-    fixes = np.asarray(tracks.get(GNSS, np.zeros((0, 4))), dtype=float).reshape(-1, 4)
-    truth = tracks.get(TRUTH)
-    if truth is not None and len(truth):
-        truth = np.asarray(truth, dtype=float).reshape(-1, 4)
-        ax.fill_between(t, 0.0, np.asarray(sigma_h_m, dtype=float), color=q("uncertainty"), alpha=0.18, lw=0,
-                        label="reported 1σ horizontal accuracy")
+    fixes = references(tracks.get(GNSS))
+    truth = references(tracks.get(TRUTH))
+    t_line, sigma = broken(seg, t, sigma_h_m)
+    ax.fill_between(t_line, 0.0, sigma, color=q("uncertainty"), alpha=0.18, lw=0,
+                    label="reported 1σ horizontal accuracy")
+    if len(truth):
         if len(fixes):
-            raw = at_times(truth[:, 0], truth[:, 1:3], fixes[:, 0])
-            ax.plot(fixes[:, 0], np.hypot(fixes[:, 1] - raw[:, 0], fixes[:, 2] - raw[:, 1]), ".",
-                    color=q("gnss"), ms=2.0, alpha=0.6, ls="none", label="the raw fixes' horizontal error")
-        ax.plot(truth[:, 0], horizontal_distance(t, p, truth), color=q("est_error"), lw=1.0,
-                label="estimate's horizontal error vs truth")
+            raw = horizontal_distance(truth[:, 0], truth[:, 1:3], fixes, truth[:, 4])
+            ax.plot(fixes[:, 0], raw, ".", color=q("gnss"), ms=2.0, alpha=0.6, ls="none",
+                    label="the raw fixes' horizontal error")
+        x, y = broken(truth[:, 4], truth[:, 0], horizontal_distance(t, p, truth, seg))
+        ax.plot(x, y, color=q("est_error"), lw=1.0, label="estimate's horizontal error vs truth")
         ax.set_ylabel("horizontal error [m]")
     else:
-        auto = tracks.get(AUTOPILOT)
-        if auto is not None and len(auto):
-            auto = np.asarray(auto, dtype=float).reshape(-1, 4)
-            ax.plot(auto[:, 0], horizontal_distance(t, p, auto), color=q("autopilot"), lw=1.0,
-                    label="estimate to the log's autopilot estimate")
+        auto = references(tracks.get(AUTOPILOT))
+        if len(auto):
+            x, y = broken(auto[:, 4], auto[:, 0], horizontal_distance(t, p, auto, seg))
+            ax.plot(x, y, color=q("autopilot"), lw=1.0, label="estimate to the log's autopilot estimate")
         if len(fixes):
-            ax.plot(fixes[:, 0], horizontal_distance(t, p, fixes), ".", color=q("gnss"), ms=2.0, alpha=0.6,
-                    ls="none", label="estimate to the GNSS fixes")
-        ax.fill_between(t, 0.0, np.asarray(sigma_h_m, dtype=float), color=q("uncertainty"), alpha=0.18, lw=0,
-                        label="reported 1σ horizontal accuracy")
+            ax.plot(fixes[:, 0], horizontal_distance(t, p, fixes, seg), ".", color=q("gnss"), ms=2.0,
+                    alpha=0.6, ls="none", label="estimate to the GNSS fixes")
         ax.set_ylabel("horizontal distance [m] (no truth)")
     ax.set_ylim(bottom=0.0)
     ax.set_title(title, fontsize=9)
@@ -123,11 +151,13 @@ def errors_figure(path: Path, t_s: np.ndarray, p_ne_m: np.ndarray, sigma_h_m: np
     if two:
         assert b is not None
         ax = axes[1, 0]
-        ax.plot(t, b, color=q("beta"), lw=1.0, label=belief_label)
+        x, y = broken(seg, t, b)
+        ax.plot(x, y, color=q("beta"), lw=1.0, label=belief_label)
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel(belief_label)
         _legend(ax, loc="lower left")
-    axes[-1, 0].set_xlabel("log time [s]")
+    restarts = len(seg) > 1 and bool(np.nanmax(seg) > np.nanmin(seg))
+    axes[-1, 0].set_xlabel("log time [s]" + (" (log segments drawn over each other)" if restarts else ""))
     for a in axes[:, 0]:
         a.grid(alpha=0.25)
     fig.tight_layout()
@@ -142,13 +172,14 @@ def save(out_dir: Path, t_s: np.ndarray, table: np.ndarray, tracks: dict[str, np
     col = {c: i - 1 for i, c in enumerate(CSV_COLUMNS)}
     table = np.asarray(table, dtype=float).reshape(len(t_s), -1)
     p_ne = table[:, [col["p_n_m"], col["p_e_m"]]]
+    seg = table[:, col["segment"]]
     with np.errstate(invalid="ignore"):
         sigma_h = np.sqrt(table[:, col["var_p_n_m2"]] + table[:, col["var_p_e_m2"]])  # as EKF2's eph
     title = f"{name}: {method}, {coupling} coupling"
     paths = [out_dir / "track.png", out_dir / "errors.png"]
-    track_figure(paths[0], p_ne, tracks, title)
+    track_figure(paths[0], p_ne, tracks, title, seg)
     label = "mean per-satellite belief" if coupling == "tight" else "belief β"
-    errors_figure(paths[1], t_s, p_ne, sigma_h, tracks, table[:, col["beta"]], label, title)
+    errors_figure(paths[1], t_s, p_ne, sigma_h, tracks, table[:, col["beta"]], label, title, seg)
     return paths
 
 
