@@ -352,10 +352,13 @@ class EphemerisStore:
 
     def no_prediction(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> np.ndarray:
         """(n,) bool: the ephemeris selected at ``t_gps_s`` broadcasts "no accuracy prediction"."""
+        if not self._any_no_prediction:
+            return np.zeros(len(system), dtype=bool)
         t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
-        rows = self.select(system, prn, t)
-        if not self._no_prediction.any():
-            return np.zeros(len(rows), dtype=bool)
+        return self._without_prediction(self.select(system, prn, t))
+
+    def _without_prediction(self, rows: np.ndarray) -> np.ndarray:
+        """(n,) bool: the selected rows (−1: none) whose ephemeris has no accuracy prediction."""
         return (rows >= 0) & self._no_prediction[np.maximum(rows, 0)]
 
     def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
@@ -364,7 +367,7 @@ class EphemerisStore:
         t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
         rows = self.select(system, prn, t)
         if self._any_no_prediction:
-            rows = np.where((rows >= 0) & self._no_prediction[np.maximum(rows, 0)], -1, rows)
+            rows = np.where(self._without_prediction(rows), -1, rows)
         n = len(rows)
         pos = np.full((n, 3), np.nan)
         vel = np.full((n, 3), np.nan)

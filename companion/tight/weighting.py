@@ -31,7 +31,7 @@ import numpy as np
 from scipy.stats import chi2 as _chi2
 
 from companion.errors import not_one_of
-from companion.tight import _tight, snapshot
+from companion.tight import _tight, belief, snapshot
 from companion.tight.config import TightConfig
 
 
@@ -197,7 +197,7 @@ class SatelliteBelief(SigmaModel):
         elif c.belief_innovation == "snapshot" and t.geometry is not None and len(y) > t.geometry.shape[1]:
             G = t.geometry
             assert t.p_pos_m2 is not None
-            r_b = t.r_nominal * c.r_inflation_max ** (1.0 - 1.0 / (1.0 + np.exp(-theta)))
+            r_b = belief.r_of_beta(belief.sigmoid(theta), t.r_nominal, c)  # each satellite's R(β)
             y_s, s0_s = snapshot.leave_one_out(
                 G, y, r_b, s0, snapshot.position_prior(t.p_pos_m2, c.belief_snapshot_sigma_m,
                                                     c.belief_snapshot_clocks_free),

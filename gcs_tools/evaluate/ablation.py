@@ -241,8 +241,8 @@ def tune(scenario: str, seeds: Sequence[int], profiles: Sequence[int], workers: 
         res = _fly(candidates, scenario, profiles, seeds, workers)
         wall = (time.perf_counter() - t0) / len(candidates)
         scores = {c.label: _score(res, c.label) for c in candidates}
-        incumbent = next((c for c in candidates if label in chosen
-                          and dict(c.overrides) == dict(chosen[label].overrides)), None)
+        before = dict(chosen[label].overrides) if label in chosen else None  # a re-tune: the row's point
+        incumbent = next((c for c in candidates if dict(c.overrides) == before), None)
         win = choose(res, candidates, scores, incumbent, rng)
         for c in candidates:
             record("own", Row(label, method, c.overrides), scores[c.label], len(res) // len(candidates), wall,

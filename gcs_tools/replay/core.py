@@ -183,9 +183,8 @@ class _Comparisons:
         self.gnss = PositionErrors(max_gap_us=max_gap_us)
         self.geodetic: dict[tuple[str, str], PositionErrors] = {}
         self.local: dict[tuple[str, str], PositionErrors] = {}
-        self._queue: list[tuple[PositionErrors, int, float, float, float]] = []
+        self._queue: list[tuple[PositionErrors, _Track, int, float, float, float]] = []
         self.tracks: dict[str, _Track] = {}  # "gnss", AUTOPILOT, TRUTH: for the figures
-        self._kinds: dict[int, str] = {id(self.gnss): "gnss"}
         self.segment = 0  # the log segment (restarts) the tracks' rows belong to
 
     def estimate(self, t_us: int, p_ned_m: Any, var_ned_m2: Any) -> None:
@@ -195,7 +194,7 @@ class _Comparisons:
 
     def fix(self, fix: GnssFix) -> None:
         if fix.fix_type >= MIN_FIX_TYPE_3D:
-            self._geodetic(self.gnss, fix.t_validity_us, fix.lat_deg, fix.lon_deg, fix.alt_m)
+            self._geodetic(self.gnss, "gnss", fix.t_validity_us, fix.lat_deg, fix.lon_deg, fix.alt_m)
 
     def reference(self, ref: Reference | LocalReference) -> None:
         key = (ref.kind, ref.source)
@@ -204,8 +203,7 @@ class _Comparisons:
             m = self.geodetic.get(key)
             if m is None:
                 m = self.geodetic[key] = PositionErrors(max_gap_us=self.max_gap_us, coverage=truth)
-                self._kinds[id(m)] = ref.kind
-            self._geodetic(m, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
+            self._geodetic(m, ref.kind, ref.t_us, ref.lat_deg, ref.lon_deg, ref.alt_m)
         else:
             m = self.local.get(key)
             if m is None:
@@ -213,8 +211,8 @@ class _Comparisons:
             m.add_reference(ref.t_us, ref.p_ned_m)  # type: ignore[union-attr]
             self._track(ref.kind).add(ref.t_us, ref.p_ned_m, self.segment)  # type: ignore[union-attr]
 
-    def _geodetic(self, m: PositionErrors, t_us: int, lat: float, lon: float, alt: float) -> None:
-        self._queue.append((m, t_us, lat, lon, alt))
+    def _geodetic(self, m: PositionErrors, kind: str, t_us: int, lat: float, lon: float, alt: float) -> None:
+        self._queue.append((m, self._track(kind), t_us, lat, lon, alt))
         if len(self._queue) >= self.BATCH:
             self.flush()
 
@@ -222,11 +220,11 @@ class _Comparisons:
         queue, self._queue = self._queue, []
         if not queue:
             return
-        lla = np.array([q[2:] for q in queue], dtype=float)
+        lla = np.array([q[3:] for q in queue], dtype=float)
         ned = self.frame.to_ned_m(lla[:, 0], lla[:, 1], lla[:, 2]).T
-        for (m, t_us, *_), p in zip(queue, ned, strict=True):
+        for (m, track, t_us, *_), p in zip(queue, ned, strict=True):
             m.add_reference(t_us, p)
-            self._track(self._kinds[id(m)]).add(t_us, p, self.segment)
+            track.add(t_us, p, self.segment)
 
     def _track(self, kind: str) -> _Track:
         track = self.tracks.get(kind)
