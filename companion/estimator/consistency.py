@@ -76,13 +76,6 @@ def variance_scale(k: float) -> np.ndarray | None:
     return np.array((k, k, k, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)) if k > 1.0 else None
 
 
-def reported_variances(cov_diag: np.ndarray, k: float) -> np.ndarray:
-    """The variances (9,: p, v, b) a filter reports: its position variances × ``k`` (velocity and the
-    rest as they are); ``cov_diag`` itself (no copy) when k is 1."""
-    scale = variance_scale(k)
-    return cov_diag if scale is None else cov_diag * scale
-
-
 def check_accuracy_window(window_s: float) -> None:
     """``accuracy_window_s`` must be a finite number ≥ 0 (ValueError naming it otherwise)."""
     if not (math.isfinite(window_s) and window_s >= 0.0):

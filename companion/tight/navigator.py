@@ -24,7 +24,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
-from companion.estimator.consistency import accuracy_inflation, reported_variances
+from companion.estimator.consistency import accuracy_inflation, variance_scale
 from companion.gnss.constants import C_M_S
 from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
@@ -63,6 +63,8 @@ class TightNavigator:
         self._rot: Any = None
         self._odo: tuple[int, float, float] | None = None  # (t_us, yaw rate, its integral)
         self._last: tuple[Any, NavEstimate] | None = None
+        # (the engine's last epoch entry, consistency.variance_scale, the floor's variances) of it
+        self._reported: tuple[Any, np.ndarray | None, np.ndarray | None] = (None, None, None)
         self._valid_us = self.cfg.reset_timeout_s * 1e6
 
     def push(self, sample: Any) -> None:
@@ -167,10 +169,14 @@ class TightNavigator:
             return self._last[1]
         t_us, out, last = now  # one array, handed out as views (as the loose navigator does)
         info = last.info
-        cov = reported_variances(out[9:18], self.accuracy_inflation())  # P's positions × k
-        floor = self.accuracy_floor_m2()
+        entries = self.engine.entries
+        entry = entries[-1] if entries else None
+        if self._reported[0] is not entry:  # a function of the last epoch alone: once per epoch
+            self._reported = (entry, variance_scale(self.accuracy_inflation()), self.accuracy_floor_m2())
+        _, scale, floor = self._reported
+        cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
         if floor is not None:  # + the common-mode floor, in quadrature
-            cov = cov.copy()
+            cov = cov.copy() if scale is None else cov
             cov[0:3] += floor
         est = NavEstimate(t_us, out[0:3], out[3:6], out[6:9], cov, info.beta_mean, info.nis,
                           self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
