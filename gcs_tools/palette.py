@@ -22,6 +22,9 @@ QUANTITY: dict[str, str] = {
     "track_error": "#e377c2",  # tracking error ‖p − p_ref‖
     "building": "#bfbfbf",  # map rectangles (fill)
     "rejected": "#d62728",  # a GNSS fix the filter rejected (its innovation gate)
+    "gnss_step": "#cc79a7",  # a GNSS fix held as a step (fused only relative to an open GNSS offset)
+    "reset": "#6a3d9a",  # the estimate reset onto a fix (or, tight, onto a single-point solution)
+    "sats_used": "#009e73",  # satellites a tightly coupled epoch used
     "uncertainty": "#1f77b4",  # the estimate's 95 % horizontal uncertainty ellipse (as the estimate)
     "real_data": "#a50f15",  # a real data set beside the simulator (calibration)
     "simulated": "#1b9e77",  # the simulator's counterpart of a real data set

@@ -121,6 +121,13 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
     nav_t = t["navigator"]
     assert t["raw_gnss"]["coupling"] == "tight" and nav_t["gnss_fused"] >= len(truth) - 2
     assert nav_t["gnss_resets"] == 0 and nav_t["sat_used"] > 6 * len(truth)
+    from gcs_tools.replay import gnss_record
+
+    ep = gnss_record.read(tmp_path / "t" / "gnss_epochs.csv")  # one row per raw epoch, as the counters
+    assert len(ep["t_s"]) == t["raw_gnss"]["epochs"] and (ep["reason"] == "start").sum() == 1
+    assert np.nansum(ep["n_used"]) == nav_t["sat_used"]
+    assert np.nansum(ep["n_excluded"]) == nav_t["sat_rejected"]
+    assert (ep["reset"] == 0).all() and not (tmp_path / "t" / "gnss_fixes.csv").exists()
     # the same pseudoranges (and models) as the loose run's single-point fixes: the tight estimate lands
     # where the loose one does (both in the frame of the first single-point solution)
     assert t["home"] == s["home"]

@@ -34,7 +34,7 @@ def test_real_tlog_writes_both_figures_and_prints_them(tmp_path: Path,
     printed = capsys.readouterr().out
     for name in ("track.png", "errors.png"):
         _assert_png(out / name)
-    assert f"wrote {out}/: estimates.csv, summary.json, track.png, errors.png" in printed
+    assert f"wrote {out}/: estimates.csv, gnss_fixes.csv, summary.json, track.png, errors.png" in printed
     # the figure's estimate-to-fix distance is the summary's (same rows, same interpolation, all fixes)
     t_s, table = figures.read_estimates(out / "estimates.csv")
     summary = json.loads((out / "summary.json").read_text())
@@ -81,7 +81,11 @@ def test_concatenated_log_compares_each_segment_with_its_own_estimates(tmp_path:
     gnss = result.summary["errors"]["gnss"]  # every fix kept: the summary's numbers exactly
     assert np.isfinite(d).sum() == gnss["n"]
     assert np.nanmedian(d) == pytest.approx(gnss["error_horizontal_m"]["median"], abs=1e-6)
-    figures.save(tmp_path, result.t_us / 1e6, result.table, result.tracks, log.name, "second-order", "loose")
+    g = result.gnss["gnss_fixes.csv"]  # the per-fix record, kept in memory without --out: per segment
+    assert set(g["segment"]) == {0.0, 1.0} and (g["reason"] == "start").sum() == 2  # a fresh navigator each
+    assert (g["reason"] == "fused").sum() + 2 == result.summary["navigator"]["gnss_fused"]
+    figures.save(tmp_path, result.t_us / 1e6, result.table, result.tracks, log.name, "second-order", "loose",
+                 result.gnss)
     _assert_png(tmp_path / "track.png")
     _assert_png(tmp_path / "errors.png")
     # segments on the same clock, 10 m apart: each compared with its own estimate, never the other's
@@ -98,7 +102,7 @@ def test_concatenated_log_compares_each_segment_with_its_own_estimates(tmp_path:
 def test_no_figures_writes_none(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "n"
     assert main(["replay", str(SITL_BIN), "--out", str(out), "--no-progress", "--no-figures"]) == 0
-    assert f"wrote {out}/: estimates.csv, summary.json\n" in capsys.readouterr().out
+    assert f"wrote {out}/: estimates.csv, gnss_fixes.csv, summary.json\n" in capsys.readouterr().out
     assert (out / "estimates.csv").is_file()
     assert not list(out.glob("*.png"))
 
@@ -141,3 +145,58 @@ def test_figure_functions_on_tiny_arrays_with_nans(tmp_path: Path, with_truth: b
     assert np.isnan(d[2])  # a NaN reference is not compared
     assert np.isfinite(d[3])  # a NaN estimate row: its neighbours, 1 s apart (not a gap), are interpolated
     assert np.nanmax(d) < 1.0
+
+
+def _step_series(path: Path) -> Path:
+    """An error series (5 Hz) with two northward GNSS steps on the hover: 30 m for 2 s from series time
+    30 s, 40 m for 12 s from 50 s (held as a step for gnss_offset_max_s = 5 s, then reset onto)."""
+    t = np.round(np.arange(0.0, 120.0, 0.2), 3)
+    north = np.where((t >= 30) & (t < 32), 30.0, 0.0) + np.where((t >= 50) & (t < 62), 40.0, 0.0)
+    rows = "".join(f"{a:.3f},{n:.3f},0,0,0.5,1.0\n" for a, n in zip(t, north, strict=True))
+    path.write_text("t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m\n" + rows)
+    return path
+
+
+def test_glitch_fixes_are_recorded_rejected_and_marked(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """gnss_fixes.csv: one row per fix with the estimator's decision, the same counts as the navigator's
+    counters; the stepped fixes rejected or held (not fused), one reset 5 s into the long step, the rest
+    fused."""
+    from gcs_tools.replay import gnss_record
+
+    out = tmp_path / "g"
+    series = _step_series(tmp_path / "steps.csv")
+    assert main(["replay", str(SITL_BIN), "--gnss-errors", str(series), "--gnss-series-start-s", "0",
+                 "--gnss-latency-ms", "100", "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert f"wrote {out}/: estimates.csv, gnss_fixes.csv, summary.json, track.png, errors.png" in printed
+    _assert_png(out / "track.png")
+    _assert_png(out / "errors.png")
+    assert not (out / "gnss_epochs.csv").exists()  # loose coupling: fixes, no raw epochs
+    g = gnss_record.read(out / "gnss_fixes.csv")
+    nav = json.loads((out / "summary.json").read_text())["navigator"]
+    reason, accepted, north, t = g["reason"], g["accepted"], g["p_n_m"], g["t_s"]
+    count = {r: int((reason == r).sum()) for r in set(reason)}
+    # every fix the navigator was given has its row
+    assert len(t) == nav["gnss_fused"] + sum(n for k, n in nav.items() if k.startswith("gnss_rejected_"))
+    assert count.get("innovation", 0) == nav["gnss_rejected_innovation"] == 2  # the first fix of each step
+    assert count.get("reset", 0) == nav["gnss_resets"] == 1
+    assert count.get("return", 0) == nav["gnss_offset_returns"]
+    taken = sum(count.get(r, 0) for r in ("start", "fused", "step", "reset", "return"))
+    assert taken == nav["gnss_fused"]  # the counters count held (step) fixes as fused
+    for r in set(reason) - {"start", "fused", "step", "reset", "return", "innovation"}:
+        assert count[r] == nav[f"gnss_rejected_{r}"], r  # refused before the gate: future, too old, ...
+    assert ((accepted == 1) == np.isin(reason, ["start", "fused", "reset", "return"])).all()
+    short = (north > 20) & (north < 35)  # the 2 s step: not one fix fused
+    assert short.sum() >= 9 and (accepted[short] == 0).all()
+    assert (reason[short] == "innovation").sum() == 1
+    assert set(reason[short]) <= {"innovation", "step", "future"}
+    long = north > 35
+    t_reset = t[reason == "reset"][0]
+    assert 5.0 <= t_reset - t[long][0] < 6.0  # accepted as the GNSS's new track after 5 s held
+    assert (accepted[long & (t < t_reset)] == 0).all()
+    assert (accepted[long & (t > t_reset) & (reason != "future")] == 1).all()
+    clean = north < 1.0  # the hover's own fixes: fused, or refused before the gate, never gated
+    assert set(reason[clean]) <= {"start", "fused", "return", "future", "too_old", "fix_type"}
+    ratio = g["test_ratio"]
+    assert (ratio[reason == "innovation"] > 1.0).all() and np.nanmax(ratio[clean & (reason == "fused")]) < 1.0

@@ -13,7 +13,7 @@ from companion.errors import UserError
 from companion.mission import Mission
 from companion.telemetry import pubsub as telemetry
 from gcs_tools import choices
-from gcs_tools.replay import core
+from gcs_tools.replay import core, gnss_record
 from gcs_tools.replay.synthetic_gnss import ACCURACY_MODES, BASES, GnssErrorOptions, velocity_option
 
 
@@ -203,7 +203,8 @@ def run(args: argparse.Namespace) -> int:
     print(report(result.summary, args.file.name))
     if gnss_note and "map" in gnss_note:  # the tight filter's map prior, stated either way
         print(f"  map: {gnss_note['map'] or 'none (no --mission: no line-of-sight prior)'}")
-    files = ["estimates.csv", "summary.json", *(f.name for f in figures)]
+    record = [name for name in (gnss_record.FIX_FILE, gnss_record.EPOCH_FILE) if (args.out / name).is_file()]
+    files = ["estimates.csv", *record, "summary.json", *(f.name for f in figures)]
     print(f"  wrote {args.out}/: {', '.join(files)}")  # as fly and sitl
     if pub is not None:
         c = pub.counters()
@@ -216,7 +217,8 @@ def _figures(result: core.ReplayResult, args: argparse.Namespace) -> list[Path]:
     from gcs_tools.replay import figures
 
     t_s, table = figures.read_estimates(args.out / "estimates.csv")
-    return figures.save(args.out, t_s, table, result.tracks, args.file.name, args.method, args.coupling)
+    return figures.save(args.out, t_s, table, result.tracks, args.file.name, args.method, args.coupling,
+                        figures.read_record(args.out))
 
 
 def is_sats(errors: str | None) -> bool:

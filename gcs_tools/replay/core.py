@@ -36,8 +36,10 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
 from companion.metrics import Distribution, PositionErrors
+from companion.tight.samples import RawGnss
 from gcs_tools.jsonvalues import plain_json
 from gcs_tools.replay.events import AUTOPILOT, MIN_FIX_TYPE_3D, TRUTH, LocalReference, LogReader, Reference
+from gcs_tools.replay.gnss_record import GnssRecord
 from gcs_tools.replay.logs import open_log
 
 if TYPE_CHECKING:
@@ -256,9 +258,9 @@ class _Run:
     """The navigator(s) of one replay: feeding, estimate rows, segments."""
 
     def __init__(self, make_nav: Callable[[], NavigatorLike], period_us: int, sink: Any,
-                 comparisons: _Comparisons, on_imu: ImuHook | None) -> None:
+                 comparisons: _Comparisons, on_imu: ImuHook | None, record: GnssRecord) -> None:
         self.make_nav, self.period_us, self.sink = make_nav, period_us, sink
-        self.comparisons, self.on_imu = comparisons, on_imu
+        self.comparisons, self.on_imu, self.record = comparisons, on_imu, record
         self.nav = make_nav()
         self.counters: Counter[str] = Counter()
         self.segments: list[dict[str, Any]] = []
@@ -277,9 +279,17 @@ class _Run:
         out: list[NavEstimate] = []
         hook_s = 0.0
         t0 = time.perf_counter()
+        record, nav = self.record, self.nav
+        record_s = record.overhead_s
         for sample in samples:
+            kind = type(sample)
+            if kind is GnssFix or kind is RawGnss:  # pushed by the record, which notes the decision
+                record.pushed(sample, nav)
+                continue
             push(sample)
-            if type(sample) is ImuSample:
+            if kind is ImuSample:
+                if sample.t_us >= record.wait_until_us:  # a fix waited for this IMU time
+                    record.imu(sample.t_us)
                 if sample.t_us >= next_row_us:
                     est = estimate()
                     if est is not None:
@@ -289,7 +299,7 @@ class _Run:
                     h0 = time.perf_counter()
                     on_imu(sample.t_us, self.nav)
                     hook_s += time.perf_counter() - h0
-        self.estimator_s += time.perf_counter() - t0 - hook_s
+        self.estimator_s += time.perf_counter() - t0 - hook_s - (record.overhead_s - record_s)
         self.next_row_us = next_row_us
         samples.clear()
         if out:
@@ -323,6 +333,7 @@ class _Run:
 
     def restart(self) -> None:
         self.end_segment()
+        self.record.restart()
         self.segment += 1
         self.nav = self.make_nav()
         self.first_imu_us = self.last_imu_us = None
@@ -338,6 +349,9 @@ class ReplayResult:
     # "gnss" (the 3-D fixes at their validity times), "autopilot_estimate", "truth" when the log has
     # them: (K, 5) rows t_s, n, e, d [m] in the replay's frame, segment; at most one per TRACK_PERIOD_US
     tracks: dict[str, np.ndarray] = field(default_factory=dict)
+    # what the estimator did with each GNSS input (``gnss_record``): file name ("gnss_fixes.csv",
+    # "gnss_epochs.csv") -> its columns; empty when the rows were streamed to files
+    gnss: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
 
 def replay(
@@ -407,11 +421,14 @@ def replay(
     sink: _MemorySink | _CsvSink = _MemorySink() if out_dir is None else _CsvSink(out_dir / "estimates.csv")
     period_us = int(1e6 / rate_hz) if rate_hz > 0 else 0
     comparisons = _Comparisons(frame, max(MAX_GAP_US, 4 * period_us))
-    run = _Run(make_nav, period_us, sink, comparisons, on_imu)
+    record = GnssRecord(frame, out_dir)
+    run = _Run(make_nav, period_us, sink, comparisons, on_imu, record)
     try:
         restarts = _stream(reader, run, comparisons, progress)
+        record.close()
     finally:
         sink.close()
+        record.abandon()
     run.end_segment()
     st = reader.stats
     if progress is not None:
@@ -464,7 +481,8 @@ def replay(
         summary["gnss_validity"] = {"gps_delay_ms": getattr(log_reader, "gps_delay_ms", None),
                                     "from": gps_delay}
     t_us, table = sink.arrays()
-    return ReplayResult(summary, t_us, table, {k: v.array() for k, v in comparisons.tracks.items()})
+    return ReplayResult(summary, t_us, table, {k: v.array() for k, v in comparisons.tracks.items()},
+                        record.arrays())
 
 
 def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
