@@ -26,7 +26,8 @@ def test_mission_typo_lists_packaged_missions(tmp_path):
     with pytest.raises(UserError) as exc:
         choices.mission("defualt")
     assert str(exc.value) == ("--mission 'defualt': no such file and not a packaged mission "
-                              "(packaged: default, test, default-tuning; did you mean 'default'?)")
+                              "(packaged: default, test, default-tuning, mild, mild-tuning; "
+                              "did you mean 'default'?)")
     m = choices.mission("test")
     assert choices.profile(m, 2) == 2
     with pytest.raises(UserError, match=r"--profile 3: mission 'test-city' has profiles 0 through-canyon, "):

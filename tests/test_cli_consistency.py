@@ -65,7 +65,8 @@ def test_sitl_typo_fails_at_once_naming_the_choices(tmp_path):
     done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--mission", "defualt", "--out",
                            str(out)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
-    assert "(packaged: default, test, default-tuning; did you mean 'default'?)" in done.stderr
+    assert ("(packaged: default, test, default-tuning, mild, mild-tuning; did you mean 'default'?)"
+            in done.stderr)
     assert not out.exists()
 
 

@@ -31,7 +31,8 @@ from companion.mission.scenarios import SCENARIOS, scenario_sections
 from companion.mission.schema import ConfigError, build, load_yaml
 from companion.mission.world import World
 
-BUILTIN_MISSIONS = ("default", "test", "default-tuning")  # companion/mission/data/<name>.yaml
+# companion/mission/data/<name>.yaml
+BUILTIN_MISSIONS = ("default", "test", "default-tuning", "mild", "mild-tuning")
 MAX_EXTENDS = 4  # a mission file may extend another (``extends:``) this many levels deep
 
 
@@ -66,7 +67,8 @@ class Mission:
 
 
 def load_mission(which: str | Path, scenario: str | None = None) -> Mission:
-    """Load a packaged mission (``BUILTIN_MISSIONS``: ``"default"``, ``"test"``, ``"default-tuning"``)
+    """Load a packaged mission (``BUILTIN_MISSIONS``: ``"default"``, ``"test"``, ``"default-tuning"``,
+    ``"mild"``, ``"mild-tuning"``)
     or a YAML file path; ``scenario`` (``--scenario``) replaces the file's ``scenario:``.
 
     A file may start from another with ``extends: NAME|PATH`` (a packaged name, or a path relative

@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "options it was started with: a flight whose directory holds a complete result "
                              "is read back, not flown; incomplete ones are cleared and flown again")
     parser.add_argument("--mission", default="default",
-                        help="mission name (default, test, default-tuning) or YAML path")
+                        help="mission name (default, test, default-tuning, mild, mild-tuning) or YAML path")
     parser.add_argument("--profiles", default="10",
                         help="mission profiles: a count N (profiles 0..N-1) or a list/range like 10-13")
     choices.add_deprecated_alias(parser, "--missions", "--profiles", "profiles")

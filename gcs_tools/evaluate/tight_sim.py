@@ -35,12 +35,14 @@ reported ``horiz_accuracy`` = sqrt(σ_N² + σ_E²).
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from companion.domain.samples import NavEstimate
 from companion.errors import UserError
 from companion.tight import RawGnss, TightConfig
 from gcs_tools import choices
@@ -48,6 +50,7 @@ from gcs_tools.evaluate.tight import table_lines
 from gcs_tools.jsonvalues import write_results_or_error
 
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
+EXTRA_ROWS = ("naive", "first-order")  # flown on request (``--rows``): fixed weights, the first-order belief
 MAP_ROWS = ("second-order-map", "second-order-imperfect-map")  # the belief with the map's prior
 FREE_ROW = "tight-second-order-map-free"  # the map belief's estimate kept out of the buildings (as fed)
 OUTSIDE = " (truth outside buildings)"  # the free-space rows again, on the steps whose truth is outside
@@ -60,12 +63,15 @@ MAP_SIGMA_SHIFT_M = 1.5
 def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              max_duration_s: float | None = None, maps: bool = True,
              accuracy: dict[str, list[tuple[float, float, float]]] | None = None,
-             on_raw: Callable[[str, Any, Any], None] | None = None) -> dict[str, np.ndarray]:
+             on_raw: Callable[[str, Any, Any], None] | None = None,
+             fly_on_truth: bool = False) -> dict[str, np.ndarray]:
     """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
     the exact and an imperfect map); ``accuracy`` (if given) collects per tight row and step (NEES_h
     reported, NEES_h of P alone, reported horiz_accuracy); ``on_raw(row, raw, navigator)`` (if given) is
     called after each row's navigator was given a raw epoch (``simvehicle.receiver.RawObservation``,
-    with the simulator's truth per satellite)."""
+    with the simulator's truth per satellite); ``fly_on_truth``: the vehicle flies its planned route on
+    the truth (as ``simcal`` flies it), the loose filter only estimates, so the receiver's path depends on
+    no estimator and stays in the streets."""
     from companion.estimator.freespace import constrain
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
@@ -93,9 +99,9 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     errors: dict[str, list[float]] = {k: [] for k in ("spp", "loose", *(f"tight-{r}" for r in tight),
                                                       *outside_rows, *(r + OUTSIDE for r in outside_rows))}
     last_fix = None
-    est = None
+    est = fly = None
     while sim.t_us < end_us:
-        out = sim.advance(est, route.setpoint(sim.t_us))
+        out = sim.advance(fly, route.setpoint(sim.t_us))
         if gnss.store is not store:  # the sky's ephemerides extended
             store = gnss.store
             for t in tight.values():
@@ -121,7 +127,10 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
                         on_raw(name, raws[j], t)
                 j += 1
         est = nav.estimate()
-        truth = np.asarray(out.final_truth.p_ned_m, float)
+        tr = out.final_truth
+        fly = est if not fly_on_truth else NavEstimate(out.t_us, tr.p_ned_m, tr.v_ned_m_s, tr.gnss_bias_ned_m,
+                                                        np.zeros(9), 1.0, math.nan, "truth")
+        truth = np.asarray(tr.p_ned_m, float)
         if est is None or last_fix is None:
             continue
         rows_now: dict[str, Any] = {"spp": last_fix, "loose": est.p_ned_m}
@@ -152,13 +161,14 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
 
 
 def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Sequence[str] = ROWS,
-        n_resamples: int = 2000, rng_seed: int = 0, max_duration_s: float | None = None) -> dict[str, Any]:
+        n_resamples: int = 2000, rng_seed: int = 0, max_duration_s: float | None = None,
+        fly_on_truth: bool = False) -> dict[str, Any]:
     flights: list[dict[str, Any]] = []
     acc: dict[str, list[tuple[float, float, float]]] = {}
     err: dict[str, list[np.ndarray]] = {}
     for p in profiles:
         for s in seeds:
-            e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc)
+            e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc, fly_on_truth=fly_on_truth)
             for k, v in e.items():
                 err.setdefault(k, []).append(v)
             flights.append({"profile": p, "seed": s, "steps": int(len(e["spp"])),
@@ -190,7 +200,9 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
             lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
             paired.append({"stat": stat, "row": FREE_ROW + sfx, "reference": map_row + sfx,
                            "mean_diff_m": float(d.mean()), "ci": [float(lo), float(hi)]})
+    flown = {"fly_on_truth": True} if fly_on_truth else {}  # (absent: flown on the loose filter)
     return {"mission": mission, "scenario": "canyon", "profiles": list(profiles), "seeds": list(seeds),
+            **flown,
             "flights": flights, "rows": out_rows, "paired": paired,
             "coverage": {k: coverage(np.asarray(v), np.concatenate(err[k])) for k, v in acc.items()},
             "method": "per-flight median and p95 of the horizontal error at every control step; mean over "
@@ -210,7 +222,9 @@ def markdown(r: dict[str, Any]) -> str:
     def ci(v: list[float], sign: str = "") -> str:
         return f"[{v[0]:{sign}.2f}, {v[1]:{sign}.2f}]"
 
-    lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}: {r['method']}.", ""]
+    flown = ", the vehicle flown on the truth" if r.get("fly_on_truth") else ""
+    lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}{flown}: {r['method']}.",
+             ""]
     lines += table_lines(("row", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
                          ((n, f"{s['median_m']['mean']:.2f}", ci(s["median_m"]["ci"]),
                            f"{s['p95_m']['mean']:.2f}", ci(s["p95_m"]["ci"])) for n, s in r["rows"].items()))
@@ -235,16 +249,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--out", type=Path, default=Path("runs/tight-sim"))
     p.add_argument("--max-duration-s", type=float, default=None)
-    p.add_argument("--rows", default=",".join(ROWS), help="tight weightings, comma-separated")
+    p.add_argument("--fly-on-truth", action="store_true",
+                   help="the vehicle flies its planned route on the truth (the loose filter only estimates)")
+    p.add_argument("--rows", default=",".join(ROWS),
+                   help=f"tight weightings, comma-separated (also: {', '.join(EXTRA_ROWS)})")
     args = p.parse_args(argv)
 
     def compute() -> dict[str, Any]:
         profiles, seeds = choices.seeds(args.profiles, "--profiles"), choices.seeds(args.seeds)
         rows = [v for v in args.rows.split(",") if v]
-        bad = sorted(set(rows) - set(ROWS))
+        bad = sorted(set(rows) - set(ROWS) - set(EXTRA_ROWS))
         if bad or not rows:
-            raise UserError(f"--rows: choose from {', '.join(ROWS)}")
-        return run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s)
+            raise UserError(f"--rows: choose from {', '.join((*ROWS, *EXTRA_ROWS))}")
+        return run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s,
+                   fly_on_truth=args.fly_on_truth)
 
     return write_results_or_error(args.out, compute, markdown)
 
