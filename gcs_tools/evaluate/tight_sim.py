@@ -22,6 +22,11 @@ Every control step each row's position is compared with the truth (horizontal di
   rows are also scored on the steps whose truth is outside every building (``... (truth outside
   buildings)``).
 
+``--fly-on-truth``: the vehicle flies its planned route on the truth (as ``simcal`` flies it), the loose
+filter only estimating, so the receiver's path stays in the streets whatever the filters do (the packaged
+``mild`` city is reported so: docs/tight.md, "A milder city"). ``--rows`` takes ``naive`` and
+``first-order`` too (not flown by default).
+
 Intervals: per-flight medians and 95th percentiles, bootstrap over flights (seeded), and paired
 differences between rows over the same flights.
 
