@@ -318,6 +318,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--sensitivity", action="store_true",
                    help="also the belief row with each main parameter halved and doubled, and with "
                         "a biased odometry")
+    p.add_argument("--variants", nargs="?", const="default", default=None, metavar="NAMES",
+                   help="in place of the ablation: the filter on variants of the drive (comma-separated, "
+                        "+ composes; default: all, gcs_tools.evaluate.tight_variants)")
     args = p.parse_args(argv)
 
     def compute() -> dict[str, Any]:
@@ -328,7 +331,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run(args.smartloc, args.truth, args.seed, args.block_s, args.resamples,
                    progress=lambda m: print(f"  {m}", flush=True), sensitivity=args.sensitivity)
 
-    code = write_results_or_error(args.out, compute, markdown)
+    def compute_variants() -> dict[str, Any]:
+        from gcs_tools.evaluate import tight_variants as tv
+
+        if not args.smartloc.is_file():
+            raise UserError(f"{args.smartloc}: no such file")
+        names = tv.DEFAULT if args.variants == "default" else tuple(args.variants.split(","))
+        return tv.run(args.smartloc, args.truth, names, progress=lambda m: print(f"  {m}", flush=True))
+
+    if args.variants is not None:
+        from gcs_tools.evaluate.tight_variants import markdown as variants_markdown
+
+        code = write_results_or_error(args.out, compute_variants, variants_markdown)
+    else:
+        code = write_results_or_error(args.out, compute, markdown)
     if code == 0:
         print(f"wrote {args.out / 'results.json'} and {args.out / 'results.md'}")
     return code
