@@ -29,6 +29,7 @@ from companion.gnss.constants import C_M_S
 from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
 from companion.tight.belief import LineOfSight
+from companion.tight.cn0cal import Cn0Calibration
 from companion.tight.config import TightConfig
 from companion.tight.model import Frame
 from companion.tight.samples import Odometry, RawGnss
@@ -66,6 +67,9 @@ class TightNavigator:
         # (the engine's last epoch entry, consistency.variance_scale, the floor's variances) of it
         self._reported: tuple[Any, np.ndarray | None, np.ndarray | None] = (None, None, None)
         self._valid_us = self.cfg.reset_timeout_s * 1e6
+        c = self.cfg
+        self._cn0 = None if math.isnan(c.cn0_calibration_ref_dbhz) else Cn0Calibration(
+            c.cn0_calibration_quantile, c.cn0_calibration_ref_dbhz, c.cn0_calibration_prior_obs)
 
     def push(self, sample: Any) -> None:
         """Consume one sample (arrival order). Never raises on bad data: it is counted."""
@@ -127,6 +131,9 @@ class TightNavigator:
             self._counts["gnss_rejected_no_solution"] += 1
             return
         assert eng.frame is not None
+        if self._cn0 is not None:  # C/N0 as the reference receiver would report it (cn0cal)
+            self._cn0.add(epoch.cn0_dbhz)
+            epoch = epoch.replace(cn0_dbhz=self._cn0.calibrated(epoch.cn0_dbhz))
         m = tight_engine.prepare_epoch(epoch, eng.frame, self.cfg, eng.klobuchar, atmosphere)
         if m is None:
             self._counts["gnss_rejected_empty"] += 1

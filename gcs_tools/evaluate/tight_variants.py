@@ -134,7 +134,7 @@ VARIANTS: dict[str, Callable[[Drive], Drive]] = {
     "gps-only": gps_only,
     "no-glonass": no_glonass,
     "1hz": decimate,
-    "cn0-6": lambda d: cn0_offset(d, -6.0),
+    "cn0-6": lambda d: cn0_offset(d, -6.0),  # any cn0±X (dB) is understood; these are the defaults
     "cn0-3": lambda d: cn0_offset(d, -3.0),
     "cn0+3": lambda d: cn0_offset(d, 3.0),
     "var-constant": variance_constant,
@@ -151,8 +151,19 @@ DEFAULT = (*VARIANTS, "1hz+no-odometry", "cn0-6+no-odometry", "cn0+3+no-odometry
 def apply(name: str, drive: Drive) -> Drive:
     """The variant ``name`` (``a+b``: a, then b) of ``drive``; a UserError naming the known ones."""
     for part in parts(name):
-        drive = VARIANTS[part](drive)
+        db = _cn0_db(part)
+        drive = VARIANTS[part](drive) if db is None else cn0_offset(drive, db)
     return drive
+
+
+def _cn0_db(part: str) -> float | None:
+    """``cn0-6`` -> -6.0 (any signed offset in dB), else None."""
+    if part.startswith(("cn0+", "cn0-")):
+        try:
+            return float(part[3:])
+        except ValueError:
+            return None
+    return None
 
 
 def parts(name: str) -> list[str]:
@@ -164,7 +175,7 @@ def parts(name: str) -> list[str]:
     else:
         out = name.split("+")
     for part in out:
-        if part not in VARIANTS:
+        if part not in VARIANTS and _cn0_db(part) is None:
             raise UserError(f"unknown variant {part!r}: choose from {', '.join(VARIANTS)} (join with +)")
     return out
 
