@@ -59,8 +59,9 @@ class TightConfig:
     # reference from the simulator's tuning flights (mission default-tuning, profiles 0-3 × seeds 1000-1001):
     # of the quantiles 0.9 / 0.95 / 0.98 / 0.99 the per-flight level varies by sd 1.5 / 0.95 / 0.46 / 0.40 dB
     # (the environment's share); 0.98 (2 % of signals, less at the mercy of a few outliers than 1 %), its
-    # pooled level there 50.2 dB-Hz. NaN: off (absolute C/N0). The prior's weight in signals (the offset shrunk
-    # by n / (n + this) while few are seen), on the same flights with every C/N0 offset by -10 / -6 / 0 / +6 dB,
+    # pooled level there 50.2 dB-Hz. NaN: off (absolute C/N0). The prior's weight in signals (the offset
+    # shrunk by n / (n + this) while few are seen), on the same flights with every C/N0 offset by -10 / -6 /
+    # 0 / +6 dB,
     # mean per-flight median / p95 of tight-second-order (m): off 15.2/56.8, 12.3/46.6, 9.3/35.1, 9.0/28.4;
     # 0: 9.1/34.4 at every offset; 50: 9.1-9.2/34.4-34.6; 200: 9.1-9.3/34.4-34.9; 1000: 8.9-9.8/33.5-37.1
     cn0_calibration_quantile: float = 0.98
@@ -208,8 +209,8 @@ class TightConfig:
             raise ValueError(f"accuracy_floor_m: must be a finite number >= 0, got {self.accuracy_floor_m!r}")
         if not (0.0 < self.cn0_calibration_quantile < 1.0 and self.cn0_calibration_prior_obs >= 0.0
                 and not math.isinf(self.cn0_calibration_ref_dbhz)):
-            raise ValueError("cn0_calibration_quantile in (0, 1), cn0_calibration_prior_obs >= 0 and a finite "
-                             "cn0_calibration_ref_dbhz (NaN: off) needed")
+            raise ValueError("cn0_calibration_quantile in (0, 1), cn0_calibration_prior_obs >= 0 and a "
+                             "finite cn0_calibration_ref_dbhz (NaN: off) needed")
         if not self.r_inflation_max >= 1.0:
             raise ValueError("r_inflation_max: must be >= 1")
         if not self.theta_min < 0.0 < self.theta_max:

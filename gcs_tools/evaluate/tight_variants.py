@@ -5,6 +5,7 @@ Every variant is a transformation of the parsed drive (``SmartLocInput`` epochs 
 truth), never a file written by hand:
 
 * ``gps-only`` keeps GPS satellites alone; ``no-glonass`` drops GLONASS (the same on a GPS + GLONASS drive);
+* ``galileo-mix``: GPS satellites of odd PRN relabelled Galileo, ``ISB_M`` later (a third system and clock);
 * ``1hz`` keeps the first epoch of every second of the drive (a 1 Hz receiver in place of ~5 Hz);
 * ``cn0-6``, ``cn0-3``, ``cn0+3``: every C/N0 offset by that many dB (another receiver's calibration);
 * ``var-constant`` (every given pseudorange variance the drive's median), ``var-missing`` (none given);
@@ -36,6 +37,7 @@ Drive = tuple[SmartLocInput, Truth]
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
 TIME_SHIFT_S = 1.0e9  # ~GPS seconds since 1980: stamps of that size instead of seconds from the start
 GAP_S = 2.0
+ISB_M = 40.0  # galileo-mix: the relabelled satellites' inter-system bias
 
 
 def _with_epochs(data: SmartLocInput, epochs: Sequence[GnssEpoch], odometry: np.ndarray | None = None
@@ -61,6 +63,18 @@ def no_glonass(drive: Drive) -> Drive:
     return keep_systems(drive, lambda s: s != System.GLONASS)
 
 
+def relabel_galileo(drive: Drive, isb_m: float = ISB_M) -> Drive:
+    """The GPS satellites of odd PRN as Galileo ones, ``isb_m`` later (another system, its own receiver
+    clock: a GPS + Galileo + … receiver's mix with the same geometry)."""
+    data, truth = drive
+    out = []
+    for e in data.epochs:
+        m = (e.system == System.GPS) & (e.prn % 2 == 1)
+        out.append(e.replace(system=np.where(m, np.int8(System.GALILEO), e.system).astype(np.int8),
+                             pseudorange_m=e.pseudorange_m + np.where(m, isb_m, 0.0)))
+    return _with_epochs(data, out), truth
+
+
 def decimate(drive: Drive, rate_hz: float = 1.0) -> Drive:
     """The first epoch of every 1/rate_hz interval, counted from the drive's first epoch."""
     data, truth = drive
@@ -84,7 +98,8 @@ def variance_constant(drive: Drive) -> Drive:
 
 def variance_missing(drive: Drive) -> Drive:
     data, truth = drive
-    return _with_epochs(data, [e.replace(pseudorange_var_m2=np.full(e.n, np.nan)) for e in data.epochs]), truth
+    eps = [e.replace(pseudorange_var_m2=np.full(e.n, np.nan)) for e in data.epochs]
+    return _with_epochs(data, eps), truth
 
 
 def time_window(drive: Drive, t_from_s: float, t_to_s: float) -> Drive:
@@ -133,6 +148,7 @@ VARIANTS: dict[str, Callable[[Drive], Drive]] = {
     "baseline": lambda d: d,
     "gps-only": gps_only,
     "no-glonass": no_glonass,
+    "galileo-mix": relabel_galileo,
     "1hz": decimate,
     "cn0-6": lambda d: cn0_offset(d, -6.0),  # any cn0±X (dB) is understood; these are the defaults
     "cn0-3": lambda d: cn0_offset(d, -3.0),
@@ -212,8 +228,8 @@ def run(input_path: Any, truth_path: Any, names: Sequence[str] = DEFAULT,
         errors["spp"] = _horizontal((series.p_ecef_m - p0) @ r_ned.T, truth_ned)
         counts: dict[str, Any] = {}
         for w in rows:
-            reader = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m,
-                                          len(data.odometry) > 0)
+            reader: Any = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m,
+                                               len(data.odometry) > 0)  # (a raw reader: replay's as in tight)
             res = core.replay(input_path, w, home=home, reader=reader,
                               navigator=tr.tight_factory(TightConfig.for_ground_vehicle()), rate_hz=20.0)
             t = res.t_us * 1e-6
@@ -225,7 +241,8 @@ def run(input_path: Any, truth_path: Any, names: Sequence[str] = DEFAULT,
         sm, sp = float(np.median(spp)), float(np.percentile(spp, 95))
         out[name] = {"epochs": int(ok.sum()), "odometry": bool(len(data.odometry)),
                      "duration_s": float(t_ep[-1] - t_ep[0]),
-                     "rows": {k: {"median_m": float(np.median(e[ok])), "p95_m": float(np.percentile(e[ok], 95)),
+                     "rows": {k: {"median_m": float(np.median(e[ok])),
+                                  "p95_m": float(np.percentile(e[ok], 95)),
                                   "max_m": float(e[ok].max()),
                                   "median_ratio": float(np.median(e[ok])) / sm,
                                   "p95_ratio": float(np.percentile(e[ok], 95)) / sp,
