@@ -52,6 +52,9 @@ def test_variants_do_what_they_say():
         np.testing.assert_array_equal(v.epochs[3].pseudorange_m, data.epochs[3].pseudorange_m)
     both = tv.apply("cn0+3+no-odometry", d)
     assert both[0].epochs[0].cn0_dbhz[0] == 43.0 and both[0].odometry.shape == (0, 3)
+    assert np.isnan(tv.apply("cn0-missing", d)[0].epochs[1].cn0_dbhz).all()
+    el = tv.apply("el-missing", d)[0].epochs[1]
+    assert np.isnan(el.elevation_deg).all() and el.cn0_dbhz.tolist() == [40.0, 35.0, 45.0]
     # the variance column constant (the median of the given ones: 4) or missing
     assert tv.apply("var-constant", d)[0].epochs[0].pseudorange_var_m2.tolist() == [4.0, 4.0, 4.0]
     assert np.isnan(tv.apply("var-missing", d)[0].epochs[0].pseudorange_var_m2).all()

@@ -8,6 +8,7 @@ truth), never a file written by hand:
 * ``galileo-mix``: GPS satellites of odd PRN relabelled Galileo, ``ISB_M`` later (a third system and clock);
 * ``1hz`` keeps the first epoch of every second of the drive (a 1 Hz receiver in place of ~5 Hz);
 * ``cn0-6``, ``cn0-3``, ``cn0+3``: every C/N0 offset by that many dB (another receiver's calibration);
+* ``cn0-missing``, ``el-missing``: no C/N0, no elevation column (NaN);
 * ``var-constant`` (every given pseudorange variance the drive's median), ``var-missing`` (none given);
 * ``first-half``, ``second-half``: the drive cut at its middle time (epochs, odometry and truth);
 * ``no-odometry``: no wheel speed or yaw rate;
@@ -89,6 +90,18 @@ def cn0_offset(drive: Drive, offset_db: float) -> Drive:
     return _with_epochs(data, [e.replace(cn0_dbhz=e.cn0_dbhz + offset_db) for e in data.epochs]), truth
 
 
+def cn0_missing(drive: Drive) -> Drive:
+    """No C/N0 reported (NaN): a receiver or format without it."""
+    data, truth = drive
+    return _with_epochs(data, [e.replace(cn0_dbhz=np.full(e.n, np.nan)) for e in data.epochs]), truth
+
+
+def elevation_missing(drive: Drive) -> Drive:
+    """No elevation column (NaN): the filters must compute their own."""
+    data, truth = drive
+    return _with_epochs(data, [e.replace(elevation_deg=np.full(e.n, np.nan)) for e in data.epochs]), truth
+
+
 def variance_constant(drive: Drive) -> Drive:
     """Every given pseudorange variance replaced by the drive's median of them."""
     data, truth = drive
@@ -153,6 +166,8 @@ VARIANTS: dict[str, Callable[[Drive], Drive]] = {
     "cn0-6": lambda d: cn0_offset(d, -6.0),  # any cn0±X (dB) is understood; these are the defaults
     "cn0-3": lambda d: cn0_offset(d, -3.0),
     "cn0+3": lambda d: cn0_offset(d, 3.0),
+    "cn0-missing": cn0_missing,
+    "el-missing": elevation_missing,
     "var-constant": variance_constant,
     "var-missing": variance_missing,
     "first-half": first_half,
