@@ -69,6 +69,11 @@ def test_variants_do_what_they_say():
     assert kept == [100.0, 100.2, 100.4, 100.6, 100.8]
     g = tv.gap(_drive(40), start_s=102.0)[0]  # 8 s: the 10 epochs in [102, 104) removed
     assert len(g.epochs) == 30 and not any(102.0 <= e.t_gps_s < 104.0 for e in g.epochs)
+    # odometry rates (10 Hz here): 50 Hz interpolated onto its grid; 1 Hz the first sample of every second
+    fast = tv.apply("odo-50hz", d)[0].odometry
+    assert len(fast) == 96 and np.allclose(np.diff(fast[:, 0]), 0.02) and (fast[:, 1] == 5.0).all()
+    slow = tv.apply("odo-1hz", d)[0].odometry
+    assert slow[:, 0].tolist() == [100.0, 101.0] and slow.shape[1] == 3
     # a time shift moves epochs, odometry and truth together
     s, ts = tv.apply("time-shift", d)
     assert s.epochs[0].t_gps_s == 100.0 + tv.TIME_SHIFT_S and s.odometry[0, 0] == 100.0 + tv.TIME_SHIFT_S

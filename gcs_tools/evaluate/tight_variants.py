@@ -12,6 +12,7 @@ truth), never a file written by hand:
 * ``var-constant`` (every given pseudorange variance the drive's median), ``var-missing`` (none given);
 * ``first-half``, ``second-half``: the drive cut at its middle time (epochs, odometry and truth);
 * ``no-odometry``: no wheel speed or yaw rate;
+* ``odo-50hz``, ``odo-1hz``: the odometry at 50 Hz (interpolated) or 1 Hz (decimated) instead of 5 Hz;
 * ``gap-2s``: no GNSS epoch for 2 s from the drive's middle time;
 * ``time-shift``: every time stamp (epochs, odometry, truth) plus ``TIME_SHIFT_S``.
 
@@ -143,6 +144,23 @@ def no_odometry(drive: Drive) -> Drive:
     return _with_epochs(data, data.epochs, np.zeros((0, 3))), truth
 
 
+def odometry_rate(drive: Drive, rate_hz: float) -> Drive:
+    """The odometry at ``rate_hz``: faster, its speed and yaw rate linearly interpolated onto that grid
+    (another car's bus rate, the same signals); slower, the first sample of every 1/rate_hz interval."""
+    data, truth = drive
+    o = data.odometry
+    if len(o) < 2:
+        return drive
+    t = o[:, 0]
+    if rate_hz * float(np.median(np.diff(t))) > 1.0:
+        grid = t[0] + np.arange(int(math.floor((t[-1] - t[0]) * rate_hz + 1e-9)) + 1) / rate_hz
+        odo = np.column_stack([grid, np.interp(grid, t, o[:, 1]), np.interp(grid, t, o[:, 2])])
+    else:
+        slot = np.floor((t - t[0]) * rate_hz + 1e-6)
+        odo = o[np.r_[True, np.diff(slot) != 0]]
+    return _with_epochs(data, data.epochs, odo), truth
+
+
 def gap(drive: Drive, start_s: float | None = None, length_s: float = GAP_S) -> Drive:
     """No GNSS epoch in [start, start + length) (default start: the drive's middle time)."""
     data, truth = drive
@@ -173,6 +191,8 @@ VARIANTS: dict[str, Callable[[Drive], Drive]] = {
     "first-half": first_half,
     "second-half": second_half,
     "no-odometry": no_odometry,
+    "odo-50hz": lambda d: odometry_rate(d, 50.0),
+    "odo-1hz": lambda d: odometry_rate(d, 1.0),
     "gap-2s": gap,
     "time-shift": time_shift,
 }
