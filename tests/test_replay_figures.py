@@ -107,6 +107,20 @@ def test_no_figures_writes_none(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert not list(out.glob("*.png"))
 
 
+def test_a_previous_runs_record_in_the_same_out_is_not_taken_for_this_runs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A tight replay's gnss_epochs.csv left in --out by an earlier run: a loose replay into the same
+    directory removes it (it was listed as written and drawn into this run's figures)."""
+    out = tmp_path / "same"
+    out.mkdir()
+    (out / "gnss_epochs.csv").write_text("t_s,segment,n_sats,n_used,n_excluded,n_low_belief,beta_mean,"
+                                         "nis,reset,reason\n1.0,0,9,0,9,0,,,0,no_satellite_used\n")
+    assert main(["replay", str(SITL_BIN), "--out", str(out), "--no-progress", "--no-figures"]) == 0
+    assert f"wrote {out}/: estimates.csv, gnss_fixes.csv, summary.json\n" in capsys.readouterr().out
+    assert not (out / "gnss_epochs.csv").exists()
+    assert (out / "gnss_fixes.csv").is_file()
+
+
 def test_at_times_interpolates_and_refuses_gaps() -> None:
     t = np.array([0.0, 1.0, 2.0, 5.0, 5.5])
     x = np.column_stack([3 * t + 1, -t])

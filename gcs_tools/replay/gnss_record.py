@@ -187,9 +187,16 @@ class GnssRecord:
         f[1].writerows([[_text(v) for v in row] for row in rows])
 
     def close(self) -> None:
-        """The replay ended: the inputs still waiting decided, every row written, the files closed."""
+        """The replay ended: the inputs still waiting decided, every row written, the files closed; a
+        record file this replay did not write (a previous run's in the same ``out_dir``) removed, so
+        that neither the figures nor the printed file list take it for this run's."""
         self.end_segment()
+        written = set(self._files)
         self.abandon()
+        if self.out_dir is not None:
+            for name in (FIX_FILE, EPOCH_FILE):
+                if name not in written:
+                    (self.out_dir / name).unlink(missing_ok=True)
 
     def abandon(self) -> None:
         """Close the files (after ``close``, or when the replay failed: what is not written is dropped)."""
