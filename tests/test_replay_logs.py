@@ -191,6 +191,20 @@ def test_truncated_ulog_is_a_one_line_error_or_a_shorter_replay(tmp_path: Path,
     assert code == 0  # half the log still replays
 
 
+def test_ulog_cut_inside_its_definitions_says_so_on_stderr_only(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """pyulog prints what it finds damaged on stdout: kept off it (stdout is the --json document) and
+    named in the one-line error instead of a bare 'no topic'."""
+    bad = tmp_path / "cut20.ulg"
+    bad.write_bytes(PX4_NEW.read_bytes()[:20])
+    assert main(["replay", str(bad), "--out", str(tmp_path / "o"), "--json"]) == 2
+    printed = capsys.readouterr()
+    assert printed.out == ""
+    err = printed.err.strip()
+    assert err.startswith("beliefnav: error: ") and "\n" not in err
+    assert "has no topic vehicle_gps_position (its definitions section is damaged: pyulog: " in err
+
+
 def test_out_naming_a_file_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     f = tmp_path / "file"
     f.write_text("x")

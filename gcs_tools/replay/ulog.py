@@ -30,6 +30,8 @@ with a one-line error naming the topic and field). Times are PX4 boot microsecon
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import struct
 from collections.abc import Callable, Iterator
@@ -123,16 +125,28 @@ class ULogScanner:
         self.path, self.wanted, self.stats = path, frozenset(wanted), stats
         self.subscribed: set[str] = set()
         self.params: dict[str, float] = {}
+        self.damaged: str | None = None  # what pyulog said of a damaged definitions section
+
+    def no_topic(self, topic: str) -> UserError:
+        """The one line for a topic the log does not define (naming a damaged definitions section)."""
+        why = f" (its definitions section is damaged: pyulog: {self.damaged})" if self.damaged else ""
+        return UserError(f"{self.path}: ULog has no topic {topic}{why}")
 
     def _definitions(self, f: IO[bytes]) -> Any:
         from pyulog import ULog
 
         handle = _KeepOpen(f)
+        said = io.StringIO()  # pyulog prints what it finds damaged on stdout (which --json keeps clean)
         try:
-            ulog = ULog(handle, parse_header_only=True)
+            with contextlib.redirect_stdout(said):
+                ulog = ULog(handle, parse_header_only=True)
         except Exception as exc:  # noqa: BLE001 - pyulog raises many kinds on a damaged file
             detail = str(exc).splitlines()[0] if str(exc) else "no detail"
             raise UserError(f"{self.path}: not a readable ULog ({type(exc).__name__}: {detail})") from None
+        lines = [line.strip() for line in said.getvalue().splitlines() if line.strip()]
+        if lines:
+            self.damaged = lines[-1]
+            self._skip("definitions_damaged", 0)
         self.params = {k: float(v) for k, v in ulog.initial_parameters.items() if isinstance(v, int | float)}
         f.seek(handle.stopped_at)
         return ulog
@@ -268,7 +282,7 @@ class ULogSource:
                 if isinstance(fix, GnssFix) and fix.fix_type >= MIN_FIX_TYPE_3D and math.isfinite(fix.alt_m):
                     return fix
         if GNSS_TOPIC not in scanner.subscribed:
-            raise UserError(f"{self.path}: ULog has no topic {GNSS_TOPIC}")
+            raise scanner.no_topic(GNSS_TOPIC)
         return None
 
     def describe_empty(self) -> str:
@@ -306,7 +320,7 @@ class ULogSource:
                 yield ev
         for topic in INPUT_TOPICS:
             if topic not in scanner.subscribed:
-                raise UserError(f"{self.path}: ULog has no topic {topic}")
+                raise scanner.no_topic(topic)
         for kind, topics in ((AUTOPILOT, AUTOPILOT_TOPICS), (TRUTH, TRUTH_TOPICS)):
             found = [t for t in topics if t in seen]  # the global one first when logged
             if found:
