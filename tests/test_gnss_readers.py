@@ -3,6 +3,8 @@ real drive when the shared data set is beside the repository)."""
 
 from __future__ import annotations
 
+import json
+
 import os
 import subprocess
 import sys
@@ -192,6 +194,7 @@ def test_gnss_spp_cli_writes_the_error_csv(tmp_path):
     np.testing.assert_allclose(rows[:, 0], 0.2 * np.arange(8), atol=1e-6)
     assert np.abs(rows[:, 1:4]).max() < 0.01 and (rows[:, 4] > 0).all()
     assert "no Earth rotation" in r.stdout
+    assert "input rows skipped: nonfinite 1, unknown_row_type 1, unknown_system 1, unparsable 1" in r.stdout
     bad = subprocess.run(
         [sys.executable, "-m", "gcs_tools", "gnss", "spp", str(tmp_path / "none.txt")],
         capture_output=True,
@@ -199,6 +202,24 @@ def test_gnss_spp_cli_writes_the_error_csv(tmp_path):
         timeout=60,
     )
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such file" in bad.stderr
+
+
+@pytest.mark.parametrize("coupling", ["loose", "tight"])
+def test_replay_smartloc_counts_the_rows_it_skipped(tmp_path, capsys, coupling):
+    """A garbage line, a NaN pseudorange, an unknown system: left out and said so in the replay's
+    'refused while reading' and its summary, not 'none'."""
+    from gcs_tools.cli import main
+
+    a, _ = _write_smartloc(tmp_path)
+    out = tmp_path / coupling
+    assert main(["replay", "--smartloc", str(a), "--coupling", coupling, "--out", str(out),
+                 "--no-figures", "--no-progress"]) == 0
+    refused = capsys.readouterr().out.split("refused while reading: ")[1].splitlines()[0].split(", ")
+    assert sorted(refused) == ["smartloc row nonfinite 1", "smartloc row unknown row type 1",
+                               "smartloc row unknown system 1", "smartloc row unparsable 1"]
+    codec = json.loads((out / "summary.json").read_text())["samples_rejected"]["codec"]
+    assert codec == {"smartloc_row_nonfinite": 1, "smartloc_row_unknown_row_type": 1,
+                     "smartloc_row_unknown_system": 1, "smartloc_row_unparsable": 1}
 
 
 def test_smartloc_real_drive_baseline():

@@ -187,6 +187,8 @@ def report(s: dict[str, Any]) -> str:
         f"{', no Earth rotation' if not c['earth_rotation'] else ''}; "
         f"{s['raim_exclusions']} exclusions)"
     ]
+    if s.get("rejected"):  # rows of the input skipped while reading (counted by reason)
+        lines.append("  input rows skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(s["rejected"].items())))
     e = s.get("errors")
     if e:
         lines.append(_row_text(e))

@@ -200,7 +200,9 @@ def smartloc_source(input_path: Path, truth_path: Path | None, config: SppConfig
         f = to_fix(s, smartloc_boot_us(t, t0))
         if f is not None:
             fixes.append(f)
-    return SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0)
+    src = SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0)
+    src.stats.rejected.update(smartloc.rows_rejected(data.rejected))
+    return src
 
 
 def rinex_log_reader(

@@ -139,6 +139,12 @@ def read_input(path: str | Path) -> SmartLocInput:
     return SmartLocInput(epochs, np.array(odo).reshape(-1, 3), rejected, n)
 
 
+def rows_rejected(rejected: Counter[str] | dict[str, int]) -> dict[str, int]:
+    """The input's skipped rows as a replay reader's ``samples_rejected`` counters
+    (``smartloc_row_<reason>``), so that a replay says how many rows it left out."""
+    return {f"smartloc_row_{reason}": n for reason, n in rejected.items()}
+
+
 def read_truth(path: str | Path) -> Truth:
     path = Path(path)
     rows: list[list[float]] = []

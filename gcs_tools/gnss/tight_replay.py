@@ -110,7 +110,9 @@ def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry:
     from gcs_tools.gnss import smartloc
 
     data, truth = smartloc.read_drive(input_path, truth_path)
-    return SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry)
+    src = SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry)
+    src.stats.rejected.update(smartloc.rows_rejected(data.rejected))
+    return src
 
 
 class LogWithRawGnss(LogWithGnss[RawGnss]):

@@ -85,6 +85,7 @@ class DriveSky:
     origin: LocalNedFrame  # the truth at the drive's first epoch that has one
     name: str
     drift_m_s: np.ndarray  # (n,) the receiver clock drift (m/s; ``clock_drift_m_s``)
+    rows_rejected: tuple[tuple[str, int], ...] = ()  # input rows skipped while reading, by reason
 
     @property
     def period_s(self) -> float:
@@ -145,7 +146,7 @@ def _drive_sky(input_path: Path, config: SppConfig, stamp: object) -> DriveSky:
     epochs = satellite_velocities(t_s, [data.epochs[i] for i in keep])
     at_truth = tuple(epoch_residuals_at_truth(e, p) for e, p in zip(epochs, truth_ecef[keep], strict=True))
     return DriveSky(t_s, epochs, truth_ecef[keep], at_truth, err[keep], origin, input_path.name,
-                    clock_drift_m_s(t_s, epochs, at_truth))
+                    clock_drift_m_s(t_s, epochs, at_truth), tuple(sorted(data.rejected.items())))
 
 
 def satellite_velocities(t_s: np.ndarray, epochs: Sequence[GnssEpoch]) -> tuple[GnssEpoch, ...]:

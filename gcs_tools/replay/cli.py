@@ -259,13 +259,19 @@ def _satellites(args: argparse.Namespace, drive: Path, opts: GnssErrorOptions) -
     note: dict[str, Any] = {"smartloc_sats": str(drive), "coupling": args.coupling,
                             "epochs": len(placed.placed.epochs),
                             "frame": "the drive's first truth point: the flight's truth moved there"}
-    if args.coupling == "loose":
-        return WithSyntheticGnss(log, placed.fixes, placed.frame, placed.raw_errors), note, None, placed
-    from companion.tight import TightConfig
-    from gcs_tools.gnss.tight_replay import tight_factory
+    from gcs_tools.gnss.smartloc import rows_rejected
 
-    note["map"] = None
-    return transplant.placed_raw_reader(log, placed, sky.name), note, tight_factory(TightConfig()), placed
+    reader: Any
+    if args.coupling == "loose":
+        reader, factory = WithSyntheticGnss(log, placed.fixes, placed.frame, placed.raw_errors), None
+    else:
+        from companion.tight import TightConfig
+        from gcs_tools.gnss.tight_replay import tight_factory
+
+        note["map"] = None
+        reader, factory = transplant.placed_raw_reader(log, placed, sky.name), tight_factory(TightConfig())
+    reader.stats.rejected.update(rows_rejected(dict(sky.rows_rejected)))  # the drive's skipped rows
+    return reader, note, factory, placed
 
 
 def _raw_gnss(args: argparse.Namespace, mission: Mission | None = None
