@@ -189,6 +189,32 @@ def test_bad_error_series_are_one_line_errors(tmp_path: Path, capsys: pytest.Cap
     assert not (tmp_path / "o").exists()
 
 
+def test_damaged_flight_files_name_the_line_in_one_line(tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """An IMU_1.csv cut mid-row, a text line in it, a GT.csv with a header only: one line naming the
+    file's line (numpy's own row numbers count differently per error), no warning on stderr."""
+    flight = tmp_path / "f"
+    write_flight(flight, seconds=25.0)
+    imu = (flight / "IMU_1.csv").read_text().splitlines(keepends=True)
+    cases = {
+        "cut": ("IMU_1.csv", "".join(imu[:101]) + imu[101][:imu[101].index(",", 3) + 3],
+                "IMU_1.csv: line 102 has 2 columns, the header 10 (a truncated or malformed row)"),
+        "text": ("IMU_1.csv", "".join(imu[:50]) + "0.5,x,1,2,3,4,5,6,7,8\n" + "".join(imu[50:]),
+                 "IMU_1.csv: line 51, column 2: 'x' is not a number"),
+        "empty_gt": ("GT.csv", (flight / "GT.csv").read_text().splitlines(keepends=True)[0],
+                     "usable IMU rows and 0 truth rows; an ANSFL flight needs both"),
+    }
+    for name, (file, text, words) in cases.items():
+        bad = tmp_path / name
+        bad.mkdir()
+        for f in ("IMU_1.csv", "GT.csv"):
+            (bad / f).write_text((flight / f).read_text())
+        (bad / file).write_text(text)
+        assert main(["replay", str(bad), "--gnss-errors", "none", "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("beliefnav: error: ") and "\n" not in err and words in err, err
+
+
 def test_replay_of_a_synthetic_flight_with_exact_fixes(tmp_path: Path) -> None:
     """Exact fixes (no error) at 10 Hz arriving 200 ms late: the estimate follows the truth to a
     few cm, the raw fixes' error is 0 at validity and, at arrival, exactly the distance flown in

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -119,14 +120,35 @@ def _read_csv(path: Path, columns: tuple[str, ...]) -> np.ndarray:
             if missing:
                 raise UserError(f"{path}: no column {missing[0]} (its columns: {','.join(header)})")
             idx = [header.index(c) for c in columns]
-            data = np.loadtxt(f, delimiter=",", usecols=idx, ndmin=2)
+            with warnings.catch_warnings():  # a file with a header and no rows: the caller's one line
+                warnings.simplefilter("ignore", UserWarning)
+                data = np.loadtxt(f, delimiter=",", usecols=idx, ndmin=2)
     except OSError as exc:
         raise UserError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
         raise UserError(f"{path}: not UTF-8 text") from None
     except ValueError as exc:
-        raise UserError(f"{path}: {str(exc).splitlines()[0]}") from None
+        raise UserError(f"{path}: {_bad_line(path, idx, len(header)) or str(exc).splitlines()[0]}") from None
     return data
+
+
+def _bad_line(path: Path, idx: list[int], n_header: int) -> str | None:
+    """The first row ``np.loadtxt`` could not read, named by its line in the file (numpy's own row
+    numbers count differently per error), e.g. a truncated last line or a text line."""
+    with open(path, encoding="utf-8") as f:
+        for number, line in enumerate(f, start=1):
+            if number == 1 or not line.strip():
+                continue
+            fields = line.rstrip("\r\n").split(",")
+            if len(fields) <= max(idx):
+                return (f"line {number} has {len(fields)} columns, the header {n_header} "
+                        "(a truncated or malformed row)")
+            for k in idx:
+                try:
+                    float(fields[k])
+                except ValueError:
+                    return f"line {number}, column {k + 1}: {fields[k].strip()!r} is not a number"
+    return None
 
 
 def _clean(t: np.ndarray, values: np.ndarray) -> np.ndarray:
