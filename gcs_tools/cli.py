@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.metadata
+import re
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
@@ -56,6 +57,9 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         command = self.prog.removeprefix("beliefnav").strip()
         where = f"{command}: " if command else ""
+        missing = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
+        if missing:  # often a value starting with '-' (a southern latitude), which argparse takes for an option
+            message += f" (if its value starts with '-': {missing.group(1)}=-VALUE)"
         self.exit(2, f"beliefnav: error: {where}{message} (see `{self.prog} --help`)\n")
 
 

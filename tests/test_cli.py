@@ -29,7 +29,9 @@ def test_top_level_help_imports_no_command_and_no_heavy_library():
 def test_parse_errors_are_one_line_with_a_hint():
     cases = ((["fly", "--seed", "x"], "beliefnav: error: fly: argument --seed: invalid int value: 'x'"),
              (["flyy"], "beliefnav: error: command 'flyy': not one of "),
-             (["fly", "--scenario", "realstic"], "did you mean 'realistic'?"))
+             (["fly", "--scenario", "realstic"], "did you mean 'realistic'?"),
+             (["replay", "x.tlog", "--home", "-37.8,144.7,0"],  # a southern latitude taken for an option
+              "argument --home: expected one argument (if its value starts with '-': --home=-VALUE)"))
     for argv, want in cases:
         done = subprocess.run([sys.executable, "-m", "gcs_tools", *argv], capture_output=True, text=True,
                               timeout=60)

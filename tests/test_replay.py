@@ -147,6 +147,14 @@ def test_bad_home_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixt
     assert "--home" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("rate", ["-1", "nan", "inf"])
+def test_bad_rate_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str], rate: str) -> None:
+    """Not silently one estimate row per IMU sample (what 0 asks for)."""
+    assert main(["replay", str(QUAD106), "--out", str(tmp_path / "o"), f"--rate-hz={rate}"]) == 2
+    assert f"--rate-hz {rate}: expected a rate >= 0" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
 def test_real_log_every_method() -> None:
     """quad106 (open sky, 668 s): finite output throughout, within metres of GNSS, β high."""
     estimator = pytest.importorskip("companion.estimator")
@@ -192,9 +200,15 @@ def test_mission_option_sets_home_and_the_missions_estimator_config(tmp_path, ca
     var_v = list(core.CSV_COLUMNS).index("var_v_n_m2_s2")
     assert plain_rows.shape == tuned_rows.shape
     assert not np.allclose(plain_rows[:, var_v], tuned_rows[:, var_v])  # the mission's process noise
-    mission_home, _ = run("mission-home", "--mission", "default")
-    assert (mission_home["home"]["lat_deg"], mission_home["home"]["lon_deg"]) == (
-        mission.frame.home_lat_deg, mission.frame.home_lon_deg)
+    # without --home the home is the mission's: Berlin, 12,000 km from this Australian log, where the
+    # local frame gives wrong numbers (distance to the fixes 8.9 m instead of 0.2): refused in one line
+    assert main(["replay", str(short), "--out", str(tmp_path / "far"), "--mission", "default"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and f"home {mission.frame.home_lat_deg:g}," in err
+    assert "km from the log's first 3-D fix (-37.85" in err and "the log was not flown there" in err
+    assert not (tmp_path / "far").exists()
+    assert main(["replay", str(short), "--out", str(tmp_path / "far"), "--home", "52.52,13.405,35"]) == 2
+    assert "12,093 km from the log's first 3-D fix" in capsys.readouterr().err
     assert main(["replay", str(short), "--out", str(tmp_path / "x"), "--mission", "nonexistent"]) == 2
     assert "nonexistent" in capsys.readouterr().err
 

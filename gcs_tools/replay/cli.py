@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -162,6 +163,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.file}: no such file")
     gnss = gnss_options(args)
     check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
+    if not 0 <= args.rate_hz < math.inf:  # NaN, negative: not silently one row per IMU sample
+        raise UserError(f"--rate-hz {args.rate_hz:g}: expected a rate >= 0 (0: one row per IMU sample)")
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
     home = parse_home(args.home) if args.home else None

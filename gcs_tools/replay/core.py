@@ -62,6 +62,7 @@ NIS_RANGE = (1e-6, 1e6)
 NIS_BINS = 27_640
 # a reference between two estimate rows further apart than this (an IMU dropout) is not compared
 MAX_GAP_US = 1_000_000
+MAX_HOME_DISTANCE_M = 50_000.0  # a given home farther than this from the log's first fix is refused (as export)
 # the fixes and reference positions kept for the figures: at most one per this interval per kind
 # (10 Hz, 40 bytes a point: 1.4 MB an hour per kind)
 TRACK_PERIOD_US = 100_000
@@ -354,6 +355,19 @@ class ReplayResult:
     gnss: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
 
+def _check_home_near_flight(home: LocalNedFrame, fix0: GnssFix | None) -> None:
+    """A given home (``--home``, ``--mission``'s) farther than ``MAX_HOME_DISTANCE_M`` from the log's
+    first 3-D fix: one line (in a local frame thousands of km away the replay's numbers are wrong)."""
+    if fix0 is None:
+        return
+    d_m = float(np.linalg.norm(home.to_ned_m(fix0.lat_deg, fix0.lon_deg, fix0.alt_m)))
+    if not d_m <= MAX_HOME_DISTANCE_M:
+        raise UserError(f"home {home.home_lat_deg:g},{home.home_lon_deg:g},{home.home_alt_m:g} (--home or "
+                        f"--mission) is {d_m / 1000:,.0f} km from the log's first 3-D fix "
+                        f"({fix0.lat_deg:.6f},{fix0.lon_deg:.6f}): the log was not flown there (give a "
+                        "--home near it, or neither option: its first fix)")
+
+
 def replay(
     path: str | Path,
     method: str,
@@ -391,6 +405,7 @@ def replay(
     path = Path(path)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     synthetic = None
+    check_home = home is not None and reader is None and gnss is None  # a given home, the log's own fixes
     if reader is not None:  # raw GNSS: the log with SPP fixes, or smartLoc
         if gnss is not None:
             raise UserError("synthetic GNSS (--gnss-errors) and raw GNSS both replace the log's fixes: "
@@ -411,6 +426,8 @@ def replay(
         if fix0 is None:
             raise UserError(f"{path}: {reader.describe_empty()}")
         home = LocalNedFrame(fix0.lat_deg, fix0.lon_deg, fix0.alt_m)
+    elif check_home and getattr(reader, "anchor", None) is None:
+        _check_home_near_flight(home, reader.first_fix())
     frame = home
 
     def make_nav() -> NavigatorLike:
