@@ -38,7 +38,7 @@ examples:
 COMMANDS: dict[str, tuple[str, str]] = {
     "fly": ("gcs_tools.fly.cli", "fly a mission in one process: vehicle, planner, estimator (seeded)"),
     "sitl": ("gcs_tools.sitl.cli", "fly a mission as processes over MAVLink 2/UDP (or ArduCopter SITL)"),
-    "replay": ("gcs_tools.replay.cli", "run the estimator on a flight log (tlog, .bin, .ulg)"),
+    "replay": ("gcs_tools.replay.cli", "run the estimator on a flight log (tlog, .bin, .ulg, ANSFL) or smartLoc"),
     "companion": ("gcs_tools.companion_cli", "the estimator beside a real autopilot (--master, --config)"),
     "evaluate": ("gcs_tools.evaluate.cli", "campaign: missions x methods x seeds, report, figures"),
     "dashboard": ("gcs_tools.dashboard.cli", "live web dashboard: map, belief, errors, health"),
