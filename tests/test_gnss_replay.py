@@ -156,10 +156,18 @@ def test_raw_gnss_option_errors_are_one_line(tmp_path, capsys):
         (["replay", "--smartloc", str(tmp_path / "in.txt"), "--coupling", "tight", "--mission", "test"],
          "no map of Berlin"),
     )
+    data = Path(__file__).parent / "data"
+    rinex = ["--rinex-obs", str(data / "synthetic_gnss.obs"), "--rinex-nav", str(data / "synthetic_gnss.nav")]
+    short = tmp_path / "short.tlog"
+    short.write_bytes(QUAD106.read_bytes()[:300_000])
+    cases += (  # RINEX of another day: the one line says where its fixes went, not only the log's count
+        (["replay", str(short), *rinex], "never initialised ("),
+    )
     for args, message in cases:
         assert main([*args, "--out", str(tmp_path / "o"), "--no-telemetry"]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1, err
+    assert "refused while reading: log fix replaced " in err and ", external fix after log 3)" in err
 
 
 SMARTLOC = (Path(__file__).resolve().parents[1] / "../shared/data/urban/smartloc"

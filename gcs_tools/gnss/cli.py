@@ -187,8 +187,9 @@ def report(s: dict[str, Any]) -> str:
         f"{', no Earth rotation' if not c['earth_rotation'] else ''}; "
         f"{s['raim_exclusions']} exclusions)"
     ]
-    if s.get("rejected"):  # rows of the input skipped while reading (counted by reason)
-        lines.append("  input rows skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(s["rejected"].items())))
+    skipped = {k: v for k, v in (s.get("rejected") or {}).items() if v}  # input rows skipped while reading
+    if skipped:
+        lines.append("  input rows skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(skipped.items())))
     e = s.get("errors")
     if e:
         lines.append(_row_text(e))

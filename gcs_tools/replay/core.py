@@ -456,8 +456,10 @@ def replay(
         raise UserError(f"{path}: no usable IMU samples ({reader.sources.get('imu') or 'none found'}) "
                         f"in {st.records} records")
     if run.rows == 0:
+        refused = ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in st.rejected.items() if v)
         raise UserError(f"{path}: the estimator never initialised ({st.decoded['gnss']} GNSS fixes, "
-                        f"{st.decoded['imu']} IMU samples)")
+                        f"{st.decoded['imu']} IMU samples"
+                        + (f"; refused while reading: {refused})" if refused else ")"))
     estimator_s = run.estimator_s
     wall_s = time.perf_counter() - wall0
     duration_s = sum(s["duration_s"] for s in run.segments)
