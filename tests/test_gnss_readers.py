@@ -204,6 +204,22 @@ def test_gnss_spp_cli_writes_the_error_csv(tmp_path):
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such file" in bad.stderr
 
 
+def test_gnss_spp_truth_ecef_is_not_overridden_by_the_truth_beside(tmp_path, capsys):
+    """--truth-ecef on a smartLoc input with its *_GT.txt beside: the static truth is used (it was
+    silently ignored, even when malformed); with --truth as well, one line."""
+    from gcs_tools.cli import main
+
+    a, b = _write_smartloc(tmp_path)
+    out = tmp_path / "o"
+    ecef = ",".join(f"{v:.3f}" for v in RX_ECEF)
+    assert main(["gnss", "spp", str(a), "--truth-ecef", ecef, "--out", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["truth"] == "a static position (--truth-ecef)"
+    assert main(["gnss", "spp", str(a), "--truth-ecef", "1,2", "--out", str(out)]) == 2
+    assert "--truth-ecef '1,2': expected X,Y,Z" in capsys.readouterr().err
+    assert main(["gnss", "spp", str(a), "--truth", str(b), "--truth-ecef", ecef, "--out", str(out)]) == 2
+    assert "two truths; give one" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("coupling", ["loose", "tight"])
 def test_replay_smartloc_counts_the_rows_it_skipped(tmp_path, capsys, coupling):
     """A garbage line, a NaN pseudorange, an unknown system: left out and said so in the replay's

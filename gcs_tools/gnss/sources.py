@@ -70,11 +70,14 @@ def parse_ecef(text: str, option: str = "--truth-ecef") -> np.ndarray:
 def load_input(
     path: Path, navs: Sequence[Path] = (), truth: Path | None = None, truth_ecef: str | None = None
 ) -> GnssInput:
+    if truth is not None and truth_ecef is not None:
+        raise UserError("--truth and --truth-ecef: two truths; give one")
     fmt = detect(path)
     if fmt == "smartloc":
         data = smartloc.read_input(path)
         out = GnssInput(path, fmt, data.epochs, rejected=data.rejected)
-        truth = truth or smartloc.default_truth_path(path)
+        if truth_ecef is None:  # the *_GT.txt beside it, unless a static truth is asked for
+            truth = truth or smartloc.default_truth_path(path)
     elif fmt == "rinex":
         if not navs:
             raise UserError(f"{path}: a RINEX observation file needs --nav (broadcast ephemerides)")
