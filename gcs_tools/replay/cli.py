@@ -82,8 +82,10 @@ def add_gnss_arguments(parser: argparse.ArgumentParser) -> None:
                         "t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m); or smartloc-sats:INPUT: a smartLoc "
                         "drive's satellites placed on the log's truth (its single-point fixes, or with "
                         "--coupling tight its raw epochs)")
-    g.add_argument("--gnss-rate-hz", type=float, default=5.0, help="fixes per second (default 5)")
-    g.add_argument("--gnss-accuracy", default="reported", choices=ACCURACY_MODES,
+    # the synthetic GNSS options default to None (their defaults applied in gnss_options) so that one given
+    # without --gnss-errors is a one-line error, not silently without effect
+    g.add_argument("--gnss-rate-hz", type=float, default=None, help="fixes per second (default 5)")
+    g.add_argument("--gnss-accuracy", default=None, choices=ACCURACY_MODES,
                    help="what each fix reports: its accuracy (model or series), nothing, or only an HDOP "
                         "(h_acc / 5 m) (default reported)")
     g.add_argument("--gnss-latency-ms", type=float, default=None,
@@ -92,18 +94,18 @@ def add_gnss_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--gnss-base", default=None, choices=BASES,
                    help="what the errors are added to (default: truth when the log has it, else its own "
                         "fixes)")
-    g.add_argument("--gnss-clearance-m", type=float, default=0.0,
+    g.add_argument("--gnss-clearance-m", type=float, default=None,
                    help="the model's distance to the nearest building (default 0: a street canyon "
                         "throughout)")
     g.add_argument("--gnss-set", action="append", default=[], metavar="gnss.FIELD=VALUE",
                    help="override a field of the model's GnssConfig (repeatable), e.g. "
                         "gnss.sigma_bias_max_m=5")
-    g.add_argument("--gnss-velocity", default="0.2", metavar="STD_M_S|none",
+    g.add_argument("--gnss-velocity", default=None, metavar="STD_M_S|none",
                    help="the fixes' velocity: the base's plus white noise of this std per axis (default 0.2 "
                         "m/s), or none")
     g.add_argument("--gnss-series-start-s", type=float, default=None,
                    help="error series time of the first fix (default: drawn from --seed)")
-    g.add_argument("--seed", type=int, default=0, help="seed of the synthetic GNSS (default 0)")
+    g.add_argument("--seed", type=int, default=None, help="seed of the synthetic GNSS (default 0)")
 
 
 def gnss_options(args: argparse.Namespace) -> GnssErrorOptions | None:
@@ -111,7 +113,9 @@ def gnss_options(args: argparse.Namespace) -> GnssErrorOptions | None:
     from gcs_tools.evaluate.tuning import parse_override
 
     if args.gnss_errors is None:
-        given = [name for name in ("gnss_set", "gnss_latency_ms", "gnss_base", "gnss_series_start_s")
+        given = [name for name in ("gnss_set", "gnss_latency_ms", "gnss_base", "gnss_series_start_s",
+                                   "gnss_rate_hz", "gnss_accuracy", "gnss_clearance_m", "gnss_velocity",
+                                   "seed")
                  if getattr(args, name) not in (None, [])]
         if given:
             raise UserError(f"--{given[0].replace('_', '-')} needs --gnss-errors")
@@ -128,11 +132,16 @@ def gnss_options(args: argparse.Namespace) -> GnssErrorOptions | None:
         if args.gnss_base == "log":
             raise UserError("--gnss-base log: smartloc-sats places the drive's satellites on the log's truth")
         errors = "none"
-    velocity = velocity_option(args.gnss_velocity)
-    opts = GnssErrorOptions(errors, rate_hz=args.gnss_rate_hz, accuracy=args.gnss_accuracy,
+    elif errors in ("none", "model") and args.gnss_series_start_s is not None:
+        raise UserError(f"--gnss-series-start-s goes with an error series or smartloc-sats, not "
+                        f"--gnss-errors {errors}")
+    velocity = velocity_option("0.2" if args.gnss_velocity is None else args.gnss_velocity)
+    opts = GnssErrorOptions(errors, rate_hz=5.0 if args.gnss_rate_hz is None else args.gnss_rate_hz,
+                            accuracy=args.gnss_accuracy or "reported",
                             latency_ms=args.gnss_latency_ms, base=args.gnss_base,
-                            clearance_m=args.gnss_clearance_m, model_overrides=tuple(overrides),
-                            velocity_std_m_s=velocity, seed=args.seed,
+                            clearance_m=0.0 if args.gnss_clearance_m is None else args.gnss_clearance_m,
+                            model_overrides=tuple(overrides), velocity_std_m_s=velocity,
+                            seed=0 if args.seed is None else args.seed,
                             series_start_s=args.gnss_series_start_s)
     opts.check()
     return opts
