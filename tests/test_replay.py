@@ -149,9 +149,11 @@ def test_bad_home_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixt
 
 @pytest.mark.parametrize("rate", ["-1", "nan", "inf"])
 def test_bad_rate_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str], rate: str) -> None:
-    """Not silently one estimate row per IMU sample (what 0 asks for)."""
+    """Not silently one estimate row per IMU sample, or as fast as possible (what 0 asks for)."""
     assert main(["replay", str(QUAD106), "--out", str(tmp_path / "o"), f"--rate-hz={rate}"]) == 2
     assert f"--rate-hz {rate}: expected a rate >= 0" in capsys.readouterr().err
+    assert main(["replay", str(QUAD106), "--out", str(tmp_path / "o"), f"--speed={rate}"]) == 2
+    assert f"--speed {rate}: expected a factor >= 0" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 

@@ -174,6 +174,8 @@ def run(args: argparse.Namespace) -> int:
     check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
     if not 0 <= args.rate_hz < math.inf:  # NaN, negative: not silently one row per IMU sample
         raise UserError(f"--rate-hz {args.rate_hz:g}: expected a rate >= 0 (0: one row per IMU sample)")
+    if not 0 <= args.speed < math.inf:  # NaN, negative: not silently as fast as possible
+        raise UserError(f"--speed {args.speed:g}: expected a factor >= 0 (0: as fast as possible)")
     if args.gps_delay_ms is not None and not (0 <= args.gps_delay_ms <= 2000):
         raise UserError(f"--gps-delay-ms {args.gps_delay_ms}: expected 0 to 2000 ms")
     home = parse_home(args.home) if args.home else None
