@@ -19,7 +19,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
-from companion.errors import UserError
+from companion.errors import UserError, not_one_of
 from companion.gnss.constants import C_M_S
 from companion.gnss.fix import to_fix
 from companion.gnss.geometry import ecef_to_geodetic
@@ -47,7 +47,7 @@ GRAVITY_M_S2 = 9.80665
 
 def check_coupling(coupling: str) -> None:
     if coupling not in COUPLINGS:
-        raise UserError(f"--coupling {coupling!r}: choose from {', '.join(COUPLINGS)}")
+        raise not_one_of("--coupling", coupling, COUPLINGS)
 
 
 def validity_gps_s(series: SppSeries) -> np.ndarray:

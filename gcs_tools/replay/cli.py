@@ -157,6 +157,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         choices.method(args.method)
     sats = is_sats(args.gnss_errors)
+    if args.no_odometry and not (args.smartloc is not None and args.coupling == "tight"):
+        raise UserError("--no-odometry goes with --smartloc --coupling tight (only the tightly coupled "
+                        "filter fuses the car's odometry)")
     if args.coupling == "tight" and args.gnss_errors is not None and not sats:
         raise UserError(f"--coupling tight --gnss-errors {args.gnss_errors}: these are fixes, and fixes "
                         "carry no satellites for the tightly coupled filter (use --gnss-errors "
