@@ -321,6 +321,20 @@ def test_replay_output_exports_estimate_belief_attitude_and_the_logs_fixes(tmp_p
     assert len(gap) > 0.9 * len(est["t_s"]) and float(np.median(gap)) < 1.0
 
 
+def test_replay_with_synthetic_fixes_does_not_export_the_logs_own(tmp_path, capsys):
+    """A replay on --gnss-errors: the estimator never saw the log's fixes, so they are not exported as
+    its fixes (they were, all 3339 of the clean receiver); the attitude still is, with a warning."""
+    short = tmp_path / "short.tlog"
+    short.write_bytes(QUAD106.read_bytes()[:400_000])
+    run = tmp_path / "replay"
+    assert main(["replay", str(short), "--gnss-errors", "model", "--out", str(run), "--no-figures"]) == 0
+    capsys.readouterr()
+    assert main(["export", str(run), "--out", str(tmp_path / "r.mcap")]) == 0
+    assert "the replay's GNSS was not the log's own" in capsys.readouterr().err
+    _, msgs, _ = _read(tmp_path / "r.mcap")
+    assert not msgs.get("/gnss/fix") and len(msgs["/pose/estimated"]) > 100
+
+
 def test_an_autopilots_repeated_gps_raw_int_is_one_fix(tmp_path, capsys):
     """ArduPilot streams GPS_RAW_INT faster than its receiver updates (measured beside ArduCopter
     SITL: each 5 Hz fix four times, same ``time_usec``): each fix is exported once, at its first

@@ -364,8 +364,19 @@ def from_replay_dir(run: Path, home: LocalNedFrame | None = None) -> Flight:
     fixes: list[Fix] = []
     attitude: dict[str, np.ndarray] = {}
     epoch, clock = None, "the log's boot time (no wall clock found)"
-    if log.is_file():
+    # the estimator's fixes were not the log's own (--gnss-errors, RINEX, UBX, smartLoc): those the log
+    # holds would be exported as if they were (the replay's own are in its gnss_fixes.csv)
+    replaced = "synthetic_gnss" in s or "raw_gnss" in s
+    if s.get("format") == "smartloc":  # the drive's pseudoranges: no log to read fixes or attitude from
+        warnings.append("a smartLoc replay: no log fixes or attitude to export")
+    elif log.is_dir():
+        warnings.append(f"the replayed log {log} is an ANSFL flight (no GNSS of its own): no fixes, no attitude")
+    elif log.is_file():
         fixes, att_t_s, att_q = _log_samples(log)
+        if replaced:
+            fixes = []
+            warnings.append("the replay's GNSS was not the log's own (--gnss-errors or raw GNSS): the "
+                            "log's attitude, no fixes")
         if len(att_t_s):
             q = nearest(t_s, att_t_s, att_q, max_gap_s=0.2)
             attitude = {"estimated": q}
@@ -374,7 +385,8 @@ def from_replay_dir(run: Path, home: LocalNedFrame | None = None) -> Flight:
             if epoch is not None:
                 clock = "the log's boot time; the wall clock of its SYSTEM_TIME"
     elif s.get("file"):
-        warnings.append(f"the replayed log {log} is not there any more: no fixes, no attitude")
+        warnings.append(f"the replayed log {log} is not there any more (or not from this directory: "
+                        "summary.json names it as given): no fixes, no attitude")
     near = (fixes[0].lat_deg, fixes[0].lon_deg, fixes[0].alt_m) if fixes else None
     frame, home_source = choose_home(home, own, "the replay's home", near, warnings)
     p = np.column_stack([table[n] for n in REPLAY_TRACKS["estimated"]])
