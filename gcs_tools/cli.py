@@ -38,7 +38,8 @@ examples:
 COMMANDS: dict[str, tuple[str, str]] = {
     "fly": ("gcs_tools.fly.cli", "fly a mission in one process: vehicle, planner, estimator (seeded)"),
     "sitl": ("gcs_tools.sitl.cli", "fly a mission as processes over MAVLink 2/UDP (or ArduCopter SITL)"),
-    "replay": ("gcs_tools.replay.cli", "run the estimator on a flight log (tlog, .bin, .ulg, ANSFL) or smartLoc"),
+    "replay": ("gcs_tools.replay.cli",
+               "run the estimator on a flight log (tlog, .bin, .ulg, ANSFL) or smartLoc"),
     "companion": ("gcs_tools.companion_cli", "the estimator beside a real autopilot (--master, --config)"),
     "evaluate": ("gcs_tools.evaluate.cli", "campaign: missions x methods x seeds, report, figures"),
     "dashboard": ("gcs_tools.dashboard.cli", "live web dashboard: map, belief, errors, health"),
@@ -58,7 +59,7 @@ class Parser(argparse.ArgumentParser):
         command = self.prog.removeprefix("beliefnav").strip()
         where = f"{command}: " if command else ""
         missing = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
-        if missing:  # often a value starting with '-' (a southern latitude), which argparse takes for an option
+        if missing:  # often a value starting with '-' (a southern latitude): argparse takes it for an option
             message += f" (if its value starts with '-': {missing.group(1)}=-VALUE)"
         self.exit(2, f"beliefnav: error: {where}{message} (see `{self.prog} --help`)\n")
 

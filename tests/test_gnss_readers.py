@@ -4,7 +4,6 @@ real drive when the shared data set is beside the repository)."""
 from __future__ import annotations
 
 import json
-
 import os
 import subprocess
 import sys

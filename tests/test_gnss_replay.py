@@ -157,7 +157,8 @@ def test_raw_gnss_option_errors_are_one_line(tmp_path, capsys):
          "no map of Berlin"),
         (["replay", "--smartloc", str(tmp_path / "in.txt"), "--no-odometry"],  # was silently without effect
          "--no-odometry goes with --smartloc --coupling tight"),
-        (["replay", "--smartloc", str(tmp_path / "in.txt"), "--coupling", "tigth"], "(did you mean 'tight'?)"),
+        (["replay", "--smartloc", str(tmp_path / "in.txt"), "--coupling", "tigth"],
+         "(did you mean 'tight'?)"),
     )
     data = Path(__file__).parent / "data"
     rinex = ["--rinex-obs", str(data / "synthetic_gnss.obs"), "--rinex-nav", str(data / "synthetic_gnss.nav")]

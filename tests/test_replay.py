@@ -163,7 +163,8 @@ def test_bad_rate_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixt
     (["--gnss-rate-hz", "2"], "--gnss-rate-hz needs --gnss-errors"),
     (["--gnss-velocity", "none"], "--gnss-velocity needs --gnss-errors"),
     (["--gnss-clearance-m", "20"], "--gnss-clearance-m needs --gnss-errors"),
-    (["--gnss-errors", "model", "--gnss-series-start-s", "5"], "--gnss-series-start-s goes with an error series"),
+    (["--gnss-errors", "model", "--gnss-series-start-s", "5"],
+     "--gnss-series-start-s goes with an error series"),
 ])
 def test_synthetic_gnss_options_without_effect_are_one_line_errors(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], words: str) -> None:

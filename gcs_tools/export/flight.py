@@ -370,7 +370,8 @@ def from_replay_dir(run: Path, home: LocalNedFrame | None = None) -> Flight:
     if s.get("format") == "smartloc":  # the drive's pseudoranges: no log to read fixes or attitude from
         warnings.append("a smartLoc replay: no log fixes or attitude to export")
     elif log.is_dir():
-        warnings.append(f"the replayed log {log} is an ANSFL flight (no GNSS of its own): no fixes, no attitude")
+        warnings.append(f"the replayed log {log} is an ANSFL flight (no GNSS of its own): no fixes, "
+                        "no attitude")
     elif log.is_file():
         fixes, att_t_s, att_q = _log_samples(log)
         if replaced:

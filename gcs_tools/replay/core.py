@@ -62,7 +62,7 @@ NIS_RANGE = (1e-6, 1e6)
 NIS_BINS = 27_640
 # a reference between two estimate rows further apart than this (an IMU dropout) is not compared
 MAX_GAP_US = 1_000_000
-MAX_HOME_DISTANCE_M = 50_000.0  # a given home farther than this from the log's first fix is refused (as export)
+MAX_HOME_DISTANCE_M = 50_000.0  # a given home farther than this from the log's first fix: refused (as export)
 # the fixes and reference positions kept for the figures: at most one per this interval per kind
 # (10 Hz, 40 bytes a point: 1.4 MB an hour per kind)
 TRACK_PERIOD_US = 100_000
