@@ -203,6 +203,16 @@ def test_gnss_spp_cli_writes_the_error_csv(tmp_path):
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such file" in bad.stderr
 
 
+def test_gnss_spp_report_names_skipped_rows_not_a_ubx_decoders_counters():
+    from gcs_tools.gnss.cli import report
+
+    base = {"input": "x", "epochs": 3, "solutions": 3, "raim_exclusions": 0,
+            "config": {"weighting": "cn0-elevation", "raim": False, "earth_rotation": True}}
+    text = report({**base, "format": "smartloc", "rejected": {"nonfinite": 2, "unparsable": 0}})
+    assert "input rows skipped: nonfinite 2\n" in text + "\n" and "unparsable" not in text
+    assert "skipped" not in report({**base, "format": "ubx", "rejected": {"rawx_epochs": 3, "pvt": 3}})
+
+
 def test_gnss_spp_truth_ecef_is_not_overridden_by_the_truth_beside(tmp_path, capsys):
     """--truth-ecef on a smartLoc input with its *_GT.txt beside: the static truth is used (it was
     silently ignored, even when malformed); with --truth as well, one line."""

@@ -187,7 +187,8 @@ def report(s: dict[str, Any]) -> str:
         f"{', no Earth rotation' if not c['earth_rotation'] else ''}; "
         f"{s['raim_exclusions']} exclusions)"
     ]
-    skipped = {k: v for k, v in (s.get("rejected") or {}).items() if v}  # input rows skipped while reading
+    # input rows skipped while reading (a UBX file's "rejected" are its decoder's counters, decoded included)
+    skipped = {k: v for k, v in (s.get("rejected") or {}).items() if v} if s["format"] != "ubx" else {}
     if skipped:
         lines.append("  input rows skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(skipped.items())))
     e = s.get("errors")
