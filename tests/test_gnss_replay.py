@@ -146,6 +146,25 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
     assert nonav.returncode == 2 and "--rinex-nav" in nonav.stderr
 
 
+def test_never_initialised_names_what_the_estimator_refused(tmp_path):
+    """Replacement fixes all stamped before the log's first IMU sample (a clock join gone wrong, e.g. a
+    simulated receiver's UBX without its receiver.json): the one line says so, not only the counts."""
+    from companion.domain.geodesy import LocalNedFrame
+    from companion.domain.samples import GnssFix
+    from companion.errors import UserError
+    from gcs_tools.gnss.replay import LogWithFixes
+    from gcs_tools.replay import core
+    from gcs_tools.replay.logs import open_log
+
+    short = tmp_path / "short.tlog"
+    short.write_bytes(QUAD106.read_bytes()[:300_000])
+    fixes = [GnssFix(1_000 + k, -37.86, 144.76, 10.0, 3, 10) for k in range(5)]
+    reader = LogWithFixes(open_log(short), fixes, "too early")
+    with pytest.raises(UserError, match="never initialised") as info:
+        core.replay(short, "naive", reader=reader, home=LocalNedFrame(-37.86, 144.76, 10.0))
+    assert "; GNSS refused by the estimator: before imu 5)" in str(info.value), info.value
+
+
 def test_raw_gnss_option_errors_are_one_line(tmp_path, capsys):
     """--ubx is raw GNSS for the tight filter; the smartLoc drive has no mission (no map of Berlin)."""
     from gcs_tools.cli import main

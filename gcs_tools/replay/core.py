@@ -457,9 +457,12 @@ def replay(
                         f"in {st.records} records")
     if run.rows == 0:
         refused = ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in st.rejected.items() if v)
+        by_nav = ", ".join(f"{k.removeprefix('gnss_rejected_').replace('_', ' ')} {v:,}"
+                           for k, v in run.counters.items() if v and k.startswith("gnss_rejected_"))
         raise UserError(f"{path}: the estimator never initialised ({st.decoded['gnss']} GNSS fixes, "
                         f"{st.decoded['imu']} IMU samples"
-                        + (f"; refused while reading: {refused})" if refused else ")"))
+                        + (f"; refused while reading: {refused}" if refused else "")
+                        + (f"; GNSS refused by the estimator: {by_nav}" if by_nav else "") + ")")
     estimator_s = run.estimator_s
     wall_s = time.perf_counter() - wall0
     duration_s = sum(s["duration_s"] for s in run.segments)
