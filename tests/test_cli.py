@@ -54,3 +54,19 @@ def test_flight_summary_gnss_line_adds_up_and_names_the_rejections():
     assert gnss_line({"sent": 10, "fused": 8, "rejected": 2}, {}) == line
     line = "GNSS fixes: 10 sent, 10 fused, none rejected"
     assert gnss_line({"sent": 10, "fused": 10, "rejected": 0}) == line
+
+
+def test_bench_lines_print_a_list_of_records_one_per_line():
+    """`bench robustness` without --json printed its 60 glitch cases as one JSON line of 20 kB."""
+    from gcs_tools.bench.cli import human_lines
+
+    lines = human_lines({"wall_s": 6.6412, "glitch": [
+        {"glitch": "jump 10 m, 8 s", "ok": True, "distance_m": {"median": 0.123456, "max": 2.0}},
+        {"glitch": "heading 90°", "ok": False, "distance_m": {"median": 1.0, "max": 2.5}}],
+        "route_length_m": [175.3, 363.1]})
+    assert lines == [f"{'wall_s':<48} 6.641",
+                     f"{'glitch.0':<48} glitch=jump 10 m, 8 s  ok=True  distance_m.median=0.1235  "
+                     "distance_m.max=2",
+                     f"{'glitch.1':<48} glitch=heading 90°  ok=False  distance_m.median=1  "
+                     "distance_m.max=2.5",
+                     f"{'route_length_m':<48} [175.3, 363.1]"]

@@ -48,14 +48,27 @@ def machine() -> dict[str, object]:
 
 
 def human_lines(value: object, prefix: str = "") -> list[str]:
-    """Nested figures as ``a.b.c  value`` lines (numbers to 4 significant digits)."""
+    """Nested figures as ``a.b.c  value`` lines (numbers to 4 significant digits); a list of records
+    (e.g. ``bench robustness``'s cases) one line per record, ``key=value`` pairs, not one JSON line."""
     if isinstance(value, dict):
         return [line for k, v in value.items() for line in human_lines(v, f"{prefix}{k}.")]
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        return [f"{prefix}{i}".ljust(48) + " " + "  ".join(_pairs(v)) for i, v in enumerate(value)]
     if isinstance(value, float):
         text = f"{value:.4g}"
     else:
         text = json.dumps(value) if isinstance(value, list) else str(value)
     return [f"{prefix.rstrip('.'):<48} {text}"]
+
+
+def _pairs(record: dict[str, object], prefix: str = "") -> list[str]:
+    out: list[str] = []
+    for k, v in record.items():
+        if isinstance(v, dict):
+            out += _pairs(v, f"{prefix}{k}.")
+        else:
+            out.append(f"{prefix}{k}={f'{v:.4g}' if isinstance(v, float) else v}")
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
