@@ -115,9 +115,10 @@ def test_a_previous_runs_record_in_the_same_out_is_not_taken_for_this_runs(
     out.mkdir()
     (out / "gnss_epochs.csv").write_text("t_s,segment,n_sats,n_used,n_excluded,n_low_belief,beta_mean,"
                                          "nis,reset,reason\n1.0,0,9,0,9,0,,,0,no_satellite_used\n")
+    (out / "track.png").write_bytes(PNG_MAGIC)  # and its figures: not this run's with --no-figures
     assert main(["replay", str(SITL_BIN), "--out", str(out), "--no-progress", "--no-figures"]) == 0
     assert f"wrote {out}/: estimates.csv, gnss_fixes.csv, summary.json\n" in capsys.readouterr().out
-    assert not (out / "gnss_epochs.csv").exists()
+    assert not (out / "gnss_epochs.csv").exists() and not (out / "track.png").exists()
     assert (out / "gnss_fixes.csv").is_file()
 
 

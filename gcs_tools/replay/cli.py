@@ -214,6 +214,9 @@ def run(args: argparse.Namespace) -> int:
         result.summary["errors"]["raw_fixes"] = {"note": core.RAW_FIXES_NOTE, **placed.raw_errors}
     core.write_summary(result, args.out)
     figures = [] if args.no_figures else _figures(result, args)
+    if args.no_figures:  # a previous run's figures in the same --out do not show this run's estimates
+        for name in ("track.png", "errors.png"):
+            (args.out / name).unlink(missing_ok=True)
     if args.json:
         print((args.out / "summary.json").read_text(encoding="utf-8"), end="")
         return 0
