@@ -203,6 +203,31 @@ def test_gnss_spp_cli_writes_the_error_csv(tmp_path):
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such file" in bad.stderr
 
 
+def test_smartloc_row_with_a_lone_damaged_time_is_skipped_not_an_epoch(tmp_path):
+    """One pseudorange row stamped 1e6 s inside a 1.6 s drive: skipped and counted (as an epoch it made
+    the tight replay synthesise IMU samples up to 1e6 s: 50 M samples, minutes); a truth row so
+    stamped is one line naming it."""
+    from gcs_tools.cli import main
+
+    a, b = _write_smartloc(tmp_path)
+    lines = a.read_text().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("pseudorange3 0.4 "))
+    lines[k] = lines[k].replace("pseudorange3 0.4 ", "pseudorange3 1000000.0 ", 1)
+    a.write_text("\n".join(lines) + "\n")
+    data = smartloc.read_input(a)
+    assert data.rejected["lone_stamp"] == 1 and len(data.epochs) == 8
+    assert max(e.t_gps_s for e in data.epochs) < 2.0
+    assert main(["replay", "--smartloc", str(a), "--coupling", "tight", "--out", str(tmp_path / "o"),
+                 "--no-figures", "--no-progress"]) == 0
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["duration_s"] < 5.0
+    gt = b.read_text().splitlines()
+    gt[3] = gt[3].replace("point3 0.6000000000000001 ", "point3 1000000.0 ", 1).replace(
+        "point3 0.6 ", "point3 1000000.0 ", 1)
+    b.write_text("\n".join(gt) + "\n")
+    with pytest.raises(UserError, match="point3 row 4 at 1e\\+06 s lies more than 10 s"):
+        smartloc.read_truth(b)
+
+
 def test_gnss_spp_report_names_skipped_rows_not_a_ubx_decoders_counters():
     from gcs_tools.gnss.cli import report
 

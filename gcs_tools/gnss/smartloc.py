@@ -8,7 +8,9 @@ the data set's own seconds from the drive's start (no GPS time is given), so epo
 32 BeiDou; GLONASS ids are 300 + slot.
 
 A row that does not parse, holds NaN/inf or names an unknown system is skipped and counted in
-``rejected`` (by reason); a file with no usable epoch is a ``UserError``.
+``rejected`` (by reason), as is a row whose time lies more than ``LONE_STAMP_S`` from both of its
+neighbours in the file (``lone_stamp``: a damaged stamp; the rows are in time order); a file with no
+usable epoch is a ``UserError``. A truth row with such a time is a ``UserError`` naming its line.
 """
 
 from __future__ import annotations
@@ -33,6 +35,9 @@ SYSTEMS = {
     32: System.BEIDOU,
 }
 EPOCH_GAP_S = 1e-6  # rows with stamps closer than this belong to one epoch
+# a row whose time is further than this from the rows before and after it in the file (which agree) is a
+# damaged stamp, not a new epoch: one such row at 1e6 s made a tight replay synthesise 50 M IMU samples
+LONE_STAMP_S = 10.0
 
 
 @dataclass
@@ -107,6 +112,8 @@ def read_input(path: str | Path) -> SmartLocInput:
                 rejected["nonfinite"] += 1
         else:
             rejected["unknown_row_type"] += 1
+    pr_rows = _drop_lone_stamps(pr_rows, rejected)
+    odo = _drop_lone_stamps(odo, rejected)
     if not pr_rows:
         raise UserError(
             f"{path}: no usable smartLoc pseudorange3 rows in {n} lines "
@@ -139,6 +146,27 @@ def read_input(path: str | Path) -> SmartLocInput:
     return SmartLocInput(epochs, np.array(odo).reshape(-1, 3), rejected, n)
 
 
+def _lone(t: np.ndarray) -> np.ndarray:
+    """Rows (in file order) whose time is more than ``LONE_STAMP_S`` from each neighbour's (at the ends:
+    from its one neighbour) while those neighbours agree with each other."""
+    n = len(t)
+    if n < 3:
+        return np.zeros(n, dtype=bool)
+    far_prev = np.r_[True, np.abs(np.diff(t)) > LONE_STAMP_S]
+    far_next = np.r_[np.abs(np.diff(t)) > LONE_STAMP_S, True]
+    around = np.r_[False, np.abs(t[2:] - t[:-2]) <= LONE_STAMP_S, False]
+    around[0], around[-1] = True, True  # the first and last rows have one neighbour
+    return far_prev & far_next & around
+
+
+def _drop_lone_stamps(rows: list[list[float]], rejected: Counter[str]) -> list[list[float]]:
+    lone = _lone(np.array([r[0] for r in rows], dtype=float))
+    if lone.any():
+        rejected["lone_stamp"] += int(lone.sum())
+        rows = [r for r, bad in zip(rows, lone, strict=True) if not bad]
+    return rows
+
+
 def rows_rejected(rejected: Counter[str] | dict[str, int]) -> dict[str, int]:
     """The input's skipped rows as a replay reader's ``samples_rejected`` counters
     (``smartloc_row_<reason>``), so that a replay says how many rows it left out."""
@@ -159,6 +187,11 @@ def read_truth(path: str | Path) -> Truth:
                 rows.append(v)
     if len(rows) < 2:
         raise UserError(f"{path}: fewer than 2 usable smartLoc point3 (truth) rows")
+    lone = _lone(np.array([r[0] for r in rows]))
+    if lone.any():
+        k = int(np.flatnonzero(lone)[0])
+        raise UserError(f"{path}: point3 row {k + 1} at {rows[k][0]:g} s lies more than {LONE_STAMP_S:g} s "
+                        "from the rows around it (a damaged time)")
     a = np.array(rows)
     a = a[np.argsort(a[:, 0], kind="stable")]
     return Truth(a[:, 0], a[:, 1:4])
