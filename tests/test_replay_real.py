@@ -215,6 +215,19 @@ def test_damaged_flight_files_name_the_line_in_one_line(tmp_path: Path,
         assert err.startswith("beliefnav: error: ") and "\n" not in err and words in err, err
 
 
+def test_a_lone_damaged_imu_time_drops_that_row_not_the_rest_of_the_flight(tmp_path: Path) -> None:
+    """One IMU row stamped 1e6 s in the middle: it was kept and every later row dropped as 'not after
+    the previous' (a 25 s flight replayed as '1000000 s' on its first half); now that row alone."""
+    flight = tmp_path / "f"
+    write_flight(flight, seconds=25.0)
+    lines = (flight / "IMU_1.csv").read_text().splitlines(keepends=True)
+    lines[1000] = "1000000.0," + lines[1000].split(",", 1)[1]
+    (flight / "IMU_1.csv").write_text("".join(lines))
+    s = core.replay(flight, "naive", gnss=GnssErrorOptions("none", rate_hz=5.0)).summary
+    assert s["samples_rejected"]["codec"]["imu_row_dropped"] == 1
+    assert s["duration_s"] < 30.0 and s["samples_used"]["imu"] == len(lines) - 2
+
+
 def test_replay_of_a_synthetic_flight_with_exact_fixes(tmp_path: Path) -> None:
     """Exact fixes (no error) at 10 Hz arriving 200 ms late: the estimate follows the truth to a
     few cm, the raw fixes' error is 0 at validity and, at arrival, exactly the distance flown in

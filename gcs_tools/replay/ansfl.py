@@ -151,9 +151,18 @@ def _bad_line(path: Path, idx: list[int], n_header: int) -> str | None:
     return None
 
 
+LONE_STAMP_S = 1.0  # a row this far in time from both neighbours (which agree) has a damaged time
+
+
 def _clean(t: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Rows to keep: finite, and later than every kept row before them."""
+    """Rows to keep: finite, not a lone damaged time (more than ``LONE_STAMP_S`` from the rows before
+    and after it, which agree: one such row far ahead dropped every row after it), and later than
+    every kept row before them."""
     ok = np.isfinite(values).all(axis=1) & np.isfinite(t)
+    if len(t) >= 3:
+        gap = np.abs(np.diff(t))
+        around = np.r_[True, np.abs(t[2:] - t[:-2]) <= LONE_STAMP_S, True]
+        ok &= ~(np.r_[True, gap > LONE_STAMP_S] & np.r_[gap > LONE_STAMP_S, True] & around)
     later = np.zeros_like(ok)
     last = -math.inf
     for i in np.flatnonzero(ok).tolist():
