@@ -228,6 +228,20 @@ def test_smartloc_row_with_a_lone_damaged_time_is_skipped_not_an_epoch(tmp_path)
         smartloc.read_truth(b)
 
 
+@pytest.mark.parametrize("coupling", ["loose", "tight"])
+def test_replay_smartloc_far_home_is_one_line(tmp_path, capsys, coupling):
+    """--home thousands of km from the drive: the numbers were silently wrong (Berlin: 29 m instead of
+    18 m median); refused as for a log."""
+    from gcs_tools.cli import main
+
+    a, _ = _write_smartloc(tmp_path)
+    assert main(["replay", "--smartloc", str(a), "--coupling", coupling, "--home", "10,10,0",
+                 "--out", str(tmp_path / "o"), "--no-figures", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "km from the log's first 3-D fix" in err and "not flown there" in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_gnss_spp_report_names_skipped_rows_not_a_ubx_decoders_counters():
     from gcs_tools.gnss.cli import report
 

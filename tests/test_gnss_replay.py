@@ -174,6 +174,8 @@ def test_raw_gnss_option_errors_are_one_line(tmp_path, capsys):
         (["replay", str(QUAD106), "--ubx", str(tmp_path / "r.ubx"), "--coupling", "tight"], "no such file"),
         (["replay", "--smartloc", str(tmp_path / "in.txt"), "--coupling", "tight", "--mission", "test"],
          "no map of Berlin"),
+        (["replay", "--smartloc", str(tmp_path / "in.txt"), "--mission", "test"],  # loose too
+         "no map of Berlin"),
         (["replay", "--smartloc", str(tmp_path / "in.txt"), "--no-odometry"],  # was silently without effect
          "--no-odometry goes with --smartloc --coupling tight"),
         (["replay", "--smartloc", str(tmp_path / "in.txt"), "--coupling", "tigth"],

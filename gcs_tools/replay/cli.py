@@ -315,6 +315,8 @@ def _raw_gnss(args: argparse.Namespace, mission: Mission | None = None
     if args.smartloc is not None:
         if args.file is not None or args.rinex_obs is not None:
             raise UserError("--smartloc replays the smartLoc drive alone: no log file, no --rinex-obs")
+        if mission is not None:  # its estimator section is a quadrotor's and its map not Berlin's
+            raise UserError("--mission: the smartLoc drive was not flown in a mission (no map of Berlin)")
         if not args.smartloc.is_file():
             raise UserError(f"{args.smartloc}: no such file")
         src = gnss_replay.smartloc_source(args.smartloc, args.truth, config)

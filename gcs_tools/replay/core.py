@@ -405,7 +405,7 @@ def replay(
     path = Path(path)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     synthetic = None
-    check_home = home is not None and reader is None and gnss is None  # a given home, the log's own fixes
+    check_home = home is not None and gnss is None  # a given home, not the synthetic fixes' own frame
     if reader is not None:  # raw GNSS: the log with SPP fixes, or smartLoc
         if gnss is not None:
             raise UserError("synthetic GNSS (--gnss-errors) and raw GNSS both replace the log's fixes: "
@@ -426,8 +426,13 @@ def replay(
         if fix0 is None:
             raise UserError(f"{path}: {reader.describe_empty()}")
         home = LocalNedFrame(fix0.lat_deg, fix0.lon_deg, fix0.alt_m)
-    elif check_home and getattr(reader, "anchor", None) is None:
-        _check_home_near_flight(home, reader.first_fix())
+    elif check_home:
+        anchor = getattr(reader, "anchor", None)
+        if anchor is None:
+            _check_home_near_flight(home, reader.first_fix())
+        elif reader.format != "ansfl":  # a geodetic anchor (raw GNSS: its first single-point solution)
+            _check_home_near_flight(home, GnssFix(0, anchor.home_lat_deg, anchor.home_lon_deg,
+                                                  anchor.home_alt_m, 3, 0))
     frame = home
 
     def make_nav() -> NavigatorLike:
