@@ -79,8 +79,10 @@ def test_cli_writes_json_and_report_and_refuses_bad_arguments(flights: list[Path
     assert len(res["runs"]) == 4 and {r["row"] for r in res["runs"]} == {"naive", "second-order", *real.RAW}
     capsys.readouterr()
     for bad, words in ((["--flights", "nowhere"], "not an ANSFL flight directory"),
-                       (["--flights", str(a), "--errors", "cloudy"], "--gnss-errors 'cloudy'"),
-                       (["--flights", str(a), "--accuracy", "some"], "--gnss-accuracy 'some'"),
+                       # named by this tool's options (they were replay's: --gnss-errors, ...)
+                       (["--flights", str(a), "--errors", "cloudy"], "error: --errors 'cloudy'"),
+                       (["--flights", str(a), "--accuracy", "some"], "error: --accuracy 'some'"),
+                       (["--flights", str(a), "--rate-hz", "0"], "error: --rate-hz 0.0: expected > 0"),
                        (["--flights", str(a), "--methods", "secnd-order"], "did you mean"),
                        (["--flights", str(a), "--seeds", "x"], "--seeds"),
                        (["--flights", str(a), "--gnss-velocity", "fast"], "--gnss-velocity 'fast'"),

@@ -466,6 +466,11 @@ def run(flights: Sequence[Path], errors: Sequence[str], accuracies: Sequence[str
     }
 
 
+# replay's synthetic GNSS option -> this campaign's name for it (GnssErrorOptions.check names replay's)
+OWN_OPTION_NAMES = {"--gnss-errors": "--errors", "--gnss-accuracy": "--accuracy",
+                    "--gnss-rate-hz": "--rate-hz", "--gnss-latency-ms": "--latency-ms"}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from companion.estimator import METHODS
     from gcs_tools import choices
@@ -516,8 +521,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
                 check_choice(e)
             for a in accuracies:
-                GnssErrorOptions("none" if is_sats(e) else e, rate_hz=args.rate_hz, accuracy=a,
-                                 latency_ms=args.latency_ms, velocity_std_m_s=velocity).check()
+                try:
+                    GnssErrorOptions("none" if is_sats(e) else e, rate_hz=args.rate_hz, accuracy=a,
+                                     latency_ms=args.latency_ms, velocity_std_m_s=velocity).check()
+                except UserError as exc:  # named as replay's options: this tool's own names instead
+                    text = str(exc)
+                    for replay_name, own in OWN_OPTION_NAMES.items():
+                        text = text.replace(replay_name, own)
+                    raise UserError(text) from None
         if not errors or not accuracies:
             raise UserError("--errors and --accuracy need at least one value each")
         if "naive" not in methods:
