@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -42,11 +43,12 @@ def write_results(out_dir: Path, result: Any, markdown: str) -> str:
 
 def write_results_or_error(out_dir: Path, compute: Callable[[], Any], markdown: Callable[[Any], str]) -> int:
     """An evaluation command's ending: ``compute()``'s result written (``write_results``) and its markdown
-    printed, 0; a ``UserError`` it raised printed as one line ``beliefnav: error: …``, 2."""
+    printed, 0; a ``UserError`` it raised printed as one line ``beliefnav: error: …`` on stderr (as every
+    command's), 2."""
     try:
         result = compute()
     except UserError as exc:
-        print(f"beliefnav: error: {exc}")
+        print(f"beliefnav: error: {exc}", file=sys.stderr)
         return 2
     print(write_results(out_dir, result, markdown(result)))
     return 0

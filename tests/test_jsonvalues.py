@@ -29,5 +29,6 @@ def test_write_results_or_error_writes_on_success_and_is_one_line_on_a_user_erro
         raise UserError("--rows: choose from a, b")
 
     assert write_results_or_error(tmp_path / "bad", bad, lambda r: "never") == 2
-    assert capsys.readouterr().out == "beliefnav: error: --rows: choose from a, b\n"
+    printed = capsys.readouterr()  # on stderr, as every command's error (it was on stdout)
+    assert printed.err == "beliefnav: error: --rows: choose from a, b\n" and printed.out == ""
     assert not (tmp_path / "bad").exists()
