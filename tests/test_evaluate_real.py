@@ -79,6 +79,7 @@ def test_cli_writes_json_and_report_and_refuses_bad_arguments(flights: list[Path
     assert len(res["runs"]) == 4 and {r["row"] for r in res["runs"]} == {"naive", "second-order", *real.RAW}
     capsys.readouterr()
     for bad, words in ((["--flights", "nowhere"], "not an ANSFL flight directory"),
+                       (["--corpus", str(tmp_path / "none"), "--flights", "reporting"], "no such directory"),
                        # named by this tool's options (they were replay's: --gnss-errors, ...)
                        (["--flights", str(a), "--errors", "cloudy"], "error: --errors 'cloudy'"),
                        (["--flights", str(a), "--accuracy", "some"], "error: --accuracy 'some'"),

@@ -409,6 +409,8 @@ def flight_dirs(corpus: Path | None, spec: str) -> tuple[str, list[Path]]:
     names = {"reporting": REPORTING_FLIGHTS, "tuning": TUNING_FLIGHTS,
              "all": (*TUNING_FLIGHTS, *REPORTING_FLIGHTS)}.get(spec)
     split = spec if names is not None else "as listed"
+    if corpus is not None and not corpus.is_dir():
+        raise UserError(f"--corpus {corpus}: no such directory (the ANSFL data set: path_1, path_2, ...)")
     items = list(names) if names is not None else [s.strip() for s in spec.split(",") if s.strip()]
     out = []
     for item in items:
