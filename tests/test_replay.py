@@ -142,6 +142,12 @@ def test_unusable_logs_end_in_one_line(
     assert not (tmp_path / "o").exists()
 
 
+def test_a_device_instead_of_a_log_is_a_one_line_error(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["replay", "/dev/null", "--out", str(tmp_path / "o")]) == 2  # was a FileNotFoundError
+    assert "/dev/null: not a regular file (a log) or a directory" in capsys.readouterr().err
+
+
 def test_bad_home_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["replay", str(QUAD106), "--out", str(tmp_path), "--home", "91,0,0"]) == 2
     assert "--home" in capsys.readouterr().err

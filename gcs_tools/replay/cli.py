@@ -173,6 +173,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("replay needs a log file (or --smartloc INPUT)")
     if not args.file.exists():
         raise UserError(f"{args.file}: no such file")
+    if not (args.file.is_file() or args.file.is_dir()):  # /dev/null, a FIFO: a traceback further on
+        raise UserError(f"{args.file}: not a regular file (a log) or a directory (an ANSFL flight)")
     gnss = gnss_options(args)
     check_out_dir(args.out)  # before the replay, not after it (created only once there are results)
     if not 0 <= args.rate_hz < math.inf:  # NaN, negative: not silently one row per IMU sample
