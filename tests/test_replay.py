@@ -148,6 +148,17 @@ def test_a_device_instead_of_a_log_is_a_one_line_error(tmp_path: Path,
     assert "/dev/null: not a regular file (a log) or a directory" in capsys.readouterr().err
 
 
+def test_synthetic_fixes_for_a_file_that_is_no_log_name_that(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """It named '--gnss-base log' (not given) for a README or a RINEX file replayed by mistake."""
+    text = tmp_path / "notes.txt"
+    text.write_text("not a flight log\n" * 20)
+    assert main(["replay", str(text), "--gnss-errors", "model", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"beliefnav: error: {text}: not a flight log (no readable tlog records): nothing to make "
+                   "fixes from")
+
+
 def test_bad_home_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["replay", str(QUAD106), "--out", str(tmp_path), "--home", "91,0,0"]) == 2
     assert "--home" in capsys.readouterr().err

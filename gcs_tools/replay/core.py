@@ -415,7 +415,10 @@ def replay(
         if gnss is not None:
             from gcs_tools.replay.synthetic_gnss import replace_gnss
 
-            synthetic, home = replace_gnss(reader, open_log(path, gps_delay_ms, home), gnss, home)
+            try:
+                synthetic, home = replace_gnss(reader, open_log(path, gps_delay_ms, home), gnss, home)
+            except UserError as exc:
+                raise UserError(f"{path}: {exc}") from None
             reader = synthetic
         elif reader.sources.get("gnss") is None:
             raise UserError(f"{path}: {reader.describe_empty()}")

@@ -483,6 +483,12 @@ def replace_gnss(reader: LogReader, probe: LogReader, opts: GnssErrorOptions,
         raise UserError("--gnss-base truth: the log has no ground truth (SIM, SIM_STATE, *_groundtruth, "
                         "GT.csv); use --gnss-base log to degrade its own fixes")
     if base == "log" and not tracks.fix_t_us:
+        if probe.stats.records == 0:  # not a flight log at all (a README, a RINEX file, ...)
+            raise UserError(f"not a flight log (no readable {probe.format} records): nothing to make "
+                            "fixes from")
+        if opts.base is None:  # the default: not the user's --gnss-base
+            raise UserError("the log has neither a ground truth nor a 3-D fix of its own to make the "
+                            "fixes from")
         raise UserError("--gnss-base log: the log has no 3-D fix of its own")
     frame = home or reader.anchor
     if frame is None:
