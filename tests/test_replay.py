@@ -174,21 +174,18 @@ def test_bad_rate_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixt
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize(("extra", "words"), [
-    (["--gnss-accuracy", "none"], "--gnss-accuracy needs --gnss-errors"),
-    (["--seed", "3"], "--seed needs --gnss-errors"),
-    (["--gnss-rate-hz", "2"], "--gnss-rate-hz needs --gnss-errors"),
-    (["--gnss-velocity", "none"], "--gnss-velocity needs --gnss-errors"),
-    (["--gnss-clearance-m", "20"], "--gnss-clearance-m needs --gnss-errors"),
-    (["--gnss-errors", "model", "--gnss-series-start-s", "5"],
-     "--gnss-series-start-s goes with an error series"),
-])
 def test_synthetic_gnss_options_without_effect_are_one_line_errors(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], words: str) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Each replayed the log's own fixes (or the model) as if the option had not been given."""
-    assert main(["replay", str(QUAD106), "--out", str(tmp_path / "o"), *extra]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("beliefnav: error: ") and words in err and "\n" not in err, err
+    given = {"--gnss-accuracy": "none", "--seed": "3", "--gnss-rate-hz": "2", "--gnss-velocity": "none",
+             "--gnss-clearance-m": "20"}
+    cases = [([option, value], f"{option} needs --gnss-errors") for option, value in given.items()]
+    cases.append((["--gnss-errors", "model", "--gnss-series-start-s", "5"],
+                  "--gnss-series-start-s goes with an error series"))
+    for extra, words in cases:
+        assert main(["replay", str(QUAD106), "--out", str(tmp_path / "o"), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("beliefnav: error: ") and words in err and "\n" not in err, err
 
 
 def test_real_log_every_method() -> None:
