@@ -300,6 +300,9 @@ def test_other_logs_with_truth_or_their_own_fixes_as_the_base() -> None:
     s = core.replay(data / "arducopter_sitl_hover.bin", "second-order",
                     gnss=GnssErrorOptions("model", rate_hz=5.0)).summary
     assert s["synthetic_gnss"]["base"] == "truth (SIM)" and s["samples_used"]["gnss_log_fix_replaced"] > 300
+    # "gnss" counts the fixes given to the estimator: the synthetic ones, not also the replaced (it did)
+    used = s["samples_used"]
+    assert used["gnss"] == s["synthetic_gnss"]["fixes"] - used.get("gnss_synthetic_after_last_imu", 0)
     assert s["errors"]["raw_fixes"]["at_validity"]["n"] > 100 and s["errors"]["truth"]["n"] > 1000
     q = core.replay(data / "quad106.tlog", "second-order",
                     gnss=GnssErrorOptions("none", rate_hz=1.0, base="log", latency_ms=0.0)).summary

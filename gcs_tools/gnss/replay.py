@@ -104,12 +104,14 @@ class LogWithGnss(Generic[T]):
     def __iter__(self) -> Iterator[Event | T]:
         items, i, n, t_us = self.items, 0, len(self.items), self._t_us
         for ev in self.inner:
-            if type(ev) is GnssFix:
+            if type(ev) is GnssFix:  # the inner reader counted it in "gnss": the external items are
                 self.stats.rejected["log_fix_replaced"] += 1
+                self.stats.decoded["gnss"] -= 1
                 continue
             if isinstance(ev, ImuSample):
                 while i < n and t_us(items[i]) <= ev.t_us:
                     self.stats.decoded["gnss_external"] += 1
+                    self.stats.decoded["gnss"] += 1
                     yield items[i]
                     i += 1
             yield ev

@@ -409,7 +409,10 @@ def report(s: dict[str, Any], name: str) -> str:
         + (f"; {s['log_restarts']} log restart(s): {len(s['segments'])} segments"
            if s["log_restarts"] else ""),
         f"  read {used.get('imu', 0):,} IMU, {used.get('attitude', 0):,} attitude and "
-        f"{used.get('gnss', 0):,} GNSS samples; refused while reading: {counts_text(refused)}"
+        f"{used.get('gnss', 0):,} GNSS samples"
+        + (f" (the log's {used['gnss_log_fix_replaced']:,} fixes replaced)"
+           if used.get("gnss_log_fix_replaced") else "")
+        + f"; refused while reading: {counts_text(refused)}"
         + (f" ({skipped_bytes:,} bytes skipped)" if skipped_bytes else ""),
         f"  IMU samples used {nav.get('imu_used', 0):,}, rejected {n_imu_rej:,}"
         + (f" ({counts_text(imu_rejected)})" if n_imu_rej else "")

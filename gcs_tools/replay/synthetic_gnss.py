@@ -455,8 +455,9 @@ class WithSyntheticGnss:
         decoded = self.stats.decoded
         for ev in self.inner:
             kind = type(ev)
-            if kind is GnssFix:
+            if kind is GnssFix:  # the inner reader counted it in "gnss": the synthetic fixes are
                 decoded["gnss_log_fix_replaced"] += 1
+                decoded["gnss"] -= 1
                 continue
             if kind is ImuSample:
                 while i < n and pending[i][0] <= ev.t_us:  # type: ignore[union-attr]
