@@ -39,7 +39,7 @@ class Cn0Calibration:
         c = np.clip(c[np.isfinite(c)], LO_DBHZ, HI_DBHZ)
         if c.size:
             idx = np.minimum(((c - self._edges[0]) / BIN_DB).astype(int), len(self._hist) - 1)
-            np.add.at(self._hist, idx, 1.0)
+            self._hist += np.bincount(idx, minlength=len(self._hist))
             self.n += int(c.size)
 
     def level_dbhz(self) -> float:
