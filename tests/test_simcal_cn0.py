@@ -65,3 +65,13 @@ def test_reference_sits_inside_every_cn0_tolerance_and_a_flat_pattern_fails():
                                 "bad_fraction_high_cn0": 0.5}}
     rows = simcal.compare(ref, flat, simcal.CN0_TOLERANCES)
     assert not any(r["pass"] for r in rows)
+
+
+def test_cn0_realism_is_a_valid_receiver_section_and_not_the_default():
+    from companion.mission.scenarios import CN0_REALISM, RAW_RECEIVER
+    from simvehicle.config import ReceiverConfig
+
+    cfg = ReceiverConfig(enabled=True, **CN0_REALISM)
+    cfg.validate()
+    assert cfg.diffuse_fading and cfg.unmapped_spreading_ref_m > 0.0
+    assert not ReceiverConfig(**RAW_RECEIVER).diffuse_fading  # the calibrated canyon stays as it was
