@@ -367,14 +367,22 @@ def _cn0_value(stats: dict[str, Any], table: str, key: str) -> float:
 
 # C/N0 against the error (docs/simcal.md, "C/N0 against the error": stated before the simulator's numbers
 # were seen; each covers the smartLoc value's 95 % moving-block bootstrap interval, 30 s blocks)
+def _auc_tol(system: str, limit: float) -> Tolerance:
+    return Tolerance(f"AUC of C/N0 for |residual| > {BAD_RESIDUAL_M:g} m, {system}",
+                     lambda s: _cn0_value(s, "auc", system), "abs", limit, digits=3)
+
+
+def _cn0_bin_tol(band: str) -> Tolerance:
+    return Tolerance(f"|residual| median, C/N0 {band} dB-Hz",
+                     lambda s: _cn0_value(s, "abs_residual_by_cn0", band), "ratio", 1.5, unit="m")
+
+
 CN0_TOLERANCES: tuple[Tolerance, ...] = (
-    Tolerance(f"AUC of C/N0 for |residual| > {BAD_RESIDUAL_M:g} m, all",
-              lambda s: _cn0_value(s, "auc", "all"), "abs", 0.05, digits=3),
-    *(Tolerance(f"AUC of C/N0 for |residual| > {BAD_RESIDUAL_M:g} m, {sy}",
-                lambda s, sy=sy: _cn0_value(s, "auc", sy), "abs", 0.07, digits=3) for sy in ("GPS", "GLO")),
-    *(Tolerance(f"|residual| median, C/N0 {b} dB-Hz", lambda s, b=b: _cn0_value(s, "abs_residual_by_cn0", b),
-                "ratio", 1.5, unit="m")
-      for b in (_cn0_bin_name(lo, hi) for lo, hi in zip(CN0_BINS_DBHZ[:-1], CN0_BINS_DBHZ[1:], strict=True))),
+    _auc_tol("all", 0.05),
+    _auc_tol("GPS", 0.07),
+    _auc_tol("GLO", 0.07),
+    *(_cn0_bin_tol(_cn0_bin_name(lo, hi))
+      for lo, hi in zip(CN0_BINS_DBHZ[:-1], CN0_BINS_DBHZ[1:], strict=True)),
     Tolerance(f"share of |residual| > {BAD_RESIDUAL_M:g} m at C/N0 ≥ {CN0_HIGH_DBHZ:g} dB-Hz",
               lambda s: 100.0 * s.get("cn0_vs_residual", {}).get("bad_fraction_high_cn0", math.nan),
               "ratio", 1.5, unit="%"),
