@@ -320,3 +320,10 @@ def test_diffuse_fading_on_open_sky_spreads_cn0_as_rician_and_moves_the_code():
     sd_db = np.std(10.0 * np.log10(r))
     assert 1.5 < sd_db < 4.0  # Rician K = 6 dB: about 2.6 dB (rounding adds a little)
     assert np.all(np.concatenate(env_off) == 0.0) and np.std(np.concatenate(env)) > 0.5
+    # seeded: the same seed gives the same fading, epoch by epoch
+    a, _ = _open_sky_receiver(diffuse_fading=True, diffuse_k_los_db=k_db, diffuse_time_s=0.2)
+    b, _ = _open_sky_receiver(diffuse_fading=True, diffuse_k_los_db=k_db, diffuse_time_s=0.2)
+    for i in range(5):
+        (ea, ta), (eb, tb) = (x.observe(i * 200_000, np.zeros(3), np.zeros(3)) for x in (a, b))
+        np.testing.assert_array_equal(ea.cn0_dbhz, eb.cn0_dbhz)
+        np.testing.assert_array_equal(ta.env_error_m, tb.env_error_m)
