@@ -260,7 +260,7 @@ class ReceiverConfig:
     antenna_rolloff_db: float = 14.0  # gain at the horizon below the zenith's
     cn0_noise_db: float = 1.0  # white noise of the C/N0 estimate per epoch
     cn0_threshold_dbhz: float = 12.0  # a tracked signal is lost below this (u-blox M8: ~10 dB-Hz) ...
-    cn0_acquire_dbhz: float = 26.0  # (cal) ... and (re)acquired only above this
+    cn0_acquire_dbhz: float = 26.0  # (cal) ... and (re)acquired only above this (18 with the C/N0 realism)
     # reflections off facades (simvehicle.receiver.reflection_amplitude): Fresnel coefficients of a dielectric
     # (or a conductor) at the incidence angle, split into the co- (RHCP) and cross-polarised (LHCP) parts the
     # antenna receives, the LHCP part rejected by the antenna's cross-polar discrimination (XPD, ∝ sin el),
@@ -277,6 +277,16 @@ class ReceiverConfig:
     unmapped_prob: float = 0.9  # (cal)
     unmapped_delay_mean_m: float = 40.0  # (cal)
     unmapped_loss_db: float = 6.0  # besides the antenna's XPD (a reflection, of whatever kind)
+    # an unmapped reflection's further loss 20 log10(δ / ref) dB for an extra path δ beyond ref: the spreading
+    # of a diffuse scatterer's power (∝ 1/distance², the distance ∝ the extra path); 0: off
+    unmapped_spreading_ref_m: float = 0.0  # (cal) 40 m with the C/N0 realism (docs/simcal.md)
+    # diffuse multipath (Rician fading) on every tracked signal: a complex Gaussian component of mean power
+    # 1/K of the signal's, Gauss-Markov in time, arriving late; in C/N0 and the DLL like the second path
+    diffuse_fading: bool = False  # off: the calibration of docs/simcal.md's first table
+    diffuse_k_los_db: float = 10.0  # Rice factor K of a direct signal (land-mobile-satellite, unshadowed)
+    diffuse_k_nlos_db: float = 3.0  # K of a reflection (itself scattered: nearer Rayleigh, K = 0)
+    diffuse_delay_mean_m: float = 15.0  # its delay, exponential, per satellite and flight (nearby scatterers)
+    diffuse_time_s: float = 1.0  # its correlation time, as the receiver's ~1 s C/N0 and code loops see it
     # code tracking: early-minus-late DLL (Betz and Kolodziej 2009 noise; triangle correlation multipath)
     correlator_spacing_chips: float = 0.2
     dll_bandwidth_hz: float = 0.5  # carrier-aided (u-blox class)
@@ -298,9 +308,10 @@ class ReceiverConfig:
 
     def validate(self) -> None:
         _positive(self, "rate_hz", "cn0_zenith_dbhz", "correlator_spacing_chips", "dll_bandwidth_hz",
-                  "integration_s", "unmapped_delay_mean_m")
+                  "integration_s", "unmapped_delay_mean_m", "diffuse_delay_mean_m", "diffuse_time_s")
         _non_negative(self, "start_spread_s", "latency_s", "antenna_rolloff_db", "cn0_noise_db",
                       "facade_absorption_db", "facade_absorption_sd_db", "antenna_xpd_db", "unmapped_loss_db",
+                      "unmapped_spreading_ref_m",
                       "doppler_sigma_m_s", "sisre_m", "sisre_glonass_m", "iono_error_fraction",
                       "glonass_ifb_sd_m", "clock_drift0_s_s", "clock_h0", "clock_h_2")
         bad = [s for s in self.systems if s not in RECEIVER_SYSTEMS]

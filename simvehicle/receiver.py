@@ -19,7 +19,11 @@ measurement epoch at the vehicle's TRUE position, velocity and time:
    rest. C/N0 = the antenna's unobstructed value at that elevation + ``20 log10 |1 + α R(δ) e^{iθ}|``
    (``R`` the code correlation triangle) + the tracked component's loss + noise; below
    ``cn0_threshold_dbhz`` the signal is lost, and a signal not tracked is acquired only from
-   ``cn0_acquire_dbhz`` (a receiver's acquisition needs a stronger signal than its tracking).
+   ``cn0_acquire_dbhz`` (a receiver's acquisition needs a stronger signal than its tracking). Optional
+   (docs/simcal.md, "C/N0 that tells the error"): an unmapped reflection loses
+   :func:`spreading_loss_db` of its extra path (``unmapped_spreading_ref_m``), and with
+   ``diffuse_fading`` every tracked signal carries a diffuse Rician component (:func:`diffuse_step`)
+   that enters C/N0 and the DLL like the second path.
 4. **Code**: the early-minus-late DLL's multipath error on the correlation triangle
    (:func:`dll_multipath_chips`, closed form) + thermal noise (:func:`dll_sigma_m`), both in the
    signal's own chips (GLONASS chips are twice as long as GPS's: twice the multipath error).
@@ -135,6 +139,25 @@ def reflection_amplitude(
     return np.sqrt(co * co + cross * cross * 10.0 ** (-xpd_zenith_db * np.maximum(sin_el, 0.0) / 10.0))
 
 
+def spreading_loss_db(extra_m: np.ndarray, ref_m: float) -> np.ndarray:
+    """Extra loss of a diffusely scattered path of extra length ``extra_m``: ``20 log10(δ / ref)`` beyond
+    ``ref_m`` (a scatterer's power falls with the square of its distance, which grows with the extra
+    path), 0 up to it."""
+    return 20.0 * np.log10(np.maximum(np.asarray(extra_m, dtype=float), ref_m) / ref_m)
+
+
+def diffuse_start(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``n`` independent circular complex Gaussians of unit mean power (the stationary state)."""
+    return (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2.0)
+
+
+def diffuse_step(g: np.ndarray, w: np.ndarray, rho: float) -> np.ndarray:
+    """One Gauss-Markov step of unit-power circular complex Gaussians: ``ρ g + sqrt((1 − ρ²)/2) (w0 + i w1)``
+    (``w`` (2, n) standard normals); stationary: E|g|² stays 1, so ``|1 + g / sqrt(K)|²`` is Rician with
+    factor K."""
+    return rho * g + math.sqrt((1.0 - rho * rho) / 2.0) * (w[0] + 1j * w[1])
+
+
 def prstd_index(sigma_m: np.ndarray) -> np.ndarray:
     """u-blox RXM-RAWX ``prStd`` (4 bits): the reported σ is ``0.01 · 2^prStd`` m."""
     return np.clip(np.rint(np.log2(np.maximum(sigma_m, 0.01) / 0.01)), 0, 15).astype(int)
@@ -236,11 +259,25 @@ class Receiver:
         self._unmapped_delay_m = np.zeros(n)
         self._unmapped_phase = np.zeros(n)
         self._lock_start_us = np.full(n, -1, dtype=np.int64)
+        if cfg.diffuse_fading:  # its own stream (spawned only then: the other draws stay as they were)
+            self._fade_rng = g.spawn(1)[0]
+            self._fade = diffuse_start(self._fade_rng, n)
+            self._fade_delay_m = self._fade_rng.exponential(cfg.diffuse_delay_mean_m, n)
+            self._fade_t_us: int | None = None
         self._t_us: int | None = None
         self._sky_cache: tuple[float, SatStates, np.ndarray] | None = None
         self._tau = np.full(n, T_LIGHT0_S)
         self._atm_cache: tuple[float, np.ndarray, np.ndarray, float] | None = None
         self.lock_ms = np.zeros(0)  # per row of the last epoch: time since lock (RXM-RAWX locktime)
+
+    def _diffuse(self, t_us: int) -> np.ndarray:
+        """Every satellite's diffuse component (complex, unit mean power) at ``t_us``, moved on from the
+        previous epoch (Gauss-Markov, ``diffuse_time_s``; a fixed count of draws per epoch)."""
+        w = self._fade_rng.standard_normal((2, len(self._fade)))
+        dt = 0.0 if self._fade_t_us is None else max(t_us - self._fade_t_us, 0) * 1e-6
+        self._fade_t_us = t_us
+        self._fade = diffuse_step(self._fade, w, math.exp(-dt / self.cfg.diffuse_time_s))
+        return self._fade
 
     # -- clock -------------------------------------------------------------------------------------
     def _advance_clock(self, t_us: int, n0: float, n1: float) -> bool:
@@ -386,8 +423,11 @@ class Receiver:
         self._blocked = blk_all
         self._unmapped &= blk_all
         unm = self._unmapped[idx]
-        amp_u = np.where(unm, 10.0 ** (-(cfg.unmapped_loss_db + cfg.antenna_xpd_db * sin_el) / 20.0), 0.0)
         extra_u = np.where(unm, self._unmapped_delay_m[idx], 0.0)
+        loss_u = cfg.unmapped_loss_db + cfg.antenna_xpd_db * sin_el
+        if cfg.unmapped_spreading_ref_m > 0.0:
+            loss_u = loss_u + spreading_loss_db(extra_u, cfg.unmapped_spreading_ref_m)
+        amp_u = np.where(unm, 10.0 ** (-loss_u / 20.0), 0.0)
         # components: 0 direct, 1 facade reflection, 2 unmapped; track the strongest
         amps = np.column_stack((amp_d, amp_r, amp_u))
         extras = np.column_stack((extra_d, extra_r, extra_u))
@@ -410,6 +450,17 @@ class Receiver:
         cos_ph = np.cos(phase)
         ac = alpha * corr
         comb2 = 1.0 + 2.0 * ac * cos_ph + ac * ac  # |1 + α R(δ) e^{iθ}|²
+        diffuse_err_m = np.zeros(m)
+        if cfg.diffuse_fading:
+            g_d = self._diffuse(t_us)[idx] * 10.0 ** (
+                -np.where(k1 == 0, cfg.diffuse_k_los_db, cfg.diffuse_k_nlos_db) / 20.0
+            )
+            dd = self._fade_delay_m[idx] / chip
+            comb = 1.0 + ac * np.exp(1j * phase) + g_d * np.maximum(1.0 - dd, 0.0)
+            comb2 = np.abs(comb) ** 2  # |1 + α R(δ) e^{iθ} + g R(δ_d)|²
+            diffuse_err_m = chip * dll_multipath_chips(
+                np.clip(g_d.real, -0.99, 0.99), dd, cfg.correlator_spacing_chips
+            )
         with np.errstate(divide="ignore"):
             cn0 = (
                 unobstructed_cn0_dbhz(el_v, self.system[idx], cfg)
@@ -422,7 +473,7 @@ class Receiver:
         a_inph = alpha * cos_ph
         env = e1 + chip * dll_multipath_chips(
             np.clip(a_inph, -0.99, 0.99), delta_chips, cfg.correlator_spacing_chips
-        )
+        ) + diffuse_err_m  # (the two multipath errors superposed: small amplitudes)
         cn0_seen = np.maximum(cn0, 0.0)  # (−inf where nothing arrives: those rows are not reported)
         sig = dll_sigma_m(cn0_seen, chip, cfg)
         n_code = sig * noise[1, idx]

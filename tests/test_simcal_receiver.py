@@ -263,3 +263,67 @@ def test_same_seed_same_epochs_and_another_seed_another_sky():
             np.testing.assert_array_equal(getattr(x.epoch, name), getattr(y.epoch, name))
     assert a_sim.gnss.t0_gps_s != c_sim.gnss.t0_gps_s  # each seed its time of day, so its sky
     assert a[0].arrival_us - a[0].t_us == 80_000 and a[0].t_us % 200_000 == 0
+
+
+def test_diffuse_fading_is_rician_with_its_factor_and_correlation():
+    """The diffuse component (``diffuse_start`` / ``diffuse_step``, seeded): unit mean power at every step,
+    lag-one correlation ρ, and ``|1 + g/√K|`` distributed as Rice(ν = 1, σ² = 1/(2K)) (Kolmogorov-Smirnov
+    against scipy's Rice); its mean power 1 + 1/K."""
+    from scipy import stats
+
+    from simvehicle.receiver import diffuse_start, diffuse_step
+
+    rng = np.random.default_rng(11)
+    n, rho, k = 20_000, 0.6, 10.0 ** (10.0 / 10.0)
+    g = diffuse_start(rng, n)
+    g0 = g.copy()
+    for _ in range(30):
+        g_prev, g = g, diffuse_step(g, rng.standard_normal((2, n)), rho)
+    assert np.mean(np.abs(g) ** 2) == pytest.approx(1.0, abs=0.03)
+    lag1 = np.real(np.mean(g * np.conj(g_prev)))
+    assert lag1 == pytest.approx(rho, abs=0.02)
+    assert abs(np.real(np.mean(g * np.conj(g0)))) < 0.03  # 30 steps apart: forgotten (ρ³⁰ ≈ 2e-7)
+    amp = np.abs(1.0 + g / math.sqrt(k))
+    assert np.mean(amp**2) == pytest.approx(1.0 + 1.0 / k, rel=0.01)
+    sigma = 1.0 / math.sqrt(2.0 * k)
+    assert stats.kstest(amp, stats.rice(1.0 / sigma, scale=sigma).cdf).pvalue > 0.01
+    # and a wrong factor is told apart: K 6 dB instead of 10 dB
+    assert stats.kstest(np.abs(1.0 + g / math.sqrt(10.0 ** 0.6)), stats.rice(1.0 / sigma, scale=sigma).cdf
+                        ).pvalue < 1e-6
+
+
+def test_spreading_loss_of_an_unmapped_reflection():
+    from simvehicle.receiver import spreading_loss_db
+
+    np.testing.assert_allclose(spreading_loss_db(np.array([0.0, 10.0, 40.0, 80.0, 400.0]), 40.0),
+                               [0.0, 0.0, 0.0, 20.0 * math.log10(2.0), 20.0], atol=1e-12)
+
+
+def test_diffuse_fading_on_open_sky_spreads_cn0_as_rician_and_moves_the_code():
+    """Open sky, at rest, many epochs: the line-of-sight C/N0 power over the unobstructed value averages
+    1 + 1/K (K = diffuse_k_los_db; C/N0 rounded to whole dB-Hz), its spread is the Rician one, and the
+    range error from the city is the diffuse component's DLL error (zero without it)."""
+    k_db = 6.0
+    rx, _ = _open_sky_receiver(diffuse_fading=True, diffuse_k_los_db=k_db, diffuse_time_s=0.2)
+    off, _ = _open_sky_receiver()
+    ratios, env, env_off = [], [], []
+    for i in range(150):
+        ep, tr = rx.observe(i * 200_000, np.zeros(3), np.zeros(3))
+        ep0, tr0 = off.observe(i * 200_000, np.zeros(3), np.zeros(3))
+        assert np.array_equal(ep.prn, ep0.prn)
+        ratios.append(10.0 ** ((ep.cn0_dbhz - ep0.cn0_dbhz) / 10.0))
+        env.append(tr.env_error_m)
+        env_off.append(tr0.env_error_m)
+    r = np.concatenate(ratios)
+    k = 10.0 ** (k_db / 10.0)
+    assert np.mean(r) == pytest.approx(1.0 + 1.0 / k, rel=0.05)
+    sd_db = np.std(10.0 * np.log10(r))
+    assert 1.5 < sd_db < 4.0  # Rician K = 6 dB: about 2.6 dB (rounding adds a little)
+    assert np.all(np.concatenate(env_off) == 0.0) and np.std(np.concatenate(env)) > 0.5
+    # seeded: the same seed gives the same fading, epoch by epoch
+    a, _ = _open_sky_receiver(diffuse_fading=True, diffuse_k_los_db=k_db, diffuse_time_s=0.2)
+    b, _ = _open_sky_receiver(diffuse_fading=True, diffuse_k_los_db=k_db, diffuse_time_s=0.2)
+    for i in range(5):
+        (ea, ta), (eb, tb) = (x.observe(i * 200_000, np.zeros(3), np.zeros(3)) for x in (a, b))
+        np.testing.assert_array_equal(ea.cn0_dbhz, eb.cn0_dbhz)
+        np.testing.assert_array_equal(ta.env_error_m, tb.env_error_m)

@@ -610,3 +610,17 @@ def test_tight_rows_on_the_calibrated_simulator_open_loop():
     # the free-space row differs from the map row it constrains only where that one was inside a building
     assert len(e["tight-second-order-map" + outside]) == len(e["tight-second-order-map-free" + outside])
     assert np.median(e["tight-second-order"]) < 0.7 * np.median(e["spp"])
+
+
+def test_tight_sim_without_cn0_changes_the_tight_rows_not_the_receiver():
+    """``cn0_missing``: the tight rows get every epoch without C/N0 (NaN), the receiver and the flight
+    are the same (fixes identical), so the C/N0-weighted row's errors differ."""
+    from gcs_tools.evaluate.tight_sim import fly_rows
+
+    seen: list[float] = []
+    a = fly_rows("default", 3, 0, rows=("cn0-elevation",), max_duration_s=8.0, maps=False)
+    b = fly_rows("default", 3, 0, rows=("cn0-elevation",), max_duration_s=8.0, maps=False, cn0_missing=True,
+                 on_raw=lambda row, raw, nav: seen.append(float(raw.epoch.cn0_dbhz[0])))
+    np.testing.assert_array_equal(a["spp"], b["spp"])
+    assert len(a["spp"]) > 50 and seen and all(np.isfinite(seen))  # the receiver still reports C/N0
+    assert not np.allclose(a["tight-cn0-elevation"], b["tight-cn0-elevation"])

@@ -75,6 +75,12 @@ MEMS_IMU_PRIOR: dict[str, Any] = {"sigma_acc_m_s2": 0.4}
 
 # A real receiver reports a Doppler velocity (simvehicle.gnss); the paper's gives positions only.
 RECEIVER_VELOCITY: dict[str, Any] = {"velocity": True}
+# C/N0 that tells a signal's error as on the smartLoc drive (docs/simcal.md, "C/N0 that tells the error"):
+# diffuse multipath (Rician fading), unmapped reflections weaker the longer their path, reacquisition from
+# 18 dB-Hz.
+# Not the canyon's default yet: to make it so, RAW_RECEIVER = {"enabled": True, **CN0_REALISM}.
+CN0_REALISM: dict[str, Any] = {"diffuse_fading": True, "cn0_acquire_dbhz": 18.0,
+                               "unmapped_spreading_ref_m": 40.0, "unmapped_delay_mean_m": 80.0}
 RAW_RECEIVER: dict[str, Any] = {"enabled": True}  # its values: simvehicle.config.ReceiverConfig
 
 SCENARIO_SECTIONS: dict[str, dict[str, dict[str, Any]]] = {

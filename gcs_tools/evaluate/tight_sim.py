@@ -22,6 +22,9 @@ Every control step each row's position is compared with the truth (horizontal di
   rows are also scored on the steps whose truth is outside every building (``... (truth outside
   buildings)``).
 
+``--cn0-missing``: every epoch reaches the tight rows without C/N0 (NaN, as ``tight_variants``'
+``cn0-missing`` does to a real drive; the receiver and its fixes unchanged): what C/N0 is worth to each row.
+
 ``--fly-on-truth``: the vehicle flies its planned route on the truth (as ``simcal`` flies it), the loose
 filter only estimating, so the receiver's path stays in the streets whatever the filters do (the packaged
 ``mild`` city is reported so: docs/tight.md, "A milder city"). ``--rows`` takes ``naive`` and
@@ -69,14 +72,14 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              max_duration_s: float | None = None, maps: bool = True,
              accuracy: dict[str, list[tuple[float, float, float]]] | None = None,
              on_raw: Callable[[str, Any, Any], None] | None = None,
-             fly_on_truth: bool = False) -> dict[str, np.ndarray]:
+             fly_on_truth: bool = False, cn0_missing: bool = False) -> dict[str, np.ndarray]:
     """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
     the exact and an imperfect map); ``accuracy`` (if given) collects per tight row and step (NEES_h
     reported, NEES_h of P alone, reported horiz_accuracy); ``on_raw(row, raw, navigator)`` (if given) is
     called after each row's navigator was given a raw epoch (``simvehicle.receiver.RawObservation``,
     with the simulator's truth per satellite); ``fly_on_truth``: the vehicle flies its planned route on
     the truth (as ``simcal`` flies it), the loose filter only estimates, so the receiver's path depends on
-    no estimator and stays in the streets."""
+    no estimator and stays in the streets; ``cn0_missing``: the tight rows get every epoch without C/N0."""
     from companion.estimator.freespace import constrain
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
@@ -126,8 +129,11 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
                 last_fix = np.asarray(f.p_ned_m, float)
                 k += 1
             while j < len(raws) and raws[j].arrival_us <= imu.t_us:
+                epoch = raws[j].epoch
+                if cn0_missing:
+                    epoch = epoch.replace(cn0_dbhz=np.full(epoch.n, np.nan))
                 for name, t in tight.items():
-                    t.push(RawGnss(raws[j].t_us, raws[j].epoch))
+                    t.push(RawGnss(raws[j].t_us, epoch))
                     if on_raw is not None:
                         on_raw(name, raws[j], t)
                 j += 1
@@ -167,13 +173,14 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
 
 def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Sequence[str] = ROWS,
         n_resamples: int = 2000, rng_seed: int = 0, max_duration_s: float | None = None,
-        fly_on_truth: bool = False) -> dict[str, Any]:
+        fly_on_truth: bool = False, cn0_missing: bool = False) -> dict[str, Any]:
     flights: list[dict[str, Any]] = []
     acc: dict[str, list[tuple[float, float, float]]] = {}
     err: dict[str, list[np.ndarray]] = {}
     for p in profiles:
         for s in seeds:
-            e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc, fly_on_truth=fly_on_truth)
+            e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc, fly_on_truth=fly_on_truth,
+                         cn0_missing=cn0_missing)
             for k, v in e.items():
                 err.setdefault(k, []).append(v)
             flights.append({"profile": p, "seed": s, "steps": int(len(e["spp"])),
@@ -206,6 +213,8 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
             paired.append({"stat": stat, "row": FREE_ROW + sfx, "reference": map_row + sfx,
                            "mean_diff_m": float(d.mean()), "ci": [float(lo), float(hi)]})
     flown = {"fly_on_truth": True} if fly_on_truth else {}  # (absent: flown on the loose filter)
+    if cn0_missing:
+        flown["cn0_missing"] = True
     return {"mission": mission, "scenario": "canyon", "profiles": list(profiles), "seeds": list(seeds),
             **flown,
             "flights": flights, "rows": out_rows, "paired": paired,
@@ -228,6 +237,7 @@ def markdown(r: dict[str, Any]) -> str:
         return f"[{v[0]:{sign}.2f}, {v[1]:{sign}.2f}]"
 
     flown = ", the vehicle flown on the truth" if r.get("fly_on_truth") else ""
+    flown += ", the tight rows without C/N0" if r.get("cn0_missing") else ""
     lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}{flown}: {r['method']}.",
              ""]
     lines += table_lines(("row", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
@@ -256,6 +266,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--max-duration-s", type=float, default=None)
     p.add_argument("--fly-on-truth", action="store_true",
                    help="the vehicle flies its planned route on the truth (the loose filter only estimates)")
+    p.add_argument("--cn0-missing", action="store_true",
+                   help="the tight rows get every epoch without C/N0 (NaN; the receiver unchanged)")
     p.add_argument("--rows", default=",".join(ROWS),
                    help=f"tight weightings, comma-separated (also: {', '.join(EXTRA_ROWS)})")
     args = p.parse_args(argv)
@@ -267,7 +279,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if bad or not rows:
             raise UserError(f"--rows: choose from {', '.join((*ROWS, *EXTRA_ROWS))}")
         return run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s,
-                   fly_on_truth=args.fly_on_truth)
+                   fly_on_truth=args.fly_on_truth, cn0_missing=args.cn0_missing)
 
     return write_results_or_error(args.out, compute, markdown)
 
