@@ -139,8 +139,10 @@ class ImuConfig:
 class AhrsConfig:
     """The attitude the vehicle sends: the truth (``enabled: false``, the paper) or the estimate of
     an onboard complementary filter (Mahony) on the simulated IMU plus a heading reference
-    (``simvehicle.ahrs``). All values (ours): roll/pitch time constant ``1 / kp_rp`` = 10 s, the
-    autopilot-style trade between gyro drift and accelerations leaking into the gravity reference."""
+    (``simvehicle.ahrs``). All values (ours) unless marked: roll/pitch time constant ``1 / kp_rp`` = 10 s,
+    the autopilot-style trade between gyro drift and accelerations leaking into the gravity reference;
+    ``gnss_velocity_reference`` takes the accelerations out with the receiver's velocity, as real
+    autopilots do (ArduPilot's DCM; its EKFs and PX4's fuse the GNSS velocity)."""
 
     enabled: bool = False
     kp_rp_1_s: float = 0.1  # roll/pitch correction gain toward the accelerometer's gravity direction
@@ -151,11 +153,20 @@ class AhrsConfig:
     heading_bias_rad: float = 0.035  # heading reference bias, 1-σ, drawn once (declination/soft iron)
     heading_rate_hz: float = 50.0  # heading reference rate
     initial_tilt_error_rad: float = 0.02  # 1-σ per axis of the attitude error at boot
+    # GNSS-aided gravity reference (ArduPilot DCM's drift correction): between two usable fixes the
+    # accelerometer's specific force, rotated to NED and integrated, is compared with the one the
+    # fixes' velocity change implies (Δv/Δt − g), not with gravity alone; without a usable fix for
+    # ``gnss_timeout_s`` the accelerometer alone, as above
+    gnss_velocity_reference: bool = False  # false: the plain complementary filter (accelerations leak in)
+    kp_rp_gnss_1_s: float = 0.2  # roll/pitch gain while GNSS-aided (ArduPilot AHRS_RP_P default)
+    gnss_min_satellites: int = 6  # a fix below this is not used (ArduPilot AHRS_GPS_MINSATS default)
+    gnss_delay_s: float = 0.1  # receiver lag the autopilot assumes: a fix is taken as valid at arrival − this
+    gnss_timeout_s: float = 1.0  # (ours) no usable fix for this long: back to the accelerometer alone
 
     def validate(self) -> None:
-        _positive(self, "kp_rp_1_s", "kp_yaw_1_s", "heading_rate_hz")
+        _positive(self, "kp_rp_1_s", "kp_yaw_1_s", "heading_rate_hz", "kp_rp_gnss_1_s", "gnss_timeout_s")
         _non_negative(self, "ki_rp_1_s2", "ki_yaw_1_s2", "heading_noise_rad", "heading_bias_rad",
-                      "initial_tilt_error_rad")
+                      "initial_tilt_error_rad", "gnss_min_satellites", "gnss_delay_s")
 
 
 @dataclass(frozen=True)

@@ -176,7 +176,6 @@ class SimVehicle:
         p, v, q, omega = block[:, 3:6], block[:, 6:9], block[:, 9:13], block[:, 13:16]
         acc, gyro = self.imu.measure(block[:, 0:3], omega)
         ap.imu_period(q, acc)
-        q_sent = None if self.ahrs is None else self.ahrs.update(acc, gyro, q)
 
         # one GNSS fix per period, valid at its end; truth carries the bias of the latest valid fix
         before = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
@@ -186,6 +185,11 @@ class SimVehicle:
             fixes.append(fix)
             arrivals.append(t)
         after = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
+        q_sent = None
+        if self.ahrs is not None:  # the autopilot's attitude: its receiver's fixes as they arrived
+            received = [((a - t0) // dt_us - 1, f.v_ned_m_s, f.satellites)
+                        for f, a in zip(fixes, arrivals, strict=True)]
+            q_sent = self.ahrs.update(acc, gyro, q, received)
         collided = self._clearance_m < veh.radius_m or p[-1, 2] >= 0.0
         raw = () if self._raw is None else tuple(self._raw.drain_raw())
         return StepOutput(

@@ -624,3 +624,17 @@ def test_tight_sim_without_cn0_changes_the_tight_rows_not_the_receiver():
     np.testing.assert_array_equal(a["spp"], b["spp"])
     assert len(a["spp"]) > 50 and seen and all(np.isfinite(seen))  # the receiver still reports C/N0
     assert not np.allclose(a["tight-cn0-elevation"], b["tight-cn0-elevation"])
+
+
+def test_tight_sim_rate_hz_keeps_the_first_epoch_of_every_second():
+    """``rate_hz``: the tight rows get one raw epoch per second (the receiver's 5 Hz otherwise)."""
+    from gcs_tools.evaluate.tight_sim import fly_rows
+
+    seen: dict[float | None, list[int]] = {}
+    for rate in (None, 1.0):
+        got = seen.setdefault(rate, [])
+        fly_rows("default", 3, 0, rows=("cn0-elevation",), max_duration_s=4.0, maps=False, rate_hz=rate,
+                 on_raw=lambda _row, raw, _nav, got=got: got.append(raw.t_us))
+    assert len(seen[None]) >= 15
+    assert len({t // 1_000_000 for t in seen[1.0]}) == len(seen[1.0]) >= 3
+    assert set(seen[1.0]) <= set(seen[None])

@@ -28,7 +28,9 @@ Every control step each row's position is compared with the truth (horizontal di
 ``--fly-on-truth``: the vehicle flies its planned route on the truth (as ``simcal`` flies it), the loose
 filter only estimating, so the receiver's path stays in the streets whatever the filters do (the packaged
 ``mild`` city is reported so: docs/tight.md, "A milder city"). ``--rows`` takes ``naive`` and
-``first-order`` too (not flown by default).
+``first-order`` too (not flown by default). ``--sigma-acc A``: the tight rows' white acceleration density;
+``--rate-hz R``: the tight rows get only the first raw epoch of every 1/R s; ``--ahrs``: the simulated
+autopilot's gravity reference (``accelerometer`` or ``gnss-velocity``: ``AhrsConfig``).
 
 Intervals: per-flight medians and 95th percentiles, bootstrap over flights (seeded), and paired
 differences between rows over the same flights.
@@ -43,6 +45,7 @@ reported ``horiz_accuracy`` = sqrt(σ_N² + σ_E²).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -72,17 +75,23 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              max_duration_s: float | None = None, maps: bool = True,
              accuracy: dict[str, list[tuple[float, float, float]]] | None = None,
              on_raw: Callable[[str, Any, Any], None] | None = None,
-             fly_on_truth: bool = False, cn0_missing: bool = False) -> dict[str, np.ndarray]:
+             fly_on_truth: bool = False, cn0_missing: bool = False, tight_config: TightConfig | None = None,
+             rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None) -> dict[str, np.ndarray]:
     """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
     the exact and an imperfect map); ``accuracy`` (if given) collects per tight row and step (NEES_h
     reported, NEES_h of P alone, reported horiz_accuracy); ``on_raw(row, raw, navigator)`` (if given) is
     called after each row's navigator was given a raw epoch (``simvehicle.receiver.RawObservation``,
     with the simulator's truth per satellite); ``fly_on_truth``: the vehicle flies its planned route on
     the truth (as ``simcal`` flies it), the loose filter only estimates, so the receiver's path depends on
-    no estimator and stays in the streets; ``cn0_missing``: the tight rows get every epoch without C/N0."""
+    no estimator and stays in the streets; ``cn0_missing``: the tight rows get every epoch without C/N0;
+    ``tight_config``: the tight rows' configuration (default ``TightConfig()``); ``rate_hz``: the tight rows
+    get only the first raw epoch of every 1 / rate_hz (the receiver and the loose filter unchanged);
+    ``ahrs_gnss_velocity``: the simulated autopilot's attitude with (True) or without (False) its
+    GNSS-velocity reference (``AhrsConfig``; None: the mission's)."""
     from companion.estimator.freespace import constrain
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
+    from simvehicle.config import sim_config_for
     from simvehicle.harness.fly import planned_route
     from simvehicle.rawgnss import RawGnssModel
     from simvehicle.vehicle import SimVehicle
@@ -90,17 +99,24 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     m = load_mission(mission, "canyon")
     nav = navigator_for(m, "second-order")
     route = planned_route(m, profile, 1.0)
-    sim = SimVehicle(m, profile, seed)
+    cfg = sim_config_for(m)
+    if ahrs_gnss_velocity is not None:
+        ahrs = dataclasses.replace(cfg.ahrs, gnss_velocity_reference=ahrs_gnss_velocity)
+        cfg = dataclasses.replace(cfg, ahrs=ahrs)
+    sim = SimVehicle(m, profile, seed, cfg)
+    tcfg = tight_config or TightConfig()
+    period_us = None if rate_hz is None else round(1e6 / rate_hz)
+    last_slot = None
     gnss = sim.gnss
     assert isinstance(gnss, RawGnssModel)  # the canyon scenario's receiver
     store = gnss.store
-    tight = {r: tight_navigator_for(m, r, config=TightConfig(), ephemerides=store, city=None) for r in rows}
+    tight = {r: tight_navigator_for(m, r, config=tcfg, ephemerides=store, city=None) for r in rows}
     if maps:
         city = mission_city(m)
         imperfect = city.perturbed(np.random.default_rng([MAP_SEED, profile, seed]), MAP_SIGMA_HEIGHT_M,
                                    MAP_SIGMA_SHIFT_M)
         for name, c in zip(MAP_ROWS, (city, imperfect), strict=True):
-            tight[name] = tight_navigator_for(m, "second-order", config=TightConfig(), ephemerides=store,
+            tight[name] = tight_navigator_for(m, "second-order", config=tcfg, ephemerides=store,
                                               city=c)
     end_us = round(min(1.0 + route.duration_s * 1.5, max_duration_s or 1e9) * 1e6)
     outside_rows = (f"tight-{MAP_ROWS[0]}", FREE_ROW) if maps else ()
@@ -116,6 +132,13 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
                 t.update_ephemerides(store)
         fixes = list(zip(out.gnss_arrival_us, out.gnss_ned, strict=True))
         raws = sorted(out.gnss_raw, key=lambda o: o.arrival_us)
+        if period_us is not None:  # the first epoch of every period only
+            first = []
+            for o in raws:
+                if o.t_us // period_us != last_slot:
+                    last_slot = o.t_us // period_us
+                    first.append(o)
+            raws = first
         k = j = 0
         for att, imu in zip(out.attitude, out.imu, strict=True):
             nav.push(att)
@@ -173,14 +196,17 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
 
 def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Sequence[str] = ROWS,
         n_resamples: int = 2000, rng_seed: int = 0, max_duration_s: float | None = None,
-        fly_on_truth: bool = False, cn0_missing: bool = False) -> dict[str, Any]:
+        fly_on_truth: bool = False, cn0_missing: bool = False, sigma_acc_m_s2: float | None = None,
+        rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None) -> dict[str, Any]:
+    tcfg = TightConfig() if sigma_acc_m_s2 is None else TightConfig(sigma_acc_m_s2=sigma_acc_m_s2)
     flights: list[dict[str, Any]] = []
     acc: dict[str, list[tuple[float, float, float]]] = {}
     err: dict[str, list[np.ndarray]] = {}
     for p in profiles:
         for s in seeds:
             e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc, fly_on_truth=fly_on_truth,
-                         cn0_missing=cn0_missing)
+                         cn0_missing=cn0_missing, tight_config=tcfg, rate_hz=rate_hz,
+                         ahrs_gnss_velocity=ahrs_gnss_velocity)
             for k, v in e.items():
                 err.setdefault(k, []).append(v)
             flights.append({"profile": p, "seed": s, "steps": int(len(e["spp"])),
@@ -212,9 +238,14 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
             lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
             paired.append({"stat": stat, "row": FREE_ROW + sfx, "reference": map_row + sfx,
                            "mean_diff_m": float(d.mean()), "ci": [float(lo), float(hi)]})
-    flown = {"fly_on_truth": True} if fly_on_truth else {}  # (absent: flown on the loose filter)
+    # (absent: flown on the loose filter, the defaults)
+    flown: dict[str, Any] = {"fly_on_truth": True} if fly_on_truth else {}
     if cn0_missing:
         flown["cn0_missing"] = True
+    for key, val in (("sigma_acc_m_s2", sigma_acc_m_s2), ("rate_hz", rate_hz),
+                     ("ahrs_gnss_velocity", ahrs_gnss_velocity)):
+        if val is not None:
+            flown[key] = val
     return {"mission": mission, "scenario": "canyon", "profiles": list(profiles), "seeds": list(seeds),
             **flown,
             "flights": flights, "rows": out_rows, "paired": paired,
@@ -238,6 +269,7 @@ def markdown(r: dict[str, Any]) -> str:
 
     flown = ", the vehicle flown on the truth" if r.get("fly_on_truth") else ""
     flown += ", the tight rows without C/N0" if r.get("cn0_missing") else ""
+    flown += "".join(f", {k} {r[k]}" for k in ("sigma_acc_m_s2", "rate_hz", "ahrs_gnss_velocity") if k in r)
     lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}{flown}: {r['method']}.",
              ""]
     lines += table_lines(("row", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
@@ -268,6 +300,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the vehicle flies its planned route on the truth (the loose filter only estimates)")
     p.add_argument("--cn0-missing", action="store_true",
                    help="the tight rows get every epoch without C/N0 (NaN; the receiver unchanged)")
+    p.add_argument("--sigma-acc", type=float, default=None,
+                   help="the tight rows' white acceleration density sigma_acc_m_s2 (default: TightConfig's)")
+    p.add_argument("--rate-hz", type=float, default=None,
+                   help="the tight rows get only the first raw epoch of every 1/RATE s (default: all)")
+    p.add_argument("--ahrs", choices=("mission", "accelerometer", "gnss-velocity"), default="mission",
+                   help="the simulated autopilot's gravity reference (ahrs.gnss_velocity_reference; "
+                        "default: the mission's)")
     p.add_argument("--rows", default=",".join(ROWS),
                    help=f"tight weightings, comma-separated (also: {', '.join(EXTRA_ROWS)})")
     args = p.parse_args(argv)
@@ -278,8 +317,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         bad = sorted(set(rows) - set(ROWS) - set(EXTRA_ROWS))
         if bad or not rows:
             raise UserError(f"--rows: choose from {', '.join((*ROWS, *EXTRA_ROWS))}")
+        ahrs = {"mission": None, "accelerometer": False, "gnss-velocity": True}[args.ahrs]
         return run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s,
-                   fly_on_truth=args.fly_on_truth, cn0_missing=args.cn0_missing)
+                   fly_on_truth=args.fly_on_truth, cn0_missing=args.cn0_missing,
+                   sigma_acc_m_s2=args.sigma_acc, rate_hz=args.rate_hz, ahrs_gnss_velocity=ahrs)
 
     return write_results_or_error(args.out, compute, markdown)
 
