@@ -38,8 +38,8 @@ def test_write_then_read_gives_the_same_epochs_odometry_and_truth(tmp_path):
     inp, gt = tmp_path / "X_Input.txt", tmp_path / "X_GT.txt"
     smartloc.write_input(inp, epochs, odo)
     t_gt = np.array([0.0, 0.2, 0.4])
-    p_gt = np.array([[3785108.1107158, 899901.49390314, 5037234.4571748]] * 3) + [[0, 0, 0], [1.5, -2.25, 3.0],
-                                                                                   [3.0, -4.5, 6.0]]
+    steps = np.array([[0, 0, 0], [1.5, -2.25, 3.0], [3.0, -4.5, 6.0]])
+    p_gt = np.array([3785108.1107158, 899901.49390314, 5037234.4571748]) + steps
     smartloc.write_truth(gt, t_gt, p_gt)
     lines = inp.read_text().splitlines()
     # the data set's layout: odometry rows first, GLONASS as 300 + slot, system codes 1 / 4 / 8

@@ -78,7 +78,8 @@ def course_odometry(t_s: np.ndarray, v_ned_m_s: np.ndarray, rng: np.random.Gener
 def drive(series: Series, rng: np.random.Generator | None) -> tuple[list[GnssEpoch], np.ndarray, np.ndarray]:
     """One flight as a drive: (epochs on the file's time, odometry (n, 3), truth times (n,))."""
     t = series.t_s - series.t_s[0]
-    epochs = [e.replace(t_gps_s=float(ti), time_base="dataset") for e, ti in zip(series.epochs, t, strict=True)]
+    epochs = [e.replace(t_gps_s=float(ti), time_base="dataset")
+              for e, ti in zip(series.epochs, t, strict=True)]
     return epochs, course_odometry(t, series.truth_v_ned_m_s, rng), t
 
 
@@ -99,8 +100,8 @@ def export(out_dir: Path, mission: str, profiles: Sequence[int], seeds: Sequence
                            "receiver_fix_median_m": float(np.median(h)),
                            "receiver_fix_p95_m": float(np.percentile(h, 95)),
                            "altitude_span_m": float(np.ptp(_up_m(series.truth_ecef_m)))})
-    return {"scenario": SCENARIO, "flown": "on the truth (simcal.receiver_flight)", "odometry_seed": ODOM_SEED,
-            "drives": drives}
+    return {"scenario": SCENARIO, "flown": "on the truth (simcal.receiver_flight)",
+            "odometry_seed": ODOM_SEED, "drives": drives}
 
 
 def _up_m(p_ecef_m: np.ndarray) -> np.ndarray:

@@ -137,7 +137,8 @@ def read_input(path: str | Path) -> SmartLocInput:
         r = a[i0:i1]
         system = np.array([SYSTEMS[int(c)] for c in r[:, 7]], dtype=np.int8)
         ident = r[:, 6].astype(int)
-        prn = np.where((system == System.GLONASS) & (ident > GLONASS_ID_OFFSET), ident - GLONASS_ID_OFFSET, ident)
+        glo = (system == System.GLONASS) & (ident > GLONASS_ID_OFFSET)
+        prn = np.where(glo, ident - GLONASS_ID_OFFSET, ident)
         epochs.append(
             make_epoch(
                 r[0, 0],
