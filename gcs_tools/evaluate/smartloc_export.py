@@ -124,11 +124,11 @@ def markdown(r: dict[str, Any]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.smartloc_export",
                                 description=(__doc__ or "").splitlines()[0])
-    p.add_argument("--mission", default="mild")
-    p.add_argument("--profiles", default="3,4")
-    p.add_argument("--seeds", default="0")
-    p.add_argument("--max-duration-s", type=float, default=None)
     p.add_argument("--out", type=Path, required=True, help="directory for the *_Input.txt / *_GT.txt drives")
+    p.add_argument("--mission", default="mild", help="flown under the canyon scenario")
+    p.add_argument("--profiles", default="3,4", help="e.g. 0-9 or 3,4")
+    p.add_argument("--seeds", default="0", help="e.g. 0-2 (tuning: 1000 on)")
+    p.add_argument("--max-duration-s", type=float, default=None, help="cut each flight there")
     args = p.parse_args(argv)
 
     def compute() -> dict[str, Any]:
