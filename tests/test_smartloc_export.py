@@ -123,3 +123,4 @@ def test_a_short_exported_flight_runs_through_evaluate_tight(tmp_path):
     assert abs(rows["spp"]["median_m"] - info["receiver_fix_median_m"]) < 0.3
     # not diverging: the belief stays within the single-point solution's worst error
     assert rows["tight-second-order"]["max_m"] < rows["spp"]["max_m"]
+    assert r["resets"] == {"tight-second-order": 0}
