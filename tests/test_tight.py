@@ -391,6 +391,7 @@ def test_smartloc_tight_rows_on_the_real_drive():
     rows, goals = r["rows"], r["goals"]["tight-second-order"]
     assert goals["median_ratio_to_spp"] <= 0.7 and goals["p95_ratio_to_spp"] <= 0.5, goals
     assert rows["tight-second-order"]["max_m"] < 40.0  # never diverging
+    assert r["resets"]["tight-second-order"] == 0
     vs_naive = next(c for c in r["paired"] if c["reference"] == "tight-naive")
     assert vs_naive["median_diff_ci_m"][1] < 0 and vs_naive["p95_diff_ci_m"][1] < 0
     beta = {(b["residual_from_m"], b["residual_to_m"]): b["beta_median"] for b in r["belief_vs_residual"]}

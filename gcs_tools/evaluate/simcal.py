@@ -61,6 +61,7 @@ class Series:
     v_acc_m: np.ndarray
     epochs: list[GnssEpoch] = field(default_factory=list)
     truth_ecef_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    truth_v_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (n, 3) true velocity
 
     @property
     def horizontal_m(self) -> np.ndarray:
@@ -120,19 +121,19 @@ def receiver_flight(mission: Mission, profile: int, seed: int, max_duration_s: f
     lat, lon = math.radians(frame.home_lat_deg), math.radians(frame.home_lon_deg)
     home = geodetic_to_ecef(lat, lon, frame.home_alt_m)
     to_ecef = ecef_to_ned_matrix(lat, lon).T
-    truth_at: dict[int, np.ndarray] = {}
-    rows: list[tuple[float, np.ndarray, float, float, GnssEpoch, np.ndarray]] = []
+    truth_at: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    rows: list[tuple[float, np.ndarray, float, float, GnssEpoch, np.ndarray, np.ndarray]] = []
     zero9 = np.zeros(9)
     est: NavEstimate | None = None
     while True:
         out = sim.advance(est, route.setpoint(sim.t_us))
-        truth_at[out.t_us] = out.p_ned_m[-1].copy()
         tr = out.final_truth
+        truth_at[out.t_us] = (out.p_ned_m[-1].copy(), np.array(tr.v_ned_m_s, dtype=float))
         est = NavEstimate(
             out.t_us, tr.p_ned_m, tr.v_ned_m_s, tr.gnss_bias_ned_m, zero9, 1.0, math.nan, "truth"
         )
         for raw in out.gnss_raw:
-            p_true = truth_at.pop(raw.t_us)
+            p_true, v_true = truth_at.pop(raw.t_us)
             sol = raw.solution
             err = np.full(3, np.nan) if sol is None else gnss.to_ned_m(sol.p_ecef_m) - p_true
             h_acc, v_acc = (math.nan, math.nan) if sol is None else (sol.h_acc_m, sol.v_acc_m)
@@ -145,7 +146,7 @@ def receiver_flight(mission: Mission, profile: int, seed: int, max_duration_s: f
                 - raw.truth.model_atmosphere_m,
                 corrected=True,
             )
-            rows.append((raw.t_us * 1e-6, err, h_acc, v_acc, solved, home + to_ecef @ p_true))
+            rows.append((raw.t_us * 1e-6, err, h_acc, v_acc, solved, home + to_ecef @ p_true, v_true))
         truth_at = {t: p for t, p in truth_at.items() if t >= out.t_us - 1_000_000}
         if out.t_us >= end_us:
             break
@@ -157,6 +158,7 @@ def receiver_flight(mission: Mission, profile: int, seed: int, max_duration_s: f
         np.array([r[3] for r in rows]),
         [r[4] for r in rows],
         np.array([r[5] for r in rows]).reshape(-1, 3),
+        np.array([r[6] for r in rows]).reshape(-1, 3),
     )
 
 

@@ -138,6 +138,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
     boot_s = np.array([src.boot_us(t) for t in t_ep]) * 1e-6
     errors: dict[str, np.ndarray] = {}
     timing: dict[str, float] = {}
+    resets: dict[str, int] = {}  # per filter row: its resets to the GNSS (the state lost and restarted)
 
     def say(msg: str) -> None:
         if progress is not None:
@@ -155,6 +156,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
         est = np.column_stack([np.interp(boot_s, t, res.table[:, i], left=np.nan) for i in range(2)])
         errors[name] = _horizontal(est, truth_ned)
         timing[name] = float(res.summary["realtime_factor"])
+        resets[name] = int(res.summary["navigator"].get("gnss_resets", 0))
 
     if loose:
         replay_row("loose", smartloc_source(input_path, truth_path, SppConfig()), None, "second-order")
@@ -208,6 +210,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
                    "bootstrap": f"moving blocks of {block} epochs ({block_s:g} s), {n_resamples} resamples, "
                                 f"seed {seed}, the same blocks for every row (paired)"},
         "rows": stats, "paired": comparisons, "goals": goals, "realtime_factor": timing,
+        "resets": {k: v for k, v in resets.items() if k in stats},
         "belief_vs_residual": belief_vs_residual(data.epochs, truth, belief_log.rows, src),
         "sensitivity": sens,
     }
@@ -290,6 +293,9 @@ def markdown(r: dict[str, Any]) -> str:
         ((name, f"{s['median_m']:.1f}", ci(s["median_ci_m"]), f"{s['p95_m']:.1f}", ci(s["p95_ci_m"]),
           f"{s['max_m']:.1f}", f"{goals[name]['median_ratio_to_spp']:.2f}",
           f"{goals[name]['p95_ratio_to_spp']:.2f}") for name, s in r["rows"].items()))
+    reset = {k: v for k, v in r.get("resets", {}).items() if v}
+    lines += ["", "Resets to the GNSS (a filter row that lost its state): "
+              + (", ".join(f"{k} {v}" for k, v in reset.items()) if reset else "none") + "."]
     lines += ["", *table_lines(
         ("paired difference", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
         ((f"{c['row']} − {c['reference']}", f"{c['median_diff_m']:+.1f}", ci(c["median_diff_ci_m"]),

@@ -11,6 +11,10 @@ A row that does not parse, holds NaN/inf or names an unknown system is skipped a
 ``rejected`` (by reason), as is a row whose time lies more than ``LONE_STAMP_S`` from both of its
 neighbours in the file (``lone_stamp``: a damaged stamp; the rows are in time order); a file with no
 usable epoch is a ``UserError``. A truth row with such a time is a ``UserError`` naming its line.
+
+``write_input`` / ``write_truth`` are the inverse (``gcs_tools.evaluate.smartloc_export`` writes the
+simulator's flights with them): every number in ``DIGITS`` significant digits (the data set's files
+carry 14), the odometry's covariance columns ``ODOM_COV`` (the data set's constants).
 """
 
 from __future__ import annotations
@@ -38,6 +42,11 @@ EPOCH_GAP_S = 1e-6  # rows with stamps closer than this belong to one epoch
 # a row whose time is further than this from the rows before and after it in the file (which agree) is a
 # damaged stamp, not a new epoch: one such row at 1e6 s made a tight replay synthesise 50 M IMU samples
 LONE_STAMP_S = 10.0
+CODES = {v: k for k, v in SYSTEMS.items()}
+GLONASS_ID_OFFSET = 300
+DIGITS = 15
+# odom3 covariances (vx, vy, vz, ωx, ωy, ωz), as smartLoc Berlin Potsdamer Platz states them on every row
+ODOM_COV = (0.0025, 0.0009, 0.0009, 4e-06, 4e-06, 4e-06)
 
 
 @dataclass
@@ -128,7 +137,8 @@ def read_input(path: str | Path) -> SmartLocInput:
         r = a[i0:i1]
         system = np.array([SYSTEMS[int(c)] for c in r[:, 7]], dtype=np.int8)
         ident = r[:, 6].astype(int)
-        prn = np.where((system == System.GLONASS) & (ident > 300), ident - 300, ident)
+        glo = (system == System.GLONASS) & (ident > GLONASS_ID_OFFSET)
+        prn = np.where(glo, ident - GLONASS_ID_OFFSET, ident)
         epochs.append(
             make_epoch(
                 r[0, 0],
@@ -215,6 +225,43 @@ def read_drive(input_path: Path, truth_path: Path | None = None) -> tuple[SmartL
     if truth_path is None:
         raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
     return data, read_truth(truth_path)
+
+
+def _num(v: float) -> str:
+    return f"{v:.{DIGITS}g}"
+
+
+def write_input(path: str | Path, epochs: list[GnssEpoch], odometry: np.ndarray) -> None:
+    """``epochs`` (pre-corrected pseudoranges with satellite positions, ``t_gps_s`` the file's time) and
+    ``odometry`` ((m, 3): t_s, forward speed m/s, yaw rate rad/s counter-clockwise) as a smartLoc
+    ``*_Input.txt``: the ``odom3`` rows, then the ``pseudorange3`` rows, in time order (the data set's
+    layout). An observation with a value that is not finite is left out (the reader would reject it)."""
+    lines = []
+    for t, v, w in np.asarray(odometry, dtype=float).reshape(-1, 3):
+        lines.append(" ".join(["odom3", _num(t), _num(v), "0", "0", "0", "0", _num(w),
+                               *(f"{c:g}" for c in ODOM_COV)]))
+    for e in epochs:
+        if not e.corrected:
+            raise ValueError("write_input: smartLoc pseudoranges are corrected (satellite clock, atmosphere)")
+        for i in range(e.n):
+            system = System(int(e.system[i]))
+            ident = int(e.prn[i]) + (GLONASS_ID_OFFSET if system == System.GLONASS else 0)
+            vals = (e.pseudorange_m[i], e.pseudorange_var_m2[i], *e.sat_pos_ecef_m[i], e.elevation_deg[i],
+                    e.cn0_dbhz[i])
+            if not all(math.isfinite(float(x)) for x in vals):
+                continue
+            lines.append(" ".join(["pseudorange3", _num(e.t_gps_s), _num(e.pseudorange_m[i]),
+                                   _num(e.pseudorange_var_m2[i]), *(_num(x) for x in e.sat_pos_ecef_m[i]),
+                                   str(ident), str(CODES[system]), _num(e.elevation_deg[i]),
+                                   _num(e.cn0_dbhz[i])]))
+    Path(path).write_text("\n".join(lines) + "\n", encoding="ascii")
+
+
+def write_truth(path: str | Path, t_s: np.ndarray, p_ecef_m: np.ndarray) -> None:
+    """Truth positions (ECEF) as a smartLoc ``*_GT.txt`` (``point3`` rows, the covariance zeros)."""
+    rows = (" ".join(["point3", _num(t), *(_num(x) for x in p), *("0" * 9)])
+            for t, p in zip(np.asarray(t_s, dtype=float), np.asarray(p_ecef_m, dtype=float), strict=True))
+    Path(path).write_text("\n".join(rows) + "\n", encoding="ascii")
 
 
 def is_smartloc(path: Path) -> bool:
