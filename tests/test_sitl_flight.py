@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -306,7 +307,22 @@ def test_launcher_never_leaves_processes_behind(tmp_path, how):
         assert "beliefnav: error: estimator process killed by SIGKILL" in stderr
 
 
+def _mavproxy_seen(tmp_path: Path) -> set[str]:
+    """GPS_RAW_INT and the NAMED_VALUE_FLOAT names in MAVProxy's log so far (it may be mid-write)."""
+    from companion.mavlink.tlog import read_tlog
+
+    seen: set[str] = set()
+    for log in tmp_path.rglob("proxy.tlog"):
+        with contextlib.suppress(OSError, ValueError):
+            for _, m in read_tlog(log, ("GPS_RAW_INT", "NAMED_VALUE_FLOAT")):
+                name = m.get_type() if m.get_type() != "NAMED_VALUE_FLOAT" else m.name
+                seen.add(name.decode() if isinstance(name, bytes) else name)
+    return seen
+
+
 def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
+    """A real MAVProxy on the ground port (udpout: it speaks first) logs our GPS and the belief; the
+    flight (real time) is interrupted once it has, or after 20 s of wall time."""
     mavproxy = Path(sys.executable).parent / "mavproxy.py"
     if not mavproxy.exists():
         pytest.skip("MAVProxy not installed (pip install --no-deps mavproxy)")
@@ -322,24 +338,33 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
         start_new_session=True,
     )
     try:
-        done = run_cli("--mission", MISSION, "--realtime", "--max-duration-s", "8", "--out", str(out),
-                       "--ports", ",".join(map(str, ports)), "--no-signing")  # MAVProxy has no key here
+        sitl = subprocess.Popen(
+            [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", MISSION, "--realtime",
+             "--max-duration-s", "20", "--out", str(out), "--ports", ",".join(map(str, ports)),
+             "--no-signing"],  # MAVProxy has no key here
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 50
+            while sitl.poll() is None and time.monotonic() < deadline:
+                if {"GPS_RAW_INT", "GNSS_BETA"} <= _mavproxy_seen(tmp_path):
+                    sitl.send_signal(signal.SIGINT)
+                    break
+                time.sleep(0.25)
+            _, stderr = sitl.communicate(timeout=30)
+        finally:
+            if sitl.poll() is None:
+                sitl.kill()
     finally:
         os.killpg(proxy.pid, signal.SIGTERM)
         try:
             proxy.wait(timeout=5)
         except subprocess.TimeoutExpired:
             os.killpg(proxy.pid, signal.SIGKILL)
-    assert done.returncode in (0, 1), done.stderr
-    from companion.mavlink.tlog import read_tlog
-
-    logs = list(tmp_path.rglob("proxy.tlog"))
-    assert logs, "MAVProxy wrote no log"
-    seen = {m.get_type() if m.get_type() != "NAMED_VALUE_FLOAT" else m.name
-            for _, m in read_tlog(logs[0], ("GPS_RAW_INT", "NAMED_VALUE_FLOAT"))}
-    seen = {s.decode() if isinstance(s, bytes) else s for s in seen}
+    assert list(tmp_path.rglob("proxy.tlog")), "MAVProxy wrote no log"
+    seen = _mavproxy_seen(tmp_path)
     assert "GPS_RAW_INT" in seen and "GNSS_BETA" in seen, seen
     s = _summary(out)
+    assert s["sitl"]["ended_by"] in ("interrupted", "vehicle"), (s["sitl"]["ended_by"], stderr)
     assert s["sitl"]["links"]["ground"]["messages_rx"] > 0  # MAVProxy talked back and was tolerated
 
 
