@@ -143,6 +143,53 @@ def test_lockstep_sitl_agrees_with_in_process_fly(lockstep_flight):
         assert math.isclose(a, b, rel_tol=0.05), (key, a, b)
 
 
+def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, tmp_path):
+    """The estimator's bias travels as DEBUG_VECT GNSS_BIAS (5 Hz): every finite row of the vehicle's
+    b_est_ned_m is one of the vectors sent, and each vector sent is the estimator's bias at its stamp
+    (replaying the tlog reproduces it to float32). `beliefnav export` of the tlog carries it on."""
+    from companion.mavlink import codec
+    from companion.mavlink.tlog import read_tlog
+    from companion.mission import load_mission
+    from companion.wiring import mission_estimator_config
+    from gcs_tools.replay.core import CSV_COLUMNS, replay
+
+    tlog = lockstep_flight / "run.tlog"
+    vectors: dict[int, np.ndarray] = {}
+    for _, m in read_tlog(tlog, ["DEBUG_VECT"]):
+        t_us, b = codec.decode_bias(m)
+        vectors.setdefault(t_us, b)
+    sent = {tuple(b) for b in vectors.values()}
+    s = _series(lockstep_flight)
+    b_est = s["b_est_ned_m"]
+    ok = np.isfinite(b_est).all(axis=1)
+    assert ok.mean() > 0.95 and len(sent) > 0.15 * len(b_est) / 4  # 5 Hz of 20 Hz rows, mostly distinct
+    assert all(tuple(row) in sent for row in b_est[ok])
+    mission = load_mission(MISSION)
+    config = mission_estimator_config(mission)
+    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
+    col = CSV_COLUMNS.index("b_n_m") - 1
+    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+    common = sorted(set(vectors) & set(replayed))
+    assert len(common) > 0.9 * len(vectors) > 50
+    diff = np.array([vectors[t] - replayed[t] for t in common])
+    scale = np.array([np.abs(replayed[t]) for t in common]) + 1.0
+    assert np.max(np.abs(diff) / scale) < 2e-7  # float32 of the DEBUG_VECT fields
+
+    from mcap.reader import make_reader
+
+    done = subprocess.run([sys.executable, "-m", "gcs_tools", "export", str(lockstep_flight / "run.tlog"),
+                           "--out", str(tmp_path / "run.mcap"), "--home", "52.52,13.405,35"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    with (tmp_path / "run.mcap").open("rb") as f:
+        states = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/beliefnav/state"])]
+    exported = np.array([[st[f"b_est_{a}_m"] for a in "ned"] for st in states if st["b_est_n_m"] is not None])
+    assert len(exported) > 0.9 * len(states)
+    sent_arr = np.array(sorted(sent))  # linear interpolation between sent vectors stays inside their range
+    assert (exported >= sent_arr.min(axis=0) - 1e-9).all() and (exported <= sent_arr.max(axis=0) + 1e-9).all()
+    assert np.std(exported[:, 0]) > 0.5 * np.std(sent_arr[:, 0])
+
+
 def test_ten_percent_loss_both_ways_still_reaches_goal(tmp_path):
     """The 30 m street (each lost step costs a 10 ms retry: the 90 m cross street took 3x the wall time):
     about 650 datagrams each way, of which 10 % are dropped (measured 10.3-11.5 %, 67-108 datagrams)."""
@@ -366,50 +413,3 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
     s = _summary(out)
     assert s["sitl"]["ended_by"] in ("interrupted", "vehicle"), (s["sitl"]["ended_by"], stderr)
     assert s["sitl"]["links"]["ground"]["messages_rx"] > 0  # MAVProxy talked back and was tolerated
-
-
-def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, tmp_path):
-    """The estimator's bias travels as DEBUG_VECT GNSS_BIAS (5 Hz): every finite row of the vehicle's
-    b_est_ned_m is one of the vectors sent, and each vector sent is the estimator's bias at its stamp
-    (replaying the tlog reproduces it to float32). `beliefnav export` of the tlog carries it on."""
-    from companion.mavlink import codec
-    from companion.mavlink.tlog import read_tlog
-    from companion.mission import load_mission
-    from companion.wiring import mission_estimator_config
-    from gcs_tools.replay.core import CSV_COLUMNS, replay
-
-    tlog = lockstep_flight / "run.tlog"
-    vectors: dict[int, np.ndarray] = {}
-    for _, m in read_tlog(tlog, ["DEBUG_VECT"]):
-        t_us, b = codec.decode_bias(m)
-        vectors.setdefault(t_us, b)
-    sent = {tuple(b) for b in vectors.values()}
-    s = _series(lockstep_flight)
-    b_est = s["b_est_ned_m"]
-    ok = np.isfinite(b_est).all(axis=1)
-    assert ok.mean() > 0.95 and len(sent) > 0.15 * len(b_est) / 4  # 5 Hz of 20 Hz rows, mostly distinct
-    assert all(tuple(row) in sent for row in b_est[ok])
-    mission = load_mission(MISSION)
-    config = mission_estimator_config(mission)
-    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
-    col = CSV_COLUMNS.index("b_n_m") - 1
-    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
-    common = sorted(set(vectors) & set(replayed))
-    assert len(common) > 0.9 * len(vectors) > 50
-    diff = np.array([vectors[t] - replayed[t] for t in common])
-    scale = np.array([np.abs(replayed[t]) for t in common]) + 1.0
-    assert np.max(np.abs(diff) / scale) < 2e-7  # float32 of the DEBUG_VECT fields
-
-    from mcap.reader import make_reader
-
-    done = subprocess.run([sys.executable, "-m", "gcs_tools", "export", str(lockstep_flight / "run.tlog"),
-                           "--out", str(tmp_path / "run.mcap"), "--home", "52.52,13.405,35"],
-                          capture_output=True, text=True, timeout=60)
-    assert done.returncode == 0, done.stderr
-    with (tmp_path / "run.mcap").open("rb") as f:
-        states = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/beliefnav/state"])]
-    exported = np.array([[st[f"b_est_{a}_m"] for a in "ned"] for st in states if st["b_est_n_m"] is not None])
-    assert len(exported) > 0.9 * len(states)
-    sent_arr = np.array(sorted(sent))  # linear interpolation between sent vectors stays inside their range
-    assert (exported >= sent_arr.min(axis=0) - 1e-9).all() and (exported <= sent_arr.max(axis=0) + 1e-9).all()
-    assert np.std(exported[:, 0]) > 0.5 * np.std(sent_arr[:, 0])
