@@ -48,7 +48,28 @@ def _series(out: Path) -> dict[str, np.ndarray]:
         return {k: npz[k] for k in npz.files}
 
 
-def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_flight):
+@pytest.fixture(scope="module")
+def lockstep_replay(lockstep_flight):
+    """The shared flight's tlog replayed (second-order, the test mission's filter, every IMU row)."""
+    from companion.mission import load_mission
+    from companion.wiring import mission_estimator_config
+    from gcs_tools.replay.core import replay
+
+    mission = load_mission(MISSION)
+    assert mission.section("estimator"), "the test mission should carry a non-default estimator section"
+    return replay(lockstep_flight / "run.tlog", "second-order", home=mission.frame,
+                  config=mission_estimator_config(mission), rate_hz=0)
+
+
+def _replayed(result, first_column: str) -> dict[int, np.ndarray]:
+    """{t_us: the replay's three columns from ``first_column``} (e.g. p_n_m: p_n, p_e, p_d)."""
+    from gcs_tools.replay.core import CSV_COLUMNS
+
+    col = CSV_COLUMNS.index(first_column) - 1
+    return {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+
+
+def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_flight, lockstep_replay):
     a = _summary(lockstep_flight)
     assert a["reached_goal"] and a["estimation_error_m"]["median"] < 5.0
     assert a["sitl"]["lockstep"]["gave_up"] == 0
@@ -61,20 +82,13 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     assert "GPS_RAW_INT" in dump.stdout and "ODOMETRY" in dump.stdout and "SYSTEM_TIME" in dump.stdout
 
     from companion.mavlink.tlog import read_tlog
-    from companion.mission import load_mission
-    from companion.wiring import mission_estimator_config
-    from gcs_tools.replay.core import CSV_COLUMNS, replay
 
     live: dict[int, tuple[float, float, float]] = {}
     for _, m in read_tlog(tlog, ("ODOMETRY",)):
         if m.time_usec % 20_000 == 0:  # 50 Hz ODOMETRY, sent right after its IMU sample
             live.setdefault(int(m.time_usec), (m.x, m.y, m.z))
-    mission = load_mission(MISSION)
-    assert mission.section("estimator"), "the test mission should carry a non-default estimator section"
-    config = mission_estimator_config(mission)
-    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
-    col = CSV_COLUMNS.index("p_n_m") - 1
-    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+    result = lockstep_replay
+    replayed = _replayed(result, "p_n_m")
     common = sorted(set(live) & set(replayed))
     assert len(common) > 0.9 * len(live) > 500
     diff = np.array([np.asarray(live[t]) - replayed[t] for t in common])
@@ -143,15 +157,12 @@ def test_lockstep_sitl_agrees_with_in_process_fly(lockstep_flight):
         assert math.isclose(a, b, rel_tol=0.05), (key, a, b)
 
 
-def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, tmp_path):
+def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, lockstep_replay, tmp_path):
     """The estimator's bias travels as DEBUG_VECT GNSS_BIAS (5 Hz): every finite row of the vehicle's
     b_est_ned_m is one of the vectors sent, and each vector sent is the estimator's bias at its stamp
     (replaying the tlog reproduces it to float32). `beliefnav export` of the tlog carries it on."""
     from companion.mavlink import codec
     from companion.mavlink.tlog import read_tlog
-    from companion.mission import load_mission
-    from companion.wiring import mission_estimator_config
-    from gcs_tools.replay.core import CSV_COLUMNS, replay
 
     tlog = lockstep_flight / "run.tlog"
     vectors: dict[int, np.ndarray] = {}
@@ -164,11 +175,7 @@ def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, 
     ok = np.isfinite(b_est).all(axis=1)
     assert ok.mean() > 0.95 and len(sent) > 0.15 * len(b_est) / 4  # 5 Hz of 20 Hz rows, mostly distinct
     assert all(tuple(row) in sent for row in b_est[ok])
-    mission = load_mission(MISSION)
-    config = mission_estimator_config(mission)
-    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
-    col = CSV_COLUMNS.index("b_n_m") - 1
-    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+    replayed = _replayed(lockstep_replay, "b_n_m")
     common = sorted(set(vectors) & set(replayed))
     assert len(common) > 0.9 * len(vectors) > 50
     diff = np.array([vectors[t] - replayed[t] for t in common])
