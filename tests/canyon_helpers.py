@@ -6,14 +6,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sitl_helpers import SHORT_MISSION
-
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.ubx import ReceiverPvt
 from companion.receiver.ubx_stream import open_stream, ubx_items
 
-# SHORT_MISSION: a short route, so a flight is mostly its set-up (beside ArduPilot EKF3 waits for the
-# companion, which waits for the receiver's first complete LNAV subframes)
+# the test city's cross street, 30 m of it: a short route, so a flight is mostly its set-up (beside
+# ArduPilot EKF3 waits for the companion, which waits for the receiver's first complete LNAV subframes)
+SHORT_MISSION = """extends: test
+profiles:
+  - {name: short-street, start_ne_m: [52, 35], goal_ne_m: [52, 65]}
+"""
 
 
 Flown = tuple[subprocess.CompletedProcess[str], Path]  # the sitl process, its --out

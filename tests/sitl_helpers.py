@@ -32,12 +32,6 @@ def route_duration_s(mission: str, profile: int) -> float:
     return plan_route(load_mission(mission), profile).duration_s
 
 
-# the test city's cross street, 30 m of it (profile 0; the mission's own cross street is 90 m): 19 s of route
-SHORT_MISSION = """extends: test
-profiles:
-  - {name: short-street, start_ne_m: [52, 35], goal_ne_m: [52, 65]}
-"""
-
 class Trio:
     """The three processes started by hand (so a test can kill, restart or impersonate one)."""
 
