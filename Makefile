@@ -44,11 +44,14 @@ browser:
 # The suite in two parts: everything but the real-autopilot tests on two workers (pytest-xdist), then
 # the tests beside a real ArduPilot or PX4 SITL alone, one after another (tests/conftest.py marks them):
 # their flights run at 5x real time and must keep their margins. Both parts always run; either failing
-# fails the target. TEST_WORKERS=0 runs the first part in one process.
+# fails the target. TEST_WORKERS=0 runs the first part in one process. --dist worksteal: the slow
+# process tests sit together (tests/test_s*), and `load` hands them out in large consecutive chunks, so
+# one worker could be left with them while the other idles; a worker that runs out takes half of the
+# other's queue instead.
 TEST_WORKERS ?= 2
 test: $(STAMP) browser
 	@status=0; \
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist load -m "not autopilot" || status=$$?; \
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not autopilot" || status=$$?; \
 	$(BIN)/python -m pytest -q -m autopilot || status=$$?; \
 	exit $$status
 

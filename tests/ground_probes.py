@@ -55,15 +55,21 @@ async def _mavsdk(port: int) -> dict[str, Any]:
         out["autopilot_type"] = _plain(await system.autopilot_type())
         telemetry = TelemetryAsync(system)
         deadline = time.monotonic() + 20.0
-        for name in TELEMETRY:  # the first update of each, waiting for a good one where it matters
+
+        async def first_of(name: str) -> Any:
             try:
-                gen = getattr(telemetry, f"subscribe_{name}")()
-                value = _plain(await first(gen, 8.0))
+                value = _plain(await first(getattr(telemetry, f"subscribe_{name}")(), 8.0))
                 while name == "flight_mode" and value != "OFFBOARD" and time.monotonic() < deadline:
                     value = _plain(await first(getattr(telemetry, f"subscribe_{name}")(), 8.0))
-                out[name] = value
+                return value
             except Exception as exc:  # a timeout is a result to report, not a crash
-                out[name] = {"error": repr(exc)}
+                return {"error": repr(exc)}
+
+        # the first update of each, waiting for a good one where it matters, one after another (health
+        # is good only a few seconds into the flight), but HOME_POSITION's (up to 5 s) meanwhile
+        home = asyncio.ensure_future(first_of("home"))
+        for name in TELEMETRY:
+            out[name] = await home if name == "home" else await first_of(name)
         params = ParamAsync(system)
         try:
             out["EST_CHI2_GATE"] = await asyncio.wait_for(params.get_param_float("EST_CHI2_GATE"), 15.0)
@@ -106,14 +112,14 @@ def _mavproxy(port: int, state_dir: Path, wall_s: float) -> dict[str, Any]:
     text = lambda: "\n".join(seen)  # noqa: E731
     ready = until(lambda: "Mode OFFBOARD" in text() and "Saved" in text(), deadline)
     if ready:
-        time.sleep(5.0)  # let it count a few seconds of traffic
+        time.sleep(2.0)  # a few more seconds of traffic counted (from its start: > 1000 packets by then)
         assert proc.stdin is not None
         proc.stdin.write("link\n")
         proc.stdin.flush()
         until(lambda: "packets" in seen[-1] if seen else False, deadline)
     proc.terminate()
     try:
-        proc.wait(timeout=5)
+        proc.wait(timeout=1)  # (it often ignores SIGTERM; its output is all read by now)
     except subprocess.TimeoutExpired:
         proc.kill()
     until(lambda: False, time.monotonic() + 0.5)

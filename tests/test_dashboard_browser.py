@@ -129,7 +129,7 @@ def test_dashboard_shows_two_vehicles_and_malformed_payloads_in_chromium(tmp_pat
     port = free_port()
     with child(["-m", "gcs_tools", "dashboard", "--port", str(port)], env) as dash:
         assert dash.stdout.readline().startswith("dashboard on http://127.0.0.1:")
-        synth = ["-m", "gcs_tools.synth", "--duration-s", "60", "--speed", "3", "--wait-subscriber"]
+        synth = ["-m", "gcs_tools.synth", "--duration-s", "120", "--speed", "6", "--wait-subscriber"]
         with child([*synth, "--vehicle", "uav1", "--malformed", "2"], env), \
                 child([*synth, "--vehicle", "uav2", "--seed", "1"], env), \
                 playwright.sync_playwright() as p:

@@ -294,6 +294,21 @@ def test_raim_excludes_an_injected_100_m_fault(scene):
     assert clean.raim_passed is True and not clean.excluded.any()
 
 
+
+def test_raim_threshold_known_answers_and_scipy_stats_not_imported_with_the_package():
+    """The χ² thresholds of RAIM and the tight FDE (tables: 3.8415 at 5 %, 1 dof; 13.2767 at 1 %, 4 dof),
+    and scipy.stats (~0.7 s) is not imported by the processes that only import companion.gnss."""
+    import subprocess
+    import sys
+
+    from companion.gnss.spp import chi2_threshold
+
+    assert chi2_threshold(0.05, 1) == pytest.approx(3.841458820694124, rel=1e-12)
+    assert chi2_threshold(0.01, np.int64(4)) == pytest.approx(13.276704135987622, rel=1e-12)
+    code = "import sys, companion.wiring, simvehicle.node; print('scipy.stats' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.stdout.strip() == "False", done.stdout + done.stderr
+
 def test_bad_observations_are_not_used(scene):
     st, ep = scene
     pr = ep.pseudorange_m.copy()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -47,7 +48,28 @@ def _series(out: Path) -> dict[str, np.ndarray]:
         return {k: npz[k] for k in npz.files}
 
 
-def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_flight):
+@pytest.fixture(scope="module")
+def lockstep_replay(lockstep_flight):
+    """The shared flight's tlog replayed (second-order, the test mission's filter, every IMU row)."""
+    from companion.mission import load_mission
+    from companion.wiring import mission_estimator_config
+    from gcs_tools.replay.core import replay
+
+    mission = load_mission(MISSION)
+    assert mission.section("estimator"), "the test mission should carry a non-default estimator section"
+    return replay(lockstep_flight / "run.tlog", "second-order", home=mission.frame,
+                  config=mission_estimator_config(mission), rate_hz=0)
+
+
+def _replayed(result, first_column: str) -> dict[int, np.ndarray]:
+    """{t_us: the replay's three columns from ``first_column``} (e.g. p_n_m: p_n, p_e, p_d)."""
+    from gcs_tools.replay.core import CSV_COLUMNS
+
+    col = CSV_COLUMNS.index(first_column) - 1
+    return {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+
+
+def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_flight, lockstep_replay):
     a = _summary(lockstep_flight)
     assert a["reached_goal"] and a["estimation_error_m"]["median"] < 5.0
     assert a["sitl"]["lockstep"]["gave_up"] == 0
@@ -60,20 +82,13 @@ def test_lockstep_flight_arrives_and_its_tlog_is_standard_and_replays(lockstep_f
     assert "GPS_RAW_INT" in dump.stdout and "ODOMETRY" in dump.stdout and "SYSTEM_TIME" in dump.stdout
 
     from companion.mavlink.tlog import read_tlog
-    from companion.mission import load_mission
-    from companion.wiring import mission_estimator_config
-    from gcs_tools.replay.core import CSV_COLUMNS, replay
 
     live: dict[int, tuple[float, float, float]] = {}
     for _, m in read_tlog(tlog, ("ODOMETRY",)):
         if m.time_usec % 20_000 == 0:  # 50 Hz ODOMETRY, sent right after its IMU sample
             live.setdefault(int(m.time_usec), (m.x, m.y, m.z))
-    mission = load_mission(MISSION)
-    assert mission.section("estimator"), "the test mission should carry a non-default estimator section"
-    config = mission_estimator_config(mission)
-    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
-    col = CSV_COLUMNS.index("p_n_m") - 1
-    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
+    result = lockstep_replay
+    replayed = _replayed(result, "p_n_m")
     common = sorted(set(live) & set(replayed))
     assert len(common) > 0.9 * len(live) > 500
     diff = np.array([np.asarray(live[t]) - replayed[t] for t in common])
@@ -140,6 +155,46 @@ def test_lockstep_sitl_agrees_with_in_process_fly(lockstep_flight):
     for key in ("estimation_error_m", "tracking_error_m"):
         a, b = sitl[key]["median"], fly[key]["median"]
         assert math.isclose(a, b, rel_tol=0.05), (key, a, b)
+
+
+def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, lockstep_replay, tmp_path):
+    """The estimator's bias travels as DEBUG_VECT GNSS_BIAS (5 Hz): every finite row of the vehicle's
+    b_est_ned_m is one of the vectors sent, and each vector sent is the estimator's bias at its stamp
+    (replaying the tlog reproduces it to float32). `beliefnav export` of the tlog carries it on."""
+    from companion.mavlink import codec
+    from companion.mavlink.tlog import read_tlog
+
+    tlog = lockstep_flight / "run.tlog"
+    vectors: dict[int, np.ndarray] = {}
+    for _, m in read_tlog(tlog, ["DEBUG_VECT"]):
+        t_us, b = codec.decode_bias(m)
+        vectors.setdefault(t_us, b)
+    sent = {tuple(b) for b in vectors.values()}
+    s = _series(lockstep_flight)
+    b_est = s["b_est_ned_m"]
+    ok = np.isfinite(b_est).all(axis=1)
+    assert ok.mean() > 0.95 and len(sent) > 0.15 * len(b_est) / 4  # 5 Hz of 20 Hz rows, mostly distinct
+    assert all(tuple(row) in sent for row in b_est[ok])
+    replayed = _replayed(lockstep_replay, "b_n_m")
+    common = sorted(set(vectors) & set(replayed))
+    assert len(common) > 0.9 * len(vectors) > 50
+    diff = np.array([vectors[t] - replayed[t] for t in common])
+    scale = np.array([np.abs(replayed[t]) for t in common]) + 1.0
+    assert np.max(np.abs(diff) / scale) < 2e-7  # float32 of the DEBUG_VECT fields
+
+    from mcap.reader import make_reader
+
+    done = subprocess.run([sys.executable, "-m", "gcs_tools", "export", str(lockstep_flight / "run.tlog"),
+                           "--out", str(tmp_path / "run.mcap"), "--home", "52.52,13.405,35"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    with (tmp_path / "run.mcap").open("rb") as f:
+        states = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/beliefnav/state"])]
+    exported = np.array([[st[f"b_est_{a}_m"] for a in "ned"] for st in states if st["b_est_n_m"] is not None])
+    assert len(exported) > 0.9 * len(states)
+    sent_arr = np.array(sorted(sent))  # linear interpolation between sent vectors stays inside their range
+    assert (exported >= sent_arr.min(axis=0) - 1e-9).all() and (exported <= sent_arr.max(axis=0) + 1e-9).all()
+    assert np.std(exported[:, 0]) > 0.5 * np.std(sent_arr[:, 0])
 
 
 def test_ten_percent_loss_both_ways_still_reaches_goal(tmp_path):
@@ -278,7 +333,7 @@ def test_launcher_never_leaves_processes_behind(tmp_path, how):
         while len(children_of(out)) < 3 or not (out / "vehicle.json").exists():  # flying (written each 1 s)
             assert time.monotonic() < deadline and proc.poll() is None
             time.sleep(0.1)
-        time.sleep(2.0)
+        time.sleep(1.0)  # a second of real-time flight on record (duration_s, run.tlog below)
         if how == "interrupt":
             proc.send_signal(signal.SIGINT)
         elif how == "crash":
@@ -299,7 +354,22 @@ def test_launcher_never_leaves_processes_behind(tmp_path, how):
         assert "beliefnav: error: estimator process killed by SIGKILL" in stderr
 
 
+def _mavproxy_seen(tmp_path: Path) -> set[str]:
+    """GPS_RAW_INT and the NAMED_VALUE_FLOAT names in MAVProxy's log so far (it may be mid-write)."""
+    from companion.mavlink.tlog import read_tlog
+
+    seen: set[str] = set()
+    for log in tmp_path.rglob("proxy.tlog"):
+        with contextlib.suppress(OSError, ValueError):
+            for _, m in read_tlog(log, ("GPS_RAW_INT", "NAMED_VALUE_FLOAT")):
+                name = m.get_type() if m.get_type() != "NAMED_VALUE_FLOAT" else m.name
+                seen.add(name.decode() if isinstance(name, bytes) else name)
+    return seen
+
+
 def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
+    """A real MAVProxy on the ground port (udpout: it speaks first) logs our GPS and the belief; the
+    flight (real time) is interrupted once it has, or after 20 s of wall time."""
     mavproxy = Path(sys.executable).parent / "mavproxy.py"
     if not mavproxy.exists():
         pytest.skip("MAVProxy not installed (pip install --no-deps mavproxy)")
@@ -315,69 +385,31 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
         start_new_session=True,
     )
     try:
-        done = run_cli("--mission", MISSION, "--realtime", "--max-duration-s", "8", "--out", str(out),
-                       "--ports", ",".join(map(str, ports)), "--no-signing")  # MAVProxy has no key here
+        sitl = subprocess.Popen(
+            [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", MISSION, "--realtime",
+             "--max-duration-s", "20", "--out", str(out), "--ports", ",".join(map(str, ports)),
+             "--no-signing"],  # MAVProxy has no key here
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 50
+            while sitl.poll() is None and time.monotonic() < deadline:
+                if {"GPS_RAW_INT", "GNSS_BETA"} <= _mavproxy_seen(tmp_path):
+                    sitl.send_signal(signal.SIGINT)
+                    break
+                time.sleep(0.25)
+            _, stderr = sitl.communicate(timeout=30)
+        finally:
+            if sitl.poll() is None:
+                sitl.kill()
     finally:
         os.killpg(proxy.pid, signal.SIGTERM)
         try:
             proxy.wait(timeout=5)
         except subprocess.TimeoutExpired:
             os.killpg(proxy.pid, signal.SIGKILL)
-    assert done.returncode in (0, 1), done.stderr
-    from companion.mavlink.tlog import read_tlog
-
-    logs = list(tmp_path.rglob("proxy.tlog"))
-    assert logs, "MAVProxy wrote no log"
-    seen = {m.get_type() if m.get_type() != "NAMED_VALUE_FLOAT" else m.name
-            for _, m in read_tlog(logs[0], ("GPS_RAW_INT", "NAMED_VALUE_FLOAT"))}
-    seen = {s.decode() if isinstance(s, bytes) else s for s in seen}
+    assert list(tmp_path.rglob("proxy.tlog")), "MAVProxy wrote no log"
+    seen = _mavproxy_seen(tmp_path)
     assert "GPS_RAW_INT" in seen and "GNSS_BETA" in seen, seen
     s = _summary(out)
+    assert s["sitl"]["ended_by"] in ("interrupted", "vehicle"), (s["sitl"]["ended_by"], stderr)
     assert s["sitl"]["links"]["ground"]["messages_rx"] > 0  # MAVProxy talked back and was tolerated
-
-
-def test_estimated_bias_reaches_the_vehicle_series_and_exports(lockstep_flight, tmp_path):
-    """The estimator's bias travels as DEBUG_VECT GNSS_BIAS (5 Hz): every finite row of the vehicle's
-    b_est_ned_m is one of the vectors sent, and each vector sent is the estimator's bias at its stamp
-    (replaying the tlog reproduces it to float32). `beliefnav export` of the tlog carries it on."""
-    from companion.mavlink import codec
-    from companion.mavlink.tlog import read_tlog
-    from companion.mission import load_mission
-    from companion.wiring import mission_estimator_config
-    from gcs_tools.replay.core import CSV_COLUMNS, replay
-
-    tlog = lockstep_flight / "run.tlog"
-    vectors: dict[int, np.ndarray] = {}
-    for _, m in read_tlog(tlog, ["DEBUG_VECT"]):
-        t_us, b = codec.decode_bias(m)
-        vectors.setdefault(t_us, b)
-    sent = {tuple(b) for b in vectors.values()}
-    s = _series(lockstep_flight)
-    b_est = s["b_est_ned_m"]
-    ok = np.isfinite(b_est).all(axis=1)
-    assert ok.mean() > 0.95 and len(sent) > 0.15 * len(b_est) / 4  # 5 Hz of 20 Hz rows, mostly distinct
-    assert all(tuple(row) in sent for row in b_est[ok])
-    mission = load_mission(MISSION)
-    config = mission_estimator_config(mission)
-    result = replay(tlog, "second-order", home=mission.frame, config=config, rate_hz=0)
-    col = CSV_COLUMNS.index("b_n_m") - 1
-    replayed = {int(t): row[col:col + 3] for t, row in zip(result.t_us, result.table, strict=True)}
-    common = sorted(set(vectors) & set(replayed))
-    assert len(common) > 0.9 * len(vectors) > 50
-    diff = np.array([vectors[t] - replayed[t] for t in common])
-    scale = np.array([np.abs(replayed[t]) for t in common]) + 1.0
-    assert np.max(np.abs(diff) / scale) < 2e-7  # float32 of the DEBUG_VECT fields
-
-    from mcap.reader import make_reader
-
-    done = subprocess.run([sys.executable, "-m", "gcs_tools", "export", str(lockstep_flight / "run.tlog"),
-                           "--out", str(tmp_path / "run.mcap"), "--home", "52.52,13.405,35"],
-                          capture_output=True, text=True, timeout=60)
-    assert done.returncode == 0, done.stderr
-    with (tmp_path / "run.mcap").open("rb") as f:
-        states = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/beliefnav/state"])]
-    exported = np.array([[st[f"b_est_{a}_m"] for a in "ned"] for st in states if st["b_est_n_m"] is not None])
-    assert len(exported) > 0.9 * len(states)
-    sent_arr = np.array(sorted(sent))  # linear interpolation between sent vectors stays inside their range
-    assert (exported >= sent_arr.min(axis=0) - 1e-9).all() and (exported <= sent_arr.max(axis=0) + 1e-9).all()
-    assert np.std(exported[:, 0]) > 0.5 * np.std(sent_arr[:, 0])

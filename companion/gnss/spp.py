@@ -27,11 +27,11 @@ solve. Vectorised over satellites; the per-iteration Python overhead dominates.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2 as _chi2
 
 from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
 from companion.gnss.constants import C_M_S, OMEGA_E_RAD_S
@@ -203,6 +203,15 @@ def _wls(h: np.ndarray, r: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.nd
     return q @ (hw.T @ r), q
 
 
+@functools.lru_cache(maxsize=256)
+def chi2_threshold(p_false_alarm: float, dof: int) -> float:
+    """The χ² test's threshold: ``chi2.ppf(1 - p_false_alarm, dof)``. scipy.stats is imported on the
+    first call, not with the module (it costs every process that imports companion.gnss ~0.7 s)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(1.0 - p_false_alarm, dof))
+
+
 def solve_position(
     epoch: GnssEpoch,
     config: SppConfig = SppConfig(),
@@ -227,7 +236,7 @@ def solve_position(
         if dof < 1:
             raim_passed = None
             break
-        if res["chi2"] <= _chi2.ppf(1.0 - config.raim_p_false_alarm, dof):
+        if res["chi2"] <= chi2_threshold(config.raim_p_false_alarm, dof):
             raim_passed = True
             break
         if int(excluded.sum()) >= config.raim_max_exclusions or dof < 2:

@@ -28,9 +28,9 @@ from collections.abc import Callable
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
-from scipy.stats import chi2 as _chi2
 
 from companion.errors import not_one_of
+from companion.gnss.spp import chi2_threshold
 from companion.tight import _tight, belief, snapshot
 from companion.tight.config import TightConfig
 
@@ -138,7 +138,7 @@ class Fde(SigmaModel):
             _, S_used = solve(t.r_nominal, used)  # the filter's S (not diagonal: the common position)
             w = np.linalg.solve(S_used, t.y[idx])
             stat = float(t.y[idx] @ w)
-            if stat <= _chi2.ppf(1.0 - c.fde_p_false_alarm, len(idx)):
+            if stat <= chi2_threshold(c.fde_p_false_alarm, len(idx)):
                 break
             norm = np.abs(w) / np.sqrt(np.diag(np.linalg.inv(S_used)))  # standardised innovations
             used = used.copy()
