@@ -204,7 +204,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
     goals = {name: {"median_ratio_to_spp": s["median_m"] / spp["median_m"],
                     "p95_ratio_to_spp": s["p95_m"] / spp["p95_m"]} for name, s in stats.items()}
     return {
-        "data": {"input": str(input_path), "epochs": int(keep.sum()),
+        "data": {"input": Path(input_path).name, "epochs": int(keep.sum()),
                  "duration_s": float(t_ep[-1] - t_ep[0])},
         "method": {"score": "horizontal distance to truth at every epoch time",
                    "bootstrap": f"moving blocks of {block} epochs ({block_s:g} s), {n_resamples} resamples, "

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -283,7 +284,7 @@ def run(input_path: Any, truth_path: Any, names: Sequence[str] = DEFAULT,
                                   "p95_ratio": float(np.percentile(e[ok], 95)) / sp,
                                   "gnss_resets": counts.get(k, 0)}
                               for k, e in errors.items()}}
-    return {"data": {"input": str(input_path)}, "variants": out}
+    return {"data": {"input": Path(input_path).name}, "variants": out}
 
 
 def markdown(r: dict[str, Any]) -> str:
