@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -106,6 +107,14 @@ def _int_list(text: str, option: str) -> tuple[int, ...]:
 def seeds(text: str, option: str = "--seeds") -> tuple[int, ...]:
     """``"0-49"``, ``"3"`` or ``"0,2,5-7"`` → sorted unique seeds."""
     return _int_list(text, option)
+
+
+def positive(value: float | None, option: str) -> float | None:
+    """An optional number that must be finite and > 0 when given (a duration, a rate, a density):
+    ``None`` passes, anything else is a one-line error naming the option."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise UserError(f"{option} must be a finite number > 0, got {value!r}")
+    return value
 
 
 class _DeprecatedAlias(argparse.Action):

@@ -38,3 +38,27 @@ def test_export_format_typo_is_rejected_by_the_cli():
     done = subprocess.run([sys.executable, "-m", "gcs_tools", "export", "x", "--format", "mcapp"],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "invalid choice: 'mcapp' (choose from 'mcap', 'csv')" in done.stderr
+
+
+def test_positive_numbers_refuse_zero_negative_and_non_finite():
+    assert choices.positive(None, "--rate-hz") is None and choices.positive(0.5, "--rate-hz") == 0.5
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(UserError, match=r"^--rate-hz must be a finite number > 0, got "):
+            choices.positive(bad, "--rate-hz")
+
+
+@pytest.mark.parametrize("command", [
+    ("gcs_tools.evaluate.tight_sim", "--rate-hz", "0"),
+    ("gcs_tools.evaluate.tight_sim", "--rate-hz", "nan"),
+    ("gcs_tools.evaluate.tight_sim", "--max-duration-s", "0"),
+    ("gcs_tools.evaluate.attitude_check", "--max-duration-s", "0"),
+    ("gcs_tools.evaluate.smartloc_export", "--max-duration-s", "-1"),
+])
+def test_evaluation_commands_refuse_a_bad_number_before_flying(tmp_path, command):
+    module, option, value = command
+    done = subprocess.run([sys.executable, "-m", module, option, value, "--seeds", "0", "--profiles", "0",
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stdout + done.stderr
+    expected = f"{option} must be a finite number > 0, got {float(value)!r}"
+    assert done.stderr.strip().splitlines()[-1].endswith(expected)
+    assert not (tmp_path / "out" / "results.json").exists()

@@ -185,7 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         real = ([real_flight(args.corpus / f"path_{n}") for n in choices.seeds(args.flights, "--flights")]
                 if args.corpus is not None else [])
         ahrs = {"mission": None, "accelerometer": False, "gnss-velocity": True}[args.ahrs]
-        sim = ([sim_flight(args.mission, pr, s, ahrs, args.max_duration_s, args.scenario)
+        max_duration_s = choices.positive(args.max_duration_s, "--max-duration-s")
+        sim = ([sim_flight(args.mission, pr, s, ahrs, max_duration_s, args.scenario)
                 for pr in choices.seeds(args.profiles, "--profiles") for s in choices.seeds(args.seeds)]
                if args.seeds not in ("", "none") else [])
         return {"mission": args.mission, "scenario": args.scenario, "ahrs": args.ahrs,

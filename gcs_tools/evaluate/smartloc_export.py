@@ -39,7 +39,6 @@ from typing import Any
 
 import numpy as np
 
-from companion.errors import UserError
 from companion.gnss.observations import GnssEpoch
 from gcs_tools import choices
 from gcs_tools.evaluate.simcal import SCENARIO, Series, simulate
@@ -133,9 +132,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def compute() -> dict[str, Any]:
         profiles, seeds = choices.seeds(args.profiles, "--profiles"), choices.seeds(args.seeds)
-        if args.max_duration_s is not None and not args.max_duration_s > 0:
-            raise UserError("--max-duration-s must be > 0")
-        return export(args.out, args.mission, profiles, seeds, args.max_duration_s)
+        max_duration_s = choices.positive(args.max_duration_s, "--max-duration-s")
+        return export(args.out, args.mission, profiles, seeds, max_duration_s)
 
     return write_results_or_error(args.out, compute, markdown)
 

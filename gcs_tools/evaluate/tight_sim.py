@@ -318,9 +318,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if bad or not rows:
             raise UserError(f"--rows: choose from {', '.join((*ROWS, *EXTRA_ROWS))}")
         ahrs = {"mission": None, "accelerometer": False, "gnss-velocity": True}[args.ahrs]
-        return run(args.mission, profiles, seeds, rows, max_duration_s=args.max_duration_s,
+        return run(args.mission, profiles, seeds, rows,
+                   max_duration_s=choices.positive(args.max_duration_s, "--max-duration-s"),
                    fly_on_truth=args.fly_on_truth, cn0_missing=args.cn0_missing,
-                   sigma_acc_m_s2=args.sigma_acc, rate_hz=args.rate_hz, ahrs_gnss_velocity=ahrs)
+                   sigma_acc_m_s2=choices.positive(args.sigma_acc, "--sigma-acc"),
+                   rate_hz=choices.positive(args.rate_hz, "--rate-hz"), ahrs_gnss_velocity=ahrs)
 
     return write_results_or_error(args.out, compute, markdown)
 
