@@ -246,14 +246,12 @@ def write_input(path: str | Path, epochs: list[GnssEpoch], odometry: np.ndarray)
         for i in range(e.n):
             system = System(int(e.system[i]))
             ident = int(e.prn[i]) + (GLONASS_ID_OFFSET if system == System.GLONASS else 0)
-            vals = (e.pseudorange_m[i], e.pseudorange_var_m2[i], *e.sat_pos_ecef_m[i], e.elevation_deg[i],
-                    e.cn0_dbhz[i])
-            if not all(math.isfinite(float(x)) for x in vals):
+            measured = (e.pseudorange_m[i], e.pseudorange_var_m2[i], *e.sat_pos_ecef_m[i])
+            sky = (e.elevation_deg[i], e.cn0_dbhz[i])
+            if not all(math.isfinite(float(x)) for x in (*measured, *sky)):
                 continue
-            lines.append(" ".join(["pseudorange3", _num(e.t_gps_s), _num(e.pseudorange_m[i]),
-                                   _num(e.pseudorange_var_m2[i]), *(_num(x) for x in e.sat_pos_ecef_m[i]),
-                                   str(ident), str(CODES[system]), _num(e.elevation_deg[i]),
-                                   _num(e.cn0_dbhz[i])]))
+            lines.append(" ".join(["pseudorange3", _num(e.t_gps_s), *map(_num, measured), str(ident),
+                                   str(CODES[system]), *map(_num, sky)]))
     Path(path).write_text("\n".join(lines) + "\n", encoding="ascii")
 
 
