@@ -21,7 +21,6 @@ attitude error correlated over seconds a number growing with T). Per flight, at 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -33,6 +32,7 @@ from companion.domain.rotation import rotation_matrix
 from companion.errors import UserError
 from gcs_tools import choices
 from gcs_tools.evaluate.tight import table_lines
+from gcs_tools.evaluate.tight_sim import AHRS_REFERENCES, sim_config
 from gcs_tools.jsonvalues import write_results_or_error
 
 WINDOWS_S = (0.2, 1.0, 2.0, 5.0)
@@ -97,17 +97,13 @@ def sim_flight(mission: str, profile: int, seed: int, ahrs_gnss_velocity: bool |
     ``scenario`` (one with an AHRS: ``realistic``, ``mismatch``, ``canyon``), measured."""
     from companion.mission import load_mission
     from companion.wiring import navigator_for
-    from simvehicle.config import sim_config_for
     from simvehicle.harness.fly import planned_route
     from simvehicle.vehicle import SimVehicle
 
     m = load_mission(mission, scenario)
-    cfg = sim_config_for(m)
+    cfg = sim_config(m, ahrs_gnss_velocity)
     if not cfg.ahrs.enabled:
         raise UserError(f"scenario {scenario!r} sends the true attitude: choose one with an AHRS")
-    if ahrs_gnss_velocity is not None:
-        ahrs = dataclasses.replace(cfg.ahrs, gnss_velocity_reference=ahrs_gnss_velocity)
-        cfg = dataclasses.replace(cfg, ahrs=ahrs)
     nav = navigator_for(m, "second-order")
     route = planned_route(m, profile, 1.0)
     sim = SimVehicle(m, profile, seed, cfg)
@@ -176,7 +172,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--profiles", default="0-3")
     p.add_argument("--seeds", default="1000-1001", help="simulator seeds (none: no simulator flights)")
     p.add_argument("--scenario", default="canyon", help="the simulator's sensor scenario (one with an AHRS)")
-    p.add_argument("--ahrs", choices=("mission", "accelerometer", "gnss-velocity"), default="mission")
+    p.add_argument("--ahrs", choices=tuple(AHRS_REFERENCES), default="mission")
     p.add_argument("--max-duration-s", type=float, default=None)
     p.add_argument("--out", type=Path, default=Path("runs/attitude-check"))
     args = p.parse_args(argv)
@@ -184,7 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     def compute() -> dict[str, Any]:
         real = ([real_flight(args.corpus / f"path_{n}") for n in choices.seeds(args.flights, "--flights")]
                 if args.corpus is not None else [])
-        ahrs = {"mission": None, "accelerometer": False, "gnss-velocity": True}[args.ahrs]
+        ahrs = AHRS_REFERENCES[args.ahrs]
         max_duration_s = choices.positive(args.max_duration_s, "--max-duration-s")
         sim = ([sim_flight(args.mission, pr, s, ahrs, max_duration_s, args.scenario)
                 for pr in choices.seeds(args.profiles, "--profiles") for s in choices.seeds(args.seeds)]

@@ -49,7 +49,7 @@ import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -60,6 +60,10 @@ from gcs_tools import choices
 from gcs_tools.evaluate.tight import table_lines
 from gcs_tools.jsonvalues import write_results_or_error
 
+if TYPE_CHECKING:
+    from companion.mission import Mission
+    from simvehicle.config import SimConfig
+
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
 EXTRA_ROWS = ("naive", "first-order")  # flown on request (``--rows``): fixed weights, the first-order belief
 MAP_ROWS = ("second-order-map", "second-order-imperfect-map")  # the belief with the map's prior
@@ -69,6 +73,21 @@ BELIEF_ROWS = ("tight-second-order", *(f"tight-{r}" for r in MAP_ROWS))
 MAP_SEED = 7
 MAP_SIGMA_HEIGHT_M = 2.5
 MAP_SIGMA_SHIFT_M = 1.5
+# the simulated autopilot's gravity reference as ``--ahrs`` names it: AhrsConfig.gnss_velocity_reference
+# set to this (None: the mission's own)
+AHRS_REFERENCES: dict[str, bool | None] = {"mission": None, "accelerometer": False, "gnss-velocity": True}
+
+
+def sim_config(mission: Mission, ahrs_gnss_velocity: bool | None) -> SimConfig:
+    """The mission's ``simvehicle`` configuration, its AHRS's GNSS-velocity reference switched on (True)
+    or off (False) when told (None: as the mission has it)."""
+    from simvehicle.config import sim_config_for
+
+    cfg = sim_config_for(mission)
+    if ahrs_gnss_velocity is None:
+        return cfg
+    ahrs = dataclasses.replace(cfg.ahrs, gnss_velocity_reference=ahrs_gnss_velocity)
+    return dataclasses.replace(cfg, ahrs=ahrs)
 
 
 def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
@@ -91,7 +110,6 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     from companion.estimator.freespace import constrain
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
-    from simvehicle.config import sim_config_for
     from simvehicle.harness.fly import planned_route
     from simvehicle.rawgnss import RawGnssModel
     from simvehicle.vehicle import SimVehicle
@@ -99,11 +117,7 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     m = load_mission(mission, "canyon")
     nav = navigator_for(m, "second-order")
     route = planned_route(m, profile, 1.0)
-    cfg = sim_config_for(m)
-    if ahrs_gnss_velocity is not None:
-        ahrs = dataclasses.replace(cfg.ahrs, gnss_velocity_reference=ahrs_gnss_velocity)
-        cfg = dataclasses.replace(cfg, ahrs=ahrs)
-    sim = SimVehicle(m, profile, seed, cfg)
+    sim = SimVehicle(m, profile, seed, sim_config(m, ahrs_gnss_velocity))
     tcfg = tight_config or TightConfig()
     period_us = None if rate_hz is None else round(1e6 / rate_hz)
     last_slot = None
@@ -304,7 +318,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the tight rows' white acceleration density sigma_acc_m_s2 (default: TightConfig's)")
     p.add_argument("--rate-hz", type=float, default=None,
                    help="the tight rows get only the first raw epoch of every 1/RATE s (default: all)")
-    p.add_argument("--ahrs", choices=("mission", "accelerometer", "gnss-velocity"), default="mission",
+    p.add_argument("--ahrs", choices=tuple(AHRS_REFERENCES), default="mission",
                    help="the simulated autopilot's gravity reference (ahrs.gnss_velocity_reference; "
                         "default: the mission's)")
     p.add_argument("--rows", default=",".join(ROWS),
@@ -317,12 +331,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         bad = sorted(set(rows) - set(ROWS) - set(EXTRA_ROWS))
         if bad or not rows:
             raise UserError(f"--rows: choose from {', '.join((*ROWS, *EXTRA_ROWS))}")
-        ahrs = {"mission": None, "accelerometer": False, "gnss-velocity": True}[args.ahrs]
         return run(args.mission, profiles, seeds, rows,
                    max_duration_s=choices.positive(args.max_duration_s, "--max-duration-s"),
                    fly_on_truth=args.fly_on_truth, cn0_missing=args.cn0_missing,
                    sigma_acc_m_s2=choices.positive(args.sigma_acc, "--sigma-acc"),
-                   rate_hz=choices.positive(args.rate_hz, "--rate-hz"), ahrs_gnss_velocity=ahrs)
+                   rate_hz=choices.positive(args.rate_hz, "--rate-hz"),
+                   ahrs_gnss_velocity=AHRS_REFERENCES[args.ahrs])
 
     return write_results_or_error(args.out, compute, markdown)
 
