@@ -119,6 +119,64 @@ def test_rinex_bad_files_are_one_line_errors(tmp_path):
     assert rinex.read_nav(tmp_path / "nan.nav").rejected["nonfinite"] == 1
 
 
+def _same_epochs(a: list, b: list) -> bool:
+    fields = ("system", "prn", "pseudorange_m", "pseudorange_rate_m_s", "cn0_dbhz")
+    return len(a) == len(b) and all(
+        x.t_gps_s == y.t_gps_s
+        and all(np.array_equal(getattr(x, f), getattr(y, f), equal_nan=True) for f in fields)
+        for x, y in zip(a, b, strict=True)
+    )
+
+
+def test_compressed_rinex_reads_as_the_plain_file(tmp_path):
+    """gzip, bzip2, Compact RINEX (Hatanaka) and Compact RINEX inside gzip: the forms RINEX archives
+    publish; the name does not matter, the content does."""
+    import bz2
+    import gzip
+
+    import hatanaka
+
+    plain = rinex.read_obs(OBS)
+    forms = {
+        "a.obs.gz": gzip.compress(OBS.read_bytes()),
+        "a.obs.bz2": bz2.compress(OBS.read_bytes()),
+        "a.crx": hatanaka.compress(OBS.read_bytes(), compression="none"),
+        "a.crx.gz": hatanaka.compress(OBS.read_bytes(), compression="gz"),
+        "renamed.obs": gzip.compress(OBS.read_bytes()),
+    }
+    assert b"COMPACT RINEX" in forms["a.crx"][:80]
+    assert b"COMPACT RINEX" in gzip.decompress(forms["a.crx.gz"])[:80]
+    for name, data in forms.items():
+        (tmp_path / name).write_bytes(data)
+        obs = rinex.read_obs(tmp_path / name)
+        assert _same_epochs(obs.epochs, plain.epochs) and obs.rejected == plain.rejected, name
+    (tmp_path / "b.nav.gz").write_bytes(gzip.compress(NAV.read_bytes()))
+    nav = rinex.read_nav(tmp_path / "b.nav.gz")
+    assert len(nav.kepler) == len(rinex.read_nav(NAV).kepler) and nav.klobuchar is not None
+    (tmp_path / "cut.obs.gz").write_bytes(forms["a.obs.gz"][:-40])
+    with pytest.raises(UserError, match=r"cut.obs.gz: cannot decompress"):
+        rinex.read_obs(tmp_path / "cut.obs.gz")
+    (tmp_path / "junk.gz").write_bytes(b"\x1f\x8b" + bytes(range(200)))
+    with pytest.raises(UserError, match=r"junk.gz: cannot decompress"):
+        rinex.read_obs(tmp_path / "junk.gz")
+
+
+def test_a_compact_rinex_file_from_another_writer():
+    """The hatanaka package's test file (RNX2CRX 4.0.8, RINEX 3.01, GPS + GLONASS + SBAS, its TIME OF
+    FIRST OBS a column late): the one epoch at 2010-03-05 00:00:30 GPS, C1C picked over C1P."""
+    from importlib.resources import files
+
+    data = files("hatanaka.test.data")
+    crx = rinex.read_obs(Path(str(data / "sample.crx.gz")))
+    plain = rinex.read_obs(Path(str(data / "sample.rnx")))
+    assert _same_epochs(crx.epochs, plain.epochs) and crx.time_system == "GPS"
+    (ep,) = crx.epochs
+    assert ep.t_gps_s == ts.gps_from_calendar(2010, 3, 5, 0, 0, 30.0, "GPS") == 951_782_430.0
+    assert ep.prn.tolist() == [13, 19, 32, 7, 23, 31, 20, 11]
+    assert ep.pseudorange_m[:2].tolist() == [24799318.768, 24597748.629]  # G13 C1C, R19 C1C
+    assert ep.cn0_dbhz[1] == 47.0 and np.isnan(ep.cn0_dbhz[0])  # R19 S1C; GPS has S1P only, no S1C
+
+
 # --- smartLoc ---------------------------------------------------------------------------------
 
 

@@ -34,6 +34,8 @@ counted (``truncated``), the records before it are kept.
 from __future__ import annotations
 
 import math
+import warnings
+import zlib
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -92,12 +94,33 @@ def _float(text: str) -> float:
     return float(t) if t else 0.0
 
 
+# the first bytes of gzip, LZW (.Z), bzip2 and zip files
+COMPRESSED_MAGIC = (b"\x1f\x8b", b"\x1f\x9d", b"BZh", b"PK\x03\x04")
+COMPACT_RINEX_LABEL = b"CRINEX VERS   / TYPE"  # the first line of a Hatanaka-compressed file
+
+
 def _read_lines(path: Path) -> list[str]:
     try:
-        with open(path, encoding="ascii", errors="replace") as f:
-            return f.read().splitlines()
+        data = path.read_bytes()
     except OSError as exc:
         raise UserError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if data.startswith(COMPRESSED_MAGIC) or COMPACT_RINEX_LABEL in data[:80]:
+        data = _decompressed(path, data)
+    return data.decode("ascii", errors="replace").splitlines()
+
+
+def _decompressed(path: Path, data: bytes) -> bytes:
+    """A compressed RINEX file (gzip, .Z, bzip2, zip, Hatanaka's Compact RINEX, or Compact RINEX inside
+    one of those: the forms RINEX archives publish) as plain RINEX, through the ``hatanaka`` package."""
+    import hatanaka  # noqa: PLC0415 - only compressed files need it (and its crx2rnx subprocess)
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # crx2rnx's notes on skipped lines; the reader counts its own
+            return bytes(hatanaka.decompress(data))
+    except (hatanaka.HatanakaException, ValueError, OSError, EOFError, zlib.error) as exc:
+        detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise UserError(f"{path}: cannot decompress: {detail}") from None
 
 
 def _header(path: Path, lines: list[str], kind: str) -> tuple[float, int]:
@@ -141,7 +164,10 @@ def read_obs(path: str | Path) -> RinexObs:
         elif label == "TIME OF FIRST OBS":
             # blank: the file's system's own time (RINEX 3.05 table A2); mixed files must state it
             own = {"E": "GAL", "C": "BDT", "R": "GLO", "J": "QZS"}.get(lines[0][40:41], "GPS")
-            ts = line[48:51].strip() or own
+            # A3 in columns 49-51 after F13.7 seconds; read as the word after the seconds, as some
+            # writers put both a column late (the hatanaka package's test files: "     0.0000000     GPS")
+            words = line[30:60].split()
+            ts = words[1] if len(words) > 1 else own
             if ts not in TIME_SYSTEMS:
                 raise UserError(f"{path}: unknown time system {ts!r} in TIME OF FIRST OBS")
             time_system = ts
