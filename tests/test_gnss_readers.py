@@ -105,7 +105,7 @@ def test_rinex_bad_files_are_one_line_errors(tmp_path):
     with pytest.raises(UserError, match="observation file was expected"):
         rinex.read_obs(p)
     p.write_text("     2.11           OBSERVATION DATA    G                   RINEX VERSION / TYPE\n")
-    with pytest.raises(UserError, match="only RINEX 3"):
+    with pytest.raises(UserError, match="only RINEX 3 and 4"):
         rinex.read_obs(p)
     p.write_text(OBS.read_text().split("END OF HEADER")[0])
     with pytest.raises(UserError, match="END OF HEADER"):
@@ -175,6 +175,65 @@ def test_a_compact_rinex_file_from_another_writer():
     assert ep.prn.tolist() == [13, 19, 32, 7, 23, 31, 20, 11]
     assert ep.pseudorange_m[:2].tolist() == [24799318.768, 24597748.629]  # G13 C1C, R19 C1C
     assert ep.cn0_dbhz[1] == 47.0 and np.isnan(ep.cn0_dbhz[0])  # R19 S1C; GPS has S1P only, no S1C
+
+
+def _as_rinex4(nav3: str) -> str:
+    """The RINEX 3 navigation file as RINEX 4 writes it: ``>`` frames, lower-case exponents, the
+    Klobuchar parameters in an ``ION`` record, GLONASS with its fourth orbit line, and records of
+    kinds the reader skips (a CNAV ephemeris, a system time offset)."""
+    head, body = nav3.split("END OF HEADER\n")
+    alpha = beta = ""
+    out_head = []
+    for line in (head + "END OF HEADER").splitlines():
+        if line.startswith("GPSA"):
+            alpha = line
+        elif line.startswith("GPSB"):
+            beta = line
+        else:
+            out_head.append(line)
+    out_head[0] = "     4.00" + out_head[0][9:]
+    a, b = ([float(x.replace("D", "E")) for x in line[4:60].split()] for line in (alpha, beta))
+    ion = [
+        "> ION G   LNAV",
+        "    2024 03 07 22 00 00" + "".join(f"{x:19.12e}" for x in a[:3]),
+        "    " + "".join(f"{x:19.12e}" for x in [a[3], *b[:3]]),
+        "    " + "".join(f"{x:19.12e}" for x in [b[3], 1.0]),
+    ]
+    msg = {"G": "LNAV", "J": "LNAV", "E": "INAV", "C": "D1", "R": "FDMA"}
+    out = (
+        out_head + ion + ["> STO G01 LNAV", "    2024 03 07 22 00 00 GPUT  UTC(USNO)", "    1.0e-09 0.0e+00"]
+    )
+    lines = body.splitlines()
+    for i, line in enumerate(lines):
+        if line[:1].strip():
+            if line[0] == "G" and line[1:3] == "01":  # a CNAV record of the same satellite: skipped
+                out += ["> EPH G01 CNAV", *(["     0.000000000000e+00"] * 9)]
+            out.append(f"> EPH {line[:3]} {msg[line[0]]}")
+        out.append(line.replace("D", "e"))
+        nxt = lines[i + 1] if i + 1 < len(lines) else "X"
+        if out[-1].startswith("     ") and nxt[:1].strip() and any(o.startswith("> EPH R") for o in out[-5:]):
+            out.append("     0.000000000000e+00 0.000000000000e+00 0.000000000000e+00 0.000000000000e+00")
+    return "\n".join(out) + "\n"
+
+
+def test_rinex4_navigation_reads_as_rinex3(tmp_path):
+    v3 = rinex.read_nav(NAV)
+    text = _as_rinex4(NAV.read_text())
+    assert "IONOSPHERIC CORR" not in text and "> EPH R01 FDMA" in text and "D+" not in text
+    (tmp_path / "v4.rnx").write_text(text)
+    v4 = rinex.read_nav(tmp_path / "v4.rnx")
+    assert v4.kepler == v3.kepler and v4.glonass == v3.glonass and v4.leap_seconds == v3.leap_seconds
+    assert v3.klobuchar is not None and v4.klobuchar is not None
+    for x, y in zip(v4.klobuchar, v3.klobuchar, strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-12)
+    assert dict(v4.rejected) == {"v4_eph_skipped": 1, "v4_sto_skipped": 1}
+    # one epoch of the observation file solved with it, as with the RINEX 3 file
+    data3, data4 = rinex_input(OBS, [NAV]), rinex_input(OBS, [tmp_path / "v4.rnx"])
+    s3, s4 = (solve_position(d.epochs[0], SppConfig(), klobuchar=d.klobuchar) for d in (data3, data4))
+    np.testing.assert_allclose(s4.p_ecef_m, s3.p_ecef_m, atol=1e-6)
+    (tmp_path / "v5.rnx").write_text(text.replace("     4.00", "     5.00", 1))
+    with pytest.raises(UserError, match="only RINEX 3 and 4"):
+        rinex.read_nav(tmp_path / "v5.rnx")
 
 
 # --- smartLoc ---------------------------------------------------------------------------------

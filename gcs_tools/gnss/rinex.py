@@ -1,4 +1,4 @@
-"""RINEX 3 observation and navigation files (GPS, Galileo, BeiDou, GLONASS, QZSS) and a small writer.
+"""RINEX 3 and 4 observation and navigation files (GPS, Galileo, BeiDou, GLONASS, QZSS); a RINEX 3 writer.
 
 Observations -> :class:`companion.gnss.GnssEpoch` per epoch, with one signal per system:
 ``C1C``/``D1C``/``S1C`` (GPS, QZSS, GLONASS G1, Galileo E1 — ``C1X``/``C1B`` accepted when C1C is
@@ -131,8 +131,8 @@ def _header(path: Path, lines: list[str], kind: str) -> tuple[float, int]:
         version = float(lines[0][:9])
     except ValueError:
         raise UserError(f"{path}: unreadable RINEX version {lines[0][:9]!r}") from None
-    if not 3.0 <= version < 4.0:
-        raise UserError(f"{path}: RINEX version {version:g}; only RINEX 3 is read")
+    if not 3.0 <= version < 5.0:
+        raise UserError(f"{path}: RINEX version {version:g}; only RINEX 3 and 4 are read")
     ftype = lines[0][20:21]
     if ftype != kind:
         what = {"O": "observation", "N": "navigation"}[kind]
@@ -326,6 +326,9 @@ def _read_nav_file(path: Path, out: RinexNav) -> None:
         elif label == "LEAP SECONDS":
             text = line[:6].strip()
             out.leap_seconds = int(text) if text.lstrip("-").isdigit() else None
+    if version >= 4.0:
+        _read_v4_records(lines[body:], out)
+        return
     if alpha is not None and beta is not None:
         out.klobuchar = (alpha, beta)
     glo_lines = 5 if version >= 3.05 else 4
@@ -355,6 +358,53 @@ def _read_nav_file(path: Path, out: RinexNav) -> None:
             out.rejected["bad_record"] += 1
 
 
+# RINEX 4 ephemeris messages whose records are RINEX 3's (the rest, e.g. CNAV, CNV1-3, are counted)
+V4_LEGACY_EPH: dict[str, tuple[str, ...]] = {
+    "G": ("LNAV",),
+    "J": ("LNAV",),
+    "I": ("LNAV",),
+    "E": ("INAV", "FNAV"),
+    "C": ("D1", "D2"),
+    "R": ("FDMA",),
+    "S": ("SBAS",),
+}
+
+
+def _read_v4_records(lines: list[str], out: RinexNav) -> None:
+    """RINEX 4 navigation: records framed by ``> EPH G01 LNAV`` / ``> ION G   LNAV`` / ``> STO`` / ``> EOP``
+    lines, each running to the next frame line. Ephemerides of the messages RINEX 3 carried are read
+    as RINEX 3 records; the GPS Klobuchar parameters come from the ``ION`` LNAV record (no longer
+    from the header); everything else is counted (``v4_<kind>_skipped``)."""
+    frames: list[tuple[list[str], list[str]]] = []
+    for line in lines:
+        if line.startswith(">"):
+            frames.append((line[1:].split(), []))
+        elif frames:
+            frames[-1][1].append(line)
+        elif line.strip():
+            out.rejected["stray_line"] += 1
+    for words, block in frames:
+        kind, sat, msg = (words + ["", "", ""])[:3]
+        letter = sat[:1]
+        if kind == "EPH" and msg in V4_LEGACY_EPH.get(letter, ()) and block:
+            try:
+                _nav_record(letter, block, out)
+            except (ValueError, IndexError, UserError):
+                out.rejected["bad_record"] += 1
+        elif kind == "ION" and letter == "G" and msg == "LNAV" and block:
+            try:
+                v = _nav_values(block)
+            except ValueError:
+                out.rejected["bad_record"] += 1
+                continue
+            if len(v) >= 8 and all(math.isfinite(x) for x in v[:8]):
+                out.klobuchar = (np.array(v[0:4]), np.array(v[4:8]))
+            else:
+                out.rejected["bad_record"] += 1
+        else:
+            out.rejected[f"v4_{(kind or 'empty').lower()}_skipped"] += 1
+
+
 def _nav_values(block: list[str]) -> list[float]:
     """The record's numbers: three on the first line, four on each following line."""
     vals = [_float(block[0][23 + 19 * j : 42 + 19 * j]) for j in range(3)]
@@ -366,7 +416,7 @@ def _nav_values(block: list[str]) -> list[float]:
 def _date(line: str, cols: tuple[int, ...]) -> tuple[int, int, int, int, int, float]:
     """Year, month, day, hour, minute (integers) and seconds from fixed columns (field starts, end)."""
     y, mo, d, h, mi = (int(line[a:b]) for a, b in zip(cols[:5], cols[1:6], strict=True))
-    return y, mo, d, h, mi, float(line[cols[5]:cols[6]])
+    return y, mo, d, h, mi, float(line[cols[5] : cols[6]])
 
 
 def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
