@@ -256,12 +256,13 @@ def decimated(log: Log, every: int) -> Log:
     return edit_fixes(log, lambda f, p: f if next(count) % every == 0 else None)
 
 
-def urban_like(log: Log, seed: int = 0) -> Log:
+def urban_like(log: Log, seed: int = 0, white_scale: float = 1.0) -> Log:
     """Every fix moved by a Gauss-Markov error (8 m per horizontal axis, 4 m vertical, 10 s
-    correlation) plus white noise (3 m, 2 m), no accuracy reported: a single-point receiver in a
-    street canyon (errors of 5-50 m) that states nothing about them."""
+    correlation) plus white noise (3 m, 2 m) × ``white_scale``, no accuracy reported: a single-point
+    receiver in a street canyon (errors of 5-50 m) that states nothing about them. The random draws
+    do not depend on ``white_scale``: 0 gives the same seed's correlated error alone."""
     rng = np.random.default_rng(seed)
-    sigma_b, sigma_w = np.array([8.0, 8.0, 4.0]), np.array([3.0, 3.0, 2.0])
+    sigma_b, sigma_w = np.array([8.0, 8.0, 4.0]), np.array([3.0, 3.0, 2.0]) * white_scale
     bias = [rng.standard_normal(3) * sigma_b]
     last_s: list[float] = []
 
@@ -276,16 +277,27 @@ def urban_like(log: Log, seed: int = 0) -> Log:
     return edit_fixes(log, edit)
 
 
-def receiver_case(log: Log, clean: tuple[np.ndarray, np.ndarray], name: str, method: str,
-                  velocity: bool) -> dict[str, Any]:
-    received = log if velocity else edit_fixes(log, lambda f, p: dataclasses.replace(f, v_ned_m_s=None))
-    r = replay(received, method)
+def without_velocity(log: Log) -> Log:
+    return edit_fixes(log, lambda f, p: dataclasses.replace(f, v_ned_m_s=None))
+
+
+def distances_to_clean(r: Replay, clean: tuple[np.ndarray, np.ndarray],
+                       fixes: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(the estimate's, the fixes') horizontal distance to the clean track at each estimate's time:
+    ``fixes`` = (validity times, NED positions (n, 3)), each used from its validity to the estimate's
+    time (the fix just received: latency counted)."""
     tc, pc = clean
     c = np.column_stack([np.interp(r.t_s, tc, pc[:, i]) for i in range(2)])
-    est = np.linalg.norm(r.p_ned_m[:, :2] - c, axis=1)
-    raw_t, raw_p = clean_track(received)  # the raw fixes, each used from its validity to the estimate's time
+    raw_t, raw_p = fixes
     k = np.clip(np.searchsorted(raw_t, r.fix_t_s), 0, len(raw_t) - 1)
-    raw = np.linalg.norm(raw_p[k, :2] - c, axis=1)
+    return np.linalg.norm(r.p_ned_m[:, :2] - c, axis=1), np.linalg.norm(raw_p[k, :2] - c, axis=1)
+
+
+def receiver_case(log: Log, clean: tuple[np.ndarray, np.ndarray], name: str, method: str,
+                  velocity: bool) -> dict[str, Any]:
+    received = log if velocity else without_velocity(log)
+    r = replay(received, method)
+    est, raw = distances_to_clean(r, clean, clean_track(received))
     cnt = r.counters
     tested = cnt["gnss_fused"] + cnt["gnss_rejected_innovation"]
     rejected = cnt["gnss_rejected_innovation"] / max(1, tested)
