@@ -226,3 +226,57 @@ def test_frozen_fix_is_rejected_after_the_stated_time_when_moving(speed_m_s):
     # repeats of the 2.0 s position at 2.2 ... 5.0 s: those > 2 s after it (4.2 ... 5.0 s: 5) are
     # frozen if the vehicle moved when that position first came
     assert c["gnss_rejected_frozen"] == (5 if speed_m_s else 0)
+
+
+def _hold_obs(r_of_t, accel=lambda t: (0.0, 2.0 * math.sin(1.5 * t)), seconds: float = 2.0, hz: float = 5.0):
+    """A held step's residuals as ``FusionEngine._hold_residual`` records them: (t, r_N, r_E, D_N, D_E),
+    D the IMU's displacement since the opening (the double integral of ``accel``, 1 ms steps), r the
+    fixes' drift against dead reckoning, ``r_of_t(t, D)``."""
+    obs, v, d, k = [], np.zeros(2), np.zeros(2), 0
+    step, every = 0.001, round(1.0 / hz / 0.001)
+    while k * step <= seconds + 1e-9:
+        if k % every == 0:
+            t = k * step
+            r = r_of_t(t, d.copy())
+            obs.append((t, float(r[0]), float(r[1]), float(d[0]), float(d[1])))
+        a = np.array(accel(k * step))
+        d += v * step + 0.5 * a * step * step
+        v += a * step
+        k += 1
+    return tuple(obs)
+
+
+def _turned(deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return np.array([[c - 1.0, -s], [s, c - 1.0]])
+
+
+def test_a_ramp_of_the_fixes_is_told_from_a_wrong_heading():
+    """Known answers of the two-model test (a receiver of 0.3 m, the velocity at the opening known to
+    0.25 m/s; noiseless drifts, the vehicle accelerating east, 2 sin(1.5 t) m/s²): fixes drifting at
+    3 m/s against an IMU that is right are a ramp, whether the vehicle manoeuvres or hovers; a drift
+    that is the IMU's displacement turned by 30°, 90° or 180° (plus a velocity error within its σ) is
+    explained exactly by that heading and is no ramp; a constant step is neither; a ramp with a 180°
+    heading on top looks like a ramp for 2 s and is found to be the IMU's by 3 s (the hold then
+    returns to the fixes)."""
+    e = _engine()
+    ramp = np.array([-2.1, -2.1])  # 3 m/s, the diagonal
+
+    def told(obs):
+        return e._ramp_or_heading(obs, 0.09, 0.0625)
+
+    assert told(_hold_obs(lambda t, d: ramp * t)) == (True, False)
+    assert told(_hold_obs(lambda t, d: ramp * t, accel=lambda t: (0.0, 0.0))) == (True, False)
+    for deg in (30.0, 90.0, 180.0):
+        m = _turned(deg)
+        obs = _hold_obs(lambda t, d, m=m: m @ d + np.array([0.2, -0.2]) * t)
+        chi_ramp, chi_head, _, _ = e._hold_fit(obs, 0.09, 0.0625)
+        assert chi_head < 1.0 < chi_ramp and not told(obs)[0], deg
+    assert told(_hold_obs(lambda t, d: np.array([0.1, -0.1]))) == (False, False)
+    both = _turned(180.0)
+    assert told(_hold_obs(lambda t, d: ramp * t + both @ d, seconds=2.0)) == (True, False)
+    assert told(_hold_obs(lambda t, d: ramp * t + both @ d, seconds=3.0)) == (False, True)
+    # too few fixes to tell (4 are needed: the ramp has 4 parameters)
+    assert told(_hold_obs(lambda t, d: ramp * t, seconds=0.4)) == (False, False)
+    # a ramp of 0.1 m/s is within what the velocity's σ explains: not told
+    assert told(_hold_obs(lambda t, d: ramp / 30.0 * t)) == (False, False)

@@ -113,6 +113,14 @@ class Fusion(NamedTuple):
     # the fused fixes' consistency so far (N, E, D innovations over their S; the reported accuracy's
     # inflation, ``consistency``)
     fit: Fit = Fit()
+    # the open step's fixes tested against dead reckoning from its opening (``_hold_fit``): the opening
+    # (t_us, x⁻, P⁻, IMU integrals, σ_b, the velocity variance the test assumes there, the offset; None:
+    # no step open, one re-opened, or the IMU found wrong), the horizontal residuals of the fixes since
+    # (t − t₀ s, r_N, r_E, D_N, D_E: D the IMU's own displacement over that time), and whether they were
+    # found a ramp of the fixes (a fading reflection; the step then held on the IMU from its opening)
+    hold_ref: tuple[Any, ...] | None = None
+    hold_obs: tuple[tuple[float, float, float, float, float], ...] = ()
+    ramp: bool = False
 
 
 class Snapshot(NamedTuple):
@@ -338,6 +346,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         off, t_off, t_fused = prev.offset, prev.t_offset_us, prev.t_fused_us
         acc, t_acc, n_ret = prev.accepted, prev.t_accepted_us, prev.n_returns
         glitch, rejected, fused_pos, reset, held = True, False, True, False, False
+        hold_ref, hold_obs, ramp, track = prev.hold_ref, prev.hold_obs, prev.ramp, False
         shift: Vec3 | None = None  # moves the position after the update: an offset accepted, or a return
         y_fused, R_fused, terms_fused = y, R, terms
         if passes:  # closes an open offset: the fixes stepped back
@@ -354,6 +363,20 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                     acc, t_acc, n_res, glitch, off, t_off = y, t_us, n_res + 1, False, None, 0
                 elif rel is not None and vel_ok:  # held on the receiver's velocity: dead reckoning
                     held, t_fused = True, t_us  # (fusing z − offset would drag the estimate with a fade)
+                elif rel is not None and hold_ref is not None:
+                    hold_obs, dr = self._hold_residual(hold_ref, hold_obs, t_us, z, ints)
+                    is_ramp, imu_wrong = self._ramp_or_heading(hold_obs, r_nom[0], hold_ref[5])
+                    if not ramp and is_ramp:
+                        # a ramp of the fixes, the IMU right: dead reckoning from the opening (what the
+                        # fixes relative to the offset dragged is undone)
+                        ramp, (x_prior, P_prior), xd = True, dr, dr[0]
+                        y = (z[0] - xd[0] - xd[6], z[1] - xd[1] - xd[7], z[2] - xd[2] - xd[8])
+                    elif ramp and imu_wrong:  # the IMU found wrong after all: back to the fixes, untested
+                        ramp, hold_ref = False, None
+                    if ramp:  # held on the IMU; the offset follows the ramp (tested fix to fix)
+                        held, t_fused, track = True, t_us, True
+                    else:  # held, the fixes relative to it observing velocity (a wrong attitude)
+                        fused_pos, (y_fused, R_fused, terms_fused) = True, rel
                 elif rel is not None:  # held, the fixes relative to it observing velocity (without a
                     fused_pos, (y_fused, R_fused, terms_fused) = True, rel  # receiver velocity, a fade drags)
             if not fused_pos and not held and acc is not None and t_us - t_acc <= self._return_us:
@@ -390,12 +413,30 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             state = self.method.update(prev.state, terms) if self._learn_rejected else prev.state
             if t_us - t_fused <= self._offset_open_us:  # a step in a consistent stream: (re)open the offset
                 off, t_off, n_off = y, t_us, n_off + 1
+                # dead reckoning from here is tested only from a state the fixes confirmed: the fix before
+                # passed the gate on its own (not a step re-opened while its fixes wandered); the velocity
+                # known to the filter's σ, widened by that fix's NIS per dof (covariance matching), and no
+                # better than it agrees with the fixes' own velocity there (``receiver_spread``'s u over
+                # the last block plus the IMU's velocity change over it: independent of the filter's state)
+                nis_prev = prev.test_ratio * self._gate2 * 0.5
+                sv2 = max(P_prior[3, 3], P_prior[4, 4]) * (nis_prev if nis_prev > 1.0 else 1.0)
+                if prev.u_ned_m_s is not None and prev.block_s > 0.0:
+                    dvn = prev.x[3] - prev.u_ned_m_s[0] - prev.dv_imu_m_s[0]
+                    dve = prev.x[4] - prev.u_ned_m_s[1] - prev.dv_imu_m_s[1]
+                    # less what the two fixes' own noise puts into u (2 R / T² per axis)
+                    sv2 = max(sv2, dvn * dvn + dve * dve - 4.0 * r_nom[0] / (prev.block_s * prev.block_s))
+                hold_ref = None if prev.glitch else (t_us, x_prior, P_prior, ints, prev.sigma_bias_m, sv2, y)
+                hold_obs, ramp = ((0.0,) * 5,), False
+        if off is None:
+            hold_ref, hold_obs, ramp = None, (), False
         if vel_ok:
             x_post, P_post = _core.update_vel(x_post, P_post, zv, rv)
         # the innovation the decision was made on: relative to a held step (so a step held does not
         # widen the gate until it passes), else the fix's own
         yd = y_fused if fused_pos else (
             (y[0] - off[0], y[1] - off[1], y[2] - off[2]) if held and off is not None else y)
+        if track:
+            off = y
         # the receiver's running centres (C core, the formulas below): its innovations' spread, and its
         # own noise: the change of u = (z − z_prev − D_imu) / T between blocks, less the IMU's velocity
         # change over the previous block, is white GNSS noise (variance σ² c) whatever the state
@@ -430,7 +471,72 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, acc, t_acc, n_ret,
             zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
-            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f, fit)
+            u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f, fit,
+            hold_ref, hold_obs, ramp)
+
+    def _hold_residual(self, ref: tuple[Any, ...], obs: tuple[Any, ...], t_us: int, z: Vec3, ints: Integrals
+                       ) -> tuple[tuple[Any, ...], tuple[model.State, model.Cov]]:
+        """``obs`` with this fix's horizontal residual against dead reckoning from the step's opening
+        ``ref`` (z − the offset opened there − the opening's state carried on the IMU alone) and the IMU's
+        own displacement D over that time; and that dead reckoning (x⁻, P⁻)."""
+        t0, x0, P0, ints0, sigma_b, _, off = ref
+        T = (t_us - t0) * 1e-6
+        alpha = math.exp(-T / self._tau_s)
+        q_b = (1.0 - alpha * alpha) * sigma_b * sigma_b
+        x, P = self._prop.predict_from(x0, P0, ints0, ints, T, alpha, q_b)[0:2]
+        tb = ints[0]
+        d0 = tb * (ints[1] - ints0[1]) - (ints[4] - ints0[4])
+        d1 = tb * (ints[2] - ints0[2]) - (ints[5] - ints0[5])
+        r0 = z[0] - off[0] - x[0] - x[6]
+        r1 = z[1] - off[1] - x[1] - x[7]
+        return (*obs, (T, r0, r1, d0, d1)), (x, P)
+
+    def _ramp_or_heading(self, obs: tuple[Any, ...], r_h: float, sv2: float) -> tuple[bool, bool]:
+        """(a ramp of the fixes with the IMU right, the IMU's heading wrong) from ``_hold_fit``'s χ²: a ramp
+        when it explains the drift better than any heading by more than gate² in the spread the fixes
+        show (the evidence a fix needs to fail the gate) and a heading on top of it adds no more than
+        gate²; the heading wrong when it adds more (the safe side: in the noise the model states)."""
+        chi_ramp, chi_head, chi_both, s2 = self._hold_fit(obs, r_h, sv2)
+        imu_wrong = chi_ramp - chi_both > self._gate2
+        return (not imu_wrong and chi_head - chi_ramp > self._gate2 * s2), imu_wrong
+
+    def _hold_fit(self, obs: tuple[Any, ...], r_h: float, sv2: float) -> tuple[float, float, float, float]:
+        """Least-squares χ² of three explanations of the held fixes' drift against dead reckoning from
+        the step's opening (``obs``: ``_hold_residual``'s; each residual's σ² the receiver's noise ``r_h``
+        plus the dead reckoning's own spread over t, the filter's white-acceleration density σ_acc² t³/3):
+
+        * a ramp of the fixes, r = a + b t (a fading reflection: the IMU right, the fixes moving at a
+          rate b of their own);
+        * the attitude's heading wrong by some angle δ, r = a + e t + (R(δ) − I) D (the fly-away: the
+          IMU's horizontal specific force turned by δ, its magnitude kept; D the IMU's displacement since
+          the opening; e the velocity error there, ~ N(0, ``sv2``) per axis);
+        * both, r = a + b t + (R(δ) − I) D.
+
+        and the scale s² ≥ 1 of the residuals' σ² the ramp leaves (its χ² per degree of freedom: real fixes
+        wander more than their learned noise, so the comparison is made in the spread they show).
+        A constant step (b = 0) is explained by all three alike; fewer than 4 fixes: (0, 0, 0, 1)."""
+        n = len(obs)
+        if n < 4:
+            return 0.0, 0.0, 0.0, 1.0
+        o = np.asarray(obs)
+        t = o[:, 0]
+        w = 1.0 / np.sqrt(r_h + self._q_acc * t * t * t / 3.0)
+        zero, tw, dn, de = np.zeros(n), t * w, o[:, 3] * w, o[:, 4] * w
+        # rows N, E, then the prior on e (the heading model's only); columns a_N, a_E, b_N / e_N, b_E / e_E
+        m = 2 * n
+        X = np.zeros((m + 2, 4))
+        X[:n] = np.column_stack((w, zero, tw, zero))
+        X[n:m] = np.column_stack((zero, w, zero, tw))
+        X[m, 2] = X[m + 1, 3] = 1.0 / math.sqrt(sv2)
+        y = np.concatenate((o[:, 1] * w, o[:, 2] * w, (0.0, 0.0)))
+        # (R(δ) − I) D = (cos δ − 1) u + sin δ v: u = D, v = D turned by 90°
+        u = np.concatenate((dn, de, (0.0, 0.0)))
+        v = np.concatenate((-de, dn, (0.0, 0.0)))
+        ramp = X[:m]
+        chi_ramp = float(np.sum((y[:m] - ramp @ np.linalg.lstsq(ramp, y[:m], rcond=None)[0]) ** 2))
+        s2 = chi_ramp / (m - 4)
+        return (chi_ramp, _min_over_headings(X, y, u, v), _min_over_headings(ramp, y[:m], u[:m], v[:m]),
+                s2 if s2 > 1.0 else 1.0)
 
     def _outside_envelope(self, x: model.State) -> bool:
         """The speed of ``x`` outside the vehicle's envelope (horizontal or vertical)."""
@@ -586,6 +692,17 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         return self._predict(self.entries[-1], self.imu.last_t_us, self.imu.last_integrals())[1]
 
 
+_HEADINGS = np.radians(np.arange(-179.0, 181.0))  # δ, every degree
+_COS1, _SIN = np.cos(_HEADINGS) - 1.0, np.sin(_HEADINGS)
+
+
+def _min_over_headings(X: np.ndarray, y: np.ndarray, u: np.ndarray, v: np.ndarray) -> float:
+    """min over δ of the least-squares χ² of y = X θ + (cos δ − 1) u + sin δ v (θ free; δ every degree)."""
+    Q = np.linalg.qr(X)[0]
+    p, q1, q2 = y - Q @ (Q.T @ y), u - Q @ (Q.T @ u), v - Q @ (Q.T @ v)
+    c, s = _COS1, _SIN
+    pp, p1, p2, q11, q22, q12 = p @ p, p @ q1, p @ q2, q1 @ q1, q2 @ q2, q1 @ q2
+    return float(np.min(pp + c * c * q11 + s * s * q22 - 2.0 * (c * p1 + s * p2 - c * s * q12)))
 _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
 _NAN3: Vec3 = (math.nan, math.nan, math.nan)
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
