@@ -61,6 +61,8 @@ _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_t
 SPP_INIT = SppConfig(raim=True)
 # L1 ionospheric delay → each system's signal (GLONASS at its centre frequency), per clock slot
 _IONO_SCALE = iono_frequency_scale(np.array([int(s) for s in model.CLOCK_SLOTS]))
+# the loose 15-state's (p, v, a, d) block inside the tight state's covariance (the output's P15)
+_IX_NAV = np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)
 # a reset also widens the position: the canyon's single-point solution is often tens of metres off
 SIGMA_SPP_EXTRA_M = 10.0
 
@@ -142,13 +144,13 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
         cfg.elevation_mask_deg)))
     if not epoch.corrected:
         ok &= np.isfinite(epoch.sat_clock_s)
-    if not ok.any():
-        return None
     ep = epoch
     if not ok.all():
+        if not ok.any():
+            return None
         ep, d, rng, sin_el = epoch.select(ok), d[ok], rng[ok], sin_el[ok]
         atmosphere_m = None if atmosphere_m is None else atmosphere_m[ok]
-    el = np.arcsin(np.clip(sin_el, -1.0, 1.0))
+    el = np.arcsin(np.minimum(np.maximum(sin_el, -1.0), 1.0))  # np.clip's values, without its wrapper
     z = ep.pseudorange_m
     rate = ep.pseudorange_rate_m_s
     if not ep.corrected and atmosphere_m is not None:
@@ -314,7 +316,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
     def _predict(self, e: Entry, t_us: int, ints: Integrals) -> tuple[np.ndarray, np.ndarray]:
         """Entry ``e`` predicted to ``t_us``: (x, P)."""
         T = (t_us - e.t_us) * 1e-6
-        x15 = (*e.x[0:6], 0.0, 0.0, 0.0, *e.x[6:12])
+        x15 = (*e.x[0:6].tolist(), 0.0, 0.0, 0.0, *e.x[6:12].tolist())
         m15, nA, nB = mean_between(x15, e.ints, ints, 1.0)
         x = e.x.copy()
         x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
@@ -474,7 +476,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
     def _output(self, last: Entry, now: int) -> tuple[int, np.ndarray, Entry]:
         if self._nav15 is None or self._nav15[0] is not last:
             P15 = np.zeros((15, 15))
-            P15[np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)] = last.P[:12, :12]
+            P15[_IX_NAV] = last.P[:12, :12]
             self._nav15 = (last, (*last.x[0:6], 0.0, 0.0, 0.0, *last.x[6:12]), P15)
         T = (now - last.t_us) * 1e-6
         _, out = self._prop.output_from(self._nav15[1], self._nav15[2], last.ints, self.imu, T, 1.0, 0.0)
