@@ -61,6 +61,7 @@ _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_t
 SPP_INIT = SppConfig(raim=True)
 # L1 ionospheric delay → each system's signal (GLONASS at its centre frequency), per clock slot
 _IONO_SCALE = iono_frequency_scale(np.array([int(s) for s in model.CLOCK_SLOTS]))
+_GLONASS = int(System.GLONASS)  # (an enum member's look-up costs more than the comparison)
 # the loose 15-state's (p, v, a, d) block inside the tight state's covariance (the output's P15)
 _IX_NAV = np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)
 # a reset also widens the position: the canyon's single-point solution is often tens of metres off
@@ -170,7 +171,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
         rate = rate + C_M_S * np.where(np.isfinite(drift), drift, 0.0)
     cn0 = ep.cn0_dbhz
     weak = 10.0 ** ((cfg.cn0_ref_dbhz - np.where(np.isfinite(cn0), cn0, cfg.cn0_ref_dbhz)) / 10.0)
-    glo = np.where(ep.system == System.GLONASS, cfg.glonass_sigma_factor**2, 1.0)
+    glo = np.where(ep.system == _GLONASS, cfg.glonass_sigma_factor**2, 1.0)
     a2 = cfg.sigma_floor_m**2
     r_model = (a2 + cfg.sigma_zenith_m**2 * weak / np.maximum(sin_el, 0.05) ** 2) * glo
     r_los = (a2 + cfg.sigma_los_cn0_m**2 * weak) * glo
@@ -407,7 +408,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                 p_hidden = blocked_probability(self.line_of_sight, x[0:3], P[0:3, 0:3], m.azimuth_rad,
                                                np.radians(m.elevation_deg), p_los, c.map_position_sigma_m)
                 prior = prior + map_theta(p_hidden, c)
-            prior = np.clip(prior, c.theta_min, c.theta_max)
+            prior = np.minimum(np.maximum(prior, c.theta_min), c.theta_max)  # np.clip's values
         terms = weighting.SatTerms(m.key, y, s0, r_nom, prior, m.r_model_m2)
         if self._snapshot:  # the epoch's own solution as the belief's reference (companion.tight.snapshot)
             cols = [0, 1, 2, *(I_CLK + j for j in m.systems)]
