@@ -425,8 +425,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         nis = math.nan
         fit = prev.fit
         if n_used:
-            u = np.flatnonzero(used)
-            fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
+            if n_used == len(used):  # every satellite (the same values as indexed by all of them)
+                fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
+            else:
+                u = np.flatnonzero(used)
+                fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
             # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
             # their own) in one update, in C (model.range_rate; the numpy form in the tests)
             x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used.astype(float), r0, C, m.sat_pos_ecef_m,

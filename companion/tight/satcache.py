@@ -96,8 +96,10 @@ class SatelliteCache:
     def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
         system = np.asarray(system, dtype=np.int64)
         prn = np.asarray(prn, dtype=np.int64)
-        t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
-        n = len(t)
+        n = len(system)
+        t = np.asarray(t_gps_s, dtype=float)
+        if t.shape != (n,):  # a scalar time (or one per row already)
+            t = t * np.ones(n)
         keys = (system * 1000 + prn).tolist()
         k = np.round(t / self.period_s)  # NaN where there is no time (no pseudorange): no state
         finite = np.isfinite(k)
