@@ -101,7 +101,7 @@ class SatelliteCache:
         if t.shape != (n,):  # a scalar time (or one per row already)
             t = t * np.ones(n)
         keys = (system * 1000 + prn).tolist()
-        k = np.round(t / self.period_s)  # NaN where there is no time (no pseudorange): no state
+        k = np.rint(t / self.period_s)  # = np.round (its rint); NaN where there is no time: no state
         finite = np.isfinite(k)
         if n and finite.all() and (k == k[0]).all():  # the usual case: one anchor for the whole epoch
             k = k.astype(np.int64)
@@ -143,7 +143,7 @@ class AtmosphereCache:
     def delays_m(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> np.ndarray:
         """The delay (m) of each observation's signal (L1 scaled to its frequency)."""
         keys = (np.asarray(system, np.int64) * 1000 + np.asarray(prn, np.int64)).tolist()
-        k = np.round(np.where(np.isfinite(t_gps_s), t_gps_s, 0.0) / self.period_s).astype(np.int64).tolist()
+        k = np.rint(np.where(np.isfinite(t_gps_s), t_gps_s, 0.0) / self.period_s).astype(np.int64).tolist()
         last = self._last
         if last is not None and last[0] == keys and last[1] == k:  # the same satellites and anchors
             return last[2]
