@@ -79,7 +79,7 @@ class GnssEpoch:
         """``dataclasses.replace`` (every field is an init field), without its per-field checks."""
         kw = {name: getattr(self, name) for name in _ALL_FIELDS}
         kw.update(changes)
-        return GnssEpoch(**kw)  # type: ignore[arg-type]
+        return GnssEpoch(**kw)
 
     def systems(self) -> tuple[System, ...]:
         return tuple(System(int(s)) for s in np.unique(self.system))
