@@ -309,6 +309,46 @@ def test_raim_threshold_known_answers_and_scipy_stats_not_imported_with_the_pack
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.stdout.strip() == "False", done.stdout + done.stderr
 
+
+def test_chi2_table_is_scipys_and_the_tight_navigator_does_not_import_scipy_stats():
+    """CHI2_TABLE holds exactly chi2.ppf(1 − 1e-3, dof); other probabilities and degrees of freedom
+    still come from scipy.stats; a tight navigator started on raw epochs (its RAIM single-point
+    solution, the FDE row) never imports scipy.stats."""
+    import subprocess
+    import sys
+
+    from scipy.stats import chi2
+
+    from companion.gnss import spp
+
+    for dof in range(1, len(spp.CHI2_TABLE) + 1):
+        assert spp.CHI2_TABLE[dof - 1] == float(chi2.ppf(1.0 - spp.CHI2_P_FALSE_ALARM_TABLE, dof)), dof
+        assert spp.chi2_threshold(1e-3, dof) == spp.CHI2_TABLE[dof - 1]
+    n = len(spp.CHI2_TABLE) + 1
+    assert spp.chi2_threshold(1e-3, n) == float(chi2.ppf(1.0 - 1e-3, n))
+    assert spp.chi2_threshold(2e-3, 3) == float(chi2.ppf(1.0 - 2e-3, 3))
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from companion.domain.samples import AttitudeSample, ImuSample\n"
+        "from companion.tight import RawGnss, TightConfig\n"
+        "from companion.wiring import tight_navigator_for\n"
+        "from gcs_tools.gnss.synthetic import RX_ECEF, T0, observe, store\n"
+        "st = store()\n"
+        "for method in ('second-order', 'fde'):\n"
+        "    nav = tight_navigator_for(None, method, config=TightConfig(), ephemerides=st)\n"
+        "    for i in range(3):\n"
+        "        t = 1_000_000 + i * 200_000\n"
+        "        nav.push(AttitudeSample(t, np.array([1.0, 0.0, 0.0, 0.0])))\n"
+        "        nav.push(ImuSample(t, np.array([0.0, 0.0, -9.80665]), np.zeros(3)))\n"
+        "        nav.push(RawGnss(t, observe(st, T0 + 100.0 + 0.2 * i, RX_ECEF)[0]))\n"
+        "    assert nav.counters()['gnss_fused'] == 2, nav.counters()\n"
+        "print('scipy.stats' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.stdout.strip() == "False", done.stdout + done.stderr
+
+
 def test_bad_observations_are_not_used(scene):
     st, ep = scene
     pr = ep.pseudorange_m.copy()

@@ -561,6 +561,25 @@ def test_c_core_equals_the_numpy_forms():
     want = F @ P @ F.T + model.process_noise(T, nA.ravel(), live, *q)
     got = _tight.predict_cov(P, T, nA.ravel(), nB.ravel(), live, *q, True)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    # without process noise, F P Fᵀ exactly as the products summed over F's non-zero entries in column
+    # order (what the C core does, and its dense loops with a zero skip did before)
+    def sparse_product(A: np.ndarray, B: np.ndarray, transpose_b: bool) -> np.ndarray:
+        out = np.zeros((N_STATE, N_STATE))
+        for i in range(N_STATE):
+            for k in range(N_STATE):
+                s = 0.0
+                for j in range(N_STATE):
+                    if transpose_b:
+                        if B[k, j] != 0.0:
+                            s += A[i, j] * B[k, j]
+                    elif A[i, j] != 0.0:
+                        s += A[i, j] * B[j, k]
+                out[i, k] = s
+        return out
+
+    exact = _tight.predict_cov(P, T, nA.ravel(), nB.ravel(), live, *(0.0,) * len(q), False)
+    FP = sparse_product(F, P, False)
+    assert np.array_equal(exact, sparse_product(FP, F, True))
     sysv, _, pos, vel = _sats()
     slot = model.SLOT_OF[sysv]
     x = _state(rng)

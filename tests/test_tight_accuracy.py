@@ -39,6 +39,13 @@ def test_fit_known_answers():
     a = Fit().add(0, key, nu, window_s).add(200_000, key, 2 * nu, window_s)
     b = Fit().add(0, key, nu, window_s).add(200_000, key[::-1], 2 * nu[::-1], window_s)
     assert a.inflation() == pytest.approx(b.inflation(), rel=1e-12) and list(b.key) == [3, 5, 8]
+    # ... exactly, through the permutation path, and equal to the general one (a channel added)
+    e = math.exp(-0.2 / window_s)
+    for later in (b.add(400_000, key[[1, 2, 0]], nu[[1, 2, 0]], window_s),
+                  b.add(400_000, np.array([5, 8, 3, 11]), np.array([nu[1], nu[2], nu[0], 0.0]), window_s)):
+        np.testing.assert_array_equal(later.key[:3], key)
+        np.testing.assert_array_equal(later.nu_sum[:3], e * (e * nu + 2 * nu) + nu)
+        np.testing.assert_array_equal(later.w2_sum[:3], (e * e) * ((e * e) * 1.0 + 1.0) + 1.0)
 
 
 def _run(bias_m: float | None, runs: int = 12, n: int = 100) -> dict[str, np.ndarray]:

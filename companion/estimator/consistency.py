@@ -39,6 +39,14 @@ class Fit(NamedTuple):
             nu_sum += nu
             w2_sum += 1.0
             return Fit(self.key, nu_sum, w2_sum, t_us)
+        if len(key) == len(self.key) and np.array_equal(np.sort(key), self.key):
+            # the same channels in another order (a receiver's order, by C/N0): what the general case
+            # below gives, without the union (self.key is sorted and unique, so key is a permutation)
+            nu_sum, w2_sum = a * self.nu_sum, (a * a) * self.w2_sum
+            at = np.searchsorted(self.key, key)
+            nu_sum[at] += nu
+            w2_sum += 1.0
+            return Fit(self.key, nu_sum, w2_sum, t_us)
         keys = np.union1d(self.key, key)
         if len(keys) == len(key) and np.array_equal(keys, key):
             keys = key  # the caller's own (sorted) keys: the next add with them takes the path above at once

@@ -73,10 +73,13 @@ class GnssEpoch:
             name: getattr(self, name)[mask]
             for name in ("system", "prn", "pseudorange_m", *(f for f, _ in _FIELDS))
         }
-        return dataclasses.replace(self, **rows)
+        return self.replace(**rows)
 
     def replace(self, **changes: object) -> GnssEpoch:
-        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+        """``dataclasses.replace`` (every field is an init field), without its per-field checks."""
+        kw = {name: getattr(self, name) for name in _ALL_FIELDS}
+        kw.update(changes)
+        return GnssEpoch(**kw)
 
     def systems(self) -> tuple[System, ...]:
         return tuple(System(int(s)) for s in np.unique(self.system))
@@ -93,6 +96,9 @@ _FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
     ("sat_clock_s", ()),
     ("sat_clock_drift_s_s", ()),
 )
+
+
+_ALL_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(GnssEpoch))
 
 
 def make_epoch(

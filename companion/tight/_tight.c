@@ -69,22 +69,29 @@ static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
     }
     for (int j = 0; j < NC; j++) F[(I_CLK + j) * N + I_DRIFT] = T * live[j];
     F[I_HEAD * N + I_YAWB] = -T;
-    /* F P: row i of F has few non-zero entries, but N is small: dense with a zero skip */
+    /* F P and (F P) F^T over each row's non-zero entries of F (a few per row), in increasing column order:
+     * the same sums, term by term, as the dense products that skip F's zeros */
+    int nz[N * N], nnz[N];
+    for (int i = 0; i < N; i++) {
+        nnz[i] = 0;
+        for (int j = 0; j < N; j++)
+            if (F[i * N + j] != 0.0) nz[i * N + nnz[i]++] = j;
+    }
     for (int i = 0; i < N; i++)
         for (int k = 0; k < N; k++) {
             double s = 0.0;
-            for (int j = 0; j < N; j++) {
-                double f = F[i * N + j];
-                if (f != 0.0) s += f * P[j * N + k];
+            for (int t = 0; t < nnz[i]; t++) {
+                int j = nz[i * N + t];
+                s += F[i * N + j] * P[j * N + k];
             }
             FP[i * N + k] = s;
         }
     for (int i = 0; i < N; i++)
         for (int k = 0; k < N; k++) {
             double s = 0.0;
-            for (int j = 0; j < N; j++) {
-                double f = F[k * N + j];
-                if (f != 0.0) s += FP[i * N + j] * f;
+            for (int t = 0; t < nnz[k]; t++) {
+                int j = nz[k * N + t];
+                s += FP[i * N + j] * F[k * N + j];
             }
             out[i * N + k] = s;
         }

@@ -36,7 +36,7 @@ class Cn0Calibration:
     def add(self, cn0_dbhz: np.ndarray) -> None:
         """Count an epoch's C/N0 values (non-finite ones ignored, the rest clipped to the histogram)."""
         c = np.asarray(cn0_dbhz, dtype=float)
-        c = np.clip(c[np.isfinite(c)], LO_DBHZ, HI_DBHZ)
+        c = np.minimum(np.maximum(c[np.isfinite(c)], LO_DBHZ), HI_DBHZ)  # np.clip's values
         if c.size:
             idx = np.minimum(((c - self._edges[0]) / BIN_DB).astype(int), len(self._hist) - 1)
             self._hist += np.bincount(idx, minlength=len(self._hist))

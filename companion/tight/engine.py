@@ -61,6 +61,9 @@ _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_t
 SPP_INIT = SppConfig(raim=True)
 # L1 ionospheric delay → each system's signal (GLONASS at its centre frequency), per clock slot
 _IONO_SCALE = iono_frequency_scale(np.array([int(s) for s in model.CLOCK_SLOTS]))
+_GLONASS = int(System.GLONASS)  # (an enum member's look-up costs more than the comparison)
+# the loose 15-state's (p, v, a, d) block inside the tight state's covariance (the output's P15)
+_IX_NAV = np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)
 # a reset also widens the position: the canyon's single-point solution is often tens of metres off
 SIGMA_SPP_EXTRA_M = 10.0
 
@@ -142,13 +145,13 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
         cfg.elevation_mask_deg)))
     if not epoch.corrected:
         ok &= np.isfinite(epoch.sat_clock_s)
-    if not ok.any():
-        return None
     ep = epoch
     if not ok.all():
+        if not ok.any():
+            return None
         ep, d, rng, sin_el = epoch.select(ok), d[ok], rng[ok], sin_el[ok]
         atmosphere_m = None if atmosphere_m is None else atmosphere_m[ok]
-    el = np.arcsin(np.clip(sin_el, -1.0, 1.0))
+    el = np.arcsin(np.minimum(np.maximum(sin_el, -1.0), 1.0))  # np.clip's values, without its wrapper
     z = ep.pseudorange_m
     rate = ep.pseudorange_rate_m_s
     if not ep.corrected and atmosphere_m is not None:
@@ -168,7 +171,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
         rate = rate + C_M_S * np.where(np.isfinite(drift), drift, 0.0)
     cn0 = ep.cn0_dbhz
     weak = 10.0 ** ((cfg.cn0_ref_dbhz - np.where(np.isfinite(cn0), cn0, cfg.cn0_ref_dbhz)) / 10.0)
-    glo = np.where(ep.system == System.GLONASS, cfg.glonass_sigma_factor**2, 1.0)
+    glo = np.where(ep.system == _GLONASS, cfg.glonass_sigma_factor**2, 1.0)
     a2 = cfg.sigma_floor_m**2
     r_model = (a2 + cfg.sigma_zenith_m**2 * weak / np.maximum(sin_el, 0.05) ** 2) * glo
     r_los = (a2 + cfg.sigma_los_cn0_m**2 * weak) * glo
@@ -314,7 +317,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
     def _predict(self, e: Entry, t_us: int, ints: Integrals) -> tuple[np.ndarray, np.ndarray]:
         """Entry ``e`` predicted to ``t_us``: (x, P)."""
         T = (t_us - e.t_us) * 1e-6
-        x15 = (*e.x[0:6], 0.0, 0.0, 0.0, *e.x[6:12])
+        x15 = (*e.x[0:6].tolist(), 0.0, 0.0, 0.0, *e.x[6:12].tolist())
         m15, nA, nB = mean_between(x15, e.ints, ints, 1.0)
         x = e.x.copy()
         x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
@@ -405,7 +408,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                 p_hidden = blocked_probability(self.line_of_sight, x[0:3], P[0:3, 0:3], m.azimuth_rad,
                                                np.radians(m.elevation_deg), p_los, c.map_position_sigma_m)
                 prior = prior + map_theta(p_hidden, c)
-            prior = np.clip(prior, c.theta_min, c.theta_max)
+            prior = np.minimum(np.maximum(prior, c.theta_min), c.theta_max)  # np.clip's values
         terms = weighting.SatTerms(m.key, y, s0, r_nom, prior, m.r_model_m2)
         if self._snapshot:  # the epoch's own solution as the belief's reference (companion.tight.snapshot)
             cols = [0, 1, 2, *(I_CLK + j for j in m.systems)]
@@ -422,8 +425,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         nis = math.nan
         fit = prev.fit
         if n_used:
-            u = np.flatnonzero(used)
-            fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
+            if n_used == len(used):  # every satellite (the same values as indexed by all of them)
+                fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
+            else:
+                u = np.flatnonzero(used)
+                fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
             # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
             # their own) in one update, in C (model.range_rate; the numpy form in the tests)
             x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used.astype(float), r0, C, m.sat_pos_ecef_m,
@@ -474,7 +480,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
     def _output(self, last: Entry, now: int) -> tuple[int, np.ndarray, Entry]:
         if self._nav15 is None or self._nav15[0] is not last:
             P15 = np.zeros((15, 15))
-            P15[np.ix_(model.NAV_OF_LOOSE, model.NAV_OF_LOOSE)] = last.P[:12, :12]
+            P15[_IX_NAV] = last.P[:12, :12]
             self._nav15 = (last, (*last.x[0:6], 0.0, 0.0, 0.0, *last.x[6:12]), P15)
         T = (now - last.t_us) * 1e-6
         _, out = self._prop.output_from(self._nav15[1], self._nav15[2], last.ints, self.imu, T, 1.0, 0.0)

@@ -51,6 +51,8 @@ class SatelliteCache:
         # anchor index -> (row of each satellite key, table (m, 12): pos, vel, acc, clock, drift, valid)
         self._anchors: dict[int, tuple[dict[int, int], np.ndarray]] = {}
         self.evaluations = 0  # satellite states computed by the store (for the benchmark)
+        # the last one-anchor query: (anchor, keys, the anchor's (index, table) then, the keys' rows)
+        self._last: tuple[int, list[int], tuple[dict[int, int], np.ndarray], np.ndarray] | None = None
 
     def _table(self, k: int, keys: list[int], system: np.ndarray, prn: np.ndarray
                ) -> tuple[dict[int, int], np.ndarray]:
@@ -78,27 +80,43 @@ class SatelliteCache:
                 del self._anchors[old]
         return index, table
 
+    def _rows(self, k: int, keys: list[int], system: np.ndarray, prn: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """(anchor ``k``'s table, the row of each key); the rows of the last query are reused while
+        the keys and the anchor's table are the same (a receiver tracks the same satellites for
+        minutes: one list comparison per epoch)."""
+        last = self._last
+        if last is not None and last[0] == k and last[2] is self._anchors.get(k) and last[1] == keys:
+            return last[2][1], last[3]
+        index, table = self._table(k, keys, system, prn)
+        rows = np.array([index[key] for key in keys], dtype=np.intp)
+        self._last = (k, keys, self._anchors[k], rows)
+        return table, rows
+
     def states(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> SatStates:
         system = np.asarray(system, dtype=np.int64)
         prn = np.asarray(prn, dtype=np.int64)
-        t = np.asarray(t_gps_s, dtype=float) * np.ones(len(system))
-        n = len(t)
-        finite = np.isfinite(t)  # no time (no pseudorange): no state
-        k = np.zeros(n, dtype=np.int64)
-        k[finite] = np.round(t[finite] / self.period_s).astype(np.int64)
+        n = len(system)
+        t = np.asarray(t_gps_s, dtype=float)
+        if t.shape != (n,):  # a scalar time (or one per row already)
+            t = t * np.ones(n)
         keys = (system * 1000 + prn).tolist()
-        anchors = set(k[finite].tolist())
-        if len(anchors) == 1 and finite.all():  # the usual case: one anchor for the whole epoch
-            index, table = self._table(anchors.pop(), keys, system, prn)
-            out = table[[index[key] for key in keys]]
+        k = np.rint(t / self.period_s)  # = np.round (its rint); NaN where there is no time: no state
+        finite = np.isfinite(k)
+        if n and finite.all() and (k == k[0]).all():  # the usual case: one anchor for the whole epoch
+            k = k.astype(np.int64)
+            table, rows = self._rows(int(k[0]), keys, system, prn)
+            out = table[rows]
+            dt = (t - k * self.period_s)[:, None]
         else:
+            k = np.where(finite, k, 0.0).astype(np.int64)
             out = np.full((n, 12), np.nan)
-            for a in anchors:
+            for a in set(k[finite].tolist()):
                 sel = np.flatnonzero(finite & (k == a))
                 sel_keys = [keys[i] for i in sel.tolist()]
                 index, table = self._table(a, sel_keys, system[sel], prn[sel])
                 out[sel] = table[[index[key] for key in sel_keys]]
-        dt = np.where(finite, t - k * self.period_s, 0.0)[:, None]
+            dt = np.where(finite, t - k * self.period_s, 0.0)[:, None]
         pos = out[:, 0:3] + out[:, 3:6] * dt + 0.5 * out[:, 6:9] * dt * dt
         vel = out[:, 3:6] + out[:, 6:9] * dt
         valid = finite & (out[:, 11] == 1.0)
@@ -119,11 +137,16 @@ class AtmosphereCache:
         self.site = (lat_rad, lon_rad, h_m)
         self.r0, self.c = np.asarray(r0_ecef_m, float), np.asarray(c_ecef_ned, float)
         self._memo: dict[tuple[int, int], float] = {}
+        # the last query: (keys, anchors, delays)
+        self._last: tuple[list[int], list[int], np.ndarray] | None = None
 
     def delays_m(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> np.ndarray:
         """The delay (m) of each observation's signal (L1 scaled to its frequency)."""
         keys = (np.asarray(system, np.int64) * 1000 + np.asarray(prn, np.int64)).tolist()
-        k = np.round(np.where(np.isfinite(t_gps_s), t_gps_s, 0.0) / self.period_s).astype(np.int64).tolist()
+        k = np.rint(np.where(np.isfinite(t_gps_s), t_gps_s, 0.0) / self.period_s).astype(np.int64).tolist()
+        last = self._last
+        if last is not None and last[0] == keys and last[1] == k:  # the same satellites and anchors
+            return last[2]
         memo = self._memo
         missing = [i for i, (key, a) in enumerate(zip(keys, k, strict=True)) if (key, a) not in memo]
         if missing:
@@ -149,4 +172,7 @@ class AtmosphereCache:
             if len(memo) > 4096:
                 for old in [key for key in memo if key[1] < newest - 8]:
                     del memo[old]
-        return np.array([memo[(key, a)] for key, a in zip(keys, k, strict=True)])
+        out = np.array([memo[(key, a)] for key, a in zip(keys, k, strict=True)])
+        out.flags.writeable = False  # handed out again for the same query
+        self._last = (keys, k, out)
+        return out
