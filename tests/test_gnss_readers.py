@@ -153,6 +153,11 @@ def test_compressed_rinex_reads_as_the_plain_file(tmp_path):
     (tmp_path / "b.nav.gz").write_bytes(gzip.compress(NAV.read_bytes()))
     nav = rinex.read_nav(tmp_path / "b.nav.gz")
     assert len(nav.kepler) == len(rinex.read_nav(NAV).kepler) and nav.klobuchar is not None
+    # the raw-GNSS entry point (gnss spp, replay) recognises them, and solves as with the plain files
+    plain_in = load_input(OBS, [NAV])
+    for name in ("a.crx.gz", "renamed.obs"):
+        packed = load_input(tmp_path / name, [tmp_path / "b.nav.gz"])
+        assert packed.format == "rinex" and _same_epochs(packed.epochs, plain_in.epochs)
     (tmp_path / "cut.obs.gz").write_bytes(forms["a.obs.gz"][:-40])
     with pytest.raises(UserError, match=r"cut.obs.gz: cannot decompress"):
         rinex.read_obs(tmp_path / "cut.obs.gz")

@@ -27,7 +27,7 @@ issue of data differ by the difference of the two group delays (nanoseconds: met
 A record with both clock bits, or no source bit, is counted (``galileo_bad_data_source``).
 
 Rejections are counted (``RinexObs.rejected`` / ``RinexNav.rejected``, by reason); a file that is
-not RINEX 3, or holds no usable record, is a one-line ``UserError``. A truncated last record is
+not RINEX 3 or 4, or holds no usable record, is a one-line ``UserError``. A truncated last record is
 counted (``truncated``), the records before it are kept.
 """
 
@@ -99,12 +99,17 @@ COMPRESSED_MAGIC = (b"\x1f\x8b", b"\x1f\x9d", b"BZh", b"PK\x03\x04")
 COMPACT_RINEX_LABEL = b"CRINEX VERS   / TYPE"  # the first line of a Hatanaka-compressed file
 
 
+def is_compressed(head: bytes) -> bool:
+    """Whether a file starting with ``head`` (its first 80 bytes or more) is compressed RINEX, or may be."""
+    return head.startswith(COMPRESSED_MAGIC) or COMPACT_RINEX_LABEL in head[:80]
+
+
 def _read_lines(path: Path) -> list[str]:
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise UserError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    if data.startswith(COMPRESSED_MAGIC) or COMPACT_RINEX_LABEL in data[:80]:
+    if is_compressed(data):
         data = _decompressed(path, data)
     return data.decode("ascii", errors="replace").splitlines()
 
@@ -294,7 +299,7 @@ def fix_glonass_rates(epoch: GnssEpoch, channel: np.ndarray) -> GnssEpoch:
 
 
 def read_nav(paths: str | Path | Iterable[str | Path]) -> RinexNav:
-    """One or more RINEX 3 navigation files (mixed or per system) into one set."""
+    """One or more RINEX 3 or 4 navigation files (mixed or per system) into one set."""
     if isinstance(paths, (str, Path)):
         paths = [paths]
     out = RinexNav([], [], None, None)

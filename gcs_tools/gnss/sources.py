@@ -1,4 +1,4 @@
-"""One entry point for raw GNSS inputs: smartLoc, RINEX 3 observation + navigation, UBX logs.
+"""One entry point for raw GNSS inputs: smartLoc, RINEX 3/4 observation + navigation (compressed or not), UBX.
 
 ``load_input`` returns epochs ready for the solver (RINEX/UBX: satellite states attached from the
 broadcast ephemerides at transmission time; observations without an ephemeris counted in
@@ -19,7 +19,7 @@ import numpy as np
 from companion.errors import UserError
 from companion.gnss.ephemeris import EphemerisStore, attach_broadcast
 from companion.gnss.observations import GnssEpoch
-from gcs_tools.gnss import smartloc
+from gcs_tools.gnss import rinex, smartloc
 
 
 @dataclass
@@ -50,11 +50,11 @@ def detect(path: Path) -> str:
         return "ubx"
     if smartloc.is_smartloc(path):
         return "smartloc"
-    if b"RINEX VERSION / TYPE" in head[:90]:
+    if b"RINEX VERSION / TYPE" in head[:90] or rinex.is_compressed(head):
         return "rinex"
     if path.suffix.lower() == ".ubx":
         return "ubx"
-    raise UserError(f"{path}: not a smartLoc, RINEX 3 observation or UBX file")
+    raise UserError(f"{path}: not a smartLoc, RINEX observation or UBX file")
 
 
 def parse_ecef(text: str, option: str = "--truth-ecef") -> np.ndarray:
