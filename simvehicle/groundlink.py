@@ -139,7 +139,7 @@ class MultiPeerLink(UdpLink):
             super()._transmit(frames)
 
     def send(self, msg: mavlink.MAVLink_message) -> None:
-        self._send_datagram(codec.pack(self.mav, msg))  # signed when a key is set
+        self._send_datagram(self.pack(msg))  # signed when the link has a key
         self.counters.messages_tx += 1
 
     def send_frame(self, frame: bytes) -> None:

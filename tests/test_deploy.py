@@ -125,3 +125,16 @@ def test_the_companion_says_where_it_waits_for_a_heartbeat(tmp_path):
     assert err.strip().splitlines() == [
         f"beliefnav: error: --master udpin:127.0.0.1:{port}: no autopilot HEARTBEAT within 3 s"]
     assert (tmp_path / "out" / "summary.json").is_file()
+
+
+def test_a_run_whose_duration_ends_before_any_heartbeat_is_no_success(tmp_path):
+    """``--duration-s`` shorter than the discovery time-out (docs/autopilot.md's udpin example with
+    nothing sending): the same one line and exit 2 as a discovery time-out, not exit 0 with no autopilot."""
+    port = free_port()
+    argv = [sys.executable, "-m", "gcs_tools", "companion", "--master", f"udpin:127.0.0.1:{port}",
+            "--out", str(tmp_path / "out"), "--no-telemetry", "--duration-s", "1"]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"beliefnav: error: --master udpin:127.0.0.1:{port}: no autopilot HEARTBEAT within 1 s"]
+    assert (tmp_path / "out" / "summary.json").is_file()

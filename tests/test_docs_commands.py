@@ -192,3 +192,19 @@ def test_the_collector_joins_continuations_as_the_shell_does() -> None:
     assert argv_of("$ A_B=1 beliefnav fly --out x  # comment") == ["beliefnav", "fly", "--out", "x"]
     assert argv_of("python -m gcs_tools.evaluate.real --flights reporting | tee log") == [
         "-m", "gcs_tools.evaluate.real", "--flights", "reporting"]
+
+
+MAIN_COMMANDS = ["beliefnav", "beliefnav replay", "beliefnav gnss spp", "beliefnav bench"]
+
+
+@pytest.mark.parametrize("command", MAIN_COMMANDS)
+def test_every_option_of_a_main_command_is_in_the_docs(command: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The converse: what ``--help`` offers for the commands a new user tries first is named somewhere in
+    README.md or docs/ (gnss spp's --no-earth-rotation and --elevation-mask-deg were not)."""
+    error, text = parse([*command.split(), "--help"], monkeypatch)
+    assert error is None, error
+    options = set(re.findall(r"(?<![\w-])--[a-z0-9][a-z0-9-]*", text)) - {"--help"}
+    assert options
+    docs = "\n".join(doc.read_text(encoding="utf-8") for doc in DOCS)
+    missing = sorted(o for o in options if not re.search(re.escape(o) + r"(?![\w-])", docs))
+    assert not missing, f"{command}: in --help but in no doc: {', '.join(missing)}"

@@ -212,6 +212,31 @@ def test_udpin_target_and_udpout_client_both_receive_the_scheduled_telemetry(gro
         client.close()
 
 
+def test_a_signed_ground_link_signs_its_own_telemetry_too():
+    """With a key every frame the vehicle sends to a ground station is signed, its own telemetry as
+    well as what it answers: a pymavlink client holding the key (as the ground station docs show)
+    reads them all, and nothing arrives unsigned."""
+    import time
+
+    key = b"k" * 32
+    client = _Client()
+    client.mav.signing.secret_key = key
+    client.mav.signing.sign_outgoing = True
+    client.mav.signing.timestamp = int((time.time() - 1_420_070_400) * 100_000)
+    link = GroundLink(GroundConfig(0, ()), {"signing_key": key}, _server(), HOME, lambda: 7_000)
+    try:
+        client.send(m.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3), link.link.port)  # udpout: talks first
+        assert [x.get_type() for x in link.link.recv_all()] == ["HEARTBEAT"]  # signed: accepted
+        link.tick(_status(t_us=0))
+        got = client.receive(want=12)
+        assert len(got) == 12 and "BAD_DATA" not in [x.get_type() for x in got]
+        assert all(x.get_signed() for x in got)
+        assert client.mav.signing.goodsig_count == 12 and client.mav.signing.unsigned_count == 0
+    finally:
+        link.close()
+        client.close()
+
+
 def test_requests_are_answered_to_the_requester(ground):
     link, listener = ground
     port = link.link.port

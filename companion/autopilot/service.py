@@ -18,7 +18,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from companion.autopilot.connection import open_connection, parse_connection
 from companion.autopilot.discovery import DiscoveryConfig
@@ -131,6 +131,15 @@ def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) ->
     return result
 
 
+def _no_heartbeat(node: AutopilotCompanion, waited_s: float) -> NoReturn:
+    """No autopilot found in ``waited_s``: one line (exit 2), naming frames refused for their signature."""
+    node.errors.append("no autopilot HEARTBEAT")
+    refused = sum(node.conn.counters[k] for k in ("unsigned", "bad_signature", "replayed"))
+    hint = (f" ({refused} frames refused: not signed with our key; is signing set up on the "
+            "autopilot? see --setup-signing)" if refused else "")
+    raise UserError(f"--master {node.config.master}: no autopilot HEARTBEAT within {waited_s:g} s" + hint)
+
+
 def serve(node: AutopilotCompanion, start_s: float, checkpoint: Any = None,
           receiver: RawReceiver | None = None) -> str | None:
     """The loop; returns why the run failed (the autopilot lost) or None. ``checkpoint()`` is called
@@ -140,16 +149,13 @@ def serve(node: AutopilotCompanion, start_s: float, checkpoint: Any = None,
     next_checkpoint = start_s + c.summary_period_s
     while True:
         now = time.monotonic()
-        if c.duration_s is not None and now - start_s >= c.duration_s:
-            return None
         d = node.discovery
+        if c.duration_s is not None and now - start_s >= c.duration_s:
+            if d.autopilot is None:  # the run's time is up before any autopilot was found: not a success
+                _no_heartbeat(node, min(c.duration_s, c.discovery_timeout_s))
+            return None
         if d.autopilot is None and now - start_s > c.discovery_timeout_s:
-            node.errors.append("no autopilot HEARTBEAT")
-            refused = sum(node.conn.counters[k] for k in ("unsigned", "bad_signature", "replayed"))
-            hint = (f" ({refused} frames refused: not signed with our key; is signing set up on the "
-                    "autopilot? see --setup-signing)" if refused else "")
-            raise UserError(f"--master {c.master}: no autopilot HEARTBEAT within {c.discovery_timeout_s:g} s"
-                            + hint)
+            _no_heartbeat(node, c.discovery_timeout_s)
         if d.given_up(now):
             ap = d.autopilot
             assert ap is not None

@@ -168,14 +168,18 @@ class UdpLink:
         """Pack (and sign) ``msg`` and send it to the peer; without a peer yet it is skipped."""
         if self.peer is None:
             return
+        self._send_datagram(self.pack(msg))
+        self.counters.messages_tx += 1
+
+    def pack(self, msg: mavlink.MAVLink_message) -> bytes:
+        """``msg`` as this link's next frame: signed when the link has a key; advances the sequence."""
         mav = self._mav
         if self.signer is None:  # the fast packer, byte-equal to pymavlink's (signed too, below)
-            self._send_datagram(pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent))
+            frame = pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent)
         else:
-            frame = pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent, signed=True)
-            self._send_datagram(self.signer.sign(frame))
+            frame = self.signer.sign(pack_frame(msg, mav.seq, mav.srcSystem, mav.srcComponent, signed=True))
         mav.seq = (mav.seq + 1) & 0xFF
-        self.counters.messages_tx += 1
+        return frame
 
     def begin_batch(self) -> None:
         """Collect the frames sent from now on into one datagram, sent by :meth:`flush` (lockstep

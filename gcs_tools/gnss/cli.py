@@ -73,7 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-earth-rotation", action="store_true", help="leave the Sagnac term out (to see what it is worth)"
     )
-    p.add_argument("--elevation-mask-deg", type=float, default=SppConfig.elevation_mask_deg)
+    p.add_argument("--elevation-mask-deg", type=float, default=SppConfig.elevation_mask_deg,
+                   help=f"satellites below this elevation (deg) are not used "
+                        f"(default {SppConfig.elevation_mask_deg:g})")
     p.add_argument(
         "--variants",
         action="store_true",

@@ -36,7 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "this mission, as the SITL estimator did; default: EstimatorConfig defaults "
                              "(real-log values), home = first good fix")
     parser.add_argument("--rate-hz", type=float, default=20.0,
-                        help="estimate rows per second in estimates.csv (0: one per IMU sample)")
+                        help="at most this many estimate rows per second in estimates.csv (default 20; "
+                             "0: one per IMU sample)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--no-figures", action="store_true",
                         help="no track.png and errors.png (the figures of the estimate against the log's "
