@@ -75,6 +75,14 @@ class EstimatorConfig:
     # Longest an IMU sample is held: a longer interval is a gap (counted; the filter coasts at
     # constant velocity after this). 10 periods at 200 Hz; quad106's ~50 Hz IMU has 1 such gap.
     imu_hold_max_s: float = 0.05
+    # A sample held over time it did not measure (an interval longer than 1.5 IMU periods: samples were
+    # lost) adds process noise (history.py, "Held time"): the held sample's white noise (σ_q² per period)
+    # and the change of the acceleration meanwhile, a random walk of this density (m/s² per √s: velocity
+    # variance σ² L³ / 3 over a hold of L s). 1.1: the vertical value of the simulated quadrotor's truth on
+    # the tuning mission (default-tuning, seeds 1000-1001: 3 E[dv²] / L³ of the true acceleration held
+    # 20-80 ms gives σ = 0.97-1.15 vertical, 0.2-0.5 horizontal: thrust changes most; docs/estimator.md).
+    # 0: the white part only.
+    imu_hold_acc_rw_m_s2_sqrt_s: float = 1.1
 
     # --- belief adaptation (eq. 15-21)
     theta0: float = 0.0  # initial belief logit (β0 = 0.5: undecided)
@@ -300,7 +308,7 @@ class EstimatorConfig:
         for name in ("future_tolerance_s", "lambda_smooth_1_m", "lambda_bias_level",
                      "sigma_bias_max_per_gnss_std", "sigma_gnss_unreported_bias_m",
                      "eta_first_order", "sigma_acc_bias0_m_s2", "sigma_acc_bias_rw_m_s2_sqrt_s",
-                     "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s"):
+                     "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s", "imu_hold_acc_rw_m_s2_sqrt_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name}: must be a finite number >= 0")
 
