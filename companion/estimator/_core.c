@@ -620,7 +620,7 @@ typedef struct {
     Py_ssize_t start, n, cap;
     Py_ssize_t trim_len;  /* push returns 1 once the history is longer (the engine trims) */
     long long n_used, n_gaps, n_nonfinite, n_backwards;  /* samples pushed, by outcome */
-    long long ring[RING];  /* the last sample intervals (us), for the period (hist_period) */
+    long long ring[RING];  /* the last sample intervals (us), for the period (held_period) */
     int ring_n, ring_i;
 } History;
 
@@ -708,26 +708,30 @@ static void next_row(const double *r, double t, double ax, double ay, double az,
     }
 }
 
-/* The IMU's period (us): the median (the lower one of an even count) of the last RING sample
- * intervals; 0 before the first interval. */
-static long long hist_period(const History *h) {
+/* The IMU's period (us), the median (the lower one of an even count) of the last RING sample intervals,
+ * when the interval dt_us is longer than 1.5 periods (a sample is missing: the interval would be two
+ * periods or more), else 0 (also before the first interval). An interval no longer than 1.5 times the
+ * shortest of them is not (no sort). */
+static long long held_period(const History *h, long long dt_us) {
     long long s[RING];
-    int n = h->ring_n;
+    int n = h->ring_n, longer = 0;
+    for (int i = 0; i < n; i++) longer |= 2 * dt_us > 3 * h->ring[i];
+    if (!longer) return 0;
     memcpy(s, h->ring, sizeof(long long) * (size_t)n);
     for (int i = 1; i < n; i++)  /* insertion sort of at most RING numbers */
         for (int k = i; k > 0 && s[k - 1] > s[k]; k--) {
             long long x = s[k]; s[k] = s[k - 1]; s[k - 1] = x;
         }
-    return n ? s[(n - 1) / 2] : 0;
+    long long p = s[(n - 1) / 2];
+    return 2 * dt_us > 3 * p ? p : 0;
 }
 
-/* The held-time densities (w, j) of an input held over [tp, t] (s), the interval to the next sample
- * dt_us long, against the period p_us: held when the interval is longer than 1.5 periods (a sample
- * is missing: the interval would be two periods or more), then w = (L - p) / p and j = L^2 / 3 over
- * the L = t - tp the input is held (history.py, "Held time"); else (0, 0). */
-static void held_densities(long long dt_us, long long p_us, double tp, double t, double *w, double *j) {
+/* The held-time densities (w, j) of an input held over [tp, t] (s) against the period p_us (held_period;
+ * 0: not held, (0, 0)): w = (L - p) / p and j = L^2 / 3 over the L = t - tp the input is held
+ * (history.py, "Held time"). */
+static void held_densities(long long p_us, double tp, double t, double *w, double *j) {
     *w = *j = 0.0;
-    if (p_us <= 0 || 2 * dt_us <= 3 * p_us) return;
+    if (p_us <= 0) return;
     double L = t - tp, p = (double)p_us * 1e-6;
     if (L <= p) return;
     *w = (L - p) / p;
@@ -750,7 +754,7 @@ static int hist_append_c(History *h, long long t_us, double ax, double ay, doubl
     }
     double *r = HROW(h, h->n - 1);
     double t = (double)(t_us - h->t0) * 1e-6;
-    long long dt_us = t_us - HT(h, h->n - 1), p_us = hist_period(h);
+    long long dt_us = t_us - HT(h, h->n - 1), p_us = held_period(h, dt_us);
     h->ring[h->ring_i] = dt_us;
     h->ring_i = (h->ring_i + 1) % RING;
     if (h->ring_n < RING) h->ring_n++;
@@ -759,7 +763,7 @@ static int hist_append_c(History *h, long long t_us, double ax, double ay, doubl
     if (gap) {  /* held for hold_max_s (held time), then coasting (none) */
         long long tv = HT(h, h->n - 1) + h->hold_us;
         double tvs = (double)(tv - h->t0) * 1e-6;
-        held_densities(dt_us, p_us, r[0], tvs, &w, &j);
+        held_densities(p_us, r[0], tvs, &w, &j);
         double *o = HROW(h, h->n);
         next_row(r, tvs, 0.0, 0.0, 0.0, r + 10, w, j, o);
         HT(h, h->n) = tv;
@@ -768,7 +772,7 @@ static int hist_append_c(History *h, long long t_us, double ax, double ay, doubl
         r = HROW(h, h->n - 1);
         w = j = 0.0;
     } else {
-        held_densities(dt_us, p_us, r[0], t, &w, &j);
+        held_densities(p_us, r[0], t, &w, &j);
     }
     next_row(r, t, ax, ay, az, rot, w, j, HROW(h, h->n));
     HT(h, h->n) = t_us;
