@@ -78,11 +78,11 @@ class EstimatorConfig:
     # A sample held over time it did not measure (an interval longer than 1.5 IMU periods: samples were
     # lost) adds process noise (history.py, "Held time"): the held sample's white noise (σ_q² per period)
     # and the change of the acceleration meanwhile, a random walk of this density (m/s² per √s: velocity
-    # variance σ² L³ / 3 over a hold of L s). 1.1: the vertical value of the simulated quadrotor's truth on
-    # the tuning mission (default-tuning, seeds 1000-1001: 3 E[dv²] / L³ of the true acceleration held
-    # 20-80 ms gives σ = 0.97-1.15 vertical, 0.2-0.5 horizontal: thrust changes most; docs/estimator.md).
-    # 0: the white part only.
-    imu_hold_acc_rw_m_s2_sqrt_s: float = 1.1
+    # variance σ² L³ / 3 over a hold of L s). 1.0: the simulated quadrotor flying the tuning mission on its
+    # estimate (python -m gcs_tools.evaluate.hold_probe: default-tuning, seeds 1000-1001, the true
+    # acceleration held 40-45 ms, a lost datagram's hold, gives σ = 0.95-0.96 vertical, 0.26-0.33
+    # horizontal: thrust changes most), rounded up. 0: the white part only.
+    imu_hold_acc_rw_m_s2_sqrt_s: float = 1.0
 
     # --- belief adaptation (eq. 15-21)
     theta0: float = 0.0  # initial belief logit (β0 = 0.5: undecided)
