@@ -17,7 +17,8 @@ def test_constant_jerk_gives_its_closed_form():
     jerk, m = np.array([0.5, -2.0, 3.0]), 8
     a = np.arange(400)[:, None] * DT * jerk
     dv = jerk * DT**2 * m * (m - 1) / 2.0
-    np.testing.assert_allclose(hold_density(_velocity(a), DT, m), np.sqrt(3.0 * dv**2 / (m * DT) ** 3), rtol=1e-9)
+    expected = np.sqrt(3.0 * dv**2 / (m * DT) ** 3)
+    np.testing.assert_allclose(hold_density(_velocity(a), DT, m), expected, rtol=1e-9)
 
 
 def test_a_tick_random_walk_gives_its_density_times_the_discrete_factor():

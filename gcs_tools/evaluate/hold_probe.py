@@ -38,7 +38,8 @@ def hold_density(v_ned_m_s: np.ndarray, dt_s: float, ticks: int) -> np.ndarray:
     return np.sqrt(3.0 * np.mean(dv * dv, axis=0) / L**3)
 
 
-def true_velocity(mission: str, profile: int, seed: int, method: str = "second-order") -> tuple[np.ndarray, float]:
+def true_velocity(mission: str, profile: int, seed: int,
+                  method: str = "second-order") -> tuple[np.ndarray, float]:
     """The true NED velocity at every physics tick of one flight flown on ``method``'s estimate (as
     ``beliefnav fly`` flies it), and the tick (s)."""
     from companion.mission import load_mission
