@@ -19,47 +19,76 @@ Row = tuple[float, ...]
 
 
 class ReferenceHistory:
-    """history.py's formulas as Python floats: rows (t_s, ã, S1, S2, R, M1, M2), zero-order hold,
-    a gap held for ``hold_max_s`` then a virtual zero-acceleration sample."""
+    """history.py's formulas as Python floats: rows (t_s, ã, S1, S2, R, M1, M2, (w, j), W, J), zero-order
+    hold, a gap held for ``hold_max_s`` then a virtual zero-acceleration sample; held time (an interval
+    over 1.5 periods, the period the median of the last 8 intervals) with its densities and moments."""
 
     def __init__(self, hold_max_s: float) -> None:
         self.hold_max_s, self.hold_us = hold_max_s, int(round(hold_max_s * 1e6))
         self.t0_us = 0
         self.t_us: list[int] = []
         self.rows: list[tuple[float, ...]] = []
+        self.intervals: list[int] = []
 
     @staticmethod
-    def _next(r: Row, t: float, a: Row, rot: Row) -> Row:
+    def _held(r: Row, t: float, dens: tuple[float, float]) -> list[float]:
+        """(w, j), W and J of the row at t after r, the interval's densities ``dens``."""
+        w, j = dens
+        if w == 0.0 and j == 0.0:
+            return [w, j, *r[39:45]]
+        dt = t - r[0]
+        m = (dt, dt * (r[0] + t) * 0.5, dt * (r[0] * r[0] + r[0] * t + t * t) / 3.0)
+        return [w, j, *(r[39 + i] + w * m[i] for i in range(3)), *(r[42 + i] + j * m[i] for i in range(3))]
+
+    @classmethod
+    def _next(cls, r: Row, t: float, a: Row, rot: Row, dens: tuple[float, float] = (0.0, 0.0)) -> Row:
         dt = t - r[0]
         dm = dt * (r[0] + t) * 0.5
         held = r[1:4] + r[10:19]
         i1 = [s + h * dt for s, h in zip(r[4:7] + r[19:28], held, strict=True)]
         i2 = [s + h * dm for s, h in zip(r[7:10] + r[28:37], held, strict=True)]
-        return (t, *a, *i1[0:3], *i2[0:3], *rot, *i1[3:12], *i2[3:12])
+        return (t, *a, *i1[0:3], *i2[0:3], *rot, *i1[3:12], *i2[3:12], *cls._held(r, t, dens))
+
+    def _densities(self, dt_us: int, t_prev: float, t_end: float) -> tuple[float, float]:
+        last = sorted(self.intervals[-9:-1])  # the period: before this interval
+        if not last:
+            return 0.0, 0.0
+        p_us = last[(len(last) - 1) // 2]
+        L, p = t_end - t_prev, p_us * 1e-6
+        if 3 * p_us >= 2 * dt_us or p >= L:
+            return 0.0, 0.0
+        return (L - p) / p, L * L / 3.0
 
     def append(self, t_us: int, ax: float, ay: float, az: float, rot: tuple[float, ...] = IDENTITY9) -> bool:
         if not self.rows:
             self.t0_us = t_us
             self.t_us.append(t_us)
-            self.rows.append((0.0, ax, ay, az, *(0.0,) * 6, *rot, *(0.0,) * 18))
+            self.rows.append((0.0, ax, ay, az, *(0.0,) * 6, *rot, *(0.0,) * 26))
             return False
         r = self.rows[-1]
         t = (t_us - self.t0_us) * 1e-6
+        dt_us = t_us - self.t_us[-1]
+        self.intervals.append(dt_us)
         gap = t - r[0] > self.hold_max_s
         if gap:
             tv_us = self.t_us[-1] + self.hold_us
+            tv = (tv_us - self.t0_us) * 1e-6
             self.t_us.append(tv_us)
-            self.rows.append(self._next(r, (tv_us - self.t0_us) * 1e-6, (0.0, 0.0, 0.0), r[10:19]))
+            self.rows.append(self._next(r, tv, (0.0, 0.0, 0.0), r[10:19], self._densities(dt_us, r[0], tv)))
+            dens = (0.0, 0.0)
+        else:
+            dens = self._densities(dt_us, r[0], t)
         self.t_us.append(t_us)
-        self.rows.append(self._next(self.rows[-1], t, (ax, ay, az), tuple(rot)))
+        self.rows.append(self._next(self.rows[-1], t, (ax, ay, az), tuple(rot), dens))
         return gap
 
     def integrals(self, t_us: int) -> tuple[float, ...]:
         k = max(i for i, t in enumerate(self.t_us) if t <= t_us)
         r = self.rows[k]
         t = (t_us - self.t0_us) * 1e-6
-        nxt = self._next(r, t, r[1:4], r[10:19]) if t != r[0] else r
-        return (t, *nxt[4:10], *nxt[19:37])
+        dens = self.rows[k + 1][37:39] if k + 1 < len(self.rows) else (0.0, 0.0)
+        nxt = self._next(r, t, r[1:4], r[10:19], dens) if t != r[0] else r
+        return (t, *nxt[4:10], *nxt[19:37], *nxt[39:45])
 
 
 def _rot9(rng: np.random.Generator) -> tuple[float, ...]:

@@ -9,7 +9,8 @@
  * numpy reference forms of model.py and a pure-Python history kept in the tests.
  *
  * State x = [p, v, b (NED), a (FRD), d (NED)] (15), covariance P 15x15 (C order, float64).
- * Integrals = (t_s, S1 (3), S2 (3), M1 (9), M2 (9)) (25 floats, history.py).
+ * Integrals = (t_s, S1 (3), S2 (3), M1 (9), M2 (9), W (3), J (3)) (31 floats, history.py): W and J
+ * the moments (∫ n, ∫ n s, ∫ n s^2) of the held-time noise densities (history.py, "Held time").
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -21,8 +22,9 @@
 
 #define NS 15
 #define NN (NS * NS)
-#define ROW 37
-#define NINT 25
+#define ROW 45
+#define NINT 31
+#define RING 8  /* recent sample intervals: their median is the IMU's period */
 
 
 /* ------------------------------------------------------------------ helpers */
@@ -177,7 +179,26 @@ static int newest_integrals(PyObject *o, double *out);
 typedef struct {
     PyObject_HEAD
     double q_acc, q_rw, q_ned;
+    double q_hold_white, q_hold_rw;  /* the densities the held-time moments W and J are scaled by */
 } Propagator;
+
+/* The held-time process noise of a block between integrals a and b (history.py, "Held time"): the
+ * white acceleration density n(s) = q_hold_white w(s) + q_hold_rw j(s) on p, v (each axis):
+ * hq = (pp, pv, vv) = (∫ n (t_b - s)^2, ∫ n (t_b - s), ∫ n) over the block; 0 when it holds no
+ * held time or the densities are 0 (then nothing is added: the prediction is bit-identical to one
+ * without). */
+static int held_q(const Propagator *pr, const double *a, const double *b, double *hq) {
+    double w0 = b[25] - a[25], j0 = b[28] - a[28];
+    if ((w0 == 0.0 || pr->q_hold_white == 0.0) && (j0 == 0.0 || pr->q_hold_rw == 0.0)) return 0;
+    double d0 = pr->q_hold_white * w0 + pr->q_hold_rw * j0;
+    double d1 = pr->q_hold_white * (b[26] - a[26]) + pr->q_hold_rw * (b[29] - a[29]);
+    double d2 = pr->q_hold_white * (b[27] - a[27]) + pr->q_hold_rw * (b[30] - a[30]);
+    double tb = b[0];
+    hq[0] = tb * tb * d0 - 2.0 * tb * d1 + d2;
+    hq[1] = tb * d0 - d1;
+    hq[2] = d0;
+    return 1;
+}
 
 /* out = F P F^T + Q for a block (model.BlockPropagator.predict); F's non-zero structure:
  * p_i row: 1 at p_i, T at v_i, -B_i (nB row i) on a, h = -T^2/2 at d_i;
@@ -207,7 +228,7 @@ static void transpose(const double *M, double *out) {
 }
 
 static void predict_c(const Propagator *pr, const double *P, double T, const double *nA, const double *nB,
-                      double alpha, double q_b, double *out) {
+                      double alpha, double q_b, const double *hq, double *out) {
     double FP[NN], FPt[NN], G[NN];
     apply_f_rows(P, FP, T, nA, nB, alpha);   /* F P */
     transpose(FP, FPt);                      /* (F P)^T = P F^T */
@@ -220,6 +241,12 @@ static void predict_c(const Propagator *pr, const double *P, double T, const dou
     double pp = q * T2 * T / 3.0 + we * T2 * T2 * T / 20.0, pv = q * T2 / 2.0 + we * T2 * T2 / 8.0;
     double vv = q * T + we * T2 * T / 3.0, aa = w * T, dd = e * T, pd = -e * T2 * T / 6.0, vd = -e * T2 / 2.0;
     double kp = pr->q_rw * T * T / 6.0, kv = pr->q_rw * T / 2.0;
+    for (int i = 0; hq && i < 3; i++) {  /* held time (held_q) */
+        out[i * NS + i] += hq[0];
+        out[i * NS + 3 + i] += hq[1];
+        out[(3 + i) * NS + i] += hq[1];
+        out[(3 + i) * NS + 3 + i] += hq[2];
+    }
     for (int i = 0; i < 3; i++) {
         out[i * NS + i] += pp;
         out[i * NS + 3 + i] += pv;
@@ -244,7 +271,7 @@ static void predict_c(const Propagator *pr, const double *P, double T, const dou
 
 /* The variances of p, v, b of predict_c, alone (BlockPropagator.variances). */
 static void variances_c(const Propagator *pr, const double *P, double T, const double *nA, const double *nB,
-                        double alpha, double q_b, double *var) {
+                        double alpha, double q_b, const double *hq, double *var) {
     double h = -0.5 * T * T, m = -T;
     for (int i = 0; i < 3; i++) {
         int ip[6] = {i, 3 + i, 9, 10, 11, 12 + i};
@@ -271,6 +298,10 @@ static void variances_c(const Propagator *pr, const double *P, double T, const d
     double pp = pr->q_acc * T2 * T / 3.0 + we * T2 * T2 * T / 20.0;
     double vv = pr->q_acc * T + we * T2 * T / 3.0;
     double a2 = alpha * alpha;
+    for (int i = 0; hq && i < 3; i++) {  /* held time (held_q), as predict_c adds it */
+        var[i] = var[i] + hq[0];
+        var[3 + i] = var[3 + i] + hq[2];
+    }
     for (int i = 0; i < 3; i++) {
         var[i] = var[i] + pp;
         var[3 + i] = var[3 + i] + vv;
@@ -328,7 +359,10 @@ static double update_c(const double *x, const double *P, const double *y, const 
 }
 
 static int prop_init(Propagator *self, PyObject *args, PyObject *kw) {
-    if (!PyArg_ParseTuple(args, "ddd", &self->q_acc, &self->q_rw, &self->q_ned)) return -1;
+    self->q_hold_white = self->q_hold_rw = 0.0;
+    if (!PyArg_ParseTuple(args, "ddd|dd", &self->q_acc, &self->q_rw, &self->q_ned, &self->q_hold_white,
+                          &self->q_hold_rw))
+        return -1;
     return 0;
 }
 
@@ -345,7 +379,7 @@ static PyObject *prop_predict(Propagator *self, PyObject *const *args, Py_ssize_
     if (nargs != 6) { PyErr_SetString(PyExc_TypeError, "predict(P, T, nA, nB, alpha, q_b)"); return NULL; }
     double P[NN], out[NN], T, nA[9], nB[9], alpha, q_b;
     if (read_cov(args[0], P) < 0 || parse_block(args + 1, &T, nA, nB, &alpha, &q_b) < 0) return NULL;
-    predict_c(self, P, T, nA, nB, alpha, q_b, out);
+    predict_c(self, P, T, nA, nB, alpha, q_b, NULL, out);
     return new_cov(out);
 }
 
@@ -357,7 +391,7 @@ static PyObject *prop_variances(Propagator *self, PyObject *const *args, Py_ssiz
     }
     double P[NN], var[9], T, nA[9], nB[9], alpha, q_b;
     if (read_cov(args[0], P) < 0 || parse_block(args + 1, &T, nA, nB, &alpha, &q_b) < 0) return NULL;
-    variances_c(self, P, T, nA, nB, alpha, q_b, var);
+    variances_c(self, P, T, nA, nB, alpha, q_b, NULL, var);
     return list_of(var, 9);
 }
 
@@ -371,7 +405,8 @@ static PyObject *prop_predict_from(Propagator *self, PyObject *const *args, Py_s
     double T = PyFloat_AsDouble(args[4]), alpha = PyFloat_AsDouble(args[5]), q_b = PyFloat_AsDouble(args[6]);
     if (PyErr_Occurred()) return NULL;
     mean_between_c(x, a, b, alpha, xo, nA, nB);
-    predict_c(self, P, T, nA, nB, alpha, q_b, out);
+    double hq[3];
+    predict_c(self, P, T, nA, nB, alpha, q_b, held_q(self, a, b, hq) ? hq : NULL, out);
     pht_of(out, PHt, hph);
     double pp[3] = {PHt[0], PHt[4], PHt[8]};
     return Py_BuildValue("(NN((ddd)(ddd)(ddd))N)", tuple_of(xo, NS), new_cov(out), hph[0], hph[1], hph[2], hph[3],
@@ -392,7 +427,8 @@ static PyObject *prop_output_from(Propagator *self, PyObject *const *args, Py_ss
     if (PyErr_Occurred()) return NULL;
     mean_between_c(x, a, b, alpha, xo, nA, nB);
     memcpy(out, xo, sizeof(double) * 9);
-    variances_c(self, P, T, nA, nB, alpha, q_b, out + 9);
+    double hq[3];
+    variances_c(self, P, T, nA, nB, alpha, q_b, held_q(self, a, b, hq) ? hq : NULL, out + 9);
     return Py_BuildValue("(NN)", tuple_of(xo, NS), new_array(1, 18, 0, out));
 }
 
@@ -409,7 +445,8 @@ static PyTypeObject PropagatorType = {
     .tp_name = "companion.estimator._core.Propagator",
     .tp_basicsize = sizeof(Propagator),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE,
-    .tp_doc = "Propagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5): the 15-state block prediction",
+    .tp_doc = "Propagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5, q_hold_white_m2_s3=0, q_hold_rw_m2_s5=0): "
+              "the 15-state block prediction",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)prop_init,
     .tp_methods = prop_methods,
@@ -578,10 +615,13 @@ typedef struct {
     long long t0;
     int started;
     long long *t;     /* sample times (us) */
-    double *rows;     /* ROW doubles per sample: t_s, a (3), S1 (3), S2 (3), R (9), M1 (9), M2 (9) */
+    double *rows;     /* ROW doubles per sample: t_s, a (3), S1 (3), S2 (3), R (9), M1 (9), M2 (9), the
+                       * held-time densities (w, j) of the interval ending here, W (3), J (3) */
     Py_ssize_t start, n, cap;
     Py_ssize_t trim_len;  /* push returns 1 once the history is longer (the engine trims) */
     long long n_used, n_gaps, n_nonfinite, n_backwards;  /* samples pushed, by outcome */
+    long long ring[RING];  /* the last sample intervals (us), for the period (held_period) */
+    int ring_n, ring_i;
 } History;
 
 static int hist_init(History *self, PyObject *args, PyObject *kw) {
@@ -594,6 +634,7 @@ static int hist_init(History *self, PyObject *args, PyObject *kw) {
     self->start = self->n = 0;
     self->trim_len = PY_SSIZE_T_MAX;
     self->n_used = self->n_gaps = self->n_nonfinite = self->n_backwards = 0;
+    self->ring_n = self->ring_i = 0;
     if (!self->t) {
         self->cap = 1024;
         self->t = PyMem_Malloc(sizeof(long long) * self->cap);
@@ -633,11 +674,28 @@ static PyTypeObject HistoryType;
 #define HROW(h, k) ((h)->rows + ((h)->start + (k)) * ROW)
 #define HT(h, k) ((h)->t[(h)->start + (k)])
 
-/* the row after r at time t (s) holding a (3) and R (9): history._next_row */
-static void next_row(const double *r, double t, double ax, double ay, double az, const double *rot, double *o) {
+/* (∫ s, ∫ s^2) over [tp, t] */
+static void moments(double tp, double t, double *dm, double *d3) {
+    double dt = t - tp;
+    *dm = dt * (tp + t) * 0.5;
+    *d3 = dt * (tp * tp + tp * t + t * t) / 3.0;
+}
+
+/* the row after r at time t (s) holding a (3) and R (9), with the held-time densities (w, j) of the
+ * interval [r's time, t]: history._next_row */
+static void next_row(const double *r, double t, double ax, double ay, double az, const double *rot, double w,
+                     double j, double *o) {
     double tp = r[0];
     double dt = t - tp;
     double dm = dt * (tp + t) * 0.5;
+    o[37] = w; o[38] = j;
+    if (w != 0.0 || j != 0.0) {
+        double d3 = dt * (tp * tp + tp * t + t * t) / 3.0;  /* ∫ s^2 (moments) */
+        o[39] = r[39] + w * dt; o[40] = r[40] + w * dm; o[41] = r[41] + w * d3;
+        o[42] = r[42] + j * dt; o[43] = r[43] + j * dm; o[44] = r[44] + j * d3;
+    } else {
+        memcpy(o + 39, r + 39, sizeof(double) * 6);
+    }
     o[0] = t; o[1] = ax; o[2] = ay; o[3] = az;
     for (int i = 0; i < 3; i++) {
         o[4 + i] = r[4 + i] + r[1 + i] * dt;
@@ -648,6 +706,36 @@ static void next_row(const double *r, double t, double ax, double ay, double az,
         o[19 + i] = r[19 + i] + r[10 + i] * dt;
         o[28 + i] = r[28 + i] + r[10 + i] * dm;
     }
+}
+
+/* The IMU's period (us), the median (the lower one of an even count) of the last RING sample intervals,
+ * when the interval dt_us is longer than 1.5 periods (a sample is missing: the interval would be two
+ * periods or more), else 0 (also before the first interval). An interval no longer than 1.5 times the
+ * shortest of them is not (no sort). */
+static long long held_period(const History *h, long long dt_us) {
+    long long s[RING];
+    int n = h->ring_n, longer = 0;
+    for (int i = 0; i < n; i++) longer |= 2 * dt_us > 3 * h->ring[i];
+    if (!longer) return 0;
+    memcpy(s, h->ring, sizeof(long long) * (size_t)n);
+    for (int i = 1; i < n; i++)  /* insertion sort of at most RING numbers */
+        for (int k = i; k > 0 && s[k - 1] > s[k]; k--) {
+            long long x = s[k]; s[k] = s[k - 1]; s[k - 1] = x;
+        }
+    long long p = s[(n - 1) / 2];
+    return 2 * dt_us > 3 * p ? p : 0;
+}
+
+/* The held-time densities (w, j) of an input held over [tp, t] (s) against the period p_us (held_period;
+ * 0: not held, (0, 0)): w = (L - p) / p and j = L^2 / 3 over the L = t - tp the input is held
+ * (history.py, "Held time"). */
+static void held_densities(long long p_us, double tp, double t, double *w, double *j) {
+    *w = *j = 0.0;
+    if (p_us <= 0) return;
+    double L = t - tp, p = (double)p_us * 1e-6;
+    if (L <= p) return;
+    *w = (L - p) / p;
+    *j = L * L / 3.0;
 }
 
 /* append (the caller gates time order and finiteness): 1 on a gap, 0 otherwise, -1 on error */
@@ -666,17 +754,27 @@ static int hist_append_c(History *h, long long t_us, double ax, double ay, doubl
     }
     double *r = HROW(h, h->n - 1);
     double t = (double)(t_us - h->t0) * 1e-6;
+    long long dt_us = t_us - HT(h, h->n - 1), p_us = held_period(h, dt_us);
+    h->ring[h->ring_i] = dt_us;
+    h->ring_i = (h->ring_i + 1) % RING;
+    if (h->ring_n < RING) h->ring_n++;
+    double w, j;
     int gap = t - r[0] > h->hold_max_s;
-    if (gap) {
+    if (gap) {  /* held for hold_max_s (held time), then coasting (none) */
         long long tv = HT(h, h->n - 1) + h->hold_us;
+        double tvs = (double)(tv - h->t0) * 1e-6;
+        held_densities(p_us, r[0], tvs, &w, &j);
         double *o = HROW(h, h->n);
-        next_row(r, (double)(tv - h->t0) * 1e-6, 0.0, 0.0, 0.0, r + 10, o);
+        next_row(r, tvs, 0.0, 0.0, 0.0, r + 10, w, j, o);
         HT(h, h->n) = tv;
         h->n++;
         if (hist_reserve(h) < 0) return -1;
         r = HROW(h, h->n - 1);
+        w = j = 0.0;
+    } else {
+        held_densities(p_us, r[0], t, &w, &j);
     }
-    next_row(r, t, ax, ay, az, rot, HROW(h, h->n));
+    next_row(r, t, ax, ay, az, rot, w, j, HROW(h, h->n));
     HT(h, h->n) = t_us;
     h->n++;
     return gap;
@@ -800,10 +898,19 @@ static int hist_integrals_c(const History *h, long long t_us, double *o) {
     double t = (double)(t_us - h->t0) * 1e-6;
     double tau = t - r[0];
     o[0] = t;
+    memcpy(o + 25, r + 39, sizeof(double) * 6);
     if (tau == 0.0) {
         memcpy(o + 1, r + 4, sizeof(double) * 6);
         memcpy(o + 7, r + 19, sizeof(double) * 18);
         return 0;
+    }
+    /* the held-time densities of the interval from r on are in the next row (none yet past the last) */
+    const double *nx = k + 1 < h->n ? HROW(h, k + 1) : NULL;
+    if (nx && (nx[37] != 0.0 || nx[38] != 0.0)) {
+        double dm2, d3;
+        moments(r[0], t, &dm2, &d3);
+        o[25] += nx[37] * tau; o[26] += nx[37] * dm2; o[27] += nx[37] * d3;
+        o[28] += nx[38] * tau; o[29] += nx[38] * dm2; o[30] += nx[38] * d3;
     }
     double dm = tau * (r[0] + t) * 0.5;
     for (int i = 0; i < 3; i++) {
@@ -833,6 +940,7 @@ static int newest_integrals(PyObject *o, double *out) {
     out[0] = r[0];
     memcpy(out + 1, r + 4, sizeof(double) * 6);
     memcpy(out + 7, r + 19, sizeof(double) * 18);
+    memcpy(out + 25, r + 39, sizeof(double) * 6);
     return 1;
 }
 

@@ -75,6 +75,14 @@ class EstimatorConfig:
     # Longest an IMU sample is held: a longer interval is a gap (counted; the filter coasts at
     # constant velocity after this). 10 periods at 200 Hz; quad106's ~50 Hz IMU has 1 such gap.
     imu_hold_max_s: float = 0.05
+    # A sample held over time it did not measure (an interval longer than 1.5 IMU periods: samples were
+    # lost) adds process noise (history.py, "Held time"): the held sample's white noise (σ_q² per period)
+    # and the change of the acceleration meanwhile, a random walk of this density (m/s² per √s: velocity
+    # variance σ² L³ / 3 over a hold of L s). 1.0: the simulated quadrotor flying the tuning mission on its
+    # estimate (python -m gcs_tools.evaluate.hold_probe: default-tuning, seeds 1000-1001, the true
+    # acceleration held 40-45 ms, a lost datagram's hold, gives σ = 0.95-0.96 vertical, 0.26-0.33
+    # horizontal: thrust changes most), rounded up. 0: the white part only.
+    imu_hold_acc_rw_m_s2_sqrt_s: float = 1.0
 
     # --- belief adaptation (eq. 15-21)
     theta0: float = 0.0  # initial belief logit (β0 = 0.5: undecided)
@@ -300,7 +308,7 @@ class EstimatorConfig:
         for name in ("future_tolerance_s", "lambda_smooth_1_m", "lambda_bias_level",
                      "sigma_bias_max_per_gnss_std", "sigma_gnss_unreported_bias_m",
                      "eta_first_order", "sigma_acc_bias0_m_s2", "sigma_acc_bias_rw_m_s2_sqrt_s",
-                     "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s"):
+                     "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s", "imu_hold_acc_rw_m_s2_sqrt_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name}: must be a finite number >= 0")
 

@@ -177,10 +177,12 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         self._q_acc = cfg.sigma_acc_m_s2**2
         self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
         self._q_ned = cfg.sigma_acc_ned_rw_m_s2_sqrt_s**2
-        self._prop = model.BlockPropagator(self._q_acc, self._q_rw, self._q_ned)
+        # held IMU time (history.py, "Held time"): the white density's share and the acceleration's change
+        q_hold = cfg.imu_hold_acc_rw_m_s2_sqrt_s**2
+        self._prop = model.BlockPropagator(self._q_acc, self._q_rw, self._q_ned, self._q_acc, q_hold)
         # while the IMU disagrees with GNSS: the white-acceleration density inflated
-        self._prop_disagree = model.BlockPropagator(self._q_acc * cfg.imu_gnss_disagree_acc_factor**2,
-                                                    self._q_rw, self._q_ned)
+        q_distrust = self._q_acc * cfg.imu_gnss_disagree_acc_factor**2
+        self._prop_disagree = model.BlockPropagator(q_distrust, self._q_rw, self._q_ned, q_distrust, q_hold)
         self._gate2 = cfg.gnss_gate_sigma**2
         self._vel_gate2 = cfg.gnss_vel_gate_sigma**2
         self._scale_tau_s = cfg.gnss_scale_tau_s

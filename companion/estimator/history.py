@@ -20,6 +20,28 @@ block's transition matrix. A sample arriving more than ``hold_max_s`` after the 
 a gap: the previous input is held for ``hold_max_s`` only, then the filter coasts at constant
 velocity (a virtual zero-acceleration sample that keeps the last rotation), so a stale
 acceleration is never integrated blindly across a gap.
+
+Held time. An interval longer than 1.5 periods of the IMU (the period: the median of the last 8
+sample intervals; a missing sample makes an interval two periods or more) holds its sample over
+time it did not measure. Over the L seconds the sample is held (the interval, or ``hold_max_s`` for
+a gap), with the period p, the hold adds to each axis's velocity variance (besides the model's σ_q² L)
+
+    ΔP_vv = σ_q² L (L − p) / p  +  σ_j² L³ / 3
+
+The first term is the held sample's white noise: a sample carries variance σ_q² / p, held over L it
+gives σ_q² L² / p where L / p measured samples would give σ_q² L. The second is the change of the
+acceleration during the hold, a random walk of density σ_j² (``imu_hold_acc_rw_m_s2_sqrt_s``):
+∫₀ᴸ (a(s) − a(0)) ds has variance σ_j² L³ / 3. Both are spread evenly over the held interval as a
+white acceleration of density n(s) = σ_q² w + σ_j² j (w = (L − p) / p, j = L² / 3), so blocks
+compose and a block holding part of a hold takes its part. The history keeps the moments of w and
+j, W = (∫ w, ∫ w s, ∫ w s²) and J alike, as prefix sums (rows never rewritten: a late fix
+re-propagated through the history gets the same noise), and a block [t_a, t_b] adds
+
+    Q_vv += ∫ n,   Q_pv += ∫ n (t_b − s),   Q_pp += ∫ n (t_b − s)²   (each axis)
+
+(``_core.Propagator``, with σ_q² and σ_j² given). Intervals no longer than 1.5 periods hold nothing
+and add nothing: a stream without a lost sample is predicted bit for bit as before. The coast after
+a gap's ``hold_max_s`` adds none either (as before).
 """
 
 from __future__ import annotations
@@ -28,9 +50,10 @@ import math
 
 from companion.estimator import _core
 
-# A row: (t_s, ã (3), S1 (3), S2 (3), R (9, row-major), M1 (9), M2 (9)); time in s since the first sample.
+# A row: (t_s, ã (3), S1 (3), S2 (3), R (9, row-major), M1 (9), M2 (9), the held-time densities (w, j) of
+# the interval ending at it, W (3), J (3)); time in s since the first sample.
 Row = tuple[float, ...]
-# The prefix integrals at one time: (t_s, S1 (3), S2 (3), M1 (9), M2 (9)).
+# The prefix integrals at one time: (t_s, S1 (3), S2 (3), M1 (9), M2 (9), W (3), J (3)).
 Integrals = tuple[float, ...]
 
 # The numeric core is C (``_core.c``: the formulas above, the same operations in the same order
@@ -58,9 +81,10 @@ class ImuHistory(_core.History):
     * ``append_batch(t_us, a_ned, rot)``: many samples (int64 (n,), float64 (n, 3), (n, 9) or None),
       already checked increasing and gap-free; the same rows as appending one by one (counted
       as used);
-    * ``integrals(t_us)``: (t_s, S1, S2, M1, M2) at a time inside the history (held input
-      extrapolated past the last); rows are never rewritten once appended, so the value for a
-      given time never changes: the engine keeps it with each fusion;
+    * ``integrals(t_us)``: (t_s, S1, S2, M1, M2, W, J) at a time inside the history (held input
+      extrapolated past the last, with no held time: that is known when the next sample comes);
+      rows are never rewritten once appended, so the value for a time up to the newest sample never
+      changes: the engine keeps it with each fusion;
     * ``last_integrals()``, ``trim_before(t_us)`` (drop samples not needed from ``t_us`` on);
     * ``len()``, ``first_t_us``, ``last_t_us``, ``t0_us``, ``hold_max_s``, and copies ``rows``,
       ``t_us`` (for tests).

@@ -21,9 +21,9 @@ attitude error correlated over seconds a number growing with T). Per flight, at 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,11 @@ from gcs_tools import choices
 from gcs_tools.evaluate.tight import table_lines
 from gcs_tools.evaluate.tight_sim import AHRS_REFERENCES, sim_config
 from gcs_tools.jsonvalues import write_results_or_error
+
+if TYPE_CHECKING:
+    from companion.estimator.navigator import Navigator
+    from companion.planning import Route
+    from simvehicle.vehicle import SimVehicle, StepOutput
 
 WINDOWS_S = (0.2, 1.0, 2.0, 5.0)
 GRID_S = 0.1  # window starts
@@ -91,6 +96,25 @@ def real_flight(path: Path) -> dict[str, Any]:
             "density": densities(f.t_s, f.a_ned_m_s2(), t_v, v)}
 
 
+def flown_on_estimate(sim: SimVehicle, nav: Navigator, route: Route, end_us: int) -> Iterator[StepOutput]:
+    """Each control period of ``sim`` to ``end_us``, flown on ``nav``'s estimate: the period's attitude,
+    IMU and released fixes (with the receiver's reported accuracies) pushed in arrival order."""
+    est = None
+    while sim.t_us < end_us:
+        out = sim.advance(est, route.setpoint(sim.t_us))
+        fixes = list(zip(out.gnss_arrival_us, out.gnss_ned, strict=True))
+        k = 0
+        for att, imu in zip(out.attitude, out.imu, strict=True):
+            nav.push(att)
+            nav.push(imu)
+            while k < len(fixes) and fixes[k][0] <= imu.t_us:
+                f = fixes[k][1]
+                nav.push_fix_ned(f.t_validity_us, f.p_ned_m, *sim.gnss.reported_accuracies_m(f))
+                k += 1
+        est = nav.estimate()
+        yield out
+
+
 def sim_flight(mission: str, profile: int, seed: int, ahrs_gnss_velocity: bool | None,
                max_duration_s: float | None = None, scenario: str = "canyon") -> dict[str, Any]:
     """One flight flown as ``tight_sim`` flies it (the loose second-order filter in the loop) under
@@ -113,24 +137,12 @@ def sim_flight(mission: str, profile: int, seed: int, ahrs_gnss_velocity: bool |
     v: list[np.ndarray] = []
     tilt: list[np.ndarray] = []
     g = np.array([0.0, 0.0, STANDARD_GRAVITY_M_S2])
-    est = None
-    while sim.t_us < end_us:
-        out = sim.advance(est, route.setpoint(sim.t_us))
+    for out in flown_on_estimate(sim, nav, route, end_us):
         q = out.q_att_ned_frd
         t.append(np.asarray(out.tick_us, float) * 1e-6)
         a.append(np.einsum("nij,nj->ni", rotation_matrix(q), out.acc_frd_m_s2) + g)
         v.append(out.v_ned_m_s)
         tilt.append(tilt_error_rad(q[-1:], out.q_ned_frd[-1:]))
-        fixes = list(zip(out.gnss_arrival_us, out.gnss_ned, strict=True))
-        k = 0
-        for att, imu in zip(out.attitude, out.imu, strict=True):
-            nav.push(att)
-            nav.push(imu)
-            while k < len(fixes) and fixes[k][0] <= imu.t_us:
-                f = fixes[k][1]
-                nav.push_fix_ned(f.t_validity_us, f.p_ned_m, *sim.gnss.reported_accuracies_m(f))
-                k += 1
-        est = nav.estimate()
     tt = np.concatenate(t)
     tilt_deg = np.degrees(np.concatenate(tilt))
     return {"profile": profile, "seed": seed, "duration_s": round(float(tt[-1] - tt[0]), 1),
