@@ -310,10 +310,10 @@ def test_raim_threshold_known_answers_and_scipy_stats_not_imported_with_the_pack
     assert done.stdout.strip() == "False", done.stdout + done.stderr
 
 
-def test_chi2_table_is_scipys_and_the_tight_navigator_does_not_import_scipy_stats():
-    """CHI2_TABLE holds exactly chi2.ppf(1 − 1e-3, dof); other probabilities and degrees of freedom
-    still come from scipy.stats; a tight navigator started on raw epochs (its RAIM single-point
-    solution, the FDE row) never imports scipy.stats."""
+def test_chi2_thresholds_are_scipys_and_the_tight_navigator_does_not_import_scipy_stats():
+    """chi2_threshold gives exactly chi2.ppf(1 − p, dof) at RAIM's and the tight FDE's default 1e-3 and at
+    other probabilities and degrees of freedom; a tight navigator started on raw epochs (its RAIM
+    single-point solution, the FDE row) never imports scipy.stats."""
     import subprocess
     import sys
 
@@ -321,12 +321,9 @@ def test_chi2_table_is_scipys_and_the_tight_navigator_does_not_import_scipy_stat
 
     from companion.gnss import spp
 
-    for dof in range(1, len(spp.CHI2_TABLE) + 1):
-        assert spp.CHI2_TABLE[dof - 1] == float(chi2.ppf(1.0 - spp.CHI2_P_FALSE_ALARM_TABLE, dof)), dof
-        assert spp.chi2_threshold(1e-3, dof) == spp.CHI2_TABLE[dof - 1]
-    n = len(spp.CHI2_TABLE) + 1
-    assert spp.chi2_threshold(1e-3, n) == float(chi2.ppf(1.0 - 1e-3, n))
-    assert spp.chi2_threshold(2e-3, 3) == float(chi2.ppf(1.0 - 2e-3, 3))
+    for p in (1e-3, 2e-3, 0.05, 1e-7):
+        for dof in range(1, 82):
+            assert spp.chi2_threshold(p, dof) == float(chi2.ppf(1.0 - p, dof)), (p, dof)
     code = (
         "import sys\n"
         "import numpy as np\n"

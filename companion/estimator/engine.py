@@ -705,6 +705,8 @@ def _min_over_headings(X: np.ndarray, y: np.ndarray, u: np.ndarray, v: np.ndarra
     c, s = _COS1, _SIN
     pp, p1, p2, q11, q22, q12 = p @ p, p @ q1, p @ q2, q1 @ q1, q2 @ q2, q1 @ q2
     return float(np.min(pp + c * c * q11 + s * s * q22 - 2.0 * (c * p1 + s * p2 - c * s * q12)))
+
+
 _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
 _NAN3: Vec3 = (math.nan, math.nan, math.nan)
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)

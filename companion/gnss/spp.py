@@ -203,40 +203,14 @@ def _wls(h: np.ndarray, r: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.nd
     return q @ (hw.T @ r), q
 
 
-# chi2.ppf(1 − 1e-3, dof) for dof 1, 2, ... (RAIM's and the tight FDE's default false-alarm
-# probability), the values scipy.stats gives (tested equal): the first call with them does not import
-# scipy.stats (~0.7-1.5 s of CPU inside the first epoch, beliefnav bench tight)
-CHI2_P_FALSE_ALARM_TABLE = 1e-3
-CHI2_TABLE = (
-    10.827566170662733, 13.815510557964274, 16.26623619623813, 18.46682695290317, 20.515005652432873,
-    22.457744484825323, 24.321886347856854, 26.12448155837614, 27.877164871256568, 29.58829844507442,
-    31.264133620239985, 32.90949040736021, 34.52817897487089, 36.12327368039813, 37.69729821835383,
-    39.252354790768464, 40.79021670690253, 42.31239633167996, 43.82019596451753, 45.31474661812586,
-    46.797038041561315, 48.26794229083518, 49.7282324664315, 51.17859777737739, 52.619655776172834,
-    54.05196238857664, 55.47602020574521, 56.892285393353625, 58.301173489794905, 59.70306430442994,
-    61.098306081058126, 62.487219057088474, 63.870098522344946, 65.24721746094244, 66.61882884370104,
-    67.98516762602424, 69.3464524962412, 70.70288741150503, 72.0546629519878, 73.40195751899103,
-    74.74493839842374, 76.08376270770002, 77.41857824131394, 78.74952422804303, 80.07673201081901,
-    81.40032565870999, 82.72042251912399, 84.03713371722348, 85.35056460859305, 86.66081519040317,
-    87.96798047562868, 89.27215083430448, 90.5734123052986, 91.8718468816601, 93.16753277222854,
-    94.46054464187807, 95.75095383248956, 97.03882856650883, 98.32423413474163, 99.60723306984946,
-    100.8878853068583, 102.16624833184879, 103.44237731987324, 104.71632526304057, 105.98814308961282,
-    107.25787977487072, 108.52558244443486, 109.79129647066172, 111.05506556267146, 112.31693185051572,
-    113.57693596394476, 114.83511710619328, 116.09151312316095, 117.34616056833929, 118.59909476379528,
-    119.85034985750531, 121.09995887729859, 122.34795378165676, 123.59436550758484, 124.83922401576478,
-)
-
-
 @functools.lru_cache(maxsize=256)
 def chi2_threshold(p_false_alarm: float, dof: int) -> float:
-    """The χ² test's threshold: ``chi2.ppf(1 - p_false_alarm, dof)``; from ``CHI2_TABLE`` at its
-    probability, else from scipy.stats, imported on the first such call, not with the module (it
-    costs every process that imports companion.gnss ~0.7 s)."""
-    if p_false_alarm == CHI2_P_FALSE_ALARM_TABLE and 1 <= dof <= len(CHI2_TABLE):
-        return CHI2_TABLE[int(dof) - 1]
-    from scipy.stats import chi2
+    """The χ² test's threshold: ``chi2.ppf(1 - p_false_alarm, dof)``, the value scipy.stats gives, from the
+    inverse survival function it evaluates (``scipy.special.chdtri`` at ``1 - (1 - p)``): scipy.stats itself
+    is not imported (~0.7-1.5 s of CPU, which fell inside a tight navigator's first epoch)."""
+    from scipy.special import chdtri
 
-    return float(chi2.ppf(1.0 - p_false_alarm, dof))
+    return float(chdtri(dof, 1.0 - (1.0 - p_false_alarm)))
 
 
 def solve_position(
