@@ -236,6 +236,15 @@ def test_rinex4_navigation_reads_as_rinex3(tmp_path):
     data3, data4 = rinex_input(OBS, [NAV]), rinex_input(OBS, [tmp_path / "v4.rnx"])
     s3, s4 = (solve_position(d.epochs[0], SppConfig(), klobuchar=d.klobuchar) for d in (data3, data4))
     np.testing.assert_allclose(s4.p_ecef_m, s3.p_ecef_m, atol=1e-6)
+    # damaged frames are counted, the rest kept: an ephemeris cut short, an ION record of junk, a bare '>'
+    lines = text.splitlines()
+    g02 = lines.index("> EPH G02 LNAV")
+    ion = lines.index("> ION G   LNAV")
+    damaged = lines[: ion + 1] + ["    junk junk junk"] + lines[ion + 4 : g02 + 4] + [">"] + lines[g02 + 9 :]
+    (tmp_path / "bad.rnx").write_text("\n".join(damaged) + "\n")
+    bad = rinex.read_nav(tmp_path / "bad.rnx")
+    assert bad.rejected["bad_record"] == 2 and bad.rejected["v4_empty_skipped"] == 1
+    assert len(bad.kepler) == len(v3.kepler) - 1 and bad.klobuchar is None and bad.glonass == v3.glonass
     (tmp_path / "v5.rnx").write_text(text.replace("     4.00", "     5.00", 1))
     with pytest.raises(UserError, match="only RINEX 3 and 4"):
         rinex.read_nav(tmp_path / "v5.rnx")
