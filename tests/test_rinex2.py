@@ -448,10 +448,13 @@ def test_damaged_rinex2_navigation_is_counted(tmp_path):
     with pytest.raises(UserError, match="no usable ephemeris .rejected: .'truncated': 1") as err:
         rinex.read_nav(_write(tmp_path, "only.99n", "\n".join(lines[:12]) + "\n"))
     assert "\n" not in str(err.value)
-    with pytest.raises(UserError, match="navigation file was expected, this one has type 'E'"):
+    with pytest.raises(UserError, match=r"RINEX 2 navigation type 'E': N \(GPS\), G \(GLONASS\) and H"):
         rinex.read_nav(
             _write(tmp_path, "e.99l", SPEC_A8_GPS_NAV.replace("N: GPS NAV DATA", "E: GAL NAV DATA "))
         )
+    geo = SPEC_A12_GLONASS_NAV.replace("GLONASS NAV DATA", "H: GEO NAV MSG DATA")  # SBAS: counted
+    with pytest.raises(UserError, match=r"no usable ephemeris \(rejected: \{'sbas_skipped': 1\}\)"):
+        rinex.read_nav(_write(tmp_path, "geo.98h", geo))
     with pytest.raises(UserError, match="GLONASS navigation 2: withdrawn clock signs"):
         rinex.read_nav(_write(tmp_path, "old.98g", SPEC_A12_GLONASS_NAV.replace("     2.11", "     2.00", 1)))
 
@@ -480,6 +483,9 @@ def test_damaged_rinex2_observations_are_counted(tmp_path):
     bad_types = SPEC_A14_MIXED_OBS.replace("     2    C1    L1", "     3    C1    L1")
     with pytest.raises(UserError, match="declares 3 types and lists 2"):
         rinex.read_obs(_write(tmp_path, "types.00o", bad_types))
+    transit = SPEC_A14_MIXED_OBS.replace("M (MIXED)", "T (TRANSIT)")
+    with pytest.raises(UserError, match="RINEX 2 satellite system 'T'; G, R, E, S and M are read"):
+        rinex.read_obs(_write(tmp_path, "transit.00o", transit))
     with pytest.raises(UserError, match="without # / TYPES OF OBSERV"):
         rinex.read_obs(
             _write(tmp_path, "none.00o", SPEC_A14_MIXED_OBS.replace("# / TYPES OF OBSERV", "COMMENT"))

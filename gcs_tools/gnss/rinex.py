@@ -1,10 +1,24 @@
-"""RINEX 3 and 4 observation and navigation files (GPS, Galileo, BeiDou, GLONASS, QZSS); a RINEX 3 writer.
+"""RINEX 2 (2.10, 2.11), 3 and 4 observation and navigation files (GPS, Galileo, BeiDou, GLONASS,
+QZSS); a RINEX 3 writer.
 
 Observations -> :class:`companion.gnss.GnssEpoch` per epoch, with one signal per system:
 ``C1C``/``D1C``/``S1C`` (GPS, QZSS, GLONASS G1, Galileo E1 — ``C1X``/``C1B`` accepted when C1C is
 absent) and BeiDou B1I (``C2I``; ``C1I`` as RINEX 3.01 named it). Epochs are read in the file's time
 system (``TIME OF FIRST OBS``: GPS, GAL, BDT, GLO = UTC) and converted to GPS time — never shifted
 by the leap seconds when the file is already in GPS time (a known pitfall of some readers).
+
+RINEX 2 observation files (one ``# / TYPES OF OBSERV`` list for all systems, 2-digit years, 12
+satellites on the epoch line and continuation lines for more, five observations a line, a blank
+system letter = GPS) are read as the RINEX 3 file they correspond to: each epoch's satellite lines
+are put in RINEX 3's layout and go through the same code, and the codes are named as RINEX 3 names
+the signal (C1/D1/S1 -> C1C/D1C/S1C, BeiDou C2/D2/S2 -> C2I/D2I/S2I as RINEX 2.12 numbers B1I; P1/P2
+-> C1P/C2P, which the reader never picks, as it picks no C1P/C1W in RINEX 3). RINEX 2 navigation files
+are per system — ``N`` GPS (``ION ALPHA``/``ION BETA`` -> Klobuchar), ``G`` GLONASS (2.01 on: the
+clock signs of RINEX 3), ``H`` SBAS (counted, as RINEX 3's SBAS records) — and their records (PRN
+without a system letter, 2-digit year, ``F5.1`` seconds, three-blank continuation lines) are RINEX 3's
+one column to the left. ``DELTA-UTC``/``CORR TO SYSTEM TIME`` are not used (nor is RINEX 3's ``TIME
+SYSTEM CORR``). Compressed files (gzip, ``.Z``, bzip2, zip; Compact RINEX 1.0 and 3.0) go through
+the ``hatanaka`` package.
 
 Navigation -> :class:`KeplerEphemeris` (GPS, QZSS, Galileo I/NAV, BeiDou D1/D2) and
 :class:`GlonassEphemeris`, plus the GPS Klobuchar parameters (``IONOSPHERIC CORR`` GPSA/GPSB).
@@ -27,8 +41,10 @@ issue of data differ by the difference of the two group delays (nanoseconds: met
 A record with both clock bits, or no source bit, is counted (``galileo_bad_data_source``).
 
 Rejections are counted (``RinexObs.rejected`` / ``RinexNav.rejected``, by reason); a file that is
-not RINEX 3 or 4, or holds no usable record, is a one-line ``UserError``. A truncated last record is
-counted (``truncated``), the records before it are kept.
+not RINEX 2, 3 or 4, or holds no usable record, is a one-line ``UserError``. A truncated last record is
+counted (``truncated``), the records before it are kept; a RINEX 2 epoch whose satellite list does
+not parse (e.g. more satellites announced than listed) is counted (``bad_epoch_line``) and its lines
+(``stray_line``) are not read as observations.
 """
 
 from __future__ import annotations
@@ -141,8 +157,11 @@ def _header(path: Path, lines: list[str], kind: str) -> tuple[float, str, int]:
     if not 2.0 <= version < 5.0:
         raise UserError(f"{path}: RINEX version {version:g}; only RINEX 2 (2.10, 2.11), 3 and 4 are read")
     ftype = lines[0][20:21]
-    allowed = tuple(V2_NAV_LETTER) if kind == "N" and version < 3.0 else (kind,)
-    if ftype not in allowed:
+    if kind == "N" and version < 3.0 and ftype not in V2_NAV_LETTER:
+        raise UserError(
+            f"{path}: RINEX 2 navigation type {ftype!r}: N (GPS), G (GLONASS) and H (SBAS) are read"
+        )
+    if ftype != kind and not (kind == "N" and version < 3.0):
         what = {"O": "observation", "N": "navigation"}[kind]
         raise UserError(f"{path}: a RINEX {what} file was expected, this one has type {ftype!r}")
     for i, line in enumerate(lines):
@@ -158,7 +177,11 @@ def read_obs(path: str | Path) -> RinexObs:
     header = lines[: body - 1]
     v2_types = _v2_obs_types(path, header) if version < 3.0 else []
     if version < 3.0:
-        systems = V2_FILE_SYSTEMS.get(lines[0][40:41], ())
+        systems = V2_FILE_SYSTEMS.get(lines[0][40:41])
+        if systems is None:
+            raise UserError(
+                f"{path}: RINEX 2 satellite system {lines[0][40:41]!r}; G, R, E, S and M are read"
+            )
         obs_types = {s: [_v3_code(c, s) for c in v2_types] for s in systems}
     else:
         obs_types = _v3_obs_types(header)
