@@ -480,6 +480,15 @@ def test_damaged_rinex2_observations_are_counted(tmp_path):
     }
     assert [ep.n for ep in obs.epochs] == [14, 12]
     assert week_tow(obs.epochs[1].t_gps_s)[1] == 42790.0
+    # an event announcing more header lines than it has (it would swallow the next epoch): counted,
+    # the epoch after it read; a new type list in an event: counted, the reading ends there
+    event = [f"{'':28s}4  3", f"{'A COMMENT':60s}COMMENT"]
+    types = [f"{'':28s}4  1", f"     1    C1{'':48s}# / TYPES OF OBSERV"]
+    obs = rinex.read_obs(
+        _write(tmp_path, "ev.00o", head + "END OF HEADER\n" + "\n".join(event + ep + types + ep))
+    )
+    assert obs.rejected == {"bad_event_record": 1, "stray_line": 1, "obs_types_changed": 1}
+    assert [ep.n for ep in obs.epochs] == [14]
     bad_types = SPEC_A14_MIXED_OBS.replace("     2    C1    L1", "     3    C1    L1")
     with pytest.raises(UserError, match="declares 3 types and lists 2"):
         rinex.read_obs(_write(tmp_path, "types.00o", bad_types))

@@ -364,7 +364,9 @@ def _v2_records(lines: list[str], start: int, n_types: int, rejected: Counter[st
     """RINEX 2 epochs: an epoch line listing 12 satellites (continuation lines for more), then each
     satellite's observations, five a line; yielded with the satellite lines in RINEX 3's layout. An
     epoch whose satellite list does not parse, or runs into the next epoch line, is counted and the
-    reading resumes at the next epoch line."""
+    reading resumes at the next epoch line; so is an event whose header lines run into one. A new
+    ``# / TYPES OF OBSERV`` list in an event ends the reading (counted): the records after it have
+    other columns."""
     per_sat = max(1, -(-n_types // 5))
     i, n_lines = start, len(lines)
     while i < n_lines:
@@ -375,6 +377,13 @@ def _v2_records(lines: list[str], start: int, n_types: int, rejected: Counter[st
             continue
         flag, nsat = int(line[28]), int(line[29:32])
         if 2 <= flag <= 5:  # event: nsat header lines follow
+            why = _v2_event_problem(lines[i + 1 : i + 1 + nsat])
+            if why:
+                rejected[why] += 1
+                if why == "obs_types_changed":
+                    return
+                i += 1
+                continue
             yield flag, line, []
             i += 1 + nsat
             continue
@@ -392,6 +401,15 @@ def _v2_records(lines: list[str], start: int, n_types: int, rejected: Counter[st
         sat_lines = [_v3_sat_line(ids[k], obs[k * per_sat : (k + 1) * per_sat]) for k in range(nsat)]
         yield flag, line, (sat_lines if flag != 6 else [])
         i = end
+
+
+def _v2_event_problem(special: list[str]) -> str:
+    """Why an event's header lines cannot be skipped as such ('' when they can)."""
+    if any(V2_EPOCH.match(x) for x in special):
+        return "bad_event_record"
+    if any(x[60:].strip() == "# / TYPES OF OBSERV" for x in special):
+        return "obs_types_changed"
+    return ""
 
 
 def _v2_sat_ids(lines: list[str], nsat: int) -> list[str] | None:
