@@ -443,6 +443,12 @@ def test_damaged_rinex2_navigation_is_counted(tmp_path):
     bad_prn = lines[:8] + ["XX" + lines[8][2:]] + lines[9:]
     nav = rinex.read_nav(_write(tmp_path, "prn.99n", "\n".join(bad_prn) + "\n"))
     assert nav.rejected == {"bad_record": 1} and [e.prn for e in nav.kepler] == [13]
+    # PRN 6 without its broadcast orbit 3 (its toe): counted, PRN 13 after it kept; a junk ION BETA
+    gap = [*lines[:7], lines[7], *lines[8:11], *lines[12:]]
+    gap[4] = gap[4].replace(".1310D+06", ".13x0D+06", 1)
+    nav = rinex.read_nav(_write(tmp_path, "gap.99n", "\n".join(gap) + "\n"))
+    assert nav.rejected == {"record_cut_short": 1, "bad_klobuchar": 1} and [e.prn for e in nav.kepler] == [13]
+    assert nav.klobuchar is None
     nav = rinex.read_nav(_write(tmp_path, "cut.99n", "\n".join(lines[:-3]) + "\n"))
     assert nav.rejected == {"truncated": 1} and [e.prn for e in nav.kepler] == [6]
     with pytest.raises(UserError, match="no usable ephemeris .rejected: .'truncated': 1") as err:

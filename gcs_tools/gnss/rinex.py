@@ -175,25 +175,17 @@ def read_obs(path: str | Path) -> RinexObs:
     lines = _read_lines(path)
     version, _, body = _header(path, lines, "O")
     header = lines[: body - 1]
-    v2_types = _v2_obs_types(path, header) if version < 3.0 else []
-    if version < 3.0:
-        systems = V2_FILE_SYSTEMS.get(lines[0][40:41])
-        if systems is None:
-            raise UserError(
-                f"{path}: RINEX 2 satellite system {lines[0][40:41]!r}; G, R, E, S and M are read"
-            )
-        obs_types = {s: [_v3_code(c, s) for c in v2_types] for s in systems}
+    rejected: Counter[str] = Counter()
+    if version < 3.0:  # one type list for every system the file holds; RINEX 2's epoch records
+        obs_types, n_types = _v2_obs_types(path, header, lines[0][40:41])
+        records, when = _v2_records(lines, body, n_types, rejected), _v2_when
     else:
         obs_types = _v3_obs_types(header)
+        records, when = _v3_records(lines, body, rejected), _v3_when
     if not obs_types:
         raise UserError(f"{path}: RINEX observation header lists no observation types")
     cols = {s: _columns(t, CODE_PREFERENCE.get(s, ())) for s, t in obs_types.items()}
     time_system = _time_system(path, header, lines[0][40:41])
-    rejected: Counter[str] = Counter()
-    if version < 3.0:
-        records, when = _v2_records(lines, body, len(v2_types), rejected), _v2_when
-    else:
-        records, when = _v3_records(lines, body, rejected), _v3_when
     epochs = _collect(records, when, cols, time_system, rejected)
     if not epochs:
         raise UserError(f"{path}: no usable observation epochs (rejected: {dict(rejected) or 'none'})")
@@ -319,8 +311,12 @@ V2_EPOCH = re.compile(r" [ \d]{2}(?: [ \d]{2}){4}[ \d.]{11}  [0-6][ \d]{2}\d")
 V2_SAT_ID = re.compile(r"[A-Z ][ \d]\d")
 
 
-def _v2_obs_types(path: Path, header: list[str]) -> list[str]:
-    """``# / TYPES OF OBSERV``: the count, then nine codes a line (continuation lines included)."""
+def _v2_obs_types(path: Path, header: list[str], file_system: str) -> tuple[dict[System, list[str]], int]:
+    """The codes of ``# / TYPES OF OBSERV`` (a count, then nine codes a line, continuation lines
+    included) as RINEX 3 names them, for each system the file's system letter allows; their number."""
+    systems = V2_FILE_SYSTEMS.get(file_system)
+    if systems is None:
+        raise UserError(f"{path}: RINEX 2 satellite system {file_system!r}; G, R, E, S and M are read")
     count, types = -1, []
     for line in header:
         if line[60:].strip() == "# / TYPES OF OBSERV":
@@ -334,7 +330,7 @@ def _v2_obs_types(path: Path, header: list[str]) -> list[str]:
         raise UserError(f"{path}: RINEX 2 observation header without # / TYPES OF OBSERV")
     if count != len(types):
         raise UserError(f"{path}: # / TYPES OF OBSERV declares {count} types and lists {len(types)}")
-    return types
+    return {s: [_v3_code(c, s) for c in types] for s in systems}, count
 
 
 def _v3_code(code: str, system: System) -> str:
@@ -554,14 +550,26 @@ def _nav_header(header: list[str], out: RinexNav) -> tuple[np.ndarray, np.ndarra
     ion: dict[str, np.ndarray] = {}
     for line in header:
         label = line[60:].strip()
-        if label == "IONOSPHERIC CORR" and line[:4] in ("GPSA", "GPSB"):
-            ion[line[3]] = np.array([_float(line[5 + 12 * j : 17 + 12 * j]) for j in range(4)])
-        elif label in ("ION ALPHA", "ION BETA"):
-            ion[label[4]] = np.array([_float(line[2 + 12 * j : 14 + 12 * j]) for j in range(4)])
+        where = _klobuchar_field(label, line)
+        if where is not None:
+            key, first = where
+            try:
+                ion[key] = np.array([_float(line[first + 12 * j : first + 12 + 12 * j]) for j in range(4)])
+            except ValueError:
+                out.rejected["bad_klobuchar"] += 1
         elif label == "LEAP SECONDS":
             text = line[:6].strip()
             out.leap_seconds = int(text) if text.lstrip("-").isdigit() else None
     return (ion["A"], ion["B"]) if "A" in ion and "B" in ion else None
+
+
+def _klobuchar_field(label: str, line: str) -> tuple[str, int] | None:
+    """Whether a header line holds GPS Klobuchar α ("A") or β ("B"), and the column of its first value."""
+    if label == "IONOSPHERIC CORR" and line[:4] in ("GPSA", "GPSB"):
+        return line[3], 5
+    if label in ("ION ALPHA", "ION BETA"):
+        return label[4], 2
+    return None
 
 
 def _nav_records(
@@ -572,7 +580,8 @@ def _nav_records(
     parse: Callable[[str, list[str], RinexNav], None],
 ) -> None:
     """Records of ``n_lines(letter)`` lines, each starting on a line where ``letter_of`` gives its
-    system letter ('' on continuation lines); records of unknown systems and damaged ones counted."""
+    system letter ('' on continuation lines); records of unknown systems, records with lines missing
+    (the next record starts inside them) and damaged ones counted."""
     i = 0
     while i < len(lines):
         letter = letter_of(lines[i])
@@ -588,6 +597,11 @@ def _nav_records(
                 i += 1
             continue
         block = lines[i : i + n]
+        cut = next((j for j in range(1, len(block)) if letter_of(block[j])), 0)
+        if cut:  # a record with lines missing: the next record starts inside it
+            out.rejected["record_cut_short"] += 1
+            i += cut
+            continue
         i += n
         if len(block) < n:
             out.rejected["truncated"] += 1
