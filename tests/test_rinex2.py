@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from companion.errors import UserError
+from companion.gnss import lnav
 from companion.gnss.systems import System
 from companion.gnss.timescale import gps_from_calendar, week_tow
 from gcs_tools.gnss import rinex
@@ -46,6 +47,101 @@ EXAMPLE OF VERSION 2.11 FORMAT                              COMMENT
     -.785747015231D-11  .000000000000D+00  .102500000000D+04  .000000000000D+00
      .000000000000D+00  .000000000000D+00  .000000000000D+00  .389000000000D+03
      .410400000000D+06  .000000000000D+00
+"""
+# A real IGS daily broadcast file: brdc2800.15n (CDDIS, version "2", 2015-10-07; georinex's test data,
+# MIT): its header and the records of PRN 1, 10 (health 63) and 25 (SV accuracy 2.8 m), as published.
+REAL_BRDC_15N = """\
+     2              NAVIGATION DATA                         RINEX VERSION / TYPE
+CCRINEXN V1.6.0 UX  CDDIS               08-OCT-15 17:31     PGM / RUN BY / DATE
+IGS BROADCAST EPHEMERIS FILE                                COMMENT
+    0.1490D-07  0.7451D-08 -0.1192D-06 -0.5960D-07          ION ALPHA
+    0.1065D+06  0.3277D+05 -0.2621D+06 -0.6554D+05          ION BETA
+   -0.931322574615D-09-0.444089209850D-14   405504     1865 DELTA-UTC: A0,A1,T,W
+    17                                                      LEAP SECONDS
+                                                            END OF HEADER
+ 1 15 10  7  0  0  0.0 0.187428668141D-05 0.795807864051D-12 0.000000000000D+00
+    0.700000000000D+02-0.673437500000D+02 0.442661285405D-08-0.106626835218D+00
+   -0.341422855854D-05 0.475465832278D-02 0.991858541966D-05 0.515366233826D+04
+    0.259200000000D+06 0.707805156708D-07 0.197561800058D+01 0.447034835815D-07
+    0.962769186081D+00 0.190156250000D+03 0.485675188401D+00-0.804783528707D-08
+    0.278583024704D-10 0.100000000000D+01 0.186500000000D+04 0.000000000000D+00
+    0.200000000000D+01 0.000000000000D+00 0.512227416039D-08 0.700000000000D+02
+    0.259200000000D+06 0.000000000000D+00 0.000000000000D+00 0.000000000000D+00
+10 15 10  7  0  0  0.0 0.203074887395D-05 0.909494701773D-12 0.000000000000D+00
+    0.117000000000D+03-0.276875000000D+02 0.487556022951D-08 0.240010296400D+01
+   -0.144354999065D-05 0.101386418100D-01 0.411830842495D-05 0.515364481354D+04
+    0.259200000000D+06-0.223517417908D-06 0.841313314979D+00 0.763684511185D-07
+    0.950244802082D+00 0.294468750000D+03 0.149353427753D+00-0.840892169391D-08
+   -0.142863093678D-11 0.100000000000D+01 0.186500000000D+04 0.000000000000D+00
+    0.200000000000D+01 0.630000000000D+02-0.512227416039D-08 0.117000000000D+03
+    0.258270000000D+06 0.400000000000D+01 0.000000000000D+00 0.000000000000D+00
+25 15 10  7  0  0  0.0-0.488185323775D-04-0.534328137292D-11 0.000000000000D+00
+    0.970000000000D+02 0.503750000000D+02 0.395516474849D-08-0.186371192704D+01
+    0.272504985332D-05 0.463449012022D-02 0.744499266148D-05 0.515362173080D+04
+    0.259200000000D+06 0.186264514923D-07-0.124820355932D+00-0.651925802231D-07
+    0.978795286867D+00 0.247500000000D+03 0.737584779412D+00-0.782711174491D-08
+    0.137505727665D-09 0.100000000000D+01 0.186500000000D+04 0.000000000000D+00
+    0.280000000000D+01 0.000000000000D+00 0.512227416039D-08 0.970000000000D+02
+    0.252018000000D+06 0.000000000000D+00 0.000000000000D+00 0.000000000000D+00
+"""
+# A real reference-station file: the first two epochs of york0440.15d (NOAA CORS station YORK,
+# Trimble 5700, teqc, RINEX 2.11 GPS as Compact RINEX 1.0; georinex's test data, MIT), as published:
+# 11 observation types (a header continuation line, three lines a satellite), C1 and P1, S1 in dB-Hz.
+REAL_YORK_15D = """\
+1.0                 COMPACT RINEX FORMAT                    CRINEX VERS   / TYPE
+RNX2CRX ver.4.0.6                       14-Feb-15 03:38     CRINEX PROG / DATE
+     2.11           OBSERVATION DATA    G (GPS)             RINEX VERSION / TYPE
+teqc  2014Jan16     NOAA/NOS/NGS/CORS   20150214 03:36:45UTCPGM / RUN BY / DATE
+Solaris x86 5.10|AMD64|cc SC5.8 -xarch=amd64|=+|=+          COMMENT
+teqc  2014Jan16     NOAA/NOS/NGS/CORS   20150214 03:33:06UTCCOMMENT
+0000.000      (antenna height)                              COMMENT
+BIT 2 OF LLI FLAGS DATA COLLECTED UNDER A/S CONDITION       COMMENT
+YORK                                                        MARKER NAME
+84                                                          MARKER NUMBER
+Charles Harpster    PADT                                    OBSERVER / AGENCY
+0220247558          TRIMBLE 5700        NP 1.00 / SP 1.22   REC # / TYPE / VERS
+0220167001          TRM33429.00+GP  NONE                    ANT # / TYPE
+  1122459.2250 -4763243.0070  4076945.5470                  APPROX POSITION XYZ
+        0.0000        0.0000        0.0000                  ANTENNA: DELTA H/E/N
+     1     1                                                WAVELENGTH FACT L1/2
+    11    L1    L2    L5    C1    P1    C2    P2    C5    S1# / TYPES OF OBSERV
+          S2    S5                                          # / TYPES OF OBSERV
+    30.0000                                                 INTERVAL
+ SNR is mapped to RINEX snr flag value [0-9]                COMMENT
+  L1 & L2: min(max(int(snr_dBHz/6), 0), 9)                  COMMENT
+teqc windowed: start @ 2015 Feb 13 00:00:00.000             COMMENT
+teqc windowed: delta = 86400.000 sec                        COMMENT
+teqc edited: all SBAS satellites excluded                   COMMENT
+teqc edited: all Galileo satellites excluded                COMMENT
+teqc edited: all Compass satellites excluded                COMMENT
+teqc edited: all QZSS satellites excluded                   COMMENT
+Forced Modulo Decimation to 30 seconds                      COMMENT
+  2015     2    13     0     0    0.0000000     GPS         TIME OF FIRST OBS
+                                                            END OF HEADER
+&15  2 13  0  0  0.0000000  0 10G07G27G19G03G23G20G09G31G10G16
+
+3&-5936986221 3&-4618665923  3&24482102132   3&24482104087  3&42000 3&28000  4744  4     4   4 4
+3&-25704126016 3&-20009522748  3&21438983975   3&21438984657  3&50000 3&44000  4847  4     4   4 4
+3&-11841697203 3&-9213788239  3&23453180558   3&23453179343  3&44000 3&32000  4745  4     4   4 4
+3&-19340692233 3&-15058112843  3&24543863338   3&24543867619  3&37000 3&23000  4643  4     4   4 4
+3&-36260838533 3&-28243529241  3&20609366076   3&20609362415  3&50000 3&45000  4847  4     4   4 4
+3&-9511042474 3&-7397247973  3&24392315186   3&24392316009  3&41000 3&23000  4643  4     4   4 4
+3&-20702741433 3&-16102649732  3&22111940234   3&22111941067  3&49000 3&41000  4846  4     4   4 4
+3&-29483161249 3&-22949140025  3&23928741307   3&23928740778  3&43000 3&33000  4745  4     4   4 4
+   3&24818393997     3&31000         4         4
+3&-38300677174 3&-29830969547  3&20239158901   3&20239156361  3&52000 3&46000  4847  4     4   4 4
+                3
+
+-119089849 -92797122  -22662216   -22662372  -1000 -1000   6
+-104171257 -81172329  -19822810   -19823365  0 0
+-147237274 -114730180  -28018433   -28017819  0 -1000
+56034137 43662864  10662777   10664061  1000 2000     4
+-49048400 -38219520  -9333975   -9333874  0 0
+-443031 -345238  -83904   -83539  1000 3000   7 4
+-100474540 -78291763  -19119876   -19120048  1000 1000     7
+45044185 35099331  8570584   8571350  -2000 -3000   6
+3&-2760660474   -7670633     2000   45
+-4763760 -3711996  -906489   -906687  -1000 0
 """
 # table A12: the GLONASS navigation message example (its first record), lower-case-free "0." numbers
 SPEC_A12_GLONASS_NAV = """\
@@ -202,6 +298,28 @@ def test_spec_gps_navigation_example_reads_to_its_printed_values(tmp_path):
     assert lower.kepler == nav.kepler
 
 
+def test_a_real_igs_broadcast_file(tmp_path):
+    """brdc2800.15n as CDDIS published it (version "2", leading zeros, 4-value last lines): toc
+    2015-10-07 00:00 GPS = week 1865 second 259200 (Wednesday), the toe; SV accuracy 2.0 m -> URA
+    index 0 (2.4 m), 2.8 m -> index 1 (3.4 m); PRN 10's health 63 kept for the store to drop; the
+    same file gzip-compressed (``brdc2800.15n.gz``) reads the same."""
+    nav = rinex.read_nav(_write(tmp_path, "brdc2800.15n", REAL_BRDC_15N))
+    assert not nav.rejected and [e.prn for e in nav.kepler] == [1, 10, 25] and nav.leap_seconds == 17
+    t = gps_from_calendar(2015, 10, 7, 0, 0, 0.0, "GPS")
+    assert week_tow(t) == (1865, 259200.0)
+    assert all(e.toc_gps_s == e.toe_gps_s == t and e.system == System.GPS for e in nav.kepler)
+    g1, g10, g25 = nav.kepler
+    assert (g1.iode, g1.health, g1.tgd_s, g1.af0_s) == (70, 0, 0.512227416039e-08, 0.187428668141e-05)
+    assert (g1.sqrt_a_m05, g1.e, g1.omega_rad) == (0.515366233826e04, 0.475465832278e-02, 0.485675188401)
+    assert (g10.health, g10.iode, g10.tgd_s) == (63, 117, -0.512227416039e-08)
+    assert (g1.accuracy_m, g25.accuracy_m) == (lnav.ura_m(0), lnav.ura_m(1)) == (2.4, 3.4)
+    assert nav.klobuchar is not None
+    np.testing.assert_array_equal(nav.klobuchar[0], [0.1490e-07, 0.7451e-08, -0.1192e-06, -0.5960e-07])
+    np.testing.assert_array_equal(nav.klobuchar[1], [0.1065e06, 0.3277e05, -0.2621e06, -0.6554e05])
+    (tmp_path / "brdc2800.15n.gz").write_bytes(gzip.compress(REAL_BRDC_15N.encode()))
+    assert rinex.read_nav(tmp_path / "brdc2800.15n.gz").kepler == nav.kepler
+
+
 def test_spec_glonass_navigation_example(tmp_path):
     """Table A12: slot 3 at 1998-02-15 00:15:00 UTC (the year 98), km -> m, -TauN and +GammaN as
     RINEX 3 stores them, frequency number 21; a GLONASS file beside a GPS one adds to it."""
@@ -245,6 +363,33 @@ def test_spec_mixed_observation_example_with_a_continuation_line(tmp_path):
     obs = rinex.read_obs(_write(tmp_path, "gps.00o", gps))
     assert obs.epochs[0].prn.tolist() == [23, 7, 2, 5, 26, 9, 21] and obs.rejected == {"unknown_system": 7}
     assert (obs.epochs[0].system == System.GPS).all() and list(obs.obs_types) == [System.GPS]
+
+
+def test_a_real_compact_rinex2_station_file(tmp_path):
+    """york0440.15d's first epochs through the ``hatanaka`` package's CRINEX 1.0 decoder: 2015-02-13
+    00:00:00 and 00:00:30 GPS, ten satellites, C1 (not P1) as the pseudorange and S1 as C/N0, the
+    first epoch's values as the file states them (Compact RINEX writes a satellite's first value in
+    full: ``3&24482102132`` is G07's C1, 24482102.132 m), the second decoded from its differences."""
+    obs = rinex.read_obs(_write(tmp_path, "york0440.15d", REAL_YORK_15D))
+    assert obs.version == 2.11 and obs.time_system == "GPS" and not obs.rejected
+    assert obs.obs_types[System.GPS][:6] == ["L1C", "L2C", "L5C", "C1C", "C1P", "C2C"]
+    assert [ep.t_gps_s for ep in obs.epochs] == [
+        gps_from_calendar(2015, 2, 13, 0, 0, s, "GPS") for s in (0.0, 30.0)
+    ]
+    first, second = obs.epochs
+    assert first.prn.tolist() == second.prn.tolist() == [7, 27, 19, 3, 23, 20, 9, 31, 10, 16]
+    assert (first.system == System.GPS).all()
+    assert first.pseudorange_m[[0, 1, 8, 9]].tolist() == [
+        24482102.132,
+        21438983.975,
+        24818393.997,
+        20239158.901,
+    ]
+    assert first.cn0_dbhz.tolist() == [42.0, 50.0, 44.0, 37.0, 50.0, 41.0, 49.0, 43.0, 31.0, 52.0]
+    assert np.isnan(first.pseudorange_rate_m_s).all()  # no D1 in the file
+    # the second epoch: C1 of G07 moved by the file's differences (−22662216 mm and so on)
+    assert second.pseudorange_m[0] == 24459439.916 and second.cn0_dbhz[0] == 41.0
+    np.testing.assert_array_equal(obs.approx_position_ecef_m, [1122459.2250, -4763243.0070, 4076945.5470])
 
 
 def test_spec_event_example_counts_every_event_and_skips_their_lines(tmp_path):

@@ -334,9 +334,10 @@ def _v2_obs_types(path: Path, header: list[str], file_system: str) -> tuple[dict
 
 
 def _v3_code(code: str, system: System) -> str:
-    """A RINEX 2 observation code as RINEX 3 names the signal the RINEX 3 reader picks: C1/D1/S1 -> C1C/
-    D1C/S1C (BeiDou C2/D2/S2 -> C2I/D2I/S2I, B1I as RINEX 2.12 numbers it); P1/P2 -> C1P/C2P (the
-    P code: never picked, as C1P/C1W are not in RINEX 3); an unknown code is kept as it is."""
+    """A RINEX 2 observation code under the RINEX 3 name of the signal the RINEX 3 reader picks: C1/D1/S1
+    -> C1C/D1C/S1C (BeiDou C2/D2/S2 -> C2I/D2I/S2I, B1I as RINEX 2.12 numbers it). The others keep
+    their band with attribute C (P1/P2: C1P/C2P, the P code) and are never picked, as in RINEX 3; a
+    code that is not a RINEX 2 one is kept as it is."""
     if len(code) != 2 or code[0] not in "CLDSP":
         return code
     if code[0] == "P":
