@@ -48,7 +48,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "plot": ("gcs_tools.recorder.plot_cli", "draw a recording's map and belief figures"),
     "export": ("gcs_tools.export.cli", "a run, tlog or recording as MCAP (Foxglove) or CSV"),
     "bench": ("gcs_tools.bench.cli", "benchmarks that print JSON"),
-    "gnss": ("gcs_tools.gnss.cli", "raw GNSS (smartLoc, RINEX 3/4, UBX): single-point solutions vs truth"),
+    "gnss": ("gcs_tools.gnss.cli", "raw GNSS (smartLoc, RINEX 2-4, UBX): single-point solutions vs truth"),
 }
 
 

@@ -104,8 +104,8 @@ def test_rinex_bad_files_are_one_line_errors(tmp_path):
     p.write_text(NAV.read_text())
     with pytest.raises(UserError, match="observation file was expected"):
         rinex.read_obs(p)
-    p.write_text("     2.11           OBSERVATION DATA    G                   RINEX VERSION / TYPE\n")
-    with pytest.raises(UserError, match="only RINEX 3 and 4"):
+    p.write_text("     1.00           OBSERVATION DATA    G                   RINEX VERSION / TYPE\n")
+    with pytest.raises(UserError, match=r"only RINEX 2 \(2.10, 2.11\), 3 and 4"):
         rinex.read_obs(p)
     p.write_text(OBS.read_text().split("END OF HEADER")[0])
     with pytest.raises(UserError, match="END OF HEADER"):
@@ -246,7 +246,7 @@ def test_rinex4_navigation_reads_as_rinex3(tmp_path):
     assert bad.rejected["bad_record"] == 2 and bad.rejected["v4_empty_skipped"] == 1
     assert len(bad.kepler) == len(v3.kepler) - 1 and bad.klobuchar is None and bad.glonass == v3.glonass
     (tmp_path / "v5.rnx").write_text(text.replace("     4.00", "     5.00", 1))
-    with pytest.raises(UserError, match="only RINEX 3 and 4"):
+    with pytest.raises(UserError, match=r"only RINEX 2 \(2.10, 2.11\), 3 and 4"):
         rinex.read_nav(tmp_path / "v5.rnx")
 
 

@@ -1,6 +1,6 @@
 """``beliefnav gnss spp INPUT``: single-point solutions from raw GNSS, scored against truth.
 
-INPUT is a smartLoc ``*_Input.txt`` (truth: the ``*_GT.txt`` beside it, or ``--truth``), a RINEX 3 or 4
+INPUT is a smartLoc ``*_Input.txt`` (truth: the ``*_GT.txt`` beside it, or ``--truth``), a RINEX 2, 3 or 4
 observation file (with ``--nav``) or a u-blox UBX log. Writes ``fixes.csv``, ``summary.json`` and,
 with truth, ``spp_errors.csv`` (``t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m``: SPP − truth in the
 NED frame at the first truth point, the solution's 1-σ accuracies) to ``--out``.
@@ -41,14 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument(
         "input",
         type=Path,
-        help="smartLoc *_Input.txt, RINEX 3/4 observation file (compressed or not) or UBX log",
+        help="smartLoc *_Input.txt, RINEX 2/3/4 observation file (compressed or not) or UBX log",
     )
     p.add_argument(
         "--nav",
         type=Path,
         action="append",
         default=[],
-        help="RINEX 3/4 navigation file(s) for a RINEX observation input (repeatable)",
+        help="RINEX 2/3/4 navigation files for a RINEX observation input (repeatable; RINEX 2: one a system)",
     )
     p.add_argument(
         "--truth",

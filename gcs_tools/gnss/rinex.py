@@ -1,10 +1,24 @@
-"""RINEX 3 and 4 observation and navigation files (GPS, Galileo, BeiDou, GLONASS, QZSS); a RINEX 3 writer.
+"""RINEX 2 (2.10, 2.11), 3 and 4 observation and navigation files (GPS, Galileo, BeiDou, GLONASS,
+QZSS); a RINEX 3 writer.
 
 Observations -> :class:`companion.gnss.GnssEpoch` per epoch, with one signal per system:
 ``C1C``/``D1C``/``S1C`` (GPS, QZSS, GLONASS G1, Galileo E1 — ``C1X``/``C1B`` accepted when C1C is
 absent) and BeiDou B1I (``C2I``; ``C1I`` as RINEX 3.01 named it). Epochs are read in the file's time
 system (``TIME OF FIRST OBS``: GPS, GAL, BDT, GLO = UTC) and converted to GPS time — never shifted
 by the leap seconds when the file is already in GPS time (a known pitfall of some readers).
+
+RINEX 2 observation files (one ``# / TYPES OF OBSERV`` list for all systems, 2-digit years, 12
+satellites on the epoch line and continuation lines for more, five observations a line, a blank
+system letter = GPS) are read as the RINEX 3 file they correspond to: each epoch's satellite lines
+are put in RINEX 3's layout and go through the same code, and the codes are named as RINEX 3 names
+the signal (C1/D1/S1 -> C1C/D1C/S1C, BeiDou C2/D2/S2 -> C2I/D2I/S2I as RINEX 2.12 numbers B1I; P1/P2
+-> C1P/C2P, which the reader never picks, as it picks no C1P/C1W in RINEX 3). RINEX 2 navigation files
+are per system — ``N`` GPS (``ION ALPHA``/``ION BETA`` -> Klobuchar), ``G`` GLONASS (2.01 on: the
+clock signs of RINEX 3), ``H`` SBAS (counted, as RINEX 3's SBAS records) — and their records (PRN
+without a system letter, 2-digit year, ``F5.1`` seconds, three-blank continuation lines) are RINEX 3's
+one column to the left. ``DELTA-UTC``/``CORR TO SYSTEM TIME`` are not used (nor is RINEX 3's ``TIME
+SYSTEM CORR``). Compressed files (gzip, ``.Z``, bzip2, zip; Compact RINEX 1.0 and 3.0) go through
+the ``hatanaka`` package.
 
 Navigation -> :class:`KeplerEphemeris` (GPS, QZSS, Galileo I/NAV, BeiDou D1/D2) and
 :class:`GlonassEphemeris`, plus the GPS Klobuchar parameters (``IONOSPHERIC CORR`` GPSA/GPSB).
@@ -27,17 +41,20 @@ issue of data differ by the difference of the two group delays (nanoseconds: met
 A record with both clock bits, or no source bit, is counted (``galileo_bad_data_source``).
 
 Rejections are counted (``RinexObs.rejected`` / ``RinexNav.rejected``, by reason); a file that is
-not RINEX 3 or 4, or holds no usable record, is a one-line ``UserError``. A truncated last record is
-counted (``truncated``), the records before it are kept.
+not RINEX 2, 3 or 4, or holds no usable record, is a one-line ``UserError``. A truncated last record is
+counted (``truncated``), the records before it are kept; a RINEX 2 epoch whose satellite list does
+not parse (e.g. more satellites announced than listed) is counted (``bad_epoch_line``) and its lines
+(``stray_line``) are not read as observations.
 """
 
 from __future__ import annotations
 
 import math
+import re
 import warnings
 import zlib
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -128,37 +145,59 @@ def _decompressed(path: Path, data: bytes) -> bytes:
         raise UserError(f"{path}: cannot decompress: {detail}") from None
 
 
-def _header(path: Path, lines: list[str], kind: str) -> tuple[float, int]:
-    """Check the version line; returns (version, index of the first line after END OF HEADER)."""
+def _header(path: Path, lines: list[str], kind: str) -> tuple[float, str, int]:
+    """Check the version line; returns (version, file type, index of the first line after END OF HEADER).
+    RINEX 2 navigation files are per system: ``N`` GPS, ``G`` GLONASS, ``H`` SBAS (GEO)."""
     if not lines or "RINEX VERSION / TYPE" not in lines[0]:
         raise UserError(f"{path}: not a RINEX file (no 'RINEX VERSION / TYPE' on the first line)")
     try:
         version = float(lines[0][:9])
     except ValueError:
         raise UserError(f"{path}: unreadable RINEX version {lines[0][:9]!r}") from None
-    if not 3.0 <= version < 5.0:
-        raise UserError(f"{path}: RINEX version {version:g}; only RINEX 3 and 4 are read")
+    if not 2.0 <= version < 5.0:
+        raise UserError(f"{path}: RINEX version {version:g}; only RINEX 2 (2.10, 2.11), 3 and 4 are read")
     ftype = lines[0][20:21]
-    if ftype != kind:
+    if kind == "N" and version < 3.0 and ftype not in V2_NAV_LETTER:
+        raise UserError(
+            f"{path}: RINEX 2 navigation type {ftype!r}: N (GPS), G (GLONASS) and H (SBAS) are read"
+        )
+    if ftype != kind and not (kind == "N" and version < 3.0):
         what = {"O": "observation", "N": "navigation"}[kind]
         raise UserError(f"{path}: a RINEX {what} file was expected, this one has type {ftype!r}")
     for i, line in enumerate(lines):
         if "END OF HEADER" in line[60:]:
-            return version, i + 1
+            return version, ftype, i + 1
     raise UserError(f"{path}: RINEX header without END OF HEADER (truncated?)")
 
 
 def read_obs(path: str | Path) -> RinexObs:
     path = Path(path)
     lines = _read_lines(path)
-    version, body = _header(path, lines, "O")
+    version, _, body = _header(path, lines, "O")
+    header = lines[: body - 1]
+    rejected: Counter[str] = Counter()
+    if version < 3.0:  # one type list for every system the file holds; RINEX 2's epoch records
+        obs_types, n_types = _v2_obs_types(path, header, lines[0][40:41])
+        records, when = _v2_records(lines, body, n_types, rejected), _v2_when
+    else:
+        obs_types = _v3_obs_types(header)
+        records, when = _v3_records(lines, body, rejected), _v3_when
+    if not obs_types:
+        raise UserError(f"{path}: RINEX observation header lists no observation types")
+    cols = {s: _columns(t, CODE_PREFERENCE.get(s, ())) for s, t in obs_types.items()}
+    time_system = _time_system(path, header, lines[0][40:41])
+    epochs = _collect(records, when, cols, time_system, rejected)
+    if not epochs:
+        raise UserError(f"{path}: no usable observation epochs (rejected: {dict(rejected) or 'none'})")
+    return RinexObs(path, version, time_system, epochs, _approx_position(header), obs_types, rejected)
+
+
+def _v3_obs_types(header: list[str]) -> dict[System, list[str]]:
+    """``SYS / # / OBS TYPES``: each system's codes, continuation lines included."""
     obs_types: dict[System, list[str]] = {}
-    time_system = "GPS"
-    approx = np.zeros(3)
     current: System | None = None
-    for line in lines[: body - 1]:
-        label = line[60:].strip()
-        if label == "SYS / # / OBS TYPES":
+    for line in header:
+        if line[60:].strip() == "SYS / # / OBS TYPES":
             letter = line[0:1]
             if letter.strip():
                 current = FROM_RINEX_LETTER.get(letter)
@@ -166,28 +205,42 @@ def read_obs(path: str | Path) -> RinexObs:
                     obs_types[current] = []
             if current is not None:
                 obs_types[current] += line[7:60].split()
-        elif label == "TIME OF FIRST OBS":
-            # blank: the file's system's own time (RINEX 3.05 table A2); mixed files must state it
-            own = {"E": "GAL", "C": "BDT", "R": "GLO", "J": "QZS"}.get(lines[0][40:41], "GPS")
+    return obs_types
+
+
+def _time_system(path: Path, header: list[str], file_system: str) -> str:
+    """The epochs' time system from ``TIME OF FIRST OBS``."""
+    for line in header:
+        if line[60:].strip() == "TIME OF FIRST OBS":
+            # blank: the file's system's own time (RINEX 3.05 table A2, RINEX 2.11 table A1); mixed
+            # files must state it
+            own = {"E": "GAL", "C": "BDT", "R": "GLO", "J": "QZS"}.get(file_system, "GPS")
             # A3 in columns 49-51 after F13.7 seconds; read as the word after the seconds, as some
             # writers put both a column late (the hatanaka package's test files: "     0.0000000     GPS")
             words = line[30:60].split()
             ts = words[1] if len(words) > 1 else own
             if ts not in TIME_SYSTEMS:
                 raise UserError(f"{path}: unknown time system {ts!r} in TIME OF FIRST OBS")
-            time_system = ts
-        elif label == "APPROX POSITION XYZ":
+            return ts
+    return "GPS"
+
+
+def _approx_position(header: list[str]) -> np.ndarray:
+    for line in header:
+        if line[60:].strip() == "APPROX POSITION XYZ":
             try:
-                approx = np.array([float(line[i : i + 14]) for i in (0, 14, 28)])
+                return np.array([float(line[i : i + 14]) for i in (0, 14, 28)])
             except ValueError:
-                approx = np.zeros(3)
-    if not obs_types:
-        raise UserError(f"{path}: RINEX observation header lists no SYS / # / OBS TYPES")
-    cols = {s: _columns(t, CODE_PREFERENCE.get(s, ())) for s, t in obs_types.items()}
-    rejected: Counter[str] = Counter()
-    epochs: list[GnssEpoch] = []
-    i = body
-    n_lines = len(lines)
+                return np.zeros(3)
+    return np.zeros(3)
+
+
+EpochRecord = tuple[int, str, list[str]]  # epoch flag, epoch line, satellite lines in RINEX 3 layout
+
+
+def _v3_records(lines: list[str], start: int, rejected: Counter[str]) -> Iterator[EpochRecord]:
+    """RINEX 3/4 epochs: a ``>`` line, then one line per satellite (or per special record)."""
+    i, n_lines = start, len(lines)
     while i < n_lines:
         line = lines[i]
         if not line.startswith(">"):
@@ -202,25 +255,174 @@ def read_obs(path: str | Path) -> RinexObs:
             i += 1
             continue
         if flag > 1:  # event: nsat special records follow
-            rejected[f"event_flag_{flag}"] += 1
+            yield flag, line, []
             i += 1 + nsat
             continue
         if i + nsat >= n_lines:  # the file ends inside this epoch
             rejected["truncated"] += 1
-            break
+            return
+        yield flag, line, lines[i + 1 : i + 1 + nsat]
+        i += 1 + nsat
+
+
+def _v3_when(line: str) -> tuple[int, int, int, int, int, float]:
+    return _date(line, (2, 7, 10, 13, 16, 18, 29))
+
+
+def _collect(
+    records: Iterable[EpochRecord],
+    when: Callable[[str], tuple[int, int, int, int, int, float]],
+    cols: dict[System, tuple[int, int, int] | None],
+    time_system: str,
+    rejected: Counter[str],
+) -> list[GnssEpoch]:
+    """Epochs from the records: events (flag > 1) and unreadable epoch times counted."""
+    epochs: list[GnssEpoch] = []
+    for flag, line, sat_lines in records:
+        if flag > 1:
+            rejected[f"event_flag_{flag}"] += 1
+            continue
         try:
-            t = gps_from_calendar(*_date(line, (2, 7, 10, 13, 16, 18, 29)), time_system)
+            t = gps_from_calendar(*when(line), time_system)
         except (ValueError, UserError):
             rejected["bad_epoch_line"] += 1
-            i += 1 + nsat
             continue
-        epoch = _epoch(t, lines[i + 1 : i + 1 + nsat], cols, rejected, flag)
+        epoch = _epoch(t, sat_lines, cols, rejected, flag)
         if epoch is not None:
             epochs.append(epoch)
-        i += 1 + nsat
-    if not epochs:
-        raise UserError(f"{path}: no usable observation epochs (rejected: {dict(rejected) or 'none'})")
-    return RinexObs(path, version, time_system, epochs, approx, obs_types, rejected)
+    return epochs
+
+
+# --- RINEX 2 (2.10, 2.11) observations ------------------------------------------------------------
+
+# the satellite systems a RINEX 2 observation file may hold, by its header's system letter
+_ALL_V2 = (System.GPS, System.GLONASS, System.GALILEO, System.SBAS, System.BEIDOU, System.QZSS)
+V2_FILE_SYSTEMS: dict[str, tuple[System, ...]] = {
+    " ": (System.GPS,),
+    "G": (System.GPS,),
+    "R": (System.GLONASS,),
+    "E": (System.GALILEO,),
+    "S": (System.SBAS,),
+    "M": _ALL_V2,
+}
+# an epoch line: 2-digit year, month, day, hour, minute (blank for events without a time), F11.7
+# seconds, the flag (0-6) and the satellite (or special record) count
+V2_EPOCH = re.compile(r" [ \d]{2}(?: [ \d]{2}){4}[ \d.]{11}  [0-6][ \d]{2}\d")
+V2_SAT_ID = re.compile(r"[A-Z ][ \d]\d")
+
+
+def _v2_obs_types(path: Path, header: list[str], file_system: str) -> tuple[dict[System, list[str]], int]:
+    """The codes of ``# / TYPES OF OBSERV`` (a count, then nine codes a line, continuation lines
+    included) as RINEX 3 names them, for each system the file's system letter allows; their number."""
+    systems = V2_FILE_SYSTEMS.get(file_system)
+    if systems is None:
+        raise UserError(f"{path}: RINEX 2 satellite system {file_system!r}; G, R, E, S and M are read")
+    count, types = -1, []
+    for line in header:
+        if line[60:].strip() == "# / TYPES OF OBSERV":
+            if count < 0:
+                try:
+                    count = int(line[:6])
+                except ValueError:
+                    raise UserError(f"{path}: unreadable # / TYPES OF OBSERV count {line[:6]!r}") from None
+            types += line[6:60].split()
+    if count < 0:
+        raise UserError(f"{path}: RINEX 2 observation header without # / TYPES OF OBSERV")
+    if count != len(types):
+        raise UserError(f"{path}: # / TYPES OF OBSERV declares {count} types and lists {len(types)}")
+    return {s: [_v3_code(c, s) for c in types] for s in systems}, count
+
+
+def _v3_code(code: str, system: System) -> str:
+    """A RINEX 2 observation code under the RINEX 3 name of the signal the RINEX 3 reader picks: C1/D1/S1
+    -> C1C/D1C/S1C (BeiDou C2/D2/S2 -> C2I/D2I/S2I, B1I as RINEX 2.12 numbers it). The others keep
+    their band with attribute C (P1/P2: C1P/C2P, the P code) and are never picked, as in RINEX 3; a
+    code that is not a RINEX 2 one is kept as it is."""
+    if len(code) != 2 or code[0] not in "CLDSP":
+        return code
+    if code[0] == "P":
+        return f"C{code[1]}P"
+    return f"{code}{'I' if system == System.BEIDOU else 'C'}"
+
+
+def _v2_when(line: str) -> tuple[int, int, int, int, int, float]:
+    y, mo, d, h, mi, s = _date(line, (0, 3, 6, 9, 12, 15, 26))
+    return _full_year(y), mo, d, h, mi, s
+
+
+def _full_year(y: int) -> int:
+    """RINEX 2's 2-digit years: 80-99 -> 1980-1999, 00-79 -> 2000-2079."""
+    if y >= 100:
+        return y
+    return y + (1900 if y >= 80 else 2000)
+
+
+def _v2_records(lines: list[str], start: int, n_types: int, rejected: Counter[str]) -> Iterator[EpochRecord]:
+    """RINEX 2 epochs: an epoch line listing 12 satellites (continuation lines for more), then each
+    satellite's observations, five a line; yielded with the satellite lines in RINEX 3's layout. An
+    epoch whose satellite list does not parse, or runs into the next epoch line, is counted and the
+    reading resumes at the next epoch line; so is an event whose header lines run into one. A new
+    ``# / TYPES OF OBSERV`` list in an event ends the reading (counted): the records after it have
+    other columns."""
+    per_sat = max(1, -(-n_types // 5))
+    i, n_lines = start, len(lines)
+    while i < n_lines:
+        line = lines[i]
+        if not V2_EPOCH.match(line):
+            rejected["stray_line"] += 1
+            i += 1
+            continue
+        flag, nsat = int(line[28]), int(line[29:32])
+        if 2 <= flag <= 5:  # event: nsat header lines follow
+            why = _v2_event_problem(lines[i + 1 : i + 1 + nsat])
+            if why:
+                rejected[why] += 1
+                if why == "obs_types_changed":
+                    return
+                i += 1
+                continue
+            yield flag, line, []
+            i += 1 + nsat
+            continue
+        n_id = max(1, -(-nsat // 12))
+        end = i + n_id + nsat * per_sat
+        if end > n_lines:  # the file ends inside this epoch
+            rejected["truncated"] += 1
+            return
+        ids = _v2_sat_ids(lines[i : i + n_id], nsat)
+        obs = lines[i + n_id : end]
+        if ids is None or any(V2_EPOCH.match(x) for x in obs):
+            rejected["bad_epoch_line"] += 1
+            i += 1
+            continue
+        sat_lines = [_v3_sat_line(ids[k], obs[k * per_sat : (k + 1) * per_sat]) for k in range(nsat)]
+        yield flag, line, (sat_lines if flag != 6 else [])
+        i = end
+
+
+def _v2_event_problem(special: list[str]) -> str:
+    """Why an event's header lines cannot be skipped as such ('' when they can)."""
+    if any(V2_EPOCH.match(x) for x in special):
+        return "bad_event_record"
+    if any(x[60:].strip() == "# / TYPES OF OBSERV" for x in special):
+        return "obs_types_changed"
+    return ""
+
+
+def _v2_sat_ids(lines: list[str], nsat: int) -> list[str] | None:
+    """The epoch's satellite identifiers (columns 33-68 of the epoch line and of its continuation lines,
+    which are blank before); None if they do not read as ``nsat`` identifiers."""
+    if any(x[:32].strip() for x in lines[1:]):
+        return None
+    text = "".join(x[32:68].ljust(36) for x in lines)
+    ids = [text[3 * k : 3 * k + 3] for k in range(nsat)]
+    return ids if all(V2_SAT_ID.fullmatch(x) for x in ids) else None
+
+
+def _v3_sat_line(sat_id: str, obs_lines: list[str]) -> str:
+    """A RINEX 2 satellite's observation lines as one RINEX 3 line (a blank system letter is GPS)."""
+    letter = sat_id[0] if sat_id[0].strip() else "G"
+    return letter + sat_id[1:] + "".join(x[:80].ljust(80) for x in obs_lines)
 
 
 def _columns(types: list[str], preference: Sequence[str]) -> tuple[int, int, int] | None:
@@ -299,7 +501,7 @@ def fix_glonass_rates(epoch: GnssEpoch, channel: np.ndarray) -> GnssEpoch:
 
 
 def read_nav(paths: str | Path | Iterable[str | Path]) -> RinexNav:
-    """One or more RINEX 3 or 4 navigation files (mixed or per system) into one set."""
+    """One or more RINEX 2, 3 or 4 navigation files (mixed or per system) into one set."""
     if isinstance(paths, (str, Path)):
         paths = [paths]
     out = RinexNav([], [], None, None)
@@ -314,51 +516,99 @@ def read_nav(paths: str | Path | Iterable[str | Path]) -> RinexNav:
 
 
 NAV_LINES = {"G": 8, "J": 8, "E": 8, "C": 8, "R": 4, "S": 4, "I": 8}
+# RINEX 2 navigation file types: the system letter of their records (which carry none)
+V2_NAV_LETTER = {"N": "G", "G": "R", "H": "S"}
 
 
 def _read_nav_file(path: Path, out: RinexNav) -> None:
     lines = _read_lines(path)
-    version, body = _header(path, lines, "N")
-    alpha = beta = None
-    for line in lines[: body - 1]:
+    version, ftype, body = _header(path, lines, "N")
+    klobuchar = _nav_header(lines[: body - 1], out)
+    if version >= 4.0:  # the Klobuchar parameters are in ION records
+        _read_v4_records(lines[body:], out)
+        return
+    if klobuchar is not None:
+        out.klobuchar = klobuchar
+    if version >= 3.0:
+        glo_lines = 5 if version >= 3.05 else 4
+        _nav_records(
+            lines[body:],
+            out,
+            lambda line: line[0:1].strip(),
+            lambda letter: glo_lines if letter == "R" else NAV_LINES.get(letter, 0),
+            _nav_record,
+        )
+        return
+    if ftype == "G" and version < 2.01:
+        raise UserError(f"{path}: GLONASS navigation {version:g}: withdrawn clock signs; 2.01 on are read")
+    letter = V2_NAV_LETTER[ftype]  # records start with the PRN (I2), continuation lines with 3 blanks
+    _nav_records(lines[body:], out, lambda x: letter if x[0:2].strip() else "", NAV_LINES.get, _nav_record_v2)
+
+
+def _nav_header(header: list[str], out: RinexNav) -> tuple[np.ndarray, np.ndarray] | None:
+    """The GPS Klobuchar parameters (RINEX 3 ``IONOSPHERIC CORR`` GPSA/GPSB, RINEX 2 ``ION ALPHA``/``ION
+    BETA``; None unless both are there); ``LEAP SECONDS`` into ``out``."""
+    ion: dict[str, np.ndarray] = {}
+    for line in header:
         label = line[60:].strip()
-        if label == "IONOSPHERIC CORR":
-            vals = [_float(line[5 + 12 * j : 17 + 12 * j]) for j in range(4)]
-            if line.startswith("GPSA"):
-                alpha = np.array(vals)
-            elif line.startswith("GPSB"):
-                beta = np.array(vals)
+        where = _klobuchar_field(label, line)
+        if where is not None:
+            key, first = where
+            try:
+                ion[key] = np.array([_float(line[first + 12 * j : first + 12 + 12 * j]) for j in range(4)])
+            except ValueError:
+                out.rejected["bad_klobuchar"] += 1
         elif label == "LEAP SECONDS":
             text = line[:6].strip()
             out.leap_seconds = int(text) if text.lstrip("-").isdigit() else None
-    if version >= 4.0:
-        _read_v4_records(lines[body:], out)
-        return
-    if alpha is not None and beta is not None:
-        out.klobuchar = (alpha, beta)
-    glo_lines = 5 if version >= 3.05 else 4
-    i = body
+    return (ion["A"], ion["B"]) if "A" in ion and "B" in ion else None
+
+
+def _klobuchar_field(label: str, line: str) -> tuple[str, int] | None:
+    """Whether a header line holds GPS Klobuchar α ("A") or β ("B"), and the column of its first value."""
+    if label == "IONOSPHERIC CORR" and line[:4] in ("GPSA", "GPSB"):
+        return line[3], 5
+    if label in ("ION ALPHA", "ION BETA"):
+        return label[4], 2
+    return None
+
+
+def _nav_records(
+    lines: list[str],
+    out: RinexNav,
+    letter_of: Callable[[str], str],
+    n_lines: Callable[[str], int | None],
+    parse: Callable[[str, list[str], RinexNav], None],
+) -> None:
+    """Records of ``n_lines(letter)`` lines, each starting on a line where ``letter_of`` gives its
+    system letter ('' on continuation lines); records of unknown systems, records with lines missing
+    (the next record starts inside them) and damaged ones counted."""
+    i = 0
     while i < len(lines):
-        line = lines[i]
-        letter = line[0:1]
-        if not letter.strip():
+        letter = letter_of(lines[i])
+        if not letter:
             out.rejected["stray_line"] += 1
             i += 1
             continue
-        n = glo_lines if letter == "R" else NAV_LINES.get(letter, 0)
+        n = n_lines(letter) or 0
         if n == 0:
             out.rejected["unknown_system"] += 1
             i += 1
-            while i < len(lines) and not lines[i][0:1].strip():
+            while i < len(lines) and not letter_of(lines[i]):
                 i += 1
             continue
         block = lines[i : i + n]
+        cut = next((j for j in range(1, len(block)) if letter_of(block[j])), 0)
+        if cut:  # a record with lines missing: the next record starts inside it
+            out.rejected["record_cut_short"] += 1
+            i += cut
+            continue
         i += n
         if len(block) < n:
             out.rejected["truncated"] += 1
             break
         try:
-            _nav_record(letter, block, out)
+            parse(letter, block, out)
         except (ValueError, IndexError, UserError):
             out.rejected["bad_record"] += 1
 
@@ -425,9 +675,23 @@ def _date(line: str, cols: tuple[int, ...]) -> tuple[int, int, int, int, int, fl
 
 
 def _nav_record(letter: str, block: list[str], out: RinexNav) -> None:
+    """A RINEX 3 record: ``G01 2024 03 07 22 00 00`` and three values, then four values a line."""
     head = block[0]
-    prn = int(head[1:3])
-    cal = _date(head, (4, 9, 12, 15, 18, 21, 23))
+    _nav_entry(letter, int(head[1:3]), _date(head, (4, 9, 12, 15, 18, 21, 23)), block, out)
+
+
+def _nav_record_v2(letter: str, block: list[str], out: RinexNav) -> None:
+    """A RINEX 2 record: ``I2`` PRN, a 2-digit year, ``F5.1`` seconds and three values, then (three
+    columns in) four values a line; read as the RINEX 3 record it is one column to the right of."""
+    head = block[0]
+    y, mo, d, h, mi, s = _date(head, (2, 5, 8, 11, 14, 17, 22))
+    _nav_entry(letter, int(head[0:2]), (_full_year(y), mo, d, h, mi, s), [" " + x for x in block], out)
+
+
+def _nav_entry(
+    letter: str, prn: int, cal: tuple[int, int, int, int, int, float], block: list[str], out: RinexNav
+) -> None:
+    """One record's ephemeris (``block`` in RINEX 3's columns) into ``out``, or a counted rejection."""
     v = _nav_values(block)
     if not all(math.isfinite(x) for x in v):
         out.rejected["nonfinite"] += 1

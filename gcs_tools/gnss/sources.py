@@ -1,4 +1,4 @@
-"""One entry point for raw GNSS inputs: smartLoc, RINEX 3/4 observation + navigation (compressed or not), UBX.
+"""One entry point for raw GNSS inputs: smartLoc, RINEX 2-4 observation + navigation (compressed or not), UBX.
 
 ``load_input`` returns epochs ready for the solver (RINEX/UBX: satellite states attached from the
 broadcast ephemerides at transmission time; observations without an ephemeris counted in

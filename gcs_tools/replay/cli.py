@@ -52,10 +52,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_gnss_arguments(parser)
     g = parser.add_argument_group("raw GNSS (docs/gnss.md)")
     g.add_argument("--rinex-obs", type=Path, default=None,
-                   help="RINEX 3/4 observations (compressed or not): their single-point fixes replace "
+                   help="RINEX 2/3/4 observations (compressed or not): their single-point fixes replace "
                         "the log's (joined to boot time through the log's SYSTEM_TIME / GPS time)")
     g.add_argument("--rinex-nav", type=Path, action="append", default=[],
-                   help="RINEX 3/4 navigation file(s) for --rinex-obs (repeatable)")
+                   help="RINEX 2/3/4 navigation files for --rinex-obs (repeatable; RINEX 2: one a system)")
     g.add_argument("--ubx", type=Path, default=None, metavar="FILE",
                    help="--coupling tight: a u-blox UBX log (RXM-RAWX, RXM-SFRBX) whose raw epochs replace "
                         "the log's fixes, e.g. a canyon run's receiver.ubx (receiver.json beside it joins "
