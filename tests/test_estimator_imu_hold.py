@@ -155,7 +155,8 @@ def test_out_of_order_fusion_through_held_time_equals_in_order(mode):
     the history, so re-propagation after a late fix reproduces the in-order filter exactly."""
     cfg = EstimatorConfig()
     s = multipath_stream(np.random.default_rng(9), cfg, [(8.0, 0.0), (8.0, 1.2)])
-    keep = {"datagrams": _lossy, "10 Hz": _slow, "outages": _outages}[mode](np.random.default_rng(10), len(s.t_us))
+    loss = {"datagrams": _lossy, "10 Hz": _slow, "outages": _outages}[mode]
+    keep = loss(np.random.default_rng(10), len(s.t_us))
     t_fix = s.fix_t_us
     inside = ~keep[s.fix_index]
     assert inside.sum() > 10  # fixes valid while the IMU was held
@@ -273,9 +274,10 @@ def _velocity_nees(q_hold_white, q_hold_rw, runs=30, fix_every=40, r_m=0.3, q_co
                 x, P, *_ = prop.predict_from(x, P, a_prev, b, (t_us[k] - t_prev) * 1e-6, 1.0, 0.0)
                 e = np.array(x[3:6]) - v[k]
                 if t_us[k] >= 2_000_000:
-                    # the coast's moments moved: 1 (the IMU came back before the fix), 2 (the fix inside the outage)
+                    # the coast's moments moved: 1 (the IMU back before the fix), 2 (the fix in the outage)
                     coasted = 0.0 if b[31] == a_prev[31] else 1.0 if keep[k] else 2.0
-                    nees.append((e[0:2] @ np.linalg.solve(P[3:5, 3:5], e[0:2]), e[2] ** 2 / P[5, 5], coasted))
+                    nees.append((e[0:2] @ np.linalg.solve(P[3:5, 3:5], e[0:2]), e[2] ** 2 / P[5, 5],
+                                 coasted))
             z = p[k] + rng.standard_normal(3) * r_m
             y = tuple((z - np.array(x[0:3])).tolist())
             x, P, _ = _core.update(x, P, y, (r_m**2,) * 3)

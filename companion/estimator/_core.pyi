@@ -39,7 +39,8 @@ class History:
 
 class Propagator:
     def __init__(self, q_acc_m2_s3: float, q_rw_m2_s5: float, q_ned_m2_s5: float,
-                 q_hold_white_m2_s3: float = ..., q_hold_rw_m2_s5: float = ..., q_coast: float = ...) -> None: ...
+                 q_hold_white_m2_s3: float = ..., q_hold_rw_m2_s5: float = ...,
+                 q_coast: float = ...) -> None: ...
     def predict(self, P: np.ndarray, T_s: float, nA: _Floats, nB: _Floats, alpha: float,
                 q_b: float) -> np.ndarray: ...
     def variances(self, P: np.ndarray, T_s: float, nA: _Floats, nB: _Floats, alpha: float, q_b: float,

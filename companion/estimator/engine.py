@@ -183,7 +183,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         self._prop = model.BlockPropagator(self._q_acc, self._q_rw, self._q_ned, self._q_acc, q_hold, 1.0)
         # while the IMU disagrees with GNSS: the white-acceleration density inflated
         q_distrust = self._q_acc * cfg.imu_gnss_disagree_acc_factor**2
-        self._prop_disagree = model.BlockPropagator(q_distrust, self._q_rw, self._q_ned, q_distrust, q_hold, 1.0)
+        self._prop_disagree = model.BlockPropagator(q_distrust, self._q_rw, self._q_ned, q_distrust, q_hold,
+                                                    1.0)
         self._gate2 = cfg.gnss_gate_sigma**2
         self._vel_gate2 = cfg.gnss_vel_gate_sigma**2
         self._scale_tau_s = cfg.gnss_scale_tau_s

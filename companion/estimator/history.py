@@ -103,7 +103,8 @@ class ImuHistory(_core.History):
       rows are never rewritten once appended, so the value for a time up to the newest sample never
       changes: the engine keeps it with each fusion;
     * ``last_integrals()``, ``trim_before(t_us)`` (drop samples not needed from ``t_us`` on);
-    * ``len()``, ``first_t_us``, ``last_t_us``, ``t0_us``, ``hold_max_s``, ``hold_periods``, and copies ``rows``,
+    * ``len()``, ``first_t_us``, ``last_t_us``, ``t0_us``, ``hold_max_s``, ``hold_periods``, and copies
+      ``rows``,
       ``t_us`` (for tests).
     """
 

@@ -201,7 +201,8 @@ def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = 
 # The engine's hot path is C (``_core.c``), equal to the reference forms above to rounding
 # (tested here and in tests/test_estimator_core.py):
 #
-# ``BlockPropagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5, q_hold_white_m2_s3=0, q_hold_rw_m2_s5=0, q_coast=0)``
+# ``BlockPropagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5, q_hold_white_m2_s3=0, q_hold_rw_m2_s5=0,
+# q_coast=0)``
 # (the densities σ_q² and σ_j² of the held-time noise and the scale of a coast's dropped acceleration,
 # 1 or 0, ``history.py``, "Held time"; the paths given the block's integrals add it, ``predict`` and
 # ``variances`` do not):
