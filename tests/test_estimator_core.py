@@ -19,29 +19,35 @@ Row = tuple[float, ...]
 
 
 class ReferenceHistory:
-    """history.py's formulas as Python floats: rows (t_s, ã, S1, S2, R, M1, M2, (w, j), W, J), zero-order
-    hold, a gap held for ``hold_max_s`` then a virtual zero-acceleration sample; held time (an interval
-    over 1.5 periods, the period the median of the last 8 intervals) with its densities and moments."""
+    """history.py's formulas as Python floats: rows (t_s, ã, S1, S2, R, M1, M2, (w, j), W, J, c (3), C (9)),
+    zero-order hold; the hold limit max(hold_max_s, hold_periods × the period), the period the median of
+    the last 8 intervals; a gap held for the limit then a virtual zero-acceleration sample; held time (an
+    interval over 1.5 periods) with its densities and moments (a gap's: w over its hold, j over the whole
+    interval), a coast with the dropped acceleration's (c_i = ã_i² C)."""
 
-    def __init__(self, hold_max_s: float) -> None:
+    def __init__(self, hold_max_s: float, hold_periods: float = 0.0) -> None:
         self.hold_max_s, self.hold_us = hold_max_s, int(round(hold_max_s * 1e6))
+        self.hold_periods = hold_periods
         self.t0_us = 0
         self.t_us: list[int] = []
         self.rows: list[tuple[float, ...]] = []
         self.intervals: list[int] = []
 
     @staticmethod
-    def _held(r: Row, t: float, dens: tuple[float, float]) -> list[float]:
-        """(w, j), W and J of the row at t after r, the interval's densities ``dens``."""
-        w, j = dens
-        if w == 0.0 and j == 0.0:
-            return [w, j, *r[39:45]]
+    def _held(r: Row, t: float, dens: tuple[float, ...]) -> list[float]:
+        """(w, j), W, J, c (3) and C (9) of the row at t after r, the interval's densities ``dens``
+        (w, j, c_x, c_y, c_z)."""
         dt = t - r[0]
         m = (dt, dt * (r[0] + t) * 0.5, dt * (r[0] * r[0] + r[0] * t + t * t) / 3.0)
-        return [w, j, *(r[39 + i] + w * m[i] for i in range(3)), *(r[42 + i] + j * m[i] for i in range(3))]
+        w, j, *c = dens
+        held = [w, j, *r[39:45]] if w == 0.0 and j == 0.0 else \
+            [w, j, *(r[39 + i] + w * m[i] for i in range(3)), *(r[42 + i] + j * m[i] for i in range(3))]
+        if not any(c):
+            return [*held, 0.0, 0.0, 0.0, *r[48:57]]
+        return [*held, *c, *(r[48 + 3 * a + i] + c[a] * m[i] for a in range(3) for i in range(3))]
 
     @classmethod
-    def _next(cls, r: Row, t: float, a: Row, rot: Row, dens: tuple[float, float] = (0.0, 0.0)) -> Row:
+    def _next(cls, r: Row, t: float, a: Row, rot: Row, dens: tuple[float, ...] = (0.0,) * 5) -> Row:
         dt = t - r[0]
         dm = dt * (r[0] + t) * 0.5
         held = r[1:4] + r[10:19]
@@ -49,11 +55,14 @@ class ReferenceHistory:
         i2 = [s + h * dm for s, h in zip(r[7:10] + r[28:37], held, strict=True)]
         return (t, *a, *i1[0:3], *i2[0:3], *rot, *i1[3:12], *i2[3:12], *cls._held(r, t, dens))
 
-    def _densities(self, dt_us: int, t_prev: float, t_end: float) -> tuple[float, float]:
+    def _period(self) -> int:
         last = sorted(self.intervals[-9:-1])  # the period: before this interval
-        if not last:
+        return last[(len(last) - 1) // 2] if last else 0
+
+    def _densities(self, dt_us: int, t_prev: float, t_end: float) -> tuple[float, float]:
+        p_us = self._period()
+        if not p_us:
             return 0.0, 0.0
-        p_us = last[(len(last) - 1) // 2]
         L, p = t_end - t_prev, p_us * 1e-6
         if 3 * p_us >= 2 * dt_us or p >= L:
             return 0.0, 0.0
@@ -63,21 +72,27 @@ class ReferenceHistory:
         if not self.rows:
             self.t0_us = t_us
             self.t_us.append(t_us)
-            self.rows.append((0.0, ax, ay, az, *(0.0,) * 6, *rot, *(0.0,) * 26))
+            self.rows.append((0.0, ax, ay, az, *(0.0,) * 6, *rot, *(0.0,) * 38))
             return False
         r = self.rows[-1]
         t = (t_us - self.t0_us) * 1e-6
         dt_us = t_us - self.t_us[-1]
         self.intervals.append(dt_us)
-        gap = t - r[0] > self.hold_max_s
+        lim_us = self.hold_us
+        if self.hold_periods > 0 and dt_us > self.hold_us:
+            lim_us = max(lim_us, round(self.hold_periods * self._period()))
+        gap = t - r[0] > (self.hold_max_s if lim_us == self.hold_us else lim_us * 1e-6)
+        w, j = self._densities(dt_us, r[0], t)
         if gap:
-            tv_us = self.t_us[-1] + self.hold_us
+            tv_us = self.t_us[-1] + lim_us
             tv = (tv_us - self.t0_us) * 1e-6
             self.t_us.append(tv_us)
-            self.rows.append(self._next(r, tv, (0.0, 0.0, 0.0), r[10:19], self._densities(dt_us, r[0], tv)))
-            dens = (0.0, 0.0)
+            w = self._densities(dt_us, r[0], tv)[0]  # the white part: the hold only
+            self.rows.append(self._next(r, tv, (0.0, 0.0, 0.0), r[10:19], (w, j, 0.0, 0.0, 0.0)))
+            c = tuple(r[1 + i] * r[1 + i] * (t - tv) for i in range(3))
+            dens = (0.0, j, *c)
         else:
-            dens = self._densities(dt_us, r[0], t)
+            dens = (w, j, 0.0, 0.0, 0.0)
         self.t_us.append(t_us)
         self.rows.append(self._next(self.rows[-1], t, (ax, ay, az), tuple(rot), dens))
         return gap
@@ -86,9 +101,9 @@ class ReferenceHistory:
         k = max(i for i, t in enumerate(self.t_us) if t <= t_us)
         r = self.rows[k]
         t = (t_us - self.t0_us) * 1e-6
-        dens = self.rows[k + 1][37:39] if k + 1 < len(self.rows) else (0.0, 0.0)
+        dens = (*self.rows[k + 1][37:39], *self.rows[k + 1][45:48]) if k + 1 < len(self.rows) else (0.0,) * 5
         nxt = self._next(r, t, r[1:4], r[10:19], dens) if t != r[0] else r
-        return (t, *nxt[4:10], *nxt[19:37], *nxt[39:45])
+        return (t, *nxt[4:10], *nxt[19:37], *nxt[39:45], *nxt[48:57])
 
 
 def _rot9(rng: np.random.Generator) -> tuple[float, ...]:
@@ -108,25 +123,40 @@ def _random_cov(rng: np.random.Generator) -> np.ndarray:
     return A @ A.T + 0.1 * np.eye(N)
 
 
-def test_history_rows_and_integrals_equal_the_float_reference_bit_for_bit():
+def _slow_stream(rng: np.random.Generator, n: int = 300):
+    """A 10 Hz IMU (90-110 ms) with a lost sample (200 ms), two lost (300 ms) and an outage (1.5 s)."""
+    dts = rng.integers(90_000, 110_000, size=n)
+    dts[[n // 5, n // 3, n // 2]] = (200_000, 300_000, 1_500_000)
+    t_us = (1_000_000 + np.concatenate([[0], np.cumsum(dts[1:])])).tolist()
+    return t_us, rng.standard_normal((n, 3)).tolist(), [_rot9(rng) for _ in range(n)]
+
+
+@pytest.mark.parametrize(("stream", "periods", "n_gaps"), [(_stream, 0.0, 3), (_stream, 2.5, 3),
+                                                          (_slow_stream, 2.5, 3), (_slow_stream, 0.0, 299)])
+def test_history_rows_and_integrals_equal_the_float_reference_bit_for_bit(stream, periods, n_gaps):
+    """Rows, gaps and integrals (inside holds and coasts too) as the float reference, with the hold limit
+    fixed and following the period: at 200 Hz the same gaps either way; at 10 Hz only the two-sample
+    loss, the outage and the first interval (no period yet) are gaps with it, every interval without."""
     rng = np.random.default_rng(11)
-    t_us, acc, rots = _stream(rng)
-    core, ref = ImuHistory(0.05), ReferenceHistory(0.05)
+    t_us, acc, rots = stream(rng)
+    core, ref = ImuHistory(0.05, periods), ReferenceHistory(0.05, periods)
     gaps = []
     for t, a, r in zip(t_us, acc, rots, strict=True):
         gaps.append(core.append(t, *a, r))
         assert ref.append(t, *a, r) == gaps[-1]
-    assert sum(gaps) == 3 and core.rows == ref.rows and core.t_us == ref.t_us
+    assert sum(gaps) == n_gaps and core.rows == ref.rows and core.t_us == ref.t_us
+    assert any(r[45] != 0.0 for r in core.rows) and any(r[38] != 0.0 for r in core.rows)
     assert (core.first_t_us, core.last_t_us, core.t0_us) == (t_us[0], t_us[-1], t_us[0])
     assert len(core) == len(ref.rows)
-    for t in [*rng.integers(t_us[0], t_us[-1] + 40_000, size=200).tolist(), *t_us[::37]]:
+    for t in [*rng.integers(t_us[0], t_us[-1] + 40_000, size=300).tolist(), *t_us[::37], *core.t_us[1::7]]:
         assert core.integrals(t) == ref.integrals(t)
     assert core.last_integrals() == ref.integrals(t_us[-1])
     # the batch path: the same rows as one by one
-    batch = ImuHistory(0.05)
+    batch = ImuHistory(0.05, periods)
     batch.append(t_us[0], *acc[0], rots[0])
     batch.append_batch(np.array(t_us[1:50]), np.array(acc[1:50]), np.array(rots[1:50]))
-    assert batch.rows == ref.rows[:50]
+    assert batch.rows == ref.rows[:len(batch)] and batch.t_us == ref.t_us[:len(batch)]
+    assert batch.last_t_us == t_us[49]
 
 
 def test_history_trim_keeps_every_integral_after_the_cut_and_grows_past_its_buffer():

@@ -169,7 +169,7 @@ def test_the_running_centre_constants_are_those_of_gaussian_innovations():
     rng = np.random.default_rng(2)
     scales = (1.0, 1.0, 1.0, 1.0)
     k, ek = 0.01, math.exp(0.01)
-    a = b = (0.0,) * 31  # integrals (history.py)
+    a = b = (0.0,) * 40  # integrals (history.py)
     hist_h, hist_v = [], []
     for i in range(40_000):
         y = tuple(rng.standard_normal(3).tolist())

@@ -22,8 +22,8 @@
 
 #define NS 15
 #define NN (NS * NS)
-#define ROW 45
-#define NINT 31
+#define ROW 57
+#define NINT 40
 #define RING 8  /* recent sample intervals: their median is the IMU's period */
 
 
@@ -180,23 +180,38 @@ typedef struct {
     PyObject_HEAD
     double q_acc, q_rw, q_ned;
     double q_hold_white, q_hold_rw;  /* the densities the held-time moments W and J are scaled by */
+    double q_coast;  /* the scale of the coast's dropped-acceleration moments C (1: on, 0: off) */
 } Propagator;
 
 /* The held-time process noise of a block between integrals a and b (history.py, "Held time"): the
- * white acceleration density n(s) = q_hold_white w(s) + q_hold_rw j(s) on p, v (each axis):
- * hq = (pp, pv, vv) = (∫ n (t_b - s)^2, ∫ n (t_b - s), ∫ n) over the block; 0 when it holds no
- * held time or the densities are 0 (then nothing is added: the prediction is bit-identical to one
- * without). */
+ * white acceleration density n_i(s) = q_hold_white w(s) + q_hold_rw j(s) + q_coast c_i(s) on p, v
+ * (axis i): hq[3 i ..] = (pp, pv, vv) = (∫ n_i (t_b - s)^2, ∫ n_i (t_b - s), ∫ n_i) over the block; 0 when
+ * it holds no held time or coast, or the densities are 0 (then nothing is added: the prediction is
+ * bit-identical to one without). */
 static int held_q(const Propagator *pr, const double *a, const double *b, double *hq) {
     double w0 = b[25] - a[25], j0 = b[28] - a[28];
-    if ((w0 == 0.0 || pr->q_hold_white == 0.0) && (j0 == 0.0 || pr->q_hold_rw == 0.0)) return 0;
-    double d0 = pr->q_hold_white * w0 + pr->q_hold_rw * j0;
-    double d1 = pr->q_hold_white * (b[26] - a[26]) + pr->q_hold_rw * (b[29] - a[29]);
-    double d2 = pr->q_hold_white * (b[27] - a[27]) + pr->q_hold_rw * (b[30] - a[30]);
+    int held = !((w0 == 0.0 || pr->q_hold_white == 0.0) && (j0 == 0.0 || pr->q_hold_rw == 0.0));
+    int coast = pr->q_coast != 0.0 && (b[31] != a[31] || b[34] != a[34] || b[37] != a[37]);
+    if (!held && !coast) return 0;
+    double d0 = 0.0, d1 = 0.0, d2 = 0.0;
+    if (held) {
+        d0 = pr->q_hold_white * w0 + pr->q_hold_rw * j0;
+        d1 = pr->q_hold_white * (b[26] - a[26]) + pr->q_hold_rw * (b[29] - a[29]);
+        d2 = pr->q_hold_white * (b[27] - a[27]) + pr->q_hold_rw * (b[30] - a[30]);
+    }
     double tb = b[0];
-    hq[0] = tb * tb * d0 - 2.0 * tb * d1 + d2;
-    hq[1] = tb * d0 - d1;
-    hq[2] = d0;
+    for (int i = 0; i < 3; i++) {
+        double e0 = d0, e1 = d1, e2 = d2;
+        if (coast) {
+            const double *ca = a + 31 + 3 * i, *cb = b + 31 + 3 * i;
+            e0 += pr->q_coast * (cb[0] - ca[0]);
+            e1 += pr->q_coast * (cb[1] - ca[1]);
+            e2 += pr->q_coast * (cb[2] - ca[2]);
+        }
+        hq[3 * i] = tb * tb * e0 - 2.0 * tb * e1 + e2;
+        hq[3 * i + 1] = tb * e0 - e1;
+        hq[3 * i + 2] = e0;
+    }
     return 1;
 }
 
@@ -242,10 +257,10 @@ static void predict_c(const Propagator *pr, const double *P, double T, const dou
     double vv = q * T + we * T2 * T / 3.0, aa = w * T, dd = e * T, pd = -e * T2 * T / 6.0, vd = -e * T2 / 2.0;
     double kp = pr->q_rw * T * T / 6.0, kv = pr->q_rw * T / 2.0;
     for (int i = 0; hq && i < 3; i++) {  /* held time (held_q) */
-        out[i * NS + i] += hq[0];
-        out[i * NS + 3 + i] += hq[1];
-        out[(3 + i) * NS + i] += hq[1];
-        out[(3 + i) * NS + 3 + i] += hq[2];
+        out[i * NS + i] += hq[3 * i];
+        out[i * NS + 3 + i] += hq[3 * i + 1];
+        out[(3 + i) * NS + i] += hq[3 * i + 1];
+        out[(3 + i) * NS + 3 + i] += hq[3 * i + 2];
     }
     for (int i = 0; i < 3; i++) {
         out[i * NS + i] += pp;
@@ -299,8 +314,8 @@ static void variances_c(const Propagator *pr, const double *P, double T, const d
     double vv = pr->q_acc * T + we * T2 * T / 3.0;
     double a2 = alpha * alpha;
     for (int i = 0; hq && i < 3; i++) {  /* held time (held_q), as predict_c adds it */
-        var[i] = var[i] + hq[0];
-        var[3 + i] = var[3 + i] + hq[2];
+        var[i] = var[i] + hq[3 * i];
+        var[3 + i] = var[3 + i] + hq[3 * i + 2];
     }
     for (int i = 0; i < 3; i++) {
         var[i] = var[i] + pp;
@@ -359,9 +374,9 @@ static double update_c(const double *x, const double *P, const double *y, const 
 }
 
 static int prop_init(Propagator *self, PyObject *args, PyObject *kw) {
-    self->q_hold_white = self->q_hold_rw = 0.0;
-    if (!PyArg_ParseTuple(args, "ddd|dd", &self->q_acc, &self->q_rw, &self->q_ned, &self->q_hold_white,
-                          &self->q_hold_rw))
+    self->q_hold_white = self->q_hold_rw = self->q_coast = 0.0;
+    if (!PyArg_ParseTuple(args, "ddd|ddd", &self->q_acc, &self->q_rw, &self->q_ned, &self->q_hold_white,
+                          &self->q_hold_rw, &self->q_coast))
         return -1;
     return 0;
 }
@@ -405,7 +420,7 @@ static PyObject *prop_predict_from(Propagator *self, PyObject *const *args, Py_s
     double T = PyFloat_AsDouble(args[4]), alpha = PyFloat_AsDouble(args[5]), q_b = PyFloat_AsDouble(args[6]);
     if (PyErr_Occurred()) return NULL;
     mean_between_c(x, a, b, alpha, xo, nA, nB);
-    double hq[3];
+    double hq[9];
     predict_c(self, P, T, nA, nB, alpha, q_b, held_q(self, a, b, hq) ? hq : NULL, out);
     pht_of(out, PHt, hph);
     double pp[3] = {PHt[0], PHt[4], PHt[8]};
@@ -427,7 +442,7 @@ static PyObject *prop_output_from(Propagator *self, PyObject *const *args, Py_ss
     if (PyErr_Occurred()) return NULL;
     mean_between_c(x, a, b, alpha, xo, nA, nB);
     memcpy(out, xo, sizeof(double) * 9);
-    double hq[3];
+    double hq[9];
     variances_c(self, P, T, nA, nB, alpha, q_b, held_q(self, a, b, hq) ? hq : NULL, out + 9);
     return Py_BuildValue("(NN)", tuple_of(xo, NS), new_array(1, 18, 0, out));
 }
@@ -445,7 +460,7 @@ static PyTypeObject PropagatorType = {
     .tp_name = "companion.estimator._core.Propagator",
     .tp_basicsize = sizeof(Propagator),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE,
-    .tp_doc = "Propagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5, q_hold_white_m2_s3=0, q_hold_rw_m2_s5=0): "
+    .tp_doc = "Propagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5, q_hold_white_m2_s3=0, q_hold_rw_m2_s5=0, q_coast=0): "
               "the 15-state block prediction",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)prop_init,
@@ -612,11 +627,13 @@ typedef struct {
     PyObject_HEAD
     double hold_max_s;
     long long hold_us;
+    double hold_periods;  /* the hold limit follows the IMU's period: max(hold_max_s, this x period); 0: off */
     long long t0;
     int started;
     long long *t;     /* sample times (us) */
     double *rows;     /* ROW doubles per sample: t_s, a (3), S1 (3), S2 (3), R (9), M1 (9), M2 (9), the
-                       * held-time densities (w, j) of the interval ending here, W (3), J (3) */
+                       * held-time densities (w, j) of the interval ending here, W (3), J (3), the coast's
+                       * densities c (3, per axis) of that interval, C (3 x 3: per axis) */
     Py_ssize_t start, n, cap;
     Py_ssize_t trim_len;  /* push returns 1 once the history is longer (the engine trims) */
     long long n_used, n_gaps, n_nonfinite, n_backwards;  /* samples pushed, by outcome */
@@ -625,10 +642,11 @@ typedef struct {
 } History;
 
 static int hist_init(History *self, PyObject *args, PyObject *kw) {
-    static char *kwlist[] = {"hold_max_s", NULL};
-    double hold;
-    if (!PyArg_ParseTupleAndKeywords(args, kw, "d", kwlist, &hold)) return -1;
+    static char *kwlist[] = {"hold_max_s", "hold_periods", NULL};
+    double hold, periods = 0.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "d|d", kwlist, &hold, &periods)) return -1;
     self->hold_max_s = hold;
+    self->hold_periods = periods;
     self->hold_us = (long long)nearbyint(hold * 1e6);  /* round half to even, as Python's round */
     self->started = 0;
     self->start = self->n = 0;
@@ -681,10 +699,10 @@ static void moments(double tp, double t, double *dm, double *d3) {
     *d3 = dt * (tp * tp + tp * t + t * t) / 3.0;
 }
 
-/* the row after r at time t (s) holding a (3) and R (9), with the held-time densities (w, j) of the
- * interval [r's time, t]: history._next_row */
+/* the row after r at time t (s) holding a (3) and R (9), with the held-time densities (w, j) and the
+ * coast's densities c (3; NULL: none) of the interval [r's time, t]: history._next_row */
 static void next_row(const double *r, double t, double ax, double ay, double az, const double *rot, double w,
-                     double j, double *o) {
+                     double j, const double *c, double *o) {
     double tp = r[0];
     double dt = t - tp;
     double dm = dt * (tp + t) * 0.5;
@@ -695,6 +713,18 @@ static void next_row(const double *r, double t, double ax, double ay, double az,
         o[42] = r[42] + j * dt; o[43] = r[43] + j * dm; o[44] = r[44] + j * d3;
     } else {
         memcpy(o + 39, r + 39, sizeof(double) * 6);
+    }
+    if (c) {
+        double d3 = dt * (tp * tp + tp * t + t * t) / 3.0;
+        for (int i = 0; i < 3; i++) {
+            o[45 + i] = c[i];
+            o[48 + 3 * i] = r[48 + 3 * i] + c[i] * dt;
+            o[49 + 3 * i] = r[49 + 3 * i] + c[i] * dm;
+            o[50 + 3 * i] = r[50 + 3 * i] + c[i] * d3;
+        }
+    } else {
+        o[45] = o[46] = o[47] = 0.0;
+        memcpy(o + 48, r + 48, sizeof(double) * 9);
     }
     o[0] = t; o[1] = ax; o[2] = ay; o[3] = az;
     for (int i = 0; i < 3; i++) {
@@ -708,22 +738,37 @@ static void next_row(const double *r, double t, double ax, double ay, double az,
     }
 }
 
-/* The IMU's period (us), the median (the lower one of an even count) of the last RING sample intervals,
- * when the interval dt_us is longer than 1.5 periods (a sample is missing: the interval would be two
- * periods or more), else 0 (also before the first interval). An interval no longer than 1.5 times the
- * shortest of them is not (no sort). */
-static long long held_period(const History *h, long long dt_us) {
+/* The IMU's period (us): the median (the lower one of an even count) of the last RING sample intervals;
+ * 0 before the first interval. */
+static long long ring_period(const History *h) {
     long long s[RING];
-    int n = h->ring_n, longer = 0;
-    for (int i = 0; i < n; i++) longer |= 2 * dt_us > 3 * h->ring[i];
-    if (!longer) return 0;
+    int n = h->ring_n;
+    if (!n) return 0;
     memcpy(s, h->ring, sizeof(long long) * (size_t)n);
     for (int i = 1; i < n; i++)  /* insertion sort of at most RING numbers */
         for (int k = i; k > 0 && s[k - 1] > s[k]; k--) {
             long long x = s[k]; s[k] = s[k - 1]; s[k - 1] = x;
         }
-    long long p = s[(n - 1) / 2];
+    return s[(n - 1) / 2];
+}
+
+/* The IMU's period (ring_period) when the interval dt_us is longer than 1.5 periods (a sample is
+ * missing: the interval would be two periods or more), else 0 (also before the first interval). An
+ * interval no longer than 1.5 times the shortest of them is not (no sort). */
+static long long held_period(const History *h, long long dt_us) {
+    int n = h->ring_n, longer = 0;
+    for (int i = 0; i < n; i++) longer |= 2 * dt_us > 3 * h->ring[i];
+    if (!longer) return 0;
+    long long p = ring_period(h);
     return 2 * dt_us > 3 * p ? p : 0;
+}
+
+/* The hold limit (us) of an interval dt_us: hold_us, or hold_periods x the period (ring_period, before
+ * this interval) when that is longer (only looked at for an interval longer than hold_us). */
+static long long hold_limit(const History *h, long long dt_us) {
+    if (h->hold_periods <= 0.0 || dt_us <= h->hold_us) return h->hold_us;
+    long long kp = (long long)nearbyint(h->hold_periods * (double)ring_period(h));
+    return kp > h->hold_us ? kp : h->hold_us;
 }
 
 /* The held-time densities (w, j) of an input held over [tp, t] (s) against the period p_us (held_period;
@@ -754,27 +799,33 @@ static int hist_append_c(History *h, long long t_us, double ax, double ay, doubl
     }
     double *r = HROW(h, h->n - 1);
     double t = (double)(t_us - h->t0) * 1e-6;
-    long long dt_us = t_us - HT(h, h->n - 1), p_us = held_period(h, dt_us);
+    long long dt_us = t_us - HT(h, h->n - 1), p_us = held_period(h, dt_us), lim_us = hold_limit(h, dt_us);
     h->ring[h->ring_i] = dt_us;
     h->ring_i = (h->ring_i + 1) % RING;
     if (h->ring_n < RING) h->ring_n++;
     double w, j;
-    int gap = t - r[0] > h->hold_max_s;
-    if (gap) {  /* held for hold_max_s (held time), then coasting (none) */
-        long long tv = HT(h, h->n - 1) + h->hold_us;
-        double tvs = (double)(tv - h->t0) * 1e-6;
-        held_densities(p_us, r[0], tvs, &w, &j);
+    /* the fixed limit compared as before (in s since t0), an extended one alike */
+    int gap = t - r[0] > (lim_us == h->hold_us ? h->hold_max_s : (double)lim_us * 1e-6);
+    /* the held-time densities of the whole interval (a gap's j: its hold and its coast alike) */
+    held_densities(p_us, r[0], t, &w, &j);
+    if (gap) {  /* held up to the limit (held time), then coasting (the acceleration's change, and the
+                 * acceleration dropped); the held sample's white noise only where it is held */
+        long long tv = HT(h, h->n - 1) + lim_us;
+        double tvs = (double)(tv - h->t0) * 1e-6, jh;
+        held_densities(p_us, r[0], tvs, &w, &jh);
         double *o = HROW(h, h->n);
-        next_row(r, tvs, 0.0, 0.0, 0.0, r + 10, w, j, o);
+        next_row(r, tvs, 0.0, 0.0, 0.0, r + 10, w, j, NULL, o);
         HT(h, h->n) = tv;
         h->n++;
         if (hist_reserve(h) < 0) return -1;
-        r = HROW(h, h->n - 1);
-        w = j = 0.0;
+        r = HROW(h, h->n - 1);  /* the virtual sample; the held one is the row before */
+        const double *held = HROW(h, h->n - 2);
+        double C = t - tvs, c[3];
+        for (int i = 0; i < 3; i++) c[i] = held[1 + i] * held[1 + i] * C;
+        next_row(r, t, ax, ay, az, rot, 0.0, j, c, HROW(h, h->n));
     } else {
-        held_densities(p_us, r[0], t, &w, &j);
+        next_row(r, t, ax, ay, az, rot, w, j, NULL, HROW(h, h->n));
     }
-    next_row(r, t, ax, ay, az, rot, w, j, HROW(h, h->n));
     HT(h, h->n) = t_us;
     h->n++;
     return gap;
@@ -899,6 +950,7 @@ static int hist_integrals_c(const History *h, long long t_us, double *o) {
     double tau = t - r[0];
     o[0] = t;
     memcpy(o + 25, r + 39, sizeof(double) * 6);
+    memcpy(o + 31, r + 48, sizeof(double) * 9);
     if (tau == 0.0) {
         memcpy(o + 1, r + 4, sizeof(double) * 6);
         memcpy(o + 7, r + 19, sizeof(double) * 18);
@@ -911,6 +963,13 @@ static int hist_integrals_c(const History *h, long long t_us, double *o) {
         moments(r[0], t, &dm2, &d3);
         o[25] += nx[37] * tau; o[26] += nx[37] * dm2; o[27] += nx[37] * d3;
         o[28] += nx[38] * tau; o[29] += nx[38] * dm2; o[30] += nx[38] * d3;
+    }
+    if (nx && (nx[45] != 0.0 || nx[46] != 0.0 || nx[47] != 0.0)) {  /* inside a coast */
+        double dm2, d3;
+        moments(r[0], t, &dm2, &d3);
+        for (int i = 0; i < 3; i++) {
+            o[31 + 3 * i] += nx[45 + i] * tau; o[32 + 3 * i] += nx[45 + i] * dm2; o[33 + 3 * i] += nx[45 + i] * d3;
+        }
     }
     double dm = tau * (r[0] + t) * 0.5;
     for (int i = 0; i < 3; i++) {
@@ -941,6 +1000,7 @@ static int newest_integrals(PyObject *o, double *out) {
     memcpy(out + 1, r + 4, sizeof(double) * 6);
     memcpy(out + 7, r + 19, sizeof(double) * 18);
     memcpy(out + 25, r + 39, sizeof(double) * 6);
+    memcpy(out + 31, r + 48, sizeof(double) * 9);
     return 1;
 }
 
@@ -999,6 +1059,7 @@ static PyObject *hist_get_t0(History *self, void *c) {
 }
 
 static PyObject *hist_get_hold(History *self, void *c) { return PyFloat_FromDouble(self->hold_max_s); }
+static PyObject *hist_get_hold_periods(History *self, void *c) { return PyFloat_FromDouble(self->hold_periods); }
 
 static Py_ssize_t hist_len(History *self) { return self->n; }
 
@@ -1033,6 +1094,7 @@ static PyGetSetDef hist_getset[] = {
     {"last_t_us", (getter)hist_get_last, NULL, "newest sample time", NULL},
     {"t0_us", (getter)hist_get_t0, NULL, "time of the first sample ever (None before)", NULL},
     {"hold_max_s", (getter)hist_get_hold, NULL, "longest hold of an input", NULL},
+    {"hold_periods", (getter)hist_get_hold_periods, NULL, "the hold limit in IMU periods (0: hold_max_s only)", NULL},
     {"counts", (getter)hist_get_counts, NULL, "samples pushed: (used, gaps, not finite, time not increasing)", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
@@ -1044,7 +1106,7 @@ static PyTypeObject HistoryType = {
     .tp_name = "companion.estimator._core.History",
     .tp_basicsize = sizeof(History),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE,
-    .tp_doc = "History(hold_max_s): held IMU inputs with prefix integrals",
+    .tp_doc = "History(hold_max_s, hold_periods=0): held IMU inputs with prefix integrals",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)hist_init,
     .tp_dealloc = (destructor)hist_dealloc,

@@ -73,12 +73,19 @@ class EstimatorConfig:
     history_s: float = 2.0  # fixes with validity older than (latest IMU − this) are rejected (≥ 1.5 s)
     future_tolerance_s: float = 0.05  # a fix valid up to this far ahead of the latest IMU waits for it
     # Longest an IMU sample is held: a longer interval is a gap (counted; the filter coasts at
-    # constant velocity after this). 10 periods at 200 Hz; quad106's ~50 Hz IMU has 1 such gap.
+    # constant velocity after this, with process noise: history.py, "Held time"). 10 periods at 200 Hz;
+    # quad106's ~50 Hz IMU has 1 such gap. A slower IMU holds longer: imu_hold_periods.
     imu_hold_max_s: float = 0.05
+    # The hold limit follows the log's own IMU period: max(imu_hold_max_s, this × the period), the period
+    # the median of the last 8 sample intervals (history.py, "The hold limit"). 2.5: an IMU at 10-20 Hz
+    # is integrated sample to sample, one lost sample (2 periods, ± half a period of jitter) is held,
+    # two or more are a gap; above 50 Hz the limit stays imu_hold_max_s (200 Hz: unchanged). 0: off.
+    imu_hold_periods: float = 2.5
     # A sample held over time it did not measure (an interval longer than 1.5 IMU periods: samples were
     # lost) adds process noise (history.py, "Held time"): the held sample's white noise (σ_q² per period)
     # and the change of the acceleration meanwhile, a random walk of this density (m/s² per √s: velocity
-    # variance σ² L³ / 3 over a hold of L s). 1.0: the simulated quadrotor flying the tuning mission on its
+    # variance σ² L³ / 3 over an interval of L s, a gap's coast included; the coast adds the acceleration
+    # it drops besides). 1.0: the simulated quadrotor flying the tuning mission on its
     # estimate (python -m gcs_tools.evaluate.hold_probe: default-tuning, seeds 1000-1001, the true
     # acceleration held 40-45 ms, a lost datagram's hold, gives σ = 0.95-0.96 vertical, 0.26-0.33
     # horizontal: thrust changes most), rounded up. 0: the white part only.
@@ -308,7 +315,8 @@ class EstimatorConfig:
         for name in ("future_tolerance_s", "lambda_smooth_1_m", "lambda_bias_level",
                      "sigma_bias_max_per_gnss_std", "sigma_gnss_unreported_bias_m",
                      "eta_first_order", "sigma_acc_bias0_m_s2", "sigma_acc_bias_rw_m_s2_sqrt_s",
-                     "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s", "imu_hold_acc_rw_m_s2_sqrt_s"):
+                     "sigma_acc_ned0_m_s2", "sigma_acc_ned_rw_m_s2_sqrt_s", "imu_hold_acc_rw_m_s2_sqrt_s",
+                     "imu_hold_periods"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name}: must be a finite number >= 0")
 

@@ -171,18 +171,20 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         ):
             self._counts.setdefault(name, 0)
         super().__init__(cfg.imu_hold_max_s, cfg.history_s, cfg.future_tolerance_s, cfg.gravity_m_s2,
-                         self._counts)
+                         self._counts, cfg.imu_hold_periods)
         self._tested = 0  # fixes that reached the innovation test (fused = this − rejected)
         self._r_nominal: Vec3 = tuple(float(v) for v in cfg.r_nominal_m2().diagonal())  # type: ignore[assignment]
         self._q_acc = cfg.sigma_acc_m_s2**2
         self._q_rw = cfg.sigma_acc_bias_rw_m_s2_sqrt_s**2
         self._q_ned = cfg.sigma_acc_ned_rw_m_s2_sqrt_s**2
-        # held IMU time (history.py, "Held time"): the white density's share and the acceleration's change
+        # held IMU time (history.py, "Held time"): the white density's share and the acceleration's change;
+        # a coast the acceleration it drops (1: on)
         q_hold = cfg.imu_hold_acc_rw_m_s2_sqrt_s**2
-        self._prop = model.BlockPropagator(self._q_acc, self._q_rw, self._q_ned, self._q_acc, q_hold)
+        self._prop = model.BlockPropagator(self._q_acc, self._q_rw, self._q_ned, self._q_acc, q_hold, 1.0)
         # while the IMU disagrees with GNSS: the white-acceleration density inflated
         q_distrust = self._q_acc * cfg.imu_gnss_disagree_acc_factor**2
-        self._prop_disagree = model.BlockPropagator(q_distrust, self._q_rw, self._q_ned, q_distrust, q_hold)
+        self._prop_disagree = model.BlockPropagator(q_distrust, self._q_rw, self._q_ned, q_distrust, q_hold,
+                                                    1.0)
         self._gate2 = cfg.gnss_gate_sigma**2
         self._vel_gate2 = cfg.gnss_vel_gate_sigma**2
         self._scale_tau_s = cfg.gnss_scale_tau_s

@@ -201,9 +201,11 @@ def initial_cov(cfg: EstimatorConfig, r_m2: tuple[float, float, float] | None = 
 # The engine's hot path is C (``_core.c``), equal to the reference forms above to rounding
 # (tested here and in tests/test_estimator_core.py):
 #
-# ``BlockPropagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5, q_hold_white_m2_s3=0, q_hold_rw_m2_s5=0)``
-# (the last two: the densities σ_q² and σ_j² of the held-time noise, ``history.py``, "Held time"; the
-# paths given the block's integrals add it, ``predict`` and ``variances`` do not):
+# ``BlockPropagator(q_acc_m2_s3, q_rw_m2_s5, q_ned_m2_s5, q_hold_white_m2_s3=0, q_hold_rw_m2_s5=0,
+# q_coast=0)``
+# (the densities σ_q² and σ_j² of the held-time noise and the scale of a coast's dropped acceleration,
+# 1 or 0, ``history.py``, "Held time"; the paths given the block's integrals add it, ``predict`` and
+# ``variances`` do not):
 #   ``predict(P, T, nA, nB, alpha, q_b)``: ``predict_block`` (F P Fᵀ + Q, a new array) from the
 #     block's −A, −B (row-major lists of 9, ``history.rotation_blocks``), using F's sparsity (a row
 #     of F for p or v has 6 or 5 non-zero entries) instead of two dense 15×15 products;

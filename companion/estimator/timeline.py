@@ -51,8 +51,8 @@ class Timeline(Generic[E, M, Out]):
     the output at the newest IMU time (cached per last entry and IMU time)."""
 
     def __init__(self, imu_hold_max_s: float, history_s: float, future_tolerance_s: float,
-                 gravity_m_s2: float, counts: dict[str, int]) -> None:
-        self.imu = ImuHistory(imu_hold_max_s)
+                 gravity_m_s2: float, counts: dict[str, int], imu_hold_periods: float = 0.0) -> None:
+        self.imu = ImuHistory(imu_hold_max_s, imu_hold_periods)
         self._g = gravity_m_s2
         self.imu.trim_len = TRIM_EVERY
         self.entries: list[E] = []
