@@ -153,7 +153,7 @@ def test_out_of_order_fusion_through_held_time_equals_in_order(mode):
     single and double losses, or 200 Hz with outages coasted beyond the limit; fixes (some valid inside a
     hold or a coast) arriving up to 1.2 s late: the held-time and coast noise and the hold decision are in
     the history, so re-propagation after a late fix reproduces the in-order filter exactly."""
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig(imu_hold_periods=2.5 if mode == "10 Hz" else 0.0)
     s = multipath_stream(np.random.default_rng(9), cfg, [(8.0, 0.0), (8.0, 1.2)])
     loss = {"datagrams": _lossy, "10 Hz": _slow, "outages": _outages}[mode]
     keep = loss(np.random.default_rng(10), len(s.t_us))
