@@ -88,3 +88,82 @@ def check_accuracy_window(window_s: float) -> None:
     """``accuracy_window_s`` must be a finite number ≥ 0 (ValueError naming it otherwise)."""
     if not (math.isfinite(window_s) and window_s >= 0.0):
         raise ValueError(f"accuracy_window_s: must be a finite number >= 0, got {window_s!r}")
+
+
+class Scatter(NamedTuple):
+    """The fused fixes' own horizontal scatter over the last ``window_s``, independent of the filter's
+    position (docs/estimator.md, "Reported accuracy"). Each fix less the motion since the first one
+    (the trapezoid of the velocities at the fixes: the receiver's, or the filter's where it states
+    none) is ``q``, the fix's error plus a slow drift; per axis N, E, exponentially weighted sums of
+    ``q``, ``q²`` and of the squared step of ``q`` from the previous fix, as of ``t_us``:
+
+    * ``variance()``: the scatter of ``q`` about its window mean (unbiased for independent fixes), the
+      variance of one fix's error as far as it varies within the window;
+    * ``correlation()``: c = max(1, 2 variance / (½ mean squared step) − 1), the variance of a mean of
+      many fixes over its independent-fix value, (1 + ρ) / (1 − ρ) for errors with step correlation ρ
+      (a Gauss-Markov error of correlation time τ at fix period Δt: ρ = e^(−Δt/τ)); 1 for
+      independent fixes."""
+
+    t_us: int = -1  # -1: no fix yet
+    z: tuple[float, float] = (0.0, 0.0)  # the last fix (N, E), m
+    v: tuple[float, float] = (0.0, 0.0)  # the velocity at it (N, E), m/s
+    q: tuple[float, float] = (0.0, 0.0)  # the last fix less the motion since the first
+    w_sum: float = 0.0
+    w2_sum: float = 0.0
+    q_sum: tuple[float, float] = (0.0, 0.0)
+    q2_sum: tuple[float, float] = (0.0, 0.0)
+    d_w_sum: float = 0.0  # the steps' weights
+    d2_sum: float = 0.0  # their squares, N + E
+
+    def add(self, t_us: int, z: tuple[float, float], v: tuple[float, float], window_s: float) -> Scatter:
+        """The fix ``z`` (N, E; m) with the velocity ``v`` (m/s) at it added, the older sums decayed by
+        exp(−Δt / window_s)."""
+        if self.t_us < 0:
+            return Scatter(t_us, z, v, (0.0, 0.0), 1.0, 1.0, (0.0, 0.0), (0.0, 0.0))
+        dt = (t_us - self.t_us) * 1e-6
+        a = math.exp(-dt / window_s)
+        h = 0.5 * dt
+        q0 = self.q[0] + (z[0] - self.z[0]) - h * (v[0] + self.v[0])
+        q1 = self.q[1] + (z[1] - self.z[1]) - h * (v[1] + self.v[1])
+        d0, d1 = q0 - self.q[0], q1 - self.q[1]
+        s, s2 = self.q_sum, self.q2_sum
+        return Scatter(t_us, z, v, (q0, q1), a * self.w_sum + 1.0, a * a * self.w2_sum + 1.0,
+                       (a * s[0] + q0, a * s[1] + q1), (a * s2[0] + q0 * q0, a * s2[1] + q1 * q1),
+                       a * self.d_w_sum + 1.0, a * self.d2_sum + d0 * d0 + d1 * d1)
+
+    def variance(self) -> float:
+        """The fixes' scatter per horizontal axis (m², the mean of N and E); 0 before 3 fixes."""
+        w, w2 = self.w_sum, self.w2_sum
+        dof = w * w - w2
+        if self.d_w_sum < 1.5 or dof <= 1e-9:
+            return 0.0
+        m0, m1 = self.q_sum[0] / w, self.q_sum[1] / w
+        var = (self.q2_sum[0] / w - m0 * m0) + (self.q2_sum[1] / w - m1 * m1)
+        return max(0.0, 0.5 * var * w * w / dof)
+
+    def correlation(self) -> float:
+        """c ≥ 1: the fixes' errors' variance inflation for a mean over many of them; 1 before 3 fixes."""
+        g = self.variance()
+        step = 0.25 * self.d2_sum / self.d_w_sum if self.d_w_sum >= 1.5 else 0.0  # ½ E[Δq²] per axis
+        if g <= 0.0 or step <= 0.0:
+            return 1.0
+        c = 2.0 * g / step - 1.0
+        return c if c > 1.0 else 1.0
+
+
+def honest_horizontal(var_ne: np.ndarray, k: float, scatter: Scatter | None, r_h_m2: float) -> np.ndarray:
+    """The horizontal position variances to report (N, E; m²) from the filter's ``var_ne``: per axis
+    max(k P, min(c k P, σ²)), ``k`` the innovations' consistency factor, ``c`` the fixes' correlation
+    (``Scatter.correlation``), σ² the larger of their scatter (``Scatter.variance``) and the receiver's
+    stated horizontal variance ``r_h_m2`` (NaN or inf: none). The filter averages the fixes as if
+    independent; errors correlated over seconds are not averaged down, up to one fix's variance."""
+    kp = var_ne * k
+    if scatter is None:
+        return kp
+    c = scatter.correlation()
+    if c <= 1.0:
+        return kp
+    s2 = scatter.variance()
+    if r_h_m2 > s2 and math.isfinite(r_h_m2):
+        s2 = r_h_m2
+    return np.maximum(kp, np.minimum(kp * c, s2))

@@ -25,7 +25,7 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEsti
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import accuracy_inflation, variance_scale
+from companion.estimator.consistency import Scatter, accuracy_inflation, honest_horizontal, variance_scale
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
@@ -101,6 +101,8 @@ class Navigator:
         self._last: tuple[Any, NavEstimate] | None = None
         # (the Fit it is of, the factor, consistency.variance_scale of it)
         self._inflation: tuple[Any, float, np.ndarray | None] = (None, 1.0, None)
+        # the last fix's (consistency.Scatter, stated horizontal R) when its fixes are correlated, else None
+        self._floor: tuple[Scatter, float] | None = None
         self._g = self.cfg.gravity_m_s2
 
     # -------------------------------------------------------------- input
@@ -238,6 +240,10 @@ class Navigator:
         self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per fix)
         scale = self._inflation[2]
         var = a[9:18] if scale is None else a[9:18] * scale
+        floor = self._floor
+        if floor is not None:  # errors correlated over seconds: not averaged down, up to one fix's variance
+            var = var.copy() if scale is None else var
+            var[0:2] = honest_horizontal(a[9:11], self._inflation[1], floor[0], floor[1])
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
                           snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
                           snap.vel_ratio, snap.disagree)
@@ -253,6 +259,9 @@ class Navigator:
         if self._inflation[0] is not fit:  # a function of the last fix's Fit alone (the entries between
             k = accuracy_inflation(fit, self.cfg.accuracy_window_s)  # fixes share it): once per fix
             self._inflation = (fit, k, variance_scale(k))
+            last = entries[-1] if entries else None
+            sc = last.scatter if last is not None and self.cfg.accuracy_window_s > 0.0 else None
+            self._floor = (sc, last.r_nominal_m2[0]) if sc is not None and sc.correlation() > 1.0 else None
         return self._inflation[1]
 
     def counters(self) -> dict[str, int]:
