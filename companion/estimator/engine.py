@@ -440,10 +440,12 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         if vel_ok:
             x_post, P_post = _core.update_vel(x_post, P_post, zv, rv)
         scatter = prev.scatter
-        if fused_pos and self._window_s > 0.0:  # the fix as fused (less an open offset), the receiver's velocity
-            v_h = (zv[0], zv[1]) if vel_ok and zv is not None and zv[0] == zv[0] and zv[1] == zv[1] else (x_post[3], x_post[4])
-            scatter = scatter.add(t_us, (x_prior[0] + x_prior[6] + y_fused[0], x_prior[1] + x_prior[7] + y_fused[1]),
-                                  v_h, self._window_s)
+        if fused_pos and self._window_s > 0.0:  # the fix as fused (less an open offset) and the receiver's
+            v_h = (x_post[3], x_post[4])  # velocity (the filter's where it gives none)
+            if vel_ok and zv is not None and zv[0] == zv[0] and zv[1] == zv[1]:
+                v_h = (zv[0], zv[1])
+            z_h = (x_prior[0] + x_prior[6] + y_fused[0], x_prior[1] + x_prior[7] + y_fused[1])
+            scatter = scatter.add(t_us, z_h, v_h, self._window_s)
         # the innovation the decision was made on: relative to a held step (so a step held does not
         # widen the gate until it passes), else the fix's own
         yd = y_fused if fused_pos else (

@@ -259,9 +259,11 @@ class Navigator:
         if self._inflation[0] is not fit:  # a function of the last fix's Fit alone (the entries between
             k = accuracy_inflation(fit, self.cfg.accuracy_window_s)  # fixes share it): once per fix
             self._inflation = (fit, k, variance_scale(k))
-            last = entries[-1] if entries else None
-            sc = last.scatter if last is not None and self.cfg.accuracy_window_s > 0.0 else None
-            self._floor = (sc, last.r_nominal_m2[0]) if sc is not None and sc.correlation() > 1.0 else None
+            self._floor = None
+            if entries and self.cfg.accuracy_window_s > 0.0:  # the fixes' own correlation: a floor
+                last = entries[-1]
+                if last.scatter.correlation() > 1.0:
+                    self._floor = (last.scatter, last.r_nominal_m2[0])
         return self._inflation[1]
 
     def counters(self) -> dict[str, int]:
