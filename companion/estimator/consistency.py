@@ -177,13 +177,29 @@ def honest_horizontal(var_ne: np.ndarray, k: float, scatter: Scatter | None, r_h
     (``Scatter.correlation``), σ² the larger of their scatter (``Scatter.variance``) and the receiver's
     stated horizontal variance ``r_h_m2`` (NaN or inf: none). The filter averages the fixes as if
     independent; errors correlated over seconds are not averaged down, up to one fix's variance."""
-    kp = var_ne * k
     if scatter is None:
-        return kp
-    c = scatter.correlation()
-    if c <= 1.0:
-        return kp
+        return var_ne * k
+    return floored(var_ne, k, *fix_floor(scatter, r_h_m2))
+
+
+def fix_floor(scatter: Scatter, r_h_m2: float) -> tuple[float, float]:
+    """(c, σ²) of ``honest_horizontal``: the fixes' correlation and one fix's variance (m²)."""
     s2 = scatter.variance()
     if r_h_m2 > s2 and math.isfinite(r_h_m2):
         s2 = r_h_m2
-    return np.maximum(kp, np.minimum(kp * c, s2))
+    return scatter.correlation(), s2
+
+
+def floored(var_ne: np.ndarray, k: float, c: float, s2: float) -> np.ndarray:
+    """max(k P, min(c k P, σ²)) per axis (k P when c is 1)."""
+    return np.array([floored_axis(float(p), k, c, s2) for p in var_ne])
+
+
+def floored_axis(p: float, k: float, c: float, s2: float) -> float:
+    """max(k p, min(c k p, σ²)) for one axis's variance ``p`` (scalars: the navigator's per-estimate cost)."""
+    kp = p * k
+    if c <= 1.0:
+        return kp
+    f = kp * c
+    f = f if f < s2 else s2
+    return f if f > kp else kp
