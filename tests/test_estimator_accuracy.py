@@ -11,11 +11,12 @@ import math
 import numpy as np
 import pytest
 
+from companion.autopilot import feeds
 from companion.domain.geodesy import LocalNedFrame
 from companion.errors import ConfigError
 from companion.estimator import Navigator
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import accuracy_inflation
+from companion.estimator.consistency import accuracy_inflation, honest_horizontal
 from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, consistent_stream, drive, late_and_in_order, multipath_stream
 
@@ -47,6 +48,18 @@ def test_a_late_fix_gives_the_in_order_accuracy(stream, method):
     assert fit.nu_sum @ fit.nu_sum / fit.w2_sum.sum() > 0.1 and len(fit.key) == 3
     np.testing.assert_allclose(np.array(late.snapshot().var) * k_late, np.array(ref.snapshot().var) * k_ref,
                                rtol=0, atol=1e-9)
+    for a, b in zip(late.entries[1:], ref.entries[-n + 1:], strict=True):  # the fixes' scatter too
+        sa, sb = a.scatter, b.scatter
+        assert sa.t_us == sb.t_us
+        np.testing.assert_allclose(_sums(sa), _sums(sb), rtol=0, atol=1e-9)
+    s_late, s_ref = late.entries[-1].scatter, ref.entries[-1].scatter
+    assert s_ref.correlation() > 1.0 and s_ref.variance() > 0.0  # not a trivial 1 = 1
+    assert s_late.correlation() == pytest.approx(s_ref.correlation(), abs=1e-9)
+    assert s_late.variance() == pytest.approx(s_ref.variance(), abs=1e-9)
+
+
+def _sums(s) -> np.ndarray:
+    return np.array((*s.q, *s.q_sum, *s.q2_sum, s.w_sum, s.w2_sum, s.d1_sum, s.d2_sum, s.d_w_sum))
 
 
 def _navigator(cfg: EstimatorConfig, s) -> Navigator:
@@ -77,7 +90,24 @@ def test_the_accuracy_is_a_report_the_estimate_is_bit_identical(stream):
     k = on.accuracy_inflation()
     assert off.accuracy_inflation() == 1.0 and k > 1.0
     np.testing.assert_array_equal(e1.cov_diag[3:], e0.cov_diag[3:])
-    np.testing.assert_allclose(e1.cov_diag[0:3], e0.cov_diag[0:3] * k, rtol=1e-12)
+    np.testing.assert_allclose(e1.cov_diag[2], e0.cov_diag[2] * k, rtol=1e-12)
+    last = on.engine.entries[-1]  # horizontally: the fixes' correlation and scatter floor k P
+    honest = honest_horizontal(e0.cov_diag[0:2], k, last.scatter, last.r_nominal_m2[0])
+    np.testing.assert_allclose(e1.cov_diag[0:2], honest, rtol=1e-12)
+    assert np.all(e1.cov_diag[0:2] >= e0.cov_diag[0:2] * k)
+    # what the autopilot gets: GPS_INPUT's horiz_accuracy, ODOMETRY's and VISION_POSITION_ESTIMATE's
+    # position covariance carry the honest variances (EKF3 takes horiz_accuracy as its measurement noise)
+    frame, cfg = LocalNedFrame(50.0, 8.0, 100.0), feeds.FeedConfig()
+    gps = feeds.gps_input(e1, frame, cfg, unix_s=1_700_000_000.0)
+    assert gps.fix_type == 3
+    assert gps.horiz_accuracy == pytest.approx(math.sqrt(honest[0] + honest[1]), rel=1e-6)
+    assert gps.horiz_accuracy > math.sqrt(k * (e0.cov_diag[0] + e0.cov_diag[1])) * 1.5  # floored here
+    assert gps.vert_accuracy == pytest.approx(math.sqrt(k * e0.cov_diag[2]), rel=1e-6)
+    level = np.array((1.0, 0.0, 0.0, 0.0))
+    odo = feeds.odometry(e1, level, np.zeros(3), cfg)
+    vis = feeds.vision_position(e1, level, cfg)
+    for cov in (odo.pose_covariance, vis.covariance):
+        assert (cov[0], cov[6]) == (pytest.approx(honest[0], rel=1e-6), pytest.approx(honest[1], rel=1e-6))
     for bad in (-1.0, math.nan, math.inf):
         with pytest.raises(ConfigError, match="accuracy_window_s"):
             Navigator(dataclasses.replace(CFG, accuracy_window_s=bad))

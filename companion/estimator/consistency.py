@@ -19,6 +19,12 @@ from typing import NamedTuple
 import numpy as np
 
 FIT_W2_MIN = 1e-3  # a channel's weight in Fit below this (gone for a few windows): forgotten
+# the largest variance inflation Scatter.correlation gives: the fixes of a 20 s window at 5 Hz (ρ → 1: one
+# error shared by all; the floor is then one fix's variance)
+C_MAX = 100.0
+# the largest correction of the scatter about the window mean for the window mean's share (Scatter.variance):
+# 2, chosen on the real-flight campaign's tuning flights (docs/estimator.md, "Reported accuracy")
+SCATTER_MAX = 2.0
 
 
 class Fit(NamedTuple):
@@ -88,3 +94,112 @@ def check_accuracy_window(window_s: float) -> None:
     """``accuracy_window_s`` must be a finite number ≥ 0 (ValueError naming it otherwise)."""
     if not (math.isfinite(window_s) and window_s >= 0.0):
         raise ValueError(f"accuracy_window_s: must be a finite number >= 0, got {window_s!r}")
+
+
+class Scatter(NamedTuple):
+    """The fused fixes' own horizontal scatter over the last ``window_s``, independent of the filter's
+    position (docs/estimator.md, "Reported accuracy"). Each fix less the motion since the first one
+    (the trapezoid of the velocities at the fixes: the receiver's, or the filter's where it states
+    none) is ``q``, the fix's error plus a slow drift; exponentially weighted sums (N and E pooled) of
+    ``q``, ``q²`` and of the squared changes of ``q`` over one and over two fixes, as of ``t_us``:
+
+    * ``variance()``: the scatter of ``q`` about its window mean (unbiased for independent fixes), the
+      variance of one fix's error as far as it varies within the window;
+    * ``correlation()``: c = (1 + ρ) / (1 − ρ), the variance of a mean of many fixes over its
+      independent-fix value for errors whose correlation from one fix to the next is ρ (a Gauss-Markov
+      error of correlation time τ at fix period Δt: ρ = e^(−Δt/τ)), with 1 + ρ = E[(q_i − q_i−2)²] /
+      E[(q_i − q_i−1)²] (exact for that process; a drift of the motion removed is second order over two
+      fixes). 1 for independent fixes, at most ``C_MAX``."""
+
+    t_us: int = -1  # -1: no fix yet
+    z: tuple[float, float] = (0.0, 0.0)  # the last fix (N, E), m
+    v: tuple[float, float] = (0.0, 0.0)  # the velocity at it (N, E), m/s
+    q: tuple[float, float] = (0.0, 0.0)  # the last fix less the motion since the first
+    q_prev: tuple[float, float] | None = None  # the one before (None: a single fix so far)
+    w_sum: float = 0.0
+    w2_sum: float = 0.0
+    q_sum: tuple[float, float] = (0.0, 0.0)
+    q2_sum: tuple[float, float] = (0.0, 0.0)
+    d1_sum: float = 0.0  # Σ w |q_i − q_i−1|² (N + E)
+    d2_sum: float = 0.0  # Σ w |q_i − q_i−2|², over the same fixes
+    d_w_sum: float = 0.0  # their weights
+
+    def add(self, t_us: int, z: tuple[float, float], v: tuple[float, float], window_s: float) -> Scatter:
+        """The fix ``z`` (N, E; m) with the velocity ``v`` (m/s) at it added, the older sums decayed by
+        exp(−Δt / window_s)."""
+        if self.t_us < 0:
+            return Scatter(t_us, z, v, (0.0, 0.0), None, 1.0, 1.0, (0.0, 0.0), (0.0, 0.0))
+        dt = (t_us - self.t_us) * 1e-6
+        a = math.exp(-dt / window_s)
+        h = 0.5 * dt
+        q0 = self.q[0] + (z[0] - self.z[0]) - h * (v[0] + self.v[0])
+        q1 = self.q[1] + (z[1] - self.z[1]) - h * (v[1] + self.v[1])
+        s, s2 = self.q_sum, self.q2_sum
+        d1, d2, dw = a * self.d1_sum, a * self.d2_sum, a * self.d_w_sum
+        qp = self.q_prev
+        if qp is not None:
+            d1 += (q0 - self.q[0]) ** 2 + (q1 - self.q[1]) ** 2
+            d2 += (q0 - qp[0]) ** 2 + (q1 - qp[1]) ** 2
+            dw += 1.0
+        return Scatter(t_us, z, v, (q0, q1), self.q, a * self.w_sum + 1.0, a * a * self.w2_sum + 1.0,
+                       (a * s[0] + q0, a * s[1] + q1), (a * s2[0] + q0 * q0, a * s2[1] + q1 * q1), d1, d2, dw)
+
+    def variance(self) -> float:
+        """One fix's error variance per horizontal axis (m², N and E pooled) from the scatter about the
+        window mean: that scatter is short of it by the share of the window mean, c / n for ``n`` = w² / Σw²
+        fixes of correlation ``c`` (``correlation()``; n / (n − 1) for independent fixes), so × 1 / (1 − c/n),
+        at most ``SCATTER_MAX``; 0 before 3 fixes."""
+        w, w2 = self.w_sum, self.w2_sum
+        if self.d_w_sum <= 0.0 or w * w <= w2 * 1.000001:
+            return 0.0
+        m0, m1 = self.q_sum[0] / w, self.q_sum[1] / w
+        var = 0.5 * ((self.q2_sum[0] / w - m0 * m0) + (self.q2_sum[1] / w - m1 * m1))
+        share = self.correlation() * w2 / (w * w)  # c / n
+        f = 1.0 / (1.0 - share) if share < 1.0 - 1.0 / SCATTER_MAX else SCATTER_MAX
+        return max(0.0, var * f)
+
+    def correlation(self) -> float:
+        """c in [1, C_MAX]: the fixes' errors' variance inflation for a mean over many of them; 1 before
+        3 fixes."""
+        if self.d_w_sum < 1.5 or self.d1_sum <= 0.0:
+            return 1.0
+        r = self.d2_sum / self.d1_sum  # 1 + ρ
+        if r <= 1.0:
+            return 1.0
+        if r >= 2.0 * C_MAX / (C_MAX + 1.0):  # (1 + ρ)/(1 − ρ) = r / (2 − r) ≥ C_MAX
+            return C_MAX
+        return r / (2.0 - r)
+
+
+def honest_horizontal(var_ne: np.ndarray, k: float, scatter: Scatter | None, r_h_m2: float) -> np.ndarray:
+    """The horizontal position variances to report (N, E; m²) from the filter's ``var_ne``: per axis
+    max(k P, min(c k P, σ²)), ``k`` the innovations' consistency factor, ``c`` the fixes' correlation
+    (``Scatter.correlation``), σ² the larger of their scatter (``Scatter.variance``) and the receiver's
+    stated horizontal variance ``r_h_m2`` (NaN or inf: none). The filter averages the fixes as if
+    independent; errors correlated over seconds are not averaged down, up to one fix's variance."""
+    if scatter is None:
+        return var_ne * k
+    return floored(var_ne, k, *fix_floor(scatter, r_h_m2))
+
+
+def fix_floor(scatter: Scatter, r_h_m2: float) -> tuple[float, float]:
+    """(c, σ²) of ``honest_horizontal``: the fixes' correlation and one fix's variance (m²)."""
+    s2 = scatter.variance()
+    if r_h_m2 > s2 and math.isfinite(r_h_m2):
+        s2 = r_h_m2
+    return scatter.correlation(), s2
+
+
+def floored(var_ne: np.ndarray, k: float, c: float, s2: float) -> np.ndarray:
+    """max(k P, min(c k P, σ²)) per axis (k P when c is 1)."""
+    return np.array([floored_axis(float(p), k, c, s2) for p in var_ne])
+
+
+def floored_axis(p: float, k: float, c: float, s2: float) -> float:
+    """max(k p, min(c k p, σ²)) for one axis's variance ``p`` (scalars: the navigator's per-estimate cost)."""
+    kp = p * k
+    if c <= 1.0:
+        return kp
+    f = kp * c
+    f = f if f < s2 else s2
+    return f if f > kp else kp

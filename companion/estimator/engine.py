@@ -36,7 +36,7 @@ import numpy as np
 from companion.estimator import _core, methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import Fit
+from companion.estimator.consistency import Fit, Scatter
 from companion.estimator.history import Integrals, finite3
 from companion.estimator.timeline import Timeline
 
@@ -121,6 +121,8 @@ class Fusion(NamedTuple):
     hold_ref: tuple[Any, ...] | None = None
     hold_obs: tuple[tuple[float, float, float, float, float], ...] = ()
     ramp: bool = False
+    # the fused fixes' own horizontal scatter and correlation (the reported accuracy's floor, ``consistency``)
+    scatter: Scatter = Scatter()
 
 
 class Snapshot(NamedTuple):
@@ -307,7 +309,9 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                       fix.r, t_us, math.nan, False, 0, 0, None, 0, 0, None, 0, 0, zv, fix.rv,
                       scale_h_m=_SCALE_H * math.sqrt(r[0]), scale_v_m=_SCALE_V * math.sqrt(r[2]),
                       noise_h_m=_SCALE_H * math.sqrt(r[0]), noise_v_m=_SCALE_V * math.sqrt(r[2]),
-                      v_smooth=(x[3], x[4], x[5]), bias_scale=f)
+                      v_smooth=(x[3], x[4], x[5]), bias_scale=f,
+                      scatter=Scatter().add(t_us, (z[0], z[1]), (x[3], x[4]), self._window_s)
+                      if self._window_s > 0.0 else Scatter())
 
     def _fuse(self, prev: Fusion, t_us: int, fix: _Fix) -> Fusion:
         """Predict the last entry to the fix's time, test it there and fuse it (Algorithm 1, lines
@@ -435,6 +439,13 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             hold_ref, hold_obs, ramp = None, (), False
         if vel_ok:
             x_post, P_post = _core.update_vel(x_post, P_post, zv, rv)
+        scatter = prev.scatter
+        if fused_pos and self._window_s > 0.0:  # the fix as fused (less an open offset) and the receiver's
+            v_h = (x_post[3], x_post[4])  # velocity (the filter's where it gives none)
+            if vel_ok and zv is not None and zv[0] == zv[0] and zv[1] == zv[1]:
+                v_h = (zv[0], zv[1])
+            z_h = (x_prior[0] + x_prior[6] + y_fused[0], x_prior[1] + x_prior[7] + y_fused[1])
+            scatter = scatter.add(t_us, z_h, v_h, self._window_s)
         # the innovation the decision was made on: relative to a held step (so a step held does not
         # widen the gate until it passes), else the fix's own
         yd = y_fused if fused_pos else (
@@ -476,7 +487,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
             u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f, fit,
-            hold_ref, hold_obs, ramp)
+            hold_ref, hold_obs, ramp, scatter)
 
     def _hold_residual(self, ref: tuple[Any, ...], obs: tuple[Any, ...], t_us: int, z: Vec3, ints: Integrals
                        ) -> tuple[tuple[Any, ...], tuple[model.State, model.Cov]]:

@@ -25,7 +25,7 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEsti
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import accuracy_inflation, variance_scale
+from companion.estimator.consistency import accuracy_inflation, fix_floor, floored_axis, variance_scale
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
@@ -101,6 +101,9 @@ class Navigator:
         self._last: tuple[Any, NavEstimate] | None = None
         # (the Fit it is of, the factor, consistency.variance_scale of it)
         self._inflation: tuple[Any, float, np.ndarray | None] = (None, 1.0, None)
+        # the last fix's (correlation c, one fix's variance σ²) when its fixes are correlated, else None
+        # (consistency.fix_floor: the horizontal variances reported are max(k P, min(c k P, σ²)))
+        self._floor: tuple[float, float] | None = None
         self._g = self.cfg.gravity_m_s2
 
     # -------------------------------------------------------------- input
@@ -238,6 +241,11 @@ class Navigator:
         self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per fix)
         scale = self._inflation[2]
         var = a[9:18] if scale is None else a[9:18] * scale
+        floor = self._floor
+        if floor is not None:  # errors correlated over seconds: not averaged down, up to one fix's variance
+            var = var.copy() if scale is None else var
+            k, (c, s2) = self._inflation[1], floor
+            var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
         est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
                           snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
                           snap.vel_ratio, snap.disagree)
@@ -253,6 +261,11 @@ class Navigator:
         if self._inflation[0] is not fit:  # a function of the last fix's Fit alone (the entries between
             k = accuracy_inflation(fit, self.cfg.accuracy_window_s)  # fixes share it): once per fix
             self._inflation = (fit, k, variance_scale(k))
+            self._floor = None
+            if entries and self.cfg.accuracy_window_s > 0.0:  # the fixes' own correlation: a floor
+                last = entries[-1]
+                c, s2 = fix_floor(last.scatter, last.r_nominal_m2[0])
+                self._floor = (c, s2) if c > 1.0 else None
         return self._inflation[1]
 
     def counters(self) -> dict[str, int]:

@@ -153,7 +153,8 @@ def flight_stats(series: Mapping[str, np.ndarray]) -> dict[str, float]:
     - ``est_h_median_m`` / ``est_3d_median_m`` / ``est_h_p95_m``: of ‖p̂ − p‖ horizontal / 3-D;
     - ``nees_mean`` / ``nees_median``: position NEES ``Σᵢ eᵢ² / Pᵢᵢ`` (3 dof, the diagonal only) of the
       position variances the estimator *reports* (``p_var``: its P × the consistency factor of
-      ``accuracy_window_s``, what GPS_INPUT and ODOMETRY carry; with that window 0, of P itself);
+      ``accuracy_window_s``, horizontally floored by the fixes' own correlation, what GPS_INPUT and
+      ODOMETRY carry; with that window 0, of P itself);
       ``nees_out95``: fraction above χ²₀.₉₅;
     - ``nis_mean`` / ``nis_median``: NIS of the last fused fix (3 dof), sampled at 20 Hz;
     - ``track_median_m``: of ‖p − p_ref‖.
