@@ -204,6 +204,7 @@ def smartloc_source(input_path: Path, truth_path: Path | None, config: SppConfig
             fixes.append(f)
     src = SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0)
     src.stats.rejected.update(smartloc.rows_rejected(data.rejected))
+    src.stats.rejected.update(smartloc.rows_rejected(truth.rejected, "truth_row"))
     return src
 
 

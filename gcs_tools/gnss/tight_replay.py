@@ -112,6 +112,7 @@ def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry:
     data, truth = smartloc.read_drive(input_path, truth_path)
     src = SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry)
     src.stats.rejected.update(smartloc.rows_rejected(data.rejected))
+    src.stats.rejected.update(smartloc.rows_rejected(truth.rejected, "truth_row"))
     return src
 
 

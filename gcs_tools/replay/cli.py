@@ -64,7 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--smartloc", type=Path, default=None, metavar="INPUT",
                    help="GNSS-only replay of a smartLoc *_Input.txt (no IMU), scored against its _GT.txt")
     g.add_argument("--truth", type=Path, default=None,
-                   help="smartLoc truth file (default: beside --smartloc)")
+                   help="--smartloc's truth: its *_GT.txt (default: beside --smartloc), or a SPAN/Inertial "
+                        "Explorer export or truth CSV on the drive's time scale (docs/gnss.md)")
     g.add_argument("--coupling", default="loose",
                    help="loose: SPP fixes into the estimator (default); tight: pseudoranges (and Doppler) "
                         "into the tightly coupled estimator, --method one of its rows (docs/tight.md)")
