@@ -212,7 +212,8 @@ def test_truth_on_another_time_scale_is_one_line(tmp_path):
     assert "covers none of the epochs" in bad.stderr and "GPS time" in bad.stderr
 
 
-def test_replay_smartloc_with_its_truth_as_csv(tmp_path, capsys):
+@pytest.mark.parametrize("coupling", ["loose", "tight"])
+def test_replay_smartloc_with_its_truth_as_csv(tmp_path, capsys, coupling):
     """replay --smartloc --truth: the drive's *_GT.txt rewritten as the truth CSV (the drive's seconds in
     t_gps_s) scores as the *_GT.txt itself; a junk truth row is counted in the summary."""
     from gcs_tools.cli import main
@@ -224,11 +225,17 @@ def test_replay_smartloc_with_its_truth_as_csv(tmp_path, capsys):
     write_csv(tmp_path / "truth.csv", gt.t_s, gt.p_ecef_m, "t")
     rows = (tmp_path / "truth.csv").read_text().splitlines()
     (tmp_path / "truth.csv").write_text("\n".join([*rows[:3], "junk", *rows[3:]]) + "\n")
-    summaries = []
+    summaries, texts = [], []
     for name, extra in (("gt", []), ("csv", ["--truth", str(tmp_path / "truth.csv")])):
-        assert main(["replay", "--smartloc", str(a), *extra, "--out", str(tmp_path / name),
-                     "--no-figures", "--no-progress"]) == 0
+        assert main(["replay", "--smartloc", str(a), *extra, "--coupling", coupling, "--out",
+                     str(tmp_path / name), "--no-figures", "--no-progress"]) == 0
         summaries.append(json.loads((tmp_path / name / "summary.json").read_text()))
-    capsys.readouterr()
+        texts.append(capsys.readouterr().out)
     _assert_same_errors(*summaries, atol=1e-9)
     assert summaries[1]["samples_rejected"]["codec"]["truth_row_short_row"] == 1
+    assert "to truth (smartLoc point3, geodetic)" in texts[0] and "to truth (CSV rows, geodetic)" in texts[1]
+    # a log replayed with raw GNSS is scored against its own truth: --truth there is refused, not ignored
+    assert main(["replay", str(DATA / "quad106.tlog"), "--rinex-obs", str(OBS), "--rinex-nav", str(NAV),
+                 "--truth", str(tmp_path / "truth.csv"), "--coupling", coupling,
+                 "--out", str(tmp_path / "o")]) == 2
+    assert "--truth goes with --smartloc" in capsys.readouterr().err

@@ -213,6 +213,11 @@ def read_truth(path: str | Path) -> Truth:
     return Truth(a[:, 0], a[:, 1:4])
 
 
+def truth_label(truth: Truth) -> str:
+    """A replay's name for the truth reference: ``smartLoc point3``, or the other format's rows."""
+    return "smartLoc point3" if truth.source == Truth.source else truth.source
+
+
 def default_truth_path(input_path: Path) -> Path | None:
     """``X_Input.txt`` -> ``X_GT.txt`` when that file exists."""
     name = input_path.name

@@ -306,6 +306,9 @@ def _raw_gnss(args: argparse.Namespace, mission: Mission | None = None
         if args.rinex_nav or args.coupling != "loose" or args.truth is not None:
             raise UserError("--rinex-nav, --coupling and --truth go with --rinex-obs, --ubx or --smartloc")
         return None, None, None
+    if args.truth is not None and args.smartloc is None:  # a flight log is scored against its own truth
+        raise UserError("--truth goes with --smartloc (a log replayed with --rinex-obs or --ubx is scored "
+                        "against its own truth)")
     if args.ubx is not None and args.coupling != "tight":
         raise UserError("--ubx goes with --coupling tight (loose coupling replays the log's own fixes: "
                         "those of the receiver)")
