@@ -1,6 +1,7 @@
 """``beliefnav gnss spp INPUT``: single-point solutions from raw GNSS, scored against truth.
 
-INPUT is a smartLoc ``*_Input.txt`` (truth: the ``*_GT.txt`` beside it, or ``--truth``), a RINEX 2, 3 or 4
+INPUT is a smartLoc ``*_Input.txt`` (truth: the ``*_GT.txt`` beside it, or ``--truth``: any format
+``gcs_tools.gnss.truth`` reads), a RINEX 2, 3 or 4
 observation file (with ``--nav``) or a u-blox UBX log. Writes ``fixes.csv``, ``summary.json`` and,
 with truth, ``spp_errors.csv`` (``t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m``: SPP − truth in the
 NED frame at the first truth point, the solution's 1-σ accuracies) to ``--out``.
@@ -54,7 +55,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--truth",
         type=Path,
         default=None,
-        help="smartLoc *_GT.txt truth (default: the _GT.txt beside a smartLoc input)",
+        help="truth file, recognised by content: smartLoc *_GT.txt (default: the one beside a smartLoc "
+        "input), a SPAN/Inertial Explorer text export or a CSV (gps_week,gps_tow_s or t_gps_s; "
+        "lat_deg,lon_deg,h_m or x_m,y_m,z_m); GPS time (docs/gnss.md)",
     )
     p.add_argument(
         "--truth-ecef",
@@ -146,6 +149,8 @@ def evaluate(
         summary["errors"] = baseline.error_statistics(series.t_s, err, series.h_acc_m, series.v_acc_m)
         summary["residuals_at_truth_m"] = baseline.residuals_at_truth(data.epochs, truth, config)
         summary["truth"] = data.truth_note
+        if data.truth is not None and data.truth.rejected:
+            summary["truth_rows_rejected"] = dict(data.truth.rejected)
     return summary, series, err
 
 
@@ -197,6 +202,9 @@ def report(s: dict[str, Any]) -> str:
     skipped = {k: v for k, v in (s.get("rejected") or {}).items() if v} if s["format"] != "ubx" else {}
     if skipped:
         lines.append("  input rows skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(skipped.items())))
+    if s.get("truth_rows_rejected"):
+        skipped_truth = sorted(s["truth_rows_rejected"].items())
+        lines.append("  truth rows skipped: " + ", ".join(f"{k} {v}" for k, v in skipped_truth))
     e = s.get("errors")
     if e:
         lines.append(_row_text(e))

@@ -137,6 +137,7 @@ class SmartLocSource:
     truth_t_s: np.ndarray
     truth_ecef_m: np.ndarray
     t0_s: float  # the drive's first epoch time (data set seconds) = boot SMARTLOC_T0_US
+    truth_source: str = "smartLoc point3"  # what the truth rows are (gcs_tools.gnss.truth)
 
     format: str = "smartloc"
 
@@ -149,7 +150,7 @@ class SmartLocSource:
         }
         self.references = {
             TRUTH: ReferenceInfo(
-                "smartLoc point3", "geodetic", "estimated position vs the smartLoc truth (ECEF -> geodetic)"
+                self.truth_source, "geodetic", "estimated position vs the smartLoc truth (ECEF -> geodetic)"
             )
         }
 
@@ -178,7 +179,7 @@ class SmartLocSource:
                     float(np.degrees(lat[ri])),
                     float(np.degrees(lon[ri])),
                     float(h[ri]),
-                    "smartLoc point3",
+                    self.truth_source,
                 )
                 ri += 1
             while fi < nf and self.fixes[fi].t_validity_us <= t:
@@ -202,8 +203,9 @@ def smartloc_source(input_path: Path, truth_path: Path | None, config: SppConfig
         f = to_fix(s, smartloc_boot_us(t, t0))
         if f is not None:
             fixes.append(f)
-    src = SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0)
+    src = SmartLocSource(fixes, truth.t_s, truth.p_ecef_m, t0, smartloc.truth_label(truth))
     src.stats.rejected.update(smartloc.rows_rejected(data.rejected))
+    src.stats.rejected.update(smartloc.rows_rejected(truth.rejected, "truth_row"))
     return src
 
 

@@ -61,9 +61,14 @@ class SmartLocInput:
 class Truth:
     t_s: np.ndarray  # (n,)
     p_ecef_m: np.ndarray  # (n, 3)
+    max_gap_s: float = 0.5  # not interpolated across a longer gap between rows
+    rejected: Counter[str] = field(default_factory=Counter)  # rows left out, by reason
+    source: str = "smartLoc point3 rows"
 
-    def at(self, t_s: np.ndarray, max_gap_s: float = 0.5) -> np.ndarray:
-        """Truth linearly interpolated at ``t_s`` (k, 3); NaN outside or across a gap > max_gap_s."""
+    def at(self, t_s: np.ndarray, max_gap_s: float | None = None) -> np.ndarray:
+        """Truth linearly interpolated at ``t_s`` (k, 3); NaN outside or across a gap > max_gap_s
+        (default: the truth's own ``max_gap_s``)."""
+        max_gap_s = self.max_gap_s if max_gap_s is None else max_gap_s
         t_s = np.asarray(t_s, dtype=float)
         out = np.column_stack([np.interp(t_s, self.t_s, self.p_ecef_m[:, i]) for i in range(3)])
         j = np.clip(np.searchsorted(self.t_s, t_s), 1, len(self.t_s) - 1)
@@ -177,10 +182,11 @@ def _drop_lone_stamps(rows: list[list[float]], rejected: Counter[str]) -> list[l
     return rows
 
 
-def rows_rejected(rejected: Counter[str] | dict[str, int]) -> dict[str, int]:
-    """The input's skipped rows as a replay reader's ``samples_rejected`` counters
-    (``smartloc_row_<reason>``), so that a replay says how many rows it left out."""
-    return {f"smartloc_row_{reason}": n for reason, n in rejected.items()}
+def rows_rejected(rejected: Counter[str] | dict[str, int], prefix: str = "smartloc_row") -> dict[str, int]:
+    """The input's (or, ``prefix="truth_row"``, the truth's) skipped rows as a replay reader's
+    ``samples_rejected`` counters (``smartloc_row_<reason>``), so that a replay says how many rows it left
+    out."""
+    return {f"{prefix}_{reason}": n for reason, n in rejected.items()}
 
 
 def read_truth(path: str | Path) -> Truth:
@@ -207,6 +213,11 @@ def read_truth(path: str | Path) -> Truth:
     return Truth(a[:, 0], a[:, 1:4])
 
 
+def truth_label(truth: Truth) -> str:
+    """A replay's name for the truth reference: ``smartLoc point3``, or the other format's rows."""
+    return "smartLoc point3" if truth.source == Truth.source else truth.source
+
+
 def default_truth_path(input_path: Path) -> Path | None:
     """``X_Input.txt`` -> ``X_GT.txt`` when that file exists."""
     name = input_path.name
@@ -218,13 +229,18 @@ def default_truth_path(input_path: Path) -> Path | None:
 
 
 def read_drive(input_path: Path, truth_path: Path | None = None) -> tuple[SmartLocInput, Truth]:
-    """A drive's input and its truth (``truth_path``, else the ``*_GT.txt`` beside the input; a
-    ``UserError`` naming ``--truth`` when there is none)."""
+    """A drive's input and its truth (``truth_path`` in any format :mod:`gcs_tools.gnss.truth` reads, on the
+    drive's time scale; else the ``*_GT.txt`` beside the input; a ``UserError`` naming ``--truth`` when
+    there is none or it covers none of the epochs)."""
+    from gcs_tools.gnss import truth as truth_formats
+
     data = read_input(input_path)
     truth_path = truth_path or default_truth_path(input_path)
     if truth_path is None:
         raise UserError(f"{input_path}: no *_GT.txt truth beside it; give --truth")
-    return data, read_truth(truth_path)
+    truth = truth_formats.read(truth_path)
+    truth_formats.check_covers(truth, np.array([e.t_gps_s for e in data.epochs]), truth_path)
+    return data, truth
 
 
 def _num(v: float) -> str:

@@ -87,10 +87,11 @@ def load_input(
 
         out = read_ubx_file(path)
     if truth is not None:
-        if not truth.is_file():
-            raise UserError(f"{truth}: no such truth file")
-        out.truth = smartloc.read_truth(truth)
-        out.truth_note = f"smartLoc point3 rows of {truth.name}, interpolated at the epochs"
+        from gcs_tools.gnss import truth as truth_formats
+
+        out.truth = truth_formats.read(truth)
+        truth_formats.check_covers(out.truth, np.array([e.t_gps_s for e in out.epochs]), truth)
+        out.truth_note = f"{out.truth.source} of {truth.name}, interpolated at the epochs"
     elif truth_ecef is not None:
         out.truth_ecef_m = parse_ecef(truth_ecef)
         out.truth_note = "a static position (--truth-ecef)"

@@ -51,6 +51,7 @@ class SmartLocRawSource:
     truth_t_s: np.ndarray
     truth_ecef_m: np.ndarray
     use_odometry: bool = True
+    truth_source: str = "smartLoc point3"  # what the truth rows are (gcs_tools.gnss.truth)
     format: str = "smartloc"
     anchor: LocalNedFrame = field(init=False)
 
@@ -64,7 +65,7 @@ class SmartLocRawSource:
             "odometry": "smartLoc odom3 (speed, yaw rate)" if self.use_odometry else None,
         }
         note = "estimated position vs the smartLoc truth (ECEF -> geodetic)"
-        self.references = {TRUTH: ReferenceInfo("smartLoc point3", "geodetic", note)}
+        self.references = {TRUTH: ReferenceInfo(self.truth_source, "geodetic", note)}
         self.anchor = anchor_of(self.epochs)
 
     def boot_us(self, t_s: float) -> int:
@@ -89,7 +90,7 @@ class SmartLocRawSource:
         for t in range(0, t_end, step):
             while ri < len(t_ref) and t_ref[ri] <= t:
                 yield Reference(TRUTH, t_ref[ri], float(np.degrees(lat[ri])), float(np.degrees(lon[ri])),
-                                float(h[ri]), "smartLoc point3")
+                                float(h[ri]), self.truth_source)
                 ri += 1
             self.stats.decoded["imu"] += 1
             self.stats.records += 1
@@ -110,8 +111,10 @@ def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry:
     from gcs_tools.gnss import smartloc
 
     data, truth = smartloc.read_drive(input_path, truth_path)
-    src = SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry)
+    src = SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry,
+                            smartloc.truth_label(truth))
     src.stats.rejected.update(smartloc.rows_rejected(data.rejected))
+    src.stats.rejected.update(smartloc.rows_rejected(truth.rejected, "truth_row"))
     return src
 
 

@@ -64,7 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--smartloc", type=Path, default=None, metavar="INPUT",
                    help="GNSS-only replay of a smartLoc *_Input.txt (no IMU), scored against its _GT.txt")
     g.add_argument("--truth", type=Path, default=None,
-                   help="smartLoc truth file (default: beside --smartloc)")
+                   help="--smartloc's truth: its *_GT.txt (default: beside --smartloc), or a SPAN/Inertial "
+                        "Explorer export or truth CSV on the drive's time scale (docs/gnss.md)")
     g.add_argument("--coupling", default="loose",
                    help="loose: SPP fixes into the estimator (default); tight: pseudoranges (and Doppler) "
                         "into the tightly coupled estimator, --method one of its rows (docs/tight.md)")
@@ -305,6 +306,9 @@ def _raw_gnss(args: argparse.Namespace, mission: Mission | None = None
         if args.rinex_nav or args.coupling != "loose" or args.truth is not None:
             raise UserError("--rinex-nav, --coupling and --truth go with --rinex-obs, --ubx or --smartloc")
         return None, None, None
+    if args.truth is not None and args.smartloc is None:  # a flight log is scored against its own truth
+        raise UserError("--truth goes with --smartloc (a log replayed with --rinex-obs or --ubx is scored "
+                        "against its own truth)")
     if args.ubx is not None and args.coupling != "tight":
         raise UserError("--ubx goes with --coupling tight (loose coupling replays the log's own fixes: "
                         "those of the receiver)")
