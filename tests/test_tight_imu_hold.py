@@ -15,17 +15,11 @@ from companion.estimator.history import ImuHistory, mean_between
 from companion.tight import TightConfig, _tight
 from companion.tight.engine import Entry, EpochInfo, TightEngine
 from companion.tight.model import N_CLK, N_STATE
+from gcs_tools.evaluate.tight_hold import without_hold_noise
 from tests.test_estimator_imu_hold import P_US, SIGMA_J, SIGMA_Q, _flight, _lossy
 from tests.test_tight import FRAME, _synthetic_epochs
 
 Q_NE, Q_D, Q_J = 0.3**2, 0.5**2, 1.1**2
-
-
-def _without_hold_noise(e: TightEngine) -> TightEngine:
-    """The engine as it was before the held-time noise (its prediction and output without it)."""
-    e._q_hold = (0.0, 0.0, 0.0, 0.0)
-    e._prop = loose.BlockPropagator(e._q[0], e._q[2], e._q[3])
-    return e
 
 
 def _predict(P, a, b, hold=(Q_NE, Q_D, Q_J, 1.0)):
@@ -79,7 +73,7 @@ def _feed(cfg, method, epochs, t_us, order, imu, hold=True) -> TightEngine:
     later ones)."""
     eng = TightEngine(cfg, method, frame=FRAME)
     if not hold:
-        _without_hold_noise(eng)
+        without_hold_noise(eng)
     t_imu, acc = imu
     i = 0
     for n, k in enumerate(order):
@@ -176,7 +170,7 @@ def _prior_nees(hold: bool, runs: int, fix_every: int = 40, r_m: float = 0.3) ->
         t_us, meas, p, v, keep = _flight(rng)
         eng = TightEngine(cfg, "naive", frame=FRAME)
         if not hold:
-            _without_hold_noise(eng)
+            without_hold_noise(eng)
         kept = np.flatnonzero(keep)
         P = np.zeros((N_STATE, N_STATE))
         P[0:6, 0:6] = np.diag([1.0] * 3 + [0.25] * 3)

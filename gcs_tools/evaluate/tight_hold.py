@@ -31,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from companion.tight import RawGnss, TightConfig, TightNavigator
+from companion.tight import RawGnss, TightConfig
+from companion.tight.engine import TightEngine
 from gcs_tools import choices
 from gcs_tools.evaluate.tight import table_lines
 from gcs_tools.jsonvalues import write_results_or_error
@@ -41,14 +42,13 @@ STATS = ("vertical_mean_abs_m", "horizontal_median_m", "velocity_rms_m_s", "nees
 START_S = 2.0  # steps scored from this long after the first estimate
 
 
-def without_hold_noise(nav: TightNavigator) -> TightNavigator:
-    """``nav`` with its engine's held-time noise off: the prediction and output as before the noise."""
+def without_hold_noise(e: TightEngine) -> TightEngine:
+    """``e`` with its held-time noise off: the prediction and the output as before the filter had it."""
     from companion.estimator.model import BlockPropagator
 
-    e = nav.engine
-    e._q_hold = (0.0, 0.0, 0.0)
+    e._q_hold = (0.0, 0.0, 0.0, 0.0)
     e._prop = BlockPropagator(e._q[0], e._q[2], e._q[3])
-    return nav
+    return e
 
 
 def fly(mission: str, profile: int, seed: int, drop_probability: float,
@@ -70,7 +70,7 @@ def fly(mission: str, profile: int, seed: int, drop_probability: float,
     store = gnss.store
     tight = {r: tight_navigator_for(m, "second-order", config=TightConfig(), ephemerides=store, city=None)
              for r in ROWS}
-    without_hold_noise(tight["lossy-before"])
+    without_hold_noise(tight["lossy-before"].engine)
     loss = np.random.default_rng([profile, seed, 77])
     end_us = round(min(1.0 + route.duration_s * 1.5, max_duration_s or 1e9) * 1e6)
     rec: dict[str, list[tuple[float, ...]]] = {r: [] for r in ROWS}
