@@ -16,7 +16,8 @@ OUT     ?= runs/demo
 # installed with apt-get (as root, or through sudo), as `browser` does for Chromium.
 CHECK_CC = printf '\043include <Python.h>\n' | $${CC:-cc} -E -I"$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["include"])')" - >/dev/null 2>&1
 
-$(STAMP): requirements.lock pyproject.toml setup.py companion/estimator/_core.c companion/tight/_tight.c
+$(STAMP): requirements.lock pyproject.toml setup.py companion/estimator/_core.c companion/tight/_tight.c \
+          companion/estimator/held.h
 	@$(CHECK_CC) || { echo "installing gcc and python3-dev for the estimator's C core"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gcc python3-dev >/dev/null; }

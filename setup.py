@@ -12,12 +12,14 @@ setup(
         Extension(
             "companion.estimator._core",
             ["companion/estimator/_core.c"],
+            depends=["companion/estimator/held.h"],
             include_dirs=[numpy.get_include()],
             extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
         ),
         Extension(  # the tightly coupled filter's hot path (companion/tight/_tight.c)
             "companion.tight._tight",
             ["companion/tight/_tight.c"],
+            depends=["companion/estimator/held.h"],  # the held-time noise, shared with _core.c
             include_dirs=[numpy.get_include()],
             extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
         ),

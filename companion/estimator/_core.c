@@ -19,6 +19,7 @@
 #include <string.h>
 #define NPY_NO_DEPRECATED_API NPY_1_22_API_VERSION
 #include <numpy/arrayobject.h>
+#include "held.h"
 
 #define NS 15
 #define NN (NS * NS)
@@ -183,36 +184,12 @@ typedef struct {
     double q_coast;  /* the scale of the coast's dropped-acceleration moments C (1: on, 0: off) */
 } Propagator;
 
-/* The held-time process noise of a block between integrals a and b (history.py, "Held time"): the
- * white acceleration density n_i(s) = q_hold_white w(s) + q_hold_rw j(s) + q_coast c_i(s) on p, v
- * (axis i): hq[3 i ..] = (pp, pv, vv) = (∫ n_i (t_b - s)^2, ∫ n_i (t_b - s), ∫ n_i) over the block; 0 when
- * it holds no held time or coast, or the densities are 0 (then nothing is added: the prediction is
- * bit-identical to one without). */
+/* The held-time process noise of a block between integrals a and b (held.h's held_noise with the
+ * propagator's densities, the white one the same on each axis): hq[3 i ..] = (pp, pv, vv) on axis i's
+ * p, v; 0 when there is none. */
 static int held_q(const Propagator *pr, const double *a, const double *b, double *hq) {
-    double w0 = b[25] - a[25], j0 = b[28] - a[28];
-    int held = !((w0 == 0.0 || pr->q_hold_white == 0.0) && (j0 == 0.0 || pr->q_hold_rw == 0.0));
-    int coast = pr->q_coast != 0.0 && (b[31] != a[31] || b[34] != a[34] || b[37] != a[37]);
-    if (!held && !coast) return 0;
-    double d0 = 0.0, d1 = 0.0, d2 = 0.0;
-    if (held) {
-        d0 = pr->q_hold_white * w0 + pr->q_hold_rw * j0;
-        d1 = pr->q_hold_white * (b[26] - a[26]) + pr->q_hold_rw * (b[29] - a[29]);
-        d2 = pr->q_hold_white * (b[27] - a[27]) + pr->q_hold_rw * (b[30] - a[30]);
-    }
-    double tb = b[0];
-    for (int i = 0; i < 3; i++) {
-        double e0 = d0, e1 = d1, e2 = d2;
-        if (coast) {
-            const double *ca = a + 31 + 3 * i, *cb = b + 31 + 3 * i;
-            e0 += pr->q_coast * (cb[0] - ca[0]);
-            e1 += pr->q_coast * (cb[1] - ca[1]);
-            e2 += pr->q_coast * (cb[2] - ca[2]);
-        }
-        hq[3 * i] = tb * tb * e0 - 2.0 * tb * e1 + e2;
-        hq[3 * i + 1] = tb * e0 - e1;
-        hq[3 * i + 2] = e0;
-    }
-    return 1;
+    const double qw[3] = {pr->q_hold_white, pr->q_hold_white, pr->q_hold_white};
+    return held_noise(a, b, qw, pr->q_hold_rw, pr->q_coast, hq);
 }
 
 /* out = F P F^T + Q for a block (model.BlockPropagator.predict); F's non-zero structure:

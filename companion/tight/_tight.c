@@ -12,6 +12,7 @@
 #include <string.h>
 #define NPY_NO_DEPRECATED_API NPY_1_22_API_VERSION
 #include <numpy/arrayobject.h>
+#include "../estimator/held.h" /* the held-time noise, shared with the loose core */
 
 #define N 21
 #define NC 6
@@ -37,15 +38,56 @@ static PyObject *new_array(int nd, npy_intp d0, npy_intp d1, const double *src) 
 }
 
 /* ---------------------------------------------------------------- prediction */
+/* the integrals a (a tuple of HELD_INTS floats, or any such sequence) into v: t and the held-time
+ * moments (held.h; the rest left 0) */
+static int read_held(PyObject *o, double *v) {
+    PyObject *seq = PySequence_Fast(o, "integrals");
+    if (!seq) return -1;
+    if (PySequence_Fast_GET_SIZE(seq) != HELD_INTS) {
+        Py_DECREF(seq);
+        PyErr_Format(PyExc_ValueError, "integrals: expected %d numbers", HELD_INTS);
+        return -1;
+    }
+    PyObject **it = PySequence_Fast_ITEMS(seq);
+    memset(v, 0, sizeof(double) * HELD_INTS);
+    v[0] = PyFloat_AsDouble(it[0]);
+    for (int k = HELD_AT; k < HELD_INTS; k++) v[k] = PyFloat_AsDouble(it[k]);
+    Py_DECREF(seq);
+    return PyErr_Occurred() ? -1 : 0;
+}
+
+/* held_noise(a, b, q_white (3: per axis), q_rw, q_coast) -> (pp, pv, vv) of each axis (9) or None:
+ * held.h's held_noise between the integrals a and b (None: no held time nor coast, or densities 0) */
+static PyObject *py_held_noise(PyObject *self, PyObject *args) {
+    PyObject *oa, *ob;
+    double qw[3], qj, qc, a[HELD_INTS], b[HELD_INTS], hq[9];
+    if (!PyArg_ParseTuple(args, "OO(ddd)dd", &oa, &ob, &qw[0], &qw[1], &qw[2], &qj, &qc)) return NULL;
+    if (read_held(oa, a) < 0 || read_held(ob, b) < 0) return NULL;
+    if (!held_noise(a, b, qw, qj, qc, hq)) Py_RETURN_NONE;
+    return Py_BuildValue("(ddddddddd)", hq[0], hq[1], hq[2], hq[3], hq[4], hq[5], hq[6], hq[7], hq[8]);
+}
+
 /* predict_cov(P, T, nA, nB, live, q_acc_ne, q_acc_d, q_rw, q_ned, q_clock, q_isb, q_drift, q_heading,
- *             q_yaw_bias, heading_live) -> F P F^T + Q  (model.transition, model.process_noise) */
+ *             q_yaw_bias, heading_live[, a, b, q_hold_ne, q_hold_d, q_hold_rw, q_coast]) -> F P F^T + Q
+ * (model.transition, model.process_noise); with the block's integrals a and b, its held-time noise
+ * (held.h: the held sample's white density q_hold_ne horizontally and q_hold_d vertically, the random
+ * walk q_hold_rw, a coast's dropped acceleration scaled by q_coast) on p, v */
 static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
-    PyObject *oP, *onA, *onB, *olive;
-    double T, qne, qd, w, e, qc, qi, qdr, qh, qb;
+    PyObject *oP, *onA, *onB, *olive, *oa = NULL, *ob = NULL;
+    double T, qne, qd, w, e, qc, qi, qdr, qh, qb, qw[3] = {0.0, 0.0, 0.0}, hrw = 0.0, hc = 0.0;
     int hlive;
-    if (!PyArg_ParseTuple(args, "OdOOOdddddddddp", &oP, &T, &onA, &onB, &olive, &qne, &qd, &w, &e, &qc, &qi,
-                          &qdr, &qh, &qb, &hlive))
+    if (!PyArg_ParseTuple(args, "OdOOOdddddddddp|OOdddd", &oP, &T, &onA, &onB, &olive, &qne, &qd, &w, &e, &qc,
+                          &qi, &qdr, &qh, &qb, &hlive, &oa, &ob, &qw[0], &qw[2], &hrw, &hc))
         return NULL;
+    qw[1] = qw[0];
+    /* held time: hq[3 i ..] = (pp, pv, vv) of axis i, when the block holds any */
+    double hq[9];
+    int held = 0;
+    if (oa && ob && (qw[0] != 0.0 || qw[2] != 0.0 || hrw != 0.0 || hc != 0.0)) {
+        double a[HELD_INTS], b[HELD_INTS];
+        if (read_held(oa, a) < 0 || read_held(ob, b) < 0) return NULL;
+        held = held_noise(a, b, qw, hrw, hc, hq);
+    }
     PyArrayObject *aP = in_array(oP, 2), *anA = in_array(onA, 1), *anB = in_array(onB, 1), *alive = in_array(olive, 1);
     if (!aP || !anA || !anB || !alive) goto fail;
     if (PyArray_DIM(aP, 0) != N || PyArray_DIM(aP, 1) != N || PyArray_DIM(anA, 0) != 9 || PyArray_DIM(anB, 0) != 9
@@ -95,6 +137,13 @@ static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
             }
             out[i * N + k] = s;
         }
+    for (int i = 0; held && i < 3; i++) { /* held time (held.h), before the model's Q as the loose core adds it */
+        const double *h3 = hq + 3 * i;
+        out[i * N + i] += h3[0];
+        out[i * N + 3 + i] += h3[1];
+        out[(3 + i) * N + i] += h3[1];
+        out[(3 + i) * N + 3 + i] += h3[2];
+    }
     /* Q (model.process_noise) */
     double T2 = T * T, T3 = T2 * T, T4 = T2 * T2, T5 = T4 * T;
     double pp = (w + e) * T5 / 20.0, pv = (w + e) * T4 / 8.0, vv = (w + e) * T3 / 3.0;
@@ -455,6 +504,7 @@ fail:
 static PyMethodDef methods[] = {
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},
     {"predict_cov", py_predict_cov, METH_VARARGS, "F P F^T + Q over a block (model.transition, model.process_noise)"},
+    {"held_noise", py_held_noise, METH_VARARGS, "the held-time noise (pp, pv, vv) between two integrals, or None"},
     {"innovations", py_innovations, METH_VARARGS, "pseudorange innovations, H, H P, (H P H^T)_ii"},
     {"update", py_update, METH_VARARGS, "the stacked Kalman update with the range rates"},
     {NULL, NULL, 0, NULL},

@@ -191,6 +191,17 @@ class TightConfig:
     history_s: float = 2.0  # epochs this late are still fused exactly
     future_tolerance_s: float = 0.05
     imu_hold_max_s: float = 0.1
+    # The hold limit can follow the log's own IMU period: max(imu_hold_max_s, this × the period), as the
+    # loose filter's field of this name (history.py, "The hold limit"). 0 (default): off, the fixed limit.
+    imu_hold_periods: float = 0.0
+    # A sample held over time it did not measure (an interval longer than 1.5 IMU periods: samples were
+    # lost) adds process noise to position and velocity, as the loose filter's (the estimator's field of
+    # this name; history.py, "Held time"): the held sample's white noise (sigma_acc_m_s2² horizontally,
+    # sigma_acc_vertical_m_s2² vertically, per period) and the change of the acceleration meanwhile, a random
+    # walk of this density (m/s² per √s: velocity variance σ² L³ / 3 over an interval of L s, a gap's coast
+    # included; the coast adds the acceleration it drops besides; 1.0, the loose filter's value). 0: the
+    # white part only.
+    imu_hold_acc_rw_m_s2_sqrt_s: float = 1.0
     gravity_m_s2: float = 9.80665
 
     def validate(self) -> None:
@@ -205,6 +216,10 @@ class TightConfig:
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
         check_accuracy_window(self.accuracy_window_s)
+        for name in ("imu_hold_acc_rw_m_s2_sqrt_s", "imu_hold_periods"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
         if not (math.isfinite(self.accuracy_floor_m) and self.accuracy_floor_m >= 0.0):
             raise ValueError(f"accuracy_floor_m: must be a finite number >= 0, got {self.accuracy_floor_m!r}")
         if not (0.0 < self.cn0_calibration_quantile < 1.0 and self.cn0_calibration_prior_obs >= 0.0

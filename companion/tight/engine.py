@@ -216,9 +216,13 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                   "speed_fused"):
             self._counts.setdefault(k, 0)
         super().__init__(cfg.imu_hold_max_s, cfg.history_s, cfg.future_tolerance_s, cfg.gravity_m_s2,
-                         self._counts)
+                         self._counts, cfg.imu_hold_periods)
         self._nav15: tuple[Entry, tuple[float, ...], np.ndarray] | None = None
-        self._prop = BlockPropagator(self._q[0], self._q[2], self._q[3])
+        # held IMU time (lost samples, history.py "Held time"), as the loose filter: the held sample's white
+        # density (horizontal, vertical), the acceleration's change and a gap's coast (1: on), on p and v
+        self._q_hold = (self._q[0], self._q[1], c.imu_hold_acc_rw_m_s2_sqrt_s**2, 1.0)
+        self._prop = BlockPropagator(self._q[0], self._q[2], self._q[3], self._q_hold[0], self._q_hold[2],
+                                     self._q_hold[3])
         nominal_fields = {"uniform": "r_uniform_m2", "model": "r_model_m2", "los": "r_los_m2"}
         self._r_field = nominal_fields[self.weighting.nominal]
         self._n_fused = 0  # epochs with at least one satellite used (in order of arrival)
@@ -325,9 +329,10 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * live
         if T <= 0.0:
             return x, e.P.copy()
-        # F P Fᵀ + Q (model.transition, model.process_noise) in C; no odometry heading yet: its
-        # states stay at rest
-        return x, _tight.predict_cov(e.P, T, nA, nB, live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0))
+        # F P Fᵀ + Q (model.transition, model.process_noise) and the held-time noise of the block
+        # (e.ints → ints) in C; no odometry heading yet: its states stay at rest
+        return x, _tight.predict_cov(e.P, T, nA, nB, live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0),
+                                     e.ints, ints, *self._q_hold)
 
     def _fuse(self, prev: Entry, t_us: int, meas: SatEpoch | Speed) -> Entry:
         ints = self.imu.integrals(t_us)
@@ -490,6 +495,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         if dq:
             out[11] += dq * T * T * T / 3.0
             out[14] += dq * T
+            # the held sample's white noise vertically: the same difference of densities over held time
+            held = _tight.held_noise(last.ints, self.imu.last_integrals(), (0.0, 0.0, dq), 0.0, 0.0)
+            if held is not None:
+                out[11] += held[6]
+                out[14] += held[8]
         return now, out, last
 
     def clock_bias_m(self, x: np.ndarray, system: System) -> float:
