@@ -43,7 +43,7 @@ def hover():
 def test_when_gnss_ends_the_position_is_flagged_invalid_and_does_not_run_away(hover, method):
     """GNSS removed for the last 14 s of the ArduCopter SITL hover: pos_valid turns False
     pos_valid_timeout_s (5 s) after the last fix's validity time (to one 25 ms estimate row), the
-    position variance only grows, and the estimate stays within 1 m of the full-GNSS replay for
+    position variance reported only grows (held at the fixes' own variance until P passes it), and the estimate stays within 1 m of the full-GNSS replay for
     12 s (measured ≤ 0.12 m; 1.8-2.0 m without the acceleration-bias state)."""
     t_end = (hover.samples[-1].t_us - hover.samples[0].t_us) * 1e-6 - 14.0
     clean = run(hover, method, every_imu=10)
@@ -53,8 +53,9 @@ def test_when_gnss_ends_the_position_is_flagged_invalid_and_does_not_run_away(ho
     invalid = cut.t_s[after & ~cut.pos_valid]
     assert len(invalid) and 0.0 < invalid[0] - (last_fix + CFG.pos_valid_timeout_s) <= 0.026
     assert not cut.pos_valid[cut.t_s > invalid[0]].any()
-    var_n = cut.var_p_m2[after, 0]
-    assert np.all(np.diff(var_n) > 0)
+    var_n = cut.var_p_m2[after, 0]  # reported: floored at one fix's variance while P is below it
+    assert np.all(np.diff(var_n) >= 0) and np.all(np.diff(var_n[var_n > var_n[0]]) > 0)
+    assert var_n[-1] > 100 * var_n[0]
     dev = np.linalg.norm(cut.p_ned_m[:, :2] - clean.p_ned_m[:, :2], axis=1)
     assert dev[after & (cut.t_s < t_end + 12.0)].max() < 1.0
 
