@@ -43,8 +43,9 @@ def hover():
 def test_when_gnss_ends_the_position_is_flagged_invalid_and_does_not_run_away(hover, method):
     """GNSS removed for the last 14 s of the ArduCopter SITL hover: pos_valid turns False
     pos_valid_timeout_s (5 s) after the last fix's validity time (to one 25 ms estimate row), the
-    position variance reported only grows (held at the fixes' own variance until P passes it), and the estimate stays within 1 m of the full-GNSS replay for
-    12 s (measured ≤ 0.12 m; 1.8-2.0 m without the acceleration-bias state)."""
+    position variance reported only grows (held at the fixes' own variance until P passes it), and
+    the estimate stays within 1 m of the full-GNSS replay for 12 s (measured ≤ 0.12 m; 1.8-2.0 m
+    without the acceleration-bias state)."""
     t_end = (hover.samples[-1].t_us - hover.samples[0].t_us) * 1e-6 - 14.0
     clean = run(hover, method, every_imu=10)
     cut = run(hover.without_gnss_after(t_end), method, every_imu=10)

@@ -9,8 +9,9 @@
  * numpy reference forms of model.py and a pure-Python history kept in the tests.
  *
  * State x = [p, v, b (NED), a (FRD), d (NED)] (15), covariance P 15x15 (C order, float64).
- * Integrals = (t_s, S1 (3), S2 (3), M1 (9), M2 (9), W (3), J (3)) (31 floats, history.py): W and J
- * the moments (∫ n, ∫ n s, ∫ n s^2) of the held-time noise densities (history.py, "Held time").
+ * Integrals = (t_s, S1 (3), S2 (3), M1 (9), M2 (9), W (3), J (3), C (9)) (40 floats, history.py): W and J
+ * the moments (∫ n, ∫ n s, ∫ n s^2) of the held-time noise densities, C those of a coast's dropped
+ * acceleration per axis (history.py, "Held time"; held.h).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -24,7 +25,7 @@
 #define NS 15
 #define NN (NS * NS)
 #define ROW 57
-#define NINT 40
+#define NINT HELD_INTS  /* held.h: the integrals' length */
 #define RING 8  /* recent sample intervals: their median is the IMU's period */
 
 
@@ -681,18 +682,16 @@ static void moments(double tp, double t, double *dm, double *d3) {
 static void next_row(const double *r, double t, double ax, double ay, double az, const double *rot, double w,
                      double j, const double *c, double *o) {
     double tp = r[0];
-    double dt = t - tp;
-    double dm = dt * (tp + t) * 0.5;
+    double dt = t - tp, dm, d3;
+    moments(tp, t, &dm, &d3);
     o[37] = w; o[38] = j;
     if (w != 0.0 || j != 0.0) {
-        double d3 = dt * (tp * tp + tp * t + t * t) / 3.0;  /* ∫ s^2 (moments) */
         o[39] = r[39] + w * dt; o[40] = r[40] + w * dm; o[41] = r[41] + w * d3;
         o[42] = r[42] + j * dt; o[43] = r[43] + j * dm; o[44] = r[44] + j * d3;
     } else {
         memcpy(o + 39, r + 39, sizeof(double) * 6);
     }
     if (c) {
-        double d3 = dt * (tp * tp + tp * t + t * t) / 3.0;
         for (int i = 0; i < 3; i++) {
             o[45 + i] = c[i];
             o[48 + 3 * i] = r[48 + 3 * i] + c[i] * dt;
@@ -935,15 +934,15 @@ static int hist_integrals_c(const History *h, long long t_us, double *o) {
     }
     /* the held-time densities of the interval from r on are in the next row (none yet past the last) */
     const double *nx = k + 1 < h->n ? HROW(h, k + 1) : NULL;
-    if (nx && (nx[37] != 0.0 || nx[38] != 0.0)) {
-        double dm2, d3;
-        moments(r[0], t, &dm2, &d3);
+    int held = nx && (nx[37] != 0.0 || nx[38] != 0.0);
+    int coast = nx && (nx[45] != 0.0 || nx[46] != 0.0 || nx[47] != 0.0);  /* inside a coast */
+    double dm2 = 0.0, d3 = 0.0;
+    if (held || coast) moments(r[0], t, &dm2, &d3);
+    if (held) {
         o[25] += nx[37] * tau; o[26] += nx[37] * dm2; o[27] += nx[37] * d3;
         o[28] += nx[38] * tau; o[29] += nx[38] * dm2; o[30] += nx[38] * d3;
     }
-    if (nx && (nx[45] != 0.0 || nx[46] != 0.0 || nx[47] != 0.0)) {  /* inside a coast */
-        double dm2, d3;
-        moments(r[0], t, &dm2, &d3);
+    if (coast) {
         for (int i = 0; i < 3; i++) {
             o[31 + 3 * i] += nx[45 + i] * tau; o[32 + 3 * i] += nx[45 + i] * dm2; o[33 + 3 * i] += nx[45 + i] * d3;
         }
