@@ -8,7 +8,9 @@ to NED.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -78,6 +80,32 @@ class NavEstimate:
     gnss_resets: int = 0  # resets to the GNSS (position, velocity, IMU error states) after the filter lost it
     vel_test_ratio: float = float("nan")  # horizontal GNSS-velocity NIS / gate² of the last fix (NaN = none)
     imu_gnss_disagreement: bool = False  # the IMU-propagated motion persistently disagrees with GNSS
+
+
+def _slots_constructor(cls: type) -> Callable[..., Any]:
+    """``cls(...)`` (the same arguments, defaults and object) for a frozen dataclass with slots, each
+    field set through its slot's descriptor instead of the dataclass ``__init__``'s ``object.__setattr__``
+    per field (half the cost for ``NavEstimate``'s 15: a navigator makes one per output). Only for
+    classes without ``default_factory`` or ``__post_init__``."""
+    ns: dict[str, Any] = {"_new": object.__new__, "_cls": cls}
+    params, body = [], []
+    for i, f in enumerate(fields(cls)):
+        if f.default_factory is not MISSING or hasattr(cls, "__post_init__"):
+            raise TypeError(f"{cls.__name__}: not a plain frozen dataclass with slots")
+        ns[f"_set{i}"] = cls.__dict__[f.name].__set__
+        if f.default is MISSING:
+            params.append(f.name)
+        else:
+            ns[f"_d{i}"] = f.default
+            params.append(f"{f.name}=_d{i}")
+        body.append(f"    _set{i}(o, {f.name})\n")
+    src = f"def new({', '.join(params)}):\n    o = _new(_cls)\n{''.join(body)}    return o\n"
+    exec(src, ns)  # as dataclasses makes __init__
+    return ns["new"]
+
+
+# ``NavEstimate(...)``, faster (the navigators' per-output path): the same object, built through the slots
+new_nav_estimate: Callable[..., NavEstimate] = _slots_constructor(NavEstimate)
 
 
 @dataclass(frozen=True, slots=True)

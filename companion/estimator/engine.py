@@ -397,10 +397,9 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         if fused_pos:
             x_post, P_post, nis = _update(x_prior, P_prior, y_fused, R_fused)
             if self._window_s > 0.0:  # each axis' innovation over the S it was fused with
-                nu = np.array((y_fused[0] / math.sqrt(hph[0][0] + R_fused[0]),
+                fit = fit_add3(fit, t_us, y_fused[0] / math.sqrt(hph[0][0] + R_fused[0]),
                                y_fused[1] / math.sqrt(hph[1][1] + R_fused[1]),
-                               y_fused[2] / math.sqrt(hph[2][2] + R_fused[2])))
-                fit = fit.add(t_us, _AXES, nu, self._window_s)
+                               y_fused[2] / math.sqrt(hph[2][2] + R_fused[2]), self._window_s)
             state = self.method.update(prev.state, terms_fused)
             t_fused = t_us
             if shift is not None:
@@ -685,9 +684,9 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         return x, P
 
     # -------------------------------------------------------------- output
-    def snapshot(self) -> Snapshot | None:
-        """The filter at the newest IMU time, or None before the first fix (cached)."""
-        return self._output_now()
+    # the filter at the newest IMU time, or None before the first fix (cached): ``Timeline._output_now``
+    # itself (no call of its own: the navigator's estimate() calls it at every output)
+    snapshot = Timeline._output_now
 
     def _output(self, last: Fusion, now: int) -> Snapshot:
         T = (now - last.t_us) * 1e-6
@@ -696,7 +695,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         prop = self._prop_disagree if last.disagree else self._prop
         x, out = prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
                                   (1.0 - alpha * alpha) * sigma_b * sigma_b)
-        valid = now - last.t_fused_us <= self._valid_us and not last.invalid and not self._outside_envelope(x)
+        valid = now - last.t_fused_us <= self._valid_us and not last.invalid and not (  # _outside_envelope
+            x[3] * x[3] + x[4] * x[4] > self._v_max2 or abs(x[5]) > self._vd_max)
         return Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
                         last.n_rejected, last.n_resets, last.vel_ratio, last.disagree)
 
@@ -725,6 +725,34 @@ _NAN3: Vec3 = (math.nan, math.nan, math.nan)
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 _INF = math.inf
 _AXES = np.arange(3)  # the Fit channels of a fix: N, E, D
+
+
+def fit_add3(fit: Fit, t_us: int, nu0: float, nu1: float, nu2: float, window_s: float) -> Fit:
+    """``fit.add(t_us, _AXES, (nu0, nu1, nu2), window_s)`` (``window_s`` > 0), the same numbers: once
+    ``fit`` holds the three axes, its sums decayed and added on floats (the per-element operations of
+    ``Fit.add``'s numpy path, without its array arithmetic at every fix)."""
+    if fit.key is not _AXES:  # the first fix (an empty Fit): Fit.add's general path
+        return fit.add(t_us, _AXES, np.array((nu0, nu1, nu2)), window_s)
+    a = math.exp(-(t_us - fit.t_us) * 1e-6 / window_s)
+    aa = a * a
+    n0, n1, n2 = fit.nu_sum.tolist()
+    w0, w1, w2 = fit.w2_sum.tolist()
+    return Fit(_AXES, np.array((a * n0 + nu0, a * n1 + nu1, a * n2 + nu2)),
+               np.array((aa * w0 + 1.0, aa * w1 + 1.0, aa * w2 + 1.0)), t_us)
+
+
+def fit_inflation3(fit: Fit) -> float:
+    """``fit.inflation()`` on floats for the loose filter's Fit (three axes, or none yet): the same number
+    (numpy's sum and dot product of three values are the left-to-right sums, checked in the tests)."""
+    if fit.key is not _AXES:
+        return fit.inflation()
+    n0, n1, n2 = fit.nu_sum.tolist()
+    w0, w1, w2 = fit.w2_sum.tolist()
+    den = w0 + w1 + w2
+    if not den > 0.0:
+        return 1.0
+    k = (n0 * n0 + n1 * n1 + n2 * n2) / den
+    return k if k > 1.0 else 1.0
 # ``push_fix``'s R of a fix whose receiver reports no accuracy: learned (Fusion.scale_*_m); also per
 # component (an infinite horizontal or vertical variance: that one learned)
 LEARN: Vec3 = (math.inf, math.inf, math.inf)

@@ -21,12 +21,12 @@ from pymap3d.ellipsoid import Ellipsoid
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.rotation import Rot, rotation_scaled
-from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, new_nav_estimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import accuracy_inflation, fix_floor, floored_axis, variance_scale
-from companion.estimator.engine import FusionEngine
+from companion.estimator.consistency import fix_floor, floored_axis, variance_scale
+from companion.estimator.engine import FusionEngine, fit_inflation3
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
 _np_cos, _np_sin, _np_hypot = np.cos, np.sin, np.hypot  # pymap3d's trigonometry (numpy's, for its bits)
@@ -97,7 +97,9 @@ class Navigator:
         self._frozen_us = int(round(self.cfg.gnss_frozen_s * 1e6))
         self.engine = FusionEngine(self.cfg, method, self._counts, context)
         self._rot: Rot | None = None  # the latest attitude as R_ned_frd (row-major)
-        self._push_frd = self.engine.push_frd
+        # the IMU path without Timeline.push_frd's own call (the same steps: Timeline.frd_sink)
+        self._imu_push, self._imu_g, self._imu_waiting, self._imu_pushed = self.engine.frd_sink()
+        self._snapshot = self.engine.snapshot
         self._last: tuple[Any, NavEstimate] | None = None
         # (the Fit it is of, the factor, consistency.variance_scale of it)
         self._inflation: tuple[Any, float, np.ndarray | None] = (None, 1.0, None)
@@ -115,7 +117,9 @@ class Navigator:
             if r is None:
                 self._counts["imu_rejected_no_attitude"] += 1
                 return
-            self._push_frd(sample.t_us, sample.acc_frd_m_s2, r)  # type: ignore[union-attr]
+            if (self._imu_push(sample.t_us, sample.acc_frd_m_s2, r, self._imu_g)  # type: ignore[union-attr]
+                    or self._imu_waiting):
+                self._imu_pushed()
         elif kind is AttitudeSample:
             r = rotation_q(sample.q_ned_frd)  # type: ignore[union-attr]
             if r is None:  # |q|² not finite or ≈ 0
@@ -232,13 +236,15 @@ class Navigator:
     # ------------------------------------------------------------- output
     def estimate(self) -> NavEstimate | None:
         """The estimate at the newest IMU time; None until the first good fix and IMU."""
-        snap = self.engine.snapshot()
+        snap = self._snapshot()
         if snap is None:
             return None
-        if self._last is not None and self._last[0] is snap:
-            return self._last[1]
+        last = self._last
+        if last is not None and last[0] is snap:
+            return last[1]
         a = snap.out  # one array for the state and the variances, handed out as views (one allocation)
-        self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per fix)
+        if self._inflation[0] is not self.engine.entries[-1].fit:  # (a snapshot: an entry)
+            self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per fix)
         scale = self._inflation[2]
         var = a[9:18] if scale is None else a[9:18] * scale
         floor = self._floor
@@ -246,9 +252,9 @@ class Navigator:
             var = var.copy() if scale is None else var
             k, (c, s2) = self._inflation[1], floor
             var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
-        est = NavEstimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
-                          snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
-                          snap.vel_ratio, snap.disagree)
+        est = new_nav_estimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
+                               snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
+                               snap.vel_ratio, snap.disagree)  # NavEstimate(...)
         self._last = (snap, est)
         return est
 
@@ -259,7 +265,8 @@ class Navigator:
         entries = self.engine.entries
         fit = entries[-1].fit if entries else None
         if self._inflation[0] is not fit:  # a function of the last fix's Fit alone (the entries between
-            k = accuracy_inflation(fit, self.cfg.accuracy_window_s)  # fixes share it): once per fix
+            w = self.cfg.accuracy_window_s  # fixes share it): once per fix; consistency.accuracy_inflation
+            k = 1.0 if fit is None or w <= 0.0 else fit_inflation3(fit)  # on floats
             self._inflation = (fit, k, variance_scale(k))
             self._floor = None
             if entries and self.cfg.accuracy_window_s > 0.0:  # the fixes' own correlation: a floor

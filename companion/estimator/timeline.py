@@ -119,6 +119,12 @@ class Timeline(Generic[E, M, Out]):
         if self.imu.push_frd(t_us, f_frd_m_s2, rot, self._g) or self._pending:
             self._imu_pushed()
 
+    def frd_sink(self) -> tuple[Any, float, list[Any], Any]:
+        """``push_frd`` in parts for a navigator's per-sample path (one Python call fewer per IMU
+        sample): (the core's ``push_frd``, the gravity, the measurements waiting for the IMU,
+        ``_imu_pushed``), used as ``if push(t_us, f_frd, rot, g) or waiting: pushed()``."""
+        return self.imu.push_frd, self._g, self._pending, self._imu_pushed
+
     def push_acc_batch(self, t_us: np.ndarray, a_ned: np.ndarray, rot: np.ndarray | None = None) -> None:
         """Many NED accelerations (with their rotations, (n, 9) row-major; None = identity) at
         once; the same result as ``push_acc`` one by one."""

@@ -57,7 +57,8 @@ class TightNavigator:
                                                          math.radians(frame.home_lon_deg), frame.home_alt_m)
         klob = None if ephemerides is None else ephemerides.klobuchar
         self.engine = tight_engine.TightEngine(self.cfg, method, self._counts, f, klob, line_of_sight)
-        self._push_frd = self.engine.push_frd
+        # the IMU path without Timeline.push_frd's own call (the same steps: Timeline.frd_sink)
+        self._imu_push, self._imu_g, self._imu_waiting, self._imu_pushed = self.engine.frd_sink()
         self._sats = None if ephemerides is None else SatelliteCache(ephemerides, sat_cache_period_s)
         self._atmo: AtmosphereCache | None = None
         self._sat_period_s = sat_cache_period_s
@@ -78,7 +79,8 @@ class TightNavigator:
             if self._rot is None:
                 self._counts["imu_rejected_no_attitude"] += 1
                 return
-            self._push_frd(sample.t_us, sample.acc_frd_m_s2, self._rot)
+            if self._imu_push(sample.t_us, sample.acc_frd_m_s2, self._rot, self._imu_g) or self._imu_waiting:
+                self._imu_pushed()
         elif kind is AttitudeSample:
             r = rotation_q(sample.q_ned_frd)
             if r is None:

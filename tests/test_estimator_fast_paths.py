@@ -1,0 +1,69 @@
+"""The loose filter's per-sample speed-ups compute the same numbers, bit for bit, as what they replace:
+the consistency factor's sums on floats (``engine.fit_add3``, ``engine.fit_inflation3``) against
+``consistency.Fit``'s numpy path, and ``samples.new_nav_estimate`` against ``NavEstimate(...)``."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from companion.domain.samples import NavEstimate, new_nav_estimate
+from companion.estimator import engine as engine_module
+from companion.estimator.config import EstimatorConfig
+from companion.estimator.consistency import Fit
+from companion.estimator.engine import _AXES, FusionEngine, fit_add3, fit_inflation3
+from tests.estimator_streams import OPEN_SKY, drive, multipath_stream
+
+CFG = EstimatorConfig()
+
+
+def test_fit_on_floats_equals_the_numpy_fit():
+    """Innovations from unit to 3σ with irregular intervals (the factor then well above 1): every sum
+    and every factor equal to ``Fit.add`` / ``Fit.inflation``'s, bit for bit."""
+    rng = np.random.default_rng(3)
+    ref, fast, t = Fit(), Fit(), 0
+    assert fit_inflation3(fast) == ref.inflation() == 1.0  # no fix yet
+    above = 0
+    for k in range(3000):
+        t += int(rng.integers(20_000, 400_000))
+        nu = rng.standard_normal(3) * (3.0 if (k // 200) % 2 else 1.0) + (0.5 if k % 500 < 100 else 0.0)
+        ref = ref.add(t, _AXES, nu, 5.0)
+        fast = fit_add3(fast, t, *nu.tolist(), 5.0)
+        assert fast.key is _AXES and fast.t_us == ref.t_us == t
+        assert fast.nu_sum.tolist() == ref.nu_sum.tolist() and fast.w2_sum.tolist() == ref.w2_sum.tolist()
+        assert fit_inflation3(fast) == ref.inflation()
+        above += ref.inflation() > 1.0
+    assert 300 < above < 2900  # both sides of the floor at 1 were compared
+
+
+def test_the_engine_fit_equals_the_numpy_fit(monkeypatch):
+    """On a stream with multipath segments (the factor above 1), every entry's Fit and factor equal, bit
+    for bit, those of the same engine adding each fix's innovations through ``Fit.add``."""
+    stream = multipath_stream(np.random.default_rng(7), CFG, [(6.0, 0.0), (10.0, 1.2)])
+    fast = FusionEngine(CFG, "second-order", context=OPEN_SKY)
+    drive(stream, fast, stream.fix_t_us)
+    monkeypatch.setattr(engine_module, "fit_add3",
+                        lambda fit, t, a, b, c, w: fit.add(t, _AXES, np.array((a, b, c)), w))
+    ref = FusionEngine(CFG, "second-order", context=OPEN_SKY)
+    drive(stream, ref, stream.fix_t_us)
+    assert len(fast.entries) == len(ref.entries) > 40  # (the last history_s of them)
+    for a, b in zip(fast.entries, ref.entries, strict=True):
+        assert a.t_us == b.t_us and a.x == b.x and a.fit.t_us == b.fit.t_us
+        assert a.fit.nu_sum.tolist() == b.fit.nu_sum.tolist()
+        assert a.fit.w2_sum.tolist() == b.fit.w2_sum.tolist()
+        assert fit_inflation3(a.fit) == b.fit.inflation()
+    assert max(e.fit.inflation() for e in ref.entries) > 1.5
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"pos_valid": False, "gnss_resets": 3, "vel_test_ratio": 0.5}])
+def test_new_nav_estimate_is_nav_estimate(kwargs):
+    """The same object as the dataclass's constructor: type, every field, defaults, frozen."""
+    args = (7, np.ones(3), np.zeros(3), np.full(3, 2.0), np.arange(9.0), 0.25, 1.5, "second-order")
+    a, b = new_nav_estimate(*args, **kwargs), NavEstimate(*args, **kwargs)
+    assert type(a) is NavEstimate and repr(a) == repr(b)
+    for f in dataclasses.fields(NavEstimate):
+        assert getattr(a, f.name) is getattr(b, f.name) or getattr(a, f.name) == getattr(b, f.name)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.t_us = 8  # type: ignore[misc]
