@@ -285,7 +285,8 @@ def test_campaign_rows_of_the_position_only_and_closed_loops(tmp_path):
     def result(seed: int, loop: str, errs: dict) -> Result:
         job = Job(ARDUPILOT, "test", 0, seed, ("second-order",), tmp_path, ArduPilotConfig(), loop)
         errs = {k: np.full(10, v) for k, v in errs.items()}
-        return Result(job, errs, np.full(10, 2.0), True, 1, "reached_goal", 10.0, 1.0)
+        # arrived with one contact: not a goal reached (as fly counts it), but it arrived
+        return Result(job, errs, np.full(10, 2.0), False, 1, "reached_goal", 10.0, 1.0)
 
     results = [result(s, "none", {"ardupilot-ekf3": 2.0 + s, "second-order": 1.0}) for s in (0, 1)]
     results += [result(s, "none-posonly", {"ardupilot-ekf3-posonly": 4.0 + 2 * s}) for s in (0, 1)]
@@ -296,13 +297,13 @@ def test_campaign_rows_of_the_position_only_and_closed_loops(tmp_path):
     assert list(ol) == list(rows) and ol["ardupilot-ekf3"]["median"] == pytest.approx(2.5)
     assert ol["ardupilot-ekf3-posonly"]["reduction_vs_ekf3"] == pytest.approx(5.0 / 2.5 - 1.0)
     v = res["flying"]["vision"]
-    assert v["flights"] == 2 and v["collisions"] == 2
+    assert v["flights"] == 2 and v["collisions"] == 2 and v["reached_goal"] == 0 and v["arrived"] == 2
     assert v["flown_estimate_error_horizontal_m"]["median"] == pytest.approx(1.5)
     assert v["companion_sent_error_horizontal_m"]["median"] == pytest.approx(1.25)
     assert res["flying"]["none-posonly"]["flown_estimate_error_horizontal_m"]["median"] == pytest.approx(5.0)
     assert res["flying"]["none"]["companion_sent_error_horizontal_m"]["n"] == 0
     text = table_text(ARDUPILOT, res)
-    assert "ExternalNav | 2 (2) | 2 | 2 | 2.00 | 2.00 | 1.50 | 1.25 |" in text
+    assert "ExternalNav | 2 (2) | 0 (2) | 2 | 2.00 | 2.00 | 1.50 | 1.25 |" in text
 
 
 def test_sitl_ardupilot_option_errors_are_one_line(tmp_path, capsys):

@@ -189,3 +189,16 @@ def test_a_flight_without_its_series_is_rescored_only_when_that_reproduces_it(tm
     assert (plain.out_dir / SERIES_FILE).exists()  # kept: read directly next time
     RESCORED.clear()
     assert read_back(job) is not None and RESCORED == []
+
+
+@pytest.mark.parametrize("collisions, reached", [(0, True), (2, False)])
+def test_a_flight_recorded_as_arrived_after_contacts_is_not_a_goal_reached(tmp_path, collisions, reached):
+    """Flights recorded before reached_goal meant "without a contact" said True after contacts; read
+    back, such a flight counts as arrived (ended_by) but not as a goal reached."""
+    job = campaign_jobs(tmp_path)[0]
+    flight = fake_flight(job)
+    summary = {**flight.summary, "reached_goal": True, "collisions": collisions}
+    r = autopilot.flight_result(job, summary, flight.series)
+    assert r.reached_goal is reached and r.ended_by == "reached_goal" and r.collisions == collisions
+    res = autopilot.aggregate(CAMPAIGN, [r], ("px4-ekf2",), (job.seed,))
+    assert res["flying"][job.loop]["reached_goal"] == int(reached) and res["flying"][job.loop]["arrived"] == 1

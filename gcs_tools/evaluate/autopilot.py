@@ -207,7 +207,9 @@ def flight_result(job: Job, summary: dict[str, Any], series: dict[str, Any]) -> 
     run = summary[spec.vehicle]
     p95 = run["command_delay_ms"]["p95"]
     return Result(job, errs, np.asarray(series.get("track_error_m", np.zeros(0))),
-                  bool(summary["reached_goal"]), int(summary["collisions"]), str(run["ended_by"]),
+                  # a flight recorded before reached_goal meant "without a contact" is read back by it
+                  bool(summary["reached_goal"]) and int(summary["collisions"]) == 0,
+                  int(summary["collisions"]), str(run["ended_by"]),
                   float(run["sim_s"]), float(run["wall_s"]), valid=bool(summary["valid"]),
                   command_delay_p95_ms=float("nan") if p95 is None else float(p95))
 
@@ -391,7 +393,8 @@ def aggregate(spec: VehicleCampaign, results: Sequence[Result], rows: Sequence[s
             "flies_on": loop.label, "flights": len(of_loop), "valid": len(good),
             "invalid_late_commands": sum(not r.valid for r in of_loop if not r.error),
             "errors": sum(bool(r.error) for r in of_loop),
-            "reached_goal": sum(r.reached_goal for r in good),
+            "reached_goal": sum(r.reached_goal for r in good),  # without a contact
+            "arrived": sum(r.ended_by == "reached_goal" for r in good),  # contacts or not
             "collisions": sum(r.collisions for r in good),
             "tracking_error_m": stats.summarize(track),
             "flown_estimate_error_horizontal_m": stats.summarize(flown),  # the EKF's, in every loop
@@ -417,14 +420,14 @@ def table_text(spec: VehicleCampaign, res: dict[str, Any]) -> str:
             lo, hi = (100 * x for x in red["ci95"])
             vs += f" (seeds {100 * red['value']:+.0f} % [{lo:+.0f}, {hi:+.0f}])"
         lines.append(f"| {row} | {e['median']:.2f} | {e['p95']:.2f} | {vs} | {seed} |")
-    lines += ["", f"| {spec.title} flies on | flights (valid) | reached goal | collisions "
+    lines += ["", f"| {spec.title} flies on | flights (valid) | reached goal (arrived) | collisions "
                   f"| tracking median [m] | p95 [m] | {ekf} horizontal median [m] | companion sent [m] |",
               "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for f in res["flying"].values():
         trk, fl, cs = (f["tracking_error_m"], f["flown_estimate_error_horizontal_m"],
                        f["companion_sent_error_horizontal_m"])
         sent = f"{cs['median']:.2f}" if cs["n"] else "—"
-        lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) | {f['reached_goal']} "
+        lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) | {f['reached_goal']} ({f['arrived']}) "
                      f"| {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} | {fl['median']:.2f} "
                      f"| {sent} |")
     return "\n".join(lines) + "\n"

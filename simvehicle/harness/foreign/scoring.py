@@ -110,12 +110,15 @@ def score_flight(vehicle: Vehicle, opts: ForeignFlightOptions, mission: Mission,
         **{f"{HORIZONTAL_ERROR_PREFIX}{name}": e for name, e in method_errors.items()},
     }
     nav = mine.counters
+    collisions = count_collisions(clearance, radius_m)
     summary: dict[str, Any] = {
         "mission": mission.name, "profile": opts.profile, "method": opts.method, "seed": opts.seed,
         "vehicle": vehicle.name, "feed": opts.feed,
-        "reached_goal": driver.outcome == "reached_goal",
+        # as fly's: never after a contact (SITL has no buildings, so the flight went on; ended_by
+        # keeps the driver's own outcome)
+        "reached_goal": driver.outcome == "reached_goal" and collisions == 0,
         "valid": run_info["valid"],  # False: our commands reached the autopilot late (a loaded machine)
-        "collisions": count_collisions(clearance, radius_m),
+        "collisions": collisions,
         "duration_s": float(t_s[-1]) if t_s.size else 0.0,
         "route_duration_s": route.duration_s,
         "wall_s": run_info["wall_s"],
