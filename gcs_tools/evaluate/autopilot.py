@@ -427,8 +427,8 @@ def table_text(spec: VehicleCampaign, res: dict[str, Any]) -> str:
         trk, fl, cs = (f["tracking_error_m"], f["flown_estimate_error_horizontal_m"],
                        f["companion_sent_error_horizontal_m"])
         sent = f"{cs['median']:.2f}" if cs["n"] else "—"
-        lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) | {f['reached_goal']} ({f['arrived']}) "
-                     f"| {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} | {fl['median']:.2f} "
+        lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) "
+                     f"| {f['reached_goal']} ({f['arrived']}) | {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} | {fl['median']:.2f} "
                      f"| {sent} |")
     return "\n".join(lines) + "\n"
 
