@@ -428,8 +428,8 @@ def table_text(spec: VehicleCampaign, res: dict[str, Any]) -> str:
                        f["companion_sent_error_horizontal_m"])
         sent = f"{cs['median']:.2f}" if cs["n"] else "—"
         lines.append(f"| {f['flies_on']} | {f['flights']} ({f['valid']}) "
-                     f"| {f['reached_goal']} ({f['arrived']}) | {f['collisions']} | {trk['median']:.2f} | {trk['p95']:.2f} | {fl['median']:.2f} "
-                     f"| {sent} |")
+                     f"| {f['reached_goal']} ({f['arrived']}) | {f['collisions']} | {trk['median']:.2f} "
+                     f"| {trk['p95']:.2f} | {fl['median']:.2f} | {sent} |")
     return "\n".join(lines) + "\n"
 
 
