@@ -33,7 +33,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.estimator.consistency import Fit
+from companion.estimator.consistency import Fit, Scatter
 from companion.estimator.history import Integrals, mean_between
 from companion.estimator.model import BlockPropagator
 from companion.estimator.timeline import Timeline
@@ -55,6 +55,7 @@ from companion.tight.model import (
     Frame,
     position_dop_ned,
 )
+from companion.tight.snapshot import epoch_fix, epoch_velocity
 
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
@@ -125,6 +126,11 @@ class Entry(NamedTuple):
     # cumulative: satellites used, satellites rejected, resets, clock resets, epochs
     totals: tuple[int, int, int, int, int]
     fit: Fit  # the used pseudoranges' consistency so far (the reported accuracy's inflation)
+    # the epochs' own snapshot positions' scatter and correlation, horizontal (N, E) and vertical, and the
+    # last snapshot's own variances (horizontal per axis, vertical; m²): the reported accuracy's floor
+    scatter_h: Scatter = Scatter()
+    scatter_v: Scatter = Scatter()
+    fix_var_m2: tuple[float, float] = (math.nan, math.nan)
 
 
 def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
@@ -369,7 +375,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             s, h = model.speed(x)
             if s <= 0.5:  # below 0.5 m/s the direction is unknown
                 return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                             prev.totals, prev.fit)
+                             prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2)
             y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])
         PHt = P @ H.T
         S = H @ PHt + R
@@ -380,7 +386,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             P = 0.5 * (P + P.T)
             self._counts["speed_fused"] += 1
         return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                     prev.totals, prev.fit)
+                     prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2)
 
     def _fuse_epoch(self, prev: Entry, t_us: int, m: SatEpoch, x: np.ndarray, P: np.ndarray,
                     ints: Integrals) -> Entry:
@@ -429,17 +435,34 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         n_used = int(used.sum())
         nis = math.nan
         fit = prev.fit
+        scatter_h, scatter_v, fix_var = prev.scatter_h, prev.scatter_v, prev.fix_var_m2
+        u = None if n_used == len(used) else np.flatnonzero(used)  # None: every satellite
+        snap = None
+        if n_used and c.accuracy_window_s > 0.0:  # this epoch's own position, weighted as fused
+            snap = epoch_fix(H, y, r, m.slot) if u is None else epoch_fix(H[u], y[u], r[u], m.slot[u])
+            if snap is not None:
+                snap = x[0:3] + snap[0], snap[1]  # the prediction + the correction: its own position
         if n_used:
-            if n_used == len(used):  # every satellite (the same values as indexed by all of them)
+            if u is None:  # every satellite (the same values as indexed by all of them)
                 fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
             else:
-                u = np.flatnonzero(used)
                 fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
             # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
             # their own) in one update, in C (model.range_rate; the numpy form in the tests)
+            r_rate = m.r_rate_m2_s2 * (r / r_nom)
             x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used.astype(float), r0, C, m.sat_pos_ecef_m,
-                                         m.sat_vel_ecef_m_s, m.z_rate_m_s, m.r_rate_m2_s2 * (r / r_nom),
-                                         c.gate_sigma**2)
+                                         m.sat_vel_ecef_m_s, m.z_rate_m_s, r_rate, c.gate_sigma**2)
+            if snap is not None:  # the motion between snapshots: the epoch's own Doppler velocity, else
+                p_snap = snap[0]  # the filter's (after this update)
+                sel = slice(None) if u is None else u
+                v = epoch_velocity(m.sat_pos_ecef_m[sel], m.sat_vel_ecef_m_s[sel], frame.ecef(p_snap), C,
+                                   m.z_rate_m_s[sel], r_rate[sel])
+                vel = x[3:6] if v is None else v
+                w = c.accuracy_window_s
+                scatter_h = scatter_h.add(t_us, (float(p_snap[0]), float(p_snap[1])),
+                                          (float(vel[0]), float(vel[1])), w)
+                scatter_v = scatter_v.add(t_us, (float(p_snap[2]),), (float(vel[2]),), w)
+                fix_var = (0.5 * float(snap[1][0] + snap[1][1]), float(snap[1][2]))
         t_good = t_us if n_used else prev.t_good_us
         self._n_fused += bool(n_used)
         if not n_used and t_us - prev.t_good_us >= self._reset_us:
@@ -457,7 +480,8 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         info = EpochInfo(m.epoch.n, n_used, nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
                          m.key, beta, y, used, q_pos)
         return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
-                     (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit)
+                     (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit,
+                     scatter_h, scatter_v, fix_var)
 
     # --------------------------------------------------------------------- history
     def _anchor(self, e: Entry, t_us: int, ints: Integrals) -> Entry:
