@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from companion.estimator.consistency import Scatter, fix_floor, floored_axis, snapshot_floor
-from companion.tight import TightConfig, TightNavigator
+from companion.tight import TightConfig, TightNavigator, _tight
 from companion.tight import engine as tight_engine
 from companion.tight.model import I_CLK, pseudorange, range_rate
-from companion.tight.snapshot import epoch_fix
+from companion.tight.snapshot import epoch_fix, epoch_velocity
 from tests.test_tight import FRAME, _feed, _synthetic_epochs
 
 PERIOD_US = 200_000
@@ -47,25 +47,55 @@ def test_epoch_fix_is_the_weighted_least_squares_position_known_answer():
     assert epoch_fix(H[:5], y[:5], r[:5], slot[:5]) is not None  # 5 on one clock: one redundant
 
 
-def test_one_axis_scatter_is_the_two_axis_one_on_two_equal_axes():
-    """The pooled statistics of one axis equal those of that axis given twice (the pooling averages)."""
-    rng = np.random.default_rng(2)
-    a, b = Scatter(), Scatter()
-    e = np.cumsum(rng.normal(size=200)) * 0.1 + rng.normal(size=200)
-    for i, d in enumerate(e):
-        a = a.add(i * PERIOD_US, (float(d),), (0.3,), 20.0)
-        b = b.add(i * PERIOD_US, (float(d), float(d)), (0.3, 0.3), 20.0)
-    assert a.correlation() == pytest.approx(b.correlation(), rel=1e-12) and a.correlation() > 1.0
-    assert a.variance() == pytest.approx(b.variance(), rel=1e-12) and a.variance() > 0.0
+def test_the_c_snapshot_equals_the_numpy_reference():
+    """``_tight.snapshot`` (the engine's, in C) == ``snapshot.epoch_fix`` + the prediction and
+    ``snapshot.epoch_velocity`` at that position, over the used satellites (to 1e-9), on a synthetic epoch
+    with Doppler; None without a redundant satellite; the velocity NaN with fewer than 5 rates."""
+    cfg = TightConfig.for_ground_vehicle()
+    rng = np.random.default_rng(3)
+    epochs, truth = _synthetic_epochs(rng, cfg, 1)
+    e = _with_doppler(rng, truth[0], epochs[0])
+    x = truth[0] + np.r_[rng.normal(0.0, 20.0, 3), np.zeros(len(truth[0]) - 3)]  # a prediction 20 m off
+    y, H, _, _, _ = _tight.innovations(x, np.eye(len(x)), FRAME.r0_ecef_m, FRAME.c_ecef_ned, e.sat_pos_ecef_m,
+                                       e.slot_f, e.z_m)
+    r = rng.uniform(4.0, 40.0, len(y))
+    used = np.ones(len(y), dtype=bool)
+    used[[1, 4]] = False
+    u = np.flatnonzero(used)
+    rr = rng.uniform(0.01, 0.05, len(y))
+    got = _tight.snapshot(H, y, r, used.astype(float), x[0:3], e.sat_pos_ecef_m, e.sat_vel_ecef_m_s,
+                          e.z_rate_m_s, rr, FRAME.r0_ecef_m, FRAME.c_ecef_ned)
+    fix = epoch_fix(H[u], y[u], r[u], e.slot[u])
+    assert got is not None and fix is not None
+    p = x[0:3] + fix[0]
+    v = epoch_velocity(e.sat_pos_ecef_m[u], e.sat_vel_ecef_m_s[u], FRAME.ecef(p), FRAME.c_ecef_ned,
+                       e.z_rate_m_s[u], rr[u])
+    assert v is not None
+    np.testing.assert_allclose(got, np.r_[p, fix[1], v], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(v, truth[0][3:6], atol=0.5)  # the true velocity, to its noise
+    rate = e.z_rate_m_s.copy()
+    rate[u[4:]] = np.nan  # 4 rates left
+    few = _tight.snapshot(H, y, r, used.astype(float), x[0:3], e.sat_pos_ecef_m, e.sat_vel_ecef_m_s, rate, rr,
+                          FRAME.r0_ecef_m, FRAME.c_ecef_ned)
+    assert few is not None and np.isnan(few[6:9]).all() and np.array_equal(few[0:6], got[0:6])
+    one = np.flatnonzero(e.slot == e.slot[0])  # one clock: 4 unknowns
+    assert len(one) >= 5
+    for n, redundant in ((4, False), (5, True)):
+        only = np.zeros(len(y))
+        only[one[:n]] = 1.0
+        got = _tight.snapshot(H, y, r, only, x[0:3], e.sat_pos_ecef_m, e.sat_vel_ecef_m_s, e.z_rate_m_s, rr,
+                              FRAME.r0_ecef_m, FRAME.c_ecef_ned)
+        assert (got is not None) == redundant
 
 
 @pytest.mark.parametrize("tau_s", [0.0, 3.0])
 def test_vertical_scatter_and_correlation_are_known_answers(tau_s):
-    """One axis (the vertical) climbing at 1 m/s whose rate is known, errors N(0, 0.5²) white or
-    Gauss-Markov (τ = 3 s): scatter 0.25 m², correlation (1 + ρ)/(1 − ρ), ρ = e^(−0.2/τ) (1; 30.0), the
-    medians over 200 independent 60 s streams within 20 % (the scatter) and 30 % (the correlation: one
-    axis has half the horizontal's pooled samples, and c = r / (2 − r) of the ratio r = 1 + ρ magnifies
-    its noise near r = 2, so the median of c falls below c; the horizontal's test holds it to 20 %)."""
+    """One axis (the vertical, given as two equal axes) climbing at 1 m/s whose rate is known, errors
+    N(0, 0.5²) white or Gauss-Markov (τ = 3 s): scatter 0.25 m², correlation (1 + ρ)/(1 − ρ),
+    ρ = e^(−0.2/τ) (1; 30.0), the medians over 200 independent 60 s streams within 20 % (the scatter) and
+    30 % (the correlation: one axis has half the horizontal's independent samples, and c = r / (2 − r) of
+    the ratio r = 1 + ρ magnifies its noise near r = 2, so the median of c falls below c; the horizontal's
+    test holds it to 20 %)."""
     rng = np.random.default_rng(5)
     n = 300
     rho = math.exp(-PERIOD_US * 1e-6 / tau_s) if tau_s > 0.0 else 0.0
@@ -75,7 +105,8 @@ def test_vertical_scatter_and_correlation_are_known_answers(tau_s):
         for i in range(n):
             if i:
                 e = rho * e + math.sqrt(1.0 - rho * rho) * 0.5 * rng.standard_normal()
-            s = s.add(i * PERIOD_US, (-1.0 * i * PERIOD_US * 1e-6 + e,), (-1.0,), 20.0)
+            d = -1.0 * i * PERIOD_US * 1e-6 + e
+            s = s.add(i * PERIOD_US, (d, d), (-1.0, -1.0), 20.0)  # one axis: given twice
         var.append(s.variance())
         cor.append(s.correlation())
     assert np.median(var) == pytest.approx(0.25, rel=0.2)
@@ -187,7 +218,7 @@ def test_white_consistent_errors_are_not_inflated():
 
 
 def test_the_floor_is_a_report_the_estimate_is_bit_identical(monkeypatch):
-    """With and without the snapshots (``epoch_fix`` returning None: no floor) every entry's state and
+    """With and without the snapshots (``_tight.snapshot`` returning None: no floor) every entry's state and
     covariance are equal bit for bit; the floor's inputs are set only with them."""
     cfg = TightConfig.for_ground_vehicle()
     rng = np.random.default_rng(4)
@@ -196,7 +227,7 @@ def test_the_floor_is_a_report_the_estimate_is_bit_identical(monkeypatch):
     epochs = [e._replace(z_m=e.z_m + gm[k]) for k, e in enumerate(epochs)]
     t_us = [1_000_000 + PERIOD_US * k for k in range(len(epochs))]
     a = _feed(cfg, "second-order", epochs, t_us, list(range(len(epochs))))
-    monkeypatch.setattr(tight_engine, "epoch_fix", lambda *args: None)
+    monkeypatch.setattr(tight_engine._tight, "snapshot", lambda *args: None)
     b = _feed(cfg, "second-order", epochs, t_us, list(range(len(epochs))))
     for ea, eb in zip(a.entries, b.entries, strict=True):
         assert np.array_equal(ea.x, eb.x) and np.array_equal(ea.P, eb.P)

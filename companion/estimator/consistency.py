@@ -97,75 +97,68 @@ def check_accuracy_window(window_s: float) -> None:
 
 
 class Scatter(NamedTuple):
-    """A series of fixes' own scatter over the last ``window_s``, independent of the filter's position
-    (docs/estimator.md, "Reported accuracy"), over one or more axes pooled (the horizontal's N and E; the
-    vertical alone). Each fix less the motion since the first one (the trapezoid of the velocities at the
-    fixes: the receiver's, or the filter's where it states none) is ``q``, the fix's error plus a slow
-    drift; exponentially weighted sums (the axes pooled) of ``q``, ``q²`` and of the squared changes of
-    ``q`` over one and over two fixes, as of ``t_us``:
+    """The fused fixes' own horizontal scatter over the last ``window_s``, independent of the filter's
+    position (docs/estimator.md, "Reported accuracy"). Each fix less the motion since the first one
+    (the trapezoid of the velocities at the fixes: the receiver's, or the filter's where it states
+    none) is ``q``, the fix's error plus a slow drift; exponentially weighted sums (N and E pooled) of
+    ``q``, ``q²`` and of the squared changes of ``q`` over one and over two fixes, as of ``t_us``:
 
     * ``variance()``: the scatter of ``q`` about its window mean (unbiased for independent fixes), the
-      variance of one fix's error per axis as far as it varies within the window;
+      variance of one fix's error as far as it varies within the window;
     * ``correlation()``: c = (1 + ρ) / (1 − ρ), the variance of a mean of many fixes over its
       independent-fix value for errors whose correlation from one fix to the next is ρ (a Gauss-Markov
       error of correlation time τ at fix period Δt: ρ = e^(−Δt/τ)), with 1 + ρ = E[(q_i − q_i−2)²] /
       E[(q_i − q_i−1)²] (exact for that process; a drift of the motion removed is second order over two
       fixes). 1 for independent fixes, at most ``C_MAX``.
 
-    The fixes may be a receiver's (the loose filter's) or the tight filter's per-epoch snapshot solutions
-    (``companion.tight.engine``): any series of positions independent of the filter that it averages."""
+    One axis alone (the vertical) is given as two equal axes, (d, d) with (v_d, v_d): the pooled
+    statistics of two equal axes are exactly that axis's. The fixes may be a receiver's (the loose
+    filter's) or the tight filter's per-epoch snapshot positions (``companion.tight.engine``): any series
+    of positions independent of the filter that it averages."""
 
     t_us: int = -1  # -1: no fix yet
-    z: tuple[float, ...] = ()  # the last fix (per axis), m
-    v: tuple[float, ...] = ()  # the velocity at it, m/s
-    q: tuple[float, ...] = ()  # the last fix less the motion since the first
-    q_prev: tuple[float, ...] | None = None  # the one before (None: a single fix so far)
+    z: tuple[float, float] = (0.0, 0.0)  # the last fix (N, E), m
+    v: tuple[float, float] = (0.0, 0.0)  # the velocity at it (N, E), m/s
+    q: tuple[float, float] = (0.0, 0.0)  # the last fix less the motion since the first
+    q_prev: tuple[float, float] | None = None  # the one before (None: a single fix so far)
     w_sum: float = 0.0
     w2_sum: float = 0.0
-    q_sum: tuple[float, ...] = ()
-    q2_sum: tuple[float, ...] = ()
-    d1_sum: float = 0.0  # Σ w |q_i − q_i−1|² (the axes summed)
+    q_sum: tuple[float, float] = (0.0, 0.0)
+    q2_sum: tuple[float, float] = (0.0, 0.0)
+    d1_sum: float = 0.0  # Σ w |q_i − q_i−1|² (N + E)
     d2_sum: float = 0.0  # Σ w |q_i − q_i−2|², over the same fixes
     d_w_sum: float = 0.0  # their weights
 
-    def add(self, t_us: int, z: tuple[float, ...], v: tuple[float, ...], window_s: float) -> Scatter:
-        """The fix ``z`` (m, per axis: the same axes every time) with the velocity ``v`` (m/s) at it added,
-        the older sums decayed by exp(−Δt / window_s)."""
+    def add(self, t_us: int, z: tuple[float, float], v: tuple[float, float], window_s: float) -> Scatter:
+        """The fix ``z`` (N, E; m) with the velocity ``v`` (m/s) at it added, the older sums decayed by
+        exp(−Δt / window_s)."""
         if self.t_us < 0:
-            zero = (0.0,) * len(z)
-            return Scatter(t_us, z, v, zero, None, 1.0, 1.0, zero, zero)
+            return Scatter(t_us, z, v, (0.0, 0.0), None, 1.0, 1.0, (0.0, 0.0), (0.0, 0.0))
         dt = (t_us - self.t_us) * 1e-6
         a = math.exp(-dt / window_s)
         h = 0.5 * dt
-        q = tuple([qi + (zi - zo) - h * (vi + vo)
-                   for qi, zi, zo, vi, vo in zip(self.q, z, self.z, v, self.v, strict=True)])
+        q0 = self.q[0] + (z[0] - self.z[0]) - h * (v[0] + self.v[0])
+        q1 = self.q[1] + (z[1] - self.z[1]) - h * (v[1] + self.v[1])
+        s, s2 = self.q_sum, self.q2_sum
         d1, d2, dw = a * self.d1_sum, a * self.d2_sum, a * self.d_w_sum
         qp = self.q_prev
         if qp is not None:
-            s1 = s2 = 0.0
-            for qi, qo, qpi in zip(q, self.q, qp, strict=True):
-                s1 += (qi - qo) ** 2
-                s2 += (qi - qpi) ** 2
-            d1 += s1
-            d2 += s2
+            d1 += (q0 - self.q[0]) ** 2 + (q1 - self.q[1]) ** 2
+            d2 += (q0 - qp[0]) ** 2 + (q1 - qp[1]) ** 2
             dw += 1.0
-        return Scatter(t_us, z, v, q, self.q, a * self.w_sum + 1.0, a * a * self.w2_sum + 1.0,
-                       tuple([a * si + qi for si, qi in zip(self.q_sum, q, strict=True)]),
-                       tuple([a * si + qi * qi for si, qi in zip(self.q2_sum, q, strict=True)]), d1, d2, dw)
+        return Scatter(t_us, z, v, (q0, q1), self.q, a * self.w_sum + 1.0, a * a * self.w2_sum + 1.0,
+                       (a * s[0] + q0, a * s[1] + q1), (a * s2[0] + q0 * q0, a * s2[1] + q1 * q1), d1, d2, dw)
 
     def variance(self) -> float:
-        """One fix's error variance per axis (m², the axes pooled) from the scatter about the
+        """One fix's error variance per horizontal axis (m², N and E pooled) from the scatter about the
         window mean: that scatter is short of it by the share of the window mean, c / n for ``n`` = w² / Σw²
         fixes of correlation ``c`` (``correlation()``; n / (n − 1) for independent fixes), so × 1 / (1 − c/n),
         at most ``SCATTER_MAX``; 0 before 3 fixes."""
         w, w2 = self.w_sum, self.w2_sum
         if self.d_w_sum <= 0.0 or w * w <= w2 * 1.000001:
             return 0.0
-        var = 0.0
-        for si, s2i in zip(self.q_sum, self.q2_sum, strict=True):
-            m = si / w
-            var += s2i / w - m * m
-        var /= len(self.q_sum)
+        m0, m1 = self.q_sum[0] / w, self.q_sum[1] / w
+        var = 0.5 * ((self.q2_sum[0] / w - m0 * m0) + (self.q2_sum[1] / w - m1 * m1))
         share = self.correlation() * w2 / (w * w)  # c / n
         f = 1.0 / (1.0 - share) if share < 1.0 - 1.0 / SCATTER_MAX else SCATTER_MAX
         return max(0.0, var * f)

@@ -313,7 +313,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                       v_smooth=(x[3], x[4], x[5]), bias_scale=f,
                       scatter=Scatter().add(t_us, (z[0], z[1]), (x[3], x[4]), self._window_s)
                       if self._window_s > 0.0 else Scatter(),
-                      scatter_v=Scatter().add(t_us, (z[2],), (x[5],), self._window_s)
+                      scatter_v=Scatter().add(t_us, (z[2], z[2]), (x[5], x[5]), self._window_s)
                       if self._window_s > 0.0 else Scatter())
 
     def _fuse(self, prev: Fusion, t_us: int, fix: _Fix) -> Fusion:
@@ -449,7 +449,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             z_h = (x_prior[0] + x_prior[6] + y_fused[0], x_prior[1] + x_prior[7] + y_fused[1])
             scatter = scatter.add(t_us, z_h, v_h, self._window_s)
             v_d = zv[2] if vel_ok and zv is not None and zv[2] == zv[2] else x_post[5]
-            scatter_v = scatter_v.add(t_us, (x_prior[2] + x_prior[8] + y_fused[2],), (v_d,), self._window_s)
+            z_d = x_prior[2] + x_prior[8] + y_fused[2]  # one axis: given twice (consistency.Scatter)
+            scatter_v = scatter_v.add(t_us, (z_d, z_d), (v_d, v_d), self._window_s)
         # the innovation the decision was made on: relative to a held step (so a step held does not
         # widen the gate until it passes), else the fix's own
         yd = y_fused if fused_pos else (

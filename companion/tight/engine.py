@@ -55,7 +55,6 @@ from companion.tight.model import (
     Frame,
     position_dop_ned,
 )
-from companion.tight.snapshot import epoch_fix, epoch_velocity
 
 _IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
@@ -438,10 +437,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         scatter_h, scatter_v, fix_var = prev.scatter_h, prev.scatter_v, prev.fix_var_m2
         u = None if n_used == len(used) else np.flatnonzero(used)  # None: every satellite
         snap = None
-        if n_used and c.accuracy_window_s > 0.0:  # this epoch's own position, weighted as fused
-            snap = epoch_fix(H, y, r, m.slot) if u is None else epoch_fix(H[u], y[u], r[u], m.slot[u])
-            if snap is not None:
-                snap = x[0:3] + snap[0], snap[1]  # the prediction + the correction: its own position
+        r_rate, used_f = m.r_rate_m2_s2 * (r / r_nom), used.astype(float)
+        if n_used and c.accuracy_window_s > 0.0:  # this epoch's own position, weighted as fused, its
+            # variances and its own Doppler velocity (snapshot.epoch_fix, .epoch_velocity: in C)
+            snap = _tight.snapshot(H, y, r, used_f, x[0:3], m.sat_pos_ecef_m, m.sat_vel_ecef_m_s,
+                                   m.z_rate_m_s, r_rate, r0, C)
         if n_used:
             if u is None:  # every satellite (the same values as indexed by all of them)
                 fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
@@ -449,20 +449,16 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                 fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
             # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
             # their own) in one update, in C (model.range_rate; the numpy form in the tests)
-            r_rate = m.r_rate_m2_s2 * (r / r_nom)
-            x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used.astype(float), r0, C, m.sat_pos_ecef_m,
+            x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used_f, r0, C, m.sat_pos_ecef_m,
                                          m.sat_vel_ecef_m_s, m.z_rate_m_s, r_rate, c.gate_sigma**2)
             if snap is not None:  # the motion between snapshots: the epoch's own Doppler velocity, else
-                p_snap = snap[0]  # the filter's (after this update)
-                sel = slice(None) if u is None else u
-                v = epoch_velocity(m.sat_pos_ecef_m[sel], m.sat_vel_ecef_m_s[sel], frame.ecef(p_snap), C,
-                                   m.z_rate_m_s[sel], r_rate[sel])
-                vel = x[3:6] if v is None else v
+                sn, se, sd, vn, ve, vd, un, ue, ud = snap.tolist()  # the filter's (after this update)
+                if un != un:
+                    un, ue, ud = float(x[3]), float(x[4]), float(x[5])
                 w = c.accuracy_window_s
-                scatter_h = scatter_h.add(t_us, (float(p_snap[0]), float(p_snap[1])),
-                                          (float(vel[0]), float(vel[1])), w)
-                scatter_v = scatter_v.add(t_us, (float(p_snap[2]),), (float(vel[2]),), w)
-                fix_var = (0.5 * float(snap[1][0] + snap[1][1]), float(snap[1][2]))
+                scatter_h = scatter_h.add(t_us, (sn, se), (un, ue), w)
+                scatter_v = scatter_v.add(t_us, (sd, sd), (ud, ud), w)  # one axis: given twice
+                fix_var = (0.5 * (vn + ve), vd)
         t_good = t_us if n_used else prev.t_good_us
         self._n_fused += bool(n_used)
         if not n_used and t_us - prev.t_good_us >= self._reset_us:
