@@ -295,6 +295,24 @@ static double range_rate_row(const double *x, const double *r0, const double *C,
  *        r_rate (m), gate2) -> (x+, P+, NIS, range rates used): the used pseudoranges and, for each used
  * satellite with a range rate that passes its own gate (y² ≤ gate2 (s0 + r)), that range rate, in one
  * Kalman update (Cholesky of S) */
+/* Cholesky factor A = L Lᵀ of the symmetric A (k×k, row-major; L in its lower triangle, in place);
+ * 0 if A is not positive definite */
+static int chol_factor(double *A, int k) {
+    for (int j = 0; j < k; j++) {
+        double s = A[j * k + j];
+        for (int c = 0; c < j; c++) s -= A[j * k + c] * A[j * k + c];
+        if (!(s > 0.0)) return 0;
+        double d = sqrt(s);
+        A[j * k + j] = d;
+        for (int i = j + 1; i < k; i++) {
+            double t = A[i * k + j];
+            for (int c = 0; c < j; c++) t -= A[i * k + c] * A[j * k + c];
+            A[i * k + j] = t / d;
+        }
+    }
+    return 1;
+}
+
 static PyObject *py_update(PyObject *self, PyObject *args) {
     PyObject *ox, *oP, *oH, *oHP, *oy, *or, *ou, *or0, *oC, *os, *ov, *ozr, *orr;
     double gate2;
@@ -357,21 +375,9 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
                 for (int c = 0; c < N; c++) s += HPs[i * N + c] * Hs[j * N + c];
                 Sm[i * k + j] = Sm[j * k + i] = s + (i == j ? rs[i] : 0.0);
             }
-        /* Cholesky S = L L^T (lower, in place) */
-        for (int j = 0; j < k; j++) {
-            double s = Sm[j * k + j];
-            for (int c = 0; c < j; c++) s -= Sm[j * k + c] * Sm[j * k + c];
-            if (!(s > 0.0)) {
-                PyErr_SetString(PyExc_ArithmeticError, "update: innovation covariance not positive definite");
-                goto done;
-            }
-            double d = sqrt(s);
-            Sm[j * k + j] = d;
-            for (int i = j + 1; i < k; i++) {
-                double t = Sm[i * k + j];
-                for (int c = 0; c < j; c++) t -= Sm[i * k + c] * Sm[j * k + c];
-                Sm[i * k + j] = t / d;
-            }
+        if (!chol_factor(Sm, k)) { /* S = L L^T (lower, in place) */
+            PyErr_SetString(PyExc_ArithmeticError, "update: innovation covariance not positive definite");
+            goto done;
         }
         /* V = L^-1 [y, HP] (k x (N+1)), forward substitution: then K y = HP^T S^-1 y = V_HP^T V_y and
          * K H P = V_HP^T V_HP (symmetric), NIS = |V_y|^2 */
@@ -505,18 +511,7 @@ fail:
 /* Cholesky solve of the symmetric positive definite A (k×k, row-major, overwritten by its factor) for
  * nr right-hand sides B (k×nr, row-major, overwritten by the solutions); 0 if A is not positive definite */
 static int chol_solve(double *A, int k, double *B, int nr) {
-    for (int j = 0; j < k; j++) {
-        double d = A[j * k + j];
-        for (int l = 0; l < j; l++) d -= A[j * k + l] * A[j * k + l];
-        if (!(d > 0.0)) return 0;
-        d = sqrt(d);
-        A[j * k + j] = d;
-        for (int i = j + 1; i < k; i++) {
-            double v = A[i * k + j];
-            for (int l = 0; l < j; l++) v -= A[i * k + l] * A[j * k + l];
-            A[i * k + j] = v / d;
-        }
-    }
+    if (!chol_factor(A, k)) return 0;
     for (int c = 0; c < nr; c++) {
         for (int i = 0; i < k; i++) { /* L z = b */
             double v = B[i * nr + c];

@@ -92,7 +92,7 @@ def sim_config(mission: Mission, ahrs_gnss_velocity: bool | None) -> SimConfig:
 
 def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              max_duration_s: float | None = None, maps: bool = True,
-             accuracy: dict[str, list[tuple[float, float, float]]] | None = None,
+             accuracy: dict[str, list[tuple[float, ...]]] | None = None,
              on_raw: Callable[[str, Any, Any], None] | None = None,
              fly_on_truth: bool = False, cn0_missing: bool = False, tight_config: TightConfig | None = None,
              rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None) -> dict[str, np.ndarray]:
