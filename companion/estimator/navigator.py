@@ -251,8 +251,10 @@ class Navigator:
         if floor is not None:  # errors correlated over seconds: not averaged down, up to one fix's variance
             var = var.copy() if scale is None else var
             k, (c, s2, c_v, s2_v) = self._inflation[1], floor
-            var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
-            var[2] = floored_axis(float(a[11]), k, c_v, s2_v)
+            if c > 1.0:  # (an axis whose fixes are not correlated keeps k P)
+                var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
+            if c_v > 1.0:
+                var[2] = floored_axis(float(a[11]), k, c_v, s2_v)
         est = new_nav_estimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
                                snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
                                snap.vel_ratio, snap.disagree)  # NavEstimate(...)
