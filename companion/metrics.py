@@ -15,7 +15,9 @@ References waiting for estimates are bounded too (``max_pending``, the oldest co
 unmatched). With ``coverage=True`` and the estimate's reported horizontal variances
 (``add_estimate(..., var_ne_m2)``) it also counts how often the horizontal error lies inside the
 reported 1-σ and 2-σ ellipses (NEES_h = e_N²/σ_N² + e_E²/σ_E² ≤ 1 and ≤ 4, the variances interpolated
-like the position; a consistent 2-D Gaussian: 39.3 % and 86.5 %): ``statistics()["coverage_horizontal"]``.
+like the position; a consistent 2-D Gaussian: 39.3 % and 86.5 %): ``statistics()["coverage_horizontal"]``;
+with the vertical variance too (``var_ne_m2`` of 3 or more), how often |e_D| ≤ σ_D and ≤ 2 σ_D (a
+consistent Gaussian: 68.3 % and 95.4 %): ``statistics()["coverage_vertical"]``.
 :func:`error_statistics` reduces the error vectors to the summary block
 ``{n, alignment, offset_ned_m, mean_error_ned_m, error_horizontal_m, error_3d_m}`` (each
 ``median, p95, max, rmse, iqr, n``).
@@ -129,8 +131,9 @@ class PositionErrors:
         self.max_errors, self.max_pending = max_errors, max_pending
         self._t: list[int] = []
         self._p: list[tuple[float, float, float]] = []
-        self._v: list[tuple[float, float]] | None = [] if coverage else None  # reported σ_N², σ_E²
+        self._v: list[tuple[float, float, float]] | None = [] if coverage else None  # reported σ² N, E, D
         self._within = [0, 0, 0]  # matched with finite variances, inside 1 σ, inside 2 σ
+        self._within_v = [0, 0, 0]  # the same vertically
         self._pending: deque[tuple[int, tuple[float, float, float]]] = deque()
         self._err = array("f")  # float32: 12 bytes per kept error
         self.unmatched = 0
@@ -139,15 +142,16 @@ class PositionErrors:
         self._max_sq = [0.0, 0.0]  # largest squared horizontal and 3-D error of all matched
 
     def add_estimate(self, t_us: int, p_ned_m: Any, var_ne_m2: Any = None) -> None:
-        """An estimate (time order) with its reported north and east variances (m²; used with
-        ``coverage``, NaN when not given)."""
+        """An estimate (time order) with its reported north and east (and down, when given) variances
+        (m²; used with ``coverage``, NaN when not given)."""
         if self._t and t_us < self._t[-1]:
             raise ValueError("estimates must come in time order (restart() for a new time base)")
         self._t.append(t_us)
         self._p.append((float(p_ned_m[0]), float(p_ned_m[1]), float(p_ned_m[2])))
         if self._v is not None:
-            self._v.append((math.nan, math.nan) if var_ne_m2 is None
-                           else (float(var_ne_m2[0]), float(var_ne_m2[1])))
+            self._v.append((math.nan, math.nan, math.nan) if var_ne_m2 is None
+                           else (float(var_ne_m2[0]), float(var_ne_m2[1]),
+                                 float(var_ne_m2[2]) if len(var_ne_m2) > 2 else math.nan))
         while self._pending and self._pending[0][0] <= t_us:
             t, p = self._pending.popleft()
             self._match(t, p)
@@ -198,6 +202,13 @@ class PositionErrors:
                 c[0] += 1
                 c[1] += nees <= 1.0
                 c[2] += nees <= 4.0
+            vd = v0[2] + w * (v1[2] - v0[2])
+            if vd > 0.0 and math.isfinite(vd):
+                nees = e[2] * e[2] / vd
+                c = self._within_v
+                c[0] += 1
+                c[1] += nees <= 1.0
+                c[2] += nees <= 4.0
         h_sq = e[0] * e[0] + e[1] * e[1]
         m = self._max_sq
         m[0], m[1] = max(m[0], h_sq), max(m[1], h_sq + e[2] * e[2])
@@ -232,6 +243,9 @@ class PositionErrors:
             n, in1, in2 = self._within
             out["coverage_horizontal"] = {"n": n, "within_1_sigma": in1 / n if n else math.nan,
                                           "within_2_sigma": in2 / n if n else math.nan}
+            n, in1, in2 = self._within_v
+            out["coverage_vertical"] = {"n": n, "within_1_sigma": in1 / n if n else math.nan,
+                                        "within_2_sigma": in2 / n if n else math.nan}
         return out
 
 

@@ -16,7 +16,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.errors import ConfigError
 from companion.estimator import Navigator
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import accuracy_inflation, honest_horizontal
+from companion.estimator.consistency import accuracy_inflation, fix_floor, floored_axis, honest_horizontal
 from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, consistent_stream, drive, late_and_in_order, multipath_stream
 
@@ -48,14 +48,15 @@ def test_a_late_fix_gives_the_in_order_accuracy(stream, method):
     assert fit.nu_sum @ fit.nu_sum / fit.w2_sum.sum() > 0.1 and len(fit.key) == 3
     np.testing.assert_allclose(np.array(late.snapshot().var) * k_late, np.array(ref.snapshot().var) * k_ref,
                                rtol=0, atol=1e-9)
-    for a, b in zip(late.entries[1:], ref.entries[-n + 1:], strict=True):  # the fixes' scatter too
-        sa, sb = a.scatter, b.scatter
-        assert sa.t_us == sb.t_us
-        np.testing.assert_allclose(_sums(sa), _sums(sb), rtol=0, atol=1e-9)
-    s_late, s_ref = late.entries[-1].scatter, ref.entries[-1].scatter
-    assert s_ref.correlation() > 1.0 and s_ref.variance() > 0.0  # not a trivial 1 = 1
-    assert s_late.correlation() == pytest.approx(s_ref.correlation(), abs=1e-9)
-    assert s_late.variance() == pytest.approx(s_ref.variance(), abs=1e-9)
+    for a, b in zip(late.entries[1:], ref.entries[-n + 1:], strict=True):  # the fixes' scatter too (N, E; D)
+        for sa, sb in ((a.scatter, b.scatter), (a.scatter_v, b.scatter_v)):
+            assert sa.t_us == sb.t_us
+            np.testing.assert_allclose(_sums(sa), _sums(sb), rtol=0, atol=1e-9)
+    for name in ("scatter", "scatter_v"):
+        s_late, s_ref = getattr(late.entries[-1], name), getattr(ref.entries[-1], name)
+        assert s_ref.correlation() > 1.0 and s_ref.variance() > 0.0  # not a trivial 1 = 1
+        assert s_late.correlation() == pytest.approx(s_ref.correlation(), abs=1e-9)
+        assert s_late.variance() == pytest.approx(s_ref.variance(), abs=1e-9)
 
 
 def _sums(s) -> np.ndarray:
@@ -90,9 +91,10 @@ def test_the_accuracy_is_a_report_the_estimate_is_bit_identical(stream):
     k = on.accuracy_inflation()
     assert off.accuracy_inflation() == 1.0 and k > 1.0
     np.testing.assert_array_equal(e1.cov_diag[3:], e0.cov_diag[3:])
-    np.testing.assert_allclose(e1.cov_diag[2], e0.cov_diag[2] * k, rtol=1e-12)
     last = on.engine.entries[-1]  # horizontally: the fixes' correlation and scatter floor k P
     honest = honest_horizontal(e0.cov_diag[0:2], k, last.scatter, last.r_nominal_m2[0])
+    vertical = floored_axis(float(e0.cov_diag[2]), k, *fix_floor(last.scatter_v, last.r_nominal_m2[2]))
+    assert e1.cov_diag[2] == pytest.approx(vertical, rel=1e-12) and vertical >= e0.cov_diag[2] * k
     np.testing.assert_allclose(e1.cov_diag[0:2], honest, rtol=1e-12)
     assert np.all(e1.cov_diag[0:2] >= e0.cov_diag[0:2] * k)
     # what the autopilot gets: GPS_INPUT's horiz_accuracy, ODOMETRY's and VISION_POSITION_ESTIMATE's
@@ -102,7 +104,7 @@ def test_the_accuracy_is_a_report_the_estimate_is_bit_identical(stream):
     assert gps.fix_type == 3
     assert gps.horiz_accuracy == pytest.approx(math.sqrt(honest[0] + honest[1]), rel=1e-6)
     assert gps.horiz_accuracy > math.sqrt(k * (e0.cov_diag[0] + e0.cov_diag[1])) * 1.5  # floored here
-    assert gps.vert_accuracy == pytest.approx(math.sqrt(k * e0.cov_diag[2]), rel=1e-6)
+    assert gps.vert_accuracy == pytest.approx(math.sqrt(vertical), rel=1e-6)
     level = np.array((1.0, 0.0, 0.0, 0.0))
     odo = feeds.odometry(e1, level, np.zeros(3), cfg)
     vis = feeds.vision_position(e1, level, cfg)

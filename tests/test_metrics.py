@@ -157,3 +157,23 @@ def test_coverage_of_the_reported_accuracy_known_answers():
     m2.add_estimate(0, (0.0, 0.0, 0.0))  # no variances given: matched, not counted
     m2.add_reference(0, (1.0, 0.0, 0.0))
     assert m2.statistics()["coverage_horizontal"]["n"] == 0 and m2.matched == 1
+
+
+def test_vertical_coverage_of_the_reported_accuracy_known_answers():
+    """The vertical error against the reported σ_D² (4 m², interpolated like the position): |e_D| ≤ σ_D
+    and ≤ 2 σ_D counted; none counted without a vertical variance (two given) or where it is not finite."""
+    m = PositionErrors(coverage=True)
+    for t in range(0, 11):  # σ_D² 4 → 12 m² over 10 s
+        m.add_estimate(t * 1_000_000, (0.0, 0.0, 0.0), (1.0, 1.0, 4.0 * (1.0 + 2.0 * t / 10.0)))
+    # t = 0: |1.9| ≤ 2 (1 σ); t = 1 s (σ_D² 4.8, σ 2.19): 3 (2 σ); t = 5 s (σ_D² 8, σ 2.83): 6 (outside)
+    for t_s, d in ((0.0, 1.9), (1.0, 3.0), (5.0, -6.0)):
+        m.add_reference(int(t_s * 1e6), (0.0, 0.0, -d))
+    cov = m.statistics()["coverage_vertical"]
+    assert cov["n"] == 3 and cov["within_1_sigma"] == 1 / 3 and cov["within_2_sigma"] == 2 / 3
+    m2 = PositionErrors(coverage=True)
+    m2.add_estimate(0, (0.0, 0.0, 0.0), (1.0, 1.0))  # horizontal only: counted horizontally alone
+    m2.add_estimate(1_000_000, (0.0, 0.0, 0.0), (1.0, 1.0, math.nan))
+    m2.add_reference(0, (1.0, 0.0, 0.0))
+    m2.add_reference(1_000_000, (1.0, 0.0, 0.0))
+    s = m2.statistics()
+    assert s["coverage_horizontal"]["n"] == 2 and s["coverage_vertical"]["n"] == 0

@@ -12,6 +12,7 @@ from scipy.stats import chi2
 
 from companion.domain.samples import GnssFix
 from companion.errors import ConfigError
+from companion.estimator.consistency import fix_floor, floored_axis, snapshot_floor
 from companion.gnss import make_epoch
 from companion.gnss.systems import System
 from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, belief, model
@@ -252,11 +253,16 @@ def test_out_of_sequence_epochs_equal_in_order():
             np.testing.assert_allclose(eb.x, ea.x, rtol=0, atol=1e-9)
             np.testing.assert_allclose(eb.P, ea.P, rtol=0, atol=1e-9)
             assert eb.fit.inflation() == pytest.approx(ea.fit.inflation(), rel=1e-9)
+            for sa, sb, i in ((ea.scatter_h, eb.scatter_h, 0), (ea.scatter_v, eb.scatter_v, 1)):
+                # the reported accuracy's snapshot floor (correlation, one snapshot's variance) re-fused too
+                fa, fb = fix_floor(sa, ea.fix_var_m2[i]), fix_floor(sb, eb.fix_var_m2[i])
+                assert fb == pytest.approx(fa, rel=1e-9) and sb.t_us == sa.t_us
             qa, qb = ea.info.q_pos_ned, eb.info.q_pos_ned
             assert (qa is None) == (qb is None)
             if qa is not None:
                 np.testing.assert_allclose(qb, qa, rtol=1e-12)
         assert a.entries[-1].info.q_pos_ned is not None
+        assert fix_floor(a.entries[-1].scatter_h, a.entries[-1].fix_var_m2[0])[1] > 0.0  # a floor to compare
         assert a.counts["sat_used"] == b.counts["sat_used"]
 
 
@@ -353,10 +359,17 @@ def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
     t_now, x_now, P_now, _ = nav.engine.state_now()  # the C output path == the full prediction
     assert t_now == est.t_us
     np.testing.assert_allclose(np.r_[est.p_ned_m, est.v_ned_m_s], x_now[0:6], atol=1e-9)
-    # the position variances reported: P's times the filter's measured consistency (≥ 1)
+    # the position variances reported: P's times the filter's measured consistency (≥ 1), floored by its
+    # own snapshots' correlation and variance (consistency.snapshot_floor); the velocities' as P's
     k = nav.accuracy_inflation()
-    assert k == nav.engine.entries[-1].fit.inflation() >= 1.0
-    np.testing.assert_allclose(est.cov_diag[0:6], np.diag(P_now)[0:6] * np.r_[k, k, k, 1, 1, 1], rtol=1e-9)
+    last = nav.engine.entries[-1]
+    assert k == last.fit.inflation() >= 1.0
+    floors = [snapshot_floor(last.scatter_h, last.fix_var_m2[0], k)] * 2 + [
+        snapshot_floor(last.scatter_v, last.fix_var_m2[1], k)]
+    want = [floored_axis(float(P_now[i, i]), k, *floors[i]) for i in range(3)]
+    np.testing.assert_allclose(est.cov_diag[0:3], want, rtol=1e-9)
+    assert (est.cov_diag[0:3] >= np.diag(P_now)[0:3] * k * (1 - 1e-12)).all()
+    np.testing.assert_allclose(est.cov_diag[3:6], np.diag(P_now)[3:6], rtol=1e-9)
     p = nav.engine.frame.ecef(np.asarray(est.p_ned_m))
     assert np.linalg.norm(p - RX_ECEF) < 2.0
     with pytest.raises(ConfigError, match="second-order"):

@@ -138,7 +138,10 @@ def test_a_receivers_c_n0_offset_changes_nothing_once_calibrated():
         if same:
             np.testing.assert_allclose(r_low, r_ref, rtol=1e-9)
             np.testing.assert_allclose(th_low, th_ref, atol=1e-9)
-            np.testing.assert_allclose(e_low.cov_diag, e_ref.cov_diag, rtol=1e-6)
+            # (1e-5: the reported accuracy's snapshot floor takes the correlation c of the epochs' own
+            # positions from their steps, here sub-millimetre (noise-free ranges: a scatter of 5e-7 m²), so
+            # the weights' 1e-9 differences show in c at 3e-6)
+            np.testing.assert_allclose(e_low.cov_diag, e_ref.cov_diag, rtol=1e-5)
             np.testing.assert_allclose(e_low.p_ned_m, e_ref.p_ned_m, atol=1e-6)
         else:  # absolute C/N0: 8 dB weaker is 10^0.8 times the variance, the prior 1.2 lower
             assert np.median(r_low / r_ref) > 4.0 and np.median(th_ref - th_low) == pytest.approx(1.2)

@@ -245,9 +245,10 @@ class EstimatorConfig:
     # N, E, D innovations over the last accuracy_window_s, exponentially weighted;
     # companion.estimator.consistency, the tight filter's rule), the variance-of-unit-weight test a
     # receiver applies to its reported accuracy: fix errors correlated over seconds (reflections), which
-    # the filter fuses as independent, leave P over-confident; horizontally floored per axis by
-    # min(c × that, one fix's variance), c the fused fixes' own correlation (1 + ρ)/(1 − ρ) and one fix's
-    # variance their scatter or the stated h_acc² over the same window (consistency.Scatter). A report
+    # the filter fuses as independent, leave P over-confident; floored per axis by min(c × that, one
+    # fix's variance), c the fused fixes' own correlation (1 + ρ)/(1 − ρ) and one fix's variance their
+    # scatter or the stated h_acc² (v_acc² vertically) over the same window (consistency.Scatter: N, E
+    # pooled; D on its own). A report
     # only: the estimate is unchanged. 20 s: the tight filter's, several of the urban fix errors' 1-10 s
     # correlation times. 0: P as it is.
     accuracy_window_s: float = 20.0

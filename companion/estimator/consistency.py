@@ -109,7 +109,12 @@ class Scatter(NamedTuple):
       independent-fix value for errors whose correlation from one fix to the next is ρ (a Gauss-Markov
       error of correlation time τ at fix period Δt: ρ = e^(−Δt/τ)), with 1 + ρ = E[(q_i − q_i−2)²] /
       E[(q_i − q_i−1)²] (exact for that process; a drift of the motion removed is second order over two
-      fixes). 1 for independent fixes, at most ``C_MAX``."""
+      fixes). 1 for independent fixes, at most ``C_MAX``.
+
+    One axis alone (the vertical) is given as two equal axes, (d, d) with (v_d, v_d): the pooled
+    statistics of two equal axes are exactly that axis's. The fixes may be a receiver's (the loose
+    filter's) or the tight filter's per-epoch snapshot positions (``companion.tight.engine``): any series
+    of positions independent of the filter that it averages."""
 
     t_us: int = -1  # -1: no fix yet
     z: tuple[float, float] = (0.0, 0.0)  # the last fix (N, E), m
@@ -188,6 +193,22 @@ def fix_floor(scatter: Scatter, r_h_m2: float) -> tuple[float, float]:
     if r_h_m2 > s2 and math.isfinite(r_h_m2):
         s2 = r_h_m2
     return scatter.correlation(), s2
+
+
+def snapshot_floor(scatter: Scatter, r_m2: float, k: float) -> tuple[float, float]:
+    """(c', σ²) for ``floored_axis`` from a filter's own per-epoch snapshot positions (the tight filter's:
+    independent of its state, each with the variance ``r_m2`` its weights give it): σ² as ``fix_floor``,
+    and c' such that the report is V = max(k P, min(c max(1, s²/r) P, σ²)), s² the snapshots' scatter
+    (``Scatter.variance``), c their correlation. P holds the snapshots' information as if each had the
+    variance r and were independent: the variance of their average over the filter's memory is P × s²/r × c.
+    That is the snapshots' side of the diagnosis k P makes from the innovations (which miss what the
+    filter follows): the larger of the two is reported, the snapshots' side at most one snapshot's
+    variance. Without a stated variance, c alone (``fix_floor``'s rule with k = 1)."""
+    c, s2 = fix_floor(scatter, r_m2)
+    if c > 1.0 and r_m2 > 0.0 and math.isfinite(r_m2):
+        ratio = scatter.variance() / r_m2
+        c = c * ratio if ratio > 1.0 else c
+    return c / k, s2
 
 
 def floored(var_ne: np.ndarray, k: float, c: float, s2: float) -> np.ndarray:

@@ -123,6 +123,7 @@ class Fusion(NamedTuple):
     ramp: bool = False
     # the fused fixes' own horizontal scatter and correlation (the reported accuracy's floor, ``consistency``)
     scatter: Scatter = Scatter()
+    scatter_v: Scatter = Scatter()  # the same vertically
 
 
 class Snapshot(NamedTuple):
@@ -311,6 +312,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                       noise_h_m=_SCALE_H * math.sqrt(r[0]), noise_v_m=_SCALE_V * math.sqrt(r[2]),
                       v_smooth=(x[3], x[4], x[5]), bias_scale=f,
                       scatter=Scatter().add(t_us, (z[0], z[1]), (x[3], x[4]), self._window_s)
+                      if self._window_s > 0.0 else Scatter(),
+                      scatter_v=Scatter().add(t_us, (z[2], z[2]), (x[5], x[5]), self._window_s)
                       if self._window_s > 0.0 else Scatter())
 
     def _fuse(self, prev: Fusion, t_us: int, fix: _Fix) -> Fusion:
@@ -438,13 +441,16 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             hold_ref, hold_obs, ramp = None, (), False
         if vel_ok:
             x_post, P_post = _core.update_vel(x_post, P_post, zv, rv)
-        scatter = prev.scatter
+        scatter, scatter_v = prev.scatter, prev.scatter_v
         if fused_pos and self._window_s > 0.0:  # the fix as fused (less an open offset) and the receiver's
             v_h = (x_post[3], x_post[4])  # velocity (the filter's where it gives none)
             if vel_ok and zv is not None and zv[0] == zv[0] and zv[1] == zv[1]:
                 v_h = (zv[0], zv[1])
             z_h = (x_prior[0] + x_prior[6] + y_fused[0], x_prior[1] + x_prior[7] + y_fused[1])
             scatter = scatter.add(t_us, z_h, v_h, self._window_s)
+            v_d = zv[2] if vel_ok and zv is not None and zv[2] == zv[2] else x_post[5]
+            z_d = x_prior[2] + x_prior[8] + y_fused[2]  # one axis: given twice (consistency.Scatter)
+            scatter_v = scatter_v.add(t_us, (z_d, z_d), (v_d, v_d), self._window_s)
         # the innovation the decision was made on: relative to a held step (so a step held does not
         # widen the gate until it passes), else the fix's own
         yd = y_fused if fused_pos else (
@@ -486,7 +492,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
             u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f, fit,
-            hold_ref, hold_obs, ramp, scatter)
+            hold_ref, hold_obs, ramp, scatter, scatter_v)
 
     def _hold_residual(self, ref: tuple[Any, ...], obs: tuple[Any, ...], t_us: int, z: Vec3, ints: Integrals
                        ) -> tuple[tuple[Any, ...], tuple[model.State, model.Cov]]:

@@ -103,9 +103,9 @@ class Navigator:
         self._last: tuple[Any, NavEstimate] | None = None
         # (the Fit it is of, the factor, consistency.variance_scale of it)
         self._inflation: tuple[Any, float, np.ndarray | None] = (None, 1.0, None)
-        # the last fix's (correlation c, one fix's variance σ²) when its fixes are correlated, else None
-        # (consistency.fix_floor: the horizontal variances reported are max(k P, min(c k P, σ²)))
-        self._floor: tuple[float, float] | None = None
+        # the last fix's (correlation c, one fix's variance σ²) horizontally and vertically when its fixes
+        # are correlated, else None (consistency.fix_floor: each variance is max(k P, min(c k P, σ²)))
+        self._floor: tuple[float, float, float, float] | None = None
         self._g = self.cfg.gravity_m_s2
 
     # -------------------------------------------------------------- input
@@ -250,8 +250,11 @@ class Navigator:
         floor = self._floor
         if floor is not None:  # errors correlated over seconds: not averaged down, up to one fix's variance
             var = var.copy() if scale is None else var
-            k, (c, s2) = self._inflation[1], floor
-            var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
+            k, (c, s2, c_v, s2_v) = self._inflation[1], floor
+            if c > 1.0:  # (an axis whose fixes are not correlated keeps k P)
+                var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
+            if c_v > 1.0:
+                var[2] = floored_axis(float(a[11]), k, c_v, s2_v)
         est = new_nav_estimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
                                snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
                                snap.vel_ratio, snap.disagree)  # NavEstimate(...)
@@ -272,7 +275,8 @@ class Navigator:
             if entries and self.cfg.accuracy_window_s > 0.0:  # the fixes' own correlation: a floor
                 last = entries[-1]
                 c, s2 = fix_floor(last.scatter, last.r_nominal_m2[0])
-                self._floor = (c, s2) if c > 1.0 else None
+                c_v, s2_v = fix_floor(last.scatter_v, last.r_nominal_m2[2])
+                self._floor = (c, s2, c_v, s2_v) if c > 1.0 or c_v > 1.0 else None
         return self._inflation[1]
 
     def counters(self) -> dict[str, int]:

@@ -295,6 +295,24 @@ static double range_rate_row(const double *x, const double *r0, const double *C,
  *        r_rate (m), gate2) -> (x+, P+, NIS, range rates used): the used pseudoranges and, for each used
  * satellite with a range rate that passes its own gate (y² ≤ gate2 (s0 + r)), that range rate, in one
  * Kalman update (Cholesky of S) */
+/* Cholesky factor A = L Lᵀ of the symmetric A (k×k, row-major; L in its lower triangle, in place);
+ * 0 if A is not positive definite */
+static int chol_factor(double *A, int k) {
+    for (int j = 0; j < k; j++) {
+        double s = A[j * k + j];
+        for (int c = 0; c < j; c++) s -= A[j * k + c] * A[j * k + c];
+        if (!(s > 0.0)) return 0;
+        double d = sqrt(s);
+        A[j * k + j] = d;
+        for (int i = j + 1; i < k; i++) {
+            double t = A[i * k + j];
+            for (int c = 0; c < j; c++) t -= A[i * k + c] * A[j * k + c];
+            A[i * k + j] = t / d;
+        }
+    }
+    return 1;
+}
+
 static PyObject *py_update(PyObject *self, PyObject *args) {
     PyObject *ox, *oP, *oH, *oHP, *oy, *or, *ou, *or0, *oC, *os, *ov, *ozr, *orr;
     double gate2;
@@ -357,21 +375,9 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
                 for (int c = 0; c < N; c++) s += HPs[i * N + c] * Hs[j * N + c];
                 Sm[i * k + j] = Sm[j * k + i] = s + (i == j ? rs[i] : 0.0);
             }
-        /* Cholesky S = L L^T (lower, in place) */
-        for (int j = 0; j < k; j++) {
-            double s = Sm[j * k + j];
-            for (int c = 0; c < j; c++) s -= Sm[j * k + c] * Sm[j * k + c];
-            if (!(s > 0.0)) {
-                PyErr_SetString(PyExc_ArithmeticError, "update: innovation covariance not positive definite");
-                goto done;
-            }
-            double d = sqrt(s);
-            Sm[j * k + j] = d;
-            for (int i = j + 1; i < k; i++) {
-                double t = Sm[i * k + j];
-                for (int c = 0; c < j; c++) t -= Sm[i * k + c] * Sm[j * k + c];
-                Sm[i * k + j] = t / d;
-            }
+        if (!chol_factor(Sm, k)) { /* S = L L^T (lower, in place) */
+            PyErr_SetString(PyExc_ArithmeticError, "update: innovation covariance not positive definite");
+            goto done;
         }
         /* V = L^-1 [y, HP] (k x (N+1)), forward substitution: then K y = HP^T S^-1 y = V_HP^T V_y and
          * K H P = V_HP^T V_HP (symmetric), NIS = |V_y|^2 */
@@ -501,7 +507,132 @@ fail:
     return NULL;
 }
 
+/* ------------------------------------------------------------- epoch snapshot */
+/* Cholesky solve of the symmetric positive definite A (k×k, row-major, overwritten by its factor) for
+ * nr right-hand sides B (k×nr, row-major, overwritten by the solutions); 0 if A is not positive definite */
+static int chol_solve(double *A, int k, double *B, int nr) {
+    if (!chol_factor(A, k)) return 0;
+    for (int c = 0; c < nr; c++) {
+        for (int i = 0; i < k; i++) { /* L z = b */
+            double v = B[i * nr + c];
+            for (int l = 0; l < i; l++) v -= A[i * k + l] * B[l * nr + c];
+            B[i * nr + c] = v / A[i * k + i];
+        }
+        for (int i = k - 1; i >= 0; i--) { /* Lᵀ x = z */
+            double v = B[i * nr + c];
+            for (int l = i + 1; l < k; l++) v -= A[l * k + i] * B[l * nr + c];
+            B[i * nr + c] = v / A[i * k + i];
+        }
+    }
+    return 1;
+}
+
+/* snapshot(H, y, r, used, p_pred, sat_pos, sat_vel, rate, r_rate, r0, C) -> (p (3), var (3), v (3)) or None:
+ * snapshot.epoch_fix's position (p_pred + the weighted least-squares correction of position and one clock
+ * per slot present among the used rows, weights 1/r, one redundant satellite required) and its variances,
+ * and snapshot.epoch_velocity's velocity at it (NaN with fewer than 5 finite rates among the used rows);
+ * None without a redundant satellite or with a singular geometry */
+static PyObject *py_snapshot(PyObject *self, PyObject *args) {
+    PyObject *objs[11];
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOO", &objs[0], &objs[1], &objs[2], &objs[3], &objs[4], &objs[5],
+                          &objs[6], &objs[7], &objs[8], &objs[9], &objs[10]))
+        return NULL;
+    int nds[11] = {2, 1, 1, 1, 1, 2, 2, 1, 1, 1, 2};
+    PyArrayObject *a[11] = {0};
+    PyObject *result = NULL;
+    for (int i = 0; i < 11; i++) {
+        a[i] = in_array(objs[i], nds[i]);
+        if (!a[i]) goto done;
+    }
+    npy_intp m = PyArray_DIM(a[1], 0);
+    if (PyArray_DIM(a[0], 0) != m || PyArray_DIM(a[0], 1) != N || PyArray_DIM(a[2], 0) != m
+        || PyArray_DIM(a[3], 0) != m || PyArray_DIM(a[4], 0) != 3 || PyArray_DIM(a[5], 0) != m
+        || PyArray_DIM(a[6], 0) != m || PyArray_DIM(a[7], 0) != m || PyArray_DIM(a[8], 0) != m
+        || PyArray_DIM(a[9], 0) != 3) {
+        PyErr_SetString(PyExc_ValueError, "snapshot: shapes");
+        goto done;
+    }
+    const double *H = PyArray_DATA(a[0]), *y = PyArray_DATA(a[1]), *r = PyArray_DATA(a[2]),
+                 *used = PyArray_DATA(a[3]), *pp = PyArray_DATA(a[4]), *sp = PyArray_DATA(a[5]),
+                 *sv = PyArray_DATA(a[6]), *zr = PyArray_DATA(a[7]), *rr = PyArray_DATA(a[8]),
+                 *r0 = PyArray_DATA(a[9]), *C = PyArray_DATA(a[10]);
+    /* the clock columns present among the used rows */
+    int col[3 + NC], k = 3, n_used = 0;
+    for (int j = 0; j < 3; j++) col[j] = j;
+    for (int j = 0; j < NC; j++) {
+        for (npy_intp i = 0; i < m; i++)
+            if (used[i] != 0.0 && H[i * N + I_CLK + j] != 0.0) {
+                col[k++] = I_CLK + j;
+                break;
+            }
+    }
+    for (npy_intp i = 0; i < m; i++) n_used += used[i] != 0.0;
+    if (n_used <= k) {
+        result = Py_None;
+        Py_INCREF(result);
+        goto done;
+    }
+    double A[(3 + NC) * (3 + NC)] = {0}, B[(3 + NC) * 4] = {0};
+    for (npy_intp i = 0; i < m; i++) {
+        if (used[i] == 0.0) continue;
+        const double *h = H + i * N;
+        double w = 1.0 / r[i];
+        for (int p = 0; p < k; p++) {
+            double gp = h[col[p]] * w;
+            if (gp == 0.0) continue;
+            for (int q = 0; q < k; q++) A[p * k + q] += gp * h[col[q]];
+            B[p * 4] += gp * y[i];
+        }
+    }
+    for (int j = 0; j < 3; j++) B[j * 4 + 1 + j] = 1.0;
+    if (!chol_solve(A, k, B, 4)) {
+        result = Py_None;
+        Py_INCREF(result);
+        goto done;
+    }
+    double out[9];
+    for (int j = 0; j < 3; j++) {
+        out[j] = pp[j] + B[j * 4];
+        out[3 + j] = B[j * 4 + 1 + j];
+        if (!isfinite(out[j]) || !(out[3 + j] > 0.0) || !isfinite(out[3 + j])) {
+            result = Py_None;
+            Py_INCREF(result);
+            goto done;
+        }
+    }
+    /* the velocity from the used rows' finite rates at the snapshot's position */
+    double re[3];
+    for (int i = 0; i < 3; i++) re[i] = r0[i] + C[i * 3] * out[0] + C[i * 3 + 1] * out[1] + C[i * 3 + 2] * out[2];
+    double Av[16] = {0}, Bv[4] = {0};
+    int n_rate = 0;
+    for (npy_intp i = 0; i < m; i++) {
+        if (used[i] == 0.0 || !isfinite(zr[i])) continue;
+        const double *s = sp + 3 * i, *u = sv + 3 * i;
+        double d0 = s[0] - re[0], d1 = s[1] - re[1], d2 = s[2] - re[2];
+        double rng = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        double l0 = d0 / rng, l1 = d1 / rng, l2 = d2 / rng;
+        double g[4];
+        for (int c = 0; c < 3; c++) g[c] = -(l0 * C[c] + l1 * C[3 + c] + l2 * C[6 + c]);
+        g[3] = 1.0;
+        double yv = zr[i] - (l0 * u[0] + l1 * u[1] + l2 * u[2]), w = 1.0 / rr[i];
+        for (int p = 0; p < 4; p++) {
+            for (int q = 0; q < 4; q++) Av[p * 4 + q] += g[p] * w * g[q];
+            Bv[p] += g[p] * w * yv;
+        }
+        n_rate++;
+    }
+    for (int j = 0; j < 3; j++) out[6 + j] = NAN;
+    if (n_rate >= 5 && chol_solve(Av, 4, Bv, 1) && isfinite(Bv[0]) && isfinite(Bv[1]) && isfinite(Bv[2])
+        && isfinite(Bv[3]))
+        for (int j = 0; j < 3; j++) out[6 + j] = Bv[j];
+    result = new_array(1, 9, 0, out);
+done:
+    for (int i = 0; i < 11; i++) Py_XDECREF(a[i]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
+    {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},
     {"predict_cov", py_predict_cov, METH_VARARGS, "F P F^T + Q over a block (model.transition, model.process_noise)"},
     {"held_noise", py_held_noise, METH_VARARGS, "the held-time noise (pp, pv, vv) between two integrals, or None"},

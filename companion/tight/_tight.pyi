@@ -24,3 +24,7 @@ def belief_step(theta: np.ndarray, h_fast: np.ndarray, h_slow: np.ndarray, y: np
                 theta_min: float, theta_max: float, gate2: float, first_order: bool, epoch_scale: bool,
                 early: float
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+def snapshot(H: np.ndarray, y: np.ndarray, r: np.ndarray, used: np.ndarray, p_pred: np.ndarray,
+             sat_pos_ecef_m: np.ndarray, sat_vel_ecef_m_s: np.ndarray, rate_m_s: np.ndarray,
+             r_rate_m2_s2: np.ndarray, r0_ecef_m: np.ndarray, c_ecef_ned: np.ndarray
+             ) -> np.ndarray | None: ...

@@ -179,7 +179,10 @@ class TightConfig:
     # the position covariance × max(1, NIS per degree of freedom of the used pseudoranges over the last
     # accuracy_window_s, exponentially weighted), the variance-of-unit-weight test a receiver applies to
     # its reported accuracy: where the measurement model is wrong (reflections the belief did not
-    # catch) P alone is over-confident. 0: report P as it is.
+    # catch) P alone is over-confident; per axis (N, E pooled; D) at least min(c × max(1, s²/r) × P, σ²)
+    # from the epochs' own snapshot positions over the same window (consistency.snapshot_floor: c their
+    # correlation, s² their scatter, r a snapshot's variance as weighted, σ² one snapshot's variance),
+    # for what the filter follows and its innovations do not show. A report only. 0: report P as it is.
     accuracy_window_s: float = 20.0
     # A common-mode floor on the reported accuracy (m, a pseudorange σ; 0 = none): the position variances
     # reported get + accuracy_floor_m² × the used satellites' position DOPs (diag of (GᵀG)⁻¹, per N, E, D)

@@ -33,7 +33,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.estimator.consistency import Fit
+from companion.estimator.consistency import Fit, Scatter
 from companion.estimator.history import Integrals, mean_between
 from companion.estimator.model import BlockPropagator
 from companion.estimator.timeline import Timeline
@@ -125,6 +125,11 @@ class Entry(NamedTuple):
     # cumulative: satellites used, satellites rejected, resets, clock resets, epochs
     totals: tuple[int, int, int, int, int]
     fit: Fit  # the used pseudoranges' consistency so far (the reported accuracy's inflation)
+    # the epochs' own snapshot positions' scatter and correlation, horizontal (N, E) and vertical, and the
+    # last snapshot's own variances (horizontal per axis, vertical; m²): the reported accuracy's floor
+    scatter_h: Scatter = Scatter()
+    scatter_v: Scatter = Scatter()
+    fix_var_m2: tuple[float, float] = (math.nan, math.nan)
 
 
 def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
@@ -369,7 +374,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             s, h = model.speed(x)
             if s <= 0.5:  # below 0.5 m/s the direction is unknown
                 return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                             prev.totals, prev.fit)
+                             prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2)
             y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])
         PHt = P @ H.T
         S = H @ PHt + R
@@ -380,7 +385,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             P = 0.5 * (P + P.T)
             self._counts["speed_fused"] += 1
         return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                     prev.totals, prev.fit)
+                     prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2)
 
     def _fuse_epoch(self, prev: Entry, t_us: int, m: SatEpoch, x: np.ndarray, P: np.ndarray,
                     ints: Integrals) -> Entry:
@@ -429,17 +434,31 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         n_used = int(used.sum())
         nis = math.nan
         fit = prev.fit
+        scatter_h, scatter_v, fix_var = prev.scatter_h, prev.scatter_v, prev.fix_var_m2
+        u = None if n_used == len(used) else np.flatnonzero(used)  # None: every satellite
+        snap = None
+        r_rate, used_f = m.r_rate_m2_s2 * (r / r_nom), used.astype(float)
+        if n_used and c.accuracy_window_s > 0.0:  # this epoch's own position, weighted as fused, its
+            # variances and its own Doppler velocity (snapshot.epoch_fix, .epoch_velocity: in C)
+            snap = _tight.snapshot(H, y, r, used_f, x[0:3], m.sat_pos_ecef_m, m.sat_vel_ecef_m_s,
+                                   m.z_rate_m_s, r_rate, r0, C)
         if n_used:
-            if n_used == len(used):  # every satellite (the same values as indexed by all of them)
+            if u is None:  # every satellite (the same values as indexed by all of them)
                 fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
             else:
-                u = np.flatnonzero(used)
                 fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
             # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
             # their own) in one update, in C (model.range_rate; the numpy form in the tests)
-            x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used.astype(float), r0, C, m.sat_pos_ecef_m,
-                                         m.sat_vel_ecef_m_s, m.z_rate_m_s, m.r_rate_m2_s2 * (r / r_nom),
-                                         c.gate_sigma**2)
+            x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used_f, r0, C, m.sat_pos_ecef_m,
+                                         m.sat_vel_ecef_m_s, m.z_rate_m_s, r_rate, c.gate_sigma**2)
+            if snap is not None:  # the motion between snapshots: the epoch's own Doppler velocity, else
+                sn, se, sd, vn, ve, vd, un, ue, ud = snap.tolist()  # the filter's (after this update)
+                if un != un:
+                    un, ue, ud = float(x[3]), float(x[4]), float(x[5])
+                w = c.accuracy_window_s
+                scatter_h = scatter_h.add(t_us, (sn, se), (un, ue), w)
+                scatter_v = scatter_v.add(t_us, (sd, sd), (ud, ud), w)  # one axis: given twice
+                fix_var = (0.5 * (vn + ve), vd)
         t_good = t_us if n_used else prev.t_good_us
         self._n_fused += bool(n_used)
         if not n_used and t_us - prev.t_good_us >= self._reset_us:
@@ -457,7 +476,8 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         info = EpochInfo(m.epoch.n, n_used, nis, float(beta.sum()) / len(beta) if len(beta) else math.nan,
                          m.key, beta, y, used, q_pos)
         return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
-                     (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit)
+                     (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit,
+                     scatter_h, scatter_v, fix_var)
 
     # --------------------------------------------------------------------- history
     def _anchor(self, e: Entry, t_us: int, ints: Integrals) -> Entry:

@@ -24,7 +24,7 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
-from companion.estimator.consistency import accuracy_inflation, variance_scale
+from companion.estimator.consistency import accuracy_inflation, floored_axis, snapshot_floor, variance_scale
 from companion.gnss.constants import C_M_S
 from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
@@ -65,8 +65,10 @@ class TightNavigator:
         self._rot: Any = None
         self._odo: tuple[int, float, float] | None = None  # (t_us, yaw rate, its integral)
         self._last: tuple[Any, NavEstimate] | None = None
-        # (the engine's last epoch entry, consistency.variance_scale, the floor's variances) of it
-        self._reported: tuple[Any, np.ndarray | None, np.ndarray | None] = (None, None, None)
+        # (the engine's last epoch entry, consistency.variance_scale, the common-mode floor's variances,
+        # (k, c_h, σ²_h, c_v, σ²_v) of the snapshots' floor or None) of it
+        self._reported: tuple[Any, np.ndarray | None, np.ndarray | None,
+                              tuple[float, float, float, float, float] | None] = (None, None, None, None)
         self._valid_us = self.cfg.reset_timeout_s * 1e6
         c = self.cfg
         self._cn0 = None if math.isnan(c.cn0_calibration_ref_dbhz) else Cn0Calibration(
@@ -181,9 +183,16 @@ class TightNavigator:
         entries = self.engine.entries
         entry = entries[-1] if entries else None
         if self._reported[0] is not entry:  # a function of the last epoch alone: once per epoch
-            self._reported = (entry, variance_scale(self.accuracy_inflation()), self.accuracy_floor_m2())
-        _, scale, floor = self._reported
+            k = self.accuracy_inflation()
+            self._reported = (entry, variance_scale(k), self.accuracy_floor_m2(), self._snapshot_floor(k))
+        _, scale, floor, snap = self._reported
         cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
+        if snap is not None:  # snapshots correlated over seconds: not averaged down, up to one snapshot's
+            k, c_h, s2_h, c_v, s2_v = snap
+            cov = cov.copy() if scale is None else cov
+            cov[0] = floored_axis(float(out[9]), k, c_h, s2_h)
+            cov[1] = floored_axis(float(out[10]), k, c_h, s2_h)
+            cov[2] = floored_axis(float(out[11]), k, c_v, s2_v)
         if floor is not None:  # + the common-mode floor, in quadrature
             cov = cov.copy() if scale is None else cov
             cov[0:3] += floor
@@ -198,6 +207,18 @@ class TightNavigator:
         NIS per degree of freedom over the last ``accuracy_window_s`` (1 when that is 0)."""
         entries = self.engine.entries
         return accuracy_inflation(entries[-1].fit if entries else None, self.cfg.accuracy_window_s)
+
+    def _snapshot_floor(self, k: float) -> tuple[float, float, float, float, float] | None:
+        """(k, c_h, σ²_h, c_v, σ²_v): the epochs' own snapshot positions' correlation and one snapshot's
+        variance (``consistency.fix_floor``: the larger of their scatter and the last one's own), horizontal
+        and vertical; None when neither is correlated (the report is k P)."""
+        entries = self.engine.entries
+        if not entries or self.cfg.accuracy_window_s <= 0.0:
+            return None
+        e = entries[-1]
+        c_h, s2_h = snapshot_floor(e.scatter_h, e.fix_var_m2[0], k)
+        c_v, s2_v = snapshot_floor(e.scatter_v, e.fix_var_m2[1], k)
+        return (k, c_h, s2_h, c_v, s2_v) if c_h > 1.0 or c_v > 1.0 else None
 
     def accuracy_floor_m2(self) -> np.ndarray | None:
         """The variances (3,: N, E, D) added to the reported position's: ``accuracy_floor_m``² × the last

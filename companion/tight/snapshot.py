@@ -78,3 +78,61 @@ def position_prior(P_pc_m2: np.ndarray, sigma_m: float, clocks_free: bool = True
     widen = np.zeros((n, n))
     widen[0:3, 0:3] = np.eye(3) * sigma_m**2
     return np.linalg.inv(P_pc_m2 + widen)
+
+
+def epoch_fix(H: np.ndarray, y: np.ndarray, r: np.ndarray, slot: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The epoch's own position about the prediction, as the filter weighed its satellites: the weighted
+    least-squares correction δp (N, E, D; m) of position (``H``'s first three columns) and one clock per
+    clock slot present (``slot``) from the pre-fit innovations ``y`` with weights 1/``r``, and its
+    variances diag((Gᵀ W G)⁻¹) of δp (m²). A linearised single-point solution: the prediction plus δp
+    is the satellites' position to first order whatever the prediction (its error drops out), so a
+    series of them is a series of fixes independent of the filter (the reported accuracy's
+    ``consistency.Scatter``). None without a redundant satellite (a solution nothing checks: one wrong
+    range moves it unseen) or with a singular geometry."""
+    slots = np.unique(slot)
+    k = 3 + len(slots)
+    if len(y) <= k:
+        return None
+    G = np.empty((len(y), k))
+    G[:, 0:3] = H[:, 0:3]
+    G[:, 3:] = slot[:, None] == slots[None, :]
+    w = 1.0 / r
+    Gw = G.T * w
+    rhs = np.zeros((k, 4))
+    rhs[:, 0] = Gw @ y
+    rhs[0:3, 1:4] = np.eye(3)
+    try:
+        sol = np.linalg.solve(Gw @ G, rhs)
+    except np.linalg.LinAlgError:
+        return None
+    var = np.diag(sol[0:3, 1:4]).copy()
+    if not (np.isfinite(sol[0:3, 0]).all() and (var > 0.0).all() and np.isfinite(var).all()):
+        return None
+    return sol[0:3, 0].copy(), var
+
+
+def epoch_velocity(sat_pos_ecef_m: np.ndarray, sat_vel_ecef_m_s: np.ndarray, r_ecef_m: np.ndarray,
+                   c_ecef_ned: np.ndarray, rate_m_s: np.ndarray, r_rate_m2_s2: np.ndarray
+                   ) -> np.ndarray | None:
+    """The epoch's own velocity (N, E, D; m/s) from its pseudorange rates alone: the weighted least squares
+    of rate − l·v_sat = −l·v + clock drift over the satellites with a finite rate (l the unit line of sight
+    from ``r_ecef_m``, a position within metres is enough; weights 1/``r_rate_m2_s2``). Independent of the
+    pseudoranges' errors: the motion between the epochs' snapshot positions (``epoch_fix``). None with
+    fewer than 5 rates or a singular geometry."""
+    ok = np.isfinite(rate_m_s)
+    if int(ok.sum()) < 5:
+        return None
+    d = sat_pos_ecef_m[ok] - r_ecef_m
+    los = d / np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
+    y = rate_m_s[ok] - np.einsum("ij,ij->i", los, sat_vel_ecef_m_s[ok])
+    G = np.empty((len(y), 4))
+    G[:, 0:3] = -(los @ c_ecef_ned)
+    G[:, 3] = 1.0
+    w = 1.0 / r_rate_m2_s2[ok]
+    Gw = G.T * w
+    try:
+        v = np.linalg.solve(Gw @ G, Gw @ y)
+    except np.linalg.LinAlgError:
+        return None
+    return v[0:3] if np.isfinite(v).all() else None

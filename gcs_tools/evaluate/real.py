@@ -56,6 +56,8 @@ RAW = ("raw fixes (at arrival)", "raw fixes (at validity)")
 STATS = ("median", "p95", "max")
 # the fraction of truth samples inside the reported 1-σ / 2-σ horizontal ellipse (2-D Gaussian: 39 / 86 %)
 COVERAGE = ("within_1_sigma", "within_2_sigma")
+# the same vertically: |e_D| within the reported 1 σ / 2 σ (a Gaussian: 68 / 95 %)
+COVERAGE_V = ("vertical_within_1_sigma", "vertical_within_2_sigma")
 BOOTSTRAP_SEED = 20261126
 GOAL_BELOW_NAIVE = -0.20  # the issue's goal: the best method's median at least 20 % below naive
 TIGHT_PREFIX = "tight-"
@@ -115,9 +117,11 @@ def _row(base: dict[str, Any], row: str, s: dict[str, Any]) -> dict[str, Any]:
     """One run's line from a replay summary."""
     h = s["errors"]["truth"]["error_horizontal_m"]
     cov = s["errors"]["truth"]["coverage_horizontal"]  # the reported accuracy's, at the truth samples
+    cov_v = s["errors"]["truth"]["coverage_vertical"]
     nav = s["navigator"]
     return {**base, "row": row, **{k: round(h[k], 4) for k in STATS},
             **{k: round(cov[k], 4) for k in COVERAGE},
+            **{k: round(cov_v[k.removeprefix("vertical_")], 4) for k in COVERAGE_V},
             "gnss_fused": nav.get("gnss_fused", 0),
             "gnss_rejected_innovation": nav.get("gnss_rejected_innovation", 0),
             "gnss_resets": nav.get("gnss_resets", 0), "wall_s": round(s["wall_s"], 4),
@@ -259,7 +263,8 @@ def summarise(runs: list[dict[str, Any]], rows: Sequence[str]) -> dict[str, Any]
             mean, lo, hi = stats.mean_ci(v, strata, rng)
             e[st] = {"mean": mean, "ci95": [lo, hi]}
         if keys and COVERAGE[0] in mine[keys[0]]:  # a filter row: its reported accuracy's coverage
-            e["coverage"] = {c: float(np.mean([mine[k][c] for k in keys])) for c in COVERAGE}
+            e["coverage"] = {c: float(np.mean([mine[k][c] for k in keys])) for c in COVERAGE
+                             + tuple(v for v in COVERAGE_V if v in mine[keys[0]])}
         e["per_flight_median"] = {f: float(np.mean([mine[k]["median"] for k in keys if k[0] == f]))
                                   for f in sorted(set(strata.tolist()))}
         pairs = [k for k in keys if k in raw_a]
@@ -360,8 +365,9 @@ def markdown(result: dict[str, Any]) -> str:
                          "velocity information (their Doppler velocity's mean per-axis std = the fixes' "
                          f"{info.get('velocity_std_m_s', 0.2):g} m/s)."), ""]
         lines += [
-                  "| row | median | p95 | max | − raw (arrival), median | vs naive | within 1 σ / 2 σ |",
-                  "|---|---|---|---|---|---|---|"]
+                  "| row | median | p95 | max | − raw (arrival), median | vs naive | within 1 σ / 2 σ "
+                  "| vertical 1 σ / 2 σ |",
+                  "|---|---|---|---|---|---|---|---|"]
         for row, e in t.items():
             diff = e["minus_raw_at_arrival_median"]
             vs = e["vs_naive_median"]
@@ -370,7 +376,9 @@ def markdown(result: dict[str, Any]) -> str:
                      "—" if row in (*RAW, "naive") else
                      f"{vs['value']:+.0%} [{vs['ci95'][0]:+.0%}, {vs['ci95'][1]:+.0%}]",
                      "—" if "coverage" not in e else
-                     f"{e['coverage'][COVERAGE[0]]:.0%} / {e['coverage'][COVERAGE[1]]:.0%}"]
+                     f"{e['coverage'][COVERAGE[0]]:.0%} / {e['coverage'][COVERAGE[1]]:.0%}",
+                     "—" if COVERAGE_V[0] not in e.get("coverage", {}) else
+                     f"{e['coverage'][COVERAGE_V[0]]:.0%} / {e['coverage'][COVERAGE_V[1]]:.0%}"]
             lines.append("| " + " | ".join(cells) + " |")
         over = g["methods_with_p95_or_max_above_raw_at_arrival"]
         over_text = ", ".join(f"`{m}` ({'/'.join(w)})" for m, w in over.items()) or "none"

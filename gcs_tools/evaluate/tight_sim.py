@@ -92,7 +92,7 @@ def sim_config(mission: Mission, ahrs_gnss_velocity: bool | None) -> SimConfig:
 
 def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              max_duration_s: float | None = None, maps: bool = True,
-             accuracy: dict[str, list[tuple[float, float, float]]] | None = None,
+             accuracy: dict[str, list[tuple[float, ...]]] | None = None,
              on_raw: Callable[[str, Any, Any], None] | None = None,
              fly_on_truth: bool = False, cn0_missing: bool = False, tight_config: TightConfig | None = None,
              rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None) -> dict[str, np.ndarray]:
@@ -200,11 +200,13 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
         if accuracy is not None:
             for r, e in ests.items():
                 assert e is not None
-                d2 = (np.asarray(e.p_ned_m[0:2]) - truth[0:2]) ** 2
-                nees = float(np.sum(d2 / np.asarray(e.cov_diag[0:2])))
-                h_acc = float(np.sqrt(e.cov_diag[0] + e.cov_diag[1]))
-                k_r = tight[r].accuracy_inflation()
-                accuracy.setdefault(f"tight-{r}", []).append((nees, nees * k_r, h_acc))
+                d2 = (np.asarray(e.p_ned_m[0:3]) - truth[0:3]) ** 2
+                cov = np.asarray(e.cov_diag[0:3])
+                now = tight[r].engine.output_now()  # P alone: the filter's own variances
+                p_alone = cov if now is None else now[1][9:12]
+                accuracy.setdefault(f"tight-{r}", []).append(
+                    (float(np.sum(d2[0:2] / cov[0:2])), float(np.sum(d2[0:2] / p_alone[0:2])),
+                     float(np.sqrt(cov[0] + cov[1])), float(d2[2] / cov[2]), float(d2[2] / p_alone[2])))
     return {k: np.asarray(v) for k, v in errors.items()}
 
 
@@ -214,7 +216,7 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
         rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None) -> dict[str, Any]:
     tcfg = TightConfig() if sigma_acc_m_s2 is None else TightConfig(sigma_acc_m_s2=sigma_acc_m_s2)
     flights: list[dict[str, Any]] = []
-    acc: dict[str, list[tuple[float, float, float]]] = {}
+    acc: dict[str, list[tuple[float, ...]]] = {}
     err: dict[str, list[np.ndarray]] = {}
     for p in profiles:
         for s in seeds:
@@ -269,10 +271,15 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
 
 
 def coverage(acc: np.ndarray, errors_m: np.ndarray) -> dict[str, float]:
-    """Pooled over steps: fractions inside the 1-σ / 2-σ ellipses (reported and P alone), medians."""
+    """Pooled over steps: fractions inside the 1-σ / 2-σ ellipses (reported and P alone), the same
+    vertically (|e_D| ≤ σ_D, 2 σ_D: 68.3 % / 95.4 % for a consistent Gaussian), medians."""
     return {"reported_1sigma": float(np.mean(acc[:, 0] <= 1.0)),
             "reported_2sigma": float(np.mean(acc[:, 0] <= 4.0)),
             "p_1sigma": float(np.mean(acc[:, 1] <= 1.0)), "p_2sigma": float(np.mean(acc[:, 1] <= 4.0)),
+            "vertical_reported_1sigma": float(np.mean(acc[:, 3] <= 1.0)),
+            "vertical_reported_2sigma": float(np.mean(acc[:, 3] <= 4.0)),
+            "vertical_p_1sigma": float(np.mean(acc[:, 4] <= 1.0)),
+            "vertical_p_2sigma": float(np.mean(acc[:, 4] <= 4.0)),
             "median_error_m": float(np.median(errors_m)),
             "median_horiz_accuracy_m": float(np.median(acc[:, 2]))}
 
@@ -295,10 +302,13 @@ def markdown(r: dict[str, Any]) -> str:
     lines += ["", "Reported accuracy, pooled over steps (a consistent 2-D Gaussian: 39.3 % inside 1 σ, "
               "86.5 % inside 2 σ):", "",
               *table_lines(("row", "inside 1 σ", "inside 2 σ", "P alone: 1 σ", "2 σ", "median error (m)",
-                            "median horiz_accuracy (m)"),
+                            "median horiz_accuracy (m)", "vertical 1 σ / 2 σ", "P alone"),
                            ((n, f"{c['reported_1sigma']:.1%}", f"{c['reported_2sigma']:.1%}",
                              f"{c['p_1sigma']:.1%}", f"{c['p_2sigma']:.1%}", f"{c['median_error_m']:.2f}",
-                             f"{c['median_horiz_accuracy_m']:.2f}") for n, c in r["coverage"].items()))]
+                             f"{c['median_horiz_accuracy_m']:.2f}",
+                             f"{c['vertical_reported_1sigma']:.1%} / {c['vertical_reported_2sigma']:.1%}",
+                             f"{c['vertical_p_1sigma']:.1%} / {c['vertical_p_2sigma']:.1%}")
+                            for n, c in r["coverage"].items()))]
     return "\n".join(lines) + "\n"
 
 
