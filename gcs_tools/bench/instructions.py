@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -96,7 +98,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tree", type=Path, default=None, help="another checkout's code (C cores built)")
     parser.add_argument("--json", action="store_true", help="one JSON object")
     args = parser.parse_args(argv)
-    r = count(args.filter, args.duration_s, args.tree)
+    if not (math.isfinite(args.duration_s) and args.duration_s > 0.0):
+        parser.error(f"--duration-s: must be a finite number > 0, got {args.duration_s!r}")
+    if args.tree is not None and not args.tree.is_dir():
+        parser.error(f"--tree: not a directory: {args.tree}")
+    if shutil.which("valgrind") is None:
+        parser.error("valgrind not found on PATH (install valgrind: the count is callgrind's)")
+    try:
+        r = count(args.filter, args.duration_s, args.tree)
+    except RuntimeError as exc:  # valgrind or the workload failed: its last line
+        last = str(exc).strip().splitlines()[-1] if str(exc).strip() else "valgrind failed"
+        parser.exit(1, f"{parser.prog}: error: {last}\n")
     if args.json:
         print(json.dumps(r))
     else:
