@@ -701,8 +701,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         prop = self._prop_disagree if last.disagree else self._prop
         x, out = prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
                                   (1.0 - alpha * alpha) * sigma_b * sigma_b)
-        valid = now - last.t_fused_us <= self._valid_us and not last.invalid and not (  # _outside_envelope
-            x[3] * x[3] + x[4] * x[4] > self._v_max2 or abs(x[5]) > self._vd_max)
+        valid = now - last.t_fused_us <= self._valid_us and not last.invalid and not self._outside_envelope(x)
         return Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
                         last.n_rejected, last.n_resets, last.vel_ratio, last.disagree)
 

@@ -272,7 +272,7 @@ class Navigator:
             k = 1.0 if fit is None or w <= 0.0 else fit_inflation3(fit)  # on floats
             self._inflation = (fit, k, variance_scale(k))
             self._floor = None
-            if entries and self.cfg.accuracy_window_s > 0.0:  # the fixes' own correlation: a floor
+            if entries and w > 0.0:  # the fixes' own correlation: a floor
                 last = entries[-1]
                 c, s2 = fix_floor(last.scatter, last.r_nominal_m2[0])
                 c_v, s2_v = fix_floor(last.scatter_v, last.r_nominal_m2[2])
