@@ -114,6 +114,13 @@ class Distribution:
                 "median": self.quantile(0.5), "max": self.max, "final": self.last}
 
 
+def _tally(counts: list[int], nees: float) -> None:
+    """One matched error into [matched, inside 1 σ, inside 2 σ] (NEES ≤ 1, ≤ 4)."""
+    counts[0] += 1
+    counts[1] += nees <= 1.0
+    counts[2] += nees <= 4.0
+
+
 class PositionErrors:
     """Online estimate-vs-reference matching (see module doc).
 
@@ -197,18 +204,10 @@ class PositionErrors:
             v0 = self._v[i - 1] if w else v1
             vn, ve = v0[0] + w * (v1[0] - v0[0]), v0[1] + w * (v1[1] - v0[1])
             if vn > 0.0 and ve > 0.0 and math.isfinite(vn) and math.isfinite(ve):
-                nees = e[0] * e[0] / vn + e[1] * e[1] / ve
-                c = self._within
-                c[0] += 1
-                c[1] += nees <= 1.0
-                c[2] += nees <= 4.0
+                _tally(self._within, e[0] * e[0] / vn + e[1] * e[1] / ve)
             vd = v0[2] + w * (v1[2] - v0[2])
             if vd > 0.0 and math.isfinite(vd):
-                nees = e[2] * e[2] / vd
-                c = self._within_v
-                c[0] += 1
-                c[1] += nees <= 1.0
-                c[2] += nees <= 4.0
+                _tally(self._within_v, e[2] * e[2] / vd)
         h_sq = e[0] * e[0] + e[1] * e[1]
         m = self._max_sq
         m[0], m[1] = max(m[0], h_sq), max(m[1], h_sq + e[2] * e[2])
