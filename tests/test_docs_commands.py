@@ -87,7 +87,7 @@ class _ParsedError(Exception):
 
 
 @contextlib.contextmanager
-def _stop_after_parsing(monkeypatch: pytest.MonkeyPatch):
+def _stop_after_parsing():
     """argparse's top-level parse returns into an exception: the command is parsed, never run."""
     parse_args, parse_known = argparse.ArgumentParser.parse_args, argparse.ArgumentParser.parse_known_args
     depth = [0]
@@ -108,9 +108,12 @@ def _stop_after_parsing(monkeypatch: pytest.MonkeyPatch):
             return parse_known(self, args, namespace)  # a subparser, or inside parse_args
         top(parse_known, self, args, namespace)
 
-    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop_args)
-    monkeypatch.setattr(argparse.ArgumentParser, "parse_known_args", stop_known)
-    yield
+    # undone on leaving (not at the test's end): each command parses against argparse's own methods,
+    # not through the wrappers of every command parsed before it
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(argparse.ArgumentParser, "parse_args", stop_args)
+        patch.setattr(argparse.ArgumentParser, "parse_known_args", stop_known)
+        yield
 
 
 def parse(words: list[str], monkeypatch: pytest.MonkeyPatch) -> tuple[str | None, str]:
@@ -118,7 +121,7 @@ def parse(words: list[str], monkeypatch: pytest.MonkeyPatch) -> tuple[str | None
     from gcs_tools.cli import main
 
     err, out = io.StringIO(), io.StringIO()
-    with _stop_after_parsing(monkeypatch), contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+    with _stop_after_parsing(), contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         try:
             if words[0] == "beliefnav":
                 main(words[1:])
