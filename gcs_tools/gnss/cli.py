@@ -147,7 +147,9 @@ def evaluate(
         origin = truth[np.isfinite(truth).all(axis=1)][0]
         err = baseline.ned_errors(series.p_ecef_m, truth, origin)
         summary["errors"] = baseline.error_statistics(series.t_s, err, series.h_acc_m, series.v_acc_m)
-        summary["residuals_at_truth_m"] = baseline.residuals_at_truth(data.epochs, truth, config)
+        summary["residuals_at_truth_m"] = baseline.residuals_at_truth(
+            data.epochs, truth, config, data.klobuchar
+        )
         summary["truth"] = data.truth_note
         if data.truth is not None and data.truth.rejected:
             summary["truth_rows_rejected"] = dict(data.truth.rejected)
