@@ -137,7 +137,8 @@ def test_compressed_station_file_reads_as_the_plain_one(tmp_path):
 
 # (systems, horizontal m, |vertical| m): measured maxima over the 4 epochs 1.6/0.5 (all), 1.6/1.1 (GPS),
 # 2.7/3.4 (Galileo, 5 satellites), 4.9/12.0 (QZSS: 4 satellites, one of them geostationary);
-# without the Earth-rotation term 27-52 m horizontal, an 18 s time error gives kilometres
+# without the Earth-rotation term 27-52 m horizontal; epoch times 18 s late (UTC read as GPS time) put
+# every constellation's solution 6-17 km off, 1 s late still 300-950 m
 TOLERANCES = [
     ((G, E, J), 4.0, 4.0),
     ((G,), 4.0, 4.0),
@@ -188,9 +189,9 @@ def test_the_tolerances_catch_a_missing_earth_rotation_and_a_leap_second(station
     store = station.store
     assert isinstance(store, EphemerisStore)
     shifted = [attach_broadcast(e.replace(t_gps_s=e.t_gps_s + 18.0), store)[0] for e in obs.epochs]
-    for systems in ((G,), (E,)):
+    for systems in ((G,), (E,), (J,)):  # measured 13-15 km, 10-17 km, 6-7 km
         enu = _enu_errors(shifted, station.klobuchar, systems, STATION_ECEF_M)
-        assert np.linalg.norm(enu, axis=1).min() > 100.0
+        assert np.linalg.norm(enu, axis=1).min() > 1000.0
 
 
 def test_rover_starts_at_its_reference_point():
