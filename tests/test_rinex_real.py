@@ -207,21 +207,39 @@ def test_rover_starts_at_its_reference_point():
         assert np.abs(enu[:, 2]).max() < v_tol_m
 
 
-def test_gnss_spp_cli_on_the_station(tmp_path):
-    """``beliefnav gnss spp`` with ``--truth-ecef``: the same answer through the command."""
-    out = tmp_path / "spp"
+def _cli(tmp_path: Path, *extra: str) -> subprocess.CompletedProcess[str]:
     truth = ",".join(f"{x:.3f}" for x in STATION_ECEF_M)
-    r = subprocess.run(
+    return subprocess.run(
         [sys.executable, "-m", "gcs_tools", "gnss", "spp", str(STATION_OBS), "--nav", str(NAV),
-         f"--truth-ecef={truth}", "--out", str(out)],
+         f"--truth-ecef={truth}", "--out", str(tmp_path / "spp"), *extra],
         capture_output=True, text=True, timeout=120,
     )
+
+
+@pytest.mark.parametrize(
+    ("letters", "h_tol_m", "v_tol_m", "not_selected"),
+    [("", 4.0, 4.0, 0), ("G", 4.0, 4.0, 36), ("E", 5.0, 6.0, 48), ("J", 8.0, 20.0, 52)],
+    ids=["all", "gps", "gal", "qzss"],
+)
+def test_gnss_spp_cli_on_the_station(tmp_path, letters, h_tol_m, v_tol_m, not_selected):
+    """``beliefnav gnss spp --truth-ecef [--systems L]``: the same answers through the command, the
+    other constellations' observations counted (4 epochs x 18 observations, less the selected)."""
+    r = _cli(tmp_path, *(("--systems", letters) if letters else ()))
     assert r.returncode == 0, r.stderr
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((tmp_path / "spp" / "summary.json").read_text())
     assert summary["epochs"] == 4 and summary["solutions"] == 4
-    assert summary["rejected"] == {"nav_galileo_fnav_skipped": 7, "no_ephemeris": 4}
-    assert summary["errors"]["horizontal_m"]["p95"] < 4.0
-    assert summary["errors"]["vertical_abs_m"]["p95"] < 4.0
+    expected = {"nav_galileo_fnav_skipped": 7, "no_ephemeris": 4, "system_not_selected": not_selected}
+    assert summary["rejected"] == {k: v for k, v in expected.items() if v}
+    assert summary["errors"]["horizontal_m"]["p95"] < h_tol_m
+    assert summary["errors"]["vertical_abs_m"]["p95"] < v_tol_m
+
+
+def test_gnss_spp_cli_systems_refused(tmp_path):
+    """A letter that is no constellation, and constellations the file does not hold: one line each."""
+    r = _cli(tmp_path, "--systems", "GX")
+    assert r.returncode == 2 and "--systems 'GX'" in r.stderr and "not one: X" in r.stderr
+    r = _cli(tmp_path, "--systems", "C,R")
+    assert r.returncode == 2 and "no observation of the systems CR" in r.stderr
 
 
 def test_residuals_at_truth_of_raw_pseudoranges_leave_the_atmosphere_out(station):
