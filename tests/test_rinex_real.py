@@ -122,6 +122,21 @@ def test_navigation_file_keeps_inav_and_counts_fnav():
     assert g24.toc_gps_s == _t(8, 0, 0) and g24.iode == 54
 
 
+def test_the_store_takes_the_nearest_broadcast():
+    """G05 and G13 have two sets in the file, toe 04:00 (2.5 h before the epochs, past GPS's 2 h) and
+    08:00 (1.5 h after): at 06:30 the 08:00 set gives the state, as RTKLIB selects."""
+    nav = rinex.read_nav(NAV)
+    t = np.array([_t(6, 30, 0)] * 2)
+    sys_, prn = np.array([int(G)] * 2), np.array([5, 13])
+    sets = [e for e in nav.kepler if e.system == G and e.prn in (5, 13)]
+    assert sorted({e.toe_gps_s - 2176 * 604800.0 for e in sets}) == [273600.0, 288000.0]
+    late = EphemerisStore([e for e in sets if e.toe_gps_s == 2176 * 604800.0 + 288000.0])
+    a, b = EphemerisStore(nav.kepler).states(sys_, prn, t), late.states(sys_, prn, t)
+    assert a.valid.all() and b.valid.all()
+    np.testing.assert_array_equal(a.pos_ecef_m, b.pos_ecef_m)
+    np.testing.assert_array_equal(a.clock_s, b.clock_s)
+
+
 def test_compressed_station_file_reads_as_the_plain_one(tmp_path):
     """The forms archives publish (Hatanaka + gzip) give the same epochs."""
     packed = tmp_path / "3034265G.21d.gz"
