@@ -189,6 +189,18 @@ class _Geometry:
             self.az = np.where(np.isfinite(epoch.azimuth_deg), np.deg2rad(epoch.azimuth_deg), np.nan)
 
 
+def geometry_at(
+    epoch: GnssEpoch,
+    p_ecef_m: np.ndarray,
+    config: SppConfig = SppConfig(),
+    klobuchar: tuple[np.ndarray, np.ndarray] | None = None,
+) -> _Geometry:
+    """The solver's model at a given receiver position: ranges (Sagnac per ``config``), line of
+    sight, elevation, azimuth and the atmosphere it takes off raw pseudoranges (``atm``, metres;
+    zero for corrected epochs)."""
+    return _Geometry(epoch, np.asarray(p_ecef_m, float), config, klobuchar)
+
+
 def _design(los: np.ndarray, cols: np.ndarray, k: int) -> np.ndarray:
     h = np.zeros((len(los), 3 + k))
     h[:, :3] = -los

@@ -16,7 +16,7 @@ from companion.domain.statistics import describe
 from companion.gnss.constants import C_M_S
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
 from companion.gnss.observations import GnssEpoch
-from companion.gnss.spp import SppConfig, SppSolution, sigma_model_m, solve_position
+from companion.gnss.spp import SppConfig, SppSolution, geometry_at, sigma_model_m, solve_position
 from companion.gnss.systems import SHORT_NAME, System
 
 ERROR_CSV_HEADER = "t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m"
@@ -131,13 +131,19 @@ def error_statistics(
 
 
 def residuals_at_truth(
-    epochs: Sequence[GnssEpoch], truth_ecef_m: np.ndarray, config: SppConfig
+    epochs: Sequence[GnssEpoch],
+    truth_ecef_m: np.ndarray,
+    config: SppConfig,
+    klobuchar: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> dict[str, dict[str, dict[str, float]]]:
     """Pseudorange residuals at the TRUE position, by system and elevation bin (median, p95, n).
 
+    Raw pseudoranges (RINEX, UBX) first lose the atmosphere the solution models (``config.tropo``:
+    Saastamoinen; ``config.iono`` with ``klobuchar``), as corrected ones (smartLoc) already have.
     Per epoch and system the receiver clock is the weighted mean (the SPP's σ model at the true
-    elevations) of ``y − ρ(truth)``; a system with a single satellite that epoch is left out (its
-    residual would be zero by construction). Positive = the signal arrived late (NLOS, multipath)."""
+    elevations) of ``y − ρ(truth) − atmosphere``; a system with a single satellite that epoch is
+    left out (its residual would be zero by construction). Positive = the signal arrived late (NLOS,
+    multipath) or the atmosphere models fell short."""
     res: list[np.ndarray] = []
     el_all: list[np.ndarray] = []
     sys_all: list[np.ndarray] = []
@@ -145,12 +151,10 @@ def residuals_at_truth(
         if not np.isfinite(p).all():
             continue
         y = e.pseudorange_m if e.corrected else e.pseudorange_m + C_M_S * e.sat_clock_s
-        rho, los = sagnac_range_m(e.sat_pos_ecef_m, p, config.earth_rotation)
-        lat, lon, _ = (float(v) for v in ecef_to_geodetic(p))
-        up = los @ ecef_to_ned_matrix(lat, lon).T
-        el = np.arcsin(np.clip(-up[:, 2], -1.0, 1.0))
+        geo = geometry_at(e, p, config, klobuchar)
+        el = geo.el
         w = 1.0 / sigma_model_m(e, el, config) ** 2
-        d = y - rho
+        d = y - geo.rho - geo.atm
         r = np.full(e.n, np.nan)
         for s in np.unique(e.system):
             m = (e.system == s) & np.isfinite(d)

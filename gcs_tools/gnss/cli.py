@@ -19,6 +19,7 @@ import numpy as np
 
 from companion.errors import UserError
 from companion.gnss.spp import WEIGHTINGS, SppConfig
+from companion.gnss.systems import FROM_RINEX_LETTER, RINEX_LETTER, System
 from gcs_tools.gnss import baseline
 from gcs_tools.gnss.sources import GnssInput, load_input
 from gcs_tools.jsonvalues import plain_json
@@ -80,6 +81,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help=f"satellites below this elevation (deg) are not used "
                         f"(default {SppConfig.elevation_mask_deg:g})")
     p.add_argument(
+        "--systems",
+        default=None,
+        metavar="LETTERS",
+        help="solve with these constellations only, RINEX letters (e.g. G, GE, G,E,J: GPS, Galileo, "
+        "QZSS; C BeiDou, R GLONASS); the others' observations are counted (system_not_selected)",
+    )
+    p.add_argument(
         "--variants",
         action="store_true",
         help="also solve the weighting on/off x RAIM on/off table (summary.json 'variants')",
@@ -95,7 +103,10 @@ def run(args: argparse.Namespace) -> int:
     if not (0.0 <= args.elevation_mask_deg < 90.0):
         raise UserError(f"--elevation-mask-deg {args.elevation_mask_deg}: expected 0 to 90")
     check_out_dir(args.out)
+    systems = parse_systems(args.systems) if args.systems is not None else None
     data = load_input(args.input, args.nav, args.truth, args.truth_ecef)
+    if systems is not None:
+        data = select_systems(data, systems)
     config = SppConfig(
         weighting=args.weighting,
         raim=args.raim,
@@ -123,6 +134,38 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def parse_systems(text: str) -> tuple[System, ...]:
+    """``--systems``: RINEX system letters (``GE``, ``G,E,J``) -> the systems, in the order given."""
+    letters = [c for c in text.upper() if c not in ", "]
+    unknown = sorted({c for c in letters if c not in FROM_RINEX_LETTER or c == "S"})
+    if not letters or unknown:
+        raise UserError(
+            f"--systems {text!r}: expected RINEX letters G (GPS), E (Galileo), C (BeiDou), J (QZSS), "
+            f"R (GLONASS)" + (f"; not one: {', '.join(unknown)}" if unknown else "")
+        )
+    return tuple(dict.fromkeys(FROM_RINEX_LETTER[c] for c in letters))
+
+
+def select_systems(data: GnssInput, systems: tuple[System, ...]) -> GnssInput:
+    """The input with only these systems' observations; the others counted (``system_not_selected``),
+    epochs left empty dropped. A one-line error when nothing is left."""
+    keep = np.array([int(s) for s in systems])
+    epochs = []
+    dropped = 0
+    for e in data.epochs:
+        m = np.isin(e.system, keep)
+        dropped += int((~m).sum())
+        if m.any():
+            epochs.append(e if m.all() else e.select(m))
+    if not epochs:
+        names = "".join(RINEX_LETTER[s] for s in systems)
+        raise UserError(f"{data.path}: no observation of the systems {names} (--systems)")
+    rejected = data.rejected.copy()
+    if dropped:
+        rejected["system_not_selected"] += dropped
+    return dataclasses.replace(data, epochs=epochs, rejected=rejected)
+
+
 def evaluate(
     data: GnssInput, config: SppConfig
 ) -> tuple[dict[str, Any], baseline.SppSeries, np.ndarray | None]:
@@ -147,7 +190,9 @@ def evaluate(
         origin = truth[np.isfinite(truth).all(axis=1)][0]
         err = baseline.ned_errors(series.p_ecef_m, truth, origin)
         summary["errors"] = baseline.error_statistics(series.t_s, err, series.h_acc_m, series.v_acc_m)
-        summary["residuals_at_truth_m"] = baseline.residuals_at_truth(data.epochs, truth, config)
+        summary["residuals_at_truth_m"] = baseline.residuals_at_truth(
+            data.epochs, truth, config, data.klobuchar
+        )
         summary["truth"] = data.truth_note
         if data.truth is not None and data.truth.rejected:
             summary["truth_rows_rejected"] = dict(data.truth.rejected)
