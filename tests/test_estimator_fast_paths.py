@@ -1,6 +1,6 @@
 """The loose filter's per-sample speed-ups compute the same numbers, bit for bit, as what they replace:
-the consistency factor's sums on floats (``engine.fit_add3``, ``engine.fit_inflation3``) against
-``consistency.Fit``'s numpy path, and ``samples.new_nav_estimate`` against ``NavEstimate(...)``."""
+the consistency factor's sums on floats (``consistency.fit_add3``, ``consistency.fit_inflation3``)
+against ``consistency.Fit``'s numpy path, and ``samples.new_nav_estimate`` against ``NavEstimate(...)``."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import pytest
 from companion.domain.samples import NavEstimate, new_nav_estimate
 from companion.estimator import engine as engine_module
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import Fit
-from companion.estimator.engine import _AXES, FusionEngine, fit_add3, fit_inflation3
+from companion.estimator.consistency import AXES3, Fit, fit_add3, fit_inflation3
+from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, drive, multipath_stream
 
 CFG = EstimatorConfig()
@@ -29,9 +29,9 @@ def test_fit_on_floats_equals_the_numpy_fit():
     for k in range(3000):
         t += int(rng.integers(20_000, 400_000))
         nu = rng.standard_normal(3) * (3.0 if (k // 200) % 2 else 1.0) + (0.5 if k % 500 < 100 else 0.0)
-        ref = ref.add(t, _AXES, nu, 5.0)
+        ref = ref.add(t, AXES3, nu, 5.0)
         fast = fit_add3(fast, t, *nu.tolist(), 5.0)
-        assert fast.key is _AXES and fast.t_us == ref.t_us == t
+        assert fast.key is AXES3 and fast.t_us == ref.t_us == t
         assert fast.nu_sum.tolist() == ref.nu_sum.tolist() and fast.w2_sum.tolist() == ref.w2_sum.tolist()
         assert fit_inflation3(fast) == ref.inflation()
         above += ref.inflation() > 1.0
@@ -45,7 +45,7 @@ def test_the_engine_fit_equals_the_numpy_fit(monkeypatch):
     fast = FusionEngine(CFG, "second-order", context=OPEN_SKY)
     drive(stream, fast, stream.fix_t_us)
     monkeypatch.setattr(engine_module, "fit_add3",
-                        lambda fit, t, a, b, c, w: fit.add(t, _AXES, np.array((a, b, c)), w))
+                        lambda fit, t, a, b, c, w: fit.add(t, AXES3, np.array((a, b, c)), w))
     ref = FusionEngine(CFG, "second-order", context=OPEN_SKY)
     drive(stream, ref, stream.fix_t_us)
     assert len(fast.entries) == len(ref.entries) > 40  # (the last history_s of them)

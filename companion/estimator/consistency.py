@@ -78,6 +78,37 @@ class Fit(NamedTuple):
         return max(1.0, float(self.nu_sum @ self.nu_sum) / den) if den > 0.0 else 1.0
 
 
+AXES3 = np.arange(3)  # the loose filter's Fit channels of a fix: N, E, D (fit_add3's key, by identity)
+
+
+def fit_add3(fit: Fit, t_us: int, nu0: float, nu1: float, nu2: float, window_s: float) -> Fit:
+    """``fit.add(t_us, AXES3, (nu0, nu1, nu2), window_s)`` (``window_s`` > 0), the same numbers: once
+    ``fit`` holds the three axes, its sums decayed and added on floats (the per-element operations of
+    ``Fit.add``'s numpy path, without its array arithmetic at every fix: the loose filter's)."""
+    if fit.key is not AXES3:  # the first fix (an empty Fit): Fit.add's general path
+        return fit.add(t_us, AXES3, np.array((nu0, nu1, nu2)), window_s)
+    a = math.exp(-(t_us - fit.t_us) * 1e-6 / window_s)
+    aa = a * a
+    n0, n1, n2 = fit.nu_sum.tolist()
+    w0, w1, w2 = fit.w2_sum.tolist()
+    return Fit(AXES3, np.array((a * n0 + nu0, a * n1 + nu1, a * n2 + nu2)),
+               np.array((aa * w0 + 1.0, aa * w1 + 1.0, aa * w2 + 1.0)), t_us)
+
+
+def fit_inflation3(fit: Fit) -> float:
+    """``fit.inflation()`` on floats for the loose filter's Fit (three axes, or none yet): the same number
+    (numpy's sum and dot product of three values are the left-to-right sums, checked in the tests)."""
+    if fit.key is not AXES3:
+        return fit.inflation()
+    n0, n1, n2 = fit.nu_sum.tolist()
+    w0, w1, w2 = fit.w2_sum.tolist()
+    den = w0 + w1 + w2
+    if not den > 0.0:
+        return 1.0
+    k = (n0 * n0 + n1 * n1 + n2 * n2) / den
+    return k if k > 1.0 else 1.0
+
+
 def accuracy_inflation(fit: Fit | None, window_s: float) -> float:
     """The factor (≥ 1) on the reported position variances: ``fit``'s, 1 without one or when
     ``window_s`` is 0 (report the covariance as it is)."""
