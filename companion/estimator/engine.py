@@ -36,7 +36,7 @@ import numpy as np
 from companion.estimator import _core, methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import Fit, Scatter, fit_add3
+from companion.estimator.consistency import Fit, Scatter, Scatter1, fit_add3
 from companion.estimator.history import Integrals, finite3
 from companion.estimator.timeline import Timeline
 
@@ -123,7 +123,7 @@ class Fusion(NamedTuple):
     ramp: bool = False
     # the fused fixes' own horizontal scatter and correlation (the reported accuracy's floor, ``consistency``)
     scatter: Scatter = Scatter()
-    scatter_v: Scatter = Scatter()  # the same vertically
+    scatter_v: Scatter1 = Scatter1()  # the same vertically (one axis)
 
 
 class Snapshot(NamedTuple):
@@ -313,8 +313,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                       v_smooth=(x[3], x[4], x[5]), bias_scale=f,
                       scatter=Scatter().add(t_us, (z[0], z[1]), (x[3], x[4]), self._window_s)
                       if self._window_s > 0.0 else Scatter(),
-                      scatter_v=Scatter().add(t_us, (z[2], z[2]), (x[5], x[5]), self._window_s)
-                      if self._window_s > 0.0 else Scatter())
+                      scatter_v=Scatter1().add(t_us, z[2], x[5], self._window_s)
+                      if self._window_s > 0.0 else Scatter1())
 
     def _fuse(self, prev: Fusion, t_us: int, fix: _Fix) -> Fusion:
         """Predict the last entry to the fix's time, test it there and fuse it (Algorithm 1, lines
@@ -449,8 +449,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             z_h = (x_prior[0] + x_prior[6] + y_fused[0], x_prior[1] + x_prior[7] + y_fused[1])
             scatter = scatter.add(t_us, z_h, v_h, self._window_s)
             v_d = zv[2] if vel_ok and zv is not None and zv[2] == zv[2] else x_post[5]
-            z_d = x_prior[2] + x_prior[8] + y_fused[2]  # one axis: given twice (consistency.Scatter)
-            scatter_v = scatter_v.add(t_us, (z_d, z_d), (v_d, v_d), self._window_s)
+            scatter_v = scatter_v.add(t_us, x_prior[2] + x_prior[8] + y_fused[2], v_d, self._window_s)
         # the innovation the decision was made on: relative to a held step (so a step held does not
         # widen the gate until it passes), else the fix's own
         yd = y_fused if fused_pos else (
