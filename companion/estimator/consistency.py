@@ -198,20 +198,15 @@ class Scatter(NamedTuple):
     def statistics(self) -> tuple[float, float]:
         """(``correlation()``, ``variance()``) in one pass (the floors take both)."""
         _, _, _, _, _, w, w2, s, s2, d1, d2, dw = self
-        c = _correlation(dw, d1, d2)
-        if dw <= 0.0 or w * w <= w2 * 1.000001:
-            return c, 0.0
-        m0, m1 = s[0] / w, s[1] / w
-        return c, _about_the_mean(0.5 * ((s2[0] / w - m0 * m0) + (s2[1] / w - m1 * m1)), w, w2, c)
+        return _statistics(w, w2, s[0], s2[0], s[1], s2[1], d1, d2, dw)
 
 
 class Scatter1(NamedTuple):
     """``Scatter`` of one axis (the vertical: D, m; its velocity, m/s): the statistics ``Scatter`` gives
     that axis given twice (``Scatter().add(t, (d, d), (v, v), w)``, as the filters did), the same bits
-    at less than half the work. Its sums are per axis like ``Scatter``'s (the same values); the squared
+    at about half the work. Its sums are per axis like ``Scatter``'s (the same values); the squared
     changes' sums are kept as that two-axis pooling has them, the axis's term twice (added to itself:
-    exact), so every statistic is the same computation on the same numbers (the variance: the pooled
-    mean of two equal values, 0.5 (x + x), is x exactly below 1e308)."""
+    exact), so every statistic is the same computation on the same numbers."""
 
     t_us: int = -1  # -1: no fix yet
     z: float = 0.0  # the last fix, m
@@ -253,22 +248,25 @@ class Scatter1(NamedTuple):
         return _correlation(self.d_w_sum, self.d1_sum, self.d2_sum)
 
     def statistics(self) -> tuple[float, float]:
-        """(``correlation()``, ``variance()``) in one pass."""
+        """(``correlation()``, ``variance()``) in one pass: ``Scatter``'s of the axis given twice."""
         _, _, _, _, _, w, w2, s, s2, d1, d2, dw = self
-        c = _correlation(dw, d1, d2)
-        if dw <= 0.0 or w * w <= w2 * 1.000001:
-            return c, 0.0
-        m = s / w
-        return c, _about_the_mean(s2 / w - m * m, w, w2, c)
+        return _statistics(w, w2, s, s2, s, s2, d1, d2, dw)
 
 
-def _about_the_mean(var: float, w: float, w2: float, c: float) -> float:
-    """``Scatter.variance`` from the scatter ``var`` about the window mean (weights Σw = ``w``,
-    Σw² = ``w2``) and the correlation ``c``: × 1 / (1 − c/n), at most ``SCATTER_MAX``, never below 0."""
+def _statistics(w: float, w2: float, s0: float, s20: float, s1: float, s21: float, d1: float, d2: float,
+                dw: float) -> tuple[float, float]:
+    """``Scatter.statistics`` from its sums (Σw, Σw², Σq and Σq² of each of the two axes, Σ d1, d2 and
+    their weights): (c, the scatter about the window mean N and E pooled × 1 / (1 − c/n), at most
+    ``SCATTER_MAX``, never below 0; 0 before 3 fixes)."""
+    c = _correlation(dw, d1, d2)
+    if dw <= 0.0 or w * w <= w2 * 1.000001:
+        return c, 0.0
+    m0, m1 = s0 / w, s1 / w
+    var = 0.5 * ((s20 / w - m0 * m0) + (s21 / w - m1 * m1))
     share = c * w2 / (w * w)  # c / n
     f = 1.0 / (1.0 - share) if share < 1.0 - 1.0 / SCATTER_MAX else SCATTER_MAX
     v = var * f
-    return v if v > 0.0 else 0.0  # (max(0.0, v), without the builtin's call)
+    return c, v if v > 0.0 else 0.0  # (max(0.0, v) without the builtin's call)
 
 
 def _correlation(d_w_sum: float, d1_sum: float, d2_sum: float) -> float:
