@@ -59,8 +59,8 @@ def test_a_late_fix_gives_the_in_order_accuracy(stream, method):
         assert s_late.variance() == pytest.approx(s_ref.variance(), abs=1e-9)
 
 
-def _sums(s) -> np.ndarray:
-    return np.array((*s.q, *s.q_sum, *s.q2_sum, s.w_sum, s.w2_sum, s.d1_sum, s.d2_sum, s.d_w_sum))
+def _sums(s) -> np.ndarray:  # a Scatter's (N, E) or a Scatter1's (D)
+    return np.hstack((s.q, s.q_sum, s.q2_sum, s.w_sum, s.w2_sum, s.d1_sum, s.d2_sum, s.d_w_sum))
 
 
 def _navigator(cfg: EstimatorConfig, s) -> Navigator:

@@ -1,10 +1,13 @@
 """The loose filter's per-sample speed-ups compute the same numbers, bit for bit, as what they replace:
-the consistency factor's sums on floats (``engine.fit_add3``, ``engine.fit_inflation3``) against
-``consistency.Fit``'s numpy path, and ``samples.new_nav_estimate`` against ``NavEstimate(...)``."""
+the consistency factor's sums on floats (``consistency.fit_add3``, ``consistency.fit_inflation3``)
+against ``consistency.Fit``'s numpy path, the vertical scatter of one axis (``consistency.Scatter1``) in
+the engine against the two-axis ``Scatter`` given the axis twice, and ``samples.new_nav_estimate``
+against ``NavEstimate(...)``."""
 
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -12,8 +15,8 @@ import pytest
 from companion.domain.samples import NavEstimate, new_nav_estimate
 from companion.estimator import engine as engine_module
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import Fit
-from companion.estimator.engine import _AXES, FusionEngine, fit_add3, fit_inflation3
+from companion.estimator.consistency import AXES3, Fit, Scatter, fit_add3, fit_inflation3, fix_floor
+from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, drive, multipath_stream
 
 CFG = EstimatorConfig()
@@ -29,9 +32,9 @@ def test_fit_on_floats_equals_the_numpy_fit():
     for k in range(3000):
         t += int(rng.integers(20_000, 400_000))
         nu = rng.standard_normal(3) * (3.0 if (k // 200) % 2 else 1.0) + (0.5 if k % 500 < 100 else 0.0)
-        ref = ref.add(t, _AXES, nu, 5.0)
+        ref = ref.add(t, AXES3, nu, 5.0)
         fast = fit_add3(fast, t, *nu.tolist(), 5.0)
-        assert fast.key is _AXES and fast.t_us == ref.t_us == t
+        assert fast.key is AXES3 and fast.t_us == ref.t_us == t
         assert fast.nu_sum.tolist() == ref.nu_sum.tolist() and fast.w2_sum.tolist() == ref.w2_sum.tolist()
         assert fit_inflation3(fast) == ref.inflation()
         above += ref.inflation() > 1.0
@@ -45,7 +48,7 @@ def test_the_engine_fit_equals_the_numpy_fit(monkeypatch):
     fast = FusionEngine(CFG, "second-order", context=OPEN_SKY)
     drive(stream, fast, stream.fix_t_us)
     monkeypatch.setattr(engine_module, "fit_add3",
-                        lambda fit, t, a, b, c, w: fit.add(t, _AXES, np.array((a, b, c)), w))
+                        lambda fit, t, a, b, c, w: fit.add(t, AXES3, np.array((a, b, c)), w))
     ref = FusionEngine(CFG, "second-order", context=OPEN_SKY)
     drive(stream, ref, stream.fix_t_us)
     assert len(fast.entries) == len(ref.entries) > 40  # (the last history_s of them)
@@ -55,6 +58,46 @@ def test_the_engine_fit_equals_the_numpy_fit(monkeypatch):
         assert a.fit.w2_sum.tolist() == b.fit.w2_sum.tolist()
         assert fit_inflation3(a.fit) == b.fit.inflation()
     assert max(e.fit.inflation() for e in ref.entries) > 1.5
+
+
+class _TwoEqualAxes(NamedTuple):
+    """The vertical scatter as the engine kept it before ``Scatter1``: a two-axis ``Scatter`` given the
+    one axis twice."""
+
+    s: Scatter = Scatter()
+
+    def add(self, t_us: int, z: float, v: float, window_s: float) -> _TwoEqualAxes:
+        return _TwoEqualAxes(self.s.add(t_us, (z, z), (v, v), window_s))
+
+    def variance(self) -> float:
+        return self.s.variance()
+
+    def correlation(self) -> float:
+        return self.s.correlation()
+
+
+def test_the_engine_vertical_scatter_equals_two_equal_axes(monkeypatch):
+    """On a stream with multipath segments (the fixes correlated), every entry's vertical scatter
+    (``consistency.Scatter1``) holds the sums, and gives the floor (``fix_floor``), of the same engine
+    keeping a two-axis ``Scatter`` of the vertical given twice, bit for bit; the states are the same."""
+    stream = multipath_stream(np.random.default_rng(7), CFG, [(6.0, 0.0), (10.0, 1.2)])
+    fast = FusionEngine(CFG, "second-order", context=OPEN_SKY)
+    drive(stream, fast, stream.fix_t_us)
+    monkeypatch.setattr(engine_module, "Scatter1", _TwoEqualAxes)
+    ref = FusionEngine(CFG, "second-order", context=OPEN_SKY)
+    drive(stream, ref, stream.fix_t_us)
+    assert len(fast.entries) == len(ref.entries) > 40
+    for a, b in zip(fast.entries, ref.entries, strict=True):
+        sa, sb = a.scatter_v, b.scatter_v.s
+        assert a.t_us == b.t_us and a.x == b.x and sa.t_us == sb.t_us
+        assert (sa.q, sa.q_sum, sa.q2_sum) == (sb.q[0], sb.q_sum[0], sb.q2_sum[0])
+        assert (sa.q, sa.q_sum, sa.q2_sum) == (sb.q[1], sb.q_sum[1], sb.q2_sum[1])
+        assert (sa.w_sum, sa.w2_sum, sa.d1_sum, sa.d2_sum, sa.d_w_sum) == (
+            sb.w_sum, sb.w2_sum, sb.d1_sum, sb.d2_sum, sb.d_w_sum)
+        assert fix_floor(sa, a.r_nominal_m2[2]) == fix_floor(sb, b.r_nominal_m2[2])
+        assert sa.variance() == sb.variance() and sa.correlation() == sb.correlation()
+    last = fast.entries[-1].scatter_v
+    assert last.correlation() > 1.0 and last.variance() > 0.0  # not a trivial 1 = 1
 
 
 @pytest.mark.parametrize("kwargs", [{}, {"pos_valid": False, "gnss_resets": 3, "vel_test_ratio": 0.5}])

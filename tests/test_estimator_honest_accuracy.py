@@ -10,7 +10,16 @@ import numpy as np
 import pytest
 
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import Fit, Scatter, accuracy_inflation, honest_horizontal
+from companion.estimator.consistency import (
+    C_MAX,
+    Fit,
+    Scatter,
+    Scatter1,
+    accuracy_inflation,
+    fix_floor,
+    honest_horizontal,
+    snapshot_floor,
+)
 from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, consistent_stream, drive
 
@@ -125,3 +134,50 @@ def test_the_floor_is_one_fix_at_most_and_never_below_p_times_k():
     np.testing.assert_allclose(honest_horizontal(tiny, 2.0, s, 4.0), tiny * 2.0 * s.correlation())
     big = np.array((50.0, 60.0))
     np.testing.assert_allclose(honest_horizontal(big, 1.5, s, 4.0), big * 1.5)  # never below k P
+
+
+def test_one_axis_scatter_is_two_equal_axes_bit_for_bit():
+    """``Scatter1`` against ``Scatter`` given the same axis twice (how the vertical was kept before), over
+    a seeded random sequence: fixes at 2.5-20 Hz with white, random-walk and stationary stretches (the
+    changes of q exactly 0), gaps of 3 windows (the window expired), of 720 windows (the decay a
+    subnormal) and of 1000 (a = 0), and restarts from empty (a reset): after every fix each sum equals
+    the two-axis sum of either axis (the squared changes' pooled sums), and the variance, the correlation
+    (alone and together, ``statistics``) and both floors (``fix_floor``, ``snapshot_floor``) are the same
+    bits."""
+    rng = np.random.default_rng(2026)
+    window = 5.0
+    one, two, t, drift = Scatter1(), Scatter(), 1_000_000, 0.0
+    seen = {"c=1": 0, "1<c<C_MAX": 0, "c=C_MAX": 0, "s2>0": 0, "s2=0": 0}
+    for i in range(6000):
+        if i % 1500 == 1499:  # a reset: both start again
+            one, two = Scatter1(), Scatter()
+        gap = 1_000_000 * {700: 3.0 * window, 2100: 720.0 * window, 3300: 1000.0 * window}.get(i, 0.0)
+        t += int(gap) or int(rng.integers(50_000, 400_000))
+        phase = (i // 250) % 4
+        if phase == 3:  # stationary: the same fix, no motion
+            z, v = 12.5, 0.0
+        else:
+            drift += 0.05 * rng.standard_normal() if phase == 1 else 0.0
+            v = float(rng.normal(-3.0, 0.1))  # the motion, roughly known
+            z = float(-3.0 * t * 1e-6 + drift + (0.3 if phase != 2 else 3.0) * rng.standard_normal())
+        one, two = one.add(t, z, v, window), two.add(t, (z, z), (v, v), window)
+        assert one.t_us == two.t_us and (one.z, one.v) == (two.z[0], two.v[0]) == (two.z[1], two.v[1])
+        assert (one.q_prev is None) == (two.q_prev is None)
+        if one.q_prev is not None:
+            assert one.q_prev == two.q_prev[0] == two.q_prev[1]
+        for ax in (0, 1):
+            assert (one.q, one.q_sum, one.q2_sum) == (two.q[ax], two.q_sum[ax], two.q2_sum[ax])
+        assert (one.w_sum, one.w2_sum, one.d1_sum, one.d2_sum, one.d_w_sum) == (
+            two.w_sum, two.w2_sum, two.d1_sum, two.d2_sum, two.d_w_sum)
+        c, s2 = one.correlation(), one.variance()
+        assert c == two.correlation() and s2 == two.variance()
+        assert one.statistics() == two.statistics() == (c, s2)  # (both at once: the floors')
+        r = float(rng.choice((0.04, 1.0, math.inf)))
+        assert fix_floor(one, r) == fix_floor(two, r)
+        assert snapshot_floor(one, r, 1.7) == snapshot_floor(two, r, 1.7)
+        seen["c=1"] += c == 1.0
+        seen["1<c<C_MAX"] += 1.0 < c < C_MAX
+        seen["c=C_MAX"] += c == C_MAX
+        seen["s2>0"] += s2 > 0.0
+        seen["s2=0"] += s2 == 0.0
+    assert min(seen.values()) > 5, seen  # every branch of both statistics compared

@@ -78,6 +78,37 @@ class Fit(NamedTuple):
         return max(1.0, float(self.nu_sum @ self.nu_sum) / den) if den > 0.0 else 1.0
 
 
+AXES3 = np.arange(3)  # the loose filter's Fit channels of a fix: N, E, D (fit_add3's key, by identity)
+
+
+def fit_add3(fit: Fit, t_us: int, nu0: float, nu1: float, nu2: float, window_s: float) -> Fit:
+    """``fit.add(t_us, AXES3, (nu0, nu1, nu2), window_s)`` (``window_s`` > 0), the same numbers: once
+    ``fit`` holds the three axes, its sums decayed and added on floats (the per-element operations of
+    ``Fit.add``'s numpy path, without its array arithmetic at every fix: the loose filter's)."""
+    if fit.key is not AXES3:  # the first fix (an empty Fit): Fit.add's general path
+        return fit.add(t_us, AXES3, np.array((nu0, nu1, nu2)), window_s)
+    a = math.exp(-(t_us - fit.t_us) * 1e-6 / window_s)
+    aa = a * a
+    n0, n1, n2 = fit.nu_sum.tolist()
+    w0, w1, w2 = fit.w2_sum.tolist()
+    return Fit(AXES3, np.array((a * n0 + nu0, a * n1 + nu1, a * n2 + nu2)),
+               np.array((aa * w0 + 1.0, aa * w1 + 1.0, aa * w2 + 1.0)), t_us)
+
+
+def fit_inflation3(fit: Fit) -> float:
+    """``fit.inflation()`` on floats for the loose filter's Fit (three axes, or none yet): the same number
+    (numpy's sum and dot product of three values are the left-to-right sums, checked in the tests)."""
+    if fit.key is not AXES3:
+        return fit.inflation()
+    n0, n1, n2 = fit.nu_sum.tolist()
+    w0, w1, w2 = fit.w2_sum.tolist()
+    den = w0 + w1 + w2
+    if not den > 0.0:
+        return 1.0
+    k = (n0 * n0 + n1 * n1 + n2 * n2) / den
+    return k if k > 1.0 else 1.0
+
+
 def accuracy_inflation(fit: Fit | None, window_s: float) -> float:
     """The factor (≥ 1) on the reported position variances: ``fit``'s, 1 without one or when
     ``window_s`` is 0 (report the covariance as it is)."""
@@ -96,6 +127,11 @@ def check_accuracy_window(window_s: float) -> None:
         raise ValueError(f"accuracy_window_s: must be a finite number >= 0, got {window_s!r}")
 
 
+# a NamedTuple from all its fields in order without its generated __new__'s Python call (Scatter.add and
+# Scatter1.add at every fix; what that __new__ does)
+_new = tuple.__new__
+
+
 class Scatter(NamedTuple):
     """The fused fixes' own horizontal scatter over the last ``window_s``, independent of the filter's
     position (docs/estimator.md, "Reported accuracy"). Each fix less the motion since the first one
@@ -111,10 +147,9 @@ class Scatter(NamedTuple):
       E[(q_i − q_i−1)²] (exact for that process; a drift of the motion removed is second order over two
       fixes). 1 for independent fixes, at most ``C_MAX``.
 
-    One axis alone (the vertical) is given as two equal axes, (d, d) with (v_d, v_d): the pooled
-    statistics of two equal axes are exactly that axis's. The fixes may be a receiver's (the loose
-    filter's) or the tight filter's per-epoch snapshot positions (``companion.tight.engine``): any series
-    of positions independent of the filter that it averages."""
+    One axis alone (the vertical): ``Scatter1``, the same statistics. The fixes may be a receiver's (the
+    loose filter's) or the tight filter's per-epoch snapshot positions (``companion.tight.engine``): any
+    series of positions independent of the filter that it averages."""
 
     t_us: int = -1  # -1: no fix yet
     z: tuple[float, float] = (0.0, 0.0)  # the last fix (N, E), m
@@ -132,48 +167,118 @@ class Scatter(NamedTuple):
     def add(self, t_us: int, z: tuple[float, float], v: tuple[float, float], window_s: float) -> Scatter:
         """The fix ``z`` (N, E; m) with the velocity ``v`` (m/s) at it added, the older sums decayed by
         exp(−Δt / window_s)."""
-        if self.t_us < 0:
+        t0, z0, v0, q, qp, w, w2, s, s2, d1, d2, dw = self  # one unpacking (a field's lookup costs more)
+        if t0 < 0:
             return Scatter(t_us, z, v, (0.0, 0.0), None, 1.0, 1.0, (0.0, 0.0), (0.0, 0.0))
-        dt = (t_us - self.t_us) * 1e-6
+        dt = (t_us - t0) * 1e-6
         a = math.exp(-dt / window_s)
         h = 0.5 * dt
-        q0 = self.q[0] + (z[0] - self.z[0]) - h * (v[0] + self.v[0])
-        q1 = self.q[1] + (z[1] - self.z[1]) - h * (v[1] + self.v[1])
-        s, s2 = self.q_sum, self.q2_sum
-        d1, d2, dw = a * self.d1_sum, a * self.d2_sum, a * self.d_w_sum
-        qp = self.q_prev
+        q0 = q[0] + (z[0] - z0[0]) - h * (v[0] + v0[0])
+        q1 = q[1] + (z[1] - z0[1]) - h * (v[1] + v0[1])
+        d1, d2, dw = a * d1, a * d2, a * dw
         if qp is not None:
-            d1 += (q0 - self.q[0]) ** 2 + (q1 - self.q[1]) ** 2
+            d1 += (q0 - q[0]) ** 2 + (q1 - q[1]) ** 2
             d2 += (q0 - qp[0]) ** 2 + (q1 - qp[1]) ** 2
             dw += 1.0
-        return Scatter(t_us, z, v, (q0, q1), self.q, a * self.w_sum + 1.0, a * a * self.w2_sum + 1.0,
-                       (a * s[0] + q0, a * s[1] + q1), (a * s2[0] + q0 * q0, a * s2[1] + q1 * q1), d1, d2, dw)
+        s, s2 = (a * s[0] + q0, a * s[1] + q1), (a * s2[0] + q0 * q0, a * s2[1] + q1 * q1)
+        return _new(Scatter, (t_us, z, v, (q0, q1), q, a * w + 1.0, a * a * w2 + 1.0, s, s2, d1, d2, dw))
 
     def variance(self) -> float:
         """One fix's error variance per horizontal axis (m², N and E pooled) from the scatter about the
         window mean: that scatter is short of it by the share of the window mean, c / n for ``n`` = w² / Σw²
         fixes of correlation ``c`` (``correlation()``; n / (n − 1) for independent fixes), so × 1 / (1 − c/n),
         at most ``SCATTER_MAX``; 0 before 3 fixes."""
-        w, w2 = self.w_sum, self.w2_sum
-        if self.d_w_sum <= 0.0 or w * w <= w2 * 1.000001:
-            return 0.0
-        m0, m1 = self.q_sum[0] / w, self.q_sum[1] / w
-        var = 0.5 * ((self.q2_sum[0] / w - m0 * m0) + (self.q2_sum[1] / w - m1 * m1))
-        share = self.correlation() * w2 / (w * w)  # c / n
-        f = 1.0 / (1.0 - share) if share < 1.0 - 1.0 / SCATTER_MAX else SCATTER_MAX
-        return max(0.0, var * f)
+        return self.statistics()[1]
 
     def correlation(self) -> float:
         """c in [1, C_MAX]: the fixes' errors' variance inflation for a mean over many of them; 1 before
         3 fixes."""
-        if self.d_w_sum < 1.5 or self.d1_sum <= 0.0:
-            return 1.0
-        r = self.d2_sum / self.d1_sum  # 1 + ρ
-        if r <= 1.0:
-            return 1.0
-        if r >= 2.0 * C_MAX / (C_MAX + 1.0):  # (1 + ρ)/(1 − ρ) = r / (2 − r) ≥ C_MAX
-            return C_MAX
-        return r / (2.0 - r)
+        return _correlation(self.d_w_sum, self.d1_sum, self.d2_sum)
+
+    def statistics(self) -> tuple[float, float]:
+        """(``correlation()``, ``variance()``) in one pass (the floors take both)."""
+        _, _, _, _, _, w, w2, s, s2, d1, d2, dw = self
+        return _statistics(w, w2, s[0], s2[0], s[1], s2[1], d1, d2, dw)
+
+
+class Scatter1(NamedTuple):
+    """``Scatter`` of one axis (the vertical: D, m; its velocity, m/s): the statistics ``Scatter`` gives
+    that axis given twice (``Scatter().add(t, (d, d), (v, v), w)``, as the filters did), the same bits
+    at about half the work. Its sums are per axis like ``Scatter``'s (the same values); the squared
+    changes' sums are kept as that two-axis pooling has them, the axis's term twice (added to itself:
+    exact), so every statistic is the same computation on the same numbers."""
+
+    t_us: int = -1  # -1: no fix yet
+    z: float = 0.0  # the last fix, m
+    v: float = 0.0  # the velocity at it, m/s
+    q: float = 0.0  # the last fix less the motion since the first
+    q_prev: float | None = None  # the one before (None: a single fix so far)
+    w_sum: float = 0.0
+    w2_sum: float = 0.0
+    q_sum: float = 0.0
+    q2_sum: float = 0.0
+    d1_sum: float = 0.0  # Σ w 2 (q_i − q_i−1)² (the axis's term twice: Scatter's pooled sum)
+    d2_sum: float = 0.0  # Σ w 2 (q_i − q_i−2)², over the same fixes
+    d_w_sum: float = 0.0  # their weights
+
+    def add(self, t_us: int, z: float, v: float, window_s: float) -> Scatter1:
+        """The fix ``z`` (m) with the velocity ``v`` (m/s) at it added, the older sums decayed by
+        exp(−Δt / window_s)."""
+        t0, z0, v0, q0, qp, w, w2, s, s2, d1, d2, dw = self  # one unpacking (a field's lookup costs more)
+        if t0 < 0:
+            return Scatter1(t_us, z, v, 0.0, None, 1.0, 1.0, 0.0, 0.0)
+        dt = (t_us - t0) * 1e-6
+        a = math.exp(-dt / window_s)
+        q = q0 + (z - z0) - (0.5 * dt) * (v + v0)
+        d1, d2, dw = a * d1, a * d2, a * dw
+        if qp is not None:
+            e1, e2 = (q - q0) ** 2, (q - qp) ** 2
+            d1 += e1 + e1
+            d2 += e2 + e2
+            dw += 1.0
+        return _new(Scatter1, (t_us, z, v, q, q0, a * w + 1.0, a * a * w2 + 1.0, a * s + q, a * s2 + q * q,
+                               d1, d2, dw))
+
+    def variance(self) -> float:
+        """One fix's error variance (m²): ``Scatter.variance`` of one axis."""
+        return self.statistics()[1]
+
+    def correlation(self) -> float:
+        """``Scatter.correlation`` of one axis."""
+        return _correlation(self.d_w_sum, self.d1_sum, self.d2_sum)
+
+    def statistics(self) -> tuple[float, float]:
+        """(``correlation()``, ``variance()``) in one pass: ``Scatter``'s of the axis given twice."""
+        _, _, _, _, _, w, w2, s, s2, d1, d2, dw = self
+        return _statistics(w, w2, s, s2, s, s2, d1, d2, dw)
+
+
+def _statistics(w: float, w2: float, s0: float, s20: float, s1: float, s21: float, d1: float, d2: float,
+                dw: float) -> tuple[float, float]:
+    """``Scatter.statistics`` from its sums (Σw, Σw², Σq and Σq² of each of the two axes, Σ d1, d2 and
+    their weights): (c, the scatter about the window mean N and E pooled × 1 / (1 − c/n), at most
+    ``SCATTER_MAX``, never below 0; 0 before 3 fixes)."""
+    c = _correlation(dw, d1, d2)
+    if dw <= 0.0 or w * w <= w2 * 1.000001:
+        return c, 0.0
+    m0, m1 = s0 / w, s1 / w
+    var = 0.5 * ((s20 / w - m0 * m0) + (s21 / w - m1 * m1))
+    share = c * w2 / (w * w)  # c / n
+    f = 1.0 / (1.0 - share) if share < 1.0 - 1.0 / SCATTER_MAX else SCATTER_MAX
+    v = var * f
+    return c, v if v > 0.0 else 0.0  # (max(0.0, v) without the builtin's call)
+
+
+def _correlation(d_w_sum: float, d1_sum: float, d2_sum: float) -> float:
+    """``Scatter.correlation`` from its sums."""
+    if d_w_sum < 1.5 or d1_sum <= 0.0:
+        return 1.0
+    r = d2_sum / d1_sum  # 1 + ρ
+    if r <= 1.0:
+        return 1.0
+    if r >= 2.0 * C_MAX / (C_MAX + 1.0):  # (1 + ρ)/(1 − ρ) = r / (2 − r) ≥ C_MAX
+        return C_MAX
+    return r / (2.0 - r)
 
 
 def honest_horizontal(var_ne: np.ndarray, k: float, scatter: Scatter | None, r_h_m2: float) -> np.ndarray:
@@ -187,15 +292,15 @@ def honest_horizontal(var_ne: np.ndarray, k: float, scatter: Scatter | None, r_h
     return floored(var_ne, k, *fix_floor(scatter, r_h_m2))
 
 
-def fix_floor(scatter: Scatter, r_h_m2: float) -> tuple[float, float]:
+def fix_floor(scatter: Scatter | Scatter1, r_h_m2: float) -> tuple[float, float]:
     """(c, σ²) of ``honest_horizontal``: the fixes' correlation and one fix's variance (m²)."""
-    s2 = scatter.variance()
+    c, s2 = scatter.statistics()
     if r_h_m2 > s2 and math.isfinite(r_h_m2):
         s2 = r_h_m2
-    return scatter.correlation(), s2
+    return c, s2
 
 
-def snapshot_floor(scatter: Scatter, r_m2: float, k: float) -> tuple[float, float]:
+def snapshot_floor(scatter: Scatter | Scatter1, r_m2: float, k: float) -> tuple[float, float]:
     """(c', σ²) for ``floored_axis`` from a filter's own per-epoch snapshot positions (the tight filter's:
     independent of its state, each with the variance ``r_m2`` its weights give it): σ² as ``fix_floor``,
     and c' such that the report is V = max(k P, min(c max(1, s²/r) P, σ²)), s² the snapshots' scatter
@@ -204,9 +309,10 @@ def snapshot_floor(scatter: Scatter, r_m2: float, k: float) -> tuple[float, floa
     That is the snapshots' side of the diagnosis k P makes from the innovations (which miss what the
     filter follows): the larger of the two is reported, the snapshots' side at most one snapshot's
     variance. Without a stated variance, c alone (``fix_floor``'s rule with k = 1)."""
-    c, s2 = fix_floor(scatter, r_m2)
+    c, var = scatter.statistics()
+    s2 = r_m2 if r_m2 > var and math.isfinite(r_m2) else var  # fix_floor's
     if c > 1.0 and r_m2 > 0.0 and math.isfinite(r_m2):
-        ratio = scatter.variance() / r_m2
+        ratio = var / r_m2
         c = c * ratio if ratio > 1.0 else c
     return c / k, s2
 

@@ -36,7 +36,7 @@ import numpy as np
 from companion.estimator import _core, methods, model
 from companion.estimator.belief import InnovationTerms, Vec3
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import Fit, Scatter
+from companion.estimator.consistency import Fit, Scatter, Scatter1, fit_add3
 from companion.estimator.history import Integrals, finite3
 from companion.estimator.timeline import Timeline
 
@@ -123,7 +123,7 @@ class Fusion(NamedTuple):
     ramp: bool = False
     # the fused fixes' own horizontal scatter and correlation (the reported accuracy's floor, ``consistency``)
     scatter: Scatter = Scatter()
-    scatter_v: Scatter = Scatter()  # the same vertically
+    scatter_v: Scatter1 = Scatter1()  # the same vertically (one axis)
 
 
 class Snapshot(NamedTuple):
@@ -313,8 +313,8 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
                       v_smooth=(x[3], x[4], x[5]), bias_scale=f,
                       scatter=Scatter().add(t_us, (z[0], z[1]), (x[3], x[4]), self._window_s)
                       if self._window_s > 0.0 else Scatter(),
-                      scatter_v=Scatter().add(t_us, (z[2], z[2]), (x[5], x[5]), self._window_s)
-                      if self._window_s > 0.0 else Scatter())
+                      scatter_v=Scatter1().add(t_us, z[2], x[5], self._window_s)
+                      if self._window_s > 0.0 else Scatter1())
 
     def _fuse(self, prev: Fusion, t_us: int, fix: _Fix) -> Fusion:
         """Predict the last entry to the fix's time, test it there and fuse it (Algorithm 1, lines
@@ -449,8 +449,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
             z_h = (x_prior[0] + x_prior[6] + y_fused[0], x_prior[1] + x_prior[7] + y_fused[1])
             scatter = scatter.add(t_us, z_h, v_h, self._window_s)
             v_d = zv[2] if vel_ok and zv is not None and zv[2] == zv[2] else x_post[5]
-            z_d = x_prior[2] + x_prior[8] + y_fused[2]  # one axis: given twice (consistency.Scatter)
-            scatter_v = scatter_v.add(t_us, (z_d, z_d), (v_d, v_d), self._window_s)
+            scatter_v = scatter_v.add(t_us, x_prior[2] + x_prior[8] + y_fused[2], v_d, self._window_s)
         # the innovation the decision was made on: relative to a held step (so a step held does not
         # widen the gate until it passes), else the fix's own
         yd = y_fused if fused_pos else (
@@ -729,35 +728,6 @@ _Hph = tuple[Vec3, Vec3, Vec3]  # H P⁻ Hᵀ (3×3, nested)
 _NAN3: Vec3 = (math.nan, math.nan, math.nan)
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 _INF = math.inf
-_AXES = np.arange(3)  # the Fit channels of a fix: N, E, D
-
-
-def fit_add3(fit: Fit, t_us: int, nu0: float, nu1: float, nu2: float, window_s: float) -> Fit:
-    """``fit.add(t_us, _AXES, (nu0, nu1, nu2), window_s)`` (``window_s`` > 0), the same numbers: once
-    ``fit`` holds the three axes, its sums decayed and added on floats (the per-element operations of
-    ``Fit.add``'s numpy path, without its array arithmetic at every fix)."""
-    if fit.key is not _AXES:  # the first fix (an empty Fit): Fit.add's general path
-        return fit.add(t_us, _AXES, np.array((nu0, nu1, nu2)), window_s)
-    a = math.exp(-(t_us - fit.t_us) * 1e-6 / window_s)
-    aa = a * a
-    n0, n1, n2 = fit.nu_sum.tolist()
-    w0, w1, w2 = fit.w2_sum.tolist()
-    return Fit(_AXES, np.array((a * n0 + nu0, a * n1 + nu1, a * n2 + nu2)),
-               np.array((aa * w0 + 1.0, aa * w1 + 1.0, aa * w2 + 1.0)), t_us)
-
-
-def fit_inflation3(fit: Fit) -> float:
-    """``fit.inflation()`` on floats for the loose filter's Fit (three axes, or none yet): the same number
-    (numpy's sum and dot product of three values are the left-to-right sums, checked in the tests)."""
-    if fit.key is not _AXES:
-        return fit.inflation()
-    n0, n1, n2 = fit.nu_sum.tolist()
-    w0, w1, w2 = fit.w2_sum.tolist()
-    den = w0 + w1 + w2
-    if not den > 0.0:
-        return 1.0
-    k = (n0 * n0 + n1 * n1 + n2 * n2) / den
-    return k if k > 1.0 else 1.0
 # ``push_fix``'s R of a fix whose receiver reports no accuracy: learned (Fusion.scale_*_m); also per
 # component (an infinite horizontal or vertical variance: that one learned)
 LEARN: Vec3 = (math.inf, math.inf, math.inf)

@@ -25,8 +25,8 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEsti
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import fix_floor, floored_axis, variance_scale
-from companion.estimator.engine import FusionEngine, fit_inflation3
+from companion.estimator.consistency import fit_inflation3, fix_floor, floored_axis, variance_scale
+from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
 _np_cos, _np_sin, _np_hypot = np.cos, np.sin, np.hypot  # pymap3d's trigonometry (numpy's, for its bits)

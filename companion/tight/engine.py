@@ -33,7 +33,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.estimator.consistency import Fit, Scatter
+from companion.estimator.consistency import Fit, Scatter, Scatter1
 from companion.estimator.history import Integrals, mean_between
 from companion.estimator.model import BlockPropagator
 from companion.estimator.timeline import Timeline
@@ -128,7 +128,7 @@ class Entry(NamedTuple):
     # the epochs' own snapshot positions' scatter and correlation, horizontal (N, E) and vertical, and the
     # last snapshot's own variances (horizontal per axis, vertical; m²): the reported accuracy's floor
     scatter_h: Scatter = Scatter()
-    scatter_v: Scatter = Scatter()
+    scatter_v: Scatter1 = Scatter1()
     fix_var_m2: tuple[float, float] = (math.nan, math.nan)
 
 
@@ -457,7 +457,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                     un, ue, ud = float(x[3]), float(x[4]), float(x[5])
                 w = c.accuracy_window_s
                 scatter_h = scatter_h.add(t_us, (sn, se), (un, ue), w)
-                scatter_v = scatter_v.add(t_us, (sd, sd), (ud, ud), w)  # one axis: given twice
+                scatter_v = scatter_v.add(t_us, sd, ud, w)
                 fix_var = (0.5 * (vn + ve), vd)
         t_good = t_us if n_used else prev.t_good_us
         self._n_fused += bool(n_used)
