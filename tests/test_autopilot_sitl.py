@@ -136,7 +136,6 @@ def test_arducopter_takes_off_and_holds_on_our_gps_input(tmp_path):
     assert flight["hold_truth_drift_m"] < 1.5, context  # SIMSTATE truth: held position
     s = json.loads((out / "summary.json").read_text())
     assert s["node"]["feed_gps_input_sent"] > 100 and s["samples"]["received"].get("GPS2_RAW", 0) > 0
-    sent = [m for m in tlog_messages(out / "run.tlog") if m.get_type() == "GPS_INPUT"]
     sent = {(m.lat, m.lon) for m in tlog_messages(out / "run.tlog") if m.get_type() == "GPS_INPUT"}
     gps1 = flight["gps1"][-10:]  # ArduPilot's GPS1 reports exactly the fixes we sent (degE7)
     assert len(gps1) == 10 and all(fix in sent for fix in gps1), (gps1, sorted(sent)[-3:])

@@ -3,8 +3,10 @@ boot time through SYSTEM_TIME, replace the log's fixes; ``--smartloc`` GNSS-only
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -34,8 +36,26 @@ def test_log_time_map_from_system_time():
 
 @pytest.fixture(scope="module")
 def rinex_for_quad106(tmp_path_factory):
-    """RINEX files seen from quad106's own GPS_RAW_INT positions once per second (receiver clock 10 µs)."""
-    out = tmp_path_factory.mktemp("rinex")
+    """RINEX files seen from quad106's own GPS_RAW_INT positions once per second (receiver clock 10 µs),
+    and the true positions. Written once per test run: this module and test_rinex2 read the same files
+    (deterministic); under pytest-xdist the first worker writes them under a lock, the others read."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the run's directory, shared by its workers
+    out = root / "rinex-quad106"
+    with open(root / "rinex-quad106.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not (out / "truth.npz").exists():
+            out.mkdir(exist_ok=True)
+            t_us, p = zip(*_write_rinex_for_quad106(out), strict=True)
+            np.savez(out / "truth-partial.npz", t_us=np.array(t_us, dtype=np.int64), p=np.array(p))
+            (out / "truth-partial.npz").rename(out / "truth.npz")  # complete, or absent
+    with np.load(out / "truth.npz") as saved:
+        truth = [(int(t), p) for t, p in zip(saved["t_us"], saved["p"], strict=True)]
+    return out / "q.obs", out / "q.nav", truth
+
+
+def _write_rinex_for_quad106(out: Path) -> list[tuple[int, np.ndarray]]:
     tmap = BootTimeMap.from_system_time(np.array([UNIX0_S * 1e6]), np.array([0.0]))
     t_mid = tmap.gps_s(300e6)
     st = store(t_mid)
@@ -59,7 +79,7 @@ def rinex_for_quad106(tmp_path_factory):
     kep, glo = constellation(t_mid)
     write_nav(out / "q.nav", kep, glo)
     write_obs(out / "q.obs", epochs, "GPS", glonass_channels={g.prn: g.channel for g in glo})
-    return out / "q.obs", out / "q.nav", truth
+    return truth
 
 
 def test_rinex_fixes_land_on_the_log_fixes(rinex_for_quad106):

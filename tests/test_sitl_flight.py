@@ -118,15 +118,26 @@ def test_lockstep_tlog_has_each_frame_once_monotonic_stamps_and_a_real_date(lock
     assert len(odometry) == len(set(odometry)) > 100  # one ODOMETRY per estimate time
 
 
-def test_lockstep_is_reproducible_even_when_a_companion_stalls(lockstep_flight, tmp_path):
-    """The same flight again, with the estimator stopped (SIGSTOP) for 1.5 s of wall time mid-flight,
-    as a loaded machine may deschedule it: the vehicle waits for it, and every recorded series is
-    bit-identical to the undisturbed flight."""
+def test_lockstep_is_reproducible_when_a_companion_stalls_and_bad_datagrams_are_rejected(lockstep_flight,
+                                                                                      tmp_path):
+    """The same flight again (signed with a key file), with bad datagrams and wrong-key frames sent at
+    every port at 2 s of simulated time, and the estimator stopped (SIGSTOP) for 1.5 s of wall time
+    from 5 s on, as a loaded machine may deschedule it: every bad datagram is counted and rejected, the
+    vehicle waits for the estimator, and every recorded series is bit-identical to the undisturbed
+    flight's (nothing that was rejected changed a bit). One flight for the two checks."""
+    from companion.mission import load_mission
     from simvehicle.harness.sitl.launcher import SitlOptions
+    from simvehicle.harness.sitl.supervisor import free_udp_ports
 
+    key_file = tmp_path / "key"
+    key_file.write_text("beliefnav-test-key")
     out = tmp_path / "stalled"
-    trio = Trio(out, SitlOptions(MISSION, 0, "second-order", SEED, out))
+    est_port = free_udp_ports(1)[0]
+    trio = Trio(out, SitlOptions(MISSION, 0, "second-order", SEED, out, signing_key_file=key_file),
+                estimator_bind_port=est_port)
     try:
+        trio.wait_sim_time(2.0, 30)
+        _send_bad_datagrams(trio, est_port, key_file, load_mission(MISSION).frame)
         trio.wait_sim_time(5.0, 30)
         estimator = trio.sup.children["estimator"]
         os.kill(estimator.pid, signal.SIGSTOP)
@@ -144,6 +155,44 @@ def test_lockstep_is_reproducible_even_when_a_companion_stalls(lockstep_flight, 
     assert a.keys() == b.keys()
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    # the bad datagrams: counted and rejected where they arrived
+    est = json.loads((out / "estimator.json").read_text())
+    assert vehicle["outcome"] == "reached_goal"
+    assert est["link"]["bad_signature"] >= 20  # the wrong-key GPS
+    links = vehicle["links"]
+    assert links["bridge"]["bad_signature"] >= 20  # the wrong-key setpoints
+    e = links["estimator"]
+    assert e["garbage"] >= 20 and e["bad_crc"] >= 20 and e["unknown_message"] >= 20
+    assert e["wrong_system_id"] >= 20  # correctly signed, but not our system
+
+
+def _send_bad_datagrams(trio: Trio, est_port: int, key_file: Path, home) -> None:
+    """20 rounds of: a wrong-key GPS fix to the estimator, a wrong-key setpoint to the vehicle's bridge
+    port, garbage, a bad CRC, an unknown message id and a right-key HEARTBEAT of system 42 to the
+    vehicle's estimator port."""
+    from companion.domain.samples import GnssFix, Setpoint
+    from companion.mavlink import codec as codec
+    from companion.mavlink.udp_link import read_signing_key
+
+    lat, lon, alt = home.to_geodetic(np.array([500.0, 500.0, -30.0]))
+    bad_fix = codec.encode_gnss(GnssFix(1_000_000, lat, lon, alt, 3, 12))
+    far = np.array([500.0, 500.0, -30.0])
+    bad_sp = codec.encode_setpoint(Setpoint(1_000, far, np.zeros(3), np.zeros(3)))
+    wrong, right = b"x" * 32, read_signing_key(key_file)
+    ok = _frame(codec.encode_heartbeat("companion"), 1)
+    bad_crc = bytearray(ok)
+    bad_crc[-1] ^= 0xFF
+    unknown = bytearray(ok)
+    unknown[7:10] = bytes((0x21, 0x43, 0x0E))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        for _ in range(20):
+            s.sendto(_frame(bad_fix, 1, wrong), ("127.0.0.1", est_port))
+            s.sendto(_frame(bad_sp, 1, wrong), ("127.0.0.1", trio.ports[1]))
+            s.sendto(b"\x00garbage", ("127.0.0.1", trio.ports[0]))
+            s.sendto(bytes(bad_crc), ("127.0.0.1", trio.ports[0]))
+            s.sendto(bytes(unknown), ("127.0.0.1", trio.ports[0]))
+            s.sendto(_frame(codec.encode_heartbeat("companion"), 42, right), ("127.0.0.1", trio.ports[0]))
+            time.sleep(0.01)
 
 
 def test_lockstep_sitl_agrees_with_in_process_fly(lockstep_flight):
@@ -218,56 +267,6 @@ def _frame(msg, system_id: int, key: bytes | None = None) -> bytes:
         mav.signing.sign_outgoing = True
         mav.signing.timestamp = int((time.time() - 1_420_070_400) * 100_000)
     return codec.pack(mav, msg)
-
-
-def test_bad_datagrams_and_wrong_key_are_counted_and_rejected(tmp_path):
-    from companion.domain.samples import GnssFix, Setpoint
-    from companion.mavlink import codec as codec
-    from companion.mavlink.udp_link import read_signing_key
-    from companion.mission import load_mission
-    from simvehicle.harness.sitl.launcher import SitlOptions
-    from simvehicle.harness.sitl.supervisor import free_udp_ports
-
-    key_file = tmp_path / "key"
-    key_file.write_text("beliefnav-test-key")
-    out = tmp_path / "run"
-    opts = SitlOptions(MISSION, 0, "second-order", 4, out, route_duration_s(MISSION, 0) + 20,
-                       signing_key_file=key_file)
-    est_port = free_udp_ports(1)[0]
-    trio = Trio(out, opts, estimator_bind_port=est_port)
-    try:
-        trio.wait_sim_time(2.0, 30)
-        home = load_mission(MISSION).frame
-        lat, lon, alt = home.to_geodetic(np.array([500.0, 500.0, -30.0]))
-        bad_fix = codec.encode_gnss(GnssFix(1_000_000, lat, lon, alt, 3, 12))
-        far = np.array([500.0, 500.0, -30.0])
-        bad_sp = codec.encode_setpoint(Setpoint(1_000, far, np.zeros(3), np.zeros(3)))
-        wrong, right = b"x" * 32, read_signing_key(key_file)
-        ok = _frame(codec.encode_heartbeat("companion"), 1)
-        bad_crc = bytearray(ok)
-        bad_crc[-1] ^= 0xFF
-        unknown = bytearray(ok)
-        unknown[7:10] = bytes((0x21, 0x43, 0x0E))
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            for _ in range(20):
-                s.sendto(_frame(bad_fix, 1, wrong), ("127.0.0.1", est_port))
-                s.sendto(_frame(bad_sp, 1, wrong), ("127.0.0.1", trio.ports[1]))
-                s.sendto(b"\x00garbage", ("127.0.0.1", trio.ports[0]))
-                s.sendto(bytes(bad_crc), ("127.0.0.1", trio.ports[0]))
-                s.sendto(bytes(unknown), ("127.0.0.1", trio.ports[0]))
-                s.sendto(_frame(codec.encode_heartbeat("companion"), 42, right), ("127.0.0.1", trio.ports[0]))
-                time.sleep(0.01)
-        vehicle = trio.wait_vehicle(50)
-    finally:
-        trio.stop()
-    est = json.loads((out / "estimator.json").read_text())
-    assert vehicle["outcome"] == "reached_goal"
-    assert est["link"]["bad_signature"] >= 20  # the wrong-key GPS
-    links = vehicle["links"]
-    assert links["bridge"]["bad_signature"] >= 20  # the wrong-key setpoints
-    e = links["estimator"]
-    assert e["garbage"] >= 20 and e["bad_crc"] >= 20 and e["unknown_message"] >= 20
-    assert e["wrong_system_id"] >= 20  # correctly signed, but not our system
 
 
 def test_companion_killed_and_restarted_vehicle_holds_and_flight_continues(tmp_path):
