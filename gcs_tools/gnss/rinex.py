@@ -250,6 +250,8 @@ def _v3_records(lines: list[str], start: int, rejected: Counter[str]) -> Iterato
         try:
             flag = int(line[31:32] or "0")
             nsat = int(line[32:35])
+            if nsat < 0:  # read as a count, it stepped back: the reader looped on this line forever
+                raise ValueError(nsat)
         except ValueError:
             rejected["bad_epoch_line"] += 1
             i += 1

@@ -1,0 +1,59 @@
+"""Fuzz the file readers (seeded): RINEX observation and navigation files, smartLoc drives, UBX logs,
+DataFlash and ULog logs, error series, truth files and the companion's config, through the real
+commands. Each damaged file ends in a result (exit 0, the damage counted) or in one line (exit 2);
+never a traceback, never a hang. And the regressions those mutations found, as known answers."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs_tools.cli import main
+from gcs_tools.gnss import rinex
+from tests.fuzz_mutations import mutations
+
+DATA = Path(__file__).parent / "data"
+OBS, NAV = DATA / "synthetic_gnss.obs", DATA / "synthetic_gnss.nav"
+REAL = DATA / "real_rinex3"
+STATION_OBS, REAL_NAV = REAL / "3034265G_excerpt.21O", REAL / "SEPT2650_excerpt.21P"
+STATION_ECEF = "-3959400.631,3385704.533,3667523.111"
+
+
+def _run(argv: list[str]) -> tuple[int, str]:
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        rc = main(argv)
+    return rc, err.getvalue()
+
+
+def _fuzz(tmp_path: Path, source: bytes, suffix: str, argv: Callable[[Path], list[str]], n: int, seed: int,
+          text: bool = True) -> dict[int, int]:
+    """Every mutation through the command: exit 0, or exit 2 with one line on stderr."""
+    rcs: dict[int, int] = {}
+    for name, data in mutations(np.random.default_rng(seed), source, n, text=text):
+        path = tmp_path / f"{name}{suffix}"
+        path.write_bytes(data)
+        rc, err = _run(argv(path))
+        assert rc in (0, 2), (name, err)
+        assert rc == 0 or (err.count("\n") == 1 and err.startswith("beliefnav: error: ")), (name, err)
+        rcs[rc] = rcs.get(rc, 0) + 1
+    return rcs
+
+
+# --- RINEX ----------------------------------------------------------------------------------------
+
+def test_rinex3_epoch_with_a_negative_satellite_count_is_counted_not_a_hang(tmp_path):
+    """``> 2024 03 07 22 01 40.0000100  0 -3``: the count stepped the reader back onto the same line
+    (an endless loop); now a bad epoch line, its satellite lines stray."""
+    lines = OBS.read_text().splitlines()
+    lines[8] = lines[8][:32] + " -3"
+    path = tmp_path / "neg.obs"
+    path.write_text("\n".join(lines) + "\n")
+    obs = rinex.read_obs(path)
+    assert len(obs.epochs) == 2
+    assert obs.rejected["bad_epoch_line"] == 1 and obs.rejected["stray_line"] == 15
