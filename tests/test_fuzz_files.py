@@ -57,3 +57,20 @@ def test_rinex3_epoch_with_a_negative_satellite_count_is_counted_not_a_hang(tmp_
     obs = rinex.read_obs(path)
     assert len(obs.epochs) == 2
     assert obs.rejected["bad_epoch_line"] == 1 and obs.rejected["stray_line"] == 15
+
+
+def test_rinex_nav_fields_out_of_range_are_bad_records(tmp_path):
+    """A GPS week of -1e308 (the toe overflowed: OverflowError) and a GLONASS frequency number of 1e308
+    (accepted, it crashed the observation reader's channel table; RINEX 2 ones run 1-24): each record
+    counted, the rest read."""
+    lines = NAV.read_text().splitlines()
+    assert lines[5].startswith("G01") and lines[285].startswith("R01")
+    lines[10] = lines[10][:42] + "-1.00000000000D+308" + lines[10][61:]  # G01's week
+    lines[287] = lines[287][:61] + " 1.00000000000D+308"  # R01's frequency number
+    path = tmp_path / "bad.nav"
+    path.write_text("\n".join(lines) + "\n")
+    nav = rinex.read_nav(path)
+    assert (len(nav.kepler), len(nav.glonass), nav.rejected) == (34, 5, {"bad_record": 2})
+    assert {e.prn for e in nav.kepler if e.system == 0} == set(range(2, 25))
+    rc, err = _run(["gnss", "spp", str(OBS), "--nav", str(path), "--out", str(tmp_path / "o")])
+    assert rc == 0, err

@@ -611,7 +611,7 @@ def _nav_records(
             break
         try:
             parse(letter, block, out)
-        except (ValueError, IndexError, UserError):
+        except (ValueError, IndexError, OverflowError, UserError):
             out.rejected["bad_record"] += 1
 
 
@@ -646,7 +646,7 @@ def _read_v4_records(lines: list[str], out: RinexNav) -> None:
         if kind == "EPH" and msg in V4_LEGACY_EPH.get(letter, ()) and block:
             try:
                 _nav_record(letter, block, out)
-            except (ValueError, IndexError, UserError):
+            except (ValueError, IndexError, OverflowError, UserError):
                 out.rejected["bad_record"] += 1
         elif kind == "ION" and letter == "G" and msg == "LNAV" and block:
             try:
@@ -703,6 +703,8 @@ def _nav_entry(
         out.rejected["sbas_skipped"] += 1
         return
     if system == System.GLONASS:
+        if not (-7 <= v[10] <= 24 and v[10] == int(v[10])):  # frequency number (RINEX 2: 1-24); 1e308 crashed
+            raise ValueError(f"GLONASS frequency number {v[10]}")
         toe = gps_from_calendar(*cal, "UTC")
         out.glonass.append(
             GlonassEphemeris(
@@ -721,6 +723,8 @@ def _nav_entry(
     scale = "BDT" if system == System.BEIDOU else "GPS"
     toc = gps_from_calendar(*cal, scale)
     toe_sow = v[11]
+    if not (0.0 <= toe_sow <= 604800.0 and 0.0 <= v[21] < 10000.0):  # a huge week overflowed the toe
+        raise ValueError(f"toe {toe_sow} s of week {v[21]}")
     week = int(v[21])
     toe = bdt_to_gps_s(week * 604800.0 + toe_sow) if system == System.BEIDOU else week * 604800.0 + toe_sow
     toe += 604800.0 * round((toc - toe) / 604800.0)  # a week number off by one at a crossover
