@@ -74,3 +74,22 @@ def test_rinex_nav_fields_out_of_range_are_bad_records(tmp_path):
     assert {e.prn for e in nav.kepler if e.system == 0} == set(range(2, 25))
     rc, err = _run(["gnss", "spp", str(OBS), "--nav", str(path), "--out", str(tmp_path / "o")])
     assert rc == 0, err
+
+
+def test_rinex_obs_doppler_and_cn0_no_receiver_gives_are_counted(tmp_path):
+    """A C/N0 of -3552 dB-Hz weighed its satellite to nothing (σ = inf): the solver's normal matrix went
+    singular (LinAlgError). NaN, inf and out-of-range Doppler and C/N0 fields are now counted; blank
+    fields (not observed) are not."""
+    lines = OBS.read_text().splitlines()
+    assert lines[9].startswith("G01") and lines[10].startswith("G04")
+    lines[9] = lines[9][:35] + "-3552.".rjust(14)  # G01's S1C
+    lines[10] = lines[10][:19] + "nan".rjust(14) + lines[10][33:]  # G04's D1C
+    lines[11] = lines[11][:19] + " " * 14 + lines[11][33:]  # G08's D1C not observed: kept
+    path = tmp_path / "bad.obs"
+    path.write_text("\n".join(lines) + "\n")
+    obs = rinex.read_obs(path)
+    assert obs.rejected == {"bad_cn0": 1, "bad_doppler": 1}
+    assert [e.n for e in obs.epochs] == [13, 15, 15]
+    assert np.isnan(obs.epochs[0].pseudorange_rate_m_s).sum() == 1
+    rc, err = _run(["gnss", "spp", str(path), "--nav", str(NAV), "--out", str(tmp_path / "o")])
+    assert rc == 0, err

@@ -44,7 +44,8 @@ Rejections are counted (``RinexObs.rejected`` / ``RinexNav.rejected``, by reason
 not RINEX 2, 3 or 4, or holds no usable record, is a one-line ``UserError``. A truncated last record is
 counted (``truncated``), the records before it are kept; a RINEX 2 epoch whose satellite list does
 not parse (e.g. more satellites announced than listed) is counted (``bad_epoch_line``) and its lines
-(``stray_line``) are not read as observations.
+(``stray_line``) are not read as observations. An observation whose Doppler or C/N0 field holds NaN,
+inf or a value no receiver gives is counted (``bad_doppler``, ``bad_cn0``), not used.
 """
 
 from __future__ import annotations
@@ -112,6 +113,8 @@ def _float(text: str) -> float:
 
 
 # the first bytes of gzip, LZW (.Z), bzip2 and zip files
+# an observation's Doppler (Hz) and C/N0 (dB-Hz) beyond these is damage, counted (bad_doppler, bad_cn0)
+MAX_DOPPLER_HZ, MAX_CN0_DBHZ = 1.0e5, 100.0
 COMPRESSED_MAGIC = (b"\x1f\x8b", b"\x1f\x9d", b"BZh", b"PK\x03\x04")
 COMPACT_RINEX_LABEL = b"CRINEX VERS   / TYPE"  # the first line of a Hatanaka-compressed file
 
@@ -447,6 +450,11 @@ def _obs_value(line: str, k: int) -> float:
     return float(v) if v else math.nan
 
 
+def _given(line: str, k: int) -> bool:
+    """Observation ``k`` is in the file (a type the header lists, its field not blank)."""
+    return k >= 0 and bool(line[3 + 16 * k : 3 + 16 * k + 14].strip())
+
+
 def _epoch(
     t: float,
     sat_lines: list[str],
@@ -474,6 +482,12 @@ def _epoch(
             continue
         if not math.isfinite(pr) or not (1.0e7 < pr < 5.0e7):
             rejected["no_pseudorange"] += 1
+            continue
+        if _given(line, c[1]) and not abs(d) < MAX_DOPPLER_HZ:
+            rejected["bad_doppler"] += 1  # a blank field is no Doppler; NaN, inf or 1e308 is damage
+            continue
+        if _given(line, c[2]) and not 0.0 <= s < MAX_CN0_DBHZ:
+            rejected["bad_cn0"] += 1  # -3552 dB-Hz weighed the satellite to nothing: a singular solve
             continue
         sysv.append(system)
         prnv.append(prn)
