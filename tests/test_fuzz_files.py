@@ -93,3 +93,33 @@ def test_rinex_obs_doppler_and_cn0_no_receiver_gives_are_counted(tmp_path):
     assert np.isnan(obs.epochs[0].pseudorange_rate_m_s).sum() == 1
     rc, err = _run(["gnss", "spp", str(path), "--nav", str(NAV), "--out", str(tmp_path / "o")])
     assert rc == 0, err
+
+
+# --- flight logs ----------------------------------------------------------------------------------
+
+def test_log_imu_beyond_full_scale_is_counted_not_fused(tmp_path):
+    """A damaged ULog sensor_combined of 1e36 m/s² was fused: the covariance went negative and the
+    replay raised (math domain error). ULog and DataFlash IMU samples beyond the MAVLink codec's full
+    scale (16 g, 35 rad/s a axis) are now counted (imu_out_of_range), as the codec counts them."""
+    from dataflash_writer import OLD_FORMATS, DataFlashWriter
+
+    from companion.domain.samples import ImuSample
+    from gcs_tools.replay.dataflash import DataFlashSource
+    from gcs_tools.replay.ulog import _imu
+
+    rows = [(0.1, 0.0, 0.0, -9.8), (0.0, 0.0, 1e36, -9.8), (40.0, 0.0, 0.0, -9.8), (float("nan"), 0, 0, 0),
+            (-34.9, 0.0, 0.0, -156.0)]
+    names = ["timestamp", *(f"gyro_rad[{i}]" for i in range(3)), *(f"accelerometer_m_s2[{i}]" for i in range(3))]
+    arr = np.array([(1000 * k, g, 0.0, 0.0, 0.0, a, f) for k, (g, _, a, f) in enumerate(rows)],
+                   dtype=[(n, "<u8" if n == "timestamp" else "<f4") for n in names])
+    got = _imu(arr)
+    assert [x if isinstance(x, str) else "ok" for x in got] == [
+        "ok", "imu_out_of_range", "imu_out_of_range", "imu_non_finite", "ok"]
+    w = DataFlashWriter()
+    w.define(*OLD_FORMATS["IMU"][:1], "IMU", *OLD_FORMATS["IMU"][1:])
+    for k, (g, _, a, f) in enumerate(rows):
+        w.add("IMU", 1000 + 20 * k, g, 0.0, 0.0, 0.0, a, f, 0, 0)
+    (tmp_path / "imu.bin").write_bytes(bytes(w.data))
+    src = DataFlashSource(tmp_path / "imu.bin")
+    assert sum(type(e) is ImuSample for e in src) == 2
+    assert src.stats.rejected["imu_out_of_range"] == 2 and src.stats.rejected["imu_non_finite"] == 1
