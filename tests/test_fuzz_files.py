@@ -123,3 +123,26 @@ def test_log_imu_beyond_full_scale_is_counted_not_fused(tmp_path):
     src = DataFlashSource(tmp_path / "imu.bin")
     assert sum(type(e) is ImuSample for e in src) == 2
     assert src.stats.rejected["imu_out_of_range"] == 2 and src.stats.rejected["imu_non_finite"] == 1
+
+
+def test_ansfl_imu_row_beyond_full_scale_is_counted_not_fused(tmp_path):
+    """An ANSFL IMU_1.csv row with Acc_X 1e30 (and one with Gyr_Y 1e30) was fused: the replay went on
+    to a track 1e27 m away, exit 0. Now counted (imu_out_of_range) and the track stays metres."""
+    import json
+
+    from ansfl_helpers import write_flight
+
+    write_flight(tmp_path / "f", seconds=8.0)
+    path = tmp_path / "f" / "IMU_1.csv"
+    lines = path.read_text().split("\n")
+    for row, col in ((200, 4), (300, 8)):
+        fields = lines[row].split(",")
+        fields[col] = "1e30"
+        lines[row] = ",".join(fields)
+    path.write_text("\n".join(lines))
+    rc, err = _run(["replay", str(tmp_path / "f"), "--gnss-errors", "none", "--out", str(tmp_path / "o"),
+                    "--no-progress", "--no-telemetry", "--no-figures"])
+    assert rc == 0, err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["samples_rejected"]["codec"]["imu_out_of_range"] == 2
+    assert s["errors"]["truth"]["error_horizontal_m"]["max"] < 20.0
