@@ -9,6 +9,7 @@ import contextlib
 import io
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -109,7 +110,8 @@ def test_log_imu_beyond_full_scale_is_counted_not_fused(tmp_path):
 
     rows = [(0.1, 0.0, 0.0, -9.8), (0.0, 0.0, 1e36, -9.8), (40.0, 0.0, 0.0, -9.8), (float("nan"), 0, 0, 0),
             (-34.9, 0.0, 0.0, -156.0)]
-    names = ["timestamp", *(f"gyro_rad[{i}]" for i in range(3)), *(f"accelerometer_m_s2[{i}]" for i in range(3))]
+    names = ["timestamp", *(f"gyro_rad[{i}]" for i in range(3)),
+             *(f"accelerometer_m_s2[{i}]" for i in range(3))]
     arr = np.array([(1000 * k, g, 0.0, 0.0, 0.0, a, f) for k, (g, _, a, f) in enumerate(rows)],
                    dtype=[(n, "<u8" if n == "timestamp" else "<f4") for n in names])
     got = _imu(arr)
@@ -146,3 +148,179 @@ def test_ansfl_imu_row_beyond_full_scale_is_counted_not_fused(tmp_path):
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert s["samples_rejected"]["codec"]["imu_out_of_range"] == 2
     assert s["errors"]["truth"]["error_horizontal_m"]["max"] < 20.0
+
+
+# --- the seeded fuzz: every reader through its command ---------------------------------------------
+
+SPP = ["gnss", "spp"]
+REPLAY_FLAGS = ["--no-progress", "--no-telemetry", "--no-figures"]
+
+
+@pytest.fixture(scope="module")
+def sources(tmp_path_factory) -> dict[str, Path]:
+    """Undamaged inputs of every reader: RINEX 2 and 4 made from the committed RINEX 3 pair, a smartLoc
+    drive, truth files, a UBX log, an error series, an ANSFL flight, a quad106 head with its RINEX."""
+    from ansfl_helpers import write_flight
+
+    from tests.gnss_helpers import RX_ECEF, T0
+    from tests.test_gnss_readers import _as_rinex4, _ubx_frames, _write_smartloc
+    from tests.test_gnss_truth import V_RX, write_csv, write_span
+    from tests.test_rinex2 import _as_rinex2
+
+    d = tmp_path_factory.mktemp("sources")
+    _, obs2, (nav2g, nav2r) = _as_rinex2(d, OBS, NAV)
+    (d / "v4.rnx").write_text(_as_rinex4(NAV.read_text()))
+    drive, gt = _write_smartloc(d)
+    t = T0 + np.arange(95.0, 106.0)
+    p = RX_ECEF + V_RX * (t - T0 - 100.0)[:, None]
+    write_span(d / "span.txt", t, p)
+    write_csv(d / "truth.csv", t, p, "week-geodetic")
+    (d / "tiny.ubx").write_bytes(_ubx_frames())
+    rng = np.random.default_rng(0)
+    rows = ["t_s,err_n_m,err_e_m,err_d_m,h_acc_m,v_acc_m"]
+    for k in range(100):
+        e = rng.normal(0.0, 3.0, 3)
+        rows.append(f"{0.2 * k:.1f},{e[0]:.3f},{e[1]:.3f},{e[2]:.3f},{abs(e[0]) + 2:.2f},{abs(e[2]) + 3:.2f}")
+    (d / "series.csv").write_text("\n".join(rows) + "\n")
+    write_flight(d / "ansfl", seconds=8.0)
+    _head_with_rinex(d)
+    return {"head": d / "head.tlog", "head_obs": d / "head.obs", "head_nav": d / "head.nav",
+            "obs2": obs2, "nav2g": nav2g, "nav2r": nav2r, "nav4": d / "v4.rnx", "drive": drive, "gt": gt,
+            "span": d / "span.txt", "truth_csv": d / "truth.csv", "ubx": d / "tiny.ubx",
+            "series": d / "series.csv", "ansfl": d / "ansfl"}
+
+
+def _head_with_rinex(d: Path) -> None:
+    """quad106's first 300 kB and RINEX files seen from its GPS_RAW_INT positions once a second (as
+    test_gnss_replay's ``rinex_for_quad106``, shorter)."""
+    import math
+
+    from companion.gnss.geometry import geodetic_to_ecef
+    from companion.gnss.timescale import BootTimeMap
+    from companion.mavlink.tlog import read_tlog
+    from gcs_tools.gnss.rinex import write_nav, write_obs
+    from tests.gnss_helpers import constellation, observe, store
+    from tests.test_fuzz_inputs import _frames
+    from tests.test_gnss_replay import QUAD106, UNIX0_S
+
+    data = QUAD106.read_bytes()[:300_000]
+    (d / "head.tlog").write_bytes(data[: _frames(data)[-1][1]])
+    tmap = BootTimeMap.from_system_time(np.array([UNIX0_S * 1e6]), np.array([0.0]))
+    fixes = [(m.time_usec, m.lat * 1e-7, m.lon * 1e-7, m.alt * 1e-3)
+             for _, m in read_tlog(d / "head.tlog", types=("GPS_RAW_INT",)) if m.fix_type >= 3]
+    t_mid = tmap.gps_s(fixes[len(fixes) // 2][0])
+    st, epochs, last = store(t_mid), [], -1
+    for t_us, lat, lon, alt in fixes:
+        if t_us // 1_000_000 != last:
+            last = t_us // 1_000_000
+            p = geodetic_to_ecef(math.radians(lat), math.radians(lon), alt)
+            epochs.append(observe(st, tmap.gps_s(t_us), p, atmosphere=False)[0])
+    kep, glo = constellation(t_mid)
+    write_nav(d / "head.nav", kep, glo)
+    write_obs(d / "head.obs", epochs, "GPS", glonass_channels={g.prn: g.channel for g in glo})
+
+
+def _spp(*args: object) -> Callable[[Path, Path], list[str]]:
+    """``gnss spp`` with the damaged file in the place of ``None``."""
+    return lambda p, out: [*SPP, *(str(p) if a is None else str(a) for a in args), "--out", str(out)]
+
+
+# (name, the undamaged file, the command with the damaged one, mutations, text)
+CASES: list[tuple[str, Callable[[dict[str, Path]], Path], Any, int, bool]] = [
+    ("rinex3_obs", lambda s: OBS, lambda s: _spp(None, "--nav", NAV), 20, True),
+    ("rinex3_nav", lambda s: NAV, lambda s: _spp(OBS, "--nav", None), 20, True),
+    ("rinex3_real_obs", lambda s: STATION_OBS,
+     lambda s: _spp(None, "--nav", REAL_NAV, f"--truth-ecef={STATION_ECEF}"), 12, True),
+    ("rinex3_real_nav", lambda s: REAL_NAV,
+     lambda s: _spp(STATION_OBS, "--nav", None, f"--truth-ecef={STATION_ECEF}"), 12, True),
+    ("rinex2_obs", lambda s: s["obs2"],
+     lambda s: _spp(None, "--nav", s["nav2g"], "--nav", s["nav2r"]), 12, True),
+    ("rinex2_gps_nav", lambda s: s["nav2g"],
+     lambda s: _spp(s["obs2"], "--nav", None, "--nav", s["nav2r"]), 8, True),
+    ("rinex2_glonass_nav", lambda s: s["nav2r"],
+     lambda s: _spp(s["obs2"], "--nav", s["nav2g"], "--nav", None), 8, True),
+    ("rinex4_nav", lambda s: s["nav4"], lambda s: _spp(OBS, "--nav", None), 8, True),
+    ("smartloc_input", lambda s: s["drive"], lambda s: _spp(None, "--truth", s["gt"]), 12, True),
+    ("smartloc_truth", lambda s: s["gt"], lambda s: _spp(s["drive"], "--truth", None), 12, True),
+    ("span_truth", lambda s: s["span"], lambda s: _spp(OBS, "--nav", NAV, "--truth", None), 8, True),
+    ("csv_truth", lambda s: s["truth_csv"], lambda s: _spp(OBS, "--nav", NAV, "--truth", None), 8, True),
+    ("ubx", lambda s: s["ubx"], lambda s: _spp(None), 12, False),
+    ("smartloc_replay_tight", lambda s: s["drive"],
+     lambda s: lambda p, out: ["replay", "--smartloc", str(p), "--truth", str(s["gt"]), "--coupling", "tight",
+                               "--out", str(out), *REPLAY_FLAGS], 6, True),
+    ("ulog", lambda s: DATA / "sample_px4_events.ulg",
+     lambda s: lambda p, out: ["replay", str(p), "--out", str(out), *REPLAY_FLAGS], 8, False),
+    ("dataflash", lambda s: DATA / "arducopter_sitl_hover.bin",
+     lambda s: lambda p, out: ["replay", str(p), "--out", str(out), *REPLAY_FLAGS], 2, False),
+    ("error_series", lambda s: s["series"],
+     lambda s: lambda p, out: ["replay", str(s["ansfl"]), "--gnss-errors", str(p), "--out", str(out),
+                               *REPLAY_FLAGS], 8, True),
+    ("ansfl_imu", lambda s: s["ansfl"] / "IMU_1.csv", lambda s: _ansfl(s, "IMU_1.csv"), 12, True),
+    ("ansfl_truth", lambda s: s["ansfl"] / "GT.csv", lambda s: _ansfl(s, "GT.csv"), 12, True),
+    ("rinex_replay_tight_obs", lambda s: s["head_obs"], lambda s: _head_replay(s, "obs"), 6, True),
+    ("rinex_replay_tight_nav", lambda s: s["head_nav"], lambda s: _head_replay(s, "nav"), 6, True),
+]
+
+
+def _ansfl(s: dict[str, Path], name: str) -> Callable[[Path, Path], list[str]]:
+    """``replay FLIGHT --gnss-errors none`` of a copy of the ANSFL flight with ``name`` damaged."""
+    def argv(p: Path, out: Path) -> list[str]:
+        flight = p.parent / f"{p.stem}_flight"
+        flight.mkdir()
+        for f in s["ansfl"].iterdir():
+            (flight / f.name).write_bytes(p.read_bytes() if f.name == name else f.read_bytes())
+        return ["replay", str(flight), "--gnss-errors", "none", "--out", str(out), *REPLAY_FLAGS]
+    return argv
+
+
+def _head_replay(s: dict[str, Path], damaged: str) -> Callable[[Path, Path], list[str]]:
+    """``replay HEAD --rinex-obs --rinex-nav --coupling tight`` with the ``damaged`` one (obs, nav)."""
+    def argv(p: Path, out: Path) -> list[str]:
+        files = {"obs": s["head_obs"], "nav": s["head_nav"], damaged: p}
+        return ["replay", str(s["head"]), "--rinex-obs", str(files["obs"]), "--rinex-nav", str(files["nav"]),
+                "--coupling", "tight", "--out", str(out), *REPLAY_FLAGS]
+    return argv
+
+
+@pytest.mark.parametrize(("name", "source", "command", "n", "text"), CASES, ids=[c[0] for c in CASES])
+def test_damaged_files_end_in_a_result_or_one_line(tmp_path, sources, name, source, command, n, text):
+    """Cuts, bit flips, junk, deleted/duplicated/swapped lines, numbers replaced by NaN/inf/huge/negative/
+    garbage or moved (time back, jumps), empty, binary junk, UTF-16: exit 0 or one line, exit 2."""
+    seed = sum(name.encode())
+    rcs = _fuzz(tmp_path, source(sources).read_bytes(), source(sources).suffix,
+                lambda p: command(sources)(p, tmp_path / "out"), n, seed, text=text)
+    assert rcs.get(2, 0) >= 2  # at least the empty file and the junk are refused
+
+
+def test_mutated_companion_configs_load_or_fail_in_one_line(tmp_path):
+    """packaging/companion.yaml mutated (as the mission files are): the options and the estimator: and
+    tight: sections load or are refused in one line (a UserError), nothing else raises."""
+    import dataclasses
+
+    from companion.autopilot.service import config_from_args
+    from companion.errors import UserError
+    from gcs_tools import companion_config
+    from gcs_tools.cli import build_parser
+
+    parser = build_parser(["companion"])
+
+    def load(path: Path) -> None:
+        args = parser.parse_args(["companion", "--config", str(path)])
+        sections = companion_config.merge(args, args._config_parser, args._option_defaults)
+        config = config_from_args(args)
+        dataclasses.replace(config, estimator=companion_config.estimator_config(sections, args.config),
+                            tight=companion_config.tight_config(sections, args.config))
+
+    source = Path(__file__).parents[1] / "packaging" / "companion.yaml"
+    load(source)
+    outcomes = {"loaded": 0, "refused": 0}
+    for name, data in mutations(np.random.default_rng(17), source.read_bytes(), 150):
+        path = tmp_path / f"{name}.yaml"
+        path.write_bytes(data)
+        try:
+            load(path)
+            outcomes["loaded"] += 1
+        except UserError as exc:
+            assert str(exc) and "\n" not in str(exc), (name, str(exc))
+            outcomes["refused"] += 1
+    assert outcomes["refused"] > 40 and sum(outcomes.values()) == 154
