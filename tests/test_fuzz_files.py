@@ -324,3 +324,17 @@ def test_mutated_companion_configs_load_or_fail_in_one_line(tmp_path):
             assert str(exc) and "\n" not in str(exc), (name, str(exc))
             outcomes["refused"] += 1
     assert outcomes["refused"] > 40 and sum(outcomes.values()) == 154
+
+
+def test_rinex_nav_orbit_inside_the_earth_or_open_is_a_bad_record(tmp_path):
+    """sqrt(A) 0 (a division by zero) and e 1.5 (NaN satellite positions) were stored as ephemerides:
+    their satellites then fell out as non-finite, uncounted. Now each record is a counted bad_record."""
+    lines = NAV.read_text().splitlines()
+    assert lines[5].startswith("G01") and lines[13].startswith("G02")
+    lines[7] = lines[7][:61] + " 0.000000000000D+00"  # G01's sqrt(A)
+    lines[15] = lines[15][:23] + " 1.500000000000D+00" + lines[15][42:]  # G02's e
+    path = tmp_path / "orbits.nav"
+    path.write_text("\n".join(lines) + "\n")
+    nav = rinex.read_nav(path)
+    assert nav.rejected == {"bad_record": 2}
+    assert {e.prn for e in nav.kepler if e.system == 0} == set(range(3, 25))

@@ -115,6 +115,7 @@ def _float(text: str) -> float:
 # the first bytes of gzip, LZW (.Z), bzip2 and zip files
 # an observation's Doppler (Hz) and C/N0 (dB-Hz) beyond these is damage, counted (bad_doppler, bad_cn0)
 MAX_DOPPLER_HZ, MAX_CN0_DBHZ = 1.0e5, 100.0
+MIN_SQRT_A = 2500.0  # √m: a semi-major axis inside the Earth (6,250 km) is damage, not a satellite
 COMPRESSED_MAGIC = (b"\x1f\x8b", b"\x1f\x9d", b"BZh", b"PK\x03\x04")
 COMPACT_RINEX_LABEL = b"CRINEX VERS   / TYPE"  # the first line of a Hatanaka-compressed file
 
@@ -739,6 +740,8 @@ def _nav_entry(
     toe_sow = v[11]
     if not (0.0 <= toe_sow <= 604800.0 and 0.0 <= v[21] < 10000.0):  # a huge week overflowed the toe
         raise ValueError(f"toe {toe_sow} s of week {v[21]}")
+    if not (v[10] > MIN_SQRT_A and 0.0 <= v[8] < 1.0):  # an orbit inside the Earth, or not closed
+        raise ValueError(f"sqrt(A) {v[10]}, e {v[8]}")
     week = int(v[21])
     toe = bdt_to_gps_s(week * 604800.0 + toe_sow) if system == System.BEIDOU else week * 604800.0 + toe_sow
     toe += 604800.0 * round((toc - toe) / 604800.0)  # a week number off by one at a crossover
