@@ -338,3 +338,23 @@ def test_rinex_nav_orbit_inside_the_earth_or_open_is_a_bad_record(tmp_path):
     nav = rinex.read_nav(path)
     assert nav.rejected == {"bad_record": 2}
     assert {e.prn for e in nav.kepler if e.system == 0} == set(range(3, 25))
+
+
+def test_smartloc_rows_no_satellite_gives_are_counted(tmp_path):
+    """A pseudorange3 row with a finite 1e308 satellite coordinate overflowed the solver (RuntimeWarnings,
+    a lost epoch, uncounted); such rows (range, satellite distance, variance, C/N0) are counted now."""
+    from gcs_tools.gnss import smartloc
+    from tests.test_gnss_readers import _write_smartloc
+
+    drive, _ = _write_smartloc(tmp_path)
+    good = smartloc.read_input(drive)
+    lines = drive.read_text().splitlines()
+    rows = [i for i, line in enumerate(lines) if line.startswith("pseudorange3 0.2 ")]
+    for i, (k, bad) in zip(rows, [(4, "1e308"), (2, "3e8"), (10, "-3552"), (3, "-1")], strict=False):
+        parts = lines[i].split()
+        parts[k] = bad
+        lines[i] = " ".join(parts)
+    drive.write_text("\n".join(lines) + "\n")
+    got = smartloc.read_input(drive)
+    assert got.rejected - good.rejected == {"out_of_range": 4}
+    assert sum(e.n for e in good.epochs) - sum(e.n for e in got.epochs) == 4
