@@ -44,7 +44,8 @@ Rejections are counted (``RinexObs.rejected`` / ``RinexNav.rejected``, by reason
 not RINEX 2, 3 or 4, or holds no usable record, is a one-line ``UserError``. A truncated last record is
 counted (``truncated``), the records before it are kept; a RINEX 2 epoch whose satellite list does
 not parse (e.g. more satellites announced than listed) is counted (``bad_epoch_line``) and its lines
-(``stray_line``) are not read as observations.
+(``stray_line``) are not read as observations. An observation whose Doppler or C/N0 field holds NaN,
+inf or a value no receiver gives is counted (``bad_doppler``, ``bad_cn0``), not used.
 """
 
 from __future__ import annotations
@@ -112,6 +113,9 @@ def _float(text: str) -> float:
 
 
 # the first bytes of gzip, LZW (.Z), bzip2 and zip files
+# an observation's Doppler (Hz) and C/N0 (dB-Hz) beyond these is damage, counted (bad_doppler, bad_cn0)
+MAX_DOPPLER_HZ, MAX_CN0_DBHZ = 1.0e5, 100.0
+MIN_SQRT_A = 2500.0  # √m: a semi-major axis inside the Earth (6,250 km) is damage, not a satellite
 COMPRESSED_MAGIC = (b"\x1f\x8b", b"\x1f\x9d", b"BZh", b"PK\x03\x04")
 COMPACT_RINEX_LABEL = b"CRINEX VERS   / TYPE"  # the first line of a Hatanaka-compressed file
 
@@ -250,6 +254,8 @@ def _v3_records(lines: list[str], start: int, rejected: Counter[str]) -> Iterato
         try:
             flag = int(line[31:32] or "0")
             nsat = int(line[32:35])
+            if nsat < 0:  # read as a count, it stepped back: the reader looped on this line forever
+                raise ValueError(nsat)
         except ValueError:
             rejected["bad_epoch_line"] += 1
             i += 1
@@ -445,6 +451,11 @@ def _obs_value(line: str, k: int) -> float:
     return float(v) if v else math.nan
 
 
+def _given(line: str, k: int) -> bool:
+    """Observation ``k`` is in the file (a type the header lists, its field not blank)."""
+    return k >= 0 and bool(line[3 + 16 * k : 3 + 16 * k + 14].strip())
+
+
 def _epoch(
     t: float,
     sat_lines: list[str],
@@ -472,6 +483,12 @@ def _epoch(
             continue
         if not math.isfinite(pr) or not (1.0e7 < pr < 5.0e7):
             rejected["no_pseudorange"] += 1
+            continue
+        if _given(line, c[1]) and not abs(d) < MAX_DOPPLER_HZ:
+            rejected["bad_doppler"] += 1  # a blank field is no Doppler; NaN, inf or 1e308 is damage
+            continue
+        if _given(line, c[2]) and not 0.0 <= s < MAX_CN0_DBHZ:
+            rejected["bad_cn0"] += 1  # -3552 dB-Hz weighed the satellite to nothing: a singular solve
             continue
         sysv.append(system)
         prnv.append(prn)
@@ -609,7 +626,7 @@ def _nav_records(
             break
         try:
             parse(letter, block, out)
-        except (ValueError, IndexError, UserError):
+        except (ValueError, IndexError, OverflowError, UserError):
             out.rejected["bad_record"] += 1
 
 
@@ -644,7 +661,7 @@ def _read_v4_records(lines: list[str], out: RinexNav) -> None:
         if kind == "EPH" and msg in V4_LEGACY_EPH.get(letter, ()) and block:
             try:
                 _nav_record(letter, block, out)
-            except (ValueError, IndexError, UserError):
+            except (ValueError, IndexError, OverflowError, UserError):
                 out.rejected["bad_record"] += 1
         elif kind == "ION" and letter == "G" and msg == "LNAV" and block:
             try:
@@ -701,6 +718,8 @@ def _nav_entry(
         out.rejected["sbas_skipped"] += 1
         return
     if system == System.GLONASS:
+        if not (-7 <= v[10] <= 24 and v[10] == int(v[10])):  # frequency number (RINEX 2: 1-24); 1e308 crashed
+            raise ValueError(f"GLONASS frequency number {v[10]}")
         toe = gps_from_calendar(*cal, "UTC")
         out.glonass.append(
             GlonassEphemeris(
@@ -719,6 +738,10 @@ def _nav_entry(
     scale = "BDT" if system == System.BEIDOU else "GPS"
     toc = gps_from_calendar(*cal, scale)
     toe_sow = v[11]
+    if not (0.0 <= toe_sow <= 604800.0 and 0.0 <= v[21] < 10000.0):  # a huge week overflowed the toe
+        raise ValueError(f"toe {toe_sow} s of week {v[21]}")
+    if not (v[10] > MIN_SQRT_A and 0.0 <= v[8] < 1.0):  # an orbit inside the Earth, or not closed
+        raise ValueError(f"sqrt(A) {v[10]}, e {v[8]}")
     week = int(v[21])
     toe = bdt_to_gps_s(week * 604800.0 + toe_sow) if system == System.BEIDOU else week * 604800.0 + toe_sow
     toe += 604800.0 * round((toc - toe) / 604800.0)  # a week number off by one at a crossover

@@ -7,7 +7,8 @@ the data set's own seconds from the drive's start (no GPS time is given), so epo
 ``time_base="dataset"``. smartLoc system codes: 1 GPS, 2 SBAS, 4 GLONASS, 8 Galileo, 16 QZSS,
 32 BeiDou; GLONASS ids are 300 + slot.
 
-A row that does not parse, holds NaN/inf or names an unknown system is skipped and counted in
+A row that does not parse, holds NaN/inf, names an unknown system or holds a range, satellite
+position, variance or C/N0 no satellite and receiver give (``out_of_range``) is skipped and counted in
 ``rejected`` (by reason), as is a row whose time lies more than ``LONE_STAMP_S`` from both of its
 neighbours in the file (``lone_stamp``: a damaged stamp; the rows are in time order); a file with no
 usable epoch is a ``UserError``. A truth row with such a time is a ``UserError`` naming its line.
@@ -112,6 +113,8 @@ def read_input(path: str | Path) -> SmartLocInput:
                 rejected["nonfinite"] += 1
             elif int(vals[7]) not in SYSTEMS:
                 rejected["unknown_system"] += 1
+            elif not _plausible(vals):
+                rejected["out_of_range"] += 1
             else:
                 pr_rows.append(vals)
         elif tag == "odom3":
@@ -159,6 +162,13 @@ def read_input(path: str | Path) -> SmartLocInput:
             )
         )
     return SmartLocInput(epochs, np.array(odo).reshape(-1, 3), rejected, n)
+
+
+def _plausible(vals: list[float]) -> bool:
+    """A pseudorange row's range (m), satellite distance from the Earth's centre (m), variance and C/N0
+    (dB-Hz) are values a satellite and receiver give (a finite 1e308 overflowed the solver)."""
+    sat_m = math.hypot(vals[3], vals[4], vals[5])
+    return 1.0e7 < vals[1] < 5.0e7 and 2.0e7 < sat_m < 5.0e7 and vals[2] >= 0.0 and 0.0 <= vals[9] < 100.0
 
 
 def _lone(t: np.ndarray) -> np.ndarray:

@@ -43,6 +43,7 @@ import numpy as np
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, ImuSample
 from companion.errors import UserError
+from companion.mavlink.codec import LIMITS
 from gcs_tools.replay.clockfit import ClockFit, fit_clock_offset
 from gcs_tools.replay.events import TRUTH, Event, LocalReference, ReaderStats, ReferenceInfo
 
@@ -243,6 +244,9 @@ class AnsflSource:
         st.rejected["truth_row_dropped"] = fl.dropped_truth_rows
         t_imu, t_truth = _us(fl.t_s), _us(fl.t_truth_s)
         truth = fl.p_truth_ned_m.tolist()
+        # beyond the MAVLink codec's full scale (a 1e30 m/s² row was fused: the track went to 1e27 m): counted
+        within = ((np.abs(fl.acc_frd_m_s2) <= LIMITS.max_specific_force_m_s2).all(axis=1)
+                  & (np.abs(fl.gyro_frd_rad_s) <= LIMITS.max_rate_rad_s).all(axis=1)).tolist()
         j, m = 0, len(t_truth)
         for i, t in enumerate(t_imu):
             while j < m and t_truth[j] <= t:
@@ -250,8 +254,11 @@ class AnsflSource:
                 j += 1
             st.records += 1
             st.decoded["attitude"] += 1
-            st.decoded["imu"] += 1
             yield AttitudeSample(t, fl.q_ned_frd[i])
+            if not within[i]:
+                st.rejected["imu_out_of_range"] += 1
+                continue
+            st.decoded["imu"] += 1
             yield ImuSample(t, fl.acc_frd_m_s2[i], fl.gyro_frd_rad_s[i])
         for k in range(j, m):
             yield LocalReference(TRUTH, t_truth[k], tuple(truth[k]), TRUTH_FILE)

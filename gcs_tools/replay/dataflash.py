@@ -50,6 +50,7 @@ from companion.autopilot.translate import ARDUPILOT_DEFAULT_GPS_DELAY_MS
 from companion.domain.rotation import euler_to_quaternion
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.errors import UserError
+from companion.mavlink.codec import LIMITS
 from gcs_tools.replay.events import (
     AUTOPILOT,
     MIN_FIX_TYPE_3D,
@@ -297,6 +298,10 @@ class DataFlashSource:
                 t, gx, gy, gz, ax, ay, az = v
                 if not all(math.isfinite(x) for x in (gx, gy, gz, ax, ay, az)):
                     rejected["imu_non_finite"] += 1
+                    continue
+                if not (max(abs(ax), abs(ay), abs(az)) <= LIMITS.max_specific_force_m_s2
+                        and max(abs(gx), abs(gy), abs(gz)) <= LIMITS.max_rate_rad_s):
+                    rejected["imu_out_of_range"] += 1  # beyond the MAVLink codec's full scale, as ULog
                     continue
                 decoded["imu"] += 1
                 last_us = int(t)

@@ -43,6 +43,7 @@ import pymap3d
 
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
 from companion.errors import UserError
+from companion.mavlink.codec import LIMITS
 from gcs_tools.replay.events import (
     AUTOPILOT,
     MIN_FIX_TYPE_3D,
@@ -342,8 +343,12 @@ def _imu(arr: np.ndarray) -> list[Any]:
     t = arr["timestamp"].astype(np.int64)
     gyro = np.column_stack([arr[f"gyro_rad[{i}]"] for i in range(3)]).astype(float)
     acc = np.column_stack([arr[f"accelerometer_m_s2[{i}]"] for i in range(3)]).astype(float)
-    ok = np.isfinite(gyro).all(axis=1) & np.isfinite(acc).all(axis=1)
-    return [ImuSample(int(t[i]), acc[i], gyro[i]) if ok[i] else "imu_non_finite" for i in range(t.size)]
+    finite = np.isfinite(gyro).all(axis=1) & np.isfinite(acc).all(axis=1)
+    # beyond the MAVLink codec's full scale (a damaged 1e36 m/s² broke the filter's covariance): counted
+    within = (np.abs(acc) <= LIMITS.max_specific_force_m_s2).all(axis=1) & (
+        np.abs(gyro) <= LIMITS.max_rate_rad_s).all(axis=1)
+    return [ImuSample(int(t[i]), acc[i], gyro[i]) if finite[i] and within[i]
+            else "imu_out_of_range" if finite[i] else "imu_non_finite" for i in range(t.size)]
 
 
 def _sample_time_us(arr: np.ndarray) -> np.ndarray:
