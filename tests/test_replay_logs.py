@@ -360,6 +360,31 @@ def test_a_lone_sample_far_back_is_not_a_restart(tmp_path: Path) -> None:
     assert s["navigator"]["imu_used"] == base["navigator"]["imu_used"]
 
 
+@pytest.mark.parametrize("stamp_us", [1_500_000_000_000_000_000, 1_000_000_000_000])
+def test_a_lone_sample_far_ahead_is_dropped_and_counted(tmp_path: Path, stamp_us: int) -> None:
+    """One IMU sample stamped decades (or days) ahead in the middle of a 60 s log, as a
+    damaged stamp: dropped and counted (imu_time_jump), the time base not moved, so every other
+    sample is used as in the undamaged log (it used to be fused, and every later sample was then
+    refused as time going backwards)."""
+    plain = tmp_path / "plain.tlog"
+    plain.write_bytes(QUAD106.read_bytes()[:400_000])
+    reader = TlogReader(plain)
+    mid = next(reader.position for _ in reader if reader.position > 200_000)
+    stray = tmp_path / "stray.tlog"
+    with TlogWriter(stray) as w:
+        w.write(0, mc.encode_imu(ImuSample(stamp_us, np.array([0.0, 0, -9.8]), np.zeros(3))))
+    data = plain.read_bytes()
+    log = tmp_path / "outlier.tlog"
+    log.write_bytes(data[:mid] + stray.read_bytes() + data[mid:])
+    s = core.replay(log, "second-order").summary
+    base = core.replay(plain, "second-order").summary
+    assert s["log_restarts"] == 0
+    assert s["navigator"]["imu_used"] == base["navigator"]["imu_used"]
+    assert s["navigator"].get("imu_rejected_time_backwards", 0) == base["navigator"].get(
+        "imu_rejected_time_backwards", 0)
+    assert s["samples_rejected"]["codec"]["imu_time_jump"] == 1
+
+
 def test_every_format_gives_the_same_summary_blocks(sitl_replay: core.ReplayResult) -> None:
     for s in (sitl_replay.summary, core.replay(PX4_NEW, "naive").summary):
         block = s["errors"]["autopilot_estimate"]

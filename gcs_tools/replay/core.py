@@ -16,7 +16,11 @@ back. The project's one clock rule decides (:mod:`companion.domain.clock_guard`,
 the new time base starts a new segment: a fresh navigator (same frame), the comparisons
 restarted; counters are summed over segments and ``log_restarts`` counts them. Events are held
 while the rule decides. A lone sample far back is not a restart: it goes to the navigator,
-which rejects it (``imu_rejected_time_backwards``). A log's IMU time may jump forward freely.
+which rejects it (``imu_rejected_time_backwards``). Forward, the IMU time may jump by up to
+:data:`FORWARD_JUMP_US` (a logger paused); a jump beyond it is a new segment only when 5 samples
+confirm it, and a lone sample that far ahead (a damaged stamp) is dropped and counted
+(``imu_time_jump`` in ``samples_rejected.codec``) instead of moving the time on, which would
+leave every later sample behind it.
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from typing import IO, TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from companion.domain.clock_guard import MAX_STAMP_US, ClockWindow, StreamClock, Verdict
+from companion.domain.clock_guard import ClockWindow, StreamClock, Verdict
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import GnssFix, ImuSample, NavEstimate
 from companion.errors import UserError
@@ -50,9 +54,11 @@ if TYPE_CHECKING:
 # Decoded samples fed to the navigator at a time: one timer pair per chunk instead of per sample
 # (the order, and so every estimate and counter, is unchanged).
 FEED_CHUNK = 512
-# IMU time going back by more than 1 s may be a log restart, once 5 IMU samples in a row (each
-# at most 1 s after the previous) continue on the new time base; forward it may jump freely
-RESTART_WINDOW = ClockWindow(max_back_us=1_000_000, max_forward_us=MAX_STAMP_US, consensus_samples=5,
+# IMU time going back by more than 1 s, or forward by more than FORWARD_JUMP_US, may be a log
+# restart, once 5 IMU samples in a row (each at most 1 s after the previous) continue on the new
+# time base; a lone sample out there is a damaged stamp
+FORWARD_JUMP_US = 600_000_000
+RESTART_WINDOW = ClockWindow(max_back_us=1_000_000, max_forward_us=FORWARD_JUMP_US, consensus_samples=5,
                              consensus_step_us=1_000_000)
 RESTART_HOLD_MAX = 4096  # events held while deciding; past this the jump is not a restart
 # β and NIS distributions in bounded memory: quantiles exact to half a bin (β: 5e-5;
@@ -525,6 +531,15 @@ def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
     count = 0
     stats = reader.stats
 
+    def far_ahead(ev: Any) -> bool:
+        """An IMU sample beyond the time base's forward window (counted ``imu_time_jump``): a lone
+        damaged stamp, never the stream's new time (a confirmed jump has moved the base to it)."""
+        base = clock.base_us
+        if type(ev) is not ImuSample or base is None or ev.t_us <= base + RESTART_WINDOW.max_forward_us:
+            return False
+        stats.rejected["imu_time_jump"] += 1
+        return True
+
     def process(ev: Any) -> None:
         kind = type(ev)
         if kind is Reference or kind is LocalReference:
@@ -560,14 +575,19 @@ def _stream(reader: LogReader, run: _Run, comparisons: _Comparisons,
             if verdict is Verdict.ACCEPT or verdict is Verdict.RESET or len(held) > RESTART_HOLD_MAX:
                 pending, held = held, []  # back on the old time base (a lone outlier), or a restart
                 for e in pending:
-                    process(e)
+                    if not far_ahead(e):
+                        process(e)
             continue
-        if verdict is Verdict.REJECT and clock.pending:  # far back: a restart, or a lone outlier?
-            held = [ev]
+        if verdict is Verdict.REJECT:
+            if clock.pending:  # far off: a restart, or a lone outlier?
+                held = [ev]
+            elif not far_ahead(ev):  # beyond any stamp (negative: the navigator counts it)
+                process(ev)
             continue
         process(ev)
     for e in held:
-        process(e)
+        if not far_ahead(e):
+            process(e)
     run.feed(chunk)
     return restarts
 
