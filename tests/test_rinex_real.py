@@ -7,7 +7,7 @@ NetR9: GPS C1C, Galileo C1X, QZSS C1C, Doppler), a Septentrio mosaic-X5 on a veh
 Galileo I/NAV and F/NAV, QZSS). The reader is checked against the files' printed numbers; the
 single-point solution per constellation against the station's published position, with tolerances
 that a leap-second shift or a missing Earth-rotation term exceed (both shown). The files hold no
-BeiDou or GLONASS observations: those time bases are not tested here.
+BeiDou or GLONASS observations: those time bases are tested in ``test_rinex_real_glo_bds.py``.
 """
 
 from __future__ import annotations
