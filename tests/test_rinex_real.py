@@ -7,7 +7,7 @@ NetR9: GPS C1C, Galileo C1X, QZSS C1C, Doppler), a Septentrio mosaic-X5 on a veh
 Galileo I/NAV and F/NAV, QZSS). The reader is checked against the files' printed numbers; the
 single-point solution per constellation against the station's published position, with tolerances
 that a leap-second shift or a missing Earth-rotation term exceed (both shown). The files hold no
-BeiDou or GLONASS observations: those time bases are not tested here.
+BeiDou or GLONASS observations: those time bases are tested in ``test_rinex_real_glo_bds.py``.
 """
 
 from __future__ import annotations
@@ -24,12 +24,13 @@ import numpy as np
 import pytest
 
 from companion.gnss.ephemeris import EphemerisStore, attach_broadcast
-from companion.gnss.geometry import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from companion.gnss.geometry import geodetic_to_ecef
 from companion.gnss.spp import SppConfig, solve_position
 from companion.gnss.systems import System
 from companion.gnss.timescale import gps_from_calendar
 from gcs_tools.gnss import baseline, rinex
 from gcs_tools.gnss.sources import rinex_input
+from tests.rinex_real_helpers import enu_errors, row
 
 DATA = Path(__file__).parent / "data" / "real_rinex3"
 STATION_OBS = DATA / "3034265G_excerpt.21O"
@@ -53,11 +54,6 @@ def _counts(epoch) -> tuple[int, int, int]:
     return tuple(int((epoch.system == s).sum()) for s in (G, E, J))  # type: ignore[return-value]
 
 
-def _row(epoch, system: System, prn: int) -> int:
-    (i,) = np.flatnonzero((epoch.system == system) & (epoch.prn == prn))
-    return int(i)
-
-
 # --- the reader, against the printed files ----------------------------------------------------------
 
 
@@ -77,7 +73,7 @@ def test_station_file_reads_every_epoch_and_its_printed_values():
         (first, J, 7, 37265858.133, -0.555, 37.600),
         (last, G, 23, 22532756.039, 2941.109, 42.600),
     ]:
-        i = _row(epoch, system, prn)
+        i = row(epoch, system, prn)
         assert epoch.pseudorange_m[i] == pr and epoch.cn0_dbhz[i] == cn0
         assert epoch.pseudorange_rate_m_s[i] == pytest.approx(-dop * lam_l1, rel=1e-12)
 
@@ -95,9 +91,9 @@ def test_rover_file_reads_blank_fields_as_missing():
     assert 12 not in obs.epochs[2].prn[obs.epochs[2].system == E]
     assert 2 not in obs.epochs[4].prn[obs.epochs[4].system == E]
     e = obs.epochs[3]
-    i = _row(e, J, 3)
+    i = row(e, J, 3)
     assert e.pseudorange_m[i] == 37421150.840 and e.cn0_dbhz[i] == 24.781
-    i = _row(obs.epochs[0], E, 2)  # a code without its phase
+    i = row(obs.epochs[0], E, 2)  # a code without its phase
     assert obs.epochs[0].pseudorange_m[i] == 28187222.822 and obs.epochs[0].cn0_dbhz[i] == 25.625
     assert all(np.isnan(e.pseudorange_rate_m_s).all() for e in obs.epochs)
 
@@ -167,22 +163,11 @@ def station():
     return rinex_input(STATION_OBS, [NAV])
 
 
-def _enu_errors(epochs, klobuchar, systems, ref, config: SppConfig | None = None) -> np.ndarray:
-    lat, lon, _ = ecef_to_geodetic(ref)
-    rot = ecef_to_enu_matrix(float(lat), float(lon))
-    out = []
-    for e in epochs:
-        sol = solve_position(e.select(np.isin(e.system, systems)), config or SppConfig(), klobuchar=klobuchar)
-        assert sol.ok, sol.reason
-        out.append(rot @ (sol.p_ecef_m - ref))
-    return np.array(out)
-
-
 @pytest.mark.parametrize(("systems", "h_tol_m", "v_tol_m"), TOLERANCES, ids=["all", "gps", "gal", "qzss"])
 def test_station_solutions_per_constellation(station, systems, h_tol_m, v_tol_m):
     """Each constellation on its own (its time base, its clock) lands on the station; all four epochs."""
     assert station.rejected == Counter({"nav_galileo_fnav_skipped": 7, "no_ephemeris": 4})  # E08: none
-    enu = _enu_errors(station.epochs, station.klobuchar, systems, STATION_ECEF_M)
+    enu = enu_errors(station.epochs, station.klobuchar, systems, STATION_ECEF_M)
     assert len(enu) == 4
     assert np.hypot(enu[:, 0], enu[:, 1]).max() < h_tol_m
     assert np.abs(enu[:, 2]).max() < v_tol_m
@@ -197,7 +182,7 @@ def test_station_is_still_by_its_doppler(station):
 
 def test_the_tolerances_catch_a_missing_earth_rotation_and_a_leap_second(station):
     """The mistakes the known answer is there for, each beyond every tolerance above."""
-    no_sagnac = _enu_errors(station.epochs, station.klobuchar, (G, E, J), STATION_ECEF_M,
+    no_sagnac = enu_errors(station.epochs, station.klobuchar, (G, E, J), STATION_ECEF_M,
                             SppConfig(earth_rotation=False))
     assert np.hypot(no_sagnac[:, 0], no_sagnac[:, 1]).min() > 20.0
     obs = rinex.read_obs(STATION_OBS)
@@ -205,7 +190,7 @@ def test_the_tolerances_catch_a_missing_earth_rotation_and_a_leap_second(station
     assert isinstance(store, EphemerisStore)
     shifted = [attach_broadcast(e.replace(t_gps_s=e.t_gps_s + 18.0), store)[0] for e in obs.epochs]
     for systems in ((G,), (E,), (J,)):  # measured 13-15 km, 10-17 km, 6-7 km
-        enu = _enu_errors(shifted, station.klobuchar, systems, STATION_ECEF_M)
+        enu = enu_errors(shifted, station.klobuchar, systems, STATION_ECEF_M)
         assert np.linalg.norm(enu, axis=1).min() > 1000.0
 
 
@@ -217,7 +202,7 @@ def test_rover_starts_at_its_reference_point():
         {"obs_no_pseudorange": 2, "nav_galileo_fnav_skipped": 7, "no_ephemeris": 4}  # E02: none
     )
     for systems, h_tol_m, v_tol_m in TOLERANCES[:3]:
-        enu = _enu_errors(rover.epochs[:2], rover.klobuchar, systems, ROVER_START_ECEF_M)
+        enu = enu_errors(rover.epochs[:2], rover.klobuchar, systems, ROVER_START_ECEF_M)
         assert np.hypot(enu[:, 0], enu[:, 1]).max() < h_tol_m
         assert np.abs(enu[:, 2]).max() < v_tol_m
 
