@@ -193,7 +193,13 @@ def test_gated_push_counts_and_the_frd_path():
     core.trim_len = 4
     assert core.push_frd(205_000, f[::-1].copy(), list(r), 9.8) is False  # lists and any 3-array work
     assert len(core) == 4 and core.t_us == [0, 50_000, 200_000, 205_000]
-    assert core.counts == (3, 1, 2, 1)  # used, gaps, not finite, time not increasing
+    assert core.counts == (3, 1, 2, 1, 0)  # used, gaps, not finite, time not increasing, out of range
+    gated = ImuHistory(0.05, 0.0, 100.0)  # max_force_m_s2: |f| per axis beyond it is not used
+    gated.push_frd(0, np.array([0.0, 100.0, -9.7]), r, 9.8)  # at the bound: used
+    gated.push_frd(5000, np.array([0.0, 0.0, -100.5]), r, 9.8)
+    gated.push_frd(10_000, np.array([1e300, 0.0, 0.0]), r, 9.8)
+    gated.push_frd(15_000, np.array([math.inf, 0.0, 0.0]), r, 9.8)  # not finite: counted as such
+    assert gated.counts == (1, 0, 1, 0, 2) and gated.t_us == [0]
     assert core.push(210_000, 0.0, 0.0, 0.0, r) is True  # longer than trim_len: time to trim
     with pytest.raises(ValueError):
         core.push(300_000, 0.0, 0.0, 0.0, r[:8])

@@ -173,6 +173,44 @@ def test_every_rejection_reason_is_counted_and_output_stays_finite():
         nav.push("not a sample")  # type: ignore[arg-type]
 
 
+def test_imu_beyond_full_scale_is_counted_not_fused():
+    """A finite specific force beyond 16 g on an axis (the readers' and the MAVLink codec's gate) pushed
+    through the Python API (``push``, ``push_imu_batch``; the tight navigator shares the core) was fused:
+    now counted, and the estimate is exactly the one without those samples."""
+    from companion.domain.physics import MAX_SPECIFIC_FORCE_M_S2
+    from companion.tight import TightConfig
+    from companion.wiring import tight_navigator_for
+    from gcs_tools.gnss.synthetic import store
+
+    t = np.arange(1, 201) * 5000
+    f = np.tile([0.3, -0.2, -G], (200, 1))
+    bad_t = t[[40, 120]] + 2500  # between samples: without them, the stream is the clean one
+    bad_f = np.array([[1e30, 0.0, -G], [0.0, -1.01 * MAX_SPECIFIC_FORCE_M_S2, -G]])
+    clean, per_sample, batch = _started(), _started(), _started()
+    for k in range(200):
+        for nav in (clean, per_sample):
+            nav.push(AttitudeSample(int(t[k]), Q_LEVEL))
+            nav.push(_imu(int(t[k]), f[k]))
+        if k in (40, 120):
+            per_sample.push(AttitudeSample(int(bad_t[k // 80]), Q_LEVEL))
+            per_sample.push(_imu(int(bad_t[k // 80]), bad_f[k // 80]))
+    order = np.argsort(np.r_[t, bad_t], kind="stable")
+    batch.push_imu_batch(np.r_[t, bad_t][order], np.r_[f, bad_f][order], np.tile(Q_LEVEL, (202, 1)))
+    for nav in (clean, per_sample, batch):
+        nav.push(_fix(1_000_000, (0.5, 0.2, 0.0)))
+    want = clean.estimate()
+    for nav in (per_sample, batch):
+        assert nav.counters()["imu_rejected_out_of_range"] == 2
+        assert nav.counters()["imu_used"] == clean.counters()["imu_used"]
+        np.testing.assert_array_equal(nav.estimate().p_ned_m, want.p_ned_m)
+        np.testing.assert_array_equal(nav.estimate().cov_diag, want.cov_diag)
+    assert clean.counters()["imu_rejected_out_of_range"] == 0
+    tight = tight_navigator_for(None, "second-order", config=TightConfig(), ephemerides=store())
+    tight.push(AttitudeSample(1000, Q_LEVEL))
+    tight.push(_imu(1000, (0.0, 0.0, 1e30)))
+    assert tight.counters()["imu_rejected_out_of_range"] == 1
+
+
 def test_bad_config_is_a_one_line_user_error():
     from companion.mission.schema import ConfigError, build
 

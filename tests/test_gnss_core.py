@@ -346,6 +346,19 @@ def test_chi2_thresholds_are_scipys_and_the_tight_navigator_does_not_import_scip
     assert done.stdout.strip() == "False", done.stdout + done.stderr
 
 
+def test_a_singular_geometry_is_an_unsolved_epoch():
+    """Six satellites on one line from the receiver (collinear lines of sight): the normal matrix has no
+    inverse. numpy's LinAlgError crashed ``gnss spp`` and the replay; now the epoch is unsolved, with the
+    reason the spp summary counts."""
+    u = RX_ECEF / np.linalg.norm(RX_ECEF)
+    pos = np.array([u * r for r in (2.6e7, 2.65e7, 2.7e7, 2.75e7, 2.8e7, 2.85e7)])
+    ep = make_epoch(T0, [int(System.GPS)] * 6, range(1, 7), np.linalg.norm(pos - RX_ECEF, axis=1),
+                    sat_pos_ecef_m=pos, corrected=True, cn0_dbhz=[45.0] * 6)
+    for config in (SppConfig(), SppConfig(weighting="uniform"), SppConfig(raim=False)):
+        s = solve_position(ep, config)
+        assert not s.ok and s.reason == "singular geometry" and np.isnan(s.p_ecef_m).all()
+
+
 def test_bad_observations_are_not_used(scene):
     st, ep = scene
     pr = ep.pseudorange_m.copy()

@@ -96,6 +96,51 @@ def test_rinex_epoch_time_systems_and_bad_records(tmp_path, system, offset_s):
     assert obs.epochs[0].pseudorange_rate_m_s[0] == pytest.approx(1000.0 * 299_792_458.0 / 1575.42e6)
 
 
+def _rinex_times(tmp_path: Path, times: list[float]) -> rinex.RinexObs:
+    """A RINEX file (our writer) with one 4-satellite GPS epoch at each time, in this order, read back."""
+    from companion.gnss import make_epoch
+
+    prn = [1, 5, 9, 12]
+    epochs = [make_epoch(T0 + t, [int(System.GPS)] * 4, prn, [2.1e7 + 1e5 * k for k in range(4)],
+                         cn0_dbhz=[45.0] * 4) for t in times]
+    p = tmp_path / "order.obs"
+    rinex.write_obs(p, epochs)
+    return rinex.read_obs(p)
+
+
+REGULAR = [float(k) for k in range(12)]  # 1 Hz
+
+
+@pytest.mark.parametrize("times, dropped, reason", [
+    (REGULAR[:5] + [8.0] + REGULAR[6:], [5], "lone_epoch_ahead"),  # one stamp 3 s late (a damaged digit)
+    (REGULAR[:5] + [2.0] + REGULAR[6:], [5], "lone_epoch_back"),  # ... 3 s early
+    (REGULAR[:5] + [5.0 + 3.2e7] + REGULAR[6:], [5], "lone_epoch_ahead"),  # a year ahead
+    ([20.0] + REGULAR[1:], [0], "lone_epoch_ahead"),  # the first epoch
+    (REGULAR[:-1] + [3.0], [11], "lone_epoch_back"),  # the last epoch
+    (REGULAR[:4] + [5.0, 4.0] + REGULAR[6:], [4], "lone_epoch_ahead"),  # two epochs swapped: one is kept
+])
+def test_rinex_lone_epoch_out_of_time_order_is_counted_not_solved(tmp_path, times, dropped, reason):
+    """An epoch whose stamp breaks the file's time order (a damaged digit) was solved at the wrong time by
+    ``gnss spp`` and the replay: dropped and counted; every other epoch reads as before."""
+    obs = _rinex_times(tmp_path, times)
+    kept = [t for k, t in enumerate(times) if k not in dropped]
+    assert [e.t_gps_s - T0 for e in obs.epochs] == pytest.approx(kept, abs=1e-6)
+    assert dict(obs.rejected) == {reason: len(dropped)}
+
+
+@pytest.mark.parametrize("times", [
+    REGULAR[:6] + [t + 7200.0 for t in REGULAR[6:]],  # a gap of two hours (a daily file)
+    [30.0 * k for k in range(12)],  # a station's 30 s
+    REGULAR[:6] + [t - 3600.0 for t in REGULAR[6:]],  # two files joined: the time goes back, 6 epochs agree
+    REGULAR[:6] + [5.0] + REGULAR[6:],  # a duplicate stamp (the replay counts it)
+    [0.1 * k for k in range(30)],  # 10 Hz
+])
+def test_rinex_epochs_in_order_or_confirmed_are_all_read(tmp_path, times):
+    obs = _rinex_times(tmp_path, times)
+    assert [e.t_gps_s - T0 for e in obs.epochs] == pytest.approx(times, abs=1e-6)
+    assert not obs.rejected
+
+
 def test_rinex_bad_files_are_one_line_errors(tmp_path):
     p = tmp_path / "x.obs"
     p.write_text("hello\n")

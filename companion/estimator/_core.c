@@ -606,6 +606,7 @@ typedef struct {
     double hold_max_s;
     long long hold_us;
     double hold_periods;  /* the hold limit follows the IMU's period: max(hold_max_s, this x period); 0: off */
+    double max_force;  /* push_frd: a specific force beyond this per axis (m/s^2) is not used (counted) */
     long long t0;
     int started;
     long long *t;     /* sample times (us) */
@@ -614,22 +615,23 @@ typedef struct {
                        * densities c (3, per axis) of that interval, C (3 x 3: per axis) */
     Py_ssize_t start, n, cap;
     Py_ssize_t trim_len;  /* push returns 1 once the history is longer (the engine trims) */
-    long long n_used, n_gaps, n_nonfinite, n_backwards;  /* samples pushed, by outcome */
+    long long n_used, n_gaps, n_nonfinite, n_backwards, n_out_of_range;  /* samples pushed, by outcome */
     long long ring[RING];  /* the last sample intervals (us), for the period (held_period) */
     int ring_n, ring_i;
 } History;
 
 static int hist_init(History *self, PyObject *args, PyObject *kw) {
-    static char *kwlist[] = {"hold_max_s", "hold_periods", NULL};
-    double hold, periods = 0.0;
-    if (!PyArg_ParseTupleAndKeywords(args, kw, "d|d", kwlist, &hold, &periods)) return -1;
+    static char *kwlist[] = {"hold_max_s", "hold_periods", "max_force_m_s2", NULL};
+    double hold, periods = 0.0, max_force = INFINITY;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "d|dd", kwlist, &hold, &periods, &max_force)) return -1;
     self->hold_max_s = hold;
     self->hold_periods = periods;
+    self->max_force = max_force;
     self->hold_us = (long long)nearbyint(hold * 1e6);  /* round half to even, as Python's round */
     self->started = 0;
     self->start = self->n = 0;
     self->trim_len = PY_SSIZE_T_MAX;
-    self->n_used = self->n_gaps = self->n_nonfinite = self->n_backwards = 0;
+    self->n_used = self->n_gaps = self->n_nonfinite = self->n_backwards = self->n_out_of_range = 0;
     self->ring_n = self->ring_i = 0;
     if (!self->t) {
         self->cap = 1024;
@@ -856,7 +858,8 @@ static PyObject *hist_push(History *self, PyObject *const *args, Py_ssize_t narg
     return push_checked(self, t, ax, ay, az, rot);
 }
 
-/* push_frd(t_us, f_frd, rot, g) -> as push, with the NED acceleration R f + [0, 0, g] */
+/* push_frd(t_us, f_frd, rot, g) -> as push, with the NED acceleration R f + [0, 0, g]; a finite specific
+ * force beyond max_force on an axis (beyond any IMU's full scale: damage) is counted, not used */
 static PyObject *hist_push_frd(History *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "push_frd(t_us, f_frd, rot, g)"); return NULL; }
     long long t = PyLong_AsLongLong(args[0]);
@@ -865,7 +868,11 @@ static PyObject *hist_push_frd(History *self, PyObject *const *args, Py_ssize_t 
     if (read_doubles(args[1], f, 3, "specific force") < 0 || read_doubles(args[2], r, 9, "rotation") < 0) return NULL;
     double g = PyFloat_AsDouble(args[3]);
     if (g == -1.0 && PyErr_Occurred()) return NULL;
-    double fx = f[0], fy = f[1], fz = f[2];
+    double fx = f[0], fy = f[1], fz = f[2], m = self->max_force;
+    if (!(fabs(fx) <= m && fabs(fy) <= m && fabs(fz) <= m) && isfinite(fx) && isfinite(fy) && isfinite(fz)) {
+        self->n_out_of_range++;
+        Py_RETURN_FALSE;
+    }
     return push_checked(self, t, r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
                         r[6] * fx + r[7] * fy + r[8] * fz + g, r);
 }
@@ -1040,7 +1047,8 @@ static PyObject *hist_get_hold_periods(History *self, void *c) { return PyFloat_
 static Py_ssize_t hist_len(History *self) { return self->n; }
 
 static PyObject *hist_get_counts(History *self, void *c) {
-    return Py_BuildValue("(LLLL)", self->n_used, self->n_gaps, self->n_nonfinite, self->n_backwards);
+    return Py_BuildValue("(LLLLL)", self->n_used, self->n_gaps, self->n_nonfinite, self->n_backwards,
+                         self->n_out_of_range);
 }
 
 static PyMemberDef hist_members[] = {
@@ -1082,7 +1090,7 @@ static PyTypeObject HistoryType = {
     .tp_name = "companion.estimator._core.History",
     .tp_basicsize = sizeof(History),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE,
-    .tp_doc = "History(hold_max_s, hold_periods=0): held IMU inputs with prefix integrals",
+    .tp_doc = "History(hold_max_s, hold_periods=0, max_force_m_s2=inf): held IMU inputs with prefix integrals",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)hist_init,
     .tp_dealloc = (destructor)hist_dealloc,

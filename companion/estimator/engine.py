@@ -41,7 +41,8 @@ from companion.estimator.history import Integrals, finite3
 from companion.estimator.timeline import Timeline
 
 # the IMU counters (``ImuHistory.counts``, counted by the core), in that order
-_IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
+_IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
+               "imu_rejected_out_of_range")
 
 
 class Fusion(NamedTuple):
@@ -166,11 +167,11 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         self._counts = counts if counts is not None else {}
         for name in (
             "imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
-            "gnss_fused", "gnss_refused", "gnss_out_of_order", "gnss_rejected_before_imu",
-            "gnss_rejected_too_old", "gnss_rejected_future", "gnss_rejected_duplicate",
-            "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets", "gnss_offsets",
-            "gnss_vel_fused", "gnss_vel_rejected_innovation", "imu_gnss_disagreements", "envelope_violations",
-            "gnss_offset_returns",
+            "imu_rejected_out_of_range", "gnss_fused", "gnss_refused", "gnss_out_of_order",
+            "gnss_rejected_before_imu", "gnss_rejected_too_old", "gnss_rejected_future",
+            "gnss_rejected_duplicate", "gnss_rejected_nonfinite", "gnss_rejected_innovation", "gnss_resets",
+            "gnss_offsets", "gnss_vel_fused", "gnss_vel_rejected_innovation", "imu_gnss_disagreements",
+            "envelope_violations", "gnss_offset_returns",
         ):
             self._counts.setdefault(name, 0)
         super().__init__(cfg.imu_hold_max_s, cfg.history_s, cfg.future_tolerance_s, cfg.gravity_m_s2,

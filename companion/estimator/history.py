@@ -85,16 +85,17 @@ mean_between = _core.mean_between
 class ImuHistory(_core.History):
     """Append-only (then trimmed) record of held inputs and their prefix integrals.
 
-    ``ImuHistory(hold_max_s, hold_periods=0)`` (the hold limit: above). The core's methods
+    ``ImuHistory(hold_max_s, hold_periods=0, max_force_m_s2=inf)`` (the hold limit: above). The core's methods
     (``_core.History``):
 
     * ``append(t_us, ax, ay, az, rot=identity) -> gap``: add a sample (strictly later than the
       last; the caller gates);
     * ``push(t_us, ax, ay, az, rot)`` and ``push_frd(t_us, f_frd, rot, g)``: the engine's gated
       per-sample path: a sample not finite or not later than the last is not used; each outcome
-      is counted in ``counts`` (used, gaps, not finite, time not increasing); returns True when
-      the history has grown past ``trim_len`` (the engine trims). ``push_frd`` rotates the body
-      specific force first (R f̃ + [0, 0, g]);
+      is counted in ``counts`` (used, gaps, not finite, time not increasing, out of range); returns
+      True when the history has grown past ``trim_len`` (the engine trims). ``push_frd`` rotates the
+      body specific force first (R f̃ + [0, 0, g]), and does not use one beyond ``max_force_m_s2``
+      (third argument, default inf; the timeline gives ``MAX_SPECIFIC_FORCE_M_S2``, 16 g) on an axis;
     * ``append_batch(t_us, a_ned, rot)``: many samples (int64 (n,), float64 (n, 3), (n, 9) or None),
       already checked increasing and gap-free; the same rows as appending one by one (counted
       as used);

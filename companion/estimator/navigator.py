@@ -20,6 +20,7 @@ import pymap3d
 from pymap3d.ellipsoid import Ellipsoid
 
 from companion.domain.geodesy import LocalNedFrame
+from companion.domain.physics import MAX_SPECIFIC_FORCE_M_S2
 from companion.domain.rotation import Rot, rotation_scaled
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, new_nav_estimate
 from companion.errors import ConfigError
@@ -135,13 +136,15 @@ class Navigator:
     def push_imu_batch(self, t_us: np.ndarray, acc_frd_m_s2: np.ndarray, q_ned_frd: np.ndarray) -> None:
         """IMU samples (n,), (n, 3) with their attitudes (n, 4, w first), in time order.
 
-        The same as pushing ``AttitudeSample(t, q)`` then ``ImuSample(t, f)`` for each row.
+        The same as pushing ``AttitudeSample(t, q)`` then ``ImuSample(t, f)`` for each row (a block
+        with anything to gate, e.g. a specific force beyond ``MAX_SPECIFIC_FORCE_M_S2``, goes that way).
         """
         q = np.asarray(q_ned_frd, dtype=float)
         f = np.asarray(acc_frd_m_s2, dtype=float)
         w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
         n2 = w * w + x * x + y * y + z * z  # the per-sample expression, so the same bits
-        if len(q) < BATCH_MIN or not (np.isfinite(n2).all() and (n2 > 1e-12).all()):
+        if len(q) < BATCH_MIN or not (np.isfinite(n2).all() and (n2 > 1e-12).all()
+                                      and (np.abs(f) <= MAX_SPECIFIC_FORCE_M_S2).all()):
             for t, fk, qk in zip(np.asarray(t_us).tolist(), f, q, strict=True):
                 self.push(AttitudeSample(t, qk))
                 self.push(ImuSample(t, fk, np.zeros(3)))

@@ -30,6 +30,7 @@ from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
+from companion.domain.physics import MAX_SPECIFIC_FORCE_M_S2
 from companion.estimator.history import ImuHistory, Integrals
 from companion.estimator.model import IDENTITY9, Rot9
 
@@ -52,7 +53,7 @@ class Timeline(Generic[E, M, Out]):
 
     def __init__(self, imu_hold_max_s: float, history_s: float, future_tolerance_s: float,
                  gravity_m_s2: float, counts: dict[str, int], imu_hold_periods: float = 0.0) -> None:
-        self.imu = ImuHistory(imu_hold_max_s, imu_hold_periods)
+        self.imu = ImuHistory(imu_hold_max_s, imu_hold_periods, MAX_SPECIFIC_FORCE_M_S2)
         self._g = gravity_m_s2
         self.imu.trim_len = TRIM_EVERY
         self.entries: list[E] = []

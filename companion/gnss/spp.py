@@ -20,6 +20,10 @@ Velocity: from pseudorange rates (−λ·Doppler) with the satellite velocities,
 drift, the Sagnac rate term (the time derivative of the range's Sagnac term; RTKLIB's ``resdop``
 has the opposite sign, a known error of a few mm/s), weighted alike.
 
+An epoch without a solution has ``ok`` False and its ``reason``: "too few satellites", "no convergence",
+"gdop", or "singular geometry" (the normal matrix has no inverse: collinear lines of sight, zero
+weights); a velocity whose geometry is singular is NaN.
+
 Cost per epoch (``beliefnav bench gnss``, this project's 2-core machine): 0.4 ms for a smartLoc
 epoch (15 satellites, pre-corrected) to 1 ms with the atmosphere models; each RAIM exclusion adds a
 solve. Vectorised over satellites; the per-iteration Python overhead dominates.
@@ -208,10 +212,26 @@ def _design(los: np.ndarray, cols: np.ndarray, k: int) -> np.ndarray:
     return h
 
 
+class SingularGeometryError(ValueError):
+    """The normal matrix of an epoch's fit has no usable inverse (collinear lines of sight, zero weights,
+    too few distinct satellites): the epoch is unsolved (``reason`` "singular geometry"), never a crash."""
+
+
+def _inverse(n: np.ndarray) -> np.ndarray:
+    """``n``'s inverse; :class:`SingularGeometryError` when it has none a covariance can come from (singular,
+    or rounding made a variance non-finite or negative)."""
+    try:
+        q = np.linalg.inv(n)
+    except np.linalg.LinAlgError:
+        raise SingularGeometryError("singular normal matrix") from None
+    if not (np.isfinite(q).all() and (np.diag(q) > 0.0).all()):
+        raise SingularGeometryError("ill-conditioned normal matrix")
+    return q
+
+
 def _wls(h: np.ndarray, r: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     hw = h * w[:, None]
-    n = h.T @ hw
-    q = np.linalg.inv(n)
+    q = _inverse(h.T @ hw)
     return q @ (hw.T @ r), q
 
 
@@ -308,7 +328,11 @@ def _iterate(
         model = geo.rho + clocks[cols_all] + geo.atm
         r = (y - model)[used]
         h = _design(geo.los[used], cols_all[used], k)[:, np.r_[True, True, True, present]]
-        dx, _ = _wls(h, r, 1.0 / sigma[used] ** 2)
+        try:
+            dx, _ = _wls(h, r, 1.0 / sigma[used] ** 2)
+        except SingularGeometryError:
+            out.update(iterations=it, used=used, reason="singular geometry")
+            return out
         x = x + dx[:3]
         clocks[present] += dx[3:]
         if float(np.linalg.norm(dx[:3])) < config.convergence_m and geo.on_earth:
@@ -325,14 +349,21 @@ def _iterate(
     w = 1.0 / sigma**2
     hu = h_full[used]
     n_mat = hu.T @ (hu * w[used][:, None])
-    q = np.linalg.inv(n_mat)
+    try:
+        q = _inverse(n_mat)
+        qg = _inverse(hu.T @ hu)  # unweighted, for DOPs
+    except SingularGeometryError:
+        out.update(iterations=it, used=used, reason="singular geometry", x=x)
+        return out
     lev = np.einsum("ij,jk,ik->i", h_full, q, h_full) * w  # h_ii of the weighted hat matrix
     standardised = np.where(used, resid / (sigma * np.sqrt(np.maximum(1.0 - lev, 1e-12))), np.nan)
     standardised = np.where(used & (lev > 1.0 - 1e-9), np.nan, standardised)
     chi2 = float(np.sum(w[used] * resid[used] ** 2))
     dof = int(used.sum()) - hu.shape[1]
-    qg = np.linalg.inv(hu.T @ hu)  # unweighted, for DOPs
     penu = geo.enu @ qg[:3, :3] @ geo.enu.T
+    if not (np.diag(penu) > 0.0).all():  # rounding left no covariance (a near-singular geometry)
+        out.update(iterations=it, used=used, reason="singular geometry", x=x)
+        return out
     tdop = math.sqrt(float(np.mean(np.diag(qg)[3:]))) if qg.shape[0] > 3 else math.nan
     dops = Dops(
         math.sqrt(float(np.trace(qg))),
@@ -460,7 +491,10 @@ def _velocity(
         # light-time rate: the signal left the satellite at t − ρ/c, so its velocity enters × (1 − ρ̇/c)
         model = geo_rate - sat_los * geo_rate / C_M_S + sagnac + v[3] - clk_drift
         r = prr - model
-        dv, q = _wls(h, r, 1.0 / sigma**2)
+        try:
+            dv, q = _wls(h, r, 1.0 / sigma**2)
+        except SingularGeometryError:  # no velocity from this geometry; the position stands
+            return np.full(3, np.nan), math.nan, math.nan
         v = v + dv
     dof = len(r) - 4
     if config.accuracy == "a-posteriori" and dof > 0:

@@ -58,7 +58,7 @@ import numpy as np  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from companion.domain.geodesy import LocalNedFrame  # noqa: E402
-from companion.domain.physics import STANDARD_GRAVITY_M_S2  # noqa: E402
+from companion.domain.physics import MAX_SPECIFIC_FORCE_M_S2, STANDARD_GRAVITY_M_S2  # noqa: E402
 from companion.domain.rotation import euler_to_quaternion, normalised, quaternion_to_euler  # noqa: E402
 from companion.domain.samples import (  # noqa: E402
     AttitudeSample,
@@ -123,7 +123,7 @@ class WireLimits:
     the autopilot or a packer (whose fixed-size integer fields would overflow).
     """
 
-    max_specific_force_m_s2: float = 16.0 * STANDARD_GRAVITY_M_S2  # |f| per axis: 16 g (IMU full scale)
+    max_specific_force_m_s2: float = MAX_SPECIFIC_FORCE_M_S2  # |f| per axis: 16 g (IMU full scale)
     max_rate_rad_s: float = 35.0  # |ω| per axis: 2000 °/s gyro full scale
     max_home_distance_m: float = 50_000.0  # positions (local NED, or a fix) this close to home
     max_speed_m_s: float = 200.0  # |v| per axis

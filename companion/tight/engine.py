@@ -56,7 +56,8 @@ from companion.tight.model import (
     position_dop_ned,
 )
 
-_IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards")
+_IMU_COUNTS = ("imu_used", "imu_gaps", "imu_rejected_nonfinite", "imu_rejected_time_backwards",
+               "imu_rejected_out_of_range")
 # initialisation and reset: the filter's own single-point solution (C/N0 + elevation weights, FDE)
 SPP_INIT = SppConfig(raim=True)
 # L1 ionospheric delay → each system's signal (GLONASS at its centre frequency), per clock slot

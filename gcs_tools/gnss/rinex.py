@@ -45,7 +45,11 @@ not RINEX 2, 3 or 4, or holds no usable record, is a one-line ``UserError``. A t
 counted (``truncated``), the records before it are kept; a RINEX 2 epoch whose satellite list does
 not parse (e.g. more satellites announced than listed) is counted (``bad_epoch_line``) and its lines
 (``stray_line``) are not read as observations. An observation whose Doppler or C/N0 field holds NaN,
-inf or a value no receiver gives is counted (``bad_doppler``, ``bad_cn0``), not used.
+inf or a value no receiver gives is counted (``bad_doppler``, ``bad_cn0``), not used. A lone epoch out
+of the file's time order (a damaged stamp: before the epoch kept last, or after the next one while
+that one agrees with it) is counted (``lone_epoch_back``, ``lone_epoch_ahead``), not solved at the
+wrong time; gaps forward are kept, and a time going back for ``RESTART_EPOCHS`` epochs in a row (two
+files joined) is adopted (:func:`_in_time_order`).
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ import zlib
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -190,7 +195,7 @@ def read_obs(path: str | Path) -> RinexObs:
         raise UserError(f"{path}: RINEX observation header lists no observation types")
     cols = {s: _columns(t, CODE_PREFERENCE.get(s, ())) for s, t in obs_types.items()}
     time_system = _time_system(path, header, lines[0][40:41])
-    epochs = _collect(records, when, cols, time_system, rejected)
+    epochs = _in_time_order(_collect(records, when, cols, time_system, rejected), rejected)
     if not epochs:
         raise UserError(f"{path}: no usable observation epochs (rejected: {dict(rejected) or 'none'})")
     return RinexObs(path, version, time_system, epochs, _approx_position(header), obs_types, rejected)
@@ -297,6 +302,45 @@ def _collect(
         if epoch is not None:
             epochs.append(epoch)
     return epochs
+
+
+# epochs in a row behind the file's time (each after the one before) that make its time go back: two files
+# joined, not a damaged stamp (the replay's rule for a restarted log's IMU samples)
+RESTART_EPOCHS = 5
+
+
+def _in_time_order(epochs: list[GnssEpoch], rejected: Counter[str]) -> list[GnssEpoch]:
+    """The epochs whose times keep the file's order: a lone epoch out of it (a damaged stamp, which would
+    be solved at the wrong time) is counted and dropped. In file order, with the time of the last epoch
+    kept as the base, an epoch
+
+    - before the base is ``lone_epoch_back``, unless it and the next ``RESTART_EPOCHS - 1`` epochs are
+      each after the one before and all before the base (the file's time went back: adopted);
+    - after the base but after the next epoch too, while that one is not before the base (the base and
+      the next epoch agree, this one does not), is ``lone_epoch_ahead``; for the first epoch, the next
+      two agree.
+
+    Gaps forward (hours in a daily file) are kept, as are equal stamps (the replay counts duplicates) and
+    an epoch in order whatever its stamp (a damaged last epoch, or one shifted by less than the interval,
+    is not seen)."""
+    t = [e.t_gps_s for e in epochs]
+    n = len(t)
+    kept: list[GnssEpoch] = []
+    base: float | None = None
+    for i, ti in enumerate(t):
+        if base is not None and ti < base:
+            run = t[i : i + RESTART_EPOCHS]
+            if not (len(run) == RESTART_EPOCHS and all(a < b < base for a, b in pairwise(run))):
+                rejected["lone_epoch_back"] += 1
+                continue
+        elif i + 1 < n and t[i + 1] < ti and (
+            t[i + 1] >= base if base is not None else i + 2 < n and t[i + 2] > t[i + 1]
+        ):
+            rejected["lone_epoch_ahead"] += 1
+            continue
+        kept.append(epochs[i])
+        base = ti
+    return kept
 
 
 # --- RINEX 2 (2.10, 2.11) observations ------------------------------------------------------------
