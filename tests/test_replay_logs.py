@@ -341,19 +341,26 @@ def test_concatenated_log_is_replayed_as_segments_with_the_navigators_counters(
     assert "2 log restart(s)" in printed
 
 
-def test_a_lone_sample_far_back_is_not_a_restart(tmp_path: Path) -> None:
-    """One IMU sample stamped 1 ms after boot in the middle of a 60 s log: counted by the
-    navigator as time going backwards, no new segment, every other sample used as before."""
+def _log_with_a_stray_imu_sample(tmp_path: Path, stamp_us: int) -> tuple[Path, Path]:
+    """The first 400 kB of quad106 (plain) and the same with one IMU sample stamped ``stamp_us``
+    inserted in the middle."""
     plain = tmp_path / "plain.tlog"
     plain.write_bytes(QUAD106.read_bytes()[:400_000])
     reader = TlogReader(plain)
     mid = next(reader.position for _ in reader if reader.position > 200_000)
     stray = tmp_path / "stray.tlog"
     with TlogWriter(stray) as w:
-        w.write(0, mc.encode_imu(ImuSample(1000, np.array([0.0, 0, -9.8]), np.zeros(3))))
+        w.write(0, mc.encode_imu(ImuSample(stamp_us, np.array([0.0, 0, -9.8]), np.zeros(3))))
     data = plain.read_bytes()
     log = tmp_path / "outlier.tlog"
     log.write_bytes(data[:mid] + stray.read_bytes() + data[mid:])
+    return plain, log
+
+
+def test_a_lone_sample_far_back_is_not_a_restart(tmp_path: Path) -> None:
+    """One IMU sample stamped 1 ms after boot in the middle of a 60 s log: counted by the
+    navigator as time going backwards, no new segment, every other sample used as before."""
+    plain, log = _log_with_a_stray_imu_sample(tmp_path, 1000)
     s = core.replay(log, "second-order").summary
     base = core.replay(plain, "second-order").summary
     assert s["log_restarts"] == 0 and s["navigator"]["imu_rejected_time_backwards"] == 1
@@ -366,16 +373,7 @@ def test_a_lone_sample_far_ahead_is_dropped_and_counted(tmp_path: Path, stamp_us
     damaged stamp: dropped and counted (imu_time_jump), the time base not moved, so every other
     sample is used as in the undamaged log (it used to be fused, and every later sample was then
     refused as time going backwards)."""
-    plain = tmp_path / "plain.tlog"
-    plain.write_bytes(QUAD106.read_bytes()[:400_000])
-    reader = TlogReader(plain)
-    mid = next(reader.position for _ in reader if reader.position > 200_000)
-    stray = tmp_path / "stray.tlog"
-    with TlogWriter(stray) as w:
-        w.write(0, mc.encode_imu(ImuSample(stamp_us, np.array([0.0, 0, -9.8]), np.zeros(3))))
-    data = plain.read_bytes()
-    log = tmp_path / "outlier.tlog"
-    log.write_bytes(data[:mid] + stray.read_bytes() + data[mid:])
+    plain, log = _log_with_a_stray_imu_sample(tmp_path, stamp_us)
     s = core.replay(log, "second-order").summary
     base = core.replay(plain, "second-order").summary
     assert s["log_restarts"] == 0
