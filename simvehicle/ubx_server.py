@@ -119,8 +119,8 @@ class UbxServer:
 class ReceiverStream:
     """A vehicle process's raw receiver outputs: UBX frames (:mod:`simvehicle.ubx`) on the TCP port and
     in ``receiver.ubx``, and ``receiver.json`` (the port, the GPS time of boot, the broadcast
-    ephemerides as ``EphemerisStore`` fields: what a consumer needs for GLONASS, Galileo and BeiDou,
-    whose navigation messages the stream does not carry), rewritten when the ephemerides are extended."""
+    ephemerides as ``EphemerisStore`` fields: the same ephemerides the stream's RXM-SFRBX carries, for a
+    consumer that does not decode navigation messages), rewritten when the ephemerides are extended."""
 
     def __init__(self, gnss: RawGnssModel, port: int, out_dir: Path) -> None:
         self.gnss = gnss

@@ -93,7 +93,7 @@ def fly(mission: Mission | str, profile_index: int, method: str, seed: int,
     push, push_fix_ned = nav.push, nav.push_fix_ned
     accuracies_m = sim.gnss.reported_accuracies_m  # what the model's to_fix puts on the wire
     vel_accuracy = sim.gnss.reported_velocity_accuracy_m_s
-    rows = array("d")  # recording.ROW_FLOATS floats per control step: ~180 B, not two domain objects (~2 kB)
+    rows = array("d")  # recording.ROW_FLOATS floats per control step: 216 B, not two domain objects (~2 kB)
     fix_rows = array("d")  # FIX_FIELDS floats per fix received
     engine, rejected_before = nav.engine, 0  # its gate counter, read after each fix
     est, collisions, in_contact, reached = None, 0, False, False
