@@ -37,7 +37,7 @@ examples:
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "fly": ("gcs_tools.fly.cli", "fly a mission in one process: vehicle, planner, estimator (seeded)"),
-    "sitl": ("gcs_tools.sitl.cli", "fly a mission as processes over MAVLink 2/UDP (or ArduCopter or PX4 SITL)"),
+    "sitl": ("gcs_tools.sitl.cli", "fly a mission as processes over MAVLink 2/UDP (or ArduPilot, PX4 SITL)"),
     "replay": ("gcs_tools.replay.cli",
                "run the estimator on a flight log (tlog, .bin, .ulg, ANSFL) or smartLoc"),
     "companion": ("gcs_tools.companion_cli", "the estimator beside a real autopilot (--master, --config)"),
