@@ -89,10 +89,4 @@ def ubx_items(stream: IO[bytes] | Any, decoder: UbxDecoder | None = None) -> Ite
             return
         if msg is None:
             continue
-        try:
-            item = dec.feed(msg)
-        except (AttributeError, ValueError, TypeError):
-            dec.counters[f"bad_{getattr(msg, 'identity', 'message')}"] += 1
-            continue
-        if item is not None:
-            yield item
+        yield from dec.feed_all(msg)  # counted, never raised

@@ -1,0 +1,118 @@
+"""A hostile receiver, live: a server on 127.0.0.1 streams the simulated receiver's UBX (40 epochs, the
+receiver's time really jumping an hour ahead at epoch 30) with seeded damage between the frames, stalls
+longer than the read timeout, and drops the connection twice (once in the middle of a frame); the
+companion's reader thread (``RawReceiver``) must hand over every clean item exactly as the clean
+stream decodes, count each damage by its reason, and reconnect."""
+
+from __future__ import annotations
+
+import io
+import pickle
+import struct
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from companion.gnss.observations import GnssEpoch
+from companion.gnss.ubx import UbxDecoder
+from companion.mission import load_mission
+from companion.receiver.ubx_stream import ubx_items
+from simvehicle import SimVehicle
+from simvehicle.ubx import UbxEncoder, frame
+
+RAWX, SFRBX, PVT = b"\x02\x15", b"\x02\x13", b"\x01\x07"
+JUMP_EPOCH, JUMP_S = 30, 3600.0
+
+
+def _payload(f: bytes) -> bytearray:
+    return bytearray(f[6:-2])
+
+
+def _reframe(f: bytes, payload: bytes | bytearray) -> bytes:
+    return frame(f[2], f[3], bytes(payload))
+
+
+def _patch(f: bytes, offset: int, fmt: str, *values: float) -> bytes:
+    """The frame with ``values`` packed at ``offset`` of its payload, its checksum made valid again."""
+    p = _payload(f)
+    struct.pack_into("<" + fmt, p, offset, *values)
+    return _reframe(f, p)
+
+
+def _each_meas(f: bytes, offset: int, fmt: str, values: list[float]) -> bytes:
+    n = _payload(f)[11]
+    for i in range(n):
+        f = _patch(f, 16 + 32 * i + offset, fmt, values[i % len(values)])
+    return f
+
+
+def _rawx_at(f: bytes, dt_s: float) -> bytes:
+    return _patch(f, 0, "d", struct.unpack_from("<d", _payload(f), 0)[0] + dt_s)
+
+
+@pytest.fixture(scope="module")
+def epochs() -> list[list[bytes]]:
+    """40 epochs (8 s at 5 Hz) of the canyon receiver: RXM-RAWX, RXM-SFRBX, NAV-SAT, NAV-PVT frames;
+    from epoch 30 on, the receiver's time (rcvTow, iTOW) an hour later: a real jump."""
+    sim = SimVehicle(load_mission("default", "canyon"), 4, 0)
+    enc = UbxEncoder(sim.gnss.store)
+    out: list[list[bytes]] = []
+    while len(out) < 40:
+        for raw in sim.advance(None, None).gnss_raw:
+            out.append(enc.epoch_frames(raw))
+    for fs in out[JUMP_EPOCH:]:
+        for j, f in enumerate(fs):
+            if f[2:4] == RAWX:
+                fs[j] = _rawx_at(f, JUMP_S)
+            elif f[2:4] in (PVT, b"\x01\x35"):  # NAV-PVT, NAV-SAT: iTOW (ms)
+                fs[j] = _patch(f, 0, "I", struct.unpack_from("<I", _payload(f), 0)[0] + int(JUMP_S * 1000))
+    return out[:40]
+
+
+def _rawx(fs: list[bytes]) -> bytes:
+    return next(f for f in fs if f[2:4] == RAWX)
+
+
+def _same(a: object, b: object) -> bool:
+    if isinstance(a, GnssEpoch) and isinstance(b, GnssEpoch):
+        return a.t_gps_s == b.t_gps_s and all(
+            np.array_equal(getattr(a, k), getattr(b, k), equal_nan=True)
+            for k in ("system", "prn", "pseudorange_m", "pseudorange_var_m2", "pseudorange_rate_m_s",
+                      "cn0_dbhz", "elevation_deg", "azimuth_deg"))
+    return pickle.dumps(a) == pickle.dumps(b)
+
+
+def _t(fs: list[bytes]) -> float:
+    from companion.gnss.timescale import gps_from_week_tow
+
+    p = _payload(_rawx(fs))
+    return gps_from_week_tow(struct.unpack_from("<H", p, 8)[0], struct.unpack_from("<d", p, 0)[0])
+
+
+def _decode(data: bytes) -> tuple[list, Counter[str]]:
+    dec = UbxDecoder()
+    return list(ubx_items(io.BytesIO(data), dec)), dec.counters
+
+
+def test_epoch_times_keep_order_a_lone_damaged_time_dropped_a_real_jump_kept(epochs):
+    r = [_rawx(fs) for fs in epochs]
+    week = struct.unpack_from("<H", _payload(r[2]), 8)[0]
+    back, ahead = _patch(r[2], 8, "H", week - 1), _patch(r[3], 8, "H", week + 1)  # lone damaged weeks
+    data = [r[0], r[1], r[1], r[2], back, r[3], ahead, r[4], _rawx_at(r[5], 3600.0), _rawx_at(r[6], 3600.0)]
+    items, c = _decode(b"".join(data))
+    assert [i.t_gps_s for i in items] == [*(_t(epochs[k]) for k in range(5)),
+                                          _t(epochs[5]) + 3600.0, _t(epochs[6]) + 3600.0]
+    assert (c["rawx_duplicate_epoch"], c["rawx_lone_time_back"], c["rawx_lone_time_ahead"],
+            c["rawx_time_jump"], c["rawx_epochs"]) == (1, 1, 1, 1, 7)
+
+
+def test_absurd_cn0_doppler_and_receiver_fix_are_counted_not_used(epochs):
+    rawx, pvt = _rawx(epochs[0]), next(f for f in epochs[0] if f[2:4] == PVT)
+    n = _payload(rawx)[11]
+    data = [_each_meas(rawx, 26, "B", [255]), _each_meas(_rawx_at(rawx, 0.2), 16, "f", [3e7]),
+            _patch(pvt, 28, "i", 2_000_000_000), pvt]
+    items, c = _decode(b"".join(data))
+    assert len(items) == 2 and np.isnan(items[0].pseudorange_rate_m_s).all() and abs(items[1].lat_deg) < 90
+    assert (c["rawx_invalid_cn0"], c["rawx_empty"], c["rawx_invalid_doppler"], c["pvt_out_of_range"]) == (
+        n, 1, n, 1)
