@@ -116,3 +116,26 @@ def test_absurd_cn0_doppler_and_receiver_fix_are_counted_not_used(epochs):
     assert len(items) == 2 and np.isnan(items[0].pseudorange_rate_m_s).all() and abs(items[1].lat_deg) < 90
     assert (c["rawx_invalid_cn0"], c["rawx_empty"], c["rawx_invalid_doppler"], c["pvt_out_of_range"]) == (
         n, 1, n, 1)
+
+
+def test_a_truncated_frame_or_a_huge_length_costs_only_its_own_bytes(epochs):
+    clean = b"".join(epochs[1]) + b"".join(epochs[2])
+    want, _ = _decode(b"".join(epochs[0]) + clean)
+    rawx = _rawx(epochs[0])
+    for damage in (rawx[: len(rawx) // 2], b"\xb5\x62\x02\x15\xff\xff" + bytes(30)):
+        items, c = _decode(b"".join(epochs[0]) + damage + clean)
+        assert len(items) == len(want) and all(_same(a, b) for a, b in zip(items, want, strict=True))
+        assert c["bad_checksum"] + c["bad_length"] >= 1
+
+
+def test_a_stall_longer_than_the_read_timeout_is_waited_on_not_an_end(epochs):
+    from companion.receiver.ubx_stream import open_stream
+    from tests.gnss_helpers import serve_bytes_once
+
+    data = b"".join(f for fs in epochs[:3] for f in fs)
+    want, _ = _decode(data)
+    dec = UbxDecoder()
+    with serve_bytes_once(data, len(data) // 2 + 7, 0.6) as port:  # half, 0.6 s of silence, the rest
+        items = list(ubx_items(open_stream(f"tcp:127.0.0.1:{port}", 0.2), dec))
+    assert len(items) == len(want) and all(_same(a, b) for a, b in zip(items, want, strict=True))
+    assert dec.counters["stalls"] == 2  # after each half (the server pauses after each piece)
