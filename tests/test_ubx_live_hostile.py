@@ -7,8 +7,12 @@ stream decodes, count each damage by its reason, and reconnect."""
 from __future__ import annotations
 
 import io
+import math
 import pickle
+import socket
 import struct
+import threading
+import time
 from collections import Counter
 
 import numpy as np
@@ -17,6 +21,7 @@ import pytest
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.ubx import UbxDecoder
 from companion.mission import load_mission
+from companion.receiver.raw_receiver import RawReceiver
 from companion.receiver.ubx_stream import ubx_items
 from simvehicle import SimVehicle
 from simvehicle.ubx import UbxEncoder, frame
@@ -139,3 +144,142 @@ def test_a_stall_longer_than_the_read_timeout_is_waited_on_not_an_end(epochs):
         items = list(ubx_items(open_stream(f"tcp:127.0.0.1:{port}", 0.2), dec))
     assert len(items) == len(want) and all(_same(a, b) for a, b in zip(items, want, strict=True))
     assert dec.counters["stalls"] == 2  # after each half (the server pauses after each piece)
+
+
+def _hostile(epochs: list[list[bytes]]) -> tuple[list[tuple[str, object]], Counter[str]]:
+    """The server's script (send bytes / pause / drop the connection) and the damage it holds."""
+    rng = np.random.default_rng(11)
+    script: list[tuple[str, object]] = []
+    damage: Counter[str] = Counter()
+
+    def send(b: bytes) -> None:
+        script.append(("send", b))
+
+    for k, fs in enumerate(epochs):
+        junk = bytes(int(x) for x in rng.integers(0, 256, int(rng.integers(1, 40))) if x != 0xB5)
+        send(junk)  # line noise between epochs, no sync character in it
+        damage["junk_bytes"] += len(junk)
+        rawx = _rawx(fs)
+        if k == 19:  # a stall in the middle of a frame, longer than the read timeout (0.3 s)
+            send(fs[0][:50])
+            script.append(("pause", 0.8))
+            send(b"".join(fs)[50:])
+        else:
+            send(b"".join(fs))
+        if k == 2:  # a bad checksum
+            p = _payload(rawx)
+            p[40] ^= 0x10
+            send(rawx[:6] + bytes(p) + rawx[-2:])
+            damage["bad_checksum"] += 1
+        elif k == 3:  # a truncated frame: its announced length swallows the next epoch's start
+            send(rawx[: len(rawx) // 2])
+            damage["bad_checksum"] += 1
+        elif k == 4:  # a header announcing 65535 bytes
+            send(b"\xb5\x62\x02\x15\xff\xff" + bytes(20))
+            damage["bad_length"] += 1
+        elif k == 5:  # pseudoranges NaN, inf, absurd; C/N0 255: no signal left
+            n = _payload(rawx)[11]
+            send(_each_meas(_rawx_at(rawx, 0.1), 0, "d", [math.nan, math.inf, 1e300, -2e7]))
+            send(_each_meas(_rawx_at(rawx, 0.1), 26, "B", [255]))
+            damage["rawx_invalid_pseudorange"] += n
+            damage["rawx_invalid_cn0"] += n
+            damage["rawx_empty"] += 2
+        elif k == 7:  # Dopplers NaN, inf, absurd (valid pseudoranges): an epoch without rates
+            send(_each_meas(_rawx_at(rawx, 0.1), 16, "f", [math.nan, math.inf, -math.inf, 3e7]))
+            damage["rawx_invalid_doppler"] += _payload(rawx)[11]
+        elif k == 9:  # numMeas beyond the payload, and numMeas 0
+            send(_patch(rawx, 11, "B", 255))
+            send(_reframe(rawx, _patch(_rawx_at(rawx, 0.1), 11, "B", 0)[6:22]))
+            damage["bad_frame"] += 1
+            damage["rawx_empty"] += 1
+        elif k == 10:  # NAV-PVT: latitude 200°, fix type 9, 5 km/s north
+            pvt = next(f for f in fs if f[2:4] == PVT)
+            for off, fmt, v in ((28, "i", 2_000_000_000), (20, "B", 9), (48, "i", 5_000_000)):
+                send(_patch(pvt, off, fmt, v))
+            damage["pvt_out_of_range"] += 3
+        elif k == 11:  # RXM-SFRBX: GPS random words, GPS without words, an unknown system
+            words = [int(w) for w in rng.integers(0, 2**32, 10, dtype=np.uint64)]
+            send(frame(2, 0x13, struct.pack("<8B10I", 0, 5, 0, 0, 10, 0, 2, 0, *words)))
+            send(frame(2, 0x13, struct.pack("<8B", 0, 5, 0, 0, 0, 0, 2, 0)))
+            send(frame(2, 0x13, struct.pack("<8BI", 42, 5, 0, 0, 1, 0, 2, 0, 7)))
+            damage["lnav_refused"] += 2
+            damage["sfrbx_not_decoded_42"] += 1
+        elif k == 12:  # a lone epoch a week back, then one a week ahead (epoch 14)
+            send(_patch(rawx, 8, "H", struct.unpack_from("<H", _payload(rawx), 8)[0] - 1))
+            damage["rawx_lone_time_back"] += 1
+        elif k == 14:
+            send(_patch(rawx, 8, "H", struct.unpack_from("<H", _payload(rawx), 8)[0] + 1))
+            damage["rawx_lone_time_ahead"] += 1
+        elif k == 15:  # a time of week NaN
+            send(_patch(rawx, 0, "d", math.nan))
+            damage["rawx_bad_time"] += 1
+        elif k == 16:  # the same epoch again
+            send(rawx)
+            damage["rawx_duplicate_epoch"] += 1
+        elif k == 22:  # the connection dropped in the middle of a (repeated) frame; a new one accepted
+            send(rawx[:100])
+            script.append(("drop", None))
+            damage["truncated_at_end"] += 1
+            damage["disconnects"] += 1
+        elif k == 26:  # dropped between frames
+            script.append(("drop", None))
+            damage["disconnects"] += 1
+    damage["disconnects"] += 1  # the server gone for good at the end
+    return script, damage
+
+
+def _serve(srv: socket.socket, script: list[tuple[str, object]]) -> None:
+    conn, _ = srv.accept()
+    for what, arg in script:
+        if what == "send":
+            conn.sendall(arg)  # type: ignore[arg-type]
+        elif what == "pause":
+            time.sleep(arg)  # type: ignore[arg-type]  # the stall under test
+        else:
+            conn.close()
+            conn, _ = srv.accept()
+    conn.close()
+    srv.close()  # the receiver is gone for good: the reader keeps trying, with backoff
+
+
+def test_a_hostile_live_receiver_loses_no_clean_item_and_counts_every_damage(epochs, capfd):
+    ref_dec = UbxDecoder()
+    reference = list(ubx_items(io.BytesIO(b"".join(f for fs in epochs for f in fs)), ref_dec))
+    assert sum(isinstance(i, GnssEpoch) for i in reference) == 40 and ref_dec.counters["rawx_time_jump"] == 1
+    script, damage = _hostile(epochs)
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    server = threading.Thread(target=_serve, args=(srv, script), daemon=True)
+    server.start()
+    rx = RawReceiver(f"tcp:127.0.0.1:{srv.getsockname()[1]}", timeout_s=0.3, first_backoff_s=0.05)
+    items: list = []
+    deadline = time.monotonic() + 12.0
+    try:
+        while time.monotonic() < deadline and rx.counters().get("disconnects", 0) < 3:  # 2 drops, the end
+            items += rx.drain()
+            time.sleep(0.02)
+        items += rx.drain()
+        c = rx.counters()
+        assert rx._thread.is_alive()  # still trying to reconnect
+    finally:
+        rx.close()
+        server.join(timeout=5.0)
+    # the epoch with its Dopplers damaged: its pseudoranges used, its rates not
+    extra = [i for i in items if isinstance(i, GnssEpoch) and i.t_gps_s == _t(epochs[7]) + 0.1]
+    assert len(extra) == 1 and np.isnan(extra[0].pseudorange_rate_m_s).all()
+    rest = [i for i in items if i is not extra[0]]
+    assert len(rest) == len(reference) and all(_same(a, b) for a, b in zip(rest, reference, strict=True))
+    # every damage counted by its reason (beyond what the clean stream counts)
+    got = Counter({k: v - ref_dec.counters.get(k, 0) for k, v in c.items() if isinstance(v, int)})
+    got["lnav_refused"] = sum(v for k, v in got.items() if k.startswith("lnav_bad"))
+    for k, v in damage.items():
+        if k in ("junk_bytes", "bad_checksum", "bad_length"):  # a damaged frame's own bytes are junk too
+            assert got[k] >= v, (k, got[k], v)
+        else:
+            assert got[k] == v, (k, got[k], v, got)
+    assert got["stalls"] >= 1 and c["reconnects"] == 2 and c["rawx_time_jump"] == 1
+    assert c["items"] == len(items) and not any(k.startswith("reader_errors") for k in c)
+    err = capfd.readouterr().err.splitlines()
+    assert err[:2] == [f"companion: receiver {rx.url}: the stream ended; reconnecting",
+                       f"companion: receiver {rx.url}: reconnected"]
