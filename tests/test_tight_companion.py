@@ -30,7 +30,7 @@ def test_raw_receiver_reads_ubx_from_tcp_on_a_thread():
         rx = RawReceiver(f"tcp:127.0.0.1:{port}")
         deadline = time.monotonic() + 10.0
         try:
-            while time.monotonic() < deadline and not rx.counters().get("stream_ended"):
+            while time.monotonic() < deadline and not rx.counters().get("disconnects"):
                 items += rx.drain()
                 time.sleep(0.01)
             items += rx.drain()
@@ -38,7 +38,7 @@ def test_raw_receiver_reads_ubx_from_tcp_on_a_thread():
             rx.close()
     assert [type(i).__name__ for i in items] == ["GnssEpoch", "KeplerEphemeris", "ReceiverPvt", "GnssEpoch"]
     c = rx.counters()
-    assert c["items"] == 4 and c["stream_ended"] == 1
+    assert c["items"] == 4 and c["disconnects"] == 1 and c["junk_bytes"] == len(b"line noise between frames")
 
 
 def test_bad_receiver_options_are_one_line_errors(tmp_path):

@@ -15,7 +15,19 @@ attributes) in arrival order; opening a file, serial port or TCP stream is the c
   (:mod:`companion.gnss.bdsnav`, BCH parity checked; the GEO satellites' D2 subframe 1 pages
   alike); other systems (SBAS, QZSS) counted as ``sfrbx_not_decoded_<system>``.
   Every refusal has a named counter (``<system>_bad_crc``, ``beidou_bad_parity``, ...).
-* ``NAV-PVT`` -> :class:`ReceiverPvt` (the receiver's own solution with its accuracies).
+* ``NAV-PVT`` -> :class:`ReceiverPvt` (the receiver's own solution with its accuracies); a solution
+  outside the Earth's ranges (latitude, longitude, height, speed, fix type, time of week) is refused
+  (``pvt_out_of_range``).
+
+Damaged input is counted, never used and never raised (``feed_all``): a signal's C/N0 beyond
+``MAX_CN0_DBHZ`` drops that signal (``rawx_invalid_cn0``); a Doppler not finite or beyond
+``MAX_RANGE_RATE_M_S`` leaves its pseudorange rate NaN (``rawx_invalid_doppler``); a message whose
+fields cannot be read is ``bad_<identity>``. Epoch times keep order: a repeated time is
+``rawx_duplicate_epoch``; an epoch not within ``MAX_EPOCH_STEP_S`` after the last one kept (back in
+time, or jumping ahead) is held until the next epoch tells: if that one follows the last kept, the
+held one was a lone damaged time (``rawx_lone_time_back`` / ``rawx_lone_time_ahead``, dropped); if it
+follows the held one, the receiver's time really jumped (``rawx_time_jump``) and both are released.
+A damaged time within ``MAX_EPOCH_STEP_S`` of the truth cannot be told from a real one.
 """
 
 from __future__ import annotations
@@ -40,6 +52,9 @@ from companion.gnss.timescale import gps_from_calendar, gps_from_week_tow
 # (gnssId, sigId) of the signal taken per system (UBX interface description, "Signal identifiers")
 PRIMARY_SIGNALS = {(0, 0), (2, 0), (2, 1), (3, 0), (3, 1), (5, 0), (6, 0)}
 KNOWN_SYSTEMS = {int(s) for s in System}
+MAX_EPOCH_STEP_S = 2.0  # a 1 Hz receiver missing one epoch; a longer step is held for the next to confirm
+MAX_CN0_DBHZ = 80.0  # receivers report 0-60 dB-Hz; beyond is a damaged field (the belief would trust it)
+MAX_RANGE_RATE_M_S = 10_000.0  # satellite motion (< 1 km/s) plus a receiver clock drift up to ~30 ppm
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,15 +89,30 @@ class UbxDecoder:
     week: int | None = None  # from the last RAWX
     t_gps_s: float | None = None  # the last RAWX's receiver time (resolves LNAV's 10-bit week)
     _sat: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)  # el, az (deg)
+    _held: tuple[int, float, GnssEpoch] | None = None  # an epoch out of time order: week, time, epoch
+
 
     @property
     def klobuchar(self) -> tuple[np.ndarray, np.ndarray] | None:
         return self.lnav.klobuchar
 
+    def feed_all(self, msg: Any) -> list[UbxItem]:
+        """The items one message gives (none, one, or a held epoch and this one); never raises."""
+        try:
+            if getattr(msg, "identity", "") == "RXM-RAWX":
+                return self._rawx(msg)
+            item = self.feed(msg)
+        except Exception:  # noqa: BLE001 - a field pyubx2 gave that cannot be read: counted, not used
+            self.counters[f"bad_{getattr(msg, 'identity', '') or 'message'}"] += 1
+            return []
+        return [] if item is None else [item]
+
     def feed(self, msg: Any) -> UbxItem | None:
+        """One message's item (the last of ``feed_all``'s: use that on a live stream)."""
         ident = getattr(msg, "identity", "")
         if ident == "RXM-RAWX":
-            return self._rawx(msg)
+            items = self._rawx(msg)
+            return items[-1] if items else None
         if ident == "RXM-SFRBX":
             return self._sfrbx(msg)
         if ident == "NAV-PVT":
@@ -93,15 +123,42 @@ class UbxDecoder:
         self.counters[f"ignored_{ident or 'unknown'}"] += 1
         return None
 
-    def _rawx(self, m: Any) -> GnssEpoch | None:
-        n = int(m.numMeas)
+    def _rawx(self, m: Any) -> list[UbxItem]:
         tow, week = float(m.rcvTow), int(m.week)
         if not (math.isfinite(tow) and 0.0 <= tow < 604800.0 and week > 0):
             self.counters["rawx_bad_time"] += 1
-            return None
-        self.week = week
+            return []
         t = gps_from_week_tow(week, tow)
-        self.t_gps_s = t
+        if t == self.t_gps_s:
+            self.counters["rawx_duplicate_epoch"] += 1
+            return []
+        epoch = self._rawx_epoch(m, t)
+        if epoch is None:
+            return []
+        last, held = self.t_gps_s, self._held
+        if last is not None and not 0.0 < t - last <= MAX_EPOCH_STEP_S:
+            if held is not None and 0.0 < t - held[1] <= MAX_EPOCH_STEP_S:  # the time really jumped
+                self.counters["rawx_time_jump"] += 1
+                self._held = None
+                self.counters["rawx_epochs"] += 2
+                self.week, self.t_gps_s = week, t
+                return [held[2], epoch]
+            self._drop_held()
+            self._held = (week, t, epoch)  # until the next epoch tells whether it was alone
+            return []
+        self._drop_held()
+        self.week, self.t_gps_s = week, t
+        self.counters["rawx_epochs"] += 1
+        return [epoch]
+
+    def _drop_held(self) -> None:
+        if self._held is not None and self.t_gps_s is not None:
+            back = self._held[1] < self.t_gps_s
+            self.counters["rawx_lone_time_back" if back else "rawx_lone_time_ahead"] += 1
+        self._held = None
+
+    def _rawx_epoch(self, m: Any, t: float) -> GnssEpoch | None:
+        n = int(m.numMeas)
         sysv, prnv, pr, var, rate, cn0, el, az = [], [], [], [], [], [], [], []
         for i in range(1, n + 1):
             s = f"_{i:02d}"
@@ -127,20 +184,26 @@ class UbxDecoder:
                 lam = C_M_S / FREQ_B1I_HZ
             else:
                 lam = C_M_S / FREQ_L1_HZ
-            d = float(getattr(m, "doMes" + s))
+            c = float(getattr(m, "cno" + s))
+            if not 0.0 <= c <= MAX_CN0_DBHZ:
+                self.counters["rawx_invalid_cn0"] += 1
+                continue
+            rr = -lam * float(getattr(m, "doMes" + s))
+            if not (math.isfinite(rr) and abs(rr) <= MAX_RANGE_RATE_M_S):
+                self.counters["rawx_invalid_doppler"] += 1
+                rr = math.nan
             sysv.append(gnss)
             prnv.append(sv)
             pr.append(p)
             var.append((0.01 * 2.0 ** int(getattr(m, "prStd" + s, 0))) ** 2)
-            rate.append(-lam * d if math.isfinite(d) else math.nan)
-            cn0.append(float(getattr(m, "cno" + s)))
+            rate.append(rr)
+            cn0.append(c)
             e_a = self._sat.get((gnss, sv), (math.nan, math.nan))
             el.append(e_a[0])
             az.append(e_a[1])
         if not sysv:
             self.counters["rawx_empty"] += 1
             return None
-        self.counters["rawx_epochs"] += 1
         return make_epoch(
             t,
             sysv,
@@ -199,7 +262,12 @@ class UbxDecoder:
             self.counters[k] = v
         return eph
 
-    def _pvt(self, m: Any) -> ReceiverPvt:
+    def _pvt(self, m: Any) -> ReceiverPvt | None:
+        speed_m_s = math.hypot(float(m.velN), float(m.velE), float(m.velD)) / 1e3
+        if not (abs(float(m.lat)) <= 90.0 and abs(float(m.lon)) <= 180.0 and int(m.fixType) <= 5
+                and abs(float(m.height)) <= 1e8 and speed_m_s <= 1000.0 and 0 <= int(m.iTOW) < 604_800_000):
+            self.counters["pvt_out_of_range"] += 1  # heights within 100 km, speeds within 1 km/s
+            return None
         t = gps_from_week_tow(self.week, float(m.iTOW) / 1e3) if self.week else math.nan
         t_utc = math.nan
         if int(getattr(m, "validDate", 0)) and int(getattr(m, "validTime", 0)):

@@ -1,25 +1,36 @@
-"""u-blox UBX from a serial port, a TCP stream or a file, through ``pyubx2``, into decoded items (the
-receiver the companion owns; ``companion.gnss.ubx`` decodes, this opens and reads).
+"""u-blox UBX from a serial port, a TCP stream or a file, framed here and parsed by ``pyubx2`` into
+decoded items (the receiver the companion owns; ``companion.gnss.ubx`` decodes, this opens and reads).
 
     for item in ubx_items(open_stream("tcp:127.0.0.1:5000")): ...  # epoch, PVT or ephemeris
 
-Stream URLs: a file path, ``serial:/dev/ttyACM0:115200``, ``tcp:HOST:PORT``. Malformed frames are
-skipped and counted by pyubx2's error handling (``quitonerror=ERR_LOG`` semantics: counted here).
+Stream URLs: a file path, ``serial:/dev/ttyACM0:115200``, ``tcp:HOST:PORT``. The framing is ours, not
+pyubx2's, so that damage costs only the damaged bytes: a frame whose checksum fails is not skipped
+whole (its announced length may swallow the good frames after it: a truncated frame, a corrupted
+length) but searched again from the byte after its sync characters; a length beyond any message the
+decoder reads is refused at once. Every refusal is counted in ``decoder.counters``:
+``junk_bytes`` (bytes outside any frame), ``bad_checksum``, ``bad_length``, ``bad_frame`` (a valid
+checksum over a payload pyubx2 cannot parse), ``truncated_at_end`` (a frame cut by the end of the
+stream), ``stalls`` (nothing for longer than the stream's timeout: waited on, not an end).
 """
 
 from __future__ import annotations
 
 import socket
-from collections.abc import Iterator
+from collections import Counter
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
 from companion.errors import UserError
 from companion.gnss.ubx import UbxDecoder, UbxItem
 
+SYNC = b"\xb5\x62"
+MAX_PAYLOAD = 16 + 32 * 255  # RXM-RAWX with 255 measurements, the largest message the decoder reads
+
 
 class _SocketStream:
-    """A TCP socket with the ``read(n)`` pyubx2 needs."""
+    """A TCP socket: ``read(n)`` gives what arrived (up to n bytes), ``b""`` at the end of the stream
+    (the peer closed), ``None`` when nothing arrived within the timeout (a stall, not an end)."""
 
     def __init__(self, host: str, port: int, timeout_s: float) -> None:
         try:
@@ -27,20 +38,27 @@ class _SocketStream:
         except OSError as exc:
             raise UserError(f"tcp:{host}:{port}: cannot connect: {exc.strerror or exc}") from None
 
-    def read(self, n: int) -> bytes:
-        out = b""
-        while len(out) < n:
-            try:
-                chunk = self.sock.recv(n - len(out))
-            except TimeoutError:
-                return out
-            if not chunk:
-                return out
-            out += chunk
-        return out
+    def read(self, n: int) -> bytes | None:
+        try:
+            return self.sock.recv(n)
+        except TimeoutError:
+            return None
 
     def close(self) -> None:
         self.sock.close()
+
+
+class _SerialStream:
+    """A serial port: pyserial's empty read is its timeout (a serial line has no end), so ``None``."""
+
+    def __init__(self, port: Any) -> None:
+        self.port = port
+
+    def read(self, n: int) -> bytes | None:
+        return self.port.read(max(1, min(n, self.port.in_waiting))) or None
+
+    def close(self) -> None:
+        self.port.close()
 
 
 def open_stream(url: str, timeout_s: float = 5.0) -> Any:
@@ -56,7 +74,7 @@ def open_stream(url: str, timeout_s: float = 5.0) -> Any:
             _, dev, baud = url.rsplit(":", 2)
             import serial  # pyserial
 
-            return serial.Serial(dev, int(baud), timeout=timeout_s)
+            return _SerialStream(serial.Serial(dev, int(baud), timeout=timeout_s))
         except ValueError:
             raise UserError(f"{url!r}: expected serial:DEVICE:BAUD") from None
         except Exception as exc:  # noqa: BLE001 - pyserial's SerialException
@@ -67,32 +85,72 @@ def open_stream(url: str, timeout_s: float = 5.0) -> Any:
     return open(path, "rb")  # noqa: SIM115 - the caller closes it
 
 
-def ubx_items(stream: IO[bytes] | Any, decoder: UbxDecoder | None = None) -> Iterator[UbxItem]:
-    """Decoded items in arrival order; unreadable frames counted in ``decoder.counters``."""
-    from pyubx2 import UBX_PROTOCOL, UBXReader
+def _checksum(body: bytes | bytearray) -> bytes:
+    a = b = 0
+    for x in body:
+        a = (a + x) & 0xFF
+        b = (b + a) & 0xFF
+    return bytes((a, b))
+
+
+def ubx_frames(stream: IO[bytes] | Any, counters: Counter[str],
+               stop: Callable[[], bool] = lambda: False) -> Iterator[bytes]:
+    """Whole UBX frames (sync to checksum) in arrival order, until the stream ends or ``stop()``."""
+    buf = bytearray()
+    stalled = False
+    while not stop():
+        chunk = stream.read(4096)
+        if chunk is None:  # nothing within the timeout: wait on (counted once per stall)
+            if not stalled:
+                counters["stalls"] += 1
+            stalled = True
+            continue
+        stalled = False
+        if not chunk:
+            break
+        buf += chunk
+        while True:
+            i = buf.find(SYNC)
+            if i < 0:
+                keep = 1 if buf[-1:] == SYNC[:1] else 0
+                counters["junk_bytes"] += len(buf) - keep
+                del buf[: len(buf) - keep]
+                break
+            if i:
+                counters["junk_bytes"] += i
+                del buf[:i]
+            if len(buf) < 6:
+                break
+            n = int.from_bytes(buf[4:6], "little")
+            if n > MAX_PAYLOAD:
+                counters["bad_length"] += 1
+                del buf[:2]  # search again after this sync
+                continue
+            if len(buf) < n + 8:
+                break
+            if _checksum(buf[2 : n + 6]) != buf[n + 6 : n + 8]:
+                counters["bad_checksum"] += 1
+                del buf[:2]  # a truncated frame's length may cover good frames: search again inside
+                continue
+            frame = bytes(buf[: n + 8])
+            del buf[: n + 8]
+            yield frame
+    if buf.startswith(SYNC):
+        counters["truncated_at_end"] += 1
+    elif buf:
+        counters["junk_bytes"] += len(buf)
+
+
+def ubx_items(stream: IO[bytes] | Any, decoder: UbxDecoder | None = None,
+              stop: Callable[[], bool] = lambda: False) -> Iterator[UbxItem]:
+    """Decoded items in arrival order; frames refused counted in ``decoder.counters``."""
+    from pyubx2 import UBXReader
 
     dec = decoder if decoder is not None else UbxDecoder()
-    reader = UBXReader(
-        stream,
-        protfilter=UBX_PROTOCOL,
-        quitonerror=2,
-        validate=1,
-        errorhandler=lambda exc: dec.counters.update(["bad_frame"]),
-    )
-    while True:
+    for frame in ubx_frames(stream, dec.counters, stop):
         try:
-            raw, msg = reader.read()
-        except Exception:  # noqa: BLE001 - pyubx2 raises on a frame it cannot parse
+            msg = UBXReader.parse(frame, validate=0)
+        except Exception:  # noqa: BLE001 - a valid checksum over a payload pyubx2 cannot parse
             dec.counters["bad_frame"] += 1
             continue
-        if raw is None:
-            return
-        if msg is None:
-            continue
-        try:
-            item = dec.feed(msg)
-        except (AttributeError, ValueError, TypeError):
-            dec.counters[f"bad_{getattr(msg, 'identity', 'message')}"] += 1
-            continue
-        if item is not None:
-            yield item
+        yield from dec.feed_all(msg)
