@@ -112,6 +112,20 @@ def test_epoch_times_keep_order_a_lone_damaged_time_dropped_a_real_jump_kept(epo
             c["rawx_time_jump"], c["rawx_epochs"]) == (1, 1, 1, 1, 7)
 
 
+def test_an_epoch_still_held_when_a_file_ends_is_counted_not_lost_unseen(epochs):
+    """The last epoch of a file jumps an hour ahead: nothing after it can confirm it, so it is dropped
+    and counted (rawx_unconfirmed_at_end); a live connection's end keeps it held for the next one."""
+    r = [_rawx(fs) for fs in epochs]
+    items, c = _decode(b"".join([r[0], r[1], _rawx_at(r[2], 3600.0)]))
+    assert [i.t_gps_s for i in items] == [_t(epochs[0]), _t(epochs[1])]
+    assert c["rawx_unconfirmed_at_end"] == 1 and c["rawx_epochs"] == 2
+    dec = UbxDecoder()
+    first = list(ubx_items(io.BytesIO(b"".join([r[0], r[1], _rawx_at(r[2], 3600.0)])), dec, final=False))
+    later = list(ubx_items(io.BytesIO(_rawx_at(r[3], 3600.0)), dec))  # the next connection confirms it
+    assert len(first) == 2 and [i.t_gps_s for i in later] == [_t(epochs[2]) + 3600.0, _t(epochs[3]) + 3600.0]
+    assert dec.counters["rawx_time_jump"] == 1 and dec.counters["rawx_unconfirmed_at_end"] == 0
+
+
 def test_absurd_cn0_doppler_and_receiver_fix_are_counted_not_used(epochs):
     rawx, pvt = _rawx(epochs[0]), next(f for f in epochs[0] if f[2:4] == PVT)
     n = _payload(rawx)[11]

@@ -159,7 +159,7 @@ def sigma_model_m(epoch: GnssEpoch, el_rad: np.ndarray, config: SppConfig) -> np
     return np.where(epoch.system == System.GLONASS, sigma * config.glonass_sigma_factor, sigma)
 
 
-class _Geometry:
+class Geometry:
     """Ranges, line of sight, elevation and atmosphere at one receiver position."""
 
     def __init__(
@@ -198,11 +198,11 @@ def geometry_at(
     p_ecef_m: np.ndarray,
     config: SppConfig = SppConfig(),
     klobuchar: tuple[np.ndarray, np.ndarray] | None = None,
-) -> _Geometry:
+) -> Geometry:
     """The solver's model at a given receiver position: ranges (Sagnac per ``config``), line of
     sight, elevation, azimuth and the atmosphere it takes off raw pseudoranges (``atm``, metres;
     zero for corrected epochs)."""
-    return _Geometry(epoch, np.asarray(p_ecef_m, float), config, klobuchar)
+    return Geometry(epoch, np.asarray(p_ecef_m, float), config, klobuchar)
 
 
 def _design(los: np.ndarray, cols: np.ndarray, k: int) -> np.ndarray:
@@ -312,11 +312,11 @@ def _iterate(
         "chi2": math.nan,
     }
     it = 0
-    geo: _Geometry | None = None
+    geo: Geometry | None = None
     used = candidate.copy()
     while it < config.max_iterations:
         it += 1
-        geo = _Geometry(epoch, x, config, klobuchar)
+        geo = Geometry(epoch, x, config, klobuchar)
         used = candidate & ((geo.el >= mask_rad) if geo.on_earth else True)
         # a system whose clock has no satellite left keeps its column out of the fit
         present = np.array([bool((used & (epoch.system == s)).any()) for s in systems], dtype=bool)
@@ -341,7 +341,7 @@ def _iterate(
         if geo is None or float(np.linalg.norm(dx[:3])) > 1.0:
             out.update(iterations=it, used=used, reason="no convergence", x=x)
             return out
-    geo = _Geometry(epoch, x, config, klobuchar)
+    geo = Geometry(epoch, x, config, klobuchar)
     sigma = sigma_model_m(epoch, geo.el, config)
     resid = y - (geo.rho + clocks[cols_all] + geo.atm)
     present = np.array([bool((used & (epoch.system == s)).any()) for s in systems], dtype=bool)
@@ -413,7 +413,7 @@ def _solution(
             raim_passed,
             iterations,
         )
-    geo: _Geometry = res["geo"]
+    geo: Geometry = res["geo"]
     dof = res["dof"]
     unit_var = res["chi2"] / dof if dof > 0 else math.nan
     scale = max(1.0, unit_var) if config.accuracy == "a-posteriori" and dof > 0 else 1.0
@@ -463,7 +463,7 @@ def _sigma_reference_m(config: SppConfig) -> float:
 
 
 def _velocity(
-    epoch: GnssEpoch, x: np.ndarray, geo: _Geometry, used: np.ndarray, config: SppConfig
+    epoch: GnssEpoch, x: np.ndarray, geo: Geometry, used: np.ndarray, config: SppConfig
 ) -> tuple[np.ndarray, float, float]:
     """Receiver velocity (ECEF) and clock drift (m/s) from pseudorange rates (RTKLIB resdop)."""
     ok = used & np.isfinite(epoch.pseudorange_rate_m_s) & np.isfinite(epoch.sat_vel_ecef_m_s).all(axis=1)

@@ -26,7 +26,8 @@ fields cannot be read is ``bad_<identity>``. Epoch times keep order: a repeated 
 ``rawx_duplicate_epoch``; an epoch not within ``MAX_EPOCH_STEP_S`` after the last one kept (back in
 time, or jumping ahead) is held until the next epoch tells: if that one follows the last kept, the
 held one was a lone damaged time (``rawx_lone_time_back`` / ``rawx_lone_time_ahead``, dropped); if it
-follows the held one, the receiver's time really jumped (``rawx_time_jump``) and both are released.
+follows the held one, the receiver's time really jumped (``rawx_time_jump``) and both are released;
+one still held when a file ends is counted ``rawx_unconfirmed_at_end`` (``end_of_stream``).
 A damaged time within ``MAX_EPOCH_STEP_S`` of the truth cannot be told from a real one.
 """
 
@@ -150,6 +151,13 @@ class UbxDecoder:
         self.week, self.t_gps_s = week, t
         self.counters["rawx_epochs"] += 1
         return [epoch]
+
+    def end_of_stream(self) -> None:
+        """The stream ended for good (a file): an epoch still held for confirmation cannot be told from a
+        lone damaged time any more: dropped and counted (``rawx_unconfirmed_at_end``), not lost unseen."""
+        if self._held is not None:
+            self.counters["rawx_unconfirmed_at_end"] += 1
+            self._held = None
 
     def _drop_held(self) -> None:
         if self._held is not None and self.t_gps_s is not None:

@@ -48,7 +48,7 @@ class RawReceiver:
     def _read(self) -> str:
         """Read the open stream to its end; why it ended."""
         try:
-            for item in ubx_items(self.stream, self.decoder, self._stop.is_set):
+            for item in ubx_items(self.stream, self.decoder, self._stop.is_set, final=False):
                 try:
                     self._queue.put_nowait(item)
                     self._counts["items"] += 1

@@ -142,8 +142,10 @@ def ubx_frames(stream: IO[bytes] | Any, counters: Counter[str],
 
 
 def ubx_items(stream: IO[bytes] | Any, decoder: UbxDecoder | None = None,
-              stop: Callable[[], bool] = lambda: False) -> Iterator[UbxItem]:
-    """Decoded items in arrival order; frames refused counted in ``decoder.counters``."""
+              stop: Callable[[], bool] = lambda: False, final: bool = True) -> Iterator[UbxItem]:
+    """Decoded items in arrival order; frames refused counted in ``decoder.counters``. ``final``: the
+    stream's end is the data's (a file; ``UbxDecoder.end_of_stream``), not a connection's that the
+    decoder outlives."""
     from pyubx2 import UBXReader
 
     dec = decoder if decoder is not None else UbxDecoder()
@@ -154,3 +156,5 @@ def ubx_items(stream: IO[bytes] | Any, decoder: UbxDecoder | None = None,
             dec.counters["bad_frame"] += 1
             continue
         yield from dec.feed_all(msg)
+    if final:
+        dec.end_of_stream()
