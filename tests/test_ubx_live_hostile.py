@@ -112,6 +112,19 @@ def test_epoch_times_keep_order_a_lone_damaged_time_dropped_a_real_jump_kept(epo
             c["rawx_time_jump"], c["rawx_epochs"]) == (1, 1, 1, 1, 7)
 
 
+def test_a_slow_receivers_epochs_are_all_kept_and_its_lone_damage_still_dropped(epochs):
+    """A receiver logging every 30 s (each epoch 30 s after the last, more than MAX_EPOCH_STEP_S): once
+    its interval shows (the second epoch, held for the third to confirm) every epoch is kept in order; a
+    lone epoch a week back among them is still dropped and counted."""
+    r = [_rawx(fs) for fs in epochs]
+    t0 = _t(epochs[0])
+    slow = [_rawx_at(r[0], 30.0 * k) for k in range(6)]  # the first epoch's measurements every 30 s
+    week = struct.unpack_from("<H", _payload(slow[3]), 8)[0]
+    items, c = _decode(b"".join([*slow[:3], _patch(slow[3], 8, "H", week - 1), *slow[3:]]))
+    assert [i.t_gps_s for i in items] == [t0 + 30.0 * k for k in range(6)]
+    assert (c["rawx_epochs"], c["rawx_lone_time_back"], c["rawx_time_jump"]) == (6, 1, 1)
+
+
 def test_an_epoch_still_held_when_a_file_ends_is_counted_not_lost_unseen(epochs):
     """The last epoch of a file jumps an hour ahead: nothing after it can confirm it, so it is dropped
     and counted (rawx_unconfirmed_at_end); a live connection's end keeps it held for the next one."""

@@ -24,7 +24,8 @@ Damaged input is counted, never used and never raised (``feed_all``): a signal's
 ``MAX_RANGE_RATE_M_S`` leaves its pseudorange rate NaN (``rawx_invalid_doppler``); a message whose
 fields cannot be read is ``bad_<identity>``. Epoch times keep order: a repeated time is
 ``rawx_duplicate_epoch``; an epoch not within ``MAX_EPOCH_STEP_S`` after the last one kept (back in
-time, or jumping ahead) is held until the next epoch tells: if that one follows the last kept, the
+time, or jumping ahead; for a receiver slower than that, 1.5 of its intervals) is held until the next
+epoch tells: if that one follows the last kept, the
 held one was a lone damaged time (``rawx_lone_time_back`` / ``rawx_lone_time_ahead``, dropped); if it
 follows the held one, the receiver's time really jumped (``rawx_time_jump``) and both are released;
 one still held when a file ends is counted ``rawx_unconfirmed_at_end`` (``end_of_stream``).
@@ -56,6 +57,12 @@ KNOWN_SYSTEMS = {int(s) for s in System}
 MAX_EPOCH_STEP_S = 2.0  # a 1 Hz receiver missing one epoch; a longer step is held for the next to confirm
 MAX_CN0_DBHZ = 80.0  # receivers report 0-60 dB-Hz; beyond is a damaged field (the belief would trust it)
 MAX_RANGE_RATE_M_S = 10_000.0  # satellite motion (< 1 km/s) plus a receiver clock drift up to ~30 ppm
+
+
+def _step_limit_s(step_s: float) -> float:
+    """The longest step an epoch may follow the last by without being held: ``MAX_EPOCH_STEP_S``, or 1.5
+    receiver intervals for a receiver slower than that (a 30 s logger's epochs are not each a jump)."""
+    return max(MAX_EPOCH_STEP_S, 1.5 * step_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +98,7 @@ class UbxDecoder:
     t_gps_s: float | None = None  # the last RAWX's receiver time (resolves LNAV's 10-bit week)
     _sat: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)  # el, az (deg)
     _held: tuple[int, float, GnssEpoch] | None = None  # an epoch out of time order: week, time, epoch
+    _step_s: float = 0.0  # between the last two epochs kept: the receiver's interval (a slow one's too)
 
 
     @property
@@ -137,17 +145,19 @@ class UbxDecoder:
         if epoch is None:
             return []
         last, held = self.t_gps_s, self._held
-        if last is not None and not 0.0 < t - last <= MAX_EPOCH_STEP_S:
-            if held is not None and 0.0 < t - held[1] <= MAX_EPOCH_STEP_S:  # the time really jumped
+        if last is not None and not 0.0 < t - last <= _step_limit_s(self._step_s):
+            if held is not None and 0.0 < t - held[1] <= _step_limit_s(held[1] - last):
+                # the time really jumped (or the receiver is slower than one epoch per 2 s: its interval)
                 self.counters["rawx_time_jump"] += 1
                 self._held = None
                 self.counters["rawx_epochs"] += 2
-                self.week, self.t_gps_s = week, t
+                self.week, self.t_gps_s, self._step_s = week, t, t - held[1]
                 return [held[2], epoch]
             self._drop_held()
             self._held = (week, t, epoch)  # until the next epoch tells whether it was alone
             return []
         self._drop_held()
+        self._step_s = t - last if last is not None else 0.0
         self.week, self.t_gps_s = week, t
         self.counters["rawx_epochs"] += 1
         return [epoch]
