@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import pickle
 import socket
 import struct
@@ -391,3 +392,65 @@ def test_on_a_live_stream_lone_damaged_stamps_and_a_real_jump_are_still_held(epo
     assert [len(o) for o in out[-4:]] == [1, 1, 0, 2]  # resumed at once; the jump held, then confirmed
     assert (c["rawx_lone_time_back"], c["rawx_lone_time_ahead"], c["rawx_duplicate_epoch"],
             c["rawx_resumed"], c["rawx_time_jump"], c["rawx_epochs"]) == (1, 2, 1, 1, 1, 9)
+
+
+def _wait(cond: object, timeout_s: float = 20.0) -> bool:
+    """Whether ``cond()`` came true within ``timeout_s`` (polled: the reader is another thread)."""
+    deadline = time.monotonic() + timeout_s
+    while not cond():  # type: ignore[operator]
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def test_a_serial_receiver_on_a_pseudo_terminal_reads_counts_and_comes_back(epochs, tmp_path, capfd):
+    """``serial:DEVICE:BAUD`` for real: pyserial opens a pseudo-terminal's device through a link (as udev's
+    /dev/serial/by-id names a USB receiver). The receiver's bytes written to the other side: every item
+    decodes as from a file, in order, a damaged frame counted; the writer closing (the cable pulled) is
+    one line and no reader error; a new device behind the same link (plugged back in) is reopened and
+    read on with the same decoder."""
+    link = tmp_path / "ublox"
+    first = [b"".join(fs) for fs in epochs[:12]]
+    rawx = _rawx(epochs[3])
+    p = _payload(rawx)
+    p[40] ^= 0x10
+    first.insert(4, rawx[:6] + bytes(p) + rawx[-2:])  # a bad checksum
+    second = [b"".join(fs) for fs in epochs[12:20]]
+    reference, _ = _decode(b"".join(b"".join(fs) for fs in epochs[:20]))
+    writer, device = os.openpty()
+    link.symlink_to(os.ttyname(device))
+    rx = RawReceiver(f"serial:{link}:115200", timeout_s=0.2, first_backoff_s=0.05)
+    os.close(device)  # the reader holds its own
+    items: list = []
+    open_fds = [writer]
+    try:
+        for chunk in first:
+            os.write(writer, chunk)
+        n_first = len(_decode(b"".join(b"".join(fs) for fs in epochs[:12]))[0])  # the items before the cut
+        assert _wait(lambda: items.extend(rx.drain()) or len(items) >= n_first), (len(items), rx.counters())
+        os.close(open_fds.pop())  # the receiver gone
+        assert _wait(lambda: rx.counters().get("disconnects", 0) == 1), rx.counters()
+        writer2, device2 = os.openpty()  # plugged back in: another device, the same link
+        open_fds += [writer2, device2]
+        tmp = tmp_path / "ublox.new"
+        tmp.symlink_to(os.ttyname(device2))
+        os.replace(tmp, link)
+        assert _wait(lambda: rx.counters().get("reconnects", 0) == 1), rx.counters()
+        os.close(open_fds.pop())
+        for chunk in second:
+            os.write(writer2, chunk)
+        assert _wait(lambda: items.extend(rx.drain()) or len(items) >= len(reference)), len(items)
+        items += rx.drain()
+        c = rx.counters()
+    finally:
+        rx.close()
+        for fd in open_fds:
+            os.close(fd)
+    assert len(items) == len(reference) and all(_same(a, b) for a, b in zip(items, reference, strict=True))
+    assert c["bad_checksum"] == 1 and c["rawx_epochs"] == 20 and c["disconnects"] == 1
+    assert not any(k.startswith("reader_errors") for k in c), (c, capfd.readouterr().err)
+    err = [line for line in capfd.readouterr().err.splitlines() if "companion: receiver" in line]
+    url = f"companion: receiver serial:{link}:115200"
+    assert len(err) == 2 and err[1] == f"{url}: reconnected", err  # pyserial's words vary with the race:
+    assert err[0].startswith(f"{url}: the device is gone (") and err[0].endswith("); reconnecting"), err

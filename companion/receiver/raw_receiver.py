@@ -62,7 +62,7 @@ class RawReceiver:
         finally:
             with contextlib.suppress(OSError):
                 self.stream.close()
-        return "the stream ended"
+        return getattr(self.stream, "ended", "") or "the stream ended"
 
     def _run(self) -> None:
         wait_s = self.first_backoff_s

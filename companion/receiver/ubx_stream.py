@@ -49,13 +49,20 @@ class _SocketStream:
 
 
 class _SerialStream:
-    """A serial port: pyserial's empty read is its timeout (a serial line has no end), so ``None``."""
+    """A serial port: pyserial's empty read is its timeout (a serial line has no end), so ``None``; a
+    read failing (the device unplugged, a pseudo-terminal's writer closed: EIO) is the stream's end,
+    ``b""``, with the reason in ``ended``."""
 
     def __init__(self, port: Any) -> None:
         self.port = port
+        self.ended = ""
 
     def read(self, n: int) -> bytes | None:
-        return self.port.read(max(1, min(n, self.port.in_waiting))) or None
+        try:
+            return self.port.read(max(1, min(n, self.port.in_waiting))) or None
+        except OSError as exc:  # pyserial's SerialException is one
+            self.ended = f"the device is gone ({exc})"
+            return b""
 
     def close(self) -> None:
         self.port.close()
