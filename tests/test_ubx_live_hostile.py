@@ -454,3 +454,18 @@ def test_a_serial_receiver_on_a_pseudo_terminal_reads_counts_and_comes_back(epoc
     url = f"companion: receiver serial:{link}:115200"
     assert len(err) == 2 and err[1] == f"{url}: reconnected", err  # pyserial's words vary with the race:
     assert err[0].startswith(f"{url}: the device is gone (") and err[0].endswith("); reconnecting"), err
+
+
+@pytest.mark.parametrize(("url", "says"), [
+    ("serial:{tmp}/none:115200", "cannot open: [Errno 2]"),  # no such device
+    ("serial:{tmp}/plain:115200", "cannot open: Could not configure port"),  # not a terminal
+    ("serial:{tmp}/none", "expected serial:DEVICE:BAUD"),
+    ("serial:{tmp}/none:fast", "expected serial:DEVICE:BAUD"),
+])
+def test_a_serial_receiver_missing_or_misnamed_is_a_one_line_error(tmp_path, url, says):
+    from companion.errors import UserError
+
+    (tmp_path / "plain").write_bytes(b"")
+    with pytest.raises(UserError) as err:
+        RawReceiver(url.format(tmp=tmp_path))
+    assert says in str(err.value) and "\n" not in str(err.value)
