@@ -25,3 +25,13 @@ def enu_errors(epochs, klobuchar, systems, ref, config: SppConfig | None = None)
         assert sol.ok, sol.reason
         out.append(rot @ (sol.p_ecef_m - ref))
     return np.array(out)
+
+
+def residuals_at(epochs, klobuchar, p_ecef_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every observation's residual at ``p_ecef_m`` (``baseline.epoch_residuals_at_truth`` with the
+    solution's atmosphere models), its elevation (degrees) and its system, over all ``epochs``."""
+    from gcs_tools.gnss.baseline import epoch_residuals_at_truth
+
+    at = [epoch_residuals_at_truth(e, p_ecef_m, SppConfig(), klobuchar) for e in epochs]
+    return (np.concatenate([a.residual_m for a in at]), np.concatenate([a.elevation_deg for a in at]),
+            np.concatenate([e.system for e in epochs]))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import pickle
 import socket
 import struct
@@ -310,3 +311,161 @@ def test_a_hostile_live_receiver_loses_no_clean_item_and_counts_every_damage(epo
     err = capfd.readouterr().err.splitlines()
     assert err[:2] == [f"companion: receiver {rx.url}: the stream ended; reconnecting",
                        f"companion: receiver {rx.url}: reconnected"]
+
+
+def _empty_rawx(f: bytes, dt_s: float) -> bytes:
+    """The epoch's RXM-RAWX ``dt_s`` later with no measurement: what a receiver without a signal sends."""
+    return _reframe(f, _patch(_rawx_at(f, dt_s), 11, "B", 0)[6:22])
+
+
+def _paced(frames: list[tuple[float, bytes]]) -> tuple[list[list], Counter[str]]:
+    """Each frame fed as it arrived on a live stream at its time (s): the items each one gave."""
+    from pyubx2 import UBXReader
+
+    dec = UbxDecoder()
+    return [dec.feed_all(UBXReader.parse(f, validate=0), arrival_s=a) for a, f in frames], dec.counters
+
+
+@pytest.mark.parametrize("gap_s", [3.0, 30.0])
+def test_the_first_epoch_after_a_gap_on_the_receivers_own_clock_is_released_at_once(epochs, gap_s):
+    """A 5 Hz receiver in a tunnel for ``gap_s``: its epochs without a signal decode to none, so the first
+    one after is beyond the step limit. On a live stream its GPS time advanced as much as the stream's
+    clock (arrival jitter 0-0.1 s, seeded): it comes out of its own frame, with its own data, not held
+    until the next confirms it (one epoch late; a file, with no clock, still holds it)."""
+    rng = np.random.default_rng(5)
+    r = [_rawx(fs) for fs in epochs[:8]]
+    t0 = _t(epochs[0])
+    n_empty = int(round(gap_s / 0.2)) - 1
+    stream = [*r[:4], *(_empty_rawx(r[3], 0.2 * (k + 1)) for k in range(n_empty)),
+              *(_rawx_at(f, gap_s - 0.2) for f in r[4:])]
+    t_of = [0.2 * k for k in range(4)] + [0.6 + 0.2 * (k + 1) for k in range(n_empty)] + [
+        _t(epochs[k]) - t0 + gap_s - 0.2 for k in range(4, 8)]
+    frames = [(1000.0 + t + 0.05 + float(rng.uniform(0.0, 0.1)), f)
+              for t, f in zip(t_of, stream, strict=True)]
+    out, c = _paced(frames)
+    first = 4 + n_empty  # the first epoch after the gap
+    assert all(len(o) == 1 for i, o in enumerate(out) if i < 4 or i >= first)
+    assert all(o == [] for o in out[4:first])
+    alone, _ = _decode(stream[first])  # its frame decoded on its own: the epoch's own data
+    assert _same(out[first][0], alone[0]) and out[first][0].t_gps_s == _t(epochs[4]) + gap_s - 0.2
+    assert [o[0].t_gps_s for o in out if o] == [_t(epochs[k]) for k in range(4)] + [
+        _t(epochs[k]) + gap_s - 0.2 for k in range(4, 8)]
+    assert (c["rawx_resumed"], c["rawx_epochs"], c["rawx_empty"]) == (1, 8, n_empty)
+    assert c["rawx_time_jump"] + c["rawx_lone_time_back"] + c["rawx_lone_time_ahead"] == 0
+    from_file, fc = _decode(b"".join(stream))  # the same bytes from a file: held for the next epoch
+    assert [i.t_gps_s for i in from_file] == [o[0].t_gps_s for o in out if o]
+    assert (fc["rawx_time_jump"], fc["rawx_resumed"]) == (1, 0)
+
+
+def test_on_a_live_stream_lone_damaged_stamps_and_a_real_jump_are_still_held(epochs):
+    """Paced at 5 Hz (arrival jitter 0-0.1 s): a lone week back, a lone week ahead and a duplicate are
+    dropped and counted as from a file; a damaged week as the first epoch after a 3 s gap is held and
+    dropped, the next (on the receiver's clock) released at once; the receiver's time jumping an hour
+    while the stream's clock moved 0.2 s is held until the next epoch confirms it."""
+    rng = np.random.default_rng(6)
+    r = [_rawx(fs) for fs in epochs]
+    t0 = _t(epochs[0])
+    week = struct.unpack_from("<H", _payload(r[0]), 8)[0]
+    gap = 3.0
+    stream: list[tuple[float, bytes]] = []
+
+    def at(t: float, f: bytes) -> None:
+        stream.append((t + 0.05 + float(rng.uniform(0.0, 0.1)), f))
+
+    for k in range(3):
+        at(_t(epochs[k]) - t0, r[k])
+    at(_t(epochs[3]) - t0, _patch(r[3], 8, "H", week - 1))  # lone week back
+    at(_t(epochs[3]) - t0, r[3])
+    at(_t(epochs[4]) - t0, _patch(r[4], 8, "H", week + 1))  # lone week ahead
+    at(_t(epochs[4]) - t0, r[4])
+    at(_t(epochs[4]) - t0, r[4])  # duplicate
+    late = [_rawx_at(f, gap) for f in r[5:8]]  # after a 3 s gap, the first epoch's week damaged
+    at(_t(epochs[5]) - t0 + gap, _patch(late[0], 8, "H", week + 1))
+    at(_t(epochs[6]) - t0 + gap, late[1])
+    at(_t(epochs[7]) - t0 + gap, late[2])
+    at(_t(epochs[8]) - t0 + gap, _rawx_at(r[8], gap + 3600.0))  # the receiver's time jumps an hour
+    at(_t(epochs[9]) - t0 + gap, _rawx_at(r[9], gap + 3600.0))
+    out, c = _paced(stream)
+    got = [i.t_gps_s for o in out for i in o]
+    assert got == [*(_t(epochs[k]) for k in range(5)), _t(epochs[6]) + gap, _t(epochs[7]) + gap,
+                   _t(epochs[8]) + gap + 3600.0, _t(epochs[9]) + gap + 3600.0]
+    assert [len(o) for o in out[-4:]] == [1, 1, 0, 2]  # resumed at once; the jump held, then confirmed
+    assert (c["rawx_lone_time_back"], c["rawx_lone_time_ahead"], c["rawx_duplicate_epoch"],
+            c["rawx_resumed"], c["rawx_time_jump"], c["rawx_epochs"]) == (1, 2, 1, 1, 1, 9)
+
+
+def _wait(cond: object, timeout_s: float = 20.0) -> bool:
+    """Whether ``cond()`` came true within ``timeout_s`` (polled: the reader is another thread)."""
+    deadline = time.monotonic() + timeout_s
+    while not cond():  # type: ignore[operator]
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def test_a_serial_receiver_on_a_pseudo_terminal_reads_counts_and_comes_back(epochs, tmp_path, capfd):
+    """``serial:DEVICE:BAUD`` for real: pyserial opens a pseudo-terminal's device through a link (as udev's
+    /dev/serial/by-id names a USB receiver). The receiver's bytes written to the other side: every item
+    decodes as from a file, in order, a damaged frame counted; the writer closing (the cable pulled) is
+    one line and no reader error; a new device behind the same link (plugged back in) is reopened and
+    read on with the same decoder."""
+    link = tmp_path / "ublox"
+    first = [b"".join(fs) for fs in epochs[:12]]
+    rawx = _rawx(epochs[3])
+    p = _payload(rawx)
+    p[40] ^= 0x10
+    first.insert(4, rawx[:6] + bytes(p) + rawx[-2:])  # a bad checksum
+    second = [b"".join(fs) for fs in epochs[12:20]]
+    reference, _ = _decode(b"".join(b"".join(fs) for fs in epochs[:20]))
+    writer, device = os.openpty()
+    link.symlink_to(os.ttyname(device))
+    rx = RawReceiver(f"serial:{link}:115200", timeout_s=0.2, first_backoff_s=0.05)
+    os.close(device)  # the reader holds its own
+    items: list = []
+    open_fds = [writer]
+    try:
+        for chunk in first:
+            os.write(writer, chunk)
+        n_first = len(_decode(b"".join(b"".join(fs) for fs in epochs[:12]))[0])  # the items before the cut
+        assert _wait(lambda: items.extend(rx.drain()) or len(items) >= n_first), (len(items), rx.counters())
+        os.close(open_fds.pop())  # the receiver gone
+        assert _wait(lambda: rx.counters().get("disconnects", 0) == 1), rx.counters()
+        writer2, device2 = os.openpty()  # plugged back in: another device, the same link
+        open_fds += [writer2, device2]
+        tmp = tmp_path / "ublox.new"
+        tmp.symlink_to(os.ttyname(device2))
+        os.replace(tmp, link)
+        assert _wait(lambda: rx.counters().get("reconnects", 0) == 1), rx.counters()
+        os.close(open_fds.pop())
+        for chunk in second:
+            os.write(writer2, chunk)
+        assert _wait(lambda: items.extend(rx.drain()) or len(items) >= len(reference)), len(items)
+        items += rx.drain()
+        c = rx.counters()
+    finally:
+        rx.close()
+        for fd in open_fds:
+            os.close(fd)
+    assert len(items) == len(reference) and all(_same(a, b) for a, b in zip(items, reference, strict=True))
+    assert c["bad_checksum"] == 1 and c["rawx_epochs"] == 20 and c["disconnects"] == 1
+    assert not any(k.startswith("reader_errors") for k in c), (c, capfd.readouterr().err)
+    err = [line for line in capfd.readouterr().err.splitlines() if "companion: receiver" in line]
+    url = f"companion: receiver serial:{link}:115200"
+    assert len(err) == 2 and err[1] == f"{url}: reconnected", err  # pyserial's words vary with the race:
+    assert err[0].startswith(f"{url}: the device is gone (") and err[0].endswith("); reconnecting"), err
+
+
+@pytest.mark.parametrize(("url", "says"), [
+    ("serial:{tmp}/none:115200", "cannot open: [Errno 2]"),  # no such device
+    ("serial:{tmp}/plain:115200", "cannot open: Could not configure port"),  # not a terminal
+    ("serial:{tmp}/none", "expected serial:DEVICE:BAUD"),
+    ("serial:{tmp}/none:fast", "expected serial:DEVICE:BAUD"),
+])
+def test_a_serial_receiver_missing_or_misnamed_is_a_one_line_error(tmp_path, url, says):
+    from companion.errors import UserError
+
+    (tmp_path / "plain").write_bytes(b"")
+    with pytest.raises(UserError) as err:
+        RawReceiver(url.format(tmp=tmp_path))
+    assert says in str(err.value) and "\n" not in str(err.value)

@@ -29,6 +29,11 @@ epoch tells: if that one follows the last kept, the
 held one was a lone damaged time (``rawx_lone_time_back`` / ``rawx_lone_time_ahead``, dropped); if it
 follows the held one, the receiver's time really jumped (``rawx_time_jump``) and both are released;
 one still held when a file ends is counted ``rawx_unconfirmed_at_end`` (``end_of_stream``).
+On a live stream the epochs' arrival times (``feed_all``'s ``arrival_s``) tell more: an epoch after a gap
+(a tunnel: the receiver's epochs without a signal decode to none) whose GPS time advanced since the last
+one kept as much as the stream's clock did (within ``RESUME_TOLERANCE_S``) continues the receiver's own
+clock and is released at once (``rawx_resumed``), not one epoch late; a damaged stamp (a week back or
+ahead) or a real jump of the receiver's time disagrees with the stream's clock and is held as above.
 A damaged time within ``MAX_EPOCH_STEP_S`` of the truth cannot be told from a real one.
 """
 
@@ -55,6 +60,8 @@ from companion.gnss.timescale import gps_from_calendar, gps_from_week_tow
 PRIMARY_SIGNALS = {(0, 0), (2, 0), (2, 1), (3, 0), (3, 1), (5, 0), (6, 0)}
 KNOWN_SYSTEMS = {int(s) for s in System}
 MAX_EPOCH_STEP_S = 2.0  # a 1 Hz receiver missing one epoch; a longer step is held for the next to confirm
+# a longer step released at once when the stream's clock elapsed as much (transport and scheduling jitter)
+RESUME_TOLERANCE_S = 0.5
 MAX_CN0_DBHZ = 80.0  # receivers report 0-60 dB-Hz; beyond is a damaged field (the belief would trust it)
 MAX_RANGE_RATE_M_S = 10_000.0  # satellite motion (< 1 km/s) plus a receiver clock drift up to ~30 ppm
 
@@ -99,17 +106,18 @@ class UbxDecoder:
     _sat: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)  # el, az (deg)
     _held: tuple[int, float, GnssEpoch] | None = None  # an epoch out of time order: week, time, epoch
     _step_s: float = 0.0  # between the last two epochs kept: the receiver's interval (a slow one's too)
-
+    _arrival_s: float | None = None  # the stream's clock when the last epoch kept arrived (live streams)
 
     @property
     def klobuchar(self) -> tuple[np.ndarray, np.ndarray] | None:
         return self.lnav.klobuchar
 
-    def feed_all(self, msg: Any) -> list[UbxItem]:
-        """The items one message gives (none, one, or a held epoch and this one); never raises."""
+    def feed_all(self, msg: Any, arrival_s: float | None = None) -> list[UbxItem]:
+        """The items one message gives (none, one, or a held epoch and this one); never raises.
+        ``arrival_s``: when it arrived on a live stream (a monotonic clock, seconds), None from a file."""
         try:
             if getattr(msg, "identity", "") == "RXM-RAWX":
-                return self._rawx(msg)
+                return self._rawx(msg, arrival_s)
             item = self.feed(msg)
         except Exception:  # noqa: BLE001 - a field pyubx2 gave that cannot be read: counted, not used
             self.counters[f"bad_{getattr(msg, 'identity', '') or 'message'}"] += 1
@@ -132,7 +140,7 @@ class UbxDecoder:
         self.counters[f"ignored_{ident or 'unknown'}"] += 1
         return None
 
-    def _rawx(self, m: Any) -> list[UbxItem]:
+    def _rawx(self, m: Any, arrival_s: float | None = None) -> list[UbxItem]:
         tow, week = float(m.rcvTow), int(m.week)
         if not (math.isfinite(tow) and 0.0 <= tow < 604800.0 and week > 0):
             self.counters["rawx_bad_time"] += 1
@@ -152,13 +160,28 @@ class UbxDecoder:
                 self._held = None
                 self.counters["rawx_epochs"] += 2
                 self.week, self.t_gps_s, self._step_s = week, t, t - held[1]
+                self._arrival_s = arrival_s
                 return [held[2], epoch]
             self._drop_held()
+            if self._resumes(t - last, arrival_s):
+                self.counters["rawx_resumed"] += 1  # after a gap, on the receiver's own clock
+                self._step_s = self._step_s or t - last  # a gap is no interval (unless none is known)
+                return self._keep(week, t, arrival_s, epoch)
             self._held = (week, t, epoch)  # until the next epoch tells whether it was alone
             return []
         self._drop_held()
         self._step_s = t - last if last is not None else 0.0
-        self.week, self.t_gps_s = week, t
+        return self._keep(week, t, arrival_s, epoch)
+
+    def _resumes(self, step_s: float, arrival_s: float | None) -> bool:
+        """Whether an epoch ``step_s`` after the last kept, out of step, continues the receiver's clock:
+        the stream's clock (live streams only) elapsed as much since the last kept one arrived."""
+        if arrival_s is None or self._arrival_s is None or step_s <= 0.0:
+            return False
+        return abs(step_s - (arrival_s - self._arrival_s)) <= RESUME_TOLERANCE_S
+
+    def _keep(self, week: int, t: float, arrival_s: float | None, epoch: GnssEpoch) -> list[UbxItem]:
+        self.week, self.t_gps_s, self._arrival_s = week, t, arrival_s
         self.counters["rawx_epochs"] += 1
         return [epoch]
 

@@ -20,6 +20,7 @@ import contextlib
 import queue
 import sys
 import threading
+import time
 from collections import Counter
 from typing import Any
 
@@ -48,7 +49,8 @@ class RawReceiver:
     def _read(self) -> str:
         """Read the open stream to its end; why it ended."""
         try:
-            for item in ubx_items(self.stream, self.decoder, self._stop.is_set, final=False):
+            clock = time.monotonic if self.live else None
+            for item in ubx_items(self.stream, self.decoder, self._stop.is_set, final=False, clock=clock):
                 try:
                     self._queue.put_nowait(item)
                     self._counts["items"] += 1
@@ -60,7 +62,7 @@ class RawReceiver:
         finally:
             with contextlib.suppress(OSError):
                 self.stream.close()
-        return "the stream ended"
+        return getattr(self.stream, "ended", "") or "the stream ended"
 
     def _run(self) -> None:
         wait_s = self.first_backoff_s

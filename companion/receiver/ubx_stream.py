@@ -49,13 +49,20 @@ class _SocketStream:
 
 
 class _SerialStream:
-    """A serial port: pyserial's empty read is its timeout (a serial line has no end), so ``None``."""
+    """A serial port: pyserial's empty read is its timeout (a serial line has no end), so ``None``; a
+    read failing (the device unplugged, a pseudo-terminal's writer closed: EIO) is the stream's end,
+    ``b""``, with the reason in ``ended``."""
 
     def __init__(self, port: Any) -> None:
         self.port = port
+        self.ended = ""
 
     def read(self, n: int) -> bytes | None:
-        return self.port.read(max(1, min(n, self.port.in_waiting))) or None
+        try:
+            return self.port.read(max(1, min(n, self.port.in_waiting))) or None
+        except OSError as exc:  # pyserial's SerialException is one
+            self.ended = f"the device is gone ({exc})"
+            return b""
 
     def close(self) -> None:
         self.port.close()
@@ -142,19 +149,22 @@ def ubx_frames(stream: IO[bytes] | Any, counters: Counter[str],
 
 
 def ubx_items(stream: IO[bytes] | Any, decoder: UbxDecoder | None = None,
-              stop: Callable[[], bool] = lambda: False, final: bool = True) -> Iterator[UbxItem]:
+              stop: Callable[[], bool] = lambda: False, final: bool = True,
+              clock: Callable[[], float] | None = None) -> Iterator[UbxItem]:
     """Decoded items in arrival order; frames refused counted in ``decoder.counters``. ``final``: the
     stream's end is the data's (a file; ``UbxDecoder.end_of_stream``), not a connection's that the
-    decoder outlives."""
+    decoder outlives. ``clock``: a live stream's (``time.monotonic``): each frame's arrival time, by
+    which an epoch after a gap on the receiver's own clock is released at once (``UbxDecoder``)."""
     from pyubx2 import UBXReader
 
     dec = decoder if decoder is not None else UbxDecoder()
     for frame in ubx_frames(stream, dec.counters, stop):
+        arrival_s = clock() if clock is not None else None
         try:
             msg = UBXReader.parse(frame, validate=0)
         except Exception:  # noqa: BLE001 - a valid checksum over a payload pyubx2 cannot parse
             dec.counters["bad_frame"] += 1
             continue
-        yield from dec.feed_all(msg)
+        yield from dec.feed_all(msg, arrival_s)
     if final:
         dec.end_of_stream()

@@ -14,7 +14,7 @@ import numpy as np
 
 from companion.domain.statistics import describe
 from companion.gnss.constants import C_M_S
-from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
+from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, geometry_at, sigma_model_m, solve_position
 from companion.gnss.systems import SHORT_NAME, System
@@ -186,22 +186,31 @@ class TruthResiduals:
     elevation_deg: np.ndarray
 
 
-def epoch_residuals_at_truth(epoch: GnssEpoch, p_ecef_m: np.ndarray) -> TruthResiduals:
+def epoch_residuals_at_truth(
+    epoch: GnssEpoch,
+    p_ecef_m: np.ndarray,
+    config: SppConfig | None = None,
+    klobuchar: tuple[np.ndarray, np.ndarray] | None = None,
+) -> TruthResiduals:
     """Each observation's residual at the true position ``p_ecef_m``: pseudorange − |sat − p| (Sagnac)
     − the receiver clock of its system, taken robustly as the MEDIAN of ``pseudorange − range`` over that
     system's satellites above ``CLOCK_ELEVATION_DEG`` (high satellites are rarely reflected; the median
-    ignores the few that are), over all of that system's satellites when none is that high."""
+    ignores the few that are), over all of that system's satellites when none is that high.
+
+    The model is the solution's (``spp.geometry_at``): raw pseudoranges (RINEX, UBX) first lose the
+    atmosphere it takes off (``config``, default ``SppConfig()``: ``tropo`` Saastamoinen, ``iono`` Klobuchar
+    with ``klobuchar``), as corrected ones (smartLoc) already have; else a clean low signal shows metres
+    of "late" residual."""
     y = epoch.pseudorange_m if epoch.corrected else epoch.pseudorange_m + C_M_S * epoch.sat_clock_s
-    rho, los = sagnac_range_m(epoch.sat_pos_ecef_m, p_ecef_m)
-    lat, lon, _ = (float(v) for v in ecef_to_geodetic(p_ecef_m))
-    el = np.degrees(np.arcsin(np.clip(-(los @ ecef_to_ned_matrix(lat, lon).T)[:, 2], -1.0, 1.0)))
-    d = y - rho
+    geo = geometry_at(epoch, p_ecef_m, config or SppConfig(), klobuchar)
+    el = np.degrees(geo.el)
+    d = y - geo.rho - geo.atm
     clock = np.full(epoch.n, np.nan)
     for s in np.unique(epoch.system):
         m = epoch.system == s
         hi = m & (el > CLOCK_ELEVATION_DEG)
         clock[m] = np.median(d[hi] if hi.sum() else d[m])
-    return TruthResiduals(d - clock, clock, los, el)
+    return TruthResiduals(d - clock, clock, geo.los, el)
 
 
 def by_system_and_elevation(system: np.ndarray, el_deg: np.ndarray, values: np.ndarray,
