@@ -171,6 +171,7 @@ def sources(tmp_path_factory) -> dict[str, Path]:
     _, obs2, (nav2g, nav2r) = _as_rinex2(d, OBS, NAV)
     (d / "v4.rnx").write_text(_as_rinex4(NAV.read_text()))
     drive, gt = _write_smartloc(d)
+    _with_imu_rows(drive, d / "imu_Input.txt")
     t = T0 + np.arange(95.0, 106.0)
     p = RX_ECEF + V_RX * (t - T0 - 100.0)[:, None]
     write_span(d / "span.txt", t, p)
@@ -187,7 +188,20 @@ def sources(tmp_path_factory) -> dict[str, Path]:
     return {"head": d / "head.tlog", "head_obs": d / "head.obs", "head_nav": d / "head.nav",
             "obs2": obs2, "nav2g": nav2g, "nav2r": nav2r, "nav4": d / "v4.rnx", "drive": drive, "gt": gt,
             "span": d / "span.txt", "truth_csv": d / "truth.csv", "ubx": d / "tiny.ubx",
-            "series": d / "series.csv", "ansfl": d / "ansfl"}
+            "series": d / "series.csv", "ansfl": d / "ansfl", "drive_imu": d / "imu_Input.txt"}
+
+
+def _with_imu_rows(drive: Path, out: Path) -> None:
+    """The drive with imu rows (100 Hz, a level IMU z up turning at 0.05 rad/s) instead of its odometry."""
+    lines = [ln for ln in drive.read_text().splitlines() if not ln.startswith("odom3")]
+    t = []
+    for ln in lines:
+        parts = ln.split()
+        if parts[:1] == ["pseudorange3"] and len(parts) > 1 and parts[1].replace(".", "", 1).isdigit():
+            t.append(float(parts[1]))  # (the drive holds one damaged row on purpose)
+    lines += [f"imu {k / 100:.2f} 0.01 -0.02 9.81 0.0 0.0 0.05 0 0 0 0 0 0"
+              for k in range(int(min(t) * 100), int(max(t) * 100) + 1)]
+    out.write_text("\n".join(lines) + "\n")
 
 
 def _head_with_rinex(d: Path) -> None:
@@ -246,6 +260,9 @@ CASES: list[tuple[str, Callable[[dict[str, Path]], Path], Any, int, bool]] = [
     ("csv_truth", lambda s: s["truth_csv"], lambda s: _spp(OBS, "--nav", NAV, "--truth", None), 8, True),
     ("ubx", lambda s: s["ubx"], lambda s: _spp(None), 12, False),
     ("smartloc_replay_tight", lambda s: s["drive"],
+     lambda s: lambda p, out: ["replay", "--smartloc", str(p), "--truth", str(s["gt"]), "--coupling", "tight",
+                               "--out", str(out), *REPLAY_FLAGS], 6, True),
+    ("smartloc_imu_replay_tight", lambda s: s["drive_imu"],
      lambda s: lambda p, out: ["replay", "--smartloc", str(p), "--truth", str(s["gt"]), "--coupling", "tight",
                                "--out", str(out), *REPLAY_FLAGS], 6, True),
     ("ulog", lambda s: DATA / "sample_px4_events.ulg",

@@ -76,6 +76,10 @@ def test_measurement_jacobians_match_finite_differences():
         _, Ho = model.odometry_velocity(x, 7.0, 0.3)
         num = _numeric_jacobian(lambda z: -model.odometry_velocity(z, 7.0, 0.3)[0], x, np.full(N_STATE, 1e-6))
         np.testing.assert_allclose(Ho, num, atol=1e-7)
+        _, hl = model.lateral_velocity(x, 0.3)
+        num = _numeric_jacobian(lambda z: -model.lateral_velocity(z, 0.3)[0], x, np.full(N_STATE, 1e-6))
+        np.testing.assert_allclose(hl, num, atol=1e-7)
+        assert np.abs(hl[0, I_HEADING]) > 0.1  # the heading term is there
         _, hs = model.speed(x)
         num = _numeric_jacobian(lambda z: np.array([model.speed(z)[0]]), x, np.full(N_STATE, 1e-6))
         np.testing.assert_allclose(hs[None, :], num, atol=1e-7)
@@ -350,10 +354,11 @@ def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
     n_ep = hold_at_rest(nav, STORE, 200)  # 4 s at 50 Hz, an epoch per 0.2 s (raw: clocks, atmosphere)
     nav.push(RawGnss(5_000_000, make_epoch(T0 + 4.0, [0], [1], [math.nan])))  # nothing usable
     nav.push(GnssFix(5_000_000, 52.5, 13.4, 60.0, 3, 10, 1.0, 1.0, 1.0))
-    nav.push(Odometry(5_000_000, math.nan, 0.0))
+    nav.push(Odometry(5_000_000, math.inf, 0.0))  # damaged (NaN alone: a gyro without a wheel speed)
+    nav.push(Odometry(5_000_000, math.nan, math.nan))
     c = nav.counters()
     assert c["gnss_fused"] == n_ep - 1 and c["gnss_rejected_empty"] == 1 and c["gnss_fix_ignored"] == 1
-    assert c["odometry_rejected"] == 1
+    assert c["odometry_rejected"] == 2
     est = nav.estimate()
     assert est is not None and est.pos_valid
     t_now, x_now, P_now, _ = nav.engine.state_now()  # the C output path == the full prediction
@@ -444,15 +449,28 @@ def test_odometry_heading_starts_once_moving_and_follows_a_turn():
     """A car at rest for 8 s, then 8 m/s north-east, turning 90° right at 3°/s from 20 s: GNSS (5 m
     noise) + wheel speed and yaw rate with a 0.05°/s bias. The heading offset starts only once the
     car moves, and the track stays within metres."""
+    eng, errs, psi, rest = _turning_car(speed_known=True)
+    assert rest and max(rest) == 0.0  # no heading while at rest
+    x = eng.entries[-1].x
+    heading = math.atan2(x[4], x[3])
+    assert abs((heading - psi + math.pi) % (2 * math.pi) - math.pi) < 0.1
+    assert np.median(errs) < 2.5 and max(errs) < 8.0, (np.median(errs), max(errs))
+
+
+def _turning_car(speed_known: bool, late: bool = False
+                 ) -> tuple[TightEngine, list[float], float, list[float]]:
+    """The car of the test above (at rest 8 s, then 8 m/s, a 90° right turn from 20 s), GNSS with 5 m
+    noise and a yaw rate with a 0.05°/s bias, the wheel speed given or not (NaN: a gyro alone); ``late``:
+    every fifth epoch arrives 0.4 s late (after the next two epochs and their odometry). Returns the
+    engine, the horizontal errors after 12 s, the final heading and the heading's variance at rest."""
     cfg = TightConfig.for_ground_vehicle()
     rng = np.random.default_rng(11)
     sysv, prn, pos, _ = _sats()
     slot = model.SLOT_OF[sysv]
     eng = TightEngine(cfg, "cn0-elevation", frame=FRAME)
     dt, p, psi = 0.02, np.zeros(3), math.radians(45.0)
-    clock = 1000.0
     eng.push_acc(0, 0.0, 0.0, 0.0)
-    yaw_int, errs = 0.0, []
+    yaw_int, errs, held, rest = 0.0, [], [], []
     for k in range(1, 2000):  # 40 s at 50 Hz
         t = k * dt
         rate = math.radians(3.0) if 20.0 <= t < 50.0 and psi < math.radians(135.0) else 0.0
@@ -465,21 +483,46 @@ def test_odometry_heading_starts_once_moving_and_follows_a_turn():
         if k % 10 == 0:
             x = np.zeros(N_STATE)
             x[0:3] = p
-            x[I_CLK + slot] = clock
+            x[I_CLK + slot] = 1000.0
             pred, _, _ = model.pseudorange(x, FRAME, pos, slot)
             ep = make_epoch(T0 + t, sysv, prn, pred + rng.normal(0, cfg.sigma_uniform_m, len(pred)),
                             sat_pos_ecef_m=pos, cn0_dbhz=np.full(len(pred), 45.0), corrected=True)
-            eng.push_epoch(t_us, prepare_epoch(ep, FRAME, cfg))
-            eng.push_speed(t_us, speed, yaw_int)
-            e = eng.entries[-1]
+            m = prepare_epoch(ep, FRAME, cfg)
+            if late and k % 50 == 0:
+                held.append((t_us, m))
+            else:
+                eng.push_epoch(t_us, m)
+            # the odometry 10 ms after the epoch (a late epoch is re-fused before it, as in order)
+            eng.push_acc(t_us + 10_000, 0.0, 0.0, 0.0)
+            eng.push_speed(t_us + 10_000, speed if speed_known else math.nan, yaw_int)
+            if late and held and t_us - held[0][0] >= 400_000:
+                eng.push_epoch(*held.pop(0))
             if t < 8.0:
-                assert e.P[I_HEADING, I_HEADING] == 0.0  # no heading while at rest
+                rest.append(float(eng.entries[-1].P[I_HEADING, I_HEADING]))
             if t > 12.0:
-                errs.append(float(np.hypot(*(e.x[0:2] - p[0:2]))))
+                errs.append(float(np.hypot(*(eng.entries[-1].x[0:2] - p[0:2]))))
+    return eng, errs, psi, rest
+
+
+def test_a_gyro_alone_keeps_the_heading_and_the_car_on_its_track():
+    """Without a wheel speed (NaN) the yaw rate still gives the heading, started from the filter's own
+    velocity once it moves, and the car does not slide sideways: the track stays within metres, the
+    heading follows the turn, and late epochs re-fused among the gyro's samples equal them in order."""
+    eng, errs, psi, rest = _turning_car(speed_known=False)
+    assert rest and max(rest) == 0.0  # no heading while at rest
     x = eng.entries[-1].x
+    assert eng.entries[-1].P[I_HEADING, I_HEADING] > 0.0  # the heading started without a speed
     heading = math.atan2(x[4], x[3])
     assert abs((heading - psi + math.pi) % (2 * math.pi) - math.pi) < 0.1
     assert np.median(errs) < 2.5 and max(errs) < 8.0, (np.median(errs), max(errs))
+    assert eng.counts.get("speed_fused", 0) > 100  # the lateral constraint was fused, not skipped
+    late, _, _, _ = _turning_car(speed_known=False, late=True)
+    assert late.counts["gnss_out_of_order"] > 0
+    assert len(late.entries) == len(eng.entries)
+    for ea, eb in zip(eng.entries, late.entries, strict=True):
+        assert ea.t_us == eb.t_us
+        np.testing.assert_allclose(eb.x, ea.x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(eb.P, ea.P, rtol=0, atol=1e-9)
 
 
 def test_c_belief_step_equals_the_numpy_forms():

@@ -254,6 +254,9 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
     def push_speed(self, t_us: int, speed_m_s: float, yaw_integral_rad: float = math.nan) -> None:
         """A ground vehicle's forward speed (odometry) as a measurement of |v_NE|; with the integral of
         its yaw rate (rad since any fixed start), of its horizontal velocity (heading ψ₀ + integral)."""
+        if math.isnan(speed_m_s) and math.isfinite(yaw_integral_rad):  # a gyro alone: no wheel speed
+            self._push(t_us, Speed(math.nan, math.nan, yaw_integral_rad))
+            return
         if not (math.isfinite(speed_m_s) and speed_m_s >= 0.0):
             self._counts["speed_rejected_nonfinite"] = self._counts.get("speed_rejected_nonfinite", 0) + 1
             return
@@ -354,9 +357,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         start = self.entries[0].t_us if self.entries else t_us
         speed = math.hypot(x[3], x[4])
         sigma_v = math.sqrt(max(P[3, 3] + P[4, 4], 0.0))
-        if (not heading_live and math.isfinite(m.yaw_integral_rad) and m.speed_m_s > 2.0
+        wheel = math.isfinite(m.speed_m_s)  # False: a gyro's yaw rate alone (the filter's own speed)
+        moving = m.speed_m_s if wheel else speed
+        if (not heading_live and math.isfinite(m.yaw_integral_rad) and moving > 2.0
                 and t_us - start >= c.odometry_heading_start_s * 1e6
-                and speed > 0.7 * m.speed_m_s and sigma_v < 0.3 * speed):
+                and speed > 0.7 * moving and sigma_v < 0.3 * speed):
             # heading offset from the filter's velocity direction (the car moves along its heading),
             # once that direction is known: the filter moves at the odometry's speed, to 30 %
             x[I_HEADING] = math.atan2(x[4], x[3]) - m.yaw_integral_rad
@@ -366,14 +371,18 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             P[I_HEADING, I_HEADING] = max(c.odometry_heading0_rad, sigma_v / speed) ** 2
             P[I_YAW_BIAS, I_YAW_BIAS] = c.sigma_yaw_rate_bias0_rad_s**2
             heading_live = True
-        if heading_live and math.isfinite(m.yaw_integral_rad):
+        if heading_live and math.isfinite(m.yaw_integral_rad) and not wheel:
+            # no side slip: the velocity across the heading is zero (its speed along it is the filter's)
+            y, H = model.lateral_velocity(x, m.yaw_integral_rad)
+            R = np.array([[c.sigma_lateral_m_s**2]])
+        elif heading_live and math.isfinite(m.yaw_integral_rad):
             y, H = model.odometry_velocity(x, m.speed_m_s, m.yaw_integral_rad)
             psi = float(x[I_HEADING]) + m.yaw_integral_rad
             u = np.array([[math.cos(psi), math.sin(psi)], [-math.sin(psi), math.cos(psi)]])  # along, across
             R = u.T @ np.diag([m.r_m2_s2, c.sigma_lateral_m_s**2]) @ u
         else:
             s, h = model.speed(x)
-            if s <= 0.5:  # below 0.5 m/s the direction is unknown
+            if s <= 0.5 or not wheel:  # below 0.5 m/s the direction is unknown; a gyro alone: no speed
                 return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
                              prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2)
             y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])

@@ -149,6 +149,18 @@ def odometry_velocity(x: np.ndarray, speed_m_s: float, yaw_integral_rad: float
     return y, H
 
 
+def lateral_velocity(x: np.ndarray, yaw_integral_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """A ground vehicle's velocity across its heading ψ = ψ₀ + ∫ yaw rate, measured as zero (no side
+    slip; a gyro's yaw rate without a wheel speed): (0 − v_across, H (1, N_STATE)),
+    v_across = −v_N sin ψ + v_E cos ψ."""
+    psi = float(x[I_HEADING]) + yaw_integral_rad
+    c, s = np.cos(psi), np.sin(psi)
+    H = np.zeros((1, N_STATE))
+    H[0, I_V], H[0, I_V + 1] = -s, c
+    H[0, I_HEADING] = -(x[I_V] * c + x[I_V + 1] * s)
+    return np.array([-(H[0, I_V] * x[I_V] + H[0, I_V + 1] * x[I_V + 1])]), H
+
+
 def elevation_rad(los_ecef: np.ndarray, frame: Frame) -> np.ndarray:
     """Elevation of receiver→satellite unit vectors at home (a few km away the difference is < 0.1°)."""
     down = los_ecef @ frame.c_ecef_ned[:, 2]

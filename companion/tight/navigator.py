@@ -160,7 +160,8 @@ class TightNavigator:
         return self._atmo
 
     def _push_odometry(self, o: Odometry) -> None:
-        if not (math.isfinite(o.speed_m_s) and math.isfinite(o.yaw_rate_rad_s)) or (
+        speed_ok = math.isnan(o.speed_m_s) or math.isfinite(o.speed_m_s)  # NaN: a gyro alone, no wheel speed
+        if not (speed_ok and math.isfinite(o.yaw_rate_rad_s)) or (
                 self._odo is not None and o.t_us <= self._odo[0]):
             self._counts["odometry_rejected"] += 1
             return

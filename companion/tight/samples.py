@@ -19,7 +19,8 @@ class RawGnss:
 @dataclass(frozen=True, slots=True)
 class Odometry:
     """A ground vehicle's wheel odometry: forward speed and heading rate (about the body's down axis,
-    clockwise seen from above: the rate of the NED yaw)."""
+    clockwise seen from above: the rate of the NED yaw). Speed NaN: a gyro's yaw rate alone (no wheel
+    speed): the filter then knows the heading's turns and that the vehicle does not slide sideways."""
 
     t_us: int
     speed_m_s: float

@@ -166,7 +166,8 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
             if not odometry and w not in NO_ODOMETRY_ROWS:
                 continue
             name = f"tight-{w}" + ("" if odometry else "-no-odometry")
-            reader = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, odometry)
+            reader = tr.SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, odometry,
+                                          odometry_source=data.odometry_source)
             cfg = TightConfig.for_ground_vehicle()
             hook = belief_log if name == BELIEF_ROW else None
             replay_row(name, reader, tr.tight_factory(cfg), w, hook)
@@ -205,7 +206,7 @@ def run(input_path: Path, truth_path: Path | None, seed: int = 0, block_s: float
                     "p95_ratio_to_spp": s["p95_m"] / spp["p95_m"]} for name, s in stats.items()}
     return {
         "data": {"input": Path(input_path).name, "epochs": int(keep.sum()),
-                 "duration_s": float(t_ep[-1] - t_ep[0])},
+                 "duration_s": float(t_ep[-1] - t_ep[0]), "odometry": data.odometry_source},
         "method": {"score": "horizontal distance to truth at every epoch time",
                    "bootstrap": f"moving blocks of {block} epochs ({block_s:g} s), {n_resamples} resamples, "
                                 f"seed {seed}, the same blocks for every row (paired)"},
@@ -285,7 +286,8 @@ def markdown(r: dict[str, Any]) -> str:
         return f"[{v[0]:.1f}, {v[1]:.1f}]"
 
     lines = [f"smartLoc {Path(r['data']['input']).name}: {r['data']['epochs']} epochs, "
-             f"{r['data']['duration_s']:.0f} s; {r['method']['score']}; "
+             f"{r['data']['duration_s']:.0f} s, odometry: {r['data'].get('odometry', 'odom3')}; "
+             f"{r['method']['score']}; "
              f"intervals: {r['method']['bootstrap']}.", ""]
     goals = r["goals"]
     lines += table_lines(

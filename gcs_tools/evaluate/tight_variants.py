@@ -145,6 +145,13 @@ def no_odometry(drive: Drive) -> Drive:
     return _with_epochs(data, data.epochs, np.zeros((0, 3))), truth
 
 
+def no_speed(drive: Drive) -> Drive:
+    """The odometry's yaw rate without its wheel speed (NaN): a car with a gyro and no speed sensor, as
+    a drive with imu rows instead of odom3 gives (``gcs_tools.gnss.imu_yaw``)."""
+    data, truth = drive
+    return _with_epochs(data, data.epochs, data.odometry * [1.0, math.nan, 1.0]), truth
+
+
 def odometry_rate(drive: Drive, rate_hz: float) -> Drive:
     """The odometry at ``rate_hz``: faster, its speed and yaw rate linearly interpolated onto that grid
     (another car's bus rate, the same signals); slower, the first sample of every 1/rate_hz interval."""
@@ -192,6 +199,7 @@ VARIANTS: dict[str, Callable[[Drive], Drive]] = {
     "first-half": first_half,
     "second-half": second_half,
     "no-odometry": no_odometry,
+    "no-speed": no_speed,
     "odo-50hz": lambda d: odometry_rate(d, 50.0),
     "odo-1hz": lambda d: odometry_rate(d, 1.0),
     "gap-2s": gap,

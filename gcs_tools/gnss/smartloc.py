@@ -2,7 +2,10 @@
 
 ``*_Input.txt`` rows ``pseudorange3 t pr var x y z id system el cn0`` (pseudoranges with satellite
 clock and atmosphere already removed, satellite ECEF positions at transmission) and ``odom3``
-rows (speed, yaw rate); ``*_GT.txt`` rows ``point3 t x y z …`` (truth in ECEF at 5 Hz). Times are
+rows (speed, yaw rate), or instead ``imu`` rows ``imu t fx fy fz wx wy wz …`` (specific force m/s² and
+body rate rad/s in the sensor's axes: the UrbanNav data set as TU Chemnitz formats it), of which the
+yaw rate about up is kept as odometry without a speed (``gcs_tools.gnss.imu_yaw``); ``*_GT.txt`` rows
+``point3 t x y z …`` (truth in ECEF at 5 Hz). Times are
 the data set's own seconds from the drive's start (no GPS time is given), so epochs carry
 ``time_base="dataset"``. smartLoc system codes: 1 GPS, 2 SBAS, 4 GLONASS, 8 Galileo, 16 QZSS,
 32 BeiDou; GLONASS ids are 300 + slot.
@@ -22,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +34,7 @@ import numpy as np
 from companion.errors import UserError
 from companion.gnss.observations import GnssEpoch, make_epoch
 from companion.gnss.systems import System
+from gcs_tools.gnss.imu_yaw import YawRate, yaw_rate_from_imu
 
 SYSTEMS = {
     1: System.GPS,
@@ -48,14 +53,21 @@ GLONASS_ID_OFFSET = 300
 DIGITS = 15
 # odom3 covariances (vx, vy, vz, ωx, ωy, ωz), as smartLoc Berlin Potsdamer Platz states them on every row
 ODOM_COV = (0.0025, 0.0009, 0.0009, 4e-06, 4e-06, 4e-06)
+# imu rows beyond any MEMS IMU's full scale (16 g, 2000 °/s)
+IMU_MAX_M_S2 = 16 * 9.80665
+IMU_MAX_RAD_S = math.radians(2000.0)
 
 
 @dataclass
 class SmartLocInput:
     epochs: list[GnssEpoch]
-    odometry: np.ndarray  # (m, 3): t_s, forward speed m/s, yaw rate rad/s
+    odometry: np.ndarray  # (m, 3): t_s, forward speed m/s (NaN: none, a gyro alone), yaw rate rad/s
     rejected: Counter[str] = field(default_factory=Counter)
     rows: int = 0
+    # where the odometry came from: "odom3" (wheel speed and yaw rate), "imu" (the yaw rate about up of
+    # the imu rows, no speed: ``gcs_tools.gnss.imu_yaw``) or "none"
+    odometry_source: str = "none"
+    imu: YawRate | None = None  # the imu rows' yaw rate, when odometry_source is "imu"
 
 
 @dataclass
@@ -94,6 +106,7 @@ def read_input(path: str | Path) -> SmartLocInput:
     rejected: Counter[str] = Counter()
     pr_rows: list[list[float]] = []
     odo: list[list[float]] = []
+    imu: list[list[float]] = []
     n = 0
     for line in _lines(path):
         parts = line.split()
@@ -102,21 +115,13 @@ def read_input(path: str | Path) -> SmartLocInput:
         n += 1
         tag = parts[0]
         if tag == "pseudorange3":
-            try:
-                vals = [float(v) for v in parts[1:11]]
-            except ValueError:
-                rejected["unparsable"] += 1
-                continue
-            if len(vals) < 10:
-                rejected["short_row"] += 1
-            elif not all(math.isfinite(v) for v in vals):
-                rejected["nonfinite"] += 1
-            elif int(vals[7]) not in SYSTEMS:
-                rejected["unknown_system"] += 1
-            elif not _plausible(vals):
-                rejected["out_of_range"] += 1
-            else:
-                pr_rows.append(vals)
+            row = _checked(parts, 10, rejected, _pseudorange_problem)
+            if row is not None:
+                pr_rows.append(row)
+        elif tag == "imu":
+            row = _checked(parts, 7, rejected, _imu_problem)
+            if row is not None:
+                imu.append(row)
         elif tag == "odom3":
             try:
                 v = [float(parts[1]), float(parts[2]), float(parts[7])]
@@ -131,6 +136,7 @@ def read_input(path: str | Path) -> SmartLocInput:
             rejected["unknown_row_type"] += 1
     pr_rows = _drop_lone_stamps(pr_rows, rejected)
     odo = _drop_lone_stamps(odo, rejected)
+    imu = _drop_lone_stamps(imu, rejected)
     if not pr_rows:
         raise UserError(
             f"{path}: no usable smartLoc pseudorange3 rows in {n} lines "
@@ -161,7 +167,41 @@ def read_input(path: str | Path) -> SmartLocInput:
                 time_base="dataset",
             )
         )
-    return SmartLocInput(epochs, np.array(odo).reshape(-1, 3), rejected, n)
+    if odo:
+        return SmartLocInput(epochs, np.array(odo).reshape(-1, 3), rejected, n, "odom3")
+    if len(imu) >= 2:  # a drive with an IMU instead of odometry: its yaw rate, the speed unknown
+        a = np.array(imu)
+        a = a[np.argsort(a[:, 0], kind="stable")]
+        yaw = yaw_rate_from_imu(a[:, 0], a[:, 1:4], a[:, 4:7])
+        rows = np.column_stack([yaw.t_s, np.full(len(yaw.t_s), np.nan), yaw.yaw_rate_ccw_rad_s])
+        return SmartLocInput(epochs, rows, rejected, n, "imu", yaw)
+    return SmartLocInput(epochs, np.zeros((0, 3)), rejected, n)
+
+
+def _checked(parts: list[str], n: int, rejected: Counter[str], problem: Callable[[list[float]], str]
+             ) -> list[float] | None:
+    """A row's first ``n`` numbers after its tag, or None with the reason counted in ``rejected``."""
+    try:
+        vals = [float(v) for v in parts[1:n + 1]]
+    except ValueError:
+        rejected["unparsable"] += 1
+        return None
+    reason = ("short_row" if len(vals) < n else "nonfinite" if not all(math.isfinite(v) for v in vals)
+              else problem(vals))
+    if reason:
+        rejected[reason] += 1
+        return None
+    return vals
+
+
+def _pseudorange_problem(vals: list[float]) -> str:
+    return "unknown_system" if int(vals[7]) not in SYSTEMS else "" if _plausible(vals) else "out_of_range"
+
+
+def _imu_problem(vals: list[float]) -> str:
+    """Beyond any MEMS IMU's full scale: a damaged row, not a car's motion."""
+    wild = max(map(abs, vals[1:4])) > IMU_MAX_M_S2 or max(map(abs, vals[4:7])) > IMU_MAX_RAD_S
+    return "out_of_range" if wild else ""
 
 
 def _plausible(vals: list[float]) -> bool:

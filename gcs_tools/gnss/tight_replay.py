@@ -30,6 +30,10 @@ from gcs_tools.gnss.replay import GRAVITY_M_S2, SMARTLOC_IMU_HZ, LogWithGnss, sm
 from gcs_tools.replay.events import TRUTH, Event, LogReader, ReaderStats, Reference, ReferenceInfo
 
 RawEvent = Event | RawGnss | Odometry  # what these readers yield
+ODOMETRY_SOURCES = {
+    "odom3": "smartLoc odom3 (speed, yaw rate)",
+    "imu": "the imu rows' yaw rate about up (no speed: the vehicle does not slide sideways)",
+}
 
 
 def anchor_of(epochs: Sequence[GnssEpoch], klobuchar: Any = None) -> LocalNedFrame:
@@ -52,6 +56,7 @@ class SmartLocRawSource:
     truth_ecef_m: np.ndarray
     use_odometry: bool = True
     truth_source: str = "smartLoc point3"  # what the truth rows are (gcs_tools.gnss.truth)
+    odometry_source: str = "odom3"  # SmartLocInput.odometry_source: "odom3", "imu" (a yaw rate, no speed)
     format: str = "smartloc"
     anchor: LocalNedFrame = field(init=False)
 
@@ -62,7 +67,8 @@ class SmartLocRawSource:
             "imu": "none (zero acceleration, level: the constant-velocity model)",
             "attitude": "none (level)",
             "gnss": "smartLoc pseudoranges (raw epochs)",
-            "odometry": "smartLoc odom3 (speed, yaw rate)" if self.use_odometry else None,
+            "odometry": (ODOMETRY_SOURCES.get(self.odometry_source)
+                         if self.use_odometry and len(self.odometry) else None),
         }
         note = "estimated position vs the smartLoc truth (ECEF -> geodetic)"
         self.references = {TRUTH: ReferenceInfo(self.truth_source, "geodetic", note)}
@@ -112,7 +118,7 @@ def smartloc_raw_source(input_path: Path, truth_path: Path | None, use_odometry:
 
     data, truth = smartloc.read_drive(input_path, truth_path)
     src = SmartLocRawSource(data.epochs, data.odometry, truth.t_s, truth.p_ecef_m, use_odometry,
-                            smartloc.truth_label(truth))
+                            smartloc.truth_label(truth), data.odometry_source)
     src.stats.rejected.update(smartloc.rows_rejected(data.rejected))
     src.stats.rejected.update(smartloc.rows_rejected(truth.rejected, "truth_row"))
     return src
