@@ -13,10 +13,16 @@
   and in their own order: under ``--dist worksteal`` the workers then end on short tests (a long test
   started last keeps one worker busy while the other has nothing left), and a worker steals from the
   end of the other's queue, so the long modules are seldom split between the workers (a split module
-  builds its shared fixtures, one flight or one replay, on both)."""
+  builds its shared fixtures, one flight or one replay, on both).
+* ``quad106_replayed``: one ``beliefnav replay`` of the real quad106 log per test run, read by the
+  modules that test what it wrote (figures, export)."""
 
+import contextlib
+import fcntl
+import io
 import os
 import socket
+from pathlib import Path
 
 import pytest
 
@@ -46,6 +52,32 @@ _LONG_MODULES = (
     "test_fuzz_inputs",  # 8
     "test_autopilot_udp",  # 8
 )
+
+
+QUAD106 = Path(__file__).parent / "data" / "quad106.tlog"
+
+
+@pytest.fixture(scope="session")
+def quad106_replayed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """``beliefnav replay tests/data/quad106.tlog --out DIR --no-progress`` (in process, exit 0), run
+    once per test run: DIR and what the command printed. The command is deterministic; under
+    pytest-xdist the first worker runs it under a lock and the others read what it left."""
+    from gcs_tools.cli import main
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the run's directory, shared by its workers
+    out, printed = root / "quad106-replay", root / "quad106-replay.printed"
+    with open(root / "quad106-replay.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not printed.exists():
+            text = io.StringIO()
+            with contextlib.redirect_stdout(text):
+                code = main(["replay", str(QUAD106), "--out", str(out), "--no-progress"])
+            assert code == 0, text.getvalue()
+            printed.with_suffix(".partial").write_text(text.getvalue())
+            printed.with_suffix(".partial").rename(printed)  # complete, or absent
+    return out, printed.read_text()
 
 
 def _free_hub() -> str:
