@@ -7,13 +7,9 @@
 * Tests that start a real autopilot (ArduPilot or PX4 SITL: their modules use the helpers named in
   ``_AUTOPILOT_HELPERS``) are marked ``autopilot``. ``make test`` runs the others on two workers, then
   these alone and one after another: a lockstep autopilot at 5x beside other CPU-heavy tests would
-  make its real-time margins the test instead of the code (measured 2026-11-27: the ArduPilot tests on
-  two workers, 2 of 16 failed with commands seconds late; two PX4 flights at once, both failed).
-* The modules whose tests take longest run first (``_LONG_MODULES``), each module's tests together
-  and in their own order: under ``--dist worksteal`` the workers then end on short tests (a long test
-  started last keeps one worker busy while the other has nothing left), and a worker steals from the
-  end of the other's queue, so the long modules are seldom split between the workers (a split module
-  builds its shared fixtures, one flight or one replay, on both).
+  make its real-time margins the test instead of the code (measured 2026-11-27 on the shared VM: the
+  ArduPilot tests on two workers, 2 of 16 failed with commands seconds late; two PX4 flights at once,
+  both failed).
 * ``quad106_replayed``: one ``beliefnav replay`` of the real quad106 log per test run, read by the
   modules that test what it wrote (figures, export)."""
 
@@ -28,30 +24,6 @@ import pytest
 
 _HUB_OWNER = "_BELIEFNAV_ZENOH_HUB_FROM_CONFTEST"
 _AUTOPILOT_HELPERS = ("require_ardupilot", "require_px4", "px4_fixture", "running_px4")
-# Longest first: the modules' summed test times (s) in `pytest -n 2 -m "not autopilot" --durations=90`
-# on the slowed VM, 2026-11-27, rounded; a module not listed runs after these, in collection order.
-_LONG_MODULES = (
-    "test_sitl_flight",  # 124
-    "test_dashboard_browser",  # 72
-    "test_simcal_scenario",  # 54
-    "test_replay_figures",  # 30
-    "test_replay",  # 57, about 30 since quad106 is read once for every method
-    "test_gnss_replay",  # 27
-    "test_export",  # 26
-    "test_rinex2",  # 24
-    "test_transplant",  # 21
-    "test_fuzz_live",  # 18
-    "test_estimator_consistency",  # 17
-    "test_ground_clients",  # 15
-    "test_evaluate_campaign",  # 14
-    "test_sitl_outcomes",  # 13
-    "test_simcal_sitl",  # 11
-    "test_sitl_vehicle_id",  # 11
-    "test_telemetry_pubsub",  # 10
-    "test_tight",  # 10
-    "test_fuzz_inputs",  # 8
-    "test_autopilot_udp",  # 8
-)
 
 
 QUAD106 = Path(__file__).parent / "data" / "quad106.tlog"
@@ -99,5 +71,3 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         module = getattr(item, "module", None)
         if module is not None and any(hasattr(module, name) for name in _AUTOPILOT_HELPERS):
             item.add_marker(pytest.mark.autopilot)
-    rank = {name: k for k, name in enumerate(_LONG_MODULES)}
-    items.sort(key=lambda item: rank.get(item.path.stem, len(rank)))  # stable: modules stay together
