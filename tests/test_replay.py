@@ -229,7 +229,8 @@ class _ReadOnce:
 def test_real_log_every_method() -> None:
     """quad106 (open sky, 668 s): finite output throughout, within metres of GNSS, β high.
     The log is read once and every method fed its events; the last method replayed from the file
-    itself gives the same table and summary bit for bit as from the events (used by every method)."""
+    itself gives the same table, summary, tracks and GNSS record bit for bit as from the events (used
+    by every method before it)."""
     estimator = pytest.importorskip("companion.estimator")
     if not hasattr(estimator, "Navigator"):
         pytest.skip("companion.estimator.Navigator has not landed yet")
@@ -252,6 +253,9 @@ def test_real_log_every_method() -> None:
     read = core.replay(QUAD106, fed.summary["method"])
     assert read.table.tobytes() == fed.table.tobytes() and read.t_us.tobytes() == fed.t_us.tobytes()
     assert _without_timing(read.summary) == _without_timing(fed.summary)
+    assert read.tracks.keys() == fed.tracks.keys() and read.gnss.keys() == fed.gnss.keys()
+    assert all(read.tracks[k].tobytes() == fed.tracks[k].tobytes() for k in read.tracks)
+    assert all(read.gnss[f][c].tobytes() == fed.gnss[f][c].tobytes() for f in read.gnss for c in read.gnss[f])
 
 
 def _without_timing(summary: dict) -> str:
