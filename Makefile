@@ -48,7 +48,9 @@ browser:
 # fails the target. TEST_WORKERS=0 runs the first part in one process. --dist worksteal: the slow
 # process tests sit together (tests/test_s*), and `load` hands them out in large consecutive chunks, so
 # one worker could be left with them while the other idles; a worker that runs out takes half of the
-# other's queue instead.
+# other's queue instead. (Longest modules first was simulated on measured durations: the workers then
+# meet among long tests and end further apart; not adopted.) The autopilot part on two workers was
+# measured failing (commands seconds late): it stays serial.
 TEST_WORKERS ?= 2
 test: $(STAMP) browser
 	@status=0; \

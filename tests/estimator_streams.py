@@ -67,17 +67,36 @@ def consistent_stream(rng: np.random.Generator, cfg: EstimatorConfig, duration_s
     x[0] = x_hat0 - np.linalg.cholesky(P0) @ rng.standard_normal(model.N_STATE)
     w = rng.standard_normal((n, model.N_STATE))
     F, L = model.transition(dt, cfg), np.linalg.cholesky(model.process_noise(dt, cfg.sigma_bias_m(beta), cfg))
+    if yaw_rate_rad_s != 0.0:
+        steps = _rotating_steps(rot, dt, cfg, beta, yaw_rate_rad_s)
     for k in range(n - 1):
         if yaw_rate_rad_s != 0.0:
-            r9 = tuple(rot[k])
-            F = model.transition(dt, cfg, r9)
-            L = np.linalg.cholesky(model.process_noise(dt, cfg.sigma_bias_m(beta), cfg, r9))
+            F, L = steps[k]
         x[k + 1] = F @ x[k] + B @ a[k] + L @ w[k]
     idx = np.arange(0, n, GNSS_EVERY)
     Lr = np.linalg.cholesky(cfg.r_nominal_m2())
     z = x[idx, 0:3] + x[idx, 6:9] + rng.standard_normal((len(idx), 3)) @ Lr.T
     z[0] = z0  # the filter starts from the first fix
     return Stream(t_us, a, x, idx, z, np.zeros(len(idx)), None if yaw_rate_rad_s == 0.0 else rot), x_hat0, P0
+
+
+_STEPS: dict[tuple[Any, ...], list[tuple[np.ndarray, np.ndarray]]] = {}
+
+
+def _rotating_steps(rot: np.ndarray, dt: float, cfg: EstimatorConfig, beta: float,
+                    yaw_rate_rad_s: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(F, chol Q) of every step of a rotating stream: the same for every stream of the same length, rate
+    and config (the attitude is a function of time only), so computed once and kept (the same arrays)."""
+    key = (len(rot), dt, cfg, beta, yaw_rate_rad_s)
+    if key not in _STEPS:
+        if len(_STEPS) >= 4:
+            _STEPS.clear()
+        _STEPS[key] = [
+            (model.transition(dt, cfg, r9),
+             np.linalg.cholesky(model.process_noise(dt, cfg.sigma_bias_m(beta), cfg, r9)))
+            for r9 in map(tuple, rot[:-1])
+        ]
+    return _STEPS[key]
 
 
 def multipath_stream(rng: np.random.Generator, cfg: EstimatorConfig, segments: list[tuple[float, float]],

@@ -292,12 +292,11 @@ def test_foxglove_layout_names_only_exported_topics_and_fields(run_dir, tmp_path
     assert {"/map/buildings", "/gnss/fix", "/map/true", "/map/estimated"} <= named
 
 
-def test_replay_output_exports_estimate_belief_attitude_and_the_logs_fixes(tmp_path):
+def test_replay_output_exports_estimate_belief_attitude_and_the_logs_fixes(tmp_path, quad106_replayed):
     """`beliefnav replay` of the real log, then export: the estimate, β and NIS of estimates.csv, the
     attitude the estimator was given, every fix of the log (read again through summary.json's
     file), on the log's clock mapped to UTC by its SYSTEM_TIME."""
-    run = tmp_path / "replay"
-    assert main(["replay", str(QUAD106), "--out", str(run), "--no-progress"]) == 0
+    run, _ = quad106_replayed  # `beliefnav replay QUAD106 --out RUN --no-progress`, exit 0
     assert main(["export", str(run), "--out", str(tmp_path / "r.mcap")]) == 0
     channels, msgs, meta = _read(tmp_path / "r.mcap")
     est = _csv(run / "estimates.csv")

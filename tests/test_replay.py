@@ -17,6 +17,8 @@ from companion.mavlink import codec as mc
 from companion.mavlink.tlog import TlogWriter
 from gcs_tools.cli import main
 from gcs_tools.replay import core
+from gcs_tools.replay.events import ReaderStats
+from gcs_tools.replay.tlog_source import TlogSource
 
 QUAD106 = Path(__file__).parent / "data" / "quad106.tlog"
 HOME = LocalNedFrame(-37.86, 144.76, 20.0)
@@ -188,17 +190,57 @@ def test_synthetic_gnss_options_without_effect_are_one_line_errors(
         assert err.startswith("beliefnav: error: ") and words in err and "\n" not in err, err
 
 
+class _ReadOnce:
+    """quad106's events as the CLI's tlog reader (``TlogSource``) yields them, read from the file once:
+    each pass yields the same (immutable) events, then ends in that reader's final state (its
+    counters added to those the replay counted, its sources and references)."""
+
+    format = TlogSource.format
+    anchor = TlogSource.anchor
+
+    def __init__(self, path: Path, read: TlogSource | None = None, events: list | None = None) -> None:
+        self._read, self._events = read, events
+        self._path = path
+        self.stats = ReaderStats()
+        self.sources, self.references = TlogSource(path).sources, {}
+
+    def again(self) -> _ReadOnce:
+        if self._events is None:
+            self._read = TlogSource(self._path)
+            self._events = list(self._read)
+        return _ReadOnce(self._path, self._read, self._events)
+
+    def first_fix(self) -> GnssFix | None:
+        return TlogSource(self._path).first_fix()
+
+    def __iter__(self):
+        assert self._read is not None and self._events is not None
+        yield from self._events
+        final, st = self._read.stats, self.stats
+        st.decoded.update(final.decoded)
+        st.rejected.update(final.rejected)
+        st.skipped.update(final.skipped)
+        st.skipped_bytes, st.records, st.position, st.size = (final.skipped_bytes, final.records,
+                                                              final.position, final.size)
+        self.sources.update(self._read.sources)
+        self.references.update(self._read.references)
+
+
 def test_real_log_every_method() -> None:
-    """quad106 (open sky, 668 s): finite output throughout, within metres of GNSS, β high."""
+    """quad106 (open sky, 668 s): finite output throughout, within metres of GNSS, β high.
+    The log is read once and every method fed its events; the last method replayed from the file
+    itself gives the same table, summary, tracks and GNSS record bit for bit as from the events (used
+    by every method before it)."""
     estimator = pytest.importorskip("companion.estimator")
     if not hasattr(estimator, "Navigator"):
         pytest.skip("companion.estimator.Navigator has not landed yet")
+    log = _ReadOnce(QUAD106)
     for method in estimator.METHODS:
         if method in ("map-beta", "map-hmm"):  # a foreign log has no map: refused, not "open sky"
             with pytest.raises(UserError, match=f"'{method}' needs the mission's map"):
                 core.replay(QUAD106, method)
             continue
-        result = core.replay(QUAD106, method)
+        result = core.replay(QUAD106, method, reader=log.again())
         s, table = result.summary, result.table
         assert s["samples_used"]["imu"] == 32936 and s["samples_used"]["gnss"] == 3339, method
         assert not s["samples_rejected"]["reader"] and not s["samples_rejected"]["codec"], method
@@ -207,6 +249,18 @@ def test_real_log_every_method() -> None:
         assert gnss["median"] < 2.0 and gnss["p95"] < 5.0, (method, gnss)
         if "order" in method:
             assert s["beta"]["median"] > 0.8, (method, s["beta"])
+        fed = result
+    read = core.replay(QUAD106, fed.summary["method"])
+    assert read.table.tobytes() == fed.table.tobytes() and read.t_us.tobytes() == fed.t_us.tobytes()
+    assert _without_timing(read.summary) == _without_timing(fed.summary)
+    assert read.tracks.keys() == fed.tracks.keys() and read.gnss.keys() == fed.gnss.keys()
+    assert all(read.tracks[k].tobytes() == fed.tracks[k].tobytes() for k in read.tracks)
+    assert all(read.gnss[f][c].tobytes() == fed.gnss[f][c].tobytes() for f in read.gnss for c in read.gnss[f])
+
+
+def _without_timing(summary: dict) -> str:
+    return json.dumps({k: v for k, v in summary.items() if k not in ("timing_s", "wall_s", "cpu_s",
+                                                                     "realtime_factor")}, sort_keys=True)
 
 
 def test_mission_option_sets_home_and_the_missions_estimator_config(tmp_path, capsys):

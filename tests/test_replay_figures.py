@@ -27,11 +27,8 @@ def _assert_png(path: Path, min_px: int = 300) -> None:
     assert float(np.std(img[..., :3])) > 0.05  # not a blank canvas
 
 
-def test_real_tlog_writes_both_figures_and_prints_them(tmp_path: Path,
-                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    out = tmp_path / "q"
-    assert main(["replay", str(QUAD106), "--out", str(out), "--no-progress"]) == 0
-    printed = capsys.readouterr().out
+def test_real_tlog_writes_both_figures_and_prints_them(quad106_replayed: tuple[Path, str]) -> None:
+    out, printed = quad106_replayed  # `beliefnav replay QUAD106 --out OUT --no-progress`, exit 0
     for name in ("track.png", "errors.png"):
         _assert_png(out / name)
     assert f"wrote {out}/: estimates.csv, gnss_fixes.csv, summary.json, track.png, errors.png" in printed
