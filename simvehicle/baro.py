@@ -37,14 +37,16 @@ class Barometer:
         self._walk_m = 0.0
 
     def error_m(self, t_s: np.ndarray) -> np.ndarray:
-        """The datum and the drift (no white noise) at ``t_s`` (n,), advancing the random walk by n samples."""
+        """The datum and the drift (no white noise) at ``t_s`` (n,), advancing the random walk by n
+        samples."""
         n = len(t_s)
         walk = self._walk_m + np.cumsum(self._normals.take(n) * self._walk_step_m)
         self._walk_m = float(walk[-1]) if n else self._walk_m
         return self.datum_m + self.drift_rate_m_s * np.asarray(t_s, float) + walk
 
     def measure(self, t_s: np.ndarray, height_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(pressure altitude (m), absolute pressure (hPa), temperature (°C)), each (n,), at times ``t_s`` (n,)
+        """(pressure altitude (m), absolute pressure (hPa), temperature (°C)), each (n,), at times ``t_s``
+        (n,)
         of true heights above home ``height_m`` (n,)."""
         alt = self._home_alt_m + np.asarray(height_m, float)
         pa = alt + self.error_m(t_s) + self.cfg.baro_sigma_m * self._normals.take(len(t_s))

@@ -129,8 +129,8 @@ class ImuConfig:
     def validate(self) -> None:
         _non_negative(self, "sigma_acc_m_s2", "sigma_gyro_rad_s", "acc_noise_density_m_s2_rt_hz",
                       "gyro_noise_density_rad_s_rt_hz", "acc_bias_turn_on_m_s2", "gyro_bias_turn_on_rad_s",
-                      "acc_bias_walk_m_s2_rt_s", "gyro_bias_walk_rad_s_rt_s", "baro_sigma_m", "baro_drift_m_s",
-                      "baro_walk_m_rt_s", "baro_datum_sigma_m")
+                      "acc_bias_walk_m_s2_rt_s", "gyro_bias_walk_rad_s_rt_s", "baro_sigma_m",
+                      "baro_drift_m_s", "baro_walk_m_rt_s", "baro_datum_sigma_m")
         for name in ("acc_scale_factor", "gyro_scale_factor"):
             if not 0.0 <= getattr(self, name) < 0.1:
                 raise ValueError(f"{name}: must be in [0, 0.1), got {getattr(self, name)!r}")

@@ -17,7 +17,16 @@ from companion.tight.engine import Baro, TightEngine
 from companion.tight.model import I_BARO, N_STATE, N_STATE_BARO
 from tests.gnss_helpers import hold_at_rest
 from tests.test_mavlink_codec import wire
-from tests.test_tight import FRAME, STORE, _numeric_jacobian, _sats, _state, _synthetic_epochs
+from tests.test_tight import (
+    FRAME,
+    STORE,
+    _feed,
+    _numeric_jacobian,
+    _sats,
+    _state,
+    _synthetic_epochs,
+    c_core_inputs,
+)
 
 PERIOD_US = 200_000  # epochs and baro samples
 
@@ -32,30 +41,26 @@ def test_baro_jacobian_matches_finite_differences_and_the_pseudoranges_ignore_b_
     sysv, _, pos, vel = _sats()
     _, H, _ = model.pseudorange(x, FRAME, pos, model.SLOT_OF[sysv])
     _, Hr = model.range_rate(x, FRAME, pos, vel)
-    assert H.shape == Hr.shape == (len(sysv), N_STATE_BARO) and not H[:, I_BARO].any() and not Hr[:, I_BARO].any()
+    assert H.shape == Hr.shape == (len(sysv), N_STATE_BARO)
+    assert not H[:, I_BARO].any() and not Hr[:, I_BARO].any()
 
 
 def test_c_core_with_the_baro_state_equals_the_numpy_forms():
     rng = np.random.default_rng(2)
-    A = rng.normal(size=(N_STATE_BARO, N_STATE_BARO))
-    P = A @ A.T + np.eye(N_STATE_BARO)
-    T = 0.2
-    nA = -(T * np.linalg.qr(rng.normal(size=(3, 3)))[0])
-    nB = 0.5 * T * nA
-    live = np.array([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])
-    q = (0.09, 0.01, 9e-6, 1e-4, 0.1, 1e-3, 0.5, 2.5e-5, 1e-8)
+    P, T, nA, nB, live, q = c_core_inputs(rng, N_STATE_BARO)
     q_baro = 0.04
     F = model.transition(T, nA.ravel(), nB.ravel(), live, n=N_STATE_BARO)
     want = F @ P @ F.T + model.process_noise(T, nA.ravel(), live, *q, q_baro=q_baro, n=N_STATE_BARO)
-    got = _tight.predict_cov(P, T, nA.ravel(), nB.ravel(), live, *q, True, None, None, 0.0, 0.0, 0.0, 0.0, q_baro)
+    no_hold = (None, None, 0.0, 0.0, 0.0, 0.0)
+    got = _tight.predict_cov(P, T, nA.ravel(), nB.ravel(), live, *q, True, *no_hold, q_baro)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
     # the 21-state block of a 22-state prediction is the 21-state prediction of that block, bit for bit,
     # when b_baro is uncorrelated (the C core's sums only gain exact zeros)
     P0 = P.copy()
     P0[I_BARO, :N_STATE] = P0[:N_STATE, I_BARO] = 0.0
     got0 = _tight.predict_cov(P0, T, nA.ravel(), nB.ravel(), live, *q, True)
-    assert np.array_equal(got0[:N_STATE, :N_STATE],
-                          _tight.predict_cov(P0[:N_STATE, :N_STATE], T, nA.ravel(), nB.ravel(), live, *q, True))
+    got21 = _tight.predict_cov(P0[:N_STATE, :N_STATE], T, nA.ravel(), nB.ravel(), live, *q, True)
+    assert np.array_equal(got0[:N_STATE, :N_STATE], got21)
     with pytest.raises(ValueError, match="shapes"):
         _tight.predict_cov(np.eye(23), T, nA.ravel(), nB.ravel(), live, *q, True)
     sysv, _, pos, vel = _sats()
@@ -82,8 +87,8 @@ def test_c_core_with_the_baro_state_equals_the_numpy_forms():
     np.testing.assert_allclose(P_c, P - K @ Hs @ P, rtol=1e-9, atol=1e-9)
 
 
-def _baro_truth(rng: np.random.Generator, truth: list[np.ndarray], cfg: TightConfig, b0: float, dt_s: float = 0.2
-                ) -> tuple[np.ndarray, np.ndarray]:
+def _baro_truth(rng: np.random.Generator, truth: list[np.ndarray], cfg: TightConfig, b0: float,
+                dt_s: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
     """(barometer heights, true b_baro) at the epochs' times: −p_D + b, b a random walk of the filter's
     density from ``b0``, white noise of the filter's σ."""
     n = len(truth)
@@ -96,21 +101,16 @@ def _feed_baro(cfg: TightConfig, epochs, heights, t_us, order, eng: TightEngine 
                baro_offset_us: int = 100_000) -> TightEngine:
     """As test_tight._feed, with a barometer sample ``baro_offset_us`` after each epoch, pushed as soon as
     the IMU passed it (the barometer in time order; the epochs in ``order``, a late one after later ones)."""
-    eng = eng or TightEngine(cfg, "naive", frame=FRAME)
-    eng.push_acc(0, 0.0, 0.0, 0.0)
-    pushed = 0
     baro_next = 0
-    for i in order:
-        target = max(t_us[j] for j in order[: order.index(i) + 1])
-        while pushed < target:
-            pushed += 20_000
-            eng.push_acc(pushed, 0.0, 0.0, 0.0)
-            while baro_next < len(heights) and t_us[baro_next] + baro_offset_us <= pushed:
-                if eng.entries:  # (before the start a sample is dropped: in order it would be too)
-                    eng.push_baro(t_us[baro_next] + baro_offset_us, float(heights[baro_next]))
-                baro_next += 1
-        eng.push_epoch(t_us[i], epochs[i])
-    return eng
+
+    def on_imu(eng: TightEngine, pushed: int) -> None:
+        nonlocal baro_next
+        while baro_next < len(heights) and t_us[baro_next] + baro_offset_us <= pushed:
+            if eng.entries:  # (before the start a sample is dropped: in order it would be too)
+                eng.push_baro(t_us[baro_next] + baro_offset_us, float(heights[baro_next]))
+            baro_next += 1
+
+    return _feed(cfg, "naive", epochs, t_us, order, eng=eng, on_imu=on_imu)
 
 
 def test_out_of_sequence_epochs_with_baro_equal_in_order():
@@ -147,6 +147,21 @@ def test_no_barometer_or_only_rejected_samples_leave_the_filter_bit_identical():
         assert len(eb.x) == N_STATE and np.array_equal(ea.x, eb.x) and np.array_equal(ea.P, eb.P)
 
 
+def _first_baro(cfg: TightConfig, epochs, t_us, height_m: float):  # type: ignore[no-untyped-def]
+    """(engine, the prediction (x, P) the first baro sample met, its entry): three epochs, then the sample."""
+    eng = TightEngine(cfg, "naive", frame=FRAME)
+    eng.push_acc(0, 0.0, 0.0, 0.0)
+    for k in range(3):
+        eng.push_acc(t_us[k], 0.0, 0.0, 0.0)
+        eng.push_epoch(t_us[k], epochs[k])
+    before = eng.entries[-1]
+    eng.push_acc(t_us[2] + 20_000, 0.0, 0.0, 0.0)
+    eng.push_baro(t_us[2] + 20_000, height_m)
+    after = eng.entries[-1]
+    x, P = eng._predict(before, after.t_us, after.ints)
+    return eng, x, P, after
+
+
 def test_baro_starts_as_a_relative_height_and_gates_an_outlier():
     cfg = TightConfig.for_ground_vehicle()
     rng = np.random.default_rng(8)
@@ -158,16 +173,7 @@ def test_baro_starts_as_a_relative_height_and_gates_an_outlier():
     c = eng.counts
     assert c["baro_started"] == 1 and c["baro_rejected_gate"] == 1
     # the start: b = h + p_D, its variance P_DD + R and its covariance P_D· (the height is not moved)
-    eng2 = TightEngine(cfg, "naive", frame=FRAME)
-    eng2.push_acc(0, 0.0, 0.0, 0.0)
-    for k in range(3):
-        eng2.push_acc(t_us[k], 0.0, 0.0, 0.0)
-        eng2.push_epoch(t_us[k], epochs[k])
-    before = eng2.entries[-1]
-    eng2.push_acc(t_us[2] + 20_000, 0.0, 0.0, 0.0)
-    eng2.push_baro(t_us[2] + 20_000, 33.0)
-    after = eng2.entries[-1]
-    x_pred, P_pred = eng2._predict(before, after.t_us, after.ints)
+    _, x_pred, P_pred, after = _first_baro(cfg, epochs, t_us, 33.0)
     assert after.x[I_BARO] == 33.0 + x_pred[2]
     np.testing.assert_array_equal(after.x[:N_STATE], x_pred)
     assert after.P[I_BARO, I_BARO] == P_pred[2, 2] + cfg.sigma_baro_m**2
@@ -219,7 +225,8 @@ def test_navigator_takes_highres_imus_pressure_altitude_one_per_period():
         t = t0 + 20_000 * k
         nav.push(AttitudeSample(t, q))
         # through HIGHRES_IMU's bytes, as the companion receives it (codec.decode_imu: bit 11)
-        nav.push(mc.decode_imu(wire(mc.encode_imu(ImuSample(t, f, np.zeros(3), 80.0 + 0.01 * k), 1003.0, 30.0))))
+        s = ImuSample(t, f, np.zeros(3), 80.0 + 0.01 * k)
+        nav.push(mc.decode_imu(wire(mc.encode_imu(s, 1003.0, 30.0))))
     nav.push(mc.decode_imu(wire(mc.encode_imu(ImuSample(t0 + 20_000 * 50, f, np.zeros(3), 1e6)))))  # absurd
     c = nav.counters()
     assert c["baro_started"] == 1 and c["baro_samples"] == 5 and c["baro_fused"] == 4  # one per 0.2 s
@@ -228,7 +235,8 @@ def test_navigator_takes_highres_imus_pressure_altitude_one_per_period():
     # the barometer's height as predicted follows it (its climb of 0.4 m partly taken by the datum)
     assert len(e.x) == N_STATE_BARO and model.baro_height(e.x)[0] == pytest.approx(80.0 + 0.01 * 40, abs=0.3)
     # a log's HIGHRES_IMU without bit 11 (fields_updated 63, a constant 1013.25 hPa) has no barometer
-    logged = mc.mavlink.MAVLink_highres_imu_message(t0 + 20_000 * 60, *f, 0, 0, 0, 0, 0, 0, 1013.25, 0, 0, 0, 63, 0)
+    logged = mc.mavlink.MAVLink_highres_imu_message(t0 + 20_000 * 60, *f, 0, 0, 0, 0, 0, 0, 1013.25, 0, 0, 0,
+                                                    63, 0)
     nav.push(mc.decode_imu(wire(logged)))
     assert nav.counters()["baro_samples"] == 5
 
@@ -238,16 +246,7 @@ def test_a_known_datum_starts_b_baro_absolute_and_fuses_the_first_sample():
     rng = np.random.default_rng(10)
     epochs, _ = _synthetic_epochs(rng, cfg, 3)
     t_us = [1_000_000 + PERIOD_US * k for k in range(3)]
-    eng = TightEngine(cfg, "naive", frame=FRAME)
-    eng.push_acc(0, 0.0, 0.0, 0.0)
-    for k in range(3):
-        eng.push_acc(t_us[k], 0.0, 0.0, 0.0)
-        eng.push_epoch(t_us[k], epochs[k])
-    before = eng.entries[-1]
-    eng.push_acc(t_us[2] + 20_000, 0.0, 0.0, 0.0)
-    eng.push_baro(t_us[2] + 20_000, 45.0)
-    after = eng.entries[-1]
-    x, P = eng._predict(before, after.t_us, after.ints)
+    eng, x, P, after = _first_baro(cfg, epochs, t_us, 45.0)
     # the update of [x, 40] with P ⊕ 2² by h = 45: the known answer of a scalar Kalman update
     xa, Pa = np.r_[x, 40.0], np.zeros((N_STATE_BARO, N_STATE_BARO))
     Pa[:N_STATE, :N_STATE], Pa[I_BARO, I_BARO] = P, 4.0

@@ -79,20 +79,25 @@ class TightConfig:
     # A system whose satellites all disagree with its predicted clock by more than this (m) has
     # stepped (a receiver clock jump of milliseconds): its clock is re-initialised, not the position.
     clock_jump_m: float = 1000.0
-    # --- barometer (TightNavigator: an ImuSample's pressure_alt_m): the height −p_D + b_baro, b_baro the pressure
-    # altitude's unknown datum (the standard atmosphere's AMSL for PX4, the height over the ground calibration
-    # for ArduPilot), a state started at the first sample from the filter's own height and vertical variance
-    # (a relative height; docs/tight.md "Barometer"). σ of one sample (m): a MEMS baro (MS5611, BMP388) is
-    # 0.1-0.2 m at rest; 0.5 for what the airframe adds (propwash, dynamic pressure). The datum's random walk
-    # (m/√s): the sensor's thermal drift (≲ a few cm/s) and the weather (~1 hPa in 3 h); 0.1 is 1 m in 100 s.
-    # One sample per baro_period_s is fused (the newest; at the IMU's rate the re-fusion after a late epoch
-    # would cost more than it adds); gated at baro_gate_sigma σ.
+    # --- barometer (TightNavigator: an ImuSample's pressure_alt_m; docs/tight.md "Barometer")
+    # The height −p_D + b_baro, b_baro the pressure altitude's unknown datum (the standard atmosphere's AMSL
+    # for
+    # PX4, the height over the ground calibration for ArduPilot): a state started at the first sample from the
+    # filter's own height and vertical variance (a relative height), a random walk.
+    # one sample: a MEMS baro (MS5611, BMP388) 0.1-0.2 m at rest, + the airframe's (propwash, airspeed)
     sigma_baro_m: float = 0.5
+    # the datum's random walk: the sensor's thermal drift (≲ a few cm/s) and the weather (~1 hPa in 3 h); 1 m
+    # in 100 s
     sigma_baro_drift_m_sqrt_s: float = 0.1
+    # one sample fused per period (the first of each): at the IMU's rate the re-fusion after a late epoch
+    # would
+    # cost more than it adds
     baro_period_s: float = 0.2
-    baro_gate_sigma: float = 5.0
-    # The datum when it is known (m; NaN: unknown, the relative start above): the pressure altitude of the frame's
-    # origin, so that b_baro starts there with σ baro_datum_sigma_m, uncorrelated, and the first sample is fused.
+    baro_gate_sigma: float = 5.0  # the barometer's innovation gate (σ)
+    # The datum when it is known (m; NaN: unknown, the relative start above): the pressure altitude of the
+    # frame's
+    # origin, so that b_baro starts there with σ baro_datum_sigma_m, uncorrelated, and the first sample is
+    # fused.
     # ArduPilot zeroes its barometer on the ground at arming: with the frame at that home (a mission's) the
     # datum is 0 to the drift since (a few m at most); a pressure altitude on the standard atmosphere (PX4)
     # is home's AMSL altitude only to the day's weather (1 hPa ≈ 8 m): leave it NaN there.
@@ -232,8 +237,8 @@ class TightConfig:
         for name in ("sigma_acc_m_s2", "sigma_acc_vertical_m_s2", "q_clock_m2_s", "q_drift_m2_s3",
                      "sigma_clock0_m", "sigma_drift0_m_s", "sigma_velocity0_m_s", "sigma_uniform_m",
                      "sigma_floor_m", "sigma_range_rate_m_s", "gate_sigma", "reset_timeout_s",
-                     "clock_jump_m", "sigma_speed_m_s", "sigma_baro_m", "baro_gate_sigma", "eta", "lambda_reg",
-                     "student_dof", "history_s", "imu_hold_max_s"):
+                     "clock_jump_m", "sigma_speed_m_s", "sigma_baro_m", "baro_gate_sigma", "eta",
+                     "lambda_reg", "student_dof", "history_s", "imu_hold_max_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
@@ -243,7 +248,8 @@ class TightConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
-        if math.isinf(self.baro_datum_m) or (math.isfinite(self.baro_datum_m) and not self.baro_datum_sigma_m > 0.0):
+        datum = self.baro_datum_m
+        if math.isinf(datum) or (math.isfinite(datum) and not self.baro_datum_sigma_m > 0.0):
             raise ValueError("baro_datum_m: finite (with baro_datum_sigma_m > 0) or NaN (unknown)")
         if not (math.isfinite(self.accuracy_floor_m) and self.accuracy_floor_m >= 0.0):
             raise ValueError(f"accuracy_floor_m: must be a finite number >= 0, got {self.accuracy_floor_m!r}")

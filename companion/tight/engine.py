@@ -53,9 +53,9 @@ from companion.tight import _tight, model, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import (
+    I_BARO,
     I_CLK,
     I_DRIFT,
-    I_BARO,
     I_HEADING,
     I_YAW_BIAS,
     N_CLK,

@@ -83,7 +83,8 @@ MAP_SIGMA_SHIFT_M = 1.5
 # the simulated autopilot's gravity reference as ``--ahrs`` names it: AhrsConfig.gnss_velocity_reference
 # set to this (None: the mission's own)
 AHRS_REFERENCES: dict[str, bool | None] = {"mission": None, "accelerometer": False, "gnss-velocity": True}
-# --baro: the tight rows' barometer; "absolute": its datum known (TightConfig.baro_datum_m, σ baro_datum_sigma_m)
+# --baro: the tight rows' barometer; "absolute": its datum known (TightConfig.baro_datum_m, σ
+# baro_datum_sigma_m)
 BARO_MODES = ("relative", "absolute")
 
 
@@ -217,7 +218,7 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
         for name, p in rows_now.items():
             errors[name].append(float(np.hypot(p[0] - truth[0], p[1] - truth[1])))
             if vertical is not None:
-                pv = rows_now.get(f"tight-{MAP_ROWS[0]}") if name == FREE_ROW else p
+                pv = rows_now[f"tight-{MAP_ROWS[0]}"] if name == FREE_ROW else p
                 vertical.setdefault(name, []).append(abs(float(pv[2]) - float(truth[2])))
         if outside_rows and m.world.clearance_m(truth[0], truth[1]) > 0.0:
             for name in outside_rows:
@@ -373,8 +374,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the simulated autopilot's gravity reference (ahrs.gnss_velocity_reference; "
                         "default: the mission's)")
     p.add_argument("--baro", choices=BARO_MODES, default=None,
-                   help="the simulator's barometer with the IMU samples, the tight rows fuse it (the flight is "
-                        "the same); absolute: its datum at home, known to them (default: no barometer)")
+                   help="the simulator's barometer with the IMU samples, the tight rows fuse it (the flight "
+                        "is the same); absolute: its datum at home, known to them (default: no barometer)")
     p.add_argument("--rows", default=",".join(ROWS),
                    help=f"tight weightings, comma-separated (also: {', '.join(EXTRA_ROWS)})")
     args = p.parse_args(argv)
