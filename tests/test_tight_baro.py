@@ -256,5 +256,12 @@ def test_a_known_datum_starts_b_baro_absolute_and_fuses_the_first_sample():
     np.testing.assert_allclose(after.x, xa + k * (45.0 - (40.0 - x[2])), rtol=0, atol=1e-9)
     np.testing.assert_allclose(after.P, Pa - np.outer(k, Pa @ h), rtol=0, atol=1e-9)
     assert eng.counts["baro_fused"] == 1 and after.P[2, 2] < P[2, 2]  # the height moved
+    # a first sample far from the filter's height (its start, a single-point solution, tens of metres off in a
+    # canyon) is fused all the same: it sets the height; a later one as far is gated
+    eng, x, P, after = _first_baro(cfg, epochs, t_us, 40.0 - x[2] + 500.0)
+    assert eng.counts["baro_fused"] == 1 and abs(after.x[2] - x[2]) > 100.0
+    eng.push_acc(t_us[2] + 40_000 + PERIOD_US, 0.0, 0.0, 0.0)
+    eng.push_baro(t_us[2] + 40_000 + PERIOD_US, 40.0 - after.x[2] + 500.0)
+    assert eng.counts["baro_rejected_gate"] == 1
     with pytest.raises(ValueError, match="baro_datum"):
         TightConfig(baro_datum_m=math.inf).validate()

@@ -395,8 +395,10 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
                    ) -> Entry:
         """The barometer's height: the first adds b_baro = h + p_D (the state's height −p_D: a relative
         height, var(b) = P_DD + R, cov(b, ·) = P_D·), or the known datum ``baro_datum_m`` (σ
-        ``baro_datum_sigma_m``, then fused as the later ones); the later ones a gated scalar update."""
+        ``baro_datum_sigma_m``, then fused as the later ones but without the gate); the later ones a gated
+        scalar update."""
         c = self._counts
+        gated = True
         if len(x) == N_STATE:
             c["baro_started"] = c.get("baro_started", 0) + 1
             Pn = np.zeros((N_STATE + 1, N_STATE + 1))
@@ -407,14 +409,16 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
                 Pn[I_BARO, :N_STATE] = Pn[:N_STATE, I_BARO] = P[2]
                 Pn[I_BARO, I_BARO] = P[2, 2] + m.r_m2
                 return prev._replace(t_us=t_us, meas=m, x=x, P=Pn, ints=ints)
-            x = np.append(x, datum)  # known: absolute, and this sample fused below
+            # known: absolute, and this sample fused below without the gate (it sets the height: the
+            # filter's start, a single-point solution, can be tens of metres off in a canyon)
+            x = np.append(x, datum)
             Pn[I_BARO, I_BARO] = self.cfg.baro_datum_sigma_m**2
-            P = Pn
+            P, gated = Pn, False
         pred, h = model.baro_height(x)
         y = m.height_m - pred
         ph = P @ h
         s = float(h @ ph) + m.r_m2
-        if y * y <= self.cfg.baro_gate_sigma**2 * s:
+        if not gated or y * y <= self.cfg.baro_gate_sigma**2 * s:
             k = ph / s
             x = x + k * y
             P = P - np.outer(k, ph)
