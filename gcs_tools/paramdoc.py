@@ -21,7 +21,8 @@ OUT = Path(__file__).resolve().parents[1] / "docs" / "parameters.md"
 
 # name suffix -> unit (units are in every name: docs/ARCHITECTURE.md); the longest suffix wins
 UNITS = dict((
-    ("_m_s2_sqrt_s", "m/s²·√s"), ("_m_s2_rt_hz", "m/s²/√Hz"), ("_rad_s_rt_hz", "rad/s/√Hz"),
+    ("_m_s2_sqrt_s", "m/s²·√s"), ("_m_sqrt_s", "m/√s"), ("_m_rt_s", "m/√s"),
+    ("_m_s2_rt_hz", "m/s²/√Hz"), ("_rad_s_rt_hz", "rad/s/√Hz"),
     ("_m_s2", "m/s²"), ("_rad_s2", "rad/s²"), ("_m_s", "m/s"), ("_rad_s", "rad/s"), ("_m_rad", "m/rad"),
     ("_kg_m2", "kg·m²"), ("_n_s_m", "N·s/m"), ("_nm", "N·m"), ("_1_s3", "1/s³"), ("_1_s2", "1/s²"),
     ("_1_s", "1/s"), ("_m2", "m²"), ("_deg", "°"), ("_rad", "rad"), ("_hz", "Hz"), ("_ms", "ms"),

@@ -117,11 +117,20 @@ class ImuConfig:
     gyro_bias_walk_rad_s_rt_s: float = 0.0
     acc_scale_factor: float = 0.0  # 1-σ of the per-axis scale-factor error (fraction)
     gyro_scale_factor: float = 0.0
+    # the barometer sent with each IMU sample (simvehicle.baro; HIGHRES_IMU's pressure fields): a MEMS sensor
+    # (MS5611, BMP388: 0.1-0.2 m white at its rate), a thermal drift (its rate drawn once per flight; ≲ a few
+    # cm/s), a random walk (weather, airflow) and the day's datum against the standard atmosphere (drawn once)
+    baro: bool = True
+    baro_sigma_m: float = 0.15
+    baro_drift_m_s: float = 0.01
+    baro_walk_m_rt_s: float = 0.02
+    baro_datum_sigma_m: float = 30.0
 
     def validate(self) -> None:
         _non_negative(self, "sigma_acc_m_s2", "sigma_gyro_rad_s", "acc_noise_density_m_s2_rt_hz",
                       "gyro_noise_density_rad_s_rt_hz", "acc_bias_turn_on_m_s2", "gyro_bias_turn_on_rad_s",
-                      "acc_bias_walk_m_s2_rt_s", "gyro_bias_walk_rad_s_rt_s")
+                      "acc_bias_walk_m_s2_rt_s", "gyro_bias_walk_rad_s_rt_s", "baro_sigma_m",
+                      "baro_drift_m_s", "baro_walk_m_rt_s", "baro_datum_sigma_m")
         for name in ("acc_scale_factor", "gyro_scale_factor"):
             if not 0.0 <= getattr(self, name) < 0.1:
                 raise ValueError(f"{name}: must be in [0, 0.1), got {getattr(self, name)!r}")

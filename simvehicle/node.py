@@ -253,11 +253,13 @@ class VehicleNode:
         frame = self.mission.frame
         fixes = list(zip(out.gnss_arrival_us, out.gnss, strict=True))
         raws = list(out.gnss_raw)
-        for imu, att, truth in zip(out.imu, out.attitude, out.truth, strict=True):
+        nan = [math.nan] * len(out.tick_us)
+        hpa, temp = (nan, nan) if out.baro is None else (out.baro[1].tolist(), out.baro[2].tolist())
+        for i, (imu, att, truth) in enumerate(zip(out.imu, out.attitude, out.truth, strict=True)):
             if pace is not None:
                 pace(imu.t_us)
             self._send(codec.encode_attitude(att))  # attitude first: the IMU sample is rotated by it
-            self._send(codec.encode_imu(imu))
+            self._send(codec.encode_imu(imu, hpa[i], temp[i]))  # with the barometer's fields
             if imu.t_us % self.config.sim_state_period_us == 0:
                 self._send(codec.encode_truth(truth, frame, self.sim.gnss.to_geodetic))
                 self._topics.publish("truth", truth)

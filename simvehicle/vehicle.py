@@ -19,6 +19,7 @@ from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEsti
 from companion.errors import UserError
 from simvehicle.ahrs import Ahrs
 from simvehicle.autopilot import Autopilot
+from simvehicle.baro import Barometer
 from simvehicle.config import SimConfig, sim_config_for
 from simvehicle.dynamics import RigidBody
 from simvehicle.gnss import GnssModel, NedFix
@@ -56,6 +57,9 @@ class StepOutput:
     q_sent_ned_frd: np.ndarray | None = None  # (n, 4) the onboard AHRS estimate; None = the truth is sent
     # the raw receiver's epochs released this period (``receiver.enabled``; each with its arrival tick)
     gnss_raw: tuple[RawObservation, ...] = ()
+    # the barometer's (pressure altitude (m), absolute pressure (hPa), temperature (°C)), each (n,), with the
+    # IMU samples (``imu.baro``; simvehicle.baro); None: none
+    baro: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
     def q_att_ned_frd(self) -> np.ndarray:
@@ -65,6 +69,9 @@ class StepOutput:
     @cached_property
     def imu(self) -> list[ImuSample]:
         acc, gyro = self.acc_frd_m_s2, self.gyro_frd_rad_s
+        if self.baro is not None:
+            alt = self.baro[0].tolist()
+            return [ImuSample(t, acc[i], gyro[i], alt[i]) for i, t in enumerate(self.tick_us)]
         return [ImuSample(t, acc[i], gyro[i]) for i, t in enumerate(self.tick_us)]
 
     @cached_property
@@ -106,11 +113,14 @@ class SimVehicle:
         n0, e0 = (float(c) for c in profiles[profile_index].start_ne_m)
         self.start_ned_m = np.array([n0, e0, -float(mission.altitude_m)])
         # children 0 and 1 are the paper's streams (spawning more leaves them as they were)
-        # child 4 is the eq. 22-27 receiver velocity's, 5 the raw receiver's
-        imu_seq, gnss_seq, ahrs_seq, nlos_seq, velocity_seq, raw_seq = np.random.SeedSequence(seed).spawn(6)
+        # child 4 is the eq. 22-27 receiver velocity's, 5 the raw receiver's, 6 the barometer's
+        seqs = np.random.SeedSequence(seed).spawn(7)
+        imu_seq, gnss_seq, ahrs_seq, nlos_seq, velocity_seq, raw_seq = seqs[:6]
         self.body = RigidBody(cfg.vehicle, self.start_ned_m)
         self.autopilot = Autopilot(cfg.autopilot, cfg.vehicle, self.start_ned_m)
         self.imu = Imu(cfg.imu, np.random.default_rng(imu_seq), cfg.vehicle.physics_rate_hz)
+        self.baro = (Barometer(cfg.imu, np.random.default_rng(seqs[6]), cfg.vehicle.physics_rate_hz,
+                               float(mission.frame.home_alt_m)) if cfg.imu.baro else None)
         self.ahrs = (Ahrs(cfg.ahrs, cfg.vehicle.physics_rate_hz, np.array(self.body.x[6:10]),
                           np.random.default_rng(ahrs_seq)) if cfg.ahrs.enabled else None)
         self._clearance_m = self._clearance(self.start_ned_m)
@@ -176,6 +186,8 @@ class SimVehicle:
         p, v, q, omega = block[:, 3:6], block[:, 6:9], block[:, 9:13], block[:, 13:16]
         acc, gyro = self.imu.measure(block[:, 0:3], omega)
         ap.imu_period(q, acc)
+        baro = None if self.baro is None else self.baro.measure(
+            np.arange(t0 + dt_us, t + 1, dt_us) * 1e-6, -p[:, 2])
 
         # one GNSS fix per period, valid at its end; truth carries the bias of the latest valid fix
         before = (gnss.bias_ned_m, gnss.latency_s, self._clearance_m)
@@ -194,5 +206,5 @@ class SimVehicle:
         raw = () if self._raw is None else tuple(self._raw.drain_raw())
         return StepOutput(
             t, range(t0 + dt_us, t + 1, dt_us), acc, gyro, q, p, v, (before, after),
-            fixes, arrivals, bool(collided), gnss.to_fix, q_sent, raw,
+            fixes, arrivals, bool(collided), gnss.to_fix, q_sent, raw, baro,
         )

@@ -47,6 +47,24 @@ def test_imu_round_trip_is_exact() -> None:
     assert mc.decode_sample(wire(mc.encode_imu(s))).t_us == s.t_us
 
 
+def test_imu_barometer_fields_follow_fields_updated() -> None:
+    """pressure_alt passed on with bit 11 (abs_pressure bit 9, temperature bit 12 set when sent); without
+    bit 11 none (a log of fields_updated 63 with a constant 1013.25 hPa); NaN or absurd: NaN, IMU kept."""
+    acc, gyro = f32(0.1, -0.2, -9.81), f32(0.01, -0.02, 0.3)
+    s = ImuSample(1_000, acc, gyro, float(f32(87.25)[0]))
+    m = wire(mc.encode_imu(s, 1002.5, 31.0))
+    assert m.fields_updated == 63 | (1 << 9) | (1 << 11) | (1 << 12)
+    assert (m.abs_pressure, m.temperature) == (1002.5, 31.0)
+    assert mc.decode_imu(m).pressure_alt_m == s.pressure_alt_m
+    plain = wire(mc.encode_imu(ImuSample(1_000, acc, gyro)))
+    assert plain.fields_updated == 63 and mc.decode_imu(plain).pressure_alt_m is None
+    logged = mc.mavlink.MAVLink_highres_imu_message(1_000, *acc, *gyro, 0, 0, 0, 1013.25, 0, 0, 0, 63, 0)
+    assert mc.decode_imu(wire(logged)).pressure_alt_m is None
+    for bad in (math.nan, math.inf, 1e6):
+        back = mc.decode_imu(wire(mc.encode_imu(ImuSample(1_000, acc, gyro, bad))))
+        assert math.isnan(back.pressure_alt_m) and back.t_us == 1_000
+
+
 def test_attitude_round_trip() -> None:
     q = unit_q(np.random.default_rng(1))
     back = mc.decode_attitude(wire(mc.encode_attitude(AttitudeSample(5_000_000, q))))

@@ -270,10 +270,12 @@ def test_out_of_sequence_epochs_equal_in_order():
         assert a.counts["sat_used"] == b.counts["sat_used"]
 
 
-def _feed(cfg: TightConfig, method: str, epochs, t_us, order, line_of_sight=None) -> TightEngine:
+def _feed(cfg: TightConfig, method: str, epochs, t_us, order, line_of_sight=None, eng=None,
+          on_imu=None) -> TightEngine:
     """IMU (zero acceleration, 50 Hz) to the end first in chunks; epochs pushed in ``order``, each as
-    soon as the IMU passed its validity (a late one after later ones); ``line_of_sight``: a map."""
-    eng = TightEngine(cfg, method, frame=FRAME, line_of_sight=line_of_sight)
+    soon as the IMU passed its validity (a late one after later ones); ``line_of_sight``: a map; ``eng``:
+    this engine; ``on_imu(eng, t_us)``: called after each IMU sample."""
+    eng = eng or TightEngine(cfg, method, frame=FRAME, line_of_sight=line_of_sight)
     eng.push_acc(0, 0.0, 0.0, 0.0)
     pushed = 0
     for i in order:
@@ -281,6 +283,8 @@ def _feed(cfg: TightConfig, method: str, epochs, t_us, order, line_of_sight=None
         while pushed < target:
             pushed += 20_000
             eng.push_acc(pushed, 0.0, 0.0, 0.0)
+            if on_imu is not None:
+                on_imu(eng, pushed)
         eng.push_epoch(t_us[i], epochs[i])
     return eng
 
@@ -600,19 +604,25 @@ def test_belief_nominal_variance_is_the_sigma_model_scaled():
         TightConfig(belief_sigma_scale=0.0).validate()
 
 
+def c_core_inputs(rng: np.random.Generator, n: int) -> tuple[np.ndarray, float, np.ndarray, np.ndarray,
+                                                               np.ndarray, tuple[float, ...]]:
+    """(P (n, n), T, −A, −B (3, 3), live clocks, process noise densities) for the C core's tests."""
+    A = rng.normal(size=(n, n))
+    P = A @ A.T + np.eye(n)
+    T = 0.2
+    nA = -(T * np.linalg.qr(rng.normal(size=(3, 3)))[0])
+    nB = 0.5 * T * nA
+    live = np.array([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])
+    return P, T, nA, nB, live, (0.09, 0.01, 9e-6, 1e-4, 0.1, 1e-3, 0.5, 2.5e-5, 1e-8)
+
+
 def test_c_core_equals_the_numpy_forms():
     """``_tight.c`` (the filter's hot path) against model.py's numpy forms: F P Fᵀ + Q, the
     pseudorange innovations with H, H P and (H P Hᵀ)_ii, and the stacked update with range rates."""
     from companion.tight import _tight
 
     rng = np.random.default_rng(12)
-    A = rng.normal(size=(N_STATE, N_STATE))
-    P = A @ A.T + np.eye(N_STATE)
-    T = 0.2
-    nA = -(T * np.linalg.qr(rng.normal(size=(3, 3)))[0])
-    nB = 0.5 * T * nA
-    live = np.array([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])
-    q = (0.09, 0.01, 9e-6, 1e-4, 0.1, 1e-3, 0.5, 2.5e-5, 1e-8)
+    P, T, nA, nB, live, q = c_core_inputs(rng, N_STATE)
     F = model.transition(T, nA.ravel(), nB.ravel(), live)
     want = F @ P @ F.T + model.process_noise(T, nA.ravel(), live, *q)
     got = _tight.predict_cov(P, T, nA.ravel(), nB.ravel(), live, *q, True)

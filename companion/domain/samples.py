@@ -19,11 +19,13 @@ Vec3 = np.ndarray
 
 @dataclass(frozen=True, slots=True)
 class ImuSample:
-    """One IMU sample: specific force and angular rate in body FRD (≈ -9.81 on z at rest)."""
+    """One IMU sample: specific force and angular rate in body FRD (≈ -9.81 on z at rest); with a
+    barometer, its pressure altitude at the same time (m, any datum: None when there is none)."""
 
     t_us: int
     acc_frd_m_s2: Vec3
     gyro_frd_rad_s: Vec3
+    pressure_alt_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -73,6 +73,10 @@ UINT16_UNKNOWN = 65535
 DEG_E7 = 1e7
 QUAT_NORM_TOLERANCE = 0.05  # |‖q‖ - 1| beyond this is a corrupt attitude, not rounding
 IMU_FIELDS_ACC_GYRO = 0b111111  # HIGHRES_IMU fields_updated bits for xacc..zgyro
+# HIGHRES_IMU fields_updated bits (HIGHRES_IMU_UPDATED_FLAGS): abs_pressure, pressure_alt, temperature
+IMU_FIELD_ABS_PRESSURE = 1 << 9
+IMU_FIELD_PRESSURE_ALT = 1 << 11
+IMU_FIELD_TEMPERATURE = 1 << 12
 BELIEF_NAME = "GNSS_BETA"
 NIS_NAME = "GNSS_NIS"
 BIAS_NAME = "GNSS_BIAS"  # DEBUG_VECT: the estimated GNSS bias, x/y/z = north/east/down [m]
@@ -130,6 +134,8 @@ class WireLimits:
     max_accel_m_s2: float = 200.0  # setpoint feed-forward |a| per axis
     max_variance: float = 1e12  # ODOMETRY covariance diagonal (m², (m/s)²)
     max_stamp_us: int = 2**62  # µs stamps (int64 headroom); ms stamps must fit uint32 when sent
+    # |pressure altitude| (m): the standard atmosphere's 1100 hPa to 10 hPa is −700 to 31,000 m
+    max_pressure_alt_m: float = 40_000.0
 
 
 LIMITS = WireLimits()
@@ -264,21 +270,39 @@ def _text(raw: str | bytes) -> str:
 # --- estimator inputs ---------------------------------------------------------------------------
 
 
-def encode_imu(s: ImuSample) -> mavlink.MAVLink_highres_imu_message:
+def encode_imu(s: ImuSample, abs_pressure_hpa: float = math.nan, temperature_c: float = math.nan
+               ) -> mavlink.MAVLink_highres_imu_message:
+    """HIGHRES_IMU: acceleration and rates; with a barometer (``s.pressure_alt_m``) its pressure altitude,
+    and the absolute pressure and temperature when given (finite), each with its fields_updated bit."""
     a, g = s.acc_frd_m_s2, s.gyro_frd_rad_s
+    flags = IMU_FIELDS_ACC_GYRO
+    alt = 0.0 if s.pressure_alt_m is None else s.pressure_alt_m
+    flags |= 0 if s.pressure_alt_m is None else IMU_FIELD_PRESSURE_ALT
+    hpa = abs_pressure_hpa if math.isfinite(abs_pressure_hpa) else 0.0
+    flags |= IMU_FIELD_ABS_PRESSURE if math.isfinite(abs_pressure_hpa) else 0
+    temp = temperature_c if math.isfinite(temperature_c) else 0.0
+    flags |= IMU_FIELD_TEMPERATURE if math.isfinite(temperature_c) else 0
     return mavlink.MAVLink_highres_imu_message(
-        s.t_us, a[0], a[1], a[2], g[0], g[1], g[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-        IMU_FIELDS_ACC_GYRO, 0,
+        s.t_us, a[0], a[1], a[2], g[0], g[1], g[2], 0.0, 0.0, 0.0, hpa, 0.0, alt, temp,
+        flags, 0,
     )
 
 
 def decode_imu(m: Any) -> ImuSample:
+    """HIGHRES_IMU; its pressure altitude passed on when fields_updated says so (bit 11): a value not finite
+    or beyond ``max_pressure_alt_m`` is passed as NaN (the tight filter counts it, uses nothing), the IMU
+    sample kept. Without bit 11 (a log of fields_updated 63 and a constant 1013.25 hPa) there is none."""
     if m.fields_updated & IMU_FIELDS_ACC_GYRO != IMU_FIELDS_ACC_GYRO:
         raise CodecError("fields_not_updated", f"HIGHRES_IMU fields_updated={m.fields_updated:#x}")
+    alt = None
+    if m.fields_updated & IMU_FIELD_PRESSURE_ALT:
+        alt = float(m.pressure_alt)
+        alt = alt if abs(alt) <= LIMITS.max_pressure_alt_m else math.nan  # (NaN fails the comparison too)
     return ImuSample(
         _stamp_us("HIGHRES_IMU", m.time_usec),
         _bounded("HIGHRES_IMU acc", LIMITS.max_specific_force_m_s2, m.xacc, m.yacc, m.zacc),
         _bounded("HIGHRES_IMU gyro", LIMITS.max_rate_rad_s, m.xgyro, m.ygyro, m.zgyro),
+        alt,
     )
 
 

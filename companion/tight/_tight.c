@@ -3,7 +3,8 @@
  * rates (model.py's formulas; equal to the numpy forms to rounding, tested in tests/test_tight.py).
  *
  * State layout (model.py): p 0-2, v 3-5, a 6-8, d 9-11, clocks 12-17, drift 18, heading offset 19,
- * yaw-rate bias 20. Arrays are float64, C order. Compiled with -ffp-contract=off (no fused
+ * yaw-rate bias 20, and (once a barometer was seen) the baro offset 21: the state size N (21 or 22) is
+ * the given covariance's. Arrays are float64, C order. Compiled with -ffp-contract=off (no fused
  * multiply-add), as the estimator's core.
  */
 #define PY_SSIZE_T_CLEAN
@@ -14,7 +15,9 @@
 #include <numpy/arrayobject.h>
 #include "../estimator/held.h" /* the held-time noise, shared with the loose core */
 
-#define N 21
+#define N_BASE 21 /* the state without the baro offset */
+#define I_BARO 21
+#define NMAX 22 /* with it */
 #define NC 6
 #define I_CLK 12
 #define I_DRIFT 18
@@ -72,12 +75,12 @@ static PyObject *py_held_noise(PyObject *self, PyObject *args) {
  * (model.transition, model.process_noise); with the block's integrals a and b, its held-time noise
  * (held.h: the held sample's white density q_hold_ne horizontally and q_hold_d vertically, the random
  * walk q_hold_rw, a coast's dropped acceleration scaled by q_coast) on p, v */
-static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
+static inline __attribute__((always_inline)) PyObject *predict_cov_n(PyObject *args, const int N) {
     PyObject *oP, *onA, *onB, *olive, *oa = NULL, *ob = NULL;
-    double T, qne, qd, w, e, qc, qi, qdr, qh, qb, qw[3] = {0.0, 0.0, 0.0}, hrw = 0.0, hc = 0.0;
+    double T, qne, qd, w, e, qc, qi, qdr, qh, qb, qw[3] = {0.0, 0.0, 0.0}, hrw = 0.0, hc = 0.0, qbaro = 0.0;
     int hlive;
-    if (!PyArg_ParseTuple(args, "OdOOOdddddddddp|OOdddd", &oP, &T, &onA, &onB, &olive, &qne, &qd, &w, &e, &qc,
-                          &qi, &qdr, &qh, &qb, &hlive, &oa, &ob, &qw[0], &qw[2], &hrw, &hc))
+    if (!PyArg_ParseTuple(args, "OdOOOdddddddddp|OOddddd", &oP, &T, &onA, &onB, &olive, &qne, &qd, &w, &e, &qc,
+                          &qi, &qdr, &qh, &qb, &hlive, &oa, &ob, &qw[0], &qw[2], &hrw, &hc, &qbaro))
         return NULL;
     qw[1] = qw[0];
     /* held time: hq[3 i ..] = (pp, pv, vv) of axis i, when the block holds any */
@@ -90,14 +93,14 @@ static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
     }
     PyArrayObject *aP = in_array(oP, 2), *anA = in_array(onA, 1), *anB = in_array(onB, 1), *alive = in_array(olive, 1);
     if (!aP || !anA || !anB || !alive) goto fail;
-    if (PyArray_DIM(aP, 0) != N || PyArray_DIM(aP, 1) != N || PyArray_DIM(anA, 0) != 9 || PyArray_DIM(anB, 0) != 9
-        || PyArray_DIM(alive, 0) != NC) {
+    if (PyArray_DIM(aP, 0) != N || PyArray_DIM(aP, 1) != N || PyArray_DIM(anA, 0) != 9
+        || PyArray_DIM(anB, 0) != 9 || PyArray_DIM(alive, 0) != NC) {
         PyErr_SetString(PyExc_ValueError, "predict_cov: shapes");
         goto fail;
     }
     const double *P = PyArray_DATA(aP), *nA = PyArray_DATA(anA), *nB = PyArray_DATA(anB), *live = PyArray_DATA(alive);
-    double F[N * N], FP[N * N], out[N * N];
-    memset(F, 0, sizeof F);
+    double F[NMAX * NMAX], FP[NMAX * NMAX], out[NMAX * NMAX];
+    memset(F, 0, sizeof(double) * (size_t)(N * N));
     for (int i = 0; i < N; i++) F[i * N + i] = 1.0;
     double h = -0.5 * T * T;
     for (int i = 0; i < 3; i++) {
@@ -113,7 +116,7 @@ static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
     F[I_HEAD * N + I_YAWB] = -T;
     /* F P and (F P) F^T over each row's non-zero entries of F (a few per row), in increasing column order:
      * the same sums, term by term, as the dense products that skip F's zeros */
-    int nz[N * N], nnz[N];
+    int nz[NMAX * NMAX], nnz[NMAX];
     for (int i = 0; i < N; i++) {
         nnz[i] = 0;
         for (int j = 0; j < N; j++)
@@ -186,6 +189,7 @@ static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
         out[I_YAWB * N + I_HEAD] += -qb * T2 / 2.0;
         out[I_YAWB * N + I_YAWB] += qb * T;
     }
+    if (N > I_BARO) out[I_BARO * N + I_BARO] += qbaro * T; /* the baro offset's random walk */
     Py_DECREF(aP); Py_DECREF(anA); Py_DECREF(anB); Py_DECREF(alive);
     return new_array(2, N, N, out);
 fail:
@@ -205,7 +209,7 @@ static void receiver(const double *x, const double *r0, const double *C, double 
 /* innovations(x, P, r0, C, sat_pos (m, 3), slot (m) float, z (m)) -> (y (m), H (m, N), HP (m, N), s0 (m),
  * min |y| per clock slot (NC, inf where none)): model.pseudorange and the β-independent innovation
  * variances (H P H^T)_ii */
-static PyObject *py_innovations(PyObject *self, PyObject *args) {
+static inline __attribute__((always_inline)) PyObject *innovations_n(PyObject *args, const int N) {
     PyObject *ox, *oP, *or0, *oC, *os, *osl, *oz;
     if (!PyArg_ParseTuple(args, "OOOOOOO", &ox, &oP, &or0, &oC, &os, &osl, &oz)) return NULL;
     PyArrayObject *ax = in_array(ox, 1), *aP = in_array(oP, 2), *ar0 = in_array(or0, 1), *aC = in_array(oC, 2),
@@ -213,8 +217,8 @@ static PyObject *py_innovations(PyObject *self, PyObject *args) {
     PyObject *oy = NULL, *oH = NULL, *oHP = NULL, *os0 = NULL, *omin = NULL;
     if (!ax || !aP || !ar0 || !aC || !as || !asl || !az) goto fail;
     npy_intp m = PyArray_DIM(as, 0);
-    if (PyArray_DIM(ax, 0) != N || PyArray_DIM(aP, 0) != N || PyArray_DIM(as, 1) != 3 || PyArray_DIM(asl, 0) != m
-        || PyArray_DIM(az, 0) != m) {
+    if (PyArray_DIM(aP, 0) != N || PyArray_DIM(ax, 0) != N || PyArray_DIM(aP, 1) != N
+        || PyArray_DIM(as, 1) != 3 || PyArray_DIM(asl, 0) != m || PyArray_DIM(az, 0) != m) {
         PyErr_SetString(PyExc_ValueError, "innovations: shapes");
         goto fail;
     }
@@ -261,7 +265,7 @@ fail:
 
 /* model.range_rate for one satellite: prediction and H row */
 static double range_rate_row(const double *x, const double *r0, const double *C, const double *rs,
-                             const double *us, double *h) {
+                             const double *us, double *h, int N) {
     double r[3], ve[3];
     receiver(x, r0, C, r, ve);
     double d[3] = {rs[0] - r[0], rs[1] - r[1], rs[2] - r[2]};
@@ -313,7 +317,7 @@ static int chol_factor(double *A, int k) {
     return 1;
 }
 
-static PyObject *py_update(PyObject *self, PyObject *args) {
+static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, const int N) {
     PyObject *ox, *oP, *oH, *oHP, *oy, *or, *ou, *or0, *oC, *os, *ov, *ozr, *orr;
     double gate2;
     if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOd", &ox, &oP, &oH, &oHP, &oy, &or, &ou, &or0, &oC, &os, &ov, &ozr,
@@ -329,6 +333,12 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
         if (!a[i]) goto done;
     }
     npy_intp m = PyArray_DIM(a[4], 0);
+    if (PyArray_DIM(a[1], 0) != N || PyArray_DIM(a[0], 0) != N || PyArray_DIM(a[1], 1) != N
+        || PyArray_DIM(a[2], 1) != N || PyArray_DIM(a[3], 1) != N || PyArray_DIM(a[2], 0) != m
+        || PyArray_DIM(a[3], 0) != m) {
+        PyErr_SetString(PyExc_ValueError, "update: shapes");
+        goto done;
+    }
     const double *x = PyArray_DATA(a[0]), *P = PyArray_DATA(a[1]), *H = PyArray_DATA(a[2]), *HP = PyArray_DATA(a[3]),
                  *y = PyArray_DATA(a[4]), *r = PyArray_DATA(a[5]), *used = PyArray_DATA(a[6]),
                  *r0 = PyArray_DATA(a[7]), *C = PyArray_DATA(a[8]), *sp = PyArray_DATA(a[9]),
@@ -348,7 +358,7 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
     for (npy_intp i = 0; i < m && k < MAXM; i++) {
         if (used[i] == 0.0 || !isfinite(zr[i]) || !isfinite(sv[3 * i])) continue;
         double *h = Hs + k * N, *hp = HPs + k * N;
-        double pred = range_rate_row(x, r0, C, sp + 3 * i, sv + 3 * i, h);
+        double pred = range_rate_row(x, r0, C, sp + 3 * i, sv + 3 * i, h, N);
         double yr = zr[i] - pred, s0 = 0.0;
         for (int c = 0; c < N; c++) {
             double v = 0.0;
@@ -363,9 +373,9 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
             n_rate++;
         }
     }
-    double xo[N], Po[N * N], nis = NAN;
-    memcpy(xo, x, sizeof xo);
-    memcpy(Po, P, sizeof Po);
+    double xo[NMAX], Po[NMAX * NMAX], nis = NAN;
+    memcpy(xo, x, sizeof(double) * (size_t)N);
+    memcpy(Po, P, sizeof(double) * (size_t)(N * N));
     if (k > 0) {
         Sm = malloc(sizeof(double) * k * k);
         W = malloc(sizeof(double) * k * (N + 1));
@@ -545,7 +555,8 @@ static PyObject *py_snapshot(PyObject *self, PyObject *args) {
         if (!a[i]) goto done;
     }
     npy_intp m = PyArray_DIM(a[1], 0);
-    if (PyArray_DIM(a[0], 0) != m || PyArray_DIM(a[0], 1) != N || PyArray_DIM(a[2], 0) != m
+    const int N = (int)PyArray_DIM(a[0], 1);
+    if (PyArray_DIM(a[0], 0) != m || (N != N_BASE && N != N_BASE + 1) || PyArray_DIM(a[2], 0) != m
         || PyArray_DIM(a[3], 0) != m || PyArray_DIM(a[4], 0) != 3 || PyArray_DIM(a[5], 0) != m
         || PyArray_DIM(a[6], 0) != m || PyArray_DIM(a[7], 0) != m || PyArray_DIM(a[8], 0) != m
         || PyArray_DIM(a[9], 0) != 3) {
@@ -629,6 +640,26 @@ static PyObject *py_snapshot(PyObject *self, PyObject *args) {
 done:
     for (int i = 0; i < 11; i++) Py_XDECREF(a[i]);
     return result;
+}
+
+/* The state size of the covariance (or H) at args[i] (dimension dim): 22 with the baro offset, else 21.
+ * Each entry point below is compiled twice, for 21 and 22 (the loops' bounds constants, as before). */
+static int state_size(PyObject *args, int i, int dim) {
+    PyObject *o = PyTuple_Check(args) && PyTuple_GET_SIZE(args) > i ? PyTuple_GET_ITEM(args, i) : NULL;
+    return o && PyArray_Check(o) && PyArray_NDIM((PyArrayObject *)o) > dim
+           && PyArray_DIM((PyArrayObject *)o, dim) == NMAX ? NMAX : N_BASE;
+}
+
+static PyObject *py_predict_cov(PyObject *self, PyObject *args) {
+    return state_size(args, 0, 0) == NMAX ? predict_cov_n(args, NMAX) : predict_cov_n(args, N_BASE);
+}
+
+static PyObject *py_innovations(PyObject *self, PyObject *args) {
+    return state_size(args, 1, 0) == NMAX ? innovations_n(args, NMAX) : innovations_n(args, N_BASE);
+}
+
+static PyObject *py_update(PyObject *self, PyObject *args) {
+    return state_size(args, 1, 0) == NMAX ? update_n(args, NMAX) : update_n(args, N_BASE);
 }
 
 static PyMethodDef methods[] = {

@@ -7,8 +7,8 @@ import numpy as np
 def predict_cov(P: np.ndarray, T_s: float, nA: Any, nB: Any, live: np.ndarray, q_acc_ne: float,
                 q_acc_d: float, q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float,
                 q_heading: float, q_yaw_bias: float, heading_live: bool, a: Any = None, b: Any = None,
-                q_hold_ne: float = 0.0, q_hold_d: float = 0.0, q_hold_rw: float = 0.0, q_coast: float = 0.0
-                ) -> np.ndarray: ...
+                q_hold_ne: float = 0.0, q_hold_d: float = 0.0, q_hold_rw: float = 0.0, q_coast: float = 0.0,
+                q_baro: float = 0.0) -> np.ndarray: ...
 def held_noise(a: Any, b: Any, q_white: tuple[float, float, float], q_rw: float, q_coast: float
                ) -> tuple[float, ...] | None: ...
 def innovations(x: np.ndarray, P: np.ndarray, r0_ecef_m: np.ndarray, c_ecef_ned: np.ndarray,

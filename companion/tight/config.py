@@ -79,6 +79,34 @@ class TightConfig:
     # A system whose satellites all disagree with its predicted clock by more than this (m) has
     # stepped (a receiver clock jump of milliseconds): its clock is re-initialised, not the position.
     clock_jump_m: float = 1000.0
+    # --- barometer (TightNavigator: an ImuSample's pressure_alt_m; docs/tight.md "Barometer")
+    # The height −p_D + b_baro, b_baro the pressure altitude's unknown datum (the standard atmosphere's AMSL
+    # for
+    # PX4, the height over the ground calibration for ArduPilot): a state started at the first sample from the
+    # filter's own height and vertical variance (a relative height), a random walk.
+    # one sample: a MEMS baro (MS5611, BMP388) 0.1-0.2 m at rest, + the airframe's (propwash, airspeed)
+    sigma_baro_m: float = 0.5
+    # the datum's random walk: the sensor's thermal drift (≲ a few cm/s) and the weather (~1 hPa in 3 h) need
+    # ~0.1 m/√s, but the filter averages the canyon's vertical GNSS errors as if white, over-confident
+    # in its height; 0.5 (5 m in 100 s) keeps the reported vertical accuracy near what it was without a
+    # barometer. Chosen on the canyon's tuning flights (default-tuning, profiles 0-3 × seeds 1000-1001,
+    # second-order, against none: 0.1: horizontal median / p95 −0.61 / −0.28 m, vertical −5.3 / −27.3 m,
+    # reported vertical 1 σ / 2 σ 35 / 75 % (60 / 97 % without); 0.5: −0.46 / −0.74, −4.3 / −16.1, 52 / 93 %)
+    sigma_baro_drift_m_sqrt_s: float = 0.5
+    # one sample fused per period (the first of each): at the IMU's rate the re-fusion after a late epoch
+    # would
+    # cost more than it adds
+    baro_period_s: float = 0.2
+    baro_gate_sigma: float = 5.0  # the barometer's innovation gate (σ)
+    # The datum when it is known (m; NaN: unknown, the relative start above): the pressure altitude of the
+    # frame's
+    # origin, so that b_baro starts there with σ baro_datum_sigma_m, uncorrelated, and the first sample is
+    # fused.
+    # ArduPilot zeroes its barometer on the ground at arming: with the frame at that home (a mission's) the
+    # datum is 0 to the drift since (a few m at most); a pressure altitude on the standard atmosphere (PX4)
+    # is home's AMSL altitude only to the day's weather (1 hPa ≈ 8 m): leave it NaN there.
+    baro_datum_m: float = math.nan
+    baro_datum_sigma_m: float = 2.0
     # --- odometry (ground vehicles): forward speed as a measurement of |v_horizontal|
     sigma_speed_m_s: float = 0.1  # wheel speed σ along the track (plus speed_sigma_fraction × speed)
     speed_sigma_fraction: float = 0.02  # + this × speed (wheel radius, slip)
@@ -213,16 +241,20 @@ class TightConfig:
         for name in ("sigma_acc_m_s2", "sigma_acc_vertical_m_s2", "q_clock_m2_s", "q_drift_m2_s3",
                      "sigma_clock0_m", "sigma_drift0_m_s", "sigma_velocity0_m_s", "sigma_uniform_m",
                      "sigma_floor_m", "sigma_range_rate_m_s", "gate_sigma", "reset_timeout_s",
-                     "clock_jump_m", "sigma_speed_m_s", "eta", "lambda_reg", "student_dof", "history_s",
-                     "imu_hold_max_s"):
+                     "clock_jump_m", "sigma_speed_m_s", "sigma_baro_m", "baro_gate_sigma", "eta",
+                     "lambda_reg", "student_dof", "history_s", "imu_hold_max_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
         check_accuracy_window(self.accuracy_window_s)
-        for name in ("imu_hold_acc_rw_m_s2_sqrt_s", "imu_hold_periods"):
+        for name in ("imu_hold_acc_rw_m_s2_sqrt_s", "imu_hold_periods", "sigma_baro_drift_m_sqrt_s",
+                     "baro_period_s", "baro_datum_sigma_m"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
+        datum = self.baro_datum_m
+        if math.isinf(datum) or (math.isfinite(datum) and not self.baro_datum_sigma_m > 0.0):
+            raise ValueError("baro_datum_m: finite (with baro_datum_sigma_m > 0) or NaN (unknown)")
         if not (math.isfinite(self.accuracy_floor_m) and self.accuracy_floor_m >= 0.0):
             raise ValueError(f"accuracy_floor_m: must be a finite number >= 0, got {self.accuracy_floor_m!r}")
         if not (0.0 < self.cn0_calibration_quantile < 1.0 and self.cn0_calibration_prior_obs >= 0.0

@@ -24,6 +24,13 @@ An epoch (``SatEpoch``: prepared once by ``prepare_epoch``, state-independent) i
 
 No satellite passing for ``reset_timeout_s`` re-starts position and clocks from a single-point
 solution of the epoch (counted ``resets``); velocity and the IMU error states are kept.
+
+A barometer's height (``push_baro``: one sample per ``baro_period_s``) is an entry of its own, re-fused
+after a late epoch like the others: the first one (after the filter started) adds the baro offset
+state ``b_baro`` (``model.I_BARO``) as the sample's height minus the filter's, so that it starts as a
+relative height (its variance the filter's vertical one plus the sample's; correlated with the position
+as that difference is); the later ones are a scalar update of −p_D + b_baro, gated at
+``baro_gate_sigma``. Without a barometer the state stays at 21, bit for bit as before.
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ from companion.tight import _tight, model, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import (
+    I_BARO,
     I_CLK,
     I_DRIFT,
     I_HEADING,
@@ -98,6 +106,13 @@ class Speed(NamedTuple):
     yaw_integral_rad: float = math.nan
 
 
+class Baro(NamedTuple):
+    """A barometer's height (m: the pressure altitude, any datum) and its variance (m²)."""
+
+    height_m: float
+    r_m2: float
+
+
 class EpochInfo(NamedTuple):
     """What one entry's fusion did (for outputs and diagnostics)."""
 
@@ -115,7 +130,7 @@ class EpochInfo(NamedTuple):
 
 class Entry(NamedTuple):
     t_us: int
-    meas: SatEpoch | Speed | None  # None: an anchor (start, re-based base)
+    meas: SatEpoch | Speed | Baro | None  # None: an anchor (start, re-based base)
     x: np.ndarray  # posterior (never written again)
     P: np.ndarray
     ints: Integrals
@@ -196,7 +211,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
                     tuple(sorted(set(slots.tolist()))))
 
 
-class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry]]):
+class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray, Entry]]):
     """The filter on NED accelerations (with attitudes: ``push_acc``, ``push_frd``, ``push_acc_batch``,
     ``Timeline``'s) and prepared epochs, in arrival order."""
 
@@ -221,6 +236,9 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
                   "gnss_rejected_no_solution", "gnss_rejected_duplicate", "gnss_out_of_order", "gnss_refused",
                   "speed_fused"):
             self._counts.setdefault(k, 0)
+        self._q_baro = c.sigma_baro_drift_m_sqrt_s**2
+        self._baro_period_us = int(round(c.baro_period_s * 1e6))
+        self._baro_last_us: int | None = None  # the last barometer sample pushed
         super().__init__(cfg.imu_hold_max_s, cfg.history_s, cfg.future_tolerance_s, cfg.gravity_m_s2,
                          self._counts, cfg.imu_hold_periods)
         self._nav15: tuple[Entry, tuple[float, ...], np.ndarray] | None = None
@@ -263,6 +281,25 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         sd = self.cfg.sigma_speed_m_s + self.cfg.speed_sigma_fraction * speed_m_s
         self._push(t_us, Speed(speed_m_s, sd * sd, yaw_integral_rad))
 
+    def push_baro(self, t_us: int, height_m: float) -> None:
+        """A barometer's height (m, its pressure altitude: any datum) valid at ``t_us``; one per
+        ``baro_period_s`` is kept (the first of each), the rest are dropped (not counted: the barometer
+        runs at the IMU's rate). Before the first epoch it is dropped (``baro_before_start``); NaN (the
+        codec's for a value not finite or out of range) is counted (``baro_rejected_invalid``), not used."""
+        c = self._counts
+        if not math.isfinite(height_m):
+            c["baro_rejected_invalid"] = c.get("baro_rejected_invalid", 0) + 1
+            return
+        last = self._baro_last_us
+        if last is not None and 0 <= t_us - last < self._baro_period_us:
+            return
+        self._baro_last_us = t_us
+        if not self.entries:
+            c["baro_before_start"] = c.get("baro_before_start", 0) + 1
+            return
+        c["baro_samples"] = c.get("baro_samples", 0) + 1
+        self._push(t_us, Baro(height_m, self.cfg.sigma_baro_m**2))
+
     def ensure_frame(self, epoch: GnssEpoch) -> bool:
         """Set the local frame at this epoch's single-point solution if there is none yet."""
         if self.frame is None:
@@ -272,7 +309,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             self.frame = Frame.at_ecef(sol.p_ecef_m)
         return True
 
-    def _measurement(self, e: Entry) -> SatEpoch | Speed | None:
+    def _measurement(self, e: Entry) -> SatEpoch | Speed | Baro | None:
         return e.meas
 
     # --------------------------------------------------------------- start / reset
@@ -280,8 +317,9 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
         sol = solve_position(meas.epoch, SPP_INIT, klobuchar=self.klobuchar)
         return sol if sol.ok else None
 
-    def _start(self, t_us: int, meas: SatEpoch | Speed) -> Entry | None:
-        """The first entry, at an epoch's single-point solution (None for odometry or no solution)."""
+    def _start(self, t_us: int, meas: SatEpoch | Speed | Baro) -> Entry | None:
+        """The first entry, at an epoch's single-point solution (None for odometry, a barometer or no
+        solution)."""
         if not isinstance(meas, SatEpoch):
             return None
         sol = self._spp(meas)
@@ -340,15 +378,55 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             return x, e.P.copy()
         # F P Fᵀ + Q (model.transition, model.process_noise) and the held-time noise of the block
         # (e.ints → ints) in C; no odometry heading yet: its states stay at rest
+        # (the baro offset's random walk, when the state has it)
         return x, _tight.predict_cov(e.P, T, nA, nB, live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0),
-                                     e.ints, ints, *self._q_hold)
+                                     e.ints, ints, *self._q_hold, self._q_baro)
 
-    def _fuse(self, prev: Entry, t_us: int, meas: SatEpoch | Speed) -> Entry:
+    def _fuse(self, prev: Entry, t_us: int, meas: SatEpoch | Speed | Baro) -> Entry:
         ints = self.imu.integrals(t_us)
         x, P = self._predict(prev, t_us, ints)
+        if isinstance(meas, SatEpoch):
+            return self._fuse_epoch(prev, t_us, meas, x, P, ints)
         if isinstance(meas, Speed):
             return self._fuse_speed(prev, t_us, meas, x, P, ints)
-        return self._fuse_epoch(prev, t_us, meas, x, P, ints)
+        return self._fuse_baro(prev, t_us, meas, x, P, ints)
+
+    def _fuse_baro(self, prev: Entry, t_us: int, m: Baro, x: np.ndarray, P: np.ndarray, ints: Integrals
+                   ) -> Entry:
+        """The barometer's height: the first adds b_baro = h + p_D (the state's height −p_D: a relative
+        height, var(b) = P_DD + R, cov(b, ·) = P_D·), or the known datum ``baro_datum_m`` (σ
+        ``baro_datum_sigma_m``, then fused as the later ones but without the gate); the later ones a gated
+        scalar update."""
+        c = self._counts
+        gated = True
+        if len(x) == N_STATE:
+            c["baro_started"] = c.get("baro_started", 0) + 1
+            Pn = np.zeros((N_STATE + 1, N_STATE + 1))
+            Pn[:N_STATE, :N_STATE] = P
+            datum = self.cfg.baro_datum_m
+            if datum != datum:  # unknown: relative to the filter's height, this sample spent on it
+                x = np.append(x, m.height_m + x[2])
+                Pn[I_BARO, :N_STATE] = Pn[:N_STATE, I_BARO] = P[2]
+                Pn[I_BARO, I_BARO] = P[2, 2] + m.r_m2
+                return prev._replace(t_us=t_us, meas=m, x=x, P=Pn, ints=ints)
+            # known: absolute, and this sample fused below without the gate (it sets the height: the
+            # filter's start, a single-point solution, can be tens of metres off in a canyon)
+            x = np.append(x, datum)
+            Pn[I_BARO, I_BARO] = self.cfg.baro_datum_sigma_m**2
+            P, gated = Pn, False
+        pred, h = model.baro_height(x)
+        y = m.height_m - pred
+        ph = P @ h
+        s = float(h @ ph) + m.r_m2
+        if not gated or y * y <= self.cfg.baro_gate_sigma**2 * s:
+            k = ph / s
+            x = x + k * y
+            P = P - np.outer(k, ph)
+            P = 0.5 * (P + P.T)
+            c["baro_fused"] = c.get("baro_fused", 0) + 1
+        else:
+            c["baro_rejected_gate"] = c.get("baro_rejected_gate", 0) + 1
+        return prev._replace(t_us=t_us, meas=m, x=x, P=P, ints=ints)
 
     def _fuse_speed(self, prev: Entry, t_us: int, m: Speed, x: np.ndarray, P: np.ndarray,
                     ints: Integrals) -> Entry:
@@ -366,8 +444,8 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed, tuple[int, np.ndarray, Entry
             # once that direction is known: the filter moves at the odometry's speed, to 30 %
             x[I_HEADING] = math.atan2(x[4], x[3]) - m.yaw_integral_rad
             x[I_YAW_BIAS] = 0.0
-            P[I_HEADING:, :] = 0.0
-            P[:, I_HEADING:] = 0.0
+            P[I_HEADING:I_YAW_BIAS + 1, :] = 0.0
+            P[:, I_HEADING:I_YAW_BIAS + 1] = 0.0
             P[I_HEADING, I_HEADING] = max(c.odometry_heading0_rad, sigma_v / speed) ** 2
             P[I_YAW_BIAS, I_YAW_BIAS] = c.sigma_yaw_rate_bias0_rad_s**2
             heading_live = True

@@ -6,6 +6,10 @@ State (``N_STATE`` = 21)::
          m/s²), c_s (receiver clock × c per system slot, m; ``CLOCK_SLOTS``), ḋ (common drift, m/s),
          ψ₀ (odometry heading offset, rad), b_ω (odometry yaw-rate bias, rad/s)]
 
+and, once a barometer was seen (``N_STATE_BARO`` = 22: the entries' state grows by one; without a
+barometer it stays 21, bit for bit as before), ``b_baro`` (m, ``I_BARO``): the pressure altitude's
+unknown datum, a random walk (the sensor's thermal drift, the weather).
+
 ``p, v, a, d`` move exactly as the loose filter's (``companion.estimator.model``: the IMU history's
 prefix integrals give the block's mean and transition for any attitude history); every system's
 clock moves with the common drift, ``c_s ← c_s + T ḋ``. A system's slot is live once one of its
@@ -18,8 +22,12 @@ the receiver at ``r = r₀ + C p`` (``C`` = R_ecef_ned at home, ``r₀`` home's 
     range rate       ρ̇_i = g_i (1 − l_i·u_i / c) + ω_e (u_iy x + y_i v_x − u_ix y − x_i v_y) / c + ḋ,
                      g_i = l_i · (u_i − v_e),  l_i = (r_i − r) / |r_i − r|
 
-(the Sagnac term and its rate, the light-time rate of ``companion.gnss.spp``). Their Jacobians are
-exact (tested against finite differences).
+    barometric height h_baro = −p_D + b_baro
+
+(the Sagnac term and its rate, the light-time rate of ``companion.gnss.spp``; the barometer's height is
+the state's above the frame's tangent plane: a kilometre away the Earth's curvature puts it 8 cm lower,
+well inside the barometer's σ). Their Jacobians are exact (tested against finite differences); H has as
+many columns as the state ``x`` (21 or 22).
 """
 
 from __future__ import annotations
@@ -44,6 +52,8 @@ I_DRIFT = I_CLK + N_CLK
 I_HEADING = I_DRIFT + 1  # heading offset ψ₀ of a ground vehicle's odometry (rad): heading = ψ₀ + ∫ yaw rate
 I_YAW_BIAS = I_HEADING + 1  # the odometry yaw rate's bias b_ω (rad/s): ψ̇₀ = −b_ω
 N_STATE = I_YAW_BIAS + 1
+I_BARO = N_STATE  # the barometer's datum offset b_baro (m), once a barometer was seen
+N_STATE_BARO = I_BARO + 1
 NAV_OF_LOOSE = np.r_[0:6, 9:15]  # the loose 15-state's p, v, a, d (its GNSS bias b dropped)
 _W = OMEGA_E_RAD_S / C_M_S
 
@@ -84,7 +94,7 @@ def pseudorange(x: np.ndarray, frame: Frame, sat_pos_ecef_m: np.ndarray, slot: n
     sag = _W * (sat_pos_ecef_m[:, 0] * r[1] - sat_pos_ecef_m[:, 1] * r[0])
     pred = rng + sag + x[I_CLK + slot]
     m = len(slot)
-    H = np.zeros((m, N_STATE))
+    H = np.zeros((m, len(x)))
     dr = -los
     dr[:, 0] -= _W * sat_pos_ecef_m[:, 1]
     dr[:, 1] += _W * sat_pos_ecef_m[:, 0]
@@ -118,7 +128,7 @@ def range_rate(x: np.ndarray, frame: Frame, sat_pos_ecef_m: np.ndarray, sat_vel_
     dm_dv = -los * f[:, None]
     dm_dv[:, 0] -= _W * rs[:, 1]
     dm_dv[:, 1] += _W * rs[:, 0]
-    H = np.zeros((len(rs), N_STATE))
+    H = np.zeros((len(rs), len(x)))
     H[:, I_P:I_P + 3] = dm_dr @ C
     H[:, I_V:I_V + 3] = dm_dv @ C
     H[:, I_DRIFT] = 1.0
@@ -129,7 +139,7 @@ def speed(x: np.ndarray) -> tuple[float, np.ndarray]:
     """(horizontal speed |v_NE| (m/s), its H row (N_STATE,))."""
     vn, ve = float(x[I_V]), float(x[I_V + 1])
     s = float(np.hypot(vn, ve))
-    h = np.zeros(N_STATE)
+    h = np.zeros(len(x))
     if s > 1e-6:
         h[I_V], h[I_V + 1] = vn / s, ve / s
     return s, h
@@ -142,7 +152,7 @@ def odometry_velocity(x: np.ndarray, speed_m_s: float, yaw_integral_rad: float
     psi = float(x[I_HEADING]) + yaw_integral_rad
     c, s = np.cos(psi), np.sin(psi)
     y = -np.array([x[I_V] - speed_m_s * c, x[I_V + 1] - speed_m_s * s])
-    H = np.zeros((2, N_STATE))
+    H = np.zeros((2, len(x)))
     H[0, I_V] = H[1, I_V + 1] = 1.0
     H[0, I_HEADING] = speed_m_s * s
     H[1, I_HEADING] = -speed_m_s * c
@@ -155,10 +165,18 @@ def lateral_velocity(x: np.ndarray, yaw_integral_rad: float) -> tuple[np.ndarray
     v_across = −v_N sin ψ + v_E cos ψ."""
     psi = float(x[I_HEADING]) + yaw_integral_rad
     c, s = np.cos(psi), np.sin(psi)
-    H = np.zeros((1, N_STATE))
+    H = np.zeros((1, len(x)))
     H[0, I_V], H[0, I_V + 1] = -s, c
     H[0, I_HEADING] = -(x[I_V] * c + x[I_V + 1] * s)
     return np.array([-(H[0, I_V] * x[I_V] + H[0, I_V + 1] * x[I_V + 1])]), H
+
+
+def baro_height(x: np.ndarray) -> tuple[float, np.ndarray]:
+    """(the barometer's predicted height −p_D + b_baro (m), its H row (N_STATE_BARO,)); ``x`` with b_baro."""
+    h = np.zeros(len(x))
+    h[I_P + 2] = -1.0
+    h[I_BARO] = 1.0
+    return float(x[I_BARO] - x[I_P + 2]), h
 
 
 def elevation_rad(los_ecef: np.ndarray, frame: Frame) -> np.ndarray:
@@ -168,11 +186,13 @@ def elevation_rad(los_ecef: np.ndarray, frame: Frame) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- propagation
-def transition(T_s: float, nA: Any, nB: Any, live: np.ndarray) -> np.ndarray:
+def transition(T_s: float, nA: Any, nB: Any, live: np.ndarray, n: int = N_STATE) -> np.ndarray:
     """F over a block from the IMU history's (−A, −B) (row-major 9 each; ``history.rotation_blocks``):
     the loose filter's transition (``companion.estimator.model.transition_block``, its GNSS bias
-    dropped) on (p, v, a, d); the live clocks moved by the common drift."""
-    F = _EYE.copy()
+    dropped) on (p, v, a, d); the live clocks moved by the common drift; ``n``: the state's size (with
+    the baro offset: it stays)."""
+    Fn = np.eye(n)
+    F = Fn[:N_STATE, :N_STATE]  # a view
     F.flat[_F_T] = T_s
     h = -0.5 * T_s * T_s
     F.flat[_F_D] = (h, h, h, -T_s, -T_s, -T_s)
@@ -180,17 +200,19 @@ def transition(T_s: float, nA: Any, nB: Any, live: np.ndarray) -> np.ndarray:
     F[3:6, I_A:I_A + 3] = np.reshape(nA, (3, 3))
     F[I_CLK:I_DRIFT, I_DRIFT] = T_s * live
     F[I_HEADING, I_YAW_BIAS] = -T_s  # the heading offset integrates minus the yaw rate's bias
-    return F
+    return Fn
 
 
 def process_noise(T_s: float, nA: Any, live: np.ndarray, q_acc_ne: float, q_acc_d: float,
                   q_rw: float, q_ned: float, q_clock: float, q_isb: float, q_drift: float,
-                  q_heading: float = 0.0, q_yaw_bias: float = 0.0) -> np.ndarray:
+                  q_heading: float = 0.0, q_yaw_bias: float = 0.0, q_baro: float = 0.0, n: int = N_STATE
+                  ) -> np.ndarray:
     """Q over a block: the loose filter's (``companion.estimator.model.add_process_noise``: white
     acceleration, here with its own vertical density; body and NED bias random walks, the body one
     through the block's mean rotation) on (p, v, a, d); common clock phase, per-system offset and
     drift random walks on the live clock slots (``live``, float 0/1 (N_CLK,)); the heading offset's
-    (the yaw rate's white noise) and the yaw-rate bias random walk integrated into it."""
+    (the yaw rate's white noise) and the yaw-rate bias random walk integrated into it; with the baro
+    offset (``n`` = N_STATE_BARO) its random walk (``q_baro``, m²/s)."""
     T, T2 = T_s, T_s * T_s
     T3, T4, T5 = T2 * T, T2 * T2, T2 * T2 * T
     w, e = q_rw, q_ned
@@ -199,7 +221,8 @@ def process_noise(T_s: float, nA: Any, live: np.ndarray, q_acc_ne: float, q_acc_
     vv_ne, vv_d = q_acc_ne * T, q_acc_d * T
     pp, pv, vv = (w + e) * T5 / 20.0, (w + e) * T4 / 8.0, (w + e) * T3 / 3.0
     pd, vd = -e * T3 / 6.0, -e * T2 / 2.0
-    Q = np.zeros((N_STATE, N_STATE))
+    Qn = np.zeros((n, n))
+    Q = Qn[:N_STATE, :N_STATE]  # a view
     Q.flat[_Q_NAV] = (pp_ne + pp, pp_ne + pp, pp_d + pp, pv_ne + pv, pv_ne + pv, pv_d + pv,
                       pv_ne + pv, pv_ne + pv, pv_d + pv, vv_ne + vv, vv_ne + vv, vv_d + vv,
                       w * T, w * T, w * T, e * T, e * T, e * T, pd, pd, pd, pd, pd, pd,
@@ -218,7 +241,9 @@ def process_noise(T_s: float, nA: Any, live: np.ndarray, q_acc_ne: float, q_acc_
     Q[I_HEADING, I_HEADING] = q_heading * T + q_yaw_bias * T3 / 3.0
     Q[I_HEADING, I_YAW_BIAS] = Q[I_YAW_BIAS, I_HEADING] = -q_yaw_bias * T2 / 2.0
     Q[I_YAW_BIAS, I_YAW_BIAS] = q_yaw_bias * T
-    return Q
+    if n > I_BARO:
+        Qn[I_BARO, I_BARO] = q_baro * T
+    return Qn
 
 
 def _diag(r0: int, c0: int) -> list[int]:

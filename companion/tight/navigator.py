@@ -2,7 +2,9 @@
 
 Takes what ``companion.estimator.Navigator`` takes for the IMU (``AttitudeSample``, ``ImuSample``)
 and, instead of position fixes, raw receiver epochs (``RawGnss``) and a ground vehicle's odometry
-(``Odometry``); gives the same ``NavEstimate`` (``b_ned_m`` is zero: there is no fix-level bias, the
+(``Odometry``), and a barometer's height with the IMU samples (``ImuSample.pressure_alt_m``: the engine's
+baro offset state, ``companion.tight.engine``); gives the same ``NavEstimate`` (``b_ned_m`` is zero: there is
+no fix-level bias, the
 per-satellite beliefs replace it; ``beta`` is the mean belief of the last epoch's satellites).
 
 Epochs without satellite states (a receiver's RXM-RAWX) are completed from the broadcast
@@ -83,6 +85,8 @@ class TightNavigator:
                 return
             if self._imu_push(sample.t_us, sample.acc_frd_m_s2, self._rot, self._imu_g) or self._imu_waiting:
                 self._imu_pushed()
+            if sample.pressure_alt_m is not None:  # the barometer's height, after its IMU sample
+                self.engine.push_baro(sample.t_us, sample.pressure_alt_m)
         elif kind is AttitudeSample:
             r = rotation_q(sample.q_ned_frd)
             if r is None:

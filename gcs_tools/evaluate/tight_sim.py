@@ -25,6 +25,13 @@ Every control step each row's position is compared with the truth (horizontal di
 ``--cn0-missing``: every epoch reaches the tight rows without C/N0 (NaN, as ``tight_variants``'
 ``cn0-missing`` does to a real drive; the receiver and its fixes unchanged): what C/N0 is worth to each row.
 
+``--baro relative|absolute``: the simulator's barometer (``simvehicle.baro``) rides on the IMU samples and
+the tight rows fuse it (their baro offset state, started relative to their own height; ``absolute``: the
+barometer zeroed at home, as ArduPilot's at arming, and its datum known to them); without it the samples
+carry none. The flight, the receiver and the loose
+filter are the same either way (the barometer has its own random stream), so the two runs pair. Every
+run also reports each row's vertical |error| (median and p95 per flight, their mean).
+
 ``--fly-on-truth``: the vehicle flies its planned route on the truth (as ``simcal`` flies it), the loose
 filter only estimating, so the receiver's path stays in the streets whatever the filters do (the packaged
 ``mild`` city is reported so: docs/tight.md, "A milder city"). ``--rows`` takes ``naive`` and
@@ -76,14 +83,23 @@ MAP_SIGMA_SHIFT_M = 1.5
 # the simulated autopilot's gravity reference as ``--ahrs`` names it: AhrsConfig.gnss_velocity_reference
 # set to this (None: the mission's own)
 AHRS_REFERENCES: dict[str, bool | None] = {"mission": None, "accelerometer": False, "gnss-velocity": True}
+# --baro: the tight rows' barometer; "absolute": its datum known (TightConfig.baro_datum_m, σ
+# baro_datum_sigma_m)
+BARO_MODES = ("relative", "absolute")
 
 
-def sim_config(mission: Mission, ahrs_gnss_velocity: bool | None) -> SimConfig:
+def sim_config(mission: Mission, ahrs_gnss_velocity: bool | None, baro: str | None = "relative") -> SimConfig:
     """The mission's ``simvehicle`` configuration, its AHRS's GNSS-velocity reference switched on (True)
-    or off (False) when told (None: as the mission has it)."""
+    or off (False) when told (None: as the mission has it); ``baro`` (``BARO_MODES``) None: the IMU samples
+    carry no barometer (its own random stream: the flight is the same), "absolute": its datum is home's
+    altitude (zeroed there, as ArduPilot's at arming: no datum error, the drift from boot on)."""
     from simvehicle.config import sim_config_for
 
     cfg = sim_config_for(mission)
+    if baro is None and cfg.imu.baro:
+        cfg = dataclasses.replace(cfg, imu=dataclasses.replace(cfg.imu, baro=False))
+    elif baro == "absolute":
+        cfg = dataclasses.replace(cfg, imu=dataclasses.replace(cfg.imu, baro=True, baro_datum_sigma_m=0.0))
     if ahrs_gnss_velocity is None:
         return cfg
     ahrs = dataclasses.replace(cfg.ahrs, gnss_velocity_reference=ahrs_gnss_velocity)
@@ -95,7 +111,8 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              accuracy: dict[str, list[tuple[float, ...]]] | None = None,
              on_raw: Callable[[str, Any, Any], None] | None = None,
              fly_on_truth: bool = False, cn0_missing: bool = False, tight_config: TightConfig | None = None,
-             rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None) -> dict[str, np.ndarray]:
+             rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None, baro: str | None = None,
+             vertical: dict[str, list[float]] | None = None) -> dict[str, np.ndarray]:
     """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
     the exact and an imperfect map); ``accuracy`` (if given) collects per tight row and step (NEES_h
     reported, NEES_h of P alone, reported horiz_accuracy); ``on_raw(row, raw, navigator)`` (if given) is
@@ -106,7 +123,11 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     ``tight_config``: the tight rows' configuration (default ``TightConfig()``); ``rate_hz``: the tight rows
     get only the first raw epoch of every 1 / rate_hz (the receiver and the loose filter unchanged);
     ``ahrs_gnss_velocity``: the simulated autopilot's attitude with (True) or without (False) its
-    GNSS-velocity reference (``AhrsConfig``; None: the mission's)."""
+    GNSS-velocity reference (``AhrsConfig``; None: the mission's); ``baro`` (``BARO_MODES``; None: none):
+    the simulator's barometer with the IMU samples, the tight rows fuse it (the loose filter and the flight
+    are unchanged), "absolute" with its datum at home's altitude and known to the tight rows;
+    ``vertical`` (if given) collects each row's |vertical error| (m) per scored step (the free-space row's
+    is its map row's)."""
     from companion.estimator.freespace import constrain
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
@@ -117,8 +138,10 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     m = load_mission(mission, "canyon")
     nav = navigator_for(m, "second-order")
     route = planned_route(m, profile, 1.0)
-    sim = SimVehicle(m, profile, seed, sim_config(m, ahrs_gnss_velocity))
+    sim = SimVehicle(m, profile, seed, sim_config(m, ahrs_gnss_velocity, baro))
     tcfg = tight_config or TightConfig()
+    if baro == "absolute":
+        tcfg = dataclasses.replace(tcfg, baro_datum_m=float(m.frame.home_alt_m))
     period_us = None if rate_hz is None else round(1e6 / rate_hz)
     last_slot = None
     gnss = sim.gnss
@@ -194,6 +217,9 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
             continue
         for name, p in rows_now.items():
             errors[name].append(float(np.hypot(p[0] - truth[0], p[1] - truth[1])))
+            if vertical is not None:
+                pv = rows_now[f"tight-{MAP_ROWS[0]}"] if name == FREE_ROW else p
+                vertical.setdefault(name, []).append(abs(float(pv[2]) - float(truth[2])))
         if outside_rows and m.world.clearance_m(truth[0], truth[1]) > 0.0:
             for name in outside_rows:
                 errors[name + OUTSIDE].append(errors[name][-1])
@@ -213,21 +239,25 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
 def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Sequence[str] = ROWS,
         n_resamples: int = 2000, rng_seed: int = 0, max_duration_s: float | None = None,
         fly_on_truth: bool = False, cn0_missing: bool = False, sigma_acc_m_s2: float | None = None,
-        rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None) -> dict[str, Any]:
+        rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None, baro: str | None = None
+        ) -> dict[str, Any]:
     tcfg = TightConfig() if sigma_acc_m_s2 is None else TightConfig(sigma_acc_m_s2=sigma_acc_m_s2)
     flights: list[dict[str, Any]] = []
     acc: dict[str, list[tuple[float, ...]]] = {}
     err: dict[str, list[np.ndarray]] = {}
     for p in profiles:
         for s in seeds:
+            vert: dict[str, list[float]] = {}
             e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc, fly_on_truth=fly_on_truth,
                          cn0_missing=cn0_missing, tight_config=tcfg, rate_hz=rate_hz,
-                         ahrs_gnss_velocity=ahrs_gnss_velocity)
+                         ahrs_gnss_velocity=ahrs_gnss_velocity, baro=baro, vertical=vert)
             for k, v in e.items():
                 err.setdefault(k, []).append(v)
             flights.append({"profile": p, "seed": s, "steps": int(len(e["spp"])),
                             "median_m": {k: float(np.median(v)) for k, v in e.items()},
-                            "p95_m": {k: float(np.percentile(v, 95)) for k, v in e.items()}})
+                            "p95_m": {k: float(np.percentile(v, 95)) for k, v in e.items()},
+                            "vertical_median_m": {k: float(np.median(v)) for k, v in vert.items()},
+                            "vertical_p95_m": {k: float(np.percentile(v, 95)) for k, v in vert.items()}})
     names = list(flights[0]["median_m"])
     rng = np.random.default_rng(rng_seed)
     idx = rng.integers(0, len(flights), size=(n_resamples, len(flights)))
@@ -254,10 +284,15 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
             lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
             paired.append({"stat": stat, "row": FREE_ROW + sfx, "reference": map_row + sfx,
                            "mean_diff_m": float(d.mean()), "ci": [float(lo), float(hi)]})
+    for stat in ("vertical_median_m", "vertical_p95_m"):  # the mean over flights (reported, not paired)
+        for n in flights[0][stat]:
+            out_rows[n][stat] = float(np.mean([f[stat][n] for f in flights]))
     # (absent: flown on the loose filter, the defaults)
     flown: dict[str, Any] = {"fly_on_truth": True} if fly_on_truth else {}
     if cn0_missing:
         flown["cn0_missing"] = True
+    if baro is not None:
+        flown["baro"] = baro
     for key, val in (("sigma_acc_m_s2", sigma_acc_m_s2), ("rate_hz", rate_hz),
                      ("ahrs_gnss_velocity", ahrs_gnss_velocity)):
         if val is not None:
@@ -290,12 +325,19 @@ def markdown(r: dict[str, Any]) -> str:
 
     flown = ", the vehicle flown on the truth" if r.get("fly_on_truth") else ""
     flown += ", the tight rows without C/N0" if r.get("cn0_missing") else ""
+    flown += f", the tight rows with the barometer ({r['baro']})" if r.get("baro") else ""
     flown += "".join(f", {k} {r[k]}" for k in ("sigma_acc_m_s2", "rate_hz", "ahrs_gnss_velocity") if k in r)
     lines = [f"{r['mission']} / canyon, profiles {r['profiles']}, seeds {r['seeds']}{flown}: {r['method']}.",
              ""]
     lines += table_lines(("row", "median (m)", "95 % CI", "p95 (m)", "95 % CI"),
                          ((n, f"{s['median_m']['mean']:.2f}", ci(s["median_m"]["ci"]),
                            f"{s['p95_m']['mean']:.2f}", ci(s["p95_m"]["ci"])) for n, s in r["rows"].items()))
+    vert = [(n, v) for n, v in r["rows"].items() if "vertical_median_m" in v]
+    if vert:
+        lines += ["", "Vertical |error|, mean over flights of the per-flight median and p95 (m):", "",
+                  *table_lines(("row", "vertical median (m)", "vertical p95 (m)"),
+                               ((n, f"{v['vertical_median_m']:.2f}", f"{v['vertical_p95_m']:.2f}")
+                                for n, v in vert))]
     lines += ["", *table_lines(("row − reference", "statistic", "mean difference (m)", "95 % CI"),
                                ((f"{c['row']} − {c['reference']}", c["stat"].removesuffix("_m"),
                                  f"{c['mean_diff_m']:+.2f}", ci(c["ci"], "+")) for c in r["paired"]))]
@@ -331,6 +373,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--ahrs", choices=tuple(AHRS_REFERENCES), default="mission",
                    help="the simulated autopilot's gravity reference (ahrs.gnss_velocity_reference; "
                         "default: the mission's)")
+    p.add_argument("--baro", choices=BARO_MODES, default=None,
+                   help="the simulator's barometer with the IMU samples, the tight rows fuse it (the flight "
+                        "is the same); absolute: its datum at home, known to them (default: no barometer)")
     p.add_argument("--rows", default=",".join(ROWS),
                    help=f"tight weightings, comma-separated (also: {', '.join(EXTRA_ROWS)})")
     args = p.parse_args(argv)
@@ -346,7 +391,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    fly_on_truth=args.fly_on_truth, cn0_missing=args.cn0_missing,
                    sigma_acc_m_s2=choices.positive(args.sigma_acc, "--sigma-acc"),
                    rate_hz=choices.positive(args.rate_hz, "--rate-hz"),
-                   ahrs_gnss_velocity=AHRS_REFERENCES[args.ahrs])
+                   ahrs_gnss_velocity=AHRS_REFERENCES[args.ahrs], baro=args.baro)
 
     return write_results_or_error(args.out, compute, markdown)
 

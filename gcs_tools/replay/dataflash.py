@@ -9,6 +9,8 @@ a message whose FMT lacks a needed field ends the replay with a one-line error n
 What is used (instance/core 0 where a message has several):
 
 - ``IMU`` (``TimeUS``, ``GyrX..Z`` rad/s, ``AccX..Z`` m/s², body FRD): one ImuSample each.
+- ``BARO`` (``Alt``, m above the barometer's ground calibration; instance 0): carried by the next IMU
+  sample (``ImuSample.pressure_alt_m``: the tight filter's barometer; the loose filter has none).
 - ``ATT`` (``Roll``, ``Pitch``, ``Yaw`` in degrees): the AHRS attitude the autopilot flies
   with (the DataFlash twin of MAVLink ATTITUDE) -> AttitudeSample.
 - ``GPS`` (``Status`` = fix type, ``Lat``/``Lng`` degrees, ``Alt`` m MSL, ``NSats``, ``HDop``;
@@ -109,9 +111,11 @@ FIELDS: dict[str, tuple[Field, ...]] = {
     "ORGN": (_f("Type"), _f("Lat"), _f("Lng"), _f("Alt")),
     "SIM": (TIME_US, _f("Lat"), _f("Lng"), _f("Alt")),
     "PARM": (_f("Name"), _f("Value")),
+    # the barometer's height above its ground calibration (m; ArduPilot's datum): on the next IMU sample
+    "BARO": (TIME_US, _f("Alt")),
 }
 REQUIRED = frozenset({"IMU", "ATT", "GPS"})  # the estimator's inputs; the rest only adds comparisons
-INSTANCE_FIELD = {"IMU": "I", "GPS": "I", "GPA": "I", "XKF1": "C", "NKF1": "C"}
+INSTANCE_FIELD = {"IMU": "I", "GPS": "I", "GPA": "I", "XKF1": "C", "NKF1": "C", "BARO": "I"}
 INFO = {
     "POS": ReferenceInfo("POS", "geodetic", "estimated position vs the autopilot's POS (lat, lon, alt MSL) "
                          "converted into the replay's frame"),
@@ -289,6 +293,7 @@ class DataFlashSource:
         origin: tuple[float, float, float] | None = None
         seen: set[str] = set()
         last_us = 0  # the latest IMU/ATT time: a GPS without a boot time (ArduPilot < 3.2) arrived then
+        baro: float | None = None  # the barometer's latest height since the last IMU sample (on the next)
         scanner = DataFlashScanner(self.path, FIELDS, st)
         for name, v in scanner:
             if pending_gps is not None and name != "GPA":
@@ -305,7 +310,11 @@ class DataFlashSource:
                     continue
                 decoded["imu"] += 1
                 last_us = int(t)
-                yield ImuSample(last_us, _vec(ax, ay, az), _vec(gx, gy, gz))
+                yield ImuSample(last_us, _vec(ax, ay, az), _vec(gx, gy, gz), baro)
+                baro = None
+            elif name == "BARO":  # (a NaN is passed on: the tight filter counts it, uses nothing)
+                decoded["baro"] += 1
+                baro = float(v[1])
             elif name == "ATT":
                 t, roll, pitch, yaw = v
                 if not all(math.isfinite(x) for x in (roll, pitch, yaw)):

@@ -20,6 +20,9 @@ with a one-line error naming the topic and field). Times are PX4 boot microsecon
   ``vel_ned_valid``, with ``s_variance_m_s`` (the speed accuracy, m/s) as its accuracy.
   Validity time = ``timestamp_sample`` when logged and non-zero, else ``timestamp`` −
   ``EKF2_GPS_DELAY`` (the log's parameter, ms: what EKF2 itself assumes).
+- ``vehicle_air_data`` (optional): ``baro_alt_meter`` (m, the standard atmosphere's pressure altitude),
+  carried by the next ``sensor_combined`` sample (``ImuSample.pressure_alt_m``: the tight filter's
+  barometer; the loose filter has none).
 - The autopilot's estimate: ``vehicle_global_position`` (``lat``, ``lon`` deg, ``alt`` m MSL) or,
   when the log has none, ``vehicle_local_position`` (``x``, ``y``, ``z`` about
   ``ref_lat``/``ref_lon``/``ref_alt``, rows with ``xy_global`` set); both geodetic.
@@ -60,7 +63,8 @@ GNSS_TOPIC = "vehicle_gps_position"
 AUTOPILOT_TOPICS = ("vehicle_global_position", "vehicle_local_position")
 TRUTH_TOPICS = ("vehicle_global_position_groundtruth", "vehicle_local_position_groundtruth")
 INPUT_TOPICS = (IMU_TOPIC, ATTITUDE_TOPIC, GNSS_TOPIC)
-TOPICS = (*INPUT_TOPICS, *AUTOPILOT_TOPICS, *TRUTH_TOPICS)
+BARO_TOPIC = "vehicle_air_data"  # optional: the barometer's altitude on the next IMU sample
+TOPICS = (*INPUT_TOPICS, *AUTOPILOT_TOPICS, *TRUTH_TOPICS, BARO_TOPIC)
 LOCAL_FIELDS = (("x",), ("y",), ("z",), ("ref_lat",), ("ref_lon",), ("ref_alt",), ("xy_global",))
 REQUIRED_FIELDS: dict[str, tuple[tuple[str, ...], ...]] = {
     IMU_TOPIC: (*((f"gyro_rad[{i}]",) for i in range(3)), *((f"accelerometer_m_s2[{i}]",) for i in range(3))),
@@ -71,6 +75,7 @@ REQUIRED_FIELDS: dict[str, tuple[tuple[str, ...], ...]] = {
     "vehicle_global_position_groundtruth": (("lat",), ("lon",), ("alt",)),
     "vehicle_local_position": LOCAL_FIELDS,
     "vehicle_local_position_groundtruth": LOCAL_FIELDS,
+    BARO_TOPIC: (("baro_alt_meter",),),
 }
 DEFAULT_EKF2_GPS_DELAY_MS = 110.0  # PX4's default, used when the log has no EKF2_GPS_DELAY
 ULOG_MAGIC = b"ULog\x01\x12\x35"
@@ -297,9 +302,13 @@ class ULogSource:
         seen: dict[str, bool] = {}  # reference topic -> all its altitudes were 0 so far
         rejected, decoded = self.stats.rejected, self.stats.decoded
         group = {IMU_TOPIC: "imu", ATTITUDE_TOPIC: "attitude", GNSS_TOPIC: "gnss"}
+        baro: float | None = None  # the barometer's latest altitude since the last IMU sample (on the next)
         for rows, order in scanner.batches():
             events: dict[str, list[Any]] = {}
             for name, arr in rows.items():
+                if name == BARO_TOPIC:
+                    events[name] = arr["baro_alt_meter"].astype(float).tolist()
+                    continue
                 if name in decoders:
                     events[name] = decoders[name](arr)
                     continue
@@ -313,6 +322,13 @@ class ULogSource:
                 if evs is None:
                     continue
                 ev = evs[k]
+                if name == BARO_TOPIC:  # (a NaN is passed on: the tight filter counts it, uses nothing)
+                    baro = ev
+                    decoded["baro"] += 1
+                    continue
+                if baro is not None and type(ev) is ImuSample:
+                    ev = ImuSample(ev.t_us, ev.acc_frd_m_s2, ev.gyro_frd_rad_s, baro)
+                    baro = None
                 if isinstance(ev, str):
                     rejected[ev] += 1
                     continue
