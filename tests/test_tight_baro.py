@@ -265,3 +265,35 @@ def test_a_known_datum_starts_b_baro_absolute_and_fuses_the_first_sample():
     assert eng.counts["baro_rejected_gate"] == 1
     with pytest.raises(ValueError, match="baro_datum"):
         TightConfig(baro_datum_m=math.inf).validate()
+
+
+def test_a_datum_step_is_gated_then_restarts_the_datum_and_late_epochs_still_equal_in_order():
+    """ArduPilot SITL's pressure_alt is 0 until its barometer is calibrated, then its altitude (a 97 m
+    step). The step is gated, and after baro_restart_s of gated samples b_baro re-starts relative (once),
+    the height untouched; the barometer is fused again after it; late epochs re-fused equal in order."""
+    cfg = TightConfig.for_ground_vehicle()
+    rng = np.random.default_rng(12)
+    epochs, truth = _synthetic_epochs(rng, cfg, 80)
+    heights, _ = _baro_truth(rng, truth, cfg, 0.0)
+    heights[20:] += 97.0
+    t_us = [1_000_000 + PERIOD_US * k for k in range(len(epochs))]
+    a = _feed_baro(cfg, epochs, heights, t_us, list(range(len(epochs))))
+    c = a.counts
+    assert c["baro_datum_restarts"] == 1
+    restart_samples = int(cfg.baro_restart_s / cfg.baro_period_s)
+    assert restart_samples <= c["baro_rejected_gate"] <= restart_samples + 1
+    after = t_us[20] + cfg.baro_restart_s * 1e6
+    fused_after = [e for e in a.entries if isinstance(e.meas, Baro) and e.t_us > after]
+    assert fused_after and all(e.baro_gated_since_us == -1 for e in fused_after[1:])
+    last = a.entries[-1]
+    assert abs(last.x[I_BARO] - 97.0) < 5.0 and abs(last.x[2] - truth[-1][2]) < 5.0
+    order = list(range(len(epochs)))
+    for k in range(2, len(order) - 3, 5):
+        order[k], order[k + 3] = order[k + 3], order[k]
+    b = _feed_baro(cfg, epochs, heights, t_us, order)
+    assert b.counts["gnss_refused"] > 0 and b.counts["baro_datum_restarts"] >= 1
+    assert len(a.entries) == len(b.entries)
+    for ea, eb in zip(a.entries, b.entries, strict=True):
+        assert ea.t_us == eb.t_us and ea.baro_gated_since_us == eb.baro_gated_since_us
+        np.testing.assert_allclose(eb.x, ea.x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(eb.P, ea.P, rtol=0, atol=1e-9)

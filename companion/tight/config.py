@@ -98,6 +98,10 @@ class TightConfig:
     # cost more than it adds
     baro_period_s: float = 0.2
     baro_gate_sigma: float = 5.0  # the barometer's innovation gate (σ)
+    # gated this long without a fused sample, the datum stepped: b_baro re-starts relative (counted
+    # baro_datum_restarts). ArduPilot SITL's HIGHRES_IMU pressure_alt is 0 for its first ~35 s, then its
+    # altitude (a 97 m step, measured): without this the barometer stayed gated for the flight.
+    baro_restart_s: float = 5.0
     # The datum when it is known (m; NaN: unknown, the relative start above): the pressure altitude of the
     # frame's
     # origin, so that b_baro starts there with σ baro_datum_sigma_m, uncorrelated, and the first sample is
@@ -248,7 +252,7 @@ class TightConfig:
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
         check_accuracy_window(self.accuracy_window_s)
         for name in ("imu_hold_acc_rw_m_s2_sqrt_s", "imu_hold_periods", "sigma_baro_drift_m_sqrt_s",
-                     "baro_period_s", "baro_datum_sigma_m"):
+                     "baro_period_s", "baro_datum_sigma_m", "baro_restart_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")

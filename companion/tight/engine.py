@@ -146,6 +146,7 @@ class Entry(NamedTuple):
     scatter_h: Scatter = Scatter()
     scatter_v: Scatter1 = Scatter1()
     fix_var_m2: tuple[float, float] = (math.nan, math.nan)
+    baro_gated_since_us: int = -1  # the barometer's first gated sample since its last fused (-1: none)
 
 
 def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
@@ -424,9 +425,21 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             P = P - np.outer(k, ph)
             P = 0.5 * (P + P.T)
             c["baro_fused"] = c.get("baro_fused", 0) + 1
-        else:
-            c["baro_rejected_gate"] = c.get("baro_rejected_gate", 0) + 1
-        return prev._replace(t_us=t_us, meas=m, x=x, P=P, ints=ints)
+            return prev._replace(t_us=t_us, meas=m, x=x, P=P, ints=ints, baro_gated_since_us=-1)
+        c["baro_rejected_gate"] = c.get("baro_rejected_gate", 0) + 1
+        since = prev.baro_gated_since_us if prev.baro_gated_since_us >= 0 else t_us
+        if t_us - since < self.cfg.baro_restart_s * 1e6:
+            return prev._replace(t_us=t_us, meas=m, x=x, P=P, ints=ints, baro_gated_since_us=since)
+        # gated for baro_restart_s: the datum stepped (ArduPilot's pressure altitude is 0 until its barometer
+        # is calibrated, then jumps to its altitude), not the height: b_baro re-starts relative, this sample
+        # spent on it (as the first one), the height kept
+        c["baro_datum_restarts"] = c.get("baro_datum_restarts", 0) + 1
+        x = x.copy()
+        x[I_BARO] = m.height_m + x[2]
+        P = P.copy()
+        P[I_BARO, :] = P[:, I_BARO] = P[2]
+        P[I_BARO, I_BARO] = P[2, 2] + m.r_m2
+        return prev._replace(t_us=t_us, meas=m, x=x, P=P, ints=ints, baro_gated_since_us=-1)
 
     def _fuse_speed(self, prev: Entry, t_us: int, m: Speed, x: np.ndarray, P: np.ndarray,
                     ints: Integrals) -> Entry:
@@ -462,7 +475,8 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             s, h = model.speed(x)
             if s <= 0.5 or not wheel:  # below 0.5 m/s the direction is unknown; a gyro alone: no speed
                 return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                             prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2)
+                             prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2,
+                             prev.baro_gated_since_us)
             y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])
         PHt = P @ H.T
         S = H @ PHt + R
@@ -473,7 +487,8 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             P = 0.5 * (P + P.T)
             self._counts["speed_fused"] += 1
         return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
-                     prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2)
+                     prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2,
+                     prev.baro_gated_since_us)
 
     def _fuse_epoch(self, prev: Entry, t_us: int, m: SatEpoch, x: np.ndarray, P: np.ndarray,
                     ints: Integrals) -> Entry:
@@ -565,7 +580,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
                          m.key, beta, y, used, q_pos)
         return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
                      (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit,
-                     scatter_h, scatter_v, fix_var)
+                     scatter_h, scatter_v, fix_var, prev.baro_gated_since_us)
 
     # --------------------------------------------------------------------- history
     def _anchor(self, e: Entry, t_us: int, ints: Integrals) -> Entry:
