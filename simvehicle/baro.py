@@ -46,8 +46,7 @@ class Barometer:
 
     def measure(self, t_s: np.ndarray, height_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(pressure altitude (m), absolute pressure (hPa), temperature (°C)), each (n,), at times ``t_s``
-        (n,)
-        of true heights above home ``height_m`` (n,)."""
+        (n,) of true heights above home ``height_m`` (n,)."""
         alt = self._home_alt_m + np.asarray(height_m, float)
         pa = alt + self.error_m(t_s) + self.cfg.baro_sigma_m * self._normals.take(len(t_s))
         temp = 15.0 - 0.0065 * alt + SELF_HEATING_C

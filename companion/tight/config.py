@@ -81,9 +81,8 @@ class TightConfig:
     clock_jump_m: float = 1000.0
     # --- barometer (TightNavigator: an ImuSample's pressure_alt_m; docs/tight.md "Barometer")
     # The height −p_D + b_baro, b_baro the pressure altitude's unknown datum (the standard atmosphere's AMSL
-    # for
-    # PX4, the height over the ground calibration for ArduPilot): a state started at the first sample from the
-    # filter's own height and vertical variance (a relative height), a random walk.
+    # for PX4, the height over the ground calibration for ArduPilot): a state started at the first sample
+    # from the filter's own height and vertical variance (a relative height), a random walk.
     # one sample: a MEMS baro (MS5611, BMP388) 0.1-0.2 m at rest, + the airframe's (propwash, airspeed)
     sigma_baro_m: float = 0.5
     # the datum's random walk: the sensor's thermal drift (≲ a few cm/s) and the weather (~1 hPa in 3 h) need
@@ -94,8 +93,7 @@ class TightConfig:
     # reported vertical 1 σ / 2 σ 35 / 75 % (60 / 97 % without); 0.5: −0.46 / −0.74, −4.3 / −16.1, 52 / 93 %)
     sigma_baro_drift_m_sqrt_s: float = 0.5
     # one sample fused per period (the first of each): at the IMU's rate the re-fusion after a late epoch
-    # would
-    # cost more than it adds
+    # would cost more than it adds
     baro_period_s: float = 0.2
     baro_gate_sigma: float = 5.0  # the barometer's innovation gate (σ)
     # gated this long without a fused sample, the datum stepped: b_baro re-starts relative (counted
@@ -103,9 +101,8 @@ class TightConfig:
     # altitude (a 97 m step, measured): without this the barometer stayed gated for the flight.
     baro_restart_s: float = 5.0
     # The datum when it is known (m; NaN: unknown, the relative start above): the pressure altitude of the
-    # frame's
-    # origin, so that b_baro starts there with σ baro_datum_sigma_m, uncorrelated, and the first sample is
-    # fused.
+    # frame's origin, so that b_baro starts there with σ baro_datum_sigma_m, uncorrelated, and the first
+    # sample is fused.
     # ArduPilot zeroes its barometer on the ground at arming: with the frame at that home (a mission's) the
     # datum is 0 to the drift since (a few m at most); a pressure altitude on the standard atmosphere (PX4)
     # is home's AMSL altitude only to the day's weather (1 hPa ≈ 8 m): leave it NaN there.

@@ -3,9 +3,9 @@
 Takes what ``companion.estimator.Navigator`` takes for the IMU (``AttitudeSample``, ``ImuSample``)
 and, instead of position fixes, raw receiver epochs (``RawGnss``) and a ground vehicle's odometry
 (``Odometry``), and a barometer's height with the IMU samples (``ImuSample.pressure_alt_m``: the engine's
-baro offset state, ``companion.tight.engine``); gives the same ``NavEstimate`` (``b_ned_m`` is zero: there is
-no fix-level bias, the
-per-satellite beliefs replace it; ``beta`` is the mean belief of the last epoch's satellites).
+baro offset state, ``companion.tight.engine``); gives the same ``NavEstimate`` (``b_ned_m`` is zero:
+there is no fix-level bias, the per-satellite beliefs replace it; ``beta`` is the mean belief of the last
+epoch's satellites).
 
 Epochs without satellite states (a receiver's RXM-RAWX) are completed from the broadcast
 ephemerides given at construction, through ``SatelliteCache`` (evaluated every
@@ -164,8 +164,8 @@ class TightNavigator:
         return self._atmo
 
     def _push_odometry(self, o: Odometry) -> None:
-        speed_ok = math.isnan(o.speed_m_s) or math.isfinite(o.speed_m_s)  # NaN: a gyro alone, no wheel speed
-        if not (speed_ok and math.isfinite(o.yaw_rate_rad_s)) or (
+        # a speed of NaN is a gyro alone (no wheel speed); an infinite one is damaged
+        if math.isinf(o.speed_m_s) or not math.isfinite(o.yaw_rate_rad_s) or (
                 self._odo is not None and o.t_us <= self._odo[0]):
             self._counts["odometry_rejected"] += 1
             return
