@@ -134,14 +134,17 @@ def test_out_of_sequence_epochs_with_baro_equal_in_order():
     assert len(a.entries[-1].x) == N_STATE_BARO
 
 
-def test_no_barometer_or_only_rejected_samples_leave_the_filter_bit_identical():
+# NaN (the codec's for a damaged field), and finite values no atmosphere gives (a damaged log's: the
+# replay readers pass ULog/DataFlash values as they are)
+@pytest.mark.parametrize("bad", [math.nan, math.inf, 1e30, -1e6])
+def test_no_barometer_or_only_rejected_samples_leave_the_filter_bit_identical(bad):
     cfg = TightConfig.for_ground_vehicle()
     rng = np.random.default_rng(6)
     epochs, _ = _synthetic_epochs(rng, cfg, 20)
     t_us = [1_000_000 + PERIOD_US * k for k in range(len(epochs))]
     order = list(range(len(epochs)))
     a = _feed_baro(cfg, epochs, [], t_us, order)
-    b = _feed_baro(cfg, epochs, np.full(len(epochs), np.nan), t_us, order)
+    b = _feed_baro(cfg, epochs, np.full(len(epochs), bad), t_us, order)
     assert b.counts["baro_rejected_invalid"] > 0 and "baro_started" not in b.counts
     for ea, eb in zip(a.entries, b.entries, strict=True):
         assert len(eb.x) == N_STATE and np.array_equal(ea.x, eb.x) and np.array_equal(ea.P, eb.P)

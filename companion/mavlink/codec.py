@@ -58,7 +58,11 @@ import numpy as np  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from companion.domain.geodesy import LocalNedFrame  # noqa: E402
-from companion.domain.physics import MAX_SPECIFIC_FORCE_M_S2, STANDARD_GRAVITY_M_S2  # noqa: E402
+from companion.domain.physics import (  # noqa: E402
+    MAX_PRESSURE_ALT_M,
+    MAX_SPECIFIC_FORCE_M_S2,
+    STANDARD_GRAVITY_M_S2,
+)
 from companion.domain.rotation import euler_to_quaternion, normalised, quaternion_to_euler  # noqa: E402
 from companion.domain.samples import (  # noqa: E402
     AttitudeSample,
@@ -134,8 +138,7 @@ class WireLimits:
     max_accel_m_s2: float = 200.0  # setpoint feed-forward |a| per axis
     max_variance: float = 1e12  # ODOMETRY covariance diagonal (m², (m/s)²)
     max_stamp_us: int = 2**62  # µs stamps (int64 headroom); ms stamps must fit uint32 when sent
-    # |pressure altitude| (m): the standard atmosphere's 1100 hPa to 10 hPa is −700 to 31,000 m
-    max_pressure_alt_m: float = 40_000.0
+    max_pressure_alt_m: float = MAX_PRESSURE_ALT_M  # |pressure altitude| (m)
 
 
 LIMITS = WireLimits()

@@ -40,6 +40,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from companion.domain.physics import MAX_PRESSURE_ALT_M
 from companion.estimator.consistency import Fit, Scatter, Scatter1
 from companion.estimator.history import Integrals, mean_between
 from companion.estimator.model import BlockPropagator
@@ -285,10 +286,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
     def push_baro(self, t_us: int, height_m: float) -> None:
         """A barometer's height (m, its pressure altitude: any datum) valid at ``t_us``; one per
         ``baro_period_s`` is kept (the first of each), the rest are dropped (not counted: the barometer
-        runs at the IMU's rate). Before the first epoch it is dropped (``baro_before_start``); NaN (the
-        codec's for a value not finite or out of range) is counted (``baro_rejected_invalid``), not used."""
+        runs at the IMU's rate). Before the first epoch it is dropped (``baro_before_start``); a value not
+        finite or beyond ``MAX_PRESSURE_ALT_M`` (a damaged log's, the codec's NaN) is counted
+        (``baro_rejected_invalid``), not used."""
         c = self._counts
-        if not math.isfinite(height_m):
+        if not abs(height_m) <= MAX_PRESSURE_ALT_M:  # (NaN fails it too)
             c["baro_rejected_invalid"] = c.get("baro_rejected_invalid", 0) + 1
             return
         last = self._baro_last_us
