@@ -47,6 +47,19 @@ def test_short_flight_reaches_the_goal_and_writes_every_file(flight):
         assert (flight / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_without_figures_the_same_files_but_the_figures_and_stale_ones_removed(tmp_path):
+    """``write_outputs(..., figures=False)`` (``beliefnav sitl --no-figures``): summary.json, timeseries.csv
+    and gnss.csv as with figures; no map.png or belief.png, and a previous run's are removed."""
+    from gcs_tools.fly.output import write_outputs
+
+    res = fly(TEST_CITY, 2, "second-order", 0, max_duration_s=2.0)
+    stale = tmp_path / "map.png"
+    stale.write_bytes(b"old")
+    paths = write_outputs(res, TEST_CITY.world, tmp_path, figures=False)
+    assert [p.name for p in paths] == ["summary.json", "timeseries.csv", "gnss.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gnss.csv", "summary.json", "timeseries.csv"]
+
+
 def test_rejected_fixes_add_up_to_the_gate_counter():
     """Each fix carries whether the innovation gate refused it (what map.png and belief.png mark):
     they add up to the navigator's counter (this flight has one)."""

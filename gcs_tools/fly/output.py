@@ -62,15 +62,17 @@ def strict_json(value: Any) -> Any:
     return plain_json(value, nan_to_none=True)
 
 
-def write_outputs(result: FlightResult, world: Any, out_dir: str | Path) -> list[Path]:
-    """Write the files into ``out_dir`` (created); returns their paths."""
+def write_outputs(result: FlightResult, world: Any, out_dir: str | Path, figures: bool = True) -> list[Path]:
+    """Write the files into ``out_dir`` (created); returns their paths. ``figures=False``: no map.png
+    or belief.png (a previous run's in ``out_dir`` are removed: they would not show this flight)."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
     s = result.summary
-    paths = [out / "summary.json", out / "timeseries.csv", out / "map.png", out / "belief.png"]
+    figure_paths = [out / "map.png", out / "belief.png"]
+    paths = [out / "summary.json", out / "timeseries.csv", *(figure_paths if figures else [])]
     paths[0].write_text(json.dumps(strict_json(s), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     columns = COLUMNS | {k: v for k, v in OPTIONAL_COLUMNS.items() if k in result.series}
     write_table(paths[1], result.series, columns)
@@ -78,6 +80,10 @@ def write_outputs(result: FlightResult, world: Any, out_dir: str | Path) -> list
     if fixes:
         paths.insert(2, out / GNSS_FILE)
         write_table(paths[2], fixes, GNSS_COLUMNS)
+    if not figures:
+        for path in figure_paths:
+            path.unlink(missing_ok=True)
+        return paths
     title = f"{s['mission']} profile {s['profile']}, {s['method']}, seed {s['seed']}"
     tracks = {"true": result.series["p_true_ned_m"], "estimated": result.series["p_est_ned_m"]}
     if "p_autopilot_ned_m" in result.series:

@@ -74,10 +74,10 @@ def run(args: argparse.Namespace) -> int:
                             scenario=args.scenario)
     result = backend(vehicle, feed=args.feed, config=cfg).fly(request)
     if result.series:
-        write_outputs(result, _world(args.mission), args.out)
+        write_outputs(result, _world(args.mission), args.out, figures=not args.no_figures)
     else:
         (Path(args.out) / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
-    _print(result.summary, Path(args.out))
+    _print(result.summary, Path(args.out), figures=not args.no_figures)
     return 0 if result.summary["reached_goal"] else 1
 
 
@@ -87,7 +87,7 @@ def _world(mission: str) -> Any:
     return load_mission(mission).world
 
 
-def _print(s: dict, out: Path) -> None:
+def _print(s: dict, out: Path, figures: bool = True) -> None:
     vehicle = s["vehicle"]
     _, _, ekf, message, sent = VEHICLES[vehicle]
     run = s[vehicle]
@@ -103,7 +103,8 @@ def _print(s: dict, out: Path) -> None:
     t = s["tracking_error_m"]
     print(f"  tracking error median {_m(t['median'])} p95 {_m(t['p95'])}; "
           f"collisions {s['collisions']}; min clearance {_m(s['min_clearance_m'])}")
-    print(f"  {message} sent {run[sent]}; wrote {out / 'summary.json'}, figures and {out / 'run.tlog'}")
+    print(f"  {message} sent {run[sent]}; wrote {out / 'summary.json'}{', figures' if figures else ''} and "
+          f"{out / 'run.tlog'}")
     for ulog in run.get("ulogs", []):
         print(f"  PX4's ULog: {out / ulog} (beliefnav replay reads it)")
 

@@ -55,6 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wall-timeout-s", type=float, help="stop everything after this much wall time")
     parser.add_argument("--drop-probability", type=float, default=0.0, help=argparse.SUPPRESS)  # tests only
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-figures", action="store_true",
+                        help="no map.png and belief.png (summary.json, timeseries.csv and the logs only)")
     telemetry.add_arguments(parser, publisher=True)  # every process publishes on Zenoh unless --no-telemetry
 
 
@@ -139,7 +141,7 @@ def _fly(args: argparse.Namespace, mission: Mission) -> int:
     if (args.out / "run.tlog").is_file():
         result = dataclasses.replace(result, fixes=tlog_fixes(args.out / "run.tlog", mission))
     if result.series:
-        write_outputs(result, mission.world, args.out)
+        write_outputs(result, mission.world, args.out, figures=not args.no_figures)
     else:
         (args.out / "summary.json").write_text(json.dumps(strict_json(result.summary), indent=2) + "\n")
     files = sorted(p.name + ("/" if p.is_dir() else "") for p in args.out.iterdir() if p.suffix != ".key")
