@@ -10,7 +10,6 @@ from typing import Any
 import numpy as np
 
 from companion.errors import UserError
-from gcs_tools.figures import belief_figure, map_figure
 from gcs_tools.jsonvalues import plain_json
 from simvehicle.harness.backend import FlightResult
 
@@ -60,6 +59,22 @@ def write_table(path: Path, table: dict[str, np.ndarray], columns: dict[str, lis
 def strict_json(value: Any) -> Any:
     """NaN/inf -> None, numpy scalars -> Python, recursively (so the file is strict JSON)."""
     return plain_json(value, nan_to_none=True)
+
+
+def map_figure(*args: Any, **kwargs: Any) -> None:
+    """``gcs_tools.figures.map_figure``, imported when first drawn: matplotlib costs about a second
+    of CPU to import, which a run without figures (and ``beliefnav export``, which reads ``COLUMNS``
+    here) does not pay."""
+    from gcs_tools.figures import map_figure as draw
+
+    draw(*args, **kwargs)
+
+
+def belief_figure(*args: Any, **kwargs: Any) -> None:
+    """``gcs_tools.figures.belief_figure``, imported when first drawn (as ``map_figure``)."""
+    from gcs_tools.figures import belief_figure as draw
+
+    draw(*args, **kwargs)
 
 
 def write_outputs(result: FlightResult, world: Any, out_dir: str | Path, figures: bool = True) -> list[Path]:
