@@ -90,8 +90,11 @@ class Trio:
         self.sup.stop(order=("vehicle",))
 
 
-def run_cli(*args: str, timeout_s: float = 55.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", *args],
+def run_cli(*args: str, timeout_s: float = 55.0, figures: bool = False) -> subprocess.CompletedProcess[str]:
+    """``beliefnav sitl --no-progress ARGS``; without ``figures`` also ``--no-figures`` (map.png and
+    belief.png cost ~2 s of CPU; the shared lockstep flight draws and checks them)."""
+    extra = [] if figures else ["--no-figures"]
+    return subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", *extra, *args],
                           capture_output=True, text=True, timeout=timeout_s)
 
 

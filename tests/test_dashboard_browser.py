@@ -55,6 +55,7 @@ def test_dashboard_plots_a_live_sitl_flight_in_chromium(tmp_path):
             page.goto(f"http://127.0.0.1:{port}/")
             page.wait_for_function("() => window.dashboardStats.frames > 0", timeout=10_000)
             with child(["-m", "gcs_tools", "sitl", "--mission", "test", "--out", str(out), "--no-progress",
+                        "--no-figures",
                         "--vehicle-id", "sitl1", "--wall-timeout-s", "40"], env) as sitl:
                 page.wait_for_function(
                     "() => { const v = window.dashboardVehicles.sitl1; return v && v.route && ['truth',"

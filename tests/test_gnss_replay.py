@@ -121,6 +121,7 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
         str(out),
         "--no-progress",
         "--no-telemetry",
+        "--no-figures",  # the figures are test_replay_figures'; not drawn here, ~2 s of CPU a run
     ]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
@@ -131,7 +132,7 @@ def test_replay_cli_with_rinex_and_coupling_options(rinex_for_quad106, tmp_path)
     # follows them as it follows the log's own fixes
     assert s["errors"]["gnss"]["error_horizontal_m"]["median"] < 2.0
     tight = subprocess.run(
-        cmd[:9] + ["--coupling", "tight", "--out", str(tmp_path / "t"), "--no-progress"],
+        cmd[:9] + ["--coupling", "tight", "--out", str(tmp_path / "t"), "--no-progress", "--no-figures"],
         capture_output=True,
         text=True,
         timeout=60,

@@ -113,7 +113,8 @@ def test_cli_writes_csv_and_strict_json(tmp_path: Path, monkeypatch: pytest.Monk
     monkeypatch.setattr(core, "default_navigator",
                         lambda method, frame, *setup: LastFixNavigator(method, frame))
     out = tmp_path / "out"
-    assert main(["replay", str(log), "--method", "naive", "--out", str(out), "--rate-hz", "10"]) == 0
+    assert main(["replay", str(log), "--method", "naive", "--out", str(out), "--rate-hz", "10",
+                 "--no-figures"]) == 0
     table = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)
     header = (out / "estimates.csv").read_text().splitlines()[0].split(",")
     assert tuple(header) == core.CSV_COLUMNS and table.shape[1] == len(core.CSV_COLUMNS)
@@ -276,7 +277,7 @@ def test_mission_option_sets_home_and_the_missions_estimator_config(tmp_path, ca
 
     def run(name: str, *extra: str) -> tuple[dict, np.ndarray]:
         out = tmp_path / name
-        assert main(["replay", str(short), "--out", str(out), "--no-progress", *extra]) == 0
+        assert main(["replay", str(short), "--out", str(out), "--no-progress", "--no-figures", *extra]) == 0
         table = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)
         return json.loads((out / "summary.json").read_text()), table
 

@@ -334,7 +334,7 @@ def test_concatenated_log_is_replayed_as_segments_with_the_navigators_counters(
     assert s3["errors"]["gnss"]["n"] == 3 * s1["errors"]["gnss"]["n"]
     assert s3["duration_s"] == pytest.approx(3 * s1["duration_s"])
     # the printed counters are the navigators'
-    assert main(["replay", str(three), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    assert main(["replay", str(three), "--out", str(tmp_path / "o"), "--no-progress", "--no-figures"]) == 0
     printed = capsys.readouterr().out
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert f"IMU samples used {summary['navigator']['imu_used']:,}," in printed

@@ -272,7 +272,8 @@ def test_cli_replays_a_flight_with_the_urban_model(tmp_path: Path,
     write_flight(tmp_path / "f", seconds=25.0)
     out = tmp_path / "o"
     assert main(["replay", str(tmp_path / "f" / "IMU_1.csv"), "--gnss-errors", "model", "--gnss-rate-hz", "1",
-                 "--gnss-accuracy", "none", "--out", str(out), "--json", "--method", "naive"]) == 0
+                 "--gnss-accuracy", "none", "--out", str(out), "--json", "--method", "naive",
+                 "--no-figures"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["format"] == "ansfl"
     assert s["synthetic_gnss"]["rate_hz"] == 1.0 and s["synthetic_gnss"]["accuracy"] == "none"

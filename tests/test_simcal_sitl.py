@@ -54,6 +54,7 @@ def test_sitl_canyon_streams_ubx_matching_its_gps_raw_int(tmp_path):
             "gcs_tools",
             "sitl",
             "--no-progress",
+            "--no-figures",
             "--mission",
             "test",
             "--scenario",
@@ -120,7 +121,7 @@ def _replay_tight(out: Path, raw_int: dict) -> None:
     for t_us in raw_int:
         assert np.min(np.abs(t_raw - t_us)) < 1_000
     base = ["replay", str(out / "run.tlog"), "--ubx", str(out / "receiver.ubx"), "--coupling", "tight",
-            "--no-progress", "--no-telemetry"]
+            "--no-progress", "--no-telemetry", "--no-figures"]  # figures: test_replay_figures
     summaries = []
     for extra, name in (([], "nomap"), (["--mission", "test"], "map")):
         assert main([*base, *extra, "--out", str(out / name)]) == 0

@@ -38,9 +38,11 @@ def lockstep_flight(tmp_path_factory) -> Path:
     """One lockstep flight through the CLI; the tests below only read what it left."""
     require_pieces()
     out = tmp_path_factory.mktemp("lockstep")
-    done = run_cli("--mission", MISSION, "--profile", "0", "--seed", str(SEED), "--out", str(out))
+    done = run_cli("--mission", MISSION, "--profile", "0", "--seed", str(SEED), "--out", str(out),
+                   figures=True)
     assert done.returncode == 0, done.stderr
-    return out
+    assert all((out / name).stat().st_size > 10_000 for name in ("map.png", "belief.png"))  # the one sitl
+    return out  # flight here that draws them: the others pass --no-figures
 
 
 def _series(out: Path) -> dict[str, np.ndarray]:
@@ -322,7 +324,7 @@ def test_companion_killed_and_restarted_vehicle_holds_and_flight_continues(tmp_p
 @pytest.mark.parametrize("how", ["interrupt", "crash", "timeout"])
 def test_launcher_never_leaves_processes_behind(tmp_path, how):
     out = tmp_path / "run"
-    args = [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", MISSION,
+    args = [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--no-figures", "--mission", MISSION,
             "--realtime", "--out", str(out)]
     if how == "timeout":
         args += ["--wall-timeout-s", "9"]
@@ -385,8 +387,8 @@ def test_mavproxy_sees_gps_and_belief_on_the_ground_port(tmp_path):
     )
     try:
         sitl = subprocess.Popen(
-            [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission", MISSION, "--realtime",
-             "--max-duration-s", "20", "--out", str(out), "--ports", ",".join(map(str, ports)),
+            [sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--no-figures", "--mission", MISSION,
+             "--realtime", "--max-duration-s", "20", "--out", str(out), "--ports", ",".join(map(str, ports)),
              "--no-signing"],  # MAVProxy has no key here
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:

@@ -49,7 +49,7 @@ def test_spooled_rows_equal_the_in_memory_record_and_a_cut_row_is_dropped(tmp_pa
 def test_vehicle_killed_run_names_the_signal_and_keeps_the_record(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--no-telemetry",
-                             "--mission", "test", "--realtime", "--out", str(out)],
+                             "--no-figures", "--mission", "test", "--realtime", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60

@@ -32,8 +32,8 @@ def test_sitl_moves_to_a_free_id_and_says_so(tmp_path):
     held = claim_vehicle_id(config, "uav1")
     assert held is not None and held.vehicle_id == "uav1"
     try:
-        done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--mission",
-                               "test", "--max-duration-s", "1", "--out", str(tmp_path)],
+        done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--no-progress", "--no-figures",
+                               "--mission", "test", "--max-duration-s", "1", "--out", str(tmp_path)],
                               capture_output=True, text=True, timeout=60)
     finally:
         held.close()
