@@ -20,8 +20,9 @@ from companion.gnss.systems import System
 from companion.gnss.timescale import BootTimeMap, unix_to_gps_s
 from companion.mavlink.tlog import read_tlog
 from gcs_tools.gnss.rinex import write_nav, write_obs
+from gcs_tools.gnss.synthetic import observe_many
 from gcs_tools.gnss.timebase import log_time_map
-from tests.gnss_helpers import CLOCKS_M, constellation, observe, store
+from tests.gnss_helpers import CLOCKS_M, constellation, store
 
 QUAD106 = Path(__file__).parent / "data" / "quad106.tlog"
 UNIX0_S = 1_700_000_000.0  # quad106's SYSTEM_TIME: time_unix_usec = 1.7e15 + time_boot_ms * 1000
@@ -64,7 +65,7 @@ def _write_rinex_for_quad106(out: Path) -> list[tuple[int, np.ndarray]]:
         for _, m in read_tlog(QUAD106, types=("GPS_RAW_INT",))
         if m.fix_type >= 3
     ]
-    epochs, truth = [], []
+    truth, t_gps, vel = [], [], []
     last_s = -1
     ecef = [geodetic_to_ecef(math.radians(lat), math.radians(lon), alt) for _, lat, lon, alt in fixes]
     for i, (t_us, *_) in enumerate(fixes):
@@ -73,9 +74,12 @@ def _write_rinex_for_quad106(out: Path) -> list[tuple[int, np.ndarray]]:
         last_s = t_us // 1_000_000
         p = ecef[i]
         j0, j1 = max(i - 1, 0), min(i + 1, len(fixes) - 1)  # the receiver's velocity (its Doppler)
-        v = (ecef[j1] - ecef[j0]) / max((fixes[j1][0] - fixes[j0][0]) * 1e-6, 1e-3)
-        epochs.append(observe(st, tmap.gps_s(t_us), p, v_rx_ecef=v, atmosphere=False)[0])
+        vel.append((ecef[j1] - ecef[j0]) / max((fixes[j1][0] - fixes[j0][0]) * 1e-6, 1e-3))
+        t_gps.append(tmap.gps_s(t_us))
         truth.append((t_us, p))
+    # every epoch at once: what observe() gives one epoch at a time, number for number (14 s -> 2 s CPU)
+    epochs = [ep for ep, _ in observe_many(st, t_gps, np.array([p for _, p in truth]).reshape(-1, 3),
+                                           np.array(vel).reshape(-1, 3), atmosphere=False)]
     kep, glo = constellation(t_mid)
     write_nav(out / "q.nav", kep, glo)
     write_obs(out / "q.obs", epochs, "GPS", glonass_channels={g.prn: g.channel for g in glo})
