@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.errors import not_one_of
@@ -27,6 +26,7 @@ from companion.mission.config import (
     PlannerConfig,
     Profile,
 )
+from companion.mission.grid import connected_4
 from companion.mission.scenarios import SCENARIOS, scenario_sections
 from companion.mission.schema import ConfigError, build, load_yaml
 from companion.mission.world import World
@@ -198,7 +198,4 @@ def _connected(blocked: np.ndarray, a: tuple[int, int], b: tuple[int, int]) -> b
     The planner moves diagonally only between free orthogonal neighbours, so its 8-connected
     moves connect exactly what 4-connectivity (``ndimage.label``'s default) connects.
     """
-    free = ~blocked
-    free[a] = free[b] = True
-    labels, _ = ndimage.label(free)
-    return bool(labels[a] == labels[b])
+    return connected_4(~blocked, a, b)

@@ -6,20 +6,20 @@ Two distances, for two jobs:
   building rectangle (0 inside) — what the GNSS model (eq. 22), collision checks and
   line-of-sight pruning use.
 * ``edt_m`` is the paper's grid clearance (eq. 1): for each cell centre, the distance to the
-  nearest occupied cell centre (``scipy.ndimage.distance_transform_edt``). A cell is
+  nearest occupied cell centre (``scipy.ndimage.distance_transform_edt``'s numbers; ``grid.py``). A cell is
   occupied when its square overlaps a building, so every building point lies in an
   occupied cell and ``clearance_m(centre) >= edt_m - resolution_m/√2``.
 
 Grid cell ``(i, j)`` spans north ``[n0 + i·res, n0 + (i+1)·res]`` and east likewise; row ``i``
-is north, column ``j`` is east. Pure numpy/scipy, no I/O.
+is north, column ``j`` is east. Pure numpy, no I/O.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from companion.mission.config import WorldConfig
+from companion.mission.grid import distance_transform_m
 
 ArrayLike = float | np.ndarray
 
@@ -130,9 +130,7 @@ class World:
         return occ
 
     def _edt(self) -> np.ndarray:
-        if not self.occupancy.any():
-            return np.full(self.shape, np.inf)
-        return ndimage.distance_transform_edt(~self.occupancy, sampling=self.resolution_m)
+        return distance_transform_m(self.occupancy, self.resolution_m)
 
 
 def _point_rect_m(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
