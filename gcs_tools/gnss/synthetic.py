@@ -164,23 +164,17 @@ def store(t0: float = T0) -> EphemerisStore:
 CLOCKS_M = {System.GPS: 3000.0, System.GALILEO: 3012.5, System.BEIDOU: 2990.0, System.GLONASS: 3031.0}
 
 
-def observe(
-    st: EphemerisStore,
-    t_true_s: float,
-    rx_ecef: np.ndarray,
-    v_rx_ecef: np.ndarray | None = None,
-    mask_deg: float = 10.0,
-    atmosphere: bool = True,
-    drift_m_s: float = 0.0,
-):
+def observe(st: EphemerisStore, t_true_s: float, rx_ecef: np.ndarray, v_rx_ecef: np.ndarray | None = None,
+            **options: Any) -> tuple[Any, np.ndarray]:
     """(epoch, visible mask) of every satellite above ``mask_deg`` at TRUE receive time ``t_true_s``.
 
     The receiver clock is ``CLOCKS_M[GPS]`` (its time tag is true time + that / c); other systems add
     their offset. Pseudorange rates by central difference of the generator over ±1 s (the
-    receiver moving at ``v_rx_ecef``), with clock drift ``drift_m_s``."""
+    receiver moving at ``v_rx_ecef``), with clock drift ``drift_m_s``. ``options``: ``mask_deg``
+    (10), ``atmosphere`` (True: Saastamoinen and Klobuchar delays added), ``drift_m_s`` (0), as
+    ``observe_many``'s, whose one-epoch case this is."""
     v = None if v_rx_ecef is None else np.asarray(v_rx_ecef, float).reshape(1, 3)
-    return observe_many(st, [t_true_s], np.asarray(rx_ecef, float).reshape(1, 3), v, mask_deg, atmosphere,
-                        drift_m_s)[0]
+    return observe_many(st, [t_true_s], np.asarray(rx_ecef, float).reshape(1, 3), v, **options)[0]
 
 
 def observe_many(
