@@ -277,18 +277,19 @@ def test_arducopter_signing_setup_then_unsigned_forgeries_are_refused_at_the_lin
         # signer takes the newest timestamp it verified (as MAVLink's C library does), else
         # ArduPilot refuses our frames as replays
         assert signer.timestamp > before
-        assert _acks(sock, signer, frame(ask, 1, 196, seq=1, signer=signer)) >= 1
+        assert _acks(sock, signer, frame(ask, 1, 196, seq=1, signer=signer), enough=1) >= 1
 
 
-def _acks(sock, signer: Signer, data: bytes, wait_s: float = 1.5) -> int:
-    """COMMAND_ACKs to ``data`` within ``wait_s`` (the frames read verified by ``signer``)."""
+def _acks(sock, signer: Signer, data: bytes, wait_s: float = 1.5, enough: int | None = None) -> int:
+    """COMMAND_ACKs to ``data`` within ``wait_s`` (the frames read verified by ``signer``); as soon as
+    there are ``enough`` of them, if given."""
     from companion.mavlink.frames import StreamScanner
 
     sock.sendall(data)
     scanner, n = StreamScanner("ardupilotmega"), 0
     sock.settimeout(0.1)
     end = time.monotonic() + wait_s
-    while time.monotonic() < end:
+    while time.monotonic() < end and (enough is None or n < enough):
         try:
             chunk = sock.recv(65536)
         except TimeoutError:
