@@ -4,6 +4,7 @@ $BELIEFNAV_ARDUPILOT_BIN). Missing, the tests skip on a developer machine and FA
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -83,10 +84,8 @@ def interrupt_when(proc: subprocess.Popen[str], out: Path, done: Callable[[dict[
     deadline = time.monotonic() + timeout_s
     seen = False
     while proc.poll() is None and time.monotonic() < deadline and not seen:
-        try:
+        with contextlib.suppress(OSError, ValueError, KeyError, TypeError):  # not written yet, or incomplete
             seen = done(json.loads((out / "summary.json").read_text()))
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
         if not seen:
             time.sleep(0.1)
     if proc.poll() is None:

@@ -9,7 +9,12 @@ import sys
 
 import numpy as np
 import pytest
-from ardupilot_helpers import assert_rescored_from_the_tlog, require_ardupilot, short_cross_street, tlog_messages
+from ardupilot_helpers import (
+    assert_rescored_from_the_tlog,
+    require_ardupilot,
+    short_cross_street,
+    tlog_messages,
+)
 from pymavlink import mavutil
 
 from simvehicle.harness.ardupilot.config import ArduPilotConfig
@@ -72,7 +77,8 @@ def test_sitl_vehicle_ardupilot_flies_the_route_and_scores_ekf3_and_the_companio
         kinds[msg.get_type()] = kinds.get(msg.get_type(), 0) + 1
     assert kinds.get("GPS_INPUT") == ap["gps_input_sent"]
     assert kinds.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 500 and kinds.get("SIM_STATE", 0) > 1000
-    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, mission, ArduPilotConfig(speedup=OPEN_LOOP_SPEEDUP))
+    config = ArduPilotConfig(speedup=OPEN_LOOP_SPEEDUP)
+    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, mission, config)
 
 
 @pytest.mark.timeout(300)
@@ -136,7 +142,8 @@ def test_closed_loop_ardupilot_flies_on_the_companion_process(tmp_path, feed):
     ours = table[:, [header.index("p_est_n_m"), header.index("p_est_e_m")]]
     apart = np.hypot(*(ekf - ours).T)
     assert np.nanmedian(apart) < 2.0  # EKF3 follows the companion (blended with its own IMU)
-    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, mission, ArduPilotConfig(speedup=CLOSED_LOOP_SPEEDUP))
+    config = ArduPilotConfig(speedup=CLOSED_LOOP_SPEEDUP)
+    assert_rescored_from_the_tlog(rescore_ardupilot, out, s, mission, config)
 
 
 

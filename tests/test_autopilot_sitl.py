@@ -10,7 +10,14 @@ import time
 
 import numpy as np
 import pytest
-from ardupilot_helpers import GroundStation, interrupt_when, require_ardupilot, run_companion, stop, tlog_messages
+from ardupilot_helpers import (
+    GroundStation,
+    interrupt_when,
+    require_ardupilot,
+    run_companion,
+    stop,
+    tlog_messages,
+)
 from pymavlink import mavutil
 
 from companion.autopilot.translate import Translator

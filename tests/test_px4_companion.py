@@ -105,12 +105,15 @@ def test_companion_beside_px4_discovers_streams_keeps_its_clock_and_feeds_ekf2(p
     assert abs(np.median(np.diff(imu[:reboot])) - 20_000) < 2_000  # the 50 Hz asked for, PX4's clock
 
 
+ACCEPTED = "MAV_CMD_SET_MESSAGE_INTERVAL:MAV_RESULT_ACCEPTED"
+
+
 def _after_reboot(s: dict, imu_before: int) -> bool:
     """The streams asked for again after the reboot, accepted and arriving again; the counts checked
     reached with a margin."""
     asks, used = s["streams"]["requests"], s["samples"]["used"]
     return (s["node"]["autopilot_reboots"] == 1 and asks >= 2
-            and s["streams"]["acks"].get("MAV_CMD_SET_MESSAGE_INTERVAL:MAV_RESULT_ACCEPTED", 0) >= 8 * (asks - 1)
+            and s["streams"]["acks"].get(ACCEPTED, 0) >= 8 * (asks - 1)
             and s["samples"]["received"]["HIGHRES_IMU"] > imu_before + 300
             and used["imu"] > 2500 and used["gnss"] > 250)
 
