@@ -24,7 +24,7 @@ from simvehicle.harness.ardupilot.driver import (
 from simvehicle.harness.ardupilot.gnss_source import gps_input_fields
 from simvehicle.harness.ardupilot.session import ArduPilotSession
 from simvehicle.harness.fly import planned_route
-from simvehicle.harness.foreign.analysis import autopilot_track, count_collisions, errors
+from simvehicle.harness.foreign.analysis import autopilot_track, companion_track, count_collisions, errors
 from simvehicle.harness.foreign.gnss_source import UrbanGnssSource
 from simvehicle.harness.foreign.recording import Recording
 
@@ -234,6 +234,50 @@ def test_driver_back_to_arming_when_disarmed_and_timeout():
     drv.phase, drv.route_t0_us = "route", 0
     drv.step(DriverInputs(t_us=int(drv.route_end_us) + 1, origin_ned_m=np.zeros(3)))
     assert drv.outcome == "timeout"
+
+
+def test_companion_track_is_the_navigators_batch_path_sample_by_sample():
+    """The scoring pushes each recorded IMU sample as an attitude and a specific force: the same bits as
+    ``Navigator.push_imu_batch`` of that one sample (its documented equivalence), for every method's
+    estimate at every evaluation time, with fixes released between samples."""
+    from companion.estimator import EstimatorConfig
+    from companion.wiring import navigator_for
+    from simvehicle.harness.foreign import analysis
+
+    m = load_mission("test")
+    t_us = np.arange(0, 12_000_000, 20_000)  # 50 Hz
+    p = _line(t_us)
+    src = UrbanGnssSource(GnssConfig(), m.world, m.frame, 10.0, np.random.default_rng(3),
+                          float(m.world.clearance_m(p[0, 0], p[0, 1])))
+    rng = np.random.default_rng(4)
+    rec = Recording()
+    for t, pk in zip(t_us.tolist(), p, strict=True):
+        src.on_truth(t, pk)
+        src.due(t)
+        q = np.array([1.0, 0.0, 0.0, 0.0]) + rng.normal(0.0, 0.01, 4)
+        rec.imu_t_us.append(t)
+        rec.imu_acc_frd_m_s2.append(np.array([0.0, 0.0, -9.81]) + rng.normal(0.0, 0.05, 3))
+        rec.imu_q_ned_frd.append(q / np.linalg.norm(q))
+    times = t_us[100:]  # the evaluation times: from 2 s on (before them, no estimate is asked)
+    sent = src.sent
+    assert len(sent) > 100
+    for method in ("second-order", "vbakf", "hmm-trust"):
+        got = companion_track(rec, sent, method, EstimatorConfig(), m, times)
+        nav = navigator_for(m, method, config=EstimatorConfig())
+
+        def batch_of_one(t: int, f: np.ndarray, q: np.ndarray, nav=nav) -> None:
+            nav.push_imu_batch(np.array([t]), f[None, :], q[None, :])
+
+        def push_fix(sf, nav=nav) -> None:
+            nav.push_fix_ned(sf.fix.t_validity_us, sf.p_ned_m, sf.fix.h_acc_m, sf.fix.v_acc_m, sf.v_ned_m_s,
+                             sf.speed_accuracy_m_s)
+
+        arrivals = [(sf.arrival_us, sf) for sf in sent]
+        ref = analysis._replayed(rec, arrivals, batch_of_one, push_fix, nav, times)
+        assert np.isfinite(got.p_ned_m).all(), method
+        for name in ("p_ned_m", "b_ned_m", "beta", "nis"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=f"{method} {name}")
+        assert got.counters == ref.counters, method
 
 
 def test_analysis_known_answers():
