@@ -1,4 +1,4 @@
-"""End to end beside a real PX4: PX4 SITL (SIH quadrotor, x5) flies the test city's cross street in
+"""End to end beside a real PX4: PX4 SITL (SIH quadrotor) flies the test city's cross street in
 OFFBOARD with our urban GNSS model as its only GNSS (HIL_GPS); EKF2 and the companion are scored
 on the same fixes, the SITL's own ULog is replayed, and in closed loop PX4 flies on the companion
 process's ODOMETRY."""
@@ -25,11 +25,19 @@ SAME_KEYS_AS_ARDUPILOT = {"mission", "profile", "method", "seed", "vehicle", "fe
                           "methods", "gnss", "estimator_counters"}
 
 
-def _sitl(out, *extra: str, mission: str = "test", profile: int = 2) -> subprocess.CompletedProcess[str]:
-    """``beliefnav sitl --vehicle px4`` (x5, no figures: no check reads them)."""
+# PX4 does not wait for us either: our HIL_GPS and setpoints reach it late by the machine's scheduling, in
+# its time (command_delay_ms; a valid flight's p95 is within 100 ms). Measured on the 2-core VM, one flight
+# alone: the open loop's p95 4 ms at x5, 16 ms at x8 (7.5x reached); the closed loop's companion feed
+# 20 ms at x5. The open loop flies at x8, the closed loop at x5.
+OPEN_LOOP_SPEED, CLOSED_LOOP_SPEED = 8.0, 5.0
+
+
+def _sitl(out, *extra: str, speed: float, mission: str = "test",
+          profile: int = 2) -> subprocess.CompletedProcess[str]:
+    """``beliefnav sitl --vehicle px4`` (no figures: no check reads them)."""
     cmd = [sys.executable, "-m", "gcs_tools", "sitl", "--vehicle", "px4", "--mission", mission, "--profile",
-           str(profile), "--seed", "0", "--out", str(out), "--wall-timeout-s", "150", "--speed-factor", "5",
-           "--no-figures", *extra]
+           str(profile), "--seed", "0", "--out", str(out), "--wall-timeout-s", "150", "--speed-factor",
+           f"{speed:g}", "--no-figures", *extra]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=200)
 
 
@@ -37,10 +45,10 @@ def _sitl(out, *extra: str, mission: str = "test", profile: int = 2) -> subproce
 def test_sitl_vehicle_px4_flies_the_route_on_hil_gps_and_its_ulog_replays(tmp_path):
     require_px4()
     out = tmp_path / "run"
-    proc = _sitl(out, "--ulog")
+    proc = _sitl(out, "--ulog", speed=OPEN_LOOP_SPEED)
     s = json.loads((out / "summary.json").read_text())
     run = s["px4"]
-    # x5 on a loaded 2-core machine still keeps our HIL_GPS and setpoints on time (PX4's time)
+    # our HIL_GPS and setpoints on time (PX4's time; see OPEN_LOOP_SPEED)
     assert s["valid"], run["command_delay_ms"]
     assert proc.returncode == 0 and s["reached_goal"], proc.stdout + proc.stderr
     assert set(s) >= SAME_KEYS_AS_ARDUPILOT and s["vehicle"] == "px4" and s["feed"] == "none"
@@ -69,7 +77,7 @@ def test_sitl_vehicle_px4_flies_the_route_on_hil_gps_and_its_ulog_replays(tmp_pa
     for m in tlog_messages(out / "run.tlog"):  # a standard tlog, both directions
         kinds[m.get_type()] = kinds.get(m.get_type(), 0) + 1
     assert kinds["HIL_GPS"] == run["hil_gps_sent"] and kinds["SET_POSITION_TARGET_LOCAL_NED"] > 500
-    assert_rescored_from_the_tlog(rescore_px4, out, s, "test", Px4FlightConfig(speed_factor=5))
+    assert_rescored_from_the_tlog(rescore_px4, out, s, "test", Px4FlightConfig(speed_factor=OPEN_LOOP_SPEED))
 
     # PX4's own log of the flight, replayed: our estimate against EKF2's logged one and SIH's truth
     (ulog,) = run["ulogs"]
@@ -97,7 +105,7 @@ def test_closed_loop_px4_flies_on_the_companion_process_odometry(tmp_path):
     require_px4()
     out = tmp_path / "closed"
     mission = str(short_cross_street(tmp_path))
-    proc = _sitl(out, "--feed", "odometry", mission=mission, profile=0)
+    proc = _sitl(out, "--feed", "odometry", speed=CLOSED_LOOP_SPEED, mission=mission, profile=0)
     s = json.loads((out / "summary.json").read_text())
     run = s["px4"]
     assert s["valid"], (run["command_delay_ms"], run["feed_delay_ms"])
@@ -122,4 +130,5 @@ def test_closed_loop_px4_flies_on_the_companion_process_odometry(tmp_path):
     ekf = table[:, [header.index("p_autopilot_n_m"), header.index("p_autopilot_e_m")]]
     ours = table[:, [header.index("p_est_n_m"), header.index("p_est_e_m")]]
     assert np.nanmedian(np.hypot(*(ekf - ours).T)) < 3.0  # EKF2 follows the companion (blended with its IMU)
-    assert_rescored_from_the_tlog(rescore_px4, out, s, mission, Px4FlightConfig(speed_factor=5))
+    config = Px4FlightConfig(speed_factor=CLOSED_LOOP_SPEED)
+    assert_rescored_from_the_tlog(rescore_px4, out, s, mission, config)
