@@ -73,8 +73,8 @@ def fake_backend(monkeypatch):
     flown: list[Job] = []
     jobs: list[Job] = []
     monkeypatch.setattr("simvehicle.harness.backend.backend", lambda *a, **k: FakeVehicle(flown, jobs))
-    monkeypatch.setattr("gcs_tools.fly.output.map_figure", lambda *a, **k: None)
-    monkeypatch.setattr("gcs_tools.fly.output.belief_figure", lambda *a, **k: None)
+    monkeypatch.setattr("gcs_tools.figures.map_figure", lambda *a, **k: None)
+    monkeypatch.setattr("gcs_tools.figures.belief_figure", lambda *a, **k: None)
     return jobs, flown
 
 

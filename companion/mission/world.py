@@ -11,7 +11,7 @@ Two distances, for two jobs:
   occupied cell and ``clearance_m(centre) >= edt_m - resolution_m/√2``.
 
 Grid cell ``(i, j)`` spans north ``[n0 + i·res, n0 + (i+1)·res]`` and east likewise; row ``i``
-is north, column ``j`` is east. Pure numpy, no I/O.
+is north, column ``j`` is east. Pure numpy (scipy for a large grid, ``grid.py``), no I/O.
 """
 
 from __future__ import annotations

@@ -61,22 +61,6 @@ def strict_json(value: Any) -> Any:
     return plain_json(value, nan_to_none=True)
 
 
-def map_figure(*args: Any, **kwargs: Any) -> None:
-    """``gcs_tools.figures.map_figure``, imported when first drawn: matplotlib costs about a second
-    of CPU to import, which a run without figures (and ``beliefnav export``, which reads ``COLUMNS``
-    here) does not pay."""
-    from gcs_tools.figures import map_figure as draw
-
-    draw(*args, **kwargs)
-
-
-def belief_figure(*args: Any, **kwargs: Any) -> None:
-    """``gcs_tools.figures.belief_figure``, imported when first drawn (as ``map_figure``)."""
-    from gcs_tools.figures import belief_figure as draw
-
-    draw(*args, **kwargs)
-
-
 def write_outputs(result: FlightResult, world: Any, out_dir: str | Path, figures: bool = True) -> list[Path]:
     """Write the files into ``out_dir`` (created); returns their paths. ``figures=False``: no map.png
     or belief.png (a previous run's in ``out_dir`` are removed: they would not show this flight)."""
@@ -99,12 +83,14 @@ def write_outputs(result: FlightResult, world: Any, out_dir: str | Path, figures
         for path in figure_paths:
             path.unlink(missing_ok=True)
         return paths
+    from gcs_tools import figures as draw  # matplotlib (about a second of CPU to import) only when drawing
+
     title = f"{s['mission']} profile {s['profile']}, {s['method']}, seed {s['seed']}"
     tracks = {"true": result.series["p_true_ned_m"], "estimated": result.series["p_est_ned_m"]}
     if "p_autopilot_ned_m" in result.series:
         tracks["autopilot"] = result.series["p_autopilot_ned_m"]
-    map_figure(out / "map.png", world, result.route.waypoints_ned_m, tracks, title,
+    draw.map_figure(out / "map.png", world, result.route.waypoints_ned_m, tracks, title,
                fixes_ned_m=fixes.get("p_ned_m"), error_m=result.series["est_error_m"],
                rejected=np.nan_to_num(fixes["rejected"]) > 0 if fixes else None)
-    belief_figure(out / "belief.png", result.series, title, fixes)
+    draw.belief_figure(out / "belief.png", result.series, title, fixes)
     return paths
