@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -101,7 +102,7 @@ def _run_master(args: argparse.Namespace) -> int:
     if summary.get("failure"):
         print(f"companion estimator: error: {summary['failure']}", file=sys.stderr)
         return 1
-    return 0
+    return 128 + signal.SIGTERM if summary.get("stop_signal") == "SIGTERM" else 0
 
 
 def _build(args: argparse.Namespace):  # noqa: ANN202 (EstimatorNode | BridgeNode)

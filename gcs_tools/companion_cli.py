@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
 import sys
 
 from companion.autopilot.options import add_master_arguments, add_signing_argument
@@ -32,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from companion.autopilot.service import config_from_args
     from companion.autopilot.service import run as run_companion
-    from companion.runtime import exit_on_sigterm
+    from companion.runtime import dump_stacks_on_sigusr1, exit_on_sigterm
 
     sections = companion_config.merge(args, args._config_parser, args._option_defaults)
     if args.master is None:
@@ -43,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
         ok, line = setup_from_args(args)
         print(line if ok else f"beliefnav: error: {line}", file=sys.stdout if ok else sys.stderr)
         return 0 if ok else 1
-    exit_on_sigterm()  # SIGTERM ends the run like Ctrl-C: summary.json is still written
+    exit_on_sigterm()  # while setting up; the run itself reads Ctrl-C and SIGTERM between messages
+    dump_stacks_on_sigusr1()
     config = config_from_args(args)
     if sections:
         config = dataclasses.replace(config,
@@ -68,4 +70,4 @@ def run(args: argparse.Namespace) -> int:
     if summary.get("failure"):
         print(f"beliefnav: error: {summary['failure']}", file=sys.stderr)
         return 1
-    return 0
+    return 128 + signal.SIGTERM if summary.get("stop_signal") == "SIGTERM" else 0  # 143, as before

@@ -3,7 +3,8 @@
 - ``run``: open ``--out`` (a file there, or a directory that cannot be made, is a one-line
   error), the connection (signed with ``--signing-key-file``; a loud warning on stderr and in
   the summary when a link that is not loopback runs unsigned), then :func:`serve` until
-  ``--duration-s``, Ctrl-C or SIGTERM. ``summary.json`` is rewritten every second (atomically:
+  ``--duration-s``, Ctrl-C or SIGTERM (read between messages: the run ends whole, and a second signal
+  ends it at once). ``summary.json`` is rewritten every second (atomically:
   a ``kill -9`` leaves the one of the last second) and at the end.
 - Endings: no autopilot within ``--discovery-timeout-s`` is a one-line error (exit 2, with the
   frames refused for want of a signature when signing is on: the usual reason); an autopilot
@@ -30,6 +31,7 @@ from companion.estimator.freespace import FreeSpaceConfig
 from companion.mavlink.signing import read_signing_key
 from companion.mission import load_mission
 from companion.receiver.raw_receiver import RawReceiver
+from companion.runtime import StopRequest, stop_on_signals, write_json
 from companion.telemetry.pubsub import TelemetryPublisher
 
 UNSIGNED_WARNING = ("WARNING: MAVLink signing is OFF on {link}, which is not loopback: anyone who can "
@@ -98,8 +100,8 @@ def security_note(config: CompanionConfig) -> dict[str, Any]:
 
 def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) -> dict[str, Any]:
     """Run until ``duration_s`` (or Ctrl-C/SIGTERM, or the autopilot is lost); write run.tlog and
-    summary.json; the summary (``failure``: why the run failed, None when it did not)."""
-    from companion.runtime import write_json
+    summary.json; the summary (``failure``: why the run failed, None when it did not; ``stop_signal``:
+    SIGINT or SIGTERM when one ended it, else None)."""
 
     prepare_out_dir(config.out_dir)
     security = security_note(config)
@@ -111,23 +113,26 @@ def run(config: CompanionConfig, telemetry: TelemetryPublisher | None = None) ->
     node = AutopilotCompanion(config, conn, telemetry)
     start = time.monotonic()
     failure: str | None = None
+    with stop_on_signals() as stop:  # through the ending too: one signal never cuts the summary short
 
-    def summary() -> dict[str, Any]:
-        extra = {} if receiver is None else {"receiver": {"url": config.ubx, **receiver.counters()}}
-        return node.summary(time.monotonic() - start) | {"security": security, "failure": failure} | extra
+        def summary() -> dict[str, Any]:
+            extra = {} if receiver is None else {"receiver": {"url": config.ubx, **receiver.counters()}}
+            return (node.summary(time.monotonic() - start)
+                    | {"security": security, "failure": failure, "stop_signal": stop.name} | extra)
 
-    try:
-        failure = serve(node, start, lambda: write_json(config.out_dir / "summary.json", summary()), receiver)
-    finally:
-        if failure is None:
-            node.finish()  # a clean end (duration, Ctrl-C, SIGTERM): the ground tools say "ended"
-        result = summary()
-        write_json(config.out_dir / "summary.json", result)
-        if receiver is not None:
-            receiver.close()
-        conn.close()
-        if conn.tlog is not None:
-            conn.tlog.close()
+        try:
+            failure = serve(node, start, lambda: write_json(config.out_dir / "summary.json", summary()),
+                            receiver, stop)
+        finally:
+            if failure is None:
+                node.finish()  # a clean end (duration, Ctrl-C, SIGTERM): the ground tools say "ended"
+            result = summary()
+            write_json(config.out_dir / "summary.json", result)
+            if receiver is not None:
+                receiver.close()
+            conn.close()
+            if conn.tlog is not None:
+                conn.tlog.close()
     return result
 
 
@@ -141,13 +146,17 @@ def _no_heartbeat(node: AutopilotCompanion, waited_s: float) -> NoReturn:
 
 
 def serve(node: AutopilotCompanion, start_s: float, checkpoint: Any = None,
-          receiver: RawReceiver | None = None) -> str | None:
+          receiver: RawReceiver | None = None, stop: StopRequest | None = None) -> str | None:
     """The loop; returns why the run failed (the autopilot lost) or None. ``checkpoint()`` is called
     every ``summary_period_s`` (it rewrites summary.json). ``receiver`` (``--coupling tight``): its
-    decoded items are handed to the node between MAVLink messages."""
+    decoded items are handed to the node between MAVLink messages. ``stop``: once it holds a signal,
+    the loop ends before its next turn (within one receive wait, 20 ms, or a lost link's reconnection
+    attempt, at most 2 s)."""
     c = node.config
     next_checkpoint = start_s + c.summary_period_s
     while True:
+        if stop:
+            return None
         now = time.monotonic()
         d = node.discovery
         if c.duration_s is not None and now - start_s >= c.duration_s:
