@@ -4,10 +4,13 @@ $BELIEFNAV_ARDUPILOT_BIN). Missing, the tests skip on a developer machine and FA
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -70,6 +73,36 @@ def stop(proc: subprocess.Popen[str], timeout_s: float = 15.0) -> tuple[int, str
         proc.kill()
         _, err = proc.communicate()
     return proc.returncode, err
+
+
+def interrupt_when(proc: subprocess.Popen[str], out: Path, done: Callable[[dict[str, Any]], bool],
+                   timeout_s: float) -> bool:
+    """Ctrl-C (SIGINT) to a ``run_companion`` process once its summary.json (rewritten every second)
+    satisfies ``done``, or after ``timeout_s`` of wall time. Ctrl-C is a clean end (exit 0, the summary
+    written), as the end of its ``--duration-s`` is. Whether ``done`` was seen (the process may also have
+    ended by itself: it is then left alone)."""
+    deadline = time.monotonic() + timeout_s
+    seen = False
+    while proc.poll() is None and time.monotonic() < deadline and not seen:
+        with contextlib.suppress(OSError, ValueError, KeyError, TypeError):  # not written yet, or incomplete
+            seen = done(json.loads((out / "summary.json").read_text()))
+        if not seen:
+            time.sleep(0.1)
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    return seen
+
+
+def wait_or_dump(proc: subprocess.Popen[str], timeout_s: float) -> None:
+    """Wait for ``proc`` to end; one still running ``timeout_s`` later fails the test with where it is
+    (SIGUSR1: the companion prints every thread's stack and goes on) and the rest of its stderr."""
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(1.0)
+        _, err = stop(proc)
+        raise AssertionError(f"still running {timeout_s:g} s later; stderr, stacks:\n{err[-6000:]}") from None
 
 
 def tlog_messages(path: Path) -> list[Any]:

@@ -10,7 +10,15 @@ import time
 
 import numpy as np
 import pytest
-from ardupilot_helpers import GroundStation, require_ardupilot, run_companion, stop, tlog_messages
+from ardupilot_helpers import (
+    GroundStation,
+    interrupt_when,
+    require_ardupilot,
+    run_companion,
+    stop,
+    tlog_messages,
+    wait_or_dump,
+)
 from pymavlink import mavutil
 
 from companion.autopilot.translate import Translator
@@ -21,26 +29,32 @@ M = mavutil.mavlink
 
 def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path):
     """... and when the autopilot reboots (SITL restarted mid-run, parameters kept): reconnect,
-    a fresh estimator, the streams asked for again and arriving again."""
+    a fresh estimator, the streams asked for again and arriving again. The reboot comes once the
+    companion's summary has what is checked of the run before it (condition, not a fixed wait); the
+    run ends with Ctrl-C (a clean end, exit 0) once the streams arrive again after it."""
     require_ardupilot()
     out = tmp_path / "companion"
     with ArduPilotSitl(SitlConfig(work_dir=tmp_path / "ap", speedup=10)) as sitl:
-        proc = run_companion(sitl.url, out, "--duration-s", "13")
+        proc = run_companion(sitl.url, out, "--duration-s", "40")
         other = mavutil.mavlink_connection(sitl.wait_serial(1), source_system=42, source_component=190)
         for msg_id in UNIT_CHECK_IDS:  # on SERIAL1 only: the IMU/attitude in every form, to check units
             other.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 100_000, *[0] * 5)
         forms: dict[str, list] = {}
         try:
             start = time.monotonic()
-            while time.monotonic() - start < 7 and proc.poll() is None:
+            while time.monotonic() - start < 20 and proc.poll() is None:
                 # another system on SERIAL1; ArduPilot routes it to SERIAL0
                 other.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
                 deadline = time.monotonic() + 0.3
                 while (m := other.recv_match(blocking=True, timeout=max(deadline - time.monotonic(), 0))):
                     forms.setdefault(m.get_type(), []).append(m)
+                if all(len(forms.get(k, [])) >= 20 for k in UNIT_CHECK_KINDS) and _before_reboot(out):
+                    break
             other.close()
+            before = json.loads((out / "summary.json").read_text())["samples"]["received"]["HIGHRES_IMU"]
             sitl.restart()
-            proc.wait(timeout=30)
+            interrupt_when(proc, out, lambda s: _after_reboot(s, before), 20.0)
+            wait_or_dump(proc, 30.0)
         finally:
             code, err = stop(proc)
     assert code == 0, err
@@ -90,6 +104,26 @@ def test_companion_beside_arducopter_discovers_streams_and_matches_ekf3(tmp_path
 
 UNIT_CHECK_IDS = (M.MAVLINK_MSG_ID_HIGHRES_IMU, M.MAVLINK_MSG_ID_RAW_IMU, M.MAVLINK_MSG_ID_SCALED_IMU2,
                   M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION)
+UNIT_CHECK_KINDS = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU2", "ATTITUDE", "ATTITUDE_QUATERNION")
+
+
+def _before_reboot(out) -> bool:
+    """The companion's summary (rewritten every second) has the counts checked, with a margin."""
+    try:
+        s = json.loads((out / "summary.json").read_text())
+        used, err = s["samples"]["used"], s["errors"]["autopilot_estimate"]["error_horizontal_m"]
+        return (used["imu"] > 1500 and used["gnss"] > 80 and err["count"] > 150
+                and s["samples"]["rejected"].get("autopilot_other_system", 0) > 0)
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def _after_reboot(s: dict, imu_before: int) -> bool:
+    """Reconnected after the reboot, the streams asked for again and accepted, and arriving again."""
+    asks = s["streams"]["requests"]
+    return (s["node"]["autopilot_reboots"] == 1 and s["link"]["reconnects"] >= 1 and asks >= 2
+            and s["streams"]["acks"].get("MAV_CMD_SET_MESSAGE_INTERVAL:MAV_RESULT_ACCEPTED") == 8 * asks
+            and s["samples"]["received"]["HIGHRES_IMU"] > imu_before + 300)
 
 
 def _same_units(forms: dict[str, list]) -> None:

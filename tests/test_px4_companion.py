@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from ardupilot_helpers import run_companion, stop, tlog_messages
+from ardupilot_helpers import interrupt_when, run_companion, stop, tlog_messages, wait_or_dump
 from px4_helpers import TEST_INSTANCES, GroundStation, listener, px4_fixture
 from pymavlink.dialects.v20 import common as M  # noqa: N812 - as mavutil.mavlink
 
@@ -31,11 +31,12 @@ def _number(text: str) -> float:
 def test_companion_beside_px4_discovers_streams_keeps_its_clock_and_feeds_ekf2(px4, tmp_path):
     """PX4 fuses no GNSS here (EKF2_GPS_CTRL 0); the ground station sends HIL_GPS at SIH's truth, which
     PX4 streams to the companion as GPS_RAW_INT; the companion sets the EKF origin to --home and feeds
-    ODOMETRY, which EKF2 fuses as external vision: its only source of position. Then PX4 reboots."""
+    ODOMETRY, which EKF2 fuses as external vision: its only source of position. Then PX4 reboots; the
+    run ends with Ctrl-C (a clean end, exit 0) once the companion's summary has what is checked of it."""
     out = tmp_path / "companion"
     home = ",".join(f"{v:.7f}" for v in HOME)
     with GroundStation(px4).feed_gps():
-        proc = run_companion(px4.url, out, "--feed", "odometry", "--home", home, "--duration-s", "14")
+        proc = run_companion(px4.url, out, "--feed", "odometry", "--home", home, "--duration-s", "40")
         try:
             fused: set[str] = set()  # EKF2's control-status flags seen set while we poll
             deadline = time.monotonic() + 15
@@ -46,8 +47,10 @@ def test_companion_beside_px4_discovers_streams_keeps_its_clock_and_feeds_ekf2(p
             odometry = listener(px4, "vehicle_visual_odometry")
             local = listener(px4, "vehicle_local_position")
             time.sleep(3.0)  # (a reboot within 2 s of its stream requests is not asked again: by design)
+            before = json.loads((out / "summary.json").read_text())["samples"]["received"]["HIGHRES_IMU"]
             px4.restart(wait_heartbeat=False)  # the companion holds the onboard port
-            proc.wait(timeout=30)
+            interrupt_when(proc, out, lambda s: _after_reboot(s, before), 25.0)
+            wait_or_dump(proc, 30.0)
         finally:
             code, err = stop(proc)
     assert code == 0, err
@@ -100,6 +103,19 @@ def test_companion_beside_px4_discovers_streams_keeps_its_clock_and_feeds_ekf2(p
     reboot = int(np.argmax(np.diff(imu) < 0)) + 1
     assert reboot > 500 and imu.size - reboot > 100  # before and again after the reboot
     assert abs(np.median(np.diff(imu[:reboot])) - 20_000) < 2_000  # the 50 Hz asked for, PX4's clock
+
+
+ACCEPTED = "MAV_CMD_SET_MESSAGE_INTERVAL:MAV_RESULT_ACCEPTED"
+
+
+def _after_reboot(s: dict, imu_before: int) -> bool:
+    """The streams asked for again after the reboot, accepted and arriving again; the counts checked
+    reached with a margin."""
+    asks, used = s["streams"]["requests"], s["samples"]["used"]
+    return (s["node"]["autopilot_reboots"] == 1 and asks >= 2
+            and s["streams"]["acks"].get(ACCEPTED, 0) >= 8 * (asks - 1)
+            and s["samples"]["received"]["HIGHRES_IMU"] > imu_before + 300
+            and used["imu"] > 2500 and used["gnss"] > 250)
 
 
 def _set_int(gs: GroundStation, name: str, value: int) -> None:
