@@ -45,7 +45,9 @@ def stop_on_signals() -> Iterator[StopRequest]:
     """SIGINT (Ctrl-C) and SIGTERM as a request to stop, not an exception: an exception raised at
     whatever line runs when the signal lands can cut a frame in the tlog in half or be lost in a
     finaliser, and a busy run must still end. A second signal ends the process at once, as a signal
-    does without this (KeyboardInterrupt for SIGINT, SystemExit 128 + signum for SIGTERM). The
+    does without this (KeyboardInterrupt for SIGINT, SystemExit 128 + signum for SIGTERM). Installed
+    even over an ignored SIGINT: a shell starts a script's background jobs with SIGINT ignored, which
+    Python keeps, so ``kill -INT`` (or the script's Ctrl-C) would not end such a run at all. The
     handlers before are restored on leaving. Outside the main thread (where Python cannot install
     handlers) nothing is installed and the request stays empty."""
     request = StopRequest()

@@ -49,6 +49,20 @@ def test_first_signal_is_a_request_the_second_ends_at_once_handlers_restored():
     assert {s: signal.getsignal(s) for s in before} == before
 
 
+def test_an_ignored_sigint_still_stops_the_run_and_is_ignored_again_after():
+    """A script's background job starts with SIGINT ignored (Python keeps SIG_IGN): a run must still
+    stop on it (this is how a companion once ran on for 30 s after a test's Ctrl-C)."""
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with stop_on_signals() as request:
+            os.kill(os.getpid(), signal.SIGINT)
+            _wait_for(request)
+            assert request.name == "SIGINT"
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 def test_outside_the_main_thread_nothing_is_installed():
     seen = {}
 
