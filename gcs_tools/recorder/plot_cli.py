@@ -18,7 +18,8 @@ from gcs_tools.recorder.recording import read_recording, recorded_route, series
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="recording made by `beliefnav record`")
-    parser.add_argument("--out", help="output folder (default: next to the recording)")
+    parser.add_argument("--out", help="output folder (default: beside the recording, named after it: "
+                                      "run/ for run.jsonl)")
     parser.add_argument("--vehicle", help="only this vehicle (default: all)")
 
 
