@@ -268,6 +268,17 @@ def test_the_collector_joins_continuations_as_the_shell_does() -> None:
         "-m", "gcs_tools.evaluate.real", "--flights", "reporting"]
 
 
+@pytest.mark.filterwarnings(RUNPY_WARNING)
+def test_the_examples_in_beliefnav_help_parse(monkeypatch: pytest.MonkeyPatch) -> None:
+    error, text = parse(["beliefnav", "--help"], monkeypatch)
+    assert error is None, error
+    examples = [re.split(r"\s{2,}", x.strip())[0] for x in text.splitlines() if x.startswith("  beliefnav ")]
+    assert len(examples) >= 5
+    bad = [f"beliefnav --help: {line}\n    {problem}" for line in examples
+           if (problem := check(line, monkeypatch)) is not None]
+    assert not bad, "\n".join(bad)
+
+
 def make_targets() -> set[str]:
     """The targets the docs name: `make NAME` in a code span or at the start of a fenced line."""
     names = set()
