@@ -66,7 +66,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="X,Y,Z",
         help="a static receiver's true ECEF position (m) instead of a truth file",
     )
-    p.add_argument("--out", type=Path, default=Path("runs/gnss-spp"), help="output directory")
+    p.add_argument(
+        "--out", type=Path, default=Path("runs/gnss-spp"), help="output directory (default runs/gnss-spp)"
+    )
     p.add_argument(
         "--weighting",
         default="cn0-elevation",
