@@ -41,7 +41,8 @@ def doc_commands() -> list[tuple[str, str, bool]]:
     for doc in DOCS:
         text = doc.read_text(encoding="utf-8")
         for m in re.finditer(r"```(\w*)\n(.*?)```", text, re.S):
-            if m.group(1) in NOT_SHELL:
+            prompted = m.group(1) == "text"  # a transcript: only its `$ ` lines are commands
+            if m.group(1) in NOT_SHELL and not prompted:
                 continue
             first = text[: m.start()].count("\n") + 2
             lines = m.group(2).split("\n")
@@ -53,6 +54,8 @@ def doc_commands() -> list[tuple[str, str, bool]]:
                     line = line[:-1] + lines[k]
                 k += 1
                 line = re.sub(r"\s+#.*$", "", line).strip()  # a trailing shell comment
+                if prompted and not line.startswith("$ "):
+                    continue
                 fragment = not COMMAND.match(line)
                 if fragment:
                     inner = inside.search(line)
