@@ -74,7 +74,12 @@ def doc_commands() -> list[tuple[str, str, bool]]:
 
 def inline_commands() -> list[tuple[str, str]]:
     """(file:line, command) of every inline code span outside fenced blocks that starts like a command:
-    often a fragment (``beliefnav sitl --vehicle``), so only its option names are checked."""
+    often a fragment (``beliefnav sitl --vehicle``), so only its option names are checked. A command
+    named without ``beliefnav`` but with an option (``replay --coupling tight``, ``gnss spp --systems GE``)
+    counts as one."""
+    from gcs_tools.cli import COMMANDS
+
+    bare = re.compile(rf"(?:{'|'.join(COMMANDS)})(?: [a-z][\w-]*)? --[a-z]")
     out = []
     for doc in DOCS:
         text = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), doc.read_text(encoding="utf-8"),
@@ -82,6 +87,8 @@ def inline_commands() -> list[tuple[str, str]]:
         # a span may wrap onto the next line (not across a paragraph)
         for m in re.finditer(r"(?<!`)`((?:[^`\n]|\n(?!\s*\n))+)`(?!`)", text):
             span = " ".join(m.group(1).split())
+            if bare.match(span):
+                span = f"beliefnav {span}"
             ours = COMMAND.match(span) and (not span.startswith("python") or span.split()[2].startswith(OURS))
             if ours:
                 out.append((f"{doc.relative_to(ROOT)}:{text[: m.start()].count(chr(10)) + 1}", span))
@@ -252,14 +259,16 @@ def test_a_command_kept_working_under_a_hidden_option_is_fine(monkeypatch: pytes
 def test_the_collector_finds_wrapped_and_continued_commands(tmp_path: Path,
                                                             monkeypatch: pytest.MonkeyPatch) -> None:
     doc = tmp_path / "doc.md"
-    doc.write_text("Run `beliefnav replay LOG\n--no-fig` to see.\n\n"
+    doc.write_text("Run `beliefnav replay LOG\n--no-fig` to see, or `gnss spp --sys GE`.\n\n"
                    "```\nbeliefnav gnss spp INPUT [--nav NAV]\n    [--no-such-option]\n"
                    "SERIAL1 <-> beliefnav companion --master tcp:HOST:PORT --feed F\n"
                    "    --no-such-feed X\n```\n",
                    encoding="utf-8")
     monkeypatch.setattr(sys.modules[__name__], "DOCS", [doc])
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
-    assert inline_commands() == [("doc.md:1", "beliefnav replay LOG --no-fig")]
+    assert inline_commands() == [("doc.md:1", "beliefnav replay LOG --no-fig"),
+                                 ("doc.md:2", "beliefnav gnss spp --sys GE")]
+    assert all(check(span, monkeypatch, names_only=True) for _, span in inline_commands())
     assert doc_commands() == [
         ("doc.md:5", "beliefnav gnss spp INPUT [--nav NAV] [--no-such-option]", False),
         ("doc.md:7", "beliefnav companion --master tcp:HOST:PORT --feed F --no-such-feed X", True)]
