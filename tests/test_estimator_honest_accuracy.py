@@ -18,7 +18,7 @@ from companion.estimator.consistency import (
     accuracy_inflation,
     fix_floor,
     honest_horizontal,
-    snapshot_floor,
+    snapshot_parts,
 )
 from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, consistent_stream, drive
@@ -142,7 +142,7 @@ def test_one_axis_scatter_is_two_equal_axes_bit_for_bit():
     changes of q exactly 0), gaps of 3 windows (the window expired), of 720 windows (the decay a
     subnormal) and of 1000 (a = 0), and restarts from empty (a reset): after every fix each sum equals
     the two-axis sum of either axis (the squared changes' pooled sums), and the variance, the correlation
-    (alone and together, ``statistics``) and both floors (``fix_floor``, ``snapshot_floor``) are the same
+    (alone and together, ``statistics``) and both floors (``fix_floor``, ``snapshot_parts``) are the same
     bits."""
     rng = np.random.default_rng(2026)
     window = 5.0
@@ -174,7 +174,7 @@ def test_one_axis_scatter_is_two_equal_axes_bit_for_bit():
         assert one.statistics() == two.statistics() == (c, s2)  # (both at once: the floors')
         r = float(rng.choice((0.04, 1.0, math.inf)))
         assert fix_floor(one, r) == fix_floor(two, r)
-        assert snapshot_floor(one, r, 1.7) == snapshot_floor(two, r, 1.7)
+        assert snapshot_parts(one, r) == snapshot_parts(two, r)
         seen["c=1"] += c == 1.0
         seen["1<c<C_MAX"] += 1.0 < c < C_MAX
         seen["c=C_MAX"] += c == C_MAX

@@ -12,7 +12,7 @@ from scipy.stats import chi2
 
 from companion.domain.samples import GnssFix
 from companion.errors import ConfigError
-from companion.estimator.consistency import fix_floor, floored_axis, snapshot_floor
+from companion.estimator.consistency import fix_floor, snapshot_axis, snapshot_parts
 from companion.gnss import make_epoch
 from companion.gnss.systems import System
 from companion.tight import Odometry, RawGnss, TightConfig, TightNavigator, belief, model
@@ -261,12 +261,14 @@ def test_out_of_sequence_epochs_equal_in_order():
                 # the reported accuracy's snapshot floor (correlation, one snapshot's variance) re-fused too
                 fa, fb = fix_floor(sa, ea.fix_var_m2[i]), fix_floor(sb, eb.fix_var_m2[i])
                 assert fb == pytest.approx(fa, rel=1e-9) and sb.t_us == sa.t_us
+            np.testing.assert_allclose(eb.delay_m2, ea.delay_m2, rtol=1e-9, atol=1e-12)  # the delays' bias too
             qa, qb = ea.info.q_pos_ned, eb.info.q_pos_ned
             assert (qa is None) == (qb is None)
             if qa is not None:
                 np.testing.assert_allclose(qb, qa, rtol=1e-12)
         assert a.entries[-1].info.q_pos_ned is not None
         assert fix_floor(a.entries[-1].scatter_h, a.entries[-1].fix_var_m2[0])[1] > 0.0  # a floor to compare
+        assert max(a.entries[-1].delay_m2) > 0.0  # weights that differ by satellite: a delay bias
         assert a.counts["sat_used"] == b.counts["sat_used"]
 
 
@@ -369,13 +371,16 @@ def test_navigator_on_raw_epochs_with_ephemerides_and_bad_input():
     assert t_now == est.t_us
     np.testing.assert_allclose(np.r_[est.p_ned_m, est.v_ned_m_s], x_now[0:6], atol=1e-9)
     # the position variances reported: P's times the filter's measured consistency (≥ 1), floored by its
-    # own snapshots' correlation and variance (consistency.snapshot_floor); the velocities' as P's
+    # own snapshots' white and slow parts (consistency.snapshot_parts) and the one-signed delays' bias
+    # (accuracy_delay_fraction² × the last snapshot's delay_m2); the velocities' as P's
     k = nav.accuracy_inflation()
     last = nav.engine.entries[-1]
     assert k == last.fit.inflation() >= 1.0
-    floors = [snapshot_floor(last.scatter_h, last.fix_var_m2[0], k)] * 2 + [
-        snapshot_floor(last.scatter_v, last.fix_var_m2[1], k)]
-    want = [floored_axis(float(P_now[i, i]), k, *floors[i]) for i in range(3)]
+    floors = [snapshot_parts(last.scatter_h, last.fix_var_m2[0], last.kept[0])] * 2 + [
+        snapshot_parts(last.scatter_v, last.fix_var_m2[1], last.kept[1])]
+    f2 = TightConfig().accuracy_delay_fraction ** 2
+    assert f2 > 0.0 and max(last.delay_m2) > 0.0  # the σ model's weights differ: a delay bias to report
+    want = [snapshot_axis(float(P_now[i, i]), k, floors[i], f2 * last.delay_m2[i]) for i in range(3)]
     np.testing.assert_allclose(est.cov_diag[0:3], want, rtol=1e-9)
     assert (est.cov_diag[0:3] >= np.diag(P_now)[0:3] * k * (1 - 1e-12)).all()
     np.testing.assert_allclose(est.cov_diag[3:6], np.diag(P_now)[3:6], rtol=1e-9)

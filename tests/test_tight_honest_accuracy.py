@@ -10,11 +10,19 @@ import math
 import numpy as np
 import pytest
 
-from companion.estimator.consistency import Scatter, fix_floor, floored_axis, snapshot_floor
+from companion.estimator.consistency import (
+    C_MAX,
+    Scatter,
+    Scatter1,
+    fix_floor,
+    snapshot_axis,
+    snapshot_parts,
+    white_and_slow,
+)
 from companion.tight import TightConfig, TightNavigator, _tight
 from companion.tight import engine as tight_engine
 from companion.tight.model import I_CLK, pseudorange, range_rate
-from companion.tight.snapshot import epoch_fix, epoch_velocity
+from companion.tight.snapshot import delay_bias, epoch_fix, epoch_velocity
 from tests.test_tight import FRAME, _feed, _synthetic_epochs
 
 PERIOD_US = 200_000
@@ -48,9 +56,10 @@ def test_epoch_fix_is_the_weighted_least_squares_position_known_answer():
 
 
 def test_the_c_snapshot_equals_the_numpy_reference():
-    """``_tight.snapshot`` (the engine's, in C) == ``snapshot.epoch_fix`` + the prediction and
-    ``snapshot.epoch_velocity`` at that position, over the used satellites (to 1e-9), on a synthetic epoch
-    with Doppler; None without a redundant satellite; the velocity NaN with fewer than 5 rates."""
+    """``_tight.snapshot`` (the engine's, in C) == ``snapshot.epoch_fix`` + the prediction,
+    ``snapshot.epoch_velocity`` at that position and ``snapshot.delay_bias``, over the used satellites (to
+    1e-9), on a synthetic epoch with Doppler; None without a redundant satellite; the velocity NaN with
+    fewer than 5 rates."""
     cfg = TightConfig.for_ground_vehicle()
     rng = np.random.default_rng(3)
     epochs, truth = _synthetic_epochs(rng, cfg, 1)
@@ -70,14 +79,16 @@ def test_the_c_snapshot_equals_the_numpy_reference():
     p = x[0:3] + fix[0]
     v = epoch_velocity(e.sat_pos_ecef_m[u], e.sat_vel_ecef_m_s[u], FRAME.ecef(p), FRAME.c_ecef_ned,
                        e.z_rate_m_s[u], rr[u])
-    assert v is not None
-    np.testing.assert_allclose(got, np.r_[p, fix[1], v], rtol=1e-9, atol=1e-9)
+    b = delay_bias(H[u], r[u], e.slot[u])
+    assert v is not None and b is not None and np.abs(b).max() > 0.1
+    np.testing.assert_allclose(got, np.r_[p, fix[1], v, b], rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(v, truth[0][3:6], atol=0.5)  # the true velocity, to its noise
     rate = e.z_rate_m_s.copy()
     rate[u[4:]] = np.nan  # 4 rates left
     few = _tight.snapshot(H, y, r, used.astype(float), x[0:3], e.sat_pos_ecef_m, e.sat_vel_ecef_m_s, rate, rr,
                           FRAME.r0_ecef_m, FRAME.c_ecef_ned)
     assert few is not None and np.isnan(few[6:9]).all() and np.array_equal(few[0:6], got[0:6])
+    assert np.array_equal(few[9:12], got[9:12])
     one = np.flatnonzero(e.slot == e.slot[0])  # one clock: 4 unknowns
     assert len(one) >= 5
     for n, redundant in ((4, False), (5, True)):
@@ -160,7 +171,7 @@ def _coverage(sigma_gm: float, sigma_white: float = 5.0, sigma_filter: float = 5
     over k P."""
     cfg = TightConfig.for_ground_vehicle(sigma_clock0_m=1e3, sigma_uniform_m=sigma_filter)
     rng = np.random.default_rng(17)
-    out: dict[str, list[float]] = {"h_kp": [], "h_rep": [], "v_kp": [], "v_rep": [], "ratio": []}
+    out: dict[str, list[float]] = {"h_kp": [], "h_rep": [], "v_kp": [], "v_rep": [], "ratio": [], "h_old": []}
     for _ in range(runs):
         epochs, truth = _common_mode_epochs(rng, cfg, n, sigma_gm, sigma_white, tau_s)
         nav = TightNavigator(cfg, "naive")
@@ -184,7 +195,60 @@ def _coverage(sigma_gm: float, sigma_white: float = 5.0, sigma_filter: float = 5
             out["v_kp"].append(float(d[2] ** 2 / (kk * p[2])))
             out["v_rep"].append(float(d[2] ** 2 / rep[2]))
             out["ratio"].extend((rep / (kk * p)).tolist())
+            out["h_old"].append(float(d[0] ** 2 / _old_rule(p[0], kk, e) + d[1] ** 2 / _old_rule(p[1], kk, e)))
     return {k: np.asarray(v) for k, v in out.items()}
+
+
+def _old_rule(p: float, k: float, e: tight_engine.Entry) -> float:
+    """The horizontal floor before the white/slow split: max(k P, min(c max(1, s²/r) P, max(s², r))), c from
+    the squared changes over one and two snapshots alone (``Scatter.correlation``)."""
+    c, s2 = e.scatter_h.statistics()
+    r = e.fix_var_m2[0]
+    return max(k * p, min(c * max(1.0, s2 / r) * p, max(s2, r)))
+
+
+def test_white_and_slow_known_answers():
+    """σ_w², σ_s², ρ back exactly from the moments of white + Gauss-Markov (δ1 = σ_w² + σ_s²(1 − ρ),
+    δ2 = σ_w² + σ_s²(1 − ρ²), s² = σ_w² + σ_s²), and the edges: no slow part (white alone), no decay over
+    two epochs (ρ = 1)."""
+    for w, s, rho in ((1.0, 9.0, 0.96), (0.0, 4.0, 0.5), (3.0, 0.5, 0.2)):
+        got = white_and_slow(w + s, w + s * (1 - rho), w + s * (1 - rho * rho))
+        np.testing.assert_allclose(got, (w, s, rho), rtol=1e-12, atol=1e-12)
+    assert white_and_slow(2.0, 2.0, 2.0) == (2.0, 0.0, 0.0)  # δ1 = s²: white
+    assert white_and_slow(2.0, 1.0, 2.5) == (2.0, 0.0, 0.0)  # δ2 ≥ s²: white
+    assert white_and_slow(5.0, 1.0, 0.8) == (1.0, 4.0, 1.0)  # δ2 ≤ δ1: no decay
+
+
+def test_a_slow_error_under_white_noise_is_seen():
+    """Snapshots with white N(0, 1) and a Gauss-Markov error of σ 3 m, τ 5 s (ρ = e^(−0.04) per 0.2 s)
+    through ``Scatter`` (the window 20 s): the two-lag correlation alone (the old rule's c) sees a white part
+    comparable to the slow one's step and misses the correlation ((1 + ρ)/(1 − ρ) = 49; its median is below
+    10), while the white/slow split gives ρ, σ_s² and σ_w² (medians over 100 streams within 0.03, 35 % and
+    50 %: the window's scatter sees part of a slow error's variance)."""
+    rng = np.random.default_rng(9)
+    rho = math.exp(-0.2 / 5.0)
+    c_old, got = [], []
+    for _ in range(100):
+        sc, g = Scatter1(), 3.0 * rng.standard_normal()
+        for i in range(400):
+            g = rho * g + math.sqrt(1.0 - rho * rho) * 3.0 * rng.standard_normal()
+            sc = sc.add(i * PERIOD_US, 2.0 * i * PERIOD_US * 1e-6 + g + rng.standard_normal(), 2.0, 20.0)
+        c_old.append(sc.correlation())
+        d = 0.25 / sc.d_w_sum
+        got.append(white_and_slow(sc.variance(), sc.d1_sum * d, sc.d2_sum * d))
+    w, s, r = np.median(np.array(got), axis=0)
+    assert np.median(c_old) < 10.0, np.median(c_old)
+    assert abs(r - rho) < 0.03 and s == pytest.approx(9.0, rel=0.35) and w == pytest.approx(1.0, rel=0.5)
+
+
+def test_a_slow_error_under_white_noise_is_covered_better():
+    """The filter told 1 m per pseudorange, white 1 m and every satellite agreeing on a Gauss-Markov error
+    (3 m, τ 5 s) that the filter follows: P × k covers almost nothing, the old floor (c from two lags) too
+    little, the white/slow split much more, without covering more than a Gaussian (2 σ: 86.5 %). Still short
+    (measured 21 / 55 %): the window's scatter sees part of a 5 s error's variance."""
+    c = _coverage(3.0, sigma_white=1.0, sigma_filter=1.0, tau_s=5.0, runs=6)
+    kp, old, new = (np.mean(c[k] <= 4.0) for k in ("h_kp", "h_old", "h_rep"))
+    assert kp < 0.2 and old < 0.4 and new > old + 0.15 and new < 0.9, (kp, old, new)
 
 
 def test_a_correlated_error_of_known_variance_is_covered():
@@ -238,8 +302,9 @@ def test_the_floor_is_a_report_the_estimate_is_bit_identical(monkeypatch):
 
 
 def test_reported_variance_is_the_floor_of_the_last_entry():
-    """The navigator's variances: per axis max(k P, min(c max(1, s²/r) P, σ²)) with c, s², σ² of the last
-    entry's horizontal and vertical scatter and r its snapshot's variance (``consistency.snapshot_floor``),
+    """The navigator's variances: per axis max(k P, min(P σ_w²/r + min(σ_s², P σ_s² c_s/r), σ²), (f b)²) with
+    the white and slow parts of the last entry's horizontal and vertical scatter (``consistency.
+    snapshot_parts``), r its snapshot's variance, b its delay bias and f ``accuracy_delay_fraction``;
     velocities as P."""
     cfg = TightConfig.for_ground_vehicle(sigma_clock0_m=1e3, sigma_uniform_m=4.0)
     epochs, _ = _common_mode_epochs(np.random.default_rng(8), cfg, 150, 3.0, 0.1, 2.0)
@@ -254,13 +319,57 @@ def test_reported_variance_is_the_floor_of_the_last_entry():
     last = nav.engine.entries[-1]
     _, out, _ = nav.engine.output_now()
     k = nav.accuracy_inflation()
-    assert fix_floor(last.scatter_h, last.fix_var_m2[0])[0] > 1.0
-    c_h, s2_h = snapshot_floor(last.scatter_h, last.fix_var_m2[0], k)
-    c_v, s2_v = snapshot_floor(last.scatter_v, last.fix_var_m2[1], k)
-    scatter = last.scatter_h.variance()
-    assert c_h == pytest.approx(last.scatter_h.correlation() * max(1.0, scatter / last.fix_var_m2[0]) / k)
-    want = [floored_axis(out[9], k, c_h, s2_h), floored_axis(out[10], k, c_h, s2_h),
-            floored_axis(out[11], k, c_v, s2_v)]
+    f_h = snapshot_parts(last.scatter_h, last.fix_var_m2[0], last.kept[0])
+    f_v = snapshot_parts(last.scatter_v, last.fix_var_m2[1], last.kept[1])
+    assert f_h is not None and f_v is not None and f_h.slow > 0.0
+    assert max(last.delay_m2) < 1e-12  # equal weights: a common delay goes to the clock
+    want = [snapshot_axis(out[9], k, f_h), snapshot_axis(out[10], k, f_h), snapshot_axis(out[11], k, f_v)]
     np.testing.assert_array_equal(est.cov_diag[0:3], want)
     np.testing.assert_array_equal(est.cov_diag[3:6], out[12:15])
     assert est.cov_diag[0] > k * out[9] and est.cov_diag[2] > k * out[11]  # the floor acts here
+
+
+def _delayed_run(fraction: float, n: int = 150
+                 ) -> tuple[list[tight_engine.Entry], np.ndarray, np.ndarray, np.ndarray]:
+    """Every satellite late by 0.4 × its own σ (the C/N0 + elevation model's, which the fixed-weight
+    cn0-elevation row fuses with: larger at low elevation) beside 0.1 m white noise, the report with
+    ``accuracy_delay_fraction`` = ``fraction``: (the entries kept, the errors N, E, D, the reported variances
+    and the last entry's ``delay_m2`` after the first 10 s)."""
+    cfg = TightConfig.for_ground_vehicle(sigma_clock0_m=1e3, sigma_uniform_m=0.1,
+                                         accuracy_delay_fraction=fraction)
+    epochs, truth = _synthetic_epochs(np.random.default_rng(21), cfg, n)
+    epochs = [e._replace(z_m=e.z_m + 0.4 * np.sqrt(e.r_model_m2)) for e in epochs]
+    nav = TightNavigator(cfg, "cn0-elevation")
+    nav.engine.frame = FRAME
+    err, rep, delay = [], [], []
+    for k, e in enumerate(epochs):
+        t_us = 1_000_000 + PERIOD_US * k
+        nav.engine.push_acc(t_us, 0.0, 0.0, 0.0)
+        nav.engine.push_epoch(t_us, e)
+        if k >= 50:
+            est = nav.estimate()
+            assert est is not None
+            err.append(np.asarray(est.p_ned_m) - truth[k][0:3])
+            rep.append(np.asarray(est.cov_diag[0:3]))
+            delay.append(nav.engine.entries[-1].delay_m2)
+    return list(nav.engine.entries), np.array(err), np.array(rep), np.array(delay)
+
+
+def test_one_signed_delays_are_covered_and_the_estimate_is_unchanged():
+    """Satellites late by 0.4 σ each (a street's one-signed delays; ``_delayed_run``): the filter's height
+    settles on the snapshot's response to them, 0.4 b (``snapshot.delay_bias``: the weighted least squares of
+    every satellite late by its σ; within 15 %), which its innovations do not show (the satellites agree on
+    that position): without the delay term the report misses it (outside 1 σ in nearly every epoch), with
+    ``accuracy_delay_fraction`` = 0.4 it is at least (0.4 b)² on every axis, |e_D| within 2 σ throughout. The
+    estimate and every entry's state and covariance are the same bits with and without the term."""
+    off, e_off, v_off, d_off = _delayed_run(0.0)
+    on, e_on, v_on, d_on = _delayed_run(0.4)
+    for a, b in zip(off, on, strict=True):
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P) and a.delay_m2 == b.delay_m2
+    assert np.array_equal(e_off, e_on) and np.array_equal(d_off, d_on)
+    bias = np.sqrt(np.array(on[-1].delay_m2))
+    assert bias[2] > 1.0  # the delays grow at low elevation: the height moves (metres)
+    assert abs(e_on[-20:, 2].mean()) == pytest.approx(0.4 * bias[2], rel=0.15)  # (the receiver moves: noise)
+    assert np.mean(e_off[:, 2] ** 2 > v_off[:, 2]) > 0.95  # before: outside 1 σ (a Gaussian: 32 %)
+    assert (v_on >= 0.16 * d_on * (1 - 1e-12)).all()
+    assert (e_on[:, 2] ** 2 <= 4.0 * v_on[:, 2]).all()  # after: within 2 σ (the filter settles within 0.6 m)

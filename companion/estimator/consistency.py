@@ -317,6 +317,72 @@ def snapshot_floor(scatter: Scatter | Scatter1, r_m2: float, k: float) -> tuple[
     return c / k, s2
 
 
+class SnapshotFloor(NamedTuple):
+    """One axis's floor from a filter's own snapshot positions (``snapshot_parts``): for the filter's variance
+    p the report is max(k p, min(p·white + min(slow, p·slow_rate), cap), delay) (``snapshot_axis``; N and E
+    share one)."""
+
+    white: float  # σ_w² / r: the white part's share, averaged down as the filter's P says
+    slow: float  # σ_s² (m²): the slow part's variance, not averaged below it
+    slow_rate: float  # σ_s² c_s / r: its variance when the filter's memory is short of its correlation
+    cap: float  # one snapshot's variance (m²): the report's most from the snapshots
+
+
+def white_and_slow(s2: float, delta1: float, delta2: float) -> tuple[float, float, float]:
+    """(σ_w², σ_s², ρ): a series' variance ``s2`` split into a white part and a Gauss-Markov part of
+    correlation ρ from one epoch to the next, from half the mean squared changes over one and two epochs,
+    δ1 = σ_w² + σ_s² (1 − ρ) and δ2 = σ_w² + σ_s² (1 − ρ²) with s² = σ_w² + σ_s²:
+
+        ρ = (s² − δ2) / (s² − δ1),   σ_s² = (s² − δ1)² / (s² − δ2),   σ_w² = s² − σ_s²
+
+    exact for that process. The edges: s² ≤ δ1 or δ2 ≥ s² (no slow part the series shows): white alone;
+    δ2 ≤ δ1 (no decay over two epochs): ρ = 1, the slow part s² − δ1."""
+    if not s2 > delta1 or not s2 > delta2:
+        return s2, 0.0, 0.0
+    if delta2 <= delta1:
+        return delta1, s2 - delta1, 1.0
+    rho = (s2 - delta2) / (s2 - delta1)
+    slow = (s2 - delta1) * (s2 - delta1) / (s2 - delta2)
+    return s2 - slow, slow, rho
+
+
+def snapshot_parts(scatter: Scatter | Scatter1, r_m2: float, kept: float = 1.0) -> SnapshotFloor | None:
+    """The floor a filter's own per-epoch snapshot positions give one axis (the tight filter's: independent
+    of its state, each with the variance ``r_m2`` its weights give it; docs/tight.md "Reported accuracy").
+    Their scatter s² (``Scatter.variance``) is split into a white part σ_w² and a Gauss-Markov part σ_s² of
+    correlation ρ from one snapshot to the next (``white_and_slow``, from the squared changes over one and
+    two snapshots). P holds the snapshots' information as if each had the variance r and were independent:
+    the white part of their average over the filter's memory has the variance P σ_w²/r, the slow part
+    P σ_s² c_s / r, at most σ_s² (a filter remembering less than the correlation averages nothing of it),
+    with c_s = (1 + aρ)/(1 − aρ) for a filter that keeps the share a = ``kept`` of its past per epoch (an
+    exponential average: its weights' correlation-weighted sum over their plain one; a = 1, the long-memory
+    limit (1 + ρ)/(1 − ρ)). r is at most s² here (a filter told more than the snapshots scatter is not
+    shrunk below its P), the report at most one snapshot's variance max(s², r). None before 3 snapshots or
+    without a stated variance."""
+    if scatter.d_w_sum < 1.5 or not (r_m2 > 0.0 and math.isfinite(r_m2)):
+        return None
+    _, s2 = scatter.statistics()
+    d = 0.25 / scatter.d_w_sum  # d1_sum, d2_sum hold both axes' (or the one axis's twice) squared changes
+    white, slow, rho = white_and_slow(s2, scatter.d1_sum * d, scatter.d2_sum * d)
+    r = s2 if 0.0 < s2 < r_m2 else r_m2
+    a_rho = rho * kept if 0.0 < kept < 1.0 else rho
+    c_s = (1.0 + a_rho) / (1.0 - a_rho) if a_rho < 1.0 - 2.0 / (C_MAX + 1.0) else C_MAX
+    return SnapshotFloor(white / r, slow, slow * c_s / r, r_m2 if r_m2 > s2 else s2)
+
+
+def snapshot_axis(p: float, k: float, f: SnapshotFloor | None, delay_m2: float = 0.0) -> float:
+    """max(k p, min(p·white + min(slow, p·slow_rate), cap), delay_m2) for one axis's variance ``p``
+    (``SnapshotFloor``; max(k p, delay_m2) without one): ``delay_m2`` the one-signed delays' bias² (m²,
+    ``TightConfig.accuracy_delay_fraction``)."""
+    v = p * k
+    if f is not None:
+        slow = p * f.slow_rate
+        s = p * f.white + (slow if slow < f.slow else f.slow)
+        s = s if s < f.cap else f.cap
+        v = v if v > s else s
+    return v if v > delay_m2 else delay_m2
+
+
 def floored(var_ne: np.ndarray, k: float, c: float, s2: float) -> np.ndarray:
     """max(k P, min(c k P, σ²)) per axis (k P when c is 1)."""
     return np.array([floored_axis(float(p), k, c, s2) for p in var_ne])

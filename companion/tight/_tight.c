@@ -537,11 +537,12 @@ static int chol_solve(double *A, int k, double *B, int nr) {
     return 1;
 }
 
-/* snapshot(H, y, r, used, p_pred, sat_pos, sat_vel, rate, r_rate, r0, C) -> (p (3), var (3), v (3)) or None:
- * snapshot.epoch_fix's position (p_pred + the weighted least-squares correction of position and one clock
- * per slot present among the used rows, weights 1/r, one redundant satellite required) and its variances,
- * and snapshot.epoch_velocity's velocity at it (NaN with fewer than 5 finite rates among the used rows);
- * None without a redundant satellite or with a singular geometry */
+/* snapshot(H, y, r, used, p_pred, sat_pos, sat_vel, rate, r_rate, r0, C) -> (p (3), var (3), v (3), b (3))
+ * or None: snapshot.epoch_fix's position (p_pred + the weighted least-squares correction of position and one
+ * clock per slot present among the used rows, weights 1/r, one redundant satellite required) and its
+ * variances, snapshot.epoch_velocity's velocity at it (NaN with fewer than 5 finite rates among the used
+ * rows), and the same correction for every used row late by its own σ = √r (snapshot.delay_bias: the
+ * one-signed delays' bias); None without a redundant satellite or with a singular geometry */
 static PyObject *py_snapshot(PyObject *self, PyObject *args) {
     PyObject *objs[11];
     if (!PyArg_ParseTuple(args, "OOOOOOOOOOO", &objs[0], &objs[1], &objs[2], &objs[3], &objs[4], &objs[5],
@@ -583,28 +584,30 @@ static PyObject *py_snapshot(PyObject *self, PyObject *args) {
         Py_INCREF(result);
         goto done;
     }
-    double A[(3 + NC) * (3 + NC)] = {0}, B[(3 + NC) * 4] = {0};
+    double A[(3 + NC) * (3 + NC)] = {0}, B[(3 + NC) * 5] = {0};
     for (npy_intp i = 0; i < m; i++) {
         if (used[i] == 0.0) continue;
         const double *h = H + i * N;
-        double w = 1.0 / r[i];
+        double w = 1.0 / r[i], sd = sqrt(r[i]);
         for (int p = 0; p < k; p++) {
             double gp = h[col[p]] * w;
             if (gp == 0.0) continue;
             for (int q = 0; q < k; q++) A[p * k + q] += gp * h[col[q]];
-            B[p * 4] += gp * y[i];
+            B[p * 5] += gp * y[i];
+            B[p * 5 + 4] += gp * sd;
         }
     }
-    for (int j = 0; j < 3; j++) B[j * 4 + 1 + j] = 1.0;
-    if (!chol_solve(A, k, B, 4)) {
+    for (int j = 0; j < 3; j++) B[j * 5 + 1 + j] = 1.0;
+    if (!chol_solve(A, k, B, 5)) {
         result = Py_None;
         Py_INCREF(result);
         goto done;
     }
-    double out[9];
+    double out[12];
     for (int j = 0; j < 3; j++) {
-        out[j] = pp[j] + B[j * 4];
-        out[3 + j] = B[j * 4 + 1 + j];
+        out[j] = pp[j] + B[j * 5];
+        out[3 + j] = B[j * 5 + 1 + j];
+        out[9 + j] = B[j * 5 + 4];
         if (!isfinite(out[j]) || !(out[3 + j] > 0.0) || !isfinite(out[3 + j])) {
             result = Py_None;
             Py_INCREF(result);
@@ -636,7 +639,7 @@ static PyObject *py_snapshot(PyObject *self, PyObject *args) {
     if (n_rate >= 5 && chol_solve(Av, 4, Bv, 1) && isfinite(Bv[0]) && isfinite(Bv[1]) && isfinite(Bv[2])
         && isfinite(Bv[3]))
         for (int j = 0; j < 3; j++) out[6 + j] = Bv[j];
-    result = new_array(1, 9, 0, out);
+    result = new_array(1, 12, 0, out);
 done:
     for (int i = 0; i < 11; i++) Py_XDECREF(a[i]);
     return result;

@@ -208,11 +208,19 @@ class TightConfig:
     # the position covariance × max(1, NIS per degree of freedom of the used pseudoranges over the last
     # accuracy_window_s, exponentially weighted), the variance-of-unit-weight test a receiver applies to
     # its reported accuracy: where the measurement model is wrong (reflections the belief did not
-    # catch) P alone is over-confident; per axis (N, E pooled; D) at least min(c × max(1, s²/r) × P, σ²)
-    # from the epochs' own snapshot positions over the same window (consistency.snapshot_floor: c their
-    # correlation, s² their scatter, r a snapshot's variance as weighted, σ² one snapshot's variance),
-    # for what the filter follows and its innovations do not show. A report only. 0: report P as it is.
+    # catch) P alone is over-confident; per axis (N, E pooled; D) at least min(P σ_w²/r + min(σ_s², P σ_s² c_s/r),
+    # σ²) from the epochs' own snapshot positions over the same window (consistency.snapshot_parts: their
+    # scatter split into a white part σ_w² and a Gauss-Markov part σ_s² of correlation c_s, r a snapshot's
+    # variance as weighted, σ² one snapshot's variance), for what the filter follows and its innovations do
+    # not show. A report only. 0: report P as it is.
     accuracy_window_s: float = 20.0
+    # The one-signed delays in the reported accuracy: a reflected signal only ever arrives late, so a street's
+    # pseudorange errors have a mean that averages out over no window; what differs between the satellites
+    # (larger at low elevation: the height) moves the position. Each axis's reported variance is at least
+    # (this × b)², b the epoch's snapshot correction were every used satellite late by its own fused σ
+    # (snapshot.delay_bias): the mean delay in units of that σ. 0.4 chosen on the canyon's tuning flights
+    # (docs/tight.md "Reported accuracy"); 0: off. A report only; needs accuracy_window_s > 0.
+    accuracy_delay_fraction: float = 0.4
     # A common-mode floor on the reported accuracy (m, a pseudorange σ; 0 = none): the position variances
     # reported get + accuracy_floor_m² × the used satellites' position DOPs (diag of (GᵀG)⁻¹, per N, E, D)
     # in quadrature: errors correlated over longer than the window (and those every satellite shares)
@@ -256,6 +264,9 @@ class TightConfig:
         datum = self.baro_datum_m
         if math.isinf(datum) or (math.isfinite(datum) and not self.baro_datum_sigma_m > 0.0):
             raise ValueError("baro_datum_m: finite (with baro_datum_sigma_m > 0) or NaN (unknown)")
+        if not (math.isfinite(self.accuracy_delay_fraction) and self.accuracy_delay_fraction >= 0.0):
+            raise ValueError(f"accuracy_delay_fraction: must be a finite number >= 0, "
+                             f"got {self.accuracy_delay_fraction!r}")
         if not (math.isfinite(self.accuracy_floor_m) and self.accuracy_floor_m >= 0.0):
             raise ValueError(f"accuracy_floor_m: must be a finite number >= 0, got {self.accuracy_floor_m!r}")
         if not (0.0 < self.cn0_calibration_quantile < 1.0 and self.cn0_calibration_prior_obs >= 0.0

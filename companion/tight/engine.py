@@ -147,6 +147,12 @@ class Entry(NamedTuple):
     scatter_h: Scatter = Scatter()
     scatter_v: Scatter1 = Scatter1()
     fix_var_m2: tuple[float, float] = (math.nan, math.nan)
+    # the last snapshot's correction for every used satellite late by its own σ, squared (N, E, D; m²:
+    # snapshot.delay_bias), the reported accuracy's one-signed delays
+    delay_m2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # the share of the position's variance (N + E, D) the last epoch's update kept, P⁺/P⁻: the filter's memory
+    # of its past epochs, per epoch (the reported accuracy's averaging of a correlated error)
+    kept: tuple[float, float] = (1.0, 1.0)
     baro_gated_since_us: int = -1  # the barometer's first gated sample since its last fused (-1: none)
 
 
@@ -478,7 +484,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             if s <= 0.5 or not wheel:  # below 0.5 m/s the direction is unknown; a gyro alone: no speed
                 return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
                              prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2,
-                             prev.baro_gated_since_us)
+                             prev.delay_m2, prev.kept, prev.baro_gated_since_us)
             y, H, R = np.array([m.speed_m_s - s]), h[None, :], np.array([[m.r_m2_s2]])
         PHt = P @ H.T
         S = H @ PHt + R
@@ -490,7 +496,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             self._counts["speed_fused"] += 1
         return Entry(t_us, m, x, P, ints, prev.live, prev.state, prev.t_good_us, prev.info,
                      prev.totals, prev.fit, prev.scatter_h, prev.scatter_v, prev.fix_var_m2,
-                     prev.baro_gated_since_us)
+                     prev.delay_m2, prev.kept, prev.baro_gated_since_us)
 
     def _fuse_epoch(self, prev: Entry, t_us: int, m: SatEpoch, x: np.ndarray, P: np.ndarray,
                     ints: Integrals) -> Entry:
@@ -539,12 +545,14 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         n_used = int(used.sum())
         nis = math.nan
         fit = prev.fit
-        scatter_h, scatter_v, fix_var = prev.scatter_h, prev.scatter_v, prev.fix_var_m2
+        scatter_h, scatter_v, fix_var, delay = prev.scatter_h, prev.scatter_v, prev.fix_var_m2, prev.delay_m2
+        kept = prev.kept
         u = None if n_used == len(used) else np.flatnonzero(used)  # None: every satellite
         snap = None
         r_rate, used_f = m.r_rate_m2_s2 * (r / r_nom), used.astype(float)
         if n_used and c.accuracy_window_s > 0.0:  # this epoch's own position, weighted as fused, its
-            # variances and its own Doppler velocity (snapshot.epoch_fix, .epoch_velocity: in C)
+            # variances, its own Doppler velocity and its delay bias (snapshot.epoch_fix, .epoch_velocity,
+            # .delay_bias: in C)
             snap = _tight.snapshot(H, y, r, used_f, x[0:3], m.sat_pos_ecef_m, m.sat_vel_ecef_m_s,
                                    m.z_rate_m_s, r_rate, r0, C)
         if n_used:
@@ -552,18 +560,22 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
                 fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
             else:
                 fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
+            p_h, p_v = P[0, 0] + P[1, 1], P[2, 2]
             # the used pseudoranges and their range rates (inflated like their pseudoranges, gated on
             # their own) in one update, in C (model.range_rate; the numpy form in the tests)
             x, P, nis, _ = _tight.update(x, P, H, HP, y, r, used_f, r0, C, m.sat_pos_ecef_m,
                                          m.sat_vel_ecef_m_s, m.z_rate_m_s, r_rate, c.gate_sigma**2)
-            if snap is not None:  # the motion between snapshots: the epoch's own Doppler velocity, else
-                sn, se, sd, vn, ve, vd, un, ue, ud = snap.tolist()  # the filter's (after this update)
+            if snap is not None:  # the motion between snapshots: the epoch's own Doppler velocity, else the
+                # filter's (after this update)
+                sn, se, sd, vn, ve, vd, un, ue, ud, bn, be, bd = snap.tolist()
                 if un != un:
                     un, ue, ud = float(x[3]), float(x[4]), float(x[5])
                 w = c.accuracy_window_s
                 scatter_h = scatter_h.add(t_us, (sn, se), (un, ue), w)
                 scatter_v = scatter_v.add(t_us, sd, ud, w)
                 fix_var = (0.5 * (vn + ve), vd)
+                delay = (bn * bn, be * be, bd * bd)
+                kept = (float(P[0, 0] + P[1, 1]) / p_h, float(P[2, 2]) / p_v)
         t_good = t_us if n_used else prev.t_good_us
         self._n_fused += bool(n_used)
         if not n_used and t_us - prev.t_good_us >= self._reset_us:
@@ -582,7 +594,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
                          m.key, beta, y, used, q_pos)
         return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
                      (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit,
-                     scatter_h, scatter_v, fix_var, prev.baro_gated_since_us)
+                     scatter_h, scatter_v, fix_var, delay, kept, prev.baro_gated_since_us)
 
     # --------------------------------------------------------------------- history
     def _anchor(self, e: Entry, t_us: int, ints: Integrals) -> Entry:

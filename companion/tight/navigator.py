@@ -26,7 +26,13 @@ from companion.domain.geodesy import LocalNedFrame
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
-from companion.estimator.consistency import accuracy_inflation, floored_axis, snapshot_floor, variance_scale
+from companion.estimator.consistency import (
+    SnapshotFloor,
+    accuracy_inflation,
+    snapshot_axis,
+    snapshot_parts,
+    variance_scale,
+)
 from companion.gnss.constants import C_M_S
 from companion.gnss.ephemeris import EphemerisStore, transmission_states
 from companion.tight import engine as tight_engine
@@ -68,9 +74,11 @@ class TightNavigator:
         self._odo: tuple[int, float, float] | None = None  # (t_us, yaw rate, its integral)
         self._last: tuple[Any, NavEstimate] | None = None
         # (the engine's last epoch entry, consistency.variance_scale, the common-mode floor's variances,
-        # (k, c_h, σ²_h, c_v, σ²_v) of the snapshots' floor or None) of it
+        # (k, the snapshots' floors N/E and D, the delay bias² N, E, D) or None) of it
         self._reported: tuple[Any, np.ndarray | None, np.ndarray | None,
-                              tuple[float, float, float, float, float] | None] = (None, None, None, None)
+                              tuple[float, SnapshotFloor | None, SnapshotFloor | None,
+                                    tuple[float, float, float]] | None] = (None, None, None, None)
+        self._delay2 = self.cfg.accuracy_delay_fraction**2
         self._valid_us = self.cfg.reset_timeout_s * 1e6
         c = self.cfg
         self._cn0 = None if math.isnan(c.cn0_calibration_ref_dbhz) else Cn0Calibration(
@@ -192,12 +200,12 @@ class TightNavigator:
             self._reported = (entry, variance_scale(k), self.accuracy_floor_m2(), self._snapshot_floor(k))
         _, scale, floor, snap = self._reported
         cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
-        if snap is not None:  # snapshots correlated over seconds: not averaged down, up to one snapshot's
-            k, c_h, s2_h, c_v, s2_v = snap
+        if snap is not None:  # snapshots correlated over seconds: not averaged down, up to one snapshot's;
+            k, f_h, f_v, d = snap  # at least the one-signed delays' bias
             cov = cov.copy() if scale is None else cov
-            cov[0] = floored_axis(float(out[9]), k, c_h, s2_h)
-            cov[1] = floored_axis(float(out[10]), k, c_h, s2_h)
-            cov[2] = floored_axis(float(out[11]), k, c_v, s2_v)
+            cov[0] = snapshot_axis(float(out[9]), k, f_h, d[0])
+            cov[1] = snapshot_axis(float(out[10]), k, f_h, d[1])
+            cov[2] = snapshot_axis(float(out[11]), k, f_v, d[2])
         if floor is not None:  # + the common-mode floor, in quadrature
             cov = cov.copy() if scale is None else cov
             cov[0:3] += floor
@@ -213,17 +221,20 @@ class TightNavigator:
         entries = self.engine.entries
         return accuracy_inflation(entries[-1].fit if entries else None, self.cfg.accuracy_window_s)
 
-    def _snapshot_floor(self, k: float) -> tuple[float, float, float, float, float] | None:
-        """(k, c_h, σ²_h, c_v, σ²_v): the epochs' own snapshot positions' correlation and one snapshot's
-        variance (``consistency.fix_floor``: the larger of their scatter and the last one's own), horizontal
-        and vertical; None when neither is correlated (the report is k P)."""
+    def _snapshot_floor(self, k: float) -> tuple[float, SnapshotFloor | None, SnapshotFloor | None,
+                                                  tuple[float, float, float]] | None:
+        """(k, the floors of the epochs' own snapshot positions horizontal and vertical
+        (``consistency.snapshot_parts``), the one-signed delays' bias² N, E, D: ``accuracy_delay_fraction``²
+        × the last snapshot's ``delay_m2``); None without either (the report is k P)."""
         entries = self.engine.entries
         if not entries or self.cfg.accuracy_window_s <= 0.0:
             return None
         e = entries[-1]
-        c_h, s2_h = snapshot_floor(e.scatter_h, e.fix_var_m2[0], k)
-        c_v, s2_v = snapshot_floor(e.scatter_v, e.fix_var_m2[1], k)
-        return (k, c_h, s2_h, c_v, s2_v) if c_h > 1.0 or c_v > 1.0 else None
+        f_h = snapshot_parts(e.scatter_h, e.fix_var_m2[0], e.kept[0])
+        f_v = snapshot_parts(e.scatter_v, e.fix_var_m2[1], e.kept[1])
+        f2 = self._delay2
+        d = (f2 * e.delay_m2[0], f2 * e.delay_m2[1], f2 * e.delay_m2[2])
+        return None if f_h is None and f_v is None and not max(d) > 0.0 else (k, f_h, f_v, d)
 
     def accuracy_floor_m2(self) -> np.ndarray | None:
         """The variances (3,: N, E, D) added to the reported position's: ``accuracy_floor_m``² × the last

@@ -112,6 +112,17 @@ def epoch_fix(H: np.ndarray, y: np.ndarray, r: np.ndarray, slot: np.ndarray
     return sol[0:3, 0].copy(), var
 
 
+def delay_bias(H: np.ndarray, r: np.ndarray, slot: np.ndarray) -> np.ndarray | None:
+    """The epoch's own position's correction (N, E, D; m) were every satellite late by its own σ = √``r``
+    (``epoch_fix`` with y = √r): the bias one-signed errors of that size leave in a snapshot. A reflected
+    signal only ever arrives late, so a street's errors have a mean; the part common to all satellites goes
+    to the clocks, what differs between them (larger at low elevation, on one side of the street) moves the
+    position and averages out over no window. The reported accuracy's delay term (``TightConfig.
+    accuracy_delay_fraction``, docs/tight.md "Reported accuracy"). None as ``epoch_fix``."""
+    fix = epoch_fix(H, np.sqrt(r), r, slot)
+    return None if fix is None else fix[0]
+
+
 def epoch_velocity(sat_pos_ecef_m: np.ndarray, sat_vel_ecef_m_s: np.ndarray, r_ecef_m: np.ndarray,
                    c_ecef_ned: np.ndarray, rate_m_s: np.ndarray, r_rate_m2_s2: np.ndarray
                    ) -> np.ndarray | None:
