@@ -261,7 +261,7 @@ def test_out_of_sequence_epochs_equal_in_order():
                 # the reported accuracy's snapshot floor (correlation, one snapshot's variance) re-fused too
                 fa, fb = fix_floor(sa, ea.fix_var_m2[i]), fix_floor(sb, eb.fix_var_m2[i])
                 assert fb == pytest.approx(fa, rel=1e-9) and sb.t_us == sa.t_us
-            np.testing.assert_allclose(eb.delay_m2, ea.delay_m2, rtol=1e-9, atol=1e-12)  # the delays' bias too
+            np.testing.assert_allclose(eb.delay_m2, ea.delay_m2, rtol=1e-9, atol=1e-12)  # the delay bias too
             qa, qb = ea.info.q_pos_ned, eb.info.q_pos_ned
             assert (qa is None) == (qb is None)
             if qa is not None:

@@ -11,10 +11,8 @@ import numpy as np
 import pytest
 
 from companion.estimator.consistency import (
-    C_MAX,
     Scatter,
     Scatter1,
-    fix_floor,
     snapshot_axis,
     snapshot_parts,
     white_and_slow,
@@ -195,7 +193,8 @@ def _coverage(sigma_gm: float, sigma_white: float = 5.0, sigma_filter: float = 5
             out["v_kp"].append(float(d[2] ** 2 / (kk * p[2])))
             out["v_rep"].append(float(d[2] ** 2 / rep[2]))
             out["ratio"].extend((rep / (kk * p)).tolist())
-            out["h_old"].append(float(d[0] ** 2 / _old_rule(p[0], kk, e) + d[1] ** 2 / _old_rule(p[1], kk, e)))
+            old = (_old_rule(p[0], kk, e), _old_rule(p[1], kk, e))
+            out["h_old"].append(float(d[0] ** 2 / old[0] + d[1] ** 2 / old[1]))
     return {k: np.asarray(v) for k, v in out.items()}
 
 

@@ -300,23 +300,6 @@ def fix_floor(scatter: Scatter | Scatter1, r_h_m2: float) -> tuple[float, float]
     return c, s2
 
 
-def snapshot_floor(scatter: Scatter | Scatter1, r_m2: float, k: float) -> tuple[float, float]:
-    """(c', σ²) for ``floored_axis`` from a filter's own per-epoch snapshot positions (the tight filter's:
-    independent of its state, each with the variance ``r_m2`` its weights give it): σ² as ``fix_floor``,
-    and c' such that the report is V = max(k P, min(c max(1, s²/r) P, σ²)), s² the snapshots' scatter
-    (``Scatter.variance``), c their correlation. P holds the snapshots' information as if each had the
-    variance r and were independent: the variance of their average over the filter's memory is P × s²/r × c.
-    That is the snapshots' side of the diagnosis k P makes from the innovations (which miss what the
-    filter follows): the larger of the two is reported, the snapshots' side at most one snapshot's
-    variance. Without a stated variance, c alone (``fix_floor``'s rule with k = 1)."""
-    c, var = scatter.statistics()
-    s2 = r_m2 if r_m2 > var and math.isfinite(r_m2) else var  # fix_floor's
-    if c > 1.0 and r_m2 > 0.0 and math.isfinite(r_m2):
-        ratio = var / r_m2
-        c = c * ratio if ratio > 1.0 else c
-    return c / k, s2
-
-
 class SnapshotFloor(NamedTuple):
     """One axis's floor from a filter's own snapshot positions (``snapshot_parts``): for the filter's variance
     p the report is max(k p, min(p·white + min(slow, p·slow_rate), cap), delay) (``snapshot_axis``; N and E

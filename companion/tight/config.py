@@ -208,11 +208,12 @@ class TightConfig:
     # the position covariance × max(1, NIS per degree of freedom of the used pseudoranges over the last
     # accuracy_window_s, exponentially weighted), the variance-of-unit-weight test a receiver applies to
     # its reported accuracy: where the measurement model is wrong (reflections the belief did not
-    # catch) P alone is over-confident; per axis (N, E pooled; D) at least min(P σ_w²/r + min(σ_s², P σ_s² c_s/r),
-    # σ²) from the epochs' own snapshot positions over the same window (consistency.snapshot_parts: their
-    # scatter split into a white part σ_w² and a Gauss-Markov part σ_s² of correlation c_s, r a snapshot's
-    # variance as weighted, σ² one snapshot's variance), for what the filter follows and its innovations do
-    # not show. A report only. 0: report P as it is.
+    # catch) P alone is over-confident; per axis (N, E pooled; D) at least
+    # min(P σ_w²/r + min(σ_s², P σ_s² c_s/r), σ²) from the epochs' own snapshot positions over the same
+    # window (consistency.snapshot_parts: their scatter split into a white part σ_w² and a Gauss-Markov
+    # part σ_s², c_s its correlation over the filter's memory, r a snapshot's variance as weighted, σ² one
+    # snapshot's variance), for what the filter follows and its innovations do not show. A report only.
+    # 0: report P as it is.
     accuracy_window_s: float = 20.0
     # The one-signed delays in the reported accuracy: a reflected signal only ever arrives late, so a street's
     # pseudorange errors have a mean that averages out over no window; what differs between the satellites
