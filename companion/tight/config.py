@@ -157,6 +157,29 @@ class TightConfig:
     # shadows explain the signals' C/N0 and elevation (map_shadow_matching; belief.blocked_probability)
     map_position_sigma_m: float = 10.0
     map_shadow_matching: bool = True
+    # Shadow matching as a horizontal position measurement (companion.tight.shadow; any row with a
+    # map; docs/tight.md "Shadow matching"): candidates on a grid around the predicted position along its
+    # horizontal covariance's principal axes (σ widened by shadow_sigma_floor_m), shadow_spacing_m apart,
+    # half-widths shadow_grid_sigmas σ clamped to [shadow_half_width_min_m, shadow_half_width_max_m], each
+    # scored by how well the map's hidden/seen verdicts there explain the signals' C/N0 and elevation (the
+    # belief's prior as P(line of sight); log-likelihood × shadow_tempering), under a flat prior. The
+    # posterior's axes narrower than shadow_max_variance_ratio × the flat grid's are fused (the grid divided
+    # out), their variance × shadow_variance_scale, at least shadow_sigma_min_m², gated at shadow_gate_sigma
+    # against the prediction; "before": fused on the prediction, the satellites' innovations then taken
+    # from it; "after": after the pseudoranges. Needs at least shadow_min_satellites satellites. Off.
+    shadow_matching: bool = False
+    shadow_stage: Literal["before", "after"] = "before"
+    shadow_spacing_m: float = 2.0
+    shadow_grid_sigmas: float = 3.0
+    shadow_sigma_floor_m: float = 5.0
+    shadow_half_width_min_m: float = 12.0
+    shadow_half_width_max_m: float = 24.0
+    shadow_tempering: float = 1.0
+    shadow_max_variance_ratio: float = 0.25
+    shadow_variance_scale: float = 4.0
+    shadow_sigma_min_m: float = 1.0
+    shadow_gate_sigma: float = 3.0
+    shadow_min_satellites: int = 4
     # What the belief's consistency is measured on: "prefit" (each satellite's innovation against the
     # prediction), "leave-one-out" (against the prediction corrected by the epoch's other satellites,
     # weighted by their beliefs: weighting.leave_one_out), "robust" (the same, the others weighted as
@@ -294,6 +317,20 @@ class TightConfig:
                 and 0.0 <= self.belief_snapshot_blend <= 1.0):
             raise ValueError("belief_snapshot_sigma_m >= 0 (inf allowed), belief_snapshot_iterations >= 0, "
                              "0 <= belief_snapshot_blend <= 1 needed")
+        if self.shadow_stage not in ("before", "after"):
+            raise ValueError(f"shadow_stage {self.shadow_stage!r}: choose before or after")
+        for name in ("shadow_spacing_m", "shadow_grid_sigmas", "shadow_half_width_min_m", "shadow_tempering",
+                     "shadow_max_variance_ratio", "shadow_variance_scale", "shadow_sigma_min_m",
+                     "shadow_gate_sigma"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+        hw_min, hw_max = self.shadow_half_width_min_m, self.shadow_half_width_max_m
+        if not (self.shadow_sigma_floor_m >= 0.0 and hw_max >= hw_min
+                and math.isfinite(hw_max) and self.shadow_max_variance_ratio < 1.0
+                and self.shadow_min_satellites >= 1):
+            raise ValueError("shadow_sigma_floor_m >= 0, shadow_half_width_min_m <= shadow_half_width_max_m "
+                             "(finite), shadow_max_variance_ratio < 1, shadow_min_satellites >= 1 needed")
         if self.student_iterations < 1 or self.fde_max_exclusions < 0 or self.belief_student_iterations < 0:
             raise ValueError("student_iterations >= 1, fde_max_exclusions >= 0, "
                              "belief_student_iterations >= 0 needed")

@@ -13,7 +13,9 @@ An epoch (``SatEpoch``: prepared once by ``prepare_epoch``, state-independent) i
 1. predict the last entry to the epoch's time;
 2. (the belief rows, with a map) each satellite's prior gets the map's line of sight at the predicted
    position, over its uncertainty (``belief.blocked_probability``): a function of the predicted
-   state, so re-fusion after a late epoch stays exact;
+   state, so re-fusion after a late epoch stays exact; with ``shadow_matching`` the map's shadows also
+   give a horizontal position fix (``shadow.shadow_fix``, at the predicted state: exact too), gated against
+   the prediction and fused on it (``shadow_stage`` "before") or after the pseudoranges ("after");
 3. a system seen for the first time gets a clock from its satellites' median residual (σ
    ``sigma_clock0_m``); a system whose satellites all disagree with its predicted clock by more
    than ``clock_jump_m`` had a clock jump: its clock is re-initialised (counted), not the position;
@@ -50,7 +52,7 @@ from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
 from companion.gnss.spp import SppConfig, SppSolution, solve_position
 from companion.gnss.systems import System
-from companion.tight import _tight, model, weighting
+from companion.tight import _tight, model, shadow, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
 from companion.tight.config import TightConfig
 from companion.tight.model import (
@@ -521,6 +523,13 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             live[j] = restarted = True
         if restarted:
             y, H, HP, s0, _ = _tight.innovations(x, P, r0, C, m.sat_pos_ecef_m, m.slot_f, m.z_m)
+        fix = None
+        if c.shadow_matching and self.line_of_sight is not None:  # the map's shadows as a position fix
+            fix = self._shadow_fix(m, x, P)
+            if fix is not None and c.shadow_stage == "before":
+                x, P = _fuse_shadow(fix, x, P)
+                y, H, HP, s0, _ = _tight.innovations(x, P, r0, C, m.sat_pos_ecef_m, m.slot_f, m.z_m)
+                fix = None
         r_nom = getattr(m, self._r_field)
         prior = m.theta_prior
         if self.weighting.uses_prior:
@@ -576,6 +585,8 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
                 fix_var = (0.5 * (vn + ve), vd)
                 delay = (bn * bn, be * be, bd * bd)
                 kept = (float(P[0, 0] + P[1, 1]) / p_h, float(P[2, 2]) / p_v)
+        if fix is not None:  # "after": gated against the prediction, fused after the pseudoranges
+            x, P = _fuse_shadow(fix, x, P)
         t_good = t_us if n_used else prev.t_good_us
         self._n_fused += bool(n_used)
         if not n_used and t_us - prev.t_good_us >= self._reset_us:
@@ -595,6 +606,22 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         return Entry(t_us, m, x, P, ints, tuple(live), state, t_good, info,
                      (used_tot + n_used, rej_tot + len(y) - n_used, resets, clock_resets, epochs + 1), fit,
                      scatter_h, scatter_v, fix_var, delay, kept, prev.baro_gated_since_us)
+
+    def _shadow_fix(self, m: SatEpoch, x: np.ndarray, P: np.ndarray) -> shadow.ShadowFix | None:
+        """The epoch's shadow-matching fix at the predicted (x, P) if it passes the gate (counted
+        ``shadow_fused`` / ``shadow_rejected_gate`` / ``shadow_none``), else None."""
+        assert self.line_of_sight is not None
+        c = self._counts
+        fix = shadow.shadow_fix(self.line_of_sight, x[0:3], P[0:3, 0:3], m.azimuth_rad,
+                                np.radians(m.elevation_deg), m.theta_prior, self.cfg)
+        if fix is None:
+            c["shadow_none"] = c.get("shadow_none", 0) + 1
+            return None
+        if not shadow.passes_gate(fix, x[0:2], P[0:2, 0:2], self.cfg.shadow_gate_sigma):
+            c["shadow_rejected_gate"] = c.get("shadow_rejected_gate", 0) + 1
+            return None
+        c["shadow_fused"] = c.get("shadow_fused", 0) + 1
+        return fix
 
     # --------------------------------------------------------------------- history
     def _anchor(self, e: Entry, t_us: int, ints: Integrals) -> Entry:
@@ -641,3 +668,13 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
 
     def clock_bias_m(self, x: np.ndarray, system: System) -> float:
         return float(x[I_CLK + int(model.SLOT_OF[int(system)])])
+
+
+def _fuse_shadow(fix: shadow.ShadowFix, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x, P) after the shadow-matching rows z = H p_NE (variances R, independent)."""
+    y, S = shadow.innovation(fix, x[0:2], P[0:2, 0:2])
+    PHt = P[:, 0:2] @ fix.H.T
+    K = np.linalg.solve(S, PHt.T).T
+    x = x + K @ y
+    P = P - K @ PHt.T
+    return x, 0.5 * (P + P.T)

@@ -74,9 +74,11 @@ if TYPE_CHECKING:
 ROWS = ("cn0-elevation", "fde", "student-t", "second-order")
 EXTRA_ROWS = ("naive", "first-order")  # flown on request (``--rows``): fixed weights, the first-order belief
 MAP_ROWS = ("second-order-map", "second-order-imperfect-map")  # the belief with the map's prior
+# flown on request (``--rows``): the map rows with shadow matching as a position fix (shadow_matching)
+SHADOW_ROWS = ("second-order-map-sm", "second-order-imperfect-map-sm")
 FREE_ROW = "tight-second-order-map-free"  # the map belief's estimate kept out of the buildings (as fed)
 OUTSIDE = " (truth outside buildings)"  # the free-space rows again, on the steps whose truth is outside
-BELIEF_ROWS = ("tight-second-order", *(f"tight-{r}" for r in MAP_ROWS))
+BELIEF_ROWS = ("tight-second-order", *(f"tight-{r}" for r in (*MAP_ROWS, *SHADOW_ROWS)))
 MAP_SEED = 7
 MAP_SIGMA_HEIGHT_M = 2.5
 MAP_SIGMA_SHIFT_M = 1.5
@@ -112,7 +114,8 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
              on_raw: Callable[[str, Any, Any], None] | None = None,
              fly_on_truth: bool = False, cn0_missing: bool = False, tight_config: TightConfig | None = None,
              rate_hz: float | None = None, ahrs_gnss_velocity: bool | None = None, baro: str | None = None,
-             vertical: dict[str, list[float]] | None = None) -> dict[str, np.ndarray]:
+             vertical: dict[str, list[float]] | None = None,
+             across: dict[str, list[tuple[float, float]]] | None = None) -> dict[str, np.ndarray]:
     """Horizontal errors (m) per control step of each row on one flight (``maps``: and the belief with
     the exact and an imperfect map); ``accuracy`` (if given) collects per tight row and step (NEES_h
     reported, NEES_h of P alone, reported horiz_accuracy); ``on_raw(row, raw, navigator)`` (if given) is
@@ -127,7 +130,9 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     the simulator's barometer with the IMU samples, the tight rows fuse it (the loose filter and the flight
     are unchanged), "absolute" with its datum at home's altitude and known to the tight rows;
     ``vertical`` (if given) collects each row's |vertical error| (m) per scored step (the free-space row's
-    is its map row's)."""
+    is its map row's); ``across`` (if given) each tight row's |horizontal error| (m) along and across the
+    truth's horizontal velocity (the street, as the route follows it) on the steps faster than 1 m/s.
+    ``rows`` may name ``SHADOW_ROWS`` (with ``maps``): the map rows with shadow matching."""
     from companion.estimator.freespace import constrain
     from companion.mission import load_mission
     from companion.wiring import mission_city, navigator_for, tight_navigator_for
@@ -147,7 +152,8 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
     gnss = sim.gnss
     assert isinstance(gnss, RawGnssModel)  # the canyon scenario's receiver
     store = gnss.store
-    tight = {r: tight_navigator_for(m, r, config=tcfg, ephemerides=store, city=None) for r in rows}
+    tight = {r: tight_navigator_for(m, r, config=tcfg, ephemerides=store, city=None) for r in rows
+             if r not in SHADOW_ROWS}
     if maps:
         city = mission_city(m)
         imperfect = city.perturbed(np.random.default_rng([MAP_SEED, profile, seed]), MAP_SIGMA_HEIGHT_M,
@@ -155,6 +161,10 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
         for name, c in zip(MAP_ROWS, (city, imperfect), strict=True):
             tight[name] = tight_navigator_for(m, "second-order", config=tcfg, ephemerides=store,
                                               city=c)
+        sm_cfg = dataclasses.replace(tcfg, shadow_matching=True)
+        for name, c in zip(SHADOW_ROWS, (city, imperfect), strict=True):
+            if name in rows:
+                tight[name] = tight_navigator_for(m, "second-order", config=sm_cfg, ephemerides=store, city=c)
     end_us = round(min(1.0 + route.duration_s * 1.5, max_duration_s or 1e9) * 1e6)
     outside_rows = (f"tight-{MAP_ROWS[0]}", FREE_ROW) if maps else ()
     errors: dict[str, list[float]] = {k: [] for k in ("spp", "loose", *(f"tight-{r}" for r in tight),
@@ -220,6 +230,13 @@ def fly_rows(mission: str, profile: int, seed: int, rows: Sequence[str] = ROWS,
             if vertical is not None:
                 pv = rows_now[f"tight-{MAP_ROWS[0]}"] if name == FREE_ROW else p
                 vertical.setdefault(name, []).append(abs(float(pv[2]) - float(truth[2])))
+        v_h = np.asarray(tr.v_ned_m_s[0:2], float)
+        if across is not None and float(np.hypot(*v_h)) > 1.0:
+            u = v_h / float(np.hypot(*v_h))
+            for r in ests:
+                d = np.asarray(rows_now[f"tight-{r}"][0:2], float) - truth[0:2]
+                along_across = (abs(float(d @ u)), abs(float(d[1] * u[0] - d[0] * u[1])))
+                across.setdefault(f"tight-{r}", []).append(along_across)
         if outside_rows and m.world.clearance_m(truth[0], truth[1]) > 0.0:
             for name in outside_rows:
                 errors[name + OUTSIDE].append(errors[name][-1])
@@ -248,16 +265,22 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
     for p in profiles:
         for s in seeds:
             vert: dict[str, list[float]] = {}
+            acr: dict[str, list[tuple[float, float]]] = {}
             e = fly_rows(mission, p, s, rows, max_duration_s, accuracy=acc, fly_on_truth=fly_on_truth,
                          cn0_missing=cn0_missing, tight_config=tcfg, rate_hz=rate_hz,
-                         ahrs_gnss_velocity=ahrs_gnss_velocity, baro=baro, vertical=vert)
+                         ahrs_gnss_velocity=ahrs_gnss_velocity, baro=baro, vertical=vert, across=acr)
             for k, v in e.items():
                 err.setdefault(k, []).append(v)
             flights.append({"profile": p, "seed": s, "steps": int(len(e["spp"])),
                             "median_m": {k: float(np.median(v)) for k, v in e.items()},
                             "p95_m": {k: float(np.percentile(v, 95)) for k, v in e.items()},
                             "vertical_median_m": {k: float(np.median(v)) for k, v in vert.items()},
-                            "vertical_p95_m": {k: float(np.percentile(v, 95)) for k, v in vert.items()}})
+                            "vertical_p95_m": {k: float(np.percentile(v, 95)) for k, v in vert.items()},
+                            # |error| along / across the truth's velocity (the street), per-flight median
+                            "along_median_m": {k: float(np.median(np.asarray(v)[:, 0]))
+                                               for k, v in acr.items()},
+                            "across_median_m": {k: float(np.median(np.asarray(v)[:, 1]))
+                                                for k, v in acr.items()}})
     names = list(flights[0]["median_m"])
     rng = np.random.default_rng(rng_seed)
     idx = rng.integers(0, len(flights), size=(n_resamples, len(flights)))
@@ -276,6 +299,14 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
                 lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
                 paired.append({"stat": stat, "row": row, "reference": ref, "mean_diff_m": float(d.mean()),
                                "ci": [float(lo), float(hi)]})
+        for sm, ref in ((f"tight-{SHADOW_ROWS[0]}", f"tight-{MAP_ROWS[0]}"),
+                        (f"tight-{SHADOW_ROWS[1]}", f"tight-{MAP_ROWS[1]}"),
+                        (f"tight-{SHADOW_ROWS[0]}", "tight-second-order")):
+            if sm in table and ref in table:  # what shadow matching adds to the map row it extends
+                d = table[sm] - table[ref]
+                lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
+                paired.append({"stat": stat, "row": sm, "reference": ref, "mean_diff_m": float(d.mean()),
+                               "ci": [float(lo), float(hi)]})
         map_row = f"tight-{MAP_ROWS[0]}"
         for sfx in ("", OUTSIDE):  # what the free-space constraint adds to the map belief it constrains
             if FREE_ROW + sfx not in table:
@@ -284,7 +315,8 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
             lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
             paired.append({"stat": stat, "row": FREE_ROW + sfx, "reference": map_row + sfx,
                            "mean_diff_m": float(d.mean()), "ci": [float(lo), float(hi)]})
-    for stat in ("vertical_median_m", "vertical_p95_m"):  # the mean over flights (reported, not paired)
+    for stat in ("vertical_median_m", "vertical_p95_m", "along_median_m", "across_median_m"):  # means over
+        # flights (reported, not paired)
         for n in flights[0][stat]:
             out_rows[n][stat] = float(np.mean([f[stat][n] for f in flights]))
     # (absent: flown on the loose filter, the defaults)
@@ -338,6 +370,13 @@ def markdown(r: dict[str, Any]) -> str:
                   *table_lines(("row", "vertical median (m)", "vertical p95 (m)"),
                                ((n, f"{v['vertical_median_m']:.2f}", f"{v['vertical_p95_m']:.2f}")
                                 for n, v in vert))]
+    street = [(n, v) for n, v in r["rows"].items() if "across_median_m" in v]
+    if street:
+        lines += ["", "|Error| along and across the truth's velocity (the street), mean over flights of the "
+                  "per-flight median (m):", "",
+                  *table_lines(("row", "along (m)", "across (m)"),
+                               ((n, f"{v['along_median_m']:.2f}", f"{v['across_median_m']:.2f}")
+                                for n, v in street))]
     lines += ["", *table_lines(("row − reference", "statistic", "mean difference (m)", "95 % CI"),
                                ((f"{c['row']} − {c['reference']}", c["stat"].removesuffix("_m"),
                                  f"{c['mean_diff_m']:+.2f}", ci(c["ci"], "+")) for c in r["paired"]))]
@@ -377,15 +416,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the simulator's barometer with the IMU samples, the tight rows fuse it (the flight "
                         "is the same); absolute: its datum at home, known to them (default: no barometer)")
     p.add_argument("--rows", default=",".join(ROWS),
-                   help=f"tight weightings, comma-separated (also: {', '.join(EXTRA_ROWS)})")
+                   help=f"tight weightings, comma-separated (also: {', '.join((*EXTRA_ROWS, *SHADOW_ROWS))}: "
+                        "the map rows with shadow matching)")
     args = p.parse_args(argv)
 
     def compute() -> dict[str, Any]:
         profiles, seeds = choices.seeds(args.profiles, "--profiles"), choices.seeds(args.seeds)
         rows = [v for v in args.rows.split(",") if v]
-        bad = sorted(set(rows) - set(ROWS) - set(EXTRA_ROWS))
+        bad = sorted(set(rows) - set(ROWS) - set(EXTRA_ROWS) - set(SHADOW_ROWS))
         if bad or not rows:
-            raise UserError(f"--rows: choose from {', '.join((*ROWS, *EXTRA_ROWS))}")
+            raise UserError(f"--rows: choose from {', '.join((*ROWS, *EXTRA_ROWS, *SHADOW_ROWS))}")
         return run(args.mission, profiles, seeds, rows,
                    max_duration_s=choices.positive(args.max_duration_s, "--max-duration-s"),
                    fly_on_truth=args.fly_on_truth, cn0_missing=args.cn0_missing,
