@@ -20,7 +20,8 @@ HEIGHT_M = 2.0  # the receiver's height (NED p_D = −2)
 # zenith and two along the street (seen from everywhere in it)
 AZ_DEG = np.array([90.0, 90.0, 90.0, 270.0, 270.0, 270.0, 0.0, 0.0, 180.0])
 EL_DEG = np.array([70.0, 72.0, 75.0, 70.0, 72.0, 75.0, 88.0, 30.0, 40.0])
-CFG = TightConfig(shadow_matching=True, shadow_spacing_m=1.0)
+# P(line of sight) = σ(θ_prior) itself (not recalibrated): the known answers below in the prior's logits
+CFG = TightConfig(shadow_matching=True, shadow_spacing_m=1.0, shadow_logit_scale=1.0, shadow_logit_offset=0.0)
 
 
 def _signals(p_ned_m: np.ndarray) -> np.ndarray:
@@ -91,6 +92,15 @@ def test_the_grid_prior_is_flat_not_the_filters_gaussian():
     np.testing.assert_allclose(cov, C0, atol=1e-9)
 
 
+def test_the_recalibrated_line_of_sight_probability():
+    cfg = TightConfig(shadow_logit_scale=0.5, shadow_logit_offset=-1.0)
+    np.testing.assert_allclose(shadow.p_los(np.array([2.0, 0.0, -4.0]), cfg),
+                               1.0 / (1.0 + np.exp(-np.array([0.0, -1.0, -3.0]))), rtol=1e-12)
+    # the default's recalibration still finds the true side (the evidence weaker than σ(θ)'s)
+    fix = _fix(-5.0, dataclasses.replace(CFG, shadow_logit_scale=0.9, shadow_logit_offset=-2.4))
+    assert fix is not None and -8.0 < fix.mean[1] < -2.0
+
+
 def test_the_gate_refuses_a_fix_far_from_a_confident_prediction():
     fix = _fix(-5.0)
     assert fix is not None
@@ -101,7 +111,7 @@ def test_the_gate_refuses_a_fix_far_from_a_confident_prediction():
 def _street_epochs():
     """The synthetic receiver (tests.test_tight: moving north-east from the frame's origin) in a street
     along its track, the buildings 40 m high 6 m either side, its signals with C/N0 set by the street."""
-    cfg = TightConfig.for_ground_vehicle()
+    cfg = TightConfig.for_ground_vehicle(shadow_logit_scale=1.0, shadow_logit_offset=0.0)  # σ(θ) as is
     epochs, truth = _synthetic_epochs(np.random.default_rng(5), cfg, 30)
     # the track (5, −3) m/s: a street along it, modelled as a rotated frame's boxes is not a City; instead
     # buildings either side of the track's start, long enough for its 6 s

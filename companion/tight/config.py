@@ -175,6 +175,10 @@ class TightConfig:
     shadow_half_width_min_m: float = 12.0
     shadow_half_width_max_m: float = 24.0
     shadow_tempering: float = 1.0
+    # P(line of sight) = σ(shadow_logit_scale θ_prior + shadow_logit_offset): the belief's C/N0 + elevation
+    # prior recalibrated as a probability (shadow.p_los; logistic fit on the tuning flights, see docs)
+    shadow_logit_scale: float = 0.9
+    shadow_logit_offset: float = -2.4
     shadow_max_variance_ratio: float = 0.25
     shadow_variance_scale: float = 4.0
     shadow_sigma_min_m: float = 1.0
@@ -319,6 +323,8 @@ class TightConfig:
                              "0 <= belief_snapshot_blend <= 1 needed")
         if self.shadow_stage not in ("before", "after"):
             raise ValueError(f"shadow_stage {self.shadow_stage!r}: choose before or after")
+        if not (math.isfinite(self.shadow_logit_scale) and math.isfinite(self.shadow_logit_offset)):
+            raise ValueError("shadow_logit_scale, shadow_logit_offset: finite numbers needed")
         for name in ("shadow_spacing_m", "shadow_grid_sigmas", "shadow_half_width_min_m", "shadow_tempering",
                      "shadow_max_variance_ratio", "shadow_variance_scale", "shadow_sigma_min_m",
                      "shadow_gate_sigma"):

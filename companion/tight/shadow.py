@@ -8,7 +8,7 @@ per axis, ``shadow_spacing_m`` apart, half-widths ``shadow_grid_sigmas`` σ clam
 vectorised line-of-sight call over candidates × satellites). Each candidate k is scored by how well the
 map's verdicts there explain the signals: with q_s = P(line of sight | C/N0, elevation) (the belief's prior,
 ``belief.sigmoid(theta_prior)``, the same probability ``belief.blocked_probability`` weighs its candidates
-with),
+with, recalibrated: ``p_los``),
 
     log L_k = τ Σ_s [hidden_ks log(1 − q_s) + (1 − hidden_ks) log q_s]        (τ = ``shadow_tempering``)
 
@@ -69,6 +69,14 @@ def grid(p_ne_m: np.ndarray, P_ne_m2: np.ndarray, cfg: TightConfig) -> tuple[np.
     return pts, vec @ np.diag(var0) @ vec.T
 
 
+def p_los(theta_prior: np.ndarray, cfg: TightConfig) -> np.ndarray:
+    """Each signal's probability of a line of sight: the belief's C/N0 + elevation prior logit recalibrated
+    as σ(a θ + b) (``shadow_logit_scale``, ``shadow_logit_offset``): the prior is a weighting, not a
+    probability (in the simulated canyon 18 % of the signals are in line of sight where its σ(θ) averages
+    ~0.6; a logistic fit on the tuning flights gives a and b)."""
+    return sigmoid(cfg.shadow_logit_scale * theta_prior + cfg.shadow_logit_offset)
+
+
 def log_likelihood(hidden: np.ndarray, p_los: np.ndarray, tempering: float) -> np.ndarray:
     """(K,) log-likelihood of each candidate's verdicts ``hidden`` (K, n) given each signal's probability of
     a line of sight ``p_los`` (n,), tempered."""
@@ -99,7 +107,7 @@ def shadow_fix(line_of_sight: LineOfSight, p_ned_m: np.ndarray, P_pos_m2: np.nda
     cand[:, 0:2] = pts
     cand[:, 2] = p_ned_m[2]
     hidden = np.asarray(line_of_sight(cand, azimuth_rad, elevation_rad), dtype=bool)
-    mean, cov = posterior(pts, log_likelihood(hidden, sigmoid(theta_prior), cfg.shadow_tempering),
+    mean, cov = posterior(pts, log_likelihood(hidden, p_los(theta_prior, cfg), cfg.shadow_tempering),
                           cfg.shadow_spacing_m)
     m0 = np.asarray(p_ned_m[0:2], dtype=float)
     lam, vec = np.linalg.eigh(cov)
