@@ -165,3 +165,21 @@ def test_off_by_default_leaves_the_estimate_bit_identical():
                t_us, order, line_of_sight=los)
     assert on.counts.get("shadow_fused", 0) > 0
     assert not np.array_equal(on.entries[-1].x, ref.entries[-1].x)
+
+
+def test_tight_sim_flies_the_shadow_matching_rows_on_request():
+    """``--rows ...,second-order-map-sm``: the map row with shadow matching beside the map rows, on the
+    same flight (its navigator's fixes counted), and the along/across-street errors of every tight row."""
+    from gcs_tools.evaluate.tight_sim import fly_rows
+
+    navs: dict[str, object] = {}
+    across: dict[str, list[tuple[float, float]]] = {}
+    e = fly_rows("default", 3, 0, rows=("second-order", "second-order-map-sm"), max_duration_s=20.0,
+                 across=across, on_raw=lambda row, _raw, nav: navs.setdefault(row, nav))
+    assert {"tight-second-order", "tight-second-order-map", "tight-second-order-map-sm"} <= set(e)
+    assert "tight-second-order-imperfect-map-sm" not in e
+    assert len(e["tight-second-order-map-sm"]) == len(e["tight-second-order-map"]) > 100
+    counts = navs["second-order-map-sm"].engine.counts  # type: ignore[attr-defined]
+    assert sum(counts.get(k, 0) for k in ("shadow_fused", "shadow_none", "shadow_rejected_gate")) > 0
+    assert not any(k.startswith("shadow") for k in navs["second-order-map"].engine.counts)  # type: ignore[attr-defined]
+    assert set(across) >= {"tight-second-order-map-sm"} and all(len(v) > 0 for v in across.values())

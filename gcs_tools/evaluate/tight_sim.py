@@ -14,6 +14,10 @@ Every control step each row's position is compared with the truth (horizontal di
   (``companion.wiring.tight_navigator_for``), and ``tight-second-order-imperfect-map`` with an
   imperfect map: every building's height off by N(0, 2.5²) m and its footprint moved by N(0, 1.5²) m per
   axis, drawn per flight from ``[MAP_SEED, profile, seed]`` (``City.perturbed``);
+* ``tight-second-order-map-sm`` and ``tight-second-order-imperfect-map-sm`` (``--rows``, flown on request):
+  those two with shadow matching as a horizontal position fix (``TightConfig.shadow_matching``,
+  ``companion.tight.shadow``); every run also reports each tight row's |error| along and across the
+  truth's horizontal velocity (the street the route follows: per-flight medians, their mean);
 * ``tight-second-order-map-free``: that belief's estimate constrained to the map's free space as the
   companion feeds it with ``--mission --free-space`` (``companion.estimator.freespace``: an estimate
   inside a building moved to its reported Gaussian's mean outside them). This simulator's vehicle,
