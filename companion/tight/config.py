@@ -186,9 +186,9 @@ class TightConfig:
     shadow_logit_offset: float = -2.4
     shadow_max_variance_ratio: float = 0.5
     shadow_variance_scale: float = 1.0
-    shadow_sigma_min_m: float = 1.0
-    shadow_gate_sigma: float = 3.0
-    shadow_min_satellites: int = 4
+    shadow_sigma_min_m: float = 1.0  # the fused rows' σ floor
+    shadow_gate_sigma: float = 3.0  # χ² per row against the prediction
+    shadow_min_satellites: int = 4  # fewer: no fix
     # What the belief's consistency is measured on: "prefit" (each satellite's innovation against the
     # prediction), "leave-one-out" (against the prediction corrected by the epoch's other satellites,
     # weighted by their beliefs: weighting.leave_one_out), "robust" (the same, the others weighted as
