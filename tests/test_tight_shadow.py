@@ -183,3 +183,10 @@ def test_tight_sim_flies_the_shadow_matching_rows_on_request():
     assert sum(counts.get(k, 0) for k in ("shadow_fused", "shadow_none", "shadow_rejected_gate")) > 0
     assert not any(k.startswith("shadow") for k in navs["second-order-map"].engine.counts)  # type: ignore[attr-defined]
     assert set(across) >= {"tight-second-order-map-sm"} and all(len(v) > 0 for v in across.values())
+
+
+def test_a_grid_too_fine_for_its_width_is_refused_in_one_line():
+    """0.1 m spacing over ±24 m would be 231,361 line-of-sight candidates an epoch: refused, not run."""
+    with pytest.raises(ValueError, match="231361 candidates an epoch, at most 10000"):
+        TightConfig(shadow_spacing_m=0.1).validate()
+    TightConfig(shadow_spacing_m=0.5).validate()  # 97² = 9,409: accepted

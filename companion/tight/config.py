@@ -19,6 +19,7 @@ from typing import Literal
 from companion.estimator.consistency import check_accuracy_window
 
 MOTIONS = ("imu", "constant-velocity")
+SHADOW_MAX_CANDIDATES = 10_000  # shadow matching's grid an epoch (default 625), one line-of-sight call
 
 
 @dataclass(frozen=True)
@@ -342,6 +343,10 @@ class TightConfig:
                 and self.shadow_min_satellites >= 1):
             raise ValueError("shadow_sigma_floor_m >= 0, shadow_half_width_min_m <= shadow_half_width_max_m "
                              "(finite), shadow_max_variance_ratio < 1, shadow_min_satellites >= 1 needed")
+        side = 2 * math.floor(hw_max / self.shadow_spacing_m) + 1
+        if side * side > SHADOW_MAX_CANDIDATES:
+            raise ValueError(f"shadow_half_width_max_m / shadow_spacing_m: {side * side} candidates an "
+                             f"epoch, at most {SHADOW_MAX_CANDIDATES} (a wider spacing or a narrower grid)")
         if self.student_iterations < 1 or self.fde_max_exclusions < 0 or self.belief_student_iterations < 0:
             raise ValueError("student_iterations >= 1, fde_max_exclusions >= 0, "
                              "belief_student_iterations >= 0 needed")
