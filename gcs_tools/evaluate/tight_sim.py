@@ -290,6 +290,13 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
     idx = rng.integers(0, len(flights), size=(n_resamples, len(flights)))
     out_rows: dict[str, dict[str, Any]] = {}
     paired: list[dict[str, Any]] = []
+
+    def pair(stat: str, row: str, ref: str) -> None:  # row − reference over the same flight resamples
+        d = table[row] - table[ref]
+        lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
+        paired.append({"stat": stat, "row": row, "reference": ref, "mean_diff_m": float(d.mean()),
+                       "ci": [float(lo), float(hi)]})
+
     for stat in ("median_m", "p95_m"):
         table = {n: np.array([f[stat][n] for f in flights]) for n in names}
         for n, v in table.items():
@@ -297,28 +304,17 @@ def run(mission: str, profiles: Sequence[int], seeds: Sequence[int], rows: Seque
             out_rows.setdefault(n, {})[stat] = {"mean": float(v.mean()), "ci": [float(lo), float(hi)]}
         for row in (b for b in BELIEF_ROWS if b in table):
             for ref in names:
-                if ref in BELIEF_ROWS or ref == FREE_ROW or ref.endswith(OUTSIDE):
-                    continue
-                d = table[row] - table[ref]
-                lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
-                paired.append({"stat": stat, "row": row, "reference": ref, "mean_diff_m": float(d.mean()),
-                               "ci": [float(lo), float(hi)]})
+                if not (ref in BELIEF_ROWS or ref == FREE_ROW or ref.endswith(OUTSIDE)):
+                    pair(stat, row, ref)
         for sm, ref in ((f"tight-{SHADOW_ROWS[0]}", f"tight-{MAP_ROWS[0]}"),
                         (f"tight-{SHADOW_ROWS[1]}", f"tight-{MAP_ROWS[1]}"),
                         (f"tight-{SHADOW_ROWS[0]}", "tight-second-order")):
             if sm in table and ref in table:  # what shadow matching adds to the map row it extends
-                d = table[sm] - table[ref]
-                lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
-                paired.append({"stat": stat, "row": sm, "reference": ref, "mean_diff_m": float(d.mean()),
-                               "ci": [float(lo), float(hi)]})
+                pair(stat, sm, ref)
         map_row = f"tight-{MAP_ROWS[0]}"
         for sfx in ("", OUTSIDE):  # what the free-space constraint adds to the map belief it constrains
-            if FREE_ROW + sfx not in table:
-                continue
-            d = table[FREE_ROW + sfx] - table[map_row + sfx]
-            lo, hi = np.percentile(d[idx].mean(axis=1), [2.5, 97.5])
-            paired.append({"stat": stat, "row": FREE_ROW + sfx, "reference": map_row + sfx,
-                           "mean_diff_m": float(d.mean()), "ci": [float(lo), float(hi)]})
+            if FREE_ROW + sfx in table:
+                pair(stat, FREE_ROW + sfx, map_row + sfx)
     for stat in ("vertical_median_m", "vertical_p95_m", "along_median_m", "across_median_m"):  # means over
         # flights (reported, not paired)
         for n in flights[0][stat]:
