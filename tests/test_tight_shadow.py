@@ -86,7 +86,7 @@ def test_the_grid_prior_is_flat_not_the_filters_gaussian():
     assert len(pts) == 25 * 25  # ±12 m at 1 m
     np.testing.assert_allclose(C0, np.eye(2) * (12 * 13 / 3.0 + 1.0 / 12.0), atol=1e-9)
     # an uninformative sky (every satellite seen everywhere): the posterior is the grid's, nothing fused
-    w = shadow.log_likelihood(np.zeros((len(pts), 3), bool), np.full(3, 0.9), 1.0)
+    w = belief.shadow_log_likelihood(np.zeros((len(pts), 3), bool), np.full(3, 0.9), 1.0)
     mean, cov = shadow.posterior(pts, w, cfg.shadow_spacing_m)
     np.testing.assert_allclose(mean, 0.0, atol=1e-9)
     np.testing.assert_allclose(cov, C0, atol=1e-9)

@@ -141,10 +141,19 @@ def blocked_probability(line_of_sight: LineOfSight, p_ned_m: np.ndarray, P_pos_m
     hidden = np.asarray(line_of_sight(pts, azimuth_rad, elevation_rad), dtype=bool)
     log_w = _GRID_LOG_WEIGHT
     if p_los is not None and len(p_los):
-        q = np.clip(p_los, 1e-3, 1.0 - 1e-3)
-        log_w = log_w + np.where(hidden, np.log1p(-q), np.log(q)).sum(axis=1)
+        log_w = log_w + shadow_log_likelihood(hidden, p_los)
     w = np.exp(log_w - log_w.max())
     return (w / w.sum()) @ hidden
+
+
+def shadow_log_likelihood(hidden: np.ndarray, p_los: np.ndarray, tempering: float = 1.0) -> np.ndarray:
+    """(K,) log-likelihood of K candidate positions' map verdicts ``hidden`` (K, n) given each signal's
+    probability of a line of sight ``p_los`` (n,), clipped to [1e-3, 1 − 1e-3]: Σ_s log(1 − q_s) where
+    hidden, log q_s where seen, times ``tempering`` (shadow matching: ``blocked_probability``'s candidate
+    weights and ``shadow.shadow_fix``'s posterior)."""
+    q = np.clip(p_los, 1e-3, 1.0 - 1e-3)
+    ll = np.where(hidden, np.log1p(-q), np.log(q)).sum(axis=1)
+    return ll if tempering == 1.0 else tempering * ll
 
 
 def map_theta(p_blocked: np.ndarray, cfg: TightConfig) -> np.ndarray:

@@ -34,10 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from companion.tight.belief import LineOfSight, sigmoid
+from companion.tight.belief import LineOfSight, shadow_log_likelihood, sigmoid
 from companion.tight.config import TightConfig
-
-_Q_EPS = 1e-3  # q clipped to [ε, 1 − ε], as belief.blocked_probability's
 
 
 class ShadowFix(NamedTuple):
@@ -77,13 +75,6 @@ def p_los(theta_prior: np.ndarray, cfg: TightConfig) -> np.ndarray:
     return sigmoid(cfg.shadow_logit_scale * theta_prior + cfg.shadow_logit_offset)
 
 
-def log_likelihood(hidden: np.ndarray, p_los: np.ndarray, tempering: float) -> np.ndarray:
-    """(K,) log-likelihood of each candidate's verdicts ``hidden`` (K, n) given each signal's probability of
-    a line of sight ``p_los`` (n,), tempered."""
-    q = np.clip(p_los, _Q_EPS, 1.0 - _Q_EPS)
-    return tempering * np.where(hidden, np.log1p(-q), np.log(q)).sum(axis=1)
-
-
 def posterior(pts: np.ndarray, log_l: np.ndarray, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Mean (2,) and covariance (2, 2) of the candidates under a flat prior, + the grid's resolution."""
     w = np.exp(log_l - log_l.max())
@@ -107,7 +98,7 @@ def shadow_fix(line_of_sight: LineOfSight, p_ned_m: np.ndarray, P_pos_m2: np.nda
     cand[:, 0:2] = pts
     cand[:, 2] = p_ned_m[2]
     hidden = np.asarray(line_of_sight(cand, azimuth_rad, elevation_rad), dtype=bool)
-    mean, cov = posterior(pts, log_likelihood(hidden, p_los(theta_prior, cfg), cfg.shadow_tempering),
+    mean, cov = posterior(pts, shadow_log_likelihood(hidden, p_los(theta_prior, cfg), cfg.shadow_tempering),
                           cfg.shadow_spacing_m)
     m0 = np.asarray(p_ned_m[0:2], dtype=float)
     lam, vec = np.linalg.eigh(cov)
