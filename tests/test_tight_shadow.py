@@ -190,3 +190,21 @@ def test_a_grid_too_fine_for_its_width_is_refused_in_one_line():
     with pytest.raises(ValueError, match="231361 candidates an epoch, at most 10000"):
         TightConfig(shadow_spacing_m=0.1).validate()
     TightConfig(shadow_spacing_m=0.5).validate()  # 97² = 9,409: accepted
+
+
+@pytest.mark.parametrize(("section", "why"), [
+    ({"shadow_spacing_m": 0.01}, "candidates an epoch, at most 10000"),
+    ({"shadow_stage": "during"}, "expected one of ['before', 'after']"),
+    ({"shadow_matching": "yes please"}, "expected true or false"),
+    ({"accuracy_delay_fraction": -1}, "accuracy_delay_fraction: must be a finite number >= 0"),
+])
+def test_bad_new_tight_settings_in_a_config_file_are_one_line_errors(section, why):
+    """The companion's --config ``tight:`` section with the new settings out of range: refused in one line."""
+    from pathlib import Path
+
+    from companion.errors import ConfigError
+    from gcs_tools import companion_config
+
+    with pytest.raises(ConfigError) as refused:
+        companion_config.tight_config({"tight": section}, Path("companion.yaml"))
+    assert why in str(refused.value) and "\n" not in str(refused.value)
