@@ -20,10 +20,12 @@ def _parser() -> argparse.ArgumentParser:
     from companion.mavlink.udp_link import add_link_arguments
     from companion.telemetry import pubsub as telemetry
 
-    parser = argparse.ArgumentParser(prog="python -m companion", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m companion", description=__doc__.splitlines()[0],
+        allow_abbrev=False)
     sub = parser.add_subparsers(dest="process", required=True)
     for name, text in (("estimator", "belief-adaptive estimator"), ("bridge", "planner bridge")):
-        p = sub.add_parser(name, help=text)
+        p = sub.add_parser(name, help=text, allow_abbrev=False)
         p.add_argument("--vehicle-port", type=int, required=name == "bridge",
                        help="our simulated vehicle's UDP port for us")
         p.add_argument("--bind-port", type=int, default=0, help="our UDP port (0: any free one)")

@@ -13,7 +13,7 @@ import importlib.metadata
 import re
 import sys
 from collections.abc import Sequence
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from companion.errors import UserError, not_one_of
 
@@ -53,7 +53,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 class Parser(argparse.ArgumentParser):
-    """An argparse parser whose errors are one line naming the command (no usage block)."""
+    """An argparse parser whose errors are one line naming the command (no usage block), and that takes
+    options by their whole names only: a prefix (``--prof`` for ``--profiles``) would keep working until
+    another option shares it, then break a user's script."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         command = self.prog.removeprefix("beliefnav").strip()

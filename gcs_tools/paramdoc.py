@@ -174,7 +174,9 @@ def render() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n", 1)[0].replace("``", "`"))
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n", 1)[0].replace("``", "`"),
+        allow_abbrev=False)
     ap.add_argument("--check", action="store_true",
                     help="only compare with the committed file (exit 1 if stale)")
     ap.add_argument("--out", type=Path, default=OUT)

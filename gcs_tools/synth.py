@@ -76,7 +76,7 @@ def messages(duration_s: float, rng: np.random.Generator) -> Iterator[tuple[str,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--vehicle", default="uav1")
     ap.add_argument("--duration-s", type=float, default=10.0, help="simulated flight time")
     ap.add_argument("--speed", type=float, default=1.0, help="times real time (0: as fast as possible)")

@@ -12,7 +12,9 @@ def _parser() -> argparse.ArgumentParser:
     from companion.telemetry import pubsub as telemetry
     from simvehicle.groundlink import add_ground_arguments
 
-    p = argparse.ArgumentParser(prog="python -m simvehicle", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(
+        prog="python -m simvehicle", description=__doc__.splitlines()[0],
+        allow_abbrev=False)
     p.add_argument("--mission", default="default", help="mission name or YAML path")
     p.add_argument("--profile", type=int, default=0, help="mission profile index")
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw of the vehicle")

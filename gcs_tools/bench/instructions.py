@@ -91,7 +91,7 @@ def count(which: str, duration_s: float, tree: Path | None = None) -> dict[str, 
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m gcs_tools.bench.instructions",
+    parser = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.bench.instructions",
                                      description=__doc__.split("\n\n")[0] if __doc__ else None)
     parser.add_argument("filter", choices=("estimator", "tight"))
     parser.add_argument("--duration-s", type=float, default=20.0, help="the stream's length (default 20)")

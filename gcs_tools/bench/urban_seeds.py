@@ -96,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from gcs_tools import choices
     from gcs_tools.evaluate.real import estimator_config, parse_sets
 
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.bench.urban_seeds",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.bench.urban_seeds",
                                 description="the urban-like receiver without a velocity over several seeds")
     p.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 of the urban-like error (default 10)")
     p.add_argument("--methods", default=",".join(rb.METHODS), help="comma-separated (default: the bench's)")

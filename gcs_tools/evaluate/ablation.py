@@ -546,7 +546,7 @@ def _tuning_seeds(text: str) -> tuple[int, ...]:
 
 def _campaign_parser(sub: Any, name: str, help_text: str) -> argparse.ArgumentParser:
     """A subcommand that flies rows of a rows file on the reported profiles (severity, effects)."""
-    c: argparse.ArgumentParser = sub.add_parser(name, help=help_text)
+    c: argparse.ArgumentParser = sub.add_parser(name, allow_abbrev=False, help=help_text)
     c.add_argument("--rows", type=Path, required=True)
     c.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
     c.add_argument("--profiles", default="10", help="reported profiles: a count N (0..N-1) or a list/range")
@@ -560,10 +560,11 @@ def _campaign_parser(sub: Any, name: str, help_text: str) -> argparse.ArgumentPa
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.ablation",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.ablation",
                                 description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
-    t = sub.add_parser("tune", help="tune every row alike on the tuning set; write rows-<scenario>.yaml")
+    t = sub.add_parser("tune", allow_abbrev=False,
+                       help="tune every row alike on the tuning set; write rows-<scenario>.yaml")
     t.add_argument("--scenario", required=True)
     t.add_argument("--seeds", default="1000")
     t.add_argument("--profiles", default=None, help=f"profiles of {tuning.TUNING_MISSION} (default: all)")
@@ -575,7 +576,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     s = _campaign_parser(sub, "severity", "error ratio against the best fixed β over mismatch severity")
     s.add_argument("--levels", default=",".join(str(v) for v in SEVERITIES))
     _campaign_parser(sub, "effects", "mismatch with each unmodelled GNSS effect switched off in turn")
-    h = sub.add_parser("shared", help="choose one setting shared by every row, on the tuning set alike")
+    h = sub.add_parser("shared", allow_abbrev=False,
+                       help="choose one setting shared by every row, on the tuning set alike")
     h.add_argument("--scenario", required=True)
     h.add_argument("--rows", type=Path, required=True)
     h.add_argument("--methods", default=None, help="row labels to fly (default: all rows of the file)")
@@ -584,11 +586,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     h.add_argument("--profiles", default=None, help=f"profiles of {tuning.TUNING_MISSION} (default: all)")
     h.add_argument("--workers", type=int, default=2)
     h.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
-    q = sub.add_parser("pair", help="rows of a campaign against rows of another, paired by flight")
+    q = sub.add_parser("pair", allow_abbrev=False,
+                       help="rows of a campaign against rows of another, paired by flight")
     q.add_argument("new", type=Path, help="campaign directory whose rows are compared (e.g. re-tuned rows)")
     q.add_argument("base", type=Path, help="campaign directory holding the reference rows")
     q.add_argument("--reference", required=True, metavar="ROW[,ROW...]")
-    r = sub.add_parser("report", help="write OUT/report.md from the steps' outputs")
+    r = sub.add_parser("report", allow_abbrev=False, help="write OUT/report.md from the steps' outputs")
     r.add_argument("--out", type=Path, default=Path("docs/results/ablation"))
     args = p.parse_args(argv)
     try:

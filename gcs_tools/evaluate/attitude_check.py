@@ -175,7 +175,7 @@ def markdown(r: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.attitude_check",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.attitude_check",
                                 description=(__doc__ or "").splitlines()[0])
     p.add_argument("--corpus", type=Path, default=None,
                    help="the ANSFL corpus directory (none: no real flights)")

@@ -57,7 +57,7 @@ def true_velocity(mission: str, profile: int, seed: int,
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.hold_probe",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.hold_probe",
                                 description=(__doc__ or "").splitlines()[0])
     p.add_argument("--mission", default="default-tuning")
     p.add_argument("--profiles", default="0-3")

@@ -82,7 +82,7 @@ def probe(profiles: Sequence[int], seeds: Sequence[int],
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.nlos_probe",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.nlos_probe",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--mission", default=tuning.TUNING_MISSION)
     ap.add_argument("--profiles", default=None,

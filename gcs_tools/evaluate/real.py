@@ -487,7 +487,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from gcs_tools.outdir import check_out_dir, ensure_out_dir
     from gcs_tools.replay.synthetic_gnss import ACCURACY_MODES, GnssErrorOptions, velocity_option
 
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.real", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m gcs_tools.evaluate.real", description=__doc__.split("\n")[0],
+        allow_abbrev=False)
     p.add_argument("--corpus", type=Path, default=None, help="the ANSFL directory (path_1, path_2, ...)")
     p.add_argument("--flights", default="reporting",
                    help="reporting (paths 5,6,7,8,10), tuning (1,2,3), all, or flight names/paths")

@@ -173,7 +173,7 @@ def bound(wins: list[tuple[np.ndarray, np.ndarray]], accuracy: str) -> dict[str,
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.real_bound",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.real_bound",
                                 description=__doc__.split("\n")[0])
     p.add_argument("--corpus", type=Path, default=None, help="the ANSFL directory (path_1, path_2, ...)")
     p.add_argument("--flights", default="tuning", help="tuning, reporting, all, or flight names/paths")

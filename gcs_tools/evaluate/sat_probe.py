@@ -224,7 +224,7 @@ def markdown(r: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.sat_probe",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.sat_probe",
                                 description=(__doc__ or "").splitlines()[0])
     p.add_argument("--mission", default=tuning.TUNING_MISSION)
     p.add_argument("--profiles", default="0,1,2,3")

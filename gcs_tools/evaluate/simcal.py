@@ -715,7 +715,7 @@ def run(
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
-        prog="python -m gcs_tools.evaluate.simcal", description=__doc__.splitlines()[0]
+        prog="python -m gcs_tools.evaluate.simcal", description=__doc__.splitlines()[0], allow_abbrev=False
     )
     p.add_argument(
         "--smartloc", type=Path, required=True, help="smartLoc *_Input.txt (its *_GT.txt beside it)"

@@ -121,7 +121,7 @@ def markdown(r: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.smartloc_export",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.smartloc_export",
                                 description=(__doc__ or "").splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="directory for the *_Input.txt / *_GT.txt drives")
     p.add_argument("--mission", default="mild", help="flown under the canyon scenario")

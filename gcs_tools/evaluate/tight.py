@@ -315,7 +315,7 @@ def markdown(r: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.tight",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.tight",
                                 description=(__doc__ or "").splitlines()[0])
     p.add_argument("--smartloc", type=Path, required=True, metavar="INPUT", help="smartLoc *_Input.txt")
     p.add_argument("--truth", type=Path, default=None, help="smartLoc *_GT.txt (default: beside INPUT)")

@@ -162,7 +162,7 @@ def markdown(r: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.tight_hold",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.tight_hold",
                                 description=(__doc__ or "").splitlines()[0])
     p.add_argument("--mission", default="test", help="mission name or YAML path (flown in scenario canyon)")
     p.add_argument("--profiles", default="2", help="mission profiles, e.g. 2 or 0-3")

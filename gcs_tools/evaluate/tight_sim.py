@@ -394,7 +394,7 @@ def markdown(r: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.tight_sim",
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.tight_sim",
                                 description=(__doc__ or "").splitlines()[0])
     p.add_argument("--mission", default="default")
     p.add_argument("--profiles", default="3,4")

@@ -119,7 +119,7 @@ def probe(row: rows_mod.Row, profiles: Sequence[int], seeds: Sequence[int],
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.trust_probe",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m gcs_tools.evaluate.trust_probe",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--rows", required=True, help="ablation rows YAML (rows-mismatch.yaml)")
     ap.add_argument("--row", required=True, help="the row label to fly")

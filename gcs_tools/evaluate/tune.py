@@ -106,7 +106,9 @@ def _commit() -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.tune", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m gcs_tools.evaluate.tune", description=__doc__.split("\n")[0],
+        allow_abbrev=False)
     p.add_argument("--vary", action="append", default=[], metavar="SECTION.FIELD=V1,V2",
                    help="values to sweep (cartesian product over repeats)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
