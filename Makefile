@@ -58,8 +58,8 @@ TEST_WORKERS ?= 2
 test: export PYTHONDONTWRITEBYTECODE :=
 test: $(STAMP) browser
 	@status=0; \
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not autopilot" || status=$$?; \
-	$(BIN)/python -m pytest -q -m autopilot || status=$$?; \
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m "not autopilot" --durations=20 || status=$$?; \
+	$(BIN)/python -m pytest -q -m autopilot --durations=10 || status=$$?; \
 	exit $$status
 
 bench: $(STAMP)
