@@ -341,6 +341,25 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _rounded(x: Any) -> Any:
+    if isinstance(x, float):
+        return round(x, 4) if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _rounded(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_rounded(v) for v in x]
+    return x
+
+
+def write_results(path: Path, result: dict[str, Any]) -> None:
+    """``result`` as JSON (numbers to 4 decimals), one compact line per run."""
+    result = _rounded(result)
+    head = {k: v for k, v in result.items() if k != "runs"}
+    text = json.dumps(head, indent=1)[:-2]
+    lines = ",\n".join(json.dumps(r, separators=(",", ":")) for r in result["runs"])
+    path.write_text(f'{text},\n "runs": [\n{lines}\n ]\n}}\n')
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from gcs_tools.evaluate.real import flight_dirs
     from gcs_tools.gnss.transplant import PREFIX
@@ -396,7 +415,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"real_tight: error: {exc}", file=sys.stderr)
         return 2
-    (out / "results.json").write_text(json.dumps(result, indent=1) + "\n")
+    write_results(out / "results.json", result)
     text = markdown(result)
     (out / "report.md").write_text(text + "\n")
     print(text)
