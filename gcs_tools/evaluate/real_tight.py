@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import math
 import sys
 from collections.abc import Callable, Iterator, Sequence
@@ -351,13 +350,12 @@ def _rounded(x: Any) -> Any:
     return x
 
 
-def write_results(path: Path, result: dict[str, Any]) -> None:
-    """``result`` as JSON (numbers to 4 decimals), one compact line per run."""
-    result = _rounded(result)
-    head = {k: v for k, v in result.items() if k != "runs"}
-    text = json.dumps(head, indent=1)[:-2]
-    lines = ",\n".join(json.dumps(r, separators=(",", ":")) for r in result["runs"])
-    path.write_text(f'{text},\n "runs": [\n{lines}\n ]\n}}\n')
+def write_results(out: Path, result: dict[str, Any]) -> None:
+    """``out/results.json`` (numbers to 4 decimals, one compact line per run) and ``out/report.md``."""
+    from gcs_tools.evaluate.real import write_outputs
+
+    rounded = _rounded(result)
+    write_outputs(out, {k: v for k, v in rounded.items() if k != "runs"}, rounded["runs"], markdown(result))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -415,11 +413,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"real_tight: error: {exc}", file=sys.stderr)
         return 2
-    write_results(out / "results.json", result)
-    text = markdown(result)
-    (out / "report.md").write_text(text + "\n")
-    print(text)
-    print(f"wrote {out / 'results.json'} and {out / 'report.md'}")
+    write_results(out, result)
     return 0
 
 
