@@ -107,3 +107,50 @@ def test_bad_arguments_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
                     "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("real_tight: error: ") for line in err)
+
+
+SMARTLOC = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "urban" / "smartloc"
+
+
+@pytest.fixture(scope="module")
+def drive_and_flight(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
+    """The smartLoc drive's first minute (as tests/test_transplant.py cuts it) and a 20 s synthetic flight."""
+    import os
+
+    src = SMARTLOC / "Berlin_Potsdamer_Platz_Input.txt"
+    if not src.is_file():
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"required in CI: the smartLoc drive beside the repository ({src})")
+        pytest.skip(f"the smartLoc drive is not beside the repository ({src})")
+    out = tmp_path_factory.mktemp("smartloc")
+    for name, limit in (("Berlin_Potsdamer_Platz_Input.txt", 60.0), ("Berlin_Potsdamer_Platz_GT.txt", 61.0)):
+        lines = (SMARTLOC / name).read_text(encoding="ascii").splitlines()
+        (out / name).write_text("\n".join(ln for ln in lines if float(ln.split()[1]) < limit) + "\n")
+    write_flight(out / "f", seconds=20.0, offset_s=0.2, seed=3)
+    return f"smartloc-sats:{out / 'Berlin_Potsdamer_Platz_Input.txt'}", out / "f"
+
+
+def test_the_imu_variant_is_the_campaigns_tight_row_and_the_others_differ(drive_and_flight: tuple[str, Path]):
+    from gcs_tools.evaluate import real
+
+    errors, flight = drive_and_flight
+    campaign = real.run([flight], [errors], ["reported"], ["naive"], [0], velocity_std_m_s=None)
+    row = next(r for r in campaign["runs"] if r["row"] == "tight-second-order")
+    runs = {v: rt.run_variant(flight, errors, 0, v, None) for v in ("imu", "gnss-only", "imu-clean")}
+    # the same replay: its errors from the estimate rows at the truth samples, the campaign's from the
+    # replay's own comparison (the same samples): equal to the estimate rows' interpolation
+    assert runs["imu"]["median"] == pytest.approx(row["median"], abs=0.02)
+    assert runs["imu"]["max"] == pytest.approx(row["max"], abs=0.02)
+    assert runs["gnss-only"]["median"] != runs["imu"]["median"]
+    assert runs["imu-clean"]["median"] < 0.5 * runs["imu"]["median"]  # Berlin's residuals removed
+    assert runs["imu"]["heading_error_deg"] == pytest.approx(0.0, abs=0.5)  # the synthetic flight's heading
+
+
+def test_placement_reads_the_flights_windows_of_the_drive(drive_and_flight: tuple[str, Path]):
+    errors, flight = drive_and_flight
+    rows = rt.placement(errors, [flight], [0, 1])
+    assert rows[0]["window"] == "whole drive" and len(rows) == 3
+    for r in rows[1:]:
+        assert 18.5 < r["span_s"] < 20.0 and 0.0 <= r["start_s"] <= 60.0 - r["span_s"]
+        for name in ("spp", "drive_whole", "drive_restarted"):
+            assert 0.0 < r[f"{name}_median"] <= r[f"{name}_p95"]
