@@ -191,8 +191,10 @@ def _placed(flight: Path, sky: Any, seed: int, velocity: float | None, clean: bo
         transplant.place = place
 
 
-def run_variant(flight: Path, errors: str, seed: int, variant: str, velocity: float | None) -> dict[str, Any]:
-    """One replay of ``tight-second-order`` on ``flight`` with the IMU of ``variant``."""
+def run_variant(flight: Path, errors: str, seed: int, variant: str, velocity: float | None, row: str = ROW
+                ) -> dict[str, Any]:
+    """One replay of ``tight-<row>`` (default: the belief per satellite) on ``flight`` with the IMU of
+    ``variant``."""
     from gcs_tools.gnss import tight_replay as tr
     from gcs_tools.gnss import transplant
     from gcs_tools.replay import core
@@ -203,7 +205,7 @@ def run_variant(flight: Path, errors: str, seed: int, variant: str, velocity: fl
     inner = transplant.on_drive_frame(flight, None, sky)
     yaw = float(getattr(inner, "clock", {}).get("yaw_deg", 0.0))
     raw: Any = transplant.placed_raw_reader(ImuVariant(inner, mode, yaw), placed, sky.name)
-    res = core.replay(flight, ROW, home=placed.frame, reader=raw, rate_hz=10.0,
+    res = core.replay(flight, row, home=placed.frame, reader=raw, rate_hz=10.0,
                       navigator=tr.tight_factory(make_config()))
     nav = res.summary["navigator"]
     return {"flight": flight.name, "seed": seed, "variant": variant, "heading_error_deg": -yaw,
@@ -307,7 +309,7 @@ def _mean(rows: Sequence[dict[str, Any]], key: str) -> float:
 
 
 def markdown(result: dict[str, Any]) -> str:
-    lines = [f"# tight-second-order on real IMU flights: {result['errors']}", "",
+    lines = [f"# {result.get('row', 'tight-' + ROW)} on real IMU flights: {result['errors']}", "",
              f"Flights {', '.join(result['flights'])}, seeds {result['seeds']}, velocity: "
              f"{result['velocity']}. Means over runs (flight × seed); NEES horizontal (consistent: 2).", "",
              "| variant | median | p95 | max | median 0-10 s | 10-20 s | after 20 s | velocity error RMS "
@@ -375,6 +377,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="synthetic Doppler of the fixes' velocity information (default: none)")
     p.add_argument("--variants", default=",".join(DEFAULT_VARIANTS),
                    help=f"comma-separated of {', '.join(VARIANTS)}")
+    p.add_argument("--row", default=ROW, help=f"the tight filter's weighting (default {ROW})")
     p.add_argument("--no-placement", action="store_true", help="skip the drive-window measurement")
     p.add_argument("--out", type=Path, default=Path("runs/real_tight"))
     args = p.parse_args(argv)
@@ -390,7 +393,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         seeds = parse_seeds(args.seeds)
         velocity = velocity_option(args.gnss_velocity)
         _sky(args.errors)
-        runs = [run_variant(f, args.errors, s, v, velocity) for v in variants for f in flights for s in seeds]
+        from gcs_tools.evaluate.tight import TIGHT_ROWS
+
+        if args.row not in TIGHT_ROWS:
+            raise UserError(f"--row {args.row!r}: choose from {', '.join(TIGHT_ROWS)}")
+        runs = [run_variant(f, args.errors, s, v, velocity, args.row)
+                for v in variants for f in flights for s in seeds]
         white, bias0, ned0 = (getattr(_tight(), k) for k in ("sigma_acc_m_s2", "sigma_acc_bias0_m_s2",
                                                                "sigma_acc_ned0_m_s2"))
         rms: dict[str, list[float]] = {}
@@ -403,7 +411,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             for T in HORIZONS_S:
                 pooled[T].append(dr[T])
         rms["pooled"] = [float(np.sqrt(np.mean(np.vstack(pooled[T]) ** 2))) for T in HORIZONS_S]
-        result = {"errors": args.errors.removeprefix(PREFIX).rsplit("/", 1)[-1],
+        result = {"row": f"tight-{args.row}", "errors": args.errors.removeprefix(PREFIX).rsplit("/", 1)[-1],
                   "flights": [f.name for f in flights], "seeds": list(seeds),
                   "velocity": "none" if velocity is None else f"synthetic Doppler ({velocity} m/s)",
                   "variants": variants, "drift": drift,
