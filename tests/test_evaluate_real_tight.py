@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ansfl_helpers import write_flight
+from ansfl_helpers import smartloc_drive_slice, write_flight
 from scipy.spatial.transform import Rotation
 
 from companion.domain.samples import AttitudeSample, ImuSample
@@ -109,25 +109,13 @@ def test_bad_arguments_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert len(err) == 2 and all(line.startswith("real_tight: error: ") for line in err)
 
 
-SMARTLOC = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "urban" / "smartloc"
-
-
 @pytest.fixture(scope="module")
 def drive_and_flight(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     """The smartLoc drive's first minute (as tests/test_transplant.py cuts it) and a 20 s synthetic flight."""
-    import os
-
-    src = SMARTLOC / "Berlin_Potsdamer_Platz_Input.txt"
-    if not src.is_file():
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"required in CI: the smartLoc drive beside the repository ({src})")
-        pytest.skip(f"the smartLoc drive is not beside the repository ({src})")
     out = tmp_path_factory.mktemp("smartloc")
-    for name, limit in (("Berlin_Potsdamer_Platz_Input.txt", 60.0), ("Berlin_Potsdamer_Platz_GT.txt", 61.0)):
-        lines = (SMARTLOC / name).read_text(encoding="ascii").splitlines()
-        (out / name).write_text("\n".join(ln for ln in lines if float(ln.split()[1]) < limit) + "\n")
+    drive = smartloc_drive_slice(out, 60.0)
     write_flight(out / "f", seconds=20.0, offset_s=0.2, seed=3)
-    return f"smartloc-sats:{out / 'Berlin_Potsdamer_Platz_Input.txt'}", out / "f"
+    return f"smartloc-sats:{drive}", out / "f"
 
 
 def test_the_imu_variant_is_the_campaigns_tight_row_and_the_others_differ(drive_and_flight: tuple[str, Path]):
