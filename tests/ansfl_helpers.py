@@ -99,3 +99,21 @@ def write_flight(directory: Path, *, seconds: float = 40.0, offset_s: float = 0.
               "height_above_takeoff(meters),North,East,Down")
     np.savetxt(directory / "GT.csv", gt, delimiter=",", header=header, comments="", fmt="%.10g")
     return traj
+
+
+SMARTLOC = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "urban" / "smartloc"
+
+
+def smartloc_drive_slice(out: Path, seconds: float = 60.0) -> Path:
+    """The smartLoc Berlin drive's first ``seconds`` (input and truth, for placing its satellites on a
+    flight) written to ``out``: its ``*_Input.txt``. Missing beside the repository: skip (fail in CI)."""
+    src = SMARTLOC / "Berlin_Potsdamer_Platz_Input.txt"
+    if not src.is_file():
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"required in CI: the smartLoc drive beside the repository ({src})")
+        pytest.skip(f"the smartLoc drive is not beside the repository ({src})")
+    for name, limit in (("Berlin_Potsdamer_Platz_Input.txt", seconds), ("Berlin_Potsdamer_Platz_GT.txt",
+                                                                          seconds + 1.0)):
+        lines = (SMARTLOC / name).read_text(encoding="ascii").splitlines()
+        (out / name).write_text("\n".join(ln for ln in lines if float(ln.split()[1]) < limit) + "\n")
+    return out / "Berlin_Potsdamer_Platz_Input.txt"

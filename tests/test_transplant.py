@@ -7,13 +7,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from ansfl_helpers import write_flight
+from ansfl_helpers import smartloc_drive_slice, write_flight
 
 from companion.gnss.constants import C_M_S, OMEGA_E_RAD_S
 from companion.gnss.geometry import ecef_to_geodetic, ecef_to_ned_matrix, sagnac_range_m
@@ -26,24 +25,13 @@ from gcs_tools.gnss import transplant
 from gcs_tools.gnss.baseline import epoch_residuals_at_truth, solve_series
 from gcs_tools.replay.synthetic_gnss import GnssErrorOptions, series_times
 
-SMARTLOC = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "urban" / "smartloc"
 SLICE_S = 60.0  # the first minute of the drive: 300 epochs
 
 
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The drive's first minute (input and truth) in a temporary directory."""
-    src = SMARTLOC / "Berlin_Potsdamer_Platz_Input.txt"
-    if not src.is_file():
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"required in CI: the smartLoc drive beside the repository ({src})")
-        pytest.skip(f"the smartLoc drive is not beside the repository ({src})")
-    out = tmp_path_factory.mktemp("smartloc")
-    for name, limit in (("Berlin_Potsdamer_Platz_Input.txt", SLICE_S), ("Berlin_Potsdamer_Platz_GT.txt",
-                                                                          SLICE_S + 1.0)):
-        lines = (SMARTLOC / name).read_text(encoding="ascii").splitlines()
-        (out / name).write_text("\n".join(ln for ln in lines if float(ln.split()[1]) < limit) + "\n")
-    return out / "Berlin_Potsdamer_Platz_Input.txt"
+    return smartloc_drive_slice(tmp_path_factory.mktemp("smartloc"), SLICE_S)
 
 
 @pytest.fixture(scope="module")

@@ -551,17 +551,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"real: error: {exc}", file=sys.stderr)
         return 2
+    runs = result.pop("runs")
+    write_outputs(out, result, runs, markdown(result))
+    return 0
+
+
+def write_outputs(out: Path, result: dict[str, Any], runs: Sequence[dict[str, Any]], text: str) -> None:
+    """``out/results.json`` (``result`` with its ``runs``, one compact line per run) and ``out/report.md``
+    (``text``, also printed)."""
     from gcs_tools.replay.core import json_safe
 
-    runs = result.pop("runs")  # one compact line per run
-    text = json.dumps(json_safe(result), indent=1)[:-2]
+    head = json.dumps(json_safe(result), indent=1)[:-2]
     lines = ",\n".join(json.dumps(json_safe(r), separators=(",", ":")) for r in runs)
-    (out / "results.json").write_text(f'{text},\n "runs": [\n{lines}\n ]\n}}\n')
-    text = markdown(result)
+    (out / "results.json").write_text(f'{head},\n "runs": [\n{lines}\n ]\n}}\n')
     (out / "report.md").write_text(text + "\n")
     print(text)
     print(f"wrote {out / 'results.json'} and {out / 'report.md'}")
-    return 0
 
 
 if __name__ == "__main__":
