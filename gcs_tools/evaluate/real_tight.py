@@ -367,7 +367,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from gcs_tools.replay.synthetic_gnss import velocity_option
 
     p = argparse.ArgumentParser(prog="python -m gcs_tools.evaluate.real_tight",
-                                description=__doc__.split("\n")[0])
+                                description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("--corpus", type=Path, default=None, help="the ANSFL directory (path_1, path_2, ...)")
     p.add_argument("--flights", default="reporting",
                    help="reporting (paths 5,6,7,8,10), tuning (1,2,3), all, or flight names/paths")
