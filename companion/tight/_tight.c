@@ -317,6 +317,23 @@ static int chol_factor(double *A, int k) {
     return 1;
 }
 
+/* Sums Σ_c a[c] b[c] taken over the nonzero b[c] alone are the full sums, bit for bit, when every a[c] is
+ * finite: a left-out term is ±0, and an accumulator that starts at +0 never becomes −0 (round to nearest),
+ * so adding ±0 never changes it. nonzero_index: the columns of b's nonzero entries (all n when a_finite is 0:
+ * the full sum) */
+static int nonzero_index(const double *b, int n, int a_finite, int *idx) {
+    int m = 0;
+    for (int c = 0; c < n; c++)
+        if (!a_finite || b[c] != 0.0) idx[m++] = c;
+    return m;
+}
+
+static int all_finite(const double *a, int n) {
+    for (int i = 0; i < n; i++)
+        if (!isfinite(a[i])) return 0;
+    return 1;
+}
+
 static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, const int N) {
     PyObject *ox, *oP, *oH, *oHP, *oy, *or, *ou, *or0, *oC, *os, *ov, *ozr, *orr;
     double gate2;
@@ -327,6 +344,7 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     int nds[13] = {1, 2, 2, 2, 1, 1, 1, 1, 2, 2, 2, 1, 1};
     PyArrayObject *a[13] = {0};
     double *Hs = NULL, *HPs = NULL, *W = NULL, *Sm = NULL;
+    int *Hnz = NULL;
     PyObject *result = NULL;
     for (int i = 0; i < 13; i++) {
         a[i] = in_array(objs[i], nds[i]);
@@ -346,7 +364,7 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     Hs = malloc(sizeof(double) * MAXM * N);
     HPs = malloc(sizeof(double) * MAXM * N);
     double ys[MAXM], rs[MAXM];
-    int k = 0, n_rate = 0;
+    int k = 0, n_rate = 0, P_finite = all_finite(P, N * N);
     for (npy_intp i = 0; i < m && k < MAXM; i++) {
         if (used[i] == 0.0) continue;
         memcpy(Hs + k * N, H + i * N, sizeof(double) * N);
@@ -360,9 +378,10 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
         double *h = Hs + k * N, *hp = HPs + k * N;
         double pred = range_rate_row(x, r0, C, sp + 3 * i, sv + 3 * i, h, N);
         double yr = zr[i] - pred, s0 = 0.0;
+        int nz[NMAX], nnz = nonzero_index(h, N, P_finite, nz); /* h: p, v and the drift */
         for (int c = 0; c < N; c++) {
             double v = 0.0;
-            for (int j = 0; j < N; j++) v += h[j] * P[j * N + c];
+            for (int t = 0; t < nnz; t++) v += h[nz[t]] * P[nz[t] * N + c];
             hp[c] = v;
         }
         for (int c = 0; c < N; c++) s0 += hp[c] * h[c];
@@ -379,10 +398,14 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     if (k > 0) {
         Sm = malloc(sizeof(double) * k * k);
         W = malloc(sizeof(double) * k * (N + 1));
+        Hnz = malloc(sizeof(int) * k * N);
+        int HP_finite = all_finite(HPs, k * N), n_nz[MAXM];
+        for (int j = 0; j < k; j++) n_nz[j] = nonzero_index(Hs + j * N, N, HP_finite, Hnz + j * N);
         for (int i = 0; i < k; i++)
-            for (int j = 0; j <= i; j++) {
+            for (int j = 0; j <= i; j++) { /* over H_j's nonzero columns: a pseudorange's 4, a range rate's 7 */
+                const int *cj = Hnz + j * N;
                 double s = 0.0;
-                for (int c = 0; c < N; c++) s += HPs[i * N + c] * Hs[j * N + c];
+                for (int t = 0; t < n_nz[j]; t++) s += HPs[i * N + cj[t]] * Hs[j * N + cj[t]];
                 Sm[i * k + j] = Sm[j * k + i] = s + (i == j ? rs[i] : 0.0);
             }
         if (!chol_factor(Sm, k)) { /* S = L L^T (lower, in place) */
@@ -428,7 +451,7 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     result = Py_BuildValue("(NNdi)", new_array(1, N, 0, xo), new_array(2, N, N, Po), nis, n_rate);
 done:
     for (int i = 0; i < 13; i++) Py_XDECREF(a[i]);
-    free(Hs); free(HPs); free(W); free(Sm);
+    free(Hs); free(HPs); free(W); free(Sm); free(Hnz);
     return result;
 }
 
