@@ -670,6 +670,47 @@ done:
 
 /* The state size of the covariance (or H) at args[i] (dimension dim): 22 with the baro offset, else 21.
  * Each entry point below is compiled twice, for 21 and 22 (the loops' bounds constants, as before). */
+/* ------------------------------------------------------------- satellite states */
+/* carry_states(rows (n, 12): each anchor's pos, vel, acc, clock, drift, valid; dt (n,) s from the anchor)
+ * -> (pos (n, 3), vel (n, 3), clock (n,), drift (n,), anchored (n,) bool: valid == 1): satcache's
+ * second-order step p + v dt + ½ a dt², v + a dt, clock + drift dt, in numpy's order of operations */
+static PyObject *py_carry_states(PyObject *self, PyObject *args) {
+    PyObject *orows, *odt;
+    if (!PyArg_ParseTuple(args, "OO", &orows, &odt)) return NULL;
+    PyArrayObject *ar = in_array(orows, 2), *adt = in_array(odt, 1);
+    PyObject *pos = NULL, *vel = NULL, *clk = NULL, *drift = NULL, *ok = NULL;
+    if (!ar || !adt) goto fail;
+    npy_intp n = PyArray_DIM(ar, 0);
+    if (PyArray_DIM(ar, 1) != 12 || PyArray_DIM(adt, 0) != n) {
+        PyErr_SetString(PyExc_ValueError, "carry_states: shapes");
+        goto fail;
+    }
+    pos = new_array(2, n, 3, NULL); vel = new_array(2, n, 3, NULL);
+    clk = new_array(1, n, 0, NULL); drift = new_array(1, n, 0, NULL);
+    ok = PyArray_SimpleNew(1, &n, NPY_BOOL);
+    if (!pos || !vel || !clk || !drift || !ok) goto fail;
+    const double *o = PyArray_DATA(ar), *dt = PyArray_DATA(adt);
+    double *p = PyArray_DATA((PyArrayObject *)pos), *v = PyArray_DATA((PyArrayObject *)vel),
+           *c = PyArray_DATA((PyArrayObject *)clk), *d = PyArray_DATA((PyArrayObject *)drift);
+    npy_bool *a = PyArray_DATA((PyArrayObject *)ok);
+    for (npy_intp i = 0; i < n; i++) {
+        const double *r = o + 12 * i, t = dt[i];
+        for (int k = 0; k < 3; k++) {
+            p[3 * i + k] = (r[k] + r[3 + k] * t) + 0.5 * r[6 + k] * t * t;
+            v[3 * i + k] = r[3 + k] + r[6 + k] * t;
+        }
+        c[i] = r[9] + r[10] * t;
+        d[i] = r[10];
+        a[i] = r[11] == 1.0;
+    }
+    Py_DECREF(ar); Py_DECREF(adt);
+    return Py_BuildValue("(NNNNN)", pos, vel, clk, drift, ok);
+fail:
+    Py_XDECREF(ar); Py_XDECREF(adt); Py_XDECREF(pos); Py_XDECREF(vel); Py_XDECREF(clk); Py_XDECREF(drift);
+    Py_XDECREF(ok);
+    return NULL;
+}
+
 static int state_size(PyObject *args, int i, int dim) {
     PyObject *o = PyTuple_Check(args) && PyTuple_GET_SIZE(args) > i ? PyTuple_GET_ITEM(args, i) : NULL;
     return o && PyArray_Check(o) && PyArray_NDIM((PyArrayObject *)o) > dim
@@ -689,6 +730,7 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
 }
 
 static PyMethodDef methods[] = {
+    {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},
     {"predict_cov", py_predict_cov, METH_VARARGS, "F P F^T + Q over a block (model.transition, model.process_noise)"},
