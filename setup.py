@@ -21,7 +21,7 @@ setup(
             ["companion/tight/_tight.c"],
             depends=["companion/estimator/held.h"],  # the held-time noise, shared with _core.c
             include_dirs=[numpy.get_include()],
-            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
+            extra_compile_args=["-O2", "-fvect-cost-model=cheap", "-ffp-contract=off", "-fno-fast-math", "-Wall"],
         ),
     ]
 )

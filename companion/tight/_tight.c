@@ -419,10 +419,10 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
             memcpy(W + i * (N + 1) + 1, HPs + i * N, sizeof(double) * N);
         }
         for (int i = 0; i < k; i++) {
-            double *wi = W + i * (N + 1);
+            double *restrict wi = W + i * (N + 1); /* rows i and j < i: apart (restrict: the loop vectorises) */
             for (int j = 0; j < i; j++) {
                 double l = Sm[i * k + j];
-                const double *wj = W + j * (N + 1);
+                const double *restrict wj = W + j * (N + 1);
                 for (int c = 0; c <= N; c++) wi[c] -= l * wj[c];
             }
             double d = Sm[i * k + i];
@@ -430,18 +430,27 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
         }
         nis = 0.0;
         for (int i = 0; i < k; i++) nis += W[i * (N + 1)] * W[i * (N + 1)];
-        for (int c = 0; c < N; c++) {
-            double s = 0.0;
-            for (int i = 0; i < k; i++) s += W[i * (N + 1) + 1 + c] * W[i * (N + 1)];
-            xo[c] += s;
+        /* the sums over the rows i, every column's at once (each in the order i = 0 … k − 1: the loops over c
+         * vectorise) */
+        double acc[NMAX];
+        for (int c = 0; c < N; c++) acc[c] = 0.0;
+        for (int i = 0; i < k; i++) {
+            const double *restrict wi = W + i * (N + 1);
+            for (int c = 0; c < N; c++) acc[c] += wi[1 + c] * wi[0];
         }
-        for (int r1 = 0; r1 < N; r1++)
-            for (int c = r1; c < N; c++) {
-                double s = 0.0;
-                for (int i = 0; i < k; i++) s += W[i * (N + 1) + 1 + r1] * W[i * (N + 1) + 1 + c];
-                Po[r1 * N + c] -= s;
-                if (c != r1) Po[c * N + r1] -= s;
+        for (int c = 0; c < N; c++) xo[c] += acc[c];
+        for (int r1 = 0; r1 < N; r1++) {
+            for (int c = r1; c < N; c++) acc[c] = 0.0;
+            for (int i = 0; i < k; i++) {
+                const double *restrict wi = W + i * (N + 1) + 1;
+                double w = wi[r1];
+                for (int c = r1; c < N; c++) acc[c] += w * wi[c];
             }
+            for (int c = r1; c < N; c++) {
+                Po[r1 * N + c] -= acc[c];
+                if (c != r1) Po[c * N + r1] -= acc[c];
+            }
+        }
         for (int r1 = 0; r1 < N; r1++) /* P was symmetric: keep it exactly so */
             for (int c = r1 + 1; c < N; c++) {
                 double s = 0.5 * (Po[r1 * N + c] + Po[c * N + r1]);
