@@ -199,8 +199,9 @@ def test_c_carry_states_equals_the_numpy_step_bit_for_bit():
     anchor table's rows, NaN rows of satellites without a state, dt of either sign and 0)."""
     rng = np.random.default_rng(7)
     n = 40
-    out = np.column_stack((rng.normal(0, 2e7, (n, 3)), rng.normal(0, 3e3, (n, 3)), rng.normal(0, 0.6, (n, 3)),
-                           rng.normal(0, 1e-4, n), rng.normal(0, 1e-11, n), (rng.uniform(size=n) > 0.2) * 1.0))
+    out = np.column_stack((rng.normal(0, 2e7, (n, 3)), rng.normal(0, 3e3, (n, 3)),
+                           rng.normal(0, 0.6, (n, 3)), rng.normal(0, 1e-4, n), rng.normal(0, 1e-11, n),
+                           (rng.uniform(size=n) > 0.2) * 1.0))
     out[3] = np.nan
     dt = rng.uniform(-2.5, 2.5, n)
     dt[5] = 0.0
@@ -224,11 +225,10 @@ def test_gnss_epoch_replace_is_dataclasses_replace(changes):
     """The same fields (an empty per-satellite array becoming NaN rows, as the constructor does)."""
     e = make_epoch(100.0, [1, 1, 3], [3, 4, 7], [2.1e7, 2.2e7, 2.3e7], cn0_dbhz=[40.0, 41.0, 42.0])
     if "pseudorange_m" in changes:  # another number of satellites: every per-satellite field given
-        changes = {**changes, **{f: np.zeros((2, 3)) if f.startswith("sat_p") or f.startswith("sat_v")
-                                 else np.zeros(2) for f in ("pseudorange_var_m2", "pseudorange_rate_m_s",
-                                                            "cn0_dbhz", "elevation_deg", "azimuth_deg",
-                                                            "sat_pos_ecef_m", "sat_vel_ecef_m_s", "sat_clock_s",
-                                                            "sat_clock_drift_s_s")}}
+        per_sat = ("pseudorange_var_m2", "pseudorange_rate_m_s", "cn0_dbhz", "elevation_deg", "azimuth_deg",
+                   "sat_pos_ecef_m", "sat_vel_ecef_m_s", "sat_clock_s", "sat_clock_drift_s_s")
+        vectors = ("sat_pos_ecef_m", "sat_vel_ecef_m_s")
+        changes = {**changes, **{f: np.zeros((2, 3)) if f in vectors else np.zeros(2) for f in per_sat}}
     got, want = e.replace(**changes), dataclasses.replace(e, **changes)
     for f in dataclasses.fields(GnssEpoch):
         a, b = getattr(got, f.name), getattr(want, f.name)

@@ -115,7 +115,9 @@ _FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
 _ALL_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(GnssEpoch))
 # (field, its slot's setter) for GnssEpoch.replace (a frozen dataclass's own __init__ goes through
 # object.__setattr__ per field)
-_SET_FIELD: tuple[tuple[str, Any], ...] = tuple((name, GnssEpoch.__dict__[name].__set__) for name in _ALL_FIELDS)
+_SET_FIELD: tuple[tuple[str, Any], ...] = tuple(
+    (name, GnssEpoch.__dict__[name].__set__) for name in _ALL_FIELDS
+)
 _NEW = object.__new__
 _FIELD_SET = frozenset(_ALL_FIELDS)
 
