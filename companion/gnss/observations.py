@@ -52,8 +52,13 @@ class GnssEpoch:
     time_base: str = "gps"
 
     def __post_init__(self) -> None:
+        self._check(_FIELDS)
+
+    def _check(self, fields: tuple[tuple[str, tuple[int, ...]], ...]) -> None:
+        """Each of these per-satellite fields: empty becomes NaN (n rows), another shape than n rows is a
+        ValueError."""
         n = len(self.pseudorange_m)
-        for name, shape in _FIELDS:
+        for name, shape in fields:
             v = getattr(self, name)
             if v.size == 0 and n:
                 object.__setattr__(self, name, _nan(n, *shape))
@@ -76,10 +81,19 @@ class GnssEpoch:
         return self.replace(**rows)
 
     def replace(self, **changes: object) -> GnssEpoch:
-        """``dataclasses.replace`` (every field is an init field), without its per-field checks."""
-        kw = {name: getattr(self, name) for name in _ALL_FIELDS}
-        kw.update(changes)
-        return GnssEpoch(**kw)
+        """``dataclasses.replace`` (every field is an init field), without its per-field checks; with the
+        same pseudoranges, the other fields set through their slots and only the changed ones checked
+        (the same object as ``GnssEpoch(...)`` gives: the tight filter replaces the satellite states and
+        C/N0 of every epoch)."""
+        if "pseudorange_m" in changes or not _FIELD_SET.issuperset(changes):  # (an unknown name: TypeError)
+            kw = {name: getattr(self, name) for name in _ALL_FIELDS}
+            kw.update(changes)
+            return GnssEpoch(**kw)
+        new = _NEW(GnssEpoch)
+        for name, set_field in _SET_FIELD:
+            set_field(new, changes[name] if name in changes else getattr(self, name))
+        new._check(tuple(f for f in _FIELDS if f[0] in changes))
+        return new
 
     def systems(self) -> tuple[System, ...]:
         return tuple(System(int(s)) for s in np.unique(self.system))
@@ -99,6 +113,13 @@ _FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
 
 
 _ALL_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(GnssEpoch))
+# (field, its slot's setter) for GnssEpoch.replace (a frozen dataclass's own __init__ goes through
+# object.__setattr__ per field)
+_SET_FIELD: tuple[tuple[str, Any], ...] = tuple(
+    (name, GnssEpoch.__dict__[name].__set__) for name in _ALL_FIELDS
+)
+_NEW = object.__new__
+_FIELD_SET = frozenset(_ALL_FIELDS)
 
 
 def make_epoch(

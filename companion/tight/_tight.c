@@ -317,6 +317,23 @@ static int chol_factor(double *A, int k) {
     return 1;
 }
 
+/* Sums Σ_c a[c] b[c] taken over the nonzero b[c] alone are the full sums, bit for bit, when every a[c] is
+ * finite: a left-out term is ±0, and an accumulator that starts at +0 never becomes −0 (round to nearest),
+ * so adding ±0 never changes it. nonzero_index: the columns of b's nonzero entries (all n when a_finite is 0:
+ * the full sum) */
+static int nonzero_index(const double *b, int n, int a_finite, int *idx) {
+    int m = 0;
+    for (int c = 0; c < n; c++)
+        if (!a_finite || b[c] != 0.0) idx[m++] = c;
+    return m;
+}
+
+static int all_finite(const double *a, int n) {
+    for (int i = 0; i < n; i++)
+        if (!isfinite(a[i])) return 0;
+    return 1;
+}
+
 static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, const int N) {
     PyObject *ox, *oP, *oH, *oHP, *oy, *or, *ou, *or0, *oC, *os, *ov, *ozr, *orr;
     double gate2;
@@ -327,6 +344,7 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     int nds[13] = {1, 2, 2, 2, 1, 1, 1, 1, 2, 2, 2, 1, 1};
     PyArrayObject *a[13] = {0};
     double *Hs = NULL, *HPs = NULL, *W = NULL, *Sm = NULL;
+    int *Hnz = NULL;
     PyObject *result = NULL;
     for (int i = 0; i < 13; i++) {
         a[i] = in_array(objs[i], nds[i]);
@@ -346,7 +364,7 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     Hs = malloc(sizeof(double) * MAXM * N);
     HPs = malloc(sizeof(double) * MAXM * N);
     double ys[MAXM], rs[MAXM];
-    int k = 0, n_rate = 0;
+    int k = 0, n_rate = 0, P_finite = all_finite(P, N * N);
     for (npy_intp i = 0; i < m && k < MAXM; i++) {
         if (used[i] == 0.0) continue;
         memcpy(Hs + k * N, H + i * N, sizeof(double) * N);
@@ -360,9 +378,10 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
         double *h = Hs + k * N, *hp = HPs + k * N;
         double pred = range_rate_row(x, r0, C, sp + 3 * i, sv + 3 * i, h, N);
         double yr = zr[i] - pred, s0 = 0.0;
+        int nz[NMAX], nnz = nonzero_index(h, N, P_finite, nz); /* h: p, v and the drift */
         for (int c = 0; c < N; c++) {
             double v = 0.0;
-            for (int j = 0; j < N; j++) v += h[j] * P[j * N + c];
+            for (int t = 0; t < nnz; t++) v += h[nz[t]] * P[nz[t] * N + c];
             hp[c] = v;
         }
         for (int c = 0; c < N; c++) s0 += hp[c] * h[c];
@@ -379,10 +398,14 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     if (k > 0) {
         Sm = malloc(sizeof(double) * k * k);
         W = malloc(sizeof(double) * k * (N + 1));
+        Hnz = malloc(sizeof(int) * k * N);
+        int HP_finite = all_finite(HPs, k * N), n_nz[MAXM];
+        for (int j = 0; j < k; j++) n_nz[j] = nonzero_index(Hs + j * N, N, HP_finite, Hnz + j * N);
         for (int i = 0; i < k; i++)
-            for (int j = 0; j <= i; j++) {
+            for (int j = 0; j <= i; j++) { /* over H_j's nonzero columns: a pseudorange's 4, a range rate's 7 */
+                const int *cj = Hnz + j * N;
                 double s = 0.0;
-                for (int c = 0; c < N; c++) s += HPs[i * N + c] * Hs[j * N + c];
+                for (int t = 0; t < n_nz[j]; t++) s += HPs[i * N + cj[t]] * Hs[j * N + cj[t]];
                 Sm[i * k + j] = Sm[j * k + i] = s + (i == j ? rs[i] : 0.0);
             }
         if (!chol_factor(Sm, k)) { /* S = L L^T (lower, in place) */
@@ -396,10 +419,10 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
             memcpy(W + i * (N + 1) + 1, HPs + i * N, sizeof(double) * N);
         }
         for (int i = 0; i < k; i++) {
-            double *wi = W + i * (N + 1);
+            double *restrict wi = W + i * (N + 1); /* rows i and j < i: apart (restrict: the loop vectorises) */
             for (int j = 0; j < i; j++) {
                 double l = Sm[i * k + j];
-                const double *wj = W + j * (N + 1);
+                const double *restrict wj = W + j * (N + 1);
                 for (int c = 0; c <= N; c++) wi[c] -= l * wj[c];
             }
             double d = Sm[i * k + i];
@@ -407,18 +430,27 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
         }
         nis = 0.0;
         for (int i = 0; i < k; i++) nis += W[i * (N + 1)] * W[i * (N + 1)];
-        for (int c = 0; c < N; c++) {
-            double s = 0.0;
-            for (int i = 0; i < k; i++) s += W[i * (N + 1) + 1 + c] * W[i * (N + 1)];
-            xo[c] += s;
+        /* the sums over the rows i, every column's at once (each in the order i = 0 … k − 1: the loops over c
+         * vectorise) */
+        double acc[NMAX];
+        for (int c = 0; c < N; c++) acc[c] = 0.0;
+        for (int i = 0; i < k; i++) {
+            const double *restrict wi = W + i * (N + 1);
+            for (int c = 0; c < N; c++) acc[c] += wi[1 + c] * wi[0];
         }
-        for (int r1 = 0; r1 < N; r1++)
-            for (int c = r1; c < N; c++) {
-                double s = 0.0;
-                for (int i = 0; i < k; i++) s += W[i * (N + 1) + 1 + r1] * W[i * (N + 1) + 1 + c];
-                Po[r1 * N + c] -= s;
-                if (c != r1) Po[c * N + r1] -= s;
+        for (int c = 0; c < N; c++) xo[c] += acc[c];
+        for (int r1 = 0; r1 < N; r1++) {
+            for (int c = r1; c < N; c++) acc[c] = 0.0;
+            for (int i = 0; i < k; i++) {
+                const double *restrict wi = W + i * (N + 1) + 1;
+                double w = wi[r1];
+                for (int c = r1; c < N; c++) acc[c] += w * wi[c];
             }
+            for (int c = r1; c < N; c++) {
+                Po[r1 * N + c] -= acc[c];
+                if (c != r1) Po[c * N + r1] -= acc[c];
+            }
+        }
         for (int r1 = 0; r1 < N; r1++) /* P was symmetric: keep it exactly so */
             for (int c = r1 + 1; c < N; c++) {
                 double s = 0.5 * (Po[r1 * N + c] + Po[c * N + r1]);
@@ -428,7 +460,7 @@ static inline __attribute__((always_inline)) PyObject *update_n(PyObject *args, 
     result = Py_BuildValue("(NNdi)", new_array(1, N, 0, xo), new_array(2, N, N, Po), nis, n_rate);
 done:
     for (int i = 0; i < 13; i++) Py_XDECREF(a[i]);
-    free(Hs); free(HPs); free(W); free(Sm);
+    free(Hs); free(HPs); free(W); free(Sm); free(Hnz);
     return result;
 }
 
@@ -647,6 +679,47 @@ done:
 
 /* The state size of the covariance (or H) at args[i] (dimension dim): 22 with the baro offset, else 21.
  * Each entry point below is compiled twice, for 21 and 22 (the loops' bounds constants, as before). */
+/* ------------------------------------------------------------- satellite states */
+/* carry_states(rows (n, 12): each anchor's pos, vel, acc, clock, drift, valid; dt (n,) s from the anchor)
+ * -> (pos (n, 3), vel (n, 3), clock (n,), drift (n,), anchored (n,) bool: valid == 1): satcache's
+ * second-order step p + v dt + ½ a dt², v + a dt, clock + drift dt, in numpy's order of operations */
+static PyObject *py_carry_states(PyObject *self, PyObject *args) {
+    PyObject *orows, *odt;
+    if (!PyArg_ParseTuple(args, "OO", &orows, &odt)) return NULL;
+    PyArrayObject *ar = in_array(orows, 2), *adt = in_array(odt, 1);
+    PyObject *pos = NULL, *vel = NULL, *clk = NULL, *drift = NULL, *ok = NULL;
+    if (!ar || !adt) goto fail;
+    npy_intp n = PyArray_DIM(ar, 0);
+    if (PyArray_DIM(ar, 1) != 12 || PyArray_DIM(adt, 0) != n) {
+        PyErr_SetString(PyExc_ValueError, "carry_states: shapes");
+        goto fail;
+    }
+    pos = new_array(2, n, 3, NULL); vel = new_array(2, n, 3, NULL);
+    clk = new_array(1, n, 0, NULL); drift = new_array(1, n, 0, NULL);
+    ok = PyArray_SimpleNew(1, &n, NPY_BOOL);
+    if (!pos || !vel || !clk || !drift || !ok) goto fail;
+    const double *o = PyArray_DATA(ar), *dt = PyArray_DATA(adt);
+    double *p = PyArray_DATA((PyArrayObject *)pos), *v = PyArray_DATA((PyArrayObject *)vel),
+           *c = PyArray_DATA((PyArrayObject *)clk), *d = PyArray_DATA((PyArrayObject *)drift);
+    npy_bool *a = PyArray_DATA((PyArrayObject *)ok);
+    for (npy_intp i = 0; i < n; i++) {
+        const double *r = o + 12 * i, t = dt[i];
+        for (int k = 0; k < 3; k++) {
+            p[3 * i + k] = (r[k] + r[3 + k] * t) + 0.5 * r[6 + k] * t * t;
+            v[3 * i + k] = r[3 + k] + r[6 + k] * t;
+        }
+        c[i] = r[9] + r[10] * t;
+        d[i] = r[10];
+        a[i] = r[11] == 1.0;
+    }
+    Py_DECREF(ar); Py_DECREF(adt);
+    return Py_BuildValue("(NNNNN)", pos, vel, clk, drift, ok);
+fail:
+    Py_XDECREF(ar); Py_XDECREF(adt); Py_XDECREF(pos); Py_XDECREF(vel); Py_XDECREF(clk); Py_XDECREF(drift);
+    Py_XDECREF(ok);
+    return NULL;
+}
+
 static int state_size(PyObject *args, int i, int dim) {
     PyObject *o = PyTuple_Check(args) && PyTuple_GET_SIZE(args) > i ? PyTuple_GET_ITEM(args, i) : NULL;
     return o && PyArray_Check(o) && PyArray_NDIM((PyArrayObject *)o) > dim
@@ -666,6 +739,7 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
 }
 
 static PyMethodDef methods[] = {
+    {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},
     {"predict_cov", py_predict_cov, METH_VARARGS, "F P F^T + Q over a block (model.transition, model.process_noise)"},

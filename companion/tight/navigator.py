@@ -23,7 +23,7 @@ from typing import Any, cast
 import numpy as np
 
 from companion.domain.geodesy import LocalNedFrame
-from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, new_nav_estimate
 from companion.errors import ConfigError
 from companion.estimator._core import rotation_q
 from companion.estimator.consistency import (
@@ -209,9 +209,9 @@ class TightNavigator:
         if floor is not None:  # + the common-mode floor, in quadrature
             cov = cov.copy() if scale is None else cov
             cov[0:3] += floor
-        est = NavEstimate(t_us, out[0:3], out[3:6], out[6:9], cov, info.beta_mean, info.nis,
-                          self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
-                          gnss_resets=last.totals[2])
+        est = new_nav_estimate(t_us, out[0:3], out[3:6], out[6:9], cov, info.beta_mean, info.nis,
+                               self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
+                               gnss_resets=last.totals[2])
         self._last = (now, est)
         return est
 

@@ -28,6 +28,7 @@ from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastam
 from companion.gnss.constants import MU_GPS_M3_S2, OMEGA_E_RAD_S
 from companion.gnss.ephemeris import SatStates
 from companion.gnss.timescale import week_tow
+from companion.tight import _tight
 
 _W = np.array([0.0, 0.0, OMEGA_E_RAD_S])
 
@@ -107,7 +108,7 @@ class SatelliteCache:
             k = k.astype(np.int64)
             table, rows = self._rows(int(k[0]), keys, system, prn)
             out = table[rows]
-            dt = (t - k * self.period_s)[:, None]
+            dt = t - k * self.period_s
         else:
             k = np.where(finite, k, 0.0).astype(np.int64)
             out = np.full((n, 12), np.nan)
@@ -116,11 +117,11 @@ class SatelliteCache:
                 sel_keys = [keys[i] for i in sel.tolist()]
                 index, table = self._table(a, sel_keys, system[sel], prn[sel])
                 out[sel] = table[[index[key] for key in sel_keys]]
-            dt = np.where(finite, t - k * self.period_s, 0.0)[:, None]
-        pos = out[:, 0:3] + out[:, 3:6] * dt + 0.5 * out[:, 6:9] * dt * dt
-        vel = out[:, 3:6] + out[:, 6:9] * dt
-        valid = finite & (out[:, 11] == 1.0)
-        return SatStates(pos, vel, out[:, 9] + out[:, 10] * dt[:, 0], out[:, 10], valid)
+            dt = np.where(finite, t - k * self.period_s, 0.0)
+        # p + v dt + ½ a dt², v + a dt, clock + drift dt and the anchors' validity, in C (_tight.carry_states:
+        # numpy's operations in its order, tested equal bit for bit)
+        pos, vel, clock, drift, anchored = _tight.carry_states(out, dt)
+        return SatStates(pos, vel, clock, drift, finite & anchored)
 
 
 class AtmosphereCache:

@@ -1,0 +1,245 @@
+"""The tight filter's speed changes keep every bit: the C update (``_tight.update``), which sums the range
+rates' H P and S = H P Hᵀ over H's nonzero columns only, against a plain-Python transcription of its dense
+loops (IEEE double arithmetic in the same order: what the C core computed before); the satellite cache's
+step in C (``_tight.carry_states``) against the numpy expressions it replaced; ``GnssEpoch.replace``'s
+slot path against ``dataclasses.replace``."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from companion.gnss.observations import GnssEpoch, make_epoch
+from companion.tight import _tight, model
+from companion.tight.model import I_DRIFT, N_STATE
+from tests.test_tight import FRAME, _sats, _state, c_core_inputs
+
+C_M_S = 299792458.0
+W_C = 7.2921151467e-5 / C_M_S
+
+
+def _receiver(x: list[float], r0: list[float], C: list[list[float]]) -> tuple[list[float], list[float]]:
+    r = [r0[i] + C[i][0] * x[0] + C[i][1] * x[1] + C[i][2] * x[2] for i in range(3)]
+    ve = [C[i][0] * x[3] + C[i][1] * x[4] + C[i][2] * x[5] for i in range(3)]
+    return r, ve
+
+
+def _range_rate_row(x: list[float], r0: list[float], C: list[list[float]], rs: list[float], us: list[float],
+                    n: int) -> tuple[float, list[float]]:
+    """_tight.c's range_rate_row, line by line."""
+    r, ve = _receiver(x, r0, C)
+    d = [rs[0] - r[0], rs[1] - r[1], rs[2] - r[2]]
+    rng = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    line = [d[0] / rng, d[1] / rng, d[2] / rng]
+    dv = [us[0] - ve[0], us[1] - ve[1], us[2] - ve[2]]
+    g = line[0] * dv[0] + line[1] * dv[1] + line[2] * dv[2]
+    sv = line[0] * us[0] + line[1] * us[1] + line[2] * us[2]
+    f = 1.0 - sv / C_M_S
+    sag = W_C * (us[0] * r[1] + rs[0] * ve[1] - us[1] * r[0] - rs[1] * ve[0])
+    dm_dr, dm_dv = [0.0] * 3, [0.0] * 3
+    for k in range(3):
+        dg, ds = -(dv[k] - g * line[k]) / rng, -(us[k] - sv * line[k]) / rng
+        dm_dr[k] = dg * f - (g / C_M_S) * ds
+        dm_dv[k] = -line[k] * f
+    dm_dr[0] -= W_C * us[1]
+    dm_dr[1] += W_C * us[0]
+    dm_dv[0] -= W_C * rs[1]
+    dm_dv[1] += W_C * rs[0]
+    h = [0.0] * n
+    for k in range(3):
+        h[k] = dm_dr[0] * C[0][k] + dm_dr[1] * C[1][k] + dm_dr[2] * C[2][k]
+        h[3 + k] = dm_dv[0] * C[0][k] + dm_dv[1] * C[1][k] + dm_dv[2] * C[2][k]
+    h[I_DRIFT] = 1.0
+    return g * f + sag + x[I_DRIFT], h
+
+
+def _chol(A: list[list[float]]) -> None:
+    k = len(A)
+    for j in range(k):
+        s = A[j][j]
+        for c in range(j):
+            s -= A[j][c] * A[j][c]
+        assert s > 0.0
+        d = math.sqrt(s)
+        A[j][j] = d
+        for i in range(j + 1, k):
+            t = A[i][j]
+            for c in range(j):
+                t -= A[i][c] * A[j][c]
+            A[i][j] = t / d
+
+
+def dense_update(x, P, H, HP, y, r, used, r0, C, sat_pos, sat_vel, z_rate, r_rate, gate2):
+    """``_tight.update`` with every sum over all N columns (its loops before the speed change)."""
+    n = len(x)
+    x, P, H, HP = x.tolist(), P.tolist(), H.tolist(), HP.tolist()
+    r0, C, sat_pos, sat_vel = r0.tolist(), C.tolist(), sat_pos.tolist(), sat_vel.tolist()
+    Hs, HPs, ys, rs, n_rate = [], [], [], [], 0
+    for i in range(len(y)):
+        if used[i] != 0.0:
+            Hs.append(H[i])
+            HPs.append(HP[i])
+            ys.append(float(y[i]))
+            rs.append(float(r[i]))
+    for i in range(len(y)):
+        if used[i] == 0.0 or not math.isfinite(z_rate[i]) or not math.isfinite(sat_vel[i][0]):
+            continue
+        pred, h = _range_rate_row(x, r0, C, sat_pos[i], sat_vel[i], n)
+        yr, s0 = float(z_rate[i]) - pred, 0.0
+        hp = []
+        for c in range(n):
+            v = 0.0
+            for j in range(n):
+                v += h[j] * P[j][c]
+            hp.append(v)
+        for c in range(n):
+            s0 += hp[c] * h[c]
+        if yr * yr <= gate2 * (s0 + r_rate[i]):
+            Hs.append(h)
+            HPs.append(hp)
+            ys.append(yr)
+            rs.append(float(r_rate[i]))
+            n_rate += 1
+    k = len(ys)
+    xo, Po, nis = list(x), [list(row) for row in P], math.nan
+    if k:
+        S = [[0.0] * k for _ in range(k)]
+        for i in range(k):
+            for j in range(i + 1):
+                s = 0.0
+                for c in range(n):
+                    s += HPs[i][c] * Hs[j][c]
+                S[i][j] = S[j][i] = s + (rs[i] if i == j else 0.0)
+        _chol(S)
+        W = [[ys[i], *HPs[i]] for i in range(k)]
+        for i in range(k):
+            for j in range(i):
+                w = S[i][j]
+                for c in range(n + 1):
+                    W[i][c] -= w * W[j][c]
+            for c in range(n + 1):
+                W[i][c] /= S[i][i]
+        nis = 0.0
+        for i in range(k):
+            nis += W[i][0] * W[i][0]
+        for c in range(n):
+            s = 0.0
+            for i in range(k):
+                s += W[i][1 + c] * W[i][0]
+            xo[c] += s
+        for a in range(n):
+            for c in range(a, n):
+                s = 0.0
+                for i in range(k):
+                    s += W[i][1 + a] * W[i][1 + c]
+                Po[a][c] -= s
+                if c != a:
+                    Po[c][a] -= s
+        for a in range(n):
+            for c in range(a + 1, n):
+                Po[a][c] = Po[c][a] = 0.5 * (Po[a][c] + Po[c][a])
+    return np.array(xo), np.array(Po), nis, n_rate
+
+
+@pytest.mark.parametrize("seed", [3, 12, 40])
+@pytest.mark.parametrize("n_state", [N_STATE, N_STATE + 1])
+def test_c_update_equals_its_dense_sums_bit_for_bit(seed, n_state):
+    """Random states and covariances (with zero rows: the heading states at rest, and negative
+    covariances: the signed zeros of the left-out terms), some satellites unused, some without Doppler,
+    every clock slot: the sparse sums give exactly the dense ones."""
+    rng = np.random.default_rng(seed)
+    P = c_core_inputs(rng, n_state)[0]
+    P[I_DRIFT + 1:I_DRIFT + 3, :] = P[:, I_DRIFT + 1:I_DRIFT + 3] = 0.0  # the odometry heading: not started
+    x = np.append(_state(rng), rng.normal(0.0, 3.0, n_state - N_STATE))
+    sysv, _, pos, vel = _sats()
+    slot = model.SLOT_OF[sysv]
+    r0, C = FRAME.r0_ecef_m, FRAME.c_ecef_ned
+    z = model.pseudorange(x[:N_STATE], FRAME, pos, slot)[0] + rng.normal(0, 5, len(slot))
+    y, H, HP, _, _ = _tight.innovations(x, P, r0, C, pos, slot.astype(float), z)
+    used = (rng.uniform(size=len(y)) > 0.2).astype(float)
+    r = rng.uniform(4, 100, len(y))
+    z_rate = model.range_rate(x[:N_STATE], FRAME, pos, vel)[0] + rng.normal(0, 0.3, len(y))
+    z_rate[::5] = np.nan
+    r_rate = rng.uniform(0.05, 1.0, len(y))
+    args = (x, P, H, HP, y, r, used, r0, C, pos, vel, z_rate, r_rate, 25.0)
+    x_c, P_c, nis_c, n_c = _tight.update(*args)
+    x_d, P_d, nis_d, n_d = dense_update(*args)
+    assert n_c == n_d > 0 and int(used.sum()) > 4
+    assert np.array_equal(x_c, x_d) and np.array_equal(P_c, P_d) and nis_c == nis_d
+
+
+def test_c_update_with_a_non_finite_covariance_takes_the_dense_sums():
+    """A NaN in P (a broken state) where every range rate's H is zero: the full sums, as before (0 · NaN is
+    NaN, so nothing may be left out): the range rates' H P and gates see it and refuse them all, as the dense
+    loops did; summed over the nonzero columns they would have passed."""
+    rng = np.random.default_rng(5)
+    P = c_core_inputs(rng, N_STATE)[0]
+    P[I_DRIFT + 1, I_DRIFT + 1] = np.nan  # the odometry heading's variance
+    x = _state(rng)
+    sysv, _, pos, vel = _sats()
+    slot = model.SLOT_OF[sysv]
+    r0, C = FRAME.r0_ecef_m, FRAME.c_ecef_ned
+    z = model.pseudorange(x, FRAME, pos, slot)[0] + rng.normal(0, 5, len(slot))
+    y, H, HP, _, _ = _tight.innovations(x, P, r0, C, pos, slot.astype(float), z)
+    z_rate = model.range_rate(x, FRAME, pos, vel)[0]
+    args = (x, P, H, HP, y, np.full(len(y), 25.0), np.ones(len(y)), r0, C, pos, vel, z_rate,
+            np.full(len(y), 0.1), 25.0)
+    x_c, P_c, nis_c, n_c = _tight.update(*args)
+    x_d, P_d, nis_d, n_d = dense_update(*args)
+    assert n_c == n_d == 0
+    assert np.array_equal(x_c, x_d) and np.array_equal(P_c, P_d, equal_nan=True) and nis_c == nis_d
+    assert np.isnan(P_c[I_DRIFT + 1, I_DRIFT + 1]) and np.isfinite(x_c).all()
+
+
+def test_c_carry_states_equals_the_numpy_step_bit_for_bit():
+    """satcache's p + v dt + ½ a dt², v + a dt, clock + drift dt and valid == 1 as numpy computed them (an
+    anchor table's rows, NaN rows of satellites without a state, dt of either sign and 0)."""
+    rng = np.random.default_rng(7)
+    n = 40
+    out = np.column_stack((rng.normal(0, 2e7, (n, 3)), rng.normal(0, 3e3, (n, 3)),
+                           rng.normal(0, 0.6, (n, 3)), rng.normal(0, 1e-4, n), rng.normal(0, 1e-11, n),
+                           (rng.uniform(size=n) > 0.2) * 1.0))
+    out[3] = np.nan
+    dt = rng.uniform(-2.5, 2.5, n)
+    dt[5] = 0.0
+    pos, vel, clock, drift, anchored = _tight.carry_states(out, dt)
+    d = dt[:, None]
+    assert np.array_equal(pos, out[:, 0:3] + out[:, 3:6] * d + 0.5 * out[:, 6:9] * d * d, equal_nan=True)
+    assert np.array_equal(vel, out[:, 3:6] + out[:, 6:9] * d, equal_nan=True)
+    assert np.array_equal(clock, out[:, 9] + out[:, 10] * dt, equal_nan=True)
+    assert np.array_equal(drift, out[:, 10], equal_nan=True)
+    assert anchored.dtype == bool and np.array_equal(anchored, out[:, 11] == 1.0) and not anchored[3]
+    assert all(len(a) == 0 for a in _tight.carry_states(np.zeros((0, 12)), np.zeros(0)))
+
+
+@pytest.mark.parametrize("changes", [
+    {"cn0_dbhz": np.array([30.0, 35.0, 40.0])},
+    {"sat_pos_ecef_m": np.ones((3, 3)), "sat_vel_ecef_m_s": np.zeros((0, 3)), "sat_clock_s": np.ones(3)},
+    {"t_gps_s": 5.0, "corrected": True},
+    {"pseudorange_m": np.array([1.0, 2.0]), "system": np.array([1, 1]), "prn": np.array([3, 4])},
+])
+def test_gnss_epoch_replace_is_dataclasses_replace(changes):
+    """The same fields (an empty per-satellite array becoming NaN rows, as the constructor does)."""
+    e = make_epoch(100.0, [1, 1, 3], [3, 4, 7], [2.1e7, 2.2e7, 2.3e7], cn0_dbhz=[40.0, 41.0, 42.0])
+    if "pseudorange_m" in changes:  # another number of satellites: every per-satellite field given
+        per_sat = ("pseudorange_var_m2", "pseudorange_rate_m_s", "cn0_dbhz", "elevation_deg", "azimuth_deg",
+                   "sat_pos_ecef_m", "sat_vel_ecef_m_s", "sat_clock_s", "sat_clock_drift_s_s")
+        vectors = ("sat_pos_ecef_m", "sat_vel_ecef_m_s")
+        changes = {**changes, **{f: np.zeros((2, 3)) if f in vectors else np.zeros(2) for f in per_sat}}
+    got, want = e.replace(**changes), dataclasses.replace(e, **changes)
+    for f in dataclasses.fields(GnssEpoch):
+        a, b = getattr(got, f.name), getattr(want, f.name)
+        assert type(a) is type(b)
+        assert np.array_equal(a, b, equal_nan=True) if isinstance(a, np.ndarray) else a == b
+        assert a is b or f.name in changes or (isinstance(a, np.ndarray) and a.size and np.isnan(a).all())
+
+
+def test_gnss_epoch_replace_refuses_what_the_constructor_refuses():
+    e = make_epoch(100.0, [1, 1], [3, 4], [2.1e7, 2.2e7])
+    with pytest.raises(ValueError, match="cn0_dbhz"):
+        e.replace(cn0_dbhz=np.zeros(3))
+    with pytest.raises(TypeError):
+        e.replace(cn0=np.zeros(2))
