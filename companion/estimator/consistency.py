@@ -75,7 +75,10 @@ class Fit(NamedTuple):
         the variance ratio of their window average to white noise's (up to (1 + a)/(1 − a),
         a = e^(−Δt/window))."""
         den = float(self.w2_sum.sum())
-        return max(1.0, float(self.nu_sum @ self.nu_sum) / den) if den > 0.0 else 1.0
+        # squares summed by numpy's reduction, not a BLAS dot product: on a CPU with FMA the BLAS
+        # kernel rounds differently (the last bit, in a fifth of the cases), so the floats path
+        # (fit_inflation3) and this one agree on every machine
+        return max(1.0, float((self.nu_sum * self.nu_sum).sum()) / den) if den > 0.0 else 1.0
 
 
 AXES3 = np.arange(3)  # the loose filter's Fit channels of a fix: N, E, D (fit_add3's key, by identity)
@@ -97,7 +100,7 @@ def fit_add3(fit: Fit, t_us: int, nu0: float, nu1: float, nu2: float, window_s: 
 
 def fit_inflation3(fit: Fit) -> float:
     """``fit.inflation()`` on floats for the loose filter's Fit (three axes, or none yet): the same number
-    (numpy's sum and dot product of three values are the left-to-right sums, checked in the tests)."""
+    (numpy's sums of three values are the left-to-right sums, checked in the tests)."""
     if fit.key is not AXES3:
         return fit.inflation()
     n0, n1, n2 = fit.nu_sum.tolist()
