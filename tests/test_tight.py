@@ -343,6 +343,35 @@ def test_a_receiver_clock_jump_resets_the_clock_not_the_position():
     assert np.linalg.norm(eng.entries[-1].x[0:3] - truth[-1][0:3]) < 5.0
 
 
+def test_the_start_takes_the_vertical_velocitys_own_prior():
+    """A car's vertical velocity starts within 0.2 m/s, a quadrotor's (and the horizontal) within 5 m/s;
+    without Doppler the start's velocity is zero with those variances. A car (its truth climbing at
+    0.1 m/s²/√Hz) keeps its vertical velocity through the first epochs' noise with the car's prior, not
+    with the quadrotor's (20 seeds), and the tighter prior is honest: its errors within its σ."""
+    car = TightConfig.for_ground_vehicle()
+    assert (car.sigma_velocity0_m_s, car.sigma_velocity0_vertical_m_s) == (5.0, 0.2)
+    assert TightConfig().sigma_velocity0_vertical_m_s == 5.0
+    wide = TightConfig.for_ground_vehicle(sigma_velocity0_vertical_m_s=5.0)
+    t_us = [1_000_000 + 200_000 * k for k in range(10)]
+    err: dict[str, list[float]] = {"car": [], "wide": []}
+    z2: list[float] = []
+    for seed in range(20):
+        epochs, truth = _synthetic_epochs(np.random.default_rng(100 + seed), car, 10)
+        for name, cfg in (("car", car), ("wide", wide)):
+            eng = _feed(cfg, "naive", epochs, t_us, list(range(10)))
+            first, last = eng.entries[0], eng.entries[-1]
+            np.testing.assert_allclose(np.diag(first.P)[3:6], [25.0, 25.0, cfg.sigma_velocity0_vertical_m_s**2])
+            np.testing.assert_array_equal(first.x[3:6], 0.0)
+            e = float(last.x[5] - truth[-1][5])
+            err[name].append(abs(e))
+            if name == "car":
+                z2.append(e * e / float(last.P[5, 5]))
+    assert np.mean(err["car"]) < 0.5 * np.mean(err["wide"]), err
+    assert np.mean(z2) < chi2.ppf(0.999, 20) / 20, np.mean(z2)  # 20 one-dof NEES: within its χ² bound
+    with pytest.raises(ValueError, match="sigma_velocity0_vertical_m_s"):
+        TightConfig(sigma_velocity0_vertical_m_s=0.0).validate()
+
+
 def test_satellite_cache_error_is_below_a_millimetre():
     cache = SatelliteCache(STORE, period_s=1.0)
     sysv, prn, _, _ = _sats()

@@ -45,6 +45,10 @@ class TightConfig:
     sigma_clock0_m: float = 100.0  # a system's clock when first seen: from its own residuals ± this
     sigma_drift0_m_s: float = 100.0  # drift at start (a receiver's clock can drift 300 m/s = 1 ppm)
     sigma_velocity0_m_s: float = 5.0  # velocity at start (from the Doppler solution when there is one)
+    # Its vertical part on its own: a quadrotor climbs at metres a second, a car on a town's roads
+    # (grades of a few per cent) at tenths of one (``for_ground_vehicle``: 0.2). Without Doppler a
+    # 5 m/s vertical prior is what the first epochs' noise moves, and the height drifts after a restart.
+    sigma_velocity0_vertical_m_s: float = 5.0
     # --- measurements
     # A-priori σ model of a pseudorange (the single-point solution's: ``companion.gnss.spp``):
     # "cn0-elevation" σ² = a² + b² 10^((45 − C/N0)/10) / sin² el, GLONASS × 1.5; "uniform"; "given".
@@ -282,7 +286,8 @@ class TightConfig:
         if self.motion not in MOTIONS:
             raise ValueError(f"motion {self.motion!r}: choose from {', '.join(MOTIONS)}")
         for name in ("sigma_acc_m_s2", "sigma_acc_vertical_m_s2", "q_clock_m2_s", "q_drift_m2_s3",
-                     "sigma_clock0_m", "sigma_drift0_m_s", "sigma_velocity0_m_s", "sigma_uniform_m",
+                     "sigma_clock0_m", "sigma_drift0_m_s", "sigma_velocity0_m_s",
+                     "sigma_velocity0_vertical_m_s", "sigma_uniform_m",
                      "sigma_floor_m", "sigma_range_rate_m_s", "gate_sigma", "reset_timeout_s",
                      "clock_jump_m", "sigma_speed_m_s", "sigma_baro_m", "baro_gate_sigma", "eta",
                      "lambda_reg", "student_dof", "history_s", "imu_hold_max_s"):
@@ -354,9 +359,11 @@ class TightConfig:
     @classmethod
     def for_ground_vehicle(cls, **over: object) -> TightConfig:
         """GNSS alone on a car (smartLoc): constant velocity with 1 m/s²/√Hz horizontally (a car
-        changes speed by ~2 m/s in 2 s in town) and 0.1 vertically (roads are smooth)."""
+        changes speed by ~2 m/s in 2 s in town) and 0.1 vertically (roads are smooth); its vertical
+        velocity at a start within 0.2 m/s (a 2 % grade at 10 m/s)."""
         base: dict[str, object] = dict(motion="constant-velocity", sigma_acc_m_s2=1.0,
-                                       sigma_acc_vertical_m_s2=0.1, sigma_acc_bias0_m_s2=0.0,
+                                       sigma_acc_vertical_m_s2=0.1, sigma_velocity0_vertical_m_s=0.2,
+                                       sigma_acc_bias0_m_s2=0.0,
                                        sigma_acc_bias_rw_m_s2_sqrt_s=0.0, sigma_acc_ned0_m_s2=0.0,
                                        sigma_acc_ned_rw_m_s2_sqrt_s=0.0)
         base.update(over)

@@ -342,7 +342,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         c = self.cfg
         x = np.zeros(N_STATE)
         P = np.zeros((N_STATE, N_STATE))
-        P[3:6, 3:6] = np.eye(3) * c.sigma_velocity0_m_s**2
+        P[3:6, 3:6] = np.diag([c.sigma_velocity0_m_s**2] * 2 + [c.sigma_velocity0_vertical_m_s**2])
         P[6:9, 6:9] = np.eye(3) * c.sigma_acc_bias0_m_s2**2
         P[9:12, 9:12] = np.eye(3) * c.sigma_acc_ned0_m_s2**2
         P[I_DRIFT, I_DRIFT] = c.sigma_drift0_m_s**2
