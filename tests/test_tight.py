@@ -360,7 +360,8 @@ def test_the_start_takes_the_vertical_velocitys_own_prior():
         for name, cfg in (("car", car), ("wide", wide)):
             eng = _feed(cfg, "naive", epochs, t_us, list(range(10)))
             first, last = eng.entries[0], eng.entries[-1]
-            np.testing.assert_allclose(np.diag(first.P)[3:6], [25.0, 25.0, cfg.sigma_velocity0_vertical_m_s**2])
+            want = [25.0, 25.0, cfg.sigma_velocity0_vertical_m_s**2]
+            np.testing.assert_allclose(np.diag(first.P)[3:6], want)
             np.testing.assert_array_equal(first.x[3:6], 0.0)
             e = float(last.x[5] - truth[-1][5])
             err[name].append(abs(e))
