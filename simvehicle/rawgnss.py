@@ -31,7 +31,7 @@ from companion.domain.samples import GnssFix
 from companion.errors import ConfigError
 from companion.gnss.constants import C_M_S
 from companion.gnss.geometry import ecef_to_ned_matrix, geodetic_to_ecef
-from companion.gnss.spp import SppConfig, SppSolution, solve_position
+from companion.gnss.spp import SppConfig, SppSolution, preload_chi2, solve_position
 from companion.gnss.timescale import gps_from_calendar
 from companion.mission.city3d import City
 from simvehicle.config import ReceiverConfig, parse_utc
@@ -86,6 +86,7 @@ class RawGnssModel(QueuedDelivery[tuple[RawObservation, RawFix | None]]):
         self.store = ephemeris_store(self.t0_gps_s - SPAN_BEFORE_S, self._covered_to_s, self.systems)
         self.receiver = Receiver(cfg, City(rects_m, heights_m), frame, self.store, self.t0_gps_s, rng)
         self.spp = SppConfig(weighting=cfg.weighting, raim=cfg.raim)
+        preload_chi2()
         lat, lon = math.radians(frame.home_lat_deg), math.radians(frame.home_lon_deg)
         self._home_ecef = geodetic_to_ecef(lat, lon, frame.home_alt_m)
         self._to_ned = ecef_to_ned_matrix(lat, lon)

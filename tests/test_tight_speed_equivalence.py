@@ -2,7 +2,7 @@
 rates' H P and S = H P Hᵀ over H's nonzero columns only, against a plain-Python transcription of its dense
 loops (IEEE double arithmetic in the same order: what the C core computed before); the satellite cache's
 step in C (``_tight.carry_states``) against the numpy expressions it replaced; ``GnssEpoch.replace``'s
-slot path against ``dataclasses.replace``."""
+slot path against ``dataclasses.replace``; no import inside the first epochs."""
 
 from __future__ import annotations
 
@@ -243,3 +243,38 @@ def test_gnss_epoch_replace_refuses_what_the_constructor_refuses():
         e.replace(cn0_dbhz=np.zeros(3))
     with pytest.raises(TypeError):
         e.replace(cn0=np.zeros(2))
+
+
+def test_no_import_falls_inside_the_first_epochs():
+    """What the first epochs need (scipy.special for the χ² tests: ~0.3 s of CPU) is imported when the
+    navigator is built, not inside the first epoch a live receiver sends (a fresh interpreter: this
+    process has imported everything already)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import sys
+        import numpy as np
+        from companion.domain.samples import AttitudeSample, ImuSample
+        from companion.tight import RawGnss, TightConfig
+        from companion.wiring import tight_navigator_for
+        from gcs_tools.bench.tight import _epochs, store
+        st = store()
+        epochs = _epochs(st, 3)
+        nav = tight_navigator_for(None, "second-order", config=TightConfig(elevation_mask_deg=-90.0),
+                                  ephemerides=st)
+        before = set(sys.modules)
+        for k, ep in enumerate(epochs):
+            t_us = 1_000_000 + 200_000 * k
+            nav.push(AttitudeSample(t_us, np.array([1.0, 0.0, 0.0, 0.0])))
+            nav.push(ImuSample(t_us, np.array([0.0, 0.0, -9.80665]), np.zeros(3)))
+            nav.push(RawGnss(t_us, ep))
+            nav.estimate()
+        c = nav.counters()
+        assert (c["gnss_epochs"], c["gnss_fused"]) == (3, 2), c  # the first starts the filter
+        print(" ".join(sorted(set(sys.modules) - before)))
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == [], out.stdout

@@ -245,6 +245,12 @@ def chi2_threshold(p_false_alarm: float, dof: int) -> float:
     return float(chdtri(dof, 1.0 - (1.0 - p_false_alarm)))
 
 
+def preload_chi2() -> None:
+    """Import what the χ² test needs (scipy.special, ~0.3 s of CPU) now: at a filter's or a receiver's
+    start-up, not inside its first epoch (a live receiver's first fix would wait for it)."""
+    chi2_threshold(SppConfig().raim_p_false_alarm, 1)
+
+
 def solve_position(
     epoch: GnssEpoch,
     config: SppConfig = SppConfig(),

@@ -50,7 +50,7 @@ from companion.estimator.timeline import Timeline
 from companion.gnss.atmosphere import iono_frequency_scale
 from companion.gnss.constants import C_M_S
 from companion.gnss.observations import GnssEpoch
-from companion.gnss.spp import SppConfig, SppSolution, solve_position
+from companion.gnss.spp import SppConfig, SppSolution, preload_chi2, solve_position
 from companion.gnss.systems import System
 from companion.tight import _tight, model, shadow, weighting
 from companion.tight.belief import LineOfSight, blocked_probability, map_theta, theta_prior
@@ -236,6 +236,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         self._snapshot = self.weighting.uses_prior and cfg.belief_innovation == "snapshot"
         self.frame = frame
         self.klobuchar = klobuchar
+        preload_chi2()
         self._reset_us = int(round(cfg.reset_timeout_s * 1e6))
         c = cfg
         self._q = (c.sigma_acc_m_s2**2, c.sigma_acc_vertical_m_s2**2, c.sigma_acc_bias_rw_m_s2_sqrt_s**2,
