@@ -2,7 +2,9 @@
 rates' H P and S = H P Hᵀ over H's nonzero columns only, against a plain-Python transcription of its dense
 loops (IEEE double arithmetic in the same order: what the C core computed before); the satellite cache's
 step in C (``_tight.carry_states``) against the numpy expressions it replaced; ``GnssEpoch.replace``'s
-slot path against ``dataclasses.replace``; no import inside the first epochs."""
+slot path against ``dataclasses.replace``; no import inside the first epochs; ``prepare_epoch``'s C path
+(``_tight.prepare``) against its numpy form, to 1e-12 relative (the C library's ``asin``, ``atan2`` and
+``pow`` and unfused 3-term dot products against numpy's own, which differ in the last bits)."""
 
 from __future__ import annotations
 
@@ -13,9 +15,11 @@ import numpy as np
 import pytest
 
 from companion.gnss.observations import GnssEpoch, make_epoch
-from companion.tight import _tight, model
+from companion.tight import _tight, engine, model
+from companion.tight.config import TightConfig
 from companion.tight.model import I_DRIFT, N_STATE
-from tests.test_tight import FRAME, _sats, _state, c_core_inputs
+from tests.gnss_helpers import RX_ECEF, T0, observe
+from tests.test_tight import FRAME, STORE, _sats, _state, c_core_inputs
 
 C_M_S = 299792458.0
 W_C = 7.2921151467e-5 / C_M_S
@@ -278,3 +282,85 @@ def test_no_import_falls_inside_the_first_epochs():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == [], out.stdout
+
+
+def _raw_epoch(rng: np.random.Generator) -> tuple[GnssEpoch, np.ndarray]:
+    """A receiver's raw epoch over every synthetic satellite (GLONASS among them, some below the
+    horizon) with its satellite states attached and atmospheric delays, as the navigator prepares it."""
+    from companion.gnss import attach_broadcast
+
+    ep, _ = observe(STORE, T0 + 30.0, RX_ECEF, mask_deg=-90.0)
+    ep, _ = attach_broadcast(ep, STORE)
+    ep = ep.replace(corrected=False, sat_clock_s=rng.normal(0.0, 1e-4, ep.n),
+                    sat_clock_drift_s_s=rng.normal(0.0, 1e-11, ep.n), cn0_dbhz=rng.uniform(15.0, 52.0, ep.n))
+    return ep, rng.uniform(2.0, 30.0, ep.n)
+
+
+def _assert_prepared_equal(got: engine.SatEpoch, want: engine.SatEpoch) -> None:
+    exact = ("key", "slot", "slot_f", "z_m", "r_uniform_m2", "sat_pos_ecef_m", "sat_vel_ecef_m_s", "z_rate_m_s",
+             "systems")
+    for name in engine.SatEpoch._fields[1:]:
+        a, b = getattr(got, name), getattr(want, name)
+        if name in exact:
+            assert (a == b) if isinstance(a, tuple) else np.array_equal(a, b, equal_nan=True), name
+        else:
+            assert a.shape == b.shape and np.isfinite(a).all() and np.isfinite(b).all(), name
+            assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max(), name  # per quantity, relative
+    assert got.epoch is want.epoch
+
+
+@pytest.mark.parametrize("damage", [None, "cn0", "drift", "velocity", "rate"])
+def test_c_prepare_equals_the_numpy_preparation(damage):
+    """Every field of a raw epoch's preparation (all satellites kept: mask −90°), undamaged and with
+    missing C/N0, clock drift, satellite velocity or Doppler (the numpy path's NaN handling)."""
+    rng = np.random.default_rng(11)
+    cfg = TightConfig(elevation_mask_deg=-90.0)
+    ep, atm = _raw_epoch(rng)
+    assert (ep.system == int(engine._GLONASS)).any() and ep.n > 20
+    if damage == "cn0":
+        ep = ep.replace(cn0_dbhz=np.where(np.arange(ep.n) % 3 == 0, np.nan, ep.cn0_dbhz))
+    elif damage == "drift":
+        ep = ep.replace(sat_clock_drift_s_s=np.where(np.arange(ep.n) % 4 == 1, np.nan, ep.sat_clock_drift_s_s))
+    elif damage == "velocity":
+        vel = ep.sat_vel_ecef_m_s.copy()
+        vel[2, 1] = np.nan
+        vel[7] = np.inf
+        ep = ep.replace(sat_vel_ecef_m_s=vel)
+    elif damage == "rate":
+        ep = ep.replace(pseudorange_rate_m_s=np.where(np.arange(ep.n) % 5 == 2, np.nan, ep.pseudorange_rate_m_s))
+    got = engine.prepare_epoch(ep, FRAME, cfg, None, atm)
+    want = engine._prepare_numpy(ep, FRAME, cfg, None, atm)
+    assert got is not None and want is not None
+    _assert_prepared_equal(got, want)
+    if damage in ("velocity", "rate"):  # the C path's own (a NaN rate and velocity rows), and not vacuous
+        assert np.isnan(got.z_rate_m_s).sum() in (2, len(range(2, ep.n, 5)))
+    # the same satellites again: the cached keys and slots are the same, read-only arrays
+    again = engine.prepare_epoch(ep, FRAME, cfg, None, atm)
+    assert again is not None and again.key is got.key and not again.key.flags.writeable
+
+
+@pytest.mark.parametrize("drop", ["mask", "pseudorange", "clock", "position"])
+def test_c_prepare_leaves_a_dropped_observation_to_numpy(drop):
+    """An observation the mask or a non-finite input drops: the C path declines (None) and the numpy
+    path selects, as before."""
+    rng = np.random.default_rng(12)
+    cfg = TightConfig(elevation_mask_deg=-90.0 if drop != "mask" else 10.0)
+    ep, atm = _raw_epoch(rng)
+    if drop == "pseudorange":
+        ep = ep.replace(pseudorange_m=np.where(np.arange(ep.n) == 3, np.nan, ep.pseudorange_m))
+    elif drop == "clock":
+        ep = ep.replace(sat_clock_s=np.where(np.arange(ep.n) == 4, np.nan, ep.sat_clock_s))
+    elif drop == "position":
+        pos = ep.sat_pos_ecef_m.copy()
+        pos[5, 0] = np.nan
+        ep = ep.replace(sat_pos_ecef_m=pos)
+    args = (ep.sat_pos_ecef_m, FRAME.r0_ecef_m, FRAME.c_ecef_ned, ep.pseudorange_m, ep.sat_clock_s, atm,
+            ep.pseudorange_rate_m_s, ep.sat_clock_drift_s_s, ep.cn0_dbhz, np.ones(ep.n), ep.sat_vel_ecef_m_s,
+            engine._prepare_params(cfg))
+    assert _tight.prepare(*args) is None
+    got = engine.prepare_epoch(ep, FRAME, cfg, None, atm)
+    want = engine._prepare_numpy(ep, FRAME, cfg, None, atm)
+    assert got is not None and want is not None and got.epoch.n == want.epoch.n < ep.n
+    for name in engine.SatEpoch._fields[1:]:
+        a, b = getattr(got, name), getattr(want, name)
+        assert (a == b) if isinstance(a, tuple) else np.array_equal(a, b, equal_nan=True), name

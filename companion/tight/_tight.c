@@ -720,6 +720,98 @@ fail:
     return NULL;
 }
 
+/* ---------------------------------------------------------------- epoch preparation */
+/* prepare(sat_pos (n,3), r0, C, pseudorange, sat_clock, atmosphere, rate, drift, cn0, glo (n: the σ² factor),
+ * sat_vel (n,3), params) -> (z, r_model, r_los, theta_prior, el_deg, az, rate (NaN where it or the
+ * satellite's velocity is not finite), r_rate (n each), every rate and velocity finite) or
+ * None (an observation dropped by the mask, or n == 0: the numpy path selects): engine.prepare_epoch's
+ * arithmetic for a receiver's raw epoch with satellite states and atmospheric delays known, element by
+ * element. params: (sin of the elevation mask, C/N0 ref, σ_floor², σ_zenith², σ_los_cn0², the range rate's
+ * σ² over the model's at the zenith, the prior's C/N0 midpoint, per dB, per degree, elevation midpoint). */
+static PyObject *py_prepare(PyObject *self, PyObject *args) {
+    PyObject *o[11];
+    double sin_mask, cn0_ref, a2, sz2, slos2, rate_scale, mid, per_db, per_deg, el_mid;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOO(dddddddddd)", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
+                          &o[7], &o[8], &o[9], &o[10], &sin_mask, &cn0_ref, &a2, &sz2, &slos2, &rate_scale, &mid,
+                          &per_db, &per_deg, &el_mid))
+        return NULL;
+    static const int nd[11] = {2, 1, 2, 1, 1, 1, 1, 1, 1, 1, 2};
+    PyArrayObject *a[11] = {NULL};
+    PyObject *out[8] = {NULL}, *res = NULL;
+    for (int k = 0; k < 11; k++)
+        if (!(a[k] = in_array(o[k], nd[k]))) goto done;
+    npy_intp n = PyArray_DIM(a[0], 0);
+    int shapes = PyArray_DIM(a[0], 1) == 3 && PyArray_DIM(a[1], 0) == 3 && PyArray_DIM(a[2], 0) == 3
+                 && PyArray_DIM(a[2], 1) == 3;
+    for (int k = 3; k < 11; k++) shapes = shapes && PyArray_DIM(a[k], 0) == n;
+    shapes = shapes && PyArray_DIM(a[10], 1) == 3;
+    if (!shapes) {
+        PyErr_SetString(PyExc_ValueError, "prepare: shapes");
+        goto done;
+    }
+    const double *sp = PyArray_DATA(a[0]), *r0 = PyArray_DATA(a[1]), *C = PyArray_DATA(a[2]),
+                 *pr = PyArray_DATA(a[3]), *clk = PyArray_DATA(a[4]), *atm = PyArray_DATA(a[5]),
+                 *rate = PyArray_DATA(a[6]), *drift = PyArray_DATA(a[7]), *cn0 = PyArray_DATA(a[8]),
+                 *glo = PyArray_DATA(a[9]), *vel = PyArray_DATA(a[10]);
+    for (npy_intp i = 0; i < n; i++) { /* the mask first: any observation dropped, the numpy path */
+        const double d0 = sp[3 * i] - r0[0], d1 = sp[3 * i + 1] - r0[1], d2 = sp[3 * i + 2] - r0[2];
+        const double se = -(d0 * C[2] + d1 * C[5] + d2 * C[8]) / sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        if (!(isfinite(pr[i]) && isfinite(se) && se >= sin_mask && isfinite(clk[i]))) {
+            res = Py_None;
+            Py_INCREF(res);
+            goto done;
+        }
+    }
+    if (n == 0) {
+        res = Py_None;
+        Py_INCREF(res);
+        goto done;
+    }
+    double *w[8];
+    for (int k = 0; k < 8; k++) {
+        if (!(out[k] = new_array(1, n, 0, NULL))) goto done;
+        w[k] = PyArray_DATA((PyArrayObject *)out[k]);
+    }
+    const double two_pi = 2.0 * 3.141592653589793, to_deg = 180.0 / 3.141592653589793;
+    int vel_all = 1;
+    for (npy_intp i = 0; i < n; i++) {
+        const double d0 = sp[3 * i] - r0[0], d1 = sp[3 * i + 1] - r0[1], d2 = sp[3 * i + 2] - r0[2];
+        const double se = -(d0 * C[2] + d1 * C[5] + d2 * C[8]) / sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        const double el = asin(se < -1.0 ? -1.0 : (se > 1.0 ? 1.0 : se));
+        w[0][i] = pr[i] + C_M_S * clk[i] - atm[i];
+        double az = fmod(atan2(d0 * C[1] + d1 * C[4] + d2 * C[7], d0 * C[0] + d1 * C[3] + d2 * C[6]), two_pi);
+        if (az != 0.0) {
+            if (az < 0.0) az += two_pi; /* numpy's remainder: the divisor's sign */
+        } else {
+            az = 0.0;
+        }
+        w[5][i] = az;
+        const double c = isfinite(cn0[i]) ? cn0[i] : cn0_ref;
+        const double weak = pow(10.0, (cn0_ref - c) / 10.0);
+        const double s = se > 0.05 ? se : 0.05;
+        w[1][i] = (a2 + sz2 * weak / (s * s)) * glo[i];
+        w[2][i] = (a2 + slos2 * weak) * glo[i];
+        w[7][i] = w[1][i] * rate_scale;
+        w[4][i] = el * to_deg;
+        w[3][i] = per_db * ((isfinite(cn0[i]) ? cn0[i] : mid) - mid) + per_deg * (w[4][i] - el_mid);
+        const double rr = rate[i] + C_M_S * (isfinite(drift[i]) ? drift[i] : 0.0);
+        const int ok = isfinite(rr) && isfinite(vel[3 * i]) && isfinite(vel[3 * i + 1]) && isfinite(vel[3 * i + 2]);
+        w[6][i] = ok ? rr : NAN;
+        vel_all = vel_all && ok;
+    }
+    res = PyTuple_New(9);
+    if (!res) goto done;
+    for (int k = 0; k < 8; k++) {
+        PyTuple_SET_ITEM(res, k, out[k]);
+        out[k] = NULL;
+    }
+    PyTuple_SET_ITEM(res, 8, PyBool_FromLong(vel_all));
+done:
+    for (int k = 0; k < 11; k++) Py_XDECREF(a[k]);
+    for (int k = 0; k < 8; k++) Py_XDECREF(out[k]);
+    return res;
+}
+
 static int state_size(PyObject *args, int i, int dim) {
     PyObject *o = PyTuple_Check(args) && PyTuple_GET_SIZE(args) > i ? PyTuple_GET_ITEM(args, i) : NULL;
     return o && PyArray_Check(o) && PyArray_NDIM((PyArrayObject *)o) > dim
@@ -739,6 +831,7 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
 }
 
 static PyMethodDef methods[] = {
+    {"prepare", py_prepare, METH_VARARGS, "an epoch's state-independent rows (engine.prepare_epoch's arithmetic)"},
     {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},

@@ -168,7 +168,63 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
 
     σ models (``companion.gnss.spp.sigma_model_m``'s, written out for speed and tested equal):
     "cn0-elevation" σ² = a² + b² w / sin² el and the line-of-sight σ² = a² + c² w, with
-    w = 10^((C/N0_ref − C/N0)/10), sin el floored at 0.05, GLONASS σ × ``glonass_sigma_factor``."""
+    w = 10^((C/N0_ref − C/N0)/10), sin el floored at 0.05, GLONASS σ × ``glonass_sigma_factor``.
+
+    A receiver's raw epoch with its satellite states and atmosphere known and every observation kept is
+    prepared in C (``_tight.prepare``: the same arithmetic element by element; its ``arcsin``,
+    ``arctan2``, power and 3-term dot products rounded by the C library, not numpy's: equal to within
+    1e-12 relative, tested); any other epoch by the numpy below."""
+    if atmosphere_m is not None and not epoch.corrected:
+        ids = _epoch_ids(epoch, cfg)
+        got = _tight.prepare(epoch.sat_pos_ecef_m, frame.r0_ecef_m, frame.c_ecef_ned, epoch.pseudorange_m,
+                             epoch.sat_clock_s, atmosphere_m, epoch.pseudorange_rate_m_s,
+                             epoch.sat_clock_drift_s_s, epoch.cn0_dbhz, ids[4], epoch.sat_vel_ecef_m_s,
+                             _prepare_params(cfg))
+        if got is not None:
+            z, r_model, r_los, theta, el_deg, az, rate, r_rate, vel_all = got
+            vel = epoch.sat_vel_ecef_m_s
+            if not vel_all:
+                vel = np.where(np.isfinite(rate)[:, None], vel, np.nan)
+            return SatEpoch(epoch, ids[0], ids[1], ids[2], z, r_model, ids[5], r_los, theta, el_deg, az,
+                            epoch.sat_pos_ecef_m, vel, rate, r_rate, ids[3])
+    return _prepare_numpy(epoch, frame, cfg, klobuchar, atmosphere_m)
+
+
+# an epoch's satellites' keys, clock slots (int, float), systems, GLONASS σ² factors and uniform σ²s, per
+# satellite list and configuration (read-only arrays shared by the epochs of the same satellites)
+_IDS: dict[tuple[bytes, bytes, str, str, float, float], tuple[Any, ...]] = {}
+_IDS_MAX = 512
+
+
+def _epoch_ids(ep: GnssEpoch, cfg: TightConfig) -> tuple[Any, ...]:
+    k = (ep.system.tobytes(), ep.prn.tobytes(), ep.system.dtype.str, ep.prn.dtype.str,
+         cfg.glonass_sigma_factor, cfg.sigma_uniform_m)
+    ids = _IDS.get(k)
+    if ids is None:
+        sysi = ep.system.astype(int)
+        slots = model.SLOT_OF[sysi]
+        arrays = (sysi * 1000 + ep.prn.astype(int), slots, slots.astype(float),
+                  np.where(ep.system == _GLONASS, cfg.glonass_sigma_factor**2, 1.0),
+                  np.full(ep.n, cfg.sigma_uniform_m**2))
+        for a in arrays:
+            a.flags.writeable = False
+        ids = (*arrays[0:3], tuple(sorted(set(slots.tolist()))), *arrays[3:5])
+        if len(_IDS) >= _IDS_MAX:
+            _IDS.clear()
+        _IDS[k] = ids
+    return ids
+
+
+def _prepare_params(cfg: TightConfig) -> tuple[float, ...]:
+    a2 = cfg.sigma_floor_m**2
+    return (math.sin(math.radians(cfg.elevation_mask_deg)), cfg.cn0_ref_dbhz, a2, cfg.sigma_zenith_m**2,
+            cfg.sigma_los_cn0_m**2, cfg.sigma_range_rate_m_s**2 / (a2 + cfg.sigma_zenith_m**2),
+            cfg.prior_cn0_mid_dbhz, cfg.prior_cn0_per_db, cfg.prior_el_per_deg, cfg.prior_el_mid_deg)
+
+
+def _prepare_numpy(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
+                   atmosphere_m: np.ndarray | None = None) -> SatEpoch | None:
+    """``prepare_epoch`` in numpy: any epoch (the reference of the C path in the tests)."""
     d = epoch.sat_pos_ecef_m - frame.r0_ecef_m
     rng = np.sqrt(np.einsum("ij,ij->i", d, d))
     sin_el = -(d @ frame.c_ecef_ned[:, 2]) / rng
