@@ -812,6 +812,71 @@ done:
     return res;
 }
 
+/* ---------------------------------------------------------------- C/N0 calibration (cn0cal) */
+/* cn0_add(hist (bins,), edges (bins + 1,), cn0 (n,), lo, hi, bin) -> the number counted: each finite value
+ * clipped to [lo, hi] counted in its bin (int((c − edges[0]) / bin), the last bin at most), in place: numpy's
+ * bincount added to the histogram, as whole numbers (exact) */
+static PyObject *py_cn0_add(PyObject *self, PyObject *args) {
+    PyObject *oh, *oe, *oc;
+    double lo, hi, bin;
+    if (!PyArg_ParseTuple(args, "OOOddd", &oh, &oe, &oc, &lo, &hi, &bin)) return NULL;
+    if (!PyArray_Check(oh) || PyArray_TYPE((PyArrayObject *)oh) != NPY_DOUBLE || PyArray_NDIM((PyArrayObject *)oh) != 1
+        || !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)oh) || !PyArray_ISWRITEABLE((PyArrayObject *)oh)) {
+        PyErr_SetString(PyExc_TypeError, "cn0_add: the histogram must be a writeable float64 vector");
+        return NULL;
+    }
+    PyArrayObject *h = (PyArrayObject *)oh, *e = in_array(oe, 1), *c = in_array(oc, 1);
+    if (!e || !c) {
+        Py_XDECREF(e); Py_XDECREF(c);
+        return NULL;
+    }
+    npy_intp bins = PyArray_DIM(h, 0), n = PyArray_DIM(c, 0), counted = 0;
+    if (PyArray_DIM(e, 0) != bins + 1 || bins < 1) {
+        Py_DECREF(e); Py_DECREF(c);
+        PyErr_SetString(PyExc_ValueError, "cn0_add: shapes");
+        return NULL;
+    }
+    double *hv = PyArray_DATA(h);
+    const double *ev = PyArray_DATA(e), *cv = PyArray_DATA(c);
+    for (npy_intp i = 0; i < n; i++) {
+        if (!isfinite(cv[i])) continue;
+        double v = cv[i] > lo ? cv[i] : lo;
+        v = v < hi ? v : hi;
+        npy_intp k = (npy_intp)((v - ev[0]) / bin);
+        hv[k < bins - 1 ? k : bins - 1] += 1.0;
+        counted++;
+    }
+    Py_DECREF(e); Py_DECREF(c);
+    return PyLong_FromSsize_t(counted);
+}
+
+/* cn0_level(hist, edges, target, bin) -> the histogram's value at the count ``target`` (> 0), linear within its
+ * bin (cn0cal.level_dbhz: numpy's cumsum and searchsorted, side "left") */
+static PyObject *py_cn0_level(PyObject *self, PyObject *args) {
+    PyObject *oh, *oe;
+    double target, bin;
+    if (!PyArg_ParseTuple(args, "OOdd", &oh, &oe, &target, &bin)) return NULL;
+    PyArrayObject *h = in_array(oh, 1), *e = in_array(oe, 1);
+    if (!h || !e || PyArray_DIM(e, 0) != PyArray_DIM(h, 0) + 1 || PyArray_DIM(h, 0) < 1) {
+        if (h && e) PyErr_SetString(PyExc_ValueError, "cn0_level: shapes");
+        Py_XDECREF(h); Py_XDECREF(e);
+        return NULL;
+    }
+    npy_intp bins = PyArray_DIM(h, 0), i = 0;
+    const double *hv = PyArray_DATA(h), *ev = PyArray_DATA(e);
+    double cum = 0.0, below = 0.0; /* below: the cumulative count before bin i */
+    for (i = 0; i < bins; i++) {
+        below = cum;
+        cum += hv[i];
+        if (cum >= target) break;
+    }
+    if (i == bins) i = bins - 1; /* past the end: the last bin (below is the count before it) */
+    const double frac = hv[i] > 0.0 ? (target - below) / hv[i] : 0.5;
+    const double level = ev[i] + frac * bin;
+    Py_DECREF(h); Py_DECREF(e);
+    return PyFloat_FromDouble(level);
+}
+
 static int state_size(PyObject *args, int i, int dim) {
     PyObject *o = PyTuple_Check(args) && PyTuple_GET_SIZE(args) > i ? PyTuple_GET_ITEM(args, i) : NULL;
     return o && PyArray_Check(o) && PyArray_NDIM((PyArrayObject *)o) > dim
@@ -832,6 +897,8 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"prepare", py_prepare, METH_VARARGS, "an epoch's state-independent rows (engine.prepare_epoch's arithmetic)"},
+    {"cn0_add", py_cn0_add, METH_VARARGS, "an epoch's C/N0 counted in the calibration's histogram (cn0cal)"},
+    {"cn0_level", py_cn0_level, METH_VARARGS, "the histogram's quantile (cn0cal.level_dbhz)"},
     {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},
