@@ -392,3 +392,44 @@ def test_c_cn0_calibration_equals_its_numpy_form_bit_for_bit():
             assert got == want or (math.isnan(got) and math.isnan(want))
             assert c.calibrated(cn0).tobytes() == (np.asarray(cn0, float) - ref.offset_db()).tobytes()
         assert c.n > 500
+
+
+def _same_states(got, want) -> None:
+    (sa, ta), (sb, tb) = got, want
+    for a, b in zip(sa, sb, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
+    assert np.array_equal(ta, tb, equal_nan=True)
+
+
+@pytest.mark.parametrize("case", ["tracked", "unknown", "nan", "boundary", "empty"])
+def test_c_transmission_states_equal_the_numpy_ones_bit_for_bit(case):
+    """``SatelliteCache.transmission_states`` (one anchor: in C) against ``ephemeris.transmission_states``
+    on the same cache (a fresh one each, so both evaluate the same anchors): every satellite tracked, one
+    without an ephemeris (not valid: no clock step back), a NaN pseudorange and anchors that differ across
+    the epoch (both the general path), no satellite."""
+    from companion.gnss.ephemeris import transmission_states
+    from companion.tight.satcache import SatelliteCache
+
+    t = T0 + 30.0 if case != "boundary" else T0 + 2.5 + 0.0734  # t − P/c straddles a 5 s anchor's edge
+    ep, _ = observe(STORE, t, RX_ECEF, mask_deg=-90.0)
+    if case == "unknown":
+        ep = ep.replace(prn=np.where(np.arange(ep.n) == 3, 99, ep.prn).astype(ep.prn.dtype))
+    elif case == "nan":
+        ep = ep.replace(pseudorange_m=np.where(np.arange(ep.n) == 4, np.nan, ep.pseudorange_m))
+    elif case == "empty":
+        ep = ep.select(np.zeros(ep.n, dtype=bool))
+    t0, k = _tight.transmit_anchor(ep.t_gps_s, ep.pseudorange_m, 5.0)
+    assert np.array_equal(t0, ep.t_gps_s - ep.pseudorange_m / C_M_S, equal_nan=True)
+    assert (k is None) == (case in ("nan", "boundary", "empty"))
+    for _ in range(2):  # the second: the anchor's rows and the keys from the caches
+        a, b = SatelliteCache(STORE, 5.0), SatelliteCache(STORE, 5.0)
+        _same_states(a.transmission_states(ep), transmission_states(b, ep))
+    if case == "unknown":
+        assert not a.transmission_states(ep)[0].valid[3] and a.transmission_states(ep)[0].valid.sum() == ep.n - 1
+    assert a.keys(ep.system, ep.prn) == (ep.system.astype(np.int64) * 1000 + ep.prn).tolist()
+
+
+def test_c_anchors_are_numpys():
+    t = np.array([0.0, 2.5, 7.5, -2.5, 12.4999, np.nan, np.inf, -np.inf, 1.1e9 + 0.3, -7.49])
+    assert _tight.anchors(t, 5.0) == np.rint(np.where(np.isfinite(t), t, 0.0) / 5.0).astype(np.int64).tolist()
+    assert _tight.anchors(np.array([1e300]), 5.0) is None  # beyond an int64: the caller's numpy

@@ -683,6 +683,124 @@ done:
 /* carry_states(rows (n, 12): each anchor's pos, vel, acc, clock, drift, valid; dt (n,) s from the anchor)
  * -> (pos (n, 3), vel (n, 3), clock (n,), drift (n,), anchored (n,) bool: valid == 1): satcache's
  * second-order step p + v dt + ½ a dt², v + a dt, clock + drift dt, in numpy's order of operations */
+/* one satellite's anchor row r (pos, vel, acc, clock, drift, valid) carried by t: p + v t + ½ a t², v + a t,
+ * clock + drift t, drift (numpy's operations in its order); returns the row's validity (valid == 1) */
+static inline int carry_row(const double *r, double t, double *p, double *v, double *c, double *d) {
+    for (int k = 0; k < 3; k++) {
+        p[k] = (r[k] + r[3 + k] * t) + 0.5 * r[6 + k] * t * t;
+        v[k] = r[3 + k] + r[6 + k] * t;
+    }
+    *c = r[9] + r[10] * t;
+    *d = r[10];
+    return r[11] == 1.0;
+}
+
+/* transmit_anchor(t_rx_s, pseudorange (n,), period) -> (t0 = t_rx − P/c (n,), the anchor round(t0 / period)
+ * as an int) or (t0, None) when the satellites' anchors differ or one is not finite (satcache: the general
+ * path) or n == 0 */
+static PyObject *py_transmit_anchor(PyObject *self, PyObject *args) {
+    PyObject *opr;
+    double t_rx, period;
+    if (!PyArg_ParseTuple(args, "dOd", &t_rx, &opr, &period)) return NULL;
+    PyArrayObject *pr = in_array(opr, 1);
+    if (!pr) return NULL;
+    npy_intp n = PyArray_DIM(pr, 0);
+    PyObject *t0 = new_array(1, n, 0, NULL);
+    if (!t0) {
+        Py_DECREF(pr);
+        return NULL;
+    }
+    const double *pv = PyArray_DATA(pr);
+    double *tv = PyArray_DATA((PyArrayObject *)t0), k0 = NAN;
+    int common = n > 0;
+    for (npy_intp i = 0; i < n; i++) {
+        tv[i] = t_rx - pv[i] / C_M_S;
+        const double k = rint(tv[i] / period); /* numpy's rint: the current (nearest-even) rounding */
+        if (i == 0) k0 = k;
+        common = common && isfinite(k) && k == k0;
+    }
+    Py_DECREF(pr);
+    if (common && fabs(k0) < 9.0e15) return Py_BuildValue("(NL)", t0, (long long)k0);
+    return Py_BuildValue("(NO)", t0, Py_None);
+}
+
+/* transmit_states(table (m, 12), rows (n, intp), t0 (n,), t_anchor) -> (pos, vel, clock, drift, valid,
+ * t_tx): the anchor rows carried to t0 (carry_row, dt = t0 − t_anchor), then moved back by the satellite
+ * clock offset dt_sv (0 where not valid): pos − vel dt_sv, clock − drift dt_sv, t0 − dt_sv
+ * (ephemeris.transmission_states's numpy, element by element) */
+static PyObject *py_transmit_states(PyObject *self, PyObject *args) {
+    PyObject *otab, *orows, *ot0;
+    double t_anchor;
+    if (!PyArg_ParseTuple(args, "OOOd", &otab, &orows, &ot0, &t_anchor)) return NULL;
+    PyArrayObject *tab = in_array(otab, 2), *t0a = in_array(ot0, 1);
+    PyArrayObject *rw = (PyArrayObject *)PyArray_FROMANY(orows, NPY_INTP, 1, 1, NPY_ARRAY_IN_ARRAY);
+    PyObject *pos = NULL, *vel = NULL, *clk = NULL, *drift = NULL, *ok = NULL, *ttx = NULL;
+    if (!tab || !t0a || !rw) goto fail;
+    npy_intp n = PyArray_DIM(rw, 0), m = PyArray_DIM(tab, 0);
+    if (PyArray_DIM(tab, 1) != 12 || PyArray_DIM(t0a, 0) != n) {
+        PyErr_SetString(PyExc_ValueError, "transmit_states: shapes");
+        goto fail;
+    }
+    const npy_intp *ri = PyArray_DATA(rw);
+    for (npy_intp i = 0; i < n; i++)
+        if (ri[i] < 0 || ri[i] >= m) {
+            PyErr_SetString(PyExc_IndexError, "transmit_states: a row outside the table");
+            goto fail;
+        }
+    pos = new_array(2, n, 3, NULL); vel = new_array(2, n, 3, NULL);
+    clk = new_array(1, n, 0, NULL); drift = new_array(1, n, 0, NULL); ttx = new_array(1, n, 0, NULL);
+    ok = PyArray_SimpleNew(1, &n, NPY_BOOL);
+    if (!pos || !vel || !clk || !drift || !ok || !ttx) goto fail;
+    const double *o = PyArray_DATA(tab), *t0 = PyArray_DATA(t0a);
+    double *p = PyArray_DATA((PyArrayObject *)pos), *v = PyArray_DATA((PyArrayObject *)vel),
+           *c = PyArray_DATA((PyArrayObject *)clk), *d = PyArray_DATA((PyArrayObject *)drift),
+           *tt = PyArray_DATA((PyArrayObject *)ttx);
+    npy_bool *a = PyArray_DATA((PyArrayObject *)ok);
+    for (npy_intp i = 0; i < n; i++) {
+        double cc;
+        a[i] = carry_row(o + 12 * ri[i], t0[i] - t_anchor, p + 3 * i, v + 3 * i, &cc, d + i);
+        const double dt = a[i] ? cc : 0.0;
+        for (int k = 0; k < 3; k++) p[3 * i + k] = p[3 * i + k] - v[3 * i + k] * dt;
+        c[i] = cc - d[i] * dt;
+        tt[i] = t0[i] - dt;
+    }
+    Py_DECREF(tab); Py_DECREF(t0a); Py_DECREF(rw);
+    return Py_BuildValue("(NNNNNN)", pos, vel, clk, drift, ok, ttx);
+fail:
+    Py_XDECREF(tab); Py_XDECREF(t0a); Py_XDECREF(rw); Py_XDECREF(pos); Py_XDECREF(vel); Py_XDECREF(clk);
+    Py_XDECREF(drift); Py_XDECREF(ok); Py_XDECREF(ttx);
+    return NULL;
+}
+
+/* anchors(t (n,), period) -> [round(t / period) as ints] (NaN and infinite times: 0), satcache.AtmosphereCache's;
+ * None when one is beyond ±9e15 (the caller's numpy) */
+static PyObject *py_anchors(PyObject *self, PyObject *args) {
+    PyObject *ot;
+    double period;
+    if (!PyArg_ParseTuple(args, "Od", &ot, &period)) return NULL;
+    PyArrayObject *ta = in_array(ot, 1);
+    if (!ta) return NULL;
+    npy_intp n = PyArray_DIM(ta, 0);
+    const double *t = PyArray_DATA(ta);
+    PyObject *out = PyList_New(n);
+    for (npy_intp i = 0; out && i < n; i++) {
+        const double k = rint((isfinite(t[i]) ? t[i] : 0.0) / period);
+        if (!(isfinite(k) && fabs(k) < 9.0e15)) {
+            Py_CLEAR(out);
+            Py_DECREF(ta);
+            Py_RETURN_NONE;
+        }
+        PyObject *v = PyLong_FromLongLong((long long)k);
+        if (!v) {
+            Py_CLEAR(out);
+            break;
+        }
+        PyList_SET_ITEM(out, i, v);
+    }
+    Py_DECREF(ta);
+    return out;
+}
+
 static PyObject *py_carry_states(PyObject *self, PyObject *args) {
     PyObject *orows, *odt;
     if (!PyArg_ParseTuple(args, "OO", &orows, &odt)) return NULL;
@@ -702,16 +820,7 @@ static PyObject *py_carry_states(PyObject *self, PyObject *args) {
     double *p = PyArray_DATA((PyArrayObject *)pos), *v = PyArray_DATA((PyArrayObject *)vel),
            *c = PyArray_DATA((PyArrayObject *)clk), *d = PyArray_DATA((PyArrayObject *)drift);
     npy_bool *a = PyArray_DATA((PyArrayObject *)ok);
-    for (npy_intp i = 0; i < n; i++) {
-        const double *r = o + 12 * i, t = dt[i];
-        for (int k = 0; k < 3; k++) {
-            p[3 * i + k] = (r[k] + r[3 + k] * t) + 0.5 * r[6 + k] * t * t;
-            v[3 * i + k] = r[3 + k] + r[6 + k] * t;
-        }
-        c[i] = r[9] + r[10] * t;
-        d[i] = r[10];
-        a[i] = r[11] == 1.0;
-    }
+    for (npy_intp i = 0; i < n; i++) a[i] = carry_row(o + 12 * i, dt[i], p + 3 * i, v + 3 * i, c + i, d + i);
     Py_DECREF(ar); Py_DECREF(adt);
     return Py_BuildValue("(NNNNN)", pos, vel, clk, drift, ok);
 fail:
@@ -899,6 +1008,9 @@ static PyMethodDef methods[] = {
     {"prepare", py_prepare, METH_VARARGS, "an epoch's state-independent rows (engine.prepare_epoch's arithmetic)"},
     {"cn0_add", py_cn0_add, METH_VARARGS, "an epoch's C/N0 counted in the calibration's histogram (cn0cal)"},
     {"cn0_level", py_cn0_level, METH_VARARGS, "the histogram's quantile (cn0cal.level_dbhz)"},
+    {"transmit_anchor", py_transmit_anchor, METH_VARARGS, "the transmission time t_rx - P/c and its common anchor"},
+    {"transmit_states", py_transmit_states, METH_VARARGS, "satellite states at transmission from one anchor's rows"},
+    {"anchors", py_anchors, METH_VARARGS, "the anchor of each time (the atmosphere cache's)"},
     {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},

@@ -18,7 +18,7 @@ tight_navigator_for`` passes the mission's) sets the belief rows' prior from the
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from companion.estimator.consistency import (
     variance_scale,
 )
 from companion.gnss.constants import C_M_S
-from companion.gnss.ephemeris import EphemerisStore, transmission_states
+from companion.gnss.ephemeris import EphemerisStore
 from companion.tight import engine as tight_engine
 from companion.tight.belief import LineOfSight
 from companion.tight.cn0cal import Cn0Calibration
@@ -128,14 +128,15 @@ class TightNavigator:
             if self._sats is None or epoch.time_base != "gps":
                 self._counts["gnss_rejected_no_ephemeris"] += 1
                 return
-            st, t_tx = transmission_states(cast(EphemerisStore, self._sats), epoch)
+            st, t_tx = self._sats.transmission_states(epoch)  # transmission_states(self._sats, epoch)
             epoch = epoch.replace(sat_pos_ecef_m=st.pos_ecef_m, sat_vel_ecef_m_s=st.vel_ecef_m_s,
                                   sat_clock_s=st.clock_s, sat_clock_drift_s_s=st.clock_drift_s_s)
             if not st.valid.all():  # no (usable) ephemeris for some: as attach_broadcast, without them
                 self._count_no_prediction(epoch, st.valid)
                 epoch, t_tx = epoch.select(st.valid), t_tx[st.valid]
             if self.engine.frame is not None:
-                atmosphere = self._atmosphere().delays_m(epoch.system, epoch.prn, t_tx)
+                atmosphere = self._atmosphere().delays_m(epoch.system, epoch.prn, t_tx,
+                                                         self._sats.keys(epoch.system, epoch.prn))
         eng = self.engine
         if epoch.n == 0:
             self._counts["gnss_rejected_empty"] += 1
