@@ -425,7 +425,8 @@ def test_c_transmission_states_equal_the_numpy_ones_bit_for_bit(case):
         a, b = SatelliteCache(STORE, 5.0), SatelliteCache(STORE, 5.0)
         _same_states(a.transmission_states(ep), transmission_states(b, ep))
     if case == "unknown":
-        assert not a.transmission_states(ep)[0].valid[3] and a.transmission_states(ep)[0].valid.sum() == ep.n - 1
+        valid = a.transmission_states(ep)[0].valid
+        assert not valid[3] and valid.sum() == ep.n - 1
     assert a.keys(ep.system, ep.prn) == (ep.system.astype(np.int64) * 1000 + ep.prn).tolist()
 
 
