@@ -29,8 +29,16 @@ static const double C_M_S = 299792458.0;
 static const double W_C = 7.2921151467e-5 / 299792458.0; /* ω_e / c */
 
 static PyArrayObject *in_array(PyObject *obj, int nd) {
-    PyArrayObject *a = (PyArrayObject *)PyArray_FROMANY(obj, NPY_DOUBLE, nd, nd, NPY_ARRAY_IN_ARRAY);
-    return a;
+    if (PyArray_CheckExact(obj)) { /* already a C-ordered, aligned float64 array of nd dimensions (the usual
+                                    * case): itself, without numpy's conversion machinery (~2 k instructions) */
+        PyArrayObject *a = (PyArrayObject *)obj;
+        if (PyArray_NDIM(a) == nd && PyArray_TYPE(a) == NPY_DOUBLE && PyArray_ISNOTSWAPPED(a)
+            && PyArray_IS_C_CONTIGUOUS(a) && PyArray_ISALIGNED(a)) {
+            Py_INCREF(obj);
+            return a;
+        }
+    }
+    return (PyArrayObject *)PyArray_FROMANY(obj, NPY_DOUBLE, nd, nd, NPY_ARRAY_IN_ARRAY);
 }
 
 static PyObject *new_array(int nd, npy_intp d0, npy_intp d1, const double *src) {
