@@ -434,3 +434,33 @@ def test_c_anchors_are_numpys():
     t = np.array([0.0, 2.5, 7.5, -2.5, 12.4999, np.nan, np.inf, -np.inf, 1.1e9 + 0.3, -7.49])
     assert _tight.anchors(t, 5.0) == np.rint(np.where(np.isfinite(t), t, 0.0) / 5.0).astype(np.int64).tolist()
     assert _tight.anchors(np.array([1e300]), 5.0) is None  # beyond an int64: the caller's numpy
+
+
+def test_c_report_cov_equals_the_numpy_report_bit_for_bit():
+    """``estimate``'s variances with the snapshots' floors (``_tight.report_cov``) against the numpy and
+    ``snapshot_axis`` form they replaced (``TightNavigator.report_cov_numpy``), with and without the scale k
+    on the positions, floors None or not, each term winning, NaN and infinite variances."""
+    from companion.estimator.consistency import SnapshotFloor, variance_scale
+    from companion.tight.navigator import TightNavigator
+
+    rng = np.random.default_rng(14)
+    wins = set()
+    for trial in range(400):
+        out = rng.lognormal(0.0, 2.0, 18)
+        if trial % 17 == 0:
+            out[rng.integers(9, 18)] = np.nan
+        if trial % 23 == 0:
+            out[rng.integers(9, 12)] = np.inf
+        k = 1.0 if trial % 3 == 0 else float(rng.uniform(1.0, 4.0))
+        floors = [None if rng.uniform() < 0.2 else SnapshotFloor(*rng.lognormal(0.0, 1.5, 4)) for _ in range(2)]
+        d = tuple(float(v) for v in (rng.lognormal(0.0, 2.0, 3) if trial % 2 else np.zeros(3)))
+        snap = (k, floors[0], floors[1], d)
+        got = _tight.report_cov(out, k, floors[0], floors[1], *d)
+        want = TightNavigator.report_cov_numpy(out, variance_scale(k), snap)
+        assert got.tobytes() == want.tobytes()
+        wins.add("k p" if got[0] == out[9] * k else "delay" if got[0] == d[0] else "floor")
+    assert wins == {"k p", "delay", "floor"}  # each term won somewhere
+    with pytest.raises(TypeError):
+        _tight.report_cov(np.zeros(18), 1.0, (1.0, 2.0), None, 0.0, 0.0, 0.0)
+    with pytest.raises(ValueError):
+        _tight.report_cov(np.zeros(9), 1.0, None, None, 0.0, 0.0, 0.0)

@@ -994,6 +994,58 @@ static PyObject *py_cn0_level(PyObject *self, PyObject *args) {
     return PyFloat_FromDouble(level);
 }
 
+/* ---------------------------------------------------------------- the reported accuracy (navigator.estimate) */
+/* a SnapshotFloor (white, slow, slow_rate, cap) into f; 0 for None */
+static int read_floor(PyObject *o, double *f) {
+    if (o == Py_None) return 0;
+    if (!PyTuple_Check(o) || PyTuple_GET_SIZE(o) != 4) {
+        PyErr_SetString(PyExc_TypeError, "report_cov: a floor is (white, slow, slow_rate, cap) or None");
+        return -1;
+    }
+    for (int k = 0; k < 4; k++) f[k] = PyFloat_AsDouble(PyTuple_GET_ITEM(o, k));
+    return PyErr_Occurred() ? -1 : 1;
+}
+
+/* consistency.snapshot_axis(p, k, f, delay) */
+static double snapshot_axis(double p, double k, int have, const double *f, double delay) {
+    double v = p * k;
+    if (have) {
+        const double slow = p * f[2];
+        double s = p * f[0] + (slow < f[1] ? slow : f[1]);
+        s = s < f[3] ? s : f[3];
+        v = v > s ? v : s;
+    }
+    return v > delay ? v : delay;
+}
+
+/* report_cov(out (18,), k, floor_h, floor_v, d_n, d_e, d_d) -> (9,): snapshot_axis of the position's variances
+ * out[9:12] (N and E with floor_h, D with floor_v, each with its delay bias²), then out[12:18] as they are */
+static PyObject *py_report_cov(PyObject *self, PyObject *args) {
+    PyObject *oo, *ofh, *ofv;
+    double k, d[3], fh[4], fv[4];
+    if (!PyArg_ParseTuple(args, "OdOOddd", &oo, &k, &ofh, &ofv, &d[0], &d[1], &d[2])) return NULL;
+    const int hh = read_floor(ofh, fh), hv = hh < 0 ? -1 : read_floor(ofv, fv);
+    if (hh < 0 || hv < 0) return NULL;
+    PyArrayObject *a = in_array(oo, 1);
+    if (!a) return NULL;
+    if (PyArray_DIM(a, 0) != 18) {
+        Py_DECREF(a);
+        PyErr_SetString(PyExc_ValueError, "report_cov: out must have 18 elements");
+        return NULL;
+    }
+    const double *o = PyArray_DATA(a);
+    PyObject *cov = new_array(1, 9, 0, NULL);
+    if (cov) {
+        double *c = PyArray_DATA((PyArrayObject *)cov);
+        c[0] = snapshot_axis(o[9], k, hh, fh, d[0]);
+        c[1] = snapshot_axis(o[10], k, hh, fh, d[1]);
+        c[2] = snapshot_axis(o[11], k, hv, fv, d[2]);
+        for (int i = 3; i < 9; i++) c[i] = o[9 + i];
+    }
+    Py_DECREF(a);
+    return cov;
+}
+
 static int state_size(PyObject *args, int i, int dim) {
     PyObject *o = PyTuple_Check(args) && PyTuple_GET_SIZE(args) > i ? PyTuple_GET_ITEM(args, i) : NULL;
     return o && PyArray_Check(o) && PyArray_NDIM((PyArrayObject *)o) > dim
@@ -1019,6 +1071,7 @@ static PyMethodDef methods[] = {
     {"transmit_anchor", py_transmit_anchor, METH_VARARGS, "the transmission time t_rx - P/c and its common anchor"},
     {"transmit_states", py_transmit_states, METH_VARARGS, "satellite states at transmission from one anchor's rows"},
     {"anchors", py_anchors, METH_VARARGS, "the anchor of each time (the atmosphere cache's)"},
+    {"report_cov", py_report_cov, METH_VARARGS, "the reported variances with the snapshots' floors (navigator.estimate)"},
     {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},

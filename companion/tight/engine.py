@@ -695,19 +695,19 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         x, P = self._predict(last, now, self.imu.last_integrals())
         return now, x, P, last
 
-    def output_now(self) -> tuple[int, np.ndarray, Entry] | None:
-        """(t_us, [p, v, 0 (3), the variances of p, v, 0 (3)] (18,), the last entry) at the newest IMU
-        time, by the loose
-        filter's C output path (``BlockPropagator.output_from``: the mean from the IMU history's
-        newest integrals and the variances of p and v, which depend on (p, v, a, d) alone), the
-        vertical white-acceleration density added where it differs; cached."""
-        return self._output_now()
+    # (t_us, [p, v, 0 (3), the variances of p, v, 0 (3)] (18,), the last entry) at the newest IMU time, by the
+    # loose filter's C output path (``BlockPropagator.output_from``: the mean from the IMU history's newest
+    # integrals and the variances of p and v, which depend on (p, v, a, d) alone), the vertical
+    # white-acceleration density added where it differs; cached (``Timeline._output_now`` itself: one
+    # Python call fewer per estimate, as the loose engine's ``snapshot``)
+    output_now = Timeline._output_now
 
     def _output(self, last: Entry, now: int) -> tuple[int, np.ndarray, Entry]:
         if self._nav15 is None or self._nav15[0] is not last:
             P15 = np.zeros((15, 15))
             P15[_IX_NAV] = last.P[:12, :12]
-            self._nav15 = (last, (*last.x[0:6], 0.0, 0.0, 0.0, *last.x[6:12]), P15)
+            # the mean as floats (the same values as the array's elements; the C core reads floats faster)
+            self._nav15 = (last, (*last.x[0:6].tolist(), 0.0, 0.0, 0.0, *last.x[6:12].tolist()), P15)
         T = (now - last.t_us) * 1e-6
         _, out = self._prop.output_from(self._nav15[1], self._nav15[2], last.ints, self.imu, T, 1.0, 0.0)
         # out: p, v, b (9) then their variances (9); b and its variances are zero here (its mean and

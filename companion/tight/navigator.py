@@ -35,6 +35,7 @@ from companion.estimator.consistency import (
 )
 from companion.gnss.constants import C_M_S
 from companion.gnss.ephemeris import EphemerisStore
+from companion.tight import _tight
 from companion.tight import engine as tight_engine
 from companion.tight.belief import LineOfSight
 from companion.tight.cn0cal import Cn0Calibration
@@ -200,13 +201,11 @@ class TightNavigator:
             k = self.accuracy_inflation()
             self._reported = (entry, variance_scale(k), self.accuracy_floor_m2(), self._snapshot_floor(k))
         _, scale, floor, snap = self._reported
-        cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
         if snap is not None:  # snapshots correlated over seconds: not averaged down, up to one snapshot's;
-            k, f_h, f_v, d = snap  # at least the one-signed delays' bias
-            cov = cov.copy() if scale is None else cov
-            cov[0] = snapshot_axis(float(out[9]), k, f_h, d[0])
-            cov[1] = snapshot_axis(float(out[10]), k, f_h, d[1])
-            cov[2] = snapshot_axis(float(out[11]), k, f_v, d[2])
+            k, f_h, f_v, d = snap  # at least the one-signed delays' bias (report_cov_numpy's, in C)
+            cov = _tight.report_cov(out, k, f_h, f_v, d[0], d[1], d[2])
+        else:
+            cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
         if floor is not None:  # + the common-mode floor, in quadrature
             cov = cov.copy() if scale is None else cov
             cov[0:3] += floor
@@ -215,6 +214,19 @@ class TightNavigator:
                                gnss_resets=last.totals[2])
         self._last = (now, est)
         return est
+
+    @staticmethod
+    def report_cov_numpy(out: np.ndarray, scale: np.ndarray | None, snap: tuple[
+            float, SnapshotFloor | None, SnapshotFloor | None, tuple[float, float, float]]) -> np.ndarray:
+        """``estimate``'s variances with the snapshots' floors, as numpy and ``snapshot_axis`` compute them
+        (the reference of ``_tight.report_cov`` in the tests)."""
+        cov = out[9:18] if scale is None else out[9:18] * scale
+        k, f_h, f_v, d = snap
+        cov = cov.copy() if scale is None else cov
+        cov[0] = snapshot_axis(float(out[9]), k, f_h, d[0])
+        cov[1] = snapshot_axis(float(out[10]), k, f_h, d[1])
+        cov[2] = snapshot_axis(float(out[11]), k, f_v, d[2])
+        return cov
 
     def accuracy_inflation(self) -> float:
         """The factor (≥ 1) on the position variances the estimates report: the used pseudoranges'
