@@ -452,7 +452,8 @@ def test_c_report_cov_equals_the_numpy_report_bit_for_bit():
         if trial % 23 == 0:
             out[rng.integers(9, 12)] = np.inf
         k = 1.0 if trial % 3 == 0 else float(rng.uniform(1.0, 4.0))
-        floors = [None if rng.uniform() < 0.2 else SnapshotFloor(*rng.lognormal(0.0, 1.5, 4)) for _ in range(2)]
+        floors = [None if rng.uniform() < 0.2 else SnapshotFloor(*rng.lognormal(0.0, 1.5, 4))
+                  for _ in range(2)]
         d = tuple(float(v) for v in (rng.lognormal(0.0, 2.0, 3) if trial % 2 else np.zeros(3)))
         snap = (k, floors[0], floors[1], d)
         got = _tight.report_cov(out, k, floors[0], floors[1], *d)
