@@ -299,7 +299,10 @@ def _raw_epoch(rng: np.random.Generator) -> tuple[GnssEpoch, np.ndarray]:
 def _assert_prepared_equal(got: engine.SatEpoch, want: engine.SatEpoch) -> None:
     exact = ("key", "slot", "slot_f", "z_m", "r_uniform_m2", "sat_pos_ecef_m", "sat_vel_ecef_m_s",
              "z_rate_m_s", "systems")
-    for name in engine.SatEpoch._fields[1:]:
+    assert want.key_sorted is None and got.key_sorted is not None  # the C path's own: the keys in order
+    assert np.array_equal(got.key_sorted[0], np.sort(want.key)) and np.array_equal(
+        got.key[got.key_sorted[1]], got.key_sorted[0])
+    for name in engine.SatEpoch._fields[1:-1]:
         a, b = getattr(got, name), getattr(want, name)
         if name in exact:
             assert (a == b) if isinstance(a, tuple) else np.array_equal(a, b, equal_nan=True), name
@@ -362,7 +365,8 @@ def test_c_prepare_leaves_a_dropped_observation_to_numpy(drop):
     got = engine.prepare_epoch(ep, FRAME, cfg, None, atm)
     want = engine._prepare_numpy(ep, FRAME, cfg, None, atm)
     assert got is not None and want is not None and got.epoch.n == want.epoch.n < ep.n
-    for name in engine.SatEpoch._fields[1:]:
+    assert got.key_sorted is None and want.key_sorted is None
+    for name in engine.SatEpoch._fields[1:-1]:
         a, b = getattr(got, name), getattr(want, name)
         assert (a == b) if isinstance(a, tuple) else np.array_equal(a, b, equal_nan=True), name
 
@@ -465,3 +469,22 @@ def test_c_report_cov_equals_the_numpy_report_bit_for_bit():
         _tight.report_cov(np.zeros(18), 1.0, (1.0, 2.0), None, 0.0, 0.0, 0.0)
     with pytest.raises(ValueError):
         _tight.report_cov(np.zeros(9), 1.0, None, None, 0.0, 0.0, 0.0)
+
+
+def test_fit_fed_in_key_order_holds_the_same_sums():
+    """The fusion hands ``Fit.add`` its channels sorted by key (``SatEpoch.key_sorted``) instead of in the
+    receiver's order: the same sums for every channel, bit for bit, through satellites setting and rising
+    (the general path) and the same ones epoch after epoch (the fast path)."""
+    from companion.estimator.consistency import Fit
+
+    rng = np.random.default_rng(15)
+    pool = np.arange(1000, 1040)
+    a = b = Fit()
+    for k in range(80):
+        keys = rng.permutation(pool[rng.integers(0, 5):rng.integers(25, 40)] if k % 9 == 0 else pool[5:25])
+        nu = rng.normal(0.0, 1.0, len(keys))
+        order = np.argsort(keys, kind="stable")
+        a = a.add(1_000_000 + 200_000 * k, keys, nu, 20.0)
+        b = b.add(1_000_000 + 200_000 * k, keys[order], nu[order], 20.0)
+        assert np.array_equal(a.key, b.key) and a.nu_sum.tobytes() == b.nu_sum.tobytes()
+        assert a.w2_sum.tobytes() == b.w2_sum.tobytes() and a.inflation() == b.inflation()

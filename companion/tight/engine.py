@@ -99,6 +99,10 @@ class SatEpoch(NamedTuple):
     z_rate_m_s: np.ndarray  # pseudorange rate free of the satellite clock drift (NaN: none)
     r_rate_m2_s2: np.ndarray
     systems: tuple[int, ...]  # the clock slots of the epoch's systems
+    # (the keys sorted (read-only, the same object for the same satellites), the order that sorts them) or
+    # None: the consistency's channels in its own order (``Fit.add``'s path for the keys it holds: the same
+    # sums)
+    key_sorted: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class Speed(NamedTuple):
@@ -186,7 +190,7 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
             if not vel_all:
                 vel = np.where(np.isfinite(rate)[:, None], vel, np.nan)
             return SatEpoch(epoch, ids[0], ids[1], ids[2], z, r_model, ids[5], r_los, theta, el_deg, az,
-                            epoch.sat_pos_ecef_m, vel, rate, r_rate, ids[3])
+                            epoch.sat_pos_ecef_m, vel, rate, r_rate, ids[3], ids[6])
     return _prepare_numpy(epoch, frame, cfg, klobuchar, atmosphere_m)
 
 
@@ -206,9 +210,11 @@ def _epoch_ids(ep: GnssEpoch, cfg: TightConfig) -> tuple[Any, ...]:
         arrays = (sysi * 1000 + ep.prn.astype(int), slots, slots.astype(float),
                   np.where(ep.system == _GLONASS, cfg.glonass_sigma_factor**2, 1.0),
                   np.full(ep.n, cfg.sigma_uniform_m**2))
+        order = np.argsort(arrays[0], kind="stable")
+        arrays = (*arrays, arrays[0][order], order)
         for a in arrays:
             a.flags.writeable = False
-        ids = (*arrays[0:3], tuple(sorted(set(slots.tolist()))), *arrays[3:5])
+        ids = (*arrays[0:3], tuple(sorted(set(slots.tolist()))), *arrays[3:5], (arrays[5], order))
         if len(_IDS) >= _IDS_MAX:
             _IDS.clear()
         _IDS[k] = ids
@@ -622,7 +628,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             snap = _tight.snapshot(H, y, r, used_f, x[0:3], m.sat_pos_ecef_m, m.sat_vel_ecef_m_s,
                                    m.z_rate_m_s, r_rate, r0, C)
         if n_used:
-            if u is None:  # every satellite (the same values as indexed by all of them)
+            if u is None and m.key_sorted is not None:  # every satellite, in the order of their keys (Fit.add
+                # then finds its own keys at once; each channel's sums the same)
+                keys, order = m.key_sorted
+                fit = fit.add(t_us, keys, (y / np.sqrt(s0 + r))[order], c.accuracy_window_s)
+            elif u is None:  # every satellite (the same values as indexed by all of them)
                 fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
             else:
                 fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
