@@ -488,3 +488,24 @@ def test_fit_fed_in_key_order_holds_the_same_sums():
         b = b.add(1_000_000 + 200_000 * k, keys[order], nu[order], 20.0)
         assert np.array_equal(a.key, b.key) and a.nu_sum.tobytes() == b.nu_sum.tobytes()
         assert a.w2_sum.tobytes() == b.w2_sum.tobytes() and a.inflation() == b.inflation()
+
+
+@pytest.mark.parametrize("n_state", [N_STATE, N_STATE + 1])
+def test_c_predict_mean_equals_the_numpy_prediction_bit_for_bit(n_state):
+    """``_tight.predict_mean`` against the numpy it replaced in ``_predict`` (``predict_mean_numpy``): random
+    states (with the barometer's offset too), live and dead clocks, T of either sign and 0, NaN."""
+    from companion.tight.engine import TightEngine
+
+    rng = np.random.default_rng(16)
+    for trial in range(200):
+        x = rng.normal(0.0, 1e3, n_state)
+        m15 = tuple(rng.normal(0.0, 50.0, 15).tolist())
+        if trial % 13 == 0:
+            x[I_DRIFT] = np.nan
+        live = tuple(bool(v) for v in rng.integers(0, 2, 6))
+        T = float(rng.choice([0.0, -0.2, 0.2, 1.7, rng.uniform(0, 5)]))
+        got = _tight.predict_mean(x, m15, T, live)
+        want = TightEngine.predict_mean_numpy(x, m15, T, live)
+        assert got.tobytes() == want.tobytes() and got is not x and x.shape == got.shape
+    with pytest.raises(ValueError):
+        _tight.predict_mean(np.zeros(N_STATE), (0.0,) * 14, 0.1, (True,) * 6)

@@ -1046,6 +1046,48 @@ static PyObject *py_report_cov(PyObject *self, PyObject *args) {
     return cov;
 }
 
+/* predict_mean(x (N,), m15 (15 numbers: the loose block's p, v, b, a, d at the new time), T, live (NC
+ * numbers)) -> x at the new time: p, v from m15[0:6], a, d from m15[9:15], each live clock + T · drift · live
+ * (engine._predict's numpy: (T x_drift) live added to the clocks), the rest as it was */
+static PyObject *py_predict_mean(PyObject *self, PyObject *args) {
+    PyObject *ox, *om, *ol;
+    double T;
+    if (!PyArg_ParseTuple(args, "OOdO", &ox, &om, &T, &ol)) return NULL;
+    double m[15], live[NC];
+    PyObject *seqs[2] = {om, ol};
+    double *dst[2] = {m, live};
+    const Py_ssize_t len[2] = {15, NC};
+    for (int s = 0; s < 2; s++) {
+        PyObject *q = PySequence_Fast(seqs[s], "predict_mean: a sequence");
+        if (!q) return NULL;
+        if (PySequence_Fast_GET_SIZE(q) != len[s]) {
+            Py_DECREF(q);
+            PyErr_SetString(PyExc_ValueError, "predict_mean: 15 means and one liveness per clock");
+            return NULL;
+        }
+        for (Py_ssize_t i = 0; i < len[s]; i++) dst[s][i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(q, i));
+        Py_DECREF(q);
+        if (PyErr_Occurred()) return NULL;
+    }
+    PyArrayObject *xa = in_array(ox, 1);
+    if (!xa) return NULL;
+    const npy_intp n = PyArray_DIM(xa, 0);
+    if (n < I_DRIFT + 1) {
+        Py_DECREF(xa);
+        PyErr_SetString(PyExc_ValueError, "predict_mean: the state is too short");
+        return NULL;
+    }
+    PyObject *out = new_array(1, n, 0, PyArray_DATA(xa));
+    Py_DECREF(xa);
+    if (!out) return NULL;
+    double *x = PyArray_DATA((PyArrayObject *)out);
+    for (int i = 0; i < 6; i++) x[i] = m[i];
+    for (int i = 6; i < 12; i++) x[i] = m[i + 3];
+    const double td = T * x[I_DRIFT];
+    for (int j = 0; j < NC; j++) x[I_CLK + j] = x[I_CLK + j] + td * live[j];
+    return out;
+}
+
 static int state_size(PyObject *args, int i, int dim) {
     PyObject *o = PyTuple_Check(args) && PyTuple_GET_SIZE(args) > i ? PyTuple_GET_ITEM(args, i) : NULL;
     return o && PyArray_Check(o) && PyArray_NDIM((PyArrayObject *)o) > dim
@@ -1072,6 +1114,7 @@ static PyMethodDef methods[] = {
     {"transmit_states", py_transmit_states, METH_VARARGS, "satellite states at transmission from one anchor's rows"},
     {"anchors", py_anchors, METH_VARARGS, "the anchor of each time (the atmosphere cache's)"},
     {"report_cov", py_report_cov, METH_VARARGS, "the reported variances with the snapshots' floors (navigator.estimate)"},
+    {"predict_mean", py_predict_mean, METH_VARARGS, "the state's mean predicted (engine._predict's numpy)"},
     {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},
