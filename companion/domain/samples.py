@@ -41,7 +41,7 @@ def _slots_function(cls: type, init: bool) -> Callable[..., Any]:
     fn = ns[head]
     if init:
         fn.__qualname__ = f"{cls.__qualname__}.__init__"
-        fn.__doc__ = cls.__init__.__doc__
+        fn.__doc__ = cls.__dict__["__init__"].__doc__
         fn.__annotations__ = {**{f.name: f.type for f in fields(cls)}, "return": None}
     return fn
 

@@ -211,10 +211,10 @@ def _epoch_ids(ep: GnssEpoch, cfg: TightConfig) -> tuple[Any, ...]:
                   np.where(ep.system == _GLONASS, cfg.glonass_sigma_factor**2, 1.0),
                   np.full(ep.n, cfg.sigma_uniform_m**2))
         order = np.argsort(arrays[0], kind="stable")
-        arrays = (*arrays, arrays[0][order], order)
-        for a in arrays:
+        key_sorted = arrays[0][order]
+        for a in (*arrays, key_sorted, order):
             a.flags.writeable = False
-        ids = (*arrays[0:3], tuple(sorted(set(slots.tolist()))), *arrays[3:5], (arrays[5], order))
+        ids = (*arrays[0:3], tuple(sorted(set(slots.tolist()))), *arrays[3:5], (key_sorted, order))
         if len(_IDS) >= _IDS_MAX:
             _IDS.clear()
         _IDS[k] = ids

@@ -142,7 +142,7 @@ class SatelliteCache:
         bit for bit); else that function itself."""
         t0, k = _tight.transmit_anchor(epoch.t_gps_s, epoch.pseudorange_m, self.period_s)
         if k is None:
-            return transmission_states(self, epoch)
+            return transmission_states(self, epoch)  # type: ignore[arg-type]  # (states() as a store's)
         table, rows = self._rows(k, self.keys(epoch.system, epoch.prn), epoch.system, epoch.prn)
         pos, vel, clock, drift, valid, t_tx = _tight.transmit_states(table, rows, t0, k * self.period_s)
         return SatStates(pos, vel, clock, drift, valid), t_tx
