@@ -115,9 +115,10 @@ class SatelliteCache:
             out = np.full((n, 12), np.nan)
             for a in set(k[finite].tolist()):
                 sel = np.flatnonzero(finite & (k == a))
-                sel_keys = [keys[i] for i in sel.tolist()]
-                index, table = self._table(a, sel_keys, system[sel], prn[sel])
-                out[sel] = table[[index[key] for key in sel_keys]]
+                # every satellite of the query evaluated at the anchor (a row is a function of the anchor and
+                # the satellite alone): an epoch straddling two anchors fills the next one whole, not in parts
+                index, table = self._table(a, keys, system, prn)
+                out[sel] = table[[index[keys[i]] for i in sel.tolist()]]
             dt = np.where(finite, t - k * self.period_s, 0.0)
         # p + v dt + ½ a dt², v + a dt, clock + drift dt and the anchors' validity, in C (_tight.carry_states:
         # numpy's operations in its order, tested equal bit for bit)
