@@ -7,12 +7,13 @@ against ``NavEstimate(...)``."""
 from __future__ import annotations
 
 import dataclasses
+import inspect
 from typing import NamedTuple
 
 import numpy as np
 import pytest
 
-from companion.domain.samples import NavEstimate, new_nav_estimate
+from companion.domain.samples import AttitudeSample, ImuSample, NavEstimate, new_nav_estimate
 from companion.estimator import engine as engine_module
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.consistency import AXES3, Fit, Scatter, fit_add3, fit_inflation3, fix_floor
@@ -110,3 +111,33 @@ def test_new_nav_estimate_is_nav_estimate(kwargs):
         assert getattr(a, f.name) is getattr(b, f.name) or getattr(a, f.name) == getattr(b, f.name)
     with pytest.raises(dataclasses.FrozenInstanceError):
         a.t_us = 8  # type: ignore[misc]
+
+
+@pytest.mark.parametrize("cls", [ImuSample, AttitudeSample])
+def test_sample_init_through_the_slots_is_the_dataclass_init(cls):
+    """The per-sample types' ``__init__`` (set through the slots) against a dataclass's own generated one for
+    the same fields: the same signature, every field the very object given, defaults, keywords, frozen, the
+    same errors."""
+    ref = dataclasses.dataclass(frozen=True, slots=True)(type(cls.__name__, (), {
+        "__annotations__": {f.name: f.type for f in dataclasses.fields(cls)},
+        **{f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}}))
+    assert inspect.signature(cls) == inspect.signature(ref)
+    assert cls.__init__ is not ref.__init__ and cls.__init__.__qualname__ == f"{cls.__name__}.__init__"
+    values = [7, np.ones(3), np.zeros(3), 12.5][:len(dataclasses.fields(cls))]
+    names = [f.name for f in dataclasses.fields(cls)]
+    for args, kwargs in ((values, {}), (values[:2], dict(zip(names[2:], values[2:], strict=True))),
+                         ([], dict(zip(names, values, strict=True))), (values[:3], {})):
+        if len(args) + len(kwargs) < sum(f.default is dataclasses.MISSING for f in dataclasses.fields(cls)):
+            continue
+        a, b = cls(*args, **kwargs), ref(*args, **kwargs)
+        for name in names:
+            assert getattr(a, name) is getattr(b, name)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            a.t_us = 8
+    for bad_args, bad_kwargs in ((values[:1], {}), (values + [1, 2], {}), (values, {"t_us": 3}),
+                                 (values, {"nope": 1})):
+        with pytest.raises(TypeError) as got:
+            cls(*bad_args, **bad_kwargs)
+        with pytest.raises(TypeError) as want:
+            ref(*bad_args, **bad_kwargs)
+        assert str(got.value).split("(")[1:] == str(want.value).split("(")[1:]

@@ -2,7 +2,9 @@
 rates' H P and S = H P Hᵀ over H's nonzero columns only, against a plain-Python transcription of its dense
 loops (IEEE double arithmetic in the same order: what the C core computed before); the satellite cache's
 step in C (``_tight.carry_states``) against the numpy expressions it replaced; ``GnssEpoch.replace``'s
-slot path against ``dataclasses.replace``; no import inside the first epochs."""
+slot path against ``dataclasses.replace``; no import inside the first epochs; ``prepare_epoch``'s C path
+(``_tight.prepare``) against its numpy form, to 1e-12 relative (the C library's ``asin``, ``atan2`` and
+``pow`` and unfused 3-term dot products against numpy's own, which differ in the last bits)."""
 
 from __future__ import annotations
 
@@ -13,9 +15,11 @@ import numpy as np
 import pytest
 
 from companion.gnss.observations import GnssEpoch, make_epoch
-from companion.tight import _tight, model
+from companion.tight import _tight, engine, model
+from companion.tight.config import TightConfig
 from companion.tight.model import I_DRIFT, N_STATE
-from tests.test_tight import FRAME, _sats, _state, c_core_inputs
+from tests.gnss_helpers import RX_ECEF, T0, observe
+from tests.test_tight import FRAME, STORE, _sats, _state, c_core_inputs
 
 C_M_S = 299792458.0
 W_C = 7.2921151467e-5 / C_M_S
@@ -278,3 +282,230 @@ def test_no_import_falls_inside_the_first_epochs():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == [], out.stdout
+
+
+def _raw_epoch(rng: np.random.Generator) -> tuple[GnssEpoch, np.ndarray]:
+    """A receiver's raw epoch over every synthetic satellite (GLONASS among them, some below the
+    horizon) with its satellite states attached and atmospheric delays, as the navigator prepares it."""
+    from companion.gnss import attach_broadcast
+
+    ep, _ = observe(STORE, T0 + 30.0, RX_ECEF, mask_deg=-90.0)
+    ep, _ = attach_broadcast(ep, STORE)
+    ep = ep.replace(corrected=False, sat_clock_s=rng.normal(0.0, 1e-4, ep.n),
+                    sat_clock_drift_s_s=rng.normal(0.0, 1e-11, ep.n), cn0_dbhz=rng.uniform(15.0, 52.0, ep.n))
+    return ep, rng.uniform(2.0, 30.0, ep.n)
+
+
+def _assert_prepared_equal(got: engine.SatEpoch, want: engine.SatEpoch) -> None:
+    exact = ("key", "slot", "slot_f", "z_m", "r_uniform_m2", "sat_pos_ecef_m", "sat_vel_ecef_m_s",
+             "z_rate_m_s", "systems")
+    assert want.key_sorted is None and got.key_sorted is not None  # the C path's own: the keys in order
+    assert np.array_equal(got.key_sorted[0], np.sort(want.key)) and np.array_equal(
+        got.key[got.key_sorted[1]], got.key_sorted[0])
+    for name in engine.SatEpoch._fields[1:-1]:
+        a, b = getattr(got, name), getattr(want, name)
+        if name in exact:
+            assert (a == b) if isinstance(a, tuple) else np.array_equal(a, b, equal_nan=True), name
+        else:
+            assert a.shape == b.shape and np.isfinite(a).all() and np.isfinite(b).all(), name
+            assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max(), name  # per quantity, relative
+    assert got.epoch is want.epoch
+
+
+@pytest.mark.parametrize("damage", [None, "cn0", "drift", "velocity", "rate"])
+def test_c_prepare_equals_the_numpy_preparation(damage):
+    """Every field of a raw epoch's preparation (all satellites kept: mask −90°), undamaged and with
+    missing C/N0, clock drift, satellite velocity or Doppler (the numpy path's NaN handling)."""
+    rng = np.random.default_rng(11)
+    cfg = TightConfig(elevation_mask_deg=-90.0)
+    ep, atm = _raw_epoch(rng)
+    assert (ep.system == int(engine._GLONASS)).any() and ep.n > 20
+    every = np.arange(ep.n)
+    if damage == "cn0":
+        ep = ep.replace(cn0_dbhz=np.where(every % 3 == 0, np.nan, ep.cn0_dbhz))
+    elif damage == "drift":
+        ep = ep.replace(sat_clock_drift_s_s=np.where(every % 4 == 1, np.nan, ep.sat_clock_drift_s_s))
+    elif damage == "velocity":
+        vel = ep.sat_vel_ecef_m_s.copy()
+        vel[2, 1] = np.nan
+        vel[7] = np.inf
+        ep = ep.replace(sat_vel_ecef_m_s=vel)
+    elif damage == "rate":
+        ep = ep.replace(pseudorange_rate_m_s=np.where(every % 5 == 2, np.nan, ep.pseudorange_rate_m_s))
+    got = engine.prepare_epoch(ep, FRAME, cfg, None, atm)
+    want = engine._prepare_numpy(ep, FRAME, cfg, None, atm)
+    assert got is not None and want is not None
+    _assert_prepared_equal(got, want)
+    if damage in ("velocity", "rate"):  # the C path's own (a NaN rate and velocity rows), and not vacuous
+        assert np.isnan(got.z_rate_m_s).sum() in (2, len(range(2, ep.n, 5)))
+    # the same satellites again: the cached keys and slots are the same, read-only arrays
+    again = engine.prepare_epoch(ep, FRAME, cfg, None, atm)
+    assert again is not None and again.key is got.key and not again.key.flags.writeable
+
+
+@pytest.mark.parametrize("drop", ["mask", "pseudorange", "clock", "position"])
+def test_c_prepare_leaves_a_dropped_observation_to_numpy(drop):
+    """An observation the mask or a non-finite input drops: the C path declines (None) and the numpy
+    path selects, as before."""
+    rng = np.random.default_rng(12)
+    cfg = TightConfig(elevation_mask_deg=-90.0 if drop != "mask" else 10.0)
+    ep, atm = _raw_epoch(rng)
+    if drop == "pseudorange":
+        ep = ep.replace(pseudorange_m=np.where(np.arange(ep.n) == 3, np.nan, ep.pseudorange_m))
+    elif drop == "clock":
+        ep = ep.replace(sat_clock_s=np.where(np.arange(ep.n) == 4, np.nan, ep.sat_clock_s))
+    elif drop == "position":
+        pos = ep.sat_pos_ecef_m.copy()
+        pos[5, 0] = np.nan
+        ep = ep.replace(sat_pos_ecef_m=pos)
+    args = (ep.sat_pos_ecef_m, FRAME.r0_ecef_m, FRAME.c_ecef_ned, ep.pseudorange_m, ep.sat_clock_s, atm,
+            ep.pseudorange_rate_m_s, ep.sat_clock_drift_s_s, ep.cn0_dbhz, np.ones(ep.n), ep.sat_vel_ecef_m_s,
+            engine._prepare_params(cfg))
+    assert _tight.prepare(*args) is None
+    got = engine.prepare_epoch(ep, FRAME, cfg, None, atm)
+    want = engine._prepare_numpy(ep, FRAME, cfg, None, atm)
+    assert got is not None and want is not None and got.epoch.n == want.epoch.n < ep.n
+    assert got.key_sorted is None and want.key_sorted is None
+    for name in engine.SatEpoch._fields[1:-1]:
+        a, b = getattr(got, name), getattr(want, name)
+        assert (a == b) if isinstance(a, tuple) else np.array_equal(a, b, equal_nan=True), name
+
+
+def test_c_cn0_calibration_equals_its_numpy_form_bit_for_bit():
+    """``Cn0Calibration.add`` and ``level_dbhz`` (in C) against ``add_numpy`` / ``level_numpy`` over epochs
+    with NaN, infinite and out-of-range values, fractional C/N0 and empty epochs: the same histogram, count
+    and quantile, bit for bit, after every epoch (quantiles near both ends included)."""
+    from companion.tight.cn0cal import Cn0Calibration
+
+    rng = np.random.default_rng(13)
+    for quantile in (0.0, 0.2, 0.75, 1.0):
+        c, ref = Cn0Calibration(quantile, 45.0, 50.0), Cn0Calibration(quantile, 45.0, 50.0)
+        assert math.isnan(c.level_dbhz()) and math.isnan(ref.level_numpy())
+        for k in range(60):
+            cn0 = rng.normal(38.0, 9.0, rng.integers(0, 25)) if k != 5 else np.zeros(0)
+            if k % 4 == 1 and len(cn0) > 3:
+                cn0[0], cn0[1], cn0[2] = np.nan, np.inf, -5.0
+            if k % 6 == 2 and len(cn0) > 1:
+                cn0[0], cn0[-1] = 95.0, 80.0
+            if k % 5 == 0:
+                cn0 = np.round(cn0)
+            c.add(cn0)
+            ref.add_numpy(cn0)
+            assert np.array_equal(c._hist, ref._hist) and c.n == ref.n
+            got, want = c.level_dbhz(), ref.level_numpy()
+            assert got == want or (math.isnan(got) and math.isnan(want))
+            assert c.calibrated(cn0).tobytes() == (np.asarray(cn0, float) - ref.offset_db()).tobytes()
+        assert c.n > 500
+
+
+def _same_states(got, want) -> None:
+    (sa, ta), (sb, tb) = got, want
+    for a, b in zip(sa, sb, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
+    assert np.array_equal(ta, tb, equal_nan=True)
+
+
+@pytest.mark.parametrize("case", ["tracked", "unknown", "nan", "boundary", "empty"])
+def test_c_transmission_states_equal_the_numpy_ones_bit_for_bit(case):
+    """``SatelliteCache.transmission_states`` (one anchor: in C) against ``ephemeris.transmission_states``
+    on the same cache (a fresh one each, so both evaluate the same anchors): every satellite tracked, one
+    without an ephemeris (not valid: no clock step back), a NaN pseudorange and anchors that differ across
+    the epoch (both the general path), no satellite."""
+    from companion.gnss.ephemeris import transmission_states
+    from companion.tight.satcache import SatelliteCache
+
+    t = T0 + 30.0 if case != "boundary" else T0 + 2.5 + 0.0734  # t − P/c straddles a 5 s anchor's edge
+    ep, _ = observe(STORE, t, RX_ECEF, mask_deg=-90.0)
+    if case == "unknown":
+        ep = ep.replace(prn=np.where(np.arange(ep.n) == 3, 99, ep.prn).astype(ep.prn.dtype))
+    elif case == "nan":
+        ep = ep.replace(pseudorange_m=np.where(np.arange(ep.n) == 4, np.nan, ep.pseudorange_m))
+    elif case == "empty":
+        ep = ep.select(np.zeros(ep.n, dtype=bool))
+    t0, k = _tight.transmit_anchor(ep.t_gps_s, ep.pseudorange_m, 5.0)
+    assert np.array_equal(t0, ep.t_gps_s - ep.pseudorange_m / C_M_S, equal_nan=True)
+    assert (k is None) == (case in ("nan", "boundary", "empty"))
+    for _ in range(2):  # the second: the anchor's rows and the keys from the caches
+        a, b = SatelliteCache(STORE, 5.0), SatelliteCache(STORE, 5.0)
+        _same_states(a.transmission_states(ep), transmission_states(b, ep))
+    if case == "unknown":
+        valid = a.transmission_states(ep)[0].valid
+        assert not valid[3] and valid.sum() == ep.n - 1
+    assert a.keys(ep.system, ep.prn) == (ep.system.astype(np.int64) * 1000 + ep.prn).tolist()
+
+
+def test_c_anchors_are_numpys():
+    t = np.array([0.0, 2.5, 7.5, -2.5, 12.4999, np.nan, np.inf, -np.inf, 1.1e9 + 0.3, -7.49])
+    assert _tight.anchors(t, 5.0) == np.rint(np.where(np.isfinite(t), t, 0.0) / 5.0).astype(np.int64).tolist()
+    assert _tight.anchors(np.array([1e300]), 5.0) is None  # beyond an int64: the caller's numpy
+
+
+def test_c_report_cov_equals_the_numpy_report_bit_for_bit():
+    """``estimate``'s variances with the snapshots' floors (``_tight.report_cov``) against the numpy and
+    ``snapshot_axis`` form they replaced (``TightNavigator.report_cov_numpy``), with and without the scale k
+    on the positions, floors None or not, each term winning, NaN and infinite variances."""
+    from companion.estimator.consistency import SnapshotFloor, variance_scale
+    from companion.tight.navigator import TightNavigator
+
+    rng = np.random.default_rng(14)
+    wins = set()
+    for trial in range(400):
+        out = rng.lognormal(0.0, 2.0, 18)
+        if trial % 17 == 0:
+            out[rng.integers(9, 18)] = np.nan
+        if trial % 23 == 0:
+            out[rng.integers(9, 12)] = np.inf
+        k = 1.0 if trial % 3 == 0 else float(rng.uniform(1.0, 4.0))
+        floors = [None if rng.uniform() < 0.2 else SnapshotFloor(*rng.lognormal(0.0, 1.5, 4))
+                  for _ in range(2)]
+        d = tuple(float(v) for v in (rng.lognormal(0.0, 2.0, 3) if trial % 2 else np.zeros(3)))
+        snap = (k, floors[0], floors[1], d)
+        got = _tight.report_cov(out, k, floors[0], floors[1], *d)
+        want = TightNavigator.report_cov_numpy(out, variance_scale(k), snap)
+        assert got.tobytes() == want.tobytes()
+        wins.add("k p" if got[0] == out[9] * k else "delay" if got[0] == d[0] else "floor")
+    assert wins == {"k p", "delay", "floor"}  # each term won somewhere
+    with pytest.raises(TypeError):
+        _tight.report_cov(np.zeros(18), 1.0, (1.0, 2.0), None, 0.0, 0.0, 0.0)
+    with pytest.raises(ValueError):
+        _tight.report_cov(np.zeros(9), 1.0, None, None, 0.0, 0.0, 0.0)
+
+
+def test_fit_fed_in_key_order_holds_the_same_sums():
+    """The fusion hands ``Fit.add`` its channels sorted by key (``SatEpoch.key_sorted``) instead of in the
+    receiver's order: the same sums for every channel, bit for bit, through satellites setting and rising
+    (the general path) and the same ones epoch after epoch (the fast path)."""
+    from companion.estimator.consistency import Fit
+
+    rng = np.random.default_rng(15)
+    pool = np.arange(1000, 1040)
+    a = b = Fit()
+    for k in range(80):
+        keys = rng.permutation(pool[rng.integers(0, 5):rng.integers(25, 40)] if k % 9 == 0 else pool[5:25])
+        nu = rng.normal(0.0, 1.0, len(keys))
+        order = np.argsort(keys, kind="stable")
+        a = a.add(1_000_000 + 200_000 * k, keys, nu, 20.0)
+        b = b.add(1_000_000 + 200_000 * k, keys[order], nu[order], 20.0)
+        assert np.array_equal(a.key, b.key) and a.nu_sum.tobytes() == b.nu_sum.tobytes()
+        assert a.w2_sum.tobytes() == b.w2_sum.tobytes() and a.inflation() == b.inflation()
+
+
+@pytest.mark.parametrize("n_state", [N_STATE, N_STATE + 1])
+def test_c_predict_mean_equals_the_numpy_prediction_bit_for_bit(n_state):
+    """``_tight.predict_mean`` against the numpy it replaced in ``_predict`` (``predict_mean_numpy``): random
+    states (with the barometer's offset too), live and dead clocks, T of either sign and 0, NaN."""
+    from companion.tight.engine import TightEngine
+
+    rng = np.random.default_rng(16)
+    for trial in range(200):
+        x = rng.normal(0.0, 1e3, n_state)
+        m15 = tuple(rng.normal(0.0, 50.0, 15).tolist())
+        if trial % 13 == 0:
+            x[I_DRIFT] = np.nan
+        live = tuple(bool(v) for v in rng.integers(0, 2, 6))
+        T = float(rng.choice([0.0, -0.2, 0.2, 1.7, rng.uniform(0, 5)]))
+        got = _tight.predict_mean(x, m15, T, live)
+        want = TightEngine.predict_mean_numpy(x, m15, T, live)
+        assert got.tobytes() == want.tobytes() and got is not x and x.shape == got.shape
+    with pytest.raises(ValueError):
+        _tight.predict_mean(np.zeros(N_STATE), (0.0,) * 14, 0.1, (True,) * 6)

@@ -17,6 +17,48 @@ import numpy as np
 Vec3 = np.ndarray
 
 
+def _slots_function(cls: type, init: bool) -> Callable[..., Any]:
+    """For a frozen dataclass with slots: ``cls(...)`` (``init`` False: a function of the constructor's
+    arguments) or its ``__init__`` (True), the same arguments, defaults and object, each field set through
+    its slot's descriptor instead of the dataclass ``__init__``'s ``object.__setattr__`` per field (half
+    the cost for ``NavEstimate``'s 15: a navigator makes one per output). Only for classes without
+    ``default_factory`` or ``__post_init__``."""
+    ns: dict[str, Any] = {"_new": object.__new__, "_cls": cls}
+    params, body = ["o"] if init else [], []
+    for i, f in enumerate(fields(cls)):
+        if f.default_factory is not MISSING or hasattr(cls, "__post_init__"):
+            raise TypeError(f"{cls.__name__}: not a plain frozen dataclass with slots")
+        ns[f"_set{i}"] = cls.__dict__[f.name].__set__
+        if f.default is MISSING:
+            params.append(f.name)
+        else:
+            ns[f"_d{i}"] = f.default
+            params.append(f"{f.name}=_d{i}")
+        body.append(f"    _set{i}(o, {f.name})\n")
+    head, first, tail = ("__init__", "", "None") if init else ("new", "    o = _new(_cls)\n", "o")
+    src = f"def {head}({', '.join(params)}):\n{first}{''.join(body)}    return {tail}\n"
+    exec(src, ns)  # as dataclasses makes __init__
+    fn = ns[head]
+    if init:
+        fn.__qualname__ = f"{cls.__qualname__}.__init__"
+        fn.__doc__ = cls.__dict__["__init__"].__doc__
+        fn.__annotations__ = {**{f.name: f.type for f in fields(cls)}, "return": None}
+    return fn
+
+
+def _slots_constructor(cls: type) -> Callable[..., Any]:
+    """``cls(...)`` through its slots (``_slots_function``)."""
+    return _slots_function(cls, init=False)
+
+
+def _slots_init(cls: type) -> type:
+    """The class with its dataclass ``__init__`` replaced by one that sets the fields through their slots
+    (``_slots_function``): the per-sample types, which every source builds at 200 Hz."""
+    cls.__init__ = _slots_function(cls, init=True)  # type: ignore[misc]
+    return cls
+
+
+@_slots_init
 @dataclass(frozen=True, slots=True)
 class ImuSample:
     """One IMU sample: specific force and angular rate in body FRD (≈ -9.81 on z at rest); with a
@@ -28,6 +70,7 @@ class ImuSample:
     pressure_alt_m: float | None = None
 
 
+@_slots_init
 @dataclass(frozen=True, slots=True)
 class AttitudeSample:
     """Attitude of body FRD relative to NED as a unit quaternion (w, x, y, z)."""
@@ -82,28 +125,6 @@ class NavEstimate:
     gnss_resets: int = 0  # resets to the GNSS (position, velocity, IMU error states) after the filter lost it
     vel_test_ratio: float = float("nan")  # horizontal GNSS-velocity NIS / gate² of the last fix (NaN = none)
     imu_gnss_disagreement: bool = False  # the IMU-propagated motion persistently disagrees with GNSS
-
-
-def _slots_constructor(cls: type) -> Callable[..., Any]:
-    """``cls(...)`` (the same arguments, defaults and object) for a frozen dataclass with slots, each
-    field set through its slot's descriptor instead of the dataclass ``__init__``'s ``object.__setattr__``
-    per field (half the cost for ``NavEstimate``'s 15: a navigator makes one per output). Only for
-    classes without ``default_factory`` or ``__post_init__``."""
-    ns: dict[str, Any] = {"_new": object.__new__, "_cls": cls}
-    params, body = [], []
-    for i, f in enumerate(fields(cls)):
-        if f.default_factory is not MISSING or hasattr(cls, "__post_init__"):
-            raise TypeError(f"{cls.__name__}: not a plain frozen dataclass with slots")
-        ns[f"_set{i}"] = cls.__dict__[f.name].__set__
-        if f.default is MISSING:
-            params.append(f.name)
-        else:
-            ns[f"_d{i}"] = f.default
-            params.append(f"{f.name}=_d{i}")
-        body.append(f"    _set{i}(o, {f.name})\n")
-    src = f"def new({', '.join(params)}):\n    o = _new(_cls)\n{''.join(body)}    return o\n"
-    exec(src, ns)  # as dataclasses makes __init__
-    return ns["new"]
 
 
 # ``NavEstimate(...)``, faster (the navigators' per-output path): the same object, built through the slots

@@ -89,9 +89,7 @@ class GnssEpoch:
             kw = {name: getattr(self, name) for name in _ALL_FIELDS}
             kw.update(changes)
             return GnssEpoch(**kw)
-        new = _NEW(GnssEpoch)
-        for name, set_field in _SET_FIELD:
-            set_field(new, changes[name] if name in changes else getattr(self, name))
+        new = _copy_with(self, changes)
         new._check(tuple(f for f in _FIELDS if f[0] in changes))
         return new
 
@@ -120,6 +118,22 @@ _SET_FIELD: tuple[tuple[str, Any], ...] = tuple(
 )
 _NEW = object.__new__
 _FIELD_SET = frozenset(_ALL_FIELDS)
+
+
+def _copy_with_source() -> tuple[str, dict[str, Any]]:
+    """The source of ``_copy_with(epoch, changes)``: a new GnssEpoch with each field ``changes``' or the
+    epoch's, set through its slot, one line per field (a loop over the fields costs three times as much)."""
+    ns: dict[str, Any] = {"_new": _NEW, "_cls": GnssEpoch}
+    lines = ["def _copy_with(self, changes):", "    new = _new(_cls)", "    get = changes.get"]
+    for i, (name, set_field) in enumerate(_SET_FIELD):
+        ns[f"_set{i}"] = set_field
+        lines.append(f"    _set{i}(new, get({name!r}, self.{name}))")
+    return "\n".join([*lines, "    return new\n"]), ns
+
+
+_src, _ns = _copy_with_source()
+exec(_src, _ns)  # as dataclasses makes __init__
+_copy_with: Any = _ns["_copy_with"]
 
 
 def make_epoch(

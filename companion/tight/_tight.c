@@ -29,8 +29,16 @@ static const double C_M_S = 299792458.0;
 static const double W_C = 7.2921151467e-5 / 299792458.0; /* ω_e / c */
 
 static PyArrayObject *in_array(PyObject *obj, int nd) {
-    PyArrayObject *a = (PyArrayObject *)PyArray_FROMANY(obj, NPY_DOUBLE, nd, nd, NPY_ARRAY_IN_ARRAY);
-    return a;
+    if (PyArray_CheckExact(obj)) { /* already a C-ordered, aligned float64 array of nd dimensions (the usual
+                                    * case): itself, without numpy's conversion machinery (~2 k instructions) */
+        PyArrayObject *a = (PyArrayObject *)obj;
+        if (PyArray_NDIM(a) == nd && PyArray_TYPE(a) == NPY_DOUBLE && PyArray_ISNOTSWAPPED(a)
+            && PyArray_IS_C_CONTIGUOUS(a) && PyArray_ISALIGNED(a)) {
+            Py_INCREF(obj);
+            return a;
+        }
+    }
+    return (PyArrayObject *)PyArray_FROMANY(obj, NPY_DOUBLE, nd, nd, NPY_ARRAY_IN_ARRAY);
 }
 
 static PyObject *new_array(int nd, npy_intp d0, npy_intp d1, const double *src) {
@@ -683,6 +691,124 @@ done:
 /* carry_states(rows (n, 12): each anchor's pos, vel, acc, clock, drift, valid; dt (n,) s from the anchor)
  * -> (pos (n, 3), vel (n, 3), clock (n,), drift (n,), anchored (n,) bool: valid == 1): satcache's
  * second-order step p + v dt + ½ a dt², v + a dt, clock + drift dt, in numpy's order of operations */
+/* one satellite's anchor row r (pos, vel, acc, clock, drift, valid) carried by t: p + v t + ½ a t², v + a t,
+ * clock + drift t, drift (numpy's operations in its order); returns the row's validity (valid == 1) */
+static inline int carry_row(const double *r, double t, double *p, double *v, double *c, double *d) {
+    for (int k = 0; k < 3; k++) {
+        p[k] = (r[k] + r[3 + k] * t) + 0.5 * r[6 + k] * t * t;
+        v[k] = r[3 + k] + r[6 + k] * t;
+    }
+    *c = r[9] + r[10] * t;
+    *d = r[10];
+    return r[11] == 1.0;
+}
+
+/* transmit_anchor(t_rx_s, pseudorange (n,), period) -> (t0 = t_rx − P/c (n,), the anchor round(t0 / period)
+ * as an int) or (t0, None) when the satellites' anchors differ or one is not finite (satcache: the general
+ * path) or n == 0 */
+static PyObject *py_transmit_anchor(PyObject *self, PyObject *args) {
+    PyObject *opr;
+    double t_rx, period;
+    if (!PyArg_ParseTuple(args, "dOd", &t_rx, &opr, &period)) return NULL;
+    PyArrayObject *pr = in_array(opr, 1);
+    if (!pr) return NULL;
+    npy_intp n = PyArray_DIM(pr, 0);
+    PyObject *t0 = new_array(1, n, 0, NULL);
+    if (!t0) {
+        Py_DECREF(pr);
+        return NULL;
+    }
+    const double *pv = PyArray_DATA(pr);
+    double *tv = PyArray_DATA((PyArrayObject *)t0), k0 = NAN;
+    int common = n > 0;
+    for (npy_intp i = 0; i < n; i++) {
+        tv[i] = t_rx - pv[i] / C_M_S;
+        const double k = rint(tv[i] / period); /* numpy's rint: the current (nearest-even) rounding */
+        if (i == 0) k0 = k;
+        common = common && isfinite(k) && k == k0;
+    }
+    Py_DECREF(pr);
+    if (common && fabs(k0) < 9.0e15) return Py_BuildValue("(NL)", t0, (long long)k0);
+    return Py_BuildValue("(NO)", t0, Py_None);
+}
+
+/* transmit_states(table (m, 12), rows (n, intp), t0 (n,), t_anchor) -> (pos, vel, clock, drift, valid,
+ * t_tx): the anchor rows carried to t0 (carry_row, dt = t0 − t_anchor), then moved back by the satellite
+ * clock offset dt_sv (0 where not valid): pos − vel dt_sv, clock − drift dt_sv, t0 − dt_sv
+ * (ephemeris.transmission_states's numpy, element by element) */
+static PyObject *py_transmit_states(PyObject *self, PyObject *args) {
+    PyObject *otab, *orows, *ot0;
+    double t_anchor;
+    if (!PyArg_ParseTuple(args, "OOOd", &otab, &orows, &ot0, &t_anchor)) return NULL;
+    PyArrayObject *tab = in_array(otab, 2), *t0a = in_array(ot0, 1);
+    PyArrayObject *rw = (PyArrayObject *)PyArray_FROMANY(orows, NPY_INTP, 1, 1, NPY_ARRAY_IN_ARRAY);
+    PyObject *pos = NULL, *vel = NULL, *clk = NULL, *drift = NULL, *ok = NULL, *ttx = NULL;
+    if (!tab || !t0a || !rw) goto fail;
+    npy_intp n = PyArray_DIM(rw, 0), m = PyArray_DIM(tab, 0);
+    if (PyArray_DIM(tab, 1) != 12 || PyArray_DIM(t0a, 0) != n) {
+        PyErr_SetString(PyExc_ValueError, "transmit_states: shapes");
+        goto fail;
+    }
+    const npy_intp *ri = PyArray_DATA(rw);
+    for (npy_intp i = 0; i < n; i++)
+        if (ri[i] < 0 || ri[i] >= m) {
+            PyErr_SetString(PyExc_IndexError, "transmit_states: a row outside the table");
+            goto fail;
+        }
+    pos = new_array(2, n, 3, NULL); vel = new_array(2, n, 3, NULL);
+    clk = new_array(1, n, 0, NULL); drift = new_array(1, n, 0, NULL); ttx = new_array(1, n, 0, NULL);
+    ok = PyArray_SimpleNew(1, &n, NPY_BOOL);
+    if (!pos || !vel || !clk || !drift || !ok || !ttx) goto fail;
+    const double *o = PyArray_DATA(tab), *t0 = PyArray_DATA(t0a);
+    double *p = PyArray_DATA((PyArrayObject *)pos), *v = PyArray_DATA((PyArrayObject *)vel),
+           *c = PyArray_DATA((PyArrayObject *)clk), *d = PyArray_DATA((PyArrayObject *)drift),
+           *tt = PyArray_DATA((PyArrayObject *)ttx);
+    npy_bool *a = PyArray_DATA((PyArrayObject *)ok);
+    for (npy_intp i = 0; i < n; i++) {
+        double cc;
+        a[i] = carry_row(o + 12 * ri[i], t0[i] - t_anchor, p + 3 * i, v + 3 * i, &cc, d + i);
+        const double dt = a[i] ? cc : 0.0;
+        for (int k = 0; k < 3; k++) p[3 * i + k] = p[3 * i + k] - v[3 * i + k] * dt;
+        c[i] = cc - d[i] * dt;
+        tt[i] = t0[i] - dt;
+    }
+    Py_DECREF(tab); Py_DECREF(t0a); Py_DECREF(rw);
+    return Py_BuildValue("(NNNNNN)", pos, vel, clk, drift, ok, ttx);
+fail:
+    Py_XDECREF(tab); Py_XDECREF(t0a); Py_XDECREF(rw); Py_XDECREF(pos); Py_XDECREF(vel); Py_XDECREF(clk);
+    Py_XDECREF(drift); Py_XDECREF(ok); Py_XDECREF(ttx);
+    return NULL;
+}
+
+/* anchors(t (n,), period) -> [round(t / period) as ints] (NaN and infinite times: 0), satcache.AtmosphereCache's;
+ * None when one is beyond ±9e15 (the caller's numpy) */
+static PyObject *py_anchors(PyObject *self, PyObject *args) {
+    PyObject *ot;
+    double period;
+    if (!PyArg_ParseTuple(args, "Od", &ot, &period)) return NULL;
+    PyArrayObject *ta = in_array(ot, 1);
+    if (!ta) return NULL;
+    npy_intp n = PyArray_DIM(ta, 0);
+    const double *t = PyArray_DATA(ta);
+    PyObject *out = PyList_New(n);
+    for (npy_intp i = 0; out && i < n; i++) {
+        const double k = rint((isfinite(t[i]) ? t[i] : 0.0) / period);
+        if (!(isfinite(k) && fabs(k) < 9.0e15)) {
+            Py_CLEAR(out);
+            Py_DECREF(ta);
+            Py_RETURN_NONE;
+        }
+        PyObject *v = PyLong_FromLongLong((long long)k);
+        if (!v) {
+            Py_CLEAR(out);
+            break;
+        }
+        PyList_SET_ITEM(out, i, v);
+    }
+    Py_DECREF(ta);
+    return out;
+}
+
 static PyObject *py_carry_states(PyObject *self, PyObject *args) {
     PyObject *orows, *odt;
     if (!PyArg_ParseTuple(args, "OO", &orows, &odt)) return NULL;
@@ -702,22 +828,264 @@ static PyObject *py_carry_states(PyObject *self, PyObject *args) {
     double *p = PyArray_DATA((PyArrayObject *)pos), *v = PyArray_DATA((PyArrayObject *)vel),
            *c = PyArray_DATA((PyArrayObject *)clk), *d = PyArray_DATA((PyArrayObject *)drift);
     npy_bool *a = PyArray_DATA((PyArrayObject *)ok);
-    for (npy_intp i = 0; i < n; i++) {
-        const double *r = o + 12 * i, t = dt[i];
-        for (int k = 0; k < 3; k++) {
-            p[3 * i + k] = (r[k] + r[3 + k] * t) + 0.5 * r[6 + k] * t * t;
-            v[3 * i + k] = r[3 + k] + r[6 + k] * t;
-        }
-        c[i] = r[9] + r[10] * t;
-        d[i] = r[10];
-        a[i] = r[11] == 1.0;
-    }
+    for (npy_intp i = 0; i < n; i++) a[i] = carry_row(o + 12 * i, dt[i], p + 3 * i, v + 3 * i, c + i, d + i);
     Py_DECREF(ar); Py_DECREF(adt);
     return Py_BuildValue("(NNNNN)", pos, vel, clk, drift, ok);
 fail:
     Py_XDECREF(ar); Py_XDECREF(adt); Py_XDECREF(pos); Py_XDECREF(vel); Py_XDECREF(clk); Py_XDECREF(drift);
     Py_XDECREF(ok);
     return NULL;
+}
+
+/* ---------------------------------------------------------------- epoch preparation */
+/* prepare(sat_pos (n,3), r0, C, pseudorange, sat_clock, atmosphere, rate, drift, cn0, glo (n: the σ² factor),
+ * sat_vel (n,3), params) -> (z, r_model, r_los, theta_prior, el_deg, az, rate (NaN where it or the
+ * satellite's velocity is not finite), r_rate (n each), every rate and velocity finite) or
+ * None (an observation dropped by the mask, or n == 0: the numpy path selects): engine.prepare_epoch's
+ * arithmetic for a receiver's raw epoch with satellite states and atmospheric delays known, element by
+ * element. params: (sin of the elevation mask, C/N0 ref, σ_floor², σ_zenith², σ_los_cn0², the range rate's
+ * σ² over the model's at the zenith, the prior's C/N0 midpoint, per dB, per degree, elevation midpoint). */
+static PyObject *py_prepare(PyObject *self, PyObject *args) {
+    PyObject *o[11];
+    double sin_mask, cn0_ref, a2, sz2, slos2, rate_scale, mid, per_db, per_deg, el_mid;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOO(dddddddddd)", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
+                          &o[7], &o[8], &o[9], &o[10], &sin_mask, &cn0_ref, &a2, &sz2, &slos2, &rate_scale, &mid,
+                          &per_db, &per_deg, &el_mid))
+        return NULL;
+    static const int nd[11] = {2, 1, 2, 1, 1, 1, 1, 1, 1, 1, 2};
+    PyArrayObject *a[11] = {NULL};
+    PyObject *out[8] = {NULL}, *res = NULL;
+    for (int k = 0; k < 11; k++)
+        if (!(a[k] = in_array(o[k], nd[k]))) goto done;
+    npy_intp n = PyArray_DIM(a[0], 0);
+    int shapes = PyArray_DIM(a[0], 1) == 3 && PyArray_DIM(a[1], 0) == 3 && PyArray_DIM(a[2], 0) == 3
+                 && PyArray_DIM(a[2], 1) == 3;
+    for (int k = 3; k < 11; k++) shapes = shapes && PyArray_DIM(a[k], 0) == n;
+    shapes = shapes && PyArray_DIM(a[10], 1) == 3;
+    if (!shapes) {
+        PyErr_SetString(PyExc_ValueError, "prepare: shapes");
+        goto done;
+    }
+    const double *sp = PyArray_DATA(a[0]), *r0 = PyArray_DATA(a[1]), *C = PyArray_DATA(a[2]),
+                 *pr = PyArray_DATA(a[3]), *clk = PyArray_DATA(a[4]), *atm = PyArray_DATA(a[5]),
+                 *rate = PyArray_DATA(a[6]), *drift = PyArray_DATA(a[7]), *cn0 = PyArray_DATA(a[8]),
+                 *glo = PyArray_DATA(a[9]), *vel = PyArray_DATA(a[10]);
+    for (npy_intp i = 0; i < n; i++) { /* the mask first: any observation dropped, the numpy path */
+        const double d0 = sp[3 * i] - r0[0], d1 = sp[3 * i + 1] - r0[1], d2 = sp[3 * i + 2] - r0[2];
+        const double se = -(d0 * C[2] + d1 * C[5] + d2 * C[8]) / sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        if (!(isfinite(pr[i]) && isfinite(se) && se >= sin_mask && isfinite(clk[i]))) {
+            res = Py_None;
+            Py_INCREF(res);
+            goto done;
+        }
+    }
+    if (n == 0) {
+        res = Py_None;
+        Py_INCREF(res);
+        goto done;
+    }
+    double *w[8];
+    for (int k = 0; k < 8; k++) {
+        if (!(out[k] = new_array(1, n, 0, NULL))) goto done;
+        w[k] = PyArray_DATA((PyArrayObject *)out[k]);
+    }
+    const double two_pi = 2.0 * 3.141592653589793, to_deg = 180.0 / 3.141592653589793;
+    int vel_all = 1;
+    for (npy_intp i = 0; i < n; i++) {
+        const double d0 = sp[3 * i] - r0[0], d1 = sp[3 * i + 1] - r0[1], d2 = sp[3 * i + 2] - r0[2];
+        const double se = -(d0 * C[2] + d1 * C[5] + d2 * C[8]) / sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        const double el = asin(se < -1.0 ? -1.0 : (se > 1.0 ? 1.0 : se));
+        w[0][i] = pr[i] + C_M_S * clk[i] - atm[i];
+        double az = fmod(atan2(d0 * C[1] + d1 * C[4] + d2 * C[7], d0 * C[0] + d1 * C[3] + d2 * C[6]), two_pi);
+        if (az != 0.0) {
+            if (az < 0.0) az += two_pi; /* numpy's remainder: the divisor's sign */
+        } else {
+            az = 0.0;
+        }
+        w[5][i] = az;
+        const double c = isfinite(cn0[i]) ? cn0[i] : cn0_ref;
+        const double weak = pow(10.0, (cn0_ref - c) / 10.0);
+        const double s = se > 0.05 ? se : 0.05;
+        w[1][i] = (a2 + sz2 * weak / (s * s)) * glo[i];
+        w[2][i] = (a2 + slos2 * weak) * glo[i];
+        w[7][i] = w[1][i] * rate_scale;
+        w[4][i] = el * to_deg;
+        w[3][i] = per_db * ((isfinite(cn0[i]) ? cn0[i] : mid) - mid) + per_deg * (w[4][i] - el_mid);
+        const double rr = rate[i] + C_M_S * (isfinite(drift[i]) ? drift[i] : 0.0);
+        const int ok = isfinite(rr) && isfinite(vel[3 * i]) && isfinite(vel[3 * i + 1]) && isfinite(vel[3 * i + 2]);
+        w[6][i] = ok ? rr : NAN;
+        vel_all = vel_all && ok;
+    }
+    res = PyTuple_New(9);
+    if (!res) goto done;
+    for (int k = 0; k < 8; k++) {
+        PyTuple_SET_ITEM(res, k, out[k]);
+        out[k] = NULL;
+    }
+    PyTuple_SET_ITEM(res, 8, PyBool_FromLong(vel_all));
+done:
+    for (int k = 0; k < 11; k++) Py_XDECREF(a[k]);
+    for (int k = 0; k < 8; k++) Py_XDECREF(out[k]);
+    return res;
+}
+
+/* ---------------------------------------------------------------- C/N0 calibration (cn0cal) */
+/* cn0_add(hist (bins,), edges (bins + 1,), cn0 (n,), lo, hi, bin) -> the number counted: each finite value
+ * clipped to [lo, hi] counted in its bin (int((c − edges[0]) / bin), the last bin at most), in place: numpy's
+ * bincount added to the histogram, as whole numbers (exact) */
+static PyObject *py_cn0_add(PyObject *self, PyObject *args) {
+    PyObject *oh, *oe, *oc;
+    double lo, hi, bin;
+    if (!PyArg_ParseTuple(args, "OOOddd", &oh, &oe, &oc, &lo, &hi, &bin)) return NULL;
+    if (!PyArray_Check(oh) || PyArray_TYPE((PyArrayObject *)oh) != NPY_DOUBLE || PyArray_NDIM((PyArrayObject *)oh) != 1
+        || !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)oh) || !PyArray_ISWRITEABLE((PyArrayObject *)oh)) {
+        PyErr_SetString(PyExc_TypeError, "cn0_add: the histogram must be a writeable float64 vector");
+        return NULL;
+    }
+    PyArrayObject *h = (PyArrayObject *)oh, *e = in_array(oe, 1), *c = in_array(oc, 1);
+    if (!e || !c) {
+        Py_XDECREF(e); Py_XDECREF(c);
+        return NULL;
+    }
+    npy_intp bins = PyArray_DIM(h, 0), n = PyArray_DIM(c, 0), counted = 0;
+    if (PyArray_DIM(e, 0) != bins + 1 || bins < 1) {
+        Py_DECREF(e); Py_DECREF(c);
+        PyErr_SetString(PyExc_ValueError, "cn0_add: shapes");
+        return NULL;
+    }
+    double *hv = PyArray_DATA(h);
+    const double *ev = PyArray_DATA(e), *cv = PyArray_DATA(c);
+    for (npy_intp i = 0; i < n; i++) {
+        if (!isfinite(cv[i])) continue;
+        double v = cv[i] > lo ? cv[i] : lo;
+        v = v < hi ? v : hi;
+        npy_intp k = (npy_intp)((v - ev[0]) / bin);
+        hv[k < bins - 1 ? k : bins - 1] += 1.0;
+        counted++;
+    }
+    Py_DECREF(e); Py_DECREF(c);
+    return PyLong_FromSsize_t(counted);
+}
+
+/* cn0_level(hist, edges, target, bin) -> the histogram's value at the count ``target`` (> 0), linear within its
+ * bin (cn0cal.level_dbhz: numpy's cumsum and searchsorted, side "left") */
+static PyObject *py_cn0_level(PyObject *self, PyObject *args) {
+    PyObject *oh, *oe;
+    double target, bin;
+    if (!PyArg_ParseTuple(args, "OOdd", &oh, &oe, &target, &bin)) return NULL;
+    PyArrayObject *h = in_array(oh, 1), *e = in_array(oe, 1);
+    if (!h || !e || PyArray_DIM(e, 0) != PyArray_DIM(h, 0) + 1 || PyArray_DIM(h, 0) < 1) {
+        if (h && e) PyErr_SetString(PyExc_ValueError, "cn0_level: shapes");
+        Py_XDECREF(h); Py_XDECREF(e);
+        return NULL;
+    }
+    npy_intp bins = PyArray_DIM(h, 0), i = 0;
+    const double *hv = PyArray_DATA(h), *ev = PyArray_DATA(e);
+    double cum = 0.0, below = 0.0; /* below: the cumulative count before bin i */
+    for (i = 0; i < bins; i++) {
+        below = cum;
+        cum += hv[i];
+        if (cum >= target) break;
+    }
+    if (i == bins) i = bins - 1; /* past the end: the last bin (below is the count before it) */
+    const double frac = hv[i] > 0.0 ? (target - below) / hv[i] : 0.5;
+    const double level = ev[i] + frac * bin;
+    Py_DECREF(h); Py_DECREF(e);
+    return PyFloat_FromDouble(level);
+}
+
+/* ---------------------------------------------------------------- the reported accuracy (navigator.estimate) */
+/* a SnapshotFloor (white, slow, slow_rate, cap) into f; 0 for None */
+static int read_floor(PyObject *o, double *f) {
+    if (o == Py_None) return 0;
+    if (!PyTuple_Check(o) || PyTuple_GET_SIZE(o) != 4) {
+        PyErr_SetString(PyExc_TypeError, "report_cov: a floor is (white, slow, slow_rate, cap) or None");
+        return -1;
+    }
+    for (int k = 0; k < 4; k++) f[k] = PyFloat_AsDouble(PyTuple_GET_ITEM(o, k));
+    return PyErr_Occurred() ? -1 : 1;
+}
+
+/* consistency.snapshot_axis(p, k, f, delay) */
+static double snapshot_axis(double p, double k, int have, const double *f, double delay) {
+    double v = p * k;
+    if (have) {
+        const double slow = p * f[2];
+        double s = p * f[0] + (slow < f[1] ? slow : f[1]);
+        s = s < f[3] ? s : f[3];
+        v = v > s ? v : s;
+    }
+    return v > delay ? v : delay;
+}
+
+/* report_cov(out (18,), k, floor_h, floor_v, d_n, d_e, d_d) -> (9,): snapshot_axis of the position's variances
+ * out[9:12] (N and E with floor_h, D with floor_v, each with its delay bias²), then out[12:18] as they are */
+static PyObject *py_report_cov(PyObject *self, PyObject *args) {
+    PyObject *oo, *ofh, *ofv;
+    double k, d[3], fh[4], fv[4];
+    if (!PyArg_ParseTuple(args, "OdOOddd", &oo, &k, &ofh, &ofv, &d[0], &d[1], &d[2])) return NULL;
+    const int hh = read_floor(ofh, fh), hv = hh < 0 ? -1 : read_floor(ofv, fv);
+    if (hh < 0 || hv < 0) return NULL;
+    PyArrayObject *a = in_array(oo, 1);
+    if (!a) return NULL;
+    if (PyArray_DIM(a, 0) != 18) {
+        Py_DECREF(a);
+        PyErr_SetString(PyExc_ValueError, "report_cov: out must have 18 elements");
+        return NULL;
+    }
+    const double *o = PyArray_DATA(a);
+    PyObject *cov = new_array(1, 9, 0, NULL);
+    if (cov) {
+        double *c = PyArray_DATA((PyArrayObject *)cov);
+        c[0] = snapshot_axis(o[9], k, hh, fh, d[0]);
+        c[1] = snapshot_axis(o[10], k, hh, fh, d[1]);
+        c[2] = snapshot_axis(o[11], k, hv, fv, d[2]);
+        for (int i = 3; i < 9; i++) c[i] = o[9 + i];
+    }
+    Py_DECREF(a);
+    return cov;
+}
+
+/* predict_mean(x (N,), m15 (15 numbers: the loose block's p, v, b, a, d at the new time), T, live (NC
+ * numbers)) -> x at the new time: p, v from m15[0:6], a, d from m15[9:15], each live clock + T · drift · live
+ * (engine._predict's numpy: (T x_drift) live added to the clocks), the rest as it was */
+static PyObject *py_predict_mean(PyObject *self, PyObject *args) {
+    PyObject *ox, *om, *ol;
+    double T;
+    if (!PyArg_ParseTuple(args, "OOdO", &ox, &om, &T, &ol)) return NULL;
+    double m[15], live[NC];
+    PyObject *seqs[2] = {om, ol};
+    double *dst[2] = {m, live};
+    const Py_ssize_t len[2] = {15, NC};
+    for (int s = 0; s < 2; s++) {
+        PyObject *q = PySequence_Fast(seqs[s], "predict_mean: a sequence");
+        if (!q) return NULL;
+        if (PySequence_Fast_GET_SIZE(q) != len[s]) {
+            Py_DECREF(q);
+            PyErr_SetString(PyExc_ValueError, "predict_mean: 15 means and one liveness per clock");
+            return NULL;
+        }
+        for (Py_ssize_t i = 0; i < len[s]; i++) dst[s][i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(q, i));
+        Py_DECREF(q);
+        if (PyErr_Occurred()) return NULL;
+    }
+    PyArrayObject *xa = in_array(ox, 1);
+    if (!xa) return NULL;
+    const npy_intp n = PyArray_DIM(xa, 0);
+    if (n < I_DRIFT + 1) {
+        Py_DECREF(xa);
+        PyErr_SetString(PyExc_ValueError, "predict_mean: the state is too short");
+        return NULL;
+    }
+    PyObject *out = new_array(1, n, 0, PyArray_DATA(xa));
+    Py_DECREF(xa);
+    if (!out) return NULL;
+    double *x = PyArray_DATA((PyArrayObject *)out);
+    for (int i = 0; i < 6; i++) x[i] = m[i];
+    for (int i = 6; i < 12; i++) x[i] = m[i + 3];
+    const double td = T * x[I_DRIFT];
+    for (int j = 0; j < NC; j++) x[I_CLK + j] = x[I_CLK + j] + td * live[j];
+    return out;
 }
 
 static int state_size(PyObject *args, int i, int dim) {
@@ -739,6 +1107,14 @@ static PyObject *py_update(PyObject *self, PyObject *args) {
 }
 
 static PyMethodDef methods[] = {
+    {"prepare", py_prepare, METH_VARARGS, "an epoch's state-independent rows (engine.prepare_epoch's arithmetic)"},
+    {"cn0_add", py_cn0_add, METH_VARARGS, "an epoch's C/N0 counted in the calibration's histogram (cn0cal)"},
+    {"cn0_level", py_cn0_level, METH_VARARGS, "the histogram's quantile (cn0cal.level_dbhz)"},
+    {"transmit_anchor", py_transmit_anchor, METH_VARARGS, "the transmission time t_rx - P/c and its common anchor"},
+    {"transmit_states", py_transmit_states, METH_VARARGS, "satellite states at transmission from one anchor's rows"},
+    {"anchors", py_anchors, METH_VARARGS, "the anchor of each time (the atmosphere cache's)"},
+    {"report_cov", py_report_cov, METH_VARARGS, "the reported variances with the snapshots' floors (navigator.estimate)"},
+    {"predict_mean", py_predict_mean, METH_VARARGS, "the state's mean predicted (engine._predict's numpy)"},
     {"carry_states", py_carry_states, METH_VARARGS, "satellite states carried from their anchors (satcache)"},
     {"snapshot", py_snapshot, METH_VARARGS, "the epoch's own weighted least-squares position, its variances, its Doppler velocity"},
     {"belief_step", py_belief_step, METH_VARARGS, "the per-satellite belief's step, R(β) and gate"},

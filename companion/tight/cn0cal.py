@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from companion.tight import _tight
+
 BIN_DB = 1.0  # receivers report C/N0 in whole dB-Hz (u-blox, smartLoc) or finer
 LO_DBHZ, HI_DBHZ = 0.0, 80.0
 
@@ -35,6 +37,17 @@ class Cn0Calibration:
 
     def add(self, cn0_dbhz: np.ndarray) -> None:
         """Count an epoch's C/N0 values (non-finite ones ignored, the rest clipped to the histogram)."""
+        # add_numpy's steps, in C
+        self.n += _tight.cn0_add(self._hist, self._edges, cn0_dbhz, LO_DBHZ, HI_DBHZ, BIN_DB)
+
+    def level_dbhz(self) -> float:
+        """The histogram's ``quantile`` (NaN before any value), linear within its bin."""
+        if self.n == 0:
+            return float("nan")
+        return float(_tight.cn0_level(self._hist, self._edges, self.quantile * self.n, BIN_DB))  # in C
+
+    def add_numpy(self, cn0_dbhz: np.ndarray) -> None:
+        """``add`` in numpy (the reference of its C form in the tests)."""
         c = np.asarray(cn0_dbhz, dtype=float)
         c = np.minimum(np.maximum(c[np.isfinite(c)], LO_DBHZ), HI_DBHZ)  # np.clip's values
         if c.size:
@@ -42,8 +55,8 @@ class Cn0Calibration:
             self._hist += np.bincount(idx, minlength=len(self._hist))
             self.n += int(c.size)
 
-    def level_dbhz(self) -> float:
-        """The histogram's ``quantile`` (NaN before any value), linear within its bin."""
+    def level_numpy(self) -> float:
+        """``level_dbhz`` in numpy (the reference of its C form in the tests)."""
         if self.n == 0:
             return float("nan")
         cum = np.cumsum(self._hist)

@@ -99,6 +99,10 @@ class SatEpoch(NamedTuple):
     z_rate_m_s: np.ndarray  # pseudorange rate free of the satellite clock drift (NaN: none)
     r_rate_m2_s2: np.ndarray
     systems: tuple[int, ...]  # the clock slots of the epoch's systems
+    # (the keys sorted (read-only, the same object for the same satellites), the order that sorts them) or
+    # None: the consistency's channels in its own order (``Fit.add``'s path for the keys it holds: the same
+    # sums)
+    key_sorted: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class Speed(NamedTuple):
@@ -168,7 +172,65 @@ def prepare_epoch(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: A
 
     σ models (``companion.gnss.spp.sigma_model_m``'s, written out for speed and tested equal):
     "cn0-elevation" σ² = a² + b² w / sin² el and the line-of-sight σ² = a² + c² w, with
-    w = 10^((C/N0_ref − C/N0)/10), sin el floored at 0.05, GLONASS σ × ``glonass_sigma_factor``."""
+    w = 10^((C/N0_ref − C/N0)/10), sin el floored at 0.05, GLONASS σ × ``glonass_sigma_factor``.
+
+    A receiver's raw epoch with its satellite states and atmosphere known and every observation kept is
+    prepared in C (``_tight.prepare``: the same arithmetic element by element; its ``arcsin``,
+    ``arctan2``, power and 3-term dot products rounded by the C library, not numpy's: equal to within
+    1e-12 relative, tested); any other epoch by the numpy below."""
+    if atmosphere_m is not None and not epoch.corrected:
+        ids = _epoch_ids(epoch, cfg)
+        got = _tight.prepare(epoch.sat_pos_ecef_m, frame.r0_ecef_m, frame.c_ecef_ned, epoch.pseudorange_m,
+                             epoch.sat_clock_s, atmosphere_m, epoch.pseudorange_rate_m_s,
+                             epoch.sat_clock_drift_s_s, epoch.cn0_dbhz, ids[4], epoch.sat_vel_ecef_m_s,
+                             _prepare_params(cfg))
+        if got is not None:
+            z, r_model, r_los, theta, el_deg, az, rate, r_rate, vel_all = got
+            vel = epoch.sat_vel_ecef_m_s
+            if not vel_all:
+                vel = np.where(np.isfinite(rate)[:, None], vel, np.nan)
+            return SatEpoch(epoch, ids[0], ids[1], ids[2], z, r_model, ids[5], r_los, theta, el_deg, az,
+                            epoch.sat_pos_ecef_m, vel, rate, r_rate, ids[3], ids[6])
+    return _prepare_numpy(epoch, frame, cfg, klobuchar, atmosphere_m)
+
+
+# an epoch's satellites' keys, clock slots (int, float), systems, GLONASS σ² factors and uniform σ²s, per
+# satellite list and configuration (read-only arrays shared by the epochs of the same satellites)
+_IDS: dict[tuple[bytes, bytes, str, str, float, float], tuple[Any, ...]] = {}
+_IDS_MAX = 512
+
+
+def _epoch_ids(ep: GnssEpoch, cfg: TightConfig) -> tuple[Any, ...]:
+    k = (ep.system.tobytes(), ep.prn.tobytes(), ep.system.dtype.str, ep.prn.dtype.str,
+         cfg.glonass_sigma_factor, cfg.sigma_uniform_m)
+    ids = _IDS.get(k)
+    if ids is None:
+        sysi = ep.system.astype(int)
+        slots = model.SLOT_OF[sysi]
+        arrays = (sysi * 1000 + ep.prn.astype(int), slots, slots.astype(float),
+                  np.where(ep.system == _GLONASS, cfg.glonass_sigma_factor**2, 1.0),
+                  np.full(ep.n, cfg.sigma_uniform_m**2))
+        order = np.argsort(arrays[0], kind="stable")
+        key_sorted = arrays[0][order]
+        for a in (*arrays, key_sorted, order):
+            a.flags.writeable = False
+        ids = (*arrays[0:3], tuple(sorted(set(slots.tolist()))), *arrays[3:5], (key_sorted, order))
+        if len(_IDS) >= _IDS_MAX:
+            _IDS.clear()
+        _IDS[k] = ids
+    return ids
+
+
+def _prepare_params(cfg: TightConfig) -> tuple[float, ...]:
+    a2 = cfg.sigma_floor_m**2
+    return (math.sin(math.radians(cfg.elevation_mask_deg)), cfg.cn0_ref_dbhz, a2, cfg.sigma_zenith_m**2,
+            cfg.sigma_los_cn0_m**2, cfg.sigma_range_rate_m_s**2 / (a2 + cfg.sigma_zenith_m**2),
+            cfg.prior_cn0_mid_dbhz, cfg.prior_cn0_per_db, cfg.prior_el_per_deg, cfg.prior_el_mid_deg)
+
+
+def _prepare_numpy(epoch: GnssEpoch, frame: Frame, cfg: TightConfig, klobuchar: Any = None,
+                   atmosphere_m: np.ndarray | None = None) -> SatEpoch | None:
+    """``prepare_epoch`` in numpy: any epoch (the reference of the C path in the tests)."""
     d = epoch.sat_pos_ecef_m - frame.r0_ecef_m
     rng = np.sqrt(np.einsum("ij,ij->i", d, d))
     sin_el = -(d @ frame.c_ecef_ned[:, 2]) / rng
@@ -382,17 +444,22 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         T = (t_us - e.t_us) * 1e-6
         x15 = (*e.x[0:6].tolist(), 0.0, 0.0, 0.0, *e.x[6:12].tolist())
         m15, nA, nB = mean_between(x15, e.ints, ints, 1.0)
-        x = e.x.copy()
-        x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
-        live = np.asarray(e.live, dtype=float)
-        x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * live
+        x = _tight.predict_mean(e.x, m15, T, e.live)  # predict_mean_numpy's, in C
         if T <= 0.0:
             return x, e.P.copy()
         # F P Fᵀ + Q (model.transition, model.process_noise) and the held-time noise of the block
         # (e.ints → ints) in C; no odometry heading yet: its states stay at rest
         # (the baro offset's random walk, when the state has it)
-        return x, _tight.predict_cov(e.P, T, nA, nB, live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0),
+        return x, _tight.predict_cov(e.P, T, nA, nB, e.live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0),
                                      e.ints, ints, *self._q_hold, self._q_baro)
+
+    @staticmethod
+    def predict_mean_numpy(x: np.ndarray, m15: Any, T: float, live: tuple[bool, ...]) -> np.ndarray:
+        """``_tight.predict_mean`` in numpy (what ``_predict`` computed before; the tests' reference)."""
+        x = x.copy()
+        x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
+        x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * np.asarray(live, dtype=float)
+        return x
 
     def _fuse(self, prev: Entry, t_us: int, meas: SatEpoch | Speed | Baro) -> Entry:
         ints = self.imu.integrals(t_us)
@@ -566,7 +633,11 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
             snap = _tight.snapshot(H, y, r, used_f, x[0:3], m.sat_pos_ecef_m, m.sat_vel_ecef_m_s,
                                    m.z_rate_m_s, r_rate, r0, C)
         if n_used:
-            if u is None:  # every satellite (the same values as indexed by all of them)
+            if u is None and m.key_sorted is not None:  # every satellite, in the order of their keys (Fit.add
+                # then finds its own keys at once; each channel's sums the same)
+                keys, order = m.key_sorted
+                fit = fit.add(t_us, keys, (y / np.sqrt(s0 + r))[order], c.accuracy_window_s)
+            elif u is None:  # every satellite (the same values as indexed by all of them)
                 fit = fit.add(t_us, m.key, y / np.sqrt(s0 + r), c.accuracy_window_s)
             else:
                 fit = fit.add(t_us, m.key[u], y[u] / np.sqrt(s0[u] + r[u]), c.accuracy_window_s)
@@ -639,19 +710,19 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         x, P = self._predict(last, now, self.imu.last_integrals())
         return now, x, P, last
 
-    def output_now(self) -> tuple[int, np.ndarray, Entry] | None:
-        """(t_us, [p, v, 0 (3), the variances of p, v, 0 (3)] (18,), the last entry) at the newest IMU
-        time, by the loose
-        filter's C output path (``BlockPropagator.output_from``: the mean from the IMU history's
-        newest integrals and the variances of p and v, which depend on (p, v, a, d) alone), the
-        vertical white-acceleration density added where it differs; cached."""
-        return self._output_now()
+    # (t_us, [p, v, 0 (3), the variances of p, v, 0 (3)] (18,), the last entry) at the newest IMU time, by the
+    # loose filter's C output path (``BlockPropagator.output_from``: the mean from the IMU history's newest
+    # integrals and the variances of p and v, which depend on (p, v, a, d) alone), the vertical
+    # white-acceleration density added where it differs; cached (``Timeline._output_now`` itself: one
+    # Python call fewer per estimate, as the loose engine's ``snapshot``)
+    output_now = Timeline._output_now
 
     def _output(self, last: Entry, now: int) -> tuple[int, np.ndarray, Entry]:
         if self._nav15 is None or self._nav15[0] is not last:
             P15 = np.zeros((15, 15))
             P15[_IX_NAV] = last.P[:12, :12]
-            self._nav15 = (last, (*last.x[0:6], 0.0, 0.0, 0.0, *last.x[6:12]), P15)
+            # the mean as floats (the same values as the array's elements; the C core reads floats faster)
+            self._nav15 = (last, (*last.x[0:6].tolist(), 0.0, 0.0, 0.0, *last.x[6:12].tolist()), P15)
         T = (now - last.t_us) * 1e-6
         _, out = self._prop.output_from(self._nav15[1], self._nav15[2], last.ints, self.imu, T, 1.0, 0.0)
         # out: p, v, b (9) then their variances (9); b and its variances are zero here (its mean and

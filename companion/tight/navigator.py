@@ -18,7 +18,7 @@ tight_navigator_for`` passes the mission's) sets the belief rows' prior from the
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +34,8 @@ from companion.estimator.consistency import (
     variance_scale,
 )
 from companion.gnss.constants import C_M_S
-from companion.gnss.ephemeris import EphemerisStore, transmission_states
+from companion.gnss.ephemeris import EphemerisStore
+from companion.tight import _tight
 from companion.tight import engine as tight_engine
 from companion.tight.belief import LineOfSight
 from companion.tight.cn0cal import Cn0Calibration
@@ -128,14 +129,15 @@ class TightNavigator:
             if self._sats is None or epoch.time_base != "gps":
                 self._counts["gnss_rejected_no_ephemeris"] += 1
                 return
-            st, t_tx = transmission_states(cast(EphemerisStore, self._sats), epoch)
+            st, t_tx = self._sats.transmission_states(epoch)  # transmission_states(self._sats, epoch)
             epoch = epoch.replace(sat_pos_ecef_m=st.pos_ecef_m, sat_vel_ecef_m_s=st.vel_ecef_m_s,
                                   sat_clock_s=st.clock_s, sat_clock_drift_s_s=st.clock_drift_s_s)
             if not st.valid.all():  # no (usable) ephemeris for some: as attach_broadcast, without them
                 self._count_no_prediction(epoch, st.valid)
                 epoch, t_tx = epoch.select(st.valid), t_tx[st.valid]
             if self.engine.frame is not None:
-                atmosphere = self._atmosphere().delays_m(epoch.system, epoch.prn, t_tx)
+                atmosphere = self._atmosphere().delays_m(epoch.system, epoch.prn, t_tx,
+                                                         self._sats.keys(epoch.system, epoch.prn))
         eng = self.engine
         if epoch.n == 0:
             self._counts["gnss_rejected_empty"] += 1
@@ -199,13 +201,11 @@ class TightNavigator:
             k = self.accuracy_inflation()
             self._reported = (entry, variance_scale(k), self.accuracy_floor_m2(), self._snapshot_floor(k))
         _, scale, floor, snap = self._reported
-        cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
         if snap is not None:  # snapshots correlated over seconds: not averaged down, up to one snapshot's;
-            k, f_h, f_v, d = snap  # at least the one-signed delays' bias
-            cov = cov.copy() if scale is None else cov
-            cov[0] = snapshot_axis(float(out[9]), k, f_h, d[0])
-            cov[1] = snapshot_axis(float(out[10]), k, f_h, d[1])
-            cov[2] = snapshot_axis(float(out[11]), k, f_v, d[2])
+            k, f_h, f_v, d = snap  # at least the one-signed delays' bias (report_cov_numpy's, in C)
+            cov = _tight.report_cov(out, k, f_h, f_v, d[0], d[1], d[2])
+        else:
+            cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
         if floor is not None:  # + the common-mode floor, in quadrature
             cov = cov.copy() if scale is None else cov
             cov[0:3] += floor
@@ -214,6 +214,19 @@ class TightNavigator:
                                gnss_resets=last.totals[2])
         self._last = (now, est)
         return est
+
+    @staticmethod
+    def report_cov_numpy(out: np.ndarray, scale: np.ndarray | None, snap: tuple[
+            float, SnapshotFloor | None, SnapshotFloor | None, tuple[float, float, float]]) -> np.ndarray:
+        """``estimate``'s variances with the snapshots' floors, as numpy and ``snapshot_axis`` compute them
+        (the reference of ``_tight.report_cov`` in the tests)."""
+        cov = out[9:18] if scale is None else out[9:18] * scale
+        k, f_h, f_v, d = snap
+        cov = cov.copy() if scale is None else cov
+        cov[0] = snapshot_axis(float(out[9]), k, f_h, d[0])
+        cov[1] = snapshot_axis(float(out[10]), k, f_h, d[1])
+        cov[2] = snapshot_axis(float(out[11]), k, f_v, d[2])
+        return cov
 
     def accuracy_inflation(self) -> float:
         """The factor (≥ 1) on the position variances the estimates report: the used pseudoranges'

@@ -26,7 +26,7 @@ import numpy as np
 
 from companion.gnss.atmosphere import iono_frequency_scale, klobuchar_m, saastamoinen_m
 from companion.gnss.constants import MU_GPS_M3_S2, OMEGA_E_RAD_S
-from companion.gnss.ephemeris import SatStates
+from companion.gnss.ephemeris import SatStates, transmission_states
 from companion.gnss.timescale import week_tow
 from companion.tight import _tight
 
@@ -54,6 +54,7 @@ class SatelliteCache:
         self.evaluations = 0  # satellite states computed by the store (for the benchmark)
         # the last one-anchor query: (anchor, keys, the anchor's (index, table) then, the keys' rows)
         self._last: tuple[int, list[int], tuple[dict[int, int], np.ndarray], np.ndarray] | None = None
+        self._last_keys: tuple[tuple[bytes, bytes, str, str], list[int]] | None = None  # (``keys``' memo)
 
     def _table(self, k: int, keys: list[int], system: np.ndarray, prn: np.ndarray
                ) -> tuple[dict[int, int], np.ndarray]:
@@ -114,14 +115,38 @@ class SatelliteCache:
             out = np.full((n, 12), np.nan)
             for a in set(k[finite].tolist()):
                 sel = np.flatnonzero(finite & (k == a))
-                sel_keys = [keys[i] for i in sel.tolist()]
-                index, table = self._table(a, sel_keys, system[sel], prn[sel])
-                out[sel] = table[[index[key] for key in sel_keys]]
+                # every satellite of the query evaluated at the anchor (a row is a function of the anchor and
+                # the satellite alone): an epoch straddling two anchors fills the next one whole, not in parts
+                index, table = self._table(a, keys, system, prn)
+                out[sel] = table[[index[keys[i]] for i in sel.tolist()]]
             dt = np.where(finite, t - k * self.period_s, 0.0)
         # p + v dt + ½ a dt², v + a dt, clock + drift dt and the anchors' validity, in C (_tight.carry_states:
         # numpy's operations in its order, tested equal bit for bit)
         pos, vel, clock, drift, anchored = _tight.carry_states(out, dt)
         return SatStates(pos, vel, clock, drift, finite & anchored)
+
+    def keys(self, system: np.ndarray, prn: np.ndarray) -> list[int]:
+        """system × 1000 + PRN per satellite, as a list (the last epoch's list while its satellites are the
+        same: a receiver tracks the same ones for minutes)."""
+        ids = (system.tobytes(), prn.tobytes(), system.dtype.str, prn.dtype.str)
+        last = self._last_keys
+        if last is not None and last[0] == ids:
+            return last[1]
+        keys = (np.asarray(system, dtype=np.int64) * 1000 + np.asarray(prn, dtype=np.int64)).tolist()
+        self._last_keys = (ids, keys)
+        return keys
+
+    def transmission_states(self, epoch: Any) -> tuple[SatStates, np.ndarray]:
+        """``companion.gnss.ephemeris.transmission_states(self, epoch)``, the same numbers: when every
+        satellite's ``t_rx − P/c`` has the same anchor (the usual case), its step from the anchor and back by
+        the clock offset in C (``_tight.transmit_states``: numpy's operations element by element, tested
+        bit for bit); else that function itself."""
+        t0, k = _tight.transmit_anchor(epoch.t_gps_s, epoch.pseudorange_m, self.period_s)
+        if k is None:
+            return transmission_states(self, epoch)  # type: ignore[arg-type]  # (states() as a store's)
+        table, rows = self._rows(k, self.keys(epoch.system, epoch.prn), epoch.system, epoch.prn)
+        pos, vel, clock, drift, valid, t_tx = _tight.transmit_states(table, rows, t0, k * self.period_s)
+        return SatStates(pos, vel, clock, drift, valid), t_tx
 
 
 class AtmosphereCache:
@@ -141,10 +166,17 @@ class AtmosphereCache:
         # the last query: (keys, anchors, delays)
         self._last: tuple[list[int], list[int], np.ndarray] | None = None
 
-    def delays_m(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray) -> np.ndarray:
-        """The delay (m) of each observation's signal (L1 scaled to its frequency)."""
-        keys = (np.asarray(system, np.int64) * 1000 + np.asarray(prn, np.int64)).tolist()
-        k = np.rint(np.where(np.isfinite(t_gps_s), t_gps_s, 0.0) / self.period_s).astype(np.int64).tolist()
+    def delays_m(self, system: np.ndarray, prn: np.ndarray, t_gps_s: np.ndarray,
+                 keys: list[int] | None = None) -> np.ndarray:
+        """The delay (m) of each observation's signal (L1 scaled to its frequency). ``keys``: system × 1000
+        + PRN of each, when known (``SatelliteCache.keys``)."""
+        if keys is None:
+            keys = (np.asarray(system, np.int64) * 1000 + np.asarray(prn, np.int64)).tolist()
+        # round(t / period) of each (0 where t is not finite), in C: numpy's rint of the same quotient
+        k = _tight.anchors(t_gps_s, self.period_s)
+        if k is None:  # a time beyond ±9e15 periods (damaged): numpy's own conversion
+            t = np.where(np.isfinite(t_gps_s), t_gps_s, 0.0)
+            k = np.rint(t / self.period_s).astype(np.int64).tolist()
         last = self._last
         if last is not None and last[0] == keys and last[1] == k:  # the same satellites and anchors
             return last[2]
