@@ -31,7 +31,10 @@ def test_parse_errors_are_one_line_with_a_hint():
              (["flyy"], "beliefnav: error: command 'flyy': not one of "),
              (["fly", "--scenario", "realstic"], "did you mean 'realistic'?"),
              (["replay", "x.tlog", "--home", "-37.8,144.7,0"],  # a southern latitude taken for an option
-              "argument --home: expected one argument (if its value starts with '-': --home=-VALUE)"))
+              "argument --home: expected one argument (if its value starts with '-': --home=-VALUE)"),
+             # a misspelt option names the command and points at that command's help, not the top level's
+             (["top", "--vehicel", "uav1"],
+              "beliefnav: error: top: unrecognized arguments: --vehicel uav1 (see `beliefnav top --help`)"))
     for argv, want in cases:
         done = subprocess.run([sys.executable, "-m", "gcs_tools", *argv], capture_output=True, text=True,
                               timeout=60)
