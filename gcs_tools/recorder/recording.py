@@ -99,6 +99,13 @@ def iter_lines(path: str | Path) -> Iterator[tuple[int, dict[str, Any] | None]]:
             yield n, d if isinstance(d, dict) else None
 
 
+def recorded_vehicle(rec: Recording, vehicle: str, path: str | Path) -> str:
+    """``vehicle`` if the recording at ``path`` holds it, else a one-line error naming the ones it holds."""
+    if vehicle not in rec.vehicles:
+        raise UserError(f"{path}: no vehicle {vehicle!r} (valid: {', '.join(rec.vehicles)})")
+    return vehicle
+
+
 def read_recording(path: str | Path) -> Recording:
     """Read and decode a recording; malformed lines and payloads are counted, not raised."""
     rec = Recording()
