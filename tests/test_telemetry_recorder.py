@@ -62,8 +62,9 @@ def test_plot_of_a_vehicle_not_recorded_names_the_recorded_ones(tmp_path):
     payload = {"t_us": 165000, "p_ned_m": [5.0, 47.0, -15.0], "v_ned_m_s": [0.0, 0.0, 0.0],
                "b_ned_m": [0.0, 0.0, 0.0], "cov_diag": [0.02] * 3 + [1.0] * 3 + [0.04] * 3, "beta": 0.5,
                "nis": None, "method": "second-order", "sent_unix_ns": 1795858207326480822}
-    rec.write_text(json.dumps({"key": "beliefnav/uav1/companion/estimate", "recv_unix_ns": 1795858207327754033,
-                               "payload": payload}) + "\n")
+    line = {"key": "beliefnav/uav1/companion/estimate", "recv_unix_ns": 1795858207327754033,
+            "payload": payload}
+    rec.write_text(json.dumps(line) + "\n")
     assert read_recording(rec).vehicles == ["uav1"]
     with child(["-m", "gcs_tools", "plot", str(rec), "--vehicle", "uav2", "--out", str(tmp_path / "fig")],
                hub_env()) as plot:
