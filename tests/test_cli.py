@@ -1,5 +1,7 @@
+import os
 import subprocess
 import sys
+import tempfile
 
 
 def test_cli_lists_commands_and_rejects_unknown():
@@ -73,3 +75,20 @@ def test_bench_lines_print_a_list_of_records_one_per_line():
                      f"{'glitch.1':<48} glitch=heading 90°  ok=False  distance_m.median=1  "
                      "distance_m.max=2.5",
                      f"{'route_length_m':<48} [175.3, 363.1]"]
+
+
+def test_a_port_out_of_range_is_one_line_before_anything_starts():
+    """A TCP port the OS cannot bind (a typo such as 80800) is refused by the parser, not by a
+    traceback from bind() in the server or in the simulated vehicle's process."""
+    cases = ((["dashboard", "--port", "80800"], "dashboard: argument --port: 80800 is not a TCP port (1-65535)"),
+             (["sitl", "--mission", "test", "--scenario", "canyon", "--ubx-port", "70000", "--out", "{tmp}"],
+              "sitl: argument --ubx-port: 70000 is not a TCP port (1-65535)"),
+             (["dashboard", "--port", "http"], "dashboard: argument --port: 'http' is not a TCP port (1-65535)"))
+    for argv, want in cases:
+        with tempfile.TemporaryDirectory() as tmp:
+            done = subprocess.run([sys.executable, "-m", "gcs_tools", *(a.format(tmp=tmp) for a in argv)],
+                                  capture_output=True, text=True, timeout=60)
+            assert os.listdir(tmp) == []
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"beliefnav: error: {want}"), done.stderr

@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-signing", action="store_true",
                         help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
-    parser.add_argument("--ubx-port", type=int, default=None,
+    parser.add_argument("--ubx-port", type=choices.tcp_port, default=None,
                         help="scenario canyon: the raw receiver's UBX TCP port on 127.0.0.1 "
                              "(default: a free one, named in OUT/receiver.json)")
     from simvehicle.groundlink import add_ground_arguments
