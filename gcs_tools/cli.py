@@ -114,7 +114,7 @@ def command_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Argum
     """The sub-parser of command ``name`` in a parser made by :func:`build_parser`."""
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
-            return action.choices[name]  # type: ignore[no-any-return]
+            return action.choices[name]
     raise LookupError(f"no command {name!r}")
 
 

@@ -80,10 +80,12 @@ def test_bench_lines_print_a_list_of_records_one_per_line():
 def test_a_port_out_of_range_is_one_line_before_anything_starts():
     """A TCP port the OS cannot bind (a typo such as 80800) is refused by the parser, not by a
     traceback from bind() in the server or in the simulated vehicle's process."""
-    cases = ((["dashboard", "--port", "80800"], "dashboard: argument --port: 80800 is not a TCP port (1-65535)"),
+    cases = ((["dashboard", "--port", "80800"],
+              "dashboard: argument --port: 80800 is not a TCP port (1-65535)"),
              (["sitl", "--mission", "test", "--scenario", "canyon", "--ubx-port", "70000", "--out", "{tmp}"],
               "sitl: argument --ubx-port: 70000 is not a TCP port (1-65535)"),
-             (["dashboard", "--port", "http"], "dashboard: argument --port: 'http' is not a TCP port (1-65535)"))
+             (["dashboard", "--port", "http"],
+              "dashboard: argument --port: 'http' is not a TCP port (1-65535)"))
     for argv, want in cases:
         with tempfile.TemporaryDirectory() as tmp:
             done = subprocess.run([sys.executable, "-m", "gcs_tools", *(a.format(tmp=tmp) for a in argv)],
