@@ -94,3 +94,22 @@ def test_a_port_out_of_range_is_one_line_before_anything_starts():
         assert done.returncode == 2, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith(f"beliefnav: error: {want}"), done.stderr
+
+
+def test_sitl_refuses_an_unusable_signing_key_file_before_starting_anything():
+    """An empty key file or a passphrase of two words: one line from `beliefnav sitl` itself, and no
+    process started nor output folder made (it used to come from the estimator's child process)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, text, want in (("empty.key", "", "is empty"),
+                                 ("two.key", "two words\n", "a passphrase must be one word")):
+            key = os.path.join(tmp, name)
+            with open(key, "w") as f:
+                f.write(text)
+            out = os.path.join(tmp, "out")
+            done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--mission", "test",
+                                   "--signing-key-file", key, "--out", out],
+                                  capture_output=True, text=True, timeout=60)
+            assert done.returncode == 2, done.stderr
+            lines = done.stderr.strip().splitlines()
+            assert len(lines) == 1 and lines[0].startswith(f"beliefnav: error: signing key file {key}"), lines
+            assert want in lines[0] and not os.path.exists(out)
