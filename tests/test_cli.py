@@ -2,6 +2,9 @@ import os
 import subprocess
 import sys
 import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_cli_lists_commands_and_rejects_unknown():
@@ -113,3 +116,18 @@ def test_sitl_refuses_an_unusable_signing_key_file_before_starting_anything():
             lines = done.stderr.strip().splitlines()
             assert len(lines) == 1 and lines[0].startswith(f"beliefnav: error: signing key file {key}"), lines
             assert want in lines[0] and not os.path.exists(out)
+
+
+def test_replay_gnss_errors_typo_or_missing_series_says_which():
+    """`--gnss-errors modle` suggests 'model'; a series CSV that is not there says "no such file"."""
+    log = "tests/data/quad106.tlog"
+    for value, want in (("modle", "--gnss-errors 'modle': no such file, and not 'none' or 'model' "
+                                  "(did you mean 'model'?)"),
+                        ("runs/nosuch.csv", "--gnss-errors 'runs/nosuch.csv': no such file, and not 'none' "
+                                            "or 'model'")):
+        with tempfile.TemporaryDirectory() as tmp:
+            done = subprocess.run([sys.executable, "-m", "gcs_tools", "replay", log, "--gnss-errors", value,
+                                   "--out", os.path.join(tmp, "out")],
+                                  capture_output=True, text=True, timeout=60, cwd=ROOT)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.strip().splitlines() == [f"beliefnav: error: {want}"], done.stderr
