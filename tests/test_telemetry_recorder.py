@@ -72,3 +72,14 @@ def test_plot_of_a_vehicle_not_recorded_names_the_recorded_ones(tmp_path):
     assert plot.returncode == 2
     assert err.strip() == f"beliefnav: error: {rec}: no vehicle 'uav2' (valid: uav1)"
     assert not (tmp_path / "fig").exists()
+
+
+def test_plot_of_a_run_directory_says_what_plot_reads(tmp_path):
+    """A user pointing `plot` at a run folder is told it reads a `beliefnav record` file."""
+    run_dir = tmp_path / "runs" / "sitl"
+    run_dir.mkdir(parents=True)
+    with child(["-m", "gcs_tools", "plot", str(run_dir)], hub_env()) as plot:
+        _, err = plot.communicate(timeout=30)
+    assert plot.returncode == 2
+    assert err.strip() == (f"beliefnav: error: {run_dir}: a directory; give a recording made by "
+                           "`beliefnav record` (.jsonl)")

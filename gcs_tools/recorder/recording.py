@@ -85,6 +85,8 @@ class Recording:
 def iter_lines(path: str | Path) -> Iterator[tuple[int, dict[str, Any] | None]]:
     """(line number, parsed line or None if unreadable); a truncated last line is just unreadable."""
     p = Path(path)
+    if p.is_dir():
+        raise UserError(f"{p}: a directory; give a recording made by `beliefnav record` (.jsonl)")
     try:
         f = p.open("rb")
     except OSError as exc:
