@@ -23,6 +23,17 @@ if TYPE_CHECKING:
     from companion.mission import Mission
 
 
+def tcp_port(text: str) -> int:
+    """An argparse ``type`` for a TCP/UDP port to bind: 1-65535 (argparse makes the error one line)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port (1-65535)") from None
+    if not 0 < port < 65536:
+        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (1-65535)")
+    return port
+
+
 def add_method_argument(parser: argparse.ArgumentParser) -> None:
     """``--method`` with the one default (``companion.estimator.DEFAULT_METHOD``)."""
     parser.add_argument("--method", default=DEFAULT_METHOD,

@@ -110,6 +110,14 @@ def build_parser(names: Sequence[str] | None = None, options: bool = True) -> ar
     return parser
 
 
+def command_parser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    """The sub-parser of command ``name`` in a parser made by :func:`build_parser`."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return action.choices[name]
+    raise LookupError(f"no command {name!r}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     # Only the chosen command's module is imported; without one (--help, --version, a typo) none is.
@@ -119,7 +127,9 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     parser = build_parser([chosen] if chosen else [], options=chosen is not None)
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # a misspelt option: the command's own parser says so and points at its own --help
+        command_parser(parser, args.command).error(f"unrecognized arguments: {' '.join(unknown)}")
     if getattr(args, "_missing", None):
         print(f"beliefnav: error: command {args.command!r} is not available in this build", file=sys.stderr)
         return 2

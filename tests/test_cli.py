@@ -1,5 +1,10 @@
+import os
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_cli_lists_commands_and_rejects_unknown():
@@ -31,7 +36,10 @@ def test_parse_errors_are_one_line_with_a_hint():
              (["flyy"], "beliefnav: error: command 'flyy': not one of "),
              (["fly", "--scenario", "realstic"], "did you mean 'realistic'?"),
              (["replay", "x.tlog", "--home", "-37.8,144.7,0"],  # a southern latitude taken for an option
-              "argument --home: expected one argument (if its value starts with '-': --home=-VALUE)"))
+              "argument --home: expected one argument (if its value starts with '-': --home=-VALUE)"),
+             # a misspelt option names the command and points at that command's help, not the top level's
+             (["top", "--vehicel", "uav1"],
+              "beliefnav: error: top: unrecognized arguments: --vehicel uav1 (see `beliefnav top --help`)"))
     for argv, want in cases:
         done = subprocess.run([sys.executable, "-m", "gcs_tools", *argv], capture_output=True, text=True,
                               timeout=60)
@@ -70,3 +78,56 @@ def test_bench_lines_print_a_list_of_records_one_per_line():
                      f"{'glitch.1':<48} glitch=heading 90°  ok=False  distance_m.median=1  "
                      "distance_m.max=2.5",
                      f"{'route_length_m':<48} [175.3, 363.1]"]
+
+
+def test_a_port_out_of_range_is_one_line_before_anything_starts():
+    """A TCP port the OS cannot bind (a typo such as 80800) is refused by the parser, not by a
+    traceback from bind() in the server or in the simulated vehicle's process."""
+    cases = ((["dashboard", "--port", "80800"],
+              "dashboard: argument --port: 80800 is not a TCP port (1-65535)"),
+             (["sitl", "--mission", "test", "--scenario", "canyon", "--ubx-port", "70000", "--out", "{tmp}"],
+              "sitl: argument --ubx-port: 70000 is not a TCP port (1-65535)"),
+             (["dashboard", "--port", "http"],
+              "dashboard: argument --port: 'http' is not a TCP port (1-65535)"))
+    for argv, want in cases:
+        with tempfile.TemporaryDirectory() as tmp:
+            done = subprocess.run([sys.executable, "-m", "gcs_tools", *(a.format(tmp=tmp) for a in argv)],
+                                  capture_output=True, text=True, timeout=60)
+            assert os.listdir(tmp) == []
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"beliefnav: error: {want}"), done.stderr
+
+
+def test_sitl_refuses_an_unusable_signing_key_file_before_starting_anything():
+    """An empty key file or a passphrase of two words: one line from `beliefnav sitl` itself, and no
+    process started nor output folder made (it used to come from the estimator's child process)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, text, want in (("empty.key", "", "is empty"),
+                                 ("two.key", "two words\n", "a passphrase must be one word")):
+            key = os.path.join(tmp, name)
+            with open(key, "w") as f:
+                f.write(text)
+            out = os.path.join(tmp, "out")
+            done = subprocess.run([sys.executable, "-m", "gcs_tools", "sitl", "--mission", "test",
+                                   "--signing-key-file", key, "--out", out],
+                                  capture_output=True, text=True, timeout=60)
+            assert done.returncode == 2, done.stderr
+            lines = done.stderr.strip().splitlines()
+            assert len(lines) == 1 and lines[0].startswith(f"beliefnav: error: signing key file {key}"), lines
+            assert want in lines[0] and not os.path.exists(out)
+
+
+def test_replay_gnss_errors_typo_or_missing_series_says_which():
+    """`--gnss-errors modle` suggests 'model'; a series CSV that is not there says "no such file"."""
+    log = "tests/data/quad106.tlog"
+    for value, want in (("modle", "--gnss-errors 'modle': no such file, and not 'none' or 'model' "
+                                  "(did you mean 'model'?)"),
+                        ("runs/nosuch.csv", "--gnss-errors 'runs/nosuch.csv': no such file, and not 'none' "
+                                            "or 'model'")):
+        with tempfile.TemporaryDirectory() as tmp:
+            done = subprocess.run([sys.executable, "-m", "gcs_tools", "replay", log, "--gnss-errors", value,
+                                   "--out", os.path.join(tmp, "out")],
+                                  capture_output=True, text=True, timeout=60, cwd=ROOT)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.strip().splitlines() == [f"beliefnav: error: {want}"], done.stderr

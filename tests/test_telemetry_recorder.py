@@ -54,3 +54,32 @@ def test_plot_of_garbage_is_one_line_error(tmp_path):
         _, err = plot.communicate(timeout=30)
     assert plot.returncode == 2
     assert err.strip() == f"beliefnav: error: {bad}: no telemetry in this recording (2 malformed lines)"
+
+
+def test_plot_of_a_vehicle_not_recorded_names_the_recorded_ones(tmp_path):
+    """`plot --vehicle` with a typo says which vehicles the recording holds, as `export --vehicle-id` does."""
+    rec = tmp_path / "run.jsonl"
+    payload = {"t_us": 165000, "p_ned_m": [5.0, 47.0, -15.0], "v_ned_m_s": [0.0, 0.0, 0.0],
+               "b_ned_m": [0.0, 0.0, 0.0], "cov_diag": [0.02] * 3 + [1.0] * 3 + [0.04] * 3, "beta": 0.5,
+               "nis": None, "method": "second-order", "sent_unix_ns": 1795858207326480822}
+    line = {"key": "beliefnav/uav1/companion/estimate", "recv_unix_ns": 1795858207327754033,
+            "payload": payload}
+    rec.write_text(json.dumps(line) + "\n")
+    assert read_recording(rec).vehicles == ["uav1"]
+    with child(["-m", "gcs_tools", "plot", str(rec), "--vehicle", "uav2", "--out", str(tmp_path / "fig")],
+               hub_env()) as plot:
+        _, err = plot.communicate(timeout=30)
+    assert plot.returncode == 2
+    assert err.strip() == f"beliefnav: error: {rec}: no vehicle 'uav2' (valid: uav1)"
+    assert not (tmp_path / "fig").exists()
+
+
+def test_plot_of_a_run_directory_says_what_plot_reads(tmp_path):
+    """A user pointing `plot` at a run folder is told it reads a `beliefnav record` file."""
+    run_dir = tmp_path / "runs" / "sitl"
+    run_dir.mkdir(parents=True)
+    with child(["-m", "gcs_tools", "plot", str(run_dir)], hub_env()) as plot:
+        _, err = plot.communicate(timeout=30)
+    assert plot.returncode == 2
+    assert err.strip() == (f"beliefnav: error: {run_dir}: a directory; give a recording made by "
+                           "`beliefnav record` (.jsonl)")

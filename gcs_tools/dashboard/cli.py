@@ -9,10 +9,11 @@ import signal
 import sys
 
 from companion.telemetry import pubsub as telemetry
+from gcs_tools.choices import tcp_port
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--port", type=int, default=8080, help="HTTP port (default 8080)")
+    parser.add_argument("--port", type=tcp_port, default=8080, help="HTTP port (default 8080)")
     parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     parser.add_argument("--duration-s", type=float, default=0.0, help="stop after this long (0: never)")
     telemetry.add_arguments(parser)

@@ -426,13 +426,10 @@ def from_recording(path: Path, vehicle: str | None, home: LocalNedFrame | None =
     """A ``beliefnav record`` file: the vehicle's estimates, truth, setpoints and fixes; the frame of
     its route's ``home_lla`` (else of the packaged mission the route names, else the first fix's
     position, with a warning); the wall clock from the publishers' stamps."""
-    from gcs_tools.recorder.recording import iter_lines, read_recording, series
+    from gcs_tools.recorder.recording import iter_lines, read_recording, recorded_vehicle, series
 
     rec = read_recording(path)
-    if vehicle is None:
-        vehicle = rec.vehicles[0]
-    elif vehicle not in rec.vehicles:
-        raise UserError(f"{path}: no vehicle {vehicle!r} (valid: {', '.join(rec.vehicles)})")
+    vehicle = rec.vehicles[0] if vehicle is None else recorded_vehicle(rec, vehicle, path)
     s = series(rec, vehicle)
     columns: dict[str, np.ndarray] = {}
     for key, cols in FLY_COLUMNS.items():

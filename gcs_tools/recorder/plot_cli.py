@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs_tools.recorder.recording import read_recording, recorded_route, series
+from gcs_tools.recorder.recording import read_recording, recorded_route, recorded_vehicle, series
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,9 +27,10 @@ def run(args: argparse.Namespace) -> int:
     from gcs_tools.figures import belief_figure, map_figure
 
     rec = read_recording(args.file)
+    vehicles = [recorded_vehicle(rec, args.vehicle, args.file)] if args.vehicle else rec.vehicles
     out = Path(args.out) if args.out else Path(args.file).with_suffix("")
     out.mkdir(parents=True, exist_ok=True)
-    for v in [args.vehicle] if args.vehicle else rec.vehicles:
+    for v in vehicles:
         s = series(rec, v)
         world, waypoints_ned_m, route_name = recorded_route(rec, v)
         title = f"{Path(args.file).name}: {v}{route_name}"

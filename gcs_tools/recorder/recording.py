@@ -85,6 +85,8 @@ class Recording:
 def iter_lines(path: str | Path) -> Iterator[tuple[int, dict[str, Any] | None]]:
     """(line number, parsed line or None if unreadable); a truncated last line is just unreadable."""
     p = Path(path)
+    if p.is_dir():
+        raise UserError(f"{p}: a directory; give a recording made by `beliefnav record` (.jsonl)")
     try:
         f = p.open("rb")
     except OSError as exc:
@@ -97,6 +99,13 @@ def iter_lines(path: str | Path) -> Iterator[tuple[int, dict[str, Any] | None]]:
                 yield n, None
                 continue
             yield n, d if isinstance(d, dict) else None
+
+
+def recorded_vehicle(rec: Recording, vehicle: str, path: str | Path) -> str:
+    """``vehicle`` if the recording at ``path`` holds it, else a one-line error naming the ones it holds."""
+    if vehicle not in rec.vehicles:
+        raise UserError(f"{path}: no vehicle {vehicle!r} (valid: {', '.join(rec.vehicles)})")
+    return vehicle
 
 
 def read_recording(path: str | Path) -> Recording:

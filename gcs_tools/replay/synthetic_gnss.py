@@ -36,6 +36,7 @@ estimate is compared fairly with what a consumer of the raw fixes would have had
 from __future__ import annotations
 
 import csv
+import difflib
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -81,7 +82,9 @@ class GnssErrorOptions:
     def check(self) -> None:
         """One-line errors for values no replay could use (before anything is read)."""
         if self.errors not in ("none", "model") and not Path(self.errors).is_file():
-            raise UserError(f"--gnss-errors {self.errors!r}: not 'none', 'model' or an error series CSV file")
+            near = difflib.get_close_matches(self.errors, ("none", "model"), n=1, cutoff=0.5)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise UserError(f"--gnss-errors {self.errors!r}: no such file, and not 'none' or 'model'{hint}")
         if not (0 < self.rate_hz <= MAX_RATE_HZ):
             raise UserError(f"--gnss-rate-hz {self.rate_hz}: expected > 0 and <= {MAX_RATE_HZ:g}")
         if self.accuracy not in ACCURACY_MODES:

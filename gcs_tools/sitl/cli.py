@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-signing", action="store_true",
                         help="no MAVLink 2 signing (anyone on the host could then fly the vehicle)")
     parser.add_argument("--ports", help="vehicle UDP ports ESTIMATOR,BRIDGE,GROUND (default: free ones)")
-    parser.add_argument("--ubx-port", type=int, default=None,
+    parser.add_argument("--ubx-port", type=choices.tcp_port, default=None,
                         help="scenario canyon: the raw receiver's UBX TCP port on 127.0.0.1 "
                              "(default: a free one, named in OUT/receiver.json)")
     from simvehicle.groundlink import add_ground_arguments
@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         return autopilot_cli.run(args)
     if args.feed != "none" or args.speedup or args.speed_factor or args.ulog:
         raise UserError("--feed, --speedup, --speed-factor and --ulog apply to --vehicle ardupilot or px4")
+    from companion.mavlink.signing import read_signing_key
     from companion.mission import with_scenario
     from gcs_tools import choices
     from gcs_tools.outdir import ensure_out_dir
@@ -91,11 +92,13 @@ def run(args: argparse.Namespace) -> int:
     check_run_arguments(args.method, args.seed)
     choices.profile(mission, args.profile)
     ground_out_targets(args)  # a bad --ground-out too
-    ensure_out_dir(args.out)
     if args.signing_key_file is not None and not args.signing_key_file.is_file():
         raise UserError(f"--signing-key-file {args.signing_key_file}: no such file")
     if args.signing_key_file is not None and args.no_signing:
         raise UserError("--signing-key-file and --no-signing contradict each other")
+    if args.signing_key_file is not None:  # an empty or unusable key: here, not from a child process
+        read_signing_key(args.signing_key_file)
+    ensure_out_dir(args.out)
     claim = claim_vehicle_id(telemetry.config_from_args(args), args.vehicle_id)
     try:
         if claim is not None:
