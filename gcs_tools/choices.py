@@ -34,6 +34,18 @@ def tcp_port(text: str) -> int:
     return port
 
 
+def run_time_s(text: str) -> float:
+    """An argparse ``type`` for ``--duration-s`` of a command that runs until stopped: finite and ≥ 0
+    (0: until Ctrl-C; a negative or NaN duration would silently mean "never stop")."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"{text} must be a finite number of seconds >= 0 (0: until Ctrl-C)")
+    return value
+
+
 def add_method_argument(parser: argparse.ArgumentParser) -> None:
     """``--method`` with the one default (``companion.estimator.DEFAULT_METHOD``)."""
     parser.add_argument("--method", default=DEFAULT_METHOD,

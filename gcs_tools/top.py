@@ -15,12 +15,13 @@ from rich.markup import escape  # "[s]", "[m]" in headers are units, not rich ma
 from rich.table import Table
 
 from companion.telemetry import pubsub as telemetry
+from gcs_tools.choices import run_time_s
 from gcs_tools.dashboard.labels import headline
 from gcs_tools.dashboard.state import FIX_TYPES, STALE_S, LiveState, ended
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--duration-s", type=float, default=0.0,
+    parser.add_argument("--duration-s", type=run_time_s, default=0.0,
                         help="stop after this long (0: until Ctrl-C)")
     parser.add_argument("--rate-hz", type=float, default=10.0, help="screen refresh rate")
     telemetry.add_arguments(parser)

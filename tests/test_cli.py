@@ -39,7 +39,11 @@ def test_parse_errors_are_one_line_with_a_hint():
               "argument --home: expected one argument (if its value starts with '-': --home=-VALUE)"),
              # a misspelt option names the command and points at that command's help, not the top level's
              (["top", "--vehicel", "uav1"],
-              "beliefnav: error: top: unrecognized arguments: --vehicel uav1 (see `beliefnav top --help`)"))
+              "beliefnav: error: top: unrecognized arguments: --vehicel uav1 (see `beliefnav top --help`)"),
+             # a negative or NaN run time would have meant "never stop"
+             (["record", "--duration-s", "-1"], "record: argument --duration-s: -1 must be a finite number"),
+             (["top", "--duration-s", "nan"], "top: argument --duration-s: nan must be a finite number"),
+             (["dashboard", "--duration-s", "x"], "dashboard: argument --duration-s: 'x' is not a number"))
     for argv, want in cases:
         done = subprocess.run([sys.executable, "-m", "gcs_tools", *argv], capture_output=True, text=True,
                               timeout=60)

@@ -9,13 +9,13 @@ import signal
 import sys
 
 from companion.telemetry import pubsub as telemetry
-from gcs_tools.choices import tcp_port
+from gcs_tools.choices import run_time_s, tcp_port
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=tcp_port, default=8080, help="HTTP port (default 8080)")
     parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    parser.add_argument("--duration-s", type=float, default=0.0, help="stop after this long (0: never)")
+    parser.add_argument("--duration-s", type=run_time_s, default=0.0, help="stop after this long (0: never)")
     telemetry.add_arguments(parser)
 
 

@@ -9,13 +9,14 @@ import threading
 import time
 
 from companion.telemetry import pubsub as telemetry
+from gcs_tools.choices import run_time_s
 from gcs_tools.recorder.recording import RecordingWriter
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="runs/record.jsonl",
                         help="recording file (JSON Lines, see README; default runs/record.jsonl)")
-    parser.add_argument("--duration-s", type=float, default=0.0,
+    parser.add_argument("--duration-s", type=run_time_s, default=0.0,
                         help="stop after this long (0: until Ctrl-C)")
     parser.add_argument("--key", default="beliefnav/**", help="Zenoh key expression to record")
     telemetry.add_arguments(parser)
