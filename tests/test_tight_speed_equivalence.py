@@ -25,6 +25,52 @@ C_M_S = 299792458.0
 W_C = 7.2921151467e-5 / C_M_S
 
 
+# The numpy forms the C functions replaced (what the filter computed before), the references below.
+def _cn0_add_numpy(cal, cn0_dbhz: np.ndarray) -> None:
+    from companion.tight.cn0cal import BIN_DB, HI_DBHZ, LO_DBHZ
+
+    c = np.asarray(cn0_dbhz, dtype=float)
+    c = np.minimum(np.maximum(c[np.isfinite(c)], LO_DBHZ), HI_DBHZ)  # np.clip's values
+    if c.size:
+        idx = np.minimum(((c - cal._edges[0]) / BIN_DB).astype(int), len(cal._hist) - 1)
+        cal._hist += np.bincount(idx, minlength=len(cal._hist))
+        cal.n += int(c.size)
+
+
+def _cn0_level_numpy(cal) -> float:
+    from companion.tight.cn0cal import BIN_DB
+
+    if cal.n == 0:
+        return float("nan")
+    cum = np.cumsum(cal._hist)
+    target = cal.quantile * cal.n
+    i = min(int(np.searchsorted(cum, target, side="left")), len(cal._hist) - 1)
+    below = cum[i - 1] if i > 0 else 0.0
+    frac = (target - below) / cal._hist[i] if cal._hist[i] > 0 else 0.5
+    return float(cal._edges[i] + frac * BIN_DB)
+
+
+def _report_cov_numpy(out: np.ndarray, scale: np.ndarray | None, snap) -> np.ndarray:
+    from companion.estimator.consistency import snapshot_axis
+
+    cov = out[9:18] if scale is None else out[9:18] * scale
+    k, f_h, f_v, d = snap
+    cov = cov.copy() if scale is None else cov
+    cov[0] = snapshot_axis(float(out[9]), k, f_h, d[0])
+    cov[1] = snapshot_axis(float(out[10]), k, f_h, d[1])
+    cov[2] = snapshot_axis(float(out[11]), k, f_v, d[2])
+    return cov
+
+
+def _predict_mean_numpy(x: np.ndarray, m15, T: float, live: tuple[bool, ...]) -> np.ndarray:
+    from companion.tight.model import I_CLK
+
+    x = x.copy()
+    x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
+    x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * np.asarray(live, dtype=float)
+    return x
+
+
 def _receiver(x: list[float], r0: list[float], C: list[list[float]]) -> tuple[list[float], list[float]]:
     r = [r0[i] + C[i][0] * x[0] + C[i][1] * x[1] + C[i][2] * x[2] for i in range(3)]
     ve = [C[i][0] * x[3] + C[i][1] * x[4] + C[i][2] * x[5] for i in range(3)]
@@ -372,7 +418,7 @@ def test_c_prepare_leaves_a_dropped_observation_to_numpy(drop):
 
 
 def test_c_cn0_calibration_equals_its_numpy_form_bit_for_bit():
-    """``Cn0Calibration.add`` and ``level_dbhz`` (in C) against ``add_numpy`` / ``level_numpy`` over epochs
+    """``Cn0Calibration.add`` and ``level_dbhz`` (in C) against their numpy forms over epochs
     with NaN, infinite and out-of-range values, fractional C/N0 and empty epochs: the same histogram, count
     and quantile, bit for bit, after every epoch (quantiles near both ends included)."""
     from companion.tight.cn0cal import Cn0Calibration
@@ -380,7 +426,7 @@ def test_c_cn0_calibration_equals_its_numpy_form_bit_for_bit():
     rng = np.random.default_rng(13)
     for quantile in (0.0, 0.2, 0.75, 1.0):
         c, ref = Cn0Calibration(quantile, 45.0, 50.0), Cn0Calibration(quantile, 45.0, 50.0)
-        assert math.isnan(c.level_dbhz()) and math.isnan(ref.level_numpy())
+        assert math.isnan(c.level_dbhz()) and math.isnan(_cn0_level_numpy(ref))
         for k in range(60):
             cn0 = rng.normal(38.0, 9.0, rng.integers(0, 25)) if k != 5 else np.zeros(0)
             if k % 4 == 1 and len(cn0) > 3:
@@ -390,9 +436,9 @@ def test_c_cn0_calibration_equals_its_numpy_form_bit_for_bit():
             if k % 5 == 0:
                 cn0 = np.round(cn0)
             c.add(cn0)
-            ref.add_numpy(cn0)
+            _cn0_add_numpy(ref, cn0)
             assert np.array_equal(c._hist, ref._hist) and c.n == ref.n
-            got, want = c.level_dbhz(), ref.level_numpy()
+            got, want = c.level_dbhz(), _cn0_level_numpy(ref)
             assert got == want or (math.isnan(got) and math.isnan(want))
             assert c.calibrated(cn0).tobytes() == (np.asarray(cn0, float) - ref.offset_db()).tobytes()
         assert c.n > 500
@@ -442,11 +488,9 @@ def test_c_anchors_are_numpys():
 
 def test_c_report_cov_equals_the_numpy_report_bit_for_bit():
     """``estimate``'s variances with the snapshots' floors (``_tight.report_cov``) against the numpy and
-    ``snapshot_axis`` form they replaced (``TightNavigator.report_cov_numpy``), with and without the scale k
+    ``snapshot_axis`` form they replaced, with and without the scale k
     on the positions, floors None or not, each term winning, NaN and infinite variances."""
     from companion.estimator.consistency import SnapshotFloor, variance_scale
-    from companion.tight.navigator import TightNavigator
-
     rng = np.random.default_rng(14)
     wins = set()
     for trial in range(400):
@@ -461,7 +505,7 @@ def test_c_report_cov_equals_the_numpy_report_bit_for_bit():
         d = tuple(float(v) for v in (rng.lognormal(0.0, 2.0, 3) if trial % 2 else np.zeros(3)))
         snap = (k, floors[0], floors[1], d)
         got = _tight.report_cov(out, k, floors[0], floors[1], *d)
-        want = TightNavigator.report_cov_numpy(out, variance_scale(k), snap)
+        want = _report_cov_numpy(out, variance_scale(k), snap)
         assert got.tobytes() == want.tobytes()
         wins.add("k p" if got[0] == out[9] * k else "delay" if got[0] == d[0] else "floor")
     assert wins == {"k p", "delay", "floor"}  # each term won somewhere
@@ -492,10 +536,8 @@ def test_fit_fed_in_key_order_holds_the_same_sums():
 
 @pytest.mark.parametrize("n_state", [N_STATE, N_STATE + 1])
 def test_c_predict_mean_equals_the_numpy_prediction_bit_for_bit(n_state):
-    """``_tight.predict_mean`` against the numpy it replaced in ``_predict`` (``predict_mean_numpy``): random
+    """``_tight.predict_mean`` against the numpy it replaced in ``_predict``: random
     states (with the barometer's offset too), live and dead clocks, T of either sign and 0, NaN."""
-    from companion.tight.engine import TightEngine
-
     rng = np.random.default_rng(16)
     for trial in range(200):
         x = rng.normal(0.0, 1e3, n_state)
@@ -505,7 +547,7 @@ def test_c_predict_mean_equals_the_numpy_prediction_bit_for_bit(n_state):
         live = tuple(bool(v) for v in rng.integers(0, 2, 6))
         T = float(rng.choice([0.0, -0.2, 0.2, 1.7, rng.uniform(0, 5)]))
         got = _tight.predict_mean(x, m15, T, live)
-        want = TightEngine.predict_mean_numpy(x, m15, T, live)
+        want = _predict_mean_numpy(x, m15, T, live)
         assert got.tobytes() == want.tobytes() and got is not x and x.shape == got.shape
     with pytest.raises(ValueError):
         _tight.predict_mean(np.zeros(N_STATE), (0.0,) * 14, 0.1, (True,) * 6)

@@ -37,7 +37,7 @@ class Cn0Calibration:
 
     def add(self, cn0_dbhz: np.ndarray) -> None:
         """Count an epoch's C/N0 values (non-finite ones ignored, the rest clipped to the histogram)."""
-        # add_numpy's steps, in C
+        # numpy's clip, bin index and bincount, in C (tested bit for bit against them)
         self.n += _tight.cn0_add(self._hist, self._edges, cn0_dbhz, LO_DBHZ, HI_DBHZ, BIN_DB)
 
     def level_dbhz(self) -> float:
@@ -45,27 +45,6 @@ class Cn0Calibration:
         if self.n == 0:
             return float("nan")
         return float(_tight.cn0_level(self._hist, self._edges, self.quantile * self.n, BIN_DB))  # in C
-
-    def add_numpy(self, cn0_dbhz: np.ndarray) -> None:
-        """``add`` in numpy (the reference of its C form in the tests)."""
-        c = np.asarray(cn0_dbhz, dtype=float)
-        c = np.minimum(np.maximum(c[np.isfinite(c)], LO_DBHZ), HI_DBHZ)  # np.clip's values
-        if c.size:
-            idx = np.minimum(((c - self._edges[0]) / BIN_DB).astype(int), len(self._hist) - 1)
-            self._hist += np.bincount(idx, minlength=len(self._hist))
-            self.n += int(c.size)
-
-    def level_numpy(self) -> float:
-        """``level_dbhz`` in numpy (the reference of its C form in the tests)."""
-        if self.n == 0:
-            return float("nan")
-        cum = np.cumsum(self._hist)
-        target = self.quantile * self.n
-        i = int(np.searchsorted(cum, target, side="left"))
-        i = min(i, len(self._hist) - 1)
-        below = cum[i - 1] if i > 0 else 0.0
-        frac = (target - below) / self._hist[i] if self._hist[i] > 0 else 0.5
-        return float(self._edges[i] + frac * BIN_DB)
 
     def offset_db(self) -> float:
         """The receiver's C/N0 minus the reference receiver's, shrunk towards 0 while n is small."""

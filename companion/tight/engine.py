@@ -444,7 +444,7 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         T = (t_us - e.t_us) * 1e-6
         x15 = (*e.x[0:6].tolist(), 0.0, 0.0, 0.0, *e.x[6:12].tolist())
         m15, nA, nB = mean_between(x15, e.ints, ints, 1.0)
-        x = _tight.predict_mean(e.x, m15, T, e.live)  # predict_mean_numpy's, in C
+        x = _tight.predict_mean(e.x, m15, T, e.live)  # (p, v, a, d) from m15, the live clocks + T drift
         if T <= 0.0:
             return x, e.P.copy()
         # F P Fᵀ + Q (model.transition, model.process_noise) and the held-time noise of the block
@@ -452,14 +452,6 @@ class TightEngine(Timeline[Entry, SatEpoch | Speed | Baro, tuple[int, np.ndarray
         # (the baro offset's random walk, when the state has it)
         return x, _tight.predict_cov(e.P, T, nA, nB, e.live, *self._q, bool(e.P[I_HEADING, I_HEADING] > 0.0),
                                      e.ints, ints, *self._q_hold, self._q_baro)
-
-    @staticmethod
-    def predict_mean_numpy(x: np.ndarray, m15: Any, T: float, live: tuple[bool, ...]) -> np.ndarray:
-        """``_tight.predict_mean`` in numpy (what ``_predict`` computed before; the tests' reference)."""
-        x = x.copy()
-        x[0:12] = np.asarray(m15)[model.NAV_OF_LOOSE]
-        x[I_CLK:I_DRIFT] += T * x[I_DRIFT] * np.asarray(live, dtype=float)
-        return x
 
     def _fuse(self, prev: Entry, t_us: int, meas: SatEpoch | Speed | Baro) -> Entry:
         ints = self.imu.integrals(t_us)

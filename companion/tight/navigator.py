@@ -29,7 +29,6 @@ from companion.estimator._core import rotation_q
 from companion.estimator.consistency import (
     SnapshotFloor,
     accuracy_inflation,
-    snapshot_axis,
     snapshot_parts,
     variance_scale,
 )
@@ -202,31 +201,19 @@ class TightNavigator:
             self._reported = (entry, variance_scale(k), self.accuracy_floor_m2(), self._snapshot_floor(k))
         _, scale, floor, snap = self._reported
         if snap is not None:  # snapshots correlated over seconds: not averaged down, up to one snapshot's;
-            k, f_h, f_v, d = snap  # at least the one-signed delays' bias (report_cov_numpy's, in C)
-            cov = _tight.report_cov(out, k, f_h, f_v, d[0], d[1], d[2])
-        else:
-            cov = out[9:18] if scale is None else out[9:18] * scale  # P's positions × k
+            k, f_h, f_v, d = snap  # at least the one-signed delays' bias (snapshot_axis per axis, in C)
+            cov = _tight.report_cov(out, k, f_h, f_v, d[0], d[1], d[2])  # a new array
+        elif scale is not None:
+            cov = out[9:18] * scale  # P's positions × k
+        else:  # out's own view, copied only to be changed
+            cov = out[9:18] if floor is None else out[9:18].copy()
         if floor is not None:  # + the common-mode floor, in quadrature
-            cov = cov.copy() if scale is None else cov
             cov[0:3] += floor
         est = new_nav_estimate(t_us, out[0:3], out[3:6], out[6:9], cov, info.beta_mean, info.nis,
                                self.method, pos_valid=t_us - last.t_good_us <= self._valid_us,
                                gnss_resets=last.totals[2])
         self._last = (now, est)
         return est
-
-    @staticmethod
-    def report_cov_numpy(out: np.ndarray, scale: np.ndarray | None, snap: tuple[
-            float, SnapshotFloor | None, SnapshotFloor | None, tuple[float, float, float]]) -> np.ndarray:
-        """``estimate``'s variances with the snapshots' floors, as numpy and ``snapshot_axis`` compute them
-        (the reference of ``_tight.report_cov`` in the tests)."""
-        cov = out[9:18] if scale is None else out[9:18] * scale
-        k, f_h, f_v, d = snap
-        cov = cov.copy() if scale is None else cov
-        cov[0] = snapshot_axis(float(out[9]), k, f_h, d[0])
-        cov[1] = snapshot_axis(float(out[10]), k, f_h, d[1])
-        cov[2] = snapshot_axis(float(out[11]), k, f_v, d[2])
-        return cov
 
     def accuracy_inflation(self) -> float:
         """The factor (≥ 1) on the position variances the estimates report: the used pseudoranges'
