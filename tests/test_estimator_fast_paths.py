@@ -141,3 +141,43 @@ def test_sample_init_through_the_slots_is_the_dataclass_init(cls):
         with pytest.raises(TypeError) as want:
             ref(*bad_args, **bad_kwargs)
         assert str(got.value).split("(")[1:] == str(want.value).split("(")[1:]
+
+
+def test_the_sorted_union_equals_numpys():
+    """``Fit.add``'s union of channel keys equals ``np.union1d``'s (empty, disjoint, overlapping,
+    repeated keys)."""
+    from companion.estimator.consistency import _sorted_union
+
+    rng = np.random.default_rng(11)
+    empty = np.zeros(0, dtype=np.int64)
+    cases = [(empty, empty), (empty, AXES3), (AXES3, empty)]
+    cases += [(np.unique(rng.integers(0, 40, rng.integers(0, 12))), rng.integers(0, 40, rng.integers(0, 12)))
+              for _ in range(500)]
+    for a, b in cases:
+        got, want = _sorted_union(a, b), np.union1d(a, b)
+        assert got.dtype == want.dtype and got.tolist() == want.tolist()
+
+
+def test_no_import_falls_inside_the_first_fixes():
+    """Nothing is imported while the first fixes are fused (``np.unique`` imported ``numpy.ma``, 11 ms,
+    inside the first fix): a fresh interpreter, the benchmark's flight."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import sys
+        from gcs_tools.bench import estimator as be
+        from companion.wiring import navigator_for
+        samples = be.flight(3.0, None)
+        nav = navigator_for(None, be.METHOD, frame=be.HOME)
+        before = set(sys.modules)
+        for s in samples:
+            nav.push(s)
+            nav.estimate()
+        assert nav.counters()["gnss_fused"] > 50, nav.counters()
+        print(" ".join(sorted(set(sys.modules) - before)))
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == [], out.stdout

@@ -27,6 +27,14 @@ C_MAX = 100.0
 SCATTER_MAX = 2.0
 
 
+def _sorted_union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.union1d(a, b)`` for integer keys, without ``np.unique`` (which imports ``numpy.ma``, 11 ms,
+    on its first call: the loose filter's first fix would wait for it)."""
+    keys = np.concatenate((a, b))
+    keys.sort()
+    return keys[np.concatenate(([True], keys[1:] != keys[:-1]))] if len(keys) else keys
+
+
 class Fit(NamedTuple):
     """The fused innovations' consistency over the last ``window_s`` (the reported accuracy's
     inflation, ``inflation``): per channel (``key``, sorted) the exponentially weighted sum of its
@@ -53,7 +61,7 @@ class Fit(NamedTuple):
             nu_sum[at] += nu
             w2_sum += 1.0
             return Fit(self.key, nu_sum, w2_sum, t_us)
-        keys = np.union1d(self.key, key)
+        keys = _sorted_union(self.key, key)
         if len(keys) == len(key) and np.array_equal(keys, key):
             keys = key  # the caller's own (sorted) keys: the next add with them takes the path above at once
         nu_sum, w2_sum = np.zeros(len(keys)), np.zeros(len(keys))
