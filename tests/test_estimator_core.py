@@ -280,3 +280,100 @@ def test_the_core_holds_no_memory_on_the_callers_arrays():
     grown = tracemalloc.get_traced_memory()[0] - before
     tracemalloc.stop()
     assert grown < 50_000  # the history's own buffer; 36 bytes × 8000 arrays if descriptions were kept
+
+
+def _reference_push(state: dict, sample: object) -> None:
+    """``Navigator.push`` as it was in Python before the C front (the reference of ``_core.Front``):
+    ``state`` holds the history, gravity, the latest rotation, the counts, the waiting list and the
+    call logs of ``pushed`` and ``other``."""
+    from companion.domain.samples import AttitudeSample, ImuSample
+    kind = type(sample)
+    if kind is ImuSample:
+        r = state["rot"]
+        if r is None:
+            state["counts"]["imu_rejected_no_attitude"] += 1
+            return
+        if state["hist"].push_frd(sample.t_us, sample.acc_frd_m_s2, r, state["g"]) or state["waiting"]:
+            state["pushed"].append(len(state["hist"]))
+    elif kind is AttitudeSample:
+        r = _core.rotation_q(sample.q_ned_frd)
+        if r is None:
+            state["counts"]["attitude_rejected_nonfinite"] += 1
+            return
+        state["rot"] = r
+        state["counts"]["attitude_used"] += 1
+    else:
+        state["other"].append(sample)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_navigator_front_equals_the_python_push_it_replaced(seed):
+    """``_core.Front`` (the navigator's push of attitude and IMU samples) against the Python push it
+    replaced, on a random stream with IMU before any attitude, zero and NaN quaternions, specific
+    forces not finite or beyond the bound, times not increasing, other samples and a waiting list:
+    the same history rows (bits), counts, calls of ``pushed`` and ``other``."""
+    from companion.domain.samples import AttitudeSample, GnssFix, ImuSample
+    rng = np.random.default_rng(seed)
+    states = []
+    for _ in range(2):
+        counts = {"attitude_used": 0, "attitude_rejected_nonfinite": 0, "imu_rejected_no_attitude": 0}
+        states.append({"hist": _core.History(0.05, 2.0, 100.0), "g": 9.80665, "rot": None, "counts": counts,
+                       "waiting": [], "pushed": [], "other": []})
+    ref, c = states
+    c["hist"].trim_len = 150
+    ref["hist"].trim_len = 150
+    front = _core.Front(c["hist"], c["g"], ImuSample, AttitudeSample, c["other"].append,
+                        lambda: c["pushed"].append(len(c["hist"])), c["waiting"], c["counts"])
+    samples: list[object] = [ImuSample(0, np.array([0.0, 0.0, -9.8]), np.zeros(3))]  # before any attitude
+    t = 0
+    for k in range(600):
+        t += int(rng.choice([5000, 5000, 5000, 0, -3000, 60_000]))
+        q = rng.standard_normal(4)
+        u = rng.random()
+        if u < 0.05:
+            q = np.zeros(4)
+        elif u < 0.1:
+            q[rng.integers(4)] = rng.choice([math.nan, math.inf])
+        samples.append(AttitudeSample(t, q))
+        f = rng.standard_normal(3) * 3.0 + np.array([0.0, 0.0, -9.8])
+        u = rng.random()
+        if u < 0.04:
+            f[rng.integers(3)] = rng.choice([math.nan, math.inf, 150.0, -1e300])
+        samples.append(ImuSample(t, f if k % 2 else tuple(f.tolist()), np.zeros(3)))
+        if k % 97 == 5:
+            samples.append(GnssFix(t, 1.0, 2.0, 3.0, 3, 10))
+        if k == 300:
+            c["waiting"].append((t + 1, None))
+            ref["waiting"].append((t + 1, None))
+    for s in samples:
+        assert front(s) is None
+        _reference_push(ref, s)
+        assert front.rot == ref["rot"]
+    assert c["hist"].rows == ref["hist"].rows and c["hist"].counts == ref["hist"].counts
+    assert c["counts"] == ref["counts"] and c["counts"]["attitude_rejected_nonfinite"] > 0
+    assert c["pushed"] == ref["pushed"] and len(c["pushed"]) > 300  # the waiting list: at every sample
+    assert c["other"] == ref["other"] and len(c["other"]) == 7
+    front.rot = None
+    front(ImuSample(t + 5000, np.zeros(3), np.zeros(3)))
+    assert c["counts"]["imu_rejected_no_attitude"] == ref["counts"]["imu_rejected_no_attitude"] + 1
+    front.rot = np.eye(3).ravel()
+    assert front.rot == (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    with pytest.raises(TypeError):
+        front()
+    with pytest.raises(ValueError):
+        front(AttitudeSample(t, np.zeros(3)))  # not 4 numbers
+    with pytest.raises(ValueError):
+        front.rot = (1.0, 0.0)
+
+
+def test_a_navigator_is_collected_with_its_front():
+    """The front refers back to its navigator (its bound methods): the cycle is collected."""
+    import gc
+    import weakref
+
+    from companion.estimator import Navigator
+    nav = Navigator()
+    ref = weakref.ref(nav)
+    del nav
+    gc.collect()
+    assert ref() is None

@@ -582,21 +582,29 @@ static PyObject *py_inv3(PyObject *self, PyObject *s) {
     return tuple_of(out, 9);
 }
 
-/* rotation_q(q) -> R_ned_frd row-major (9-tuple) of the quaternion (w, x, y, z), or None when
- * |q|^2 is not finite or <= 1e-12 (navigator.rotation_scaled with s = 2 / |q|^2). */
-static PyObject *py_rotation_q(PyObject *self, PyObject *q_o) {
-    double q[4];
-    if (read_doubles(q_o, q, 4, "quaternion") < 0) return NULL;
+/* R_ned_frd row-major of the quaternion q = (w, x, y, z) (navigator.rotation_scaled with s = 2 / |q|^2);
+ * 0 (r untouched) when |q|^2 is not finite or <= 1e-12 */
+static int rotation_of(const double *q, double *r) {
     double w = q[0], x = q[1], y = q[2], z = q[3];
     double n2 = w * w + x * x + y * y + z * z;
-    if (!(isfinite(n2) && n2 > 1e-12)) Py_RETURN_NONE;
+    if (!(isfinite(n2) && n2 > 1e-12)) return 0;
     double s = 2.0 / n2;
     double xs = x * s, ys = y * s, zs = z * s;
     double wx = w * xs, wy = w * ys, wz = w * zs;
     double xx = x * xs, xy = x * ys, xz = x * zs;
     double yy = y * ys, yz = y * zs, zz = z * zs;
-    double r[9] = {1.0 - (yy + zz), xy - wz, xz + wy, xy + wz, 1.0 - (xx + zz), yz - wx, xz - wy, yz + wx,
-                   1.0 - (xx + yy)};
+    r[0] = 1.0 - (yy + zz); r[1] = xy - wz; r[2] = xz + wy;
+    r[3] = xy + wz; r[4] = 1.0 - (xx + zz); r[5] = yz - wx;
+    r[6] = xz - wy; r[7] = yz + wx; r[8] = 1.0 - (xx + yy);
+    return 1;
+}
+
+/* rotation_q(q) -> R_ned_frd row-major (9-tuple) of the quaternion (w, x, y, z), or None when
+ * |q|^2 is not finite or <= 1e-12 (rotation_of). */
+static PyObject *py_rotation_q(PyObject *self, PyObject *q_o) {
+    double q[4], r[9];
+    if (read_doubles(q_o, q, 4, "quaternion") < 0) return NULL;
+    if (!rotation_of(q, r)) Py_RETURN_NONE;
     return tuple_of(r, 9);
 }
 
@@ -858,8 +866,19 @@ static PyObject *hist_push(History *self, PyObject *const *args, Py_ssize_t narg
     return push_checked(self, t, ax, ay, az, rot);
 }
 
-/* push_frd(t_us, f_frd, rot, g) -> as push, with the NED acceleration R f + [0, 0, g]; a finite specific
+/* push_checked of the NED acceleration R f + [0, 0, g] of the body specific force f; a finite specific
  * force beyond max_force on an axis (beyond any IMU's full scale: damage) is counted, not used */
+static PyObject *push_frd_c(History *self, long long t, const double *f, const double *r, double g) {
+    double fx = f[0], fy = f[1], fz = f[2], m = self->max_force;
+    if (!(fabs(fx) <= m && fabs(fy) <= m && fabs(fz) <= m) && isfinite(fx) && isfinite(fy) && isfinite(fz)) {
+        self->n_out_of_range++;
+        Py_RETURN_FALSE;
+    }
+    return push_checked(self, t, r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
+                        r[6] * fx + r[7] * fy + r[8] * fz + g, r);
+}
+
+/* push_frd(t_us, f_frd, rot, g) -> push_frd_c */
 static PyObject *hist_push_frd(History *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "push_frd(t_us, f_frd, rot, g)"); return NULL; }
     long long t = PyLong_AsLongLong(args[0]);
@@ -868,13 +887,7 @@ static PyObject *hist_push_frd(History *self, PyObject *const *args, Py_ssize_t 
     if (read_doubles(args[1], f, 3, "specific force") < 0 || read_doubles(args[2], r, 9, "rotation") < 0) return NULL;
     double g = PyFloat_AsDouble(args[3]);
     if (g == -1.0 && PyErr_Occurred()) return NULL;
-    double fx = f[0], fy = f[1], fz = f[2], m = self->max_force;
-    if (!(fabs(fx) <= m && fabs(fy) <= m && fabs(fz) <= m) && isfinite(fx) && isfinite(fy) && isfinite(fz)) {
-        self->n_out_of_range++;
-        Py_RETURN_FALSE;
-    }
-    return push_checked(self, t, r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
-                        r[6] * fx + r[7] * fy + r[8] * fz + g, r);
+    return push_frd_c(self, t, f, r, g);
 }
 
 /* append_batch(t_us int64 (n,), a_ned float64 (n, 3), rot float64 (n, 9) or None): append one by
@@ -1100,6 +1113,164 @@ static PyTypeObject HistoryType = {
     .tp_as_sequence = &hist_seq,
 };
 
+/* ------------------------------------------------------------------ the navigator's per-sample front */
+/* Front(history, g_m_s2, imu_type, attitude_type, other, pushed, waiting, counts): a navigator's push(sample)
+ * (navigator.Navigator.push; docs in its class): an attitude sample's rotation kept (rotation_of; counted
+ * in ``counts`` as attitude_used or attitude_rejected_nonfinite), an IMU sample pushed with the latest
+ * rotation (History.push_frd; imu_rejected_no_attitude before any) and ``pushed()`` called when that
+ * returns True or ``waiting`` (a list) is not empty; any other sample handed to ``other(sample)``. */
+typedef struct {
+    PyObject_HEAD
+    vectorcallfunc vectorcall;
+    History *hist;
+    double g;
+    PyObject *imu_type, *att_type, *other, *pushed, *waiting, *counts;
+    double rot[9];
+    int has_rot;
+} Front;
+
+static PyObject *s_t_us, *s_acc, *s_q, *s_used, *s_nonfinite, *s_no_attitude;
+
+static int count_one(PyObject *counts, PyObject *key) {
+    PyObject *v = PyDict_GetItemWithError(counts, key);  /* borrowed */
+    if (!v && PyErr_Occurred()) return -1;
+    long long k = v ? PyLong_AsLongLong(v) : 0;
+    if (k == -1 && PyErr_Occurred()) return -1;
+    PyObject *n = PyLong_FromLongLong(k + 1);
+    if (!n) return -1;
+    int rc = PyDict_SetItem(counts, key, n);
+    Py_DECREF(n);
+    return rc;
+}
+
+static PyObject *front_push(Front *self, PyObject *sample) {
+    PyTypeObject *kind = Py_TYPE(sample);
+    if ((PyObject *)kind == self->imu_type) {
+        if (!self->has_rot) return count_one(self->counts, s_no_attitude) < 0 ? NULL : Py_NewRef(Py_None);
+        PyObject *t_o = PyObject_GetAttr(sample, s_t_us);
+        if (!t_o) return NULL;
+        long long t = PyLong_AsLongLong(t_o);
+        Py_DECREF(t_o);
+        if (t == -1 && PyErr_Occurred()) return NULL;
+        PyObject *f_o = PyObject_GetAttr(sample, s_acc);
+        if (!f_o) return NULL;
+        double f[3];
+        int rc = read_doubles(f_o, f, 3, "specific force");
+        Py_DECREF(f_o);
+        if (rc < 0) return NULL;
+        PyObject *due = push_frd_c(self->hist, t, f, self->rot, self->g);
+        if (!due) return NULL;
+        int is_due = due == Py_True;
+        Py_DECREF(due);
+        if (is_due || PyList_GET_SIZE(self->waiting) > 0) return PyObject_CallNoArgs(self->pushed);
+        Py_RETURN_NONE;
+    }
+    if ((PyObject *)kind == self->att_type) {
+        PyObject *q_o = PyObject_GetAttr(sample, s_q);
+        if (!q_o) return NULL;
+        double q[4];
+        int rc = read_doubles(q_o, q, 4, "quaternion");
+        Py_DECREF(q_o);
+        if (rc < 0) return NULL;
+        if (!rotation_of(q, self->rot)) return count_one(self->counts, s_nonfinite) < 0 ? NULL : Py_NewRef(Py_None);
+        self->has_rot = 1;
+        return count_one(self->counts, s_used) < 0 ? NULL : Py_NewRef(Py_None);
+    }
+    return PyObject_CallOneArg(self->other, sample);
+}
+
+static PyObject *front_vectorcall(PyObject *self, PyObject *const *args, size_t nargsf, PyObject *kwnames) {
+    if (PyVectorcall_NARGS(nargsf) != 1 || (kwnames && PyTuple_GET_SIZE(kwnames))) {
+        PyErr_SetString(PyExc_TypeError, "push(sample): one sample");
+        return NULL;
+    }
+    return front_push((Front *)self, args[0]);
+}
+
+static int front_init(Front *self, PyObject *args, PyObject *kw) {
+    PyObject *hist, *imu_type, *att_type, *other, *pushed, *waiting, *counts;
+    double g;
+    if (!PyArg_ParseTuple(args, "O!dOOOOO!O!", &HistoryType, &hist, &g, &imu_type, &att_type, &other, &pushed,
+                          &PyList_Type, &waiting, &PyDict_Type, &counts))
+        return -1;
+    Py_XSETREF(self->hist, (History *)Py_NewRef(hist));
+    Py_XSETREF(self->imu_type, Py_NewRef(imu_type));
+    Py_XSETREF(self->att_type, Py_NewRef(att_type));
+    Py_XSETREF(self->other, Py_NewRef(other));
+    Py_XSETREF(self->pushed, Py_NewRef(pushed));
+    Py_XSETREF(self->waiting, Py_NewRef(waiting));
+    Py_XSETREF(self->counts, Py_NewRef(counts));
+    self->g = g;
+    self->has_rot = 0;
+    self->vectorcall = front_vectorcall;
+    return 0;
+}
+
+static int front_traverse(Front *self, visitproc visit, void *arg) {
+    Py_VISIT(self->hist);
+    Py_VISIT(self->imu_type);
+    Py_VISIT(self->att_type);
+    Py_VISIT(self->other);
+    Py_VISIT(self->pushed);
+    Py_VISIT(self->waiting);
+    Py_VISIT(self->counts);
+    return 0;
+}
+
+static int front_clear(Front *self) {
+    Py_CLEAR(self->hist);
+    Py_CLEAR(self->imu_type);
+    Py_CLEAR(self->att_type);
+    Py_CLEAR(self->other);
+    Py_CLEAR(self->pushed);
+    Py_CLEAR(self->waiting);
+    Py_CLEAR(self->counts);
+    return 0;
+}
+
+static void front_dealloc(Front *self) {
+    PyObject_GC_UnTrack(self);
+    front_clear(self);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* rot: the latest attitude's R_ned_frd (9-tuple; None before one); settable (a batch of samples sets it) */
+static PyObject *front_get_rot(Front *self, void *c) {
+    if (!self->has_rot) Py_RETURN_NONE;
+    return tuple_of(self->rot, 9);
+}
+
+static int front_set_rot(Front *self, PyObject *v, void *c) {
+    if (!v || v == Py_None) { self->has_rot = 0; return 0; }
+    double r[9];
+    if (read_doubles(v, r, 9, "rotation") < 0) return -1;
+    memcpy(self->rot, r, sizeof r);
+    self->has_rot = 1;
+    return 0;
+}
+
+static PyGetSetDef front_getset[] = {
+    {"rot", (getter)front_get_rot, (setter)front_set_rot, "the latest R_ned_frd (row-major) or None", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyTypeObject FrontType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "companion.estimator._core.Front",
+    .tp_basicsize = sizeof(Front),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL,
+    .tp_doc = "Front(history, g_m_s2, imu_type, attitude_type, other, pushed, waiting, counts): a navigator's "
+              "push(sample)",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)front_init,
+    .tp_traverse = (traverseproc)front_traverse,
+    .tp_clear = (inquiry)front_clear,
+    .tp_dealloc = (destructor)front_dealloc,
+    .tp_call = PyVectorcall_Call,
+    .tp_vectorcall_offset = offsetof(Front, vectorcall),
+    .tp_getset = front_getset,
+};
+
 static PyMethodDef module_methods[] = {
     {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
      "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
@@ -1124,11 +1295,18 @@ static struct PyModuleDef core_module = {
 
 PyMODINIT_FUNC PyInit__core(void) {
     import_array();
-    if (PyType_Ready(&HistoryType) < 0 || PyType_Ready(&PropagatorType) < 0) return NULL;
+    if (PyType_Ready(&HistoryType) < 0 || PyType_Ready(&PropagatorType) < 0 || PyType_Ready(&FrontType) < 0)
+        return NULL;
+    if (!(s_t_us = PyUnicode_InternFromString("t_us")) || !(s_acc = PyUnicode_InternFromString("acc_frd_m_s2"))
+        || !(s_q = PyUnicode_InternFromString("q_ned_frd")) || !(s_used = PyUnicode_InternFromString("attitude_used"))
+        || !(s_nonfinite = PyUnicode_InternFromString("attitude_rejected_nonfinite"))
+        || !(s_no_attitude = PyUnicode_InternFromString("imu_rejected_no_attitude")))
+        return NULL;
     PyObject *m = PyModule_Create(&core_module);
     if (!m) return NULL;
     if (PyModule_AddObjectRef(m, "History", (PyObject *)&HistoryType) < 0
-        || PyModule_AddObjectRef(m, "Propagator", (PyObject *)&PropagatorType) < 0) {
+        || PyModule_AddObjectRef(m, "Propagator", (PyObject *)&PropagatorType) < 0
+        || PyModule_AddObjectRef(m, "Front", (PyObject *)&FrontType) < 0) {
         Py_DECREF(m);
         return NULL;
     }

@@ -1,5 +1,6 @@
 """Types of the C core (``_core.c``); the docstrings are in history.py and model.py."""
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,13 @@ class Propagator:
                      q_b: float) -> tuple[tuple[float, ...], np.ndarray, _Hph, _Vec3]: ...
     def output_from(self, x: _Floats, P: np.ndarray, a: _Floats, b: _Floats | History, T_s: float,
                     alpha: float, q_b: float) -> tuple[tuple[float, ...], np.ndarray]: ...
+
+class Front:
+    def __init__(self, history: History, g_m_s2: float, imu_type: type, attitude_type: type,
+                 other: Callable[[Any], None], pushed: Callable[[], None], waiting: list[Any],
+                 counts: dict[str, int]) -> None: ...
+    def __call__(self, sample: Any) -> None: ...
+    rot: Any  # the latest R_ned_frd (_Rot9) or None; set from any 9 numbers or None
 
 def mean_between(x: _Floats, a: _Floats, b: _Floats, alpha: float
                  ) -> tuple[tuple[float, ...], list[float], list[float]]: ...

@@ -13,6 +13,7 @@ recorded or simulated blocks that gives the same result as pushing attitude + IM
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -21,10 +22,10 @@ from pymap3d.ellipsoid import Ellipsoid
 
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.physics import MAX_SPECIFIC_FORCE_M_S2
-from companion.domain.rotation import Rot, rotation_scaled
+from companion.domain.rotation import rotation_scaled
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, new_nav_estimate
 from companion.errors import ConfigError
-from companion.estimator._core import rotation_q
+from companion.estimator._core import Front
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.consistency import fit_inflation3, fix_floor, floored_axis, variance_scale
 from companion.estimator.engine import FusionEngine
@@ -75,7 +76,10 @@ class NedConverter:
 
 
 class Navigator:
-    """Belief-adaptive GNSS/IMU navigation on wire samples pushed in arrival order."""
+    """Belief-adaptive GNSS/IMU navigation on wire samples pushed in arrival order.
+
+    ``push(sample)`` consumes one ``ImuSample``, ``AttitudeSample`` or ``GnssFix`` (arrival order; another
+    type: TypeError). It never raises on bad data: that is counted (``counters``)."""
 
     def __init__(self, cfg: EstimatorConfig | None = None, method: str = DEFAULT_METHOD,
                  frame: LocalNedFrame | None = None, context: MethodContext | None = None) -> None:
@@ -97,9 +101,13 @@ class Navigator:
         self._fix_seen: tuple[tuple[float, float, float], int, bool] | None = None
         self._frozen_us = int(round(self.cfg.gnss_frozen_s * 1e6))
         self.engine = FusionEngine(self.cfg, method, self._counts, context)
-        self._rot: Rot | None = None  # the latest attitude as R_ned_frd (row-major)
-        # the IMU path without Timeline.push_frd's own call (the same steps: Timeline.frd_sink)
-        self._imu_push, self._imu_g, self._imu_waiting, self._imu_pushed = self.engine.frd_sink()
+        # push(sample): attitude and IMU samples in the C core (the latest attitude as R_ned_frd, row-major:
+        # ``_front.rot``; the IMU path as Timeline.push_frd, through Timeline.frd_sink's parts), any other
+        # sample through _push_other
+        _, g, waiting, pushed = self.engine.frd_sink()
+        self._front = Front(self.engine.imu, g, ImuSample, AttitudeSample, self._push_other, pushed, waiting,
+                            self._counts)
+        self.push: Callable[[ImuSample | AttitudeSample | GnssFix], None] = self._front
         self._snapshot = self.engine.snapshot
         self._last: tuple[Any, NavEstimate] | None = None
         # (the Fit it is of, the factor, consistency.variance_scale of it)
@@ -110,28 +118,12 @@ class Navigator:
         self._g = self.cfg.gravity_m_s2
 
     # -------------------------------------------------------------- input
-    def push(self, sample: ImuSample | AttitudeSample | GnssFix) -> None:
-        """Consume one sample (arrival order). Never raises on bad data: it is counted."""
-        kind = type(sample)
-        if kind is ImuSample:
-            r = self._rot
-            if r is None:
-                self._counts["imu_rejected_no_attitude"] += 1
-                return
-            if (self._imu_push(sample.t_us, sample.acc_frd_m_s2, r, self._imu_g)  # type: ignore[union-attr]
-                    or self._imu_waiting):
-                self._imu_pushed()
-        elif kind is AttitudeSample:
-            r = rotation_q(sample.q_ned_frd)  # type: ignore[union-attr]
-            if r is None:  # |q|² not finite or ≈ 0
-                self._counts["attitude_rejected_nonfinite"] += 1
-                return
-            self._rot = r
-            self._counts["attitude_used"] += 1
-        elif kind is GnssFix:
-            self._push_fix(sample)  # type: ignore[arg-type]
+    def _push_other(self, sample: Any) -> None:
+        """``push`` of a sample other than attitude and IMU (those the C front takes itself)."""
+        if type(sample) is GnssFix:
+            self._push_fix(sample)
         else:
-            raise TypeError(f"Navigator.push: not a sample: {kind.__name__}")
+            raise TypeError(f"Navigator.push: not a sample: {type(sample).__name__}")
 
     def push_imu_batch(self, t_us: np.ndarray, acc_frd_m_s2: np.ndarray, q_ned_frd: np.ndarray) -> None:
         """IMU samples (n,), (n, 3) with their attitudes (n, 4, w first), in time order.
@@ -155,7 +147,7 @@ class Navigator:
                              r[:, 3] * fx + r[:, 4] * fy + r[:, 5] * fz,
                              r[:, 6] * fx + r[:, 7] * fy + r[:, 8] * fz + self._g))
         self._counts["attitude_used"] += len(q)
-        self._rot = tuple(r[-1].tolist())
+        self._front.rot = r[-1]
         self.engine.push_acc_batch(np.asarray(t_us, dtype=np.int64), a, r)
 
     def _push_fix(self, fix: GnssFix) -> None:
