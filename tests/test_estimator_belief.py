@@ -220,3 +220,83 @@ def test_belief_recovers_from_its_floor_within_the_stated_time(method, bias_std_
     after = b[t >= 70.0]
     assert _first_time(after > 0.5) < 12.0 and _first_time(after > 0.9) < 18.0
     assert after[-1] > 0.9
+
+
+def _floats(t: InnovationTerms) -> InnovationTerms:
+    """``t`` of Python floats, as the engine builds it (numpy's scalars divide by 0 without raising)."""
+    return InnovationTerms(*(tuple(map(float, v)) if isinstance(v, tuple) else float(v) for v in t))
+
+
+def _same_bits(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
+    return len(a) == len(b) and all(x == y or (x != x and y != y) for x, y in zip(a, b, strict=True))
+
+
+@pytest.mark.parametrize("loss", ["student-t", "gaussian"])
+@pytest.mark.parametrize("lambda_b", [0.0, 0.7])
+def test_the_core_loss_grad_equals_loss_grad_bit_for_bit(loss, lambda_b):
+    """``_core.loss_grad`` (the belief methods' path at every fix) is ``belief.loss_grad`` operation for
+    operation: the same bits on random terms and beliefs, zero innovations (no position jump), NaN and
+    infinite inputs, and the same exception where Python's arithmetic raises one (a logarithm out of its
+    domain, a division by zero, a power overflowing)."""
+    from companion.estimator import _core
+    from companion.estimator.belief import loss_params
+    cfg = dataclasses.replace(CFG, loss=loss, lambda_bias_level=lambda_b)
+    raised: set[type] = set()
+
+    def check(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> bool:
+        try:
+            want = loss_grad(beta, t, cfg)
+        except (ValueError, ZeroDivisionError, OverflowError) as exc:
+            with pytest.raises(type(exc)):
+                _core.loss_grad(beta, t, loss_params(cfg))
+            raised.add(type(exc))
+            return False
+        got = _core.loss_grad(beta, t, loss_params(cfg))
+        assert _same_bits(got, want), (beta, t, got, want)
+        return True
+
+    rng = np.random.default_rng(17)
+    special = (0.0, math.nan, math.inf, -math.inf, 1e300, -1e-300)
+    n_checked = 0
+    for k in range(3000):
+        t = _terms(rng, float(rng.choice([0.01, 0.3, 5.0])), float(rng.choice([1.0, 3.3])))
+        t = _floats(t)
+        beta = float(rng.choice([rng.random(), 0.0, 1.0, 1e-12]))
+        if k % 5 == 0:  # a special value in one of the inputs
+            field = int(rng.integers(7))
+            v = float(rng.choice(special))
+            if field in (2, 5):
+                t = t._replace(**{t._fields[field]: v})
+            else:
+                vec = list(t[field])
+                vec[int(rng.integers(3))] = v
+                t = t._replace(**{t._fields[field]: tuple(vec)})
+        if k % 7 == 0:
+            t = t._replace(y=(0.0, 0.0, 0.0))
+        if k % 11 == 0:
+            beta = float(rng.choice(special))
+        n_checked += check(beta, t, cfg)
+    assert n_checked > 2000 and ValueError in raised
+    zero3 = (0.0, 0.0, 0.0)
+    t = _floats(_terms(rng, 0.3))
+    assert not check(0.5, t._replace(s0=zero3, r_nominal=zero3, q_bias_unit=0.0), cfg)  # S = 0
+    assert not check(-1e4, t, cfg)  # R(β) = 1.5625^(1 − β) overflows
+    no_floor = dataclasses.replace(cfg, sigma_bias_floor_m=0.0)
+    assert check(1.0, t, no_floor) == (lambda_b == 0.0)  # σ_b = 0: the bias-level term divides by it
+    assert raised == {ValueError, ZeroDivisionError, OverflowError}
+
+
+def test_the_belief_methods_update_as_with_the_python_loss_grad():
+    """A belief method's update through the C loss gradient equals the one through ``belief.loss_grad``
+    (the method as it was) over a multipath stream: the same states, bit for bit."""
+    from companion.estimator.belief import loss_grad as py_loss_grad
+    rng = np.random.default_rng(5)
+    for name in ("second-order", "first-order"):
+        m = methods.make(name, CFG)
+        state = ref = m.initial_state()
+        for _ in range(300):
+            t = _terms(rng, float(rng.choice([0.05, 0.5, 4.0])))
+            state = m.update(state, t)
+            b = ref.beta
+            ref = m._state(*m.step(ref, py_loss_grad(b, t, CFG)[1] * b * (1.0 - b)))
+            assert state == ref

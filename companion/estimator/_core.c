@@ -1271,6 +1271,92 @@ static PyTypeObject FrontType = {
     .tp_getset = front_getset,
 };
 
+/* ------------------------------------------------------------------ the belief's loss */
+/* loss_grad(beta, terms, params) -> (loss, d loss / d beta, NIS): belief.loss_grad, operation for operation
+ * (belief.s_of_beta, belief._terms, the Student-t or Gaussian fit, belief.bias_level), for an
+ * InnovationTerms ``terms`` (y, s0, q_bias_unit, r_nominal, pht_p, bias_scale, bias_m2) and ``params`` =
+ * belief.loss_params(cfg): (sigma_bias_max_m, sigma_bias_floor_m, r_inflation_max, lambda_smooth_1_m,
+ * student (1) or gaussian (0), student_dof, lambda_bias_level). */
+/* NULL with the exception Python's float arithmetic raises (belief.loss_grad's out of its domain) */
+static PyObject *py_error(PyObject *type, const char *what) {
+    PyErr_SetString(type, what);
+    return NULL;
+}
+
+static PyObject *py_loss_grad(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 3 || !PyTuple_Check(args[1]) || PyTuple_GET_SIZE(args[1]) != 7 || !PyTuple_Check(args[2])
+        || PyTuple_GET_SIZE(args[2]) != 7) {
+        PyErr_SetString(PyExc_TypeError, "loss_grad(beta, terms (7), params (7))");
+        return NULL;
+    }
+    PyObject *t = args[1];
+    double beta = PyFloat_AsDouble(args[0]), y[3], s0[3], rn[3], p[3], bm[3], c[7];
+    double qbu = PyFloat_AsDouble(PyTuple_GET_ITEM(t, 2)), f = PyFloat_AsDouble(PyTuple_GET_ITEM(t, 5));
+    if (PyErr_Occurred() || read_doubles(PyTuple_GET_ITEM(t, 0), y, 3, "y") < 0
+        || read_doubles(PyTuple_GET_ITEM(t, 1), s0, 3, "s0") < 0
+        || read_doubles(PyTuple_GET_ITEM(t, 3), rn, 3, "r_nominal") < 0
+        || read_doubles(PyTuple_GET_ITEM(t, 4), p, 3, "pht_p") < 0
+        || read_doubles(PyTuple_GET_ITEM(t, 6), bm, 3, "bias_m2") < 0 || read_doubles(args[2], c, 7, "params") < 0)
+        return NULL;
+    double smax = c[0], floor_m = c[1], rmax = c[2], lam = c[3], nu = c[5], wb = c[6];
+    /* s_of_beta */
+    double sb = (smax * (1.0 - beta) + floor_m) * f;
+    double e = 1.0 - beta, r = pow(rmax, e);
+    if (isinf(r) && isfinite(rmax) && isfinite(e)) {  /* Python's ** overflowing */
+        PyErr_SetString(PyExc_OverflowError, "(34, 'Numerical result out of range')");
+        return NULL;
+    }
+    double q = qbu * sb * sb;
+    double dq = -2.0 * qbu * sb * smax * f;
+    double dr = -log(rmax) * r;
+    double S[3], dS[3], w[3];
+    for (int i = 0; i < 3; i++) {
+        S[i] = (s0[i] + q) + r * rn[i];
+        dS[i] = dq + dr * rn[i];
+        w[i] = y[i] / S[i];
+    }
+    /* _terms: sums over the axes from 0.0, left to right */
+    double logdet = 0.0, d_logdet = 0.0, nis = 0.0, d_nis = 0.0, dp2 = 0.0, d_dp2 = 0.0;
+    for (int i = 0; i < 3; i++)  /* Python's y / S, then math.log(S): their exceptions, in that order */
+        if (S[i] == 0.0) return py_error(PyExc_ZeroDivisionError, "float division by zero");
+    for (int i = 0; i < 3; i++) {
+        if (S[i] < 0.0) return py_error(PyExc_ValueError, "math domain error");
+        logdet += log(S[i]);
+        d_logdet += dS[i] / S[i];
+        nis += y[i] * w[i];
+        d_nis -= w[i] * w[i] * dS[i];
+        double j = p[i] * w[i];
+        dp2 += j * j;
+        d_dp2 += 2.0 * j * (-p[i] * w[i] * dS[i] / S[i]);
+    }
+    double n = sqrt(dp2), smooth = 0.0, d_smooth = 0.0;
+    if (n > 0.0) {
+        smooth = lam * n;
+        d_smooth = 0.5 * lam * d_dp2 / n;
+    }
+    double fit, d_fit;
+    if (c[4] != 0.0) {
+        if (nis / nu <= -1.0) return py_error(PyExc_ValueError, "math domain error");  /* math.log1p's */
+        fit = 0.5 * (nu + 3.0) * log1p(nis / nu);
+        d_fit = 0.5 * (nu + 3.0) * d_nis / (nu + nis);
+    } else {
+        fit = 0.5 * nis;
+        d_fit = 0.5 * d_nis;
+    }
+    double level = 0.0, d_level = 0.0;  /* bias_level */
+    if (wb != 0.0) {
+        double sigma = (smax * (1.0 - beta) + floor_m) * f;
+        if (sigma * sigma == 0.0) return py_error(PyExc_ZeroDivisionError, "float division by zero");
+        if (sigma < 0.0) return py_error(PyExc_ValueError, "math domain error");
+        double m = bm[0] + bm[1] + bm[2];
+        double inv2 = 1.0 / (sigma * sigma);
+        level = wb * (3.0 * log(sigma) + 0.5 * m * inv2);
+        d_level = wb * (3.0 - m * inv2) / sigma * (-smax * f);
+    }
+    return Py_BuildValue("(ddd)", 0.5 * logdet + fit + smooth + level, 0.5 * d_logdet + d_fit + d_smooth + d_level,
+                         nis);
+}
+
 static PyMethodDef module_methods[] = {
     {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
      "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
@@ -1285,6 +1371,8 @@ static PyMethodDef module_methods[] = {
      "update_vel(x, P, z_v, r) -> (x+, P+): the reported velocity components fused"},
     {"inv3", (PyCFunction)py_inv3, METH_O, "inverse of a symmetric 3x3, row-major"},
     {"rotation_q", (PyCFunction)py_rotation_q, METH_O, "R_ned_frd of a quaternion, or None"},
+    {"loss_grad", (PyCFunction)(void (*)(void))py_loss_grad, METH_FASTCALL,
+     "loss_grad(beta, terms, params) -> (loss, its beta-derivative, NIS): belief.loss_grad"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -128,6 +128,15 @@ def loss_grad(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[fl
     return 0.5 * logdet + fit + smooth + level, 0.5 * d_logdet + d_fit + d_smooth + d_level, nis
 
 
+def loss_params(cfg: EstimatorConfig) -> tuple[float, float, float, float, float, float, float]:
+    """The configuration's numbers ``loss_grad`` reads, as the C core's ``_core.loss_grad(beta, t, params)``
+    takes them (the same computation, operation for operation: the methods' path at every fix; tested
+    bit for bit against ``loss_grad``): σ_b,max, σ_b floor, R inflation max, λ, Student-t (1) or Gaussian
+    (0), ν, λ_b."""
+    return (cfg.sigma_bias_max_m, cfg.sigma_bias_floor_m, cfg.r_inflation_max, cfg.lambda_smooth_1_m,
+            0.0 if cfg.loss == "gaussian" else 1.0, cfg.student_dof, cfg.lambda_bias_level)
+
+
 def paper_loss_grad(beta: float, t: InnovationTerms, cfg: EstimatorConfig) -> tuple[float, float, float]:
     """(ℓ, ∂ℓ/∂β, NIS) of eq. 16 as printed: log(1 + NIS/χ²₀.₉₅) + λ‖Δp‖ (no interior minimum)."""
     _, _, nis, d_nis, smooth, d_smooth = _terms(beta, t, cfg)

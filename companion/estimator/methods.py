@@ -38,7 +38,8 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol
 
 from companion.errors import ConfigError, not_one_of
-from companion.estimator.belief import InnovationTerms, Vec3, loss_grad, paper_loss_grad, sigmoid
+from companion.estimator._core import loss_grad as _loss_grad
+from companion.estimator.belief import InnovationTerms, Vec3, loss_params, paper_loss_grad, sigmoid
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.plugin_config import PluginConfig
 
@@ -193,6 +194,7 @@ class _Belief:
 
     def __init__(self, cfg: EstimatorConfig) -> None:
         self.cfg = cfg
+        self._loss_params = loss_params(cfg)  # belief.loss_grad's numbers, for the C core's
 
     def _state(self, theta: float, h_fast: float, h_slow: float) -> BeliefState:
         theta = min(self.cfg.theta_max, max(self.cfg.theta_min, theta))
@@ -209,9 +211,9 @@ class _Belief:
         return (f * terms.r_nominal[0], f * terms.r_nominal[1], f * terms.r_nominal[2])
 
     def grad_theta(self, state: BeliefState, terms: InnovationTerms) -> float:
-        """∇θ ℓ = ∂ℓ/∂β · β(1 − β) (chain rule through eq. 15)."""
+        """∇θ ℓ = ∂ℓ/∂β · β(1 − β) (chain rule through eq. 15; ``belief.loss_grad``'s ∂ℓ/∂β, in C)."""
         beta = state.beta
-        return loss_grad(beta, terms, self.cfg)[1] * beta * (1.0 - beta)
+        return _loss_grad(beta, terms, self._loss_params)[1] * beta * (1.0 - beta)
 
     def step(self, state: BeliefState, g: float) -> tuple[float, float, float]:
         """(θ, H_fast, H_slow) after a step along ∇θ ℓ = g."""
