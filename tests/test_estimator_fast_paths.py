@@ -2,12 +2,14 @@
 the consistency factor's sums on floats (``consistency.fit_add3``, ``consistency.fit_inflation3``)
 against ``consistency.Fit``'s numpy path, the vertical scatter of one axis (``consistency.Scatter1``) in
 the engine against the two-axis ``Scatter`` given the axis twice, and ``samples.new_nav_estimate``
-against ``NavEstimate(...)``."""
+against ``NavEstimate(...)``, and the C core's per-fix sums (``Scatter.add``, ``Scatter1.add``, ``fit_add3``)
+against the Python forms they replaced (kept here)."""
 
 from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -16,7 +18,7 @@ import pytest
 from companion.domain.samples import AttitudeSample, ImuSample, NavEstimate, new_nav_estimate
 from companion.estimator import engine as engine_module
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import AXES3, Fit, Scatter, fit_add3, fit_inflation3, fix_floor
+from companion.estimator.consistency import AXES3, Fit, Scatter, Scatter1, fit_add3, fit_inflation3, fix_floor
 from companion.estimator.engine import FusionEngine
 from tests.estimator_streams import OPEN_SKY, drive, multipath_stream
 
@@ -181,3 +183,96 @@ def test_no_import_falls_inside_the_first_fixes():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == [], out.stdout
+
+
+def _scatter_add_reference(self: Scatter, t_us: int, z: tuple[float, float], v: tuple[float, float],
+                           window_s: float) -> Scatter:
+    """``Scatter.add`` as it was in Python (what the C core's ``scatter_add`` replaced)."""
+    t0, z0, v0, q, qp, w, w2, s, s2, d1, d2, dw = self
+    if t0 < 0:
+        return Scatter(t_us, z, v, (0.0, 0.0), None, 1.0, 1.0, (0.0, 0.0), (0.0, 0.0))
+    dt = (t_us - t0) * 1e-6
+    a = math.exp(-dt / window_s)
+    h = 0.5 * dt
+    q0 = q[0] + (z[0] - z0[0]) - h * (v[0] + v0[0])
+    q1 = q[1] + (z[1] - z0[1]) - h * (v[1] + v0[1])
+    d1, d2, dw = a * d1, a * d2, a * dw
+    if qp is not None:
+        d1 += (q0 - q[0]) ** 2 + (q1 - q[1]) ** 2
+        d2 += (q0 - qp[0]) ** 2 + (q1 - qp[1]) ** 2
+        dw += 1.0
+    s, s2 = (a * s[0] + q0, a * s[1] + q1), (a * s2[0] + q0 * q0, a * s2[1] + q1 * q1)
+    return Scatter(t_us, z, v, (q0, q1), q, a * w + 1.0, a * a * w2 + 1.0, s, s2, d1, d2, dw)
+
+
+def _scatter1_add_reference(self: Scatter1, t_us: int, z: float, v: float, window_s: float) -> Scatter1:
+    """``Scatter1.add`` as it was in Python (what the C core's ``scatter1_add`` replaced)."""
+    t0, z0, v0, q0, qp, w, w2, s, s2, d1, d2, dw = self
+    if t0 < 0:
+        return Scatter1(t_us, z, v, 0.0, None, 1.0, 1.0, 0.0, 0.0)
+    dt = (t_us - t0) * 1e-6
+    a = math.exp(-dt / window_s)
+    q = q0 + (z - z0) - (0.5 * dt) * (v + v0)
+    d1, d2, dw = a * d1, a * d2, a * dw
+    if qp is not None:
+        e1, e2 = (q - q0) ** 2, (q - qp) ** 2
+        d1 += e1 + e1
+        d2 += e2 + e2
+        dw += 1.0
+    return Scatter1(t_us, z, v, q, q0, a * w + 1.0, a * a * w2 + 1.0, a * s + q, a * s2 + q * q, d1, d2, dw)
+
+
+def _same(a: object, b: object) -> bool:
+    """Equal, NaN equal to NaN, recursively through tuples; the same types."""
+    if isinstance(a, tuple) or isinstance(b, tuple):
+        return (type(a) is type(b) and len(a) == len(b)  # type: ignore[arg-type]
+                and all(_same(x, y) for x, y in zip(a, b, strict=True)))  # type: ignore[call-overload]
+    if isinstance(a, float) and isinstance(b, float) and a != a:
+        return b != b
+    return type(a) is type(b) and a == b
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_scatters_add_in_c_as_in_python(seed):
+    """``Scatter.add`` and ``Scatter1.add`` (the C core's ``scatter_add``/``scatter1_add`` after the first
+    fix) against their Python forms: every field the same bits and types (the fix and velocity the very
+    objects given, the previous q kept) over random series with gaps, equal times, NaN and infinite
+    fixes, and the same OverflowError where a squared change overflows."""
+    rng = np.random.default_rng(seed)
+    c2, r2, c1, r1 = Scatter(), Scatter(), Scatter1(), Scatter1()
+    t = 0
+    for k in range(2000):
+        t += int(rng.choice([0, 50_000, 200_000, 3_000_000]))
+        z = tuple((rng.standard_normal(2) * float(rng.choice([0.1, 10.0]))).tolist())
+        v = tuple(rng.standard_normal(2).tolist())
+        if k % 97 == 13:
+            z = (float(rng.choice([math.nan, math.inf])), z[1])
+        c2, r2 = c2.add(t, z, v, 20.0), _scatter_add_reference(r2, t, z, v, 20.0)
+        c1, r1 = c1.add(t, z[0], v[0], 20.0), _scatter1_add_reference(r1, t, z[0], v[0], 20.0)
+        assert _same(c2, r2) and _same(c1, r1), k
+        assert c2.z is z and c2.v is v and c1.z is z[0]
+        assert c2.statistics() == r2.statistics() or _same(c2.statistics(), r2.statistics())
+        if k % 300 == 299:  # start again (a NaN poisons the sums for good)
+            c2, r2, c1, r1 = Scatter(), Scatter(), Scatter1(), Scatter1()
+    big = Scatter().add(0, (0.0, 0.0), (0.0, 0.0), 20.0).add(1000, (1e200, 0.0), (0.0, 0.0), 20.0)
+    with pytest.raises(OverflowError):
+        _scatter_add_reference(big, 2000, (-1e200, 0.0), (0.0, 0.0), 20.0)
+    with pytest.raises(OverflowError):
+        big.add(2000, (-1e200, 0.0), (0.0, 0.0), 20.0)
+    big1 = Scatter1().add(0, 0.0, 0.0, 20.0).add(1000, 1e200, 0.0, 20.0)
+    with pytest.raises(OverflowError):
+        _scatter1_add_reference(big1, 2000, -1e200, 0.0, 20.0)
+    with pytest.raises(OverflowError):
+        big1.add(2000, -1e200, 0.0, 20.0)
+
+
+def test_fit_add3_with_nan_and_infinite_innovations_as_the_numpy_fit():
+    """``fit_add3`` (its sums in the C core) against ``Fit.add`` where innovations are NaN or infinite."""
+    ref, fast, t = Fit(), Fit(), 0
+    nus = [(0.1, -0.2, 0.3), (math.nan, 0.0, 1.0), (math.inf, -math.inf, 0.0), (1.0, 2.0, 3.0)]
+    for k, nu in enumerate(nus):
+        t += 100_000 * (k + 1)
+        ref, fast = ref.add(t, AXES3, np.array(nu), 5.0), fit_add3(fast, t, *nu, 5.0)
+        assert type(fast) is Fit and fast.key is AXES3 and fast.t_us == t
+        np.testing.assert_array_equal(fast.nu_sum, ref.nu_sum)
+        np.testing.assert_array_equal(fast.w2_sum, ref.w2_sum)

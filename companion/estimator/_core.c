@@ -1357,6 +1357,138 @@ static PyObject *py_loss_grad(PyObject *self, PyObject *const *args, Py_ssize_t 
                          nis);
 }
 
+/* ------------------------------------------------------------------ the reported accuracy's sums */
+/* x ** 2 as Python's float power computes it (libm's pow; OverflowError where it overflows) */
+static int py_square(double x, double *out) {
+    double r = pow(x, 2.0);
+    if (isinf(r) && isfinite(x)) {
+        PyErr_SetString(PyExc_OverflowError, "(34, 'Numerical result out of range')");
+        return -1;
+    }
+    *out = r;
+    return 0;
+}
+
+/* the weight exp(-dt / window_s) of the older sums, dt = (t_us - t0) * 1e-6 (math.exp: OverflowError where
+ * it overflows); -1 on error */
+static int decay_of(PyObject *t_o, long long t0, double window_s, double *dt, double *a) {
+    long long t = PyLong_AsLongLong(t_o);
+    if (t == -1 && PyErr_Occurred()) return -1;
+    *dt = (double)(t - t0) * 1e-6;
+    double e = -*dt / window_s;
+    *a = exp(e);
+    if (isinf(*a) && isfinite(e)) {
+        PyErr_SetString(PyExc_OverflowError, "math range error");
+        return -1;
+    }
+    return 0;
+}
+
+/* a NamedTuple of the type of ``like`` holding ``items`` (stolen; NULL: an error already set) */
+static PyObject *same_type(PyObject *like, PyObject *items) {
+    if (!items) return NULL;
+    PyObject *args = PyTuple_Pack(1, items);
+    Py_DECREF(items);
+    if (!args) return NULL;
+    PyObject *o = PyTuple_Type.tp_new(Py_TYPE(like), args, NULL);
+    Py_DECREF(args);
+    return o;
+}
+
+/* the fields of a Scatter or Scatter1 (12), their t_us; -1 on error */
+static int scatter_fields(PyObject *s, PyObject ***f, long long *t0) {
+    if (!PyTuple_Check(s) || PyTuple_GET_SIZE(s) != 12) {
+        PyErr_SetString(PyExc_TypeError, "scatter_add: not a Scatter");
+        return -1;
+    }
+    *f = &PyTuple_GET_ITEM(s, 0);
+    *t0 = PyLong_AsLongLong((*f)[0]);
+    return (*t0 == -1 && PyErr_Occurred()) ? -1 : 0;
+}
+
+/* scatter_add(s, t_us, z, v, window_s) -> consistency.Scatter.add of a Scatter ``s`` holding a fix (t_us >= 0),
+ * operation for operation (z, v: (N, E) 2-tuples, kept as given) */
+static PyObject *py_scatter_add(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 5) { PyErr_SetString(PyExc_TypeError, "scatter_add(s, t_us, z, v, window_s)"); return NULL; }
+    PyObject **f;
+    long long t0;
+    if (scatter_fields(args[0], &f, &t0) < 0) return NULL;
+    double z[2], v[2], z0[2], v0[2], q[2], qp[2], s[2], s2[2], dt, a;
+    double w = PyFloat_AsDouble(f[5]), w2 = PyFloat_AsDouble(f[6]), d1 = PyFloat_AsDouble(f[9]),
+           d2 = PyFloat_AsDouble(f[10]), dw = PyFloat_AsDouble(f[11]), window_s = PyFloat_AsDouble(args[4]);
+    int has_prev = f[4] != Py_None;
+    if (PyErr_Occurred() || read_doubles(args[2], z, 2, "z") < 0 || read_doubles(args[3], v, 2, "v") < 0
+        || read_doubles(f[1], z0, 2, "z") < 0 || read_doubles(f[2], v0, 2, "v") < 0
+        || read_doubles(f[3], q, 2, "q") < 0 || (has_prev && read_doubles(f[4], qp, 2, "q_prev") < 0)
+        || read_doubles(f[7], s, 2, "q_sum") < 0 || read_doubles(f[8], s2, 2, "q2_sum") < 0
+        || decay_of(args[1], t0, window_s, &dt, &a) < 0)
+        return NULL;
+    double h = 0.5 * dt;
+    double q0 = q[0] + (z[0] - z0[0]) - h * (v[0] + v0[0]);
+    double q1 = q[1] + (z[1] - z0[1]) - h * (v[1] + v0[1]);
+    d1 = a * d1;
+    d2 = a * d2;
+    dw = a * dw;
+    if (has_prev) {
+        double e0, e1, e2, e3;
+        if (py_square(q0 - q[0], &e0) < 0 || py_square(q1 - q[1], &e1) < 0 || py_square(q0 - qp[0], &e2) < 0
+            || py_square(q1 - qp[1], &e3) < 0)
+            return NULL;
+        d1 += e0 + e1;
+        d2 += e2 + e3;
+        dw += 1.0;
+    }
+    return same_type(args[0], Py_BuildValue("(OOO(dd)Odd(dd)(dd)ddd)", args[1], args[2], args[3], q0, q1, f[3],
+                                            a * w + 1.0, a * a * w2 + 1.0, a * s[0] + q0, a * s[1] + q1,
+                                            a * s2[0] + q0 * q0, a * s2[1] + q1 * q1, d1, d2, dw));
+}
+
+/* scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add of a Scatter1 ``s`` holding a fix, operation
+ * for operation (z, v: floats) */
+static PyObject *py_scatter1_add(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 5) { PyErr_SetString(PyExc_TypeError, "scatter1_add(s, t_us, z, v, window_s)"); return NULL; }
+    PyObject **f;
+    long long t0;
+    if (scatter_fields(args[0], &f, &t0) < 0) return NULL;
+    double z = PyFloat_AsDouble(args[2]), v = PyFloat_AsDouble(args[3]), window_s = PyFloat_AsDouble(args[4]);
+    double z0 = PyFloat_AsDouble(f[1]), v0 = PyFloat_AsDouble(f[2]), q0 = PyFloat_AsDouble(f[3]);
+    double w = PyFloat_AsDouble(f[5]), w2 = PyFloat_AsDouble(f[6]), s = PyFloat_AsDouble(f[7]),
+           s2 = PyFloat_AsDouble(f[8]), d1 = PyFloat_AsDouble(f[9]), d2 = PyFloat_AsDouble(f[10]),
+           dw = PyFloat_AsDouble(f[11]);
+    int has_prev = f[4] != Py_None;
+    double qp = has_prev ? PyFloat_AsDouble(f[4]) : 0.0, dt, a;
+    if (PyErr_Occurred() || decay_of(args[1], t0, window_s, &dt, &a) < 0) return NULL;
+    double q = q0 + (z - z0) - (0.5 * dt) * (v + v0);
+    d1 = a * d1;
+    d2 = a * d2;
+    dw = a * dw;
+    if (has_prev) {
+        double e1, e2;
+        if (py_square(q - q0, &e1) < 0 || py_square(q - qp, &e2) < 0) return NULL;
+        d1 += e1 + e1;
+        d2 += e2 + e2;
+        dw += 1.0;
+    }
+    return same_type(args[0], Py_BuildValue("(OOOdOddddddd)", args[1], args[2], args[3], q, f[3], a * w + 1.0,
+                                            a * a * w2 + 1.0, a * s + q, a * s2 + q * q, d1, d2, dw));
+}
+
+/* decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1) as new arrays (3,):
+ * consistency.fit_add3's sums */
+static PyObject *py_decay_add3(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 6) { PyErr_SetString(PyExc_TypeError, "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2)"); return NULL; }
+    double n[3], w[3], nu[3], a = PyFloat_AsDouble(args[2]);
+    for (int i = 0; i < 3; i++) nu[i] = PyFloat_AsDouble(args[3 + i]);
+    if (PyErr_Occurred() || read_doubles(args[0], n, 3, "nu_sum") < 0 || read_doubles(args[1], w, 3, "w2_sum") < 0)
+        return NULL;
+    double aa = a * a, no[3], wo[3];
+    for (int i = 0; i < 3; i++) {
+        no[i] = a * n[i] + nu[i];
+        wo[i] = aa * w[i] + 1.0;
+    }
+    return Py_BuildValue("(NN)", new_array(1, 3, 0, no), new_array(1, 3, 0, wo));
+}
+
 static PyMethodDef module_methods[] = {
     {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
      "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
@@ -1371,6 +1503,12 @@ static PyMethodDef module_methods[] = {
      "update_vel(x, P, z_v, r) -> (x+, P+): the reported velocity components fused"},
     {"inv3", (PyCFunction)py_inv3, METH_O, "inverse of a symmetric 3x3, row-major"},
     {"rotation_q", (PyCFunction)py_rotation_q, METH_O, "R_ned_frd of a quaternion, or None"},
+    {"scatter_add", (PyCFunction)(void (*)(void))py_scatter_add, METH_FASTCALL,
+     "scatter_add(s, t_us, z, v, window_s) -> consistency.Scatter.add (s holding a fix)"},
+    {"scatter1_add", (PyCFunction)(void (*)(void))py_scatter1_add, METH_FASTCALL,
+     "scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add (s holding a fix)"},
+    {"decay_add3", (PyCFunction)(void (*)(void))py_decay_add3, METH_FASTCALL,
+     "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1)"},
     {"loss_grad", (PyCFunction)(void (*)(void))py_loss_grad, METH_FASTCALL,
      "loss_grad(beta, terms, params) -> (loss, its beta-derivative, NIS): belief.loss_grad"},
     {NULL, NULL, 0, NULL},

@@ -8,7 +8,8 @@ to its reported accuracy, extended over time (docs/tight.md "Reported accuracy",
 over the channels ``s`` fused (the tight filter's satellites; the loose filter's N, E, D axes of a fix),
 each innovation normalised by the variance it was fused with, ν = y / √S. A ``Fit`` is immutable and
 stored with each filter entry, so a late measurement re-fused out of sequence gives the same factor.
-Pure: numpy only.
+Pure: numpy, and the C core for the loose filter's per-fix sums (``_core``: scatter_add, scatter1_add,
+decay_add3; their Python forms are in the tests).
 """
 
 from __future__ import annotations
@@ -18,6 +19,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from companion.estimator._core import decay_add3 as _decay_add3
+from companion.estimator._core import scatter1_add as _scatter1_add
+from companion.estimator._core import scatter_add as _scatter_add
+
 FIT_W2_MIN = 1e-3  # a channel's weight in Fit below this (gone for a few windows): forgotten
 # the largest variance inflation Scatter.correlation gives: the fixes of a 20 s window at 5 Hz (ρ → 1: one
 # error shared by all; the floor is then one fix's variance)
@@ -25,6 +30,10 @@ C_MAX = 100.0
 # the largest correction of the scatter about the window mean for the window mean's share (Scatter.variance):
 # 2, chosen on the real-flight campaign's tuning flights (docs/estimator.md, "Reported accuracy")
 SCATTER_MAX = 2.0
+
+
+# a NamedTuple from all its fields in order without its generated __new__'s Python call (what it does)
+_new = tuple.__new__
 
 
 def _sorted_union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -95,15 +104,12 @@ AXES3 = np.arange(3)  # the loose filter's Fit channels of a fix: N, E, D (fit_a
 def fit_add3(fit: Fit, t_us: int, nu0: float, nu1: float, nu2: float, window_s: float) -> Fit:
     """``fit.add(t_us, AXES3, (nu0, nu1, nu2), window_s)`` (``window_s`` > 0), the same numbers: once
     ``fit`` holds the three axes, its sums decayed and added on floats (the per-element operations of
-    ``Fit.add``'s numpy path, without its array arithmetic at every fix: the loose filter's)."""
+    ``Fit.add``'s numpy path in the C core, without its array arithmetic at every fix: the loose filter's)."""
     if fit.key is not AXES3:  # the first fix (an empty Fit): Fit.add's general path
         return fit.add(t_us, AXES3, np.array((nu0, nu1, nu2)), window_s)
     a = math.exp(-(t_us - fit.t_us) * 1e-6 / window_s)
-    aa = a * a
-    n0, n1, n2 = fit.nu_sum.tolist()
-    w0, w1, w2 = fit.w2_sum.tolist()
-    return Fit(AXES3, np.array((a * n0 + nu0, a * n1 + nu1, a * n2 + nu2)),
-               np.array((aa * w0 + 1.0, aa * w1 + 1.0, aa * w2 + 1.0)), t_us)
+    nu_sum, w2_sum = _decay_add3(fit.nu_sum, fit.w2_sum, a, nu0, nu1, nu2)  # a nu_sum + nu, a² w2_sum + 1
+    return _new(Fit, (AXES3, nu_sum, w2_sum, t_us))
 
 
 def fit_inflation3(fit: Fit) -> float:
@@ -137,10 +143,6 @@ def check_accuracy_window(window_s: float) -> None:
     if not (math.isfinite(window_s) and window_s >= 0.0):
         raise ValueError(f"accuracy_window_s: must be a finite number >= 0, got {window_s!r}")
 
-
-# a NamedTuple from all its fields in order without its generated __new__'s Python call (Scatter.add and
-# Scatter1.add at every fix; what that __new__ does)
-_new = tuple.__new__
 
 
 class Scatter(NamedTuple):
@@ -178,21 +180,9 @@ class Scatter(NamedTuple):
     def add(self, t_us: int, z: tuple[float, float], v: tuple[float, float], window_s: float) -> Scatter:
         """The fix ``z`` (N, E; m) with the velocity ``v`` (m/s) at it added, the older sums decayed by
         exp(−Δt / window_s)."""
-        t0, z0, v0, q, qp, w, w2, s, s2, d1, d2, dw = self  # one unpacking (a field's lookup costs more)
-        if t0 < 0:
+        if self.t_us < 0:
             return Scatter(t_us, z, v, (0.0, 0.0), None, 1.0, 1.0, (0.0, 0.0), (0.0, 0.0))
-        dt = (t_us - t0) * 1e-6
-        a = math.exp(-dt / window_s)
-        h = 0.5 * dt
-        q0 = q[0] + (z[0] - z0[0]) - h * (v[0] + v0[0])
-        q1 = q[1] + (z[1] - z0[1]) - h * (v[1] + v0[1])
-        d1, d2, dw = a * d1, a * d2, a * dw
-        if qp is not None:
-            d1 += (q0 - q[0]) ** 2 + (q1 - q[1]) ** 2
-            d2 += (q0 - qp[0]) ** 2 + (q1 - qp[1]) ** 2
-            dw += 1.0
-        s, s2 = (a * s[0] + q0, a * s[1] + q1), (a * s2[0] + q0 * q0, a * s2[1] + q1 * q1)
-        return _new(Scatter, (t_us, z, v, (q0, q1), q, a * w + 1.0, a * a * w2 + 1.0, s, s2, d1, d2, dw))
+        return _scatter_add(self, t_us, z, v, window_s)  # type: ignore[return-value]
 
     def variance(self) -> float:
         """One fix's error variance per horizontal axis (m², N and E pooled) from the scatter about the
@@ -235,20 +225,9 @@ class Scatter1(NamedTuple):
     def add(self, t_us: int, z: float, v: float, window_s: float) -> Scatter1:
         """The fix ``z`` (m) with the velocity ``v`` (m/s) at it added, the older sums decayed by
         exp(−Δt / window_s)."""
-        t0, z0, v0, q0, qp, w, w2, s, s2, d1, d2, dw = self  # one unpacking (a field's lookup costs more)
-        if t0 < 0:
+        if self.t_us < 0:
             return Scatter1(t_us, z, v, 0.0, None, 1.0, 1.0, 0.0, 0.0)
-        dt = (t_us - t0) * 1e-6
-        a = math.exp(-dt / window_s)
-        q = q0 + (z - z0) - (0.5 * dt) * (v + v0)
-        d1, d2, dw = a * d1, a * d2, a * dw
-        if qp is not None:
-            e1, e2 = (q - q0) ** 2, (q - qp) ** 2
-            d1 += e1 + e1
-            d2 += e2 + e2
-            dw += 1.0
-        return _new(Scatter1, (t_us, z, v, q, q0, a * w + 1.0, a * a * w2 + 1.0, a * s + q, a * s2 + q * q,
-                               d1, d2, dw))
+        return _scatter1_add(self, t_us, z, v, window_s)  # type: ignore[return-value]
 
     def variance(self) -> float:
         """One fix's error variance (m²): ``Scatter.variance`` of one axis."""
