@@ -276,3 +276,48 @@ def test_fit_add3_with_nan_and_infinite_innovations_as_the_numpy_fit():
         assert type(fast) is Fit and fast.key is AXES3 and fast.t_us == t
         np.testing.assert_array_equal(fast.nu_sum, ref.nu_sum)
         np.testing.assert_array_equal(fast.w2_sum, ref.w2_sum)
+
+
+def _reported_reference(a: np.ndarray, k: float, floor: tuple[float, float, float, float] | None
+                        ) -> tuple[np.ndarray, ...]:
+    """What ``Navigator.estimate`` reported from a snapshot's ``out`` before the C core's ``reported``: the
+    position variances × k (``variance_scale``), floored per axis where the fixes are correlated."""
+    from companion.estimator.consistency import floored_axis, variance_scale
+    scale = variance_scale(k)
+    var = a[9:18] if scale is None else a[9:18] * scale
+    if floor is not None:
+        var = var.copy() if scale is None else var
+        c, s2, c_v, s2_v = floor
+        if c > 1.0:
+            var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
+        if c_v > 1.0:
+            var[2] = floored_axis(float(a[11]), k, c_v, s2_v)
+    return a[0:3], a[3:6], a[6:9], var
+
+
+def test_the_reported_estimate_in_c_as_in_python():
+    """``_core.reported`` against the navigator's former numpy form: the same bits (NaN where NaN) on random
+    snapshots with NaN, infinite, zero and negative entries, factors 1 and above, floors absent, inactive
+    (c ≤ 1) and active on either axis; new arrays, the snapshot untouched."""
+    from companion.estimator._core import reported
+    rng = np.random.default_rng(11)
+    special = [math.nan, math.inf, -math.inf, 0.0, -0.0, -1.0, 1e-300]
+    for n in range(3000):
+        a = rng.standard_normal(18) * 10.0
+        a[9:18] = np.abs(a[9:18])
+        if n % 3 == 0:
+            a[rng.integers(18)] = special[int(rng.integers(len(special)))]
+        k = 1.0 if n % 2 else float(1.0 + rng.exponential(2.0))
+        floor: tuple[float, float, float, float] | None = None
+        if n % 5:
+            floor = (float(rng.choice([0.5, 1.0, 3.0, 100.0])), float(rng.exponential(1.0)),
+                     float(rng.choice([1.0, 1.5, 40.0])), float(rng.choice([0.0, 2.0, math.inf])))
+        before = a.copy()
+        got, want = reported(a, k, floor), _reported_reference(a, k, floor)
+        for g, w in zip(got, want, strict=True):
+            assert g.dtype == np.float64 and g.shape == w.shape and not np.shares_memory(g, a)
+            np.testing.assert_array_equal(g, w)
+            assert np.signbit(g).tolist() == np.signbit(w).tolist()
+        np.testing.assert_array_equal(a, before)
+    with pytest.raises(ValueError):
+        reported(np.zeros(17), 1.0, None)

@@ -1489,6 +1489,38 @@ static PyObject *py_decay_add3(PyObject *self, PyObject *const *args, Py_ssize_t
     return Py_BuildValue("(NN)", new_array(1, 3, 0, no), new_array(1, 3, 0, wo));
 }
 
+/* consistency.floored_axis: max(k p, min(c k p, s2)) for one axis's variance p (k p when c <= 1) */
+static double floored_axis_c(double p, double k, double c, double s2) {
+    double kp = p * k;
+    if (c <= 1.0) return kp;
+    double f = kp * c;
+    f = f < s2 ? f : s2;
+    return f > kp ? f : kp;
+}
+
+/* reported(out, k, floor) -> (p, v, b, var): a snapshot's ``out`` (18,: p, v, b, their variances) as the
+ * navigator reports it, four new arrays (3, 3, 3, 9): the position variances x k (the consistency factor,
+ * 1: none), and with ``floor`` = (c, s2, c_v, s2_v) (None: none) each horizontal one floored_axis(P, k, c,
+ * s2) when c > 1, the vertical one with (c_v, s2_v) when c_v > 1 */
+static PyObject *py_reported(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 3) { PyErr_SetString(PyExc_TypeError, "reported(out, k, floor)"); return NULL; }
+    double o[18], fl[4], k = PyFloat_AsDouble(args[1]);
+    if ((k == -1.0 && PyErr_Occurred()) || read_doubles(args[0], o, 18, "out") < 0
+        || (args[2] != Py_None && read_doubles(args[2], fl, 4, "floor") < 0))
+        return NULL;
+    double var[9];
+    for (int i = 0; i < 9; i++) var[i] = i < 3 ? o[9 + i] * k : o[9 + i];
+    if (args[2] != Py_None) {
+        if (fl[0] > 1.0) {
+            var[0] = floored_axis_c(o[9], k, fl[0], fl[1]);
+            var[1] = floored_axis_c(o[10], k, fl[0], fl[1]);
+        }
+        if (fl[2] > 1.0) var[2] = floored_axis_c(o[11], k, fl[2], fl[3]);
+    }
+    return Py_BuildValue("(NNNN)", new_array(1, 3, 0, o), new_array(1, 3, 0, o + 3), new_array(1, 3, 0, o + 6),
+                         new_array(1, 9, 0, var));
+}
+
 static PyMethodDef module_methods[] = {
     {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
      "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
@@ -1509,6 +1541,8 @@ static PyMethodDef module_methods[] = {
      "scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add (s holding a fix)"},
     {"decay_add3", (PyCFunction)(void (*)(void))py_decay_add3, METH_FASTCALL,
      "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1)"},
+    {"reported", (PyCFunction)(void (*)(void))py_reported, METH_FASTCALL,
+     "reported(out, k, floor) -> (p, v, b, var): a snapshot as the navigator reports it"},
     {"loss_grad", (PyCFunction)(void (*)(void))py_loss_grad, METH_FASTCALL,
      "loss_grad(beta, terms, params) -> (loss, its beta-derivative, NIS): belief.loss_grad"},
     {NULL, NULL, 0, NULL},

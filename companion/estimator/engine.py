@@ -701,9 +701,10 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         prop = self._prop_disagree if last.disagree else self._prop
         x, out = prop.output_from(last.x, last.P, last.ints, self.imu, T, alpha,  # its newest sample
                                   (1.0 - alpha * alpha) * sigma_b * sigma_b)
-        valid = now - last.t_fused_us <= self._valid_us and not last.invalid and not self._outside_envelope(x)
-        return Snapshot(now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
-                        last.n_rejected, last.n_resets, last.vel_ratio, last.disagree)
+        valid = (now - last.t_fused_us <= self._valid_us and not last.invalid  # (_outside_envelope, inline)
+                 and not (x[3] * x[3] + x[4] * x[4] > self._v_max2 or abs(x[5]) > self._vd_max))
+        return _new(Snapshot, (now, x, out, last.beta, last.nis, last.test_ratio, last.glitch, valid,
+                               last.n_rejected, last.n_resets, last.vel_ratio, last.disagree))  # every field
 
     def covariance_now(self) -> model.Cov | None:
         """The full covariance (15×15) at the newest IMU time (None before the first fix)."""
@@ -758,6 +759,7 @@ class _Fix(NamedTuple):
     zv: Vec3 | None  # the receiver's velocity (NED, m/s; NaN = not reported; None: none)
     rv: Vec3  # its variances ((m/s)²)
 _update = _core.update  # (x⁻, P⁻, y, R) -> (x⁺, P⁺, NIS): model.update_fast
+_new = tuple.__new__  # a NamedTuple from all its fields, without its generated __new__'s Python call
 
 
 def _nis(y: Vec3, hph: _Hph, r: Vec3) -> float:

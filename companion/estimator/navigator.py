@@ -26,8 +26,9 @@ from companion.domain.rotation import rotation_scaled
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, new_nav_estimate
 from companion.errors import ConfigError
 from companion.estimator._core import Front
+from companion.estimator._core import reported as _reported
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import fit_inflation3, fix_floor, floored_axis, variance_scale
+from companion.estimator.consistency import fit_inflation3, fix_floor
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
@@ -110,8 +111,8 @@ class Navigator:
         self.push: Callable[[ImuSample | AttitudeSample | GnssFix], None] = self._front
         self._snapshot = self.engine.snapshot
         self._last: tuple[Any, NavEstimate] | None = None
-        # (the Fit it is of, the factor, consistency.variance_scale of it)
-        self._inflation: tuple[Any, float, np.ndarray | None] = (None, 1.0, None)
+        # (the Fit it is of, the factor)
+        self._inflation: tuple[Any, float] = (None, 1.0)
         # the last fix's (correlation c, one fix's variance σ²) horizontally and vertically when its fixes
         # are correlated, else None (consistency.fix_floor: each variance is max(k P, min(c k P, σ²)))
         self._floor: tuple[float, float, float, float] | None = None
@@ -237,20 +238,12 @@ class Navigator:
         last = self._last
         if last is not None and last[0] is snap:
             return last[1]
-        a = snap.out  # one array for the state and the variances, handed out as views (one allocation)
         if self._inflation[0] is not self.engine.entries[-1].fit:  # (a snapshot: an entry)
-            self.accuracy_inflation()  # P's positions × k (the factor and its scale cached per fix)
-        scale = self._inflation[2]
-        var = a[9:18] if scale is None else a[9:18] * scale
-        floor = self._floor
-        if floor is not None:  # errors correlated over seconds: not averaged down, up to one fix's variance
-            var = var.copy() if scale is None else var
-            k, (c, s2, c_v, s2_v) = self._inflation[1], floor
-            if c > 1.0:  # (an axis whose fixes are not correlated keeps k P)
-                var[0], var[1] = floored_axis(float(a[9]), k, c, s2), floored_axis(float(a[10]), k, c, s2)
-            if c_v > 1.0:
-                var[2] = floored_axis(float(a[11]), k, c_v, s2_v)
-        est = new_nav_estimate(snap.t_us, a[0:3], a[3:6], a[6:9], var, snap.beta, snap.nis, self.method,
+            self.accuracy_inflation()  # P's positions × k (the factor and its floor cached per fix)
+        # p, v, b and the variances, the positions' × k, floored where the fixes' errors are correlated over
+        # seconds (not averaged down, up to one fix's variance; consistency.floored_axis), in the C core
+        p, v, b, var = _reported(snap.out, self._inflation[1], self._floor)
+        est = new_nav_estimate(snap.t_us, p, v, b, var, snap.beta, snap.nis, self.method,
                                snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
                                snap.vel_ratio, snap.disagree)  # NavEstimate(...)
         self._last = (snap, est)
@@ -265,7 +258,7 @@ class Navigator:
         if self._inflation[0] is not fit:  # a function of the last fix's Fit alone (the entries between
             w = self.cfg.accuracy_window_s  # fixes share it): once per fix; consistency.accuracy_inflation
             k = 1.0 if fit is None or w <= 0.0 else fit_inflation3(fit)  # on floats
-            self._inflation = (fit, k, variance_scale(k))
+            self._inflation = (fit, k)
             self._floor = None
             if entries and w > 0.0:  # the fixes' own correlation: a floor
                 last = entries[-1]
