@@ -248,3 +248,42 @@ def test_ned_converter_equals_local_ned_frame():
         d = (x - hx, y - hy, z - hz)
         assert conv(lat, lon, alt) == tuple(sum(r * v for r, v in zip(row, d, strict=True))
                                             for row in conv.r_ned_ecef)
+
+
+def _ned_numpy_reference(conv, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
+    """``NedConverter.__call__`` as it was before the C core: pymap3d's geodetic2ecef formula on numpy's
+    cos, sin and hypot (the functions pymap3d calls)."""
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    cos_lat, sin_lat = float(np.cos(lat)), float(np.sin(lat))
+    n = conv._A2 / float(np.hypot(conv._A * cos_lat, conv._B * sin_lat))
+    x = (n + alt_m) * cos_lat * float(np.cos(lon))
+    y = (n + alt_m) * cos_lat * float(np.sin(lon))
+    z = (n * conv._B_A_2 + alt_m) * sin_lat
+    hx, hy, hz = conv.home_ecef_m
+    dx, dy, dz = x - hx, y - hy, z - hz
+    (a, b, c), (d, e, f), (g, h, i) = conv.r_ned_ecef
+    return (a * dx + b * dy + c * dz, d * dx + e * dy + f * dz, g * dx + h * dy + i * dz)
+
+
+def test_ned_converter_in_c_equals_its_numpy_form_bit_for_bit():
+    """The C core's geodesy (``_core.geodetic_ned``) against the numpy form it replaced, on fixes near and far
+    from home, at the poles and the antimeridian, and NaN/inf inputs (NaN where NaN): the same bits (numpy's
+    float64 cos, sin and hypot are libm's on this platform, which this test checks)."""
+    from companion.domain.geodesy import LocalNedFrame
+    from companion.estimator.navigator import NedConverter
+
+    rng = np.random.default_rng(8)
+    for home in (HOME, LocalNedFrame(-33.9, 151.2, 40.0), LocalNedFrame(89.9, -179.9, 0.0)):
+        conv = NedConverter(home)
+        near = rng.uniform(-0.05, 0.05, (2, 4000))
+        lats = np.concatenate((home.home_lat_deg + near[0], rng.uniform(-90.0, 90.0, 4000),
+                               [90.0, -90.0, 0.0, math.nan, math.inf]))
+        lons = np.concatenate((home.home_lon_deg + near[1], rng.uniform(-180.0, 180.0, 4000),
+                               [180.0, -180.0, 0.0, 1.0, 2.0]))
+        alts = np.concatenate((rng.uniform(-100.0, 3000.0, 8000), [0.0, 1e4, -math.inf, 5.0, 6.0]))
+        for lat, lon, alt in zip(lats.tolist(), lons.tolist(), alts.tolist(), strict=True):
+            with np.errstate(invalid="ignore"):  # (cos and sin of inf: NaN)
+                got, want = conv(lat, lon, alt), _ned_numpy_reference(conv, lat, lon, alt)
+            assert type(got) is tuple and all(type(v) is float for v in got)
+            same = all(g == w or (g != g and w != w) for g, w in zip(got, want, strict=True))
+            assert same, (lat, lon, alt, got, want)

@@ -1521,6 +1521,26 @@ static PyObject *py_reported(PyObject *self, PyObject *const *args, Py_ssize_t n
                          new_array(1, 9, 0, var));
 }
 
+/* geodetic_ned(consts, lat_deg, lon_deg, alt_m) -> (N, E, D) (m): navigator.NedConverter, pymap3d's
+ * geodetic2ecef written out operation for operation (math.radians' product, libm's cos, sin and hypot:
+ * numpy's float64 functions where they are libm's) less the home's ECEF position, rotated into its NED;
+ * consts = (A, A^2, B, (B/A)^2, the home's ECEF x, y, z, R_ned_ecef row-major (9)) */
+static PyObject *py_geodetic_ned(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "geodetic_ned(consts, lat_deg, lon_deg, alt_m)"); return NULL; }
+    double c[16];
+    double lat_deg = PyFloat_AsDouble(args[1]), lon_deg = PyFloat_AsDouble(args[2]), alt = PyFloat_AsDouble(args[3]);
+    if (PyErr_Occurred() || read_doubles(args[0], c, 16, "consts") < 0) return NULL;
+    const double deg = Py_MATH_PI / 180.0;  /* math.radians */
+    double lat = lat_deg * deg, lon = lon_deg * deg;
+    double cos_lat = cos(lat), sin_lat = sin(lat);
+    double n = c[1] / hypot(c[0] * cos_lat, c[2] * sin_lat);
+    double x = (n + alt) * cos_lat * cos(lon), y = (n + alt) * cos_lat * sin(lon), z = (n * c[3] + alt) * sin_lat;
+    double dx = x - c[4], dy = y - c[5], dz = z - c[6];
+    const double *r = c + 7;
+    return Py_BuildValue("(ddd)", r[0] * dx + r[1] * dy + r[2] * dz, r[3] * dx + r[4] * dy + r[5] * dz,
+                         r[6] * dx + r[7] * dy + r[8] * dz);
+}
+
 static PyMethodDef module_methods[] = {
     {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
      "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
@@ -1541,6 +1561,8 @@ static PyMethodDef module_methods[] = {
      "scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add (s holding a fix)"},
     {"decay_add3", (PyCFunction)(void (*)(void))py_decay_add3, METH_FASTCALL,
      "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1)"},
+    {"geodetic_ned", (PyCFunction)(void (*)(void))py_geodetic_ned, METH_FASTCALL,
+     "geodetic_ned(consts, lat_deg, lon_deg, alt_m) -> (N, E, D): navigator.NedConverter"},
     {"reported", (PyCFunction)(void (*)(void))py_reported, METH_FASTCALL,
      "reported(out, k, floor) -> (p, v, b, var): a snapshot as the navigator reports it"},
     {"loss_grad", (PyCFunction)(void (*)(void))py_loss_grad, METH_FASTCALL,

@@ -26,13 +26,13 @@ from companion.domain.rotation import rotation_scaled
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, new_nav_estimate
 from companion.errors import ConfigError
 from companion.estimator._core import Front
+from companion.estimator._core import geodetic_ned as _geodetic_ned
 from companion.estimator._core import reported as _reported
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.consistency import fit_inflation3, fix_floor
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
-_np_cos, _np_sin, _np_hypot = np.cos, np.sin, np.hypot  # pymap3d's trigonometry (numpy's, for its bits)
 BATCH_MIN = 64  # below this many samples the per-sample float path is faster than numpy
 
 
@@ -41,10 +41,11 @@ class NedConverter:
 
     pymap3d's geodetic → NED is ECEF(fix) − ECEF(home), rotated into the home's tangent plane;
     both the home ECEF and the rotation (from pymap3d, on the unit vectors) are constant, so
-    each fix costs pymap3d's ``geodetic2ecef`` formula and a 3×3 product in floats. The degrees
-    are converted with ``math.radians`` (the same product as numpy's) and the formula is written
-    out with each trigonometric value computed once by the same numpy functions pymap3d calls
-    (it calls cos(lat) three times): a third of the cost (docs/estimator.md, Speed), the same bits (tested).
+    each fix costs pymap3d's ``geodetic2ecef`` formula and a 3×3 product, in the C core
+    (``_core.geodetic_ned``): the formula written out with each trigonometric value computed once
+    (pymap3d calls cos(lat) three times), the degrees converted as ``math.radians`` does, cos, sin and
+    hypot libm's, which numpy's float64 functions that pymap3d calls are here (docs/estimator.md,
+    Speed): the same bits (tested against pymap3d and against the numpy form it replaced).
     """
 
     WGS84 = Ellipsoid.from_name("wgs84")
@@ -61,19 +62,11 @@ class NedConverter:
             e, n, u = pymap3d.uvw2enu(*unit, frame.home_lat_deg, frame.home_lon_deg)
             rows.append((float(n), float(e), -float(u)))  # column of R_ned_ecef for this ECEF axis
         self.r_ned_ecef = tuple(tuple(rows[j][i] for j in range(3)) for i in range(3))
+        self._consts = (float(self._A), float(self._A2), float(self._B), float(self._B_A_2),
+                        *self.home_ecef_m, *(v for row in self.r_ned_ecef for v in row))
 
     def __call__(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
-        lat, lon = math.radians(lat_deg), math.radians(lon_deg)
-        # pymap3d.geodetic2ecef(lat, lon, alt_m, WGS84, deg=False), operation for operation
-        cos_lat, sin_lat = float(_np_cos(lat)), float(_np_sin(lat))
-        n = self._A2 / float(_np_hypot(self._A * cos_lat, self._B * sin_lat))
-        x = (n + alt_m) * cos_lat * float(_np_cos(lon))
-        y = (n + alt_m) * cos_lat * float(_np_sin(lon))
-        z = (n * self._B_A_2 + alt_m) * sin_lat
-        hx, hy, hz = self.home_ecef_m
-        dx, dy, dz = x - hx, y - hy, z - hz
-        (a, b, c), (d, e, f), (g, h, i) = self.r_ned_ecef
-        return (a * dx + b * dy + c * dz, d * dx + e * dy + f * dz, g * dx + h * dy + i * dz)
+        return _geodetic_ned(self._consts, lat_deg, lon_deg, alt_m)
 
 
 class Navigator:
