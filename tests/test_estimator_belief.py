@@ -287,16 +287,35 @@ def test_the_core_loss_grad_equals_loss_grad_bit_for_bit(loss, lambda_b):
 
 
 def test_the_belief_methods_update_as_with_the_python_loss_grad():
-    """A belief method's update through the C loss gradient equals the one through ``belief.loss_grad``
-    (the method as it was) over a multipath stream: the same states, bit for bit."""
+    """A belief method's update in C (``_core.belief_update``: the C loss gradient, the first- or second-order
+    step, the clamp and the sigmoid) equals the Python one through ``belief.loss_grad`` (the method as it
+    was: ``step`` and ``_state``) over random terms, with large innovations that push θ to its clamps and
+    NaN/inf inputs: the same states, bit for bit (NaN where NaN), BeliefStates, the same exceptions."""
     from companion.estimator.belief import loss_grad as py_loss_grad
     rng = np.random.default_rng(5)
+    special = (math.nan, math.inf, 0.0, 1e300)
     for name in ("second-order", "first-order"):
         m = methods.make(name, CFG)
         state = ref = m.initial_state()
-        for _ in range(300):
-            t = _terms(rng, float(rng.choice([0.05, 0.5, 4.0])))
-            state = m.update(state, t)
-            b = ref.beta
-            ref = m._state(*m.step(ref, py_loss_grad(b, t, CFG)[1] * b * (1.0 - b)))
-            assert state == ref
+        clamped = 0
+        for k in range(1500):
+            t = _floats(_terms(rng, float(rng.choice([0.05, 0.5, 4.0, 60.0]))))
+            if k % 50 == 49:
+                t = t._replace(y=(float(rng.choice(special)), 0.1, 0.2))
+            try:
+                b = ref.beta
+                ref_next = m._state(*m.step(ref, py_loss_grad(b, t, CFG)[1] * b * (1.0 - b)))
+            except (ValueError, ZeroDivisionError, OverflowError) as exc:
+                with pytest.raises(type(exc)):
+                    m.update(state, t)
+                continue
+            state, ref = m.update(state, t), ref_next
+            assert type(state) is methods.BeliefState
+            same = all(a == b or (a != a and b != b) for a, b in zip(state, ref, strict=True))
+            assert same, (k, state, ref)
+            clamped += state.theta in (CFG.theta_min, CFG.theta_max)
+            if state.theta != state.theta or state.h_fast != state.h_fast:  # a NaN stays: start again
+                state = ref = m.initial_state()
+        assert clamped > 0
+    literal = methods.make("paper-literal", CFG)  # its own gradient: the Python update
+    assert type(literal).update is methods._Belief.update

@@ -1283,28 +1283,32 @@ static PyObject *py_error(PyObject *type, const char *what) {
     return NULL;
 }
 
-static PyObject *py_loss_grad(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 3 || !PyTuple_Check(args[1]) || PyTuple_GET_SIZE(args[1]) != 7 || !PyTuple_Check(args[2])
-        || PyTuple_GET_SIZE(args[2]) != 7) {
-        PyErr_SetString(PyExc_TypeError, "loss_grad(beta, terms (7), params (7))");
-        return NULL;
+/* -1 with the exception Python's float arithmetic raises */
+static int fail(PyObject *type, const char *what) {
+    PyErr_SetString(type, what);
+    return -1;
+}
+
+static int loss_grad_c(double beta, PyObject *t, PyObject *params, double *out) {
+    if (!PyTuple_Check(t) || PyTuple_GET_SIZE(t) != 7) {
+        PyErr_SetString(PyExc_TypeError, "loss_grad: terms, an InnovationTerms (7)");
+        return -1;
     }
-    PyObject *t = args[1];
-    double beta = PyFloat_AsDouble(args[0]), y[3], s0[3], rn[3], p[3], bm[3], c[7];
+    double y[3], s0[3], rn[3], p[3], bm[3], c[7];
     double qbu = PyFloat_AsDouble(PyTuple_GET_ITEM(t, 2)), f = PyFloat_AsDouble(PyTuple_GET_ITEM(t, 5));
     if (PyErr_Occurred() || read_doubles(PyTuple_GET_ITEM(t, 0), y, 3, "y") < 0
         || read_doubles(PyTuple_GET_ITEM(t, 1), s0, 3, "s0") < 0
         || read_doubles(PyTuple_GET_ITEM(t, 3), rn, 3, "r_nominal") < 0
         || read_doubles(PyTuple_GET_ITEM(t, 4), p, 3, "pht_p") < 0
-        || read_doubles(PyTuple_GET_ITEM(t, 6), bm, 3, "bias_m2") < 0 || read_doubles(args[2], c, 7, "params") < 0)
-        return NULL;
+        || read_doubles(PyTuple_GET_ITEM(t, 6), bm, 3, "bias_m2") < 0 || read_doubles(params, c, 7, "params") < 0)
+        return -1;
     double smax = c[0], floor_m = c[1], rmax = c[2], lam = c[3], nu = c[5], wb = c[6];
     /* s_of_beta */
     double sb = (smax * (1.0 - beta) + floor_m) * f;
     double e = 1.0 - beta, r = pow(rmax, e);
     if (isinf(r) && isfinite(rmax) && isfinite(e)) {  /* Python's ** overflowing */
         PyErr_SetString(PyExc_OverflowError, "(34, 'Numerical result out of range')");
-        return NULL;
+        return -1;
     }
     double q = qbu * sb * sb;
     double dq = -2.0 * qbu * sb * smax * f;
@@ -1318,9 +1322,9 @@ static PyObject *py_loss_grad(PyObject *self, PyObject *const *args, Py_ssize_t 
     /* _terms: sums over the axes from 0.0, left to right */
     double logdet = 0.0, d_logdet = 0.0, nis = 0.0, d_nis = 0.0, dp2 = 0.0, d_dp2 = 0.0;
     for (int i = 0; i < 3; i++)  /* Python's y / S, then math.log(S): their exceptions, in that order */
-        if (S[i] == 0.0) return py_error(PyExc_ZeroDivisionError, "float division by zero");
+        if (S[i] == 0.0) return fail(PyExc_ZeroDivisionError, "float division by zero");
     for (int i = 0; i < 3; i++) {
-        if (S[i] < 0.0) return py_error(PyExc_ValueError, "math domain error");
+        if (S[i] < 0.0) return fail(PyExc_ValueError, "math domain error");
         logdet += log(S[i]);
         d_logdet += dS[i] / S[i];
         nis += y[i] * w[i];
@@ -1336,7 +1340,7 @@ static PyObject *py_loss_grad(PyObject *self, PyObject *const *args, Py_ssize_t 
     }
     double fit, d_fit;
     if (c[4] != 0.0) {
-        if (nis / nu <= -1.0) return py_error(PyExc_ValueError, "math domain error");  /* math.log1p's */
+        if (nis / nu <= -1.0) return fail(PyExc_ValueError, "math domain error");  /* math.log1p's */
         fit = 0.5 * (nu + 3.0) * log1p(nis / nu);
         d_fit = 0.5 * (nu + 3.0) * d_nis / (nu + nis);
     } else {
@@ -1346,15 +1350,61 @@ static PyObject *py_loss_grad(PyObject *self, PyObject *const *args, Py_ssize_t 
     double level = 0.0, d_level = 0.0;  /* bias_level */
     if (wb != 0.0) {
         double sigma = (smax * (1.0 - beta) + floor_m) * f;
-        if (sigma * sigma == 0.0) return py_error(PyExc_ZeroDivisionError, "float division by zero");
-        if (sigma < 0.0) return py_error(PyExc_ValueError, "math domain error");
+        if (sigma * sigma == 0.0) return fail(PyExc_ZeroDivisionError, "float division by zero");
+        if (sigma < 0.0) return fail(PyExc_ValueError, "math domain error");
         double m = bm[0] + bm[1] + bm[2];
         double inv2 = 1.0 / (sigma * sigma);
         level = wb * (3.0 * log(sigma) + 0.5 * m * inv2);
         d_level = wb * (3.0 - m * inv2) / sigma * (-smax * f);
     }
-    return Py_BuildValue("(ddd)", 0.5 * logdet + fit + smooth + level, 0.5 * d_logdet + d_fit + d_smooth + d_level,
-                         nis);
+    out[0] = 0.5 * logdet + fit + smooth + level;
+    out[1] = 0.5 * d_logdet + d_fit + d_smooth + d_level;
+    out[2] = nis;
+    return 0;
+}
+
+static PyObject *py_loss_grad(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 3) { PyErr_SetString(PyExc_TypeError, "loss_grad(beta, terms, params)"); return NULL; }
+    double beta = PyFloat_AsDouble(args[0]), out[3];
+    if ((beta == -1.0 && PyErr_Occurred()) || loss_grad_c(beta, args[1], args[2], out) < 0) return NULL;
+    return Py_BuildValue("(ddd)", out[0], out[1], out[2]);
+}
+
+static PyObject *same_type(PyObject *like, PyObject *items);
+
+/* belief_update(state, terms, loss_params, step) -> methods._Belief.update of the first-order (step = (1, eta_1,
+ * theta_min, theta_max)) or second-order (step = (2, eta, theta_min, theta_max, alpha_fast, alpha_slow,
+ * omega_fast, lambda_reg)) belief, operation for operation: g = loss_grad's derivative x beta (1 - beta), the
+ * step, theta clamped (min(theta_max, max(theta_min, theta)) as Python's builtins), beta = 1 / (1 + e^-theta);
+ * a BeliefState (the type of ``state``: theta, h_fast, h_slow, beta) */
+static PyObject *py_belief_update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4 || !PyTuple_Check(args[0]) || PyTuple_GET_SIZE(args[0]) != 4 || !PyTuple_Check(args[3])) {
+        PyErr_SetString(PyExc_TypeError, "belief_update(state (4), terms, loss_params, step)");
+        return NULL;
+    }
+    double st[4], k[8], lg[3];
+    Py_ssize_t n = PyTuple_GET_SIZE(args[3]);
+    if (read_doubles(args[0], st, 4, "state") < 0 || (n != 4 && n != 8)
+        || read_doubles(args[3], k, n, "step") < 0)
+        return PyErr_Occurred() ? NULL : py_error(PyExc_ValueError, "belief_update: step of 4 or 8 numbers");
+    double beta = st[3];
+    if (loss_grad_c(beta, args[1], args[2], lg) < 0) return NULL;
+    double g = lg[1] * beta * (1.0 - beta), theta, h_fast = st[1], h_slow = st[2];
+    if (k[0] == 1.0 && n == 4) {
+        theta = st[0] - k[1] * g;
+    } else if (k[0] == 2.0 && n == 8) {
+        h_fast = k[4] * st[1] + g * g;
+        h_slow = k[5] * st[2] + g * g;
+        double h = k[6] * h_fast + (1.0 - k[6]) * h_slow;
+        theta = st[0] - k[1] * g / (h + k[7]);
+    } else {
+        return py_error(PyExc_ValueError, "belief_update: step kind 1 (4 numbers) or 2 (8 numbers)");
+    }
+    if (!(theta > k[2])) theta = k[2];  /* max(theta_min, theta): theta only when greater */
+    if (!(theta < k[3])) theta = k[3];  /* min(theta_max, theta): theta only when less */
+    double e = exp(-theta);
+    if (isinf(e) && isfinite(theta)) return py_error(PyExc_OverflowError, "math range error");
+    return same_type(args[0], Py_BuildValue("(dddd)", theta, h_fast, h_slow, 1.0 / (1.0 + e)));
 }
 
 /* ------------------------------------------------------------------ the reported accuracy's sums */
@@ -1565,6 +1615,8 @@ static PyMethodDef module_methods[] = {
      "geodetic_ned(consts, lat_deg, lon_deg, alt_m) -> (N, E, D): navigator.NedConverter"},
     {"reported", (PyCFunction)(void (*)(void))py_reported, METH_FASTCALL,
      "reported(out, k, floor) -> (p, v, b, var): a snapshot as the navigator reports it"},
+    {"belief_update", (PyCFunction)(void (*)(void))py_belief_update, METH_FASTCALL,
+     "belief_update(state, terms, loss_params, step) -> BeliefState: methods._Belief.update, first/second order"},
     {"loss_grad", (PyCFunction)(void (*)(void))py_loss_grad, METH_FASTCALL,
      "loss_grad(beta, terms, params) -> (loss, its beta-derivative, NIS): belief.loss_grad"},
     {NULL, NULL, 0, NULL},

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol
 
 from companion.errors import ConfigError, not_one_of
+from companion.estimator._core import belief_update as _belief_update
 from companion.estimator._core import loss_grad as _loss_grad
 from companion.estimator.belief import InnovationTerms, Vec3, loss_params, paper_loss_grad, sigmoid
 from companion.estimator.config import EstimatorConfig
@@ -227,13 +228,26 @@ class _Belief:
 class FirstOrder(_Belief):
     """Plain gradient step θ ← θ − η₁ ∇θ ℓ (the ablation baseline)."""
 
+    def __init__(self, cfg: EstimatorConfig) -> None:
+        super().__init__(cfg)
+        self._step = (1.0, cfg.eta_first_order, cfg.theta_min, cfg.theta_max)
+
     def step(self, state: BeliefState, g: float) -> tuple[float, float, float]:
         return state.theta - self.cfg.eta_first_order * g, state.h_fast, state.h_slow
+
+    def update(self, state: BeliefState, terms: InnovationTerms) -> BeliefState:
+        """``_Belief.update`` with this step, in C (``_core.belief_update``: the same operations)."""
+        return _belief_update(state, terms, self._loss_params, self._step)  # type: ignore[return-value]
 
 
 @register("second-order")
 class SecondOrder(_Belief):
     """Dual-timescale damped Newton step (eq. 18-21)."""
+
+    def __init__(self, cfg: EstimatorConfig) -> None:
+        super().__init__(cfg)
+        self._step = (2.0, cfg.eta, cfg.theta_min, cfg.theta_max, cfg.alpha_fast, cfg.alpha_slow,
+                      cfg.omega_fast, cfg.lambda_reg)
 
     def step(self, state: BeliefState, g: float) -> tuple[float, float, float]:
         c = self.cfg
@@ -242,12 +256,18 @@ class SecondOrder(_Belief):
         h = c.omega_fast * h_fast + (1.0 - c.omega_fast) * h_slow
         return state.theta - c.eta * g / (h + c.lambda_reg), h_fast, h_slow
 
+    def update(self, state: BeliefState, terms: InnovationTerms) -> BeliefState:
+        """``_Belief.update`` with this step, in C (``_core.belief_update``: the same operations)."""
+        return _belief_update(state, terms, self._loss_params, self._step)  # type: ignore[return-value]
+
 
 @register("paper-literal")
 class PaperLiteral(SecondOrder):
     """FOR COMPARISON ONLY: eq. 16 and eq. 17 exactly as printed (loss without interior
     minimum, gradient sign flipped), with the second-order step. It drifts to β → 1 whatever
     the GNSS quality."""
+
+    update = _Belief.update  # its own gradient, in Python
 
     def grad_theta(self, state: BeliefState, terms: InnovationTerms) -> float:
         beta = state.beta
