@@ -321,3 +321,25 @@ def test_the_reported_estimate_in_c_as_in_python():
         np.testing.assert_array_equal(a, before)
     with pytest.raises(ValueError):
         reported(np.zeros(17), 1.0, None)
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"pos_valid": False, "gnss_resets": 3, "vel_test_ratio": 0.5}])
+def test_the_navigator_estimate_built_in_c_is_nav_estimate(kwargs):
+    """``_core.slots_new`` through NavEstimate's slots (the navigator's estimate()): the same object as the
+    dataclass's constructor given every field (type, each field the very object, frozen); a wrong count or a
+    non-descriptor is a TypeError."""
+    from companion.estimator._core import slots_new
+    from companion.estimator.navigator import _ESTIMATE_FIELDS
+    args = (7, np.ones(3), np.zeros(3), np.full(3, 2.0), np.arange(9.0), 0.25, 1.5, "second-order")
+    b = NavEstimate(*args, **kwargs)
+    values = [getattr(b, f.name) for f in dataclasses.fields(NavEstimate)]
+    a = slots_new(NavEstimate, _ESTIMATE_FIELDS, *values)
+    assert type(a) is NavEstimate and repr(a) == repr(b) and a == b
+    for f in dataclasses.fields(NavEstimate):
+        assert getattr(a, f.name) is getattr(b, f.name)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.t_us = 8  # type: ignore[misc]
+    with pytest.raises(TypeError):
+        slots_new(NavEstimate, _ESTIMATE_FIELDS, *values[:-1])
+    with pytest.raises(TypeError):
+        slots_new(NavEstimate, (1,) * len(values), *values)

@@ -1591,6 +1591,28 @@ static PyObject *py_geodetic_ned(PyObject *self, PyObject *const *args, Py_ssize
                          r[6] * dx + r[7] * dy + r[8] * dz);
 }
 
+/* slots_new(cls, descriptors, *values) -> object.__new__(cls) with each descriptor's __set__(obj, value) in
+ * turn: a frozen dataclass with slots built from all its fields (samples.new_nav_estimate's steps, without
+ * its Python call: the navigator's per-estimate NavEstimate) */
+static PyObject *py_slots_new(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs < 2 || !PyType_Check(args[0]) || !PyTuple_Check(args[1]) || PyTuple_GET_SIZE(args[1]) != nargs - 2) {
+        PyErr_SetString(PyExc_TypeError, "slots_new(cls, descriptors, *values): one value per descriptor");
+        return NULL;
+    }
+    PyObject *empty = PyTuple_New(0);
+    if (!empty) return NULL;
+    PyObject *o = PyBaseObject_Type.tp_new((PyTypeObject *)args[0], empty, NULL);
+    Py_DECREF(empty);
+    if (!o) return NULL;
+    for (Py_ssize_t i = 0; i < nargs - 2; i++) {
+        PyObject *d = PyTuple_GET_ITEM(args[1], i);
+        descrsetfunc set = Py_TYPE(d)->tp_descr_set;
+        if (!set) { Py_DECREF(o); PyErr_SetString(PyExc_TypeError, "slots_new: not a data descriptor"); return NULL; }
+        if (set(d, o, args[2 + i]) < 0) { Py_DECREF(o); return NULL; }
+    }
+    return o;
+}
+
 static PyMethodDef module_methods[] = {
     {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
      "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
@@ -1611,6 +1633,8 @@ static PyMethodDef module_methods[] = {
      "scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add (s holding a fix)"},
     {"decay_add3", (PyCFunction)(void (*)(void))py_decay_add3, METH_FASTCALL,
      "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1)"},
+    {"slots_new", (PyCFunction)(void (*)(void))py_slots_new, METH_FASTCALL,
+     "slots_new(cls, descriptors, *values) -> a slots dataclass set through its descriptors"},
     {"geodetic_ned", (PyCFunction)(void (*)(void))py_geodetic_ned, METH_FASTCALL,
      "geodetic_ned(consts, lat_deg, lon_deg, alt_m) -> (N, E, D): navigator.NedConverter"},
     {"reported", (PyCFunction)(void (*)(void))py_reported, METH_FASTCALL,

@@ -12,6 +12,7 @@ recorded or simulated blocks that gives the same result as pushing attitude + IM
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any
@@ -23,17 +24,21 @@ from pymap3d.ellipsoid import Ellipsoid
 from companion.domain.geodesy import LocalNedFrame
 from companion.domain.physics import MAX_SPECIFIC_FORCE_M_S2
 from companion.domain.rotation import rotation_scaled
-from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate, new_nav_estimate
+from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import Front
 from companion.estimator._core import geodetic_ned as _geodetic_ned
 from companion.estimator._core import reported as _reported
+from companion.estimator._core import slots_new as _slots_new
 from companion.estimator.config import EstimatorConfig
 from companion.estimator.consistency import fit_inflation3, fix_floor
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
 BATCH_MIN = 64  # below this many samples the per-sample float path is faster than numpy
+# NavEstimate's fields' slot descriptors, in order: estimate() builds one through them (``_core.slots_new``,
+# samples.new_nav_estimate's steps in C)
+_ESTIMATE_FIELDS = tuple(NavEstimate.__dict__[f.name] for f in dataclasses.fields(NavEstimate))
 
 
 class NedConverter:
@@ -236,9 +241,9 @@ class Navigator:
         # p, v, b and the variances, the positions' × k, floored where the fixes' errors are correlated over
         # seconds (not averaged down, up to one fix's variance; consistency.floored_axis), in the C core
         p, v, b, var = _reported(snap.out, self._inflation[1], self._floor)
-        est = new_nav_estimate(snap.t_us, p, v, b, var, snap.beta, snap.nis, self.method,
-                               snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected, snap.n_resets,
-                               snap.vel_ratio, snap.disagree)  # NavEstimate(...)
+        est = _slots_new(NavEstimate, _ESTIMATE_FIELDS, snap.t_us, p, v, b, var, snap.beta, snap.nis,
+                         self.method, snap.test_ratio, snap.glitch, snap.pos_valid, snap.n_rejected,
+                         snap.n_resets, snap.vel_ratio, snap.disagree)  # NavEstimate(...), every field, in C
         self._last = (snap, est)
         return est
 
