@@ -343,3 +343,20 @@ def test_the_navigator_estimate_built_in_c_is_nav_estimate(kwargs):
         slots_new(NavEstimate, _ESTIMATE_FIELDS, *values[:-1])
     with pytest.raises(TypeError):
         slots_new(NavEstimate, (1,) * len(values), *values)
+
+
+def test_the_named_tuples_built_without_their_new_get_every_field():
+    """``_new(Cls, (...))`` (tuple.__new__, the engine's and consistency's per-fix and per-estimate path)
+    skips the NamedTuple's own __new__ and its defaults: every such call in the code passes all the fields."""
+    import ast
+
+    from companion.estimator import belief, consistency, engine
+    names = {**vars(engine), **vars(consistency), **vars(belief)}
+    n_calls = 0
+    for module in (engine, consistency):
+        for node in ast.walk(ast.parse(inspect.getsource(module))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "_new":
+                cls = names[node.args[0].id]  # type: ignore[attr-defined]
+                assert isinstance(node.args[1], ast.Tuple) and len(node.args[1].elts) == len(cls._fields), cls
+                n_calls += 1
+    assert n_calls >= 4

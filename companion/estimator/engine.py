@@ -486,13 +486,13 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         f = self.cfg.bias_scale(r_nom[0])
         if reset and f != 1.0:  # the reset's bias prior at the receiver's scale (model.reset_to_fix's form)
             P_post = model.scale_bias_prior(P_post, f, self._reset_var[0])
-        return Fusion(
+        return _new(Fusion, (  # every field, in order (Fusion(...) without its generated __new__'s call)
             t_us, z, x_post, P_post, state, nis, ints, beta, self.cfg.sigma_bias_m(beta) * f,
             r_given, t_fused, ratio, glitch, n_rej + rejected, n_res, off, t_off, n_off, acc, t_acc, n_ret,
             zv, rv, vel_ratio,
             n_vt, n_vr, level, disagree, prev.n_disagree + (disagree and not prev.disagree), scale_h, scale_v,
             u, dv_imu, T, noise_h, noise_v, vs, invalid, prev.n_invalid + invalid, f, fit,
-            hold_ref, hold_obs, ramp, scatter, scatter_v)
+            hold_ref, hold_obs, ramp, scatter, scatter_v))
 
     def _hold_residual(self, ref: tuple[Any, ...], obs: tuple[Any, ...], t_us: int, z: Vec3, ints: Integrals
                        ) -> tuple[tuple[Any, ...], tuple[model.State, model.Cov]]:
@@ -601,7 +601,7 @@ class FusionEngine(Timeline[Fusion, "_Fix", "Snapshot"]):
         floor_v = spread_v if spread_v > self._gate_r_min else self._gate_r_min
         bias_m2 = (x_prior[6] * x_prior[6] + P_prior[6, 6], x_prior[7] * x_prior[7] + P_prior[7, 7],
                    x_prior[8] * x_prior[8] + P_prior[8, 8]) if self._bias_level else _ZERO3  # read only by it
-        terms = InnovationTerms(y, s0, q_bias_unit, r_nom, pht_p, prev.bias_scale, bias_m2)
+        terms = _new(InnovationTerms, (y, s0, q_bias_unit, r_nom, pht_p, prev.bias_scale, bias_m2))  # all 7
         # a receiver stating neither its accuracy nor a velocity: innovations beyond its own noise may be
         # the IMU's fault (a wrong attitude), so an R-learner may not learn much more than that noise
         k_max = self._r_max_blind if (r_given[0] == math.inf and zv is None) else self._r_max
