@@ -1114,39 +1114,31 @@ static PyTypeObject HistoryType = {
 };
 
 /* ------------------------------------------------------------------ the navigator's per-sample front */
-/* Front(history, g_m_s2, imu_type, attitude_type, other, pushed, waiting, counts): a navigator's push(sample)
+/* Front(history, g_m_s2, imu_type, attitude_type, other, pushed, waiting): a navigator's push(sample)
  * (navigator.Navigator.push; docs in its class): an attitude sample's rotation kept (rotation_of; counted
- * in ``counts`` as attitude_used or attitude_rejected_nonfinite), an IMU sample pushed with the latest
- * rotation (History.push_frd; imu_rejected_no_attitude before any) and ``pushed()`` called when that
+ * in attitude_used or attitude_rejected_nonfinite), an IMU sample pushed with the latest rotation
+ * (History.push_frd; counted in imu_rejected_no_attitude before any) and ``pushed()`` called when that
  * returns True or ``waiting`` (a list) is not empty; any other sample handed to ``other(sample)``. */
 typedef struct {
     PyObject_HEAD
     vectorcallfunc vectorcall;
     History *hist;
     double g;
-    PyObject *imu_type, *att_type, *other, *pushed, *waiting, *counts;
+    PyObject *imu_type, *att_type, *other, *pushed, *waiting;
     double rot[9];
     int has_rot;
+    long long n_used, n_nonfinite, n_no_attitude;  /* the samples counted (the navigator's counters) */
 } Front;
 
-static PyObject *s_t_us, *s_acc, *s_q, *s_used, *s_nonfinite, *s_no_attitude;
-
-static int count_one(PyObject *counts, PyObject *key) {
-    PyObject *v = PyDict_GetItemWithError(counts, key);  /* borrowed */
-    if (!v && PyErr_Occurred()) return -1;
-    long long k = v ? PyLong_AsLongLong(v) : 0;
-    if (k == -1 && PyErr_Occurred()) return -1;
-    PyObject *n = PyLong_FromLongLong(k + 1);
-    if (!n) return -1;
-    int rc = PyDict_SetItem(counts, key, n);
-    Py_DECREF(n);
-    return rc;
-}
+static PyObject *s_t_us, *s_acc, *s_q;
 
 static PyObject *front_push(Front *self, PyObject *sample) {
     PyTypeObject *kind = Py_TYPE(sample);
     if ((PyObject *)kind == self->imu_type) {
-        if (!self->has_rot) return count_one(self->counts, s_no_attitude) < 0 ? NULL : Py_NewRef(Py_None);
+        if (!self->has_rot) {
+            self->n_no_attitude++;
+            Py_RETURN_NONE;
+        }
         PyObject *t_o = PyObject_GetAttr(sample, s_t_us);
         if (!t_o) return NULL;
         long long t = PyLong_AsLongLong(t_o);
@@ -1172,9 +1164,13 @@ static PyObject *front_push(Front *self, PyObject *sample) {
         int rc = read_doubles(q_o, q, 4, "quaternion");
         Py_DECREF(q_o);
         if (rc < 0) return NULL;
-        if (!rotation_of(q, self->rot)) return count_one(self->counts, s_nonfinite) < 0 ? NULL : Py_NewRef(Py_None);
+        if (!rotation_of(q, self->rot)) {
+            self->n_nonfinite++;
+            Py_RETURN_NONE;
+        }
         self->has_rot = 1;
-        return count_one(self->counts, s_used) < 0 ? NULL : Py_NewRef(Py_None);
+        self->n_used++;
+        Py_RETURN_NONE;
     }
     return PyObject_CallOneArg(self->other, sample);
 }
@@ -1188,10 +1184,10 @@ static PyObject *front_vectorcall(PyObject *self, PyObject *const *args, size_t 
 }
 
 static int front_init(Front *self, PyObject *args, PyObject *kw) {
-    PyObject *hist, *imu_type, *att_type, *other, *pushed, *waiting, *counts;
+    PyObject *hist, *imu_type, *att_type, *other, *pushed, *waiting;
     double g;
-    if (!PyArg_ParseTuple(args, "O!dOOOOO!O!", &HistoryType, &hist, &g, &imu_type, &att_type, &other, &pushed,
-                          &PyList_Type, &waiting, &PyDict_Type, &counts))
+    if (!PyArg_ParseTuple(args, "O!dOOOOO!", &HistoryType, &hist, &g, &imu_type, &att_type, &other, &pushed,
+                          &PyList_Type, &waiting))
         return -1;
     Py_XSETREF(self->hist, (History *)Py_NewRef(hist));
     Py_XSETREF(self->imu_type, Py_NewRef(imu_type));
@@ -1199,7 +1195,6 @@ static int front_init(Front *self, PyObject *args, PyObject *kw) {
     Py_XSETREF(self->other, Py_NewRef(other));
     Py_XSETREF(self->pushed, Py_NewRef(pushed));
     Py_XSETREF(self->waiting, Py_NewRef(waiting));
-    Py_XSETREF(self->counts, Py_NewRef(counts));
     self->g = g;
     self->has_rot = 0;
     self->vectorcall = front_vectorcall;
@@ -1213,7 +1208,6 @@ static int front_traverse(Front *self, visitproc visit, void *arg) {
     Py_VISIT(self->other);
     Py_VISIT(self->pushed);
     Py_VISIT(self->waiting);
-    Py_VISIT(self->counts);
     return 0;
 }
 
@@ -1224,7 +1218,6 @@ static int front_clear(Front *self) {
     Py_CLEAR(self->other);
     Py_CLEAR(self->pushed);
     Py_CLEAR(self->waiting);
-    Py_CLEAR(self->counts);
     return 0;
 }
 
@@ -1254,13 +1247,20 @@ static PyGetSetDef front_getset[] = {
     {NULL, NULL, NULL, NULL, NULL},
 };
 
+static PyMemberDef front_members[] = {
+    {"attitude_used", T_LONGLONG, offsetof(Front, n_used), 0, "attitude samples used"},
+    {"attitude_rejected_nonfinite", T_LONGLONG, offsetof(Front, n_nonfinite), 0,
+     "attitude samples whose quaternion is not finite or about 0"},
+    {"imu_rejected_no_attitude", T_LONGLONG, offsetof(Front, n_no_attitude), 0, "IMU samples before any attitude"},
+    {NULL, 0, 0, 0, NULL},
+};
+
 static PyTypeObject FrontType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "companion.estimator._core.Front",
     .tp_basicsize = sizeof(Front),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL,
-    .tp_doc = "Front(history, g_m_s2, imu_type, attitude_type, other, pushed, waiting, counts): a navigator's "
-              "push(sample)",
+    .tp_doc = "Front(history, g_m_s2, imu_type, attitude_type, other, pushed, waiting): a navigator's push(sample)",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)front_init,
     .tp_traverse = (traverseproc)front_traverse,
@@ -1269,6 +1269,7 @@ static PyTypeObject FrontType = {
     .tp_call = PyVectorcall_Call,
     .tp_vectorcall_offset = offsetof(Front, vectorcall),
     .tp_getset = front_getset,
+    .tp_members = front_members,
 };
 
 /* ------------------------------------------------------------------ the belief's loss */
@@ -1656,9 +1657,7 @@ PyMODINIT_FUNC PyInit__core(void) {
     if (PyType_Ready(&HistoryType) < 0 || PyType_Ready(&PropagatorType) < 0 || PyType_Ready(&FrontType) < 0)
         return NULL;
     if (!(s_t_us = PyUnicode_InternFromString("t_us")) || !(s_acc = PyUnicode_InternFromString("acc_frd_m_s2"))
-        || !(s_q = PyUnicode_InternFromString("q_ned_frd")) || !(s_used = PyUnicode_InternFromString("attitude_used"))
-        || !(s_nonfinite = PyUnicode_InternFromString("attitude_rejected_nonfinite"))
-        || !(s_no_attitude = PyUnicode_InternFromString("imu_rejected_no_attitude")))
+        || !(s_q = PyUnicode_InternFromString("q_ned_frd")))
         return NULL;
     PyObject *m = PyModule_Create(&core_module);
     if (!m) return NULL;

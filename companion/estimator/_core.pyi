@@ -54,8 +54,10 @@ class Propagator:
 
 class Front:
     def __init__(self, history: History, g_m_s2: float, imu_type: type, attitude_type: type,
-                 other: Callable[[Any], None], pushed: Callable[[], None], waiting: list[Any],
-                 counts: dict[str, int]) -> None: ...
+                 other: Callable[[Any], None], pushed: Callable[[], None], waiting: list[Any]) -> None: ...
+    attitude_used: int
+    attitude_rejected_nonfinite: int
+    imu_rejected_no_attitude: int
     def __call__(self, sample: Any) -> None: ...
     rot: Any  # the latest R_ned_frd (_Rot9) or None; set from any 9 numbers or None
 

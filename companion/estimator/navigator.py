@@ -36,6 +36,8 @@ from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
 BATCH_MIN = 64  # below this many samples the per-sample float path is faster than numpy
+# the counters the C front keeps (its attributes of these names)
+_FRONT_COUNTS = ("attitude_used", "attitude_rejected_nonfinite", "imu_rejected_no_attitude")
 # NavEstimate's fields' slot descriptors, in order: estimate() builds one through them (``_core.slots_new``,
 # samples.new_nav_estimate's steps in C)
 _ESTIMATE_FIELDS = tuple(NavEstimate.__dict__[f.name] for f in dataclasses.fields(NavEstimate))
@@ -101,11 +103,10 @@ class Navigator:
         self._frozen_us = int(round(self.cfg.gnss_frozen_s * 1e6))
         self.engine = FusionEngine(self.cfg, method, self._counts, context)
         # push(sample): attitude and IMU samples in the C core (the latest attitude as R_ned_frd, row-major:
-        # ``_front.rot``; the IMU path as Timeline.push_frd, through Timeline.frd_sink's parts), any other
-        # sample through _push_other
+        # ``_front.rot``; the IMU path as Timeline.push_frd, through Timeline.frd_sink's parts; their counters
+        # _FRONT_COUNTS, which counters() reads), any other sample through _push_other
         _, g, waiting, pushed = self.engine.frd_sink()
-        self._front = Front(self.engine.imu, g, ImuSample, AttitudeSample, self._push_other, pushed, waiting,
-                            self._counts)
+        self._front = Front(self.engine.imu, g, ImuSample, AttitudeSample, self._push_other, pushed, waiting)
         self.push: Callable[[ImuSample | AttitudeSample | GnssFix], None] = self._front
         self._snapshot = self.engine.snapshot
         self._last: tuple[Any, NavEstimate] | None = None
@@ -145,7 +146,7 @@ class Navigator:
         a = np.column_stack((r[:, 0] * fx + r[:, 1] * fy + r[:, 2] * fz,
                              r[:, 3] * fx + r[:, 4] * fy + r[:, 5] * fz,
                              r[:, 6] * fx + r[:, 7] * fy + r[:, 8] * fz + self._g))
-        self._counts["attitude_used"] += len(q)
+        self._front.attitude_used += len(q)
         self._front.rot = r[-1]
         self.engine.push_acc_batch(np.asarray(t_us, dtype=np.int64), a, r)
 
@@ -267,4 +268,6 @@ class Navigator:
 
     def counters(self) -> dict[str, int]:
         """Samples used and rejected by reason (stable names)."""
+        front = self._front
+        self._counts.update((name, getattr(front, name)) for name in _FRONT_COUNTS)
         return dict(self.engine.counts)  # the same dict, with the core's IMU counters
