@@ -360,3 +360,41 @@ def test_the_named_tuples_built_without_their_new_get_every_field():
                 assert isinstance(node.args[1], ast.Tuple) and len(node.args[1].elts) == len(cls._fields), cls
                 n_calls += 1
     assert n_calls >= 4
+
+
+def test_the_navigator_floor_and_factor_in_c_as_in_python():
+    """``_core.fix_floors`` and ``_core.inflation3`` (the navigator's accuracy_inflation) against
+    ``consistency.fix_floor`` of each scatter and ``fit_inflation3``: the same bits on scatters of random
+    series (independent, correlated, a few fixes, NaN), stated variances finite, infinite, NaN; None exactly
+    where neither correlation is above 1."""
+    from companion.estimator._core import fix_floors, inflation3
+    rng = np.random.default_rng(21)
+    n_floor = n_none = 0
+    for n in range(400):
+        h, v, t, bias = Scatter(), Scatter1(), 0, np.zeros(3)
+        rho = float(rng.choice([0.0, 0.9, 0.99]))
+        for _ in range(int(rng.integers(1, 60))):
+            t += 200_000
+            bias = rho * bias + rng.standard_normal(3)
+            z = tuple((bias * float(rng.choice([0.1, 2.0]))).tolist())
+            h, v = h.add(t, (z[0], z[1]), (0.0, 0.0), 20.0), v.add(t, z[2], 0.0, 20.0)
+        if n % 41 == 0:
+            h = h._replace(q2_sum=(math.nan, h.q2_sum[1]))
+        r_h, r_v = (float(rng.choice([0.01, 4.0, math.inf, math.nan])) for _ in range(2))
+        want_h, want_v = fix_floor(h, r_h), fix_floor(v, r_v)
+        got = fix_floors(h, v, r_h, r_v)
+        if want_h[0] > 1.0 or want_v[0] > 1.0:
+            assert got is not None
+            assert _same(got, (*want_h, *want_v)), (got, want_h, want_v)
+            n_floor += 1
+        else:
+            assert got is None
+            n_none += 1
+    assert n_floor > 50 and n_none > 50
+    fit = Fit()
+    for k, nu in enumerate([(0.1, -0.2, 0.3), (3.0, 2.0, -4.0), (math.nan, 0.0, 1.0), (math.inf, 0.0, 0.0)]):
+        fit = fit_add3(fit, 100_000 * (k + 1), *nu, 5.0)
+        got_k, want_k = inflation3(fit.nu_sum, fit.w2_sum), fit_inflation3(fit)
+        assert got_k == want_k or (got_k != got_k and want_k != want_k)
+    empty = Fit(AXES3, np.zeros(3), np.zeros(3), 0)
+    assert inflation3(empty.nu_sum, empty.w2_sum) == 1.0 == fit_inflation3(empty)

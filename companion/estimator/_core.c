@@ -1614,6 +1614,73 @@ static PyObject *py_slots_new(PyObject *self, PyObject *const *args, Py_ssize_t 
     return o;
 }
 
+/* consistency._correlation: c in [1, C_MAX] from the squared changes' sums */
+#define C_MAX 100.0
+#define SCATTER_MAX 2.0
+static double correlation_c(double dw, double d1, double d2) {
+    if (dw < 1.5 || d1 <= 0.0) return 1.0;
+    double r = d2 / d1;
+    if (r <= 1.0) return 1.0;
+    if (r >= 2.0 * C_MAX / (C_MAX + 1.0)) return C_MAX;
+    return r / (2.0 - r);
+}
+
+/* consistency.fix_floor(scatter, r) of a Scatter (N and E: q_sum a 2-tuple) or a Scatter1 (the axis given
+ * twice), operation for operation (_statistics, _correlation): out = (c, s2); -1 on error */
+static int fix_floor_c(PyObject *sc, PyObject *r_o, double *out) {
+    if (!PyTuple_Check(sc) || PyTuple_GET_SIZE(sc) != 12) {
+        PyErr_SetString(PyExc_TypeError, "fix_floors: not a Scatter");
+        return -1;
+    }
+    PyObject **f = &PyTuple_GET_ITEM(sc, 0);
+    double s[2], s2[2];
+    if (PyTuple_Check(f[7])) {
+        if (read_doubles(f[7], s, 2, "q_sum") < 0 || read_doubles(f[8], s2, 2, "q2_sum") < 0) return -1;
+    } else {
+        s[0] = s[1] = PyFloat_AsDouble(f[7]);
+        s2[0] = s2[1] = PyFloat_AsDouble(f[8]);
+    }
+    double w = PyFloat_AsDouble(f[5]), w2 = PyFloat_AsDouble(f[6]), d1 = PyFloat_AsDouble(f[9]),
+           d2 = PyFloat_AsDouble(f[10]), dw = PyFloat_AsDouble(f[11]), r = PyFloat_AsDouble(r_o);
+    if (PyErr_Occurred()) return -1;
+    double c = correlation_c(dw, d1, d2), v = 0.0;
+    if (!(dw <= 0.0 || w * w <= w2 * 1.000001)) {
+        if (w == 0.0 || w * w == 0.0) return fail(PyExc_ZeroDivisionError, "float division by zero");
+        double m0 = s[0] / w, m1 = s[1] / w;
+        double var = 0.5 * ((s2[0] / w - m0 * m0) + (s2[1] / w - m1 * m1));
+        double share = c * w2 / (w * w);
+        double fa = share < 1.0 - 1.0 / SCATTER_MAX ? 1.0 / (1.0 - share) : SCATTER_MAX;
+        v = var * fa;
+        v = v > 0.0 ? v : 0.0;
+    }
+    if (r > v && isfinite(r)) v = r;
+    out[0] = c;
+    out[1] = v;
+    return 0;
+}
+
+/* fix_floors(scatter, scatter_v, r_h, r_v) -> (c, s2, c_v, s2_v), consistency.fix_floor of the horizontal and
+ * the vertical scatter (the navigator's floor), or None when neither c is above 1 */
+static PyObject *py_fix_floors(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) { PyErr_SetString(PyExc_TypeError, "fix_floors(scatter, scatter_v, r_h, r_v)"); return NULL; }
+    double h[2], v[2];
+    if (fix_floor_c(args[0], args[2], h) < 0 || fix_floor_c(args[1], args[3], v) < 0) return NULL;
+    if (!(h[0] > 1.0 || v[0] > 1.0)) Py_RETURN_NONE;
+    return Py_BuildValue("(dddd)", h[0], h[1], v[0], v[1]);
+}
+
+/* inflation3(nu_sum, w2_sum) -> consistency.fit_inflation3 of a three-axis Fit's sums (1 when the weights'
+ * sum is not > 0, at least 1) */
+static PyObject *py_inflation3(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 2) { PyErr_SetString(PyExc_TypeError, "inflation3(nu_sum, w2_sum)"); return NULL; }
+    double n[3], w[3];
+    if (read_doubles(args[0], n, 3, "nu_sum") < 0 || read_doubles(args[1], w, 3, "w2_sum") < 0) return NULL;
+    double den = w[0] + w[1] + w[2];
+    if (!(den > 0.0)) return PyFloat_FromDouble(1.0);
+    double k = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) / den;
+    return PyFloat_FromDouble(k > 1.0 ? k : 1.0);
+}
+
 static PyMethodDef module_methods[] = {
     {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
      "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
@@ -1634,6 +1701,10 @@ static PyMethodDef module_methods[] = {
      "scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add (s holding a fix)"},
     {"decay_add3", (PyCFunction)(void (*)(void))py_decay_add3, METH_FASTCALL,
      "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1)"},
+    {"fix_floors", (PyCFunction)(void (*)(void))py_fix_floors, METH_FASTCALL,
+     "fix_floors(scatter, scatter_v, r_h, r_v) -> (c, s2, c_v, s2_v) or None: consistency.fix_floor of both"},
+    {"inflation3", (PyCFunction)(void (*)(void))py_inflation3, METH_FASTCALL,
+     "inflation3(nu_sum, w2_sum) -> consistency.fit_inflation3 of a three-axis Fit"},
     {"slots_new", (PyCFunction)(void (*)(void))py_slots_new, METH_FASTCALL,
      "slots_new(cls, descriptors, *values) -> a slots dataclass set through its descriptors"},
     {"geodetic_ned", (PyCFunction)(void (*)(void))py_geodetic_ned, METH_FASTCALL,

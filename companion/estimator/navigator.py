@@ -27,11 +27,13 @@ from companion.domain.rotation import rotation_scaled
 from companion.domain.samples import AttitudeSample, GnssFix, ImuSample, NavEstimate
 from companion.errors import ConfigError
 from companion.estimator._core import Front
+from companion.estimator._core import fix_floors as _fix_floors
 from companion.estimator._core import geodetic_ned as _geodetic_ned
+from companion.estimator._core import inflation3 as _inflation3
 from companion.estimator._core import reported as _reported
 from companion.estimator._core import slots_new as _slots_new
 from companion.estimator.config import EstimatorConfig
-from companion.estimator.consistency import fit_inflation3, fix_floor
+from companion.estimator.consistency import AXES3, fit_inflation3
 from companion.estimator.engine import FusionEngine
 from companion.estimator.methods import DEFAULT_METHOD, MethodContext
 
@@ -256,14 +258,17 @@ class Navigator:
         fit = entries[-1].fit if entries else None
         if self._inflation[0] is not fit:  # a function of the last fix's Fit alone (the entries between
             w = self.cfg.accuracy_window_s  # fixes share it): once per fix; consistency.accuracy_inflation
-            k = 1.0 if fit is None or w <= 0.0 else fit_inflation3(fit)  # on floats
+            if fit is None or w <= 0.0:
+                k = 1.0
+            elif fit.key is AXES3:  # fit_inflation3's float path, in C
+                k = _inflation3(fit.nu_sum, fit.w2_sum)
+            else:
+                k = fit_inflation3(fit)
             self._inflation = (fit, k)
             self._floor = None
-            if entries and w > 0.0:  # the fixes' own correlation: a floor
-                last = entries[-1]
-                c, s2 = fix_floor(last.scatter, last.r_nominal_m2[0])
-                c_v, s2_v = fix_floor(last.scatter_v, last.r_nominal_m2[2])
-                self._floor = (c, s2, c_v, s2_v) if c > 1.0 or c_v > 1.0 else None
+            if entries and w > 0.0:  # the fixes' own correlation: a floor (c, s2, c_v, s2_v) where c or c_v
+                last, r = entries[-1], entries[-1].r_nominal_m2  # > 1 (consistency.fix_floor of each, in C)
+                self._floor = _fix_floors(last.scatter, last.scatter_v, r[0], r[2])
         return self._inflation[1]
 
     def counters(self) -> dict[str, int]:
