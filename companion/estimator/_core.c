@@ -1119,12 +1119,13 @@ static PyTypeObject HistoryType = {
  * in attitude_used or attitude_rejected_nonfinite), an IMU sample pushed with the latest rotation
  * (History.push_frd; counted in imu_rejected_no_attitude before any) and ``pushed()`` called when that
  * returns True or ``waiting`` (a list) is not empty; any other sample handed to ``other(sample)``. */
+enum { F_HIST, F_IMU_TYPE, F_ATT_TYPE, F_OTHER, F_PUSHED, F_WAITING, F_NREF };
+
 typedef struct {
     PyObject_HEAD
     vectorcallfunc vectorcall;
-    History *hist;
+    PyObject *ref[F_NREF];  /* the objects held (F_*: the history, the two sample types, other, pushed, waiting) */
     double g;
-    PyObject *imu_type, *att_type, *other, *pushed, *waiting;
     double rot[9];
     int has_rot;
     long long n_used, n_nonfinite, n_no_attitude;  /* the samples counted (the navigator's counters) */
@@ -1132,9 +1133,18 @@ typedef struct {
 
 static PyObject *s_t_us, *s_acc, *s_q;
 
+/* n floats from the attribute ``name`` of ``o`` (read_doubles) */
+static int attr_doubles(PyObject *o, PyObject *name, double *out, Py_ssize_t n, const char *what) {
+    PyObject *v = PyObject_GetAttr(o, name);
+    if (!v) return -1;
+    int rc = read_doubles(v, out, n, what);
+    Py_DECREF(v);
+    return rc;
+}
+
 static PyObject *front_push(Front *self, PyObject *sample) {
     PyTypeObject *kind = Py_TYPE(sample);
-    if ((PyObject *)kind == self->imu_type) {
+    if ((PyObject *)kind == self->ref[F_IMU_TYPE]) {
         if (!self->has_rot) {
             self->n_no_attitude++;
             Py_RETURN_NONE;
@@ -1144,26 +1154,18 @@ static PyObject *front_push(Front *self, PyObject *sample) {
         long long t = PyLong_AsLongLong(t_o);
         Py_DECREF(t_o);
         if (t == -1 && PyErr_Occurred()) return NULL;
-        PyObject *f_o = PyObject_GetAttr(sample, s_acc);
-        if (!f_o) return NULL;
         double f[3];
-        int rc = read_doubles(f_o, f, 3, "specific force");
-        Py_DECREF(f_o);
-        if (rc < 0) return NULL;
-        PyObject *due = push_frd_c(self->hist, t, f, self->rot, self->g);
+        if (attr_doubles(sample, s_acc, f, 3, "specific force") < 0) return NULL;
+        PyObject *due = push_frd_c((History *)self->ref[F_HIST], t, f, self->rot, self->g);
         if (!due) return NULL;
         int is_due = due == Py_True;
         Py_DECREF(due);
-        if (is_due || PyList_GET_SIZE(self->waiting) > 0) return PyObject_CallNoArgs(self->pushed);
+        if (is_due || PyList_GET_SIZE(self->ref[F_WAITING]) > 0) return PyObject_CallNoArgs(self->ref[F_PUSHED]);
         Py_RETURN_NONE;
     }
-    if ((PyObject *)kind == self->att_type) {
-        PyObject *q_o = PyObject_GetAttr(sample, s_q);
-        if (!q_o) return NULL;
+    if ((PyObject *)kind == self->ref[F_ATT_TYPE]) {
         double q[4];
-        int rc = read_doubles(q_o, q, 4, "quaternion");
-        Py_DECREF(q_o);
-        if (rc < 0) return NULL;
+        if (attr_doubles(sample, s_q, q, 4, "quaternion") < 0) return NULL;
         if (!rotation_of(q, self->rot)) {
             self->n_nonfinite++;
             Py_RETURN_NONE;
@@ -1172,7 +1174,7 @@ static PyObject *front_push(Front *self, PyObject *sample) {
         self->n_used++;
         Py_RETURN_NONE;
     }
-    return PyObject_CallOneArg(self->other, sample);
+    return PyObject_CallOneArg(self->ref[F_OTHER], sample);
 }
 
 static PyObject *front_vectorcall(PyObject *self, PyObject *const *args, size_t nargsf, PyObject *kwnames) {
@@ -1189,12 +1191,8 @@ static int front_init(Front *self, PyObject *args, PyObject *kw) {
     if (!PyArg_ParseTuple(args, "O!dOOOOO!", &HistoryType, &hist, &g, &imu_type, &att_type, &other, &pushed,
                           &PyList_Type, &waiting))
         return -1;
-    Py_XSETREF(self->hist, (History *)Py_NewRef(hist));
-    Py_XSETREF(self->imu_type, Py_NewRef(imu_type));
-    Py_XSETREF(self->att_type, Py_NewRef(att_type));
-    Py_XSETREF(self->other, Py_NewRef(other));
-    Py_XSETREF(self->pushed, Py_NewRef(pushed));
-    Py_XSETREF(self->waiting, Py_NewRef(waiting));
+    PyObject *held[F_NREF] = {hist, imu_type, att_type, other, pushed, waiting};
+    for (int i = 0; i < F_NREF; i++) Py_XSETREF(self->ref[i], Py_NewRef(held[i]));
     self->g = g;
     self->has_rot = 0;
     self->vectorcall = front_vectorcall;
@@ -1202,22 +1200,12 @@ static int front_init(Front *self, PyObject *args, PyObject *kw) {
 }
 
 static int front_traverse(Front *self, visitproc visit, void *arg) {
-    Py_VISIT(self->hist);
-    Py_VISIT(self->imu_type);
-    Py_VISIT(self->att_type);
-    Py_VISIT(self->other);
-    Py_VISIT(self->pushed);
-    Py_VISIT(self->waiting);
+    for (int i = 0; i < F_NREF; i++) Py_VISIT(self->ref[i]);
     return 0;
 }
 
 static int front_clear(Front *self) {
-    Py_CLEAR(self->hist);
-    Py_CLEAR(self->imu_type);
-    Py_CLEAR(self->att_type);
-    Py_CLEAR(self->other);
-    Py_CLEAR(self->pushed);
-    Py_CLEAR(self->waiting);
+    for (int i = 0; i < F_NREF; i++) Py_CLEAR(self->ref[i]);
     return 0;
 }
 
@@ -1681,40 +1669,31 @@ static PyObject *py_inflation3(PyObject *self, PyObject *const *args, Py_ssize_t
     return PyFloat_FromDouble(k > 1.0 ? k : 1.0);
 }
 
+/* a module function of the METH_FASTCALL convention, py_NAME */
+#define FASTCALL(name, doc) {#name, (PyCFunction)(void (*)(void))py_##name, METH_FASTCALL, doc}
+
 static PyMethodDef module_methods[] = {
-    {"mean_between", (PyCFunction)(void (*)(void))py_mean_between, METH_FASTCALL,
-     "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"},
-    {"rotation_blocks", (PyCFunction)(void (*)(void))py_rotation_blocks, METH_FASTCALL,
-     "rotation_blocks(a, b) -> (-A, -B) row-major"},
-    {"update", (PyCFunction)(void (*)(void))py_update, METH_FASTCALL, "update(x, P, y, r) -> (x+, P+, NIS)"},
-    {"receiver_spread", (PyCFunction)(void (*)(void))py_receiver_spread, METH_FASTCALL,
-     "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek, kn, ekn) -> (4 centres, u, dv)"},
-    {"vel_nis", (PyCFunction)(void (*)(void))py_vel_nis, METH_FASTCALL,
-     "vel_nis(x, P, z_v, r) -> (horizontal NIS, vertical NIS) of a velocity measurement"},
-    {"update_vel", (PyCFunction)(void (*)(void))py_update_vel, METH_FASTCALL,
-     "update_vel(x, P, z_v, r) -> (x+, P+): the reported velocity components fused"},
+    FASTCALL(mean_between, "mean_between(x, a, b, alpha) -> (x at b, -A, -B)"),
+    FASTCALL(rotation_blocks, "rotation_blocks(a, b) -> (-A, -B) row-major"),
+    FASTCALL(update, "update(x, P, y, r) -> (x+, P+, NIS)"),
+    FASTCALL(receiver_spread,
+             "receiver_spread(a, b, z, pz, pu, pd, tp, T, yd, scales, k, ek, kn, ekn) -> (4 centres, u, dv)"),
+    FASTCALL(vel_nis, "vel_nis(x, P, z_v, r) -> (horizontal NIS, vertical NIS) of a velocity measurement"),
+    FASTCALL(update_vel, "update_vel(x, P, z_v, r) -> (x+, P+): the reported velocity components fused"),
     {"inv3", (PyCFunction)py_inv3, METH_O, "inverse of a symmetric 3x3, row-major"},
     {"rotation_q", (PyCFunction)py_rotation_q, METH_O, "R_ned_frd of a quaternion, or None"},
-    {"scatter_add", (PyCFunction)(void (*)(void))py_scatter_add, METH_FASTCALL,
-     "scatter_add(s, t_us, z, v, window_s) -> consistency.Scatter.add (s holding a fix)"},
-    {"scatter1_add", (PyCFunction)(void (*)(void))py_scatter1_add, METH_FASTCALL,
-     "scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add (s holding a fix)"},
-    {"decay_add3", (PyCFunction)(void (*)(void))py_decay_add3, METH_FASTCALL,
-     "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1)"},
-    {"fix_floors", (PyCFunction)(void (*)(void))py_fix_floors, METH_FASTCALL,
-     "fix_floors(scatter, scatter_v, r_h, r_v) -> (c, s2, c_v, s2_v) or None: consistency.fix_floor of both"},
-    {"inflation3", (PyCFunction)(void (*)(void))py_inflation3, METH_FASTCALL,
-     "inflation3(nu_sum, w2_sum) -> consistency.fit_inflation3 of a three-axis Fit"},
-    {"slots_new", (PyCFunction)(void (*)(void))py_slots_new, METH_FASTCALL,
-     "slots_new(cls, descriptors, *values) -> a slots dataclass set through its descriptors"},
-    {"geodetic_ned", (PyCFunction)(void (*)(void))py_geodetic_ned, METH_FASTCALL,
-     "geodetic_ned(consts, lat_deg, lon_deg, alt_m) -> (N, E, D): navigator.NedConverter"},
-    {"reported", (PyCFunction)(void (*)(void))py_reported, METH_FASTCALL,
-     "reported(out, k, floor) -> (p, v, b, var): a snapshot as the navigator reports it"},
-    {"belief_update", (PyCFunction)(void (*)(void))py_belief_update, METH_FASTCALL,
-     "belief_update(state, terms, loss_params, step) -> BeliefState: methods._Belief.update, first/second order"},
-    {"loss_grad", (PyCFunction)(void (*)(void))py_loss_grad, METH_FASTCALL,
-     "loss_grad(beta, terms, params) -> (loss, its beta-derivative, NIS): belief.loss_grad"},
+    FASTCALL(scatter_add, "scatter_add(s, t_us, z, v, window_s) -> consistency.Scatter.add (s holding a fix)"),
+    FASTCALL(scatter1_add, "scatter1_add(s, t_us, z, v, window_s) -> consistency.Scatter1.add (s holding a fix)"),
+    FASTCALL(decay_add3, "decay_add3(nu_sum, w2_sum, a, nu0, nu1, nu2) -> (a nu_sum + nu, a^2 w2_sum + 1)"),
+    FASTCALL(fix_floors,
+             "fix_floors(scatter, scatter_v, r_h, r_v) -> (c, s2, c_v, s2_v) or None: consistency.fix_floor of both"),
+    FASTCALL(inflation3, "inflation3(nu_sum, w2_sum) -> consistency.fit_inflation3 of a three-axis Fit"),
+    FASTCALL(slots_new, "slots_new(cls, descriptors, *values) -> a slots dataclass set through its descriptors"),
+    FASTCALL(geodetic_ned, "geodetic_ned(consts, lat_deg, lon_deg, alt_m) -> (N, E, D): navigator.NedConverter"),
+    FASTCALL(reported, "reported(out, k, floor) -> (p, v, b, var): a snapshot as the navigator reports it"),
+    FASTCALL(belief_update,
+             "belief_update(state, terms, loss_params, step) -> BeliefState: a first/second-order _Belief.update"),
+    FASTCALL(loss_grad, "loss_grad(beta, terms, params) -> (loss, its beta-derivative, NIS): belief.loss_grad"),
     {NULL, NULL, 0, NULL},
 };
 
