@@ -8,7 +8,7 @@ to its reported accuracy, extended over time (docs/tight.md "Reported accuracy",
 over the channels ``s`` fused (the tight filter's satellites; the loose filter's N, E, D axes of a fix),
 each innovation normalised by the variance it was fused with, ν = y / √S. A ``Fit`` is immutable and
 stored with each filter entry, so a late measurement re-fused out of sequence gives the same factor.
-Pure: numpy, and the C core for the loose filter's per-fix sums (``_core``: scatter_add, scatter1_add,
+Pure: numpy, and the C core for the filters' per-fix sums (``_core``: scatter_add, scatter1_add,
 decay_add3; their Python forms are in the tests).
 """
 
@@ -142,7 +142,6 @@ def check_accuracy_window(window_s: float) -> None:
     """``accuracy_window_s`` must be a finite number ≥ 0 (ValueError naming it otherwise)."""
     if not (math.isfinite(window_s) and window_s >= 0.0):
         raise ValueError(f"accuracy_window_s: must be a finite number >= 0, got {window_s!r}")
-
 
 
 class Scatter(NamedTuple):
