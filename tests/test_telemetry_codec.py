@@ -148,3 +148,21 @@ def test_nesting_depth_is_counted_on_the_parsed_payload():
     assert _nested_deeper_than(json.loads("[" * 9 + "]" * 9), 8)
     assert not _nested_deeper_than(json.loads("[" * 8 + "]" * 8), 8)
     assert not _nested_deeper_than(5, 0)
+
+
+def test_vector_fast_path_agrees_with_the_general_path():
+    """A list of n finite JSON floats takes the one-numpy-call path; anything else the validating
+    one: the same arrays (float64, exact values) and the same named errors either way."""
+    vec3, opt3 = zc._dec_array((3,)), zc._dec_array((3,), optional=True)
+    for v in ([0.5, -0.0, 1e308], [1, 2.5, 3]):  # all floats: fast path; with an int: general path
+        a = vec3(v, "x")
+        assert a.dtype == np.float64 and a.shape == (3,)
+        np.testing.assert_array_equal(a, [float(x) for x in v])
+        assert math.copysign(1.0, a[1]) == math.copysign(1.0, float(v[1]))  # -0.0 kept
+    np.testing.assert_array_equal(opt3([1.0, None, 3.0], "x"), [1.0, np.nan, 3.0])
+    for bad, msg in (([float("inf"), 1.0, 2.0], "x: expected finite"),
+                     ([float("nan")] * 3, "x: expected finite"),
+                     ([1.0, 2.0], "x: expected shape 3, got 2"), ([1.0] * 4, "x: expected shape 3, got 4"),
+                     ((1.0, 2.0, 3.0), "x: expected a list")):
+        with pytest.raises(zc.MalformedPayloadError, match=msg):
+            vec3(bad, "x")
